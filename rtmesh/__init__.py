@@ -1,0 +1,1 @@
+"""rtmesh: a CPU ray tracer for triangle-mesh scenes."""

@@ -1,0 +1,185 @@
+"""The Embree boundary: the only place where rtmesh converts between float64 and float32.
+
+Shading runs in float64; Embree (through embreex) works in float32.  This module
+
+* uploads the scene's triangles to one Embree scene in robust mode,
+* answers batched closest-hit (:meth:`Accel.intersect`) and any-hit
+  (:meth:`Accel.occluded`) queries, converting rays to float32 on the way in,
+* reconstructs hit points from the barycentrics Embree returns, on the exact float32
+  triangles Embree saw, and
+* owns the self-intersection rule (:func:`offset_ray_origins`): embreex's ``run()`` has no
+  ``tnear``, so a secondary ray must start on the correct side of the surface it leaves.
+"""
+
+import numpy as np
+from embreex import rtcore_scene
+from embreex.mesh_construction import TriangleMesh
+
+# Constants of the integer-ULP offset of Waechter & Binder, "A Fast and Robust Method for
+# Avoiding Self-Intersection" (Ray Tracing Gems, ch. 6).  The offset is 256 float32 ulps of
+# each coordinate along the normal: that covers the error of a float32 hit point computed
+# from barycentrics, which is a few ulps of the largest coordinate.  Near zero, where ulps
+# get absurdly small, a fixed offset of 1/65536 (scaled by the normal) is used instead.
+_ORIGIN = np.float32(1.0 / 32.0)
+_FLOAT_SCALE = np.float32(1.0 / 65536.0)
+_INT_SCALE = np.float32(256.0)
+
+
+def offset_ray_origins(points, normals):
+    """Move points off a surface along its geometric normal, in float32 space.
+
+    Parameters
+    ----------
+    points : (n, 3) float
+        Points on the surface.
+    normals : (n, 3) float
+        Unit geometric normals pointing to the side the new ray leaves toward.
+
+    Returns
+    -------
+    (n, 3) float64
+        Offset origins; every value is exactly representable in float32, so handing them to
+        Embree does not round them back onto the surface.
+    """
+    p = points.astype(np.float32)
+    n = normals.astype(np.float32)
+    offset_ulps = (_INT_SCALE * n).astype(np.int32)
+    bits = p.view(np.int32)
+    # moving toward +n means adding ulps to positive coordinates and subtracting from
+    # negative ones (float bit patterns grow with magnitude)
+    moved = (bits + np.where(p < 0, -offset_ulps, offset_ulps)).view(np.float32)
+    near_zero = np.abs(p) < _ORIGIN
+    out = np.where(near_zero, p + _FLOAT_SCALE * n, moved)
+    return out.astype(np.float64)
+
+
+class Hits:
+    """Closest hits of a ray batch.
+
+    Attributes
+    ----------
+    t : (n,) float64
+        Distance along the (unit) ray direction; ``inf`` for misses.
+    prim : (n,) int32
+        Triangle index; -1 for misses.
+    u, v : (n,) float64
+        Barycentric coordinates of the hit (weights of vertices 1 and 2).
+    """
+
+    __slots__ = ("t", "prim", "u", "v")
+
+    def __init__(self, t, prim, u, v):
+        self.t, self.prim, self.u, self.v = t, prim, u, v
+
+    def __len__(self):
+        return len(self.prim)
+
+    @property
+    def hit(self):
+        """(n,) bool: rays that hit something."""
+        return self.prim >= 0
+
+
+class Accel:
+    """Embree scene over a triangle soup.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float
+        Vertex positions.  Keep the scene near the origin (the integrator re-centres it):
+        float32 resolution is relative to the magnitude of the coordinates.
+    faces : (F, 3) int
+        Vertex indices.
+
+    Notes
+    -----
+    After construction the Embree scene is committed and read-only, so :meth:`intersect`
+    and :meth:`occluded` may be called from several threads at once; embreex releases the
+    GIL while it traces.
+    """
+
+    def __init__(self, vertices, faces):
+        self.vertices32 = np.ascontiguousarray(vertices, dtype=np.float32)
+        # the float64 copy of exactly the triangles Embree sees, for hit reconstruction
+        self.vertices = self.vertices32.astype(np.float64)
+        self.faces = np.ascontiguousarray(faces, dtype=np.int32)
+        self._scene = rtcore_scene.EmbreeScene(robust=True)
+        TriangleMesh(self._scene, self.vertices32, self.faces)
+        # run() commits lazily and is not thread-safe while doing so: commit now
+        self._scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32), query="OCCLUDED")
+
+    @staticmethod
+    def _rays32(origins, directions):
+        return (np.ascontiguousarray(origins, dtype=np.float32),
+                np.ascontiguousarray(directions, dtype=np.float32))
+
+    def intersect(self, origins, directions):
+        """Closest hit of each ray.
+
+        Parameters
+        ----------
+        origins : (n, 3) float
+        directions : (n, 3) float
+            Unit directions.
+
+        Returns
+        -------
+        Hits
+        """
+        n = len(origins)
+        if n == 0:
+            empty = np.zeros(0)
+            return Hits(empty, np.zeros(0, np.int32), empty, empty)
+        o, d = self._rays32(origins, directions)
+        result = self._scene.run(o, d, output=1)
+        prim = result["primID"]
+        t = result["tfar"].astype(np.float64)
+        t[prim < 0] = np.inf
+        return Hits(t, prim, result["u"].astype(np.float64), result["v"].astype(np.float64))
+
+    def occluded(self, origins, directions, t_max):
+        """Whether anything lies on each ray between its origin and ``t_max``.
+
+        Parameters
+        ----------
+        origins : (n, 3) float
+        directions : (n, 3) float
+            Unit directions.
+        t_max : (n,) float
+            Segment length; ``inf`` for rays to infinitely distant lights.
+
+        Returns
+        -------
+        (n,) bool
+        """
+        if len(origins) == 0:
+            return np.zeros(0, dtype=bool)
+        o, d = self._rays32(origins, directions)
+        # embreex writes into the distance array it is given: always pass a fresh one.
+        # float32 max stands in for inf, which Embree's robust mode handles less predictably.
+        t = np.minimum(t_max, np.finfo(np.float32).max).astype(np.float32)
+        return self._scene.run(o, d, dists=t, query="OCCLUDED") != -1
+
+    def hit_points(self, hits, mask=None):
+        """World positions of hits, interpolated on the float32 triangles Embree traced.
+
+        Interpolating with the barycentrics keeps the error relative to the triangle's own
+        coordinates, whereas ``origin + t * direction`` carries the error of ``t``, which grows
+        with the ray's length.
+
+        Parameters
+        ----------
+        hits : Hits
+        mask : (n,) bool, optional
+            Only these hits (default: all, which must all be hits).
+
+        Returns
+        -------
+        (k, 3) float64
+        """
+        prim, u, v = hits.prim, hits.u, hits.v
+        if mask is not None:
+            prim, u, v = prim[mask], u[mask], v[mask]
+        tri = self.vertices[self.faces[prim]]
+        return (tri[:, 0] * (1.0 - u - v)[:, None] + tri[:, 1] * u[:, None]
+                + tri[:, 2] * v[:, None])

@@ -1,0 +1,132 @@
+"""Film: per-pixel accumulation, error estimates, output passes and tone mapping."""
+
+import numpy as np
+
+TONEMAPS = ("clamp", "reinhard", "aces")
+
+
+class Film:
+    """Per-pixel sums of sample radiance and of its square, plus requested passes.
+
+    Parameters
+    ----------
+    width, height : int
+    passes : dict of str to int
+        Name and channel count of each extra pass to accumulate (e.g. ``{"ao": 1}``).
+
+    Attributes
+    ----------
+    sum, sum_sq : (height * width, 3) float64
+        Sum over samples of radiance and radiance squared, per pixel (row-major).
+    count : (height * width,) int64
+        Samples per pixel so far.
+    pass_sums : dict of str to (height * width, k) float64
+    """
+
+    def __init__(self, width, height, passes=None):
+        self.width, self.height = int(width), int(height)
+        n = self.width * self.height
+        self.sum = np.zeros((n, 3))
+        self.sum_sq = np.zeros((n, 3))
+        self.count = np.zeros(n, dtype=np.int64)
+        self.pass_sums = {name: np.zeros((n, k)) for name, k in (passes or {}).items()}
+
+    def add_tile(self, first_pixel, radiance, passes=None):
+        """Add the samples of a run of consecutive pixels.
+
+        Parameters
+        ----------
+        first_pixel : int
+            Linear index of the first pixel of the run.
+        radiance : (m, spp, 3) float
+            Radiance of every sample of the ``m`` pixels.
+        passes : dict of str to (m, spp, k) float, optional
+        """
+        m, spp = radiance.shape[:2]
+        px = slice(first_pixel, first_pixel + m)
+        # add samples one index at a time so each pixel's sum has the same rounding
+        # whatever the tile size or thread count (bit-identical renders)
+        for s in range(spp):
+            r = radiance[:, s]
+            self.sum[px] += r
+            self.sum_sq[px] += r * r
+            for name, values in (passes or {}).items():
+                self.pass_sums[name][px] += values[:, s]
+        self.count[px] += spp
+
+    def _to_image(self, values):
+        return values.reshape(self.height, self.width, -1).astype(np.float32)
+
+    def image(self):
+        """(height, width, 3) float32: mean radiance per pixel (box filter)."""
+        return self._to_image(self.sum / np.maximum(self.count, 1)[:, None])
+
+    def variance_of_mean(self):
+        """(height, width, 3) float32: estimated variance of each pixel's mean.
+
+        The unbiased sample variance divided by the sample count; zero where a pixel has
+        fewer than two samples (no estimate possible).
+        """
+        n = self.count[:, None].astype(np.float64)
+        mean = self.sum / np.maximum(n, 1)
+        var = (self.sum_sq - n * mean * mean) / np.maximum(n - 1, 1)
+        var = np.where(n > 1, np.maximum(var, 0.0), 0.0) / np.maximum(n, 1)
+        return self._to_image(var)
+
+    def relative_error(self):
+        """Mean relative standard error of the image, a scalar estimate of its own error.
+
+        The standard error of each pixel's luminance-free mean (per channel), divided by the
+        mean plus 0.01 (so near-black pixels do not dominate), averaged over all pixels and
+        channels.  NaN when pixels have fewer than two samples.
+        """
+        if self.count.min() < 2:
+            return float("nan")
+        mean = self.sum / self.count[:, None]
+        std_err = np.sqrt(self.variance_of_mean().reshape(-1, 3))
+        return float(np.mean(std_err / (np.abs(mean) + 0.01)))
+
+    def pass_image(self, name):
+        """(height, width, k) float32: the mean of a pass per pixel."""
+        return self._to_image(self.pass_sums[name] / np.maximum(self.count, 1)[:, None])
+
+
+def tonemap(image, exposure=0.0, operator="reinhard"):
+    """Map linear radiance to display values in [0, 1] (still linear, not sRGB-encoded).
+
+    Parameters
+    ----------
+    image : (h, w, 3) float
+        Linear radiance.
+    exposure : float
+        Exposure in stops: the image is scaled by ``2**exposure`` first.
+    operator : {"clamp", "reinhard", "aces"}
+        ``clamp`` cuts at 1; ``reinhard`` is ``x / (1 + x)`` per channel; ``aces`` is
+        Narkowicz's fit of the ACES filmic curve.
+
+    Returns
+    -------
+    (h, w, 3) float32
+    """
+    x = np.maximum(np.asarray(image, dtype=np.float32) * np.float32(2.0 ** exposure), 0.0)
+    if operator == "clamp":
+        y = x
+    elif operator == "reinhard":
+        y = x / (1.0 + x)
+    elif operator == "aces":
+        y = (x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14)
+    else:
+        raise ValueError(f"unknown tonemap {operator!r}; expected one of {', '.join(TONEMAPS)}")
+    return np.clip(y, 0.0, 1.0).astype(np.float32)
+
+
+def linear_to_srgb(x):
+    """sRGB transfer function (IEC 61966-2-1) of linear values in [0, 1]."""
+    x = np.clip(x, 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
+
+
+def srgb_to_linear(x):
+    """Inverse of :func:`linear_to_srgb`."""
+    x = np.clip(x, 0.0, 1.0)
+    return np.where(x <= 0.04045, x / 12.92, np.power((x + 0.055) / 1.055, 2.4))

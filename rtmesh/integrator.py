@@ -1,0 +1,453 @@
+"""The wavefront Whitted integrator.
+
+Each chunk of pixel samples is rendered as a sequence of named stages, every stage working
+on whole ray batches (no per-ray Python loop)::
+
+    camera rays -> [intersect -> misses -> absorption -> surfaces -> local shading
+                    (ambient/AO, lights with shadow rays) -> spawn reflection and
+                    refraction rays] repeated until max depth or no ray is left
+                -> film
+
+Rays carry the index of the sample they belong to and their throughput; contributions go
+back to the sample by scattering.  Chunks run on a thread pool (Embree and NumPy release
+the GIL).  Every random number is a function of (seed, pixel, sample, dimension), and each
+pixel is rendered whole inside one chunk, so the image is bit-identical whatever the thread
+count and chunk size.
+
+Before rendering, :class:`Integrator` looks at the scene and the settings and enables only
+the stages that can contribute (see :attr:`Integrator.stages`).
+"""
+
+import dataclasses
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+from .accel import Accel, offset_ray_origins
+from .batches import RayBatch
+from .film import Film
+from .sampling import Dim, pixel_offsets, square_to_cosine_hemisphere, uniform2
+from .settings import RenderStats
+from .vecmath import dot, fresnel_dielectric, fresnel_schlick, normalize, orthonormal_basis, reflect, refract
+from .materials import blinn_phong
+
+# Shadow rays to point and spot lights stop this fraction short of the light, so a light
+# placed exactly on a surface does not count that surface as an occluder.
+_SHADOW_SHORTEN = 1.0 - 1e-5
+
+
+@dataclass
+class RenderResult:
+    """Output of :func:`render`.
+
+    Attributes
+    ----------
+    image : (height, width, 3) float32
+        Linear radiance, row 0 at the top.
+    passes : dict of str to (height, width, k) float32
+        Requested extra passes.
+    stats : RenderStats
+    film : Film
+        The accumulation buffers (sums, sums of squares) for error estimates.
+    """
+
+    image: np.ndarray
+    passes: dict
+    stats: RenderStats
+    film: Film
+
+
+class _Surfaces:
+    """Shading records of the rays that hit something (one row per hit).
+
+    ``ng`` and ``ns`` are flipped to the side the ray came from; ``front`` says whether that
+    is the outer side of the triangle (counter-clockwise winding).
+    """
+
+    __slots__ = ("p", "ng", "ns", "wo", "front", "mat", "t")
+
+
+def _translated(obj, shift):
+    """A copy of a camera or light moved by ``-shift`` (directions are unchanged)."""
+    changes = {}
+    for name in ("position", "look_at"):
+        if hasattr(obj, name):
+            changes[name] = getattr(obj, name) - shift
+    return dataclasses.replace(obj, **changes) if changes else obj
+
+
+class Integrator:
+    """Renders one scene with one set of settings.
+
+    Parameters
+    ----------
+    scene : Scene
+    settings : RenderSettings
+
+    Attributes
+    ----------
+    stages : dict of str to bool
+        Which optional stages this scene and these settings need.
+    """
+
+    def __init__(self, scene, settings):
+        self.settings = settings.validate()
+        self.scene = scene
+        # Re-centre the scene on the origin before it meets float32: float32 resolution is
+        # relative to the size of the coordinates, so a model 1e6 units from the origin would
+        # otherwise be traced on a grid of 1/16 unit.  Shading sees the same shifted frame.
+        self.shift = scene.bounds.mean(axis=0)
+        self.accel = Accel(scene.vertices - self.shift, scene.faces)
+        self.camera = _translated(scene.camera, self.shift)
+        self.camera.frame()  # fail early on a degenerate camera
+        self.lights = [_translated(light, self.shift) for light in scene.lights if not light.is_black]
+        m = scene.materials
+        self.ao_distance = settings.ao_distance or 0.2 * float(np.linalg.norm(np.ptp(scene.bounds, axis=0)))
+        ambient_on = bool((scene.ambient > 0).any() and (m.ambient > 0).any())
+        self.stages = {
+            "emission": m.any_emission,
+            "ambient": ambient_on,
+            "lights": bool(self.lights) and bool(((m.diffuse > 0) | (m.specular > 0)).any()),
+            "specular": m.any_specular,
+            "smooth_normals": scene.vertex_normals is not None,
+            "reflection": settings.max_depth > 0 and (m.any_mirror or m.any_transmission),
+            "refraction": settings.max_depth > 0 and m.any_transmission,
+            "absorption": m.any_absorption,
+            "background": bool((scene.background > 0).any()),
+            "ao": settings.ao_samples > 0 and (ambient_on or "ao" in settings.passes),
+            "lens": self.camera.aperture > 0.0,
+        }
+        self.ao_samples = settings.ao_samples or (16 if "ao" in settings.passes else 0)
+        if "ao" in settings.passes:
+            self.stages["ao"] = True
+        # per-material flags, looked up per hit
+        self._reflective = (m.mirror > 0).any(axis=1) | (m.transmission > 0).any(axis=1)
+        self._transmissive = (m.transmission > 0).any(axis=1)
+        self._shaded = (m.diffuse > 0).any(axis=1) | (m.specular > 0).any(axis=1)
+        self._ior = np.concatenate([m.ior, [1.0]])  # index -1 (outside) reads 1.0: vacuum/air
+        self._fresnel = fresnel_exact_or_schlick(settings.fresnel)
+
+    # ---------------------------------------------------------------- whole image
+    def render(self, progress=None):
+        """Render the image.
+
+        Parameters
+        ----------
+        progress : callable, optional
+            Called as ``progress(chunks_done, chunks_total)`` from the calling thread.
+
+        Returns
+        -------
+        RenderResult
+        """
+        s = self.settings
+        start = time.perf_counter()
+        film = Film(s.width, s.height, {"ao": 1} if "ao" in s.passes else None)
+        n_pixels = s.width * s.height
+        pixels_per_chunk = max(1, s.chunk_samples // s.spp)
+        chunks = [(p, min(p + pixels_per_chunk, n_pixels)) for p in range(0, n_pixels, pixels_per_chunk)]
+        stats = RenderStats(threads=s.thread_count)
+        stats.stages_enabled = [name for name, on in self.stages.items() if on]
+
+        def finish(first_pixel, result, done):
+            radiance, passes, chunk_stats = result
+            t0 = time.perf_counter()
+            film.add_tile(first_pixel, radiance, passes)
+            chunk_stats.stage_seconds["film"] += time.perf_counter() - t0
+            stats.merge(chunk_stats)
+            if progress is not None:
+                progress(done, len(chunks))
+
+        if s.thread_count == 1 or len(chunks) == 1:
+            for i, (p0, p1) in enumerate(chunks):
+                finish(p0, self.render_chunk(p0, p1), i + 1)
+        else:
+            with ThreadPoolExecutor(max_workers=s.thread_count) as pool:
+                futures = [pool.submit(self.render_chunk, p0, p1) for p0, p1 in chunks]
+                # results are added in chunk order; pixels never overlap, so order only
+                # matters for the stats, which are sums of integers and timings
+                for i, ((p0, _), future) in enumerate(zip(chunks, futures)):
+                    finish(p0, future.result(), i + 1)
+        stats.wall_seconds = time.perf_counter() - start
+        stats.relative_error = film.relative_error()
+        passes = {name: film.pass_image(name) for name in film.pass_sums}
+        return RenderResult(film.image(), passes, stats, film)
+
+    # ---------------------------------------------------------------- one chunk
+    def render_chunk(self, first_pixel, end_pixel):
+        """Render every sample of the pixels ``first_pixel .. end_pixel - 1``.
+
+        Returns
+        -------
+        radiance : (m, spp, 3) float64
+        passes : dict of str to (m, spp, k) float64
+        stats : RenderStats
+            Ray counts and stage times of this chunk.
+        """
+        s = self.settings
+        stats = RenderStats()
+        clock = _Clock(stats.stage_seconds)
+        m = end_pixel - first_pixel
+        n = m * s.spp
+
+        # camera: one ray per pixel sample
+        pixel = np.repeat(np.arange(first_pixel, end_pixel, dtype=np.int64), s.spp)
+        sample_in_pixel = np.tile(np.arange(s.spp, dtype=np.int64), m)
+        film_xy = pixel_offsets(s.sampler, s.seed, pixel, sample_in_pixel, s.spp)
+        film_xy[:, 0] += pixel % s.width
+        film_xy[:, 1] += pixel // s.width
+        lens_uv = uniform2(s.seed, pixel, sample_in_pixel, Dim.LENS) if self.stages["lens"] else None
+        origins, directions = self.camera.generate_rays(film_xy, s.width, s.height, lens_uv)
+        rays = RayBatch(origins, directions, np.arange(n, dtype=np.int64), np.ones((n, 3)),
+                        np.full(n, -1, dtype=np.int32))
+        radiance = np.zeros((n, 3))
+        ao_pass = np.ones((n, 1)) if "ao" in s.passes else None
+        stats.rays["camera"] += n
+        clock.lap("camera")
+
+        keys = (pixel, sample_in_pixel)
+        for depth in range(s.max_depth + 1):
+            if not len(rays):
+                break
+            hits = self.accel.intersect(rays.origins, rays.directions)
+            clock.lap("intersect")
+            rays = self._shade(rays, hits, depth, radiance, ao_pass, keys, stats, clock)
+
+        passes = {"ao": ao_pass.reshape(m, s.spp, 1)} if ao_pass is not None else None
+        return radiance.reshape(m, s.spp, 3), passes, stats
+
+    # ---------------------------------------------------------------- stages
+    def _shade(self, rays, hits, depth, radiance, ao_pass, keys, stats, clock):
+        """Shade one depth level; returns the rays of the next level."""
+        hit = hits.prim >= 0
+        m = self.scene.materials
+
+        # absorption: rays inside a medium lose light over the distance they travelled
+        if self.stages["absorption"]:
+            inside = rays.medium >= 0
+            if inside.any():
+                sigma = m.absorption[rays.medium[inside]]
+                t = hits.t[inside][:, None]
+                # exp(-0 * inf) would be NaN for a non-absorbing medium left through a hole
+                rays.throughput[inside] *= np.where(sigma > 0, np.exp(-sigma * t), 1.0)
+
+        # misses: rays leaving the scene see the background
+        if self.stages["background"] and not hit.all():
+            miss = ~hit
+            _scatter_add(radiance, rays.sample[miss], rays.throughput[miss] * self.scene.background)
+
+        if not hit.any():
+            return RayBatch.empty()
+        rays = rays.subset(hit)
+        prim = hits.prim[hit]
+        srf = self._surfaces(rays, hits, hit, prim)
+        clock.lap("shade")
+
+        local = self._local_shading(srf, rays, depth, ao_pass, keys, stats, clock)
+        if local is not None:
+            _scatter_add(radiance, rays.sample, local * rays.throughput)
+        clock.lap("shade")
+
+        if depth >= self.settings.max_depth or not self.stages["reflection"]:
+            return RayBatch.empty()
+        next_rays = self._spawn(srf, rays, stats)
+        clock.lap("spawn")
+        return next_rays
+
+    def _surfaces(self, rays, hits, hit, prim):
+        """Hit points, normals facing the incoming ray, and material ids."""
+        sc = self.scene
+        srf = _Surfaces()
+        srf.p = self.accel.hit_points(hits, hit)
+        srf.t = hits.t[hit]
+        srf.wo = -rays.directions
+        ng = sc.face_normals[prim]
+        srf.front = dot(rays.directions, ng) < 0.0
+        flip = np.where(srf.front, 1.0, -1.0)[:, None]
+        srf.ng = ng * flip
+        srf.mat = sc.material_id[prim]
+        if self.stages["smooth_normals"]:
+            u, v = hits.u[hit], hits.v[hit]
+            tri = sc.faces[prim]
+            vn = sc.vertex_normals
+            ns = (vn[tri[:, 0]] * (1.0 - u - v)[:, None] + vn[tri[:, 1]] * u[:, None]
+                  + vn[tri[:, 2]] * v[:, None])
+            ns = normalize(ns) * flip
+            smooth = sc.smooth[prim] & (dot(ns, srf.ng) > 0.0)
+            srf.ns = np.where(smooth[:, None], ns, srf.ng)
+        else:
+            srf.ns = srf.ng
+        return srf
+
+    def _local_shading(self, srf, rays, depth, ao_pass, keys, stats, clock):
+        """Emission, ambient (with AO) and direct light with hard shadows; (k, 3) or None."""
+        m = self.scene.materials
+        st = self.stages
+        local = None
+        if st["emission"]:
+            local = m.emission[srf.mat].copy()
+
+        ao = None
+        if st["ao"] and (st["ambient"] or (depth == 0 and ao_pass is not None)):
+            ao = self._ambient_occlusion(srf, rays, depth, keys, stats)
+            if depth == 0 and ao_pass is not None:
+                ao_pass[rays.sample, 0] = ao
+            clock.lap("ao")
+        if st["ambient"]:
+            amb = m.ambient[srf.mat] * self.scene.ambient
+            if ao is not None:
+                amb *= ao[:, None]
+            local = amb if local is None else local + amb
+
+        if st["lights"]:
+            shaded = self._shaded[srf.mat]
+            idx = np.flatnonzero(shaded)
+            if len(idx):
+                direct = self._direct_light(srf, idx, stats, clock)
+                if local is None:
+                    local = np.zeros((len(srf.mat), 3))
+                local[idx] += direct
+        return local
+
+    def _direct_light(self, srf, idx, stats, clock):
+        """Blinn-Phong light from every light, with one shadow ray per lit (hit, light)."""
+        m = self.scene.materials
+        p, ng, ns, wo, mat = srf.p[idx], srf.ng[idx], srf.ns[idx], srf.wo[idx], srf.mat[idx]
+        kd = m.diffuse[mat]
+        ks = m.specular[mat] if self.stages["specular"] else None
+        shininess = m.shininess[mat] if ks is not None else None
+        shadow_origins = offset_ray_origins(p, ng)
+        total = np.zeros((len(idx), 3))
+        for light in self.lights:
+            wi, distance, incident = light.illuminate(p)
+            # only lights on the side the ray came from can light this point (no leaks
+            # through the surface), and only where the light reaches at all
+            lit = (dot(wi, ng) > 0.0) & (incident > 0.0).any(axis=1)
+            j = np.flatnonzero(lit)
+            if not len(j):
+                continue
+            value = blinn_phong(ns[j], wo[j], wi[j], kd[j], None if ks is None else ks[j],
+                                None if shininess is None else shininess[j])
+            clock.lap("shade")
+            occluded = self.accel.occluded(shadow_origins[j], wi[j], distance[j] * _SHADOW_SHORTEN)
+            stats.rays["shadow"] += len(j)
+            clock.lap("shadow")
+            visible = ~occluded
+            total[j[visible]] += value[visible] * incident[j[visible]]
+        return total
+
+    def _ambient_occlusion(self, srf, rays, depth, keys, stats):
+        """Fraction of cosine-weighted hemisphere rays that escape within ``ao_distance``."""
+        pixel, sample_in_pixel = keys
+        k = len(srf.mat)
+        n_ao = self.ao_samples
+        origins = offset_ray_origins(srf.p, srf.ng)
+        t, b = orthonormal_basis(srf.ng)
+        px, sp = pixel[rays.sample], sample_in_pixel[rays.sample]
+        free = np.zeros(k)
+        for i in range(n_ao):
+            u = uniform2(self.settings.seed, px, sp, Dim.AO + 2 * (i + depth * 1024))
+            w = square_to_cosine_hemisphere(u)
+            d = t * w[:, :1] + b * w[:, 1:2] + srf.ng * w[:, 2:3]
+            free += ~self.accel.occluded(origins, d, np.full(k, self.ao_distance))
+        stats.rays["ao"] += k * n_ao
+        return free / n_ao
+
+    def _spawn(self, srf, rays, stats):
+        """Mirror-reflection and refraction rays with their throughput weights."""
+        m = self.scene.materials
+        reflective = self._reflective[srf.mat]
+        if not reflective.any():
+            return RayBatch.empty()
+        idx = np.flatnonzero(reflective)
+        mat = srf.mat[idx]
+        wo, ng, ns = srf.wo[idx], srf.ng[idx], srf.ns[idx]
+        beta = rays.throughput[idx]
+        reflect_weight = m.mirror[mat]
+        batches = []
+
+        refract_batch = None
+        if self.stages["refraction"]:
+            trans = self._transmissive[mat]
+            j = np.flatnonzero(trans)
+            if len(j):
+                mat_j = mat[j]
+                entering = srf.front[idx[j]]
+                ior_outside = self._ior[rays.medium[idx[j]]]
+                ior_inside = m.ior[mat_j]
+                # leaving an object returns the ray to the outside (air) in this model
+                eta = np.where(entering, ior_outside / ior_inside, ior_inside)
+                cos_i = np.clip(dot(wo[j], ns[j]), 0.0, 1.0)
+                fresnel = self._fresnel(cos_i, eta)
+                wt, tir = refract(wo[j], ns[j], eta)
+                # a shading normal can bend the refracted ray back to the incoming side of
+                # the real surface; such rays cannot go through and are dropped
+                ok = ~tir & (dot(wt, ng[j]) < 0.0)
+                transmission = m.transmission[mat_j]
+                reflect_weight = reflect_weight.copy()
+                reflect_weight[j] += np.where(tir, 1.0, fresnel)[:, None] * transmission
+                w_t = (1.0 - fresnel)[:, None] * transmission
+                keep = ok & ((beta[j] * w_t).max(axis=1) >= self.settings.cutoff)
+                jk = j[keep]
+                if len(jk):
+                    refract_batch = RayBatch(
+                        offset_ray_origins(srf.p[idx[jk]], -ng[jk]),
+                        wt[keep],
+                        rays.sample[idx[jk]],
+                        beta[jk] * w_t[keep],
+                        np.where(entering[keep], mat_j[keep], -1).astype(np.int32),
+                    )
+                    stats.rays["refraction"] += len(jk)
+
+        beta_r = beta * reflect_weight
+        keep = beta_r.max(axis=1) >= self.settings.cutoff
+        if keep.any():
+            wr = reflect(wo[keep], ns[keep])
+            # a shading normal can send the mirror direction under the real surface:
+            # fall back to the geometric mirror direction there
+            below = dot(wr, ng[keep]) <= 0.0
+            if below.any():
+                wr[below] = reflect(wo[keep][below], ng[keep][below])
+            batches.append(RayBatch(
+                offset_ray_origins(srf.p[idx[keep]], ng[keep]),
+                wr,
+                rays.sample[idx[keep]],
+                beta_r[keep],
+                rays.medium[idx[keep]],
+            ))
+            stats.rays["reflection"] += int(keep.sum())
+        if refract_batch is not None:
+            batches.append(refract_batch)
+        return RayBatch.concatenate(batches)
+
+
+def fresnel_exact_or_schlick(mode):
+    """The Fresnel function for a ``fresnel`` setting."""
+    return fresnel_dielectric if mode == "exact" else fresnel_schlick
+
+
+def _scatter_add(target, index, values):
+    """``target[index] += values`` with repeated indices accumulating, in index order."""
+    np.add.at(target, index, values)
+
+
+class _Clock:
+    """Adds the time since the previous lap to a named stage."""
+
+    __slots__ = ("seconds", "last")
+
+    def __init__(self, seconds):
+        self.seconds = seconds
+        self.last = time.perf_counter()
+
+    def lap(self, stage):
+        now = time.perf_counter()
+        self.seconds[stage] += now - self.last
+        self.last = now
+
+
+def render(scene, settings, progress=None):
+    """Render ``scene`` with ``settings``; see :meth:`Integrator.render`."""
+    return Integrator(scene, settings).render(progress)

@@ -1,0 +1,154 @@
+"""Materials: the Blinn-Phong surface model with mirror reflection and dielectric transmission.
+
+A material's reflected radiance toward ``wo`` under a light of incident radiance-like term
+``E`` (intensity / distance^2 for point lights, irradiance for directional lights) from
+``wi`` is::
+
+    L = emission + ambient * ambient_light * ao
+        + sum over lights of E * (diffuse * cos(theta_i) + specular * max(0, n.h)^shininess)
+
+(no 1/pi: ``diffuse`` is the classic Phong kd).  On top of that local term a material can
+spawn a mirror-reflected ray weighted by ``mirror`` (a colour: metals tint their
+reflections) and, when ``transmission`` > 0, behaves as a smooth dielectric of index
+``ior``: it reflects with the Fresnel weight ``F * transmission`` and refracts with
+``(1 - F) * transmission``; inside, light is attenuated by Beer-Lambert with ``absorption``
+(per scene unit).
+"""
+
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+
+
+def _colour(value):
+    a = np.asarray(value, dtype=np.float64)
+    return np.repeat(a, 3) if a.ndim == 0 else a.reshape(3)
+
+
+@dataclass
+class Material:
+    """One surface material; colours are linear RGB.
+
+    Attributes
+    ----------
+    name : str
+    diffuse : (3,) float
+        Lambert reflectance kd.
+    specular : (3,) float
+        Blinn-Phong specular reflectance ks.
+    shininess : float
+        Blinn-Phong exponent (larger = smaller, sharper highlight).
+    ambient : (3,) float or None
+        Ambient reflectance ka; None means "same as diffuse".
+    mirror : (3,) float
+        Mirror reflectance kr (tinted for metals).
+    transmission : (3,) float
+        Fraction of light handled as a smooth dielectric; > 0 makes the material refract.
+    ior : float
+        Index of refraction of the interior.
+    absorption : (3,) float
+        Beer-Lambert absorption coefficient of the interior, 1 / scene unit.
+    emission : (3,) float
+        Emitted radiance.
+    """
+
+    name: str = "default"
+    diffuse: np.ndarray = field(default_factory=lambda: np.full(3, 0.7))
+    specular: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    shininess: float = 32.0
+    ambient: np.ndarray | None = None
+    mirror: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    transmission: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    ior: float = 1.5
+    absorption: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    def __post_init__(self):
+        for f in fields(self):
+            if f.name in ("name", "shininess", "ior"):
+                continue
+            value = getattr(self, f.name)
+            if value is not None:
+                setattr(self, f.name, _colour(value))
+        if self.ambient is None:
+            self.ambient = self.diffuse.copy()
+
+
+class MaterialTable:
+    """The scene's materials as stacked arrays, indexed by material id.
+
+    Attributes
+    ----------
+    materials : list of Material
+    diffuse, specular, ambient, mirror, transmission, absorption, emission : (m, 3) float
+    shininess, ior : (m,) float
+    """
+
+    def __init__(self, materials):
+        self.materials = list(materials)
+        for name in ("diffuse", "specular", "ambient", "mirror", "transmission", "absorption",
+                     "emission"):
+            setattr(self, name, np.array([getattr(m, name) for m in self.materials], dtype=np.float64).reshape(-1, 3))
+        self.shininess = np.array([m.shininess for m in self.materials], dtype=np.float64)
+        self.ior = np.array([m.ior for m in self.materials], dtype=np.float64)
+
+    def __len__(self):
+        return len(self.materials)
+
+    @property
+    def any_specular(self):
+        """True if any material has a specular highlight."""
+        return bool((self.specular > 0).any())
+
+    @property
+    def any_mirror(self):
+        """True if any material spawns mirror-reflection rays."""
+        return bool((self.mirror > 0).any())
+
+    @property
+    def any_transmission(self):
+        """True if any material refracts."""
+        return bool((self.transmission > 0).any())
+
+    @property
+    def any_emission(self):
+        """True if any material emits."""
+        return bool((self.emission > 0).any())
+
+    @property
+    def any_absorption(self):
+        """True if any refracting material absorbs inside."""
+        return bool(((self.absorption > 0).any(axis=1) & (self.transmission > 0).any(axis=1)).any())
+
+
+def blinn_phong(n, wo, wi, diffuse, specular, shininess):
+    """Blinn-Phong reflected-radiance factor for unit incident light.
+
+    Parameters
+    ----------
+    n : (k, 3) float
+        Unit shading normals.
+    wo, wi : (k, 3) float
+        Unit directions toward the viewer and toward the light.
+    diffuse, specular : (k, 3) float
+        kd and ks.
+    shininess : (k,) float
+        Specular exponent.
+
+    Returns
+    -------
+    (k, 3) float
+        ``kd * max(0, n.wi) + ks * max(0, n.h)^shininess`` (the specular term only where
+        ``n.wi > 0``), to be multiplied by the light's intensity / distance^2 or irradiance.
+    """
+    cos_i = np.einsum("ij,ij->i", n, wi)
+    lit = cos_i > 0.0
+    value = diffuse * np.maximum(cos_i, 0.0)[:, None]
+    if specular is not None:
+        h = wo + wi
+        h_len = np.sqrt(np.einsum("ij,ij->i", h, h))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cos_h = np.einsum("ij,ij->i", n, h) / h_len
+        cos_h = np.where(lit & (h_len > 0), np.maximum(cos_h, 0.0), 0.0)
+        value = value + specular * (cos_h ** shininess)[:, None]
+    return value

@@ -1,0 +1,223 @@
+"""The flattened scene: one triangle soup with per-face material and object ids."""
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .camera import Camera, frame_bounds
+from .errors import MeshError
+from .lights import DirectionalLight
+from .materials import Material, MaterialTable
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class MeshPart:
+    """One mesh placed in the scene, before flattening.
+
+    Attributes
+    ----------
+    name : str
+        Object name (for messages and the object-id pass).
+    vertices : (v, 3) float
+        World-space positions.
+    faces : (f, 3) int
+        Vertex indices, counter-clockwise seen from the outside.
+    material : int
+        Index into the scene's material list.
+    vertex_normals : (v, 3) float or None
+        Unit normals for smooth shading; None shades flat.
+    """
+
+    name: str
+    vertices: np.ndarray
+    faces: np.ndarray
+    material: int = 0
+    vertex_normals: np.ndarray | None = None
+
+
+@dataclass
+class Scene:
+    """Everything the renderer needs, as flat arrays.
+
+    Attributes
+    ----------
+    vertices : (V, 3) float64
+    faces : (F, 3) int32
+    face_normals : (F, 3) float64
+        Unit geometric normals from the winding order.
+    vertex_normals : (V, 3) float64 or None
+        Unit shading normals; None when no object is smooth-shaded.
+    smooth : (F,) bool or None
+        Which faces interpolate ``vertex_normals``; None when none do.
+    material_id : (F,) int32
+    object_id : (F,) int32
+    object_names : list of str
+    materials : MaterialTable
+    lights : list
+    camera : Camera
+    ambient : (3,) float
+        Ambient light colour multiplying every material's ``ambient`` reflectance.
+    background : (3,) float
+        Radiance of rays that leave the scene.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    face_normals: np.ndarray
+    vertex_normals: np.ndarray | None
+    smooth: np.ndarray | None
+    material_id: np.ndarray
+    object_id: np.ndarray
+    object_names: list
+    materials: MaterialTable
+    lights: list
+    camera: Camera
+    ambient: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    background: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    @property
+    def bounds(self):
+        """(2, 3) float: axis-aligned bounds of the geometry."""
+        used = self.vertices[np.unique(self.faces)]
+        return np.stack([used.min(axis=0), used.max(axis=0)])
+
+    @classmethod
+    def from_parts(cls, parts, materials=None, lights=None, camera=None, ambient=None,
+                   background=None, source="scene"):
+        """Flatten mesh parts into one scene, dropping faces that cannot render.
+
+        Faces that touch a non-finite vertex or have zero area are removed with a warning
+        naming the object; an object with nothing left is dropped; a scene with nothing left
+        is an error.
+
+        Parameters
+        ----------
+        parts : list of MeshPart
+        materials : list of Material, optional
+            Defaults to a single grey material.
+        lights : list, optional
+            Defaults to :func:`default_lights` (a three-light rig).
+        camera : Camera, optional
+            Defaults to one framing the bounds (:func:`rtmesh.camera.frame_bounds`).
+        ambient, background : (3,) float, optional
+        source : str
+            Where the parts came from, for error messages.
+
+        Raises
+        ------
+        MeshError
+            If no renderable triangle remains.
+        """
+        materials = list(materials) if materials else [Material()]
+        vertices, faces, normals, vnormals, smooth, mat_ids, obj_ids, names = ([] for _ in range(8))
+        offset = 0
+        for part in parts:
+            v = np.asarray(part.vertices, dtype=np.float64).reshape(-1, 3)
+            f = np.asarray(part.faces, dtype=np.int64).reshape(-1, 3)
+            if len(f) and (f.min() < 0 or f.max() >= len(v)):
+                raise MeshError(f"{source}: object '{part.name}' has face indices out of range")
+            if part.material < 0 or part.material >= len(materials):
+                raise MeshError(f"{source}: object '{part.name}' uses unknown material {part.material}")
+            keep = np.isfinite(v).all(axis=1)[f].all(axis=1)
+            if not keep.all():
+                log.warning("%s: object '%s': dropped %d faces with NaN/Inf vertices",
+                            source, part.name, int((~keep).sum()))
+            f = f[keep]
+            tri = v[f]
+            cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+            area2 = np.linalg.norm(cross, axis=1)
+            nondegenerate = area2 > 0.0
+            if not nondegenerate.all():
+                log.warning("%s: object '%s': dropped %d zero-area faces",
+                            source, part.name, int((~nondegenerate).sum()))
+            f, cross, area2 = f[nondegenerate], cross[nondegenerate], area2[nondegenerate]
+            if not len(f):
+                log.warning("%s: object '%s' has no renderable triangles; skipped", source, part.name)
+                continue
+            # non-finite vertices that no face uses are harmless but must not reach Embree
+            vertices.append(np.where(np.isfinite(v), v, 0.0))
+            faces.append(f + offset)
+            normals.append(cross / area2[:, None])
+            vn, face_smooth = _unit_vertex_normals(part.vertex_normals, v, f)
+            vnormals.append(vn)
+            smooth.append(face_smooth)
+            mat_ids.append(np.full(len(f), part.material, dtype=np.int32))
+            obj_ids.append(np.full(len(f), len(names), dtype=np.int32))
+            names.append(part.name)
+            offset += len(v)
+        if not faces:
+            raise MeshError(f"{source}: nothing to render (no non-degenerate triangles with finite vertices)")
+        smooth_faces = np.concatenate(smooth)
+        if smooth_faces.any():
+            vertex_normals = np.concatenate(vnormals)
+        else:
+            # flat shading everywhere: no normal interpolation stage at all
+            vertex_normals, smooth_faces = None, None
+        vertices = np.concatenate(vertices)
+        faces = np.concatenate(faces).astype(np.int32)
+        scene = cls(
+            vertices=vertices,
+            faces=faces,
+            face_normals=np.concatenate(normals),
+            vertex_normals=vertex_normals,
+            smooth=smooth_faces,
+            material_id=np.concatenate(mat_ids),
+            object_id=np.concatenate(obj_ids),
+            object_names=names,
+            materials=MaterialTable(materials),
+            lights=list(lights) if lights is not None else [],
+            camera=camera,
+            ambient=np.asarray(ambient if ambient is not None else np.zeros(3), dtype=np.float64),
+            background=np.asarray(background if background is not None else np.zeros(3), dtype=np.float64),
+        )
+        if camera is None:
+            scene.camera = frame_bounds(scene.bounds)
+        if lights is None:
+            scene.lights = default_lights(scene.camera)
+        return scene
+
+
+def _unit_vertex_normals(vertex_normals, vertices, faces):
+    """Unit vertex normals and the faces that can use them.
+
+    Returns
+    -------
+    normals : (v, 3) float
+        Unit normals (zero rows where the input was unusable).
+    smooth : (f,) bool
+        True for faces whose three vertex normals are all usable; the others shade flat.
+    """
+    if vertex_normals is None:
+        return np.zeros_like(vertices), np.zeros(len(faces), dtype=bool)
+    vn = np.asarray(vertex_normals, dtype=np.float64).reshape(-1, 3)
+    length = np.linalg.norm(vn, axis=1)
+    good = np.isfinite(length) & (length > 0.0)
+    vn = np.where(good[:, None], vn / np.where(good, length, 1.0)[:, None], 0.0)
+    return vn, good[faces].all(axis=1)
+
+
+def default_lights(camera):
+    """A three-light rig (key, fill, rim) of directional lights placed relative to the camera.
+
+    Directional lights make the rig independent of the scene's scale.
+
+    Parameters
+    ----------
+    camera : Camera
+
+    Returns
+    -------
+    list of DirectionalLight
+    """
+    forward, right, up = camera.frame()
+    key = forward - 0.8 * right - 0.9 * up  # from upper left, in front of the subject
+    fill = forward + 0.9 * right - 0.2 * up  # from the right, weaker
+    rim = -forward - 0.3 * right - 0.8 * up  # from behind, separates the silhouette
+    return [
+        DirectionalLight(key, irradiance=np.full(3, 1.0)),
+        DirectionalLight(fill, irradiance=np.full(3, 0.35)),
+        DirectionalLight(rim, irradiance=np.full(3, 0.5)),
+    ]

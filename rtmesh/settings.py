@@ -1,0 +1,138 @@
+"""Render settings and render statistics."""
+
+import os
+from dataclasses import dataclass, field
+
+from .film import TONEMAPS
+from .sampling import SAMPLERS
+
+FRESNEL_MODES = ("schlick", "exact")
+PASSES = ("ao",)
+
+
+@dataclass
+class RenderSettings:
+    """How to render.
+
+    Attributes
+    ----------
+    width, height : int
+        Image size in pixels.
+    spp : int
+        Samples per pixel.
+    sampler : {"regular", "random", "jittered"}
+        Pixel sample pattern (box filter).
+    max_depth : int
+        Number of reflection/refraction bounces after the camera ray.
+    seed : int
+        Seed of every random number (same seed, same image).
+    threads : int or None
+        Worker threads; None uses every core.
+    chunk_samples : int
+        Pixel samples per work chunk; bounds memory, never changes the image.
+    cutoff : float
+        Paths whose largest throughput channel falls below this stop.
+    fresnel : {"schlick", "exact"}
+    ao_samples : int
+        Ambient-occlusion rays per hit; 0 turns AO off (unless the ``ao`` pass is asked for).
+    ao_distance : float or None
+        Occluders farther than this do not count; None means 0.2 x the scene's diagonal.
+    passes : tuple of str
+        Extra output passes (``"ao"``).
+    exposure : float
+        Stops, applied when writing 8-bit images.
+    tonemap : {"clamp", "reinhard", "aces"}
+        Operator for 8-bit images.
+    """
+
+    width: int = 640
+    height: int = 480
+    spp: int = 4
+    sampler: str = "jittered"
+    max_depth: int = 5
+    seed: int = 0
+    threads: int | None = None
+    chunk_samples: int = 32768
+    cutoff: float = 1e-3
+    fresnel: str = "schlick"
+    ao_samples: int = 0
+    ao_distance: float | None = None
+    passes: tuple = ()
+    exposure: float = 0.0
+    tonemap: str = "reinhard"
+
+    def validate(self):
+        """Raise ValueError naming the first setting out of range."""
+        checks = [
+            (self.width >= 1 and self.height >= 1, "width and height must be >= 1"),
+            (self.spp >= 1, "spp must be >= 1"),
+            (self.sampler in SAMPLERS, f"sampler must be one of {', '.join(SAMPLERS)}"),
+            (self.max_depth >= 0, "max_depth must be >= 0"),
+            (self.threads is None or self.threads >= 1, "threads must be >= 1"),
+            (self.chunk_samples >= 1, "chunk_samples must be >= 1"),
+            (self.cutoff >= 0, "cutoff must be >= 0"),
+            (self.fresnel in FRESNEL_MODES, f"fresnel must be one of {', '.join(FRESNEL_MODES)}"),
+            (self.ao_samples >= 0, "ao_samples must be >= 0"),
+            (self.ao_distance is None or self.ao_distance > 0, "ao_distance must be > 0"),
+            (all(p in PASSES for p in self.passes), f"passes must be among {', '.join(PASSES)}"),
+            (self.tonemap in TONEMAPS, f"tonemap must be one of {', '.join(TONEMAPS)}"),
+        ]
+        for ok, message in checks:
+            if not ok:
+                raise ValueError(message)
+        return self
+
+    @property
+    def thread_count(self):
+        """Threads to use: ``threads`` or the machine's usable cores."""
+        if self.threads:
+            return self.threads
+        try:
+            return len(os.sched_getaffinity(0))
+        except AttributeError:  # not on Linux
+            return os.cpu_count() or 1
+
+
+RAY_KINDS = ("camera", "shadow", "reflection", "refraction", "ao")
+STAGES = ("camera", "intersect", "shade", "shadow", "ao", "spawn", "film")
+
+
+@dataclass
+class RenderStats:
+    """What a render did.
+
+    Attributes
+    ----------
+    rays : dict of str to int
+        Rays traced per kind (see ``RAY_KINDS``).
+    stage_seconds : dict of str to float
+        Time per stage summed over threads (thread-seconds).
+    stages_enabled : list of str
+        Stages the scene needed (others never ran).
+    wall_seconds : float
+    threads : int
+    relative_error : float
+        Mean relative standard error estimated from the samples (NaN at 1 spp).
+    """
+
+    rays: dict = field(default_factory=lambda: dict.fromkeys(RAY_KINDS, 0))
+    stage_seconds: dict = field(default_factory=lambda: dict.fromkeys(STAGES, 0.0))
+    stages_enabled: list = field(default_factory=list)
+    wall_seconds: float = 0.0
+    threads: int = 1
+    relative_error: float = float("nan")
+
+    def merge(self, other):
+        """Add another (per-chunk) record's ray counts and stage times into this one."""
+        for k, v in other.rays.items():
+            self.rays[k] += v
+        for k, v in other.stage_seconds.items():
+            self.stage_seconds[k] += v
+
+    @property
+    def total_rays(self):
+        return sum(self.rays.values())
+
+    @property
+    def rays_per_second(self):
+        return self.total_rays / self.wall_seconds if self.wall_seconds > 0 else 0.0
