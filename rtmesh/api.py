@@ -1,0 +1,78 @@
+"""The Python API: load a scene, render it, write the image."""
+
+import dataclasses
+import os
+
+import trimesh
+
+from .errors import SceneError
+from .importers import load_mesh_scene, scene_from_trimesh
+from .camera import frame_bounds
+from .integrator import Integrator
+from .scene import Scene
+from .scene_file import read_scene_file
+from .settings import RenderSettings
+
+SCENE_EXTENSIONS = (".toml",)
+
+
+def load_scene(source, **settings):
+    """Load a scene from a scene file, a mesh file, or a trimesh object.
+
+    Parameters
+    ----------
+    source : str, os.PathLike, trimesh.Trimesh or trimesh.Scene
+        A ``.toml`` scene file, a mesh file (OBJ, glTF/GLB, PLY, STL, OFF), or an in-memory
+        trimesh object.  Meshes get an automatic camera and the default light rig.
+    **settings
+        Render settings (see :class:`RenderSettings`) overriding the scene file's.
+
+    Returns
+    -------
+    scene : Scene
+    settings : RenderSettings
+    """
+    overrides = {k: v for k, v in settings.items() if v is not None}
+    if isinstance(source, (trimesh.Trimesh, trimesh.Scene)):
+        scene = scene_from_trimesh(source)
+        base = RenderSettings(**overrides)
+    elif os.path.splitext(os.fspath(source))[1].lower() in SCENE_EXTENSIONS:
+        return read_scene_file(source, overrides)
+    else:
+        scene = load_mesh_scene(source)
+        base = RenderSettings(**overrides)
+    try:
+        base.validate()
+    except ValueError as exc:
+        raise SceneError(f"render settings: {exc}") from None
+    # frame for the image's aspect ratio, keeping the lights the rig placed
+    scene.camera = frame_bounds(scene.bounds, aspect=base.width / base.height)
+    return scene, base
+
+
+def render(scene, settings=None, progress=None, **overrides):
+    """Render a scene.
+
+    Parameters
+    ----------
+    scene : Scene, str, os.PathLike, trimesh.Trimesh or trimesh.Scene
+        A loaded scene, or anything :func:`load_scene` accepts.
+    settings : RenderSettings, optional
+    progress : callable, optional
+        ``progress(chunks_done, chunks_total)``.
+    **overrides
+        Render settings to change (``width=256, spp=16``...).
+
+    Returns
+    -------
+    RenderResult
+        ``image`` (height, width, 3) float32 linear radiance, ``passes``, ``stats``.
+    """
+    if not isinstance(scene, Scene):
+        scene, loaded = load_scene(scene, **overrides)
+        settings = settings or loaded
+    elif settings is None:
+        settings = RenderSettings(**overrides)
+    elif overrides:
+        settings = dataclasses.replace(settings, **overrides)
+    return Integrator(scene, settings).render(progress)

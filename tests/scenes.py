@@ -1,0 +1,164 @@
+"""Tiny scenes built in code, scalar reference functions, and a checked render helper.
+
+Everything here is shared by several test modules.  The scalar references are written
+for readability (one ray at a time, whole-word names), not speed: the vectorised rtmesh
+code is compared against them.
+"""
+
+import math
+
+import numpy as np
+import trimesh
+
+from rtmesh.camera import Camera
+from rtmesh.integrator import Integrator
+from rtmesh.lights import PointLight
+from rtmesh.materials import Material
+from rtmesh.scene import MeshPart, Scene
+from rtmesh.settings import RenderSettings
+
+
+# ---------------------------------------------------------------- geometry builders
+def icosphere(subdivisions=3, radius=1.0, centre=(0.0, 0.0, 0.0)):
+    """A trimesh icosphere of ``radius`` around ``centre`` (vertices exactly on the sphere)."""
+    mesh = trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius)
+    mesh.apply_translation(centre)
+    return mesh
+
+
+def box(extents=(1.0, 1.0, 1.0), centre=(0.0, 0.0, 0.0)):
+    """An axis-aligned trimesh box of ``extents`` around ``centre``."""
+    mesh = trimesh.creation.box(extents=extents)
+    mesh.apply_translation(centre)
+    return mesh
+
+
+def quad(corners):
+    """Two triangles spanning four corners given counter-clockwise seen from the front.
+
+    Returns
+    -------
+    vertices : (4, 3) float
+    faces : (2, 3) int
+    """
+    vertices = np.asarray(corners, dtype=np.float64).reshape(4, 3)
+    faces = np.array([[0, 1, 2], [0, 2, 3]])
+    return vertices, faces
+
+
+def floor_quad(half_size=10.0, height=0.0):
+    """A square in the plane z = ``height`` facing +z."""
+    s = half_size
+    return quad([[-s, -s, height], [s, -s, height], [s, s, height], [-s, s, height]])
+
+
+def part(name, mesh_or_arrays, material=0, smooth=False):
+    """A MeshPart from a trimesh mesh or a (vertices, faces) pair."""
+    if isinstance(mesh_or_arrays, trimesh.Trimesh):
+        vertices, faces = mesh_or_arrays.vertices, mesh_or_arrays.faces
+        normals = mesh_or_arrays.vertex_normals if smooth else None
+    else:
+        vertices, faces = mesh_or_arrays
+        normals = None
+    return MeshPart(name, np.array(vertices, dtype=np.float64), np.array(faces), material, normals)
+
+
+def sphere_on_floor_scene(shift=(0.0, 0.0, 0.0), subdivisions=3):
+    """A diffuse sphere resting on a diffuse floor, lit by one point light, seen from above.
+
+    ``shift`` moves everything (geometry, camera and light) by the same vector.
+    """
+    shift = np.asarray(shift, dtype=np.float64)
+    sphere = icosphere(subdivisions, 1.0, np.array([0.0, 0.0, 1.0]) + shift)
+    floor_vertices, floor_faces = floor_quad(8.0)
+    parts = [part("sphere", sphere, 0), part("floor", (floor_vertices + shift, floor_faces), 1)]
+    materials = [Material("sphere", diffuse=0.6), Material("floor", diffuse=0.5)]
+    lights = [PointLight(np.array([2.0, -1.0, 6.0]) + shift, 30.0)]
+    camera = Camera(np.array([0.0, -7.0, 6.0]) + shift, np.array([0.0, 0.0, 0.0]) + shift,
+                    [0.0, 0.0, 1.0], 50.0)
+    return Scene.from_parts(parts, materials, lights, camera)
+
+
+# ---------------------------------------------------------------- scalar references
+def ray_sphere_distance(origin, direction, centre, radius):
+    """Distance to the first hit of a ray with a sphere, or None when it misses.
+
+    Hits behind the origin do not count; a ray starting inside returns the exit distance.
+    """
+    oc = [origin[i] - centre[i] for i in range(3)]
+    a = sum(d * d for d in direction)
+    half_b = sum(oc[i] * direction[i] for i in range(3))
+    c = sum(x * x for x in oc) - radius * radius
+    discriminant = half_b * half_b - a * c
+    if discriminant < 0.0:
+        return None
+    root = math.sqrt(discriminant)
+    for t in ((-half_b - root) / a, (-half_b + root) / a):
+        if t > 0.0:
+            return t
+    return None
+
+
+def ray_sphere_distances(origins, directions, centre, radius):
+    """Vectorised closed-form ray-sphere distance; ``inf`` for misses.
+
+    Used for whole images, after it has been checked against :func:`ray_sphere_distance`.
+    """
+    oc = origins - np.asarray(centre, dtype=np.float64)
+    a = np.einsum("ij,ij->i", directions, directions)
+    half_b = np.einsum("ij,ij->i", oc, directions)
+    c = np.einsum("ij,ij->i", oc, oc) - radius * radius
+    discriminant = half_b * half_b - a * c
+    root = np.sqrt(np.maximum(discriminant, 0.0))
+    near = (-half_b - root) / a
+    far = (-half_b + root) / a
+    t = np.where(near > 0.0, near, far)
+    return np.where((discriminant >= 0.0) & (t > 0.0), t, np.inf)
+
+
+def pixel_centre_rays(camera, width, height):
+    """Camera rays through every pixel centre, row-major (row 0 at the top).
+
+    Written from the pinhole model, independently of :meth:`Camera.generate_rays`.
+    """
+    forward = camera.look_at - camera.position
+    forward = forward / np.linalg.norm(forward)
+    right = np.cross(forward, camera.up)
+    right = right / np.linalg.norm(right)
+    up = np.cross(right, forward)
+    half_height = math.tan(math.radians(camera.fov) / 2.0)
+    half_width = half_height * width / height
+    column, row = np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5)
+    screen_x = (2.0 * column.ravel() / width - 1.0) * half_width
+    screen_y = (1.0 - 2.0 * row.ravel() / height) * half_height
+    directions = forward + screen_x[:, None] * right + screen_y[:, None] * up
+    directions /= np.linalg.norm(directions, axis=1)[:, None]
+    origins = np.broadcast_to(camera.position, directions.shape).copy()
+    return origins, directions
+
+
+# ---------------------------------------------------------------- rendering
+def settings(**overrides):
+    """Small, fast, deterministic render settings; keyword arguments override."""
+    values = dict(width=32, height=32, spp=1, sampler="regular", max_depth=5, seed=0, threads=1)
+    values.update(overrides)
+    return RenderSettings(**values)
+
+
+def render(scene, **overrides):
+    """Render with :func:`settings` and check the image and every pass are finite.
+
+    Every render in the suite goes through here, so no test can pass on a NaN image.
+    """
+    result = Integrator(scene, settings(**overrides)).render()
+    assert_finite(result)
+    return result
+
+
+def assert_finite(result):
+    """No NaN or Inf in the image or in any pass of a RenderResult."""
+    assert result.image.dtype == np.float32
+    assert np.isfinite(result.image).all(), "rendered image holds NaN or Inf"
+    assert (result.image >= 0.0).all(), "rendered image holds negative radiance"
+    for name, image in result.passes.items():
+        assert np.isfinite(image).all(), f"pass {name!r} holds NaN or Inf"
