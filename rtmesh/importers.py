@@ -85,7 +85,7 @@ def material_from_trimesh(visual, name):
             name=material.name or name,
             diffuse=base * (1.0 - metallic),
             specular=0.04 * (1.0 - metallic) + base * metallic,
-            shininess=min(2.0 / r4 - 2.0, 10000.0),
+            shininess=float(np.clip(2.0 / r4 - 2.0, 1.0, 10000.0)),
             mirror=base * metallic * (1.0 - roughness),
         )
     if isinstance(material, trimesh.visual.material.SimpleMaterial):
