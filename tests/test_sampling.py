@@ -1,0 +1,217 @@
+"""rtmesh.sampling: pixel patterns, the counter-based generator and the warps."""
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from rtmesh.sampling import (Dim, pixel_offsets, square_to_cosine_hemisphere,
+                             square_to_cosine_hemisphere_pdf, square_to_uniform_disk_concentric,
+                             strata_shape, uniform, uniform2)
+
+SPPS = [1, 2, 4, 6, 9, 12, 16]
+
+
+def chi_square_p_value(counts):
+    """p-value of a chi-square test that ``counts`` come from equally likely bins."""
+    counts = np.asarray(counts, dtype=np.float64).ravel()
+    return stats.chisquare(counts).pvalue
+
+
+def uniform_keys(count):
+    """Pixel and sample keys like a render's: many pixels, a few samples each."""
+    pixel = np.repeat(np.arange(count // 4, dtype=np.int64), 4)
+    sample = np.tile(np.arange(4, dtype=np.int64), count // 4)
+    return pixel, sample
+
+
+# ---------------------------------------------------------------- pixel patterns
+@pytest.mark.parametrize("spp", SPPS)
+def test_strata_shape_covers_spp_and_is_as_square_as_possible(spp):
+    nx, ny = strata_shape(spp)
+    assert nx * ny == spp
+    assert nx >= ny
+    # no squarer factorisation exists
+    for rows in range(ny + 1, int(np.sqrt(spp)) + 1):
+        assert spp % rows
+    assert strata_shape(16) == (4, 4) and strata_shape(6) == (3, 2)
+
+
+@pytest.mark.parametrize("spp", [1, 4, 6, 16])
+def test_every_jittered_stratum_holds_exactly_one_sample(spp):
+    pixels = 500
+    nx, ny = strata_shape(spp)
+    pixel = np.repeat(np.arange(pixels, dtype=np.int64), spp)
+    sample = np.tile(np.arange(spp, dtype=np.int64), pixels)
+    offsets = pixel_offsets("jittered", 42, pixel, sample, spp)
+    assert ((offsets >= 0.0) & (offsets < 1.0)).all()
+    column = np.floor(offsets[:, 0] * nx).astype(int)
+    row = np.floor(offsets[:, 1] * ny).astype(int)
+    stratum = (row * nx + column).reshape(pixels, spp)
+    expected = np.arange(spp)
+    for p in range(pixels):
+        np.testing.assert_array_equal(np.sort(stratum[p]), expected)
+    # and the jitter is not degenerate: positions inside a stratum vary between pixels
+    inside = np.column_stack([offsets[:, 0] * nx - column, offsets[:, 1] * ny - row])
+    assert inside.std(axis=0).min() > 0.25
+
+
+@pytest.mark.parametrize("spp", [1, 4, 6, 16])
+def test_regular_samples_sit_at_stratum_centres(spp):
+    nx, ny = strata_shape(spp)
+    pixel = np.repeat(np.arange(3, dtype=np.int64), spp)
+    sample = np.tile(np.arange(spp, dtype=np.int64), 3)
+    offsets = pixel_offsets("regular", 7, pixel, sample, spp)
+    column, row = sample % nx, sample // nx
+    expected = np.column_stack([(column + 0.5) / nx, (row + 0.5) / ny])
+    np.testing.assert_allclose(offsets, expected, rtol=0, atol=1e-15)
+    # the seed does not move a regular pattern
+    np.testing.assert_array_equal(offsets, pixel_offsets("regular", 8, pixel, sample, spp))
+
+
+def test_random_pixel_offsets_are_in_the_unit_square_and_uniform():
+    pixel, sample = uniform_keys(40000)
+    offsets = pixel_offsets("random", 3, pixel, sample, 4)
+    assert ((offsets >= 0.0) & (offsets < 1.0)).all()
+    counts, _, _ = np.histogram2d(offsets[:, 0], offsets[:, 1], bins=4, range=[[0, 1], [0, 1]])
+    assert chi_square_p_value(counts) > 1e-3
+
+
+def test_unknown_sampler_is_an_error():
+    with pytest.raises(ValueError, match="sampler"):
+        pixel_offsets("sobol", 0, np.zeros(1, np.int64), np.zeros(1, np.int64), 1)
+
+
+# ---------------------------------------------------------------- uniform()
+def test_uniform_values_are_in_the_half_open_unit_interval():
+    pixel, sample = uniform_keys(200000)
+    for dimension in (0, 1, Dim.AO, 12345):
+        u = uniform(9, pixel, sample, dimension)
+        assert u.dtype == np.float64
+        assert ((u >= 0.0) & (u < 1.0)).all()
+
+
+def test_uniform_is_roughly_uniform():
+    pixel, sample = uniform_keys(160000)
+    u = uniform(1, pixel, sample, 0)
+    assert abs(u.mean() - 0.5) < 0.005
+    assert abs(u.var() - 1.0 / 12.0) < 0.002
+    counts, _ = np.histogram(u, bins=16, range=(0, 1))
+    assert chi_square_p_value(counts) > 1e-3
+
+
+@pytest.mark.parametrize("varying", ["pixel", "sample", "dimension", "seed"])
+def test_uniform_is_uniform_along_each_key(varying):
+    count = 20000
+    keys = np.arange(count, dtype=np.int64)
+    if varying == "pixel":
+        u = uniform(5, keys, 3, 2)
+    elif varying == "sample":
+        u = uniform(5, 3, keys, 2)
+    elif varying == "dimension":
+        u = np.array([uniform(5, np.array([3]), 3, int(d))[0] for d in keys[:4000]])
+    else:
+        u = np.array([uniform(int(s), np.array([3]), 3, 2)[0] for s in keys[:4000]])
+    counts, _ = np.histogram(u, bins=16, range=(0, 1))
+    assert chi_square_p_value(counts) > 1e-3
+
+
+def test_uniform_pairs_are_uncorrelated_across_dimensions_and_pixels():
+    pixel, sample = uniform_keys(100000)
+    pair = uniform2(2, pixel, sample, Dim.PIXEL)
+    counts, _, _ = np.histogram2d(pair[:, 0], pair[:, 1], bins=8, range=[[0, 1], [0, 1]])
+    assert chi_square_p_value(counts) > 1e-3
+    # neighbouring pixels (the keys a render uses side by side) are independent too
+    u = uniform(2, np.arange(100000), 0, 0)
+    assert abs(np.corrcoef(u[:-1], u[1:])[0, 1]) < 0.02
+
+
+def test_uniform_is_a_pure_function_of_its_keys():
+    pixel, sample = uniform_keys(1000)
+    first = uniform(11, pixel, sample, 4)
+    # same keys, in another order and another batch size, give the same values
+    order = np.random.default_rng(0).permutation(len(pixel))
+    again = uniform(11, pixel[order], sample[order], 4)
+    np.testing.assert_array_equal(again, first[order])
+    np.testing.assert_array_equal(uniform(11, pixel[:10], sample[:10], 4), first[:10])
+    np.testing.assert_array_equal(uniform(11, pixel[5], sample[5], 4), first[5])
+    # changing any one key changes (nearly) every value
+    for changed in (uniform(12, pixel, sample, 4), uniform(11, pixel + 1, sample, 4),
+                    uniform(11, pixel, sample + 1, 4), uniform(11, pixel, sample, 5)):
+        assert (changed != first).mean() > 0.99
+
+
+def test_uniform_handles_large_and_negative_seeds():
+    pixel, sample = uniform_keys(1000)
+    for seed in (2 ** 63 - 1, 2 ** 64 - 1, -1, -12345):
+        u = uniform(seed, pixel, sample, 0)
+        assert ((u >= 0.0) & (u < 1.0)).all()
+    assert not np.array_equal(uniform(-1, pixel, sample, 0), uniform(1, pixel, sample, 0))
+
+
+# ---------------------------------------------------------------- warps
+def test_concentric_disk_stays_in_the_unit_disk_and_reaches_its_rim():
+    grid = (np.stack(np.meshgrid(np.arange(101), np.arange(101)), axis=-1).reshape(-1, 2)) / 100.0
+    d = square_to_uniform_disk_concentric(grid)
+    radius = np.linalg.norm(d, axis=1)
+    assert np.isfinite(d).all()
+    assert (radius <= 1.0 + 1e-12).all()
+    # the square's boundary maps onto the circle, its centre onto the disk's centre
+    on_edge = (grid == 0.0).any(axis=1) | (grid == 1.0).any(axis=1)
+    np.testing.assert_allclose(radius[on_edge], 1.0, atol=1e-12)
+    np.testing.assert_allclose(square_to_uniform_disk_concentric(np.array([[0.5, 0.5]])), 0.0,
+                               atol=1e-15)
+
+
+def test_concentric_disk_is_area_preserving():
+    # uniform points in the square must land uniformly in the disk: count them in 8 rings of
+    # equal area x 16 equal sectors
+    rng = np.random.default_rng(1)
+    d = square_to_uniform_disk_concentric(rng.random((200000, 2)))
+    ring = np.minimum((np.sum(d * d, axis=1) * 8).astype(int), 7)
+    sector = np.minimum(((np.arctan2(d[:, 1], d[:, 0]) + np.pi) / (2 * np.pi) * 16).astype(int), 15)
+    counts = np.bincount(ring * 16 + sector, minlength=128)
+    assert chi_square_p_value(counts) > 1e-3
+    # deterministic version: cut the square into n x n cells; each mapped cell (its boundary
+    # traced with many points, area by the shoelace formula) has area pi / n^2
+    n, per_side = 16, 32
+    s = np.arange(per_side) / per_side
+    unit_boundary = np.concatenate([np.column_stack([s, 0 * s]), np.column_stack([1 + 0 * s, s]),
+                                    np.column_stack([1 - s, 1 + 0 * s]), np.column_stack([0 * s, 1 - s])])
+    cells = np.stack(np.meshgrid(np.arange(n), np.arange(n), indexing="ij"), -1).reshape(-1, 1, 2)
+    boundary = (cells + unit_boundary[None]) / n  # (cells, points, 2)
+    mapped = square_to_uniform_disk_concentric(boundary.reshape(-1, 2)).reshape(boundary.shape)
+    x, y = mapped[..., 0], mapped[..., 1]
+    area = 0.5 * np.abs((x * np.roll(y, -1, axis=1) - np.roll(x, -1, axis=1) * y).sum(axis=1))
+    np.testing.assert_allclose(area * n * n, np.pi, rtol=0.01)
+
+
+def test_cosine_hemisphere_directions_are_unit_and_above_the_surface():
+    rng = np.random.default_rng(2)
+    u = np.concatenate([rng.random((10000, 2)), [[0.0, 0.0], [0.5, 0.5], [1.0 - 2 ** -53, 0.0]]])
+    w = square_to_cosine_hemisphere(u)
+    assert np.isfinite(w).all()
+    assert (w[:, 2] >= 0.0).all()
+    np.testing.assert_allclose(np.linalg.norm(w, axis=1), 1.0, atol=1e-12)
+
+
+def test_cosine_hemisphere_pdf_integrates_to_one():
+    # Monte Carlo over the whole sphere with uniform sampling (pdf 1 / 4 pi)
+    rng = np.random.default_rng(3)
+    w = rng.normal(size=(400000, 3))
+    w /= np.linalg.norm(w, axis=1)[:, None]
+    pdf = square_to_cosine_hemisphere_pdf(w)
+    integral = (pdf * 4.0 * np.pi).mean()
+    assert integral == pytest.approx(1.0, abs=0.01)
+    assert (pdf[w[:, 2] < 0.0] == 0.0).all()
+
+
+def test_cosine_hemisphere_samples_follow_their_pdf():
+    # for density cos(theta) / pi, z^2 is uniform on [0, 1) and phi uniform on [0, 2 pi)
+    rng = np.random.default_rng(4)
+    w = square_to_cosine_hemisphere(rng.random((200000, 2)))
+    z2_bin = np.minimum((w[:, 2] ** 2 * 8).astype(int), 7)
+    phi_bin = np.minimum(((np.arctan2(w[:, 1], w[:, 0]) + np.pi) / (2 * np.pi) * 8).astype(int), 7)
+    counts = np.bincount(z2_bin * 8 + phi_bin, minlength=64)
+    assert chi_square_p_value(counts) > 1e-3
+    # mean cosine under this density is 2/3
+    assert w[:, 2].mean() == pytest.approx(2.0 / 3.0, abs=0.003)
