@@ -1,0 +1,142 @@
+"""End-to-end command line: renders that read back, and one-line errors for bad input."""
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from rtmesh.cli import main
+from rtmesh.image_io import read_image
+
+HERE = os.path.dirname(__file__)
+DATA = os.path.join(HERE, "data")
+ASSETS = os.path.join(HERE, "..", "assets")
+
+SMALL_SCENE = """
+[render]
+width = 48
+height = 32
+spp = 2
+
+[camera]
+position = [0.0, -4.0, 2.0]
+look_at = [0.0, 0.0, 0.5]
+up = [0.0, 0.0, 1.0]
+
+[materials.red]
+diffuse = [0.8, 0.1, 0.1]
+
+[[objects]]
+primitive = "icosphere"
+subdivisions = 2
+translate = [0.0, 0.0, 1.0]
+material = "red"
+
+[[objects]]
+primitive = "plane"
+size = [10.0, 10.0]
+
+[[lights]]
+type = "point"
+position = [2.0, -2.0, 5.0]
+intensity = 30.0
+"""
+
+
+@pytest.fixture
+def scene_file(tmp_path):
+    path = tmp_path / "scene.toml"
+    path.write_text(SMALL_SCENE)
+    return path
+
+
+def run_cli(*args):
+    """Run ``python -m rtmesh.cli`` as a user would; returns (exit code, stdout, stderr)."""
+    proc = subprocess.run([sys.executable, "-m", "rtmesh.cli", *map(str, args)],
+                          capture_output=True, text=True, timeout=120)
+    return proc.returncode, proc.stdout, proc.stderr
+
+
+def test_render_writes_exr_and_png_that_read_back(scene_file, tmp_path):
+    exr, png = tmp_path / "out.exr", tmp_path / "out.png"
+    assert main(["render", str(scene_file), "-o", str(exr), "--passes", "ao", "-q"]) == 0
+    assert main(["render", str(scene_file), "-o", str(png), "-q"]) == 0
+    linear, names = read_image(exr)
+    assert names == ["R", "G", "B", "AO"]
+    assert linear.shape == (32, 48, 4)
+    assert np.isfinite(linear).all()
+    # the red sphere is in the middle of the frame: red dominates there
+    centre = linear[14:18, 22:26, :3].mean(axis=(0, 1))
+    assert centre[0] > 2 * centre[1] and centre[0] > 2 * centre[2]
+    assert ((linear[..., 3] >= 0) & (linear[..., 3] <= 1)).all()
+    display, _ = read_image(png)
+    assert display.shape == (32, 48, 3)
+    # the PNG is the EXR tone mapped (reinhard) and sRGB encoded, to 8-bit precision
+    x = np.clip(linear[..., :3] / (1 + linear[..., :3]), 0, 1)
+    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
+    assert np.abs(display - srgb).max() <= 0.5 / 255 + 1e-6
+
+
+def test_summary_line_reports_resolution_rays_and_time(scene_file, tmp_path, capsys):
+    assert main(["render", str(scene_file), "-o", str(tmp_path / "a.png"), "-q"]) == 0
+    line = capsys.readouterr().out.strip()
+    assert "48x32" in line and "2 spp" in line and "rays/s" in line and " s, " in line
+
+
+def test_bare_mesh_file_renders(tmp_path):
+    out = tmp_path / "bunny.png"
+    mesh = os.path.join(ASSETS, "meshes", "bunny.ply")
+    assert main(["render", mesh, "-o", str(out), "--width", "40", "--height", "30", "--spp", "1", "-q"]) == 0
+    image, _ = read_image(out)
+    # the automatic camera frames the mesh: something lit in the centre, background at a corner
+    assert image[12:18, 17:23].mean() > 0.05
+    assert image[0, 0].max() == 0.0
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["render", "{data}/empty.obj", "-o", "{tmp}/x.png"], "nothing to render"),
+        (["render", "{tmp}/missing.ply", "-o", "{tmp}/x.png"], "no such mesh file"),
+        (["render", "{scene}", "-o", "{tmp}/no/such/folder/x.png"], "does not exist"),
+        (["render", "{scene}", "-o", "{tmp}/x.bmp"], "unsupported output format"),
+        (["render", "{tmp}/notes.txt", "-o", "{tmp}/x.png"], "unsupported mesh format"),
+    ],
+)
+def test_bad_input_is_one_line_exit_2_no_traceback_no_file(args, message, scene_file, tmp_path):
+    (tmp_path / "notes.txt").write_text("hello")
+    fill = {"data": DATA, "tmp": tmp_path, "scene": scene_file}
+    args = [a.format(**fill) for a in args]
+    code, out, err = run_cli(*args)
+    assert code == 2
+    assert message in err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert not (tmp_path / "x.png").exists() and not (tmp_path / "x.bmp").exists()
+    assert not [p for p in os.listdir(tmp_path) if ".tmp" in p]
+
+
+def test_scene_file_error_names_file_and_key(tmp_path):
+    path = tmp_path / "bad.toml"
+    path.write_text(SMALL_SCENE.replace('material = "red"', 'material = "red"\nsmoth = true'))
+    code, _, err = run_cli("render", path, "-o", tmp_path / "x.png")
+    assert code == 2
+    assert f"{path}: objects[0].smoth: unknown key" in err
+    assert "Traceback" not in err
+
+
+def test_failed_write_keeps_existing_image_and_leaves_no_temporary(scene_file, tmp_path, monkeypatch):
+    out = tmp_path / "keep.png"
+    out.write_bytes(b"previous image")
+    import rtmesh.image_io as image_io
+
+    class Failing:
+        @staticmethod
+        def create(path):
+            raise KeyboardInterrupt  # the user stops the program in the middle of the write
+
+    monkeypatch.setattr(image_io.oiio, "ImageOutput", Failing)
+    assert main(["render", str(scene_file), "-o", str(out), "-q"]) == 130
+    assert out.read_bytes() == b"previous image"
+    assert sorted(os.listdir(tmp_path)) == ["keep.png", "scene.toml"]

@@ -1,0 +1,99 @@
+"""Scene files: every kind of mistake is an error naming the file and the key."""
+
+import numpy as np
+import pytest
+
+from rtmesh.errors import SceneError
+from rtmesh.lights import DirectionalLight, PointLight, SpotLight
+from rtmesh.scene_file import read_scene_file, scene_from_dict
+
+BASE = {
+    "objects": [{"primitive": "icosphere", "subdivisions": 1}],
+    "lights": [{"type": "point", "position": [0, 0, 5], "intensity": 10}],
+}
+
+
+def with_(**tables):
+    doc = {k: (list(v) if isinstance(v, list) else dict(v)) for k, v in BASE.items()}
+    doc.update(tables)
+    return doc
+
+
+@pytest.mark.parametrize(
+    "doc, where",
+    [
+        (with_(rendr={}), "rendr: unknown key"),
+        (with_(render={"spp": "4"}), "render.spp: expected an integer"),
+        (with_(render={"spp": 0}), "render: spp must be >= 1"),
+        (with_(render={"sampler": "sobol"}), "render: sampler must be one of"),
+        (with_(render={"width": 1.5}), "render.width: expected an integer"),
+        (with_(camera={"position": [0, 0], "look_at": [0, 0, 0]}), "camera.position: expected a list of 3 numbers"),
+        (with_(camera={"position": [0, 0, 1], "look_at": [0, 0, 1]}), "camera: camera position and look_at coincide"),
+        (with_(materials={"m": {"difuse": 0.5}}), "materials.m.difuse: unknown key"),
+        (with_(materials={"m": {"diffuse": -1}}), "materials.m.diffuse: colour components must be >= 0"),
+        (with_(objects=[{"primitive": "cone"}]), "objects[0].primitive: expected one of"),
+        (with_(objects=[{"primitive": "box", "material": "nope"}]), "objects[0].material: unknown material 'nope'"),
+        (with_(objects=[{"primitive": "box", "radius": 2}]), "objects[0].radius: does not apply"),
+        (with_(objects=[{"mesh": "a.obj", "primitive": "box"}]), "objects[0]: needs exactly one of"),
+        (with_(objects=[{"mesh": "missing.obj"}]), "objects[0].mesh:"),
+        (with_(objects=[]), "objects: the scene has no objects"),
+        (with_(objects=[{"primitive": "box", "scale": 0}]), "objects[0].scale: scale must not be zero"),
+        (with_(lights=[{"type": "point", "position": [0, 0, 1]}]), "lights[0].intensity: missing"),
+        (with_(lights=[{"type": "point", "position": [0, 0, 1], "intensity": 1, "irradiance": 1}]),
+         "lights[0].irradiance: does not apply to a point light"),
+        (with_(lights=[{"position": [0, 0, 1]}]), "lights[0].type: missing"),
+        (with_(lights=[{"type": "directional", "direction": [0, 0, 0], "irradiance": 1}]),
+         "lights[0]: directional light direction has zero length"),
+        (with_(environment={"ambient": "grey"}), "environment.ambient: expected a number or a list of 3 numbers"),
+        (with_(render={"cutoff": float("nan")}), "render.cutoff: expected a finite number"),
+    ],
+)
+def test_invalid_scene_names_file_and_key(doc, where):
+    with pytest.raises(SceneError) as info:
+        scene_from_dict(doc, source="s.toml")
+    assert str(info.value).startswith(f"s.toml: {where}")
+
+
+def test_toml_syntax_error_names_the_file(tmp_path):
+    path = tmp_path / "broken.toml"
+    path.write_text("[render\nwidth = 3")
+    with pytest.raises(SceneError, match=f"{path}: TOML syntax error"):
+        read_scene_file(path)
+
+
+def test_scene_builds_objects_materials_lights_and_transforms():
+    doc = {
+        "render": {"width": 20, "height": 10, "spp": 3},
+        "camera": {"position": [0, -5, 0], "look_at": [0, 0, 0], "up": [0, 0, 1], "fov": 30},
+        "environment": {"ambient": 0.2, "background": [0.1, 0.2, 0.3]},
+        "materials": {"glass": {"transmission": 1, "ior": 1.33, "diffuse": 0}},
+        "objects": [
+            {"primitive": "box", "extents": [2, 2, 2], "translate": [10, 0, 0], "material": "glass"},
+            {"primitive": "plane", "size": [4, 2], "rotate": [90, 0, 0], "scale": 2},
+        ],
+        "lights": [
+            {"type": "point", "position": [0, 0, 5], "intensity": [1, 2, 3]},
+            {"type": "directional", "direction": [0, 0, -2], "irradiance": 0.5},
+            {"type": "spot", "position": [0, 0, 5], "look_at": [0, 0, 0], "intensity": 4},
+        ],
+    }
+    scene, settings = scene_from_dict(doc)
+    assert (settings.width, settings.height, settings.spp) == (20, 10, 3)
+    assert scene.object_names == ["box[0]", "plane[1]"]
+    box = scene.vertices[np.unique(scene.faces[scene.object_id == 0])]
+    np.testing.assert_allclose(box.min(axis=0), [9, -1, -1])
+    np.testing.assert_allclose(box.max(axis=0), [11, 1, 1])
+    # the plane (4 x 2, scaled 2, rotated 90 degrees about X) lies in the XZ plane
+    plane = scene.vertices[np.unique(scene.faces[scene.object_id == 1])]
+    np.testing.assert_allclose(np.ptp(plane, axis=0), [8, 0, 4], atol=1e-12)
+    np.testing.assert_allclose(np.abs(scene.face_normals[scene.object_id == 1]), [[0, 1, 0]] * 2, atol=1e-12)
+    assert scene.materials.materials[scene.material_id[0]].name == "glass"
+    assert scene.materials.ior[scene.material_id[0]] == 1.33
+    assert [type(light) for light in scene.lights] == [PointLight, DirectionalLight, SpotLight]
+    np.testing.assert_allclose(scene.lights[2].direction, [0, 0, -1])
+    np.testing.assert_allclose(scene.background, [0.1, 0.2, 0.3])
+
+
+def test_command_line_overrides_scene_settings():
+    _, settings = scene_from_dict(with_(render={"spp": 8, "width": 30}), overrides={"spp": 2, "height": None})
+    assert settings.spp == 2 and settings.width == 30 and settings.height == 480
