@@ -123,6 +123,9 @@ def fresnel_schlick(cos_i, eta):
     cos_t = np.sqrt(np.maximum(0.0, 1.0 - sin2_t))
     cos = np.where(eta > 1.0, cos_t, cos_i)
     f = r0 + (1.0 - r0) * (1.0 - cos) ** 5
+    # at eta == 1 there is no interface, but Schlick's curve still rises toward grazing
+    # angles: an index-matched object must be invisible, so reflect nothing there
+    f = np.where(eta == 1.0, 0.0, f)
     return np.where(tir, 1.0, f)
 
 
