@@ -15,6 +15,8 @@ import numpy as np
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
+from .batches import component_major, take_rows
+
 # Constants of the integer-ULP offset of Waechter & Binder, "A Fast and Robust Method for
 # Avoiding Self-Intersection" (Ray Tracing Gems, ch. 6).  The offset is 256 float32 ulps of
 # each coordinate along the normal: that covers the error of a float32 hit point computed
@@ -91,6 +93,17 @@ class Accel:
     faces : (F, 3) int
         Vertex indices.
 
+    Attributes
+    ----------
+    vertices32 : (V, 3) float32
+        The positions Embree traces.
+    vertices : (V, 3) float64
+        The same values in float64.
+    faces : (F, 3) int32
+    triangles : (F, 9) float64
+        Per face ``[v0, v1 - v0, v2 - v0]`` of the float32 triangles, component-major; see
+        :func:`barycentric_interpolate`.
+
     Notes
     -----
     After construction the Embree scene is committed and read-only, so :meth:`intersect`
@@ -103,15 +116,15 @@ class Accel:
         # the float64 copy of exactly the triangles Embree sees, for hit reconstruction
         self.vertices = self.vertices32.astype(np.float64)
         self.faces = np.ascontiguousarray(faces, dtype=np.int32)
+        # Per-face [v0, v1 - v0, v2 - v0], so one gather per hit gives everything
+        # hit_points needs.  The edges are differences of float32 numbers, which float64
+        # represents exactly: the table still describes exactly the triangles Embree saw.
+        v0, v1, v2 = (self.vertices[self.faces[:, k]] for k in range(3))
+        self.triangles = component_major(np.concatenate([v0.T, (v1 - v0).T, (v2 - v0).T]))
         self._scene = rtcore_scene.EmbreeScene(robust=True)
         TriangleMesh(self._scene, self.vertices32, self.faces)
         # run() commits lazily and is not thread-safe while doing so: commit now
         self._scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32), query="OCCLUDED")
-
-    @staticmethod
-    def _rays32(origins, directions):
-        return (np.ascontiguousarray(origins, dtype=np.float32),
-                np.ascontiguousarray(directions, dtype=np.float32))
 
     def intersect(self, origins, directions):
         """Closest hit of each ray.
@@ -130,14 +143,13 @@ class Accel:
         if n == 0:
             empty = np.zeros(0)
             return Hits(empty, np.zeros(0, np.int32), empty, empty)
-        o, d = self._rays32(origins, directions)
-        result = self._scene.run(o, d, output=1)
+        result = self._scene.run(_float32_rows(origins), _float32_rows(directions), output=1)
         prim = result["primID"]
         t = result["tfar"].astype(np.float64)
         t[prim < 0] = np.inf
         return Hits(t, prim, result["u"].astype(np.float64), result["v"].astype(np.float64))
 
-    def occluded(self, origins, directions, t_max):
+    def occluded(self, origins, directions, t_max, rows=None):
         """Whether anything lies on each ray between its origin and ``t_max``.
 
         Parameters
@@ -147,17 +159,21 @@ class Accel:
             Unit directions.
         t_max : (n,) float
             Segment length; ``inf`` for rays to infinitely distant lights.
+        rows : (k,) int, optional
+            Trace only these rays (the gather is fused with the float32 conversion).
 
         Returns
         -------
-        (n,) bool
+        (n,) or (k,) bool
         """
-        if len(origins) == 0:
+        if rows is not None:
+            t_max = t_max[rows]
+        if len(t_max) == 0:
             return np.zeros(0, dtype=bool)
-        o, d = self._rays32(origins, directions)
         # embreex writes into the distance array it is given: always pass a fresh one.
         # float32 max stands in for inf, which Embree's robust mode handles less predictably.
         t = np.minimum(t_max, np.finfo(np.float32).max).astype(np.float32)
+        o, d = _float32_rows(origins, rows), _float32_rows(directions, rows)
         return self._scene.run(o, d, dists=t, query="OCCLUDED") != -1
 
     def hit_points(self, hits, mask=None):
@@ -176,10 +192,41 @@ class Accel:
         Returns
         -------
         (k, 3) float64
+            Component-major (see :mod:`rtmesh.batches`).
         """
         prim, u, v = hits.prim, hits.u, hits.v
         if mask is not None:
             prim, u, v = prim[mask], u[mask], v[mask]
-        tri = self.vertices[self.faces[prim]]
-        return (tri[:, 0] * (1.0 - u - v)[:, None] + tri[:, 1] * u[:, None]
-                + tri[:, 2] * v[:, None])
+        return barycentric_interpolate(take_rows(self.triangles, prim), u, v)
+
+
+def barycentric_interpolate(corner_and_edges, u, v):
+    """Interpolate a per-vertex quantity at barycentric coordinates.
+
+    Parameters
+    ----------
+    corner_and_edges : (k, 9) float
+        Per hit: the value at vertex 0, its change toward vertex 1 and toward vertex 2
+        (e.g. gathered rows of :attr:`Accel.triangles`).
+    u, v : (k,) float
+        Barycentric weights of vertices 1 and 2.
+
+    Returns
+    -------
+    (k, 3) float64
+        ``value0 + u * (value1 - value0) + v * (value2 - value0)``, laid out like the input.
+    """
+    u, v = u[:, None], v[:, None]
+    return corner_and_edges[:, 0:3] + u * corner_and_edges[:, 3:6] + v * corner_and_edges[:, 6:9]
+
+
+def _float32_rows(array, rows=None):
+    """A C-contiguous float32 ``(n, 3)`` copy of ``array`` (or of its ``rows``) for Embree.
+
+    Built column by column: NumPy's transposing copy of a component-major array is several
+    times slower than three strided column writes.
+    """
+    if rows is None and array.flags.c_contiguous:
+        return array.astype(np.float32)
+    columns = [array[:, c] if rows is None else array[:, c].take(rows) for c in range(3)]
+    return np.stack(columns, axis=1, dtype=np.float32)

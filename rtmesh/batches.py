@@ -1,8 +1,55 @@
-"""Ray batches: structure-of-arrays records that share a leading dimension."""
+"""Ray batches: structure-of-arrays records that share a leading dimension.
+
+Memory layout
+-------------
+Arrays of 3-vectors have shape ``(n, 3)`` everywhere, but on the renderer's hot path they
+are stored *component-major* (Fortran order: the n x components, then the n y, then the n z
+are each contiguous).  NumPy then runs every elementwise operation, row-wise dot product and
+per-row scaling ``a * s[:, None]`` as long contiguous loops, which is several times faster
+than on the row-major layout, where each row is a run of only three numbers.  Results do not
+depend on the layout; :func:`component_major` and :func:`take_rows` create and preserve it.
+"""
 
 from dataclasses import dataclass, fields
 
 import numpy as np
+
+
+def component_major(components):
+    """An ``(n, 3)`` view of component rows, stored component-major.
+
+    Parameters
+    ----------
+    components : (3, n) float
+        x, y and z as rows.
+
+    Returns
+    -------
+    (n, 3) float
+        ``components.T`` (made contiguous first if it is not).
+    """
+    return np.ascontiguousarray(components).T
+
+
+def take_rows(array, rows):
+    """``array[rows]`` that keeps a component-major ``(n, k)`` array component-major.
+
+    Parameters
+    ----------
+    array : (n,) or (n, k) array
+    rows : (m,) int or None
+        Row indices; None selects every row and returns ``array`` itself (no copy).
+
+    Returns
+    -------
+    (m,) or (m, k) array
+    """
+    if rows is None:
+        return array
+    if array.ndim == 2 and array.flags.f_contiguous and not array.flags.c_contiguous:
+        # gather each contiguous component row; the transpose back is free
+        return array.T.take(rows, axis=1).T
+    return array.take(rows, axis=0)
 
 
 @dataclass
@@ -33,7 +80,9 @@ class RayBatch:
 
     def subset(self, index):
         """The rays selected by a boolean mask or an index array."""
-        return RayBatch(*(getattr(self, f.name)[index] for f in fields(self)))
+        if index is not None and np.asarray(index).dtype == bool:
+            index = np.flatnonzero(index)
+        return RayBatch(*(take_rows(getattr(self, f.name), index) for f in fields(self)))
 
     @staticmethod
     def concatenate(batches):

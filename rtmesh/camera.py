@@ -4,6 +4,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .batches import component_major
 from .sampling import square_to_uniform_disk_concentric
 from .vecmath import normalize
 
@@ -89,15 +90,16 @@ class Camera:
         -------
         origins : (n, 3) float64
         directions : (n, 3) float64
-            Unit directions.
+            Unit directions, component-major (see :mod:`rtmesh.batches`).
         """
         forward, right, up = self.frame()
         tan_half = np.tan(np.radians(self.fov) * 0.5)
         aspect = width / height
         sx = (2.0 * film_xy[:, 0] / width - 1.0) * tan_half * aspect
         sy = (1.0 - 2.0 * film_xy[:, 1] / height) * tan_half
-        # direction to the point at unit distance along forward on the image plane
-        d = forward[None, :] + sx[:, None] * right[None, :] + sy[:, None] * up[None, :]
+        # direction to the point at unit distance along forward on the image plane, built
+        # component-major (one contiguous row per component; see rtmesh.batches)
+        d = component_major(forward[:, None] + right[:, None] * sx + up[:, None] * sy)
         n = len(film_xy)
         if self.aperture > 0.0 and lens_uv is not None:
             # thin lens: every ray through a film point meets the pinhole ray on the plane of

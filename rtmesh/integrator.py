@@ -25,13 +25,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .accel import Accel, offset_ray_origins
-from .batches import RayBatch
+from .accel import Accel, barycentric_interpolate, offset_ray_origins
+from .batches import RayBatch, component_major, take_rows
 from .film import Film
 from .sampling import Dim, pixel_offsets, square_to_cosine_hemisphere, uniform2
 from .settings import RenderStats
 from .vecmath import dot, fresnel_dielectric, fresnel_schlick, normalize, orthonormal_basis, reflect, refract
-from .materials import blinn_phong
+from .materials import blinn_phong_highlight, lambert
 
 # Shadow rays to point and spot lights stop this fraction short of the light, so a light
 # placed exactly on a surface does not count that surface as an occluder.
@@ -62,11 +62,13 @@ class RenderResult:
 class _Surfaces:
     """Shading records of the rays that hit something (one row per hit).
 
-    ``ng`` and ``ns`` are flipped to the side the ray came from; ``front`` says whether that
-    is the outer side of the triangle (counter-clockwise winding).
+    ``p``, ``ng``, ``ns`` and ``wo`` are (k, 3) component-major arrays (see
+    :mod:`rtmesh.batches`).  ``ng`` and ``ns`` are flipped to the side the ray came from;
+    ``front`` says whether that is the outer side of the triangle (counter-clockwise
+    winding).  ``sample`` is the pixel sample each hit contributes to.
     """
 
-    __slots__ = ("p", "ng", "ns", "wo", "front", "mat", "t")
+    __slots__ = ("p", "ng", "ns", "wo", "front", "mat", "t", "sample")
 
 
 def _translated(obj, shift):
@@ -128,6 +130,32 @@ class Integrator:
         self._shaded = (m.diffuse > 0).any(axis=1) | (m.specular > 0).any(axis=1)
         self._ior = np.concatenate([m.ior, [1.0]])  # index -1 (outside) reads 1.0: vacuum/air
         self._fresnel = fresnel_exact_or_schlick(settings.fresnel)
+        self._has_specular = (m.specular > 0).any(axis=1)
+        # per-material colours, component-major so that gathering them per hit keeps the
+        # fast layout; the ambient term is the product of two constants, formed once
+        self._diffuse = component_major(m.diffuse.T)
+        self._specular = component_major(m.specular.T)
+        self._emission = component_major(m.emission.T)
+        self._ambient_light = component_major((m.ambient * scene.ambient).T)
+        self._faces = self._face_table()
+
+    def _face_table(self):
+        """Everything shading reads per hit triangle, packed so one gather per hit fetches it.
+
+        Returns
+        -------
+        (F, 12) or (F, 21) float64
+            Component-major columns: the triangle ``[v0, v1 - v0, v2 - v0]`` as Embree saw
+            it (:attr:`Accel.triangles`), the unit geometric normal, and with smooth
+            normals the vertex normals as ``[n0, n1 - n0, n2 - n0]``, all ready for
+            :func:`barycentric_interpolate`.
+        """
+        sc = self.scene
+        columns = [self.accel.triangles.T, sc.face_normals.T]
+        if self.stages["smooth_normals"]:
+            n0, n1, n2 = (sc.vertex_normals[sc.faces[:, k]] for k in range(3))
+            columns += [n0.T, (n1 - n0).T, (n2 - n0).T]
+        return component_major(np.concatenate(columns))
 
     # ---------------------------------------------------------------- whole image
     def render(self, progress=None):
@@ -196,13 +224,16 @@ class Integrator:
         pixel = np.repeat(np.arange(first_pixel, end_pixel, dtype=np.int64), s.spp)
         sample_in_pixel = np.tile(np.arange(s.spp, dtype=np.int64), m)
         film_xy = pixel_offsets(s.sampler, s.seed, pixel, sample_in_pixel, s.spp)
-        film_xy[:, 0] += pixel % s.width
-        film_xy[:, 1] += pixel // s.width
+        row, column = np.divmod(pixel, s.width)
+        film_xy[:, 0] += column
+        film_xy[:, 1] += row
         lens_uv = uniform2(s.seed, pixel, sample_in_pixel, Dim.LENS) if self.stages["lens"] else None
         origins, directions = self.camera.generate_rays(film_xy, s.width, s.height, lens_uv)
-        rays = RayBatch(origins, directions, np.arange(n, dtype=np.int64), np.ones((n, 3)),
-                        np.full(n, -1, dtype=np.int32))
-        radiance = np.zeros((n, 3))
+        # camera rays have unit throughput: a read-only broadcast costs nothing, and
+        # _shade does not multiply by it at depth 0
+        rays = RayBatch(origins, directions, np.arange(n, dtype=np.int64),
+                        np.broadcast_to(1.0, (n, 3)), np.full(n, -1, dtype=np.int32))
+        radiance = np.zeros((n, 3), order="F")
         ao_pass = np.ones((n, 1)) if "ao" in s.passes else None
         stats.rays["camera"] += n
         clock.lap("camera")
@@ -216,13 +247,15 @@ class Integrator:
             rays = self._shade(rays, hits, depth, radiance, ao_pass, keys, stats, clock)
 
         passes = {"ao": ao_pass.reshape(m, s.spp, 1)} if ao_pass is not None else None
-        return radiance.reshape(m, s.spp, 3), passes, stats
+        return np.ascontiguousarray(radiance).reshape(m, s.spp, 3), passes, stats
 
     # ---------------------------------------------------------------- stages
     def _shade(self, rays, hits, depth, radiance, ao_pass, keys, stats, clock):
         """Shade one depth level; returns the rays of the next level."""
         hit = hits.prim >= 0
         m = self.scene.materials
+        # camera rays (depth 0) are one per sample, in sample order, with unit throughput
+        primary = depth == 0
 
         # absorption: rays inside a medium lose light over the distance they travelled
         if self.stages["absorption"]:
@@ -234,92 +267,104 @@ class Integrator:
                 rays.throughput[inside] *= np.where(sigma > 0, np.exp(-sigma * t), 1.0)
 
         # misses: rays leaving the scene see the background
-        if self.stages["background"] and not hit.all():
-            miss = ~hit
-            _scatter_add(radiance, rays.sample[miss], rays.throughput[miss] * self.scene.background)
+        n_hit = int(np.count_nonzero(hit))
+        if self.stages["background"] and n_hit < len(hit):
+            miss = np.flatnonzero(~hit)
+            _scatter_add(radiance, rays.sample[miss],
+                         take_rows(rays.throughput, miss) * self.scene.background, unique=primary)
 
-        if not hit.any():
+        if not n_hit:
             return RayBatch.empty()
-        rays = rays.subset(hit)
-        prim = hits.prim[hit]
-        srf = self._surfaces(rays, hits, hit, prim)
+        # the rows of the rays that hit; None when all did (no gathers needed)
+        rows = None if n_hit == len(hit) else np.flatnonzero(hit)
+        srf = self._surfaces(rays, hits, rows)
         clock.lap("shade")
 
-        local = self._local_shading(srf, rays, depth, ao_pass, keys, stats, clock)
+        local = self._local_shading(srf, depth, ao_pass, keys, stats, clock)
         if local is not None:
-            _scatter_add(radiance, rays.sample, local * rays.throughput)
+            if not primary:
+                local = local * take_rows(rays.throughput, rows)
+            _scatter_add(radiance, None if primary and rows is None else srf.sample, local,
+                         unique=primary)
         clock.lap("shade")
 
         if depth >= self.settings.max_depth or not self.stages["reflection"]:
             return RayBatch.empty()
-        next_rays = self._spawn(srf, rays, stats)
+        next_rays = self._spawn(srf, rays.subset(rows), stats)
         clock.lap("spawn")
         return next_rays
 
-    def _surfaces(self, rays, hits, hit, prim):
-        """Hit points, normals facing the incoming ray, and material ids."""
+    def _surfaces(self, rays, hits, rows):
+        """Hit points, normals facing the incoming ray, and material ids of the hit ``rows``."""
         sc = self.scene
         srf = _Surfaces()
-        srf.p = self.accel.hit_points(hits, hit)
-        srf.t = hits.t[hit]
-        srf.wo = -rays.directions
-        ng = sc.face_normals[prim]
-        srf.front = dot(rays.directions, ng) < 0.0
+        prim, u, v = (take_rows(a, rows) for a in (hits.prim, hits.u, hits.v))
+        face = take_rows(self._faces, prim)
+        srf.p = barycentric_interpolate(face[:, 0:9], u, v)
+        srf.t = take_rows(hits.t, rows)
+        srf.sample = take_rows(rays.sample, rows)
+        directions = take_rows(rays.directions, rows)
+        srf.wo = -directions
+        ng = face[:, 9:12]
+        srf.front = dot(directions, ng) < 0.0
         flip = np.where(srf.front, 1.0, -1.0)[:, None]
         srf.ng = ng * flip
-        srf.mat = sc.material_id[prim]
+        srf.mat = sc.material_id.take(prim)
         if self.stages["smooth_normals"]:
-            u, v = hits.u[hit], hits.v[hit]
-            tri = sc.faces[prim]
-            vn = sc.vertex_normals
-            ns = (vn[tri[:, 0]] * (1.0 - u - v)[:, None] + vn[tri[:, 1]] * u[:, None]
-                  + vn[tri[:, 2]] * v[:, None])
-            ns = normalize(ns) * flip
-            smooth = sc.smooth[prim] & (dot(ns, srf.ng) > 0.0)
-            srf.ns = np.where(smooth[:, None], ns, srf.ng)
+            ns = normalize(barycentric_interpolate(face[:, 12:21], u, v)) * flip
+            smooth = sc.smooth.take(prim) & (dot(ns, srf.ng) > 0.0)
+            srf.ns = ns if smooth.all() else np.where(smooth[:, None], ns, srf.ng)
         else:
             srf.ns = srf.ng
         return srf
 
-    def _local_shading(self, srf, rays, depth, ao_pass, keys, stats, clock):
+    def _local_shading(self, srf, depth, ao_pass, keys, stats, clock):
         """Emission, ambient (with AO) and direct light with hard shadows; (k, 3) or None."""
-        m = self.scene.materials
         st = self.stages
         local = None
         if st["emission"]:
-            local = m.emission[srf.mat].copy()
+            local = take_rows(self._emission, srf.mat)
 
         ao = None
         if st["ao"] and (st["ambient"] or (depth == 0 and ao_pass is not None)):
-            ao = self._ambient_occlusion(srf, rays, depth, keys, stats)
+            ao = self._ambient_occlusion(srf, depth, keys, stats)
             if depth == 0 and ao_pass is not None:
-                ao_pass[rays.sample, 0] = ao
+                ao_pass[srf.sample, 0] = ao
             clock.lap("ao")
         if st["ambient"]:
-            amb = m.ambient[srf.mat] * self.scene.ambient
+            amb = take_rows(self._ambient_light, srf.mat)
             if ao is not None:
-                amb *= ao[:, None]
+                amb = amb * ao[:, None]
             local = amb if local is None else local + amb
 
         if st["lights"]:
-            shaded = self._shaded[srf.mat]
-            idx = np.flatnonzero(shaded)
-            if len(idx):
-                direct = self._direct_light(srf, idx, stats, clock)
-                if local is None:
-                    local = np.zeros((len(srf.mat), 3))
-                local[idx] += direct
+            direct = self._direct_light(srf, stats, clock)
+            if direct is not None:
+                local = direct if local is None else local + direct
         return local
 
-    def _direct_light(self, srf, idx, stats, clock):
-        """Blinn-Phong light from every light, with one shadow ray per lit (hit, light)."""
-        m = self.scene.materials
-        p, ng, ns, wo, mat = srf.p[idx], srf.ng[idx], srf.ns[idx], srf.wo[idx], srf.mat[idx]
-        kd = m.diffuse[mat]
-        ks = m.specular[mat] if self.stages["specular"] else None
-        shininess = m.shininess[mat] if ks is not None else None
+    def _direct_light(self, srf, stats, clock):
+        """Blinn-Phong light from every light, with one shadow ray per lit (hit, light).
+
+        Returns
+        -------
+        (k, 3) float64 or None
+            Component-major; None when no hit has a material that reflects light.
+        """
+        shaded = self._shaded[srf.mat]
+        rows = None if shaded.all() else np.flatnonzero(shaded)
+        if rows is not None and not len(rows):
+            return None
+        p, ng, ns, wo, mat = (take_rows(a, rows) for a in (srf.p, srf.ng, srf.ns, srf.wo, srf.mat))
+        k = len(mat)
+        kd = take_rows(self._diffuse, mat)
+        # the highlight (with its costly power) only where a material has one
+        spec_rows = None
+        if self.stages["specular"]:
+            has_specular = self._has_specular.take(mat)
+            spec_rows = None if has_specular.all() else np.flatnonzero(has_specular)
         shadow_origins = offset_ray_origins(p, ng)
-        total = np.zeros((len(idx), 3))
+        total = None
         for light in self.lights:
             wi, distance, incident = light.illuminate(p)
             # only lights on the side the ray came from can light this point (no leaks
@@ -328,24 +373,36 @@ class Integrator:
             j = np.flatnonzero(lit)
             if not len(j):
                 continue
-            value = blinn_phong(ns[j], wo[j], wi[j], kd[j], None if ks is None else ks[j],
-                                None if shininess is None else shininess[j])
+            cos_i = dot(ns, wi)
+            value = lambert(cos_i, kd)
+            if self.stages["specular"]:
+                s = spec_rows if spec_rows is None else spec_rows[lit[spec_rows]]
+                mat_s = take_rows(mat, s)
+                highlight = blinn_phong_highlight(
+                    take_rows(ns, s), take_rows(wo, s), take_rows(wi, s), take_rows(cos_i, s),
+                    take_rows(self._specular, mat_s), self.scene.materials.shininess[mat_s])
+                value = _add_rows(value, s, highlight)
             clock.lap("shade")
-            occluded = self.accel.occluded(shadow_origins[j], wi[j], distance[j] * _SHADOW_SHORTEN)
+            occluded = self.accel.occluded(shadow_origins, wi, distance * _SHADOW_SHORTEN, rows=j)
             stats.rays["shadow"] += len(j)
             clock.lap("shadow")
-            visible = ~occluded
-            total[j[visible]] += value[visible] * incident[j[visible]]
-        return total
+            visible = np.zeros(k, dtype=bool)
+            visible[j] = ~occluded
+            contribution = np.where(visible[:, None], value * incident, 0.0)
+            total = contribution if total is None else total + contribution
+        if total is None or rows is None:
+            return total
+        full = np.zeros((len(srf.mat), 3), order="F")
+        return _add_rows(full, rows, total)
 
-    def _ambient_occlusion(self, srf, rays, depth, keys, stats):
+    def _ambient_occlusion(self, srf, depth, keys, stats):
         """Fraction of cosine-weighted hemisphere rays that escape within ``ao_distance``."""
         pixel, sample_in_pixel = keys
         k = len(srf.mat)
         n_ao = self.ao_samples
         origins = offset_ray_origins(srf.p, srf.ng)
         t, b = orthonormal_basis(srf.ng)
-        px, sp = pixel[rays.sample], sample_in_pixel[rays.sample]
+        px, sp = pixel[srf.sample], sample_in_pixel[srf.sample]
         free = np.zeros(k)
         for i in range(n_ao):
             u = uniform2(self.settings.seed, px, sp, Dim.AO + 2 * (i + depth * 1024))
@@ -428,9 +485,40 @@ def fresnel_exact_or_schlick(mode):
     return fresnel_dielectric if mode == "exact" else fresnel_schlick
 
 
-def _scatter_add(target, index, values):
-    """``target[index] += values`` with repeated indices accumulating, in index order."""
-    np.add.at(target, index, values)
+def _scatter_add(target, index, values, unique=False):
+    """``target[index] += values`` with repeated indices accumulating, in index order.
+
+    Parameters
+    ----------
+    target : (n, 3) float
+    index : (k,) int or None
+        Rows of ``target``; None means all rows in order (``k == n``).
+    values : (k, 3) float
+    unique : bool
+        The caller guarantees no repeated index (e.g. camera rays, one per sample), so a
+        plain fancy-index add gives the same sums as the much slower ``np.add.at``.
+    """
+    if index is None:
+        target += values
+    elif unique:
+        _add_rows(target, index, values)
+    else:
+        for c in range(target.shape[1]):
+            np.add.at(target[:, c], index, values[:, c])
+
+
+def _add_rows(target, rows, values):
+    """``target[rows] += values`` for distinct ``rows`` (None: all rows); returns ``target``.
+
+    Column by column, so a component-major ``target`` is updated along contiguous columns.
+    """
+    if rows is None:
+        target += values
+        return target
+    for c in range(target.shape[1]):
+        column = target[:, c]
+        column[rows] += values[:, c]
+    return target
 
 
 class _Clock:

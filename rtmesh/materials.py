@@ -19,6 +19,8 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
+from .vecmath import dot, norm
+
 
 def _colour(value):
     a = np.asarray(value, dtype=np.float64)
@@ -141,14 +143,55 @@ def blinn_phong(n, wo, wi, diffuse, specular, shininess):
         ``kd * max(0, n.wi) + ks * max(0, n.h)^shininess`` (the specular term only where
         ``n.wi > 0``), to be multiplied by the light's intensity / distance^2 or irradiance.
     """
-    cos_i = np.einsum("ij,ij->i", n, wi)
-    lit = cos_i > 0.0
-    value = diffuse * np.maximum(cos_i, 0.0)[:, None]
+    cos_i = dot(n, wi)
+    value = lambert(cos_i, diffuse)
     if specular is not None:
-        h = wo + wi
-        h_len = np.sqrt(np.einsum("ij,ij->i", h, h))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            cos_h = np.einsum("ij,ij->i", n, h) / h_len
-        cos_h = np.where(lit & (h_len > 0), np.maximum(cos_h, 0.0), 0.0)
-        value = value + specular * (cos_h ** shininess)[:, None]
+        value = value + blinn_phong_highlight(n, wo, wi, cos_i, specular, shininess)
     return value
+
+
+def lambert(cos_i, diffuse):
+    """The diffuse part of :func:`blinn_phong`.
+
+    Parameters
+    ----------
+    cos_i : (k,) float
+        ``n . wi``, cosine between the shading normal and the direction to the light.
+    diffuse : (k, 3) float
+        kd.
+
+    Returns
+    -------
+    (k, 3) float
+        ``kd * max(0, cos_i)``, laid out like ``diffuse``.
+    """
+    return diffuse * np.maximum(cos_i, 0.0)[:, None]
+
+
+def blinn_phong_highlight(n, wo, wi, cos_i, specular, shininess):
+    """The specular part of :func:`blinn_phong`.
+
+    Parameters
+    ----------
+    n : (k, 3) float
+        Unit shading normals.
+    wo, wi : (k, 3) float
+        Unit directions toward the viewer and toward the light.
+    cos_i : (k,) float
+        ``n . wi``; no highlight where it is <= 0 (light below the shading horizon).
+    specular : (k, 3) float
+        ks.
+    shininess : (k,) float
+        Specular exponent.
+
+    Returns
+    -------
+    (k, 3) float
+        ``ks * max(0, n.h)^shininess`` with ``h`` the half vector, laid out like ``n``.
+    """
+    h = wo + wi
+    h_len = norm(h)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cos_h = dot(n, h) / h_len
+    cos_h = np.where((cos_i > 0.0) & (h_len > 0), np.maximum(cos_h, 0.0), 0.0)
+    return specular * (cos_h ** shininess)[:, None]
