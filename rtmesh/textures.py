@@ -1,0 +1,97 @@
+"""Image textures: decoding to linear float and bilinear lookup with wrap modes."""
+
+import numpy as np
+
+from .film import srgb_to_linear
+
+WRAP_MODES = ("repeat", "clamp", "mirror")
+
+
+class Texture:
+    """An image addressed by UV coordinates.
+
+    Parameters
+    ----------
+    pixels : (h, w, c) float
+        Texel values, row 0 at the top of the image; already linear.
+    wrap : {"repeat", "clamp", "mirror"}
+        What UVs outside [0, 1] read.
+    name : str
+        For messages.
+
+    Notes
+    -----
+    UV (0, 0) is the bottom-left corner of the image and (1, 1) the top-right (the OBJ and
+    OpenGL convention; trimesh converts glTF's top-left origin to it).  Texel centres sit at
+    half-integer positions, so a UV at a texel centre reads that texel exactly.
+    """
+
+    def __init__(self, pixels, wrap="repeat", name="texture"):
+        if wrap not in WRAP_MODES:
+            raise ValueError(f"unknown wrap mode {wrap!r}; expected one of {', '.join(WRAP_MODES)}")
+        pixels = np.asarray(pixels, dtype=np.float64)
+        if pixels.ndim == 2:
+            pixels = pixels[:, :, None]
+        self.pixels = pixels
+        self.wrap = wrap
+        self.name = name
+
+    @classmethod
+    def from_8bit(cls, pixels, srgb=True, **options):
+        """A texture from 8-bit texels, sRGB-decoded for colour data.
+
+        Parameters
+        ----------
+        pixels : (h, w, c) uint8
+        srgb : bool
+            True for colour textures (base colour, diffuse); False for data (normals,
+            roughness), which are stored linearly.
+        """
+        values = np.asarray(pixels, dtype=np.float64) / 255.0
+        if srgb:
+            # alpha is always linear
+            colour = srgb_to_linear(values[..., :3])
+            values = np.concatenate([colour, values[..., 3:]], axis=-1)
+        return cls(values, **options)
+
+    @classmethod
+    def from_pil(cls, image, srgb=True, **options):
+        """A texture from a PIL image (as trimesh decodes them), keeping alpha if present."""
+        mode = "RGBA" if image.mode in ("RGBA", "LA", "PA") or "transparency" in image.info else "RGB"
+        return cls.from_8bit(np.asarray(image.convert(mode)), srgb=srgb, **options)
+
+    @property
+    def channels(self):
+        return self.pixels.shape[2]
+
+    def _wrap(self, i, size):
+        if self.wrap == "repeat":
+            return np.mod(i, size)
+        if self.wrap == "clamp":
+            return np.clip(i, 0, size - 1)
+        period = np.mod(i, 2 * size)
+        return np.where(period < size, period, 2 * size - 1 - period)
+
+    def sample(self, uv):
+        """Bilinearly filtered texel values at UV coordinates.
+
+        Parameters
+        ----------
+        uv : (k, 2) float
+
+        Returns
+        -------
+        (k, c) float64
+        """
+        h, w, _ = self.pixels.shape
+        x = uv[:, 0] * w - 0.5
+        y = (1.0 - uv[:, 1]) * h - 0.5  # v grows upward, rows grow downward
+        x0, y0 = np.floor(x), np.floor(y)
+        fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+        x0, y0 = x0.astype(np.int64), y0.astype(np.int64)
+        xs = (self._wrap(x0, w), self._wrap(x0 + 1, w))
+        ys = (self._wrap(y0, h), self._wrap(y0 + 1, h))
+        p = self.pixels
+        top = p[ys[0], xs[0]] * (1.0 - fx) + p[ys[0], xs[1]] * fx
+        bottom = p[ys[1], xs[0]] * (1.0 - fx) + p[ys[1], xs[1]] * fx
+        return top * (1.0 - fy) + bottom * fy
