@@ -63,7 +63,7 @@ def part(name, mesh_or_arrays, material=0, smooth=False):
     return MeshPart(name, np.array(vertices, dtype=np.float64), np.array(faces), material, normals)
 
 
-def sphere_on_floor_scene(shift=(0.0, 0.0, 0.0), subdivisions=3):
+def sphere_on_floor_scene(shift=(0.0, 0.0, 0.0), subdivisions=3, smooth=False):
     """A diffuse sphere resting on a diffuse floor, lit by one point light, seen from above.
 
     ``shift`` moves everything (geometry, camera and light) by the same vector.
@@ -71,7 +71,7 @@ def sphere_on_floor_scene(shift=(0.0, 0.0, 0.0), subdivisions=3):
     shift = np.asarray(shift, dtype=np.float64)
     sphere = icosphere(subdivisions, 1.0, np.array([0.0, 0.0, 1.0]) + shift)
     floor_vertices, floor_faces = floor_quad(8.0)
-    parts = [part("sphere", sphere, 0), part("floor", (floor_vertices + shift, floor_faces), 1)]
+    parts = [part("sphere", sphere, 0, smooth), part("floor", (floor_vertices + shift, floor_faces), 1)]
     materials = [Material("sphere", diffuse=0.6), Material("floor", diffuse=0.5)]
     lights = [PointLight(np.array([2.0, -1.0, 6.0]) + shift, 30.0)]
     camera = Camera(np.array([0.0, -7.0, 6.0]) + shift, np.array([0.0, 0.0, 0.0]) + shift,
