@@ -89,20 +89,97 @@ def material_from_trimesh(visual, name):
             mirror=base * metallic * (1.0 - roughness),
         )
     if isinstance(material, trimesh.visual.material.SimpleMaterial):
-        diffuse = np.asarray(material.diffuse, dtype=np.float64)[:3] / 255.0
-        if getattr(material, "image", None) is not None:
-            diffuse = diffuse * _mean_texture_colour(material.image)
-        specular = np.asarray(material.specular, dtype=np.float64)[:3] / 255.0
-        return Material(
-            name=material.name or name,
-            diffuse=diffuse,
-            specular=specular,
-            shininess=float(material.glossiness or 32.0),
-        )
+        return _mtl_material(material, name)
     colours = getattr(visual, "main_color", None)
     if colours is not None and getattr(visual, "defined", False):
         return Material(name=name, diffuse=np.asarray(colours, dtype=np.float64)[:3] / 255.0)
     return Material(name=name)
+
+
+def _mtl_floats(kwargs, key, count):
+    """A float or colour statement of an MTL file as trimesh keeps it, or None."""
+    value = kwargs.get(key)
+    if value is None:
+        return None
+    try:
+        values = np.atleast_1d(np.asarray(value, dtype=np.float64)).ravel()
+    except (TypeError, ValueError):
+        return None
+    if not len(values) or not np.isfinite(values).all():
+        return None
+    return float(values[0]) if count == 1 else np.resize(values, count)
+
+
+# illum models of the MTL specification -> (lit, specular, mirror, transmissive)
+_ILLUM = {
+    0: (False, False, False, False),  # colour on, no lighting: Kd shown as is
+    1: (True, False, False, False),  # diffuse only
+    2: (True, True, False, False),  # Blinn-Phong
+    3: (True, True, True, False),  # + ray-traced reflection (Ks)
+    4: (True, True, True, True),  # glass: reflection + transparency (1 - d)
+    5: (True, True, True, False),  # reflection with Fresnel (treated as mirror Ks)
+    6: (True, True, True, True),  # reflection + refraction (Ni)
+    7: (True, True, True, True),  # reflection + refraction with Fresnel
+    8: (True, True, True, False),  # reflection, not ray traced (treated as 3)
+    9: (True, True, True, True),  # glass, not ray traced (treated as 4)
+    10: (True, True, False, False),  # shadow matte (treated as 2)
+}
+
+
+def _mtl_material(material, name):
+    """Map an OBJ/MTL material onto rtmesh's model.
+
+    Ka, Kd, Ks, Ke and Ns map to ambient, diffuse, specular, emission and shininess; the
+    ``illum`` model chooses lighting, highlights, mirror reflection (weight Ks) and
+    refraction (index Ni; weight Tf, times 1 - opacity for the "transparency" models 4 and 9).  Opacity comes from ``d`` (1 = opaque);
+    ``Tr`` is only read when ``d`` is absent, as ``1 - Tr``, except that ``Tr 1`` is read as
+    opaque: several exporters (MeshLab among them) write Tr as an opacity, and a model that
+    disappears is the worse failure.  The colours trimesh quantised to 8 bits are read back
+    at full precision from the file's statements when trimesh kept them.
+    """
+    kw = {k.lower(): v for k, v in (getattr(material, "kwargs", None) or {}).items()}
+
+    def colour(key, fallback):
+        value = _mtl_floats(kw, key, 3)
+        return value if value is not None else fallback
+
+    diffuse = colour("kd", np.asarray(material.diffuse, dtype=np.float64)[:3] / 255.0)
+    ambient = colour("ka", diffuse)
+    specular = colour("ks", np.asarray(material.specular, dtype=np.float64)[:3] / 255.0)
+    emission = colour("ke", np.zeros(3))
+    shininess = _mtl_floats(kw, "ns", 1)
+    if shininess is None:
+        shininess = float(material.glossiness) if material.glossiness else 32.0
+    illum_value = _mtl_floats(kw, "illum", 1)
+    illum = 2 if illum_value is None else int(illum_value)
+    lit, has_specular, has_mirror, transmissive = _ILLUM.get(illum, _ILLUM[2])
+    opacity = _mtl_floats(kw, "d", 1)
+    if opacity is None:
+        tr = _mtl_floats(kw, "tr", 1)
+        opacity = 1.0 if tr is None or tr >= 1.0 else 1.0 - tr
+    if getattr(material, "image", None) is not None:
+        # until textures are sampled, the mean texel colour stands in for the texture
+        diffuse = diffuse * _mean_texture_colour(material.image)
+    transmission = np.zeros(3)
+    if transmissive:
+        tf = _mtl_floats(kw, "tf", 3)
+        transmission = tf if tf is not None else np.ones(3)
+        if illum in (4, 9):
+            # "transparency" models: how much passes is the dissolve
+            transmission = transmission * (1.0 - opacity)
+    if not lit:
+        emission, diffuse, ambient = emission + diffuse, np.zeros(3), np.zeros(3)
+    return Material(
+        name=material.name or name,
+        diffuse=diffuse,
+        ambient=ambient,
+        specular=specular if has_specular else np.zeros(3),
+        shininess=float(np.clip(shininess, 1.0, 10000.0)),
+        mirror=specular if has_mirror else np.zeros(3),
+        transmission=np.clip(transmission, 0.0, 1.0),
+        ior=_mtl_floats(kw, "ni", 1) or 1.5,
+        emission=emission,
+    )
 
 
 def _mean_texture_colour(image):
