@@ -1,4 +1,4 @@
-"""Command line: ``rtmesh render``."""
+"""Command line: ``rtmesh render`` and ``rtmesh batch``."""
 
 import argparse
 import logging
@@ -60,7 +60,84 @@ def build_parser():
     p.add_argument("--exposure", type=float, help="exposure in stops for 8-bit output")
     p.add_argument("--tonemap", choices=TONEMAPS, help="tone-mapping operator for 8-bit output")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    _add_batch_parser(commands)
     return parser
+
+
+def _names(allowed):
+    """argparse type for a comma-separated list of names among ``allowed``."""
+    def parse(text):
+        names = tuple(n.strip() for n in text.split(",") if n.strip())
+        for name in names:
+            if name not in allowed:
+                raise argparse.ArgumentTypeError(f"unknown {name!r} (available: {', '.join(allowed)})")
+        return names
+    return parse
+
+
+def _positive_float(text):
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text}")
+    return value
+
+
+def _bytes(text):
+    """A memory size: ``4G``, ``512M``, ``2.5GiB``, a plain number of bytes, or 0 (off)."""
+    units = {"": 1, "K": 2**10, "M": 2**20, "G": 2**30, "T": 2**40}
+    t = text.strip().upper().removesuffix("IB").removesuffix("B")
+    unit = t[-1:] if t[-1:] in units else ""
+    try:
+        value = float(t[:-1] if unit else t)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a size like 4G or 512M, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a size >= 0, got {text!r}")
+    return int(value * units[unit])
+
+
+def _add_batch_parser(commands):
+    from .batch import FORMATS, VIEWS
+
+    p = commands.add_parser(
+        "batch", help="render many mesh files (folders, manifests) to images, resumably",
+        description="Render every mesh file named by INPUTS into OUTDIR, mirroring the input "
+        "tree. INPUTS are mesh files, folders (searched recursively) or manifests (.txt: one "
+        "path per line; .csv: a 'path' column plus optional width, height, spp, views, "
+        "turntable, formats, passes, seed). Re-running the same command skips finished images "
+        "(OUTDIR/rtmesh-batch-ledger.jsonl); OUTDIR/rtmesh-batch-report.json lists every asset. "
+        "Exit status: 0 all done, 1 some assets failed, 2 bad input.")
+    p.add_argument("inputs", nargs="+", metavar="INPUT", help="mesh file, folder or manifest")
+    p.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="output folder")
+    p.add_argument("--width", type=_positive_int, default=256, help="image width (default 256)")
+    p.add_argument("--height", type=_positive_int, default=256, help="image height (default 256)")
+    p.add_argument("--spp", type=_positive_int, default=4, help="samples per pixel (default 4)")
+    p.add_argument("--views", type=_names(tuple(VIEWS)), default=("iso",),
+                   help="comma-separated fixed views: " + ", ".join(VIEWS) + " (default iso)")
+    p.add_argument("--turntable", type=_positive_int, metavar="N",
+                   help="N frames orbiting each asset (instead of --views)")
+    p.add_argument("--formats", type=_names(FORMATS), default=("png",),
+                   help="comma-separated output formats: " + ", ".join(FORMATS) + " (default png)")
+    p.add_argument("--passes", type=_passes, default=(), help="extra EXR passes: " + ", ".join(PASSES))
+    p.add_argument("--ground", action="store_true", help="a ground plane under each asset (shadow)")
+    p.add_argument("--seed", type=int, default=0, help="random seed")
+    p.add_argument("--max-depth", type=int, default=5, help="reflection/refraction bounces")
+    p.add_argument("--exposure", type=float, default=0.0, help="exposure in stops for 8-bit output")
+    p.add_argument("--tonemap", choices=TONEMAPS, default="reinhard", help="tone mapping for 8-bit output")
+    p.add_argument("--workers", type=_positive_int, help="local worker processes (default: all cores)")
+    p.add_argument("--threads", type=_positive_int,
+                   help="render threads per asset (default: cores / workers locally, 1 on Dask)")
+    p.add_argument("--scheduler", metavar="tcp://HOST:PORT",
+                   help="run on a dask.distributed cluster (pip install rtmesh[distributed])")
+    p.add_argument("--time-limit", type=_positive_float, default=600.0, metavar="SECONDS",
+                   help="seconds one asset may take before it is stopped (default 600)")
+    p.add_argument("--memory-limit", type=_bytes, metavar="SIZE",
+                   help="address space per local worker, e.g. 4G; 0 = off (default: RAM / workers)")
+    p.add_argument("--force", action="store_true", help="redo every image, ignoring the ledger")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
 
 
 class ProgressBar:
@@ -112,6 +189,20 @@ def cmd_render(args):
     return 0
 
 
+def cmd_batch(args):
+    from .batch import batch_convert
+
+    report = batch_convert(
+        args.inputs, args.output, width=args.width, height=args.height, spp=args.spp,
+        views=args.views, turntable=args.turntable or 0, formats=args.formats, passes=args.passes,
+        ground=args.ground, seed=args.seed, max_depth=args.max_depth, exposure=args.exposure,
+        tonemap=args.tonemap, workers=args.workers, threads=args.threads,
+        scheduler=args.scheduler, time_limit=args.time_limit, memory_limit=args.memory_limit,
+        force=args.force, quiet=args.quiet)
+    print(report.summary())
+    return 1 if report.counts["failed"] else 0
+
+
 def main(argv=None):
     """Entry point of the ``rtmesh`` command; returns the exit status."""
     logging.basicConfig(format="rtmesh: warning: %(message)s", level=logging.WARNING)
@@ -121,11 +212,17 @@ def main(argv=None):
     try:
         if args.command == "render":
             return cmd_render(args)
+        if args.command == "batch":
+            return cmd_batch(args)
     except RtmeshError as exc:
         print(f"rtmesh: error: {exc}", file=sys.stderr)
         return EXIT_USER_ERROR
     except KeyboardInterrupt:
-        print("rtmesh: interrupted; no image written", file=sys.stderr)
+        if args.command == "batch":
+            print("rtmesh: interrupted; finished images are kept: run the same command to resume",
+                  file=sys.stderr)
+        else:
+            print("rtmesh: interrupted; no image written", file=sys.stderr)
         return 130
     return 0
 
