@@ -229,3 +229,25 @@ def test_invalid_settings_are_rejected_before_rendering():
                 dict(fresnel="fast"), dict(passes=("normals",)), dict(ao_distance=0.0)):
         with pytest.raises(ValueError):
             Integrator(scene, settings(**bad))
+
+
+@pytest.mark.slow
+def test_ao_beside_a_wall_matches_the_closed_form_pixel_by_pixel():
+    # statistical: 1024 AO rays per pixel bring each pixel within ~0.016 (1 sigma) of the
+    # closed form, so every pixel can be checked on its own at 5 sigma
+    ao_distance, big = 1.0, 6.0
+    floor = quad([[0.0, -big, 0.0], [big, -big, 0.0], [big, big, 0.0], [0.0, big, 0.0]])
+    wall = quad([[0.0, -big, 0.0], [0.0, big, 0.0], [0.0, big, big], [0.0, -big, big]])
+    camera = Camera([0.7, 0.0, 4.0], [0.7, 0.0, 0.0], [0.0, 1.0, 0.0], 25.0)
+    scene = Scene.from_parts([part("floor", floor), part("wall", wall)], [Material("f")], [], camera)
+    width = height = 64
+    result = render(scene, width=width, height=height, ao_samples=1024, passes=("ao",),
+                    ao_distance=ao_distance, threads=2)
+    ao = result.passes["ao"].reshape(-1)
+    origins, directions = pixel_centre_rays(camera, width, height)
+    t = -origins[:, 2] / directions[:, 2]
+    x = origins[:, 0] + t * directions[:, 0]
+    on_floor = x > 1e-3
+    expected = unoccluded_fraction_beside_wall(x, ao_distance)
+    sigma = np.sqrt(expected * (1.0 - expected) / 1024) + 1e-6
+    assert (np.abs(ao[on_floor] - expected[on_floor]) < 5.0 * sigma[on_floor] + 1e-3).all()
