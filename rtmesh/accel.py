@@ -15,7 +15,7 @@ import numpy as np
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
-from .batches import component_major, take_rows
+from .batches import component_major, rows_as_float32, take_rows
 
 # Constants of the integer-ULP offset of Waechter & Binder, "A Fast and Robust Method for
 # Avoiding Self-Intersection" (Ray Tracing Gems, ch. 6).  The offset is 256 float32 ulps of
@@ -143,7 +143,7 @@ class Accel:
         if n == 0:
             empty = np.zeros(0)
             return Hits(empty, np.zeros(0, np.int32), empty, empty)
-        result = self._scene.run(_float32_rows(origins), _float32_rows(directions), output=1)
+        result = self._scene.run(rows_as_float32(origins), rows_as_float32(directions), output=1)
         prim = result["primID"]
         t = result["tfar"].astype(np.float64)
         t[prim < 0] = np.inf
@@ -173,7 +173,7 @@ class Accel:
         # embreex writes into the distance array it is given: always pass a fresh one.
         # float32 max stands in for inf, which Embree's robust mode handles less predictably.
         t = np.minimum(t_max, np.finfo(np.float32).max).astype(np.float32)
-        o, d = _float32_rows(origins, rows), _float32_rows(directions, rows)
+        o, d = rows_as_float32(origins, rows), rows_as_float32(directions, rows)
         return self._scene.run(o, d, dists=t, query="OCCLUDED") != -1
 
     def hit_points(self, hits, mask=None):
@@ -218,15 +218,3 @@ def barycentric_interpolate(corner_and_edges, u, v):
     """
     u, v = u[:, None], v[:, None]
     return corner_and_edges[:, 0:3] + u * corner_and_edges[:, 3:6] + v * corner_and_edges[:, 6:9]
-
-
-def _float32_rows(array, rows=None):
-    """A C-contiguous float32 ``(n, 3)`` copy of ``array`` (or of its ``rows``) for Embree.
-
-    Built column by column: NumPy's transposing copy of a component-major array is several
-    times slower than three strided column writes.
-    """
-    if rows is None and array.flags.c_contiguous:
-        return array.astype(np.float32)
-    columns = [array[:, c] if rows is None else array[:, c].take(rows) for c in range(3)]
-    return np.stack(columns, axis=1, dtype=np.float32)

@@ -112,7 +112,8 @@ class Camera:
                 + disk[:, 1:] * up[None, :]
             )
             return origins, normalize(focus_points - origins)
-        origins = np.broadcast_to(self.position, (n, 3)).copy()
+        # filling component rows is several times faster than repeating a row n times
+        origins = component_major(np.repeat(self.position, n).reshape(3, n))
         return origins, normalize(d)
 
 

@@ -2,6 +2,8 @@
 
 import numpy as np
 
+from .batches import rows_as_float32
+
 TONEMAPS = ("clamp", "reinhard", "aces")
 
 
@@ -17,7 +19,9 @@ class Film:
     Attributes
     ----------
     sum, sum_sq : (height * width, 3) float64
-        Sum over samples of radiance and radiance squared, per pixel (row-major).
+        Sum over samples of radiance and radiance squared, per pixel (row-major pixel
+        order; stored component-major like the integrator's radiance, see
+        :mod:`rtmesh.batches`).
     count : (height * width,) int64
         Samples per pixel so far.
     pass_sums : dict of str to (height * width, k) float64
@@ -26,8 +30,8 @@ class Film:
     def __init__(self, width, height, passes=None):
         self.width, self.height = int(width), int(height)
         n = self.width * self.height
-        self.sum = np.zeros((n, 3))
-        self.sum_sq = np.zeros((n, 3))
+        self.sum = np.zeros((n, 3), order="F")
+        self.sum_sq = np.zeros((n, 3), order="F")
         self.count = np.zeros(n, dtype=np.int64)
         self.pass_sums = {name: np.zeros((n, k)) for name, k in (passes or {}).items()}
 
@@ -55,7 +59,7 @@ class Film:
         self.count[px] += spp
 
     def _to_image(self, values):
-        return values.reshape(self.height, self.width, -1).astype(np.float32)
+        return rows_as_float32(values).reshape(self.height, self.width, -1)
 
     def image(self):
         """(height, width, 3) float32: mean radiance per pixel (box filter)."""

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .batches import component_major
 from .vecmath import norm
 
 
@@ -56,7 +57,9 @@ class PointLight:
         # a light sitting exactly on a point lights it from nowhere: direction 0, term 0
         safe = np.where(distance > 0.0, distance, np.inf)
         wi = to_light / safe[:, None]
-        incident = self.intensity[None, :] / (safe * safe)[:, None]
+        # component-major like the points (see rtmesh.batches): the shading arithmetic
+        # that combines the two then runs on contiguous columns
+        incident = component_major(self.intensity[:, None] / (safe * safe))
         return wi, distance, incident
 
     @property
@@ -147,7 +150,7 @@ class SpotLight:
         safe = np.where(distance > 0.0, distance, np.inf)
         wi = to_light / safe[:, None]
         cone = self.falloff(-(wi @ self.direction))
-        incident = self.intensity[None, :] * (cone / (safe * safe))[:, None]
+        incident = component_major(self.intensity[:, None] * (cone / (safe * safe)))
         return wi, distance, incident
 
     @property

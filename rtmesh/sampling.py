@@ -14,6 +14,8 @@ from enum import IntEnum
 
 import numpy as np
 
+from .batches import component_major, take_rows
+
 SAMPLERS = ("regular", "random", "jittered")
 
 
@@ -75,11 +77,10 @@ def uniform2(seed, pixel, sample, dimension):
     Returns
     -------
     (n, 2) float64
+        Component-major (see :mod:`rtmesh.batches`).
     """
-    return np.stack(
-        [uniform(seed, pixel, sample, dimension), uniform(seed, pixel, sample, dimension + 1)],
-        axis=1,
-    )
+    return component_major(np.stack(
+        [uniform(seed, pixel, sample, dimension), uniform(seed, pixel, sample, dimension + 1)]))
 
 
 def strata_shape(spp):
@@ -120,19 +121,22 @@ def pixel_offsets(sampler, seed, pixel, sample, spp):
     Returns
     -------
     (n, 2) float64
-        Offsets in [0, 1)^2 from the pixel's top-left corner (x right, y down).
+        Offsets in [0, 1)^2 from the pixel's top-left corner (x right, y down),
+        component-major (see :mod:`rtmesh.batches`).
     """
     if sampler == "random":
         return uniform2(seed, pixel, sample, Dim.PIXEL)
-    nx, ny = strata_shape(spp)
-    cell = np.stack([sample % nx, sample // nx], axis=1).astype(np.float64)
-    if sampler == "regular":
-        jitter = 0.5
-    elif sampler == "jittered":
-        jitter = uniform2(seed, pixel, sample, Dim.PIXEL)
-    else:
+    if sampler not in SAMPLERS:
         raise ValueError(f"unknown sampler {sampler!r}; expected one of {', '.join(SAMPLERS)}")
-    return (cell + jitter) / np.array([nx, ny], dtype=np.float64)
+    nx, ny = strata_shape(spp)
+    size = np.array([nx, ny], dtype=np.float64)
+    # the spp strata are worked out once and looked up per sample: a gather from a tiny
+    # table is much cheaper than integer division of every sample index
+    strata = np.arange(spp)
+    cells = component_major(np.stack([strata % nx, strata // nx]).astype(np.float64))
+    if sampler == "regular":
+        return take_rows((cells + 0.5) / size, sample)
+    return (take_rows(cells, sample) + uniform2(seed, pixel, sample, Dim.PIXEL)) / size
 
 
 def square_to_uniform_disk_concentric(u):

@@ -43,7 +43,7 @@ def normalize(a):
     (n, 3) float
     """
     length = norm(a)
-    inv = np.divide(1.0, length, out=np.zeros_like(length), where=length > 0.0)
+    inv = 1.0 / np.where(length > 0.0, length, np.inf)
     return a * inv[:, None]
 
 
