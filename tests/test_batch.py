@@ -1,0 +1,353 @@
+"""Batch conversion: inputs, names, resume after a kill, bad assets, limits, Dask.
+
+Every batch here renders tiny images (16-64 pixels, 1 spp) so the whole file stays quick;
+most of the time goes into starting worker processes, which is what these tests exercise.
+"""
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+import pytest
+import trimesh
+
+import rtmesh
+from rtmesh.batch import REPORT_NAME
+from rtmesh.batch_inputs import InputError, discover
+from rtmesh.batch_ledger import LEDGER_NAME, Ledger
+from rtmesh.cli import main
+from rtmesh.image_io import read_image
+
+HERE = os.path.dirname(__file__)
+DATA = os.path.join(HERE, "data")
+REPO = os.path.dirname(HERE)
+
+TINY = dict(width=24, height=16, spp=1, quiet=True)
+
+
+def make_mesh(path, subdivisions=1, kind="sphere"):
+    """Write a small mesh (the format follows the extension) and return its path."""
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    if kind == "sphere":
+        mesh = trimesh.creation.icosphere(subdivisions=subdivisions)
+    else:
+        mesh = trimesh.creation.box(extents=(1.0, 2.0, 0.5))
+    mesh.export(path)
+    return str(path)
+
+
+def truncated_glb(path):
+    """A GLB cut off in the middle of its binary chunk."""
+    make_mesh(path, subdivisions=2)
+    data = open(path, "rb").read()
+    with open(path, "wb") as f:
+        f.write(data[: len(data) // 2])
+    return str(path)
+
+
+def ledger_records(outdir):
+    """Every line of the ledger, parsed (duplicates kept)."""
+    with open(os.path.join(outdir, LEDGER_NAME)) as f:
+        return [json.loads(line) for line in f if line.strip()]
+
+
+def temporary_files(folder):
+    """Files a half-finished write could have left behind."""
+    return [os.path.join(here, f) for here, _, files in os.walk(folder)
+            for f in files if ".tmp" in f]
+
+
+def run_cli(*args, **kwargs):
+    proc = subprocess.run([sys.executable, "-m", "rtmesh.cli", *map(str, args)],
+                          capture_output=True, text=True, timeout=120, **kwargs)
+    return proc.returncode, proc.stdout, proc.stderr
+
+
+# ------------------------------------------------------------------------- inputs and names
+
+def test_duplicate_file_names_in_different_folders_get_distinct_outputs(tmp_path):
+    src = tmp_path / "assets"
+    make_mesh(src / "chairs" / "model.obj")
+    make_mesh(src / "tables" / "model.obj", kind="box")
+    make_mesh(src / "tables" / "model.ply")  # same stem, same folder, other format
+    out = tmp_path / "out"
+    report = rtmesh.batch_convert([src], out, workers=2, **TINY)
+    assert report.counts == {"assets": 3, "done": 3, "skipped": 0, "failed": 0, "images": 3}
+    for name in ("chairs/model.obj.png", "tables/model.obj.png", "tables/model.ply.png"):
+        image, _ = read_image(out / name)
+        assert image.shape == (16, 24, 3)
+    # the box and the sphere really are different images
+    a, _ = read_image(out / "chairs/model.obj.png")
+    b, _ = read_image(out / "tables/model.obj.png")
+    assert not np.array_equal(a, b)
+
+
+def test_names_mirror_the_deepest_common_folder_of_the_inputs(tmp_path):
+    first = make_mesh(tmp_path / "x" / "a" / "m.obj")
+    second = make_mesh(tmp_path / "x" / "b" / "deep" / "m.obj")
+    names = [a.name for a in discover([first, second, first])]  # a file named twice: once
+    assert names == ["a/m.obj", "b/deep/m.obj"]
+    # a folder input is the base of its own files, whatever they hold
+    assert [a.name for a in discover([tmp_path / "x" / "b"])] == ["deep/m.obj"]
+
+
+def test_empty_input_is_a_one_line_error(tmp_path):
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "list.txt").write_text("# nothing yet\n\n")
+    for inputs in ([tmp_path / "empty"], [tmp_path / "list.txt"]):
+        code = main(["batch", *map(str, inputs), "-o", str(tmp_path / "out"), "-q"])
+        assert code == 2
+    with pytest.raises(InputError, match="no mesh files"):
+        rtmesh.batch_convert([tmp_path / "empty"], tmp_path / "out", **TINY)
+    assert not (tmp_path / "out").exists()  # nothing created for nothing to do
+    code, out, err = run_cli("batch", tmp_path / "missing", "-o", tmp_path / "out")
+    assert code == 2 and err.strip().count("\n") == 0
+    assert err.startswith("rtmesh: error:") and "missing" in err
+
+
+def test_manifests_line_and_csv_with_per_asset_overrides(tmp_path):
+    a = make_mesh(tmp_path / "m" / "a.obj")
+    b = make_mesh(tmp_path / "m" / "b.stl", kind="box")
+    (tmp_path / "list.txt").write_text(f"# assets\n{a}\n\nm/b.stl  # relative to the manifest\n")
+    (tmp_path / "list.csv").write_text(
+        "path,width,height,views,formats\n"
+        "m/a.obj,32,20,,\n"
+        f'{b},16,16,"front,top",png;exr\n')
+    report = rtmesh.batch_convert([tmp_path / "list.txt"], tmp_path / "out1", workers=1, **TINY)
+    assert report.counts["done"] == 2
+    assert sorted(os.listdir(tmp_path / "out1" / "m"))[:2] == ["a.obj.png", "b.stl.png"]
+    report = rtmesh.batch_convert([tmp_path / "list.csv"], tmp_path / "out2", workers=1, **TINY)
+    assert report.counts["done"] == 2 and report.counts["images"] == 3
+    out = tmp_path / "out2" / "m"
+    assert read_image(out / "a.obj.png")[0].shape == (20, 32, 3)
+    assert read_image(out / "b.stl.front.png")[0].shape == (16, 16, 3)
+    assert "AO" not in read_image(out / "b.stl.top.exr")[1]
+    assert not (out / "b.stl.top.jpg").exists()
+    # a bad cell stops the batch before anything runs, naming the file and the line
+    (tmp_path / "bad.csv").write_text("path,spp\nm/a.obj,many\n")
+    with pytest.raises(InputError, match=r"bad\.csv: line 2: spp"):
+        rtmesh.batch_convert([tmp_path / "bad.csv"], tmp_path / "out3", **TINY)
+
+
+# ------------------------------------------------------------------------- bad assets, bad outputs
+
+def test_corrupt_files_in_the_middle_of_a_batch_fail_alone(tmp_path):
+    src = tmp_path / "src"
+    make_mesh(src / "a_good.obj")
+    shutil.copy(os.path.join(DATA, "empty.obj"), src / "b_empty.obj")
+    shutil.copy(os.path.join(DATA, "notenoughindices.obj"), src / "c_notenoughindices.obj")
+    truncated_glb(src / "d_truncated.glb")
+    make_mesh(src / "e_good.ply", kind="box")
+    out = tmp_path / "out"
+    code = main(["batch", str(src), "-o", str(out), "--width", "16", "--height", "16",
+                 "--spp", "1", "--workers", "2", "-q"])
+    assert code == 1  # something failed
+    report = json.loads((out / REPORT_NAME).read_text())
+    status = {a["asset"]: a for a in report["assets"]}
+    assert status["a_good.obj"]["status"] == status["e_good.ply"]["status"] == "done"
+    for bad in ("b_empty.obj", "d_truncated.glb"):
+        assert status[bad]["status"] == "failed"
+        (error,) = status[bad]["errors"]
+        assert error["stage"] == "load" and bad in error["message"] and "\n" not in error["message"]
+        assert not (out / f"{bad}.png").exists()
+    # whatever happens to a half-broken file, the batch finished and accounted for it
+    assert status["c_notenoughindices.obj"]["status"] in ("done", "failed")
+    assert report["counts"]["assets"] == 5
+    assert temporary_files(out) == []
+
+
+def test_unwritable_output_folder_is_a_one_line_error(tmp_path):
+    src = make_mesh(tmp_path / "a.obj")
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    code, out, err = run_cli("batch", src, "-o", blocker / "out")
+    assert code == 2 and err.count("\n") == 1 and err.startswith("rtmesh: error:")
+    assert blocker.read_text() == "not a folder"
+    if os.geteuid() != 0:  # root writes anywhere: the permission case needs a normal user
+        locked = tmp_path / "locked"
+        locked.mkdir(mode=0o500)
+        code, out, err = run_cli("batch", src, "-o", locked)
+        assert code == 2 and "not writable" in err
+
+
+def test_an_output_path_that_cannot_be_written_fails_only_that_asset(tmp_path):
+    make_mesh(tmp_path / "src" / "sub" / "a.obj")
+    make_mesh(tmp_path / "src" / "b.obj")
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "sub").write_text("a file where a folder of images should go")
+    report = rtmesh.batch_convert([tmp_path / "src"], out, workers=1, **TINY)
+    (failed,) = report.failed
+    assert failed["asset"] == "sub/a.obj" and failed["errors"][0]["stage"] == "write"
+    assert read_image(out / "b.obj.png")[0].shape == (16, 24, 3)
+
+
+def test_time_limit_stops_a_runaway_asset_and_the_batch_goes_on(tmp_path):
+    make_mesh(tmp_path / "src" / "a_slow.obj", subdivisions=4)
+    make_mesh(tmp_path / "src" / "b_quick.obj")
+    (tmp_path / "list.csv").write_text("path,width,height,spp\nsrc/a_slow.obj,512,512,256\nsrc/b_quick.obj,,,\n")
+    start = time.perf_counter()
+    report = rtmesh.batch_convert([tmp_path / "list.csv"], tmp_path / "out", workers=1,
+                                  threads=1, time_limit=1.0, **TINY)
+    assert time.perf_counter() - start < 30
+    (failed,) = report.failed
+    assert failed["asset"] == "src/a_slow.obj" and failed["errors"][0]["stage"] == "time"
+    assert report.counts["done"] == 1
+
+
+def test_memory_guard_fails_an_asset_that_needs_too_much(tmp_path):
+    src = make_mesh(tmp_path / "a.obj")
+    # a 6000 x 6000 film needs gigabytes; the guard lets the worker start but not render it
+    report = rtmesh.batch_convert([src], tmp_path / "out", workers=1, width=6000, height=6000,
+                                  spp=1, memory_limit=1536 * 2**20, quiet=True)
+    (failed,) = report.failed
+    assert failed["errors"][0]["stage"] in ("memory", "crash")
+    assert "memory" in failed["errors"][0]["message"]
+
+
+# ------------------------------------------------------------------------- resume
+
+def test_rerun_skips_finished_images_and_redoes_changed_or_deleted_ones(tmp_path):
+    make_mesh(tmp_path / "src" / "a.obj")
+    make_mesh(tmp_path / "src" / "b.obj", kind="box")
+    out = tmp_path / "out"
+    first = rtmesh.batch_convert([tmp_path / "src"], out, workers=1, **TINY)
+    assert first.counts["done"] == 2
+    inode = os.stat(out / "a.obj.png").st_ino
+    again = rtmesh.batch_convert([tmp_path / "src"], out, workers=1, **TINY)
+    assert again.counts["skipped"] == 2 and again.counts["images"] == 0
+    assert os.stat(out / "a.obj.png").st_ino == inode  # not rewritten
+    os.unlink(out / "b.obj.png")
+    again = rtmesh.batch_convert([tmp_path / "src"], out, workers=1, **TINY)
+    assert again.counts == {"assets": 2, "done": 1, "skipped": 1, "failed": 0, "images": 1}
+    # other settings, other images: nothing is skipped
+    again = rtmesh.batch_convert([tmp_path / "src"], out, workers=1, **{**TINY, "spp": 2})
+    assert again.counts["done"] == 2
+
+
+def test_ledger_ignores_a_torn_last_line(tmp_path):
+    with Ledger(str(tmp_path)) as ledger:
+        ledger.record("a", "f1", "done", files=[])
+        ledger.record("b", "f2", "done", files=[])
+    with open(tmp_path / LEDGER_NAME, "a") as f:
+        f.write('{"key": "c", "fingerpri')  # a write cut short
+    with Ledger(str(tmp_path)) as ledger:
+        assert ledger.is_done("a", "f1") and ledger.is_done("b", "f2")
+        assert not ledger.is_done("b", "other inputs") and "c" not in ledger.records
+    # reopening compacted it back to whole lines
+    assert [r["key"] for r in ledger_records(tmp_path)] == ["a", "b"]
+
+
+def test_resume_after_sigkill_writes_every_image_exactly_once(tmp_path):
+    psutil = pytest.importorskip("psutil")
+    src = tmp_path / "src"
+    for i in range(16):
+        make_mesh(src / f"group{i % 3}" / f"m{i:02d}.obj", subdivisions=3)
+    out = tmp_path / "out"
+    command = [sys.executable, "-m", "rtmesh.cli", "batch", str(src), "-o", str(out), "--width",
+               "64", "--height", "64", "--spp", "4", "--workers", "1", "--threads", "1", "-q"]
+    batch = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    ledger = out / LEDGER_NAME
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and batch.poll() is None:
+        if ledger.exists() and len(ledger.read_text().splitlines()) >= 3:
+            break
+        time.sleep(0.02)
+    assert batch.poll() is None, "the batch finished before it could be killed"
+    workers = psutil.Process(batch.pid).children()
+    batch.send_signal(signal.SIGKILL)
+    batch.wait()
+    # the workers die with the batch: none goes on writing images nobody records
+    gone, alive = psutil.wait_procs(workers, timeout=5)
+    assert not alive
+
+    finished = {r["key"]: r for r in ledger_records(out) if r["status"] == "done"}
+    assert 3 <= len(finished) < 16
+    before = {f: os.stat(out / f).st_ino for r in finished.values() for f in r["files"]}
+    # a killed batch leaves its temporary files behind; none of them is taken for an image
+    for name in os.listdir(out / "group0"):
+        assert name.endswith(".obj.png") or name.startswith(".")
+
+    proc = subprocess.run(command, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    report = json.loads((out / REPORT_NAME).read_text())
+    assert report["counts"]["skipped"] == len(finished)
+    assert report["counts"]["done"] == 16 - len(finished)
+    records = ledger_records(out)
+    assert sorted(r["key"] for r in records) == sorted({r["key"] for r in records})  # once each
+    assert len(records) == 16 and all(r["status"] == "done" for r in records)
+    for name, inode in before.items():  # finished before the kill: never written again
+        assert os.stat(out / name).st_ino == inode
+    for r in records:
+        image, _ = read_image(out / r["files"][0])
+        assert image.shape == (64, 64, 3) and image.max() > 0
+    assert temporary_files(out) == []  # leftovers of the killed run are cleaned up
+
+
+# ------------------------------------------------------------------------- entry points, Dask
+
+def test_tool_script_runs_the_batch_command(tmp_path):
+    src = make_mesh(tmp_path / "a.obj")
+    proc = subprocess.run([sys.executable, os.path.join(REPO, "tools", "batch_convert.py"), src,
+                           "-o", str(tmp_path / "out"), "--width", "16", "--height", "16",
+                           "--spp", "1", "--formats", "png,exr", "-q"],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "1 done" in proc.stdout
+    images = sorted(n for n in os.listdir(tmp_path / "out") if n.startswith("a."))
+    assert images == ["a.obj.exr", "a.obj.png"]
+
+
+def test_missing_dask_gives_an_install_hint(tmp_path, monkeypatch):
+    src = make_mesh(tmp_path / "a.obj")
+    monkeypatch.setitem(sys.modules, "distributed", None)  # import distributed -> ImportError
+    with pytest.raises(rtmesh.RtmeshError, match=r"pip install rtmesh\[distributed\]"):
+        rtmesh.batch_convert([src], tmp_path / "out", scheduler="tcp://127.0.0.1:1", **TINY)
+
+
+def test_dask_cluster_with_a_worker_killed_mid_batch(tmp_path):
+    distributed = pytest.importorskip("distributed")
+    src = tmp_path / "src"
+    for i in range(14):
+        make_mesh(src / f"m{i:02d}.obj", subdivisions=3)
+    out = tmp_path / "out"
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None, silence_logs=50) as cluster, \
+            distributed.Client(cluster) as client:
+        pids = list(client.run(os.getpid).values())
+        result = {}
+
+        def batch():
+            result["report"] = rtmesh.batch_convert(
+                [src], out, scheduler=cluster.scheduler_address, width=64, height=64, spp=4,
+                quiet=True)
+
+        runner = threading.Thread(target=batch)
+        runner.start()
+        ledger = out / LEDGER_NAME
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and runner.is_alive():
+            if ledger.exists() and len(ledger.read_text().splitlines()) >= 2:
+                break
+            time.sleep(0.01)
+        assert runner.is_alive(), "the batch finished before a worker could be killed"
+        os.kill(pids[0], signal.SIGKILL)  # the nanny restarts it; its task runs again
+        runner.join(timeout=120)
+        assert not runner.is_alive()
+    report = result["report"]
+    assert report.counts == {"assets": 14, "done": 14, "skipped": 0, "failed": 0, "images": 14}
+    assert report.runner == "dask"
+    records = ledger_records(out)
+    assert len(records) == 14 == len({r["key"] for r in records})
+    for r in records:
+        assert read_image(out / r["files"][0])[0].shape == (64, 64, 3)
+    # the killed worker may have died mid-write: its temporary file is hidden, and the next
+    # run over this folder removes it
+    visible = [n for n in os.listdir(out) if not n.startswith(".")]
+    assert len([n for n in visible if n.endswith(".png")]) == 14
