@@ -19,6 +19,7 @@ import dataclasses
 import hashlib
 import json
 import os
+import re
 import sys
 import tempfile
 import time
@@ -235,6 +236,7 @@ def batch_convert(inputs, outdir, **options):
     if opts.scheduler is not None:
         _check_dask()
     with Ledger(outdir) as ledger:
+        _remove_stale_temporaries(outdir)
         jobs, records = plan(assets, outdir, opts, ledger)
         progress = BatchProgress(len(assets), len(assets) - len(jobs), enabled=not opts.quiet)
 
@@ -364,6 +366,21 @@ def _make_output_folder(outdir):
             pass
     except OSError as exc:
         raise OutputError(f"{outdir}: output folder is not writable: {exc.strerror}") from None
+
+
+def _remove_stale_temporaries(outdir):
+    """Delete half-written images a killed run left (hidden ``.NAME.XXXX.tmp.EXT`` files).
+
+    Only called while this batch holds the folder's lock, so no live writer owns them.
+    """
+    pattern = re.compile(r"^\..+\.tmp\.(png|exr|jpe?g)$", re.IGNORECASE)
+    for here, dirs, files in os.walk(outdir):
+        for name in files:
+            if pattern.match(name):
+                try:
+                    os.unlink(os.path.join(here, name))
+                except OSError:
+                    pass  # harmless: it is hidden and never taken for an image
 
 
 def _check_dask():

@@ -6,7 +6,8 @@ file whose header names a ``path`` column and optionally per-asset overrides
 Relative paths in a manifest are resolved against the manifest's folder.
 
 Every asset gets an output name that mirrors the input tree: its path relative to the
-deepest folder that holds every input, with its extension kept (``chairs/oak.obj``), so two
+deepest folder that holds every input (a folder input, a file's folder, a manifest's folder
+for the entries under it), with its extension kept (``chairs/oak.obj``), so two
 files that differ only by extension or by folder never share an output.
 """
 
@@ -84,9 +85,9 @@ def discover(inputs):
         elif ext in MESH_EXTENSIONS:
             found.append((path, os.path.dirname(path), {}))
         elif ext in CSV_MANIFEST_EXTENSIONS:
-            found.extend((p, os.path.dirname(p), o) for p, o in read_csv_manifest(path))
+            found.extend((p, _manifest_root(path, p), o) for p, o in read_csv_manifest(path))
         elif ext in LINE_MANIFEST_EXTENSIONS:
-            found.extend((p, os.path.dirname(p), {}) for p in read_line_manifest(path))
+            found.extend((p, _manifest_root(path, p), {}) for p in read_line_manifest(path))
         else:
             raise InputError(
                 f"{item}: not a mesh file ({', '.join(MESH_EXTENSIONS)}), a folder or a manifest "
@@ -104,6 +105,15 @@ def discover(inputs):
     base = os.path.commonpath([root for _, root, _ in unique])
     return [Asset(path, os.path.relpath(path, base).replace(os.sep, "/"), overrides)
             for path, _, overrides in unique]
+
+
+def _manifest_root(manifest, path):
+    """The folder a manifest entry's name is relative to: the manifest's folder when the
+    entry lies under it (so ``m/a.obj`` is named ``m/a.obj``), else the entry's own folder."""
+    folder = os.path.dirname(manifest)
+    if os.path.commonpath([folder, path]) == folder:
+        return folder
+    return os.path.dirname(path)
 
 
 def _walk(folder):

@@ -22,6 +22,7 @@ import time
 from collections import deque
 from multiprocessing.connection import wait
 
+from . import batch_worker
 from .batch_worker import run_job
 from .errors import RtmeshError
 
@@ -48,19 +49,33 @@ def run_local(jobs, workers, on_image, on_job, time_limit=None, memory_limit=Non
     # inherit locks held by threads that no longer exist
     context = multiprocessing.get_context("spawn")
     pool = [_Worker(context, memory_limit) for _ in range(max(1, min(workers, len(pending))))]
+    failed_starts = 0
     try:
         while pending or any(w.job for w in pool):
             for i, worker in enumerate(pool):
-                if worker.job is None and pending:
-                    if not worker.process.is_alive():  # died while idle: replace it first
-                        worker.close()
-                        pool[i] = worker = _Worker(context, memory_limit)
+                if worker.process.is_alive() or worker.job is not None:
+                    continue
+                # died before or between jobs (its job, if any, is handled below)
+                if not worker.ready:
+                    failed_starts += 1
+                    if failed_starts >= 3 * len(pool):
+                        reason = _death_reason(worker.process.exitcode, memory_limit)
+                        raise RtmeshError(f"batch worker processes cannot start: {reason}")
+                worker.close()
+                pool[i] = _Worker(context, memory_limit)
+            for worker in pool:
+                # only a worker that has started gets a job: the time limit is the job's own
+                # time, not the seconds a new process spends importing NumPy and Embree
+                if worker.ready and worker.job is None and pending:
                     worker.assign(pending.popleft(), time_limit)
-            busy = [w for w in pool if w.job is not None]
-            deadlines = [w.deadline for w in busy if w.deadline is not None]
+            watched = [w for w in pool if w.job is not None or not w.ready]
+            deadlines = [w.deadline for w in watched if w.deadline is not None]
             timeout = max(0.0, min(deadlines) - time.monotonic()) if deadlines else None
-            wait([w.conn for w in busy] + [w.process.sentinel for w in busy], timeout)
+            wait([w.conn for w in watched] + [w.process.sentinel for w in watched], timeout)
             for i, worker in enumerate(pool):
+                if not worker.ready:
+                    worker.check_ready()
+                    continue
                 if worker.job is None:
                     continue
                 finished = worker.drain(on_image, on_job)
@@ -91,7 +106,17 @@ class _Worker:
                                        args=(child_conn, memory_limit, os.getpid()), daemon=True)
         self.process.start()
         child_conn.close()
+        self.ready = False
         self.job, self.deadline, self.reported, self.start = None, None, set(), 0.0
+
+    def check_ready(self):
+        """Note the worker's "ready" message, sent once it has imported and set up."""
+        try:
+            if self.conn.poll():
+                kind, _ = self.conn.recv()
+                self.ready = kind == "ready"
+        except (EOFError, OSError):
+            pass  # died while starting: the pool replaces it
 
     def assign(self, job, time_limit):
         self.job, self.reported, self.start = job, set(), time.perf_counter()
@@ -151,9 +176,11 @@ def _worker_main(conn, memory_limit, parent_pid):
         _, hard = resource.getrlimit(resource.RLIMIT_AS)
         limit = memory_limit if hard == resource.RLIM_INFINITY else min(memory_limit, hard)
         resource.setrlimit(resource.RLIMIT_AS, (limit, hard))
+        batch_worker.MEMORY_LIMIT_NOTE = f" (limit {limit / 2**30:.1f} GiB)"
     # warnings about a single asset's oddities would scramble the batch's progress bar
     logging.basicConfig(level=logging.ERROR)
     logging.getLogger("trimesh").setLevel(logging.ERROR)
+    conn.send(("ready", None))
     while True:
         try:
             job = conn.recv()

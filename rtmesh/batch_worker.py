@@ -127,6 +127,10 @@ class AssetJob:
     ground: bool = False
 
 
+# set by a worker process that runs under an address-space limit, for the failure message
+MEMORY_LIMIT_NOTE = ""
+
+
 class TimeLimitExceeded(Exception):
     """Raised inside a render when the job's deadline passes (cooperative time limit)."""
 
@@ -168,7 +172,7 @@ def run_job(job, on_image=None, deadline=None):
     try:
         parts, materials, bounds = _load(job)
     except MemoryError:
-        fail_all(job.images, "memory", "out of memory while loading")
+        fail_all(job.images, "memory", f"out of memory while loading{MEMORY_LIMIT_NOTE}")
         return _job_result(job, results, start)
     except Exception as exc:  # any failure of one asset is that asset's, not the batch's
         fail_all(job.images, "load", _one_line(exc))
@@ -193,7 +197,7 @@ def run_job(job, on_image=None, deadline=None):
             break
         except MemoryError:
             results.append(_image_result(task, "failed", time.perf_counter() - image_start,
-                                         stage="memory", message=f"out of memory during {stage}"))
+                                         stage="memory", message=f"out of memory during {stage}{MEMORY_LIMIT_NOTE}"))
         except Exception as exc:
             results.append(_image_result(task, "failed", time.perf_counter() - image_start,
                                          stage=stage, message=_one_line(exc)))
