@@ -61,17 +61,19 @@ def rows_as_float32(array, rows=None):
     Parameters
     ----------
     array : (n, k) float
-    rows : (m,) int, optional
-        Row indices; the gather is fused with the conversion.
+    rows : (m,) intp, optional
+        Row indices, gathered after the conversion (copying whole rows of the float32
+        result is cheaper than gathering each column).
 
     Returns
     -------
     (n, k) or (m, k) float32
     """
-    if rows is None and array.flags.c_contiguous:
-        return array.astype(np.float32)
-    columns = [array[:, c] if rows is None else array[:, c].take(rows) for c in range(array.shape[1])]
-    return np.stack(columns, axis=1, dtype=np.float32)
+    if array.flags.c_contiguous:
+        out = array.astype(np.float32)
+    else:
+        out = np.stack([array[:, c] for c in range(array.shape[1])], axis=1, dtype=np.float32)
+    return out if rows is None else out.take(rows, axis=0)
 
 
 @dataclass

@@ -28,7 +28,7 @@ def norm(a):
     return np.sqrt(dot(a, a))
 
 
-def normalize(a):
+def normalize(a, scale=None):
     """Unit vectors along the rows of ``a``.
 
     Rows of zero length stay zero instead of becoming NaN, so a degenerate input never
@@ -37,6 +37,10 @@ def normalize(a):
     Parameters
     ----------
     a : (n, 3) float
+    scale : (n,) float, optional
+        Factor for each result row, folded into the per-row multiplier (one pass over
+        ``a`` instead of two); with ``scale = +-1`` (flipping) the result is exactly
+        ``normalize(a) * scale[:, None]``.
 
     Returns
     -------
@@ -44,6 +48,8 @@ def normalize(a):
     """
     length = norm(a)
     inv = 1.0 / np.where(length > 0.0, length, np.inf)
+    if scale is not None:
+        inv *= scale
     return a * inv[:, None]
 
 
