@@ -71,7 +71,7 @@ class _Surfaces:
     sample each hit contributes to.
     """
 
-    __slots__ = ("p", "ng", "ns", "d", "front", "mat", "t", "sample")
+    __slots__ = ("p", "ng", "ns", "d", "front", "mat", "sample")
 
 
 def _translated(obj, shift):
@@ -310,7 +310,6 @@ class Integrator:
         u, v = take_rows(hits.u, rows), take_rows(hits.v, rows)
         face = take_rows(self._faces, prim)
         srf.p = barycentric_interpolate(face[:, 0:9], u, v)
-        srf.t = take_rows(hits.t, rows)
         srf.sample = take_rows(rays.sample, rows)
         srf.d = take_rows(rays.directions, rows)
         ng = face[:, 9:12]
