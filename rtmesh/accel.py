@@ -27,7 +27,7 @@ _FLOAT_SCALE = np.float32(1.0 / 65536.0)
 _INT_SCALE = np.float32(256.0)
 
 
-def offset_ray_origins(points, normals):
+def offset_ray_origins(points, normals, dtype=np.float64):
     """Move points off a surface along its geometric normal, in float32 space.
 
     Parameters
@@ -36,12 +36,16 @@ def offset_ray_origins(points, normals):
         Points on the surface.
     normals : (n, 3) float
         Unit geometric normals pointing to the side the new ray leaves toward.
+    dtype : {np.float64, np.float32}
+        Type of the result.  The values are the same; float32 saves two conversions for
+        origins that go straight back to :meth:`Accel.occluded` (no arithmetic may be done
+        on them outside this module).
 
     Returns
     -------
-    (n, 3) float64
-        Offset origins; every value is exactly representable in float32, so handing them to
-        Embree does not round them back onto the surface.
+    (n, 3) float64 or float32
+        Offset origins, laid out like ``points``; every value is exactly representable in
+        float32, so handing them to Embree does not round them back onto the surface.
     """
     p = points.astype(np.float32)
     n = normals.astype(np.float32)
@@ -51,8 +55,7 @@ def offset_ray_origins(points, normals):
     # negative ones (float bit patterns grow with magnitude)
     moved = (bits + np.where(p < 0, -offset_ulps, offset_ulps)).view(np.float32)
     near_zero = np.abs(p) < _ORIGIN
-    out = np.where(near_zero, p + _FLOAT_SCALE * n, moved)
-    return out.astype(np.float64)
+    return np.where(near_zero, p + _FLOAT_SCALE * n, moved).astype(dtype, copy=False)
 
 
 class Hits:

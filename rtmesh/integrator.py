@@ -230,7 +230,8 @@ class Integrator:
         pixel = np.arange(first_pixel, end_pixel, dtype=np.int64)
         if s.spp > 1:
             pixel = np.repeat(pixel, s.spp)
-        sample_in_pixel = np.tile(np.arange(s.spp, dtype=np.int64), m)
+        sample_in_pixel = (np.tile(np.arange(s.spp, dtype=np.int64), m) if s.spp > 1
+                           else np.zeros(n, dtype=np.int64))
         film_xy = pixel_offsets(s.sampler, s.seed, pixel, sample_in_pixel, s.spp)
         row = pixel // s.width
         film_xy[:, 0] += pixel - row * s.width
@@ -370,7 +371,7 @@ class Integrator:
         if self.stages["specular"]:
             has_specular = self._has_specular.take(mat)
             spec_rows = None if has_specular.all() else np.flatnonzero(has_specular)
-        shadow_origins = offset_ray_origins(p, ng)
+        shadow_origins = offset_ray_origins(p, ng, dtype=np.float32)
         total = None
         for light in self.lights:
             wi, distance, incident = light.illuminate(p)
@@ -395,7 +396,8 @@ class Integrator:
             clock.lap("shadow")
             visible = np.zeros(k, dtype=bool)
             visible[j] = ~occluded
-            contribution = np.where(visible[:, None], value * incident, 0.0)
+            np.multiply(value, incident, out=value)
+            contribution = np.where(visible[:, None], value, 0.0)
             total = contribution if total is None else total + contribution
         if total is None or rows is None:
             return total
