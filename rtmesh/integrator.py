@@ -141,27 +141,29 @@ class Integrator:
         self._specular = component_major(m.specular.T)
         self._emission = component_major(m.emission.T)
         self._ambient_light = component_major((m.ambient * scene.ambient).T)
-        self._faces = self._face_table()
+        self._faces, self._vertex_normals = self._face_tables()
         # gathers with int32 indices are ~10x slower in NumPy than with intp ones
         self._material_id = scene.material_id.astype(np.intp)
 
-    def _face_table(self):
-        """Everything shading reads per hit triangle, packed so one gather per hit fetches it.
+    def _face_tables(self):
+        """What shading reads per hit triangle, packed so that one gather fetches it.
 
         Returns
         -------
-        (F, 12) or (F, 21) float64
+        faces : (F, 12) float64
             Component-major columns: the triangle ``[v0, v1 - v0, v2 - v0]`` as Embree saw
-            it (:attr:`Accel.triangles`), the unit geometric normal, and with smooth
-            normals the vertex normals as ``[n0, n1 - n0, n2 - n0]``, all ready for
-            :func:`barycentric_interpolate`.
+            it (:attr:`Accel.triangles`, ready for :func:`barycentric_interpolate`) and the
+            unit geometric normal.
+        vertex_normals : (F, 9) float64 or None
+            Component-major ``[n0, n1 - n0, n2 - n0]`` of each face's vertex normals, for
+            :func:`barycentric_interpolate`; gathered only for hits on smooth faces.
         """
         sc = self.scene
-        columns = [self.accel.triangles.T, sc.face_normals.T]
-        if self.stages["smooth_normals"]:
-            n0, n1, n2 = (sc.vertex_normals[sc.faces[:, k]] for k in range(3))
-            columns += [n0.T, (n1 - n0).T, (n2 - n0).T]
-        return component_major(np.concatenate(columns))
+        faces = component_major(np.concatenate([self.accel.triangles.T, sc.face_normals.T]))
+        if not self.stages["smooth_normals"]:
+            return faces, None
+        n0, n1, n2 = (sc.vertex_normals[sc.faces[:, k]] for k in range(3))
+        return faces, component_major(np.concatenate([n0.T, (n1 - n0).T, (n2 - n0).T]))
 
     # ---------------------------------------------------------------- whole image
     def render(self, progress=None):
@@ -305,7 +307,6 @@ class Integrator:
 
     def _surfaces(self, rays, hits, rows):
         """Hit points, normals facing the incoming ray, and material ids of the hit ``rows``."""
-        sc = self.scene
         srf = _Surfaces()
         prim = take_rows(hits.prim, rows).astype(np.intp)
         u, v = take_rows(hits.u, rows), take_rows(hits.v, rows)
@@ -319,12 +320,31 @@ class Integrator:
         srf.ng = ng * flip[:, None]
         srf.mat = self._material_id.take(prim)
         if self.stages["smooth_normals"]:
-            ns = normalize(barycentric_interpolate(face[:, 12:21], u, v), scale=flip)
-            smooth = sc.smooth.take(prim) & (dot(ns, srf.ng) > 0.0)
-            srf.ns = ns if smooth.all() else np.where(smooth[:, None], ns, srf.ng)
+            srf.ns = self._shading_normals(prim, u, v, flip, srf.ng)
         else:
             srf.ns = srf.ng
         return srf
+
+    def _shading_normals(self, prim, u, v, flip, ng):
+        """Interpolated vertex normals on smooth faces, ``ng`` elsewhere; (k, 3).
+
+        Only the rows on smooth faces are interpolated.  An interpolated normal on the other
+        side of the surface than ``ng`` (possible near silhouettes) is not used either.
+        """
+        smooth_face = self.scene.smooth.take(prim)
+        rows = None if smooth_face.all() else np.flatnonzero(smooth_face)
+        if rows is not None and not len(rows):
+            return ng
+        corner_and_edges = take_rows(self._vertex_normals, take_rows(prim, rows))
+        ns = normalize(barycentric_interpolate(corner_and_edges, take_rows(u, rows), take_rows(v, rows)),
+                       scale=take_rows(flip, rows))
+        ng_rows = take_rows(ng, rows)
+        usable = dot(ns, ng_rows) > 0.0
+        if not usable.all():
+            ns = np.where(usable[:, None], ns, ng_rows)
+        if rows is None:
+            return ns
+        return _put_rows(ng.copy(order="K"), rows, ns)
 
     def _local_shading(self, srf, depth, ao_pass, keys, stats, clock):
         """Emission, ambient (with AO) and direct light with hard shadows; (k, 3) or None."""
@@ -514,6 +534,14 @@ def _scatter_add(target, index, values, unique=False):
     else:
         for c in range(target.shape[1]):
             np.add.at(target[:, c], index, values[:, c])
+
+
+def _put_rows(target, rows, values):
+    """``target[rows] = values`` column by column (see :func:`_add_rows`); returns ``target``."""
+    for c in range(target.shape[1]):
+        column = target[:, c]
+        column[rows] = values[:, c]
+    return target
 
 
 def _add_rows(target, rows, values):
