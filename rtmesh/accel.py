@@ -15,7 +15,7 @@ import numpy as np
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
-from .batches import component_major, rows_as_float32, take_rows
+from .batches import component_major, take_rows
 
 # Constants of the integer-ULP offset of Waechter & Binder, "A Fast and Robust Method for
 # Avoiding Self-Intersection" (Ray Tracing Gems, ch. 6).  The offset is 256 float32 ulps of
@@ -146,7 +146,7 @@ class Accel:
         if n == 0:
             empty = np.zeros(0)
             return Hits(empty, np.zeros(0, np.int32), empty, empty)
-        result = self._scene.run(rows_as_float32(origins), rows_as_float32(directions), output=1)
+        result = self._scene.run(_embree_rays(origins), _embree_rays(directions), output=1)
         prim = result["primID"]
         t = result["tfar"].astype(np.float64)
         t[prim < 0] = np.inf
@@ -176,7 +176,7 @@ class Accel:
         # embreex writes into the distance array it is given: always pass a fresh one.
         # float32 max stands in for inf, which Embree's robust mode handles less predictably.
         t = np.minimum(t_max, np.finfo(np.float32).max).astype(np.float32)
-        o, d = rows_as_float32(origins, rows), rows_as_float32(directions, rows)
+        o, d = _embree_rays(origins, rows), _embree_rays(directions, rows)
         return self._scene.run(o, d, dists=t, query="OCCLUDED") != -1
 
     def hit_points(self, hits, mask=None):
@@ -201,6 +201,26 @@ class Accel:
         if mask is not None:
             prim, u, v = prim[mask], u[mask], v[mask]
         return barycentric_interpolate(take_rows(self.triangles, prim), u, v)
+
+
+def _embree_rays(array, rows=None):
+    """float32 ray origins or directions for ``embreex.run()``, from any ``(n, 3)`` layout.
+
+    embreex reads the rays through the buffer's strides, so a component-major array is
+    converted in its own layout (contiguous passes) instead of being transposed to
+    row-major, which costs NumPy several times more.
+
+    Parameters
+    ----------
+    array : (n, 3) float
+    rows : (m,) intp, optional
+        Only these rays.
+
+    Returns
+    -------
+    (n, 3) or (m, 3) float32
+    """
+    return take_rows(array, rows).astype(np.float32, copy=False)
 
 
 def barycentric_interpolate(corner_and_edges, u, v):

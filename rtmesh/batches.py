@@ -52,8 +52,8 @@ def take_rows(array, rows):
     return array.take(rows, axis=0)
 
 
-def rows_as_float32(array, rows=None):
-    """A C-contiguous float32 copy of an ``(n, k)`` array, or of its ``rows``.
+def rows_as_float32(array):
+    """A C-contiguous (row-major) float32 copy of an ``(n, k)`` array.
 
     Built column by column: NumPy's transposing copy of a component-major array is several
     times slower than ``k`` strided column writes.
@@ -61,19 +61,14 @@ def rows_as_float32(array, rows=None):
     Parameters
     ----------
     array : (n, k) float
-    rows : (m,) intp, optional
-        Row indices, gathered after the conversion (copying whole rows of the float32
-        result is cheaper than gathering each column).
 
     Returns
     -------
-    (n, k) or (m, k) float32
+    (n, k) float32
     """
     if array.flags.c_contiguous:
-        out = array.astype(np.float32)
-    else:
-        out = np.stack([array[:, c] for c in range(array.shape[1])], axis=1, dtype=np.float32)
-    return out if rows is None else out.take(rows, axis=0)
+        return array.astype(np.float32)
+    return np.stack([array[:, c] for c in range(array.shape[1])], axis=1, dtype=np.float32)
 
 
 @dataclass
