@@ -65,10 +65,10 @@ class _Surfaces:
     """Shading records of the rays that hit something (one row per hit).
 
     ``p``, ``ng``, ``ns`` and ``d`` (the incoming ray direction; ``wo = -d`` is formed only
-    where it is needed) are (k, 3) component-major arrays (see :mod:`rtmesh.batches`).  ``ng`` and ``ns`` are flipped to the side the ray
-    came from; ``front`` says whether that is the outer side of the triangle
-    (counter-clockwise winding).  ``mat`` (intp) is the material, ``sample`` the pixel
-    sample each hit contributes to.
+    where it is needed) are (k, 3) component-major arrays (see :mod:`rtmesh.batches`).
+    ``ng`` and ``ns`` are flipped to the side the ray came from; ``front`` says whether
+    that is the outer side of the triangle (counter-clockwise winding).  ``mat`` (intp) is
+    the material, ``sample`` the pixel sample each hit contributes to.
     """
 
     __slots__ = ("p", "ng", "ns", "d", "front", "mat", "sample")
@@ -421,8 +421,7 @@ class Integrator:
             total = contribution if total is None else total + contribution
         if total is None or rows is None:
             return total
-        full = np.zeros((len(srf.mat), 3), order="F")
-        return _add_rows(full, rows, total)
+        return _put_rows(np.zeros((len(srf.mat), 3), order="F"), rows, total)
 
     def _ambient_occlusion(self, srf, depth, keys, stats):
         """Fraction of cosine-weighted hemisphere rays that escape within ``ao_distance``."""
