@@ -1,0 +1,250 @@
+"""Core renderer vs raw Embree: how much the NumPy side of a render costs.
+
+Builds the benchmark scene in code (an icosphere of 20480 smooth-shaded triangles on a
+ground quad, one point light), renders it with rtmesh at 1 and 2 threads, and times raw
+embreex ``run()`` on exactly the rays rtmesh traced (camera rays and shadow rays, recorded
+from the render through the Accel), at 1 thread and at 2 threads splitting the rays.
+Prints a table and two ratios and writes them to ``docs/BENCHMARKS.md``:
+
+* rtmesh 1 thread / raw Embree 1 thread: the overhead of everything that is not tracing
+  (target: <= 1.5);
+* rtmesh 1 thread / rtmesh 2 threads: the thread speed-up (target: >= 1.8).
+
+Timings are medians over ``--runs`` runs after a warm-up; the four measurements are
+interleaved run by run so that a noisy, shared machine slows them alike.
+
+Usage::
+
+    python tools/bench_core.py [--width 512] [--height 512] [--runs 7] [--no-write]
+"""
+
+import argparse
+import datetime
+import os
+import platform
+import re
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+import trimesh
+from embreex import rtcore_scene
+from embreex.mesh_construction import TriangleMesh
+
+from rtmesh.camera import Camera
+from rtmesh.integrator import Integrator
+from rtmesh.lights import PointLight
+from rtmesh.materials import Material
+from rtmesh.scene import MeshPart, Scene
+from rtmesh.settings import RenderSettings
+
+SECTION = "Core renderer vs raw Embree"
+DOC = Path(__file__).resolve().parent.parent / "docs" / "BENCHMARKS.md"
+
+
+def benchmark_scene():
+    """The benchmark scene: icosphere (5 subdivisions, radius 1, centre (0, 0, 1), smooth
+    normals) on a 20 x 20 ground quad at z = 0, a point light at (3, -3, 6), a 45 degree
+    camera at (0, -4, 2.5) looking at (0, 0, 0.8); diffuse albedo 0.7."""
+    sphere = trimesh.creation.icosphere(subdivisions=5)
+    sphere.apply_translation([0, 0, 1])
+    ground_v = np.array([[-10, -10, 0], [10, -10, 0], [10, 10, 0], [-10, 10, 0]], dtype=float)
+    parts = [
+        MeshPart("sphere", sphere.vertices, sphere.faces, 0, sphere.vertex_normals),
+        MeshPart("ground", ground_v, np.array([[0, 1, 2], [0, 2, 3]]), 1),
+    ]
+    materials = [Material("sphere", diffuse=0.7, specular=0.3, shininess=50),
+                 Material("ground", diffuse=0.7)]
+    camera = Camera([0, -4, 2.5], [0, 0, 0.8], [0, 0, 1], 45)
+    return Scene.from_parts(parts, materials, [PointLight([3, -3, 6], 40)], camera,
+                            ambient=[0.05] * 3)
+
+
+class RayRecorder:
+    """Wraps an Accel's queries during one render and keeps the float32 rays they traced.
+
+    The arrays are rebuilt the way Accel builds them (gather the rows, round to float32,
+    clamp ``t_max`` to the float32 range), so they are bit for bit the rays Embree saw.
+    """
+
+    def __init__(self, accel):
+        self.accel = accel
+        self.camera, self.shadow = [], []
+
+    def __enter__(self):
+        accel, intersect, occluded = self.accel, self.accel.intersect, self.accel.occluded
+
+        def recording_intersect(origins, directions):
+            self.camera.append((np.asarray(origins, np.float32), np.asarray(directions, np.float32)))
+            return intersect(origins, directions)
+
+        def recording_occluded(origins, directions, t_max, rows=None):
+            pick = (lambda a: a) if rows is None else (lambda a: a[rows])
+            t = np.minimum(pick(t_max), np.finfo(np.float32).max).astype(np.float32)
+            self.shadow.append((pick(origins).astype(np.float32), pick(directions).astype(np.float32), t))
+            return occluded(origins, directions, t_max, rows)
+
+        accel.intersect, accel.occluded = recording_intersect, recording_occluded
+        return self
+
+    def __exit__(self, *exc):
+        del self.accel.intersect, self.accel.occluded  # back to the class methods
+
+    def batches(self):
+        """All camera rays and all shadow rays as two contiguous batches."""
+        cam = tuple(np.ascontiguousarray(np.concatenate(a)) for a in zip(*self.camera))
+        sha = tuple(np.ascontiguousarray(np.concatenate(a)) for a in zip(*self.shadow))
+        return cam, sha
+
+
+def raw_embree_runner(accel, camera_rays, shadow_rays, threads):
+    """A function that traces the recorded rays with bare embreex ``run()`` calls.
+
+    A separate Embree scene is built from the same float32 triangles (robust mode, like
+    Accel).  With several threads each traces a contiguous share of both ray sets.
+    """
+    scene = rtcore_scene.EmbreeScene(robust=True)
+    TriangleMesh(scene, accel.vertices32, accel.faces)
+    scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32), query="OCCLUDED")
+    (co, cd), (so, sd, st) = camera_rays, shadow_rays
+    cam_parts = np.array_split(np.arange(len(co)), threads)
+    sha_parts = np.array_split(np.arange(len(so)), threads)
+    shares = [(co[c[0]:c[-1] + 1], cd[c[0]:c[-1] + 1], so[s[0]:s[-1] + 1], sd[s[0]:s[-1] + 1],
+               st[s[0]:s[-1] + 1]) for c, s in zip(cam_parts, sha_parts)]
+
+    def trace(share):
+        o, d, o_s, d_s, t_s = share
+        scene.run(o, d, output=1)
+        scene.run(o_s, d_s, dists=t_s.copy(), query="OCCLUDED")  # run() overwrites dists
+
+    if threads == 1:
+        def run():
+            trace(shares[0])
+    else:
+        pool = ThreadPoolExecutor(max_workers=threads)
+
+        def run():
+            list(pool.map(trace, shares))
+    return run
+
+
+def seconds(fn):
+    start = time.perf_counter()
+    fn()
+    return time.perf_counter() - start
+
+
+def machine():
+    model = "unknown CPU"
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    model = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    return f"{os.cpu_count()} CPUs (nproc), {model}, Python {platform.python_version()}, NumPy {np.__version__}"
+
+
+def command(args):
+    """The command line that reproduces this run (non-default options only)."""
+    words = ["python tools/bench_core.py"]
+    for name, default in (("width", 512), ("height", 512), ("runs", 7)):
+        if getattr(args, name) != default:
+            words.append(f"--{name} {getattr(args, name)}")
+    return " ".join(words)
+
+
+def write_section(text):
+    """Replace (or append) this benchmark's section in docs/BENCHMARKS.md."""
+    DOC.parent.mkdir(exist_ok=True)
+    old = DOC.read_text() if DOC.exists() else "# Benchmarks\n"
+    pattern = re.compile(rf"^## {re.escape(SECTION)}\n.*?(?=^## |\Z)", re.S | re.M)
+    if pattern.search(old):
+        new = pattern.sub(lambda _: text, old)
+    else:
+        new = old.rstrip("\n") + "\n\n" + text
+    DOC.write_text(new)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--width", type=int, default=512)
+    parser.add_argument("--height", type=int, default=512)
+    parser.add_argument("--runs", type=int, default=7, help="timed runs per measurement (>= 5 advised)")
+    parser.add_argument("--no-write", action="store_true", help="print only; leave docs/BENCHMARKS.md alone")
+    args = parser.parse_args()
+
+    scene = benchmark_scene()
+    integrators = {
+        threads: Integrator(scene, RenderSettings(width=args.width, height=args.height, spp=1,
+                                                  sampler="regular", threads=threads))
+        for threads in (1, 2)
+    }
+    one = integrators[1]
+    with RayRecorder(one.accel) as recorder:
+        reference = one.render()
+    camera_rays, shadow_rays = recorder.batches()
+    assert len(camera_rays[0]) == args.width * args.height
+    assert len(shadow_rays[0]) == reference.stats.rays["shadow"]
+    raw = {threads: raw_embree_runner(one.accel, camera_rays, shadow_rays, threads) for threads in (1, 2)}
+
+    measurements = {
+        "rtmesh, 1 thread": lambda: integrators[1].render(),
+        "rtmesh, 2 threads": lambda: integrators[2].render(),
+        "raw embreex run(), 1 thread": raw[1],
+        "raw embreex run(), 2 threads": raw[2],
+    }
+    for fn in measurements.values():  # warm-up
+        fn()
+    times = {name: [] for name in measurements}
+    stages = []
+    for _ in range(args.runs):
+        for name, fn in measurements.items():
+            times[name].append(seconds(fn))
+        stages.append(integrators[1].render().stats.stage_seconds)
+    median = {name: float(np.median(t)) for name, t in times.items()}
+    best = {name: float(np.min(t)) for name, t in times.items()}
+    stage_median = {k: float(np.median([s[k] for s in stages])) for k in stages[0]}
+
+    n_cam, n_shadow = len(camera_rays[0]), len(shadow_rays[0])
+    overhead = median["rtmesh, 1 thread"] / median["raw embreex run(), 1 thread"]
+    speedup = median["rtmesh, 1 thread"] / median["rtmesh, 2 threads"]
+    rows = [f"| {name} | {1e3 * t:.1f} | {1e3 * best[name]:.1f} | {(n_cam + n_shadow) / t / 1e6:.2f} |"
+            for name, t in median.items()]
+    stage_text = ", ".join(f"{k} {1e3 * v:.1f}" for k, v in stage_median.items() if v > 0)
+    text = "\n".join([
+        f"## {SECTION}",
+        "",
+        f"Command: `{command(args)}`",
+        "",
+        f"- Machine: {machine()}",
+        f"- Date: {datetime.date.today().isoformat()}",
+        f"- Scene: icosphere (5 subdivisions, 20480 smooth triangles) on a 2-triangle ground quad, "
+        f"one point light, {args.width}x{args.height}, 1 spp (regular sampler), max depth 5 "
+        f"(no reflective materials, so only camera and shadow rays)",
+        f"- Rays: {n_cam} camera + {n_shadow} shadow; raw embreex traces exactly these "
+        f"(recorded from the render), 2 threads each take half",
+        f"- Median of {args.runs} runs after a warm-up, the four measurements interleaved",
+        "",
+        "| measurement | median ms | best ms | Mrays/s (median) |",
+        "|---|---:|---:|---:|",
+        *rows,
+        "",
+        f"- rtmesh 1 thread / raw Embree 1 thread: **{overhead:.2f}** (target <= 1.5); "
+        f"from best times {best['rtmesh, 1 thread'] / best['raw embreex run(), 1 thread']:.2f}",
+        f"- rtmesh 1 thread / rtmesh 2 threads: **{speedup:.2f}** (target >= 1.8); "
+        f"raw Embree 1 / 2 threads: {median['raw embreex run(), 1 thread'] / median['raw embreex run(), 2 threads']:.2f}",
+        f"- rtmesh 1-thread stage times, ms: {stage_text}",
+        "",
+    ])
+    print(text)
+    if not args.no_write:
+        write_section(text)
+        print(f"written to {DOC}")
+
+
+if __name__ == "__main__":
+    main()
