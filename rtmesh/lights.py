@@ -11,12 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .batches import component_major
+from .materials import as_colour
 from .vecmath import norm
-
-
-def _colour(value):
-    a = np.asarray(value, dtype=np.float64)
-    return np.repeat(a, 3) if a.ndim == 0 else a.reshape(3)
 
 
 @dataclass
@@ -35,7 +31,7 @@ class PointLight:
 
     def __post_init__(self):
         self.position = np.asarray(self.position, dtype=np.float64).reshape(3)
-        self.intensity = _colour(self.intensity)
+        self.intensity = as_colour(self.intensity)
 
     def illuminate(self, points):
         """Direction, distance and incident term at ``points``.
@@ -88,7 +84,7 @@ class DirectionalLight:
         if not length > 0.0:
             raise ValueError("directional light direction has zero length")
         self.direction = d / length
-        self.irradiance = _colour(self.irradiance)
+        self.irradiance = as_colour(self.irradiance)
 
     def illuminate(self, points):
         """See :meth:`PointLight.illuminate`; the distance is ``inf``."""
@@ -130,7 +126,7 @@ class SpotLight:
         if not length > 0.0:
             raise ValueError("spot light direction has zero length")
         self.direction = d / length
-        self.intensity = _colour(self.intensity)
+        self.intensity = as_colour(self.intensity)
         if not 0.0 <= self.inner_angle <= self.outer_angle <= 180.0:
             raise ValueError("spot light needs 0 <= inner_angle <= outer_angle <= 180")
 

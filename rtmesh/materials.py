@@ -22,7 +22,8 @@ import numpy as np
 from .vecmath import dot, norm
 
 
-def _colour(value):
+def as_colour(value):
+    """A colour from a number (grey) or three numbers, as a (3,) float64 array."""
     a = np.asarray(value, dtype=np.float64)
     return np.repeat(a, 3) if a.ndim == 0 else a.reshape(3)
 
@@ -71,7 +72,7 @@ class Material:
                 continue
             value = getattr(self, f.name)
             if value is not None:
-                setattr(self, f.name, _colour(value))
+                setattr(self, f.name, as_colour(value))
         if self.ambient is None:
             self.ambient = self.diffuse.copy()
 

@@ -71,6 +71,29 @@ def reflect(wo, n):
     return 2.0 * dot(wo, n)[:, None] * n - wo
 
 
+def transmitted_cosine(cos_i, eta):
+    """Cosine of the refracted angle by Snell's law, and where none exists.
+
+    Parameters
+    ----------
+    cos_i : (n,) float
+        Cosine of the incident angle, in [0, 1].
+    eta : (n,) float
+        Relative index of refraction ``eta_incident / eta_transmitted``.
+
+    Returns
+    -------
+    cos_t : (n,) float
+        Cosine of the transmitted angle (0 under total internal reflection).
+    tir : (n,) bool
+        True where ``sin_t = eta sin_i >= 1``: total internal reflection.
+    """
+    # the clamps keep rounding (|cos_i| a hair above 1) from producing NaN
+    sin2_t = eta * eta * np.maximum(0.0, 1.0 - cos_i * cos_i)
+    tir = sin2_t >= 1.0
+    return np.sqrt(np.maximum(0.0, 1.0 - sin2_t)), tir
+
+
 def refract(wo, n, eta):
     """Refracted direction by Snell's law, with a total-internal-reflection mask.
 
@@ -92,9 +115,7 @@ def refract(wo, n, eta):
     """
     cos_i = dot(wo, n)
     eta = np.broadcast_to(np.asarray(eta, dtype=np.float64), cos_i.shape)
-    sin2_t = eta * eta * np.maximum(0.0, 1.0 - cos_i * cos_i)
-    tir = sin2_t >= 1.0
-    cos_t = np.sqrt(np.maximum(0.0, 1.0 - sin2_t))
+    cos_t, tir = transmitted_cosine(cos_i, eta)
     wt = -eta[:, None] * wo + (eta * cos_i - cos_t)[:, None] * n
     wt[tir] = 0.0
     return wt, tir
@@ -124,9 +145,7 @@ def fresnel_schlick(cos_i, eta):
     cos_i = np.asarray(cos_i, dtype=np.float64)
     eta = np.broadcast_to(np.asarray(eta, dtype=np.float64), cos_i.shape)
     r0 = ((1.0 - eta) / (1.0 + eta)) ** 2
-    sin2_t = eta * eta * np.maximum(0.0, 1.0 - cos_i * cos_i)
-    tir = sin2_t >= 1.0
-    cos_t = np.sqrt(np.maximum(0.0, 1.0 - sin2_t))
+    cos_t, tir = transmitted_cosine(cos_i, eta)
     cos = np.where(eta > 1.0, cos_t, cos_i)
     f = r0 + (1.0 - r0) * (1.0 - cos) ** 5
     # at eta == 1 there is no interface, but Schlick's curve still rises toward grazing
@@ -152,9 +171,7 @@ def fresnel_dielectric(cos_i, eta):
     """
     cos_i = np.asarray(cos_i, dtype=np.float64)
     eta = np.broadcast_to(np.asarray(eta, dtype=np.float64), cos_i.shape)
-    sin2_t = eta * eta * np.maximum(0.0, 1.0 - cos_i * cos_i)
-    tir = sin2_t >= 1.0
-    cos_t = np.sqrt(np.maximum(0.0, 1.0 - sin2_t))
+    cos_t, tir = transmitted_cosine(cos_i, eta)
     # with n_i = eta * n_t: r_s = (eta cos_i - cos_t) / (eta cos_i + cos_t), likewise r_p
     with np.errstate(divide="ignore", invalid="ignore"):
         r_s = (eta * cos_i - cos_t) / (eta * cos_i + cos_t)
