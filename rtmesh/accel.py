@@ -27,7 +27,7 @@ _FLOAT_SCALE = np.float32(1.0 / 65536.0)
 _INT_SCALE = np.float32(256.0)
 
 
-def offset_ray_origins(points, normals, dtype=np.float64):
+def offset_ray_origins(points, normals, dtype=np.float64, scale=1.0):
     """Move points off a surface along its geometric normal, in float32 space.
 
     Parameters
@@ -40,6 +40,11 @@ def offset_ray_origins(points, normals, dtype=np.float64):
         Type of the result.  The values are the same; float32 saves two conversions for
         origins that go straight back to :meth:`Accel.occluded` (no arithmetic may be done
         on them outside this module).
+    scale : float
+        Size of the scene (largest coordinate magnitude).  Near zero, where float32 ulps
+        become tiny, Waechter & Binder use a fixed offset of 2^-16 below |x| < 2^-5; both
+        are meant for scenes of unit size, so they are scaled by ``scale``: a scene shrunk to
+        1e-4 units would otherwise be offset by 15 % of its own size.
 
     Returns
     -------
@@ -54,8 +59,9 @@ def offset_ray_origins(points, normals, dtype=np.float64):
     # moving toward +n means adding ulps to positive coordinates and subtracting from
     # negative ones (float bit patterns grow with magnitude)
     moved = (bits + np.where(p < 0, -offset_ulps, offset_ulps)).view(np.float32)
-    near_zero = np.abs(p) < _ORIGIN
-    return np.where(near_zero, p + _FLOAT_SCALE * n, moved).astype(dtype, copy=False)
+    near_zero = np.abs(p) < _ORIGIN * np.float32(scale)
+    fixed = (_FLOAT_SCALE * np.float32(scale)) * n
+    return np.where(near_zero, p + fixed, moved).astype(dtype, copy=False)
 
 
 class Hits:

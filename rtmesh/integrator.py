@@ -106,6 +106,9 @@ class Integrator:
         # otherwise be traced on a grid of 1/16 unit.  Shading sees the same shifted frame.
         self.shift = scene.bounds.mean(axis=0)
         self.accel = Accel(scene.vertices - self.shift, scene.faces)
+        # the scene's size in the re-centred frame sets the near-zero offset (see
+        # offset_ray_origins); it cannot be zero for a scene that renders
+        self.offset_scale = max(float(np.abs(scene.bounds - self.shift).max()), 1e-30)
         self.camera = _translated(scene.camera, self.shift)
         self.camera.frame()  # fail early on a degenerate camera
         self.lights = [_translated(light, self.shift) for light in scene.lights if not light.is_black]
@@ -391,7 +394,7 @@ class Integrator:
         if self.stages["specular"]:
             has_specular = self._has_specular.take(mat)
             spec_rows = None if has_specular.all() else np.flatnonzero(has_specular)
-        shadow_origins = offset_ray_origins(p, ng, dtype=np.float32)
+        shadow_origins = offset_ray_origins(p, ng, dtype=np.float32, scale=self.offset_scale)
         total = None
         for light in self.lights:
             wi, distance, incident = light.illuminate(p)
@@ -428,7 +431,7 @@ class Integrator:
         pixel, sample_in_pixel = keys
         k = len(srf.mat)
         n_ao = self.ao_samples
-        origins = offset_ray_origins(srf.p, srf.ng)
+        origins = offset_ray_origins(srf.p, srf.ng, scale=self.offset_scale)
         t, b = orthonormal_basis(srf.ng)
         px, sp = pixel[srf.sample], sample_in_pixel[srf.sample]
         free = np.zeros(k)
@@ -478,7 +481,7 @@ class Integrator:
                 jk = j[keep]
                 if len(jk):
                     refract_batch = RayBatch(
-                        offset_ray_origins(srf.p[idx[jk]], -ng[jk]),
+                        offset_ray_origins(srf.p[idx[jk]], -ng[jk], scale=self.offset_scale),
                         wt[keep],
                         rays.sample[idx[jk]],
                         beta[jk] * w_t[keep],
@@ -496,7 +499,7 @@ class Integrator:
             if below.any():
                 wr[below] = reflect(wo[keep][below], ng[keep][below])
             batches.append(RayBatch(
-                offset_ray_origins(srf.p[idx[keep]], ng[keep]),
+                offset_ray_origins(srf.p[idx[keep]], ng[keep], scale=self.offset_scale),
                 wr,
                 rays.sample[idx[keep]],
                 beta_r[keep],
