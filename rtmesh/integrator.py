@@ -207,8 +207,15 @@ class Integrator:
                 futures = [pool.submit(self.render_chunk, p0, p1) for p0, p1 in chunks]
                 # results are added in chunk order; pixels never overlap, so order only
                 # matters for the stats, which are sums of integers and timings
-                for i, ((p0, _), future) in enumerate(zip(chunks, futures)):
-                    finish(p0, future.result(), i + 1)
+                try:
+                    for i, ((p0, _), future) in enumerate(zip(chunks, futures)):
+                        finish(p0, future.result(), i + 1)
+                except BaseException:
+                    # Ctrl-C or a failing chunk: drop the chunks not yet started instead of
+                    # rendering the rest of the image before giving up
+                    for future in futures:
+                        future.cancel()
+                    raise
         stats.wall_seconds = time.perf_counter() - start
         stats.relative_error = film.relative_error()
         passes = {name: film.pass_image(name) for name in film.pass_sums}
