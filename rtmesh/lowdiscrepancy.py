@@ -11,6 +11,8 @@ with the hash-based permutation of Burley, "Practical Hash-based Owen Scrambling
 
 import numpy as np
 
+from .hashing import GOLDEN, mix64
+
 _BITS = 32
 
 # generator matrices as 32 column vectors (most significant bit first):
@@ -73,10 +75,8 @@ def _sobol_bits(index, matrix):
 
 def _hash_seeds(keys, count):
     """``count`` independent 32-bit seeds per key, (n,) uint64 -> (count, n) uint32."""
-    from .sampling import _mix64  # one hash for the whole package
-
     with np.errstate(over="ignore"):
-        seeds = [_mix64(keys + np.uint64(0x9E3779B97F4A7C15) * np.uint64(i + 1)) for i in range(count)]
+        seeds = [mix64(keys + GOLDEN * np.uint64(i + 1)) for i in range(count)]
     return [(s >> np.uint64(32)).astype(np.uint32) for s in seeds]
 
 

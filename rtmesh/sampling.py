@@ -15,8 +15,10 @@ from enum import IntEnum
 import numpy as np
 
 from .batches import component_major, take_rows
+from .hashing import GOLDEN, M1, mix64
+from .lowdiscrepancy import sobol_02
 
-SAMPLERS = ("regular", "random", "jittered")
+SAMPLERS = ("regular", "random", "jittered", "sobol")
 
 
 class Dim(IntEnum):
@@ -27,18 +29,16 @@ class Dim(IntEnum):
     AO = 16  # first of the ambient-occlusion dimensions; AO ray k at depth d uses AO + 2*(k + d*1024)
 
 
-_M1 = np.uint64(0xBF58476D1CE4E5B9)
-_M2 = np.uint64(0x94D049BB133111EB)
-_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+def sequence_key(seed, pixel, dimension):
+    """64-bit key of the sample sequence of one pixel and dimension, (n,) -> (n,) uint64.
 
-
-def _mix64(x):
-    """SplitMix64 finaliser: a bijective 64-bit mix with full avalanche (wraps modulo 2**64)."""
-    x = x ^ (x >> np.uint64(30))
-    x = x * _M1
-    x = x ^ (x >> np.uint64(27))
-    x = x * _M2
-    return x ^ (x >> np.uint64(31))
+    Every sample of a pixel in a given dimension shares it; :func:`uniform` hashes the
+    sample index into it, the Sobol sampler uses it as the scrambling seed.
+    """
+    pixel = np.asarray(pixel, dtype=np.uint64)
+    with np.errstate(over="ignore"):  # the multiplications are meant to wrap modulo 2**64
+        key = mix64(np.uint64(seed & 0xFFFFFFFFFFFFFFFF) * GOLDEN + np.uint64(dimension))
+        return mix64(key ^ (pixel * GOLDEN))
 
 
 def uniform(seed, pixel, sample, dimension):
@@ -60,13 +60,9 @@ def uniform(seed, pixel, sample, dimension):
     (n,) float64
         Values in [0, 1), 53 random bits each.
     """
-    pixel = np.asarray(pixel, dtype=np.uint64)
     sample = np.asarray(sample, dtype=np.uint64)
-    # the multiplications are meant to wrap modulo 2**64
-    with np.errstate(over="ignore"):
-        key = _mix64(np.uint64(seed & 0xFFFFFFFFFFFFFFFF) * _GOLDEN + np.uint64(dimension))
-        x = _mix64(key ^ (pixel * _GOLDEN))
-        x = _mix64(x ^ (sample * _M1 + np.uint64(1)))
+    with np.errstate(over="ignore"):  # the multiplication is meant to wrap modulo 2**64
+        x = mix64(sequence_key(seed, pixel, dimension) ^ (sample * M1 + np.uint64(1)))
     # top 53 bits -> exactly representable doubles in [0, 1)
     return (x >> np.uint64(11)).astype(np.float64) * (1.0 / 9007199254740992.0)
 
@@ -107,9 +103,11 @@ def pixel_offsets(sampler, seed, pixel, sample, spp):
 
     Parameters
     ----------
-    sampler : {"regular", "random", "jittered"}
+    sampler : {"regular", "random", "jittered", "sobol"}
         ``regular`` puts the samples at the centres of an ``nx x ny`` grid of strata,
-        ``random`` places them uniformly, ``jittered`` puts one uniform sample in each stratum.
+        ``random`` places them uniformly, ``jittered`` puts one uniform sample in each stratum,
+        ``sobol`` takes them from an Owen-scrambled (0,2)-sequence scrambled per pixel, so
+        every power-of-two prefix of a pixel's samples is stratified.
     seed : int
     pixel : (n,) int
         Linear pixel index of each sample.
@@ -126,6 +124,9 @@ def pixel_offsets(sampler, seed, pixel, sample, spp):
     """
     if sampler == "random":
         return uniform2(seed, pixel, sample, Dim.PIXEL)
+    if sampler == "sobol":
+        points = sobol_02(sample, sequence_key(seed, pixel, Dim.PIXEL))
+        return component_major(points.T)
     if sampler not in SAMPLERS:
         raise ValueError(f"unknown sampler {sampler!r}; expected one of {', '.join(SAMPLERS)}")
     nx, ny = strata_shape(spp)

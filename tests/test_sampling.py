@@ -78,7 +78,7 @@ def test_random_pixel_offsets_are_in_the_unit_square_and_uniform():
 
 def test_unknown_sampler_is_an_error():
     with pytest.raises(ValueError, match="sampler"):
-        pixel_offsets("sobol", 0, np.zeros(1, np.int64), np.zeros(1, np.int64), 1)
+        pixel_offsets("halton", 0, np.zeros(1, np.int64), np.zeros(1, np.int64), 1)
 
 
 # ---------------------------------------------------------------- uniform()
@@ -215,3 +215,18 @@ def test_cosine_hemisphere_samples_follow_their_pdf():
     assert chi_square_p_value(counts) > 1e-3
     # mean cosine under this density is 2/3
     assert w[:, 2].mean() == pytest.approx(2.0 / 3.0, abs=0.003)
+
+
+def test_sobol_pixel_samples_are_stratified_in_every_elementary_interval():
+    from rtmesh.sampling import pixel_offsets
+
+    spp, pixels = 16, 50
+    pixel = np.repeat(np.arange(pixels), spp)
+    sample = np.tile(np.arange(spp), pixels)
+    offsets = np.asarray(pixel_offsets("sobol", 7, pixel, sample, spp)).reshape(pixels, spp, 2)
+    for points in offsets:
+        for a in range(5):  # 1x16, 2x8, 4x4, 8x2, 16x1 grids: one sample per cell
+            cells = np.floor(points[:, 0] * 2 ** a) * 2 ** (4 - a) + np.floor(points[:, 1] * 2 ** (4 - a))
+            assert sorted(cells.astype(int).tolist()) == list(range(16))
+    # pixels are scrambled independently
+    assert len(np.unique(offsets[:, 0, 0])) == pixels

@@ -25,7 +25,7 @@ def with_(**tables):
         (with_(rendr={}), "rendr: unknown key"),
         (with_(render={"spp": "4"}), "render.spp: expected an integer"),
         (with_(render={"spp": 0}), "render: spp must be >= 1"),
-        (with_(render={"sampler": "sobol"}), "render: sampler must be one of"),
+        (with_(render={"sampler": "halton"}), "render: sampler must be one of"),
         (with_(render={"width": 1.5}), "render.width: expected an integer"),
         (with_(camera={"position": [0, 0], "look_at": [0, 0, 0]}), "camera.position: expected a list of 3 numbers"),
         (with_(camera={"position": [0, 0, 1], "look_at": [0, 0, 1]}), "camera: camera position and look_at coincide"),
