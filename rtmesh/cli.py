@@ -17,14 +17,6 @@ from .settings import FRESNEL_MODES, PASSES
 EXIT_USER_ERROR = 2
 
 
-def _passes(text):
-    names = tuple(p.strip() for p in text.split(",") if p.strip())
-    for name in names:
-        if name not in PASSES:
-            raise argparse.ArgumentTypeError(f"unknown pass {name!r} (available: {', '.join(PASSES)})")
-    return names
-
-
 def _positive_int(text):
     try:
         value = int(text)
@@ -55,7 +47,7 @@ def build_parser():
     p.add_argument("--threads", type=_positive_int, help="worker threads (default: all cores)")
     p.add_argument("--ao-samples", type=int, help="ambient-occlusion rays per hit (0 = off)")
     p.add_argument("--ao-distance", type=float, help="ambient-occlusion reach, scene units")
-    p.add_argument("--passes", type=_passes, help="extra EXR passes, comma-separated: " + ", ".join(PASSES))
+    p.add_argument("--passes", type=_names(PASSES), help="extra EXR passes, comma-separated: " + ", ".join(PASSES))
     p.add_argument("--fresnel", choices=FRESNEL_MODES, help="Fresnel model for dielectrics")
     p.add_argument("--exposure", type=float, help="exposure in stops for 8-bit output")
     p.add_argument("--tonemap", choices=TONEMAPS, help="tone-mapping operator for 8-bit output")
@@ -121,7 +113,7 @@ def _add_batch_parser(commands):
                    help="N frames orbiting each asset (instead of --views)")
     p.add_argument("--formats", type=_names(FORMATS), default=("png",),
                    help="comma-separated output formats: " + ", ".join(FORMATS) + " (default png)")
-    p.add_argument("--passes", type=_passes, default=(), help="extra EXR passes: " + ", ".join(PASSES))
+    p.add_argument("--passes", type=_names(PASSES), default=(), help="extra EXR passes: " + ", ".join(PASSES))
     p.add_argument("--ground", action="store_true", help="a ground plane under each asset (shadow)")
     p.add_argument("--seed", type=int, default=0, help="random seed")
     p.add_argument("--max-depth", type=int, default=5, help="reflection/refraction bounces")
