@@ -7,7 +7,6 @@ import trimesh
 
 from .errors import SceneError
 from .importers import load_mesh_scene, scene_from_trimesh
-from .camera import frame_bounds
 from .integrator import Integrator
 from .scene import Scene
 from .scene_file import read_scene_file
@@ -33,20 +32,20 @@ def load_scene(source, **settings):
     settings : RenderSettings
     """
     overrides = {k: v for k, v in settings.items() if v is not None}
-    if isinstance(source, (trimesh.Trimesh, trimesh.Scene)):
-        scene = scene_from_trimesh(source)
-        base = RenderSettings(**overrides)
-    elif os.path.splitext(os.fspath(source))[1].lower() in SCENE_EXTENSIONS:
+    if not isinstance(source, (trimesh.Trimesh, trimesh.Scene)) and \
+            os.path.splitext(os.fspath(source))[1].lower() in SCENE_EXTENSIONS:
         return read_scene_file(source, overrides)
-    else:
-        scene = load_mesh_scene(source)
-        base = RenderSettings(**overrides)
+    base = RenderSettings(**overrides)
     try:
         base.validate()
     except ValueError as exc:
         raise SceneError(f"render settings: {exc}") from None
-    # frame for the image's aspect ratio, keeping the lights the rig placed
-    scene.camera = frame_bounds(scene.bounds, aspect=base.width / base.height)
+    # the automatic camera frames the bounds for the image's aspect ratio
+    aspect = base.width / base.height
+    if isinstance(source, (trimesh.Trimesh, trimesh.Scene)):
+        scene = scene_from_trimesh(source, aspect=aspect)
+    else:
+        scene = load_mesh_scene(source, aspect=aspect)
     return scene, base
 
 

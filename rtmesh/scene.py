@@ -86,7 +86,7 @@ class Scene:
 
     @classmethod
     def from_parts(cls, parts, materials=None, lights=None, camera=None, ambient=None,
-                   background=None, source="scene"):
+                   background=None, source="scene", aspect=1.0):
         """Flatten mesh parts into one scene, dropping faces that cannot render.
 
         Faces that touch a non-finite vertex or have zero area are removed with a warning
@@ -105,6 +105,8 @@ class Scene:
         ambient, background : (3,) float, optional
         source : str
             Where the parts came from, for error messages.
+        aspect : float
+            Image width / height the automatic camera frames the bounds for.
 
         Raises
         ------
@@ -174,7 +176,7 @@ class Scene:
             background=np.asarray(background if background is not None else np.zeros(3), dtype=np.float64),
         )
         if camera is None:
-            scene.camera = frame_bounds(scene.bounds)
+            scene.camera = frame_bounds(scene.bounds, aspect=aspect)
         if lights is None:
             scene.lights = default_lights(scene.camera)
         return scene

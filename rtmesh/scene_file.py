@@ -17,7 +17,7 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
-from .camera import Camera, frame_bounds
+from .camera import Camera
 from .errors import RtmeshError, SceneError
 from .importers import load_trimesh, parts_from_trimesh
 from .lights import DirectionalLight, PointLight, SpotLight
@@ -284,11 +284,8 @@ def scene_from_dict(doc, source="scene", base_dir=".", overrides=None):
         parts, materials, lights=lights, camera=camera,
         ambient=environment.get("ambient", np.zeros(3) if lights is not None else np.full(3, 0.05)),
         background=environment.get("background", np.zeros(3)),
-        source=source,
+        source=source, aspect=settings.width / settings.height,
     )
-    if camera is None:
-        # the automatic camera frames the image's aspect ratio too
-        scene.camera = frame_bounds(scene.bounds, aspect=settings.width / settings.height)
     return scene, settings
 
 
