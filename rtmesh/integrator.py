@@ -115,6 +115,8 @@ class Integrator:
         m = scene.materials
         self.ao_distance = settings.ao_distance or 0.2 * float(np.linalg.norm(np.ptp(scene.bounds, axis=0)))
         ambient_on = bool((scene.ambient > 0).any() and (m.ambient > 0).any())
+        # the AO pass alone asks for 16 rays per camera hit unless ao_samples says otherwise
+        self.ao_samples = settings.ao_samples or (16 if "ao" in settings.passes else 0)
         self.stages = {
             "emission": m.any_emission,
             "ambient": ambient_on,
@@ -125,12 +127,9 @@ class Integrator:
             "refraction": settings.max_depth > 0 and m.any_transmission,
             "absorption": m.any_absorption,
             "background": bool((scene.background > 0).any()),
-            "ao": settings.ao_samples > 0 and (ambient_on or "ao" in settings.passes),
+            "ao": self.ao_samples > 0 and (ambient_on or "ao" in settings.passes),
             "lens": self.camera.aperture > 0.0,
         }
-        self.ao_samples = settings.ao_samples or (16 if "ao" in settings.passes else 0)
-        if "ao" in settings.passes:
-            self.stages["ao"] = True
         # per-material flags, looked up per hit
         self._reflective = (m.mirror > 0).any(axis=1) | (m.transmission > 0).any(axis=1)
         self._transmissive = (m.transmission > 0).any(axis=1)
