@@ -226,6 +226,10 @@ def _embree_rays(array, rows=None):
     -------
     (n, 3) or (m, 3) float32
     """
+    if array.strides[0] == 0 and rows is None:
+        # one row broadcast to every ray (the origin of pinhole camera rays): Embree reads
+        # rays through the strides, so it is converted once instead of materialised n times
+        return np.broadcast_to(array[:1].astype(np.float32), array.shape)
     return take_rows(array, rows).astype(np.float32, copy=False)
 
 
