@@ -2,6 +2,7 @@
 
 import argparse
 import logging
+import os
 import sys
 import time
 
@@ -9,7 +10,8 @@ from . import __version__
 from .api import load_scene
 from .errors import RtmeshError
 from .film import TONEMAPS
-from .image_io import check_output_path, write_image
+from .aov import display_values
+from .image_io import check_output_path, write_display_image, write_image
 from .integrator import Integrator
 from .sampling import SAMPLERS
 from .settings import FRESNEL_MODES, PASSES
@@ -48,6 +50,9 @@ def build_parser():
     p.add_argument("--ao-samples", type=int, help="ambient-occlusion rays per hit (0 = off)")
     p.add_argument("--ao-distance", type=float, help="ambient-occlusion reach, scene units")
     p.add_argument("--passes", type=_names(PASSES), help="extra EXR passes, comma-separated: " + ", ".join(PASSES))
+    p.add_argument("--pass-png", action="store_true",
+                   help="also write each pass as OUTPUT_<pass>.png (normals as 0.5 + 0.5 n, depth "
+                   "normalised, ids as distinct colours)")
     p.add_argument("--fresnel", choices=FRESNEL_MODES, help="Fresnel model for dielectrics")
     p.add_argument("--exposure", type=float, help="exposure in stops for 8-bit output")
     p.add_argument("--tonemap", choices=TONEMAPS, help="tone-mapping operator for 8-bit output")
@@ -158,8 +163,16 @@ class ProgressBar:
             self.stream.flush()
 
 
+def _pass_png_path(output, name):
+    """``out.exr`` -> ``out_depth.png``: where ``--pass-png`` writes a pass."""
+    return f"{os.path.splitext(output)[0]}_{name}.png"
+
+
 def cmd_render(args):
     check_output_path(args.output)
+    if args.pass_png:
+        for name in args.passes or ():
+            check_output_path(_pass_png_path(args.output, name))
     overrides = {
         "width": args.width, "height": args.height, "spp": args.spp, "sampler": args.sampler,
         "max_depth": args.max_depth, "seed": args.seed, "threads": args.threads,
@@ -172,7 +185,14 @@ def cmd_render(args):
         result = Integrator(scene, settings).render(progress=bar)
     finally:
         bar.close()
-    write_image(args.output, result.image, result.passes, settings.exposure, settings.tonemap)
+    write_image(args.output, result.image, result.passes, settings.exposure, settings.tonemap,
+                alpha=result.alpha)
+    if args.pass_png:
+        coverage = result.passes.get("alpha", result.alpha)
+        coverage = None if coverage is None else coverage[:, :, 0]
+        for name, values in result.passes.items():
+            display, srgb = display_values(name, values, coverage)
+            write_display_image(_pass_png_path(args.output, name), display, srgb)
     st = result.stats
     error = "" if st.relative_error != st.relative_error else f", est. rel. error {st.relative_error:.3g}"
     print(f"{args.output}: {settings.width}x{settings.height}, {settings.spp} spp, "

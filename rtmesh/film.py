@@ -13,8 +13,10 @@ class Film:
     Parameters
     ----------
     width, height : int
-    passes : dict of str to int
-        Name and channel count of each extra pass to accumulate (e.g. ``{"ao": 1}``).
+    passes : dict of str to int or (int, str)
+        Name and channel count of each extra pass (e.g. ``{"ao": 1}``), optionally with
+        how a pixel's samples are reduced: ``"mean"`` (the default), ``"first"`` (the
+        pixel's first sample, e.g. integer ids) or ``"min"`` (e.g. the nearest depth).
 
     Attributes
     ----------
@@ -25,6 +27,8 @@ class Film:
     count : (height * width,) int64
         Samples per pixel so far.
     pass_sums : dict of str to (height * width, k) float64
+        Sums for ``mean`` passes; the kept value for ``first`` and ``min`` passes.
+    pass_reductions : dict of str to str
     """
 
     def __init__(self, width, height, passes=None):
@@ -33,7 +37,11 @@ class Film:
         self.sum = np.zeros((n, 3), order="F")
         self.sum_sq = np.zeros((n, 3), order="F")
         self.count = np.zeros(n, dtype=np.int64)
-        self.pass_sums = {name: np.zeros((n, k)) for name, k in (passes or {}).items()}
+        specs = {name: (v, "mean") if isinstance(v, int) else tuple(v) for name, v in (passes or {}).items()}
+        self.pass_reductions = {name: reduction for name, (_, reduction) in specs.items()}
+        # a min pass starts above every sample; +inf left over means "no sample"
+        self.pass_sums = {name: np.full((n, k), np.inf if reduction == "min" else 0.0)
+                          for name, (k, reduction) in specs.items()}
 
     def add_tile(self, first_pixel, radiance, passes=None):
         """Add the samples of a run of consecutive pixels.
@@ -47,14 +55,24 @@ class Film:
         passes : dict of str to (m, spp, k) float, optional
         """
         m, spp = radiance.shape[:2]
-        px = slice(first_pixel, first_pixel + m)
+        px = first_pixel if isinstance(first_pixel, slice) else slice(first_pixel, first_pixel + m)
         # add samples one index at a time so each pixel's sum has the same rounding
         # whatever the tile size or thread count (bit-identical renders)
+        mean_passes = {}
+        for name, values in (passes or {}).items():
+            reduction = self.pass_reductions[name]
+            if reduction == "mean":
+                mean_passes[name] = values
+            elif reduction == "min":
+                self.pass_sums[name][px] = np.minimum(self.pass_sums[name][px], values.min(axis=1))
+            else:  # first: only pixels without a sample yet take this tile's sample 0
+                fresh = (self.count[px] == 0)[:, None]
+                self.pass_sums[name][px] = np.where(fresh, values[:, 0], self.pass_sums[name][px])
         for s in range(spp):
             r = radiance[:, s]
             self.sum[px] += r
             self.sum_sq[px] += r * r
-            for name, values in (passes or {}).items():
+            for name, values in mean_passes.items():
                 self.pass_sums[name][px] += values[:, s]
         self.count[px] += spp
 
@@ -96,8 +114,15 @@ class Film:
         return float(np.mean(std_err / (np.abs(mean) + 0.01)))
 
     def pass_image(self, name):
-        """(height, width, k) float32: the mean of a pass per pixel."""
-        return self._to_image(self.pass_sums[name] / self._divisor())
+        """(height, width, k) float32: a pass reduced per pixel (mean, first sample or
+        minimum; a minimum no sample set is 0)."""
+        values = self.pass_sums[name]
+        reduction = self.pass_reductions[name]
+        if reduction == "mean":
+            return self._to_image(values / self._divisor())
+        if reduction == "min":
+            values = np.where(np.isfinite(values), values, 0.0)
+        return self._to_image(values)
 
 
 def tonemap(image, exposure=0.0, operator="reinhard"):

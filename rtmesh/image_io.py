@@ -11,6 +11,7 @@ import tempfile
 import numpy as np
 import OpenImageIO as oiio
 
+from .aov import exr_channel_names
 from .errors import OutputError
 from .film import linear_to_srgb, tonemap
 
@@ -46,7 +47,7 @@ def check_output_path(path):
         raise OutputError(f"{path}: is a folder, not a file name")
 
 
-def write_image(path, image, passes=None, exposure=0.0, operator="reinhard"):
+def write_image(path, image, passes=None, exposure=0.0, operator="reinhard", alpha=None):
     """Write a rendered image; the format follows the file extension.
 
     Parameters
@@ -58,12 +59,18 @@ def write_image(path, image, passes=None, exposure=0.0, operator="reinhard"):
     image : (h, w, 3) float
         Linear radiance.
     passes : dict of str to (h, w) or (h, w, k) float, optional
-        Extra channels for EXR: a one-channel pass ``ao`` becomes channel ``AO``, a k-channel
-        pass ``normal`` becomes ``normal.X``, ``normal.Y``, ... (k = 3) or ``name.0``...
+        Extra channels for EXR, one OpenEXR layer per pass named as in
+        :func:`rtmesh.aov.exr_channel_names` (``depth.Z``, ``normal.X``...); the ``alpha``
+        pass is the image's ``A`` channel.
     exposure : float
         Stops, for 8-bit formats.
     operator : str
         Tone-mapping operator for 8-bit formats (see :func:`rtmesh.film.tonemap`).
+    alpha : (h, w) or (h, w, 1) float, optional
+        Coverage of a render on a transparent background; ``image`` is premultiplied by it.
+        EXR stores it as channel ``A`` (premultiplied RGBA, the OpenEXR convention); PNG as
+        straight (unassociated) alpha: the colour is divided by alpha before tone mapping.
+        JPEG has no alpha: the image is written over black.
 
     Raises
     ------
@@ -75,36 +82,89 @@ def write_image(path, image, passes=None, exposure=0.0, operator="reinhard"):
     ext = os.path.splitext(path)[1].lower()
     image = np.asarray(image, dtype=np.float32)
     h, w = image.shape[:2]
+    if alpha is not None:
+        alpha = np.asarray(alpha, dtype=np.float32).reshape(h, w, 1)
     if ext in FLOAT_FORMATS:
-        channels, names = _exr_channels(image, passes or {})
+        passes = dict(passes or {})
+        if alpha is not None:
+            passes["alpha"] = alpha
+        channels, names = _exr_channels(image, passes)
         spec = oiio.ImageSpec(w, h, len(names), oiio.FLOAT)
         spec.channelnames = tuple(names)
+        if "A" in names:
+            spec.alpha_channel = names.index("A")
         spec.attribute("compression", "zip")
         pixels = channels
     else:
+        straight_alpha = alpha is not None and ext == ".png"
+        if straight_alpha:
+            # PNG alpha is straight: un-premultiply (nothing to divide where alpha is 0)
+            image = np.where(alpha > 0, image / np.maximum(alpha, 1e-30), 0.0)
         display = linear_to_srgb(tonemap(image, exposure, operator))
-        # round to nearest: 8-bit quantisation error at most half a step
-        pixels = np.round(display * 255.0).astype(np.uint8)
-        spec = oiio.ImageSpec(w, h, 3, oiio.UINT8)
-        if ext in (".jpg", ".jpeg"):
-            spec.attribute("Compression", "jpeg:95")
+        if straight_alpha:
+            display = np.concatenate([display, np.clip(alpha, 0.0, 1.0)], axis=2)
+        pixels, spec = _8bit(display, ext)
     _write_atomically(path, spec, pixels)
 
 
+def write_display_image(path, display, srgb=False):
+    """Write display values in [0, 1] as an 8-bit image (a pass shown as a PNG).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        ``.png`` or ``.jpg``.
+    display : (h, w, 3) or (h, w, 4) float
+        Values in [0, 1], written as they are or sRGB-encoded.
+    srgb : bool
+        Encode the colour channels with the sRGB transfer function (linear colour data);
+        False writes data (normals, grey ramps) unchanged.
+
+    Raises
+    ------
+    OutputError
+    """
+    check_output_path(path)
+    path = os.fspath(path)
+    ext = os.path.splitext(path)[1].lower()
+    if ext not in DISPLAY_FORMATS:
+        raise OutputError(f"{path}: a pass image must be one of {', '.join(DISPLAY_FORMATS)}")
+    display = np.clip(np.asarray(display, dtype=np.float64), 0.0, 1.0)
+    if srgb:
+        display = np.concatenate([linear_to_srgb(display[:, :, :3]), display[:, :, 3:]], axis=2)
+    pixels, spec = _8bit(display, ext)
+    _write_atomically(path, spec, pixels)
+
+
+def _8bit(display, ext):
+    """Quantised pixels and the spec of an 8-bit image of display values in [0, 1]."""
+    h, w, c = display.shape
+    # round to nearest: 8-bit quantisation error at most half a step
+    pixels = np.round(display * 255.0).astype(np.uint8)
+    spec = oiio.ImageSpec(w, h, c, oiio.UINT8)
+    if c == 4:
+        spec.alpha_channel = 3
+    if ext in (".jpg", ".jpeg"):
+        if c == 4:
+            pixels, spec = pixels[:, :, :3].copy(), oiio.ImageSpec(w, h, 3, oiio.UINT8)
+        spec.attribute("Compression", "jpeg:95")
+    return np.ascontiguousarray(pixels), spec
+
+
 def _exr_channels(image, passes):
-    """Stack the RGB image and the passes into one (h, w, c) array with channel names."""
+    """Stack the RGB image and the passes into one (h, w, c) array with channel names.
+
+    The image's channels come first (R, G, B, then A when there is an ``alpha`` pass), then
+    every other pass in the order given.
+    """
     arrays, names = [image], ["R", "G", "B"]
-    for name, values in passes.items():
+    ordered = sorted(passes.items(), key=lambda item: item[0] != "alpha")
+    for name, values in ordered:
         values = np.asarray(values, dtype=np.float32)
         if values.ndim == 2:
             values = values[:, :, None]
-        k = values.shape[2]
         arrays.append(values)
-        if k == 1:
-            names.append(name.upper() if len(name) <= 2 else name)
-        else:
-            suffixes = "XYZ" if k == 3 else [str(i) for i in range(k)]
-            names.extend(f"{name}.{s}" for s in suffixes)
+        names.extend(exr_channel_names(name, values.shape[2]))
     return np.ascontiguousarray(np.concatenate(arrays, axis=2)), names
 
 

@@ -28,6 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .accel import Accel, barycentric_interpolate, offset_ray_origins
+from .aov import PassRecorder
+from .background import as_background
 from .batches import RayBatch, component_major, take_rows
 from .film import Film
 from .sampling import Dim, pixel_offsets, square_to_cosine_hemisphere, uniform2
@@ -49,16 +51,19 @@ class RenderResult:
     image : (height, width, 3) float32
         Linear radiance, row 0 at the top.
     passes : dict of str to (height, width, k) float32
-        Requested extra passes.
+        Requested extra passes (see :mod:`rtmesh.aov`).
     stats : RenderStats
     film : Film
         The accumulation buffers (sums, sums of squares) for error estimates.
+    alpha : (height, width, 1) float32 or None
+        Coverage, when the background is transparent (``image`` is then premultiplied).
     """
 
     image: np.ndarray
     passes: dict
     stats: RenderStats
     film: Film
+    alpha: np.ndarray | None = None
 
 
 class _Surfaces:
@@ -115,6 +120,10 @@ class Integrator:
         m = scene.materials
         self.ao_distance = settings.ao_distance or 0.2 * float(np.linalg.norm(np.ptp(scene.bounds, axis=0)))
         ambient_on = bool((scene.ambient > 0).any() and (m.ambient > 0).any())
+        self.background = as_background(scene.background)
+        # only the passes asked for are computed; a transparent background needs coverage
+        self.passes = PassRecorder(scene, settings.passes + ("alpha",) * self.background.transparent,
+                                   self.camera, self.shift)
         # the AO pass alone asks for 16 rays per camera hit unless ao_samples says otherwise
         self.ao_samples = settings.ao_samples or (16 if "ao" in settings.passes else 0)
         self.stages = {
@@ -126,7 +135,8 @@ class Integrator:
             "reflection": settings.max_depth > 0 and (m.any_mirror or m.any_transmission),
             "refraction": settings.max_depth > 0 and m.any_transmission,
             "absorption": m.any_absorption,
-            "background": bool((scene.background > 0).any()),
+            "background": not self.background.is_black,
+            "passes": bool(self.passes),
             "ao": self.ao_samples > 0 and (ambient_on or "ao" in settings.passes),
             "lens": self.camera.aperture > 0.0,
         }
@@ -182,7 +192,7 @@ class Integrator:
         """
         s = self.settings
         start = time.perf_counter()
-        film = Film(s.width, s.height, {"ao": 1} if "ao" in s.passes else None)
+        film = Film(s.width, s.height, self.passes.film_passes())
         n_pixels = s.width * s.height
         pixels_per_chunk = max(1, s.chunk_samples // s.spp)
         chunks = [(p, min(p + pixels_per_chunk, n_pixels)) for p in range(0, n_pixels, pixels_per_chunk)]
@@ -217,8 +227,9 @@ class Integrator:
                     raise
         stats.wall_seconds = time.perf_counter() - start
         stats.relative_error = film.relative_error()
-        passes = {name: film.pass_image(name) for name in film.pass_sums}
-        return RenderResult(film.image(), passes, stats, film)
+        passes = {name: film.pass_image(name) for name in film.pass_sums if name in s.passes}
+        alpha = film.pass_image("alpha") if self.background.transparent else None
+        return RenderResult(film.image(), passes, stats, film, alpha)
 
     # ---------------------------------------------------------------- one chunk
     def render_chunk(self, first_pixel, end_pixel):
@@ -254,7 +265,7 @@ class Integrator:
         rays = RayBatch(origins, directions, np.arange(n, dtype=np.int64),
                         np.broadcast_to(1.0, (n, 3)), np.full(n, -1, dtype=np.int32))
         radiance = np.zeros((n, 3), order="F")
-        ao_pass = np.ones((n, 1)) if "ao" in s.passes else None
+        aov = self.passes.buffers(n)
         stats.rays["camera"] += n
         clock.lap("camera")
 
@@ -264,13 +275,13 @@ class Integrator:
                 break
             hits = self.accel.intersect(rays.origins, rays.directions)
             clock.lap("intersect")
-            rays = self._shade(rays, hits, depth, radiance, ao_pass, keys, stats, clock)
+            rays = self._shade(rays, hits, depth, radiance, aov, keys, stats, clock)
 
-        passes = {"ao": ao_pass.reshape(m, s.spp, 1)} if ao_pass is not None else None
+        passes = self.passes.per_pixel(aov, m, s.spp) or None
         return radiance.reshape(m, s.spp, 3), passes, stats
 
     # ---------------------------------------------------------------- stages
-    def _shade(self, rays, hits, depth, radiance, ao_pass, keys, stats, clock):
+    def _shade(self, rays, hits, depth, radiance, aov, keys, stats, clock):
         """Shade one depth level; returns the rays of the next level."""
         hit = hits.prim >= 0
         m = self.scene.materials
@@ -290,8 +301,9 @@ class Integrator:
         n_hit = int(np.count_nonzero(hit))
         if self.stages["background"] and n_hit < len(hit):
             miss = np.flatnonzero(~hit)
-            _scatter_add(radiance, rays.sample[miss],
-                         take_rows(rays.throughput, miss) * self.scene.background, unique=primary)
+            seen = self.background.radiance(take_rows(rays.directions, miss))
+            _scatter_add(radiance, rays.sample[miss], take_rows(rays.throughput, miss) * seen,
+                         unique=primary)
 
         if not n_hit:
             return RayBatch.empty()
@@ -299,8 +311,11 @@ class Integrator:
         rows = None if n_hit == len(hit) else np.flatnonzero(hit)
         srf = self._surfaces(rays, hits, rows)
         clock.lap("shade")
+        if primary and self.stages["passes"]:
+            self.passes.record(aov, srf, hits, rows)
+            clock.lap("passes")
 
-        local = self._local_shading(srf, depth, ao_pass, keys, stats, clock)
+        local = self._local_shading(srf, depth, aov.get("ao"), keys, stats, clock)
         if local is not None:
             if not primary:
                 local = local * take_rows(rays.throughput, rows)

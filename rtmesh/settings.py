@@ -3,11 +3,12 @@
 import os
 from dataclasses import dataclass, field
 
+from .aov import PASS_NAMES
 from .film import TONEMAPS
 from .sampling import SAMPLERS
 
 FRESNEL_MODES = ("schlick", "exact")
-PASSES = ("ao",)
+PASSES = PASS_NAMES
 
 
 @dataclass
@@ -38,7 +39,7 @@ class RenderSettings:
     ao_distance : float or None
         Occluders farther than this do not count; None means 0.2 x the scene's diagonal.
     passes : tuple of str
-        Extra output passes (``"ao"``).
+        Extra output passes (see :data:`rtmesh.aov.REGISTRY`).
     exposure : float
         Stops, applied when writing 8-bit images.
     tonemap : {"clamp", "reinhard", "aces"}
@@ -94,7 +95,7 @@ class RenderSettings:
 
 
 RAY_KINDS = ("camera", "shadow", "reflection", "refraction", "ao")
-STAGES = ("camera", "intersect", "shade", "shadow", "ao", "spawn", "film")
+STAGES = ("camera", "intersect", "shade", "passes", "shadow", "ao", "spawn", "film")
 
 
 @dataclass

@@ -64,7 +64,7 @@ def test_render_writes_exr_and_png_that_read_back(scene_file, tmp_path):
     assert main(["render", str(scene_file), "-o", str(exr), "--passes", "ao", "-q"]) == 0
     assert main(["render", str(scene_file), "-o", str(png), "-q"]) == 0
     linear, names = read_image(exr)
-    assert names == ["R", "G", "B", "AO"]
+    assert names == ["R", "G", "B", "ao.Y"]
     assert linear.shape == (32, 48, 4)
     assert np.isfinite(linear).all()
     # the red sphere is in the middle of the frame: red dominates there

@@ -1,0 +1,299 @@
+"""Output passes (arbitrary output variables): the registry, the per-sample producers, and
+the 8-bit display mapping of each pass.
+
+A pass is described once, in :data:`REGISTRY`: its EXR channel names, how the film reduces
+a pixel's samples to one value, the value a camera ray that sees no surface contributes, and
+how the pass is shown in a PNG.  The integrator only calls :meth:`PassRecorder.record` with
+the hits of the camera rays; everything else about passes lives here, so a new pass is one
+registry entry (plus a producer function).
+
+EXR naming (one OpenEXR layer per pass, ``layer.channel``)::
+
+    ao          ao.Y                     mean    misses count as unoccluded (1)
+    depth       depth.Z                  min     z-depth; 0 where no sample hits
+    normal      normal.X normal.Y normal.Z   mean    world-space unit shading normal, camera side
+    albedo      albedo.R albedo.G albedo.B   mean    diffuse reflectance (texture-tinted)
+    position    position.X .Y .Z         mean    world-space hit point
+    uv          uv.U uv.V                mean    texture coordinates
+    object_id   object_id.id             first   index into Scene.object_names; -1 = none
+    material_id material_id.id           first   index into the material table; -1 = none
+    alpha       A                        mean    camera-ray coverage (the image's alpha)
+
+``mean`` averages every sample of the pixel, misses included with their miss value, so
+``normal``, ``albedo``, ``position`` and ``uv`` are premultiplied by coverage (divide by
+``A`` to un-premultiply).  ``first`` keeps the pixel's sample 0 (an average of two integer
+ids is no id).  ``min`` keeps the nearest surface any sample saw: an average of a near and a
+far depth at a silhouette is a distance where nothing is, and the nearest is what depth
+compositing needs.
+"""
+
+import colorsys
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+from .batches import take_rows
+log = logging.getLogger(__name__)
+
+REDUCTIONS = ("mean", "first", "min")
+
+
+@dataclass(frozen=True)
+class PassSpec:
+    """One pass of the registry.
+
+    Attributes
+    ----------
+    name : str
+    channels : tuple of str
+        EXR channel names, written as ``name.channel`` (a channel ``A`` is the image's own
+        alpha channel and is written without the layer prefix).
+    reduction : {"mean", "first", "min"}
+        How the film combines a pixel's samples (see the module docstring).
+    miss : float
+        What a camera ray that hits nothing contributes.
+    doc : str
+        One line for the documentation and ``--help``.
+    """
+
+    name: str
+    channels: tuple
+    reduction: str
+    miss: float
+    doc: str
+
+    @property
+    def width(self):
+        return len(self.channels)
+
+    def exr_names(self):
+        """EXR channel names of this pass, in order."""
+        return [c if c == "A" else f"{self.name}.{c}" for c in self.channels]
+
+
+REGISTRY = {
+    spec.name: spec for spec in (
+        PassSpec("ao", ("Y",), "mean", 1.0, "ambient occlusion: unoccluded fraction of the hemisphere"),
+        PassSpec("depth", ("Z",), "min", np.inf, "z-depth: distance along the view axis to the nearest hit"),
+        PassSpec("normal", ("X", "Y", "Z"), "mean", 0.0, "world-space unit shading normal facing the camera"),
+        PassSpec("albedo", ("R", "G", "B"), "mean", 0.0, "diffuse reflectance (texture-tinted)"),
+        PassSpec("position", ("X", "Y", "Z"), "mean", 0.0, "world-space hit point"),
+        PassSpec("uv", ("U", "V"), "mean", 0.0, "texture coordinates (0 without UVs)"),
+        PassSpec("object_id", ("id",), "first", -1.0, "object index (Scene.object_names), -1 for none"),
+        PassSpec("material_id", ("id",), "first", -1.0, "material index, -1 for none"),
+        PassSpec("alpha", ("A",), "mean", 0.0, "coverage of camera rays by geometry"),
+    )
+}
+PASS_NAMES = tuple(REGISTRY)
+
+# channel names of passes that are not per-sample (the film derives them from its sums)
+_OTHER_CHANNELS = {"variance": ("R", "G", "B"), "spp": ("Y",)}
+
+
+def exr_channel_names(name, width):
+    """EXR channel names of a pass of ``width`` channels (registry or generic scheme)."""
+    if name in REGISTRY and REGISTRY[name].width == width:
+        return REGISTRY[name].exr_names()
+    channels = _OTHER_CHANNELS.get(name)
+    if channels is None or len(channels) != width:
+        channels = ("Y",) if width == 1 else ("X", "Y", "Z") if width == 3 else tuple(map(str, range(width)))
+    return [f"{name}.{c}" for c in channels]
+
+
+class PassRecorder:
+    """Computes the requested passes for the camera rays of one render.
+
+    Parameters
+    ----------
+    scene : Scene
+    names : iterable of str
+        Passes to compute; names not in :data:`REGISTRY` are ignored (the film derives
+        them).  Nothing is computed for a pass that is not named.
+    camera : Camera
+        The camera in the integrator's shifted frame.
+    shift : (3,) float
+        The integrator's re-centring shift (world = shifted + ``shift``).
+    """
+
+    def __init__(self, scene, names, camera, shift):
+        self.names = tuple(n for n in dict.fromkeys(names) if n in REGISTRY)
+        self.specs = [REGISTRY[n] for n in self.names]
+        self.scene = scene
+        self.shift = np.asarray(shift, dtype=np.float64)
+        self.forward = camera.frame()[0]
+        self.eye = camera.position
+        self.uv = getattr(scene, "uv", None)
+        if "uv" in self.names and self.uv is None:
+            log.warning("the uv pass is zero: the scene has no texture coordinates")
+        self._diffuse = scene.materials.diffuse
+        # exact float ids: every int32 index below 2^24 is a float32 integer
+        self._object_id = scene.object_id.astype(np.float64)
+        self._material_id = scene.material_id.astype(np.float64)
+
+    def __bool__(self):
+        return bool(self.names)
+
+    def film_passes(self):
+        """``{name: (channels, reduction)}`` for :class:`rtmesh.film.Film`."""
+        return {s.name: (s.width, s.reduction) for s in self.specs}
+
+    def buffers(self, n):
+        """Per-sample buffers for ``n`` camera rays, filled with each pass's miss value.
+
+        Returns
+        -------
+        dict of str to (n, k) float64
+        """
+        return {s.name: np.full((n, s.width), s.miss) for s in self.specs}
+
+    def record(self, buffers, srf, hits, rows):
+        """Write the passes of the camera rays that hit something.
+
+        Parameters
+        ----------
+        buffers : dict of str to (n, k) float
+            From :meth:`buffers`; rows are camera samples.
+        srf : rtmesh.integrator._Surfaces
+            Shading records of the hits (``sample`` gives their rows in ``buffers``).
+        hits : Hits
+            Embree hits of every camera ray.
+        rows : (k,) int or None
+            Rays of ``hits`` that hit, in the order of ``srf``; None when all did.
+        """
+        sample = srf.sample
+        prim = None
+        for name in self.names:
+            if name == "ao":
+                continue  # written by the integrator's AO stage
+            if name in ("object_id", "material_id", "uv") and prim is None:
+                prim = take_rows(hits.prim, rows).astype(np.intp)
+            if name == "depth":
+                # distance from the lens plane along the view axis: the same for a pinhole
+                # and a thin lens, whose ray origins all lie in that plane
+                values = (srf.p - self.eye) @ self.forward
+            elif name == "normal":
+                values = srf.ns
+            elif name == "albedo":
+                values = take_rows(self._diffuse, srf.mat)
+                tints = getattr(srf, "tints", None)
+                if tints is not None and getattr(tints, "diffuse", None) is not None:
+                    values = values * tints.diffuse
+            elif name == "position":
+                values = srf.p + self.shift
+            elif name == "uv":
+                values = self._uv(prim, take_rows(hits.u, rows), take_rows(hits.v, rows))
+            elif name == "object_id":
+                values = self._object_id.take(prim)
+            elif name == "material_id":
+                values = self._material_id.take(prim)
+            elif name == "alpha":
+                values = 1.0
+            buffer = buffers[name]
+            values = np.asarray(values, dtype=np.float64)
+            if values.ndim == 1 and buffer.shape[1] == 1:
+                values = values[:, None]
+            buffer[sample] = values
+
+    def _uv(self, prim, u, v):
+        """(k, 2) texture coordinates interpolated from the hit barycentrics."""
+        if self.uv is None:
+            return 0.0
+        corners = self.scene.faces[prim]
+        uv0, uv1, uv2 = (self.uv[corners[:, i]] for i in range(3))
+        return uv0 + u[:, None] * (uv1 - uv0) + v[:, None] * (uv2 - uv0)
+
+    def per_pixel(self, buffers, m, spp):
+        """Reshape the per-sample buffers to ``(m, spp, k)`` for :meth:`Film.add_tile`."""
+        return {name: b.reshape(m, spp, -1) for name, b in buffers.items()}
+
+
+# ---------------------------------------------------------------- display (PNG) mapping
+
+
+def display_values(name, values, coverage=None):
+    """Map a pass to displayable values in [0, 1] for an 8-bit image.
+
+    Parameters
+    ----------
+    name : str
+        Pass name.
+    values : (h, w, k) float
+        The pass as the film returns it.
+    coverage : (h, w) float, optional
+        The alpha pass, when available: pixels with no coverage stay black in the
+        normalised passes (depth, position).
+
+    Returns
+    -------
+    display : (h, w, 3) float
+        In [0, 1].
+    srgb : bool
+        True when ``display`` is linear colour to be sRGB-encoded (albedo); False for data
+        written as is (normals as ``0.5 + 0.5 n``, grey ramps, id colours).
+
+    Notes
+    -----
+    ``normal``: ``0.5 + 0.5 n`` per component (the normal-map convention).  ``depth``: the
+    nearest covered depth white, the farthest dark grey (0.1), no hit black.  ``position``:
+    each axis normalised over the covered pixels' range.  ``uv``: (u, v, 0) wrapped to
+    [0, 1).  ``object_id``/``material_id``: a distinct colour per id (golden-ratio hues),
+    -1 black.  ``alpha``, ``ao``: grey.  Anything else: each channel divided by its maximum.
+    """
+    values = np.asarray(values, dtype=np.float64)
+    h, w, k = values.shape
+    if name == "depth" or name == "position":
+        covered = values.any(axis=2) if coverage is None else coverage > 0
+        out = np.zeros((h, w, k))
+        if covered.any():
+            lo = values[covered].min(axis=0)
+            hi = values[covered].max(axis=0)
+            span = np.where(hi > lo, hi - lo, 1.0)
+            x = (values - lo) / span
+            if name == "depth":
+                x = 1.0 - 0.9 * x  # near white, far dark grey; black stays "no hit"
+            out = np.where(covered[:, :, None], np.clip(x, 0.0, 1.0), 0.0)
+        return _rgb(out), False
+    if name == "normal":
+        return np.clip(0.5 + 0.5 * values, 0.0, 1.0), False
+    if name == "albedo":
+        return np.clip(values, 0.0, 1.0), True
+    if name == "uv":
+        return np.concatenate([np.mod(values, 1.0), np.zeros((h, w, 1))], axis=2), False
+    if name in ("object_id", "material_id"):
+        return id_colours(values[:, :, 0]), False
+    if name in ("alpha", "ao"):
+        return _rgb(np.clip(values, 0.0, 1.0)), False
+    top = np.abs(values).reshape(-1, k).max(axis=0)
+    return _rgb(np.clip(values / np.where(top > 0, top, 1.0), 0.0, 1.0)), False
+
+
+def id_colours(ids):
+    """Distinct colours for integer ids: hue steps of the golden ratio, id -1 black.
+
+    Parameters
+    ----------
+    ids : (h, w) float
+        Integer-valued ids.
+
+    Returns
+    -------
+    (h, w, 3) float in [0, 1]
+    """
+    ids = np.rint(ids).astype(np.int64)
+    unique = np.unique(ids)
+    # a small table of colours, one per id present (colorsys is scalar; ids are few)
+    table = np.array([(0.0, 0.0, 0.0) if i < 0 else
+                      colorsys.hsv_to_rgb((i * 0.6180339887498949) % 1.0, 0.65, 0.95)
+                      for i in unique])
+    return table[np.searchsorted(unique, ids)]
+
+
+def _rgb(values):
+    """A one-channel image as grey RGB, anything else cut or padded to three channels."""
+    k = values.shape[2]
+    if k == 1:
+        return np.repeat(values, 3, axis=2)
+    if k >= 3:
+        return values[:, :, :3]
+    return np.concatenate([values, np.zeros(values.shape[:2] + (3 - k,))], axis=2)
