@@ -167,6 +167,27 @@ class EnvironmentBackground:
         return self._texture.sample(uv)
 
 
+def latlong_directions(width, height):
+    """Unit directions of the texel centres of a ``width`` x ``height`` lat-long image.
+
+    The inverse of :meth:`EnvironmentBackground.uv` (rotation 0), for building
+    environment maps procedurally.
+
+    Returns
+    -------
+    (height, width, 3) float64
+        Row 0 at the top (+Y).
+    """
+    u = (np.arange(width) + 0.5) / width
+    v = 1.0 - (np.arange(height) + 0.5) / height
+    azimuth = (u - 0.5) * 2.0 * math.pi
+    elevation = (v - 0.5) * math.pi
+    cos_el = np.cos(elevation)[:, None]
+    return np.stack([cos_el * np.cos(azimuth)[None, :],
+                     np.broadcast_to(np.sin(elevation)[:, None], (height, width)),
+                     cos_el * np.sin(azimuth)[None, :]], axis=2)
+
+
 def as_background(value):
     """A background object from a background or a colour ((3,) or a number)."""
     if hasattr(value, "radiance"):

@@ -60,8 +60,9 @@ class Scene:
     camera : Camera
     ambient : (3,) float
         Ambient light colour multiplying every material's ``ambient`` reflectance.
-    background : (3,) float
-        Radiance of rays that leave the scene.
+    background : (3,) float or background object
+        What rays that leave the scene see: a radiance, or one of the backgrounds of
+        :mod:`rtmesh.background` (gradient, environment image, transparent).
     """
 
     vertices: np.ndarray
@@ -173,7 +174,8 @@ class Scene:
             lights=list(lights) if lights is not None else [],
             camera=camera,
             ambient=np.asarray(ambient if ambient is not None else np.zeros(3), dtype=np.float64),
-            background=np.asarray(background if background is not None else np.zeros(3), dtype=np.float64),
+            background=(background if hasattr(background, "radiance") else
+                        np.asarray(background if background is not None else np.zeros(3), dtype=np.float64)),
         )
         if camera is None:
             scene.camera = frame_bounds(scene.bounds, aspect=aspect)

@@ -17,6 +17,8 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
+from .background import (BACKGROUND_TYPES, GradientBackground, SolidBackground, TransparentBackground,
+                         read_environment)
 from .camera import Camera
 from .errors import RtmeshError, SceneError
 from .importers import load_trimesh, parts_from_trimesh
@@ -148,7 +150,17 @@ LIGHT_REQUIRED = {
     "directional": ("direction", "irradiance"),
     "spot": ("position", "intensity"),
 }
-TOP_LEVEL = ("render", "camera", "environment", "materials", "objects", "lights")
+BACKGROUND_KEYS = {
+    "type": _one_of(*BACKGROUND_TYPES), "colour": _colour, "top": _colour, "bottom": _colour,
+    "file": _str, "rotation": _float, "intensity": _non_negative,
+}
+BACKGROUND_ALLOWED = {
+    "solid": ("colour",), "gradient": ("top", "bottom"),
+    "environment": ("file", "rotation", "intensity"), "transparent": (),
+}
+BACKGROUND_REQUIRED = {"solid": ("colour",), "gradient": ("top", "bottom"), "environment": ("file",),
+                       "transparent": ()}
+TOP_LEVEL = ("render", "camera", "environment", "background", "materials", "objects", "lights")
 
 
 class _Reader:
@@ -283,10 +295,41 @@ def scene_from_dict(doc, source="scene", base_dir=".", overrides=None):
     scene = Scene.from_parts(
         parts, materials, lights=lights, camera=camera,
         ambient=environment.get("ambient", np.zeros(3) if lights is not None else np.full(3, 0.05)),
-        background=environment.get("background", np.zeros(3)),
+        background=_background(r, doc, environment, base_dir),
         source=source, aspect=settings.width / settings.height,
     )
     return scene, settings
+
+
+def _background(r, doc, environment, base_dir):
+    """The scene's background from ``[background]`` (or ``[environment].background``)."""
+    if "background" not in doc:
+        return environment.get("background", np.zeros(3))
+    if "background" in environment:
+        raise r.error("background", "give the background either as [background] or as "
+                      "environment.background, not both")
+    values = r.fields(r.table(doc["background"], "background"), BACKGROUND_KEYS, "background")
+    kind = values.get("type", "solid")
+    for key in values:
+        if key != "type" and key not in BACKGROUND_ALLOWED[kind]:
+            raise r.error(f"background.{key}", f"does not apply to a {kind} background")
+    for key in BACKGROUND_REQUIRED[kind]:
+        if key not in values:
+            raise r.error(f"background.{key}", f"missing (a {kind} background needs "
+                          + " and ".join(BACKGROUND_REQUIRED[kind]) + ")")
+    if kind == "solid":
+        return SolidBackground(values["colour"])
+    if kind == "gradient":
+        return GradientBackground(values["top"], values["bottom"])
+    if kind == "transparent":
+        return TransparentBackground()
+    path = values["file"]
+    if not os.path.isabs(path):
+        path = os.path.join(base_dir, path)
+    try:
+        return read_environment(path, values.get("rotation", 0.0), values.get("intensity", 1.0))
+    except RtmeshError as exc:
+        raise r.error("background.file", str(exc)) from None
 
 
 def _object_parts(r, values, where, base_dir, materials, material_index):
