@@ -7,6 +7,7 @@ import numpy as np
 import trimesh
 
 from .errors import MeshError
+from .gltf_scene import file_cameras_and_lights
 from .materials import Material
 from .scene import MeshPart, Scene
 
@@ -277,7 +278,16 @@ def scene_from_trimesh(obj, name="mesh", **scene_options):
 
 
 def load_mesh_scene(path, **scene_options):
-    """A renderable :class:`Scene` from a mesh file, framed by an automatic camera and lit by
-    the default light rig.
+    """A renderable :class:`Scene` from a mesh file.
+
+    A glTF file's first perspective camera and its KHR_lights_punctual lights are used when
+    it has them (see :mod:`rtmesh.gltf_scene`); otherwise an automatic camera frames the
+    mesh and the default light rig lights it.
     """
-    return scene_from_trimesh(load_trimesh(path), name=os.fspath(path), **scene_options)
+    obj = load_trimesh(path)
+    cameras, lights = file_cameras_and_lights(path)
+    if cameras:
+        scene_options.setdefault("camera", cameras[0][1])
+    if lights:
+        scene_options.setdefault("lights", lights)
+    return scene_from_trimesh(obj, name=os.fspath(path), **scene_options)

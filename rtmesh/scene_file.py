@@ -21,6 +21,7 @@ from .background import (BACKGROUND_TYPES, GradientBackground, SolidBackground, 
                          read_environment)
 from .camera import Camera
 from .errors import RtmeshError, SceneError
+from .gltf_scene import file_cameras_and_lights
 from .importers import load_trimesh, parts_from_trimesh
 from .lights import DirectionalLight, PointLight, SpotLight
 from .materials import Material
@@ -124,7 +125,7 @@ RENDER_KEYS = {
 }
 CAMERA_KEYS = {
     "position": _vec3, "look_at": _vec3, "up": _vec3, "fov": _positive,
-    "aperture": _non_negative, "focus_distance": _positive,
+    "aperture": _non_negative, "focus_distance": _positive, "from_file": _str,
 }
 ENVIRONMENT_KEYS = {"ambient": _colour, "background": _colour}
 MATERIAL_KEYS = {
@@ -137,7 +138,7 @@ OBJECT_KEYS = {
     "primitive": _one_of("icosphere", "box", "plane"),
     "subdivisions": _int, "radius": _positive, "extents": _vec3, "size": _vec2,
     "material": _str, "smooth": _bool,
-    "translate": _vec3, "rotate": _vec3, "scale": _scale,
+    "translate": _vec3, "rotate": _vec3, "scale": _scale, "import_lights": _bool,
 }
 LIGHT_KEYS = {
     "type": _one_of("point", "directional", "spot"),
@@ -277,20 +278,34 @@ def scene_from_dict(doc, source="scene", base_dir=".", overrides=None):
     objects = r.array_of_tables(doc.get("objects", []), "objects")
     if not objects:
         raise r.error("objects", "the scene has no objects (add at least one [[objects]] table)")
-    parts = []
+    parts, file_cameras, file_lights = [], [], []
     for i, table in enumerate(objects):
         where = f"objects[{i}]"
-        parts.extend(_object_parts(r, r.fields(table, OBJECT_KEYS, where), where, base_dir,
-                                   materials, material_index))
+        values = r.fields(table, OBJECT_KEYS, where)
+        parts.extend(_object_parts(r, values, where, base_dir, materials, material_index))
+        if "mesh" in values:
+            try:
+                cameras, lights = file_cameras_and_lights(_mesh_path(values, base_dir), _transform(values))
+            except RtmeshError as exc:
+                raise r.error(f"{where}.mesh", str(exc)) from None
+            file_cameras.extend(cameras)
+            if values.get("import_lights", True):
+                file_lights.extend(lights)
+        elif "import_lights" in values:
+            raise r.error(f"{where}.import_lights", "does not apply to a primitive")
 
     lights = None
     if "lights" in doc:
         lights = [_light(r, r.fields(t, LIGHT_KEYS, f"lights[{i}]"), f"lights[{i}]")
                   for i, t in enumerate(r.array_of_tables(doc["lights"], "lights"))]
+    if file_lights:
+        # a glTF file's own lights join the scene file's (and replace the default rig)
+        lights = (lights or []) + file_lights
 
     camera = None
     if "camera" in doc:
-        camera = _camera(r, r.fields(r.table(doc["camera"], "camera"), CAMERA_KEYS, "camera"))
+        camera = _camera(r, r.fields(r.table(doc["camera"], "camera"), CAMERA_KEYS, "camera"),
+                         file_cameras)
 
     scene = Scene.from_parts(
         parts, materials, lights=lights, camera=camera,
@@ -352,9 +367,7 @@ def _object_parts(r, values, where, base_dir, materials, material_index):
     name = values.get("name")
     smooth = values.get("smooth")
     if has_mesh:
-        mesh_path = values["mesh"]
-        if not os.path.isabs(mesh_path):
-            mesh_path = os.path.join(base_dir, mesh_path)
+        mesh_path = _mesh_path(values, base_dir)
         try:
             obj = load_trimesh(mesh_path)
         except RtmeshError as exc:
@@ -402,6 +415,12 @@ def _object_parts(r, values, where, base_dir, materials, material_index):
                      0 if material is None else material, normals)]
 
 
+def _mesh_path(values, base_dir):
+    """An object's mesh file, resolved against the scene file's folder."""
+    path = values["mesh"]
+    return path if os.path.isabs(path) else os.path.join(base_dir, path)
+
+
 def _transform(values):
     """4x4 matrix: scale, then rotate (X, then Y, then Z, degrees), then translate."""
     matrix = np.diag(np.append(values.get("scale", np.ones(3)), 1.0))
@@ -442,7 +461,9 @@ def _light(r, values, where):
         raise r.error(where, str(exc)) from None
 
 
-def _camera(r, values):
+def _camera(r, values, file_cameras=()):
+    if "from_file" in values:
+        return _file_camera(r, values, file_cameras)
     for key in ("position", "look_at"):
         if key not in values:
             raise r.error(f"camera.{key}", "missing")
@@ -454,6 +475,21 @@ def _camera(r, values):
     except ValueError as exc:
         raise r.error("camera", str(exc)) from None
     return camera
+
+
+def _file_camera(r, values, file_cameras):
+    """The camera named ``from_file`` among the cameras of the scene's glTF objects."""
+    for key in values:
+        if key not in ("from_file", "aperture", "focus_distance"):
+            raise r.error(f"camera.{key}", "does not apply with from_file (the file sets it)")
+    name = values["from_file"]
+    for names, camera in file_cameras:
+        if name in names:
+            return dataclasses.replace(camera, aperture=values.get("aperture", 0.0),
+                                       focus_distance=values.get("focus_distance"))
+    available = ", ".join(repr(n[0]) for n, _ in file_cameras if n) or "none"
+    raise r.error("camera.from_file", f"no camera named {name!r} in the scene's glTF files "
+                  f"(available: {available})")
 
 
 def settings_fields():
