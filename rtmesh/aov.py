@@ -234,7 +234,8 @@ def display_values(name, values, coverage=None):
 
     Notes
     -----
-    ``normal``: ``0.5 + 0.5 n`` per component (the normal-map convention).  ``depth``: the
+    ``normal``: ``0.5 + 0.5 n`` per component (the normal-map convention), black where
+    ``coverage`` is 0.  ``depth``: the
     nearest covered depth white, the farthest dark grey (0.1), no hit black.  ``position``:
     each axis normalised over the covered pixels' range.  ``uv``: (u, v, 0) wrapped to
     [0, 1).  ``object_id``/``material_id``: a distinct colour per id (golden-ratio hues),
@@ -255,7 +256,10 @@ def display_values(name, values, coverage=None):
             out = np.where(covered[:, :, None], np.clip(x, 0.0, 1.0), 0.0)
         return _rgb(out), False
     if name == "normal":
-        return np.clip(0.5 + 0.5 * values, 0.0, 1.0), False
+        shown = np.clip(0.5 + 0.5 * values, 0.0, 1.0)
+        if coverage is not None:  # no surface, no normal: black rather than mid grey
+            shown = np.where(coverage[:, :, None] > 0, shown, 0.0)
+        return shown, False
     if name == "albedo":
         return np.clip(values, 0.0, 1.0), True
     if name == "uv":

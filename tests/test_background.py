@@ -236,3 +236,17 @@ def test_corrupt_environment_file_is_an_error(tmp_path):
     bad.write_bytes(b"not an image")
     with pytest.raises(SceneError, match="cannot read environment image"):
         read_environment(bad)
+
+
+def test_shipped_passes_scene_renders_with_its_environment():
+    from rtmesh.api import load_scene
+    from rtmesh.integrator import Integrator
+    from scenes import assert_finite
+
+    scene, settings = load_scene(os.path.join(ASSETS, "passes.toml"), width=32, height=24, spp=1,
+                                 threads=1, passes=("depth",))
+    assert isinstance(scene.background, EnvironmentBackground)
+    result = Integrator(scene, settings).render()
+    assert_finite(result)
+    # the top row sees the sky (no geometry there: depth 0), lit by the environment
+    assert (result.passes["depth"][0] == 0).all() and (result.image[0] > 0.1).all()
