@@ -25,9 +25,12 @@ from .batches import component_major, take_rows
 _ORIGIN = np.float32(1.0 / 32.0)
 _FLOAT_SCALE = np.float32(1.0 / 65536.0)
 _INT_SCALE = np.float32(256.0)
+# How far a ray's origin also moves along its own direction, relative to the normal offset
+# (see offset_ray_origins: it clears the neighbouring faces at edges and vertices).
+_DIRECTION_SHARE = np.float32(0.25)
 
 
-def offset_ray_origins(points, normals, dtype=np.float64, scale=1.0):
+def offset_ray_origins(points, normals, dtype=np.float64, scale=1.0, directions=None):
     """Move points off a surface along its geometric normal, in float32 space.
 
     Parameters
@@ -45,6 +48,15 @@ def offset_ray_origins(points, normals, dtype=np.float64, scale=1.0):
         become tiny, Waechter & Binder use a fixed offset of 2^-16 below |x| < 2^-5; both
         are meant for scenes of unit size, so they are scaled by ``scale``: a scene shrunk to
         1e-4 units would otherwise be offset by 15 % of its own size.
+    directions : (n, 3) float, optional
+        Unit directions of the rays that will start there.  The normal offset lifts a point
+        off the face it lies on, but a point on an edge or vertex also lies on the planes
+        of the neighbouring faces, and after the normal offset still does when they meet
+        at a right angle: a ray from there into the solid (or away from a wall, at a
+        concave edge) hits that neighbour at t = 0.  With ``directions`` the point also
+        moves a quarter as far along the ray, and at least one ulp in every coordinate
+        the ray changes, which puts it on the side of every surface through the point that
+        the ray is heading to, so those surfaces are behind the ray.
 
     Returns
     -------
@@ -55,6 +67,12 @@ def offset_ray_origins(points, normals, dtype=np.float64, scale=1.0):
     p = points.astype(np.float32)
     n = normals.astype(np.float32)
     offset_ulps = (_INT_SCALE * n).astype(np.int32)
+    if directions is not None:
+        d = directions.astype(np.float32)
+        # truncated separately, so the offset along the normal is never reduced; the sign
+        # term rounds every non-zero component away from zero (at least one ulp)
+        offset_ulps += (_DIRECTION_SHARE * _INT_SCALE * d + np.sign(d)).astype(np.int32)
+        n = n + _DIRECTION_SHARE * d
     bits = p.view(np.int32)
     # moving toward +n means adding ulps to positive coordinates and subtracting from
     # negative ones (float bit patterns grow with magnitude)
@@ -226,6 +244,10 @@ def _embree_rays(array, rows=None):
     -------
     (n, 3) or (m, 3) float32
     """
+    if array.strides[0] == 0 and rows is None:
+        # one row broadcast to every ray (the origin of pinhole camera rays): Embree reads
+        # rays through the strides, so it is converted once instead of materialised n times
+        return np.broadcast_to(array[:1].astype(np.float32), array.shape)
     return take_rows(array, rows).astype(np.float32, copy=False)
 
 

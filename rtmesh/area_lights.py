@@ -354,7 +354,7 @@ class AreaLighting:
         self.offset_scale = offset_scale
         self.visible = [light for light in self.lights if light.visible]
 
-    def direct(self, p, ng, origins, reflectance, pixel, sample, depth, stats, clock):
+    def direct(self, p, ng, reflectance, pixel, sample, depth, stats, clock):
         """Direct light from every area light, ``light_samples`` shadow rays per (hit, light).
 
         Parameters
@@ -363,9 +363,7 @@ class AreaLighting:
             Shading points.
         ng : (k, 3) float
             Unit geometric normals on the side the incoming ray came from: lights behind
-            the surface do not light it.
-        origins : (k, 3) float32
-            Shadow-ray origins, ``p`` offset along ``ng`` (:func:`offset_ray_origins`).
+            the surface do not light it, and shadow rays leave on that side.
         reflectance : callable
             ``reflectance(wi, lit) -> (k, 3)``: the material's Blinn-Phong factor for unit
             directions ``wi`` toward the light, evaluated (at least) where ``lit``.
@@ -390,14 +388,14 @@ class AreaLighting:
             dimension = light_dimension(depth, light_index, len(self.lights))
             for j in range(n):
                 u = stratified_points(self.sampler, self.seed, pixel, index0 + j, n, dimension)
-                contribution = self._one_sample(p, ng, origins, reflectance, light, u, stats, clock)
+                contribution = self._one_sample(p, ng, reflectance, light, u, stats, clock)
                 if contribution is not None:
                     total = contribution if total is None else total + contribution
         if total is not None:
             total *= 1.0 / n
         return total
 
-    def _one_sample(self, p, ng, origins, reflectance, light, u, stats, clock):
+    def _one_sample(self, p, ng, reflectance, light, u, stats, clock):
         """One light sample per hit: ``V f L cos_l / (d^2 pdf_A)``, (k, 3) or None."""
         y, n_light, radiance, inverse_pdf = light.sample(u)
         to_light = y - p
@@ -410,14 +408,18 @@ class AreaLighting:
         rows = np.flatnonzero(lit)
         if not len(rows):
             return None
-        # The shadow ray ends just short of the sampled point: the point is moved off the
-        # light toward the hit by the same float32 ulp offset that moves the hit off its
-        # surface, so an emissive triangle (which is in Embree) cannot occlude its own sample
-        # and a light flush with a ceiling is not hidden by it, even at grazing angles.
+        # The shadow ray leaves the hit like every spawned ray, and ends just short of the
+        # sampled point: the point is moved off the light toward the hit by the same float32
+        # ulp offset (the ray run backwards), so an emissive triangle, which is in Embree,
+        # cannot occlude its own sample, and a light flush with a ceiling is not hidden by
+        # it, even at grazing angles.
+        wi_rows = take_rows(wi, rows)
+        start = offset_ray_origins(take_rows(p, rows), take_rows(ng, rows), scale=self.offset_scale,
+                                   directions=wi_rows)
         toward = np.where(facing > 0.0, 1.0, -1.0)
         n_rows = (n_light[None, :] if n_light.ndim == 1 else take_rows(n_light, rows)) * toward[rows, None]
-        target = offset_ray_origins(take_rows(y, rows), n_rows, scale=self.offset_scale)
-        start = take_rows(origins, rows).astype(np.float64)
+        target = offset_ray_origins(take_rows(y, rows), n_rows, scale=self.offset_scale,
+                                    directions=-wi_rows)
         segment = target - start
         length = np.sqrt(dot(segment, segment))
         direction = segment / np.where(length > 0.0, length, np.inf)[:, None]

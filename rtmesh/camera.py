@@ -95,16 +95,16 @@ class Camera:
         forward, right, up = self.frame()
         tan_half = np.tan(np.radians(self.fov) * 0.5)
         aspect = width / height
-        sx = (2.0 * film_xy[:, 0] / width - 1.0) * tan_half * aspect
-        sy = (1.0 - 2.0 * film_xy[:, 1] / height) * tan_half
-        # direction to the point at unit distance along forward on the image plane, built
-        # component-major (one contiguous row per component; see rtmesh.batches)
-        d = component_major(forward[:, None] + right[:, None] * sx + up[:, None] * sy)
+        # image-plane coordinates at unit distance along forward, each an affine map of one
+        # film coordinate (two passes instead of five)
+        sx = film_xy[:, 0] * (2.0 * tan_half * aspect / width) - tan_half * aspect
+        sy = film_xy[:, 1] * (-2.0 * tan_half / height) + tan_half
         n = len(film_xy)
         if self.aperture > 0.0 and lens_uv is not None:
             # thin lens: every ray through a film point meets the pinhole ray on the plane of
             # focus, so that plane is sharp and everything else blurs with distance from it
-            focus_points = self.position + d * self.focus
+            d = component_major(forward[:, None] + right[:, None] * sx + up[:, None] * sy)
+            focus_points = self.position + normalize(d) * self.focus
             disk = square_to_uniform_disk_concentric(lens_uv) * (0.5 * self.aperture)
             origins = (
                 self.position[None, :]
@@ -112,9 +112,26 @@ class Camera:
                 + disk[:, 1:] * up[None, :]
             )
             return origins, normalize(focus_points - origins)
-        # filling component rows is several times faster than repeating a row n times
-        origins = component_major(np.repeat(self.position, n).reshape(3, n))
-        return origins, normalize(d)
+        # forward, right and up are orthonormal, so |forward + sx right + sy up|^2 is
+        # 1 + sx^2 + sy^2: the direction is normalised without forming its length from the
+        # three components (the rounding differs from normalize() by an ulp or so)
+        inv_length = sx * sx
+        inv_length += sy * sy
+        inv_length += 1.0
+        np.sqrt(inv_length, out=inv_length)
+        np.divide(1.0, inv_length, out=inv_length)
+        sx *= inv_length
+        sy *= inv_length
+        # built component-major (one contiguous row per component; see rtmesh.batches)
+        d = np.empty((3, n))
+        scratch = np.empty(n)
+        for c in range(3):
+            np.multiply(inv_length, forward[c], out=d[c])
+            d[c] += np.multiply(sx, right[c], out=scratch)
+            d[c] += np.multiply(sy, up[c], out=scratch)
+        # every ray starts at the eye: a read-only broadcast row, which the Accel hands to
+        # Embree without materialising it
+        return np.broadcast_to(self.position, (n, 3)), d.T
 
 
 def _cross(a, b):

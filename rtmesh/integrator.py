@@ -423,7 +423,6 @@ class Integrator:
         if self.stages["specular"]:
             has_specular = self._has_specular.take(mat)
             spec_rows = None if has_specular.all() else np.flatnonzero(has_specular)
-        shadow_origins = offset_ray_origins(p, ng, dtype=np.float32, scale=self.offset_scale)
 
         def reflectance(wi, lit):
             """Blinn-Phong factor toward unit directions ``wi``; highlights only where ``lit``."""
@@ -448,8 +447,11 @@ class Integrator:
             if not len(j):
                 continue
             value = reflectance(wi, lit)
+            # origins only for the lit rows, offset along the normal and the shadow ray
+            p_j, wi_j = take_rows(p, j), take_rows(wi, j)
+            origins = offset_ray_origins(p_j, take_rows(ng, j), np.float32, self.offset_scale, wi_j)
             clock.lap("shade")
-            occluded = self.accel.occluded(shadow_origins, wi, distance * _SHADOW_SHORTEN, rows=j)
+            occluded = self.accel.occluded(origins, wi_j, distance[j] * _SHADOW_SHORTEN)
             stats.rays["shadow"] += len(j)
             clock.lap("shadow")
             visible = np.zeros(k, dtype=bool)
@@ -460,7 +462,7 @@ class Integrator:
         if self.stages["area_lights"]:
             pixel, sample_in_pixel = keys
             sample = take_rows(srf.sample, rows)
-            area = self.area_lighting.direct(p, ng, shadow_origins, reflectance, pixel[sample],
+            area = self.area_lighting.direct(p, ng, reflectance, pixel[sample],
                                              sample_in_pixel[sample], depth, stats, clock)
             if area is not None:
                 total = area if total is None else total + area
@@ -473,7 +475,6 @@ class Integrator:
         pixel, sample_in_pixel = keys
         k = len(srf.mat)
         n_ao = self.ao_samples
-        origins = offset_ray_origins(srf.p, srf.ng, scale=self.offset_scale)
         t, b = orthonormal_basis(srf.ng)
         px, sp = pixel[srf.sample], sample_in_pixel[srf.sample]
         free = np.zeros(k)
@@ -484,6 +485,7 @@ class Integrator:
                                   Dim.AO + 2 * depth)
             w = square_to_cosine_hemisphere(u)
             d = t * w[:, :1] + b * w[:, 1:2] + srf.ng * w[:, 2:3]
+            origins = offset_ray_origins(srf.p, srf.ng, np.float32, self.offset_scale, d)
             free += ~self.accel.occluded(origins, d, np.full(k, self.ao_distance))
         stats.rays["ao"] += k * n_ao
         return free / n_ao
@@ -526,7 +528,8 @@ class Integrator:
                 jk = j[keep]
                 if len(jk):
                     refract_batch = RayBatch(
-                        offset_ray_origins(srf.p[idx[jk]], -ng[jk], scale=self.offset_scale),
+                        offset_ray_origins(srf.p[idx[jk]], -ng[jk], scale=self.offset_scale,
+                                           directions=wt[keep]),
                         wt[keep],
                         rays.sample[idx[jk]],
                         beta[jk] * w_t[keep],
@@ -544,7 +547,7 @@ class Integrator:
             if below.any():
                 wr[below] = reflect(wo[keep][below], ng[keep][below])
             batches.append(RayBatch(
-                offset_ray_origins(srf.p[idx[keep]], ng[keep], scale=self.offset_scale),
+                offset_ray_origins(srf.p[idx[keep]], ng[keep], scale=self.offset_scale, directions=wr),
                 wr,
                 rays.sample[idx[keep]],
                 beta_r[keep],

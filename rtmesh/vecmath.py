@@ -19,8 +19,15 @@ def dot(a, b):
     -------
     (n,) float
     """
-    # einsum avoids the (n, 3) temporary that (a * b).sum(axis=1) makes
-    return np.einsum("ij,ij->i", a, b)
+    # The sum is always (x + y) + z, whatever the memory layout, so that a result does not
+    # depend on how an array happens to be stored (a one-row batch is both C- and
+    # F-contiguous; renders must be bit-identical for any chunking).  On component-major
+    # input einsum accumulates the components in exactly that order without the (n, 3)
+    # temporary of (a * b).sum(axis=1); on row-major input it uses an unrolled reduction
+    # that rounds differently, so the explicit form is used there.
+    if a.strides[0] == a.itemsize and b.strides[0] == b.itemsize:
+        return np.einsum("ij,ij->i", a, b)
+    return (a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1]) + a[:, 2] * b[:, 2]
 
 
 def norm(a):

@@ -16,7 +16,7 @@ import math
 import numpy as np
 import pytest
 
-from rtmesh.accel import Accel, offset_ray_origins
+from rtmesh.accel import Accel
 from rtmesh.area_lights import AreaLighting, DiskLight, QuadLight, light_dimension
 from rtmesh.camera import Camera
 from rtmesh.errors import SceneError
@@ -89,14 +89,13 @@ def direct_light(lights, points, normal=(0.0, 0.0, 1.0), blockers=(), samples=64
     scale = 10.0
     ng = np.broadcast_to(np.asarray(normal, dtype=np.float64), (k, 3))
     lighting = AreaLighting(lights, accel, settings(light_samples=samples, sampler=sampler, seed=seed), scale)
-    origins = offset_ray_origins(points, ng, dtype=np.float32, scale=scale)
     diffuse = np.full((k, 3), kd)
 
     def reflectance(wi, lit):
         return lambert(dot(ng, wi), diffuse)
 
     stats = RenderStats()
-    value = lighting.direct(points, ng, origins, reflectance, np.arange(k), np.zeros(k, np.int64), 0,
+    value = lighting.direct(points, ng, reflectance, np.arange(k), np.zeros(k, np.int64), 0,
                             stats, _NoClock())
     return (np.zeros(k) if value is None else value[:, 0]), stats
 
@@ -507,20 +506,22 @@ def test_light_samples_must_be_positive():
 def test_stratified_ao_at_the_foot_of_a_wall_and_in_a_corner_is_exact():
     # with jittered (or Sobol) AO rays the cosine-weighted hemisphere splits exactly: the
     # concentric map sends u0 < 1/2 to x < 0 and u1 < 1/2 to y < 0, so a wall at x = 0
-    # blocks exactly half of every even stratified set and two walls a quarter
+    # blocks exactly half of every even stratified set and two walls a quarter.  The points
+    # are 0.05 from walls 1000 high: only directions within 5e-5 of the wall's plane (an
+    # area fraction of ~6e-5 of the disk) could pass over it
     big = 1e3
     floor = quad([[0.0, 0.0, 0.0], [big, 0.0, 0.0], [big, big, 0.0], [0.0, big, 0.0]])
     wall_x = quad([[0.0, 0.0, 0.0], [0.0, big, 0.0], [0.0, big, big], [0.0, 0.0, big]])
     wall_y = quad([[0.0, 0.0, 0.0], [0.0, 0.0, big], [big, 0.0, big], [big, 0.0, 0.0]])
     for sampler in ("jittered", "sobol"):
         # near the foot of the wall x = 0, far from the wall y = 0
-        camera = Camera([0.002, 50.0, 1.0], [0.002, 50.0, 0.0], [0.0, 1.0, 0.0], 0.05)
+        camera = Camera([0.05, 50.0, 1.0], [0.05, 50.0, 0.0], [0.0, 1.0, 0.0], 0.05)
         scene = Scene.from_parts([part("floor", floor), part("wall", wall_x)], [Material("f")], [], camera)
         ao = render(scene, width=4, height=4, spp=2, sampler=sampler, ao_samples=16, passes=("ao",),
                     ao_distance=1e4).passes["ao"]
         np.testing.assert_array_equal(ao, 0.5)
         # in the corner of both walls
-        camera = Camera([0.002, 0.002, 1.0], [0.002, 0.002, 0.0], [0.0, 1.0, 0.0], 0.05)
+        camera = Camera([0.05, 0.05, 1.0], [0.05, 0.05, 0.0], [0.0, 1.0, 0.0], 0.05)
         scene = Scene.from_parts([part("floor", floor), part("wall_x", wall_x), part("wall_y", wall_y)],
                                  [Material("f")], [], camera)
         ao = render(scene, width=4, height=4, spp=2, sampler=sampler, ao_samples=16, passes=("ao",),

@@ -71,6 +71,20 @@ def test_dot_and_norm_match_numpy():
     np.testing.assert_allclose(norm(a), 3.0, rtol=1e-14)
 
 
+def test_dot_is_bit_identical_for_every_layout_and_length():
+    # renders are bit-identical for any chunking only if a row's dot product does not depend
+    # on how its array is stored or how many rows are beside it
+    rng = np.random.default_rng(11)
+    a, b = rng.normal(size=(2, 257, 3)) * rng.uniform(1e-3, 1e3, size=(2, 257, 1))
+    expected = (a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1]) + a[:, 2] * b[:, 2]
+    for layout in (np.ascontiguousarray, np.asfortranarray):
+        np.testing.assert_array_equal(dot(layout(a), layout(b)), expected)
+        for start, stop in ((0, 1), (5, 7), (3, 260)):
+            np.testing.assert_array_equal(dot(layout(a[start:stop]), layout(b[start:stop])),
+                                          expected[start:stop])
+    np.testing.assert_array_equal(dot(a, np.broadcast_to(b[0], a.shape)), dot(a, np.tile(b[0], (257, 1))))
+
+
 def test_normalize_gives_unit_vectors_in_the_same_direction():
     rng = np.random.default_rng(3)
     a = rng.normal(size=(200, 3)) * rng.uniform(1e-6, 1e6, size=(200, 1))
