@@ -527,3 +527,60 @@ def test_stratified_ao_at_the_foot_of_a_wall_and_in_a_corner_is_exact():
         ao = render(scene, width=4, height=4, spp=2, sampler=sampler, ao_samples=16, passes=("ao",),
                     ao_distance=1e4).passes["ao"]
         np.testing.assert_array_equal(ao, 0.25)
+
+
+# ---------------------------------------------------------------- command line and assets
+AREA_SCENE = """
+[render]
+width = 12
+height = 9
+spp = 1
+
+[camera]
+position = [0, 3, 4]
+look_at = [0, 0, 0]
+
+[[objects]]
+primitive = "plane"
+size = [6, 6]
+rotate = [-90, 0, 0]
+
+[[lights]]
+type = "quad"
+position = [0, 2, 0]
+edge1 = [1, 0, 0]
+edge2 = [0, 0, 1]
+radiance = 5
+"""
+
+
+def test_light_samples_flag_sets_the_shadow_rays_per_hit(tmp_path, capsys):
+    from rtmesh.api import load_scene
+    from rtmesh.cli import main
+
+    path = tmp_path / "area.toml"
+    path.write_text(AREA_SCENE)
+    _, loaded = load_scene(path, light_samples=7)
+    assert loaded.light_samples == 7
+    assert main(["render", str(path), "-o", str(tmp_path / "a.png"), "--light-samples", "7", "-q"]) == 0
+    # a zero or a non-number is refused by the parser: exit status 2, no image
+    for bad in ("0", "many"):
+        with pytest.raises(SystemExit) as info:
+            main(["render", str(path), "-o", str(tmp_path / "b.png"), "--light-samples", bad])
+        assert info.value.code == 2
+    assert "--light-samples" in capsys.readouterr().err
+    assert not (tmp_path / "b.png").exists()
+
+
+def test_shipped_soft_shadow_scene_renders():
+    import os
+
+    from rtmesh.scene_file import read_scene_file
+
+    path = os.path.join(os.path.dirname(__file__), "..", "assets", "effects", "soft_shadow.toml")
+    scene, _ = read_scene_file(path)
+    result = render(scene, width=24, height=18, spp=1, light_samples=2)
+    assert {"area_lights", "area_light_visibility", "emission"} <= set(result.stats.stages_enabled)
+    assert result.stats.rays["area_shadow"] > 0 and result.stats.rays["shadow"] == 0
+    # the visible quad light is in the top-left corner of the frame, at its full radiance
+    assert result.image[:4, :6].max() == pytest.approx(9.0, rel=1e-6)
