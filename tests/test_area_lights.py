@@ -276,14 +276,15 @@ def test_small_or_distant_area_light_converges_to_a_point_light():
     assert errors[4] < 2e-3
 
 
-def test_tiny_quad_light_renders_like_the_equivalent_point_light():
+def test_tiny_quad_light_renders_like_the_equivalent_point_light_highlight_included():
     camera = Camera([0.0, 0.0, 5.0], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0], 40.0)
     centre = np.array([0.4, -0.3, 1.5])
     # 1 mm square (faces down) of intensity L A = 1: bias ~ (size / distance)^2 ~ 1e-6, and
     # 16 stratified samples of an integrand varying by ~0.2 % leave noise far below 1e-4
     quad_light = QuadLight(centre, [0.0, 1e-3, 0.0], [1e-3, 0.0, 0.0], 1e6, visible=False)
     floor = [part("floor", floor_quad(10.0))]
-    material = [Material("f", diffuse=0.6)]
+    # a Blinn-Phong highlight too: it is evaluated per light sample like the diffuse term
+    material = [Material("f", diffuse=0.6, specular=0.8, shininess=30)]
     width = height = 16
     area = render(Scene.from_parts(floor, material, [quad_light], camera), width=width, height=height,
                   light_samples=16).image[..., 0].reshape(-1)
