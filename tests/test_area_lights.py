@@ -377,6 +377,29 @@ def test_each_stratum_of_the_light_holds_exactly_one_sample(sampler):
     assert np.unique(np.round(a, 6)).size > pixels
 
 
+@pytest.mark.parametrize("sampler, smooth_slope, penumbra_slope", [
+    ("random", (-0.6, -0.4), (-0.6, -0.4)),  # Monte Carlo: N^-1/2
+    ("jittered", (-1.2, -0.85), (-0.9, -0.7)),  # stratified in 2D: N^-1, N^-3/4 across an edge
+    ("sobol", (-1.7, -1.2), (-1.2, -0.9)),  # Owen-scrambled: N^-3/2, N^-1 across an edge
+])
+def test_light_sample_error_falls_at_the_rate_of_the_sampler(sampler, smooth_slope, penumbra_slope):
+    # RMSE over 300 points against the closed form, for N = 4 .. 256 light samples, with
+    # the light in full view (a smooth integrand) and half hidden by the plate (an edge)
+    rng = np.random.default_rng(0)
+    xy = rng.uniform(-1.5, 1.5, size=(300, 2))
+    points = np.column_stack([xy, np.zeros(300)])
+    full = np.array([rectangle_integral(-1 - x, 1 - x, -1 - y, 1 - y, 2.0) for x, y in xy])
+    # behind the plate only the part of the light with x > -x0 is seen from (x0, y0)
+    part_seen = np.array([rectangle_integral(max(-1.0, -x) - x, 1 - x, -1 - y, 1 - y, 2.0) if x > -1 else 0.0
+                          for x, y in xy])
+    counts = [4, 16, 64, 256]
+    for blockers, expected, (low, high) in [((), full, smooth_slope), ((PLATE,), part_seen, penumbra_slope)]:
+        rmse = [np.sqrt(np.mean((direct_light([ceiling_quad()], points, blockers=list(blockers), samples=n,
+                                              sampler=sampler)[0] - expected) ** 2)) for n in counts]
+        slope = np.polyfit(np.log(counts), np.log(rmse), 1)[0]
+        assert low < slope < high, f"{sampler}, blockers={len(blockers)}: slope {slope:.2f}"
+
+
 def test_light_samples_are_decorrelated_across_lights_depths_and_pixel_samples():
     # every (depth, light) pair has its own dimensions, from Dim.LIGHT up to below Dim.GLOSSY
     dims = [light_dimension(depth, i, 3) for depth in range(4) for i in range(3)]
