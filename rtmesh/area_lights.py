@@ -27,8 +27,9 @@ the 1/pi, kept so that area and point lights agree.
 Estimator
 ---------
 Per (hit, light), ``N = light_samples`` points ``y_j`` are drawn uniformly by area (pdf
-``1 / A``; for an emissive mesh a triangle is chosen in proportion to its power, area x mean
-emission, then a point uniformly on it) and each gets a shadow ray::
+``1 / A``; all the emissive triangles of a scene form one light, on which a triangle is
+chosen in proportion to its power, area x mean emission, then a point uniformly on it) and
+each gets a shadow ray::
 
     (1 / N) sum_j V(p, y_j) f(wi_j) L(y_j) cos_l,j / (d_j^2 pdf_A(y_j))
 
@@ -226,7 +227,7 @@ class DiskLight:
 
 
 class MeshLight:
-    """The emissive triangles of one object, as one light emitting on both sides.
+    """Emissive triangles as one light emitting on both sides.
 
     Parameters
     ----------
@@ -239,7 +240,7 @@ class MeshLight:
     emission : (F, 3) float
         Emitted radiance of each face; every face emits (some channel > 0).
     name : str
-        Object name, for messages.
+        What the triangles are, for messages.
     """
 
     two_sided = True
@@ -292,8 +293,14 @@ def is_area_light(light):
     return isinstance(light, (QuadLight, DiskLight, MeshLight))
 
 
-def emissive_mesh_lights(triangles, normals, emission, object_id, object_names):
-    """One :class:`MeshLight` per object that has emissive faces.
+def emissive_mesh_light(triangles, normals, emission):
+    """All emissive triangles of a scene as one :class:`MeshLight`, or None if there are none.
+
+    One light, not one per object: each hit then sends ``light_samples`` shadow rays to
+    emissive geometry however many objects emit, and the power-proportional choice of
+    triangle shares them out between the emitters as a power-based light sampler would
+    (a lamp twice as bright gets twice the samples).  A scene with many dim emissive parts
+    costs no more than one with a single lamp.
 
     Parameters
     ----------
@@ -303,20 +310,15 @@ def emissive_mesh_lights(triangles, normals, emission, object_id, object_names):
         Unit face normals.
     emission : (F, 3) float
         Emitted radiance of each face (its material's emission).
-    object_id : (F,) int
-    object_names : list of str
 
     Returns
     -------
-    list of MeshLight
+    MeshLight or None
     """
-    emits = (emission > 0.0).any(axis=1)
-    lights = []
-    for obj in np.unique(object_id[emits]):
-        faces = np.flatnonzero(emits & (object_id == obj))
-        lights.append(MeshLight(take_rows(triangles, faces), normals[faces], emission[faces],
-                                object_names[obj]))
-    return lights
+    faces = np.flatnonzero((emission > 0.0).any(axis=1))
+    if not len(faces):
+        return None
+    return MeshLight(take_rows(triangles, faces), normals[faces], emission[faces], "emissive surfaces")
 
 
 def light_dimension(depth, light_index, light_count):

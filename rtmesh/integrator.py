@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .accel import Accel, barycentric_interpolate, offset_ray_origins
-from .area_lights import AreaLighting, emissive_mesh_lights, is_area_light
+from .area_lights import AreaLighting, emissive_mesh_light, is_area_light
 from .batches import RayBatch, component_major, take_rows
 from .film import Film
 from .sampling import Dim, pixel_offsets, square_to_cosine_hemisphere, stratified_points, uniform2
@@ -117,9 +117,9 @@ class Integrator:
         m = scene.materials
         area_lights = [light for light in lights if is_area_light(light)]
         if m.any_emission:
-            area_lights += emissive_mesh_lights(self.accel.triangles, scene.face_normals,
-                                                m.emission[scene.material_id], scene.object_id,
-                                                scene.object_names)
+            emitters = emissive_mesh_light(self.accel.triangles, scene.face_normals,
+                                           m.emission[scene.material_id])
+            area_lights += [emitters] if emitters is not None else []
         self.area_lighting = (AreaLighting(area_lights, self.accel, self.settings, self.offset_scale)
                               if area_lights else None)
         shaded_any = bool(((m.diffuse > 0) | (m.specular > 0)).any())

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from rtmesh.accel import Accel
-from rtmesh.area_lights import AreaLighting, DiskLight, QuadLight, light_dimension
+from rtmesh.area_lights import AreaLighting, DiskLight, QuadLight, emissive_mesh_light, light_dimension
 from rtmesh.camera import Camera
 from rtmesh.errors import SceneError
 from rtmesh.lights import PointLight
@@ -338,6 +338,35 @@ def test_emissive_mesh_lights_like_the_equivalent_quad_light():
         assert abs((value - expected).sum()) < 5 * math.sqrt((sigma ** 2).sum())
     assert "area_lights" in as_mesh.stats.stages_enabled
     assert as_mesh.stats.rays["area_shadow"] == as_quad.stats.rays["area_shadow"] > 0
+
+
+def test_all_emitters_form_one_light_sharing_samples_by_power():
+    # two emissive squares at height 1.5, radiance 1 and 3: one light, so light_samples rays
+    # per point in all, a quarter of them to the dim square; the estimate is the sum of both
+    tri = []  # rows [v0, v1 - v0, v2 - v0], as Accel.triangles
+    for x0 in (-1.0, 0.2):
+        v0, v1, v2, v3 = np.array([[x0, -0.5, 1.5], [x0, 0.5, 1.5], [x0 + 1.0, 0.5, 1.5], [x0 + 1.0, -0.5, 1.5]])
+        tri += [np.concatenate([v0, v1 - v0, v2 - v0]), np.concatenate([v0, v2 - v0, v3 - v0])]
+    emission = np.repeat([[1.0] * 3, [3.0] * 3], 2, axis=0)
+    light = emissive_mesh_light(np.array(tri), np.tile(DOWN, (4, 1)), emission)
+    assert light.area == pytest.approx(2.0)
+    xs = np.linspace(-1.5, 1.7, 41)
+    n = 256
+    value, stats = direct_light([light], np.column_stack([xs, np.zeros(41), np.zeros(41)]), samples=n)
+    assert stats.rays["area_shadow"] == 41 * n
+    radiance, share = (1.0, 3.0), (0.25, 0.75)
+    expected, sigma = [], []
+    for x in xs:
+        boxes = [(-1.0 - x, 0.0 - x, -0.5, 0.5, 1.5), (0.2 - x, 1.2 - x, -0.5, 0.5, 1.5)]
+        mean = sum(L * rectangle_integral(*b) for L, b in zip(radiance, boxes))
+        # one sample: lamp i with probability share_i, then L_i (A_i g) / share_i
+        second = sum(L * L / p * (var + m * m)
+                     for L, p, (m, var) in zip(radiance, share, (rectangle_moments(*b, n=100) for b in boxes)))
+        expected.append(mean)
+        sigma.append(math.sqrt((second - mean ** 2) / n))
+    expected, sigma = np.array(expected), np.array(sigma)
+    assert (np.abs(value - expected) < 5 * sigma).all()
+    assert abs((value - expected).sum()) < 5 * math.sqrt((sigma ** 2).sum())
 
 
 def test_emissive_mesh_emission_is_seen_from_both_sides_and_lights_both():
