@@ -26,7 +26,8 @@ class Dim(IntEnum):
 
     PIXEL = 0  # (x, y) position inside the pixel
     LENS = 2  # (u, v) on the thin-lens aperture
-    AO = 16  # first of the ambient-occlusion dimensions; AO ray k at depth d uses AO + 2*(k + d*1024)
+    AO = 16  # first of the ambient-occlusion dimensions; AO rays at depth d use AO + 2*d
+    LIGHT = 1 << 24  # first of the area-light dimensions (see rtmesh.area_lights.light_dimension)
 
 
 def sequence_key(seed, pixel, dimension):
@@ -104,10 +105,7 @@ def pixel_offsets(sampler, seed, pixel, sample, spp):
     Parameters
     ----------
     sampler : {"regular", "random", "jittered", "sobol"}
-        ``regular`` puts the samples at the centres of an ``nx x ny`` grid of strata,
-        ``random`` places them uniformly, ``jittered`` puts one uniform sample in each stratum,
-        ``sobol`` takes them from an Owen-scrambled (0,2)-sequence scrambled per pixel, so
-        every power-of-two prefix of a pixel's samples is stratified.
+        See :func:`stratified_points`.
     seed : int
     pixel : (n,) int
         Linear pixel index of each sample.
@@ -122,22 +120,61 @@ def pixel_offsets(sampler, seed, pixel, sample, spp):
         Offsets in [0, 1)^2 from the pixel's top-left corner (x right, y down),
         component-major (see :mod:`rtmesh.batches`).
     """
+    return stratified_points(sampler, seed, pixel, sample, spp, Dim.PIXEL)
+
+
+def stratified_points(sampler, seed, pixel, index, count, dimension):
+    """Points in [0, 1)^2 drawn in sets of ``count`` that are stratified together.
+
+    The one sample machinery of the renderer: pixel positions, ambient-occlusion directions
+    and area-light samples all come from here, each in its own :class:`Dim` dimension.
+    Point ``index`` of a pixel's sequence belongs to the set ``index // count`` and to the
+    stratum ``index % count`` of that set, so a caller that needs ``count`` points per pixel
+    sample passes ``index = sample * count + j`` for ``j`` in ``[0, count)``.
+
+    Parameters
+    ----------
+    sampler : {"regular", "random", "jittered", "sobol"}
+        ``random`` places the points uniformly, ``jittered`` puts one uniform point in each
+        stratum of an ``nx x ny`` grid (:func:`strata_shape`) in every set, ``sobol`` takes
+        them from an Owen-scrambled (0,2)-sequence scrambled per pixel and dimension, so
+        every power-of-two prefix of a pixel's points (and, for a power-of-two ``count``,
+        every set) is stratified.  ``regular`` puts pixel positions (:attr:`Dim.PIXEL`) at
+        the stratum centres, an ordered supersampling grid; in every other dimension the
+        same points in every pixel would turn the integration error into bands repeated
+        across the image (a penumbra made of ``count`` hard shadows), so there it jitters.
+    seed : int
+    pixel : (n,) int
+        Linear pixel index of each point.
+    index : (n,) int
+        Index of the point in its pixel's sequence for this dimension.
+    count : int
+        Points per stratified set, >= 1.
+    dimension : int
+        First of the two dimensions the point uses (see :class:`Dim`).
+
+    Returns
+    -------
+    (n, 2) float64
+        Component-major (see :mod:`rtmesh.batches`).
+    """
     if sampler == "random":
-        return uniform2(seed, pixel, sample, Dim.PIXEL)
+        return uniform2(seed, pixel, index, dimension)
     if sampler == "sobol":
-        points = sobol_02(sample, sequence_key(seed, pixel, Dim.PIXEL))
+        points = sobol_02(index, sequence_key(seed, pixel, dimension))
         return component_major(points.T)
     if sampler not in SAMPLERS:
         raise ValueError(f"unknown sampler {sampler!r}; expected one of {', '.join(SAMPLERS)}")
-    nx, ny = strata_shape(spp)
+    nx, ny = strata_shape(count)
     size = np.array([nx, ny], dtype=np.float64)
-    # the spp strata are worked out once and looked up per sample: a gather from a tiny
-    # table is much cheaper than integer division of every sample index
-    strata = np.arange(spp)
+    # the strata are worked out once and looked up per point: a gather from a tiny table is
+    # much cheaper than dividing every index by nx
+    strata = np.arange(count)
     cells = component_major(np.stack([strata % nx, strata // nx]).astype(np.float64))
-    if sampler == "regular":
-        return take_rows((cells + 0.5) / size, sample)
-    return (take_rows(cells, sample) + uniform2(seed, pixel, sample, Dim.PIXEL)) / size
+    stratum = index % count if count > 1 else np.zeros_like(index)
+    if sampler == "regular" and dimension == Dim.PIXEL:
+        return take_rows((cells + 0.5) / size, stratum)
+    return (take_rows(cells, stratum) + uniform2(seed, pixel, index, dimension)) / size
 
 
 def square_to_uniform_disk_concentric(u):
@@ -188,3 +225,34 @@ def square_to_cosine_hemisphere(u):
 def square_to_cosine_hemisphere_pdf(w):
     """Solid-angle density of :func:`square_to_cosine_hemisphere`: ``max(0, z) / pi``."""
     return np.maximum(0.0, w[:, 2]) / np.pi
+
+
+def square_to_uniform_triangle(u):
+    """Uniform points on a triangle, as barycentric weights of its vertices 1 and 2.
+
+    ``(b1, b2) = sqrt(u0) * (1 - u1, u1)``: the Jacobian of the map is the constant 1/2, so
+    the density is uniform over the triangle, and the map is continuous, so stratified
+    ``u`` stay stratified on the triangle.
+
+    Parameters
+    ----------
+    u : (n, 2) float
+        Points in [0, 1)^2.
+
+    Returns
+    -------
+    (n, 2) float
+        Barycentric weights ``(b1, b2)`` with ``b1, b2 >= 0`` and ``b1 + b2 <= 1``
+        (see :func:`rtmesh.accel.barycentric_interpolate`); density ``1 / area`` with respect
+        to area on any triangle.
+    """
+    s = np.sqrt(u[:, 0])
+    return np.stack([s * (1.0 - u[:, 1]), s * u[:, 1]], axis=1)
+
+
+def uniform_triangle_to_square(b):
+    """Inverse of :func:`square_to_uniform_triangle`, (n, 2) -> (n, 2)."""
+    total = b[:, 0] + b[:, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u1 = np.where(total > 0.0, b[:, 1] / total, 0.0)
+    return np.stack([total * total, u1], axis=1)
