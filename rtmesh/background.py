@@ -222,3 +222,30 @@ def read_environment(path, rotation=0.0, intensity=1.0):
         return EnvironmentBackground(pixels, rotation, intensity, name=path)
     except ValueError as exc:
         raise SceneError(str(exc)) from None
+
+
+def background_from_option(text):
+    """The background a command-line ``--background`` value names.
+
+    Parameters
+    ----------
+    text : str
+        ``transparent``; a colour as one number or ``r,g,b`` (linear); or the path of an
+        equirectangular environment image.
+
+    Raises
+    ------
+    SceneError
+        Not a colour, not ``transparent``, and no such image.
+    """
+    text = text.strip()
+    if text == "transparent":
+        return TransparentBackground()
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        return read_environment(text)
+    if len(values) not in (1, 3) or not all(math.isfinite(v) and v >= 0 for v in values):
+        raise SceneError(f"--background {text}: expected transparent, a colour (g or r,g,b >= 0) "
+                         "or an environment image")
+    return SolidBackground(np.broadcast_to(values, (3,)))

@@ -11,6 +11,7 @@ from .api import load_scene
 from .errors import RtmeshError
 from .film import TONEMAPS
 from .aov import display_values
+from .background import background_from_option
 from .image_io import check_output_path, write_display_image, write_image
 from .integrator import Integrator
 from .sampling import SAMPLERS
@@ -52,6 +53,9 @@ def build_parser():
     p.add_argument("--light-samples", type=_positive_int,
                    help="shadow rays per hit and area light (soft shadows; default 4)")
     p.add_argument("--passes", type=_names(PASSES), help="extra EXR passes, comma-separated: " + ", ".join(PASSES))
+    p.add_argument("--background", metavar="BG",
+                   help="what misses see, overriding the scene's: transparent (RGBA output), a "
+                   "linear colour (g or r,g,b), or an equirectangular .exr/.hdr environment image")
     p.add_argument("--pass-png", action="store_true",
                    help="also write each pass as OUTPUT_<pass>.png (normals as 0.5 + 0.5 n, depth "
                    "normalised, ids as distinct colours)")
@@ -182,7 +186,10 @@ def cmd_render(args):
         "light_samples": args.light_samples,
         "fresnel": args.fresnel, "exposure": args.exposure, "tonemap": args.tonemap,
     }
+    background = None if args.background is None else background_from_option(args.background)
     scene, settings = load_scene(args.input, **overrides)
+    if background is not None:
+        scene.background = background
     bar = ProgressBar(enabled=not args.quiet and sys.stderr.isatty())
     try:
         result = Integrator(scene, settings).render(progress=bar)

@@ -250,3 +250,25 @@ def test_shipped_passes_scene_renders_with_its_environment():
     assert_finite(result)
     # the top row sees the sky (no geometry there: depth 0), lit by the environment
     assert (result.passes["depth"][0] == 0).all() and (result.image[0] > 0.1).all()
+
+
+def test_background_option_makes_a_bare_mesh_render_transparent(tmp_path):
+    bunny = os.path.join(ASSETS, "meshes", "bunny.ply")
+    out = tmp_path / "bunny.png"
+    assert main(["render", bunny, "-o", str(out), "--width", "24", "--height", "18", "--spp", "1",
+                 "--background", "transparent", "-q"]) == 0
+    rgba, _ = read_image(out)
+    assert rgba.shape == (18, 24, 4) and rgba[0, 0, 3] == 0.0 and rgba[9, 12, 3] == 1.0
+    out = tmp_path / "sky.exr"
+    assert main(["render", bunny, "-o", str(out), "--width", "24", "--height", "18", "--spp", "1",
+                 "--background", SKY, "-q"]) == 0
+    sky, names = read_image(out)
+    assert names == ["R", "G", "B"] and sky[0, 0].min() > 0.05
+
+
+@pytest.mark.parametrize("value", ["1,2", "-1", "missing.exr"])
+def test_bad_background_option_is_exit_status_2(tmp_path, capsys, value):
+    bunny = os.path.join(ASSETS, "meshes", "bunny.ply")
+    out = tmp_path / "x.png"
+    assert main(["render", bunny, "-o", str(out), "--background", value, "-q"]) == 2
+    assert "error" in capsys.readouterr().err and not out.exists()
