@@ -103,7 +103,9 @@ class Scene:
             Defaults to :func:`default_lights` (a three-light rig).
         camera : Camera, optional
             Defaults to one framing the bounds (:func:`rtmesh.camera.frame_bounds`).
-        ambient, background : (3,) float, optional
+        ambient : (3,) float, optional
+        background : (3,) float or background object, optional
+            A radiance, or a background of :mod:`rtmesh.background`.
         source : str
             Where the parts came from, for error messages.
         aspect : float

@@ -217,3 +217,8 @@ def test_scene_file_picks_a_camera_by_name_and_applies_the_object_transform(gltf
 def test_bad_file_camera_is_a_one_line_error(gltf_file, camera, message):
     with pytest.raises(SceneError, match=message):
         scene_from_dict({"objects": [{"mesh": str(gltf_file)}], "camera": camera}, source="s.toml")
+
+
+def test_import_lights_on_a_primitive_is_an_error():
+    with pytest.raises(SceneError, match=r"objects\[0\]\.import_lights: does not apply to a primitive"):
+        scene_from_dict({"objects": [{"primitive": "box", "import_lights": True}]}, source="s.toml")
