@@ -272,3 +272,18 @@ def test_bad_background_option_is_exit_status_2(tmp_path, capsys, value):
     out = tmp_path / "x.png"
     assert main(["render", bunny, "-o", str(out), "--background", value, "-q"]) == 2
     assert "error" in capsys.readouterr().err and not out.exists()
+
+
+def test_environment_is_seen_through_refraction():
+    # a slab of index 1 bends nothing and reflects nothing (Fresnel 0): through it the
+    # environment looks exactly as it does without it, but only via refracted rays
+    env = read_environment(SKY)
+    camera = horizon_camera()
+    from scenes import box
+    slab = Material("clear", diffuse=0.0, transmission=1.0, ior=1.0)
+    scene = Scene.from_parts([part("slab", box(extents=(20.0, 20.0, 0.5), centre=(0.0, 0.0, -3.0)))],
+                             [slab], [], camera, background=env)
+    result = render(scene, width=12, height=8, max_depth=2)
+    _, d = pixel_centre_rays(camera, 12, 8)
+    np.testing.assert_allclose(result.image.reshape(-1, 3), env.radiance(d), rtol=1e-5)
+    assert result.stats.rays["refraction"] == 2 * 12 * 8
