@@ -3,21 +3,23 @@ the 8-bit display mapping of each pass.
 
 A pass is described once, in :data:`REGISTRY`: its EXR channel names, how the film reduces
 a pixel's samples to one value, the value a camera ray that sees no surface contributes, and
-how the pass is shown in a PNG.  The integrator only calls :meth:`PassRecorder.record` with
-the hits of the camera rays; everything else about passes lives here, so a new pass is one
-registry entry (plus a producer function).
+the producer that computes it from the hits of the camera rays.  The integrator only calls
+:meth:`PassRecorder.record` with those hits; everything else about passes lives here, so a
+new pass is a producer function and a registry entry (and a case in
+:func:`display_values` if its PNG needs more than the generic mapping).
 
 EXR naming (one OpenEXR layer per pass, ``layer.channel``)::
 
-    ao          ao.Y                     mean    misses count as unoccluded (1)
-    depth       depth.Z                  min     z-depth; 0 where no sample hits
-    normal      normal.X normal.Y normal.Z   mean    world-space unit shading normal, camera side
-    albedo      albedo.R albedo.G albedo.B   mean    diffuse reflectance (texture-tinted)
-    position    position.X .Y .Z         mean    world-space hit point
-    uv          uv.U uv.V                mean    texture coordinates
-    object_id   object_id.id             first   index into Scene.object_names; -1 = none
-    material_id material_id.id           first   index into the material table; -1 = none
-    alpha       A                        mean    camera-ray coverage (the image's alpha)
+    pass         channels                       reduction  value
+    ao           ao.Y                           mean       misses count as unoccluded (1)
+    depth        depth.Z                        min        z-depth; 0 where no sample hits
+    normal       normal.X normal.Y normal.Z     mean       world shading normal, camera side
+    albedo       albedo.R albedo.G albedo.B     mean       diffuse reflectance (tinted)
+    position     position.X position.Y position.Z  mean    world-space hit point
+    uv           uv.U uv.V                      mean       texture coordinates
+    object_id    object_id.id                   first      Scene.object_names index; -1 none
+    material_id  material_id.id                 first      material index; -1 none
+    alpha        A                              mean       camera-ray coverage (image alpha)
 
 ``mean`` averages every sample of the pixel, misses included with their miss value, so
 ``normal``, ``albedo``, ``position`` and ``uv`` are premultiplied by coverage (divide by
@@ -39,6 +41,87 @@ log = logging.getLogger(__name__)
 REDUCTIONS = ("mean", "first", "min")
 
 
+class CameraHits:
+    """What a producer may read about the camera rays that hit: one row per hit.
+
+    Attributes
+    ----------
+    srf : rtmesh.integrator._Surfaces
+        Shading records: ``p`` (hit points in the integrator's shifted frame), ``ns``
+        (shading normals facing the ray), ``mat`` (material ids), ``sample`` (camera-sample
+        rows), and ``tints`` where the scene has textures.
+    recorder : PassRecorder
+        Scene-wide tables (camera frame, shift, id tables).
+    """
+
+    __slots__ = ("srf", "recorder", "_hits", "_rows", "_prim")
+
+    def __init__(self, srf, hits, rows, recorder):
+        self.srf, self.recorder = srf, recorder
+        self._hits, self._rows, self._prim = hits, rows, None
+
+    @property
+    def prim(self):
+        """(k,) intp: the triangle each ray hit (gathered once, on first use)."""
+        if self._prim is None:
+            self._prim = take_rows(self._hits.prim, self._rows).astype(np.intp)
+        return self._prim
+
+    @property
+    def barycentrics(self):
+        """(k,) float, (k,) float: Embree's u and v of each hit."""
+        return take_rows(self._hits.u, self._rows), take_rows(self._hits.v, self._rows)
+
+
+# ---------------------------------------------------------------- producers
+# Each returns the pass values of the hits, (k, width) or (k,) for one channel, or a
+# scalar for all of them.
+
+def _depth(h):
+    # distance from the lens plane along the view axis: the same for a pinhole and a thin
+    # lens, whose ray origins all lie in that plane
+    rec = h.recorder
+    return (h.srf.p - rec.eye) @ rec.forward
+
+
+def _normal(h):
+    return h.srf.ns
+
+
+def _albedo(h):
+    values = take_rows(h.recorder.diffuse, h.srf.mat)
+    tints = getattr(h.srf, "tints", None)  # texture and vertex-colour multipliers
+    if tints is not None and getattr(tints, "diffuse", None) is not None:
+        values = values * tints.diffuse
+    return values
+
+
+def _position(h):
+    return h.srf.p + h.recorder.shift
+
+
+def _uv(h):
+    uv = h.recorder.uv
+    if uv is None:
+        return 0.0
+    corners = h.recorder.faces[h.prim]
+    u, v = h.barycentrics
+    uv0, uv1, uv2 = (uv[corners[:, i]] for i in range(3))
+    return uv0 + u[:, None] * (uv1 - uv0) + v[:, None] * (uv2 - uv0)
+
+
+def _object_id(h):
+    return h.recorder.object_id.take(h.prim)
+
+
+def _material_id(h):
+    return h.recorder.material_id.take(h.prim)
+
+
+def _covered(h):
+    return 1.0
+
+
 @dataclass(frozen=True)
 class PassSpec:
     """One pass of the registry.
@@ -53,14 +136,18 @@ class PassSpec:
         How the film combines a pixel's samples (see the module docstring).
     miss : float
         What a camera ray that hits nothing contributes.
+    producer : callable or None
+        ``producer(CameraHits) -> values`` for the camera rays that hit; None for a pass
+        another stage writes (``ao``: the integrator's AO stage).
     doc : str
-        One line for the documentation and ``--help``.
+        One line for the documentation.
     """
 
     name: str
     channels: tuple
     reduction: str
     miss: float
+    producer: object
     doc: str
 
     @property
@@ -74,15 +161,15 @@ class PassSpec:
 
 REGISTRY = {
     spec.name: spec for spec in (
-        PassSpec("ao", ("Y",), "mean", 1.0, "ambient occlusion: unoccluded fraction of the hemisphere"),
-        PassSpec("depth", ("Z",), "min", np.inf, "z-depth: distance along the view axis to the nearest hit"),
-        PassSpec("normal", ("X", "Y", "Z"), "mean", 0.0, "world-space unit shading normal facing the camera"),
-        PassSpec("albedo", ("R", "G", "B"), "mean", 0.0, "diffuse reflectance (texture-tinted)"),
-        PassSpec("position", ("X", "Y", "Z"), "mean", 0.0, "world-space hit point"),
-        PassSpec("uv", ("U", "V"), "mean", 0.0, "texture coordinates (0 without UVs)"),
-        PassSpec("object_id", ("id",), "first", -1.0, "object index (Scene.object_names), -1 for none"),
-        PassSpec("material_id", ("id",), "first", -1.0, "material index, -1 for none"),
-        PassSpec("alpha", ("A",), "mean", 0.0, "coverage of camera rays by geometry"),
+        PassSpec("ao", ("Y",), "mean", 1.0, None, "ambient occlusion: unoccluded fraction of the hemisphere"),
+        PassSpec("depth", ("Z",), "min", np.inf, _depth, "z-depth: distance along the view axis to the nearest hit"),
+        PassSpec("normal", ("X", "Y", "Z"), "mean", 0.0, _normal, "world-space unit shading normal facing the camera"),
+        PassSpec("albedo", ("R", "G", "B"), "mean", 0.0, _albedo, "diffuse reflectance (texture-tinted)"),
+        PassSpec("position", ("X", "Y", "Z"), "mean", 0.0, _position, "world-space hit point"),
+        PassSpec("uv", ("U", "V"), "mean", 0.0, _uv, "texture coordinates (0 without UVs)"),
+        PassSpec("object_id", ("id",), "first", -1.0, _object_id, "object index (Scene.object_names), -1 for none"),
+        PassSpec("material_id", ("id",), "first", -1.0, _material_id, "material index, -1 for none"),
+        PassSpec("alpha", ("A",), "mean", 0.0, _covered, "coverage of camera rays by geometry"),
     )
 }
 PASS_NAMES = tuple(REGISTRY)
@@ -119,17 +206,17 @@ class PassRecorder:
     def __init__(self, scene, names, camera, shift):
         self.names = tuple(n for n in dict.fromkeys(names) if n in REGISTRY)
         self.specs = [REGISTRY[n] for n in self.names]
-        self.scene = scene
         self.shift = np.asarray(shift, dtype=np.float64)
         self.forward = camera.frame()[0]
         self.eye = camera.position
+        self.faces = scene.faces
         self.uv = getattr(scene, "uv", None)
         if "uv" in self.names and self.uv is None:
             log.warning("the uv pass is zero: the scene has no texture coordinates")
-        self._diffuse = scene.materials.diffuse
+        self.diffuse = scene.materials.diffuse
         # exact float ids: every int32 index below 2^24 is a float32 integer
-        self._object_id = scene.object_id.astype(np.float64)
-        self._material_id = scene.material_id.astype(np.float64)
+        self.object_id = scene.object_id.astype(np.float64)
+        self.material_id = scene.material_id.astype(np.float64)
 
     def __bool__(self):
         return bool(self.names)
@@ -161,47 +248,14 @@ class PassRecorder:
         rows : (k,) int or None
             Rays of ``hits`` that hit, in the order of ``srf``; None when all did.
         """
-        sample = srf.sample
-        prim = None
-        for name in self.names:
-            if name == "ao":
-                continue  # written by the integrator's AO stage
-            if name in ("object_id", "material_id", "uv") and prim is None:
-                prim = take_rows(hits.prim, rows).astype(np.intp)
-            if name == "depth":
-                # distance from the lens plane along the view axis: the same for a pinhole
-                # and a thin lens, whose ray origins all lie in that plane
-                values = (srf.p - self.eye) @ self.forward
-            elif name == "normal":
-                values = srf.ns
-            elif name == "albedo":
-                values = take_rows(self._diffuse, srf.mat)
-                tints = getattr(srf, "tints", None)
-                if tints is not None and getattr(tints, "diffuse", None) is not None:
-                    values = values * tints.diffuse
-            elif name == "position":
-                values = srf.p + self.shift
-            elif name == "uv":
-                values = self._uv(prim, take_rows(hits.u, rows), take_rows(hits.v, rows))
-            elif name == "object_id":
-                values = self._object_id.take(prim)
-            elif name == "material_id":
-                values = self._material_id.take(prim)
-            elif name == "alpha":
-                values = 1.0
-            buffer = buffers[name]
-            values = np.asarray(values, dtype=np.float64)
-            if values.ndim == 1 and buffer.shape[1] == 1:
+        camera_hits = CameraHits(srf, hits, rows, self)
+        for spec in self.specs:
+            if spec.producer is None:
+                continue
+            values = np.asarray(spec.producer(camera_hits), dtype=np.float64)
+            if values.ndim == 1:
                 values = values[:, None]
-            buffer[sample] = values
-
-    def _uv(self, prim, u, v):
-        """(k, 2) texture coordinates interpolated from the hit barycentrics."""
-        if self.uv is None:
-            return 0.0
-        corners = self.scene.faces[prim]
-        uv0, uv1, uv2 = (self.uv[corners[:, i]] for i in range(3))
-        return uv0 + u[:, None] * (uv1 - uv0) + v[:, None] * (uv2 - uv0)
+            buffers[spec.name][srf.sample] = values
 
     def per_pixel(self, buffers, m, spp):
         """Reshape the per-sample buffers to ``(m, spp, k)`` for :meth:`Film.add_tile`."""
