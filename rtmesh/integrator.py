@@ -132,7 +132,7 @@ class Integrator:
         ambient_on = bool((scene.ambient > 0).any() and (m.ambient > 0).any())
         self.background = as_background(scene.background)
         # only the passes asked for are computed; a transparent background needs coverage
-        self.passes = PassRecorder(scene, settings.passes + ("alpha",) * self.background.transparent,
+        self.passes = PassRecorder(scene, tuple(settings.passes) + ("alpha",) * self.background.transparent,
                                    self.camera, self.shift)
         # the AO pass alone asks for 16 rays per camera hit unless ao_samples says otherwise
         self.ao_samples = settings.ao_samples or (16 if "ao" in settings.passes else 0)
