@@ -204,9 +204,18 @@ def file_cameras_and_lights(path, transform=None):
     -------
     cameras : list of (names, Camera)
     lights : list
+
+    Raises
+    ------
+    MeshError
+        Unreadable glTF JSON or a malformed camera or light.
     """
     path = os.fspath(path)
     if os.path.splitext(path)[1].lower() not in GLTF_EXTENSIONS:
         return [], []
     doc = read_gltf_json(path)
-    return cameras_from_gltf(doc, transform, source=path), lights_from_gltf(doc, transform)
+    try:
+        return cameras_from_gltf(doc, transform, source=path), lights_from_gltf(doc, transform)
+    except (KeyError, IndexError, TypeError, ValueError, AttributeError) as exc:
+        # a camera or light entry that breaks the glTF schema (a bad index, a missing yfov)
+        raise MeshError(f"{path}: malformed glTF camera or light: {type(exc).__name__}: {exc}") from None

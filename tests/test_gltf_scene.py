@@ -222,3 +222,16 @@ def test_bad_file_camera_is_a_one_line_error(gltf_file, camera, message):
 def test_import_lights_on_a_primitive_is_an_error():
     with pytest.raises(SceneError, match=r"objects\[0\]\.import_lights: does not apply to a primitive"):
         scene_from_dict({"objects": [{"primitive": "box", "import_lights": True}]}, source="s.toml")
+
+
+def test_malformed_camera_is_a_one_line_error_naming_the_file(tmp_path, capsys):
+    path = write_gltf(tmp_path / "bad.gltf")
+    doc = json.loads(path.read_text())
+    del doc["cameras"][1]["perspective"]["yfov"]  # required by the glTF schema
+    path.write_text(json.dumps(doc))
+    from rtmesh.cli import main
+    out = tmp_path / "o.png"
+    assert main(["render", str(path), "-o", str(out), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "bad.gltf: malformed glTF camera or light" in err and err.count("\n") == 1
+    assert not out.exists()
