@@ -161,13 +161,18 @@ class PassSpec:
 
 REGISTRY = {
     spec.name: spec for spec in (
-        PassSpec("ao", ("Y",), "mean", 1.0, None, "ambient occlusion: unoccluded fraction of the hemisphere"),
-        PassSpec("depth", ("Z",), "min", np.inf, _depth, "z-depth: distance along the view axis to the nearest hit"),
-        PassSpec("normal", ("X", "Y", "Z"), "mean", 0.0, _normal, "world-space unit shading normal facing the camera"),
-        PassSpec("albedo", ("R", "G", "B"), "mean", 0.0, _albedo, "diffuse reflectance (texture-tinted)"),
+        PassSpec("ao", ("Y",), "mean", 1.0, None,
+                 "ambient occlusion: unoccluded fraction of the hemisphere"),
+        PassSpec("depth", ("Z",), "min", np.inf, _depth,
+                 "z-depth: distance along the view axis to the nearest hit"),
+        PassSpec("normal", ("X", "Y", "Z"), "mean", 0.0, _normal,
+                 "world-space unit shading normal facing the camera"),
+        PassSpec("albedo", ("R", "G", "B"), "mean", 0.0, _albedo,
+                 "diffuse reflectance (texture-tinted)"),
         PassSpec("position", ("X", "Y", "Z"), "mean", 0.0, _position, "world-space hit point"),
         PassSpec("uv", ("U", "V"), "mean", 0.0, _uv, "texture coordinates (0 without UVs)"),
-        PassSpec("object_id", ("id",), "first", -1.0, _object_id, "object index (Scene.object_names), -1 for none"),
+        PassSpec("object_id", ("id",), "first", -1.0, _object_id,
+                 "object index (Scene.object_names), -1 for none"),
         PassSpec("material_id", ("id",), "first", -1.0, _material_id, "material index, -1 for none"),
         PassSpec("alpha", ("A",), "mean", 0.0, _covered, "coverage of camera rays by geometry"),
     )

@@ -52,7 +52,8 @@ def build_parser():
     p.add_argument("--ao-distance", type=float, help="ambient-occlusion reach, scene units")
     p.add_argument("--light-samples", type=_positive_int,
                    help="shadow rays per hit and area light (soft shadows; default 4)")
-    p.add_argument("--passes", type=_names(PASSES), help="extra EXR passes, comma-separated: " + ", ".join(PASSES))
+    p.add_argument("--passes", type=_names(PASSES),
+                   help="extra outputs (EXR layers), comma-separated: " + ", ".join(PASSES))
     p.add_argument("--background", metavar="BG",
                    help="what misses see, overriding the scene's: transparent (RGBA output), a "
                    "linear colour (g or r,g,b), or an equirectangular .exr/.hdr environment image")

@@ -74,7 +74,8 @@ def test_bilinear_lookup_blends_across_the_seam_and_clamps_at_the_poles():
     # straight up reads the top row only (no wrap to the bottom row)
     pixels = np.zeros((4, 8, 3))
     pixels[0] = 5.0
-    np.testing.assert_allclose(EnvironmentBackground(pixels).radiance(np.array([[0.0, 1.0, 0.0]])), [[5.0] * 3])
+    up = np.array([[0.0, 1.0, 0.0]])
+    np.testing.assert_allclose(EnvironmentBackground(pixels).radiance(up), [[5.0] * 3])
 
 
 def test_rotation_and_intensity():

@@ -91,7 +91,8 @@ def write_gltf(path):
              "rotation": [-SQRT_HALF, 0.0, 0.0, SQRT_HALF]},
         ],
         "cameras": [
-            {"name": "front", "type": "perspective", "perspective": {"yfov": 0.2, "znear": 0.1, "aspectRatio": 1.0}},
+            {"name": "front", "type": "perspective",
+             "perspective": {"yfov": 0.2, "znear": 0.1, "aspectRatio": 1.0}},
             {"name": "top", "type": "perspective", "perspective": {"yfov": 0.8, "znear": 0.1}},
         ],
         "meshes": [{"name": "cube", "primitives": [cube]}, {"name": "pair", "primitives": [near, far]}],

@@ -193,8 +193,10 @@ def test_albedo_is_the_diffuse_colour_of_the_material_hit():
     result = render(scene, width=24, height=12, passes=("albedo", "material_id"))
     albedo = result.passes["albedo"].reshape(-1, 3)
     material = result.passes["material_id"].reshape(-1).astype(int)
-    np.testing.assert_allclose(albedo[material == 1], np.broadcast_to([0.1, 0.2, 0.3], albedo[material == 1].shape), rtol=1e-6)
-    np.testing.assert_allclose(albedo[material == 2], np.broadcast_to([0.9, 0.5, 0.25], albedo[material == 2].shape), rtol=1e-6)
+    for index, colour in ((1, [0.1, 0.2, 0.3]), (2, [0.9, 0.5, 0.25])):
+        rows = albedo[material == index]
+        assert len(rows)
+        np.testing.assert_allclose(rows, np.broadcast_to(colour, rows.shape), rtol=1e-6)
     assert (albedo[material == -1] == 0).all()
 
 
