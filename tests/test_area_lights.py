@@ -480,6 +480,48 @@ def test_area_light_stages_run_only_for_scenes_with_area_lights():
     assert {"area_lights", "area_light_visibility"} <= set(lit.stats.stages_enabled)
 
 
+def test_light_intersection_agrees_with_embree_on_the_same_quad():
+    # a tilted parallelogram light, and the same shape as two triangles traced by Embree:
+    # the light answers only for rays coming at its emitting side
+    light = QuadLight([0.3, -0.2, 1.0], [1.2, 0.1, 0.3], [-0.2, 0.9, 0.1], 1.0)
+    corners = light.corner + np.array([[0, 0], [1, 0], [1, 1], [0, 1]]) @ np.stack([light.edge1, light.edge2])
+    accel = Accel(corners, np.array([[0, 1, 2], [0, 2, 3]]))
+    rng = np.random.default_rng(7)
+    origins = rng.uniform(-3.0, 3.0, size=(4000, 3))
+    targets = light.corner + rng.uniform(-0.2, 1.2, size=(4000, 2)) @ np.stack([light.edge1, light.edge2])
+    directions = targets - origins
+    directions /= np.linalg.norm(directions, axis=1)[:, None]
+    directions[:10] = np.cross(light.edge1, light.normal) / np.linalg.norm(light.edge1)  # parallel
+    with np.errstate(all="raise"):
+        t = light.intersect(origins, directions)
+    embree = accel.intersect(origins, directions).t
+    front = directions @ light.normal < 0.0
+    # away from the edges (where float32 Embree may round either way) and from grazing
+    # angles (where its float32 t error grows like 1 / cos) they agree
+    local = targets - light.corner
+    a, b = local @ light._dual1, local @ light._dual2
+    clear = (np.minimum(np.abs(a - np.round(a)), np.abs(b - np.round(b))) > 1e-3) & \
+        (np.abs(directions @ light.normal) > 0.05)
+    expected = np.where(front, embree, np.inf)
+    assert np.isfinite(expected[clear]).sum() > 500
+    np.testing.assert_allclose(t[clear], expected[clear], rtol=1e-5)
+    assert np.isinf(t[:10]).all()
+    disk = DiskLight([0.0, 0.0, 1.0], DOWN, 0.5, 1.0)
+    with np.errstate(all="raise"):
+        t = disk.intersect(origins, directions)
+    hit_point = origins + np.where(np.isfinite(t), t, 0.0)[:, None] * directions
+    seen = np.isfinite(t)
+    assert seen.sum() > 100
+    np.testing.assert_allclose(hit_point[seen, 2], 1.0, atol=1e-12)
+    assert (np.hypot(hit_point[seen, 0], hit_point[seen, 1]) <= 0.5 + 1e-12).all()
+    assert (directions[seen, 2] > 0).all()  # only from below, the side it emits to
+    # and every ray from below through the disk is seen
+    z_hit = (1.0 - origins[:, 2]) / directions[:, 2]
+    crossing = origins + z_hit[:, None] * directions
+    through = (directions[:, 2] > 0) & (z_hit > 0) & (np.hypot(crossing[:, 0], crossing[:, 1]) < 0.5 - 1e-9)
+    assert (seen == through).all()
+
+
 def test_visible_area_light_is_seen_from_its_front_only_and_in_mirrors():
     radiance = np.array([4.0, 3.0, 2.0])
     light = ceiling_quad(half=5.0, height=2.0, radiance=radiance)  # faces down
