@@ -369,6 +369,39 @@ def test_all_emitters_form_one_light_sharing_samples_by_power():
     assert abs((value - expected).sum()) < 5 * math.sqrt((sigma ** 2).sum())
 
 
+def test_an_emitter_never_shadows_its_own_samples_even_at_grazing_angles():
+    # the emissive square in Embree or not: no shadow ray may stop on the triangle it aims
+    # at, so the estimates are identical, down to points 1e-3 below the emitter's plane
+    # and 1000 units away (seen at 0.1 degree)
+    v = np.array([[-0.5, -0.5, 1.5], [-0.5, 0.5, 1.5], [0.5, 0.5, 1.5], [0.5, -0.5, 1.5]])
+    tri = np.array([np.concatenate([v[0], v[1] - v[0], v[2] - v[0]]),
+                    np.concatenate([v[0], v[2] - v[0], v[3] - v[0]])])
+    light = emissive_mesh_light(tri, np.tile(DOWN, (2, 1)), np.ones((2, 3)))
+    x = np.concatenate([np.linspace(-3.0, 3.0, 25), [10.0, 100.0, 1000.0]])
+    for z in (0.0, 1.5 - 1e-3):
+        points = np.column_stack([x, 0.3 * np.ones_like(x), np.full_like(x, z)])
+        alone, _ = direct_light([light], points, samples=16)
+        with_itself, _ = direct_light([light], points, blockers=[(v, [[0, 1, 2], [0, 2, 3]])], samples=16)
+        assert (alone > 0).all()
+        np.testing.assert_array_equal(with_itself, alone)
+
+
+def test_a_light_flush_with_a_ceiling_lights_the_room_and_is_seen():
+    # the light lies exactly in the plane of a ceiling (facing down): the ceiling neither
+    # shadows it nor hides it from the camera
+    ceiling = quad([[-5.0, -5.0, 2.0], [-5.0, 5.0, 2.0], [5.0, 5.0, 2.0], [5.0, -5.0, 2.0]])  # faces down
+    light = ceiling_quad(half=0.5, height=2.0, radiance=3.0)
+    x = np.linspace(-3.0, 3.0, 13)
+    points = np.column_stack([x, np.zeros_like(x), np.zeros_like(x)])
+    open_sky, _ = direct_light([light], points, samples=16)
+    under_ceiling, _ = direct_light([light], points, blockers=[ceiling], samples=16)
+    np.testing.assert_array_equal(under_ceiling, open_sky)
+    camera = Camera([0.0, 0.0, 0.5], [0.0, 0.0, 2.0], [0.0, 1.0, 0.0], 10.0)
+    scene = Scene.from_parts([part("floor", floor_quad(5.0)), part("ceiling", ceiling)], [Material("f")],
+                             [light], camera)
+    np.testing.assert_array_equal(render(scene, width=4, height=4).image, np.float32(3.0))
+
+
 def test_emissive_mesh_emission_is_seen_from_both_sides_and_lights_both():
     # an emissive square floating between two floors lights both
     materials = [Material("floor", diffuse=0.5), Material("lamp", diffuse=0.0, emission=1.0)]
