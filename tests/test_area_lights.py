@@ -84,7 +84,8 @@ def direct_light(lights, points, normal=(0.0, 0.0, 1.0), blockers=(), samples=64
         offsets = np.cumsum([0] + [len(v) for v, _ in blockers[:-1]])
         faces = np.concatenate([np.asarray(f) + o for (_, f), o in zip(blockers, offsets)])
     else:  # nothing to hit: one tiny triangle far away
-        vertices, faces = np.array([[1e3, 1e3, 1e3], [1e3 + 1e-3, 1e3, 1e3], [1e3, 1e3 + 1e-3, 1e3]]), np.array([[0, 1, 2]])
+        vertices = np.array([[1e3, 1e3, 1e3], [1e3 + 1e-3, 1e3, 1e3], [1e3, 1e3 + 1e-3, 1e3]])
+        faces = np.array([[0, 1, 2]])
     accel = Accel(vertices, faces)
     scale = 10.0
     ng = np.broadcast_to(np.asarray(normal, dtype=np.float64), (k, 3))
@@ -345,7 +346,8 @@ def test_all_emitters_form_one_light_sharing_samples_by_power():
     # per point in all, a quarter of them to the dim square; the estimate is the sum of both
     tri = []  # rows [v0, v1 - v0, v2 - v0], as Accel.triangles
     for x0 in (-1.0, 0.2):
-        v0, v1, v2, v3 = np.array([[x0, -0.5, 1.5], [x0, 0.5, 1.5], [x0 + 1.0, 0.5, 1.5], [x0 + 1.0, -0.5, 1.5]])
+        v0, v1, v2, v3 = np.array([[x0, -0.5, 1.5], [x0, 0.5, 1.5], [x0 + 1.0, 0.5, 1.5],
+                                   [x0 + 1.0, -0.5, 1.5]])
         tri += [np.concatenate([v0, v1 - v0, v2 - v0]), np.concatenate([v0, v2 - v0, v3 - v0])]
     emission = np.repeat([[1.0] * 3, [3.0] * 3], 2, axis=0)
     light = emissive_mesh_light(np.array(tri), np.tile(DOWN, (4, 1)), emission)
@@ -360,8 +362,8 @@ def test_all_emitters_form_one_light_sharing_samples_by_power():
         boxes = [(-1.0 - x, 0.0 - x, -0.5, 0.5, 1.5), (0.2 - x, 1.2 - x, -0.5, 0.5, 1.5)]
         mean = sum(L * rectangle_integral(*b) for L, b in zip(radiance, boxes))
         # one sample: lamp i with probability share_i, then L_i (A_i g) / share_i
-        second = sum(L * L / p * (var + m * m)
-                     for L, p, (m, var) in zip(radiance, share, (rectangle_moments(*b, n=100) for b in boxes)))
+        moments = [rectangle_moments(*b, n=100) for b in boxes]
+        second = sum(L * L / p * (var + m * m) for L, p, (m, var) in zip(radiance, share, moments))
         expected.append(mean)
         sigma.append(math.sqrt((second - mean ** 2) / n))
     expected, sigma = np.array(expected), np.array(sigma)
@@ -609,7 +611,8 @@ def test_scene_file_area_lights_and_light_samples():
      "lights[0]: quad light edges are zero or parallel"),
     ({"type": "quad", "position": [0, 0, 1], "edge1": [1, 0, 0], "edge2": [0, 1, 0], "radiance": 1,
       "radius": 1}, "lights[0].radius: does not apply to a quad light"),
-    ({"type": "disk", "position": [0, 0, 1], "radius": 1, "radiance": 1}, "lights[0]: a disk light needs exactly one"),
+    ({"type": "disk", "position": [0, 0, 1], "radius": 1, "radiance": 1},
+     "lights[0]: a disk light needs exactly one"),
     ({"type": "disk", "position": [0, 0, 1], "direction": [0, 0, -1], "radius": 0, "radiance": 1},
      "lights[0].radius: expected a number > 0"),
     ({"type": "disk", "position": [0, 0, 1], "direction": [0, 0, -1], "radius": 1, "radiance": 1,
