@@ -26,7 +26,9 @@ class Dim(IntEnum):
 
     PIXEL = 0  # (x, y) position inside the pixel
     LENS = 2  # (u, v) on the thin-lens aperture
+    TIME = 4  # time in the shutter interval (one number; dimension 5 is unused)
     AO = 16  # first of the ambient-occlusion dimensions; AO ray k at depth d uses AO + 2*(k + d*1024)
+    GLOSSY = 1 << 25  # glossy-reflection directions; the rays spawned at depth d use GLOSSY + 2*d
 
 
 def sequence_key(seed, pixel, dimension):
@@ -104,10 +106,7 @@ def pixel_offsets(sampler, seed, pixel, sample, spp):
     Parameters
     ----------
     sampler : {"regular", "random", "jittered", "sobol"}
-        ``regular`` puts the samples at the centres of an ``nx x ny`` grid of strata,
-        ``random`` places them uniformly, ``jittered`` puts one uniform sample in each stratum,
-        ``sobol`` takes them from an Owen-scrambled (0,2)-sequence scrambled per pixel, so
-        every power-of-two prefix of a pixel's samples is stratified.
+        See :func:`stratified_points`.
     seed : int
     pixel : (n,) int
         Linear pixel index of each sample.
@@ -122,22 +121,155 @@ def pixel_offsets(sampler, seed, pixel, sample, spp):
         Offsets in [0, 1)^2 from the pixel's top-left corner (x right, y down),
         component-major (see :mod:`rtmesh.batches`).
     """
+    return stratified_points(sampler, seed, pixel, sample, spp, Dim.PIXEL)
+
+
+def stratified_points(sampler, seed, pixel, index, count, dimension):
+    """Points in [0, 1)^2 drawn in sets of ``count`` that are stratified together.
+
+    The one sample machinery of the renderer: pixel positions, ambient-occlusion directions
+    and area-light samples all come from here, each in its own :class:`Dim` dimension.
+    Point ``index`` of a pixel's sequence belongs to the set ``index // count`` and to the
+    stratum ``index % count`` of that set, so a caller that needs ``count`` points per pixel
+    sample passes ``index = sample * count + j`` for ``j`` in ``[0, count)``.
+
+    Parameters
+    ----------
+    sampler : {"regular", "random", "jittered", "sobol"}
+        ``random`` places the points uniformly, ``jittered`` puts one uniform point in each
+        stratum of an ``nx x ny`` grid (:func:`strata_shape`) in every set, ``sobol`` takes
+        them from an Owen-scrambled (0,2)-sequence scrambled per pixel and dimension, so
+        every power-of-two prefix of a pixel's points (and, for a power-of-two ``count``,
+        every set) is stratified.  ``regular`` puts pixel positions (:attr:`Dim.PIXEL`) at
+        the stratum centres, an ordered supersampling grid; in every other dimension the
+        same points in every pixel would turn the integration error into bands repeated
+        across the image (a penumbra made of ``count`` hard shadows), so there it jitters.
+    seed : int
+    pixel : (n,) int
+        Linear pixel index of each point.
+    index : (n,) int
+        Index of the point in its pixel's sequence for this dimension.
+    count : int
+        Points per stratified set, >= 1.
+    dimension : int
+        First of the two dimensions the point uses (see :class:`Dim`).
+
+    Returns
+    -------
+    (n, 2) float64
+        Component-major (see :mod:`rtmesh.batches`).
+    """
     if sampler == "random":
-        return uniform2(seed, pixel, sample, Dim.PIXEL)
+        return uniform2(seed, pixel, index, dimension)
     if sampler == "sobol":
-        points = sobol_02(sample, sequence_key(seed, pixel, Dim.PIXEL))
+        points = sobol_02(index, sequence_key(seed, pixel, dimension))
         return component_major(points.T)
     if sampler not in SAMPLERS:
         raise ValueError(f"unknown sampler {sampler!r}; expected one of {', '.join(SAMPLERS)}")
-    nx, ny = strata_shape(spp)
+    nx, ny = strata_shape(count)
     size = np.array([nx, ny], dtype=np.float64)
-    # the spp strata are worked out once and looked up per sample: a gather from a tiny
-    # table is much cheaper than integer division of every sample index
-    strata = np.arange(spp)
+    # the strata are worked out once and looked up per point: a gather from a tiny table is
+    # much cheaper than dividing every index by nx
+    strata = np.arange(count)
     cells = component_major(np.stack([strata % nx, strata // nx]).astype(np.float64))
-    if sampler == "regular":
-        return take_rows((cells + 0.5) / size, sample)
-    return (take_rows(cells, sample) + uniform2(seed, pixel, sample, Dim.PIXEL)) / size
+    stratum = index % count if count > 1 else np.zeros_like(index)
+    if sampler == "regular" and dimension == Dim.PIXEL:
+        return take_rows((cells + 0.5) / size, stratum)
+    return (take_rows(cells, stratum) + uniform2(seed, pixel, index, dimension)) / size
+
+
+def shuffled_strata(seed, pixel, sample, spp, dimension):
+    """A per-pixel permutation of the strata ``[0, spp)``, applied to sample indices.
+
+    Jittered points of every dimension put sample ``i`` in stratum ``i``, so without a
+    shuffle the sample in the top-left pixel stratum would always get, say, the first lens
+    or time stratum: the dimensions would be correlated and a moving edge would sweep across
+    the pixel in step with the time.  Each pixel and dimension gets the permutation
+    ``i -> (a i + b) mod spp`` with hashed ``a`` (a unit modulo ``spp``) and ``b``: computed
+    point by point, so it works on any subset of a pixel's samples (rays that survive to
+    depth d), and independent between pixels and dimensions.
+
+    Parameters
+    ----------
+    seed : int
+    pixel : (n,) int
+    sample : (n,) int
+        Sample index within the pixel, in ``[0, spp)``.
+    spp : int
+    dimension : int
+
+    Returns
+    -------
+    (n,) int64
+        The permuted index, in ``[0, spp)``.
+    """
+    sample = np.asarray(sample, dtype=np.int64)
+    if spp == 1:
+        return sample
+    key = sequence_key(seed, pixel, dimension)
+    units = np.flatnonzero(np.gcd(np.arange(spp), spp) == 1)
+    a = units[(key >> np.uint64(32)) % np.uint64(len(units))]
+    b = (key & np.uint64(0xFFFFFFFF)) % np.uint64(spp)
+    return (a * sample + b.astype(np.int64)) % spp
+
+
+def decorrelated_points(sampler, seed, pixel, sample, spp, dimension):
+    """One point in [0, 1)^2 per pixel sample for a dimension other than the pixel's.
+
+    :func:`stratified_points` with each pixel's ``spp`` points stratified together, and,
+    for the ``jittered`` and ``regular`` samplers, their strata paired with the pixel
+    strata by :func:`shuffled_strata` (Owen-scrambled Sobol points are scrambled per
+    dimension already, random points are independent).
+
+    Parameters
+    ----------
+    sampler : {"regular", "random", "jittered", "sobol"}
+    seed : int
+    pixel, sample : (n,) int
+        Linear pixel index and sample index within the pixel (in ``[0, spp)``).
+    spp : int
+    dimension : int
+        First of the two dimensions the point uses (see :class:`Dim`).
+
+    Returns
+    -------
+    (n, 2) float64
+        Component-major (see :mod:`rtmesh.batches`).
+    """
+    if sampler in ("jittered", "regular"):
+        sample = shuffled_strata(seed, pixel, sample, spp, dimension)
+    return stratified_points(sampler, seed, pixel, sample, spp, dimension)
+
+
+def stratified_values(sampler, seed, pixel, sample, spp, dimension):
+    """One number in [0, 1) per pixel sample, the ``spp`` numbers of a pixel stratified.
+
+    For one-dimensional quantities such as the time in the shutter.  ``jittered`` and
+    ``regular`` put exactly one value in each interval ``[k / spp, (k + 1) / spp)``,
+    assigned to the samples by :func:`shuffled_strata`; ``sobol`` uses the first coordinate
+    of the scrambled (0,2)-sequence, a (0,1)-sequence: every power-of-two prefix is
+    stratified the same way; ``random`` is uniform.
+
+    Parameters
+    ----------
+    sampler : {"regular", "random", "jittered", "sobol"}
+    seed : int
+    pixel, sample : (n,) int
+    spp : int
+    dimension : int
+
+    Returns
+    -------
+    (n,) float64
+    """
+    if sampler == "random":
+        return uniform(seed, pixel, sample, dimension)
+    if sampler == "sobol":
+        return sobol_02(sample, sequence_key(seed, pixel, dimension))[:, 0]
+    if sampler not in SAMPLERS:
+        raise ValueError(f"unknown sampler {sampler!r}; expected one of {', '.join(SAMPLERS)}")
+    stratum = shuffled_strata(seed, pixel, sample, spp, dimension)
+    return (stratum + uniform(seed, pixel, sample, dimension)) * (1.0 / spp)
 
 
 def square_to_uniform_disk_concentric(u):
