@@ -232,3 +232,45 @@ def test_motion_accel_queries_agree_with_baked_scenes():
         np.testing.assert_array_equal(scene.object_id[hits.prim], scene.object_id[expected.prim])
         occluded = accel.occluded(origins, directions, np.full(n, 4.0), time=time)
         np.testing.assert_array_equal(occluded, reference.occluded(origins, directions, np.full(n, 4.0)))
+
+
+# ---------------------------------------------------------------- scene files
+SCENE_BASE = {"lights": [{"type": "point", "position": [0, 0, 5], "intensity": 1}],
+              "camera": {"position": [0, -5, 1], "look_at": [0, 0, 0], "shutter": [0.0, 0.5]}}
+
+
+def test_motion_and_shutter_scene_keys():
+    from rtmesh.scene_file import scene_from_dict
+
+    doc = dict(SCENE_BASE, objects=[
+        {"primitive": "box", "translate": [1, 2, 3],
+         "motion": {"translate": [0.5, 0, 0], "rotate_axis": [0, 0, 2], "rotate_degrees": 90}},
+        {"primitive": "plane"}])
+    scene, _ = scene_from_dict(doc)
+    assert scene.camera.shutter == (0.0, 0.5)
+    assert list(scene.motions) == [0]
+    motion = scene.motions[0]
+    np.testing.assert_array_equal(motion.translate, [0.5, 0, 0])
+    np.testing.assert_array_equal(motion.axis, [0, 0, 1])
+    np.testing.assert_allclose(motion.centre, [1, 2, 3])  # the box's bounds centre
+    assert motion.degrees == 90.0
+
+
+@pytest.mark.parametrize("camera, motion, message", [
+    ({"shutter": [1.0, 0.0]}, None, r"camera\.shutter: expected \[open, close\] with open <= close"),
+    ({"shutter": [0.0]}, None, r"camera\.shutter: expected a list of 2 numbers"),
+    ({}, {"translat": [1, 0, 0]}, r"objects\[0\]\.motion\.translat: unknown key"),
+    ({}, {"rotate_degrees": 10}, r"objects\[0\]\.motion\.rotate_axis: missing"),
+    ({}, {"rotate_axis": [0, 0, 0], "rotate_degrees": 10}, r"objects\[0\]\.motion: a rotating motion needs"),
+    ({}, [1, 0, 0], r"objects\[0\]\.motion: expected a table"),
+])
+def test_bad_motion_keys_name_the_key(camera, motion, message):
+    from rtmesh.errors import SceneError
+    from rtmesh.scene_file import scene_from_dict
+
+    obj = {"primitive": "box"}
+    if motion is not None:
+        obj["motion"] = motion
+    doc = dict(SCENE_BASE, camera={**SCENE_BASE["camera"], **camera}, objects=[obj])
+    with pytest.raises(SceneError, match=message):
+        scene_from_dict(doc)
