@@ -116,7 +116,8 @@ class Integrator:
         self.motion = None
         if blurs(scene):
             self.motion = MotionAccel(scene.vertices - self.shift, scene.faces, scene.object_id,
-                                      {k: m.shifted(self.shift) for k, m in object_motions(scene).items()})
+                                      {k: m.shifted(self.shift) for k, m in object_motions(scene).items()},
+                                      scene.camera.shutter)
         self.accel = self.motion or Accel(scene.vertices - self.shift, scene.faces)
         # the scene's size in the re-centred frame sets the near-zero offset (see
         # offset_ray_origins); it cannot be zero for a scene that renders.  With motion,

@@ -53,6 +53,7 @@ import numpy as np
 
 from .accel import Accel, Hits
 from .batches import component_major, take_rows
+from .vecmath import dot
 
 
 @dataclass
@@ -242,15 +243,35 @@ def swept_bounds(scene):
 
 
 class _Mover:
-    """One moving object: its Accel over the rest-pose triangles and its global face ids."""
+    """One moving object: its Accel over the rest-pose triangles, its global face ids, and a
+    sphere holding everything it sweeps during the shutter (to skip the rays that miss it)."""
 
-    __slots__ = ("accel", "faces", "motion")
+    __slots__ = ("accel", "faces", "motion", "centre", "radius2")
 
-    def __init__(self, vertices, faces, face_ids, motion):
+    def __init__(self, vertices, faces, face_ids, motion, shutter):
         used, local = np.unique(faces[face_ids], return_inverse=True)
         self.accel = Accel(vertices[used], local.reshape(-1, 3))
         self.faces = face_ids
         self.motion = motion
+        # the object stays within `reach` of its pivot (rotation keeps distances to the
+        # pivot), and the pivot moves along a segment: a sphere around the segment's middle
+        points = self.accel.vertices
+        pivot = motion.centre if motion.rotates else points.mean(axis=0)
+        reach = float(np.linalg.norm(points - pivot, axis=1).max())
+        t0, t1 = shutter
+        self.centre = pivot + 0.5 * (t0 + t1) * motion.translate
+        radius = reach + 0.5 * abs(t1 - t0) * float(np.linalg.norm(motion.translate))
+        # generous margin: the test only has to be conservative
+        self.radius2 = (radius * (1.0 + 1e-6) + 1e-6 * max(float(np.abs(self.centre).max()), 1.0)) ** 2
+
+    def candidates(self, origins, directions, t_max):
+        """Rows of the rays that can meet the object before ``t_max`` (unit directions)."""
+        oc = origins - self.centre
+        b = dot(oc, directions)
+        c = dot(oc, oc) - self.radius2
+        disc = b * b - c
+        root = np.sqrt(np.maximum(disc, 0.0))
+        return np.flatnonzero((disc >= 0.0) & (root - b >= 0.0) & (-b - root <= t_max))
 
 
 class MotionAccel:
@@ -267,6 +288,8 @@ class MotionAccel:
     object_id : (F,) int
     motions : dict of int to Motion
         Moving objects, in the same (re-centred) frame as ``vertices``.
+    shutter : (2,) float
+        The interval every query time lies in.
 
     Attributes
     ----------
@@ -277,7 +300,7 @@ class MotionAccel:
         Index of the face's moving object in :attr:`movers`, -1 for static faces.
     """
 
-    def __init__(self, vertices, faces, object_id, motions):
+    def __init__(self, vertices, faces, object_id, motions, shutter=(0.0, 1.0)):
         faces = np.asarray(faces)
         object_id = np.asarray(object_id)
         self.face_mover = np.full(len(faces), -1, dtype=np.intp)
@@ -286,7 +309,7 @@ class MotionAccel:
             face_ids = np.flatnonzero(object_id == k)
             if len(face_ids):
                 self.face_mover[face_ids] = len(self.movers)
-                self.movers.append(_Mover(vertices, faces, face_ids, motions[k]))
+                self.movers.append(_Mover(vertices, faces, face_ids, motions[k], shutter))
         self.static_faces = np.flatnonzero(self.face_mover < 0)
         self.static = Accel(vertices, faces[self.static_faces]) if len(self.static_faces) else None
         triangles = np.zeros((9, len(faces)))
@@ -318,14 +341,20 @@ class MotionAccel:
             t, prim, u, v = np.full(n, np.inf), np.full(n, -1, dtype=np.int64), np.zeros(n), np.zeros(n)
         for mover in self.movers:
             m = mover.motion
-            h = mover.accel.intersect(m.to_rest(origins, time), m.rotate_vectors(directions, time, inverse=True))
+            rows = mover.candidates(origins, directions, t)
+            if not len(rows):
+                continue
+            tr = time[rows]
+            h = mover.accel.intersect(m.to_rest(take_rows(origins, rows), tr),
+                                      m.rotate_vectors(take_rows(directions, rows), tr, inverse=True))
             # the static scene wins ties: a fixed order keeps the result deterministic
-            closer = np.flatnonzero(h.t < t)
+            closer = np.flatnonzero(h.t < t[rows])
             if len(closer):
-                t[closer] = h.t[closer]
-                prim[closer] = mover.faces[h.prim[closer]]
-                u[closer] = h.u[closer]
-                v[closer] = h.v[closer]
+                hit_rows = rows[closer]
+                t[hit_rows] = h.t[closer]
+                prim[hit_rows] = mover.faces[h.prim[closer]]
+                u[hit_rows] = h.u[closer]
+                v[hit_rows] = h.v[closer]
         return Hits(t, prim.astype(np.int32), u, v)
 
     def occluded(self, origins, directions, t_max, rows=None, time=None):
@@ -355,6 +384,10 @@ class MotionAccel:
             free = np.flatnonzero(~occluded)
             if not len(free):
                 break
+            o, d = take_rows(origins, free).astype(np.float64), take_rows(directions, free)
+            free = free[mover.candidates(o, d, t_max[free])]
+            if not len(free):
+                continue
             m, tf = mover.motion, time[free]
             o = m.to_rest(take_rows(origins, free).astype(np.float64), tf)
             d = m.rotate_vectors(take_rows(directions, free), tf, inverse=True)
