@@ -169,3 +169,13 @@ def test_roughness_scene_key_is_validated():
     # roughness without anything to reflect enables nothing
     scene, _ = scene_from_dict({**base, "materials": {"m": {"roughness": 0.5}}})
     assert not scene.materials.any_glossy
+
+
+def test_glossy_depth_of_field_render_is_bit_identical_across_threads_and_chunks():
+    scene = glossy_ball_scene(0.2)
+    scene.camera.aperture, scene.camera.focus_distance = 0.3, 5.0
+    for sampler in ("jittered", "sobol"):
+        one = render(scene, spp=4, sampler=sampler, threads=1, chunk_samples=100000)
+        two = render(scene, spp=4, sampler=sampler, threads=2, chunk_samples=200)
+        assert {"glossy", "lens"} <= set(one.stats.stages_enabled)
+        np.testing.assert_array_equal(one.image, two.image)
