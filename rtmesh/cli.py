@@ -47,6 +47,8 @@ def build_parser():
     p.add_argument("--threads", type=_positive_int, help="worker threads (default: all cores)")
     p.add_argument("--ao-samples", type=int, help="ambient-occlusion rays per hit (0 = off)")
     p.add_argument("--ao-distance", type=float, help="ambient-occlusion reach, scene units")
+    p.add_argument("--light-samples", type=_positive_int,
+                   help="shadow rays per hit and area light (soft shadows; default 4)")
     p.add_argument("--passes", type=_names(PASSES), help="extra EXR passes, comma-separated: " + ", ".join(PASSES))
     p.add_argument("--fresnel", choices=FRESNEL_MODES, help="Fresnel model for dielectrics")
     p.add_argument("--exposure", type=float, help="exposure in stops for 8-bit output")
@@ -164,6 +166,7 @@ def cmd_render(args):
         "width": args.width, "height": args.height, "spp": args.spp, "sampler": args.sampler,
         "max_depth": args.max_depth, "seed": args.seed, "threads": args.threads,
         "ao_samples": args.ao_samples, "ao_distance": args.ao_distance, "passes": args.passes,
+        "light_samples": args.light_samples,
         "fresnel": args.fresnel, "exposure": args.exposure, "tonemap": args.tonemap,
     }
     scene, settings = load_scene(args.input, **overrides)

@@ -28,12 +28,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from .accel import Accel, barycentric_interpolate, offset_ray_origins
+from .area_lights import AreaLighting, emissive_mesh_light, is_area_light
 from .batches import RayBatch, component_major, take_rows
 from .film import Film
 from .glossy import sample_glossy_directions
 from .motion import MotionAccel, blurs, object_motions, scene_at_time, swept_bounds
 from .sampling import (Dim, decorrelated_points, pixel_offsets, square_to_cosine_hemisphere,
-                       stratified_values, uniform2)
+                       stratified_points, stratified_values, uniform2)
 from .settings import RenderStats
 from .vecmath import dot, fresnel_dielectric, fresnel_schlick, normalize, orthonormal_basis, reflect, refract
 from .materials import blinn_phong_highlight, lambert
@@ -126,8 +127,17 @@ class Integrator:
         self.offset_scale = max(float(np.abs(bounds - self.shift).max()), 1e-30)
         self.camera = _translated(scene.camera, self.shift)
         self.camera.frame()  # fail early on a degenerate camera
-        self.lights = [_translated(light, self.shift) for light in scene.lights if not light.is_black]
+        lights = [_translated(light, self.shift) for light in scene.lights if not light.is_black]
+        self.lights = [light for light in lights if not is_area_light(light)]
         m = scene.materials
+        area_lights = [light for light in lights if is_area_light(light)]
+        if m.any_emission:
+            emitters = emissive_mesh_light(self.accel.triangles, scene.face_normals,
+                                           m.emission[scene.material_id])
+            area_lights += [emitters] if emitters is not None else []
+        self.area_lighting = (AreaLighting(area_lights, self.accel, self.settings, self.offset_scale)
+                              if area_lights else None)
+        shaded_any = bool(((m.diffuse > 0) | (m.specular > 0)).any())
         self.ao_distance = settings.ao_distance or 0.2 * float(np.linalg.norm(np.ptp(scene.bounds, axis=0)))
         ambient_on = bool((scene.ambient > 0).any() and (m.ambient > 0).any())
         # the AO pass alone asks for 16 rays per camera hit unless ao_samples says otherwise
@@ -135,7 +145,9 @@ class Integrator:
         self.stages = {
             "emission": m.any_emission,
             "ambient": ambient_on,
-            "lights": bool(self.lights) and bool(((m.diffuse > 0) | (m.specular > 0)).any()),
+            "lights": bool(self.lights) and shaded_any,
+            "area_lights": self.area_lighting is not None and shaded_any,
+            "area_light_visibility": self.area_lighting is not None and bool(self.area_lighting.visible),
             "specular": m.any_specular,
             "smooth_normals": scene.vertex_normals is not None,
             "reflection": settings.max_depth > 0 and (m.any_mirror or m.any_transmission),
@@ -300,10 +312,15 @@ class Integrator:
     # ---------------------------------------------------------------- stages
     def _shade(self, rays, hits, depth, radiance, ao_pass, keys, stats, clock, sample_time=None):
         """Shade one depth level; returns the rays of the next level."""
-        hit = hits.prim >= 0
         m = self.scene.materials
         # camera rays (depth 0) are one per sample, in sample order, with unit throughput
         primary = depth == 0
+
+        # area lights seen directly: rays meeting one before any surface end there
+        on_light = None
+        if self.stages["area_light_visibility"]:
+            on_light = self.area_lighting.intersect(rays.origins, rays.directions, hits)
+        hit = hits.prim >= 0
 
         # absorption: rays inside a medium lose light over the distance they travelled
         if self.stages["absorption"]:
@@ -314,10 +331,15 @@ class Integrator:
                 # exp(-0 * inf) would be NaN for a non-absorbing medium left through a hole
                 rays.throughput[inside] *= np.where(sigma > 0, np.exp(-sigma * t), 1.0)
 
+        if on_light is not None and len(on_light[0]):
+            ended, emitted = on_light
+            _scatter_add(radiance, rays.sample[ended], take_rows(rays.throughput, ended) * emitted,
+                         unique=primary)
+
         # misses: rays leaving the scene see the background
         n_hit = int(np.count_nonzero(hit))
         if self.stages["background"] and n_hit < len(hit):
-            miss = np.flatnonzero(~hit)
+            miss = np.flatnonzero(hits.prim == -1)  # -2: ended on an area light
             _scatter_add(radiance, rays.sample[miss],
                          take_rows(rays.throughput, miss) * self.scene.background, unique=primary)
 
@@ -392,7 +414,7 @@ class Integrator:
         return _put_rows(ng.copy(order="K"), rows, ns)
 
     def _local_shading(self, srf, depth, ao_pass, keys, stats, clock):
-        """Emission, ambient (with AO) and direct light with hard shadows; (k, 3) or None."""
+        """Emission, ambient (with AO) and direct light with shadows; (k, 3) or None."""
         st = self.stages
         local = None
         if st["emission"]:
@@ -410,14 +432,15 @@ class Integrator:
                 amb = amb * ao[:, None]
             local = amb if local is None else local + amb
 
-        if st["lights"]:
-            direct = self._direct_light(srf, stats, clock)
+        if st["lights"] or st["area_lights"]:
+            direct = self._direct_light(srf, depth, keys, stats, clock)
             if direct is not None:
                 local = direct if local is None else local + direct
         return local
 
-    def _direct_light(self, srf, stats, clock):
-        """Blinn-Phong light from every light, with one shadow ray per lit (hit, light).
+    def _direct_light(self, srf, depth, keys, stats, clock):
+        """Blinn-Phong light from every light: one shadow ray per lit (hit, point-like light),
+        ``light_samples`` per (hit, area light) (see :mod:`rtmesh.area_lights`).
 
         Returns
         -------
@@ -436,15 +459,9 @@ class Integrator:
         if self.stages["specular"]:
             has_specular = self._has_specular.take(mat)
             spec_rows = None if has_specular.all() else np.flatnonzero(has_specular)
-        total = None
-        for light in self.lights:
-            wi, distance, incident = light.illuminate(p)
-            # only lights on the side the ray came from can light this point (no leaks
-            # through the surface), and only where the light reaches at all
-            lit = (dot(wi, ng) > 0.0) & (incident > 0.0).any(axis=1)
-            j = np.flatnonzero(lit)
-            if not len(j):
-                continue
+
+        def reflectance(wi, lit):
+            """Blinn-Phong factor toward unit directions ``wi``; highlights only where ``lit``."""
             cos_i = dot(ns, wi)
             value = lambert(cos_i, kd)
             if self.stages["specular"]:
@@ -454,6 +471,18 @@ class Integrator:
                     take_rows(ns, s), -take_rows(d, s), take_rows(wi, s), take_rows(cos_i, s),
                     take_rows(self._specular, mat_s), self.scene.materials.shininess[mat_s])
                 value = _add_rows(value, s, highlight)
+            return value
+
+        total = None
+        for light in self.lights:
+            wi, distance, incident = light.illuminate(p)
+            # only lights on the side the ray came from can light this point (no leaks
+            # through the surface), and only where the light reaches at all
+            lit = (dot(wi, ng) > 0.0) & (incident > 0.0).any(axis=1)
+            j = np.flatnonzero(lit)
+            if not len(j):
+                continue
+            value = reflectance(wi, lit)
             # origins only for the lit rows, offset along the normal and the shadow ray
             p_j, wi_j = take_rows(p, j), take_rows(wi, j)
             origins = offset_ray_origins(p_j, take_rows(ng, j), np.float32, self.offset_scale, wi_j)
@@ -467,6 +496,14 @@ class Integrator:
             np.multiply(value, incident, out=value)
             contribution = np.where(visible[:, None], value, 0.0)
             total = contribution if total is None else total + contribution
+        if self.stages["area_lights"]:
+            pixel, sample_in_pixel = keys
+            sample = take_rows(srf.sample, rows)
+            area = self.area_lighting.direct(p, ng, reflectance, pixel[sample],
+                                             sample_in_pixel[sample], depth, stats, clock,
+                                             _time_rows(srf.time, rows))
+            if area is not None:
+                total = area if total is None else total + area
         if total is None or rows is None:
             return total
         return _put_rows(np.zeros((len(srf.mat), 3), order="F"), rows, total)
@@ -479,8 +516,11 @@ class Integrator:
         t, b = orthonormal_basis(srf.ng)
         px, sp = pixel[srf.sample], sample_in_pixel[srf.sample]
         free = np.zeros(k)
+        # the n_ao rays of a hit are one stratified set of the render's sampler
+        first = sp * n_ao
         for i in range(n_ao):
-            u = uniform2(self.settings.seed, px, sp, Dim.AO + 2 * (i + depth * 1024))
+            u = stratified_points(self.settings.sampler, self.settings.seed, px, first + i, n_ao,
+                                  Dim.AO + 2 * depth)
             w = square_to_cosine_hemisphere(u)
             d = t * w[:, :1] + b * w[:, 1:2] + srf.ng * w[:, 2:3]
             origins = offset_ray_origins(srf.p, srf.ng, np.float32, self.offset_scale, d)
@@ -563,7 +603,6 @@ class Integrator:
         if refract_batch is not None:
             batches.append(refract_batch)
         return RayBatch.concatenate(batches)
-
 
     def _glossy(self, mirror, ng, mat, sample, depth, keys):
         """Reflection directions of rough materials, sampled in a lobe around the mirror.

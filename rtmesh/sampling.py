@@ -27,7 +27,8 @@ class Dim(IntEnum):
     PIXEL = 0  # (x, y) position inside the pixel
     LENS = 2  # (u, v) on the thin-lens aperture
     TIME = 4  # time in the shutter interval (one number; dimension 5 is unused)
-    AO = 16  # first of the ambient-occlusion dimensions; AO ray k at depth d uses AO + 2*(k + d*1024)
+    AO = 16  # first of the ambient-occlusion dimensions; AO rays at depth d use AO + 2*d
+    LIGHT = 1 << 24  # first of the area-light dimensions (see rtmesh.area_lights.light_dimension)
     GLOSSY = 1 << 25  # glossy-reflection directions; the rays spawned at depth d use GLOSSY + 2*d
 
 
@@ -320,3 +321,34 @@ def square_to_cosine_hemisphere(u):
 def square_to_cosine_hemisphere_pdf(w):
     """Solid-angle density of :func:`square_to_cosine_hemisphere`: ``max(0, z) / pi``."""
     return np.maximum(0.0, w[:, 2]) / np.pi
+
+
+def square_to_uniform_triangle(u):
+    """Uniform points on a triangle, as barycentric weights of its vertices 1 and 2.
+
+    ``(b1, b2) = sqrt(u0) * (1 - u1, u1)``: the Jacobian of the map is the constant 1/2, so
+    the density is uniform over the triangle, and the map is continuous, so stratified
+    ``u`` stay stratified on the triangle.
+
+    Parameters
+    ----------
+    u : (n, 2) float
+        Points in [0, 1)^2.
+
+    Returns
+    -------
+    (n, 2) float
+        Barycentric weights ``(b1, b2)`` with ``b1, b2 >= 0`` and ``b1 + b2 <= 1``
+        (see :func:`rtmesh.accel.barycentric_interpolate`); density ``1 / area`` with respect
+        to area on any triangle.
+    """
+    s = np.sqrt(u[:, 0])
+    return np.stack([s * (1.0 - u[:, 1]), s * u[:, 1]], axis=1)
+
+
+def uniform_triangle_to_square(b):
+    """Inverse of :func:`square_to_uniform_triangle`, (n, 2) -> (n, 2)."""
+    total = b[:, 0] + b[:, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u1 = np.where(total > 0.0, b[:, 1] / total, 0.0)
+    return np.stack([total * total, u1], axis=1)

@@ -20,6 +20,7 @@ except ModuleNotFoundError:  # Python 3.10
 from .camera import Camera
 from .errors import RtmeshError, SceneError
 from .importers import load_trimesh, parts_from_trimesh
+from .area_lights import DiskLight, QuadLight
 from .lights import DirectionalLight, PointLight, SpotLight
 from .materials import Material
 from .motion import Motion
@@ -133,6 +134,7 @@ RENDER_KEYS = {
     "width": _int, "height": _int, "spp": _int, "sampler": _str, "max_depth": _int,
     "seed": _int, "threads": _int, "chunk_samples": _int, "cutoff": _non_negative,
     "fresnel": _str, "ao_samples": _int, "ao_distance": _positive, "passes": _str_list,
+    "light_samples": _int,
     "exposure": _float, "tonemap": _str,
 }
 CAMERA_KEYS = {
@@ -154,15 +156,18 @@ OBJECT_KEYS = {
 }
 MOTION_KEYS = {"translate": _vec3, "rotate_axis": _vec3, "rotate_degrees": _float}
 LIGHT_KEYS = {
-    "type": _one_of("point", "directional", "spot"),
+    "type": _one_of("point", "directional", "spot", "quad", "disk"),
     "position": _vec3, "direction": _vec3, "look_at": _vec3,
     "intensity": _colour, "irradiance": _colour,
     "inner_angle": _non_negative, "outer_angle": _non_negative,
+    "edge1": _vec3, "edge2": _vec3, "radius": _positive, "radiance": _colour, "visible": _bool,
 }
 LIGHT_REQUIRED = {
     "point": ("position", "intensity"),
     "directional": ("direction", "irradiance"),
     "spot": ("position", "intensity"),
+    "quad": ("position", "edge1", "edge2", "radiance"),
+    "disk": ("position", "radius", "radiance"),
 }
 TOP_LEVEL = ("render", "camera", "environment", "materials", "objects", "lights")
 
@@ -410,11 +415,14 @@ def _motion(r, table, where):
 def _light(r, values, where):
     kind = values.get("type")
     if kind is None:
-        raise r.error(f"{where}.type", "missing (point, directional or spot)")
+        raise r.error(f"{where}.type", "missing (point, directional, spot, quad or disk)")
     allowed = {"point": {"type", "position", "intensity"},
                "directional": {"type", "direction", "irradiance"},
                "spot": {"type", "position", "direction", "look_at", "intensity", "inner_angle",
-                        "outer_angle"}}[kind]
+                        "outer_angle"},
+               "quad": {"type", "position", "edge1", "edge2", "radiance", "visible"},
+               "disk": {"type", "position", "direction", "look_at", "radius", "radiance",
+                        "visible"}}[kind]
     for key in values:
         if key not in allowed:
             raise r.error(f"{where}.{key}", f"does not apply to a {kind} light")
@@ -426,9 +434,15 @@ def _light(r, values, where):
             return PointLight(values["position"], values["intensity"])
         if kind == "directional":
             return DirectionalLight(values["direction"], values["irradiance"])
+        if kind == "quad":
+            return QuadLight(values["position"], values["edge1"], values["edge2"],
+                             values["radiance"], values.get("visible", True))
         if ("direction" in values) == ("look_at" in values):
-            raise ValueError("a spot light needs exactly one of direction or look_at")
+            raise ValueError(f"a {kind} light needs exactly one of direction or look_at")
         direction = values.get("direction", values.get("look_at", 0) - values["position"])
+        if kind == "disk":
+            return DiskLight(values["position"], direction, values["radius"], values["radiance"],
+                             values.get("visible", True))
         return SpotLight(values["position"], direction, values["intensity"],
                          values.get("inner_angle", 20.0), values.get("outer_angle", 30.0))
     except ValueError as exc:

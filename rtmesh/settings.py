@@ -37,6 +37,9 @@ class RenderSettings:
         Ambient-occlusion rays per hit; 0 turns AO off (unless the ``ao`` pass is asked for).
     ao_distance : float or None
         Occluders farther than this do not count; None means 0.2 x the scene's diagonal.
+    light_samples : int
+        Shadow rays per (hit, area light) toward stratified points on the light (soft
+        shadows); point, spot and directional lights always take one.
     passes : tuple of str
         Extra output passes (``"ao"``).
     exposure : float
@@ -57,6 +60,7 @@ class RenderSettings:
     fresnel: str = "schlick"
     ao_samples: int = 0
     ao_distance: float | None = None
+    light_samples: int = 4
     passes: tuple = ()
     exposure: float = 0.0
     tonemap: str = "reinhard"
@@ -74,6 +78,7 @@ class RenderSettings:
             (self.fresnel in FRESNEL_MODES, f"fresnel must be one of {', '.join(FRESNEL_MODES)}"),
             (self.ao_samples >= 0, "ao_samples must be >= 0"),
             (self.ao_distance is None or self.ao_distance > 0, "ao_distance must be > 0"),
+            (self.light_samples >= 1, "light_samples must be >= 1"),
             (all(p in PASSES for p in self.passes), f"passes must be among {', '.join(PASSES)}"),
             (self.tonemap in TONEMAPS, f"tonemap must be one of {', '.join(TONEMAPS)}"),
         ]
@@ -93,7 +98,9 @@ class RenderSettings:
             return os.cpu_count() or 1
 
 
-RAY_KINDS = ("camera", "shadow", "reflection", "refraction", "ao")
+# "shadow": one per (hit, point/spot/directional light); "area_shadow": light_samples per
+# (hit, area light or emissive object)
+RAY_KINDS = ("camera", "shadow", "area_shadow", "reflection", "refraction", "ao")
 STAGES = ("camera", "intersect", "shade", "shadow", "ao", "spawn", "film")
 
 

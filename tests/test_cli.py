@@ -140,3 +140,15 @@ def test_failed_write_keeps_existing_image_and_leaves_no_temporary(scene_file, t
     assert main(["render", str(scene_file), "-o", str(out), "-q"]) == 130
     assert out.read_bytes() == b"previous image"
     assert sorted(os.listdir(tmp_path)) == ["keep.png", "scene.toml"]
+
+
+def test_bundled_showcase_scene_renders(tmp_path):
+    # the README's first command renders assets/showcase.toml: keep that file valid
+    showcase = os.path.join(os.path.dirname(__file__), os.pardir, "assets", "showcase.toml")
+    out = tmp_path / "showcase.png"
+    assert main(["render", showcase, "-o", str(out), "--width", "64", "--height", "48", "--spp", "1",
+                 "-q"]) == 0
+    image, _ = read_image(out)
+    assert image.shape == (48, 64, 3)
+    # lit objects in front of a sky-blue background: not a blank frame
+    assert image.std() > 0.05

@@ -274,3 +274,19 @@ def test_bad_motion_keys_name_the_key(camera, motion, message):
     doc = dict(SCENE_BASE, camera={**SCENE_BASE["camera"], **camera}, objects=[obj])
     with pytest.raises(SceneError, match=message):
         scene_from_dict(doc)
+
+
+def test_area_light_shadows_see_moving_objects_at_the_rays_time():
+    from rtmesh.area_lights import QuadLight
+
+    scene = moving_box_over_floor(degrees=40.0)
+    # a small quad light facing down, where the point light was
+    scene.lights = [QuadLight([2.5, 0.0, 6.0], [0.6, 0.0, 0.0], [0.0, -0.6, 0.0], 110.0, visible=False)]
+    size = dict(width=24, height=24, sampler="jittered", max_depth=0, light_samples=2)
+    blurred = render(scene, spp=64, **size)
+    assert {"motion", "area_lights"} <= set(blurred.stats.stages_enabled)
+    times = (np.arange(16) + 0.5) / 16
+    average = np.mean([render(scene_at_time(scene, t), spp=16, **size).image for t in times], axis=0)
+    assert np.abs(blurred.image - average).mean() < 0.01
+    instant = render(scene_at_time(scene, 0.5), spp=16, **size).image
+    assert np.abs(blurred.image - instant).mean() > 3 * np.abs(blurred.image - average).mean()
