@@ -155,11 +155,12 @@ class QuadLight:
         (n,) float
         """
         cos = directions @ self.normal
+        # rays parallel to the plane get t = inf or NaN and fail every test below
         with np.errstate(divide="ignore", invalid="ignore"):
             t = ((self.corner - origins) @ self.normal) / cos
-        p = origins + directions * t[:, None] - self.corner
-        a, b = p @ self._dual1, p @ self._dual2
-        hit = (cos < 0.0) & (t > 0.0) & (a >= 0.0) & (a <= 1.0) & (b >= 0.0) & (b <= 1.0)
+            p = origins + directions * t[:, None] - self.corner
+            a, b = p @ self._dual1, p @ self._dual2
+            hit = (cos < 0.0) & (t > 0.0) & (a >= 0.0) & (a <= 1.0) & (b >= 0.0) & (b <= 1.0)
         return np.where(hit, t, np.inf)
 
 
@@ -219,10 +220,10 @@ class DiskLight:
     def intersect(self, origins, directions):
         """See :meth:`QuadLight.intersect`."""
         cos = directions @ self.normal
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore"):  # see QuadLight.intersect
             t = ((self.position - origins) @ self.normal) / cos
-        p = origins + directions * t[:, None] - self.position
-        hit = (cos < 0.0) & (t > 0.0) & (dot(p, p) <= self.radius ** 2)
+            p = origins + directions * t[:, None] - self.position
+            hit = (cos < 0.0) & (t > 0.0) & (dot(p, p) <= self.radius ** 2)
         return np.where(hit, t, np.inf)
 
 

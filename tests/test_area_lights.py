@@ -84,7 +84,8 @@ def direct_light(lights, points, normal=(0.0, 0.0, 1.0), blockers=(), samples=64
         offsets = np.cumsum([0] + [len(v) for v, _ in blockers[:-1]])
         faces = np.concatenate([np.asarray(f) + o for (_, f), o in zip(blockers, offsets)])
     else:  # nothing to hit: one tiny triangle far away
-        vertices, faces = np.array([[1e3, 1e3, 1e3], [1e3 + 1e-3, 1e3, 1e3], [1e3, 1e3 + 1e-3, 1e3]]), np.array([[0, 1, 2]])
+        vertices = np.array([[1e3, 1e3, 1e3], [1e3 + 1e-3, 1e3, 1e3], [1e3, 1e3 + 1e-3, 1e3]])
+        faces = np.array([[0, 1, 2]])
     accel = Accel(vertices, faces)
     scale = 10.0
     ng = np.broadcast_to(np.asarray(normal, dtype=np.float64), (k, 3))
@@ -345,7 +346,8 @@ def test_all_emitters_form_one_light_sharing_samples_by_power():
     # per point in all, a quarter of them to the dim square; the estimate is the sum of both
     tri = []  # rows [v0, v1 - v0, v2 - v0], as Accel.triangles
     for x0 in (-1.0, 0.2):
-        v0, v1, v2, v3 = np.array([[x0, -0.5, 1.5], [x0, 0.5, 1.5], [x0 + 1.0, 0.5, 1.5], [x0 + 1.0, -0.5, 1.5]])
+        v0, v1, v2, v3 = np.array([[x0, -0.5, 1.5], [x0, 0.5, 1.5], [x0 + 1.0, 0.5, 1.5],
+                                   [x0 + 1.0, -0.5, 1.5]])
         tri += [np.concatenate([v0, v1 - v0, v2 - v0]), np.concatenate([v0, v2 - v0, v3 - v0])]
     emission = np.repeat([[1.0] * 3, [3.0] * 3], 2, axis=0)
     light = emissive_mesh_light(np.array(tri), np.tile(DOWN, (4, 1)), emission)
@@ -360,13 +362,46 @@ def test_all_emitters_form_one_light_sharing_samples_by_power():
         boxes = [(-1.0 - x, 0.0 - x, -0.5, 0.5, 1.5), (0.2 - x, 1.2 - x, -0.5, 0.5, 1.5)]
         mean = sum(L * rectangle_integral(*b) for L, b in zip(radiance, boxes))
         # one sample: lamp i with probability share_i, then L_i (A_i g) / share_i
-        second = sum(L * L / p * (var + m * m)
-                     for L, p, (m, var) in zip(radiance, share, (rectangle_moments(*b, n=100) for b in boxes)))
+        moments = [rectangle_moments(*b, n=100) for b in boxes]
+        second = sum(L * L / p * (var + m * m) for L, p, (m, var) in zip(radiance, share, moments))
         expected.append(mean)
         sigma.append(math.sqrt((second - mean ** 2) / n))
     expected, sigma = np.array(expected), np.array(sigma)
     assert (np.abs(value - expected) < 5 * sigma).all()
     assert abs((value - expected).sum()) < 5 * math.sqrt((sigma ** 2).sum())
+
+
+def test_an_emitter_never_shadows_its_own_samples_even_at_grazing_angles():
+    # the emissive square in Embree or not: no shadow ray may stop on the triangle it aims
+    # at, so the estimates are identical, down to points 1e-3 below the emitter's plane
+    # and 1000 units away (seen at 0.1 degree)
+    v = np.array([[-0.5, -0.5, 1.5], [-0.5, 0.5, 1.5], [0.5, 0.5, 1.5], [0.5, -0.5, 1.5]])
+    tri = np.array([np.concatenate([v[0], v[1] - v[0], v[2] - v[0]]),
+                    np.concatenate([v[0], v[2] - v[0], v[3] - v[0]])])
+    light = emissive_mesh_light(tri, np.tile(DOWN, (2, 1)), np.ones((2, 3)))
+    x = np.concatenate([np.linspace(-3.0, 3.0, 25), [10.0, 100.0, 1000.0]])
+    for z in (0.0, 1.5 - 1e-3):
+        points = np.column_stack([x, 0.3 * np.ones_like(x), np.full_like(x, z)])
+        alone, _ = direct_light([light], points, samples=16)
+        with_itself, _ = direct_light([light], points, blockers=[(v, [[0, 1, 2], [0, 2, 3]])], samples=16)
+        assert (alone > 0).all()
+        np.testing.assert_array_equal(with_itself, alone)
+
+
+def test_a_light_flush_with_a_ceiling_lights_the_room_and_is_seen():
+    # the light lies exactly in the plane of a ceiling (facing down): the ceiling neither
+    # shadows it nor hides it from the camera
+    ceiling = quad([[-5.0, -5.0, 2.0], [-5.0, 5.0, 2.0], [5.0, 5.0, 2.0], [5.0, -5.0, 2.0]])  # faces down
+    light = ceiling_quad(half=0.5, height=2.0, radiance=3.0)
+    x = np.linspace(-3.0, 3.0, 13)
+    points = np.column_stack([x, np.zeros_like(x), np.zeros_like(x)])
+    open_sky, _ = direct_light([light], points, samples=16)
+    under_ceiling, _ = direct_light([light], points, blockers=[ceiling], samples=16)
+    np.testing.assert_array_equal(under_ceiling, open_sky)
+    camera = Camera([0.0, 0.0, 0.5], [0.0, 0.0, 2.0], [0.0, 1.0, 0.0], 10.0)
+    scene = Scene.from_parts([part("floor", floor_quad(5.0)), part("ceiling", ceiling)], [Material("f")],
+                             [light], camera)
+    np.testing.assert_array_equal(render(scene, width=4, height=4).image, np.float32(3.0))
 
 
 def test_emissive_mesh_emission_is_seen_from_both_sides_and_lights_both():
@@ -480,6 +515,48 @@ def test_area_light_stages_run_only_for_scenes_with_area_lights():
     assert {"area_lights", "area_light_visibility"} <= set(lit.stats.stages_enabled)
 
 
+def test_light_intersection_agrees_with_embree_on_the_same_quad():
+    # a tilted parallelogram light, and the same shape as two triangles traced by Embree:
+    # the light answers only for rays coming at its emitting side
+    light = QuadLight([0.3, -0.2, 1.0], [1.2, 0.1, 0.3], [-0.2, 0.9, 0.1], 1.0)
+    corners = light.corner + np.array([[0, 0], [1, 0], [1, 1], [0, 1]]) @ np.stack([light.edge1, light.edge2])
+    accel = Accel(corners, np.array([[0, 1, 2], [0, 2, 3]]))
+    rng = np.random.default_rng(7)
+    origins = rng.uniform(-3.0, 3.0, size=(4000, 3))
+    targets = light.corner + rng.uniform(-0.2, 1.2, size=(4000, 2)) @ np.stack([light.edge1, light.edge2])
+    directions = targets - origins
+    directions /= np.linalg.norm(directions, axis=1)[:, None]
+    directions[:10] = np.cross(light.edge1, light.normal) / np.linalg.norm(light.edge1)  # parallel
+    with np.errstate(all="raise"):
+        t = light.intersect(origins, directions)
+    embree = accel.intersect(origins, directions).t
+    front = directions @ light.normal < 0.0
+    # away from the edges (where float32 Embree may round either way) and from grazing
+    # angles (where its float32 t error grows like 1 / cos) they agree
+    local = targets - light.corner
+    a, b = local @ light._dual1, local @ light._dual2
+    clear = (np.minimum(np.abs(a - np.round(a)), np.abs(b - np.round(b))) > 1e-3) & \
+        (np.abs(directions @ light.normal) > 0.05)
+    expected = np.where(front, embree, np.inf)
+    assert np.isfinite(expected[clear]).sum() > 500
+    np.testing.assert_allclose(t[clear], expected[clear], rtol=1e-5)
+    assert np.isinf(t[:10]).all()
+    disk = DiskLight([0.0, 0.0, 1.0], DOWN, 0.5, 1.0)
+    with np.errstate(all="raise"):
+        t = disk.intersect(origins, directions)
+    hit_point = origins + np.where(np.isfinite(t), t, 0.0)[:, None] * directions
+    seen = np.isfinite(t)
+    assert seen.sum() > 100
+    np.testing.assert_allclose(hit_point[seen, 2], 1.0, atol=1e-12)
+    assert (np.hypot(hit_point[seen, 0], hit_point[seen, 1]) <= 0.5 + 1e-12).all()
+    assert (directions[seen, 2] > 0).all()  # only from below, the side it emits to
+    # and every ray from below through the disk is seen
+    z_hit = (1.0 - origins[:, 2]) / directions[:, 2]
+    crossing = origins + z_hit[:, None] * directions
+    through = (directions[:, 2] > 0) & (z_hit > 0) & (np.hypot(crossing[:, 0], crossing[:, 1]) < 0.5 - 1e-9)
+    assert (seen == through).all()
+
+
 def test_visible_area_light_is_seen_from_its_front_only_and_in_mirrors():
     radiance = np.array([4.0, 3.0, 2.0])
     light = ceiling_quad(half=5.0, height=2.0, radiance=radiance)  # faces down
@@ -534,7 +611,8 @@ def test_scene_file_area_lights_and_light_samples():
      "lights[0]: quad light edges are zero or parallel"),
     ({"type": "quad", "position": [0, 0, 1], "edge1": [1, 0, 0], "edge2": [0, 1, 0], "radiance": 1,
       "radius": 1}, "lights[0].radius: does not apply to a quad light"),
-    ({"type": "disk", "position": [0, 0, 1], "radius": 1, "radiance": 1}, "lights[0]: a disk light needs exactly one"),
+    ({"type": "disk", "position": [0, 0, 1], "radius": 1, "radiance": 1},
+     "lights[0]: a disk light needs exactly one"),
     ({"type": "disk", "position": [0, 0, 1], "direction": [0, 0, -1], "radius": 0, "radiance": 1},
      "lights[0].radius: expected a number > 0"),
     ({"type": "disk", "position": [0, 0, 1], "direction": [0, 0, -1], "radius": 1, "radiance": 1,
