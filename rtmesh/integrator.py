@@ -34,7 +34,7 @@ from .film import Film
 from .glossy import sample_glossy_directions
 from .motion import MotionAccel, blurs, object_motions, scene_at_time, swept_bounds
 from .sampling import (Dim, decorrelated_points, pixel_offsets, square_to_cosine_hemisphere,
-                       stratified_points, stratified_values, uniform2)
+                       stratified_points, stratified_values)
 from .settings import RenderStats
 from .vecmath import dot, fresnel_dielectric, fresnel_schlick, normalize, orthonormal_basis, reflect, refract
 from .materials import blinn_phong_highlight, lambert
@@ -116,9 +116,9 @@ class Integrator:
         # moving objects get Embree scenes of their own, traced at each ray's time
         self.motion = None
         if blurs(scene):
+            motions = {k: m.shifted(self.shift) for k, m in object_motions(scene).items()}
             self.motion = MotionAccel(scene.vertices - self.shift, scene.faces, scene.object_id,
-                                      {k: m.shifted(self.shift) for k, m in object_motions(scene).items()},
-                                      scene.camera.shutter)
+                                      motions, scene.camera.shutter)
         self.accel = self.motion or Accel(scene.vertices - self.shift, scene.faces)
         # the scene's size in the re-centred frame sets the near-zero offset (see
         # offset_ray_origins); it cannot be zero for a scene that renders.  With motion,
@@ -278,7 +278,8 @@ class Integrator:
         film_xy[:, 1] += row
         lens_uv = None
         if self.stages["lens"]:
-            lens_uv = decorrelated_points(s.sampler, s.seed, pixel, sample_in_pixel, s.spp, Dim.LENS)
+            lens_uv = decorrelated_points(s.sampler, s.seed, pixel, sample_in_pixel, s.spp,
+                                          Dim.LENS)
         sample_time = None
         if self.stages["motion"]:
             # one time per camera sample, stratified per pixel; its rays all inherit it
@@ -302,9 +303,11 @@ class Integrator:
             if sample_time is None:
                 hits = self.accel.intersect(rays.origins, rays.directions)
             else:
-                hits = self.motion.intersect(rays.origins, rays.directions, sample_time[rays.sample])
+                hits = self.motion.intersect(rays.origins, rays.directions,
+                                             sample_time[rays.sample])
             clock.lap("intersect")
-            rays = self._shade(rays, hits, depth, radiance, ao_pass, keys, stats, clock, sample_time)
+            rays = self._shade(rays, hits, depth, radiance, ao_pass, keys, stats, clock,
+                               sample_time)
 
         passes = {"ao": ao_pass.reshape(m, s.spp, 1)} if ao_pass is not None else None
         return radiance.reshape(m, s.spp, 3), passes, stats
@@ -389,7 +392,8 @@ class Integrator:
         else:
             srf.ns = srf.ng
         if srf.time is not None:
-            srf.p, srf.ng, srf.ns = self.motion.surfaces_to_world(prim, srf.time, srf.p, srf.ng, srf.ns)
+            srf.p, srf.ng, srf.ns = self.motion.surfaces_to_world(prim, srf.time, srf.p, srf.ng,
+                                                                  srf.ns)
         return srf
 
     def _shading_normals(self, prim, u, v, flip, ng):
@@ -632,8 +636,8 @@ class Integrator:
         pixel, sample_in_pixel = keys
         s = self.settings
         key_rows = sample.take(rough)
-        u = decorrelated_points(s.sampler, s.seed, pixel.take(key_rows), sample_in_pixel.take(key_rows),
-                                s.spp, Dim.GLOSSY + 2 * depth)
+        u = decorrelated_points(s.sampler, s.seed, pixel.take(key_rows),
+                                sample_in_pixel.take(key_rows), s.spp, Dim.GLOSSY + 2 * depth)
         mirror[rough] = sample_glossy_directions(take_rows(mirror, rough), take_rows(ng, rough),
                                                  roughness.take(rough), u)
         return mirror

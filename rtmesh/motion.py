@@ -211,7 +211,8 @@ def scene_at_time(scene, time):
         used = np.unique(scene.faces[faces])
         t = np.full(len(used), float(time))
         vertices[used] = motion.to_world(vertices[used], t)
-        face_normals[faces] = motion.rotate_vectors(face_normals[faces], np.full(int(faces.sum()), float(time)))
+        face_time = np.full(int(faces.sum()), float(time))
+        face_normals[faces] = motion.rotate_vectors(face_normals[faces], face_time)
         if vertex_normals is not None:
             vertex_normals[used] = motion.rotate_vectors(vertex_normals[used], t)
     return dataclasses.replace(scene, vertices=vertices, face_normals=face_normals,
@@ -262,7 +263,8 @@ class _Mover:
         self.centre = pivot + 0.5 * (t0 + t1) * motion.translate
         radius = reach + 0.5 * abs(t1 - t0) * float(np.linalg.norm(motion.translate))
         # generous margin: the test only has to be conservative
-        self.radius2 = (radius * (1.0 + 1e-6) + 1e-6 * max(float(np.abs(self.centre).max()), 1.0)) ** 2
+        margin = 1e-6 * (radius + max(float(np.abs(self.centre).max()), 1.0))
+        self.radius2 = (radius + margin) ** 2
 
     def candidates(self, origins, directions, t_max):
         """Rows of the rays that can meet the object before ``t_max`` (unit directions)."""
@@ -338,15 +340,17 @@ class MotionAccel:
             prim = np.where(hits.prim >= 0, self.static_faces.take(np.maximum(hits.prim, 0)), -1)
             t, u, v = hits.t, hits.u, hits.v
         else:
-            t, prim, u, v = np.full(n, np.inf), np.full(n, -1, dtype=np.int64), np.zeros(n), np.zeros(n)
+            t, prim = np.full(n, np.inf), np.full(n, -1, dtype=np.int64)
+            u, v = np.zeros(n), np.zeros(n)
         for mover in self.movers:
             m = mover.motion
             rows = mover.candidates(origins, directions, t)
             if not len(rows):
                 continue
             tr = time[rows]
-            h = mover.accel.intersect(m.to_rest(take_rows(origins, rows), tr),
-                                      m.rotate_vectors(take_rows(directions, rows), tr, inverse=True))
+            o = m.to_rest(take_rows(origins, rows), tr)
+            d = m.rotate_vectors(take_rows(directions, rows), tr, inverse=True)
+            h = mover.accel.intersect(o, d)
             # the static scene wins ties: a fixed order keeps the result deterministic
             closer = np.flatnonzero(h.t < t[rows])
             if len(closer):
@@ -413,7 +417,8 @@ class MotionAccel:
         for i, rows in self._rows_per_mover(prim, rotating_only=True):
             if out is directions:
                 out = directions.copy(order="K")
-            out[rows] = self.movers[i].motion.rotate_vectors(directions[rows], time[rows], inverse=True)
+            motion = self.movers[i].motion
+            out[rows] = motion.rotate_vectors(directions[rows], time[rows], inverse=True)
         return out
 
     def surfaces_to_world(self, prim, time, points, ng, ns):

@@ -34,7 +34,8 @@ def edge_scene(depth, aperture=0.0, focus=None):
                                           [far, far, -depth], [x_edge, far, -depth]]), 0)
     camera = Camera([0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0], FOV, aperture=aperture,
                     focus_distance=focus)
-    return Scene.from_parts([half_plane], [Material(diffuse=0.0, ambient=0.0, emission=1.0)], [], camera)
+    light = Material(diffuse=0.0, ambient=0.0, emission=1.0)
+    return Scene.from_parts([half_plane], [light], [], camera)
 
 
 def disk_marginal_cdf(a):
@@ -65,7 +66,8 @@ def circle_of_confusion_px(aperture, depth, focus):
 def test_an_edge_on_the_focus_plane_is_as_sharp_as_with_a_pinhole():
     # off-axis, so that a lens focusing on a sphere of radius f instead of the plane at
     # depth f (1.5 pixels of blur here) would fail
-    pinhole = render(edge_scene(4.0), width=WIDTH, height=HEIGHT, spp=16, sampler="jittered", max_depth=0)
+    pinhole = render(edge_scene(4.0), width=WIDTH, height=HEIGHT, spp=16, sampler="jittered",
+                     max_depth=0)
     lens = render(edge_scene(4.0, aperture=1.0, focus=4.0), width=WIDTH, height=HEIGHT, spp=16,
                   sampler="jittered", max_depth=0)
     assert "lens" in lens.stats.stages_enabled

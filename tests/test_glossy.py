@@ -103,8 +103,8 @@ def rough_mirror_floor(roughness, mirror=0.8, background=1.0):
     """A mirror floor under a uniform sky, seen at a grazing angle."""
     floor = part("floor", floor_quad(50.0), 0)
     camera = Camera([0.0, -6.0, 1.0], [0.0, 0.0, 0.0], [0.0, 0.0, 1.0], 40.0)
-    return Scene.from_parts([floor], [Material(diffuse=0.0, ambient=0.0, mirror=mirror, roughness=roughness)],
-                            [], camera, background=np.full(3, background))
+    material = Material(diffuse=0.0, ambient=0.0, mirror=mirror, roughness=roughness)
+    return Scene.from_parts([floor], [material], [], camera, background=np.full(3, background))
 
 
 @pytest.mark.parametrize("roughness", [0.05, 0.5, 2.0])
@@ -125,7 +125,8 @@ def glossy_ball_scene(roughness):
     camera = Camera([0.0, -5.0, 2.0], [0.0, 0.0, 0.8], [0.0, 0.0, 1.0], 40.0)
     materials = [Material("floor", diffuse=0.0, emission=[1.0, 0.5, 0.2]),
                  Material("ball", diffuse=0.1, mirror=0.85, roughness=roughness)]
-    return Scene.from_parts([checker, ball], materials, [], camera, background=np.array([0.2, 0.3, 0.8]))
+    return Scene.from_parts([checker, ball], materials, [], camera,
+                            background=np.array([0.2, 0.3, 0.8]))
 
 
 def test_roughness_to_zero_reproduces_the_mirror_image():

@@ -5,12 +5,16 @@ import dataclasses
 import numpy as np
 import pytest
 
+from rtmesh.accel import Accel
+from rtmesh.area_lights import QuadLight
 from rtmesh.camera import Camera
+from rtmesh.errors import SceneError
 from rtmesh.lights import PointLight
 from rtmesh.materials import Material
 from rtmesh.motion import Motion, MotionAccel, rotate, scene_at_time
 from rtmesh.sampling import Dim, stratified_values
 from rtmesh.scene import Scene
+from rtmesh.scene_file import scene_from_dict
 from scenes import box, floor_quad, part, quad, render
 
 
@@ -38,8 +42,8 @@ def test_rotate_matches_the_rotation_matrix_and_motion_inverts_exactly():
     same_time = motion.to_world(v, np.full(50, 0.37))
     np.testing.assert_allclose(np.linalg.norm(same_time[1:] - same_time[:-1], axis=1),
                                np.linalg.norm(v[1:] - v[:-1], axis=1), rtol=1e-12)
-    np.testing.assert_allclose(motion.rotate_vectors(motion.rotate_vectors(v, time), time, inverse=True),
-                               v, atol=1e-12)
+    turned = motion.rotate_vectors(v, time)
+    np.testing.assert_allclose(motion.rotate_vectors(turned, time, inverse=True), v, atol=1e-12)
 
 
 def test_times_are_stratified_per_pixel():
@@ -53,7 +57,8 @@ def test_times_are_stratified_per_pixel():
         # and the strata are not handed out in the order of the pixel strata
         first = np.floor(t * spp).astype(int).reshape(pixels, spp)[:, 0]
         assert len(np.unique(first)) == spp
-    t = stratified_values("sobol", 3, np.repeat(np.arange(pixels), 16), np.tile(np.arange(16), pixels), 16, Dim.TIME)
+    pixel, sample = np.repeat(np.arange(pixels), 16), np.tile(np.arange(16), pixels)
+    t = stratified_values("sobol", 3, pixel, sample, 16, Dim.TIME)
     strata = np.sort(np.floor(t * 16).astype(int).reshape(pixels, 16), axis=1)
     assert (strata == np.arange(16)).all()
 
@@ -133,9 +138,10 @@ def test_zero_motion_and_closed_shutter_are_the_static_render():
 def test_motion_path_with_zero_motion_is_bit_identical_to_the_static_path(monkeypatch):
     # force the rest-frame tracing path on an object that does not move: separate Embree
     # scenes, per-ray transforms, prim remapping and the surface transforms must all be exact
-    static = render(moving_box_over_floor(translate=(0.0, 0.0, 0.0)), spp=2, sampler="jittered", width=24, height=24)
+    size = dict(spp=2, sampler="jittered", width=24, height=24)
+    static = render(moving_box_over_floor(translate=(0.0, 0.0, 0.0)), **size)
     monkeypatch.setattr(Motion, "moves", property(lambda self: True))
-    forced = render(moving_box_over_floor(translate=(0.0, 0.0, 0.0)), spp=2, sampler="jittered", width=24, height=24)
+    forced = render(moving_box_over_floor(translate=(0.0, 0.0, 0.0)), **size)
     assert "motion" in forced.stats.stages_enabled
     np.testing.assert_array_equal(forced.image, static.image)
 
@@ -145,7 +151,8 @@ def test_rotating_object_matches_the_average_of_static_renders():
     size = dict(width=24, height=24, sampler="jittered", max_depth=1)
     blurred = render(scene, spp=64, **size).image
     times = (np.arange(16) + 0.5) / 16
-    average = np.mean([render(scene_at_time(scene, t), spp=16, **size).image for t in times], axis=0)
+    average = np.mean([render(scene_at_time(scene, t), spp=16, **size).image for t in times],
+                      axis=0)
     # same expectation; the difference is Monte Carlo noise of both estimates
     assert abs(blurred.mean() - average.mean()) < 0.01 * average.mean()
     error = np.abs(blurred - average).mean()
@@ -163,7 +170,8 @@ def test_shadow_of_a_moving_object_is_blurred_like_the_time_average():
     # fraction of the shutter during which x < x_edge(t): a linear ramp.
     dx = -1.0
     scene = moving_box_over_floor(translate=(dx, 0.0, 0.0))
-    floor_only = Scene.from_parts([part("floor", floor_quad(6.0), 0)], [Material("floor", diffuse=0.8, ambient=0.0)],
+    floor_only = Scene.from_parts([part("floor", floor_quad(6.0), 0)],
+                                  [Material("floor", diffuse=0.8, ambient=0.0)],
                                   scene.lights, scene.camera)
     centre, fov, width = -4.0, 20.0, 40
     for s in (scene, floor_only):
@@ -223,15 +231,16 @@ def test_motion_accel_queries_agree_with_baked_scenes():
     for t in (0.0, 0.3, 1.0):
         time = np.full(n, t)
         baked = scene_at_time(scene, t)
-        from rtmesh.accel import Accel
         reference = Accel(baked.vertices, baked.faces)
         expected = reference.intersect(origins, directions)
         hits = accel.intersect(origins, directions, time)
         np.testing.assert_array_equal(hits.prim >= 0, expected.prim >= 0)
-        np.testing.assert_allclose(hits.t[hits.prim >= 0], expected.t[expected.prim >= 0], atol=1e-5)
+        np.testing.assert_allclose(hits.t[hits.prim >= 0], expected.t[expected.prim >= 0],
+                                   atol=1e-5)
         np.testing.assert_array_equal(scene.object_id[hits.prim], scene.object_id[expected.prim])
         occluded = accel.occluded(origins, directions, np.full(n, 4.0), time=time)
-        np.testing.assert_array_equal(occluded, reference.occluded(origins, directions, np.full(n, 4.0)))
+        expected_occluded = reference.occluded(origins, directions, np.full(n, 4.0))
+        np.testing.assert_array_equal(occluded, expected_occluded)
 
 
 # ---------------------------------------------------------------- scene files
@@ -240,8 +249,6 @@ SCENE_BASE = {"lights": [{"type": "point", "position": [0, 0, 5], "intensity": 1
 
 
 def test_motion_and_shutter_scene_keys():
-    from rtmesh.scene_file import scene_from_dict
-
     doc = dict(SCENE_BASE, objects=[
         {"primitive": "box", "translate": [1, 2, 3],
          "motion": {"translate": [0.5, 0, 0], "rotate_axis": [0, 0, 2], "rotate_degrees": 90}},
@@ -257,17 +264,16 @@ def test_motion_and_shutter_scene_keys():
 
 
 @pytest.mark.parametrize("camera, motion, message", [
-    ({"shutter": [1.0, 0.0]}, None, r"camera\.shutter: expected \[open, close\] with open <= close"),
+    ({"shutter": [1.0, 0.0]}, None,
+     r"camera\.shutter: expected \[open, close\] with open <= close"),
     ({"shutter": [0.0]}, None, r"camera\.shutter: expected a list of 2 numbers"),
     ({}, {"translat": [1, 0, 0]}, r"objects\[0\]\.motion\.translat: unknown key"),
     ({}, {"rotate_degrees": 10}, r"objects\[0\]\.motion\.rotate_axis: missing"),
-    ({}, {"rotate_axis": [0, 0, 0], "rotate_degrees": 10}, r"objects\[0\]\.motion: a rotating motion needs"),
+    ({}, {"rotate_axis": [0, 0, 0], "rotate_degrees": 10},
+     r"objects\[0\]\.motion: a rotating motion needs"),
     ({}, [1, 0, 0], r"objects\[0\]\.motion: expected a table"),
 ])
 def test_bad_motion_keys_name_the_key(camera, motion, message):
-    from rtmesh.errors import SceneError
-    from rtmesh.scene_file import scene_from_dict
-
     obj = {"primitive": "box"}
     if motion is not None:
         obj["motion"] = motion
@@ -277,16 +283,16 @@ def test_bad_motion_keys_name_the_key(camera, motion, message):
 
 
 def test_area_light_shadows_see_moving_objects_at_the_rays_time():
-    from rtmesh.area_lights import QuadLight
-
     scene = moving_box_over_floor(degrees=40.0)
     # a small quad light facing down, where the point light was
-    scene.lights = [QuadLight([2.5, 0.0, 6.0], [0.6, 0.0, 0.0], [0.0, -0.6, 0.0], 110.0, visible=False)]
+    scene.lights = [QuadLight([2.5, 0.0, 6.0], [0.6, 0.0, 0.0], [0.0, -0.6, 0.0], 110.0,
+                              visible=False)]
     size = dict(width=24, height=24, sampler="jittered", max_depth=0, light_samples=2)
     blurred = render(scene, spp=64, **size)
     assert {"motion", "area_lights"} <= set(blurred.stats.stages_enabled)
     times = (np.arange(16) + 0.5) / 16
-    average = np.mean([render(scene_at_time(scene, t), spp=16, **size).image for t in times], axis=0)
+    average = np.mean([render(scene_at_time(scene, t), spp=16, **size).image for t in times],
+                      axis=0)
     assert np.abs(blurred.image - average).mean() < 0.01
     instant = render(scene_at_time(scene, 0.5), spp=16, **size).image
     assert np.abs(blurred.image - instant).mean() > 3 * np.abs(blurred.image - average).mean()
