@@ -195,14 +195,16 @@ def shuffled_strata(seed, pixel, sample, spp, dimension):
     seed : int
     pixel : (n,) int
     sample : (n,) int
-        Sample index within the pixel, in ``[0, spp)``.
+        Sample index within the pixel.  Indices past ``spp`` (samples added in later rounds)
+        belong to the set ``sample // spp``, which is permuted the same way.
     spp : int
+        Samples per stratified set.
     dimension : int
 
     Returns
     -------
     (n,) int64
-        The permuted index, in ``[0, spp)``.
+        The permuted index, in the same set of ``spp`` as ``sample``.
     """
     sample = np.asarray(sample, dtype=np.int64)
     if spp == 1:
@@ -210,8 +212,9 @@ def shuffled_strata(seed, pixel, sample, spp, dimension):
     key = sequence_key(seed, pixel, dimension)
     units = np.flatnonzero(np.gcd(np.arange(spp), spp) == 1)
     a = units[(key >> np.uint64(32)) % np.uint64(len(units))]
-    b = (key & np.uint64(0xFFFFFFFF)) % np.uint64(spp)
-    return (a * sample + b.astype(np.int64)) % spp
+    b = ((key & np.uint64(0xFFFFFFFF)) % np.uint64(spp)).astype(np.int64)
+    stratum = sample % spp
+    return (sample - stratum) + (a * stratum + b) % spp
 
 
 def decorrelated_points(sampler, seed, pixel, sample, spp, dimension):

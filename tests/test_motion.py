@@ -12,7 +12,7 @@ from rtmesh.errors import SceneError
 from rtmesh.lights import PointLight
 from rtmesh.materials import Material
 from rtmesh.motion import Motion, MotionAccel, rotate, scene_at_time
-from rtmesh.sampling import Dim, stratified_values
+from rtmesh.sampling import Dim, shuffled_strata, stratified_values
 from rtmesh.scene import Scene
 from rtmesh.scene_file import scene_from_dict
 from scenes import box, floor_quad, part, quad, render
@@ -296,3 +296,16 @@ def test_area_light_shadows_see_moving_objects_at_the_rays_time():
     assert np.abs(blurred.image - average).mean() < 0.01
     instant = render(scene_at_time(scene, 0.5), spp=16, **size).image
     assert np.abs(blurred.image - instant).mean() > 3 * np.abs(blurred.image - average).mean()
+
+
+def test_shuffled_strata_permute_each_set_of_samples():
+    spp, pixels = 6, 200
+    pixel = np.repeat(np.arange(pixels), 3 * spp)
+    sample = np.tile(np.arange(3 * spp), pixels)  # three rounds of spp samples
+    permuted = shuffled_strata(5, pixel, sample, spp, Dim.TIME).reshape(pixels, 3, spp)
+    # each set of spp samples maps onto itself, one to one
+    expected = np.arange(3 * spp).reshape(3, spp)
+    assert (np.sort(permuted, axis=2) == expected).all()
+    # and later rounds get fresh jitter: no two samples of a pixel share a time
+    t = stratified_values("jittered", 5, pixel, sample, spp, Dim.TIME).reshape(pixels, 3 * spp)
+    assert all(len(np.unique(row)) == 3 * spp for row in t)
