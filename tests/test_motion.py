@@ -15,7 +15,7 @@ from rtmesh.motion import Motion, MotionAccel, rotate, scene_at_time
 from rtmesh.sampling import Dim, shuffled_strata, stratified_values
 from rtmesh.scene import Scene
 from rtmesh.scene_file import scene_from_dict
-from scenes import box, floor_quad, part, quad, render
+from scenes import box, floor_quad, icosphere, part, quad, render
 
 
 # ---------------------------------------------------------------- the transforms
@@ -309,3 +309,22 @@ def test_shuffled_strata_permute_each_set_of_samples():
     # and later rounds get fresh jitter: no two samples of a pixel share a time
     t = stratified_values("jittered", 5, pixel, sample, spp, Dim.TIME).reshape(pixels, 3 * spp)
     assert all(len(np.unique(row)) == 3 * spp for row in t)
+
+
+def test_a_smooth_ball_spinning_about_its_centre_looks_still():
+    # its shading normals (interpolated in the rest pose) must turn with it: lit from one
+    # side, a spinning ball keeps its terminator where the light puts it
+    def scene(degrees):
+        ball = part("ball", icosphere(4, 1.0, (0.0, 0.0, 1.0)), 0, smooth=True)
+        ball.motion = Motion([0.0, 0.0, 0.0], [0.3, 1.0, 0.2], degrees)
+        floor = part("floor", floor_quad(8.0), 0)
+        camera = Camera([0.0, -6.0, 2.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0], 35.0, shutter=(0.0, 1.0))
+        return Scene.from_parts([ball, floor], [Material(diffuse=0.7, specular=0.3, shininess=40)],
+                                [PointLight([4.0, -3.0, 5.0], 50.0)], camera)
+
+    size = dict(width=32, height=32, spp=8, sampler="jittered")
+    still = render(scene(0.0), **size).image
+    spinning = render(scene(120.0), **size)
+    assert "motion" in spinning.stats.stages_enabled
+    assert np.abs(spinning.image - still).mean() < 2e-3
+    assert np.abs(spinning.image - still).max() < 0.05
