@@ -318,7 +318,8 @@ def test_a_smooth_ball_spinning_about_its_centre_looks_still():
         ball = part("ball", icosphere(4, 1.0, (0.0, 0.0, 1.0)), 0, smooth=True)
         ball.motion = Motion([0.0, 0.0, 0.0], [0.3, 1.0, 0.2], degrees)
         floor = part("floor", floor_quad(8.0), 0)
-        camera = Camera([0.0, -6.0, 2.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0], 35.0, shutter=(0.0, 1.0))
+        camera = Camera([0.0, -6.0, 2.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0], 35.0,
+                        shutter=(0.0, 1.0))
         return Scene.from_parts([ball, floor], [Material(diffuse=0.7, specular=0.3, shininess=40)],
                                 [PointLight([4.0, -3.0, 5.0], 50.0)], camera)
 
