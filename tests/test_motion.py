@@ -213,10 +213,11 @@ def test_sliding_floor_has_no_self_intersection():
     np.testing.assert_allclose(b.image, a, atol=2e-4)
 
 
-def test_motion_blur_is_bit_identical_across_threads_and_chunks():
+@pytest.mark.parametrize("sampler", ["jittered", "sobol", "random"])
+def test_motion_blur_is_bit_identical_across_threads_and_chunks(sampler):
     scene = moving_box_over_floor(degrees=30.0)
-    one = render(scene, spp=4, sampler="jittered", threads=1, chunk_samples=100000)
-    two = render(scene, spp=4, sampler="jittered", threads=2, chunk_samples=300)
+    one = render(scene, spp=4, sampler=sampler, threads=1, chunk_samples=100000)
+    two = render(scene, spp=4, sampler=sampler, threads=2, chunk_samples=300)
     np.testing.assert_array_equal(one.image, two.image)
 
 
