@@ -357,7 +357,7 @@ class AreaLighting:
         self.offset_scale = offset_scale
         self.visible = [light for light in self.lights if light.visible]
 
-    def direct(self, p, ng, reflectance, pixel, sample, depth, stats, clock):
+    def direct(self, p, ng, reflectance, pixel, sample, depth, stats, clock, time=None):
         """Direct light from every area light, ``light_samples`` shadow rays per (hit, light).
 
         Parameters
@@ -378,6 +378,9 @@ class AreaLighting:
             Shadow rays are counted as ``area_shadow``.
         clock : object with ``lap(stage)``
             Times the work as ``shade`` and ``shadow``.
+        time : (k,) float, optional
+            Time of each hit's ray, with motion blur: the shadow rays see the moving objects
+            at that time (``accel`` is then a :class:`rtmesh.motion.MotionAccel`).
 
         Returns
         -------
@@ -391,14 +394,14 @@ class AreaLighting:
             dimension = light_dimension(depth, light_index, len(self.lights))
             for j in range(n):
                 u = stratified_points(self.sampler, self.seed, pixel, index0 + j, n, dimension)
-                contribution = self._one_sample(p, ng, reflectance, light, u, stats, clock)
+                contribution = self._one_sample(p, ng, reflectance, light, u, stats, clock, time)
                 if contribution is not None:
                     total = contribution if total is None else total + contribution
         if total is not None:
             total *= 1.0 / n
         return total
 
-    def _one_sample(self, p, ng, reflectance, light, u, stats, clock):
+    def _one_sample(self, p, ng, reflectance, light, u, stats, clock, time=None):
         """One light sample per hit: ``V f L cos_l / (d^2 pdf_A)``, (k, 3) or None."""
         y, n_light, radiance, inverse_pdf = light.sample(u)
         to_light = y - p
@@ -427,7 +430,10 @@ class AreaLighting:
         length = np.sqrt(dot(segment, segment))
         direction = segment / np.where(length > 0.0, length, np.inf)[:, None]
         clock.lap("shade")
-        occluded = self.accel.occluded(start, direction, length)
+        if time is None:
+            occluded = self.accel.occluded(start, direction, length)
+        else:
+            occluded = self.accel.occluded(start, direction, length, time=time[rows])
         stats.rays["area_shadow"] += len(rows)
         clock.lap("shadow")
         visible = np.zeros(len(lit), dtype=bool)

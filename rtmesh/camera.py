@@ -27,6 +27,9 @@ class Camera:
         Lens diameter, scene units.  0 gives a pinhole camera (everything sharp).
     focus_distance : float or None
         Distance along the view direction that is in focus; None means ``|look_at - position|``.
+    shutter : (2,) float
+        Times the shutter opens and closes (the time unit of object motion, see
+        :mod:`rtmesh.motion`); equal times take an instantaneous picture (no motion blur).
     """
 
     position: np.ndarray
@@ -35,11 +38,13 @@ class Camera:
     fov: float = 45.0
     aperture: float = 0.0
     focus_distance: float | None = None
+    shutter: tuple = (0.0, 0.0)
 
     def __post_init__(self):
         self.position = np.asarray(self.position, dtype=np.float64)
         self.look_at = np.asarray(self.look_at, dtype=np.float64)
         self.up = np.asarray(self.up, dtype=np.float64)
+        self.shutter = (float(self.shutter[0]), float(self.shutter[1]))
 
     def frame(self):
         """Orthonormal camera frame.
@@ -102,9 +107,12 @@ class Camera:
         n = len(film_xy)
         if self.aperture > 0.0 and lens_uv is not None:
             # thin lens: every ray through a film point meets the pinhole ray on the plane of
-            # focus, so that plane is sharp and everything else blurs with distance from it
+            # focus, so that plane is sharp and everything else blurs with distance from it.
+            # d has a forward component of exactly 1, so position + focus * d lies on the
+            # plane at depth `focus` (a normalised d would focus on a sphere instead, and
+            # blur the off-axis parts of the focus plane)
             d = component_major(forward[:, None] + right[:, None] * sx + up[:, None] * sy)
-            focus_points = self.position + normalize(d) * self.focus
+            focus_points = self.position + d * self.focus
             disk = square_to_uniform_disk_concentric(lens_uv) * (0.5 * self.aperture)
             origins = (
                 self.position[None, :]

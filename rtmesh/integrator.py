@@ -33,7 +33,10 @@ from .aov import PassRecorder
 from .background import as_background
 from .batches import RayBatch, component_major, take_rows
 from .film import Film
-from .sampling import Dim, pixel_offsets, square_to_cosine_hemisphere, stratified_points, uniform2
+from .glossy import sample_glossy_directions
+from .motion import MotionAccel, blurs, object_motions, scene_at_time, swept_bounds
+from .sampling import (Dim, decorrelated_points, pixel_offsets, square_to_cosine_hemisphere,
+                       stratified_points, stratified_values)
 from .settings import RenderStats
 from .vecmath import dot, fresnel_dielectric, fresnel_schlick, normalize, orthonormal_basis, reflect, refract
 from .materials import blinn_phong_highlight, lambert
@@ -74,10 +77,11 @@ class _Surfaces:
     where it is needed) are (k, 3) component-major arrays (see :mod:`rtmesh.batches`).
     ``ng`` and ``ns`` are flipped to the side the ray came from; ``front`` says whether
     that is the outer side of the triangle (counter-clockwise winding).  ``mat`` (intp) is
-    the material, ``sample`` the pixel sample each hit contributes to.
+    the material, ``sample`` the pixel sample each hit contributes to, ``time`` (float,
+    None without motion blur) the time of the ray (see :mod:`rtmesh.motion`).
     """
 
-    __slots__ = ("p", "ng", "ns", "d", "front", "mat", "sample")
+    __slots__ = ("p", "ng", "ns", "d", "front", "mat", "sample", "time")
 
 
 def _translated(obj, shift):
@@ -106,15 +110,26 @@ class Integrator:
     def __init__(self, scene, settings):
         _keep_freed_memory()
         self.settings = settings.validate()
+        if object_motions(scene) and not blurs(scene):
+            # an instantaneous shutter: moving objects stand still where the shutter finds them
+            scene = scene_at_time(scene, scene.camera.shutter[0])
         self.scene = scene
         # Re-centre the scene on the origin before it meets float32: float32 resolution is
         # relative to the size of the coordinates, so a model 1e6 units from the origin would
         # otherwise be traced on a grid of 1/16 unit.  Shading sees the same shifted frame.
         self.shift = scene.bounds.mean(axis=0)
-        self.accel = Accel(scene.vertices - self.shift, scene.faces)
+        # moving objects get Embree scenes of their own, traced at each ray's time
+        self.motion = None
+        if blurs(scene):
+            motions = {k: m.shifted(self.shift) for k, m in object_motions(scene).items()}
+            self.motion = MotionAccel(scene.vertices - self.shift, scene.faces, scene.object_id,
+                                      motions, scene.camera.shutter)
+        self.accel = self.motion or Accel(scene.vertices - self.shift, scene.faces)
         # the scene's size in the re-centred frame sets the near-zero offset (see
-        # offset_ray_origins); it cannot be zero for a scene that renders
-        self.offset_scale = max(float(np.abs(scene.bounds - self.shift).max()), 1e-30)
+        # offset_ray_origins); it cannot be zero for a scene that renders.  With motion,
+        # the size of the space the objects sweep during the shutter.
+        bounds = swept_bounds(scene) if self.motion else scene.bounds
+        self.offset_scale = max(float(np.abs(bounds - self.shift).max()), 1e-30)
         self.camera = _translated(scene.camera, self.shift)
         self.camera.frame()  # fail early on a degenerate camera
         lights = [_translated(light, self.shift) for light in scene.lights if not light.is_black]
@@ -145,12 +160,14 @@ class Integrator:
             "specular": m.any_specular,
             "smooth_normals": scene.vertex_normals is not None,
             "reflection": settings.max_depth > 0 and (m.any_mirror or m.any_transmission),
+            "glossy": settings.max_depth > 0 and m.any_glossy,
             "refraction": settings.max_depth > 0 and m.any_transmission,
             "absorption": m.any_absorption,
             "background": not self.background.is_black,
             "passes": bool(self.passes),
             "ao": self.ao_samples > 0 and (ambient_on or "ao" in settings.passes),
             "lens": self.camera.aperture > 0.0,
+            "motion": self.motion is not None,
         }
         # per-material flags, looked up per hit
         self._reflective = (m.mirror > 0).any(axis=1) | (m.transmission > 0).any(axis=1)
@@ -270,7 +287,16 @@ class Integrator:
         row = pixel // s.width
         film_xy[:, 0] += pixel - row * s.width
         film_xy[:, 1] += row
-        lens_uv = uniform2(s.seed, pixel, sample_in_pixel, Dim.LENS) if self.stages["lens"] else None
+        lens_uv = None
+        if self.stages["lens"]:
+            lens_uv = decorrelated_points(s.sampler, s.seed, pixel, sample_in_pixel, s.spp,
+                                          Dim.LENS)
+        sample_time = None
+        if self.stages["motion"]:
+            # one time per camera sample, stratified per pixel; its rays all inherit it
+            t_open, t_close = self.camera.shutter
+            u = stratified_values(s.sampler, s.seed, pixel, sample_in_pixel, s.spp, Dim.TIME)
+            sample_time = t_open + (t_close - t_open) * u
         origins, directions = self.camera.generate_rays(film_xy, s.width, s.height, lens_uv)
         # camera rays have unit throughput: a read-only broadcast costs nothing, and
         # _shade does not multiply by it at depth 0
@@ -285,15 +311,19 @@ class Integrator:
         for depth in range(s.max_depth + 1):
             if not len(rays):
                 break
-            hits = self.accel.intersect(rays.origins, rays.directions)
+            if sample_time is None:
+                hits = self.accel.intersect(rays.origins, rays.directions)
+            else:
+                hits = self.motion.intersect(rays.origins, rays.directions,
+                                             sample_time[rays.sample])
             clock.lap("intersect")
-            rays = self._shade(rays, hits, depth, radiance, aov, keys, stats, clock)
+            rays = self._shade(rays, hits, depth, radiance, aov, keys, stats, clock, sample_time)
 
         passes = self.passes.per_pixel(aov, m, s.spp) or None
         return radiance.reshape(m, s.spp, 3), passes, stats
 
     # ---------------------------------------------------------------- stages
-    def _shade(self, rays, hits, depth, radiance, aov, keys, stats, clock):
+    def _shade(self, rays, hits, depth, radiance, aov, keys, stats, clock, sample_time=None):
         """Shade one depth level; returns the rays of the next level."""
         m = self.scene.materials
         # camera rays (depth 0) are one per sample, in sample order, with unit throughput
@@ -331,7 +361,7 @@ class Integrator:
             return RayBatch.empty()
         # the rows of the rays that hit; None when all did (no gathers needed)
         rows = None if n_hit == len(hit) else np.flatnonzero(hit)
-        srf = self._surfaces(rays, hits, rows)
+        srf = self._surfaces(rays, hits, rows, sample_time)
         clock.lap("shade")
         if primary and self.stages["passes"]:
             self.passes.record(aov, srf, hits, rows)
@@ -347,12 +377,16 @@ class Integrator:
 
         if depth >= self.settings.max_depth or not self.stages["reflection"]:
             return RayBatch.empty()
-        next_rays = self._spawn(srf, rays.subset(rows), stats)
+        next_rays = self._spawn(srf, rays.subset(rows), depth, keys, stats)
         clock.lap("spawn")
         return next_rays
 
-    def _surfaces(self, rays, hits, rows):
-        """Hit points, normals facing the incoming ray, and material ids of the hit ``rows``."""
+    def _surfaces(self, rays, hits, rows, sample_time=None):
+        """Hit points, normals facing the incoming ray, and material ids of the hit ``rows``.
+
+        With motion blur, points and normals are formed on the rest pose of the object hit
+        and moved to the ray's time at the end (see :mod:`rtmesh.motion`).
+        """
         srf = _Surfaces()
         prim = take_rows(hits.prim, rows).astype(np.intp)
         u, v = take_rows(hits.u, rows), take_rows(hits.v, rows)
@@ -360,8 +394,10 @@ class Integrator:
         srf.p = barycentric_interpolate(face[:, 0:9], u, v)
         srf.sample = take_rows(rays.sample, rows)
         srf.d = take_rows(rays.directions, rows)
+        srf.time = None if sample_time is None else sample_time[srf.sample]
         ng = face[:, 9:12]
-        srf.front = dot(srf.d, ng) < 0.0
+        d = srf.d if srf.time is None else self.motion.directions_to_rest(prim, srf.time, srf.d)
+        srf.front = dot(d, ng) < 0.0
         flip = np.where(srf.front, 1.0, -1.0)
         srf.ng = ng * flip[:, None]
         srf.mat = self._material_id.take(prim)
@@ -369,6 +405,9 @@ class Integrator:
             srf.ns = self._shading_normals(prim, u, v, flip, srf.ng)
         else:
             srf.ns = srf.ng
+        if srf.time is not None:
+            srf.p, srf.ng, srf.ns = self.motion.surfaces_to_world(prim, srf.time, srf.p, srf.ng,
+                                                                  srf.ns)
         return srf
 
     def _shading_normals(self, prim, u, v, flip, ng):
@@ -466,7 +505,8 @@ class Integrator:
             p_j, wi_j = take_rows(p, j), take_rows(wi, j)
             origins = offset_ray_origins(p_j, take_rows(ng, j), np.float32, self.offset_scale, wi_j)
             clock.lap("shade")
-            occluded = self.accel.occluded(origins, wi_j, distance[j] * _SHADOW_SHORTEN)
+            occluded = self._occluded(origins, wi_j, distance[j] * _SHADOW_SHORTEN,
+                                      _time_rows(srf.time, rows, j))
             stats.rays["shadow"] += len(j)
             clock.lap("shadow")
             visible = np.zeros(k, dtype=bool)
@@ -478,7 +518,8 @@ class Integrator:
             pixel, sample_in_pixel = keys
             sample = take_rows(srf.sample, rows)
             area = self.area_lighting.direct(p, ng, reflectance, pixel[sample],
-                                             sample_in_pixel[sample], depth, stats, clock)
+                                             sample_in_pixel[sample], depth, stats, clock,
+                                             _time_rows(srf.time, rows))
             if area is not None:
                 total = area if total is None else total + area
         if total is None or rows is None:
@@ -501,12 +542,18 @@ class Integrator:
             w = square_to_cosine_hemisphere(u)
             d = t * w[:, :1] + b * w[:, 1:2] + srf.ng * w[:, 2:3]
             origins = offset_ray_origins(srf.p, srf.ng, np.float32, self.offset_scale, d)
-            free += ~self.accel.occluded(origins, d, np.full(k, self.ao_distance))
+            free += ~self._occluded(origins, d, np.full(k, self.ao_distance), srf.time)
         stats.rays["ao"] += k * n_ao
         return free / n_ao
 
-    def _spawn(self, srf, rays, stats):
-        """Mirror-reflection and refraction rays with their throughput weights."""
+    def _occluded(self, origins, directions, t_max, time):
+        """Shadow-ray query; with motion blur the moving objects stand where ``time`` says."""
+        if time is None:
+            return self.accel.occluded(origins, directions, t_max)
+        return self.motion.occluded(origins, directions, t_max, time=time)
+
+    def _spawn(self, srf, rays, depth, keys, stats):
+        """Mirror (or glossy) reflection and refraction rays with their throughput weights."""
         m = self.scene.materials
         reflective = self._reflective[srf.mat]
         if not reflective.any():
@@ -561,6 +608,8 @@ class Integrator:
             below = dot(wr, ng[keep]) <= 0.0
             if below.any():
                 wr[below] = reflect(wo[keep][below], ng[keep][below])
+            if self.stages["glossy"]:
+                wr = self._glossy(wr, ng[keep], mat[keep], srf.sample[idx[keep]], depth, keys)
             batches.append(RayBatch(
                 offset_ray_origins(srf.p[idx[keep]], ng[keep], scale=self.offset_scale, directions=wr),
                 wr,
@@ -572,6 +621,49 @@ class Integrator:
         if refract_batch is not None:
             batches.append(refract_batch)
         return RayBatch.concatenate(batches)
+
+    def _glossy(self, mirror, ng, mat, sample, depth, keys):
+        """Reflection directions of rough materials, sampled in a lobe around the mirror.
+
+        Parameters
+        ----------
+        mirror : (k, 3) float
+            Mirror directions (above the surface); the rows of smooth materials are kept.
+        ng : (k, 3) float
+            Geometric normals on the side the rays leave toward.
+        mat : (k,) intp
+        sample : (k,) int
+            Pixel sample of each ray (within the chunk), keying its random numbers.
+        depth : int
+            Depth of the hit; the spawned rays use dimensions ``Dim.GLOSSY + 2 * depth``.
+        keys : (pixel, sample_in_pixel)
+
+        Returns
+        -------
+        (k, 3) float
+            Weight unchanged (see :mod:`rtmesh.glossy`).
+        """
+        roughness = self.scene.materials.roughness.take(mat)
+        rough = np.flatnonzero(roughness > 0.0)
+        if not len(rough):
+            return mirror
+        pixel, sample_in_pixel = keys
+        s = self.settings
+        key_rows = sample.take(rough)
+        u = decorrelated_points(s.sampler, s.seed, pixel.take(key_rows),
+                                sample_in_pixel.take(key_rows), s.spp, Dim.GLOSSY + 2 * depth)
+        mirror[rough] = sample_glossy_directions(take_rows(mirror, rough), take_rows(ng, rough),
+                                                 roughness.take(rough), u)
+        return mirror
+
+
+def _time_rows(time, *row_sets):
+    """``time`` gathered by successive row selections (None rows: all); None stays None."""
+    if time is None:
+        return None
+    for rows in row_sets:
+        time = take_rows(time, rows)
+    return time
 
 
 def fresnel_exact_or_schlick(mode):

@@ -53,6 +53,9 @@ class Material:
         Beer-Lambert absorption coefficient of the interior, 1 / scene unit.
     emission : (3,) float
         Emitted radiance.
+    roughness : float
+        Blur of the mirror (and dielectric) reflection: 0 is a perfect mirror, r > 0 a lobe
+        about r radians wide around the mirror direction (see :mod:`rtmesh.glossy`).
     """
 
     name: str = "default"
@@ -65,10 +68,11 @@ class Material:
     ior: float = 1.5
     absorption: np.ndarray = field(default_factory=lambda: np.zeros(3))
     emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    roughness: float = 0.0
 
     def __post_init__(self):
         for f in fields(self):
-            if f.name in ("name", "shininess", "ior"):
+            if f.name in ("name", "shininess", "ior", "roughness"):
                 continue
             value = getattr(self, f.name)
             if value is not None:
@@ -84,7 +88,7 @@ class MaterialTable:
     ----------
     materials : list of Material
     diffuse, specular, ambient, mirror, transmission, absorption, emission : (m, 3) float
-    shininess, ior : (m,) float
+    shininess, ior, roughness : (m,) float
     """
 
     def __init__(self, materials):
@@ -94,6 +98,7 @@ class MaterialTable:
             setattr(self, name, np.array([getattr(m, name) for m in self.materials], dtype=np.float64).reshape(-1, 3))
         self.shininess = np.array([m.shininess for m in self.materials], dtype=np.float64)
         self.ior = np.array([m.ior for m in self.materials], dtype=np.float64)
+        self.roughness = np.array([m.roughness for m in self.materials], dtype=np.float64)
 
     def __len__(self):
         return len(self.materials)
@@ -112,6 +117,12 @@ class MaterialTable:
     def any_transmission(self):
         """True if any material refracts."""
         return bool((self.transmission > 0).any())
+
+    @property
+    def any_glossy(self):
+        """True if any material blurs the reflection rays it spawns (roughness > 0)."""
+        reflects = (self.mirror > 0).any(axis=1) | (self.transmission > 0).any(axis=1)
+        return bool(((self.roughness > 0) & reflects).any())
 
     @property
     def any_emission(self):

@@ -26,8 +26,10 @@ class Dim(IntEnum):
 
     PIXEL = 0  # (x, y) position inside the pixel
     LENS = 2  # (u, v) on the thin-lens aperture
+    TIME = 4  # time in the shutter interval (one number; dimension 5 is unused)
     AO = 16  # first of the ambient-occlusion dimensions; AO rays at depth d use AO + 2*d
     LIGHT = 1 << 24  # first of the area-light dimensions (see rtmesh.area_lights.light_dimension)
+    GLOSSY = 1 << 25  # glossy-reflection directions; the rays spawned at depth d use GLOSSY + 2*d
 
 
 def sequence_key(seed, pixel, dimension):
@@ -175,6 +177,103 @@ def stratified_points(sampler, seed, pixel, index, count, dimension):
     if sampler == "regular" and dimension == Dim.PIXEL:
         return take_rows((cells + 0.5) / size, stratum)
     return (take_rows(cells, stratum) + uniform2(seed, pixel, index, dimension)) / size
+
+
+def shuffled_strata(seed, pixel, sample, spp, dimension):
+    """A per-pixel permutation of the strata ``[0, spp)``, applied to sample indices.
+
+    Jittered points of every dimension put sample ``i`` in stratum ``i``, so without a
+    shuffle the sample in the top-left pixel stratum would always get, say, the first lens
+    or time stratum: the dimensions would be correlated and a moving edge would sweep across
+    the pixel in step with the time.  Each pixel and dimension gets the permutation
+    ``i -> (a i + b) mod spp`` with hashed ``a`` (a unit modulo ``spp``) and ``b``: computed
+    point by point, so it works on any subset of a pixel's samples (rays that survive to
+    depth d), and independent between pixels and dimensions.
+
+    Parameters
+    ----------
+    seed : int
+    pixel : (n,) int
+    sample : (n,) int
+        Sample index within the pixel.  Indices past ``spp`` (samples added in later rounds)
+        belong to the set ``sample // spp``, which is permuted the same way.
+    spp : int
+        Samples per stratified set.
+    dimension : int
+
+    Returns
+    -------
+    (n,) int64
+        The permuted index, in the same set of ``spp`` as ``sample``.
+    """
+    sample = np.asarray(sample, dtype=np.int64)
+    if spp == 1:
+        return sample
+    key = sequence_key(seed, pixel, dimension)
+    units = np.flatnonzero(np.gcd(np.arange(spp), spp) == 1)
+    a = units[(key >> np.uint64(32)) % np.uint64(len(units))]
+    b = ((key & np.uint64(0xFFFFFFFF)) % np.uint64(spp)).astype(np.int64)
+    stratum = sample % spp
+    return (sample - stratum) + (a * stratum + b) % spp
+
+
+def decorrelated_points(sampler, seed, pixel, sample, spp, dimension):
+    """One point in [0, 1)^2 per pixel sample for a dimension other than the pixel's.
+
+    :func:`stratified_points` with each pixel's ``spp`` points stratified together, and,
+    for the ``jittered`` and ``regular`` samplers, their strata paired with the pixel
+    strata by :func:`shuffled_strata` (Owen-scrambled Sobol points are scrambled per
+    dimension already, random points are independent).
+
+    Parameters
+    ----------
+    sampler : {"regular", "random", "jittered", "sobol"}
+    seed : int
+    pixel, sample : (n,) int
+        Linear pixel index and sample index within the pixel (in ``[0, spp)``).
+    spp : int
+    dimension : int
+        First of the two dimensions the point uses (see :class:`Dim`).
+
+    Returns
+    -------
+    (n, 2) float64
+        Component-major (see :mod:`rtmesh.batches`).
+    """
+    if sampler in ("jittered", "regular"):
+        sample = shuffled_strata(seed, pixel, sample, spp, dimension)
+    return stratified_points(sampler, seed, pixel, sample, spp, dimension)
+
+
+def stratified_values(sampler, seed, pixel, sample, spp, dimension):
+    """One number in [0, 1) per pixel sample, the ``spp`` numbers of a pixel stratified.
+
+    For one-dimensional quantities such as the time in the shutter.  ``jittered`` and
+    ``regular`` put exactly one value in each interval ``[k / spp, (k + 1) / spp)``,
+    assigned to the samples by :func:`shuffled_strata`; ``sobol`` uses the first coordinate
+    of the scrambled (0,2)-sequence, a (0,1)-sequence: every power-of-two prefix is
+    stratified the same way; ``random`` is uniform.
+
+    Parameters
+    ----------
+    sampler : {"regular", "random", "jittered", "sobol"}
+    seed : int
+    pixel, sample : (n,) int
+    spp : int
+    dimension : int
+
+    Returns
+    -------
+    (n,) float64
+    """
+    if sampler == "random":
+        return uniform(seed, pixel, sample, dimension)
+    if sampler == "sobol":
+        return sobol_02(sample, sequence_key(seed, pixel, dimension))[:, 0]
+    if sampler not in SAMPLERS:
+        raise ValueError(f"unknown sampler {sampler!r}; expected one of {', '.join(SAMPLERS)}")
+    stratum = shuffled_strata(seed, pixel, sample, spp, dimension)
+    return (stratum + uniform(seed, pixel, sample, dimension)) * (1.0 / spp)
 
 
 def square_to_uniform_disk_concentric(u):

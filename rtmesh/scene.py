@@ -1,5 +1,6 @@
 """The flattened scene: one triangle soup with per-face material and object ids."""
 
+import dataclasses
 import logging
 from dataclasses import dataclass, field
 
@@ -29,6 +30,8 @@ class MeshPart:
         Index into the scene's material list.
     vertex_normals : (v, 3) float or None
         Unit normals for smooth shading; None shades flat.
+    motion : rtmesh.motion.Motion or None
+        Rigid motion during the shutter (see :mod:`rtmesh.motion`); None stands still.
     """
 
     name: str
@@ -36,6 +39,7 @@ class MeshPart:
     faces: np.ndarray
     material: int = 0
     vertex_normals: np.ndarray | None = None
+    motion: object = None
 
 
 @dataclass
@@ -63,6 +67,8 @@ class Scene:
     background : (3,) float or background object
         What rays that leave the scene see: a radiance, or one of the backgrounds of
         :mod:`rtmesh.background` (gradient, environment image, transparent).
+    motions : dict of int to rtmesh.motion.Motion
+        Motion of each moving object (by object index); static objects are absent.
     """
 
     vertices: np.ndarray
@@ -78,6 +84,7 @@ class Scene:
     camera: Camera
     ambient: np.ndarray = field(default_factory=lambda: np.zeros(3))
     background: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    motions: dict = field(default_factory=dict)
 
     @property
     def bounds(self):
@@ -118,6 +125,7 @@ class Scene:
         """
         materials = list(materials) if materials else [Material()]
         vertices, faces, normals, vnormals, smooth, mat_ids, obj_ids, names = ([] for _ in range(8))
+        motions = {}
         offset = 0
         for part in parts:
             v = np.asarray(part.vertices, dtype=np.float64).reshape(-1, 3)
@@ -151,6 +159,8 @@ class Scene:
             smooth.append(face_smooth)
             mat_ids.append(np.full(len(f), part.material, dtype=np.int32))
             obj_ids.append(np.full(len(f), len(names), dtype=np.int32))
+            if part.motion is not None:
+                motions[len(names)] = _with_centre(part.motion, v[np.unique(f)])
             names.append(part.name)
             offset += len(v)
         if not faces:
@@ -178,12 +188,20 @@ class Scene:
             ambient=np.asarray(ambient if ambient is not None else np.zeros(3), dtype=np.float64),
             background=(background if hasattr(background, "radiance") else
                         np.asarray(background if background is not None else np.zeros(3), dtype=np.float64)),
+            motions=motions,
         )
         if camera is None:
             scene.camera = frame_bounds(scene.bounds, aspect=aspect)
         if lights is None:
             scene.lights = default_lights(scene.camera)
         return scene
+
+
+def _with_centre(motion, points):
+    """``motion`` rotating about the centre of ``points``' bounds unless it has a centre."""
+    if motion.centre is not None:
+        return motion
+    return dataclasses.replace(motion, centre=0.5 * (points.min(axis=0) + points.max(axis=0)))
 
 
 def _unit_vertex_normals(vertex_normals, vertices, faces):

@@ -26,6 +26,7 @@ from .importers import load_trimesh, parts_from_trimesh
 from .area_lights import DiskLight, QuadLight
 from .lights import DirectionalLight, PointLight, SpotLight
 from .materials import Material
+from .motion import Motion
 from .scene import MeshPart, Scene
 from .settings import RenderSettings
 
@@ -108,6 +109,20 @@ def _str_list(v):
     return tuple(v)
 
 
+def _shutter(v):
+    """[open, close] with open <= close."""
+    times = _vec2(v)
+    if times[1] < times[0]:
+        raise TypeError("expected [open, close] with open <= close")
+    return times
+
+
+def _table(v):
+    if not isinstance(v, dict):
+        raise TypeError("expected a table")
+    return v
+
+
 def _one_of(*choices):
     def convert(v):
         if v not in choices:
@@ -128,12 +143,13 @@ RENDER_KEYS = {
 CAMERA_KEYS = {
     "position": _vec3, "look_at": _vec3, "up": _vec3, "fov": _positive,
     "aperture": _non_negative, "focus_distance": _positive, "from_file": _str,
+    "shutter": _shutter,
 }
 ENVIRONMENT_KEYS = {"ambient": _colour, "background": _colour}
 MATERIAL_KEYS = {
     "diffuse": _colour, "specular": _colour, "shininess": _non_negative, "ambient": _colour,
     "mirror": _colour, "transmission": _colour, "ior": _positive, "absorption": _colour,
-    "emission": _colour,
+    "emission": _colour, "roughness": _non_negative,
 }
 OBJECT_KEYS = {
     "name": _str, "mesh": _str,
@@ -141,7 +157,9 @@ OBJECT_KEYS = {
     "subdivisions": _int, "radius": _positive, "extents": _vec3, "size": _vec2,
     "material": _str, "smooth": _bool,
     "translate": _vec3, "rotate": _vec3, "scale": _scale, "import_lights": _bool,
+    "motion": _table,
 }
+MOTION_KEYS = {"translate": _vec3, "rotate_axis": _vec3, "rotate_degrees": _float}
 LIGHT_KEYS = {
     "type": _one_of("point", "directional", "spot", "quad", "disk"),
     "position": _vec3, "direction": _vec3, "look_at": _vec3,
@@ -369,6 +387,7 @@ def _object_parts(r, values, where, base_dir, materials, material_index):
             raise r.error(f"{where}.{key}", "does not apply to this object"
                           + (f" (a {values['primitive']})" if has_primitive else " (a mesh file)"))
     transform = _transform(values)
+    motion = _motion(r, values["motion"], f"{where}.motion") if "motion" in values else None
     name = values.get("name")
     smooth = values.get("smooth")
     if has_mesh:
@@ -388,6 +407,12 @@ def _object_parts(r, values, where, base_dir, materials, material_index):
         if name:
             for part in parts:
                 part.name = name if len(parts) == 1 else f"{name}/{part.name}"
+        if motion is not None:
+            # the parts of one object turn about the centre of the whole object
+            points = np.concatenate([p.vertices for p in parts]) if parts else np.zeros((1, 3))
+            motion.centre = 0.5 * (points.min(axis=0) + points.max(axis=0))
+            for part in parts:
+                part.motion = motion
         return parts
 
     kind = values["primitive"]
@@ -417,7 +442,7 @@ def _object_parts(r, values, where, base_dir, materials, material_index):
     if smooth:
         normals = np.asarray(mesh.vertex_normals) @ np.linalg.inv(transform[:3, :3])
     return [MeshPart(name or f"{kind}{where[7:]}", vertices, faces,
-                     0 if material is None else material, normals)]
+                     0 if material is None else material, normals, motion)]
 
 
 def _mesh_path(values, base_dir):
@@ -436,6 +461,19 @@ def _transform(values):
     matrix = rotation @ matrix
     matrix[:3, 3] = values.get("translate", np.zeros(3))
     return matrix
+
+
+def _motion(r, table, where):
+    """A :class:`Motion` from an object's ``motion`` table."""
+    values = r.fields(r.table(table, where), MOTION_KEYS, where)
+    degrees = values.get("rotate_degrees", 0.0)
+    if degrees != 0.0 and "rotate_axis" not in values:
+        raise r.error(f"{where}.rotate_axis", "missing (needed by rotate_degrees)")
+    try:
+        return Motion(values.get("translate", np.zeros(3)),
+                      values.get("rotate_axis", np.array([0.0, 1.0, 0.0])), degrees)
+    except ValueError as exc:
+        raise r.error(where, str(exc)) from None
 
 
 def _light(r, values, where):
@@ -483,7 +521,8 @@ def _camera(r, values, file_cameras=()):
             raise r.error(f"camera.{key}", "missing")
     camera = Camera(values["position"], values["look_at"], values.get("up", np.array([0.0, 1.0, 0.0])),
                     fov=values.get("fov", 45.0), aperture=values.get("aperture", 0.0),
-                    focus_distance=values.get("focus_distance"))
+                    focus_distance=values.get("focus_distance"),
+                    shutter=tuple(values.get("shutter", (0.0, 0.0))))
     try:
         camera.frame()
     except ValueError as exc:

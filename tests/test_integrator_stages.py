@@ -38,7 +38,7 @@ def test_diffuse_scene_traces_no_reflection_refraction_or_ao_rays():
     assert rays["reflection"] == rays["refraction"] == rays["ao"] == 0
     enabled = set(result.stats.stages_enabled)
     assert not enabled & {"reflection", "refraction", "absorption", "ao", "specular", "lens",
-                          "smooth_normals", "emission", "ambient", "background"}
+                          "smooth_normals", "emission", "ambient", "background", "glossy", "motion"}
     assert "lights" in enabled
     assert result.passes == {}
 
