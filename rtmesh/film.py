@@ -5,6 +5,11 @@ import numpy as np
 from .batches import rows_as_float32
 
 TONEMAPS = ("clamp", "reinhard", "aces")
+# Pixels per block of the whole-film reductions (image, variance, relative error): 16384
+# pixels make 0.4 MB float64 (m, 3) temporaries, large enough that the per-block Python
+# overhead is invisible (~500 blocks at 4K), small enough that the few temporaries alive
+# at once stay a small fraction of any sizeable film.
+BLOCK_PIXELS = 16384
 
 
 class Film:
@@ -76,17 +81,39 @@ class Film:
                 self.pass_sums[name][px] += values[:, s]
         self.count[px] += spp
 
-    def _divisor(self):
-        """(n, 1) float64: the sample count of each pixel, at least 1 (exact integers; as
-        floats the broadcast division runs several times faster than with int64)."""
-        return np.maximum(self.count, 1).astype(np.float64)[:, None]
+    def _blocks(self):
+        """Pixel slices of at most ``BLOCK_PIXELS`` covering the film, in order."""
+        n = self.width * self.height
+        return (slice(a, min(a + BLOCK_PIXELS, n)) for a in range(0, n, BLOCK_PIXELS))
 
-    def _to_image(self, values):
-        return rows_as_float32(values).reshape(self.height, self.width, -1)
+    def _divisor(self, px):
+        """(m, 1) float64: the sample count of the pixels ``px``, at least 1 (exact
+        integers; as floats the broadcast division runs several times faster than with
+        int64)."""
+        return np.maximum(self.count[px], 1).astype(np.float64)[:, None]
+
+    def _to_image(self, per_block, channels):
+        """(height, width, channels) float32 filled block by block from ``per_block(px)``.
+
+        Whole-film expressions would make float64 temporaries of the film's full size
+        (hundreds of MB at 4K); blocks keep the extra memory at a few MB whatever the
+        resolution.
+        """
+        out = np.zeros((self.width * self.height, channels), dtype=np.float32)
+        for px in self._blocks():
+            out[px] = rows_as_float32(per_block(px))
+        return out.reshape(self.height, self.width, channels)
 
     def image(self):
         """(height, width, 3) float32: mean radiance per pixel (box filter)."""
-        return self._to_image(self.sum / self._divisor())
+        return self._to_image(lambda px: self.sum[px] / self._divisor(px), 3)
+
+    def _variance_of_mean(self, px):
+        """(m, 3) float64: :meth:`variance_of_mean` of the pixels ``px``."""
+        n = self.count[px, None].astype(np.float64)
+        mean = self.sum[px] / np.maximum(n, 1)
+        var = (self.sum_sq[px] - n * mean * mean) / np.maximum(n - 1, 1)
+        return np.where(n > 1, np.maximum(var, 0.0), 0.0) / np.maximum(n, 1)
 
     def variance_of_mean(self):
         """(height, width, 3) float32: estimated variance of each pixel's mean.
@@ -94,24 +121,23 @@ class Film:
         The unbiased sample variance divided by the sample count; zero where a pixel has
         fewer than two samples (no estimate possible).
         """
-        n = self.count[:, None].astype(np.float64)
-        mean = self.sum / np.maximum(n, 1)
-        var = (self.sum_sq - n * mean * mean) / np.maximum(n - 1, 1)
-        var = np.where(n > 1, np.maximum(var, 0.0), 0.0) / np.maximum(n, 1)
-        return self._to_image(var)
+        return self._to_image(self._variance_of_mean, 3)
 
     def relative_error(self):
         """Mean relative standard error of the image, a scalar estimate of its own error.
 
         The standard error of each pixel's luminance-free mean (per channel), divided by the
         mean plus 0.01 (so near-black pixels do not dominate), averaged over all pixels and
-        channels.  NaN when pixels have fewer than two samples.
+        channels.  NaN when pixels have fewer than two samples.  Summed block by block, so
+        it needs no temporary of the film's size.
         """
         if self.count.min() < 2:
             return float("nan")
-        mean = self.sum / self.count[:, None]
-        std_err = np.sqrt(self.variance_of_mean().reshape(-1, 3))
-        return float(np.mean(std_err / (np.abs(mean) + 0.01)))
+        total = 0.0
+        for px in self._blocks():
+            mean = self.sum[px] / self.count[px, None]
+            total += float(np.sum(np.sqrt(self._variance_of_mean(px)) / (np.abs(mean) + 0.01)))
+        return total / (3 * self.width * self.height)
 
     def pass_image(self, name):
         """(height, width, k) float32: a pass reduced per pixel (mean, first sample or
@@ -119,10 +145,11 @@ class Film:
         values = self.pass_sums[name]
         reduction = self.pass_reductions[name]
         if reduction == "mean":
-            return self._to_image(values / self._divisor())
+            return self._to_image(lambda px: values[px] / self._divisor(px), values.shape[1])
         if reduction == "min":
-            values = np.where(np.isfinite(values), values, 0.0)
-        return self._to_image(values)
+            return self._to_image(lambda px: np.where(np.isfinite(values[px]), values[px], 0.0),
+                                  values.shape[1])
+        return self._to_image(lambda px: values[px], values.shape[1])
 
 
 def tonemap(image, exposure=0.0, operator="reinhard"):

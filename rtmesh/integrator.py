@@ -22,6 +22,7 @@ import ctypes
 import dataclasses
 import functools
 import time
+from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -224,7 +225,7 @@ class Integrator:
         film = Film(s.width, s.height, self.passes.film_passes())
         n_pixels = s.width * s.height
         pixels_per_chunk = max(1, s.chunk_samples // s.spp)
-        chunks = [(p, min(p + pixels_per_chunk, n_pixels)) for p in range(0, n_pixels, pixels_per_chunk)]
+        chunks = range(0, n_pixels, pixels_per_chunk)
         stats = RenderStats(threads=s.thread_count)
         stats.stages_enabled = [name for name, on in self.stages.items() if on]
 
@@ -237,21 +238,39 @@ class Integrator:
             if progress is not None:
                 progress(done, len(chunks))
 
+        def chunk(p0):
+            return self.render_chunk(p0, min(p0 + pixels_per_chunk, n_pixels))
+
         if s.thread_count == 1 or len(chunks) == 1:
-            for i, (p0, p1) in enumerate(chunks):
-                finish(p0, self.render_chunk(p0, p1), i + 1)
+            for i, p0 in enumerate(chunks):
+                finish(p0, chunk(p0), i + 1)
         else:
-            with ThreadPoolExecutor(max_workers=s.thread_count) as pool:
-                futures = [pool.submit(self.render_chunk, p0, p1) for p0, p1 in chunks]
+            # At most two chunks per thread are in flight (running, queued or finished but
+            # not yet on the film): submitting every chunk at once would let finished
+            # results pile up, so peak memory would grow with resolution x spp instead of
+            # staying a few chunk sizes.  Two per thread keep every thread busy while the
+            # calling thread adds results to the film.
+            in_flight = 2 * s.thread_count
+            pending = deque()
+
+            def finish_oldest(submitted):
                 # results are added in chunk order; pixels never overlap, so order only
                 # matters for the stats, which are sums of integers and timings
+                first, future = pending.popleft()
+                finish(first, future.result(), submitted - len(pending))
+
+            with ThreadPoolExecutor(max_workers=s.thread_count) as pool:
                 try:
-                    for i, ((p0, _), future) in enumerate(zip(chunks, futures)):
-                        finish(p0, future.result(), i + 1)
+                    for submitted, p0 in enumerate(chunks, 1):
+                        pending.append((p0, pool.submit(chunk, p0)))
+                        if len(pending) >= in_flight:
+                            finish_oldest(submitted)
+                    while pending:
+                        finish_oldest(len(chunks))
                 except BaseException:
                     # Ctrl-C or a failing chunk: drop the chunks not yet started instead of
                     # rendering the rest of the image before giving up
-                    for future in futures:
+                    for _, future in pending:
                         future.cancel()
                     raise
         stats.wall_seconds = time.perf_counter() - start
