@@ -6,7 +6,12 @@ sample's value does not depend on which thread renders it, on the chunk it falls
 how many other samples were drawn before it: renders are bit-identical for any thread count
 and chunk size.
 
-Dimensions used by the integrator are named in :class:`Dim`.
+Dimensions used by the integrator are named in :class:`Dim`.  Every stratified quantity
+(pixel position, lens, time, glossy direction, ambient-occlusion and area-light points) comes
+from one machinery, :func:`pixel_offsets`, :func:`decorrelated_points` and
+:func:`stratified_values` over a private ``_stratified``.  A pixel's sample index is global
+across adaptive rounds: samples ``k spp .. (k + 1) spp - 1`` form the k-th stratified set
+(jittered), and any power-of-two prefix of the samples is stratified (Sobol).
 """
 
 import functools
