@@ -30,14 +30,16 @@ import numpy as np
 
 from .accel import Accel, barycentric_interpolate, offset_ray_origins
 from .area_lights import AreaLighting, emissive_mesh_light, is_area_light
-from .aov import PassRecorder
+from .adaptive import render_rounds
+from .aov import DERIVED_PASSES, PassRecorder, derived_pass
 from .background import as_background
 from .batches import RayBatch, component_major, take_rows
 from .film import Film
 from .glossy import sample_glossy_directions
+from .media import Media
 from .motion import MotionAccel, blurs, object_motions, scene_at_time, swept_bounds
 from .sampling import (Dim, decorrelated_points, pixel_offsets, square_to_cosine_hemisphere,
-                       stratified_points, stratified_values)
+                       stratified_values)
 from .settings import RenderStats
 from .vecmath import dot, fresnel_dielectric, fresnel_schlick, normalize, orthonormal_basis, reflect, refract
 from .materials import blinn_phong_highlight, lambert
@@ -78,11 +80,12 @@ class _Surfaces:
     where it is needed) are (k, 3) component-major arrays (see :mod:`rtmesh.batches`).
     ``ng`` and ``ns`` are flipped to the side the ray came from; ``front`` says whether
     that is the outer side of the triangle (counter-clockwise winding).  ``mat`` (intp) is
-    the material, ``sample`` the pixel sample each hit contributes to, ``time`` (float,
-    None without motion blur) the time of the ray (see :mod:`rtmesh.motion`).
+    the material, ``prim`` (intp) the face hit, ``sample`` the pixel sample each hit
+    contributes to, ``time`` (float, None without motion blur) the time of the ray (see
+    :mod:`rtmesh.motion`).
     """
 
-    __slots__ = ("p", "ng", "ns", "d", "front", "mat", "sample", "time")
+    __slots__ = ("p", "ng", "ns", "d", "front", "mat", "prim", "sample", "time")
 
 
 def _translated(obj, shift):
@@ -174,7 +177,7 @@ class Integrator:
         self._reflective = (m.mirror > 0).any(axis=1) | (m.transmission > 0).any(axis=1)
         self._transmissive = (m.transmission > 0).any(axis=1)
         self._shaded = (m.diffuse > 0).any(axis=1) | (m.specular > 0).any(axis=1)
-        self._ior = np.concatenate([m.ior, [1.0]])  # index -1 (outside) reads 1.0: vacuum/air
+        self._init_media(scene)
         self._fresnel = fresnel_exact_or_schlick(settings.fresnel)
         self._has_specular = (m.specular > 0).any(axis=1)
         # per-material colours, component-major so that gathering them per hit keeps the
@@ -186,6 +189,36 @@ class Integrator:
         self._faces, self._vertex_normals = self._face_tables()
         # gathers with int32 indices are ~10x slower in NumPy than with intp ones
         self._material_id = scene.material_id.astype(np.intp)
+
+    def _init_media(self, scene):
+        """Medium stacks (see :mod:`rtmesh.media`), only for scenes that refract.
+
+        Sets ``media`` (None without transmissive materials), ``_camera_medium`` (the
+        camera's stack, ``(STACK_DEPTH,)``; ``(0,)`` without media) and ``_camera_absorbs``
+        (camera rays lose light before their first hit, so their throughput is not 1).
+        """
+        m = scene.materials
+        self.media = None
+        self._camera_medium = np.zeros(0, dtype=np.int32)
+        self._camera_absorbs = False
+        if not m.any_transmission:
+            return
+        self.media = Media(m, scene.material_id, scene.vertices, scene.faces,
+                           scene.face_normals)
+        trace, to_rest = self.accel.intersect, None
+        if self.motion is not None:
+            # the camera's media when the shutter opens
+            def at_open(n):
+                return np.full(n, self.camera.shutter[0])
+
+            def trace(origins, directions):
+                return self.motion.intersect(origins, directions, at_open(len(origins)))
+
+            def to_rest(prim, directions):
+                return self.motion.directions_to_rest(prim, at_open(len(prim)), directions)
+        self._camera_medium = self.media.camera_stack(trace, self.camera.position, self.offset_scale,
+                                                      to_rest)
+        self._camera_absorbs = bool((self.media.absorption[self._camera_medium[0]] > 0).any())
 
     def _face_tables(self):
         """What shading reads per hit triangle, packed so that one gather fetches it.
@@ -209,12 +242,14 @@ class Integrator:
 
     # ---------------------------------------------------------------- whole image
     def render(self, progress=None):
-        """Render the image.
+        """Render the image: at ``spp`` samples per pixel, or adaptively in rounds when the
+        settings ask for it (see :mod:`rtmesh.adaptive`).
 
         Parameters
         ----------
         progress : callable, optional
-            Called as ``progress(chunks_done, chunks_total)`` from the calling thread.
+            Called as ``progress(chunks_done, chunks_total)`` from the calling thread
+            (per round, for an adaptive render).
 
         Returns
         -------
@@ -223,65 +258,101 @@ class Integrator:
         s = self.settings
         start = time.perf_counter()
         film = Film(s.width, s.height, self.passes.film_passes())
-        n_pixels = s.width * s.height
-        pixels_per_chunk = max(1, s.chunk_samples // s.spp)
-        chunks = range(0, n_pixels, pixels_per_chunk)
-        stats = RenderStats(threads=s.thread_count)
+        stats = RenderStats(threads=s.thread_count, pixels=s.width * s.height)
         stats.stages_enabled = [name for name, on in self.stages.items() if on]
+        render_rounds(self, film, stats, progress)
+        stats.wall_seconds = time.perf_counter() - start
+        stats.samples = int(film.count.sum())
+        stats.relative_error = film.relative_error()
+        passes = {name: film.pass_image(name) for name in film.pass_sums if name in s.passes}
+        passes.update({name: derived_pass(name, film) for name in s.passes if name in DERIVED_PASSES})
+        passes = {name: passes[name] for name in s.passes if name in passes}  # order asked for
+        alpha = film.pass_image("alpha") if self.background.transparent else None
+        return RenderResult(film.image(), passes, stats, film, alpha)
 
-        def finish(first_pixel, result, done):
+    def render_samples(self, film, groups, stats, progress=None):
+        """Render sets of samples of sets of pixels into ``film``, in chunks on the threads.
+
+        Parameters
+        ----------
+        film : Film
+        groups : list of ((m,) int array, int, int)
+            ``(pixels, first_sample, spp)``: the samples ``first_sample .. first_sample +
+            spp - 1`` of each of ``pixels`` (distinct, ascending; no pixel in two groups).
+        stats : RenderStats
+            Ray counts and stage times are added to it.
+        progress : callable, optional
+            ``progress(chunks_done, chunks_total)``.
+        """
+        s = self.settings
+        chunks = []
+        for pixels, first_sample, spp in groups:
+            per_chunk = max(1, s.chunk_samples // spp)
+            chunks += [(pixels[i:i + per_chunk], first_sample, spp)
+                       for i in range(0, len(pixels), per_chunk)]
+
+        def finish(chunk, result, done):
+            pixels = chunk[0]
             radiance, passes, chunk_stats = result
             t0 = time.perf_counter()
-            film.add_tile(first_pixel, radiance, passes)
+            # a run of consecutive pixels (every chunk of a uniform render) is a slice:
+            # cheaper to add into than a gather-scatter through an index array
+            contiguous = pixels[-1] - pixels[0] == len(pixels) - 1
+            film.add_tile(slice(pixels[0], pixels[-1] + 1) if contiguous else pixels, radiance, passes)
             chunk_stats.stage_seconds["film"] += time.perf_counter() - t0
             stats.merge(chunk_stats)
             if progress is not None:
                 progress(done, len(chunks))
 
-        def chunk(p0):
-            return self.render_chunk(p0, min(p0 + pixels_per_chunk, n_pixels))
-
         if s.thread_count == 1 or len(chunks) == 1:
-            for i, p0 in enumerate(chunks):
-                finish(p0, chunk(p0), i + 1)
-        else:
-            # At most two chunks per thread are in flight (running, queued or finished but
-            # not yet on the film): submitting every chunk at once would let finished
-            # results pile up, so peak memory would grow with resolution x spp instead of
-            # staying a few chunk sizes.  Two per thread keep every thread busy while the
-            # calling thread adds results to the film.
-            in_flight = 2 * s.thread_count
-            pending = deque()
+            for i, chunk in enumerate(chunks):
+                finish(chunk, self.render_chunk(*chunk), i + 1)
+            return
+        # At most two chunks per thread are in flight (running, queued, or finished and not
+        # yet on the film): with every chunk submitted at once, the finished results stay
+        # referenced until the end and memory grows with resolution x spp instead of
+        # staying a few chunk sizes.  Two per thread keep every thread busy while the
+        # calling thread adds results to the film.
+        in_flight = 2 * s.thread_count
+        pending = deque()
 
-            def finish_oldest(submitted):
-                # results are added in chunk order; pixels never overlap, so order only
-                # matters for the stats, which are sums of integers and timings
-                first, future = pending.popleft()
-                finish(first, future.result(), submitted - len(pending))
+        def finish_oldest(submitted):
+            # results are added in chunk order; pixels never overlap, so order only
+            # matters for the stats, which are sums of integers and timings
+            chunk, future = pending.popleft()
+            finish(chunk, future.result(), submitted - len(pending))
 
-            with ThreadPoolExecutor(max_workers=s.thread_count) as pool:
-                try:
-                    for submitted, p0 in enumerate(chunks, 1):
-                        pending.append((p0, pool.submit(chunk, p0)))
-                        if len(pending) >= in_flight:
-                            finish_oldest(submitted)
-                    while pending:
-                        finish_oldest(len(chunks))
-                except BaseException:
-                    # Ctrl-C or a failing chunk: drop the chunks not yet started instead of
-                    # rendering the rest of the image before giving up
-                    for _, future in pending:
-                        future.cancel()
-                    raise
-        stats.wall_seconds = time.perf_counter() - start
-        stats.relative_error = film.relative_error()
-        passes = {name: film.pass_image(name) for name in film.pass_sums if name in s.passes}
-        alpha = film.pass_image("alpha") if self.background.transparent else None
-        return RenderResult(film.image(), passes, stats, film, alpha)
+        with ThreadPoolExecutor(max_workers=s.thread_count) as pool:
+            try:
+                for submitted, chunk in enumerate(chunks, 1):
+                    pending.append((chunk, pool.submit(self.render_chunk, *chunk)))
+                    if len(pending) >= in_flight:
+                        finish_oldest(submitted)
+                while pending:
+                    finish_oldest(len(chunks))
+            except BaseException:
+                # Ctrl-C or a failing chunk: drop the chunks not yet started instead of
+                # rendering the rest of the image before giving up
+                for _, future in pending:
+                    future.cancel()
+                raise
 
     # ---------------------------------------------------------------- one chunk
-    def render_chunk(self, first_pixel, end_pixel):
-        """Render every sample of the pixels ``first_pixel .. end_pixel - 1``.
+    def render_chunk(self, pixels, first_sample, spp):
+        """Render the samples ``first_sample .. first_sample + spp - 1`` of some pixels.
+
+        Sample indices are global to the pixel across adaptive rounds, so the samples a
+        later round adds continue the same sequences (stratified in sets of the settings'
+        ``spp``; Sobol prefixes stay well distributed) instead of repeating the first ones.
+
+        Parameters
+        ----------
+        pixels : (m,) int array
+            Linear pixel indices (``row * width + column``).
+        first_sample : int
+            Index of the first sample to take in each pixel.
+        spp : int
+            Samples to take in each pixel.
 
         Returns
         -------
@@ -293,15 +364,14 @@ class Integrator:
         s = self.settings
         stats = RenderStats()
         clock = _Clock(stats.stage_seconds)
-        m = end_pixel - first_pixel
-        n = m * s.spp
+        pixels = np.asarray(pixels, dtype=np.int64)
+        m = len(pixels)
+        n = m * spp
 
         # camera: one ray per pixel sample
-        pixel = np.arange(first_pixel, end_pixel, dtype=np.int64)
-        if s.spp > 1:
-            pixel = np.repeat(pixel, s.spp)
-        sample_in_pixel = (np.tile(np.arange(s.spp, dtype=np.int64), m) if s.spp > 1
-                           else np.zeros(n, dtype=np.int64))
+        pixel = np.repeat(pixels, spp) if spp > 1 else pixels
+        sample_in_pixel = np.tile(np.arange(first_sample, first_sample + spp, dtype=np.int64), m)
+        # every dimension is stratified in sets of the settings' spp, whatever the round
         film_xy = pixel_offsets(s.sampler, s.seed, pixel, sample_in_pixel, s.spp)
         row = pixel // s.width
         film_xy[:, 0] += pixel - row * s.width
@@ -319,8 +389,10 @@ class Integrator:
         origins, directions = self.camera.generate_rays(film_xy, s.width, s.height, lens_uv)
         # camera rays have unit throughput: a read-only broadcast costs nothing, and
         # _shade does not multiply by it at depth 0
-        rays = RayBatch(origins, directions, np.arange(n, dtype=np.int64),
-                        np.broadcast_to(1.0, (n, 3)), np.full(n, -1, dtype=np.int32))
+        # (inside an absorbing medium they lose light on the way: then a real array)
+        throughput = np.ones((n, 3), order="F") if self._camera_absorbs else np.broadcast_to(1.0, (n, 3))
+        rays = RayBatch(origins, directions, np.arange(n, dtype=np.int64), throughput,
+                        np.broadcast_to(self._camera_medium, (n, len(self._camera_medium))))
         radiance = np.zeros((n, 3), order="F")
         aov = self.passes.buffers(n)
         stats.rays["camera"] += n
@@ -338,15 +410,17 @@ class Integrator:
             clock.lap("intersect")
             rays = self._shade(rays, hits, depth, radiance, aov, keys, stats, clock, sample_time)
 
-        passes = self.passes.per_pixel(aov, m, s.spp) or None
-        return radiance.reshape(m, s.spp, 3), passes, stats
+        passes = self.passes.per_pixel(aov, m, spp) or None
+        return radiance.reshape(m, spp, 3), passes, stats
 
     # ---------------------------------------------------------------- stages
     def _shade(self, rays, hits, depth, radiance, aov, keys, stats, clock, sample_time=None):
         """Shade one depth level; returns the rays of the next level."""
         m = self.scene.materials
         # camera rays (depth 0) are one per sample, in sample order, with unit throughput
+        # unless the camera sits in an absorbing medium
         primary = depth == 0
+        unit_throughput = primary and not self._camera_absorbs
 
         # area lights seen directly: rays meeting one before any surface end there
         on_light = None
@@ -356,12 +430,14 @@ class Integrator:
 
         # absorption: rays inside a medium lose light over the distance they travelled
         if self.stages["absorption"]:
-            inside = rays.medium >= 0
+            medium = rays.medium[:, 0]
+            inside = medium >= 0
             if inside.any():
-                sigma = m.absorption[rays.medium[inside]]
+                sigma = m.absorption[medium[inside]]
                 t = hits.t[inside][:, None]
                 # exp(-0 * inf) would be NaN for a non-absorbing medium left through a hole
-                rays.throughput[inside] *= np.where(sigma > 0, np.exp(-sigma * t), 1.0)
+                with np.errstate(invalid="ignore"):
+                    rays.throughput[inside] *= np.where(sigma > 0, np.exp(-sigma * t), 1.0)
 
         if on_light is not None and len(on_light[0]):
             ended, emitted = on_light
@@ -388,7 +464,7 @@ class Integrator:
 
         local = self._local_shading(srf, depth, aov.get("ao"), keys, stats, clock)
         if local is not None:
-            if not primary:
+            if not unit_throughput:
                 local = local * take_rows(rays.throughput, rows)
             _scatter_add(radiance, None if primary and rows is None else srf.sample, local,
                          unique=primary)
@@ -420,6 +496,7 @@ class Integrator:
         flip = np.where(srf.front, 1.0, -1.0)
         srf.ng = ng * flip[:, None]
         srf.mat = self._material_id.take(prim)
+        srf.prim = prim
         if self.stages["smooth_normals"]:
             srf.ns = self._shading_normals(prim, u, v, flip, srf.ng)
         else:
@@ -553,11 +630,11 @@ class Integrator:
         t, b = orthonormal_basis(srf.ng)
         px, sp = pixel[srf.sample], sample_in_pixel[srf.sample]
         free = np.zeros(k)
-        # the n_ao rays of a hit are one stratified set of the render's sampler
-        first = sp * n_ao
+        s = self.settings
+        # the spp * n_ao rays of a pixel's samples are one stratified set of the render's
+        # sampler, and the n_ao of each hit are stratified among themselves
         for i in range(n_ao):
-            u = stratified_points(self.settings.sampler, self.settings.seed, px, first + i, n_ao,
-                                  Dim.AO + 2 * depth)
+            u = decorrelated_points(s.sampler, s.seed, px, sp, s.spp, Dim.AO + 2 * depth, i, n_ao)
             w = square_to_cosine_hemisphere(u)
             d = t * w[:, :1] + b * w[:, 1:2] + srf.ng * w[:, 2:3]
             origins = offset_ray_origins(srf.p, srf.ng, np.float32, self.offset_scale, d)
@@ -590,11 +667,9 @@ class Integrator:
             j = np.flatnonzero(trans)
             if len(j):
                 mat_j = mat[j]
-                entering = srf.front[idx[j]]
-                ior_outside = self._ior[rays.medium[idx[j]]]
-                ior_inside = m.ior[mat_j]
-                # leaving an object returns the ray to the outside (air) in this model
-                eta = np.where(entering, ior_outside / ior_inside, ior_inside)
+                # the index ratio and the media beyond come from the ray's medium stack
+                eta, beyond = self.media.cross(rays.medium[idx[j]], srf.prim[idx[j]],
+                                               srf.front[idx[j]])
                 cos_i = np.clip(dot(wo[j], ns[j]), 0.0, 1.0)
                 fresnel = self._fresnel(cos_i, eta)
                 wt, tir = refract(wo[j], ns[j], eta)
@@ -614,7 +689,7 @@ class Integrator:
                         wt[keep],
                         rays.sample[idx[jk]],
                         beta[jk] * w_t[keep],
-                        np.where(entering[keep], mat_j[keep], -1).astype(np.int32),
+                        beyond[keep],
                     )
                     stats.rays["refraction"] += len(jk)
 
