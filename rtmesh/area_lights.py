@@ -39,8 +39,10 @@ what makes penumbrae smooth at small N.  Its variance grows only for points clos
 light than the light's own size, where ``1 / d^2`` varies strongly over the light;
 solid-angle sampling (Urena et al. 2013 for rectangles) would remove that.
 
-The sample points come from the render's sampler (:func:`rtmesh.sampling.stratified_points`,
-keyed by seed, pixel, sample and dimension), in dimensions from :attr:`Dim.LIGHT` upward.
+The sample points come from the render's sampler (:func:`rtmesh.sampling.decorrelated_points`,
+keyed by seed, pixel, sample, ray and dimension), in dimensions from :attr:`Dim.LIGHT` upward:
+the ``spp * N`` points a pixel's samples send to one light are one stratified set, and the
+``N`` of each hit are stratified among themselves.
 
 Visibility
 ----------
@@ -59,8 +61,8 @@ import numpy as np
 from .accel import barycentric_interpolate, offset_ray_origins
 from .batches import component_major, take_rows
 from .materials import as_colour
-from .sampling import (Dim, square_to_uniform_disk_concentric, square_to_uniform_triangle,
-                       stratified_points)
+from .sampling import (Dim, decorrelated_points, square_to_uniform_disk_concentric,
+                       square_to_uniform_triangle)
 from .vecmath import dot, orthonormal_basis
 
 # Rays meeting a visible light and a surface at the same distance (a light placed flush on a
@@ -143,6 +145,15 @@ class QuadLight:
                                  + self.edge2[:, None] * u[:, 1])
         return points, self.normal, self.radiance, self.area
 
+    def to_square(self, points):
+        """Inverse of :meth:`sample`: points in the light's plane to ``u``, (k, 3) -> (k, 2).
+
+        ``u`` is in [0, 1]^2 for points on the light (the coordinates along the two edges,
+        from the corner).
+        """
+        p = points - self.corner
+        return np.stack([p @ self._dual1, p @ self._dual2], axis=1)
+
     def intersect(self, origins, directions):
         """Distance along each ray to the light's emitting side; ``inf`` where it misses.
 
@@ -158,9 +169,8 @@ class QuadLight:
         # rays parallel to the plane get t = inf or NaN and fail every test below
         with np.errstate(divide="ignore", invalid="ignore"):
             t = ((self.corner - origins) @ self.normal) / cos
-            p = origins + directions * t[:, None] - self.corner
-            a, b = p @ self._dual1, p @ self._dual2
-            hit = (cos < 0.0) & (t > 0.0) & (a >= 0.0) & (a <= 1.0) & (b >= 0.0) & (b <= 1.0)
+            u = self.to_square(origins + directions * t[:, None])
+            hit = (cos < 0.0) & (t > 0.0) & ((u >= 0.0) & (u <= 1.0)).all(axis=1)
         return np.where(hit, t, np.inf)
 
 
@@ -343,7 +353,8 @@ class AreaLighting:
     accel : Accel
         Traces the shadow rays.
     settings : RenderSettings
-        ``light_samples``, ``sampler`` and ``seed``.
+        ``light_samples``, ``sampler``, ``seed`` and ``spp`` (the size of the sets of pixel
+        samples whose light samples are stratified together).
     offset_scale : float
         Scene size for :func:`rtmesh.accel.offset_ray_origins`.
     """
@@ -354,6 +365,7 @@ class AreaLighting:
         self.samples = settings.light_samples
         self.sampler = settings.sampler
         self.seed = settings.seed
+        self.spp = settings.spp
         self.offset_scale = offset_scale
         self.visible = [light for light in self.lights if light.visible]
 
@@ -388,12 +400,12 @@ class AreaLighting:
             None when no sample reached any hit.
         """
         n = self.samples
-        index0 = np.asarray(sample, dtype=np.int64) * n
         total = None
         for light_index, light in enumerate(self.lights):
             dimension = light_dimension(depth, light_index, len(self.lights))
             for j in range(n):
-                u = stratified_points(self.sampler, self.seed, pixel, index0 + j, n, dimension)
+                u = decorrelated_points(self.sampler, self.seed, pixel, sample, self.spp, dimension,
+                                        j, n)
                 contribution = self._one_sample(p, ng, reflectance, light, u, stats, clock, time)
                 if contribution is not None:
                     total = contribution if total is None else total + contribution

@@ -37,7 +37,7 @@ from .film import Film
 from .glossy import sample_glossy_directions
 from .motion import MotionAccel, blurs, object_motions, scene_at_time, swept_bounds
 from .sampling import (Dim, decorrelated_points, pixel_offsets, square_to_cosine_hemisphere,
-                       stratified_points, stratified_values)
+                       stratified_values)
 from .settings import RenderStats
 from .vecmath import (dot, face_viewer, fresnel_dielectric, fresnel_schlick, normalize, orthonormal_basis,
                       reflect, refract)
@@ -588,11 +588,11 @@ class Integrator:
         t, b = orthonormal_basis(srf.ng)
         px, sp = pixel[srf.sample], sample_in_pixel[srf.sample]
         free = np.zeros(k)
-        # the n_ao rays of a hit are one stratified set of the render's sampler
-        first = sp * n_ao
+        s = self.settings
+        # the spp * n_ao rays of a pixel's samples are one stratified set of the render's
+        # sampler, and the n_ao of each hit are stratified among themselves
         for i in range(n_ao):
-            u = stratified_points(self.settings.sampler, self.settings.seed, px, first + i, n_ao,
-                                  Dim.AO + 2 * depth)
+            u = decorrelated_points(s.sampler, s.seed, px, sp, s.spp, Dim.AO + 2 * depth, i, n_ao)
             w = square_to_cosine_hemisphere(u)
             d = t * w[:, :1] + b * w[:, 1:2] + srf.ng * w[:, 2:3]
             origins = offset_ray_origins(srf.p, srf.ng, np.float32, self.offset_scale, d)

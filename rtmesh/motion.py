@@ -129,6 +129,22 @@ class Motion:
         c = self.centre
         return rotate(moved - c, self.axis, -np.radians(self.degrees) * time) + c
 
+    def rays_to_rest(self, origins, directions, time):
+        """World rays at their times in the object's rest frame, where its Accel traces them.
+
+        Parameters
+        ----------
+        origins, directions : (k, 3) float
+        time : (k,) float
+
+        Returns
+        -------
+        origins, directions : (k, 3) float
+            Distances along the rays are unchanged (the motion is rigid).
+        """
+        return (self.to_rest(origins, time),
+                self.rotate_vectors(directions, time, inverse=True))
+
     def rotate_vectors(self, vectors, time, inverse=False):
         """Directions or normals carried by the motion (the rotation alone).
 
@@ -347,9 +363,7 @@ class MotionAccel:
             rows = mover.candidates(origins, directions, t)
             if not len(rows):
                 continue
-            tr = time[rows]
-            o = m.to_rest(take_rows(origins, rows), tr)
-            d = m.rotate_vectors(take_rows(directions, rows), tr, inverse=True)
+            o, d = m.rays_to_rest(take_rows(origins, rows), take_rows(directions, rows), time[rows])
             h = mover.accel.intersect(o, d)
             # the static scene wins ties: a fixed order keeps the result deterministic
             closer = np.flatnonzero(h.t < t[rows])
@@ -389,12 +403,11 @@ class MotionAccel:
             if not len(free):
                 break
             o, d = take_rows(origins, free).astype(np.float64), take_rows(directions, free)
-            free = free[mover.candidates(o, d, t_max[free])]
-            if not len(free):
+            near = mover.candidates(o, d, t_max[free])
+            if not len(near):
                 continue
-            m, tf = mover.motion, time[free]
-            o = m.to_rest(take_rows(origins, free).astype(np.float64), tf)
-            d = m.rotate_vectors(take_rows(directions, free), tf, inverse=True)
+            free = free[near]
+            o, d = mover.motion.rays_to_rest(take_rows(o, near), take_rows(d, near), time[free])
             occluded[free] = mover.accel.occluded(o, d, t_max[free])
         return occluded
 

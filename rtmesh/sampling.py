@@ -6,9 +6,15 @@ sample's value does not depend on which thread renders it, on the chunk it falls
 how many other samples were drawn before it: renders are bit-identical for any thread count
 and chunk size.
 
-Dimensions used by the integrator are named in :class:`Dim`.
+Dimensions used by the integrator are named in :class:`Dim`.  Every stratified quantity
+(pixel position, lens, time, glossy direction, ambient-occlusion and area-light points) comes
+from one machinery, :func:`pixel_offsets`, :func:`decorrelated_points` and
+:func:`stratified_values` over a private ``_stratified``.  A pixel's sample index is global
+across adaptive rounds: samples ``k spp .. (k + 1) spp - 1`` form the k-th stratified set
+(jittered), and any power-of-two prefix of the samples is stratified (Sobol).
 """
 
+import functools
 import math
 from enum import IntEnum
 
@@ -108,14 +114,16 @@ def pixel_offsets(sampler, seed, pixel, sample, spp):
     Parameters
     ----------
     sampler : {"regular", "random", "jittered", "sobol"}
-        See :func:`stratified_points`.
+        See :func:`decorrelated_points`; ``regular`` puts the samples at the stratum centres,
+        an ordered supersampling grid.
     seed : int
     pixel : (n,) int
         Linear pixel index of each sample.
     sample : (n,) int
-        Sample index within its pixel, in ``[0, spp)``.
+        Sample index within its pixel, global across adaptive rounds: the jittered strata
+        are ``sample % spp``.
     spp : int
-        Samples per pixel.
+        Samples per stratified set (the render's samples per pixel).
 
     Returns
     -------
@@ -123,137 +131,66 @@ def pixel_offsets(sampler, seed, pixel, sample, spp):
         Offsets in [0, 1)^2 from the pixel's top-left corner (x right, y down),
         component-major (see :mod:`rtmesh.batches`).
     """
-    return stratified_points(sampler, seed, pixel, sample, spp, Dim.PIXEL)
+    return _stratified(sampler, seed, pixel, sample, spp, Dim.PIXEL, 0, 1, 2)
 
 
-def stratified_points(sampler, seed, pixel, index, count, dimension):
-    """Points in [0, 1)^2 drawn in sets of ``count`` that are stratified together.
+def decorrelated_points(sampler, seed, pixel, sample, spp, dimension, ray=0, rays=1):
+    """Points in [0, 1)^2 for a dimension other than the pixel's: lens, glossy, AO, lights.
 
-    The one sample machinery of the renderer: pixel positions, ambient-occlusion directions
-    and area-light samples all come from here, each in its own :class:`Dim` dimension.
-    Point ``index`` of a pixel's sequence belongs to the set ``index // count`` and to the
-    stratum ``index % count`` of that set, so a caller that needs ``count`` points per pixel
-    sample passes ``index = sample * count + j`` for ``j`` in ``[0, count)``.
+    The one sample machinery of the renderer for two-dimensional quantities.  Pixel
+    sample ``sample`` gets ``rays`` points (``ray`` in ``[0, rays)``: the ambient-occlusion
+    or shadow rays of its hit), and the ``spp * rays`` points of a pixel's set of ``spp``
+    samples are stratified *together*:
 
-    Parameters
-    ----------
-    sampler : {"regular", "random", "jittered", "sobol"}
-        ``random`` places the points uniformly, ``jittered`` puts one uniform point in each
-        stratum of an ``nx x ny`` grid (:func:`strata_shape`) in every set, ``sobol`` takes
-        them from an Owen-scrambled (0,2)-sequence scrambled per pixel and dimension, so
-        every power-of-two prefix of a pixel's points (and, for a power-of-two ``count``,
-        every set) is stratified.  ``regular`` puts pixel positions (:attr:`Dim.PIXEL`) at
-        the stratum centres, an ordered supersampling grid; in every other dimension the
-        same points in every pixel would turn the integration error into bands repeated
-        across the image (a penumbra made of ``count`` hard shadows), so there it jitters.
-    seed : int
-    pixel : (n,) int
-        Linear pixel index of each point.
-    index : (n,) int
-        Index of the point in its pixel's sequence for this dimension.
-    count : int
-        Points per stratified set, >= 1.
-    dimension : int
-        First of the two dimensions the point uses (see :class:`Dim`).
+    - ``jittered`` (and ``regular``, which jitters outside the pixel dimension: the same
+      points in every pixel would turn the integration error into bands repeated across
+      the image, a penumbra made of ``rays`` hard shadows) splits the square into
+      ``rays`` cells (:func:`strata_shape`), each cut into ``spp`` strata.  Ray ``ray`` of
+      every sample falls in cell ``ray``, so the rays of one hit are stratified among
+      themselves, and in the stratum of that cell given by a per-pixel permutation of the
+      samples (:func:`shuffled_strata`), so the ``spp`` samples fill every stratum once
+      and the strata are not paired with the pixel strata;
+    - ``sobol`` takes point ``sample * rays + ray`` of an Owen-scrambled (0,2)-sequence
+      scrambled per pixel and dimension: every power-of-two prefix of a pixel's points is
+      stratified in all elementary intervals, as is, for power-of-two ``rays``, the set of
+      one hit;
+    - ``random`` places the points uniformly and independently.
 
-    Returns
-    -------
-    (n, 2) float64
-        Component-major (see :mod:`rtmesh.batches`).
-    """
-    if sampler == "random":
-        return uniform2(seed, pixel, index, dimension)
-    if sampler == "sobol":
-        points = sobol_02(index, sequence_key(seed, pixel, dimension))
-        return component_major(points.T)
-    if sampler not in SAMPLERS:
-        raise ValueError(f"unknown sampler {sampler!r}; expected one of {', '.join(SAMPLERS)}")
-    nx, ny = strata_shape(count)
-    size = np.array([nx, ny], dtype=np.float64)
-    # the strata are worked out once and looked up per point: a gather from a tiny table is
-    # much cheaper than dividing every index by nx
-    strata = np.arange(count)
-    cells = component_major(np.stack([strata % nx, strata // nx]).astype(np.float64))
-    stratum = index % count if count > 1 else np.zeros_like(index)
-    if sampler == "regular" and dimension == Dim.PIXEL:
-        return take_rows((cells + 0.5) / size, stratum)
-    return (take_rows(cells, stratum) + uniform2(seed, pixel, index, dimension)) / size
-
-
-def shuffled_strata(seed, pixel, sample, spp, dimension):
-    """A per-pixel permutation of the strata ``[0, spp)``, applied to sample indices.
-
-    Jittered points of every dimension put sample ``i`` in stratum ``i``, so without a
-    shuffle the sample in the top-left pixel stratum would always get, say, the first lens
-    or time stratum: the dimensions would be correlated and a moving edge would sweep across
-    the pixel in step with the time.  Each pixel and dimension gets the permutation
-    ``i -> (a i + b) mod spp`` with hashed ``a`` (a unit modulo ``spp``) and ``b``: computed
-    point by point, so it works on any subset of a pixel's samples (rays that survive to
-    depth d), and independent between pixels and dimensions.
-
-    Parameters
-    ----------
-    seed : int
-    pixel : (n,) int
-    sample : (n,) int
-        Sample index within the pixel.  Indices past ``spp`` (samples added in later rounds)
-        belong to the set ``sample // spp``, which is permuted the same way.
-    spp : int
-        Samples per stratified set.
-    dimension : int
-
-    Returns
-    -------
-    (n,) int64
-        The permuted index, in the same set of ``spp`` as ``sample``.
-    """
-    sample = np.asarray(sample, dtype=np.int64)
-    if spp == 1:
-        return sample
-    key = sequence_key(seed, pixel, dimension)
-    units = np.flatnonzero(np.gcd(np.arange(spp), spp) == 1)
-    a = units[(key >> np.uint64(32)) % np.uint64(len(units))]
-    b = ((key & np.uint64(0xFFFFFFFF)) % np.uint64(spp)).astype(np.int64)
-    stratum = sample % spp
-    return (sample - stratum) + (a * stratum + b) % spp
-
-
-def decorrelated_points(sampler, seed, pixel, sample, spp, dimension):
-    """One point in [0, 1)^2 per pixel sample for a dimension other than the pixel's.
-
-    :func:`stratified_points` with each pixel's ``spp`` points stratified together, and,
-    for the ``jittered`` and ``regular`` samplers, their strata paired with the pixel
-    strata by :func:`shuffled_strata` (Owen-scrambled Sobol points are scrambled per
-    dimension already, random points are independent).
+    Each point is a pure function of ``(seed, pixel, sample, ray, dimension)``; sample
+    indices past ``spp`` (later adaptive rounds) form further stratified sets.
 
     Parameters
     ----------
     sampler : {"regular", "random", "jittered", "sobol"}
     seed : int
     pixel, sample : (n,) int
-        Linear pixel index and sample index within the pixel (in ``[0, spp)``).
+        Linear pixel index and sample index within the pixel.
     spp : int
+        Samples per stratified set.
     dimension : int
         First of the two dimensions the point uses (see :class:`Dim`).
+    ray : int or (n,) int, optional
+        Which of the sample's points, in ``[0, rays)``.
+    rays : int, optional
+        Points per pixel sample, >= 1.
 
     Returns
     -------
     (n, 2) float64
         Component-major (see :mod:`rtmesh.batches`).
     """
-    if sampler in ("jittered", "regular"):
-        sample = shuffled_strata(seed, pixel, sample, spp, dimension)
-    return stratified_points(sampler, seed, pixel, sample, spp, dimension)
+    return _stratified(sampler, seed, pixel, sample, spp, dimension, ray, rays, 2)
 
 
 def stratified_values(sampler, seed, pixel, sample, spp, dimension):
-    """One number in [0, 1) per pixel sample, the ``spp`` numbers of a pixel stratified.
+    """One number in [0, 1) per pixel sample, the ``spp`` numbers of a set stratified.
 
-    For one-dimensional quantities such as the time in the shutter.  ``jittered`` and
-    ``regular`` put exactly one value in each interval ``[k / spp, (k + 1) / spp)``,
-    assigned to the samples by :func:`shuffled_strata`; ``sobol`` uses the first coordinate
-    of the scrambled (0,2)-sequence, a (0,1)-sequence: every power-of-two prefix is
-    stratified the same way; ``random`` is uniform.
+    For one-dimensional quantities such as the time in the shutter: the one-dimensional
+    case of :func:`decorrelated_points`.  ``jittered`` and ``regular`` put exactly one value
+    of each set of ``spp`` samples in each interval ``[k / spp, (k + 1) / spp)``, assigned
+    to the samples by :func:`shuffled_strata`; ``sobol`` uses the first coordinate of the
+    scrambled (0,2)-sequence, a (0,1)-sequence: every power-of-two prefix is stratified the
+    same way; ``random`` is uniform.
 
     Parameters
     ----------
@@ -267,14 +204,133 @@ def stratified_values(sampler, seed, pixel, sample, spp, dimension):
     -------
     (n,) float64
     """
-    if sampler == "random":
-        return uniform(seed, pixel, sample, dimension)
-    if sampler == "sobol":
-        return sobol_02(sample, sequence_key(seed, pixel, dimension))[:, 0]
+    return _stratified(sampler, seed, pixel, sample, spp, dimension, 0, 1, 1)
+
+
+def shuffled_strata(seed, pixel, sample, spp, dimension, ray=0, rays=1):
+    """A per-pixel permutation of the strata ``[0, spp)``, applied to sample indices.
+
+    Jittered points of every dimension would put sample ``i`` in stratum ``i``, so without
+    a shuffle the sample in the top-left pixel stratum would always get, say, the first lens
+    or time stratum: the dimensions would be correlated and a moving edge would sweep across
+    the pixel in step with the time.  Each set of ``spp`` samples of a pixel gets, in each
+    dimension and for each ray of :func:`decorrelated_points`, the permutation
+    ``i -> (a i + b) mod spp`` with hashed ``a`` (a unit modulo ``spp``) and ``b``: computed
+    point by point, so it works on any subset of a pixel's samples (rays that survive to
+    depth d), and independent between pixels, dimensions, rays and sets.
+
+    Parameters
+    ----------
+    seed : int
+    pixel : (n,) int
+    sample : (n,) int
+        Sample index within the pixel.  Indices past ``spp`` (samples added in later rounds)
+        belong to the set ``sample // spp``, which gets its own permutation.
+    spp : int
+        Samples per stratified set.
+    dimension : int
+    ray : int or (n,) int, optional
+    rays : int, optional
+        See :func:`decorrelated_points`.
+
+    Returns
+    -------
+    (n,) int64
+        The permuted index, in the same set of ``spp`` as ``sample``.
+    """
+    sample = np.asarray(sample, dtype=np.int64)
+    stratum = sample % spp
+    return (sample - stratum) + _permuted_strata(seed, pixel, sample, spp, dimension, ray, rays)
+
+
+def _permuted_strata(seed, pixel, sample, spp, dimension, ray, rays):
+    """The stratum ``shuffled_strata`` gives each sample, in ``[0, spp)``, (n,) int64."""
+    stratum = np.asarray(sample, dtype=np.int64) % spp
+    if spp == 1:
+        return stratum
+    key = sequence_key(seed, pixel, dimension)
+    # one permutation per (set, ray): the set and ray index hashed into the pixel's key
+    stream = (np.asarray(sample, dtype=np.int64) // spp) * rays + ray
+    with np.errstate(over="ignore"):  # the multiplication is meant to wrap modulo 2**64
+        key = mix64(key + stream.astype(np.uint64) * GOLDEN)
+    a = _units(spp)[(key >> np.uint64(32)) % np.uint64(len(_units(spp)))]
+    b = ((key & np.uint64(0xFFFFFFFF)) % np.uint64(spp)).astype(np.int64)
+    return (a * stratum + b) % spp
+
+
+@functools.lru_cache(maxsize=64)
+def _units(spp):
+    """The units modulo ``spp`` (the multipliers of an affine permutation), (k,) int64."""
+    return np.flatnonzero(np.gcd(np.arange(spp), spp) == 1).astype(np.int64)
+
+
+@functools.lru_cache(maxsize=64)
+def _cell_grids(rays, spp, dims):
+    """Cell and stratum grids of one stratified set of ``rays`` points per sample.
+
+    Returns
+    -------
+    cells : (int, int)
+        ``(cx, cy)``: the ``rays`` cells (one per ray) tiling the square, or the unit
+        interval (``cy == 1``) when ``dims == 1``.
+    strata : (int, int)
+        ``(sx, sy)``: each cell cut into ``spp`` strata, chosen so that the joint grid of
+        ``cx * sx`` by ``cy * sy`` strata is as square as the factors allow (with a single
+        ray it is :func:`strata_shape` of ``spp``).
+    table : (spp, 2) float64
+        Column and row of each stratum inside its cell, component-major: a gather from a
+        tiny table is much cheaper than dividing every index by ``sx``.
+    """
+    if dims == 1:
+        cells, strata = (rays, 1), (spp, 1)
+    else:
+        cells = strata_shape(rays)
+        pairs = [(spp // ny, ny) for ny in range(1, spp + 1) if spp % ny == 0]
+        # squarest joint grid; among equals the wider one, as strata_shape
+        strata = min(pairs, key=lambda p: (abs(math.log(cells[0] * p[0] / (cells[1] * p[1]))),
+                                           -cells[0] * p[0]))
+    k = np.arange(spp)
+    table = component_major(np.stack([k % strata[0], k // strata[0]]).astype(np.float64))
+    return cells, strata, table
+
+
+def _stratified(sampler, seed, pixel, sample, spp, dimension, ray, rays, dims):
+    """Every sampler's points: see :func:`decorrelated_points`.
+
+    ``dims`` is 2 for points in [0, 1)^2, returned as (n, 2) component-major, or 1 for
+    values in [0, 1), returned as (n,).  The pixel dimension (:attr:`Dim.PIXEL`) keeps
+    sample ``i`` in stratum ``i % spp`` (the reference the other dimensions are shuffled
+    against) and ``regular`` puts it at the stratum's centre.
+    """
     if sampler not in SAMPLERS:
         raise ValueError(f"unknown sampler {sampler!r}; expected one of {', '.join(SAMPLERS)}")
-    stratum = shuffled_strata(seed, pixel, sample, spp, dimension)
-    return (stratum + uniform(seed, pixel, sample, dimension)) * (1.0 / spp)
+    sample = np.asarray(sample, dtype=np.int64)
+    index = sample * rays + ray if rays > 1 else sample
+    if sampler == "random":
+        if dims == 1:
+            return uniform(seed, pixel, index, dimension)
+        return uniform2(seed, pixel, index, dimension)
+    if sampler == "sobol":
+        points = sobol_02(index, sequence_key(seed, pixel, dimension))
+        return points[:, 0] if dims == 1 else component_major(points.T)
+    (cx, cy), (sx, sy), table = _cell_grids(rays, spp, dims)
+    if dimension == Dim.PIXEL:
+        stratum = sample % spp if spp > 1 else np.zeros_like(sample)
+    else:
+        stratum = _permuted_strata(seed, pixel, sample, spp, dimension, ray, rays)
+    if dims == 1:
+        jitter = uniform(seed, pixel, index, dimension)
+        return ((ray * spp + stratum) + jitter) * (1.0 / (rays * spp))
+    if sampler == "regular" and dimension == Dim.PIXEL:
+        jitter = 0.5
+    else:
+        jitter = uniform2(seed, pixel, index, dimension)
+    corner = take_rows(table, stratum)
+    if rays > 1:
+        ray = np.asarray(ray, dtype=np.int64)
+        cell = np.stack([ray % cx * sx, ray // cx * sy]).astype(np.float64)
+        corner = corner + (component_major(cell) if ray.ndim else cell)
+    return (corner + jitter) / np.array([cx * sx, cy * sy], dtype=np.float64)
 
 
 def square_to_uniform_disk_concentric(u):
@@ -304,6 +360,30 @@ def square_to_uniform_disk_concentric(u):
     return np.stack([r * np.cos(phi), r * np.sin(phi)], axis=1)
 
 
+def uniform_disk_concentric_to_square(d):
+    """Inverse of :func:`square_to_uniform_disk_concentric`, (n, 2) -> (n, 2).
+
+    Each of the four sectors of angle pi/2 around the axes came from one triangle of the
+    square between its centre and one side; there the side's coordinate is ``+-r`` and the
+    other is proportional to the angle from the sector's axis.
+    """
+    r = np.hypot(d[:, 0], d[:, 1])
+    # angle in [-pi/4, 7pi/4): sector k (0..3) is centred on the angle k pi/2
+    phi = np.arctan2(d[:, 1], d[:, 0])
+    phi = np.where(phi < -np.pi / 4.0, phi + 2.0 * np.pi, phi)
+    sector = np.clip(np.floor((phi + np.pi / 4.0) / (np.pi / 2.0)), 0, 3).astype(np.int64)
+    side = np.where(sector < 2, r, -r)  # +r for the sectors facing +x, +y; -r for -x, -y
+    along = (phi - sector * (np.pi / 2.0)) * side / (np.pi / 4.0)
+    a = np.where(sector % 2 == 0, side, -along)
+    b = np.where(sector % 2 == 0, along, side)
+    return np.stack([0.5 * (a + 1.0), 0.5 * (b + 1.0)], axis=1)
+
+
+def square_to_uniform_disk_concentric_pdf(d):
+    """Area density of :func:`square_to_uniform_disk_concentric`: ``1 / pi`` on the disk."""
+    return np.where((d * d).sum(axis=1) <= 1.0, 1.0 / np.pi, 0.0)
+
+
 def square_to_cosine_hemisphere(u):
     """Cosine-weighted directions on the hemisphere around +z (Malley's method).
 
@@ -320,6 +400,11 @@ def square_to_cosine_hemisphere(u):
     d = square_to_uniform_disk_concentric(u)
     z = np.sqrt(np.maximum(0.0, 1.0 - (d * d).sum(axis=1)))
     return np.column_stack([d, z])
+
+
+def cosine_hemisphere_to_square(w):
+    """Inverse of :func:`square_to_cosine_hemisphere`, (n, 3) -> (n, 2)."""
+    return uniform_disk_concentric_to_square(w[:, :2])
 
 
 def square_to_cosine_hemisphere_pdf(w):

@@ -22,7 +22,7 @@ from rtmesh.camera import Camera
 from rtmesh.errors import SceneError
 from rtmesh.lights import PointLight
 from rtmesh.materials import Material, lambert
-from rtmesh.sampling import Dim, stratified_points, square_to_uniform_triangle, uniform_triangle_to_square
+from rtmesh.sampling import Dim, decorrelated_points, square_to_uniform_triangle, uniform_triangle_to_square
 from rtmesh.scene import Scene
 from rtmesh.scene_file import scene_from_dict
 from rtmesh.settings import RenderStats
@@ -185,7 +185,8 @@ def test_a_point_half_covered_by_an_edge_on_blocker_sees_exactly_half():
     _, variance = rectangle_moments(-1, 1, -1, 1, 2.0, visible_from=0.0)
     for sampler in ("jittered", "sobol"):
         # the blocker's edge splits every 4 x 4 stratified set of the light in two halves
-        u = stratified_points(sampler, 0, np.zeros(n, np.int64), np.arange(n), n, light_dimension(0, 0, 1))
+        u = decorrelated_points(sampler, 0, np.zeros(n, np.int64), np.zeros(n, np.int64), 1,
+                                light_dimension(0, 0, 1), np.arange(n), n)
         points, *_ = light.sample(u)
         assert (points[:, 0] < 0.0).sum() == n // 2
         free, _ = direct_light([light], [[0.0, 0.0, 0.0]], samples=n, sampler=sampler)
@@ -427,18 +428,105 @@ def test_each_stratum_of_the_light_holds_exactly_one_sample(sampler):
     light = QuadLight([1.0, 2.0, 3.0], [2.0, 0.0, 0.0], [0.5, 0.0, 1.5], 1.0)  # a parallelogram
     n, pixels = 16, 200
     pixel = np.repeat(np.arange(pixels), n)
-    sample = np.full(pixels * n, 3)  # pixel sample 3 of each pixel
-    u = stratified_points(sampler, 5, pixel, sample * n + np.tile(np.arange(n), pixels), n, 1 << 24)
+    sample = np.full(pixels * n, 3)  # pixel sample 3 of each pixel (of 4)
+    u = decorrelated_points(sampler, 5, pixel, sample, 4, 1 << 24, np.tile(np.arange(n), pixels), n)
     points, *_ = light.sample(u)
     # coordinates of the points along the two edges, from the corner
-    local = points - light.corner
-    a, b = local @ light._dual1, local @ light._dual2
+    a, b = light.to_square(points).T
     assert ((a >= 0) & (a < 1) & (b >= 0) & (b < 1)).all()
     cell = (np.floor(b * 4) * 4 + np.floor(a * 4)).astype(int).reshape(pixels, n)
     for row in cell:
         np.testing.assert_array_equal(np.sort(row), np.arange(n))
     # and the sets of different pixels differ
     assert np.unique(np.round(a, 6)).size > pixels
+
+
+@pytest.mark.parametrize("sampler", ["jittered", "regular", "sobol"])
+def test_area_light_and_ao_points_of_a_pixel_are_one_stratified_set(sampler, monkeypatch):
+    # spp = 4 camera samples per pixel x 4 rays per hit: the 16 points a pixel's samples
+    # send to the light (and the 16 ambient-occlusion directions) fill every stratum of the
+    # 4 x 4 grid once (for Sobol every elementary interval), as the renderer draws them
+    import rtmesh.area_lights
+    import rtmesh.integrator
+    drawn = []
+
+    def recording(module):
+        original = module.decorrelated_points
+
+        def draw(sampler, seed, pixel, sample, spp, dimension, ray=0, rays=1):
+            u = original(sampler, seed, pixel, sample, spp, dimension, ray, rays)
+            drawn.append((dimension, np.array(pixel), np.array(sample), ray, np.array(u)))
+            return u
+        monkeypatch.setattr(module, "decorrelated_points", draw)
+    recording(rtmesh.area_lights)
+    recording(rtmesh.integrator)
+    camera = Camera([0.0, 0.0, 1.0], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0], 30.0)
+    scene = Scene.from_parts([part("floor", floor_quad(20.0))], [Material("f")], [ceiling_quad()], camera)
+    width = height = 3
+    render(scene, width=width, height=height, spp=4, sampler=sampler, light_samples=4, ao_samples=4,
+           passes=("ao",))
+    for dimension in (Dim.AO, light_dimension(0, 0, 1)):
+        calls = [c for c in drawn if c[0] == dimension]
+        assert sorted(c[3] for c in calls) == [0, 1, 2, 3]  # one call per ray of the hits
+        pixel = np.concatenate([c[1] for c in calls])
+        sample = np.concatenate([c[2] for c in calls])
+        u = np.concatenate([c[4] for c in calls])
+        assert len(u) == width * height * 16
+        for p in range(width * height):
+            mine = u[pixel == p]
+            assert sorted(sample[pixel == p].tolist()) == sorted(list(range(4)) * 4)
+            grids = [(4, 4)] if sampler != "sobol" else [(1, 16), (2, 8), (4, 4), (8, 2), (16, 1)]
+            for nx, ny in grids:
+                cells = np.floor(mine[:, 0] * nx) * ny + np.floor(mine[:, 1] * ny)
+                assert sorted(cells.astype(int).tolist()) == list(range(16))
+
+
+def test_quad_and_disk_light_samples_round_trip_and_have_density_one_over_area():
+    quad_light = QuadLight([1.0, 2.0, 3.0], [2.0, 0.0, 0.0], [0.5, 0.0, 1.5], 1.0)  # a parallelogram
+    disk_light = DiskLight([0.5, -1.0, 2.0], [1.0, 2.0, -0.5], 0.7, 1.0)
+    rng = np.random.default_rng(7)
+    u = rng.uniform(1e-3, 1.0 - 1e-3, size=(2000, 2))
+    u = u[(np.abs(u[:, 0] - u[:, 1]) > 1e-3) & (np.abs(u[:, 0] + u[:, 1] - 1.0) > 1e-3)]
+    points, _, _, inverse_pdf = quad_light.sample(u)
+    np.testing.assert_allclose(quad_light.to_square(points), u, rtol=0, atol=1e-12)
+    # the density the points follow, 1 / |dy/du0 x dy/du1|, is the pdf the estimator divides by
+    h = 1e-6
+    for light in (quad_light, disk_light):
+        d0 = (light.sample(u + [h, 0.0])[0] - light.sample(u - [h, 0.0])[0]) / (2 * h)
+        d1 = (light.sample(u + [0.0, h])[0] - light.sample(u - [0.0, h])[0]) / (2 * h)
+        area_scale = np.linalg.norm(np.cross(d0, d1), axis=1)
+        np.testing.assert_allclose(area_scale, light.sample(u)[3], rtol=1e-6)
+        # and the points lie in the light's plane
+        offset = light.sample(u)[0] - light.position
+        np.testing.assert_allclose(offset @ light.normal, 0.0, atol=1e-12)
+
+
+def test_mesh_light_pdf_integrates_to_one_and_matches_its_jacobian():
+    # two triangles of different areas and emissions, not in one plane
+    v = np.array([[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 1.0, 0.0],
+                  [0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [0.0, 0.5, 1.5]])
+    tris = np.array([np.concatenate([v[i], v[i + 1] - v[i], v[i + 2] - v[i]]) for i in (0, 3)])
+    normals = np.cross(tris[:, 3:6], tris[:, 6:9])
+    area = 0.5 * np.linalg.norm(normals, axis=1)
+    normals /= 2.0 * area[:, None]
+    light = emissive_mesh_light(tris, normals, np.array([[1.0, 2.0, 3.0], [0.5, 0.5, 0.5]]))
+    # pdf per unit area on each face (1 / inverse_pdf) times the face's area sums to one
+    power = area * np.array([2.0, 0.5])
+    share = power / power.sum()
+    # u0 picks the face by its share of the power: the middle of each face's interval
+    _, _, _, inverse_pdf = light.sample(np.column_stack([np.cumsum(share) - 0.5 * share, [0.5, 0.5]]))
+    assert (1.0 / inverse_pdf * area).sum() == pytest.approx(1.0, abs=1e-12)
+    np.testing.assert_allclose(1.0 / inverse_pdf * area, share, rtol=1e-12)
+    # the points' density, 1 / |dy/du0 x dy/du1|, is that pdf (away from the seam between
+    # the faces in u0)
+    rng = np.random.default_rng(8)
+    u = rng.uniform(1e-3, 1.0 - 1e-3, size=(2000, 2))
+    u = u[np.abs(u[:, 0] - share[0]) > 1e-3]
+    h = 1e-7
+    d0 = (light.sample(u + [h, 0.0])[0] - light.sample(u - [h, 0.0])[0]) / (2 * h)
+    d1 = (light.sample(u + [0.0, h])[0] - light.sample(u - [0.0, h])[0]) / (2 * h)
+    area_scale = np.linalg.norm(np.cross(d0, d1), axis=1)
+    np.testing.assert_allclose(area_scale, light.sample(u)[3], rtol=1e-5)
 
 
 @pytest.mark.parametrize("sampler, smooth_slope, penumbra_slope", [
@@ -469,10 +557,10 @@ def test_light_samples_are_decorrelated_across_lights_depths_and_pixel_samples()
     dims = [light_dimension(depth, i, 3) for depth in range(4) for i in range(3)]
     assert len(set(dims)) == 12 and min(dims) == Dim.LIGHT and max(dims) < 1 << 25
     assert all(d % 2 == 0 for d in dims)  # pairs never overlap
-    pixel = np.zeros(4, np.int64)
-    a = stratified_points("jittered", 0, pixel, np.arange(4), 4, 1 << 24)
-    b = stratified_points("jittered", 0, pixel, np.arange(4) + 4, 4, 1 << 24)
-    c = stratified_points("jittered", 0, pixel, np.arange(4), 4, (1 << 24) + 2)
+    pixel, ray = np.zeros(4, np.int64), np.arange(4)
+    a = decorrelated_points("jittered", 0, pixel, np.zeros(4, np.int64), 2, 1 << 24, ray, 4)
+    b = decorrelated_points("jittered", 0, pixel, np.ones(4, np.int64), 2, 1 << 24, ray, 4)
+    c = decorrelated_points("jittered", 0, pixel, np.zeros(4, np.int64), 2, (1 << 24) + 2, ray, 4)
     assert not np.allclose(a, b) and not np.allclose(a, c)
 
 

@@ -19,6 +19,19 @@ from scenes import box, floor_quad, icosphere, part, quad, render
 
 
 # ---------------------------------------------------------------- the transforms
+def test_rays_to_rest_keep_every_point_at_the_same_distance_along_the_ray():
+    # a point t along a world ray at time tau is, in the rest frame, t along the rest ray
+    rng = np.random.default_rng(2)
+    motion = Motion([0.5, -1.0, 2.0], [0.3, -0.5, 0.8], 70.0, centre=np.array([1.0, 2.0, 3.0]))
+    origins, directions = rng.normal(size=(40, 3)), rng.normal(size=(40, 3))
+    directions /= np.linalg.norm(directions, axis=1)[:, None]
+    time, t = rng.uniform(0.0, 1.0, 40), rng.uniform(0.0, 5.0, 40)
+    o, d = motion.rays_to_rest(origins, directions, time)
+    np.testing.assert_allclose(o + t[:, None] * d,
+                               motion.to_rest(origins + t[:, None] * directions, time), atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(d, axis=1), 1.0, atol=1e-12)
+
+
 def test_rotate_matches_the_rotation_matrix_and_motion_inverts_exactly():
     rng = np.random.default_rng(1)
     axis = np.array([0.3, -0.5, 0.8])

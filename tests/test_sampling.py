@@ -4,9 +4,12 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from rtmesh.sampling import (Dim, pixel_offsets, square_to_cosine_hemisphere,
+from rtmesh.sampling import (SAMPLERS, Dim, cosine_hemisphere_to_square, decorrelated_points,
+                             pixel_offsets, square_to_cosine_hemisphere,
                              square_to_cosine_hemisphere_pdf, square_to_uniform_disk_concentric,
-                             strata_shape, uniform, uniform2)
+                             square_to_uniform_disk_concentric_pdf, strata_shape,
+                             stratified_values, uniform, uniform2,
+                             uniform_disk_concentric_to_square)
 
 SPPS = [1, 2, 4, 6, 9, 12, 16]
 
@@ -79,6 +82,102 @@ def test_random_pixel_offsets_are_in_the_unit_square_and_uniform():
 def test_unknown_sampler_is_an_error():
     with pytest.raises(ValueError, match="sampler"):
         pixel_offsets("halton", 0, np.zeros(1, np.int64), np.zeros(1, np.int64), 1)
+
+
+# ---------------------------------------------------------------- the other dimensions
+def pixel_sets(pixels, spp, rays=1, rounds=1):
+    """Keys of every point of ``pixels`` pixels: ``rounds * spp`` samples, ``rays`` each."""
+    per_pixel = rounds * spp * rays
+    pixel = np.repeat(np.arange(pixels, dtype=np.int64), per_pixel)
+    sample = np.tile(np.repeat(np.arange(rounds * spp, dtype=np.int64), rays), pixels)
+    ray = np.tile(np.arange(rays, dtype=np.int64), pixels * rounds * spp)
+    return pixel, sample, ray
+
+
+def cell_of(points, nx, ny):
+    """Index of the cell of an ``nx x ny`` grid holding each point, (n,) int."""
+    return (np.floor(points[:, 1] * ny) * nx + np.floor(points[:, 0] * nx)).astype(int)
+
+
+@pytest.mark.parametrize("sampler", ["jittered", "regular"])
+@pytest.mark.parametrize("spp, rays, grid", [
+    (1, 16, (4, 4)), (4, 4, (4, 4)), (2, 8, (4, 4)), (6, 3, (6, 3)), (9, 2, (6, 3)), (16, 16, (16, 16)),
+])
+def test_the_spp_times_rays_points_of_a_pixel_are_one_stratified_set(sampler, spp, rays, grid):
+    # ambient-occlusion and shadow rays: rays per hit x spp hits per pixel, every stratum
+    # of the joint grid holds exactly one point, in every round of spp samples
+    pixels, rounds = 40, 2
+    pixel, sample, ray = pixel_sets(pixels, spp, rays, rounds)
+    u = decorrelated_points(sampler, 3, pixel, sample, spp, Dim.AO + 2, ray, rays)
+    assert ((u >= 0.0) & (u < 1.0)).all()
+    cells = cell_of(u, *grid).reshape(pixels, rounds, spp * rays)
+    assert (np.sort(cells, axis=2) == np.arange(spp * rays)).all()
+    # and the rays of each hit are stratified among themselves, one in each of `rays` cells
+    cells = cell_of(u, *strata_shape(rays)).reshape(pixels, rounds, spp, rays)
+    assert (np.sort(cells, axis=3) == np.arange(rays)).all()
+    # later rounds are fresh points, and pixels differ
+    points = u.reshape(pixels, rounds, spp * rays, 2)
+    assert not np.isin(points[:, 1, :, 0], points[:, 0, :, 0]).any()
+    assert len(np.unique(points[:, 0, 0, 0])) == pixels
+
+
+@pytest.mark.parametrize("spp, rays", [(1, 16), (4, 4), (2, 8), (16, 1)])
+def test_sobol_points_of_a_pixel_and_each_hit_fill_every_elementary_interval(spp, rays):
+    pixels, m = 40, int(np.log2(spp * rays))
+    pixel, sample, ray = pixel_sets(pixels, spp, rays)
+    u = decorrelated_points("sobol", 3, pixel, sample, spp, Dim.LIGHT, ray, rays)
+    sets = u.reshape(pixels, spp * rays, 2)
+    hits = u.reshape(pixels * spp, rays, 2)
+    for points, k in [(sets, m), (hits, int(np.log2(rays)))]:
+        for a in range(k + 1):  # the 2^a x 2^(k - a) grids
+            cells = np.sort(cell_of(points.reshape(-1, 2), 2 ** a, 2 ** (k - a)).reshape(len(points), -1))
+            assert (cells == np.arange(2 ** k)).all(), (k, a)
+
+
+def test_sobol_prefixes_of_any_number_of_rounds_are_stratified():
+    # adaptive sampling adds rounds of `spp` samples; the first 2^k samples of a pixel
+    # (whatever the round size) are a (0, m, 2)-net in 2D and one value per 2^-k in time
+    pixels, spp, rays = 20, 2, 4
+    pixel, sample, ray = pixel_sets(pixels, spp, rays, rounds=8)
+    u = decorrelated_points("sobol", 1, pixel, sample, spp, Dim.AO, ray, rays).reshape(pixels, -1, 2)
+    t = stratified_values("sobol", 1, pixel[::rays], sample[::rays], spp, Dim.TIME).reshape(pixels, -1)
+    for k in range(5):
+        points = u[:, : 2 ** k * rays].reshape(-1, 2)
+        m = k + 2
+        for a in range(m + 1):
+            cells = np.sort(cell_of(points, 2 ** a, 2 ** (m - a)).reshape(pixels, -1))
+            assert (cells == np.arange(2 ** m)).all(), (k, a)
+        strata = np.sort(np.floor(t[:, : 2 ** k] * 2 ** k).astype(int))
+        assert (strata == np.arange(2 ** k)).all()
+
+
+@pytest.mark.parametrize("sampler", SAMPLERS)
+def test_stratified_values_of_later_rounds_stay_in_the_unit_interval(sampler):
+    # sample indices past spp (later adaptive rounds) once gave times above 1
+    spp, pixels, rounds = 6, 100, 4
+    pixel, sample, _ = pixel_sets(pixels, spp, rounds=rounds)
+    t = stratified_values(sampler, 2, pixel, sample, spp, Dim.TIME)
+    assert ((t >= 0.0) & (t < 1.0)).all()
+    if sampler in ("jittered", "regular"):
+        # each round of spp samples puts one value in each interval [k / spp, (k + 1) / spp)
+        strata = np.sort(np.floor(t * spp).astype(int).reshape(pixels, rounds, spp), axis=2)
+        assert (strata == np.arange(spp)).all()
+    # and no two samples of a pixel share a time
+    assert all(len(np.unique(row)) == rounds * spp for row in t.reshape(pixels, -1))
+
+
+@pytest.mark.parametrize("sampler", SAMPLERS)
+def test_points_are_a_pure_function_of_their_keys(sampler):
+    # rays that survive to depth d are a subset of the samples: each keeps its point, and
+    # the batch's composition and order do not matter
+    pixel, sample, ray = pixel_sets(30, 4, 3, rounds=2)
+    full = decorrelated_points(sampler, 8, pixel, sample, 4, Dim.GLOSSY, ray, 3)
+    rows = np.random.default_rng(0).permutation(len(pixel))[:50]
+    subset = decorrelated_points(sampler, 8, pixel[rows], sample[rows], 4, Dim.GLOSSY, ray[rows], 3)
+    np.testing.assert_array_equal(subset, full[rows])
+    one_ray = decorrelated_points(sampler, 8, pixel[rows], sample[rows], 4, Dim.GLOSSY, int(ray[rows[0]]), 3)
+    same = ray[rows] == ray[rows[0]]
+    np.testing.assert_array_equal(one_ray[same], full[rows][same])
 
 
 # ---------------------------------------------------------------- uniform()
@@ -195,14 +294,76 @@ def test_cosine_hemisphere_directions_are_unit_and_above_the_surface():
 
 
 def test_cosine_hemisphere_pdf_integrates_to_one():
-    # Monte Carlo over the whole sphere with uniform sampling (pdf 1 / 4 pi)
-    rng = np.random.default_rng(3)
-    w = rng.normal(size=(400000, 3))
-    w /= np.linalg.norm(w, axis=1)[:, None]
+    # midpoint rule over the whole sphere in (z, phi), where d omega = dz dphi: the pdf is
+    # piecewise linear in z with its kink on a cell boundary, so the rule is exact
+    z = -1.0 + (np.arange(2000) + 0.5) / 1000.0
+    phi = (np.arange(64) + 0.5) * (2.0 * np.pi / 64)
+    z, phi = np.repeat(z, 64), np.tile(phi, 2000)
+    s = np.sqrt(1.0 - z * z)
+    w = np.column_stack([s * np.cos(phi), s * np.sin(phi), z])
     pdf = square_to_cosine_hemisphere_pdf(w)
-    integral = (pdf * 4.0 * np.pi).mean()
-    assert integral == pytest.approx(1.0, abs=0.01)
+    assert pdf.sum() * (1.0 / 1000.0) * (2.0 * np.pi / 64) == pytest.approx(1.0, abs=1e-12)
     assert (pdf[w[:, 2] < 0.0] == 0.0).all()
+
+
+def test_concentric_disk_pdf_integrates_to_one():
+    # midpoint rule in polar coordinates over a disk of radius 1.5 (the cut at r = 1 falls
+    # on a cell boundary): the density must be 1 / pi on the unit disk and 0 outside it
+    r = (np.arange(1500) + 0.5) / 1000.0
+    phi = (np.arange(32) + 0.5) * (2.0 * np.pi / 32)
+    r, phi = np.repeat(r, 32), np.tile(phi, 1500)
+    d = np.column_stack([r * np.cos(phi), r * np.sin(phi)])
+    pdf = square_to_uniform_disk_concentric_pdf(d)
+    integral = (pdf * r).sum() * (1.0 / 1000.0) * (2.0 * np.pi / 32)
+    assert integral == pytest.approx(1.0, abs=1e-12)
+    assert (pdf[r > 1.0] == 0.0).all()
+
+
+def jacobian_determinant(warp, u, h=1e-6):
+    """Area (or solid angle) scale of ``warp`` at ``u`` by central differences, (n,)."""
+    du = [np.array([h, 0.0]), np.array([0.0, h])]
+    d0, d1 = [(warp(u + e) - warp(u - e)) / (2.0 * h) for e in du]
+    if d0.shape[1] == 2:
+        return np.abs(d0[:, 0] * d1[:, 1] - d0[:, 1] * d1[:, 0])
+    return np.linalg.norm(np.cross(d0, d1), axis=1)
+
+
+def interior_points(count, seed, margin=1e-3):
+    """Uniform points in the square away from its edges (where the hemisphere's z has an
+    infinite derivative) and from the diagonals (where the concentric map switches between
+    its pieces and has no derivative)."""
+    u = np.random.default_rng(seed).uniform(margin, 1.0 - margin, size=(4 * count, 2))
+    off_diagonals = (np.abs(u[:, 0] - u[:, 1]) > margin) & (np.abs(u[:, 0] + u[:, 1] - 1.0) > margin)
+    return u[off_diagonals][:count]
+
+
+@pytest.mark.parametrize("warp, pdf", [
+    (square_to_uniform_disk_concentric, square_to_uniform_disk_concentric_pdf),
+    (square_to_cosine_hemisphere, square_to_cosine_hemisphere_pdf),
+])
+def test_warp_density_is_the_inverse_of_its_jacobian(warp, pdf):
+    # a warp whose pdf is p has |det J| p(warp(u)) = 1 everywhere: the pdf is the density
+    # the samples really follow, not just a function integrating to one
+    u = interior_points(2000, 5)
+    np.testing.assert_allclose(jacobian_determinant(warp, u) * pdf(warp(u)), 1.0, rtol=1e-5)
+
+
+@pytest.mark.parametrize("warp, inverse", [
+    (square_to_uniform_disk_concentric, uniform_disk_concentric_to_square),
+    (square_to_cosine_hemisphere, cosine_hemisphere_to_square),
+])
+def test_warps_round_trip_through_their_inverse(warp, inverse):
+    rng = np.random.default_rng(6)
+    # the square's centre, corners, edges and diagonals included (the pieces' seams)
+    t = rng.random(500)
+    special = np.concatenate([np.column_stack([t, t]), np.column_stack([t, 1.0 - t]),
+                              np.column_stack([t, 0.0 * t]), np.column_stack([0.0 * t, t]),
+                              [[0.5, 0.5], [0.0, 0.0], [0.0, 1.0 - 2 ** -53]]])
+    u = np.concatenate([rng.random((20000, 2)), special])
+    np.testing.assert_allclose(inverse(warp(u)), u, rtol=0, atol=1e-12)
+    # and the other way: random points of the disk (or hemisphere) come back
+    x = warp(rng.random((20000, 2)))
+    np.testing.assert_allclose(warp(inverse(x)), x, rtol=0, atol=1e-12)
 
 
 def test_cosine_hemisphere_samples_follow_their_pdf():
