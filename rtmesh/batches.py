@@ -14,6 +14,10 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+# Media a ray can be nested in at once (see rtmesh.media): glass in water in a tank is 3;
+# deeper nesting drops the outermost.  Scenes without transmissive materials carry none.
+STACK_DEPTH = 4
+
 
 def component_major(components):
     """An ``(n, 3)`` view of component rows, stored component-major.
@@ -84,8 +88,11 @@ class RayBatch:
         Index of the pixel sample (within the current tile) the ray contributes to.
     throughput : (n, 3) float64
         Product of the weights along the path so far (``beta``).
-    medium : (n,) int32
-        Material whose interior the ray travels through; -1 outside every object.
+    medium : (n, k) int32
+        The media the ray is nested in, innermost first (see :mod:`rtmesh.media`):
+        column 0 is the transmissive material whose interior the ray travels through, -1
+        outside every object; -1 pads unused entries.  ``k`` is :data:`STACK_DEPTH` in
+        scenes with transmissive materials and 0 in the others.
     """
 
     origins: np.ndarray
@@ -118,4 +125,4 @@ class RayBatch:
     def empty():
         """A batch of no rays."""
         return RayBatch(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64),
-                        np.zeros((0, 3)), np.zeros(0, np.int32))
+                        np.zeros((0, 3)), np.zeros((0, STACK_DEPTH), np.int32))

@@ -35,6 +35,7 @@ from .background import as_background
 from .batches import RayBatch, component_major, take_rows
 from .film import Film
 from .glossy import sample_glossy_directions
+from .media import Media
 from .motion import MotionAccel, blurs, object_motions, scene_at_time, swept_bounds
 from .sampling import (Dim, decorrelated_points, pixel_offsets, square_to_cosine_hemisphere,
                        stratified_values)
@@ -83,13 +84,13 @@ class _Surfaces:
     where it is needed) are (k, 3) component-major arrays (see :mod:`rtmesh.batches`).
     ``ng`` and ``ns`` are flipped to the side the ray came from; ``front`` says whether
     that is the outer side of the triangle (counter-clockwise winding).  ``mat`` (intp) is
-    the material, ``sample`` the pixel sample each hit contributes to, ``time`` (float,
-    None without motion blur) the time of the ray (see :mod:`rtmesh.motion`).  ``tints``
-    (:class:`rtmesh.texturing.Tints` or None) holds the texture and vertex-colour
-    multipliers of the material colours.
+    the material, ``prim`` (intp) the face hit, ``sample`` the pixel sample each hit
+    contributes to, ``time`` (float, None without motion blur) the time of the ray (see
+    :mod:`rtmesh.motion`).  ``tints`` (:class:`rtmesh.texturing.Tints` or None) holds the
+    texture and vertex-colour multipliers of the material colours.
     """
 
-    __slots__ = ("p", "ng", "ns", "d", "front", "mat", "sample", "time", "tints")
+    __slots__ = ("p", "ng", "ns", "d", "front", "mat", "prim", "sample", "time", "tints")
 
 
 def _translated(obj, shift):
@@ -197,7 +198,7 @@ class Integrator:
         self._reflective = (m.mirror > 0).any(axis=1) | (m.transmission > 0).any(axis=1)
         self._transmissive = (m.transmission > 0).any(axis=1)
         self._shaded = ((m.diffuse > 0).any(axis=1) | (m.specular > 0).any(axis=1)) & ~m.unlit
-        self._ior = np.concatenate([m.ior, [1.0]])  # index -1 (outside) reads 1.0: vacuum/air
+        self._init_media(scene)
         self._fresnel = fresnel_exact_or_schlick(settings.fresnel)
         self._has_specular = (m.specular > 0).any(axis=1)
         # per-material colours, component-major so that gathering them per hit keeps the
@@ -209,6 +210,36 @@ class Integrator:
         self._faces, self._vertex_normals = self._face_tables()
         # gathers with int32 indices are ~10x slower in NumPy than with intp ones
         self._material_id = scene.material_id.astype(np.intp)
+
+    def _init_media(self, scene):
+        """Medium stacks (see :mod:`rtmesh.media`), only for scenes that refract.
+
+        Sets ``media`` (None without transmissive materials), ``_camera_medium`` (the
+        camera's stack, ``(STACK_DEPTH,)``; ``(0,)`` without media) and ``_camera_absorbs``
+        (camera rays lose light before their first hit, so their throughput is not 1).
+        """
+        m = scene.materials
+        self.media = None
+        self._camera_medium = np.zeros(0, dtype=np.int32)
+        self._camera_absorbs = False
+        if not m.any_transmission:
+            return
+        self.media = Media(m, scene.material_id, scene.vertices, scene.faces,
+                           scene.face_normals)
+        trace, to_rest = self.accel.intersect, None
+        if self.motion is not None:
+            # the camera's media when the shutter opens
+            def at_open(n):
+                return np.full(n, self.camera.shutter[0])
+
+            def trace(origins, directions):
+                return self.motion.intersect(origins, directions, at_open(len(origins)))
+
+            def to_rest(prim, directions):
+                return self.motion.directions_to_rest(prim, at_open(len(prim)), directions)
+        self._camera_medium = self.media.camera_stack(trace, self.camera.position, self.offset_scale,
+                                                      to_rest)
+        self._camera_absorbs = bool((self.media.absorption[self._camera_medium[0]] > 0).any())
 
     def _face_tables(self):
         """What shading reads per hit triangle, packed so that one gather fetches it.
@@ -326,8 +357,10 @@ class Integrator:
         origins, directions = self.camera.generate_rays(film_xy, s.width, s.height, lens_uv)
         # camera rays have unit throughput: a read-only broadcast costs nothing, and
         # _shade does not multiply by it at depth 0
-        rays = RayBatch(origins, directions, np.arange(n, dtype=np.int64),
-                        np.broadcast_to(1.0, (n, 3)), np.full(n, -1, dtype=np.int32))
+        # (inside an absorbing medium they lose light on the way: then a real array)
+        throughput = np.ones((n, 3), order="F") if self._camera_absorbs else np.broadcast_to(1.0, (n, 3))
+        rays = RayBatch(origins, directions, np.arange(n, dtype=np.int64), throughput,
+                        np.broadcast_to(self._camera_medium, (n, len(self._camera_medium))))
         radiance = np.zeros((n, 3), order="F")
         aov = self.passes.buffers(n)
         stats.rays["camera"] += n
@@ -353,7 +386,9 @@ class Integrator:
         """Shade one depth level; returns the rays of the next level."""
         m = self.scene.materials
         # camera rays (depth 0) are one per sample, in sample order, with unit throughput
+        # unless the camera sits in an absorbing medium
         primary = depth == 0
+        unit_throughput = primary and not self._camera_absorbs
 
         # area lights seen directly: rays meeting one before any surface end there
         on_light = None
@@ -363,12 +398,14 @@ class Integrator:
 
         # absorption: rays inside a medium lose light over the distance they travelled
         if self.stages["absorption"]:
-            inside = rays.medium >= 0
+            medium = rays.medium[:, 0]
+            inside = medium >= 0
             if inside.any():
-                sigma = m.absorption[rays.medium[inside]]
+                sigma = m.absorption[medium[inside]]
                 t = hits.t[inside][:, None]
                 # exp(-0 * inf) would be NaN for a non-absorbing medium left through a hole
-                rays.throughput[inside] *= np.where(sigma > 0, np.exp(-sigma * t), 1.0)
+                with np.errstate(invalid="ignore"):
+                    rays.throughput[inside] *= np.where(sigma > 0, np.exp(-sigma * t), 1.0)
 
         if on_light is not None and len(on_light[0]):
             ended, emitted = on_light
@@ -395,7 +432,7 @@ class Integrator:
 
         local = self._local_shading(srf, depth, aov.get("ao"), keys, stats, clock)
         if local is not None:
-            if not primary:
+            if not unit_throughput:
                 local = local * take_rows(rays.throughput, rows)
             _scatter_add(radiance, None if primary and rows is None else srf.sample, local,
                          unique=primary)
@@ -427,6 +464,7 @@ class Integrator:
         flip = np.where(srf.front, 1.0, -1.0)
         srf.ng = ng * flip[:, None]
         srf.mat = self._material_id.take(prim)
+        srf.prim = prim
         if self.stages["smooth_normals"]:
             srf.ns = self._shading_normals(prim, u, v, flip, srf.ng)
         else:
@@ -439,7 +477,7 @@ class Integrator:
         if self.stages["smooth_normals"] or self.stages["normal_maps"]:
             # the shading-normal terminator: no normal facing away from the viewer or
             # below the real surface (see face_viewer)
-            srf.ns = face_viewer(srf.ns, srf.ng, srf.d)
+            srf.ns = face_viewer(srf.ns, srf.ng, d)  # rest frame, like ns and ng
         if srf.time is not None:
             srf.p, srf.ng, srf.ns = self.motion.surfaces_to_world(prim, srf.time, srf.p, srf.ng,
                                                                   srf.ns)
@@ -627,11 +665,9 @@ class Integrator:
             j = np.flatnonzero(trans)
             if len(j):
                 mat_j = mat[j]
-                entering = srf.front[idx[j]]
-                ior_outside = self._ior[rays.medium[idx[j]]]
-                ior_inside = m.ior[mat_j]
-                # leaving an object returns the ray to the outside (air) in this model
-                eta = np.where(entering, ior_outside / ior_inside, ior_inside)
+                # the index ratio and the media beyond come from the ray's medium stack
+                eta, beyond = self.media.cross(rays.medium[idx[j]], srf.prim[idx[j]],
+                                               srf.front[idx[j]])
                 cos_i = np.clip(dot(wo[j], ns[j]), 0.0, 1.0)
                 fresnel = self._fresnel(cos_i, eta)
                 wt, tir = refract(wo[j], ns[j], eta)
@@ -651,7 +687,7 @@ class Integrator:
                         wt[keep],
                         rays.sample[idx[jk]],
                         beta[jk] * w_t[keep],
-                        np.where(entering[keep], mat_j[keep], -1).astype(np.int32),
+                        beyond[keep],
                     )
                     stats.rays["refraction"] += len(jk)
 
