@@ -5,6 +5,8 @@ import numpy as np
 from .batches import rows_as_float32
 
 TONEMAPS = ("clamp", "reinhard", "aces")
+# added to a pixel's mean before dividing its standard error by it (relative errors)
+ERROR_FLOOR = 0.01
 
 
 class Film:
@@ -43,19 +45,24 @@ class Film:
         self.pass_sums = {name: np.full((n, k), np.inf if reduction == "min" else 0.0)
                           for name, (k, reduction) in specs.items()}
 
-    def add_tile(self, first_pixel, radiance, passes=None):
-        """Add the samples of a run of consecutive pixels.
+    def add_tile(self, pixels, radiance, passes=None):
+        """Add the samples of a set of pixels.
 
         Parameters
         ----------
-        first_pixel : int
-            Linear index of the first pixel of the run.
+        pixels : int, slice or (m,) int array
+            Linear indices of the ``m`` pixels: an array of distinct indices (e.g. the
+            pixels an adaptive round refines), a slice, or the first index of a run of
+            consecutive pixels.
         radiance : (m, spp, 3) float
-            Radiance of every sample of the ``m`` pixels.
+            Radiance of every sample of the ``m`` pixels, in sample order.
         passes : dict of str to (m, spp, k) float, optional
         """
         m, spp = radiance.shape[:2]
-        px = first_pixel if isinstance(first_pixel, slice) else slice(first_pixel, first_pixel + m)
+        if isinstance(pixels, (slice, np.ndarray)):
+            px = pixels
+        else:
+            px = slice(int(pixels), int(pixels) + m)
         # add samples one index at a time so each pixel's sum has the same rounding
         # whatever the tile size or thread count (bit-identical renders)
         mean_passes = {}
@@ -88,30 +95,58 @@ class Film:
         """(height, width, 3) float32: mean radiance per pixel (box filter)."""
         return self._to_image(self.sum / self._divisor())
 
+    def _variance_of_mean_rows(self):
+        """(height * width, 3) float64: see :meth:`variance_of_mean`."""
+        n = self.count[:, None].astype(np.float64)
+        mean = self.sum / np.maximum(n, 1)
+        var = (self.sum_sq - n * mean * mean) / np.maximum(n - 1, 1)
+        return np.where(n > 1, np.maximum(var, 0.0), 0.0) / np.maximum(n, 1)
+
     def variance_of_mean(self):
         """(height, width, 3) float32: estimated variance of each pixel's mean.
 
         The unbiased sample variance divided by the sample count; zero where a pixel has
-        fewer than two samples (no estimate possible).
+        fewer than two samples (no estimate possible).  For stratified samplers the samples
+        of a pixel are not independent and this overestimates the true variance of the mean.
+        """
+        return self._to_image(self._variance_of_mean_rows())
+
+    def pixel_relative_error(self, floor=ERROR_FLOOR):
+        """Estimated relative standard error of each pixel's mean.
+
+        Parameters
+        ----------
+        floor : float
+            Added to the mean before dividing, so that the error of near-black pixels is
+            measured against ``floor`` instead of blowing up (a 1e-4 error on a 1e-5 pixel
+            is invisible).
+
+        Returns
+        -------
+        (height * width,) float64
+            ``mean over channels of sqrt(variance_of_mean) / (|mean| + floor)``, row-major;
+            NaN for pixels with fewer than two samples.
         """
         n = self.count[:, None].astype(np.float64)
         mean = self.sum / np.maximum(n, 1)
-        var = (self.sum_sq - n * mean * mean) / np.maximum(n - 1, 1)
-        var = np.where(n > 1, np.maximum(var, 0.0), 0.0) / np.maximum(n, 1)
-        return self._to_image(var)
+        std_err = np.sqrt(self._variance_of_mean_rows())
+        error = np.mean(std_err / (np.abs(mean) + floor), axis=1)
+        return np.where(self.count >= 2, error, np.nan)
 
     def relative_error(self):
         """Mean relative standard error of the image, a scalar estimate of its own error.
 
-        The standard error of each pixel's luminance-free mean (per channel), divided by the
-        mean plus 0.01 (so near-black pixels do not dominate), averaged over all pixels and
-        channels.  NaN when pixels have fewer than two samples.
+        The average of :meth:`pixel_relative_error` over all pixels (the standard error of
+        each channel's mean divided by the mean plus 0.01, so near-black pixels do not
+        dominate).  NaN when pixels have fewer than two samples.
         """
         if self.count.min() < 2:
             return float("nan")
-        mean = self.sum / self.count[:, None]
-        std_err = np.sqrt(self.variance_of_mean().reshape(-1, 3))
-        return float(np.mean(std_err / (np.abs(mean) + 0.01)))
+        return float(np.mean(self.pixel_relative_error()))
+
+    def spp_image(self):
+        """(height, width, 1) float32: samples taken in each pixel."""
+        return self._to_image(self.count[:, None].astype(np.float64))
 
     def pass_image(self, name):
         """(height, width, k) float32: a pass reduced per pixel (mean, first sample or

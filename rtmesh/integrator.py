@@ -30,7 +30,8 @@ import numpy as np
 
 from .accel import Accel, barycentric_interpolate, offset_ray_origins
 from .area_lights import AreaLighting, emissive_mesh_light, is_area_light
-from .aov import PassRecorder
+from .adaptive import render_rounds
+from .aov import DERIVED_PASSES, PassRecorder, derived_pass
 from .background import as_background
 from .batches import RayBatch, component_major, take_rows
 from .film import Film
@@ -263,12 +264,14 @@ class Integrator:
 
     # ---------------------------------------------------------------- whole image
     def render(self, progress=None):
-        """Render the image.
+        """Render the image: at ``spp`` samples per pixel, or adaptively in rounds when the
+        settings ask for it (see :mod:`rtmesh.adaptive`).
 
         Parameters
         ----------
         progress : callable, optional
-            Called as ``progress(chunks_done, chunks_total)`` from the calling thread.
+            Called as ``progress(chunks_done, chunks_total)`` from the calling thread
+            (per round, for an adaptive render).
 
         Returns
         -------
@@ -277,49 +280,88 @@ class Integrator:
         s = self.settings
         start = time.perf_counter()
         film = Film(s.width, s.height, self.passes.film_passes())
-        n_pixels = s.width * s.height
-        pixels_per_chunk = max(1, s.chunk_samples // s.spp)
-        chunks = [(p, min(p + pixels_per_chunk, n_pixels)) for p in range(0, n_pixels, pixels_per_chunk)]
-        stats = RenderStats(threads=s.thread_count)
+        stats = RenderStats(threads=s.thread_count, pixels=s.width * s.height)
         stats.stages_enabled = [name for name, on in self.stages.items() if on]
+        render_rounds(self, film, stats, progress)
+        if self.cutouts is not None:
+            stats.rays["cutout"] += self.cutouts.layers_traced
+        stats.wall_seconds = time.perf_counter() - start
+        stats.samples = int(film.count.sum())
+        stats.relative_error = film.relative_error()
+        passes = {name: film.pass_image(name) for name in film.pass_sums if name in s.passes}
+        passes.update({name: derived_pass(name, film) for name in s.passes if name in DERIVED_PASSES})
+        passes = {name: passes[name] for name in s.passes if name in passes}  # order asked for
+        alpha = film.pass_image("alpha") if self.background.transparent else None
+        return RenderResult(film.image(), passes, stats, film, alpha)
 
-        def finish(first_pixel, result, done):
+    def render_samples(self, film, groups, stats, progress=None):
+        """Render sets of samples of sets of pixels into ``film``, in chunks on the threads.
+
+        Parameters
+        ----------
+        film : Film
+        groups : list of ((m,) int array, int, int)
+            ``(pixels, first_sample, spp)``: the samples ``first_sample .. first_sample +
+            spp - 1`` of each of ``pixels`` (distinct, ascending; no pixel in two groups).
+        stats : RenderStats
+            Ray counts and stage times are added to it.
+        progress : callable, optional
+            ``progress(chunks_done, chunks_total)``.
+        """
+        s = self.settings
+        chunks = []
+        for pixels, first_sample, spp in groups:
+            per_chunk = max(1, s.chunk_samples // spp)
+            chunks += [(pixels[i:i + per_chunk], first_sample, spp)
+                       for i in range(0, len(pixels), per_chunk)]
+
+        def finish(chunk, result, done):
+            pixels = chunk[0]
             radiance, passes, chunk_stats = result
             t0 = time.perf_counter()
-            film.add_tile(first_pixel, radiance, passes)
+            # a run of consecutive pixels (every chunk of a uniform render) is a slice:
+            # cheaper to add into than a gather-scatter through an index array
+            contiguous = pixels[-1] - pixels[0] == len(pixels) - 1
+            film.add_tile(slice(pixels[0], pixels[-1] + 1) if contiguous else pixels, radiance, passes)
             chunk_stats.stage_seconds["film"] += time.perf_counter() - t0
             stats.merge(chunk_stats)
             if progress is not None:
                 progress(done, len(chunks))
 
         if s.thread_count == 1 or len(chunks) == 1:
-            for i, (p0, p1) in enumerate(chunks):
-                finish(p0, self.render_chunk(p0, p1), i + 1)
-        else:
-            with ThreadPoolExecutor(max_workers=s.thread_count) as pool:
-                futures = [pool.submit(self.render_chunk, p0, p1) for p0, p1 in chunks]
-                # results are added in chunk order; pixels never overlap, so order only
-                # matters for the stats, which are sums of integers and timings
-                try:
-                    for i, ((p0, _), future) in enumerate(zip(chunks, futures)):
-                        finish(p0, future.result(), i + 1)
-                except BaseException:
-                    # Ctrl-C or a failing chunk: drop the chunks not yet started instead of
-                    # rendering the rest of the image before giving up
-                    for future in futures:
-                        future.cancel()
-                    raise
-        if self.cutouts is not None:
-            stats.rays["cutout"] += self.cutouts.layers_traced
-        stats.wall_seconds = time.perf_counter() - start
-        stats.relative_error = film.relative_error()
-        passes = {name: film.pass_image(name) for name in film.pass_sums if name in s.passes}
-        alpha = film.pass_image("alpha") if self.background.transparent else None
-        return RenderResult(film.image(), passes, stats, film, alpha)
+            for i, chunk in enumerate(chunks):
+                finish(chunk, self.render_chunk(*chunk), i + 1)
+            return
+        with ThreadPoolExecutor(max_workers=s.thread_count) as pool:
+            futures = [pool.submit(self.render_chunk, *chunk) for chunk in chunks]
+            # results are added in chunk order; pixels never overlap, so order only
+            # matters for the stats, which are sums of integers and timings
+            try:
+                for i, (chunk, future) in enumerate(zip(chunks, futures)):
+                    finish(chunk, future.result(), i + 1)
+            except BaseException:
+                # Ctrl-C or a failing chunk: drop the chunks not yet started instead of
+                # rendering the rest of the image before giving up
+                for future in futures:
+                    future.cancel()
+                raise
 
     # ---------------------------------------------------------------- one chunk
-    def render_chunk(self, first_pixel, end_pixel):
-        """Render every sample of the pixels ``first_pixel .. end_pixel - 1``.
+    def render_chunk(self, pixels, first_sample, spp):
+        """Render the samples ``first_sample .. first_sample + spp - 1`` of some pixels.
+
+        Sample indices are global to the pixel across adaptive rounds, so the samples a
+        later round adds continue the same sequences (stratified in sets of the settings'
+        ``spp``; Sobol prefixes stay well distributed) instead of repeating the first ones.
+
+        Parameters
+        ----------
+        pixels : (m,) int array
+            Linear pixel indices (``row * width + column``).
+        first_sample : int
+            Index of the first sample to take in each pixel.
+        spp : int
+            Samples to take in each pixel.
 
         Returns
         -------
@@ -331,15 +373,14 @@ class Integrator:
         s = self.settings
         stats = RenderStats()
         clock = _Clock(stats.stage_seconds)
-        m = end_pixel - first_pixel
-        n = m * s.spp
+        pixels = np.asarray(pixels, dtype=np.int64)
+        m = len(pixels)
+        n = m * spp
 
         # camera: one ray per pixel sample
-        pixel = np.arange(first_pixel, end_pixel, dtype=np.int64)
-        if s.spp > 1:
-            pixel = np.repeat(pixel, s.spp)
-        sample_in_pixel = (np.tile(np.arange(s.spp, dtype=np.int64), m) if s.spp > 1
-                           else np.zeros(n, dtype=np.int64))
+        pixel = np.repeat(pixels, spp) if spp > 1 else pixels
+        sample_in_pixel = np.tile(np.arange(first_sample, first_sample + spp, dtype=np.int64), m)
+        # every dimension is stratified in sets of the settings' spp, whatever the round
         film_xy = pixel_offsets(s.sampler, s.seed, pixel, sample_in_pixel, s.spp)
         row = pixel // s.width
         film_xy[:, 0] += pixel - row * s.width
@@ -378,8 +419,8 @@ class Integrator:
             clock.lap("intersect")
             rays = self._shade(rays, hits, depth, radiance, aov, keys, stats, clock, sample_time)
 
-        passes = self.passes.per_pixel(aov, m, s.spp) or None
-        return radiance.reshape(m, s.spp, 3), passes, stats
+        passes = self.passes.per_pixel(aov, m, spp) or None
+        return radiance.reshape(m, spp, 3), passes, stats
 
     # ---------------------------------------------------------------- stages
     def _shade(self, rays, hits, depth, radiance, aov, keys, stats, clock, sample_time=None):
