@@ -12,6 +12,7 @@ from .gltf_scene import GLTF_EXTENSIONS, file_cameras_and_lights, read_gltf_json
 from .material_files import gltf_material, gltf_material_extensions, mtl_material, obj_materials
 from .materials import Material
 from .scene import MeshPart, Scene
+from .smoothing import CREASE_ANGLE, smooth_vertex_normals
 from .textures import Texture
 
 log = logging.getLogger(__name__)
@@ -176,7 +177,8 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
         Material index for every part; None imports each geometry's own material.
     smooth : bool, optional
         True forces smooth shading, False flat; None uses the file's vertex normals where it
-        has them and smooths by angle (30 degrees) where it does not.
+        has them and smooths by angle where it does not (split along edges of 20 degrees
+        or more, see :mod:`rtmesh.smoothing`).
 
     Returns
     -------
@@ -204,19 +206,23 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
             continue
         if len(mesh.faces) == 0:
             continue
-        if smooth is None and not _file_has_vertex_normals(mesh):
-            mesh = mesh.smooth_shaded  # split at creases, smooth elsewhere
+        vertices, faces, normals = np.asarray(mesh.vertices), np.asarray(mesh.faces), None
+        if smooth is not False:
+            if _file_has_vertex_normals(mesh):
+                normals = np.asarray(mesh.vertex_normals)
+            else:
+                # split at creases (unless smooth shading is forced), smooth elsewhere
+                vertices, faces, normals = smooth_vertex_normals(
+                    vertices, faces, CREASE_ANGLE if smooth is None else None)
         matrix = transform @ node_transform
-        vertices = trimesh.transform_points(mesh.vertices, matrix)
-        faces = np.asarray(mesh.faces)
+        vertices = trimesh.transform_points(vertices, matrix)
         if np.linalg.det(matrix[:3, :3]) < 0:
             faces = faces[:, ::-1]  # a mirroring transform flips the winding
-        normals = None
-        if smooth is not False:
+        if normals is not None:
             # normals transform with the inverse transpose of the linear part
             normal_matrix = np.linalg.inv(matrix[:3, :3]).T
             with np.errstate(invalid="ignore"):
-                normals = np.asarray(mesh.vertex_normals) @ normal_matrix.T
+                normals = normals @ normal_matrix.T
         if material is None:
             key = id(getattr(mesh.visual, "material", mesh.visual))
             if key not in material_ids:
