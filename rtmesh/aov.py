@@ -20,6 +20,11 @@ EXR naming (one OpenEXR layer per pass, ``layer.channel``)::
     object_id    object_id.id                   first      Scene.object_names index; -1 none
     material_id  material_id.id                 first      material index; -1 none
     alpha        A                              mean       camera-ray coverage (image alpha)
+    variance     variance.R variance.G variance.B  film   estimated variance of the pixel mean
+    spp          spp.Y                          film       samples taken in the pixel
+
+``variance`` and ``spp`` are derived passes (:data:`DERIVED_PASSES`): the film computes them
+from its per-pixel sums and sample counts after the render, nothing is recorded per sample.
 
 ``mean`` averages every sample of the pixel, misses included with their miss value, so
 ``normal``, ``albedo``, ``position`` and ``uv`` are premultiplied by coverage (divide by
@@ -177,17 +182,53 @@ REGISTRY = {
         PassSpec("alpha", ("A",), "mean", 0.0, _covered, "coverage of camera rays by geometry"),
     )
 }
-PASS_NAMES = tuple(REGISTRY)
 
-# channel names of passes that are not per-sample (the film derives them from its sums)
-_OTHER_CHANNELS = {"variance": ("R", "G", "B"), "spp": ("Y",)}
+
+@dataclass(frozen=True)
+class DerivedPass:
+    """A pass the film computes from its per-pixel sums after the render (not per sample).
+
+    Attributes
+    ----------
+    name : str
+    channels : tuple of str
+        EXR channel names, written as ``name.channel``.
+    compute : callable
+        ``compute(film) -> (height, width, k) float32``.
+    doc : str
+    """
+
+    name: str
+    channels: tuple
+    compute: object
+    doc: str
+
+
+DERIVED_PASSES = {
+    spec.name: spec for spec in (
+        DerivedPass("variance", ("R", "G", "B"), lambda film: film.variance_of_mean(),
+                    "estimated variance of each pixel's mean radiance (sample variance / spp)"),
+        DerivedPass("spp", ("Y",), lambda film: film.spp_image(), "samples taken in each pixel"),
+    )
+}
+PASS_NAMES = tuple(REGISTRY) + tuple(DERIVED_PASSES)
+
+
+def pass_width(name):
+    """Channels of the registry or derived pass ``name``."""
+    return REGISTRY[name].width if name in REGISTRY else len(DERIVED_PASSES[name].channels)
+
+
+def derived_pass(name, film):
+    """(height, width, k) float32: the derived pass ``name`` of ``film``."""
+    return DERIVED_PASSES[name].compute(film)
 
 
 def exr_channel_names(name, width):
     """EXR channel names of a pass of ``width`` channels (registry or generic scheme)."""
     if name in REGISTRY and REGISTRY[name].width == width:
         return REGISTRY[name].exr_names()
-    channels = _OTHER_CHANNELS.get(name)
+    channels = DERIVED_PASSES[name].channels if name in DERIVED_PASSES else None
     if channels is None or len(channels) != width:
         channels = ("Y",) if width == 1 else ("X", "Y", "Z") if width == 3 else tuple(map(str, range(width)))
     return [f"{name}.{c}" for c in channels]

@@ -45,6 +45,13 @@ def build_parser():
     p.add_argument("--height", type=_positive_int, help="image height in pixels")
     p.add_argument("--spp", type=_positive_int, help="samples per pixel")
     p.add_argument("--sampler", choices=SAMPLERS, help="pixel sample pattern (default jittered)")
+    p.add_argument("--target-error", type=_positive_float, metavar="E",
+                   help="adaptive sampling: add samples in rounds until every pixel's estimated "
+                   "relative error is <= E (e.g. 0.02); --spp is the first round's")
+    p.add_argument("--time-limit", type=_positive_float, metavar="SECONDS",
+                   help="adaptive sampling: start no round that would end after this many seconds")
+    p.add_argument("--max-spp", type=_positive_int, metavar="N",
+                   help="adaptive sampling: at most N samples in any pixel (default 1024)")
     p.add_argument("--max-depth", type=int, help="reflection/refraction bounces")
     p.add_argument("--seed", type=int, help="random seed (same seed, same image)")
     p.add_argument("--threads", type=_positive_int, help="worker threads (default: all cores)")
@@ -184,7 +191,8 @@ def cmd_render(args):
         "width": args.width, "height": args.height, "spp": args.spp, "sampler": args.sampler,
         "max_depth": args.max_depth, "seed": args.seed, "threads": args.threads,
         "ao_samples": args.ao_samples, "ao_distance": args.ao_distance, "passes": args.passes,
-        "light_samples": args.light_samples,
+        "light_samples": args.light_samples, "target_error": args.target_error,
+        "time_limit": args.time_limit, "max_spp": args.max_spp,
         "fresnel": args.fresnel, "exposure": args.exposure, "tonemap": args.tonemap,
     }
     background = None if args.background is None else background_from_option(args.background)
@@ -204,12 +212,28 @@ def cmd_render(args):
         for name, values in result.passes.items():
             display, srgb = display_values(name, values, coverage)
             write_display_image(_pass_png_path(args.output, name), display, srgb)
-    st = result.stats
-    error = "" if st.relative_error != st.relative_error else f", est. rel. error {st.relative_error:.3g}"
-    print(f"{args.output}: {settings.width}x{settings.height}, {settings.spp} spp, "
-          f"{st.total_rays / 1e6:.2f} M rays ({st.rays_per_second / 1e6:.2f} M rays/s), "
-          f"{st.wall_seconds:.2f} s, {st.threads} threads{error}")
+    print(summary_line(args.output, settings, result.stats))
     return 0
+
+
+def summary_line(output, settings, st):
+    """The line a render prints: size, samples, rays, time, threads, estimated error, and
+    for an adaptive render its rounds and why it stopped."""
+    error = "" if st.relative_error != st.relative_error else f", est. rel. error {st.relative_error:.3g}"
+    samples = f"{settings.spp} spp"
+    adaptive = ""
+    if settings.adaptive:
+        samples = f"{st.mean_spp:.1f} spp mean"
+        shown = [f"{r.pixels}px/{r.relative_error:.3g}" for r in st.rounds]
+        if len(shown) > 6:  # a long tail of small rounds: the first and the last
+            shown = shown[:3] + ["..."] + shown[-2:]
+        rounds = " ".join(shown)
+        stop = {"target": "target reached", "time_limit": "time limit",
+                "max_spp": "max spp reached"}.get(st.stop_reason, st.stop_reason)
+        adaptive = f"; {len(st.rounds)} rounds (pixels/est. error: {rounds}), stopped: {stop}"
+    return (f"{output}: {settings.width}x{settings.height}, {samples}, "
+            f"{st.total_rays / 1e6:.2f} M rays ({st.rays_per_second / 1e6:.2f} M rays/s), "
+            f"{st.wall_seconds:.2f} s, {st.threads} threads{error}{adaptive}")
 
 
 def cmd_batch(args):

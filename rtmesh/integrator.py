@@ -21,7 +21,9 @@ the stages that can contribute (see :attr:`Integrator.stages`).
 import ctypes
 import dataclasses
 import functools
+import logging
 import time
+from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -29,7 +31,8 @@ import numpy as np
 
 from .accel import Accel, barycentric_interpolate, offset_ray_origins
 from .area_lights import AreaLighting, emissive_mesh_light, is_area_light
-from .aov import PassRecorder
+from .adaptive import render_rounds
+from .aov import DERIVED_PASSES, PassRecorder, derived_pass
 from .background import as_background
 from .batches import RayBatch, component_major, take_rows
 from .film import Film
@@ -39,8 +42,13 @@ from .motion import MotionAccel, blurs, object_motions, scene_at_time, swept_bou
 from .sampling import (Dim, decorrelated_points, pixel_offsets, square_to_cosine_hemisphere,
                        stratified_values)
 from .settings import RenderStats
-from .vecmath import dot, fresnel_dielectric, fresnel_schlick, normalize, orthonormal_basis, reflect, refract
-from .materials import blinn_phong_highlight, lambert
+from .vecmath import (dot, face_viewer, fresnel_dielectric, fresnel_schlick, normalize, orthonormal_basis,
+                      reflect, refract)
+from .materials import ALPHA_MODES, blinn_phong_highlight, lambert
+from .texturing import SurfaceTextures
+from .cutouts import CutoutAccel
+
+log = logging.getLogger(__name__)
 
 # Shadow rays to point and spot lights stop this fraction short of the light, so a light
 # placed exactly on a surface does not count that surface as an occluder.
@@ -80,10 +88,11 @@ class _Surfaces:
     that is the outer side of the triangle (counter-clockwise winding).  ``mat`` (intp) is
     the material, ``prim`` (intp) the face hit, ``sample`` the pixel sample each hit
     contributes to, ``time`` (float, None without motion blur) the time of the ray (see
-    :mod:`rtmesh.motion`).
+    :mod:`rtmesh.motion`).  ``tints`` (:class:`rtmesh.texturing.Tints` or None) holds the
+    texture and vertex-colour multipliers of the material colours.
     """
 
-    __slots__ = ("p", "ng", "ns", "d", "front", "mat", "prim", "sample", "time")
+    __slots__ = ("p", "ng", "ns", "d", "front", "mat", "prim", "sample", "time", "tints")
 
 
 def _translated(obj, shift):
@@ -133,11 +142,22 @@ class Integrator:
         # the size of the space the objects sweep during the shutter.
         bounds = swept_bounds(scene) if self.motion else scene.bounds
         self.offset_scale = max(float(np.abs(bounds - self.shift).max()), 1e-30)
+        m = scene.materials
+        # textures and vertex colours, looked up per hit only where the scene has them
+        self.textures = SurfaceTextures(scene)
+        self.cutouts = None
+        if m.any_cutout and self.motion is not None:
+            log.warning("cut-out (alpha mask/blend) materials render opaque with motion blur")
+        elif m.any_cutout:
+            # every query (camera, secondary, shadow, area-light, AO rays) sees the cut-outs
+            self.cutouts = CutoutAccel(self.accel, scene.face_normals, scene.material_id, m.cutout,
+                                       m.alpha_mode == ALPHA_MODES.index("blend"), m.alpha_cutoff,
+                                       self.textures, self.offset_scale, settings.seed)
+            self.accel = self.cutouts
         self.camera = _translated(scene.camera, self.shift)
         self.camera.frame()  # fail early on a degenerate camera
         lights = [_translated(light, self.shift) for light in scene.lights if not light.is_black]
         self.lights = [light for light in lights if not is_area_light(light)]
-        m = scene.materials
         area_lights = [light for light in lights if is_area_light(light)]
         if m.any_emission:
             emitters = emissive_mesh_light(self.accel.triangles, scene.face_normals,
@@ -145,7 +165,8 @@ class Integrator:
             area_lights += [emitters] if emitters is not None else []
         self.area_lighting = (AreaLighting(area_lights, self.accel, self.settings, self.offset_scale)
                               if area_lights else None)
-        shaded_any = bool(((m.diffuse > 0) | (m.specular > 0)).any())
+        lit = ~m.unlit[:, None]
+        shaded_any = bool((((m.diffuse > 0) | (m.specular > 0)) & lit).any())
         self.ao_distance = settings.ao_distance or 0.2 * float(np.linalg.norm(np.ptp(scene.bounds, axis=0)))
         ambient_on = bool((scene.ambient > 0).any() and (m.ambient > 0).any())
         self.background = as_background(scene.background)
@@ -162,6 +183,10 @@ class Integrator:
             "area_light_visibility": self.area_lighting is not None and bool(self.area_lighting.visible),
             "specular": m.any_specular,
             "smooth_normals": scene.vertex_normals is not None,
+            "textures": bool(self.textures),
+            "normal_maps": self.textures.tangents is not None,
+            "cutouts": self.cutouts is not None,
+            "unlit": m.any_unlit,
             "reflection": settings.max_depth > 0 and (m.any_mirror or m.any_transmission),
             "glossy": settings.max_depth > 0 and m.any_glossy,
             "refraction": settings.max_depth > 0 and m.any_transmission,
@@ -175,7 +200,7 @@ class Integrator:
         # per-material flags, looked up per hit
         self._reflective = (m.mirror > 0).any(axis=1) | (m.transmission > 0).any(axis=1)
         self._transmissive = (m.transmission > 0).any(axis=1)
-        self._shaded = (m.diffuse > 0).any(axis=1) | (m.specular > 0).any(axis=1)
+        self._shaded = ((m.diffuse > 0).any(axis=1) | (m.specular > 0).any(axis=1)) & ~m.unlit
         self._init_media(scene)
         self._fresnel = fresnel_exact_or_schlick(settings.fresnel)
         self._has_specular = (m.specular > 0).any(axis=1)
@@ -241,12 +266,14 @@ class Integrator:
 
     # ---------------------------------------------------------------- whole image
     def render(self, progress=None):
-        """Render the image.
+        """Render the image: at ``spp`` samples per pixel, or adaptively in rounds when the
+        settings ask for it (see :mod:`rtmesh.adaptive`).
 
         Parameters
         ----------
         progress : callable, optional
-            Called as ``progress(chunks_done, chunks_total)`` from the calling thread.
+            Called as ``progress(chunks_done, chunks_total)`` from the calling thread
+            (per round, for an adaptive render).
 
         Returns
         -------
@@ -255,47 +282,103 @@ class Integrator:
         s = self.settings
         start = time.perf_counter()
         film = Film(s.width, s.height, self.passes.film_passes())
-        n_pixels = s.width * s.height
-        pixels_per_chunk = max(1, s.chunk_samples // s.spp)
-        chunks = [(p, min(p + pixels_per_chunk, n_pixels)) for p in range(0, n_pixels, pixels_per_chunk)]
-        stats = RenderStats(threads=s.thread_count)
+        stats = RenderStats(threads=s.thread_count, pixels=s.width * s.height)
         stats.stages_enabled = [name for name, on in self.stages.items() if on]
+        render_rounds(self, film, stats, progress)
+        if self.cutouts is not None:
+            stats.rays["cutout"] += self.cutouts.layers_traced
+        stats.wall_seconds = time.perf_counter() - start
+        stats.samples = int(film.count.sum())
+        stats.relative_error = film.relative_error()
+        passes = {name: film.pass_image(name) for name in film.pass_sums if name in s.passes}
+        passes.update({name: derived_pass(name, film) for name in s.passes if name in DERIVED_PASSES})
+        passes = {name: passes[name] for name in s.passes if name in passes}  # order asked for
+        alpha = film.pass_image("alpha") if self.background.transparent else None
+        return RenderResult(film.image(), passes, stats, film, alpha)
 
-        def finish(first_pixel, result, done):
+    def render_samples(self, film, groups, stats, progress=None):
+        """Render sets of samples of sets of pixels into ``film``, in chunks on the threads.
+
+        Parameters
+        ----------
+        film : Film
+        groups : list of ((m,) int array, int, int)
+            ``(pixels, first_sample, spp)``: the samples ``first_sample .. first_sample +
+            spp - 1`` of each of ``pixels`` (distinct, ascending; no pixel in two groups).
+        stats : RenderStats
+            Ray counts and stage times are added to it.
+        progress : callable, optional
+            ``progress(chunks_done, chunks_total)``.
+        """
+        s = self.settings
+        chunks = []
+        for pixels, first_sample, spp in groups:
+            per_chunk = max(1, s.chunk_samples // spp)
+            chunks += [(pixels[i:i + per_chunk], first_sample, spp)
+                       for i in range(0, len(pixels), per_chunk)]
+
+        def finish(chunk, result, done):
+            pixels = chunk[0]
             radiance, passes, chunk_stats = result
             t0 = time.perf_counter()
-            film.add_tile(first_pixel, radiance, passes)
+            # a run of consecutive pixels (every chunk of a uniform render) is a slice:
+            # cheaper to add into than a gather-scatter through an index array
+            contiguous = pixels[-1] - pixels[0] == len(pixels) - 1
+            film.add_tile(slice(pixels[0], pixels[-1] + 1) if contiguous else pixels, radiance, passes)
             chunk_stats.stage_seconds["film"] += time.perf_counter() - t0
             stats.merge(chunk_stats)
             if progress is not None:
                 progress(done, len(chunks))
 
         if s.thread_count == 1 or len(chunks) == 1:
-            for i, (p0, p1) in enumerate(chunks):
-                finish(p0, self.render_chunk(p0, p1), i + 1)
-        else:
-            with ThreadPoolExecutor(max_workers=s.thread_count) as pool:
-                futures = [pool.submit(self.render_chunk, p0, p1) for p0, p1 in chunks]
-                # results are added in chunk order; pixels never overlap, so order only
-                # matters for the stats, which are sums of integers and timings
-                try:
-                    for i, ((p0, _), future) in enumerate(zip(chunks, futures)):
-                        finish(p0, future.result(), i + 1)
-                except BaseException:
-                    # Ctrl-C or a failing chunk: drop the chunks not yet started instead of
-                    # rendering the rest of the image before giving up
-                    for future in futures:
-                        future.cancel()
-                    raise
-        stats.wall_seconds = time.perf_counter() - start
-        stats.relative_error = film.relative_error()
-        passes = {name: film.pass_image(name) for name in film.pass_sums if name in s.passes}
-        alpha = film.pass_image("alpha") if self.background.transparent else None
-        return RenderResult(film.image(), passes, stats, film, alpha)
+            for i, chunk in enumerate(chunks):
+                finish(chunk, self.render_chunk(*chunk), i + 1)
+            return
+        # At most two chunks per thread are in flight (running, queued, or finished and not
+        # yet on the film): with every chunk submitted at once, the finished results stay
+        # referenced until the end and memory grows with resolution x spp instead of
+        # staying a few chunk sizes.  Two per thread keep every thread busy while the
+        # calling thread adds results to the film.
+        in_flight = 2 * s.thread_count
+        pending = deque()
+
+        def finish_oldest(submitted):
+            # results are added in chunk order; pixels never overlap, so order only
+            # matters for the stats, which are sums of integers and timings
+            chunk, future = pending.popleft()
+            finish(chunk, future.result(), submitted - len(pending))
+
+        with ThreadPoolExecutor(max_workers=s.thread_count) as pool:
+            try:
+                for submitted, chunk in enumerate(chunks, 1):
+                    pending.append((chunk, pool.submit(self.render_chunk, *chunk)))
+                    if len(pending) >= in_flight:
+                        finish_oldest(submitted)
+                while pending:
+                    finish_oldest(len(chunks))
+            except BaseException:
+                # Ctrl-C or a failing chunk: drop the chunks not yet started instead of
+                # rendering the rest of the image before giving up
+                for _, future in pending:
+                    future.cancel()
+                raise
 
     # ---------------------------------------------------------------- one chunk
-    def render_chunk(self, first_pixel, end_pixel):
-        """Render every sample of the pixels ``first_pixel .. end_pixel - 1``.
+    def render_chunk(self, pixels, first_sample, spp):
+        """Render the samples ``first_sample .. first_sample + spp - 1`` of some pixels.
+
+        Sample indices are global to the pixel across adaptive rounds, so the samples a
+        later round adds continue the same sequences (stratified in sets of the settings'
+        ``spp``; Sobol prefixes stay well distributed) instead of repeating the first ones.
+
+        Parameters
+        ----------
+        pixels : (m,) int array
+            Linear pixel indices (``row * width + column``).
+        first_sample : int
+            Index of the first sample to take in each pixel.
+        spp : int
+            Samples to take in each pixel.
 
         Returns
         -------
@@ -307,15 +390,14 @@ class Integrator:
         s = self.settings
         stats = RenderStats()
         clock = _Clock(stats.stage_seconds)
-        m = end_pixel - first_pixel
-        n = m * s.spp
+        pixels = np.asarray(pixels, dtype=np.int64)
+        m = len(pixels)
+        n = m * spp
 
         # camera: one ray per pixel sample
-        pixel = np.arange(first_pixel, end_pixel, dtype=np.int64)
-        if s.spp > 1:
-            pixel = np.repeat(pixel, s.spp)
-        sample_in_pixel = (np.tile(np.arange(s.spp, dtype=np.int64), m) if s.spp > 1
-                           else np.zeros(n, dtype=np.int64))
+        pixel = np.repeat(pixels, spp) if spp > 1 else pixels
+        sample_in_pixel = np.tile(np.arange(first_sample, first_sample + spp, dtype=np.int64), m)
+        # every dimension is stratified in sets of the settings' spp, whatever the round
         film_xy = pixel_offsets(s.sampler, s.seed, pixel, sample_in_pixel, s.spp)
         row = pixel // s.width
         film_xy[:, 0] += pixel - row * s.width
@@ -354,8 +436,8 @@ class Integrator:
             clock.lap("intersect")
             rays = self._shade(rays, hits, depth, radiance, aov, keys, stats, clock, sample_time)
 
-        passes = self.passes.per_pixel(aov, m, s.spp) or None
-        return radiance.reshape(m, s.spp, 3), passes, stats
+        passes = self.passes.per_pixel(aov, m, spp) or None
+        return radiance.reshape(m, spp, 3), passes, stats
 
     # ---------------------------------------------------------------- stages
     def _shade(self, rays, hits, depth, radiance, aov, keys, stats, clock, sample_time=None):
@@ -445,6 +527,15 @@ class Integrator:
             srf.ns = self._shading_normals(prim, u, v, flip, srf.ng)
         else:
             srf.ns = srf.ng
+        srf.tints = None
+        if self.stages["textures"]:
+            srf.tints = self.textures.tints(prim, u, v, srf.mat)
+            if self.stages["normal_maps"]:
+                srf.ns = self.textures.normal_mapped(srf.ns, prim, u, v, srf.mat, flip)
+        if self.stages["smooth_normals"] or self.stages["normal_maps"]:
+            # the shading-normal terminator: no normal facing away from the viewer or
+            # below the real surface (see face_viewer)
+            srf.ns = face_viewer(srf.ns, srf.ng, d)  # rest frame, like ns and ng
         if srf.time is not None:
             srf.p, srf.ng, srf.ns = self.motion.surfaces_to_world(prim, srf.time, srf.p, srf.ng,
                                                                   srf.ns)
@@ -477,6 +568,14 @@ class Integrator:
         local = None
         if st["emission"]:
             local = take_rows(self._emission, srf.mat)
+        tint = None if srf.tints is None else srf.tints.diffuse
+        if st["unlit"]:
+            # unlit materials show their (textured) colour as is
+            unlit = self.scene.materials.unlit.take(srf.mat)
+            if unlit.any():
+                shown = np.where(unlit[:, None], take_rows(self._diffuse, srf.mat), 0.0)
+                shown = shown if tint is None else shown * tint
+                local = shown if local is None else local + shown
 
         ao = None
         if st["ao"] and (st["ambient"] or (depth == 0 and ao_pass is not None)):
@@ -486,6 +585,8 @@ class Integrator:
             clock.lap("ao")
         if st["ambient"]:
             amb = take_rows(self._ambient_light, srf.mat)
+            if tint is not None:
+                amb = amb * tint
             if ao is not None:
                 amb = amb * ao[:, None]
             local = amb if local is None else local + amb
@@ -512,6 +613,13 @@ class Integrator:
         p, ng, ns, d, mat = (take_rows(a, rows) for a in (srf.p, srf.ng, srf.ns, srf.d, srf.mat))
         k = len(mat)
         kd = take_rows(self._diffuse, mat)
+        tints = srf.tints
+        if tints is not None and tints.diffuse is not None:
+            kd = kd * take_rows(tints.diffuse, rows)
+        ks = self._specular
+        if tints is not None and tints.specular is not None:
+            # per-hit specular colours: gathered with the hit rows instead of by material
+            ks = take_rows(self._specular, srf.mat) * tints.specular
         # the highlight (with its costly power) only where a material has one
         spec_rows = None
         if self.stages["specular"]:
@@ -527,7 +635,9 @@ class Integrator:
                 mat_s = take_rows(mat, s)
                 highlight = blinn_phong_highlight(
                     take_rows(ns, s), -take_rows(d, s), take_rows(wi, s), take_rows(cos_i, s),
-                    take_rows(self._specular, mat_s), self.scene.materials.shininess[mat_s])
+                    take_rows(self._specular, mat_s) if ks is self._specular
+                    else take_rows(take_rows(ks, rows), s),
+                    self.scene.materials.shininess[mat_s])
                 value = _add_rows(value, s, highlight)
             return value
 
@@ -603,6 +713,8 @@ class Integrator:
         wo, ng, ns = -srf.d[idx], srf.ng[idx], srf.ns[idx]
         beta = rays.throughput[idx]
         reflect_weight = m.mirror[mat]
+        if srf.tints is not None and srf.tints.mirror is not None:
+            reflect_weight = reflect_weight * srf.tints.mirror[idx]
         batches = []
 
         refract_batch = None

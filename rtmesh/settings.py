@@ -1,5 +1,6 @@
 """Render settings and render statistics."""
 
+import math
 import os
 from dataclasses import dataclass, field
 
@@ -9,6 +10,8 @@ from .sampling import SAMPLERS
 
 FRESNEL_MODES = ("schlick", "exact")
 PASSES = PASS_NAMES
+# adaptive sampling's cap on samples per pixel when max_spp is not given
+DEFAULT_MAX_SPP = 1024
 
 
 @dataclass
@@ -47,6 +50,17 @@ class RenderSettings:
         Stops, applied when writing 8-bit images.
     tonemap : {"clamp", "reinhard", "aces"}
         Operator for 8-bit images.
+    target_error : float or None
+        Adaptive sampling (see :mod:`rtmesh.adaptive`): render in rounds until every pixel's
+        estimated relative standard error is at most this (e.g. 0.02).  ``spp`` is then the
+        samples of the first round.
+    time_limit : float or None
+        Adaptive sampling within a time budget, seconds: no round starts that would end
+        after it (the first round always runs).  Alone, it refines the pixels noisier than
+        the image's mean for as long as it allows.
+    max_spp : int or None
+        Most samples any pixel gets with adaptive sampling; None means
+        ``DEFAULT_MAX_SPP`` (or ``spp``, if larger).
     """
 
     width: int = 640
@@ -65,6 +79,9 @@ class RenderSettings:
     passes: tuple = ()
     exposure: float = 0.0
     tonemap: str = "reinhard"
+    target_error: float | None = None
+    time_limit: float | None = None
+    max_spp: int | None = None
 
     def validate(self):
         """Raise ValueError naming the first setting out of range."""
@@ -82,11 +99,30 @@ class RenderSettings:
             (self.light_samples >= 1, "light_samples must be >= 1"),
             (all(p in PASSES for p in self.passes), f"passes must be among {', '.join(PASSES)}"),
             (self.tonemap in TONEMAPS, f"tonemap must be one of {', '.join(TONEMAPS)}"),
+            (self.target_error is None or 0 < self.target_error < math.inf,
+             "target_error must be a number > 0"),
+            (self.time_limit is None or 0 < self.time_limit < math.inf,
+             "time_limit must be a number of seconds > 0"),
+            (self.max_spp is None or self.max_spp >= self.spp, "max_spp must be >= spp"),
+            (self.max_spp is None or self.adaptive,
+             "max_spp needs target_error or time_limit (adaptive sampling)"),
+            (self.spp >= 2 or not self.adaptive,
+             "spp must be >= 2 with target_error or time_limit (one sample gives no error estimate)"),
         ]
         for ok, message in checks:
             if not ok:
                 raise ValueError(message)
         return self
+
+    @property
+    def adaptive(self):
+        """True when the render refines noisy pixels in rounds (see :mod:`rtmesh.adaptive`)."""
+        return self.target_error is not None or self.time_limit is not None
+
+    @property
+    def sample_cap(self):
+        """Most samples per pixel an adaptive render may take."""
+        return self.max_spp if self.max_spp is not None else max(self.spp, DEFAULT_MAX_SPP)
 
     @property
     def thread_count(self):
@@ -100,8 +136,8 @@ class RenderSettings:
 
 
 # "shadow": one per (hit, point/spot/directional light); "area_shadow": light_samples per
-# (hit, area light or emissive object)
-RAY_KINDS = ("camera", "shadow", "area_shadow", "reflection", "refraction", "ao")
+# (hit, area light or emissive object); "cutout": rays traced again beyond a cut-out surface
+RAY_KINDS = ("camera", "shadow", "area_shadow", "reflection", "refraction", "ao", "cutout")
 STAGES = ("camera", "intersect", "shade", "passes", "shadow", "ao", "spawn", "film")
 
 
@@ -121,6 +157,16 @@ class RenderStats:
     threads : int
     relative_error : float
         Mean relative standard error estimated from the samples (NaN at 1 spp).
+    samples : int
+        Camera samples taken over the whole image.
+    pixels : int
+        Pixels in the image.
+    rounds : list of RoundStats
+        One record per adaptive round (a uniform render is one round).
+    stop_reason : str
+        Why an adaptive render stopped: ``"target"`` (every pixel at or below
+        ``target_error``), ``"time_limit"``, ``"max_spp"`` (every pixel still above target
+        is at the cap); ``"uniform"`` for a render without adaptive sampling.
     """
 
     rays: dict = field(default_factory=lambda: dict.fromkeys(RAY_KINDS, 0))
@@ -129,6 +175,10 @@ class RenderStats:
     wall_seconds: float = 0.0
     threads: int = 1
     relative_error: float = float("nan")
+    samples: int = 0
+    pixels: int = 0
+    rounds: list = field(default_factory=list)
+    stop_reason: str = "uniform"
 
     def merge(self, other):
         """Add another (per-chunk) record's ray counts and stage times into this one."""
@@ -138,9 +188,40 @@ class RenderStats:
             self.stage_seconds[k] += v
 
     @property
+    def mean_spp(self):
+        """Camera samples per pixel, averaged over the image."""
+        return self.samples / self.pixels if self.pixels else 0.0
+
+    @property
     def total_rays(self):
         return sum(self.rays.values())
 
     @property
     def rays_per_second(self):
         return self.total_rays / self.wall_seconds if self.wall_seconds > 0 else 0.0
+
+
+@dataclass
+class RoundStats:
+    """One round of an adaptive render.
+
+    Attributes
+    ----------
+    pixels : int
+        Pixels that took new samples in the round.
+    samples : int
+        Camera samples the round took.
+    seconds : float
+        Wall time of the round.
+    relative_error : float
+        The image's mean estimated relative error after the round.
+    above_target : int
+        Pixels whose estimated error was still above target after the round (above the
+        image's mean error when no target is set).
+    """
+
+    pixels: int
+    samples: int
+    seconds: float
+    relative_error: float
+    above_target: int

@@ -4,7 +4,7 @@ the film reductions, EXR channel names and PNG mappings behind them."""
 import numpy as np
 import pytest
 
-from rtmesh.aov import PASS_NAMES, REGISTRY, display_values, exr_channel_names, id_colours
+from rtmesh.aov import PASS_NAMES, display_values, exr_channel_names, id_colours, pass_width
 from rtmesh.camera import Camera
 from rtmesh.cli import main
 from rtmesh.film import Film
@@ -254,7 +254,7 @@ def test_exr_holds_every_pass_under_its_layer_names_and_pngs_map_them(tmp_path):
     expected = ["R", "G", "B", "A"]
     for name in PASS_NAMES:
         if name != "alpha":
-            expected += exr_channel_names(name, REGISTRY[name].width)
+            expected += exr_channel_names(name, pass_width(name))
     # OpenEXR stores channels sorted by name; the image's own R, G, B, A come first
     assert names[:4] == ["R", "G", "B", "A"] and sorted(names) == sorted(expected)
     assert "depth.Z" in names and "normal.X" in names and "object_id.id" in names
