@@ -9,7 +9,7 @@ import trimesh
 from .errors import MeshError
 from .film import srgb_to_linear
 from .gltf_scene import GLTF_EXTENSIONS, file_cameras_and_lights, read_gltf_json
-from .material_files import gltf_material, gltf_material_extensions, mtl_material, obj_materials
+from .material_files import gltf_json_materials, gltf_material, mtl_material, obj_materials
 from .materials import Material
 from .scene import MeshPart, Scene
 from .textures import Texture
@@ -79,8 +79,8 @@ def material_from_trimesh(visual, name, file_materials=None):
     """
     material = getattr(visual, "material", None)
     if isinstance(material, trimesh.visual.material.PBRMaterial):
-        extensions = file_materials.gltf_extensions.get(material.name) if file_materials else None
-        return gltf_material(material, extensions, name)
+        json_material = file_materials.gltf.get(material.name) if file_materials else None
+        return gltf_material(material, json_material, name)
     if isinstance(material, trimesh.visual.material.SimpleMaterial):
         if file_materials is not None and file_materials.obj is not None:
             found = file_materials.obj.get(material.name)
@@ -120,14 +120,14 @@ class FileMaterials:
     ----------
     obj : dict of str to Material or None
         An OBJ file's MTL materials by name (None for other formats).
-    gltf_extensions : dict of str to dict
-        A glTF file's material extensions by material name.
+    gltf : dict of str to dict
+        A glTF file's material objects (JSON) by material name.
     drop_vertex_colours : bool
         The file's vertex colours are unusable (NaN in an OBJ: trimesh reads them as black).
     """
 
     def __init__(self, path=None):
-        self.obj, self.gltf_extensions, self.drop_vertex_colours = None, {}, False
+        self.obj, self.gltf, self.drop_vertex_colours = None, {}, False
         if path is None:
             return
         ext = os.path.splitext(path)[1].lower()
@@ -138,7 +138,7 @@ class FileMaterials:
                             os.path.basename(path), nan_vertices)
                 self.drop_vertex_colours = True
         elif ext in GLTF_EXTENSIONS:
-            self.gltf_extensions = gltf_material_extensions(read_gltf_json(path))
+            self.gltf = gltf_json_materials(read_gltf_json(path))
 
 
 def vertex_colours(mesh):
