@@ -23,6 +23,7 @@ import dataclasses
 import functools
 import logging
 import time
+from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -332,17 +333,32 @@ class Integrator:
             for i, chunk in enumerate(chunks):
                 finish(chunk, self.render_chunk(*chunk), i + 1)
             return
-        with ThreadPoolExecutor(max_workers=s.thread_count) as pool:
-            futures = [pool.submit(self.render_chunk, *chunk) for chunk in chunks]
+        # At most two chunks per thread are in flight (running, queued, or finished and not
+        # yet on the film): with every chunk submitted at once, the finished results stay
+        # referenced until the end and memory grows with resolution x spp instead of
+        # staying a few chunk sizes.  Two per thread keep every thread busy while the
+        # calling thread adds results to the film.
+        in_flight = 2 * s.thread_count
+        pending = deque()
+
+        def finish_oldest(submitted):
             # results are added in chunk order; pixels never overlap, so order only
             # matters for the stats, which are sums of integers and timings
+            chunk, future = pending.popleft()
+            finish(chunk, future.result(), submitted - len(pending))
+
+        with ThreadPoolExecutor(max_workers=s.thread_count) as pool:
             try:
-                for i, (chunk, future) in enumerate(zip(chunks, futures)):
-                    finish(chunk, future.result(), i + 1)
+                for submitted, chunk in enumerate(chunks, 1):
+                    pending.append((chunk, pool.submit(self.render_chunk, *chunk)))
+                    if len(pending) >= in_flight:
+                        finish_oldest(submitted)
+                while pending:
+                    finish_oldest(len(chunks))
             except BaseException:
                 # Ctrl-C or a failing chunk: drop the chunks not yet started instead of
                 # rendering the rest of the image before giving up
-                for future in futures:
+                for _, future in pending:
                     future.cancel()
                 raise
 
