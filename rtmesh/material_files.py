@@ -288,7 +288,9 @@ def _gltf_factors(pbr, doc):
     mr = doc.get("pbrMetallicRoughness", {}) or {}
 
     def pick(json_value, trimesh_value, default):
-        return _factor(json_value if json_value is not None else trimesh_value, default)
+        if json_value is not None:  # JSON numbers are factors in [0, 1], integers included
+            return np.asarray(json_value, dtype=np.float64)
+        return _factor(trimesh_value, default)
 
     return dict(
         base=pick(mr.get("baseColorFactor"), pbr.baseColorFactor, [1.0, 1.0, 1.0, 1.0]),

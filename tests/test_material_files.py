@@ -8,7 +8,7 @@ import trimesh
 from PIL import Image
 from trimesh.visual.material import PBRMaterial
 
-from rtmesh.importers import load_mesh_scene
+from rtmesh.importers import load_mesh_scene, parts_from_trimesh
 from rtmesh.material_files import gltf_material, map_statement, mtl_material, roughness_to_shininess
 from rtmesh.scene_file import scene_from_dict
 
@@ -195,3 +195,16 @@ def test_nested_nodes_instances_and_primitives_are_placed_from_a_glb(tmp_path):
     assert lows == sorted([((9.0, -1.0, -1.0), (11.0, 1.0, 1.0)),      # parent: 2x box at x=10
                            ((9.5, 5.5, -0.5), (10.5, 6.5, 0.5)),       # child: 2 * 3 up, 2x size
                            ((-0.5, -0.5, -5.5), (0.5, 0.5, -4.5))])    # instance
+
+
+def test_smoothing_by_angle_keeps_the_material_and_carries_uvs():
+    # trimesh's smooth_shaded copy drops the visual: rtmesh maps UVs through the split
+    box = trimesh.creation.box()
+    box = trimesh.Trimesh(box.vertices, box.faces, process=False)
+    uv = box.vertices[:, :2] + 0.5
+    box.visual = trimesh.visual.TextureVisuals(uv=uv, material=pbr(baseColorFactor=[0.2, 0.4, 0.6, 1.0],
+                                                                   metallicFactor=0.0))
+    (part, *_), materials = parts_from_trimesh(box, smooth=None)
+    assert len(part.vertices) > len(box.vertices)  # split at the 90 degree creases
+    np.testing.assert_allclose(materials[0].diffuse, np.round(np.array([0.2, 0.4, 0.6]) * 255) / 255)
+    np.testing.assert_allclose(part.uv, part.vertices[:, :2] + 0.5)
