@@ -136,8 +136,9 @@ class Integrator:
             self.motion = MotionAccel(scene.vertices - self.shift, scene.faces, scene.object_id,
                                       motions, scene.camera.shutter)
         self.accel = self.motion or Accel(scene.vertices - self.shift, scene.faces)
-        # the scene's size in the re-centred frame sets the near-zero offset (see
-        # offset_ray_origins); it cannot be zero for a scene that renders.  With motion,
+        # the scene's size in the re-centred frame bounds the triangles' size, which sets
+        # part of the origin offset (see offset_ray_origins); it cannot be zero for a scene
+        # that renders.  With motion,
         # the size of the space the objects sweep during the shutter.
         bounds = swept_bounds(scene) if self.motion else scene.bounds
         self.offset_scale = max(float(np.abs(bounds - self.shift).max()), 1e-30)
