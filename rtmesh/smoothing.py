@@ -72,6 +72,9 @@ def smooth_vertex_normals(vertices, faces, crease_angle=CREASE_ANGLE):
     normals : (V2, 3) float64
         Unit normals; zero where the weights cancel (e.g. only zero-area faces), which
         :meth:`rtmesh.scene.Scene.from_parts` then shades flat.
+    original : (V2,) intp
+        The input vertex each output vertex copies (``vertices = input[original]``), for
+        per-vertex attributes such as texture coordinates and colours.
     """
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.intp).reshape(-1, 3)
@@ -110,4 +113,4 @@ def smooth_vertex_normals(vertices, faces, crease_angle=CREASE_ANGLE):
     normal_sum = np.stack([np.bincount(group, weighted[:, c], minlength=n_groups) for c in range(3)], axis=1)
     length = np.sqrt(np.einsum("ij,ij->i", normal_sum, normal_sum))
     normals = normal_sum / np.where(length > 0.0, length, np.inf)[:, None]
-    return vertices[source], group.reshape(n_faces, 3).astype(np.intp), normals
+    return vertices[source], group.reshape(n_faces, 3).astype(np.intp), normals, source

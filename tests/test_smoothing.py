@@ -56,7 +56,7 @@ def test_corner_angles_of_a_right_triangle_sum_to_pi():
 
 def test_icosphere_normals_are_radial_and_match_trimesh():
     sphere = icosphere(4)
-    vertices, faces, normals = smooth_vertex_normals(sphere.vertices, sphere.faces)
+    vertices, faces, normals, _ = smooth_vertex_normals(sphere.vertices, sphere.faces)
     # a smooth closed surface: no vertex is split
     assert len(vertices) == len(sphere.vertices)
     np.testing.assert_array_equal(vertices[faces], sphere.vertices[sphere.faces])
@@ -67,20 +67,20 @@ def test_icosphere_normals_are_radial_and_match_trimesh():
 
 def test_box_splits_into_flat_faces_and_smooths_to_diagonals_without_creases():
     box = trimesh.creation.box()
-    vertices, faces, normals = smooth_vertex_normals(box.vertices, box.faces)
+    vertices, faces, normals, _ = smooth_vertex_normals(box.vertices, box.faces)
     assert len(vertices) == 24  # every corner of every side on its own
     np.testing.assert_allclose(corner_normals(faces, normals),
                                np.repeat(box.face_normals[:, None, :], 3, axis=1), atol=1e-15)
     # smoothed everywhere, each corner's three sides weigh a right angle each, whatever
     # their triangulation: the normal is the diagonal
-    vertices, faces, normals = smooth_vertex_normals(box.vertices, box.faces, crease_angle=None)
+    vertices, faces, normals, _ = smooth_vertex_normals(box.vertices, box.faces, crease_angle=None)
     assert len(vertices) == 8
     np.testing.assert_allclose(normals, np.sign(vertices) / math.sqrt(3.0), atol=1e-15)
 
 
 def test_cylinder_sides_smooth_and_caps_flat():
     cylinder = trimesh.creation.cylinder(radius=1.0, height=2.0, sections=32)
-    vertices, faces, normals = smooth_vertex_normals(cylinder.vertices, cylinder.faces)
+    vertices, faces, normals, _ = smooth_vertex_normals(cylinder.vertices, cylinder.faces)
     n = corner_normals(faces, normals)
     on_cap = np.abs(cylinder.face_normals[:, 2]) > 0.99
     np.testing.assert_allclose(n[on_cap], np.repeat(cylinder.face_normals[on_cap, None, :], 3, axis=1), atol=1e-12)
@@ -96,10 +96,12 @@ def test_matches_scalar_reference_on_a_bumpy_mesh(crease_degrees):
     sphere = icosphere(1)
     rng = np.random.default_rng(3)
     bumpy = sphere.vertices * (1.0 + 0.15 * rng.random((len(sphere.vertices), 1)))
-    vertices, faces, normals = smooth_vertex_normals(bumpy, sphere.faces, math.radians(crease_degrees))
+    vertices, faces, normals, original = smooth_vertex_normals(bumpy, sphere.faces,
+                                                               math.radians(crease_degrees))
     expected = scalar_corner_normals(bumpy, sphere.faces, math.radians(crease_degrees))
     np.testing.assert_allclose(corner_normals(faces, normals), expected, atol=1e-12)
     np.testing.assert_array_equal(vertices[faces], bumpy[sphere.faces])
+    np.testing.assert_array_equal(vertices, bumpy[original])  # attributes follow the split
     assert len(sphere.vertices) < len(vertices) < 3 * len(sphere.faces)  # some, not all, split
 
 
