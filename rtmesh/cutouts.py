@@ -148,16 +148,16 @@ class CutoutAccel:
         keys = None
         travelled = np.zeros(len(hits))
         retraced = 0
+        active = np.arange(len(hits))  # rays whose latest hit is still to be decided
         for layer in range(MAX_LAYERS + 1):
-            on_cutout = np.flatnonzero((hits.prim >= 0) & self.cutout_face[np.maximum(hits.prim, 0)])
+            prim = hits.prim[active]
+            on_cutout = active[(prim >= 0) & self.cutout_face[np.maximum(prim, 0)]]
             if not len(on_cutout):
                 break
             if keys is None:
                 keys = ray_keys(origins, directions)
             through = on_cutout[self.passes(hits, on_cutout, keys, layer)]
-            if not len(through):
-                break
-            if layer == MAX_LAYERS:
+            if not len(through) or layer == MAX_LAYERS:
                 break  # too deep: stop at this surface (a shadow ray counts as occluded)
             start = self._beyond(hits, through, directions)
             step = self._hits_from(start, take_rows(directions, through),
@@ -166,6 +166,7 @@ class CutoutAccel:
             travelled[through] += hits.t[through]
             hits.prim[through], hits.u[through], hits.v[through] = step.prim, step.u, step.v
             hits.t[through] = step.t
+            active = through
         with self._lock:
             self.layers_traced += retraced
         hits.t = hits.t + travelled

@@ -9,7 +9,7 @@ import trimesh
 from .errors import MeshError
 from .film import srgb_to_linear
 from .gltf_scene import GLTF_EXTENSIONS, file_cameras_and_lights, read_gltf_json
-from .material_files import gltf_material, gltf_material_extensions, mtl_material, obj_materials
+from .material_files import gltf_json_materials, gltf_material, mtl_material, obj_materials
 from .materials import Material
 from .scene import MeshPart, Scene
 from .textures import Texture
@@ -79,8 +79,8 @@ def material_from_trimesh(visual, name, file_materials=None):
     """
     material = getattr(visual, "material", None)
     if isinstance(material, trimesh.visual.material.PBRMaterial):
-        extensions = file_materials.gltf_extensions.get(material.name) if file_materials else None
-        return gltf_material(material, extensions, name)
+        json_material = file_materials.gltf.get(material.name) if file_materials else None
+        return gltf_material(material, json_material, name)
     if isinstance(material, trimesh.visual.material.SimpleMaterial):
         if file_materials is not None and file_materials.obj is not None:
             found = file_materials.obj.get(material.name)
@@ -120,14 +120,14 @@ class FileMaterials:
     ----------
     obj : dict of str to Material or None
         An OBJ file's MTL materials by name (None for other formats).
-    gltf_extensions : dict of str to dict
-        A glTF file's material extensions by material name.
+    gltf : dict of str to dict
+        A glTF file's material objects (JSON) by material name.
     drop_vertex_colours : bool
         The file's vertex colours are unusable (NaN in an OBJ: trimesh reads them as black).
     """
 
     def __init__(self, path=None):
-        self.obj, self.gltf_extensions, self.drop_vertex_colours = None, {}, False
+        self.obj, self.gltf, self.drop_vertex_colours = None, {}, False
         if path is None:
             return
         ext = os.path.splitext(path)[1].lower()
@@ -138,7 +138,7 @@ class FileMaterials:
                             os.path.basename(path), nan_vertices)
                 self.drop_vertex_colours = True
         elif ext in GLTF_EXTENSIONS:
-            self.gltf_extensions = gltf_material_extensions(read_gltf_json(path))
+            self.gltf = gltf_json_materials(read_gltf_json(path))
 
 
 def vertex_colours(mesh):
@@ -160,6 +160,30 @@ def vertex_colours(mesh):
     if "from_gltf_primitive" not in getattr(mesh, "metadata", {}):
         colours = np.concatenate([srgb_to_linear(colours[:, :3]), colours[:, 3:]], axis=1)
     return colours
+
+
+def smooth_by_angle(mesh):
+    """trimesh's ``smooth_shaded`` copy and the original vertex of each of its vertices.
+
+    The copy is split into patches at creases (its vertices are the original ones, repeated
+    per patch), so per-vertex attributes follow as ``attribute[original]``.
+
+    Returns
+    -------
+    smooth : trimesh.Trimesh
+    original : (v', ) intp
+        Index into ``mesh.vertices`` of every vertex of ``smooth``.
+    """
+    smooth = mesh.smooth_shaded
+    components = smooth.metadata.get("original_components")
+    faces = np.hstack(components) if components else np.arange(len(mesh.faces))
+    original = np.zeros(len(smooth.vertices), dtype=np.intp)
+    if len(faces) == len(smooth.faces):
+        original[np.asarray(smooth.faces).ravel()] = np.asarray(mesh.faces)[faces].ravel()
+    if len(faces) != len(smooth.faces) or not np.array_equal(mesh.vertices[original], smooth.vertices):
+        # not the layout this relies on (another trimesh version): keep the mesh unsplit
+        return mesh, np.arange(len(mesh.vertices))
+    return smooth, original
 
 
 def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=None):
@@ -204,8 +228,16 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
             continue
         if len(mesh.faces) == 0:
             continue
+        # the material and per-vertex attributes come from the mesh as loaded: trimesh's
+        # smooth_shaded copy drops its visual
+        visual = mesh.visual
+        uv = getattr(visual, "uv", None)
+        uv = None if uv is None or len(uv) != len(mesh.vertices) else np.asarray(uv, dtype=np.float64)
+        colours = None if file_materials and file_materials.drop_vertex_colours else vertex_colours(mesh)
         if smooth is None and not _file_has_vertex_normals(mesh):
-            mesh = mesh.smooth_shaded  # split at creases, smooth elsewhere
+            mesh, original = smooth_by_angle(mesh)  # split at creases, smooth elsewhere
+            uv = None if uv is None else uv[original]
+            colours = None if colours is None else colours[original]
         matrix = transform @ node_transform
         vertices = trimesh.transform_points(mesh.vertices, matrix)
         faces = np.asarray(mesh.faces)
@@ -218,18 +250,14 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
             with np.errstate(invalid="ignore"):
                 normals = np.asarray(mesh.vertex_normals) @ normal_matrix.T
         if material is None:
-            key = id(getattr(mesh.visual, "material", mesh.visual))
+            key = id(getattr(visual, "material", visual))
             if key not in material_ids:
                 material_ids[key] = len(materials)
-                materials.append(material_from_trimesh(mesh.visual, node_name, file_materials))
+                materials.append(material_from_trimesh(visual, node_name, file_materials))
             mat = material_ids[key]
         else:
             mat = material
-        uv = getattr(mesh.visual, "uv", None)
-        colours = None if file_materials and file_materials.drop_vertex_colours else vertex_colours(mesh)
-        parts.append(MeshPart(node_name, vertices, faces, mat, normals,
-                              uv=None if uv is None or len(uv) != len(vertices) else np.asarray(uv, dtype=np.float64),
-                              vertex_colors=colours))
+        parts.append(MeshPart(node_name, vertices, faces, mat, normals, uv=uv, vertex_colors=colours))
     return parts, materials
 
 

@@ -63,7 +63,7 @@ def scan_obj(path):
     with open(path, "rb") as f:
         text = f.read()
     folder = os.path.dirname(os.path.abspath(path))
-    mtl_paths = [os.path.join(folder, m.decode("utf-8", "replace")) for m in _MTLLIB.findall(text)]
+    mtl_paths = [os.path.join(folder, m.decode("utf-8", "replace").strip()) for m in _MTLLIB.findall(text)]
     return mtl_paths, len(_SHORT_FACE.findall(text)), len(_NAN_VERTEX.findall(text))
 
 
@@ -274,11 +274,34 @@ def obj_materials(path):
 
 
 def _factor(value, default):
-    """A glTF factor as float64 array, 8-bit trimesh colours rescaled to [0, 1]."""
+    """A glTF factor as a float64 array; trimesh's 8-bit colours rescaled to [0, 1]."""
     if value is None:
         return np.asarray(default, dtype=np.float64)
-    a = np.asarray(value, dtype=np.float64)
-    return a / 255.0 if a.dtype.kind in "ui" or np.asarray(value).dtype == np.uint8 else a
+    raw = np.asarray(value)
+    return raw.astype(np.float64) / 255.0 if raw.dtype.kind in "ui" else raw.astype(np.float64)
+
+
+def _gltf_factors(pbr, doc):
+    """The factors of a material: from the file's JSON when known (full precision), else
+    from trimesh's ``PBRMaterial`` (which keeps the base colour in 8 bits)."""
+    doc = doc or {}
+    mr = doc.get("pbrMetallicRoughness", {}) or {}
+
+    def pick(json_value, trimesh_value, default):
+        if json_value is not None:  # JSON numbers are factors in [0, 1], integers included
+            return np.asarray(json_value, dtype=np.float64)
+        return _factor(trimesh_value, default)
+
+    return dict(
+        base=pick(mr.get("baseColorFactor"), pbr.baseColorFactor, [1.0, 1.0, 1.0, 1.0]),
+        metallic=float(pick(mr.get("metallicFactor"), pbr.metallicFactor, 1.0)),
+        roughness=float(pick(mr.get("roughnessFactor"), pbr.roughnessFactor, 1.0)),
+        emission=pick(doc.get("emissiveFactor"), pbr.emissiveFactor, [0.0, 0.0, 0.0])[:3],
+        mode=str(doc.get("alphaMode") or pbr.alphaMode or "OPAQUE").lower(),
+        cutoff=float(pick(doc.get("alphaCutoff"), pbr.alphaCutoff, 0.5)),
+        double_sided=bool(doc.get("doubleSided", pbr.doubleSided)),
+        extensions=doc.get("extensions", {}) or {},
+    )
 
 
 def roughness_to_shininess(roughness):
@@ -291,7 +314,7 @@ def roughness_to_shininess(roughness):
     return float(np.clip(2.0 / r4 - 2.0, 1.0, 10000.0))
 
 
-def gltf_material(pbr, extensions=None, name="gltf"):
+def gltf_material(pbr, json_material=None, name="gltf"):
     """Map a glTF metallic-roughness material onto rtmesh's model (see docs/MATERIALS.md).
 
     ``diffuse = base * (1 - metallic)``; ``specular = 0.04 (1 - metallic) + base * metallic``
@@ -307,8 +330,9 @@ def gltf_material(pbr, extensions=None, name="gltf"):
     Parameters
     ----------
     pbr : trimesh.visual.material.PBRMaterial
-    extensions : dict, optional
-        The material's ``extensions`` object from the file's JSON.
+    json_material : dict, optional
+        The material's object in the file's JSON: its factors (full precision) and its
+        ``extensions``, which trimesh does not keep.
     name : str
         Used when the material has no name.
 
@@ -316,11 +340,11 @@ def gltf_material(pbr, extensions=None, name="gltf"):
     -------
     Material
     """
-    ext = extensions or {}
-    base = _factor(pbr.baseColorFactor, [1.0, 1.0, 1.0, 1.0])
-    base = np.resize(base, 4) if len(base) != 3 else np.append(base, 1.0)
-    metallic = float(pbr.metallicFactor if pbr.metallicFactor is not None else 1.0)
-    roughness = float(pbr.roughnessFactor if pbr.roughnessFactor is not None else 1.0)
+    f = _gltf_factors(pbr, json_material)
+    ext = f["extensions"]
+    base = f["base"]
+    base = np.append(base, 1.0) if len(base) == 3 else np.resize(base, 4)
+    metallic, roughness = f["metallic"], f["roughness"]
     if pbr.metallicRoughnessTexture is not None:
         # glTF: roughness in green, metalness in blue, both linear
         texels = Texture.from_pil(pbr.metallicRoughnessTexture, srgb=False).pixels
@@ -329,8 +353,7 @@ def gltf_material(pbr, extensions=None, name="gltf"):
             roughness, metallic = roughness * mean[1], metallic * mean[2]
     metallic, roughness = float(np.clip(metallic, 0, 1)), float(np.clip(roughness, 0, 1))
     colour = base[:3]
-    emission = _factor(pbr.emissiveFactor, [0.0, 0.0, 0.0])[:3]
-    emission = emission * float(ext.get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0))
+    emission = f["emission"] * float(ext.get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0))
     transmission, ior, absorption = np.zeros(3), 1.5, np.zeros(3)
     if "KHR_materials_ior" in ext:
         ior = float(ext["KHR_materials_ior"].get("ior", 1.5)) or 1.5
@@ -341,7 +364,7 @@ def gltf_material(pbr, extensions=None, name="gltf"):
         tint = np.clip(np.asarray(volume.get("attenuationColor", [1.0, 1.0, 1.0]), dtype=np.float64), 1e-6, 1.0)
         if np.isfinite(distance) and distance > 0:
             absorption = -np.log(tint) / distance
-    mode = str(pbr.alphaMode or "OPAQUE").lower()
+    mode = f["mode"]
     texture = None
     if pbr.baseColorTexture is not None:
         texture = Texture.from_pil(pbr.baseColorTexture, srgb=True, name=f"{name} baseColorTexture")
@@ -363,18 +386,18 @@ def gltf_material(pbr, extensions=None, name="gltf"):
         emission=emission,
         opacity=float(base[3]),
         alpha_mode=mode if mode in ("mask", "blend") else "opaque",
-        alpha_cutoff=float(pbr.alphaCutoff if pbr.alphaCutoff is not None else 0.5),
-        double_sided=bool(pbr.doubleSided),
+        alpha_cutoff=f["cutoff"],
+        double_sided=f["double_sided"],
         unlit="KHR_materials_unlit" in ext,
         diffuse_texture=texture,
         normal_texture=normal,
     )
 
 
-def gltf_material_extensions(doc):
-    """``{material name: extensions}`` of a glTF JSON document (unnamed materials skipped)."""
+def gltf_json_materials(doc):
+    """``{material name: material object}`` of a glTF JSON document (unnamed ones skipped)."""
     out = {}
     for material in doc.get("materials", []) or []:
         if isinstance(material, dict) and isinstance(material.get("name"), str):
-            out[material["name"]] = material.get("extensions", {}) or {}
+            out[material["name"]] = material
     return out
