@@ -49,7 +49,9 @@ def render_rounds(integrator, film, stats, progress=None):
     deadline = None if s.time_limit is None else start + s.time_limit
     cap = s.sample_cap
 
-    all_pixels = np.arange(film.count.size, dtype=np.int64)
+    # a range, not an index array: each chunk makes its own small slice of it, so memory
+    # beyond the film does not grow with the image (8 bytes a pixel at 4K is 66 MB)
+    all_pixels = range(film.count.size)
     error = _run_round(integrator, film, stats, [(all_pixels, 0, s.spp)], s.target_error, progress)
     if not s.adaptive:
         stats.stop_reason = "uniform"

@@ -50,6 +50,13 @@ from .cutouts import CutoutAccel
 
 log = logging.getLogger(__name__)
 
+# At most this many chunks per thread are in flight (running, queued, or finished and not yet
+# on the film).  With every chunk submitted at once the finished results stay referenced
+# until the end, and memory grows with resolution x spp instead of staying a few chunk
+# sizes; two per thread keep every thread busy while the calling thread adds results to
+# the film.
+CHUNKS_IN_FLIGHT_PER_THREAD = 2
+
 # Shadow rays to point and spot lights stop this fraction short of the light, so a light
 # placed exactly on a surface does not count that surface as an occluder.
 _SHADOW_SHORTEN = 1.0 - 1e-5
@@ -305,7 +312,7 @@ class Integrator:
         Parameters
         ----------
         film : Film
-        groups : list of ((m,) int array, int, int)
+        groups : list of ((m,) int array or range, int, int)
             ``(pixels, first_sample, spp)``: the samples ``first_sample .. first_sample +
             spp - 1`` of each of ``pixels`` (distinct, ascending; no pixel in two groups).
         stats : RenderStats
@@ -337,12 +344,8 @@ class Integrator:
             for i, chunk in enumerate(chunks):
                 finish(chunk, self.render_chunk(*chunk), i + 1)
             return
-        # At most two chunks per thread are in flight (running, queued, or finished and not
-        # yet on the film): with every chunk submitted at once, the finished results stay
-        # referenced until the end and memory grows with resolution x spp instead of
-        # staying a few chunk sizes.  Two per thread keep every thread busy while the
-        # calling thread adds results to the film.
-        in_flight = 2 * s.thread_count
+        # a bounded window of chunks (see CHUNKS_IN_FLIGHT_PER_THREAD)
+        in_flight = CHUNKS_IN_FLIGHT_PER_THREAD * s.thread_count
         pending = deque()
 
         def finish_oldest(submitted):
@@ -376,7 +379,7 @@ class Integrator:
 
         Parameters
         ----------
-        pixels : (m,) int array
+        pixels : (m,) int array or range
             Linear pixel indices (``row * width + column``).
         first_sample : int
             Index of the first sample to take in each pixel.
@@ -393,6 +396,8 @@ class Integrator:
         s = self.settings
         stats = RenderStats()
         clock = _Clock(stats.stage_seconds)
+        if isinstance(pixels, range):
+            pixels = np.arange(pixels.start, pixels.stop, pixels.step, dtype=np.int64)
         pixels = np.asarray(pixels, dtype=np.int64)
         m = len(pixels)
         n = m * spp

@@ -145,7 +145,9 @@ def machine():
                     break
     except OSError:
         pass
-    return f"{os.cpu_count()} CPUs (nproc), {model}, Python {platform.python_version()}, NumPy {np.__version__}"
+    # the 1-minute load average says how busy the (shared) machine was at the start
+    return (f"{os.cpu_count()} CPUs (nproc), {model}, Python {platform.python_version()}, "
+            f"NumPy {np.__version__}, load average {os.getloadavg()[0]:.1f} at the start")
 
 
 def command(args):
