@@ -34,7 +34,7 @@ from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from bench_core import machine, write_section  # noqa: E402
+from bench_core import machine, publish  # noqa: E402
 
 from rtmesh.accel import Accel  # noqa: E402
 from rtmesh.importers import load_trimesh, parts_from_trimesh  # noqa: E402
@@ -123,9 +123,7 @@ def main():
         *rows,
         "",
     ])
-    print(text)
-    if not args.no_write:
-        write_section(text, SECTION)
+    publish(text, SECTION, write=not args.no_write)
 
 
 if __name__ == "__main__":

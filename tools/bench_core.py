@@ -174,6 +174,14 @@ def write_section(text, section=SECTION):
     DOC.write_text(new)
 
 
+def publish(text, section=SECTION, write=True):
+    """Print a benchmark's section and, if ``write``, put it into docs/BENCHMARKS.md."""
+    print(text)
+    if write:
+        write_section(text, section)
+        print(f"written to {DOC}")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--width", type=int, default=512)
@@ -245,10 +253,7 @@ def main():
         f"- rtmesh 1-thread stage times, ms: {stage_text}",
         "",
     ])
-    print(text)
-    if not args.no_write:
-        write_section(text)
-        print(f"written to {DOC}")
+    publish(text, write=not args.no_write)
 
 
 if __name__ == "__main__":

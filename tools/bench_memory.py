@@ -32,7 +32,7 @@ import time
 import tracemalloc
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from bench_core import benchmark_scene, machine, write_section  # noqa: E402
+from bench_core import benchmark_scene, machine, publish  # noqa: E402
 
 from rtmesh.integrator import Integrator  # noqa: E402
 from rtmesh.settings import RenderSettings  # noqa: E402
@@ -172,9 +172,7 @@ def main():
         *rows,
         "",
     ])
-    print(text)
-    if not args.no_write:
-        write_section(text, SECTION)
+    publish(text, SECTION, write=not args.no_write)
 
 
 if __name__ == "__main__":

@@ -45,7 +45,7 @@ from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from bench_core import machine, seconds, write_section  # noqa: E402
+from bench_core import machine, publish, seconds  # noqa: E402
 
 from rtmesh.accel import Accel  # noqa: E402
 from rtmesh.camera import Camera  # noqa: E402
@@ -343,9 +343,7 @@ def main():
         f"| 2 | {threads[2]:.3f} | {threads[1] / threads[2]:.2f} |",
         "",
     ])
-    print(text)
-    if not args.no_write:
-        write_section(text, SECTION)
+    publish(text, SECTION, write=not args.no_write)
 
 
 if __name__ == "__main__":
