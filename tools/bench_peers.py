@@ -250,7 +250,7 @@ def equal_error(meshes, scene, args, folder):
             ratio = t[name] / base if t[name] and base else None
             ratios.append(f"{ratio:.2f}" if ratio else "n/a")
             key[(name, target)] = ratio
-        lines.append(f"| {target:.1%} | " + " | ".join(cells) + " | " + " | ".join(ratios) + " |")
+        lines.append(f"| {100 * target:g}% | " + " | ".join(cells) + " | " + " | ".join(ratios) + " |")
     key["mean_difference"], key["reference_rmse"] = mean_difference, reference_rmse
     return lines, key
 
