@@ -321,11 +321,13 @@ class Integrator:
             ``progress(chunks_done, chunks_total)``.
         """
         s = self.settings
-        chunks = []
-        for pixels, first_sample, spp in groups:
-            per_chunk = max(1, s.chunk_samples // spp)
-            chunks += [(pixels[i:i + per_chunk], first_sample, spp)
-                       for i in range(0, len(pixels), per_chunk)]
+        # chunks are made as they are submitted: a list of them would grow with
+        # resolution x spp (a 4K image at 64 spp has 16200)
+        per_chunk = [max(1, s.chunk_samples // spp) for _, _, spp in groups]
+        n_chunks = sum(-(-len(pixels) // k) for (pixels, _, _), k in zip(groups, per_chunk))
+        chunks = ((pixels[i:i + k], first_sample, spp)
+                  for (pixels, first_sample, spp), k in zip(groups, per_chunk)
+                  for i in range(0, len(pixels), k))
 
         def finish(chunk, result, done):
             pixels = chunk[0]
@@ -338,9 +340,9 @@ class Integrator:
             chunk_stats.stage_seconds["film"] += time.perf_counter() - t0
             stats.merge(chunk_stats)
             if progress is not None:
-                progress(done, len(chunks))
+                progress(done, n_chunks)
 
-        if s.thread_count == 1 or len(chunks) == 1:
+        if s.thread_count == 1 or n_chunks == 1:
             for i, chunk in enumerate(chunks):
                 finish(chunk, self.render_chunk(*chunk), i + 1)
             return
@@ -361,7 +363,7 @@ class Integrator:
                     if len(pending) >= in_flight:
                         finish_oldest(submitted)
                 while pending:
-                    finish_oldest(len(chunks))
+                    finish_oldest(n_chunks)
             except BaseException:
                 # Ctrl-C or a failing chunk: drop the chunks not yet started instead of
                 # rendering the rest of the image before giving up
