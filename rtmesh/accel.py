@@ -16,15 +16,23 @@ from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
 from .batches import component_major, take_rows
+from .vecmath import dot
 
-# Constants of the integer-ULP offset of Waechter & Binder, "A Fast and Robust Method for
-# Avoiding Self-Intersection" (Ray Tracing Gems, ch. 6).  The offset is 256 float32 ulps of
-# each coordinate along the normal: that covers the error of a float32 hit point computed
-# from barycentrics, which is a few ulps of the largest coordinate.  Near zero, where ulps
-# get absurdly small, a fixed offset of 1/65536 (scaled by the normal) is used instead.
-_ORIGIN = np.float32(1.0 / 32.0)
-_FLOAT_SCALE = np.float32(1.0 / 65536.0)
-_INT_SCALE = np.float32(256.0)
+# The origin offset (see offset_ray_origins).  A spawned ray must start clear of the surface
+# it leaves, by more than two errors (in the spirit of Waechter & Binder, "A Fast and Robust
+# Method for Avoiding Self-Intersection", Ray Tracing Gems ch. 6, and pbrt's error bounds):
+# * the hit point, rounded to float32, is off the float32 triangle's plane by up to half an
+#   ulp of each coordinate, i.e. by sum_i |n_i| ulp(p_i) / 2 along the normal;
+# * Embree evaluates the plane relative to the ray origin in float32, with an error of a
+#   few float32 epsilons of the triangle's extent, which is at most the scene's size; near
+#   the origin, where ulps are tiny, this is the larger term.
+# The test suite (self-intersection, acne, grazing emitters) passes down to 1 ulp and half
+# an epsilon; the constants keep a margin of 4 and 32 over that.  Both terms are relative to
+# the point's own magnitude and the scene's size, so the offset stays a tiny fraction of
+# any object even far from the origin (the former fixed 256-ulp offset was ~2 units at
+# |x| ~ 1e5, more than a unit object, which rays then tunnelled through).
+_ULPS = np.float32(4.0)
+_EXTENT_EPSILONS = np.float32(16.0 * np.finfo(np.float32).eps)
 # How far a ray's origin also moves along its own direction, relative to the normal offset
 # (see offset_ray_origins: it clears the neighbouring faces at edges and vertices).
 _DIRECTION_SHARE = np.float32(0.25)
@@ -32,6 +40,11 @@ _DIRECTION_SHARE = np.float32(0.25)
 
 def offset_ray_origins(points, normals, dtype=np.float64, scale=1.0, directions=None):
     """Move points off a surface along its geometric normal, in float32 space.
+
+    The distance is ``4 * sum_i |n_i| ulp(p_i) + 16 * eps32 * scale``: a few float32 ulps
+    of the point's coordinates (its rounding error) plus a few float32 epsilons of the
+    scene's size (the error of Embree's float32 plane test), and every coordinate the
+    offset changes moves by one more ulp, toward the side the ray leaves.
 
     Parameters
     ----------
@@ -44,10 +57,8 @@ def offset_ray_origins(points, normals, dtype=np.float64, scale=1.0, directions=
         origins that go straight back to :meth:`Accel.occluded` (no arithmetic may be done
         on them outside this module).
     scale : float
-        Size of the scene (largest coordinate magnitude).  Near zero, where float32 ulps
-        become tiny, Waechter & Binder use a fixed offset of 2^-16 below |x| < 2^-5; both
-        are meant for scenes of unit size, so they are scaled by ``scale``: a scene shrunk to
-        1e-4 units would otherwise be offset by 15 % of its own size.
+        Size of the scene (largest coordinate magnitude of the re-centred scene), which
+        bounds the size of the triangles.
     directions : (n, 3) float, optional
         Unit directions of the rays that will start there.  The normal offset lifts a point
         off the face it lies on, but a point on an edge or vertex also lies on the planes
@@ -66,20 +77,17 @@ def offset_ray_origins(points, normals, dtype=np.float64, scale=1.0, directions=
     """
     p = points.astype(np.float32)
     n = normals.astype(np.float32)
-    offset_ulps = (_INT_SCALE * n).astype(np.int32)
+    ulp = np.spacing(np.abs(p))
+    distance = _ULPS * dot(np.abs(n), ulp) + _EXTENT_EPSILONS * np.float32(scale)
+    move = n
     if directions is not None:
-        d = directions.astype(np.float32)
-        # truncated separately, so the offset along the normal is never reduced; the sign
-        # term rounds every non-zero component away from zero (at least one ulp)
-        offset_ulps += (_DIRECTION_SHARE * _INT_SCALE * d + np.sign(d)).astype(np.int32)
-        n = n + _DIRECTION_SHARE * d
-    bits = p.view(np.int32)
-    # moving toward +n means adding ulps to positive coordinates and subtracting from
-    # negative ones (float bit patterns grow with magnitude)
-    moved = (bits + np.where(p < 0, -offset_ulps, offset_ulps)).view(np.float32)
-    near_zero = np.abs(p) < _ORIGIN * np.float32(scale)
-    fixed = (_FLOAT_SCALE * np.float32(scale)) * n
-    return np.where(near_zero, p + fixed, moved).astype(dtype, copy=False)
+        move = n + _DIRECTION_SHARE * directions.astype(np.float32)
+    # one more ulp in every coordinate the offset changes: float32 rounding cannot give it
+    # back its old value, so the point leaves every plane through it that the ray moves
+    # away from (an addition of at least one ulp always lands on another float)
+    step = move * distance[:, None]
+    step += np.sign(move) * ulp
+    return (p + step).astype(dtype, copy=False)
 
 
 class Hits:

@@ -7,6 +7,11 @@ from .batches import rows_as_float32
 TONEMAPS = ("clamp", "reinhard", "aces")
 # added to a pixel's mean before dividing its standard error by it (relative errors)
 ERROR_FLOOR = 0.01
+# Pixels per block of the whole-film reductions (image, variance, relative error): 16384
+# pixels make 0.4 MB float64 (m, 3) temporaries, large enough that the per-block Python
+# overhead is invisible (~500 blocks at 4K), small enough that the few temporaries alive
+# at once stay a small fraction of any sizeable film.
+BLOCK_PIXELS = 16384
 
 
 class Film:
@@ -83,23 +88,38 @@ class Film:
                 self.pass_sums[name][px] += values[:, s]
         self.count[px] += spp
 
-    def _divisor(self):
-        """(n, 1) float64: the sample count of each pixel, at least 1 (exact integers; as
-        floats the broadcast division runs several times faster than with int64)."""
-        return np.maximum(self.count, 1).astype(np.float64)[:, None]
+    def _blocks(self):
+        """Pixel slices of at most ``BLOCK_PIXELS`` covering the film, in order."""
+        n = self.width * self.height
+        return (slice(a, min(a + BLOCK_PIXELS, n)) for a in range(0, n, BLOCK_PIXELS))
 
-    def _to_image(self, values):
-        return rows_as_float32(values).reshape(self.height, self.width, -1)
+    def _divisor(self, px):
+        """(m, 1) float64: the sample count of the pixels ``px``, at least 1 (exact
+        integers; as floats the broadcast division runs several times faster than with
+        int64)."""
+        return np.maximum(self.count[px], 1).astype(np.float64)[:, None]
+
+    def _to_image(self, per_block, channels):
+        """(height, width, channels) float32 filled block by block from ``per_block(px)``.
+
+        Whole-film expressions would make float64 temporaries of the film's full size
+        (hundreds of MB at 4K); blocks keep the extra memory at a few MB whatever the
+        resolution.
+        """
+        out = np.zeros((self.width * self.height, channels), dtype=np.float32)
+        for px in self._blocks():
+            out[px] = rows_as_float32(per_block(px))
+        return out.reshape(self.height, self.width, channels)
 
     def image(self):
         """(height, width, 3) float32: mean radiance per pixel (box filter)."""
-        return self._to_image(self.sum / self._divisor())
+        return self._to_image(lambda px: self.sum[px] / self._divisor(px), 3)
 
-    def _variance_of_mean_rows(self):
-        """(height * width, 3) float64: see :meth:`variance_of_mean`."""
-        n = self.count[:, None].astype(np.float64)
-        mean = self.sum / np.maximum(n, 1)
-        var = (self.sum_sq - n * mean * mean) / np.maximum(n - 1, 1)
+    def _variance_of_mean_rows(self, px):
+        """(m, 3) float64: :meth:`variance_of_mean` of the pixels ``px``."""
+        n = self.count[px, None].astype(np.float64)
+        mean = self.sum[px] / np.maximum(n, 1)
+        var = (self.sum_sq[px] - n * mean * mean) / np.maximum(n - 1, 1)
         return np.where(n > 1, np.maximum(var, 0.0), 0.0) / np.maximum(n, 1)
 
     def variance_of_mean(self):
@@ -109,7 +129,14 @@ class Film:
         fewer than two samples (no estimate possible).  For stratified samplers the samples
         of a pixel are not independent and this overestimates the true variance of the mean.
         """
-        return self._to_image(self._variance_of_mean_rows())
+        return self._to_image(self._variance_of_mean_rows, 3)
+
+    def _pixel_relative_error_rows(self, px, floor):
+        """(m,) float64: :meth:`pixel_relative_error` of the pixels ``px``."""
+        mean = self.sum[px] / self._divisor(px)
+        std_err = np.sqrt(self._variance_of_mean_rows(px))
+        error = np.mean(std_err / (np.abs(mean) + floor), axis=1)
+        return np.where(self.count[px] >= 2, error, np.nan)
 
     def pixel_relative_error(self, floor=ERROR_FLOOR):
         """Estimated relative standard error of each pixel's mean.
@@ -125,28 +152,30 @@ class Film:
         -------
         (height * width,) float64
             ``mean over channels of sqrt(variance_of_mean) / (|mean| + floor)``, row-major;
-            NaN for pixels with fewer than two samples.
+            NaN for pixels with fewer than two samples.  Formed block by block: the result
+            is the only array of the film's size.
         """
-        n = self.count[:, None].astype(np.float64)
-        mean = self.sum / np.maximum(n, 1)
-        std_err = np.sqrt(self._variance_of_mean_rows())
-        error = np.mean(std_err / (np.abs(mean) + floor), axis=1)
-        return np.where(self.count >= 2, error, np.nan)
+        error = np.zeros(self.width * self.height)
+        for px in self._blocks():
+            error[px] = self._pixel_relative_error_rows(px, floor)
+        return error
 
     def relative_error(self):
         """Mean relative standard error of the image, a scalar estimate of its own error.
 
         The average of :meth:`pixel_relative_error` over all pixels (the standard error of
         each channel's mean divided by the mean plus 0.01, so near-black pixels do not
-        dominate).  NaN when pixels have fewer than two samples.
+        dominate).  NaN when pixels have fewer than two samples.  Summed block by block,
+        with no temporary of the film's size.
         """
         if self.count.min() < 2:
             return float("nan")
-        return float(np.mean(self.pixel_relative_error()))
+        total = sum(float(self._pixel_relative_error_rows(px, ERROR_FLOOR).sum()) for px in self._blocks())
+        return total / (self.width * self.height)
 
     def spp_image(self):
         """(height, width, 1) float32: samples taken in each pixel."""
-        return self._to_image(self.count[:, None].astype(np.float64))
+        return self._to_image(lambda px: self.count[px, None].astype(np.float64), 1)
 
     def pass_image(self, name):
         """(height, width, k) float32: a pass reduced per pixel (mean, first sample or
@@ -154,10 +183,11 @@ class Film:
         values = self.pass_sums[name]
         reduction = self.pass_reductions[name]
         if reduction == "mean":
-            return self._to_image(values / self._divisor())
+            return self._to_image(lambda px: values[px] / self._divisor(px), values.shape[1])
         if reduction == "min":
-            values = np.where(np.isfinite(values), values, 0.0)
-        return self._to_image(values)
+            return self._to_image(lambda px: np.where(np.isfinite(values[px]), values[px], 0.0),
+                                  values.shape[1])
+        return self._to_image(lambda px: values[px], values.shape[1])
 
 
 def tonemap(image, exposure=0.0, operator="reinhard"):

@@ -7,9 +7,12 @@ import numpy as np
 import trimesh
 
 from .errors import MeshError
-from .gltf_scene import file_cameras_and_lights
+from .film import srgb_to_linear
+from .gltf_scene import GLTF_EXTENSIONS, file_cameras_and_lights, read_gltf_json
+from .material_files import gltf_json_materials, gltf_material, mtl_material, obj_materials
 from .materials import Material
 from .scene import MeshPart, Scene
+from .textures import Texture
 
 log = logging.getLogger(__name__)
 
@@ -40,10 +43,13 @@ def load_trimesh(path):
         raise MeshError(f"{path}: unsupported mesh format {ext or '(none)'!r}; use "
                         + ", ".join(MESH_EXTENSIONS))
     try:
-        return trimesh.load(path, force="scene")
+        scene = trimesh.load(path, force="scene")
     except Exception as exc:  # trimesh raises many types for malformed files
         detail = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise MeshError(f"{path}: cannot read mesh: {detail}") from exc
+    # parts_from_trimesh reads the file's own materials (MTL maps, glTF extensions)
+    scene.metadata["rtmesh_file_materials"] = FileMaterials(path)
+    return scene
 
 
 def _file_has_vertex_normals(mesh):
@@ -52,20 +58,20 @@ def _file_has_vertex_normals(mesh):
     return "vertex_normals" in cache
 
 
-def material_from_trimesh(visual, name):
-    """Map a trimesh visual's material onto rtmesh's Blinn-Phong :class:`Material`.
+def material_from_trimesh(visual, name, file_materials=None):
+    """Map a trimesh visual's material onto rtmesh's :class:`Material`.
 
-    OBJ/MTL materials (``SimpleMaterial``) give diffuse, specular and shininess directly.
-    glTF PBR materials give ``diffuse = base * (1 - metallic)``, a specular colour blended
-    from 0.04 (dielectrics) to ``base`` (metals), a shininess from the roughness
-    (``2 / r^4 - 2``, the Blinn-Phong exponent with the same highlight width as a GGX lobe of
-    roughness ``r^2``), and a tinted mirror reflectance ``base * metallic``.  Vertex and face
-    colours give their mean as the diffuse colour.
+    glTF PBR materials go through :func:`rtmesh.material_files.gltf_material` (with the
+    file's material extensions when known); OBJ materials are taken from the file's own MTL
+    statements by name (:func:`rtmesh.material_files.obj_materials`) when the file is known,
+    else from trimesh's parsed statements.  Face colours give their mean as the diffuse
+    colour (vertex colours are carried per vertex, see :func:`vertex_colours`).
 
     Parameters
     ----------
     visual : trimesh visual or None
     name : str
+    file_materials : FileMaterials, optional
 
     Returns
     -------
@@ -73,124 +79,111 @@ def material_from_trimesh(visual, name):
     """
     material = getattr(visual, "material", None)
     if isinstance(material, trimesh.visual.material.PBRMaterial):
-        base = np.asarray(material.baseColorFactor if material.baseColorFactor is not None
-                          else [255, 255, 255, 255], dtype=np.float64)
-        base = base[:3] / 255.0 if base.max() > 1.0 else base[:3]
-        metallic = float(material.metallicFactor if material.metallicFactor is not None else 1.0)
-        roughness = float(material.roughnessFactor if material.roughnessFactor is not None else 1.0)
-        if material.baseColorTexture is not None:
-            # until textures are sampled, the mean texel colour stands in for the texture
-            base = base * _mean_texture_colour(material.baseColorTexture)
-        r4 = max(roughness, 0.05) ** 4
-        return Material(
-            name=material.name or name,
-            diffuse=base * (1.0 - metallic),
-            specular=0.04 * (1.0 - metallic) + base * metallic,
-            shininess=float(np.clip(2.0 / r4 - 2.0, 1.0, 10000.0)),
-            mirror=base * metallic * (1.0 - roughness),
-        )
+        json_material = file_materials.gltf.get(material.name) if file_materials else None
+        return gltf_material(material, json_material, name)
     if isinstance(material, trimesh.visual.material.SimpleMaterial):
-        return _mtl_material(material, name)
+        if file_materials is not None and file_materials.obj is not None:
+            found = file_materials.obj.get(material.name)
+            return found if found is not None else Material(name=material.name or name)
+        return _simple_material(material, name)
     colours = getattr(visual, "main_color", None)
-    if colours is not None and getattr(visual, "defined", False):
-        return Material(name=name, diffuse=np.asarray(colours, dtype=np.float64)[:3] / 255.0)
+    if getattr(visual, "kind", None) == "face" and colours is not None:
+        return Material(name=name, diffuse=srgb_to_linear(np.asarray(colours, dtype=np.float64)[:3] / 255.0))
     return Material(name=name)
 
 
-def _mtl_floats(kwargs, key, count):
-    """A float or colour statement of an MTL file as trimesh keeps it, or None."""
-    value = kwargs.get(key)
-    if value is None:
-        return None
-    try:
-        values = np.atleast_1d(np.asarray(value, dtype=np.float64)).ravel()
-    except (TypeError, ValueError):
-        return None
-    if not len(values) or not np.isfinite(values).all():
-        return None
-    return float(values[0]) if count == 1 else np.resize(values, count)
+def _simple_material(material, name):
+    """A trimesh ``SimpleMaterial`` not read from a known file (built in code)."""
+    statements = {k.lower(): " ".join(str(x) for x in np.atleast_1d(v))
+                  for k, v in (getattr(material, "kwargs", None) or {}).items()}
+    for key, value in (("kd", material.diffuse), ("ka", material.ambient), ("ks", material.specular)):
+        if key not in statements and value is not None:
+            statements[key] = " ".join(str(x / 255.0) for x in np.asarray(value)[:3])
+    result = mtl_material(statements, material.name or name, ".")
+    image = getattr(material, "image", None)
+    if image is not None and not _is_placeholder(material):
+        result.diffuse_texture = Texture.from_pil(image, srgb=True, name=f"{result.name} image")
+    return result
 
 
-# illum models of the MTL specification -> (lit, specular, mirror, transmissive)
-_ILLUM = {
-    0: (False, False, False, False),  # colour on, no lighting: Kd shown as is
-    1: (True, False, False, False),  # diffuse only
-    2: (True, True, False, False),  # Blinn-Phong
-    3: (True, True, True, False),  # + ray-traced reflection (Ks)
-    4: (True, True, True, True),  # glass: reflection + transparency (1 - d)
-    5: (True, True, True, False),  # reflection with Fresnel (treated as mirror Ks)
-    6: (True, True, True, True),  # reflection + refraction (Ni)
-    7: (True, True, True, True),  # reflection + refraction with Fresnel
-    8: (True, True, True, False),  # reflection, not ray traced (treated as 3)
-    9: (True, True, True, True),  # glass, not ray traced (treated as 4)
-    10: (True, True, False, False),  # shadow matte (treated as 2)
-}
+def _is_placeholder(material):
+    """trimesh's stand-in for a missing material: no name, no statements, a tiny flat image."""
+    image = getattr(material, "image", None)
+    return (material.name is None and not getattr(material, "kwargs", None) and image is not None
+            and image.size[0] * image.size[1] <= 4)
 
 
-def _mtl_material(material, name):
-    """Map an OBJ/MTL material onto rtmesh's model.
+class FileMaterials:
+    """What the materials of a mesh file need beyond trimesh's visuals.
 
-    Ka, Kd, Ks, Ke and Ns map to ambient, diffuse, specular, emission and shininess; the
-    ``illum`` model chooses lighting, highlights, mirror reflection (weight Ks) and
-    refraction (index Ni; weight Tf, times 1 - opacity for the "transparency" models 4 and 9).  Opacity comes from ``d`` (1 = opaque);
-    ``Tr`` is only read when ``d`` is absent, as ``1 - Tr``, except that ``Tr 1`` is read as
-    opaque: several exporters (MeshLab among them) write Tr as an opacity, and a model that
-    disappears is the worse failure.  The colours trimesh quantised to 8 bits are read back
-    at full precision from the file's statements when trimesh kept them.
+    Attributes
+    ----------
+    obj : dict of str to Material or None
+        An OBJ file's MTL materials by name (None for other formats).
+    gltf : dict of str to dict
+        A glTF file's material objects (JSON) by material name.
+    drop_vertex_colours : bool
+        The file's vertex colours are unusable (NaN in an OBJ: trimesh reads them as black).
     """
-    kw = {k.lower(): v for k, v in (getattr(material, "kwargs", None) or {}).items()}
 
-    def colour(key, fallback):
-        value = _mtl_floats(kw, key, 3)
-        return value if value is not None else fallback
-
-    diffuse = colour("kd", np.asarray(material.diffuse, dtype=np.float64)[:3] / 255.0)
-    ambient = colour("ka", diffuse)
-    specular = colour("ks", np.asarray(material.specular, dtype=np.float64)[:3] / 255.0)
-    emission = colour("ke", np.zeros(3))
-    shininess = _mtl_floats(kw, "ns", 1)
-    if shininess is None:
-        shininess = float(material.glossiness) if material.glossiness else 32.0
-    illum_value = _mtl_floats(kw, "illum", 1)
-    illum = 2 if illum_value is None else int(illum_value)
-    lit, has_specular, has_mirror, transmissive = _ILLUM.get(illum, _ILLUM[2])
-    opacity = _mtl_floats(kw, "d", 1)
-    if opacity is None:
-        tr = _mtl_floats(kw, "tr", 1)
-        opacity = 1.0 if tr is None or tr >= 1.0 else 1.0 - tr
-    if getattr(material, "image", None) is not None:
-        # until textures are sampled, the mean texel colour stands in for the texture
-        diffuse = diffuse * _mean_texture_colour(material.image)
-    transmission = np.zeros(3)
-    if transmissive:
-        tf = _mtl_floats(kw, "tf", 3)
-        transmission = tf if tf is not None else np.ones(3)
-        if illum in (4, 9):
-            # "transparency" models: how much passes is the dissolve
-            transmission = transmission * (1.0 - opacity)
-    if not lit:
-        emission, diffuse, ambient = emission + diffuse, np.zeros(3), np.zeros(3)
-    return Material(
-        name=material.name or name,
-        diffuse=diffuse,
-        ambient=ambient,
-        specular=specular if has_specular else np.zeros(3),
-        shininess=float(np.clip(shininess, 1.0, 10000.0)),
-        mirror=specular if has_mirror else np.zeros(3),
-        transmission=np.clip(transmission, 0.0, 1.0),
-        ior=_mtl_floats(kw, "ni", 1) or 1.5,
-        emission=emission,
-    )
+    def __init__(self, path=None):
+        self.obj, self.gltf, self.drop_vertex_colours = None, {}, False
+        if path is None:
+            return
+        ext = os.path.splitext(path)[1].lower()
+        if ext == ".obj":
+            self.obj, nan_vertices = obj_materials(path)
+            if nan_vertices:
+                log.warning("%s: %d vertices hold NaN values; the vertex colours are ignored",
+                            os.path.basename(path), nan_vertices)
+                self.drop_vertex_colours = True
+        elif ext in GLTF_EXTENSIONS:
+            self.gltf = gltf_json_materials(read_gltf_json(path))
 
 
-def _mean_texture_colour(image):
-    """Mean linear colour of a PIL image (sRGB-decoded), (3,) float."""
-    try:
-        pixels = np.asarray(image.convert("RGB"), dtype=np.float64) / 255.0
-    except Exception:  # a texture trimesh could not decode leaves the factor colour alone
-        return np.ones(3)
-    linear = np.where(pixels <= 0.04045, pixels / 12.92, ((pixels + 0.055) / 1.055) ** 2.4)
-    return linear.reshape(-1, 3).mean(axis=0)
+def vertex_colours(mesh):
+    """Linear RGBA vertex colours of a trimesh mesh, (v, 4) float, or None.
+
+    glTF's COLOR_0 is linear already; every other format's 8-bit colours are sRGB-encoded.
+    """
+    visual = mesh.visual
+    colours = None
+    if getattr(visual, "kind", None) == "vertex" and isinstance(visual, trimesh.visual.ColorVisuals):
+        colours = visual.vertex_colors
+    elif hasattr(visual, "vertex_attributes"):
+        colours = visual.vertex_attributes.get("color")
+    if colours is None or len(colours) != len(mesh.vertices):
+        return None
+    colours = np.asarray(colours, dtype=np.float64)
+    if colours.max(initial=0.0) > 1.0 or np.asarray(colours).dtype.kind in "ui":
+        colours = colours / 255.0
+    if "from_gltf_primitive" not in getattr(mesh, "metadata", {}):
+        colours = np.concatenate([srgb_to_linear(colours[:, :3]), colours[:, 3:]], axis=1)
+    return colours
+
+
+def smooth_by_angle(mesh):
+    """trimesh's ``smooth_shaded`` copy and the original vertex of each of its vertices.
+
+    The copy is split into patches at creases (its vertices are the original ones, repeated
+    per patch), so per-vertex attributes follow as ``attribute[original]``.
+
+    Returns
+    -------
+    smooth : trimesh.Trimesh
+    original : (v', ) intp
+        Index into ``mesh.vertices`` of every vertex of ``smooth``.
+    """
+    smooth = mesh.smooth_shaded
+    components = smooth.metadata.get("original_components")
+    faces = np.hstack(components) if components else np.arange(len(mesh.faces))
+    original = np.zeros(len(smooth.vertices), dtype=np.intp)
+    if len(faces) == len(smooth.faces):
+        original[np.asarray(smooth.faces).ravel()] = np.asarray(mesh.faces)[faces].ravel()
+    if len(faces) != len(smooth.faces) or not np.array_equal(mesh.vertices[original], smooth.vertices):
+        # not the layout this relies on (another trimesh version): keep the mesh unsplit
+        return mesh, np.arange(len(mesh.vertices))
+    return smooth, original
 
 
 def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=None):
@@ -226,6 +219,7 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
     else:
         raise MeshError(f"{name}: expected a trimesh.Trimesh or trimesh.Scene, got {type(obj).__name__}")
 
+    file_materials = getattr(obj, "metadata", {}).get("rtmesh_file_materials")
     parts, materials, material_ids = [], [], {}
     for node_name, node_transform, mesh in nodes:
         if not isinstance(mesh, trimesh.Trimesh):
@@ -234,8 +228,16 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
             continue
         if len(mesh.faces) == 0:
             continue
+        # the material and per-vertex attributes come from the mesh as loaded: trimesh's
+        # smooth_shaded copy drops its visual
+        visual = mesh.visual
+        uv = getattr(visual, "uv", None)
+        uv = None if uv is None or len(uv) != len(mesh.vertices) else np.asarray(uv, dtype=np.float64)
+        colours = None if file_materials and file_materials.drop_vertex_colours else vertex_colours(mesh)
         if smooth is None and not _file_has_vertex_normals(mesh):
-            mesh = mesh.smooth_shaded  # split at creases, smooth elsewhere
+            mesh, original = smooth_by_angle(mesh)  # split at creases, smooth elsewhere
+            uv = None if uv is None else uv[original]
+            colours = None if colours is None else colours[original]
         matrix = transform @ node_transform
         vertices = trimesh.transform_points(mesh.vertices, matrix)
         faces = np.asarray(mesh.faces)
@@ -248,14 +250,14 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
             with np.errstate(invalid="ignore"):
                 normals = np.asarray(mesh.vertex_normals) @ normal_matrix.T
         if material is None:
-            key = id(getattr(mesh.visual, "material", mesh.visual))
+            key = id(getattr(visual, "material", visual))
             if key not in material_ids:
                 material_ids[key] = len(materials)
-                materials.append(material_from_trimesh(mesh.visual, node_name))
+                materials.append(material_from_trimesh(visual, node_name, file_materials))
             mat = material_ids[key]
         else:
             mat = material
-        parts.append(MeshPart(node_name, vertices, faces, mat, normals))
+        parts.append(MeshPart(node_name, vertices, faces, mat, normals, uv=uv, vertex_colors=colours))
     return parts, materials
 
 

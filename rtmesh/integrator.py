@@ -21,7 +21,9 @@ the stages that can contribute (see :attr:`Integrator.stages`).
 import ctypes
 import dataclasses
 import functools
+import logging
 import time
+from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -40,8 +42,13 @@ from .motion import MotionAccel, blurs, object_motions, scene_at_time, swept_bou
 from .sampling import (Dim, decorrelated_points, pixel_offsets, square_to_cosine_hemisphere,
                        stratified_values)
 from .settings import RenderStats
-from .vecmath import dot, fresnel_dielectric, fresnel_schlick, normalize, orthonormal_basis, reflect, refract
-from .materials import blinn_phong_highlight, lambert
+from .vecmath import (dot, face_viewer, fresnel_dielectric, fresnel_schlick, normalize, orthonormal_basis,
+                      reflect, refract)
+from .materials import ALPHA_MODES, blinn_phong_highlight, lambert
+from .texturing import SurfaceTextures
+from .cutouts import CutoutAccel
+
+log = logging.getLogger(__name__)
 
 # Shadow rays to point and spot lights stop this fraction short of the light, so a light
 # placed exactly on a surface does not count that surface as an occluder.
@@ -83,10 +90,11 @@ class _Surfaces:
     that is the outer side of the triangle (counter-clockwise winding).  ``mat`` (intp) is
     the material, ``prim`` (intp) the face hit, ``sample`` the pixel sample each hit
     contributes to, ``time`` (float, None without motion blur) the time of the ray (see
-    :mod:`rtmesh.motion`).
+    :mod:`rtmesh.motion`).  ``tints`` (:class:`rtmesh.texturing.Tints` or None) holds the
+    texture and vertex-colour multipliers of the material colours.
     """
 
-    __slots__ = ("p", "ng", "ns", "d", "front", "mat", "prim", "sample", "time")
+    __slots__ = ("p", "ng", "ns", "d", "front", "mat", "prim", "sample", "time", "tints")
 
 
 def _translated(obj, shift):
@@ -130,16 +138,28 @@ class Integrator:
             self.motion = MotionAccel(scene.vertices - self.shift, scene.faces, scene.object_id,
                                       motions, scene.camera.shutter)
         self.accel = self.motion or Accel(scene.vertices - self.shift, scene.faces)
-        # the scene's size in the re-centred frame sets the near-zero offset (see
-        # offset_ray_origins); it cannot be zero for a scene that renders.  With motion,
+        # the scene's size in the re-centred frame bounds the triangles' size, which sets
+        # part of the origin offset (see offset_ray_origins); it cannot be zero for a scene
+        # that renders.  With motion,
         # the size of the space the objects sweep during the shutter.
         bounds = swept_bounds(scene) if self.motion else scene.bounds
         self.offset_scale = max(float(np.abs(bounds - self.shift).max()), 1e-30)
+        m = scene.materials
+        # textures and vertex colours, looked up per hit only where the scene has them
+        self.textures = SurfaceTextures(scene)
+        self.cutouts = None
+        if m.any_cutout and self.motion is not None:
+            log.warning("cut-out (alpha mask/blend) materials render opaque with motion blur")
+        elif m.any_cutout:
+            # every query (camera, secondary, shadow, area-light, AO rays) sees the cut-outs
+            self.cutouts = CutoutAccel(self.accel, scene.face_normals, scene.material_id, m.cutout,
+                                       m.alpha_mode == ALPHA_MODES.index("blend"), m.alpha_cutoff,
+                                       self.textures, self.offset_scale, settings.seed)
+            self.accel = self.cutouts
         self.camera = _translated(scene.camera, self.shift)
         self.camera.frame()  # fail early on a degenerate camera
         lights = [_translated(light, self.shift) for light in scene.lights if not light.is_black]
         self.lights = [light for light in lights if not is_area_light(light)]
-        m = scene.materials
         area_lights = [light for light in lights if is_area_light(light)]
         if m.any_emission:
             emitters = emissive_mesh_light(self.accel.triangles, scene.face_normals,
@@ -147,7 +167,8 @@ class Integrator:
             area_lights += [emitters] if emitters is not None else []
         self.area_lighting = (AreaLighting(area_lights, self.accel, self.settings, self.offset_scale)
                               if area_lights else None)
-        shaded_any = bool(((m.diffuse > 0) | (m.specular > 0)).any())
+        lit = ~m.unlit[:, None]
+        shaded_any = bool((((m.diffuse > 0) | (m.specular > 0)) & lit).any())
         self.ao_distance = settings.ao_distance or 0.2 * float(np.linalg.norm(np.ptp(scene.bounds, axis=0)))
         ambient_on = bool((scene.ambient > 0).any() and (m.ambient > 0).any())
         self.background = as_background(scene.background)
@@ -164,6 +185,10 @@ class Integrator:
             "area_light_visibility": self.area_lighting is not None and bool(self.area_lighting.visible),
             "specular": m.any_specular,
             "smooth_normals": scene.vertex_normals is not None,
+            "textures": bool(self.textures),
+            "normal_maps": self.textures.tangents is not None,
+            "cutouts": self.cutouts is not None,
+            "unlit": m.any_unlit,
             "reflection": settings.max_depth > 0 and (m.any_mirror or m.any_transmission),
             "glossy": settings.max_depth > 0 and m.any_glossy,
             "refraction": settings.max_depth > 0 and m.any_transmission,
@@ -177,7 +202,7 @@ class Integrator:
         # per-material flags, looked up per hit
         self._reflective = (m.mirror > 0).any(axis=1) | (m.transmission > 0).any(axis=1)
         self._transmissive = (m.transmission > 0).any(axis=1)
-        self._shaded = (m.diffuse > 0).any(axis=1) | (m.specular > 0).any(axis=1)
+        self._shaded = ((m.diffuse > 0).any(axis=1) | (m.specular > 0).any(axis=1)) & ~m.unlit
         self._init_media(scene)
         self._fresnel = fresnel_exact_or_schlick(settings.fresnel)
         self._has_specular = (m.specular > 0).any(axis=1)
@@ -262,6 +287,8 @@ class Integrator:
         stats = RenderStats(threads=s.thread_count, pixels=s.width * s.height)
         stats.stages_enabled = [name for name, on in self.stages.items() if on]
         render_rounds(self, film, stats, progress)
+        if self.cutouts is not None:
+            stats.rays["cutout"] += self.cutouts.layers_traced
         stats.wall_seconds = time.perf_counter() - start
         stats.samples = int(film.count.sum())
         stats.relative_error = film.relative_error()
@@ -317,17 +344,32 @@ class Integrator:
             for i, chunk in enumerate(chunks):
                 finish(chunk, self.render_chunk(*chunk), i + 1)
             return
-        with ThreadPoolExecutor(max_workers=s.thread_count) as pool:
-            futures = [pool.submit(self.render_chunk, *chunk) for chunk in chunks]
+        # At most two chunks per thread are in flight (running, queued, or finished and not
+        # yet on the film): with every chunk submitted at once, the finished results stay
+        # referenced until the end and memory grows with resolution x spp instead of
+        # staying a few chunk sizes.  Two per thread keep every thread busy while the
+        # calling thread adds results to the film.
+        in_flight = 2 * s.thread_count
+        pending = deque()
+
+        def finish_oldest(submitted):
             # results are added in chunk order; pixels never overlap, so order only
             # matters for the stats, which are sums of integers and timings
+            chunk, future = pending.popleft()
+            finish(chunk, future.result(), submitted - len(pending))
+
+        with ThreadPoolExecutor(max_workers=s.thread_count) as pool:
             try:
-                for i, (chunk, future) in enumerate(zip(chunks, futures)):
-                    finish(chunk, future.result(), i + 1)
+                for submitted, chunk in enumerate(chunks, 1):
+                    pending.append((chunk, pool.submit(self.render_chunk, *chunk)))
+                    if len(pending) >= in_flight:
+                        finish_oldest(submitted)
+                while pending:
+                    finish_oldest(len(chunks))
             except BaseException:
                 # Ctrl-C or a failing chunk: drop the chunks not yet started instead of
                 # rendering the rest of the image before giving up
-                for future in futures:
+                for _, future in pending:
                     future.cancel()
                 raise
 
@@ -384,7 +426,8 @@ class Integrator:
         # camera rays have unit throughput: a read-only broadcast costs nothing, and
         # _shade does not multiply by it at depth 0
         # (inside an absorbing medium they lose light on the way: then a real array)
-        throughput = np.ones((n, 3), order="F") if self._camera_absorbs else np.broadcast_to(1.0, (n, 3))
+        throughput = (np.ones((n, 3), order="F") if self._camera_absorbs
+                      else np.broadcast_to(1.0, (n, 3)))
         rays = RayBatch(origins, directions, np.arange(n, dtype=np.int64), throughput,
                         np.broadcast_to(self._camera_medium, (n, len(self._camera_medium))))
         radiance = np.zeros((n, 3), order="F")
@@ -495,6 +538,15 @@ class Integrator:
             srf.ns = self._shading_normals(prim, u, v, flip, srf.ng)
         else:
             srf.ns = srf.ng
+        srf.tints = None
+        if self.stages["textures"]:
+            srf.tints = self.textures.tints(prim, u, v, srf.mat)
+            if self.stages["normal_maps"]:
+                srf.ns = self.textures.normal_mapped(srf.ns, prim, u, v, srf.mat, flip)
+        if self.stages["smooth_normals"] or self.stages["normal_maps"]:
+            # the shading-normal terminator: no normal facing away from the viewer or
+            # below the real surface (see face_viewer)
+            srf.ns = face_viewer(srf.ns, srf.ng, d)  # rest frame, like ns and ng
         if srf.time is not None:
             srf.p, srf.ng, srf.ns = self.motion.surfaces_to_world(prim, srf.time, srf.p, srf.ng,
                                                                   srf.ns)
@@ -527,6 +579,14 @@ class Integrator:
         local = None
         if st["emission"]:
             local = take_rows(self._emission, srf.mat)
+        tint = None if srf.tints is None else srf.tints.diffuse
+        if st["unlit"]:
+            # unlit materials show their (textured) colour as is
+            unlit = self.scene.materials.unlit.take(srf.mat)
+            if unlit.any():
+                shown = np.where(unlit[:, None], take_rows(self._diffuse, srf.mat), 0.0)
+                shown = shown if tint is None else shown * tint
+                local = shown if local is None else local + shown
 
         ao = None
         if st["ao"] and (st["ambient"] or (depth == 0 and ao_pass is not None)):
@@ -536,6 +596,8 @@ class Integrator:
             clock.lap("ao")
         if st["ambient"]:
             amb = take_rows(self._ambient_light, srf.mat)
+            if tint is not None:
+                amb = amb * tint
             if ao is not None:
                 amb = amb * ao[:, None]
             local = amb if local is None else local + amb
@@ -562,6 +624,13 @@ class Integrator:
         p, ng, ns, d, mat = (take_rows(a, rows) for a in (srf.p, srf.ng, srf.ns, srf.d, srf.mat))
         k = len(mat)
         kd = take_rows(self._diffuse, mat)
+        tints = srf.tints
+        if tints is not None and tints.diffuse is not None:
+            kd = kd * take_rows(tints.diffuse, rows)
+        ks = self._specular
+        if tints is not None and tints.specular is not None:
+            # per-hit specular colours: gathered with the hit rows instead of by material
+            ks = take_rows(self._specular, srf.mat) * tints.specular
         # the highlight (with its costly power) only where a material has one
         spec_rows = None
         if self.stages["specular"]:
@@ -577,7 +646,9 @@ class Integrator:
                 mat_s = take_rows(mat, s)
                 highlight = blinn_phong_highlight(
                     take_rows(ns, s), -take_rows(d, s), take_rows(wi, s), take_rows(cos_i, s),
-                    take_rows(self._specular, mat_s), self.scene.materials.shininess[mat_s])
+                    take_rows(self._specular, mat_s) if ks is self._specular
+                    else take_rows(take_rows(ks, rows), s),
+                    self.scene.materials.shininess[mat_s])
                 value = _add_rows(value, s, highlight)
             return value
 
@@ -653,6 +724,8 @@ class Integrator:
         wo, ng, ns = -srf.d[idx], srf.ng[idx], srf.ns[idx]
         beta = rays.throughput[idx]
         reflect_weight = m.mirror[mat]
+        if srf.tints is not None and srf.tints.mirror is not None:
+            reflect_weight = reflect_weight * srf.tints.mirror[idx]
         batches = []
 
         refract_batch = None

@@ -15,7 +15,7 @@ reflections) and, when ``transmission`` > 0, behaves as a smooth dielectric of i
 (per scene unit).
 """
 
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -26,6 +26,12 @@ def as_colour(value):
     """A colour from a number (grey) or three numbers, as a (3,) float64 array."""
     a = np.asarray(value, dtype=np.float64)
     return np.repeat(a, 3) if a.ndim == 0 else a.reshape(3)
+
+
+ALPHA_MODES = ("opaque", "mask", "blend")
+COLOUR_FIELDS = ("diffuse", "specular", "ambient", "mirror", "transmission", "absorption",
+                 "emission")
+TEXTURE_FIELDS = ("diffuse_texture", "specular_texture", "opacity_texture", "normal_texture")
 
 
 @dataclass
@@ -56,6 +62,26 @@ class Material:
     roughness : float
         Blur of the mirror (and dielectric) reflection: 0 is a perfect mirror, r > 0 a lobe
         about r radians wide around the mirror direction (see :mod:`rtmesh.glossy`).
+    opacity : float
+        Coverage in [0, 1] (MTL ``d``, glTF base-colour alpha); used by ``alpha_mode``.
+    alpha_mode : {"opaque", "mask", "blend"}
+        "opaque" ignores opacity; "mask" lets rays through where opacity < ``alpha_cutoff``;
+        "blend" lets them through with probability 1 - opacity (see :mod:`rtmesh.cutouts`).
+    alpha_cutoff : float
+        Threshold of the "mask" mode.
+    unlit : bool
+        Shows ``diffuse`` (times textures) as is, with no lighting, and lights nothing
+        (MTL ``illum 0``, glTF KHR_materials_unlit).
+    metallic : float
+        In [0, 1]: how much the base-colour texture also tints ``specular`` and ``mirror``
+        (metals reflect in their own colour); see :mod:`rtmesh.texturing`.
+    double_sided : bool
+        Kept from glTF for reference; both sides of every triangle are always shaded.
+    diffuse_texture, specular_texture, opacity_texture, normal_texture : Texture or None
+        Image textures (:class:`rtmesh.textures.Texture`): base colour (multiplies
+        ``diffuse`` and ``ambient``; its alpha multiplies ``opacity``), specular colour
+        (multiplies ``specular``), opacity (first channel multiplies ``opacity``) and a
+        tangent-space normal map.
     """
 
     name: str = "default"
@@ -69,14 +95,25 @@ class Material:
     absorption: np.ndarray = field(default_factory=lambda: np.zeros(3))
     emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
     roughness: float = 0.0
+    opacity: float = 1.0
+    alpha_mode: str = "opaque"
+    alpha_cutoff: float = 0.5
+    unlit: bool = False
+    metallic: float = 0.0
+    double_sided: bool = False
+    diffuse_texture: object = None
+    specular_texture: object = None
+    opacity_texture: object = None
+    normal_texture: object = None
 
     def __post_init__(self):
-        for f in fields(self):
-            if f.name in ("name", "shininess", "ior", "roughness"):
-                continue
-            value = getattr(self, f.name)
+        if self.alpha_mode not in ALPHA_MODES:
+            raise ValueError(f"unknown alpha mode {self.alpha_mode!r}; expected one of "
+                             + ", ".join(ALPHA_MODES))
+        for name in COLOUR_FIELDS:
+            value = getattr(self, name)
             if value is not None:
-                setattr(self, f.name, as_colour(value))
+                setattr(self, name, as_colour(value))
         if self.ambient is None:
             self.ambient = self.diffuse.copy()
 
@@ -88,17 +125,20 @@ class MaterialTable:
     ----------
     materials : list of Material
     diffuse, specular, ambient, mirror, transmission, absorption, emission : (m, 3) float
-    shininess, ior, roughness : (m,) float
+    shininess, ior, roughness, opacity, alpha_cutoff, metallic : (m,) float
+    alpha_mode : (m,) int
+        Index into :data:`ALPHA_MODES`.
+    unlit : (m,) bool
     """
 
     def __init__(self, materials):
         self.materials = list(materials)
-        for name in ("diffuse", "specular", "ambient", "mirror", "transmission", "absorption",
-                     "emission"):
+        for name in COLOUR_FIELDS:
             setattr(self, name, np.array([getattr(m, name) for m in self.materials], dtype=np.float64).reshape(-1, 3))
-        self.shininess = np.array([m.shininess for m in self.materials], dtype=np.float64)
-        self.ior = np.array([m.ior for m in self.materials], dtype=np.float64)
-        self.roughness = np.array([m.roughness for m in self.materials], dtype=np.float64)
+        for name in ("shininess", "ior", "roughness", "opacity", "alpha_cutoff", "metallic"):
+            setattr(self, name, np.array([getattr(m, name) for m in self.materials], dtype=np.float64))
+        self.alpha_mode = np.array([ALPHA_MODES.index(m.alpha_mode) for m in self.materials], dtype=np.intp)
+        self.unlit = np.array([m.unlit for m in self.materials], dtype=bool)
 
     def __len__(self):
         return len(self.materials)
@@ -123,6 +163,26 @@ class MaterialTable:
         """True if any material blurs the reflection rays it spawns (roughness > 0)."""
         reflects = (self.mirror > 0).any(axis=1) | (self.transmission > 0).any(axis=1)
         return bool(((self.roughness > 0) & reflects).any())
+
+    @property
+    def any_texture(self):
+        """True if any material has an image texture."""
+        return any(getattr(m, name) is not None for m in self.materials for name in TEXTURE_FIELDS)
+
+    @property
+    def cutout(self):
+        """(m,) bool: materials that can let rays through (alpha mask or blend)."""
+        return self.alpha_mode != ALPHA_MODES.index("opaque")
+
+    @property
+    def any_cutout(self):
+        """True if any material can let rays through (see :mod:`rtmesh.cutouts`)."""
+        return bool(self.cutout.any())
+
+    @property
+    def any_unlit(self):
+        """True if any material shows its colour without lighting."""
+        return bool(self.unlit.any())
 
     @property
     def any_emission(self):

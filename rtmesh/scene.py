@@ -32,6 +32,10 @@ class MeshPart:
         Unit normals for smooth shading; None shades flat.
     motion : rtmesh.motion.Motion or None
         Rigid motion during the shutter (see :mod:`rtmesh.motion`); None stands still.
+    uv : (v, 2) float or None
+        Texture coordinates per vertex ((0, 0) the bottom-left corner of an image).
+    vertex_colors : (v, 4) float or None
+        Linear RGBA per vertex, multiplying the material's base colour and opacity.
     """
 
     name: str
@@ -40,6 +44,8 @@ class MeshPart:
     material: int = 0
     vertex_normals: np.ndarray | None = None
     motion: object = None
+    uv: np.ndarray | None = None
+    vertex_colors: np.ndarray | None = None
 
 
 @dataclass
@@ -69,6 +75,11 @@ class Scene:
         :mod:`rtmesh.background` (gradient, environment image, transparent).
     motions : dict of int to rtmesh.motion.Motion
         Motion of each moving object (by object index); static objects are absent.
+    uv : (V, 2) float64 or None
+        Texture coordinates per vertex; None when no object has any (objects without
+        them read (0, 0)).
+    vertex_colors : (V, 4) float64 or None
+        Linear RGBA per vertex; None when no object has any (the others read white).
     """
 
     vertices: np.ndarray
@@ -85,6 +96,8 @@ class Scene:
     ambient: np.ndarray = field(default_factory=lambda: np.zeros(3))
     background: np.ndarray = field(default_factory=lambda: np.zeros(3))
     motions: dict = field(default_factory=dict)
+    uv: np.ndarray | None = None
+    vertex_colors: np.ndarray | None = None
 
     @property
     def bounds(self):
@@ -125,6 +138,7 @@ class Scene:
         """
         materials = list(materials) if materials else [Material()]
         vertices, faces, normals, vnormals, smooth, mat_ids, obj_ids, names = ([] for _ in range(8))
+        uvs, colours = [], []
         motions = {}
         offset = 0
         for part in parts:
@@ -157,6 +171,10 @@ class Scene:
             vn, face_smooth = _unit_vertex_normals(part.vertex_normals, v, f)
             vnormals.append(vn)
             smooth.append(face_smooth)
+            uvs.append(_vertex_attribute(part.uv, len(v), 2, 0.0, "texture coordinates",
+                                         source, part.name))
+            colours.append(_vertex_attribute(part.vertex_colors, len(v), 4, 1.0, "vertex colours",
+                                             source, part.name))
             mat_ids.append(np.full(len(f), part.material, dtype=np.int32))
             obj_ids.append(np.full(len(f), len(names), dtype=np.int32))
             if part.motion is not None:
@@ -171,6 +189,10 @@ class Scene:
         else:
             # flat shading everywhere: no normal interpolation stage at all
             vertex_normals, smooth_faces = None, None
+        uv = None if all(a is None for a in uvs) else np.concatenate(
+            [np.zeros((len(v), 2)) if a is None else a for v, a in zip(vertices, uvs)])
+        vertex_colors = None if all(a is None for a in colours) else np.concatenate(
+            [np.ones((len(v), 4)) if a is None else a for v, a in zip(vertices, colours)])
         vertices = np.concatenate(vertices)
         faces = np.concatenate(faces).astype(np.int32)
         scene = cls(
@@ -189,12 +211,37 @@ class Scene:
             background=(background if hasattr(background, "radiance") else
                         np.asarray(background if background is not None else np.zeros(3), dtype=np.float64)),
             motions=motions,
+            uv=uv,
+            vertex_colors=vertex_colors,
         )
         if camera is None:
             scene.camera = frame_bounds(scene.bounds, aspect=aspect)
         if lights is None:
             scene.lights = default_lights(scene.camera)
         return scene
+
+
+def _vertex_attribute(values, count, width, fill, what, source, name):
+    """A per-vertex attribute as ``(count, width)`` float64, or None if absent or unusable.
+
+    Non-finite entries are replaced by ``fill`` with a warning naming the object; an
+    attribute with the wrong number of rows is dropped with a warning.  Colours with three
+    channels get an opaque alpha.
+    """
+    if values is None:
+        return None
+    a = np.asarray(values, dtype=np.float64)
+    if a.ndim != 2 or len(a) != count or a.shape[1] not in (width, width - 1 if width == 4 else width):
+        log.warning("%s: object '%s': %s do not match the vertices; ignored", source, name, what)
+        return None
+    if a.shape[1] < width:
+        a = np.concatenate([a, np.full((len(a), width - a.shape[1]), 1.0)], axis=1)
+    finite = np.isfinite(a)
+    if not finite.all():
+        log.warning("%s: object '%s': %d non-finite %s replaced by %g", source, name,
+                    int((~finite.all(axis=1)).sum()), what, fill)
+        a = np.where(finite, a, fill)
+    return a
 
 
 def _with_centre(motion, points):

@@ -399,11 +399,13 @@ def _object_parts(r, values, where, base_dir, materials, material_index):
             raise r.error(f"{where}.mesh", str(exc)) from None
         parts, imported = parts_from_trimesh(obj, name or os.path.basename(mesh_path), transform,
                                              material, smooth)
-        # imported materials are appended after the scene file's own
-        for part in parts:
-            if material is None:
-                part.material += len(materials)
+        # imported materials are appended after the scene file's own; one whose name a
+        # [materials.NAME] table defines is replaced by that table
         if material is None:
+            remap = [material_index.get(m.name, len(materials) + i) if m.name != "default"
+                     else len(materials) + i for i, m in enumerate(imported)]
+            for part in parts:
+                part.material = remap[part.material]
             materials.extend(imported)
         if name:
             for part in parts:

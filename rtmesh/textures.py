@@ -1,8 +1,14 @@
 """Image textures: decoding to linear float and bilinear lookup with wrap modes."""
 
+import os
+
 import numpy as np
 
+from .errors import MeshError, RtmeshError
 from .film import srgb_to_linear
+
+# formats whose values are linear already (everything else is 8/16-bit display-encoded)
+_LINEAR_FORMATS = (".exr", ".hdr")
 
 WRAP_MODES = ("repeat", "clamp", "mirror")
 
@@ -95,3 +101,70 @@ class Texture:
         top = p[ys[0], xs[0]] * (1.0 - fx) + p[ys[0], xs[1]] * fx
         bottom = p[ys[1], xs[0]] * (1.0 - fx) + p[ys[1], xs[1]] * fx
         return top * (1.0 - fy) + bottom * fy
+
+    def height_to_normals(self, strength=1.0):
+        """A tangent-space normal map from this height map (first channel).
+
+        Central differences in texels, times ``strength`` (MTL ``-bm``): the normal of the
+        height field ``h(x, y)`` is ``(-dh/dx, -dh/dy, 1)`` normalised, with y growing with v
+        (up the image), stored as the usual ``0.5 + 0.5 n``.
+
+        Returns
+        -------
+        Texture
+            Linear, 3 channels.
+        """
+        height = self.pixels[:, :, 0] * float(strength)
+        dh_drow, dh_dx = np.gradient(height)
+        n = np.stack([-dh_dx, dh_drow, np.ones_like(height)], axis=2)  # rows grow downward
+        n /= np.linalg.norm(n, axis=2, keepdims=True)
+        return Texture(0.5 + 0.5 * n, wrap=self.wrap, name=f"{self.name} (normals)")
+
+
+def load_texture(path, srgb=True, wrap="repeat", cache=None):
+    """Read an image file as a :class:`Texture`, once per (path, srgb, wrap) in ``cache``.
+
+    Parameters
+    ----------
+    path : str
+    srgb : bool
+        Decode 8-bit colour channels from sRGB (colour maps); False for data maps.  EXR and
+        HDR files (read with OpenImageIO) are linear already; other formats are read with
+        PIL, 8 bits per channel.
+    wrap : str
+    cache : dict, optional
+
+    Raises
+    ------
+    MeshError
+        The file exists but cannot be decoded (one line naming it).
+    """
+    key = (os.path.abspath(path), srgb, wrap)
+    if cache is not None and key in cache:
+        return cache[key]
+    if os.path.splitext(path)[1].lower() not in _LINEAR_FORMATS:
+        # 8-bit images through PIL (trimesh's decoder): it reports a corrupt file as an
+        # exception, where libpng under OpenImageIO also prints to stderr
+        from PIL import Image, UnidentifiedImageError
+
+        try:
+            with Image.open(path) as image:
+                image.load()
+                return _cached(cache, key, Texture.from_pil(image, srgb=srgb, wrap=wrap,
+                                                            name=os.path.basename(path)))
+        except (OSError, UnidentifiedImageError, SyntaxError, ValueError) as exc:
+            raise MeshError(f"{path}: corrupt or unreadable texture ({exc})") from None
+    from .image_io import read_image  # image_io imports the pass registry; keep this module light
+
+    try:
+        pixels, _ = read_image(path)
+    except RtmeshError as exc:
+        detail = str(exc).splitlines()[0].removeprefix(f"{path}: ")
+        raise MeshError(f"{path}: corrupt or unreadable texture ({detail})") from None
+    return _cached(cache, key, Texture(pixels, wrap=wrap, name=os.path.basename(path)))
+
+
+def _cached(cache, key, texture):
+    if cache is not None:
+        cache[key] = texture
+    return texture

@@ -209,3 +209,48 @@ def orthonormal_basis(n):
     t = np.stack([1.0 + sign * n[:, 0] ** 2 * a, sign * b_, -sign * n[:, 0]], axis=1)
     b = np.stack([b_, sign + n[:, 1] ** 2 * a, -n[:, 1]], axis=1)
     return t, b
+
+
+# Smallest cosine between a bent shading normal and the direction to the viewer: enough to
+# keep the Blinn-Phong half vector and the mirror direction well defined.
+_VIEW_COSINE = 1e-2
+
+
+def face_viewer(ns, ng, d):
+    """Shading normals that face the viewer: the shading-normal terminator fix.
+
+    Interpolated (or normal-mapped) normals can lean away from the viewer near
+    silhouettes.  Shading with such a normal makes black speckles (the highlight and the
+    mirror direction point into the surface) or lights the surface from below.  Normals
+    on the wrong side of the geometric normal are replaced by it; normals that face away
+    from the viewer are bent toward the viewer, within the plane of the normal and the view
+    direction, until ``ns . wo = 0.01`` (before normalising): the smallest change that
+    fixes them, and none for every other normal.  Light leaks are stopped separately: a
+    light counts only when it is on the geometric side the ray came from.
+
+    Parameters
+    ----------
+    ns : (k, 3) float
+        Unit shading normals on the side the ray came from.
+    ng : (k, 3) float
+        Unit geometric normals, same side (``ng . d < 0``).
+    d : (k, 3) float
+        Unit incoming ray directions (``wo = -d``).
+
+    Returns
+    -------
+    (k, 3) float
+        ``ns`` itself when no row needs a change, else a corrected copy.
+    """
+    cos_o = -dot(ns, d)
+    bad = (cos_o < _VIEW_COSINE) | ~(dot(ns, ng) > 0.0)
+    if not bad.any():
+        return ns
+    rows = np.flatnonzero(bad)
+    n = ns[rows]
+    n = np.where((dot(n, ng[rows]) > 0.0)[:, None], n, ng[rows])
+    wo = -d[rows]
+    c = np.maximum(_VIEW_COSINE - dot(n, wo), 0.0)
+    out = np.array(ns, order="K", copy=True)
+    out[rows] = normalize(n + c[:, None] * wo)
+    return out

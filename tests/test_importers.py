@@ -46,9 +46,11 @@ def test_mtl_illum_models(tmp_path, illum, specular, mirror, transmission):
         np.testing.assert_array_equal(m.mirror, [0.4] * 3)  # reflection weighted by Ks
     if transmission:
         assert m.ior == 1.33
-    if illum == 0:  # constant colour: Kd shown without lighting
-        assert not m.diffuse.any()
-        np.testing.assert_array_equal(m.emission, [0.5] * 3)
+    # illum 0 is "colour on, lighting off": Kd shown as is, and not an emitter that would
+    # light the rest of the scene
+    assert m.unlit == (illum == 0)
+    np.testing.assert_array_equal(m.diffuse, [0.5] * 3)
+    assert not m.emission.any()
 
 
 @pytest.mark.parametrize(

@@ -309,3 +309,23 @@ def test_orthonormal_basis_at_exactly_minus_z_and_signed_zero():
     t, b = orthonormal_basis(n)
     np.testing.assert_allclose(np.cross(t, b), n, atol=1e-15)
     np.testing.assert_allclose(dot(t, n), 0.0, atol=1e-15)
+
+
+def test_face_viewer_bends_only_normals_facing_away_and_keeps_them_above_the_surface():
+    from rtmesh.vecmath import face_viewer, normalize
+
+    rng = np.random.default_rng(3)
+    n = 2000
+    ng = np.tile([0.0, 0.0, 1.0], (n, 1))
+    # incoming directions from above (the side ng is on), some grazing
+    d = normalize(np.column_stack([rng.normal(size=(n, 2)), -rng.uniform(0.02, 1.0, n)]))
+    # shading normals tilted up to 80 degrees from ng, some below the surface
+    ns = normalize(np.column_stack([rng.normal(size=(n, 2)) * 2.0, rng.uniform(-0.3, 1.0, n)]))
+    out = face_viewer(ns, ng, d)
+    wo = -d
+    np.testing.assert_allclose(np.linalg.norm(out, axis=1), 1.0)
+    assert ((out * wo).sum(axis=1) > 0.0).all()  # faces the viewer: no black speckles
+    assert ((out * ng).sum(axis=1) > 0.0).all()  # never below the real surface
+    fine = ((ns * wo).sum(axis=1) >= 1e-2) & (ns[:, 2] > 0.0)
+    np.testing.assert_array_equal(out[fine], ns[fine])  # the others are left alone
+    assert (~fine).sum() > 100  # the test exercised the fix

@@ -157,11 +157,14 @@ def command(args):
     return " ".join(words)
 
 
-def write_section(text):
-    """Replace (or append) this benchmark's section in docs/BENCHMARKS.md."""
+def write_section(text, section=SECTION):
+    """Replace (or append) the section ``## <section>`` of docs/BENCHMARKS.md with ``text``.
+
+    Every benchmark tool writes its own section through this; the others are kept.
+    """
     DOC.parent.mkdir(exist_ok=True)
     old = DOC.read_text() if DOC.exists() else "# Benchmarks\n"
-    pattern = re.compile(rf"^## {re.escape(SECTION)}\n.*?(?=^## |\Z)", re.S | re.M)
+    pattern = re.compile(rf"^## {re.escape(section)}\n.*?(?=^## |\Z)", re.S | re.M)
     if pattern.search(old):
         new = pattern.sub(lambda _: text, old)
     else:

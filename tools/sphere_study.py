@@ -4,7 +4,8 @@ For a lit (Blinn-Phong) sphere and an absorbing glass sphere, renders the icosph
 rising subdivision with rtmesh and compares each image with the exact analytic sphere
 (tools/analytic_sphere.py), next to the render time: the trade-off a user picks from.
 
-    python tools/sphere_study.py --out docs/sphere_study.csv --plot docs/sphere_study.png
+    python tools/sphere_study.py --out docs/sphere_study.csv --plot docs/images/sphere_study.png
+    python tools/sphere_study.py --from-csv docs/sphere_study.csv --plot docs/images/sphere_study.png
 
 Writes a CSV (case, subdivisions, triangles, seconds, rmse, relative_error) and, if matplotlib
 is installed, a log-log plot of error against time.
@@ -63,8 +64,15 @@ def main(argv=None):
     parser.add_argument("--threads", type=int, default=None)
     parser.add_argument("--out", default="sphere_study.csv")
     parser.add_argument("--plot", default=None)
+    parser.add_argument("--from-csv", default=None,
+                        help="plot the rows of an earlier run instead of rendering")
     args = parser.parse_args(argv)
 
+    if args.from_csv:
+        with open(args.from_csv, newline="") as f:
+            rows = [dict(r, seconds=float(r["seconds"])) for r in csv.DictReader(f)]
+        plot(rows, args.plot or "sphere_study.png")
+        return 0
     rows = []
     for case, material in CASES.items():
         reference = render_analytic_image(

@@ -1,0 +1,120 @@
+"""Alpha cut-outs: masked texels let camera and shadow rays through, blended ones a fraction."""
+
+import numpy as np
+import pytest
+
+from rtmesh.accel import Accel
+from rtmesh.api import render
+from rtmesh.camera import Camera
+from rtmesh.cutouts import CutoutAccel
+from rtmesh.lights import DirectionalLight
+from rtmesh.materials import Material
+from rtmesh.scene import MeshPart, Scene
+from rtmesh.textures import Texture
+from rtmesh.texturing import SurfaceTextures
+
+N = 4  # checker texels per side
+SIZE = 32  # image pixels per side: 8 pixels per texel
+
+
+def checker_alpha(n=N):
+    """(n, n, 4) white texels, alpha 1 where column + row is even (row 0 at the top)."""
+    rows, cols = np.mgrid[0:n, 0:n]
+    alpha = ((rows + cols) % 2 == 0).astype(np.float64)
+    return np.concatenate([np.ones((n, n, 3)), alpha[:, :, None]], axis=2)
+
+
+def plane(name, z=0.0, half=1.0, material=0):
+    """A square in the plane ``z`` facing +z, UVs (0, 0) at (-half, -half)."""
+    vertices = np.array([[-half, -half, z], [half, -half, z], [half, half, z], [-half, half, z]])
+    uv = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    return MeshPart(name, vertices, np.array([[0, 1, 2], [0, 2, 3]]), material, uv=uv)
+
+
+def front_camera():
+    # 90 degrees at distance 1: the plane [-1, 1]^2 fills the image exactly
+    return Camera(np.array([0.0, 0.0, 1.0]), np.zeros(3), np.array([0.0, 1.0, 0.0]), fov=90.0)
+
+
+def checker_scene(mode="mask"):
+    card = Material("card", diffuse=[1.0, 0.5, 0.25], unlit=True, alpha_mode=mode,
+                    diffuse_texture=Texture(checker_alpha(), wrap="clamp"))
+    return Scene.from_parts([plane("card")], [card], lights=[], camera=front_camera(),
+                            background=np.array([0.0, 0.0, 1.0]))
+
+
+def test_masked_checker_lets_exactly_the_transparent_texels_through():
+    result = render(checker_scene(), width=SIZE, height=SIZE, spp=1, sampler="regular", threads=1)
+    image = result.image
+    rows, cols = np.mgrid[0:SIZE, 0:SIZE]
+    solid = ((rows // (SIZE // N) + cols // (SIZE // N)) % 2 == 0)
+    np.testing.assert_allclose(image[solid], np.broadcast_to([1.0, 0.5, 0.25], (solid.sum(), 3)))
+    np.testing.assert_array_equal(image[~solid], np.broadcast_to([0.0, 0.0, 1.0], ((~solid).sum(), 3)))
+    assert result.stats.rays["cutout"] == (~solid).sum()
+
+
+def cutout_accel(mode="mask", opacity=1.0):
+    """A checker card at z = 1 over a floor at z = 0, wrapped in a CutoutAccel."""
+    card = Material("card", alpha_mode=mode, opacity=opacity,
+                    diffuse_texture=Texture(checker_alpha(), wrap="clamp"))
+    scene = Scene.from_parts([plane("floor", 0.0, 3.0, material=1), plane("card", 1.0)],
+                             [card, Material("floor")], lights=[])
+    m = scene.materials
+    return CutoutAccel(Accel(scene.vertices, scene.faces), scene.face_normals, scene.material_id,
+                       m.cutout, m.alpha_mode == 2, m.alpha_cutoff, SurfaceTextures(scene), 3.0, 0)
+
+
+def test_shadow_rays_pass_exactly_through_the_holes():
+    accel = cutout_accel()
+    # one shadow ray straight up from the floor under the centre of each texel
+    centres = (np.arange(N) + 0.5) / N * 2.0 - 1.0
+    x, y = np.meshgrid(centres, centres[::-1])  # row 0 of the texture is the top (+y)
+    origins = np.stack([x.ravel(), y.ravel(), np.full(N * N, 1e-3)], axis=1)
+    up = np.tile([0.0, 0.0, 1.0], (N * N, 1))
+    occluded = accel.occluded(origins, up, np.full(N * N, 5.0))
+    np.testing.assert_array_equal(occluded, checker_alpha()[:, :, 3].ravel() > 0.5)
+    # and the closest hit of a ray through a hole is the floor below, at the right distance
+    hits = accel.intersect(origins + [0, 0, 2.0], -up)
+    through = ~occluded
+    np.testing.assert_allclose(hits.t[through], 2.0 + 1e-3, rtol=1e-5)
+    np.testing.assert_allclose(hits.t[~through], 1.0 + 1e-3, rtol=1e-5)
+
+
+def test_shadows_of_a_masked_card_in_a_render_follow_the_checker():
+    card = Material("card", alpha_mode="mask", diffuse_texture=Texture(checker_alpha(), wrap="clamp"))
+    floor = Material("floor", diffuse=1.0)
+    # light straight down through the card at z = 1 onto the floor; the camera sits between
+    # them, under the card, looking down
+    scene = Scene.from_parts([plane("floor", 0.0, 1.0, material=1), plane("card", 1.0)],
+                             [card, floor], lights=[DirectionalLight([0.0, 0.0, -1.0], irradiance=1.0)],
+                             camera=Camera(np.array([0.0, 0.0, 0.5]), np.zeros(3),
+                                           np.array([0.0, 1.0, 0.0]), fov=90.0))
+    image = render(scene, width=SIZE, height=SIZE, spp=1, sampler="regular", threads=1).image
+    # the camera at z = 0.5 sees the floor region [-0.5, 0.5]^2: the middle 2 x 2 texels
+    rows, cols = np.mgrid[0:SIZE, 0:SIZE]
+    texel_row = 1 + rows // (SIZE // 2)
+    texel_col = 1 + cols // (SIZE // 2)
+    lit = checker_alpha()[texel_row, texel_col, 3] == 0.0
+    assert (image[lit][:, 0] > 0.99).all() and (image[~lit][:, 0] == 0.0).all()
+
+
+def test_blended_card_covers_its_opacity_on_average():
+    card = Material("card", diffuse=1.0, unlit=True, alpha_mode="blend", opacity=0.25)
+    scene = Scene.from_parts([plane("card")], [card], lights=[], camera=front_camera())
+    result = render(scene, width=16, height=16, spp=16, threads=1)
+    # 4096 independent coin flips: standard error 0.0068
+    assert result.image.mean() == pytest.approx(0.25, abs=0.03)
+    two_threads = render(scene, width=16, height=16, spp=16, threads=2, chunk_samples=256)
+    np.testing.assert_array_equal(result.image, two_threads.image)
+
+
+def test_blended_shadow_lets_through_one_minus_opacity():
+    accel = cutout_accel("blend", opacity=0.3)
+    rng = np.random.default_rng(1)
+    n = 4000
+    # rays up through the centre of a solid texel (texel alpha 1) of the card: opacity 0.3
+    # each (distinct origins: the coin flip of a ray is keyed by the ray)
+    origins = np.column_stack([-0.75 + rng.uniform(-1e-4, 1e-4, n), 0.75 + rng.uniform(-1e-4, 1e-4, n),
+                               np.full(n, 1e-3)])
+    occluded = accel.occluded(origins, np.tile([0.0, 0.0, 1.0], (n, 1)), np.full(n, 5.0))
+    assert occluded.mean() == pytest.approx(0.3, abs=0.03)
