@@ -416,7 +416,8 @@ class Integrator:
         # camera rays have unit throughput: a read-only broadcast costs nothing, and
         # _shade does not multiply by it at depth 0
         # (inside an absorbing medium they lose light on the way: then a real array)
-        throughput = np.ones((n, 3), order="F") if self._camera_absorbs else np.broadcast_to(1.0, (n, 3))
+        throughput = (np.ones((n, 3), order="F") if self._camera_absorbs
+                      else np.broadcast_to(1.0, (n, 3)))
         rays = RayBatch(origins, directions, np.arange(n, dtype=np.int64), throughput,
                         np.broadcast_to(self._camera_medium, (n, len(self._camera_medium))))
         radiance = np.zeros((n, 3), order="F")

@@ -19,7 +19,8 @@ from rtmesh.media import Media, coincident_faces
 from rtmesh.scene import Scene
 from rtmesh.vecmath import fresnel_schlick, refract
 
-from scenes import box, icosphere, part, pixel_centre_rays, ray_sphere_distances, render, settings
+from scenes import (box, icosphere, part, pixel_centre_rays, quad, ray_sphere_distances, render,
+                    settings)
 
 GLASS, WATER = 1.5, 1.33
 
@@ -48,7 +49,8 @@ def toy_media():
 
 
 def cross(media, stack, face, entering):
-    eta, after = media.cross(np.array([stack], dtype=np.int32), np.array([face]), np.array([entering]))
+    eta, after = media.cross(np.array([stack], dtype=np.int32), np.array([face]),
+                             np.array([entering]))
     return eta[0], [int(m) for m in after[0] if m >= 0]
 
 
@@ -56,7 +58,8 @@ def test_entering_pushes_and_leaving_pops_with_the_ior_ratio_of_both_sides():
     media = toy_media()
     # air -> water -> glass, and back out
     assert cross(media, [-1, -1, -1, -1], 2, True) == (pytest.approx(1.0 / WATER, rel=1e-15), [2])
-    assert cross(media, [2, -1, -1, -1], 1, True) == (pytest.approx(WATER / GLASS, rel=1e-15), [1, 2])
+    assert cross(media, [2, -1, -1, -1], 1, True) == (pytest.approx(WATER / GLASS, rel=1e-15),
+                                                       [1, 2])
     assert cross(media, [1, 2, -1, -1], 1, False) == (pytest.approx(GLASS / WATER, rel=1e-15), [2])
     assert cross(media, [2, -1, -1, -1], 2, False) == (pytest.approx(WATER, rel=1e-15), [])
 
@@ -90,7 +93,8 @@ def test_refraction_from_water_into_glass_follows_snell_at_known_angles():
     media = toy_media()
     angles = np.radians([0.0, 10.0, 30.0, 50.0, 70.0, 85.0])
     k = len(angles)
-    eta, _ = media.cross(np.tile(np.int32([2, -1, -1, -1]), (k, 1)), np.full(k, 1), np.ones(k, bool))
+    in_water = np.tile(np.int32([2, -1, -1, -1]), (k, 1))
+    eta, _ = media.cross(in_water, np.full(k, 1), np.ones(k, bool))
     normal = np.tile([0.0, 0.0, 1.0], (k, 1))
     wo = np.stack([np.sin(angles), np.zeros(k), np.cos(angles)], axis=1)
     wt, tir = refract(wo, normal, eta)
@@ -163,12 +167,13 @@ def test_interface_between_media_of_equal_index_is_invisible():
     nested = glass_in_water_scene(0.0, 0.0, camera=camera)
     nested.materials = MaterialTable([glass(ior=WATER), water()])
     nested.background = sky
-    alone = Scene.from_parts([part("water", icosphere(4, 2.0), 0, smooth=True)], [water()], [], camera,
-                             background=sky)
+    alone = Scene.from_parts([part("water", icosphere(4, 2.0), 0, smooth=True)], [water()], [],
+                             camera, background=sky)
     # the inner ball's surfaces still count toward max_depth: enough depth for both
     a = render(nested, width=32, height=32, max_depth=16)
     b = render(alone, width=32, height=32, max_depth=16)
-    assert a.stats.rays["refraction"] > b.stats.rays["refraction"] + 200  # the inner ball is crossed
+    # the inner ball is crossed
+    assert a.stats.rays["refraction"] > b.stats.rays["refraction"] + 200
     # only the origin offsets at the extra interfaces differ
     np.testing.assert_allclose(a.image, b.image, rtol=0, atol=1e-5)
 
@@ -195,8 +200,8 @@ def test_camera_inside_glass_inside_water_finds_both_media(coincident):
     assert list(Integrator(scene, settings())._camera_medium) == expected_stack
     # glass -> water -> air head on: two refractions, one unit of each medium
     result = render(scene, width=9, height=9, max_depth=2, cutoff=0.0)
-    expected = (normal_incidence_transmittance(GLASS / WATER) * normal_incidence_transmittance(WATER)
-                * np.exp(-sigma_glass - sigma_water))
+    expected = (normal_incidence_transmittance(GLASS / WATER)
+                * normal_incidence_transmittance(WATER) * np.exp(-sigma_glass - sigma_water))
     np.testing.assert_allclose(result.image[4, 4], expected, rtol=2e-3)
 
 
@@ -228,7 +233,8 @@ def test_camera_inside_absorbing_glass_sees_the_world_refracted_and_absorbed():
                 * sky.radiance(wt))
     # away from the critical angle, where the tessellation can tip a ray either way
     clear = np.abs(GLASS * np.sqrt(1.0 - cos_i ** 2) - 1.0) > 0.1
-    assert clear.sum() > 0.75 * width * height and (tir & clear).sum() > 300 and (~tir & clear).sum() > 300
+    assert clear.sum() > 0.75 * width * height
+    assert (tir & clear).sum() > 300 and (~tir & clear).sum() > 300
     image = result.image.reshape(-1, 3)
     np.testing.assert_allclose(image[clear], expected[clear], rtol=0.01, atol=2e-3)
     np.testing.assert_array_equal(image[tir & clear], 0.0)
@@ -266,10 +272,8 @@ def test_slabs_of_glass_in_water_shift_the_floor_by_snells_law():
     # halves x < 0 and x > 0 glow red and blue.  Through parallel interfaces a ray keeps its
     # horizontal direction and, in a medium of index n, sin(theta_n) = sin(theta_air) / n:
     # where it lands on the floor is a closed form.
-    floor_left = part("left", (np.array([[-9, -9, -0.5], [0, -9, -0.5], [0, 9, -0.5], [-9, 9, -0.5]],
-                                        dtype=float), np.array([[0, 1, 2], [0, 2, 3]])), 2)
-    floor_right = part("right", (np.array([[0, -9, -0.5], [9, -9, -0.5], [9, 9, -0.5], [0, 9, -0.5]],
-                                          dtype=float), np.array([[0, 1, 2], [0, 2, 3]])), 3)
+    floor_left = part("left", quad([[-9, -9, -0.5], [0, -9, -0.5], [0, 9, -0.5], [-9, 9, -0.5]]), 2)
+    floor_right = part("right", quad([[0, -9, -0.5], [9, -9, -0.5], [9, 9, -0.5], [0, 9, -0.5]]), 3)
     slabs = [part("water", box((8.0, 8.0, 2.0), (0.0, 0.0, 1.0)), 1),
              part("glass", box((6.0, 6.0, 1.0), (0.0, 0.0, 1.0)), 0)]
     materials = [glass(), water(), Material("red", diffuse=0.0, ambient=[1, 0, 0]),
