@@ -12,6 +12,7 @@ from .gltf_scene import GLTF_EXTENSIONS, file_cameras_and_lights, read_gltf_json
 from .material_files import gltf_json_materials, gltf_material, mtl_material, obj_materials
 from .materials import Material
 from .scene import MeshPart, Scene
+from .smoothing import CREASE_ANGLE, smooth_vertex_normals
 from .textures import Texture
 
 log = logging.getLogger(__name__)
@@ -162,30 +163,6 @@ def vertex_colours(mesh):
     return colours
 
 
-def smooth_by_angle(mesh):
-    """trimesh's ``smooth_shaded`` copy and the original vertex of each of its vertices.
-
-    The copy is split into patches at creases (its vertices are the original ones, repeated
-    per patch), so per-vertex attributes follow as ``attribute[original]``.
-
-    Returns
-    -------
-    smooth : trimesh.Trimesh
-    original : (v', ) intp
-        Index into ``mesh.vertices`` of every vertex of ``smooth``.
-    """
-    smooth = mesh.smooth_shaded
-    components = smooth.metadata.get("original_components")
-    faces = np.hstack(components) if components else np.arange(len(mesh.faces))
-    original = np.zeros(len(smooth.vertices), dtype=np.intp)
-    if len(faces) == len(smooth.faces):
-        original[np.asarray(smooth.faces).ravel()] = np.asarray(mesh.faces)[faces].ravel()
-    if len(faces) != len(smooth.faces) or not np.array_equal(mesh.vertices[original], smooth.vertices):
-        # not the layout this relies on (another trimesh version): keep the mesh unsplit
-        return mesh, np.arange(len(mesh.vertices))
-    return smooth, original
-
-
 def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=None):
     """Flatten a trimesh object (mesh or scene graph) into world-space parts.
 
@@ -200,7 +177,8 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
         Material index for every part; None imports each geometry's own material.
     smooth : bool, optional
         True forces smooth shading, False flat; None uses the file's vertex normals where it
-        has them and smooths by angle (30 degrees) where it does not.
+        has them and smooths by angle where it does not (split along edges of 20 degrees
+        or more, see :mod:`rtmesh.smoothing`).
 
     Returns
     -------
@@ -228,27 +206,31 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
             continue
         if len(mesh.faces) == 0:
             continue
-        # the material and per-vertex attributes come from the mesh as loaded: trimesh's
-        # smooth_shaded copy drops its visual
+        # the material and per-vertex attributes come from the mesh as loaded
         visual = mesh.visual
         uv = getattr(visual, "uv", None)
         uv = None if uv is None or len(uv) != len(mesh.vertices) else np.asarray(uv, dtype=np.float64)
         colours = None if file_materials and file_materials.drop_vertex_colours else vertex_colours(mesh)
-        if smooth is None and not _file_has_vertex_normals(mesh):
-            mesh, original = smooth_by_angle(mesh)  # split at creases, smooth elsewhere
-            uv = None if uv is None else uv[original]
-            colours = None if colours is None else colours[original]
+        vertices, faces, normals = np.asarray(mesh.vertices), np.asarray(mesh.faces), None
+        if smooth is not False:
+            if _file_has_vertex_normals(mesh):
+                normals = np.asarray(mesh.vertex_normals)
+            else:
+                # split at creases (unless smooth shading is forced), smooth elsewhere;
+                # per-vertex attributes follow the vertices they were split from
+                vertices, faces, normals, original = smooth_vertex_normals(
+                    vertices, faces, CREASE_ANGLE if smooth is None else None)
+                uv = None if uv is None else uv[original]
+                colours = None if colours is None else colours[original]
         matrix = transform @ node_transform
-        vertices = trimesh.transform_points(mesh.vertices, matrix)
-        faces = np.asarray(mesh.faces)
+        vertices = trimesh.transform_points(vertices, matrix)
         if np.linalg.det(matrix[:3, :3]) < 0:
             faces = faces[:, ::-1]  # a mirroring transform flips the winding
-        normals = None
-        if smooth is not False:
+        if normals is not None:
             # normals transform with the inverse transpose of the linear part
             normal_matrix = np.linalg.inv(matrix[:3, :3]).T
             with np.errstate(invalid="ignore"):
-                normals = np.asarray(mesh.vertex_normals) @ normal_matrix.T
+                normals = normals @ normal_matrix.T
         if material is None:
             key = id(getattr(visual, "material", visual))
             if key not in material_ids:

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .accel import Accel, barycentric_interpolate, offset_ray_origins
+from .accel import Accel, barycentric_interpolate, corner_table, offset_ray_origins
 from .area_lights import AreaLighting, emissive_mesh_light, is_area_light
 from .adaptive import render_rounds
 from .aov import DERIVED_PASSES, PassRecorder, derived_pass
@@ -128,7 +128,8 @@ class Integrator:
         # Re-centre the scene on the origin before it meets float32: float32 resolution is
         # relative to the size of the coordinates, so a model 1e6 units from the origin would
         # otherwise be traced on a grid of 1/16 unit.  Shading sees the same shifted frame.
-        self.shift = scene.bounds.mean(axis=0)
+        scene_bounds = scene.bounds  # a pass over every vertex: formed once
+        self.shift = scene_bounds.mean(axis=0)
         # moving objects get Embree scenes of their own, traced at each ray's time
         self.motion = None
         if blurs(scene):
@@ -140,7 +141,7 @@ class Integrator:
         # part of the origin offset (see offset_ray_origins); it cannot be zero for a scene
         # that renders.  With motion,
         # the size of the space the objects sweep during the shutter.
-        bounds = swept_bounds(scene) if self.motion else scene.bounds
+        bounds = swept_bounds(scene) if self.motion else scene_bounds
         self.offset_scale = max(float(np.abs(bounds - self.shift).max()), 1e-30)
         m = scene.materials
         # textures and vertex colours, looked up per hit only where the scene has them
@@ -167,7 +168,7 @@ class Integrator:
                               if area_lights else None)
         lit = ~m.unlit[:, None]
         shaded_any = bool((((m.diffuse > 0) | (m.specular > 0)) & lit).any())
-        self.ao_distance = settings.ao_distance or 0.2 * float(np.linalg.norm(np.ptp(scene.bounds, axis=0)))
+        self.ao_distance = settings.ao_distance or 0.2 * float(np.linalg.norm(np.ptp(scene_bounds, axis=0)))
         ambient_on = bool((scene.ambient > 0).any() and (m.ambient > 0).any())
         self.background = as_background(scene.background)
         # only the passes asked for are computed; a transparent background needs coverage
@@ -258,11 +259,13 @@ class Integrator:
             :func:`barycentric_interpolate`; gathered only for hits on smooth faces.
         """
         sc = self.scene
-        faces = component_major(np.concatenate([self.accel.triangles.T, sc.face_normals.T]))
+        faces = np.zeros((12, len(sc.faces)))
+        faces[:9] = self.accel.triangles.T  # rows of a component-major table: plain copies
+        faces[9:] = sc.face_normals.T
+        faces = faces.T
         if not self.stages["smooth_normals"]:
             return faces, None
-        n0, n1, n2 = (sc.vertex_normals[sc.faces[:, k]] for k in range(3))
-        return faces, component_major(np.concatenate([n0.T, (n1 - n0).T, (n2 - n0).T]))
+        return faces, corner_table(sc.vertex_normals, sc.faces)
 
     # ---------------------------------------------------------------- whole image
     def render(self, progress=None):
