@@ -53,6 +53,8 @@ log = logging.getLogger(__name__)
 # Shadow rays to point and spot lights stop this fraction short of the light, so a light
 # placed exactly on a surface does not count that surface as an occluder.
 _SHADOW_SHORTEN = 1.0 - 1e-5
+# smallest chunk (pixel samples) the thread balancing of Integrator.render_samples makes
+_MIN_CHUNK_SAMPLES = 2048
 
 
 @dataclass
@@ -314,9 +316,17 @@ class Integrator:
             ``progress(chunks_done, chunks_total)``.
         """
         s = self.settings
+        chunk_samples = s.chunk_samples
+        if s.thread_count > 1:
+            # at least four chunks per thread when there is enough work, so that a small
+            # adaptive round (or the last chunk of a small image) does not leave threads
+            # idle; never below _MIN_CHUNK_SAMPLES, where the fixed cost of a chunk's
+            # stages would show.  The image does not depend on the chunk size.
+            total = sum(len(pixels) * spp for pixels, _, spp in groups)
+            chunk_samples = min(chunk_samples, max(_MIN_CHUNK_SAMPLES, -(-total // (4 * s.thread_count))))
         chunks = []
         for pixels, first_sample, spp in groups:
-            per_chunk = max(1, s.chunk_samples // spp)
+            per_chunk = max(1, chunk_samples // spp)
             chunks += [(pixels[i:i + per_chunk], first_sample, spp)
                        for i in range(0, len(pixels), per_chunk)]
 
