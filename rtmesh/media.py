@@ -151,9 +151,9 @@ class Media:
         if second is not None:
             rows, twin_mat, twin_entering = second
             after[rows], _ = _apply(after[rows], twin_mat, twin_entering)
+        # the same medium (or two of equal ior) on both sides gives exactly 1: no Fresnel
+        # reflection, no bending
         eta = self.ior.take(before_medium) / self.ior.take(after[:, 0])
-        # the same medium on both sides: exactly no interface (a ratio of equal numbers is
-        # exactly 1, but two materials of equal ior give that too, which is intended)
         return eta, after
 
     # ------------------------------------------------------------------ camera
