@@ -614,7 +614,8 @@ class Integrator:
         """Interpolated vertex normals on smooth faces, ``ng`` elsewhere; (k, 3).
 
         Only the rows on smooth faces are interpolated.  An interpolated normal on the other
-        side of the surface than ``ng`` (possible near silhouettes) is not used either.
+        side of the surface than ``ng`` (possible near silhouettes), or not finite (zero or
+        broken vertex normals), is left for :func:`face_viewer` to replace with ``ng``.
         """
         smooth_face = self.scene.smooth.take(prim)
         rows = None if smooth_face.all() else np.flatnonzero(smooth_face)
@@ -623,10 +624,6 @@ class Integrator:
         corner_and_edges = take_rows(self._vertex_normals, take_rows(prim, rows))
         ns = normalize(barycentric_interpolate(corner_and_edges, take_rows(u, rows), take_rows(v, rows)),
                        scale=take_rows(flip, rows))
-        ng_rows = take_rows(ng, rows)
-        usable = dot(ns, ng_rows) > 0.0
-        if not usable.all():
-            ns = np.where(usable[:, None], ns, ng_rows)
         if rows is None:
             return ns
         return _put_rows(ng.copy(order="K"), rows, ns)
