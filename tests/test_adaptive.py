@@ -271,6 +271,13 @@ def test_adaptive_render_is_the_same_for_any_thread_count():
     assert len(one.stats.rounds) > 2
     np.testing.assert_array_equal(one.image, two.image)
     np.testing.assert_array_equal(one.film.count, two.film.count)
+    # and for any chunk size: rounds with pixels at different counts are cut into chunks
+    # at pixel boundaries, one chunk for the whole round here
+    whole = adaptive(threads=1, sampler="sobol", chunk_samples=1 << 20)
+    cut = adaptive(threads=1, sampler="sobol", chunk_samples=97)
+    assert len(np.unique(whole.film.count)) >= 3
+    np.testing.assert_array_equal(whole.image, cut.image)
+    np.testing.assert_array_equal(whole.film.count, cut.film.count)
 
 
 # ---------------------------------------------------------------- passes

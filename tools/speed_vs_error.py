@@ -6,10 +6,12 @@ error against the reference next to its wall time:
 
     python tools/speed_vs_error.py --out docs/speed_vs_error.csv --plot docs/images/speed_vs_error.png
 
-Writes a CSV (scene, method, sampler, spp, target, seconds, cpu_seconds, mean_spp, rmse,
+Writes a CSV (scene, method, sampler, spp, target, seconds, cpu_seconds, mean_spp, rays, rmse,
 relative_error, estimated_error), a log-log plot of RMSE against time (needs matplotlib: the
-``bench`` extra), and prints a summary: the time adaptive sampling saves at equal RMSE, and
-how the render's own error estimate compares with the measured error.
+``bench`` extra), and prints a summary: the time adaptive sampling saves at equal RMSE, what
+one of its samples costs against a uniform render's (rays and CPU time per sample), and how
+the render's own error estimate compares with the measured error.  Adaptive targets are
+display-scale errors (standard error / sqrt(mean + 0.01), what ``target_error`` bounds).
 
 Renders run on one thread by default and are timed by wall clock (``seconds``) and by the
 process's CPU time (``cpu_seconds``); on a shared, loaded machine the CPU time of a
@@ -44,13 +46,18 @@ SCENES = {
     "glass_edges": ("assets/glass_edges.toml", 160, 120, 1024, 64),
     "showcase": ("assets/showcase.toml", 160, 120, 1024, 64),
     "glossy": ("assets/effects/glossy.toml", 160, 120, 1024, 64),
+    # localised noise, what adaptive sampling is for: only the moving objects and their
+    # shadows are noisy, the still scene converges in the first round
+    "motion_blur": ("assets/effects/motion_blur.toml", 160, 120, 1024, 64),
 }
 SAMPLERS = ("regular", "random", "jittered", "sobol")
 ADAPTIVE_SAMPLERS = ("sobol", "jittered")
-TARGETS = (0.2, 0.1, 0.05, 0.025)
+# display-scale errors, standard error / sqrt(mean + 0.01) (rtmesh.film.Film.pixel_display_error)
+TARGETS = (0.08, 0.04, 0.02, 0.01)
 BASE_SPP = 4
+SOBOL_REACH = 4  # the uniform Sobol sweep goes to 4x the scene's largest uniform spp
 MAX_SPP = 256
-FIELDS = ("scene", "method", "sampler", "spp", "target", "seconds", "cpu_seconds", "mean_spp", "rmse",
+FIELDS = ("scene", "method", "sampler", "spp", "target", "seconds", "cpu_seconds", "mean_spp", "rays", "rmse",
           "relative_error", "estimated_error")
 
 
@@ -74,8 +81,10 @@ def run_scene(name, threads, quick):
     print(f"{name}: {width}x{height}, reference {ref_spp} spp sobol in {ref.stats.wall_seconds:.1f} s "
           f"(estimated error {ref.stats.relative_error:.3g})", flush=True)
 
+    # the uniform Sobol curve goes further, so that adaptive renders at low error still
+    # have a uniform render of equal RMSE to compare with
     runs = [("uniform", sampler, spp, None) for sampler in SAMPLERS
-            for spp in 2 ** np.arange(int(np.log2(top_spp)) + 1)]
+            for spp in 2 ** np.arange(int(np.log2(top_spp * (SOBOL_REACH if sampler == "sobol" else 1))) + 1)]
     runs += [("adaptive", sampler, BASE_SPP, target) for sampler in ADAPTIVE_SAMPLERS for target in TARGETS]
     rows = []
     for method, sampler, spp, target in runs:
@@ -89,7 +98,7 @@ def run_scene(name, threads, quick):
         rows.append({"scene": name, "method": method, "sampler": sampler, "spp": int(spp),
                      "target": "" if target is None else target, "seconds": round(st.wall_seconds, 4),
                      "cpu_seconds": round(cpu, 4),
-                     "mean_spp": round(st.mean_spp, 2), "rmse": f"{rmse:.5g}",
+                     "mean_spp": round(st.mean_spp, 2), "rays": st.total_rays, "rmse": f"{rmse:.5g}",
                      "relative_error": f"{relative:.5g}",
                      "estimated_error": "" if np.isnan(st.relative_error) else f"{st.relative_error:.5g}"})
         label = f"target {target}" if target else f"{int(spp)} spp"
@@ -127,11 +136,18 @@ def summary(rows):
                 saved = "outside the uniform range" if t_uniform is None else (
                     f"uniform needs {t_uniform:.2f} s: {t_uniform / float(r['cpu_seconds']):.2f}x the time, "
                     f"{spp_uniform:.1f} spp: {spp_uniform / float(r['mean_spp']):.2f}x the samples")
+                # cost of a sample: rays and CPU time per sample against the largest uniform render
+                top = max(uniform, key=lambda u: u["spp"])
+                samples, top_samples = float(r["mean_spp"]), float(top["mean_spp"])
+                saved += (f"; per sample {r['rays'] / samples / (top['rays'] / top_samples):.2f}x the rays, "
+                          f"{float(r['cpu_seconds']) / samples / (float(top['cpu_seconds']) / top_samples):.2f}x "
+                          f"the time of uniform {top['spp']} spp")
                 lines.append(f"{scene} adaptive {sampler} target {r['target']}: RMSE {r['rmse']} "
                              f"in {r['cpu_seconds']} s CPU ({r['mean_spp']} spp mean); {saved}")
         for sampler in SAMPLERS:
             ratios = [float(r["relative_error"]) / float(r["estimated_error"]) for r in mine
-                      if r["sampler"] == sampler and r["method"] == "uniform" and r["estimated_error"]]
+                      if r["sampler"] == sampler and r["method"] == "uniform" and r["estimated_error"]
+                      and r["spp"] <= 64]
             if ratios:
                 lines.append(f"{scene} {sampler}: measured / estimated relative error, median "
                              f"{np.median(ratios):.2f} (range {min(ratios):.2f}-{max(ratios):.2f}; "
