@@ -155,11 +155,18 @@ def _run_round(integrator, film, stats, pixels, first_sample, spp, target, progr
     t0 = time.perf_counter()
     integrator.render_samples(film, pixels, first_sample, spp, stats, progress)
     seconds = time.perf_counter() - t0
+    samples = int(np.sum(np.broadcast_to(spp, np.shape(pixels))))
+    if not integrator.settings.adaptive:
+        # a uniform render has one round and nothing to steer: the per-pixel error (a
+        # whole-film pass, ~10% of a 1-spp frame) is not computed; stats.relative_error
+        # still reports the render's error
+        stats.rounds.append(RoundStats(len(pixels), samples, seconds, float("nan"), 0))
+        return None
     error = film.pixel_display_error()
     above = np.count_nonzero(error > _threshold(error, target))
     stats.rounds.append(RoundStats(
         pixels=len(pixels),
-        samples=int(np.sum(np.broadcast_to(spp, np.shape(pixels)))),
+        samples=samples,
         seconds=seconds,
         error=float(np.mean(error)),
         above_target=int(above),

@@ -217,7 +217,8 @@ class RoundStats:
         Wall time of the round.
     error : float
         The image's mean estimated display error after the round (what ``target_error``
-        bounds, :meth:`rtmesh.film.Film.pixel_display_error`).
+        bounds, :meth:`rtmesh.film.Film.pixel_display_error`); NaN for the single round of a
+        uniform render, which does not estimate per-pixel errors.
     above_target : int
         Pixels whose estimated error was still above target after the round (above the
         image's mean error when no target is set).

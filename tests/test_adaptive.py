@@ -444,3 +444,15 @@ def test_sobol_prefixes_converge_like_whole_sets():
         rmse = [np.sqrt(np.mean((covered[:, :n].mean(axis=1) - truth) ** 2)) for n in COUNTS]
         slope = log_slope(COUNTS, rmse)
         assert slope < high, f"{sampler}: slope {slope:.2f}"
+
+
+def test_a_uniform_render_estimates_no_per_pixel_error(monkeypatch):
+    # one round, nothing to steer: the whole-film per-pixel error pass must not run, while
+    # the render still reports its own error
+    def refuse(self, *args, **kwargs):
+        raise AssertionError("per-pixel error computed for a uniform render")
+
+    monkeypatch.setattr(Film, "pixel_display_error", refuse)
+    result = render(SPHERE, width=16, height=12, spp=4, sampler="jittered")
+    assert len(result.stats.rounds) == 1 and np.isnan(result.stats.rounds[0].error)
+    assert result.stats.relative_error > 0
