@@ -70,16 +70,8 @@ class Film:
             px = slice(int(pixels), int(pixels) + m)
         # add samples one index at a time so each pixel's sum has the same rounding
         # whatever the tile size or thread count (bit-identical renders)
-        mean_passes = {}
-        for name, values in (passes or {}).items():
-            reduction = self.pass_reductions[name]
-            if reduction == "mean":
-                mean_passes[name] = values
-            elif reduction == "min":
-                self.pass_sums[name][px] = np.minimum(self.pass_sums[name][px], values.min(axis=1))
-            else:  # first: only pixels without a sample yet take this tile's sample 0
-                fresh = (self.count[px] == 0)[:, None]
-                self.pass_sums[name][px] = np.where(fresh, values[:, 0], self.pass_sums[name][px])
+        mean_passes = self._keep_min_and_first(px, passes, lambda v: v.min(axis=1),
+                                               lambda v: v[:, 0])
         for s in range(spp):
             r = radiance[:, s]
             self.sum[px] += r
@@ -114,17 +106,8 @@ class Film:
         # taking[k]: pixels with more than k samples
         taking = len(counts) - np.searchsorted(counts[order][::-1], np.arange(counts.max(initial=0)),
                                                side="right")
-        mean_passes = {}
-        for name, values in (passes or {}).items():
-            reduction = self.pass_reductions[name]
-            if reduction == "mean":
-                mean_passes[name] = values
-            elif reduction == "min":
-                self.pass_sums[name][pixels] = np.minimum(self.pass_sums[name][pixels],
-                                                          np.minimum.reduceat(values, starts, axis=0))
-            else:  # first: only pixels without a sample yet take their first new sample
-                fresh = (self.count[pixels] == 0)[:, None]
-                self.pass_sums[name][pixels] = np.where(fresh, values[starts], self.pass_sums[name][pixels])
+        mean_passes = self._keep_min_and_first(
+            pixels, passes, lambda v: np.minimum.reduceat(v, starts, axis=0), lambda v: v[starts])
         for k, active in enumerate(taking):
             px = px_sorted[:active]
             rows = starts_sorted[:active] + k
@@ -134,6 +117,35 @@ class Film:
             for name, values in mean_passes.items():
                 self.pass_sums[name][px] += values[rows]
         self.count[pixels] += counts
+
+    def _keep_min_and_first(self, px, passes, smallest, first):
+        """Update the ``min`` and ``first`` passes of the pixels ``px`` with new samples.
+
+        Parameters
+        ----------
+        px : slice or (m,) int array
+        passes : dict of str to array, or None
+            New samples of each pass, in the caller's layout.
+        smallest, first : callable
+            Map a pass's new samples to (m, k) per pixel: their minimum, and the pixel's
+            first new sample (kept only by pixels that had no sample yet).
+
+        Returns
+        -------
+        dict of str to array
+            The ``mean`` passes, left for the caller to sum sample by sample.
+        """
+        mean_passes = {}
+        for name, values in (passes or {}).items():
+            reduction = self.pass_reductions[name]
+            if reduction == "mean":
+                mean_passes[name] = values
+            elif reduction == "min":
+                self.pass_sums[name][px] = np.minimum(self.pass_sums[name][px], smallest(values))
+            else:
+                fresh = (self.count[px] == 0)[:, None]
+                self.pass_sums[name][px] = np.where(fresh, first(values), self.pass_sums[name][px])
+        return mean_passes
 
     def _blocks(self):
         """Pixel slices of at most ``BLOCK_PIXELS`` covering the film, in order."""
