@@ -77,7 +77,7 @@ def offset_ray_origins(points, normals, dtype=np.float64, scale=1.0, directions=
     """
     p = points.astype(np.float32)
     n = normals.astype(np.float32)
-    ulp = np.spacing(np.abs(p))
+    ulp = float32_ulp(p)
     distance = _ULPS * dot(np.abs(n), ulp) + _EXTENT_EPSILONS * np.float32(scale)
     move = n
     if directions is not None:
@@ -88,6 +88,26 @@ def offset_ray_origins(points, normals, dtype=np.float64, scale=1.0, directions=
     step = move * distance[:, None]
     step += np.sign(move) * ulp
     return (p + step).astype(dtype, copy=False)
+
+
+def float32_ulp(x):
+    """The spacing of float32 numbers at ``x``: ``np.spacing(abs(x))`` for normal floats.
+
+    Read from the exponent bits (``2**(e - 23)``), which is an order of magnitude faster than
+    ``np.spacing``; zeros and subnormals give 0 instead of the smallest subnormal (the
+    offset's scene-size term is far larger anyway).
+
+    Parameters
+    ----------
+    x : (...) float32
+
+    Returns
+    -------
+    (...) float32
+        Laid out like ``x``.
+    """
+    exponent_bits = x.view(np.int32) & np.int32(0x7F800000)  # drops sign and mantissa
+    return exponent_bits.view(np.float32) * np.float32(2.0 ** -23)
 
 
 class Hits:

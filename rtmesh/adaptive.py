@@ -1,10 +1,23 @@
 """Adaptive sampling: render in rounds, spending new samples only where the image is noisy.
 
 Round 0 takes ``spp`` samples in every pixel (a render without adaptive settings stops
-there).  Every later round looks at each pixel's estimated relative standard error
-(:meth:`rtmesh.film.Film.pixel_relative_error`: the standard error of the mean over the
-mean plus a floor of 0.01, so near-black pixels do not dominate) and doubles the samples of
-the pixels above ``target_error`` and of their eight neighbours.  The neighbours are there
+there).  Every later round looks at each pixel's estimated error on a display scale
+(:meth:`rtmesh.film.Film.pixel_display_error`: the standard error of the mean over the
+square root of the mean plus a floor of 0.01) and doubles the samples of the pixels above
+``target_error`` and of their eight neighbours.
+
+Why the square root: an error judged relative to the pixel's brightness (standard error /
+mean) spends most samples on dark pixels, whose noise neither shows on screen nor counts in
+an absolute error measure, and an absolute error ignores that brightness differences are
+seen relative to the brightness.  On a square-root display scale (near sRGB's gamma) a
+pixel's visible error is its standard error over twice the root of its mean, so the
+criterion weights pixels as a viewer does; Cycles' adaptive sampler normalises the same
+way.  The estimate is the per-pixel sample variance (``count - 1`` degrees of freedom per
+channel, steady from round 0's few samples).  A half-buffer estimate (the difference of
+two halves of the samples, as Cycles uses) would follow the faster convergence of
+stratified samplers, but has one degree of freedom per channel, so a noisy pixel often
+looks converged by chance; with the sample variance a stratified render simply meets its
+target with a margin (the estimate is 1.5-3x high for Sobol, see docs/BENCHMARKS.md).  The neighbours are there
 because an error estimate from few samples can miss a feature every one of a pixel's
 samples happened to miss (a thin highlight, the edge of a penumbra) while its neighbour
 caught it; renderers with adaptive sampling widen the noisy set the same way (Cycles and
@@ -52,7 +65,7 @@ def render_rounds(integrator, film, stats, progress=None):
     # a range, not an index array: each chunk makes its own small slice of it, so memory
     # beyond the film does not grow with the image (8 bytes a pixel at 4K is 66 MB)
     all_pixels = range(film.count.size)
-    error = _run_round(integrator, film, stats, [(all_pixels, 0, s.spp)], s.target_error, progress)
+    error = _run_round(integrator, film, stats, all_pixels, 0, s.spp, s.target_error, progress)
     if not s.adaptive:
         stats.stop_reason = "uniform"
         return
@@ -76,7 +89,9 @@ def render_rounds(integrator, film, stats, progress=None):
                 return
             cut = len(chosen[0]) < len(pixels)
             pixels, new = chosen
-        error = _run_round(integrator, film, stats, _groups(pixels, film.count[pixels], new),
+        # one batch for the whole round, each pixel continuing its own sequence from its
+        # count (splitting the round by count made small batches, which cost more per sample)
+        error = _run_round(integrator, film, stats, pixels, film.count[pixels], new,
                            s.target_error, progress)
         if cut:
             stats.stop_reason = "time_limit"
@@ -110,15 +125,6 @@ def dilate(mask):
     return out
 
 
-def _groups(pixels, counts, new):
-    """Pixels grouped by their sample count: ``(pixels, first_sample, spp)`` per group."""
-    groups = []
-    for c in np.unique(counts):
-        same = counts == c
-        groups.append((pixels[same], int(c), int(new[same][0])))
-    return groups
-
-
 def _within_budget(pixels, new, error, stats, seconds_left):
     """The noisiest of ``pixels`` whose new samples fit in ``seconds_left``.
 
@@ -145,18 +151,27 @@ def _within_budget(pixels, new, error, stats, seconds_left):
     return pixels[fits], new[fits]
 
 
-def _run_round(integrator, film, stats, groups, target, progress):
-    """Render one round and record it; returns the pixels' errors after it, (n,) float."""
+def _run_round(integrator, film, stats, pixels, first_sample, spp, target, progress):
+    """Render one round (see :meth:`~rtmesh.integrator.Integrator.render_samples`) and
+    record it; returns the pixels' display errors after it, (n,) float."""
     t0 = time.perf_counter()
-    integrator.render_samples(film, groups, stats, progress)
+    integrator.render_samples(film, pixels, first_sample, spp, stats, progress)
     seconds = time.perf_counter() - t0
-    error = film.pixel_relative_error()
+    # len(), not np.shape(): the shape of a range is found by building its array
+    samples = len(pixels) * spp if np.ndim(spp) == 0 else int(np.sum(spp))
+    if not integrator.settings.adaptive:
+        # a uniform render has one round and nothing to steer: the per-pixel error (a
+        # whole-film pass, ~10% of a 1-spp frame) is not computed; stats.relative_error
+        # still reports the render's error
+        stats.rounds.append(RoundStats(len(pixels), samples, seconds, float("nan"), 0))
+        return None
+    error = film.pixel_display_error()
     above = np.count_nonzero(error > _threshold(error, target))
     stats.rounds.append(RoundStats(
-        pixels=sum(len(p) for p, _, _ in groups),
-        samples=sum(len(p) * spp for p, _, spp in groups),
+        pixels=len(pixels),
+        samples=samples,
         seconds=seconds,
-        relative_error=float(np.mean(error)),
+        error=float(np.mean(error)),
         above_target=int(above),
     ))
     return error

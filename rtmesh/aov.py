@@ -307,6 +307,10 @@ class PassRecorder:
         """Reshape the per-sample buffers to ``(m, spp, k)`` for :meth:`Film.add_tile`."""
         return {name: b.reshape(m, spp, -1) for name, b in buffers.items()}
 
+    def per_sample(self, buffers, n):
+        """The per-sample buffers as ``(n, k)`` for :meth:`Film.add_samples`."""
+        return {name: b.reshape(n, -1) for name, b in buffers.items()}
+
 
 # ---------------------------------------------------------------- display (PNG) mapping
 

@@ -47,7 +47,8 @@ def build_parser():
     p.add_argument("--sampler", choices=SAMPLERS, help="pixel sample pattern (default jittered)")
     p.add_argument("--target-error", type=_positive_float, metavar="E",
                    help="adaptive sampling: add samples in rounds until every pixel's estimated "
-                   "relative error is <= E (e.g. 0.02); --spp is the first round's")
+                   "error, standard error / sqrt(mean + 0.01), is <= E (e.g. 0.01); --spp is the "
+                   "first round's")
     p.add_argument("--time-limit", type=_positive_float, metavar="SECONDS",
                    help="adaptive sampling: start no round that would end after this many seconds")
     p.add_argument("--max-spp", type=_positive_int, metavar="N",
@@ -224,7 +225,7 @@ def summary_line(output, settings, st):
     adaptive = ""
     if settings.adaptive:
         samples = f"{st.mean_spp:.1f} spp mean"
-        shown = [f"{r.pixels}px/{r.relative_error:.3g}" for r in st.rounds]
+        shown = [f"{r.pixels}px/{r.error:.3g}" for r in st.rounds]
         if len(shown) > 6:  # a long tail of small rounds: the first and the last
             shown = shown[:3] + ["..."] + shown[-2:]
         rounds = " ".join(shown)

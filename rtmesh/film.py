@@ -70,16 +70,8 @@ class Film:
             px = slice(int(pixels), int(pixels) + m)
         # add samples one index at a time so each pixel's sum has the same rounding
         # whatever the tile size or thread count (bit-identical renders)
-        mean_passes = {}
-        for name, values in (passes or {}).items():
-            reduction = self.pass_reductions[name]
-            if reduction == "mean":
-                mean_passes[name] = values
-            elif reduction == "min":
-                self.pass_sums[name][px] = np.minimum(self.pass_sums[name][px], values.min(axis=1))
-            else:  # first: only pixels without a sample yet take this tile's sample 0
-                fresh = (self.count[px] == 0)[:, None]
-                self.pass_sums[name][px] = np.where(fresh, values[:, 0], self.pass_sums[name][px])
+        mean_passes = self._keep_min_and_first(px, passes, lambda v: v.min(axis=1),
+                                               lambda v: v[:, 0])
         for s in range(spp):
             r = radiance[:, s]
             self.sum[px] += r
@@ -87,6 +79,73 @@ class Film:
             for name, values in mean_passes.items():
                 self.pass_sums[name][px] += values[:, s]
         self.count[px] += spp
+
+    def add_samples(self, pixels, counts, radiance, passes=None):
+        """Add a different number of samples to each of a set of pixels.
+
+        Accumulates exactly as :meth:`add_tile` would pixel by pixel (each pixel's samples
+        in order), so sums do not depend on how pixels are grouped into calls.
+
+        Parameters
+        ----------
+        pixels : (m,) int array
+            Distinct linear pixel indices.
+        counts : (m,) int array
+            Samples of each pixel, each >= 1.
+        radiance : (sum(counts), 3) float
+            The samples, pixel by pixel in sample order.
+        passes : dict of str to (sum(counts), k) float, optional
+        """
+        pixels = np.asarray(pixels, dtype=np.int64)
+        counts = np.asarray(counts, dtype=np.int64)
+        starts = np.cumsum(counts) - counts
+        # pixels by decreasing count: the pixels taking a k-th sample are a prefix, so
+        # the k-th samples of all pixels are one vectorised add (max(counts) adds in all)
+        order = np.argsort(-counts, kind="stable")
+        px_sorted, starts_sorted = pixels[order], starts[order]
+        # taking[k]: pixels with more than k samples
+        taking = len(counts) - np.searchsorted(counts[order][::-1], np.arange(counts.max(initial=0)),
+                                               side="right")
+        mean_passes = self._keep_min_and_first(
+            pixels, passes, lambda v: np.minimum.reduceat(v, starts, axis=0), lambda v: v[starts])
+        for k, active in enumerate(taking):
+            px = px_sorted[:active]
+            rows = starts_sorted[:active] + k
+            r = radiance[rows]
+            self.sum[px] += r
+            self.sum_sq[px] += r * r
+            for name, values in mean_passes.items():
+                self.pass_sums[name][px] += values[rows]
+        self.count[pixels] += counts
+
+    def _keep_min_and_first(self, px, passes, smallest, first):
+        """Update the ``min`` and ``first`` passes of the pixels ``px`` with new samples.
+
+        Parameters
+        ----------
+        px : slice or (m,) int array
+        passes : dict of str to array, or None
+            New samples of each pass, in the caller's layout.
+        smallest, first : callable
+            Map a pass's new samples to (m, k) per pixel: their minimum, and the pixel's
+            first new sample (kept only by pixels that had no sample yet).
+
+        Returns
+        -------
+        dict of str to array
+            The ``mean`` passes, left for the caller to sum sample by sample.
+        """
+        mean_passes = {}
+        for name, values in (passes or {}).items():
+            reduction = self.pass_reductions[name]
+            if reduction == "mean":
+                mean_passes[name] = values
+            elif reduction == "min":
+                self.pass_sums[name][px] = np.minimum(self.pass_sums[name][px], smallest(values))
+            else:
+                fresh = (self.count[px] == 0)[:, None]
+                self.pass_sums[name][px] = np.where(fresh, first(values), self.pass_sums[name][px])
+        return mean_passes
 
     def _blocks(self):
         """Pixel slices of at most ``BLOCK_PIXELS`` covering the film, in order."""
@@ -131,12 +190,22 @@ class Film:
         """
         return self._to_image(self._variance_of_mean_rows, 3)
 
-    def _pixel_relative_error_rows(self, px, floor):
-        """(m,) float64: :meth:`pixel_relative_error` of the pixels ``px``."""
+    def _pixel_error_rows(self, px, floor, power):
+        """(m,) float64: mean over channels of the pixels' standard error divided by
+        ``(|mean| + floor) ** power``; NaN below two samples."""
         mean = self.sum[px] / self._divisor(px)
         std_err = np.sqrt(self._variance_of_mean_rows(px))
-        error = np.mean(std_err / (np.abs(mean) + floor), axis=1)
+        scale = np.abs(mean) + floor
+        error = np.mean(std_err / (scale if power == 1 else np.sqrt(scale)), axis=1)
         return np.where(self.count[px] >= 2, error, np.nan)
+
+    def _per_pixel(self, floor, power):
+        """(height * width,) float64 :meth:`_pixel_error_rows` of every pixel, block by
+        block: the result is the only array of the film's size."""
+        error = np.zeros(self.width * self.height)
+        for px in self._blocks():
+            error[px] = self._pixel_error_rows(px, floor, power)
+        return error
 
     def pixel_relative_error(self, floor=ERROR_FLOOR):
         """Estimated relative standard error of each pixel's mean.
@@ -152,13 +221,37 @@ class Film:
         -------
         (height * width,) float64
             ``mean over channels of sqrt(variance_of_mean) / (|mean| + floor)``, row-major;
-            NaN for pixels with fewer than two samples.  Formed block by block: the result
-            is the only array of the film's size.
+            NaN for pixels with fewer than two samples.
         """
-        error = np.zeros(self.width * self.height)
-        for px in self._blocks():
-            error[px] = self._pixel_relative_error_rows(px, floor)
-        return error
+        return self._per_pixel(floor, 1)
+
+    def pixel_display_error(self, floor=ERROR_FLOOR):
+        """Estimated standard error of each pixel on a display (square-root) scale: what
+        adaptive sampling steers by.
+
+        ``sqrt(variance_of_mean) / sqrt(|mean| + floor)``, averaged over channels.  A
+        display encoding ``y = sqrt(x)`` (close to sRGB's x^(1/2.2)) turns a standard error
+        ``s`` at radiance ``x`` into ``s / (2 sqrt(x))``, so this is twice the standard
+        error a viewer sees (radiance 1 displayed as 1).  It sits between the relative
+        error, which spends samples on dark pixels whose noise is invisible and barely
+        counts in an absolute error, and the absolute error, which ignores that the eye
+        judges brightness differences relative to the brightness.  Cycles' adaptive
+        sampling normalises its per-pixel error the same way (error / sqrt(intensity),
+        after Dammertz et al. 2009, "A hierarchical automatic stopping condition for Monte
+        Carlo global illumination").
+
+        Parameters
+        ----------
+        floor : float
+            Added under the square root, so black pixels are judged against
+            ``sqrt(floor)`` (0.1 for the default 0.01) instead of dividing by zero.
+
+        Returns
+        -------
+        (height * width,) float64
+            Row-major; NaN for pixels with fewer than two samples.
+        """
+        return self._per_pixel(floor, 0.5)
 
     def relative_error(self):
         """Mean relative standard error of the image, a scalar estimate of its own error.
@@ -170,7 +263,7 @@ class Film:
         """
         if self.count.min() < 2:
             return float("nan")
-        total = sum(float(self._pixel_relative_error_rows(px, ERROR_FLOOR).sum()) for px in self._blocks())
+        total = sum(float(self._pixel_error_rows(px, ERROR_FLOOR, 1).sum()) for px in self._blocks())
         return total / (self.width * self.height)
 
     def spp_image(self):

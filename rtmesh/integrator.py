@@ -60,6 +60,8 @@ CHUNKS_IN_FLIGHT_PER_THREAD = 2
 # Shadow rays to point and spot lights stop this fraction short of the light, so a light
 # placed exactly on a surface does not count that surface as an occluder.
 _SHADOW_SHORTEN = 1.0 - 1e-5
+# smallest chunk (pixel samples) the thread balancing of Integrator.render_samples makes
+_MIN_CHUNK_SAMPLES = 2048
 
 
 @dataclass
@@ -100,6 +102,29 @@ class _Surfaces:
     """
 
     __slots__ = ("p", "ng", "ns", "d", "front", "mat", "prim", "sample", "time", "tints")
+
+
+def _ragged_chunks(counts, chunk_samples):
+    """Cut a run of pixels with ``counts`` samples each into chunks of about
+    ``chunk_samples`` samples, never splitting a pixel.
+
+    Parameters
+    ----------
+    counts : (m,) int array
+    chunk_samples : int
+
+    Returns
+    -------
+    list of (int, int)
+        ``(start, stop)`` pixel ranges covering ``0 .. m`` in order.
+    """
+    if not len(counts):
+        return []
+    before = np.cumsum(counts) - counts  # samples ahead of each pixel
+    # a chunk starts at the first pixel whose samples begin at or after each multiple
+    starts = np.unique(np.searchsorted(before, np.arange(0, max(int(before[-1]), 0) + 1, chunk_samples)))
+    stops = np.append(starts[1:], len(counts))
+    return list(zip(starts.tolist(), stops.tolist()))
 
 
 def _translated(obj, shift):
@@ -306,28 +331,54 @@ class Integrator:
         alpha = film.pass_image("alpha") if self.background.transparent else None
         return RenderResult(film.image(), passes, stats, film, alpha)
 
-    def render_samples(self, film, groups, stats, progress=None):
-        """Render sets of samples of sets of pixels into ``film``, in chunks on the threads.
+    def render_samples(self, film, pixels, first_sample, spp, stats, progress=None):
+        """Render samples of a set of pixels into ``film``, in chunks on the threads.
 
         Parameters
         ----------
         film : Film
-        groups : list of ((m,) int array or range, int, int)
-            ``(pixels, first_sample, spp)``: the samples ``first_sample .. first_sample +
-            spp - 1`` of each of ``pixels`` (distinct, ascending; no pixel in two groups).
+        pixels : (m,) int array or range
+            Linear pixel indices, distinct and ascending.
+        first_sample : int or (m,) int array
+            Global index of each pixel's first new sample (its sample count so far).
+        spp : int or (m,) int array
+            New samples per pixel: a number for all (a uniform render, or an adaptive
+            round's first), or one per pixel (a later adaptive round, where pixels at
+            different counts each double theirs).  Either way the round is one batch,
+            cut into chunks of about ``chunk_samples`` samples; a chunk never splits a
+            pixel's samples, so each pixel's sum is formed in sample order whatever the
+            chunking and thread count.
         stats : RenderStats
             Ray counts and stage times are added to it.
         progress : callable, optional
             ``progress(chunks_done, chunks_total)``.
         """
         s = self.settings
-        # chunks are made as they are submitted: a list of them would grow with
-        # resolution x spp (a 4K image at 64 spp has 16200)
-        per_chunk = [max(1, s.chunk_samples // spp) for _, _, spp in groups]
-        n_chunks = sum(-(-len(pixels) // k) for (pixels, _, _), k in zip(groups, per_chunk))
-        chunks = ((pixels[i:i + k], first_sample, spp)
-                  for (pixels, first_sample, spp), k in zip(groups, per_chunk)
-                  for i in range(0, len(pixels), k))
+        uniform = np.ndim(spp) == 0 and np.ndim(first_sample) == 0
+        if uniform:
+            total = len(pixels) * spp  # pixels may be a range (a whole uniform image)
+        else:
+            pixels = np.asarray(pixels, dtype=np.int64)
+            counts = np.broadcast_to(np.asarray(spp, dtype=np.int64), pixels.shape)
+            total = int(counts.sum())
+        chunk_samples = s.chunk_samples
+        if s.thread_count > 1:
+            # at least four chunks per thread when there is enough work, so that a small
+            # adaptive round (or the last chunk of a small image) does not leave threads
+            # idle; never below _MIN_CHUNK_SAMPLES, where the fixed cost of a chunk's
+            # stages would show.  The image does not depend on the chunk size.
+            chunk_samples = min(chunk_samples, max(_MIN_CHUNK_SAMPLES, -(-total // (4 * s.thread_count))))
+        if uniform:
+            # made as they are submitted: a list would grow with resolution x spp (a 4K
+            # image at 64 spp has 16200 chunks)
+            per_chunk = max(1, chunk_samples // spp)
+            n_chunks = -(-len(pixels) // per_chunk)
+            chunks = ((pixels[i:i + per_chunk], first_sample, spp) for i in range(0, len(pixels), per_chunk))
+        else:
+            first = np.broadcast_to(np.asarray(first_sample, dtype=np.int64), pixels.shape)
+            chunks = [(pixels[a:b], first[a:b], counts[a:b])
+                      for a, b in _ragged_chunks(counts, chunk_samples)]
+            n_chunks = len(chunks)
 
         def finish(chunk, result, done):
             pixels = chunk[0]
@@ -335,8 +386,11 @@ class Integrator:
             t0 = time.perf_counter()
             # a run of consecutive pixels (every chunk of a uniform render) is a slice:
             # cheaper to add into than a gather-scatter through an index array
-            contiguous = pixels[-1] - pixels[0] == len(pixels) - 1
-            film.add_tile(slice(pixels[0], pixels[-1] + 1) if contiguous else pixels, radiance, passes)
+            if not uniform:
+                film.add_samples(pixels, chunk[2], radiance, passes)
+            else:
+                contiguous = pixels[-1] - pixels[0] == len(pixels) - 1
+                film.add_tile(slice(pixels[0], pixels[-1] + 1) if contiguous else pixels, radiance, passes)
             chunk_stats.stage_seconds["film"] += time.perf_counter() - t0
             stats.merge(chunk_stats)
             if progress is not None:
@@ -378,20 +432,24 @@ class Integrator:
         Sample indices are global to the pixel across adaptive rounds, so the samples a
         later round adds continue the same sequences (stratified in sets of the settings'
         ``spp``; Sobol prefixes stay well distributed) instead of repeating the first ones.
+        Every sample point is a function of (seed, pixel, global sample index, dimension)
+        only, so a sample's radiance is the same whatever chunk or round takes it.
 
         Parameters
         ----------
         pixels : (m,) int array or range
             Linear pixel indices (``row * width + column``).
-        first_sample : int
-            Index of the first sample to take in each pixel.
-        spp : int
-            Samples to take in each pixel.
+        first_sample : int or (m,) int array
+            Index of the first sample to take in each pixel (one for all, or per pixel).
+        spp : int or (m,) int array
+            Samples to take in each pixel (one for all, or per pixel).
 
         Returns
         -------
-        radiance : (m, spp, 3) float64
-        passes : dict of str to (m, spp, k) float64
+        radiance : (m, spp, 3) float64, or (sum(spp), 3) with per-pixel ``spp``
+            Radiance of every sample, pixel by pixel in sample order (with per-pixel
+            counts the samples of pixel ``i`` are rows ``sum(spp[:i]) ..``).
+        passes : dict of str to (m, spp, k) float64 (or (sum(spp), k)), or None
         stats : RenderStats
             Ray counts and stage times of this chunk.
         """
@@ -402,11 +460,21 @@ class Integrator:
             pixels = np.arange(pixels.start, pixels.stop, pixels.step, dtype=np.int64)
         pixels = np.asarray(pixels, dtype=np.int64)
         m = len(pixels)
-        n = m * spp
+        ragged = np.ndim(spp) > 0 or np.ndim(first_sample) > 0
 
         # camera: one ray per pixel sample
-        pixel = np.repeat(pixels, spp) if spp > 1 else pixels
-        sample_in_pixel = np.tile(np.arange(first_sample, first_sample + spp, dtype=np.int64), m)
+        if ragged:
+            counts = np.broadcast_to(np.asarray(spp, dtype=np.int64), pixels.shape)
+            first = np.broadcast_to(np.asarray(first_sample, dtype=np.int64), pixels.shape)
+            n = int(counts.sum())
+            pixel = np.repeat(pixels, counts)
+            # global index: the pixel's first sample plus the position in its run of rows
+            row_start = np.cumsum(counts) - counts
+            sample_in_pixel = np.repeat(first - row_start, counts) + np.arange(n, dtype=np.int64)
+        else:
+            n = m * spp
+            pixel = np.repeat(pixels, spp) if spp > 1 else pixels
+            sample_in_pixel = np.tile(np.arange(first_sample, first_sample + spp, dtype=np.int64), m)
         # every dimension is stratified in sets of the settings' spp, whatever the round
         film_xy = pixel_offsets(s.sampler, s.seed, pixel, sample_in_pixel, s.spp)
         row = pixel // s.width
@@ -447,6 +515,8 @@ class Integrator:
             clock.lap("intersect")
             rays = self._shade(rays, hits, depth, radiance, aov, keys, stats, clock, sample_time)
 
+        if ragged:
+            return radiance, self.passes.per_sample(aov, n) or None, stats
         passes = self.passes.per_pixel(aov, m, spp) or None
         return radiance.reshape(m, spp, 3), passes, stats
 
@@ -556,7 +626,8 @@ class Integrator:
         """Interpolated vertex normals on smooth faces, ``ng`` elsewhere; (k, 3).
 
         Only the rows on smooth faces are interpolated.  An interpolated normal on the other
-        side of the surface than ``ng`` (possible near silhouettes) is not used either.
+        side of the surface than ``ng`` (possible near silhouettes), or not finite (zero or
+        broken vertex normals), is left for :func:`face_viewer` to replace with ``ng``.
         """
         smooth_face = self.scene.smooth.take(prim)
         rows = None if smooth_face.all() else np.flatnonzero(smooth_face)
@@ -565,10 +636,6 @@ class Integrator:
         corner_and_edges = take_rows(self._vertex_normals, take_rows(prim, rows))
         ns = normalize(barycentric_interpolate(corner_and_edges, take_rows(u, rows), take_rows(v, rows)),
                        scale=take_rows(flip, rows))
-        ng_rows = take_rows(ng, rows)
-        usable = dot(ns, ng_rows) > 0.0
-        if not usable.all():
-            ns = np.where(usable[:, None], ns, ng_rows)
         if rows is None:
             return ns
         return _put_rows(ng.copy(order="K"), rows, ns)

@@ -65,10 +65,11 @@ def nested_uniform_scramble(x, seed):
 def _sobol_bits(index, matrix):
     """Multiply the bits of ``index`` by a generator matrix over GF(2)."""
     out = np.zeros(index.shape, dtype=np.uint32)
-    for k in range(_BITS):
+    # up to the highest bit set in any index (stopping at the first bit no index has would
+    # drop higher bits: a point would depend on which other indices share the call)
+    top = int(np.bitwise_or.reduce(index, axis=None, initial=np.uint32(0))).bit_length()
+    for k in range(top):
         bit = (index >> np.uint32(k)) & np.uint32(1)
-        if not bit.any():
-            break  # no higher bit set in any index
         out ^= bit * matrix[k]
     return out
 

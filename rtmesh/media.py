@@ -151,9 +151,9 @@ class Media:
         if second is not None:
             rows, twin_mat, twin_entering = second
             after[rows], _ = _apply(after[rows], twin_mat, twin_entering)
+        # the same medium (or two of equal ior) on both sides gives exactly 1: no Fresnel
+        # reflection, no bending
         eta = self.ior.take(before_medium) / self.ior.take(after[:, 0])
-        # the same medium on both sides: exactly no interface (a ratio of equal numbers is
-        # exactly 1, but two materials of equal ior give that too, which is intended)
         return eta, after
 
     # ------------------------------------------------------------------ camera
@@ -243,20 +243,31 @@ def _apply(stack, mat, entering):
     found : (k,) bool
         Where a leaving ray found ``mat`` on its stack (True for entering rays too).
     """
-    k, depth = stack.shape
+    k = len(stack)
     stack = stack.astype(np.int32, copy=False)
-    match = stack == mat[:, None]
-    found = match.any(axis=1) | entering
-    # removing column c shifts the columns beyond it one place toward the top
-    first = match.argmax(axis=1)
-    columns = np.arange(depth)
-    source = columns + (columns >= first[:, None])
-    padded = np.concatenate([stack, np.full((k, 1), -1, dtype=np.int32)], axis=1)
-    removed = np.take_along_axis(padded, source, axis=1)
-    removed = np.where(match.any(axis=1)[:, None], removed, stack)
-    # entering: everything moves one place down, the outermost entry falls off the bottom
-    pushed = np.concatenate([mat[:, None].astype(np.int32), stack[:, :-1]], axis=1)
-    return np.where(entering[:, None], pushed, removed), found
+    mat = mat.astype(np.int32, copy=False)
+    outside = np.full((k, 1), -1, dtype=np.int32)
+    # entering: everything moves one place down, the outermost entry falls off the bottom;
+    # leaving the top (the nested case): everything moves one place up
+    pushed = np.concatenate([mat[:, None], stack[:, :-1]], axis=1)
+    popped = np.concatenate([stack[:, 1:], outside], axis=1)
+    on_top = stack[:, 0] == mat
+    after = np.where(entering[:, None], pushed, np.where(on_top[:, None], popped, stack))
+    found = entering | on_top
+    # leaving a medium below the top (overlapping objects): only that entry goes
+    rows = np.flatnonzero(~found)
+    if len(rows):
+        match = stack[rows] == mat[rows, None]
+        below = match.any(axis=1)
+        rows, match = rows[below], match[below]
+        if len(rows):
+            first = match.argmax(axis=1)
+            columns = np.arange(stack.shape[1])
+            source = columns + (columns >= first[:, None])
+            padded = np.concatenate([stack[rows], outside[rows]], axis=1)
+            after[rows] = np.take_along_axis(padded, source, axis=1)
+            found[rows] = True
+    return after, found
 
 
 def coincident_faces(vertices, faces, candidates):

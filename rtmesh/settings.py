@@ -52,8 +52,10 @@ class RenderSettings:
         Operator for 8-bit images.
     target_error : float or None
         Adaptive sampling (see :mod:`rtmesh.adaptive`): render in rounds until every pixel's
-        estimated relative standard error is at most this (e.g. 0.02).  ``spp`` is then the
-        samples of the first round.
+        estimated display error is at most this (e.g. 0.01):
+        standard error / sqrt(mean + 0.01) (:meth:`rtmesh.film.Film.pixel_display_error`),
+        twice the standard error of the pixel on a square-root display scale with
+        radiance 1 as white.  ``spp`` is then the samples of the first round.
     time_limit : float or None
         Adaptive sampling within a time budget, seconds: no round starts that would end
         after it (the first round always runs).  Alone, it refines the pixels noisier than
@@ -213,8 +215,10 @@ class RoundStats:
         Camera samples the round took.
     seconds : float
         Wall time of the round.
-    relative_error : float
-        The image's mean estimated relative error after the round.
+    error : float
+        The image's mean estimated display error after the round (what ``target_error``
+        bounds, :meth:`rtmesh.film.Film.pixel_display_error`); NaN for the single round of a
+        uniform render, which does not estimate per-pixel errors.
     above_target : int
         Pixels whose estimated error was still above target after the round (above the
         image's mean error when no target is set).
@@ -223,5 +227,5 @@ class RoundStats:
     pixels: int
     samples: int
     seconds: float
-    relative_error: float
+    error: float
     above_target: int

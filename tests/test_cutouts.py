@@ -118,3 +118,22 @@ def test_blended_shadow_lets_through_one_minus_opacity():
                                np.full(n, 1e-3)])
     occluded = accel.occluded(origins, np.tile([0.0, 0.0, 1.0], (n, 1)), np.full(n, 5.0))
     assert occluded.mean() == pytest.approx(0.3, abs=0.03)
+
+
+def test_normal_map_tilts_the_shading_normal_along_the_uv_tangent():
+    # a plane facing +z with u along +x and v along +y; a texel that encodes the tangent-space
+    # normal (sin a, 0, cos a) gives the world normal (sin a, 0, cos a) on the front, and its
+    # opposite on the back (the same tilted surface seen from the other side)
+    a = 0.4
+    texel = 0.5 + 0.5 * np.array([np.sin(a), 0.0, np.cos(a)])
+    material = Material("bumpy", normal_texture=Texture(np.tile(texel, (2, 2, 1))))
+    scene = Scene.from_parts([plane("p")], [material], lights=[])
+    textures = SurfaceTextures(scene)
+    prim = np.array([0, 1])
+    u = v = np.array([0.25, 0.25])
+    front = textures.normal_mapped(np.tile([0.0, 0.0, 1.0], (2, 1)), prim, u, v, np.zeros(2, np.intp),
+                                   np.ones(2))
+    np.testing.assert_allclose(front, np.tile([np.sin(a), 0.0, np.cos(a)], (2, 1)), atol=1e-12)
+    back = textures.normal_mapped(np.tile([0.0, 0.0, -1.0], (2, 1)), prim, u, v, np.zeros(2, np.intp),
+                                  -np.ones(2))
+    np.testing.assert_allclose(back, np.tile([-np.sin(a), 0.0, -np.cos(a)], (2, 1)), atol=1e-12)

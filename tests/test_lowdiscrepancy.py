@@ -63,3 +63,19 @@ def test_scramble_is_a_permutation_of_the_high_bits():
 def test_pure_function_of_index_and_key():
     a = sobol_02(np.array([5, 9, 5]), np.array([3, 3, 3], dtype=np.uint64))
     assert np.array_equal(a[0], a[2]) and not np.array_equal(a[0], a[1])
+
+
+def test_a_point_does_not_depend_on_the_other_indices_in_the_call():
+    # each point alone, and in calls with few indices (where some bit is set in no
+    # scrambled index), equals the point computed among many: rounds and chunks of any
+    # size take the same samples
+    rng = np.random.default_rng(5)
+    index = rng.integers(0, 1 << 12, 300)
+    keys = rng.integers(0, 1 << 63, 300).astype(np.uint64)
+    together = sobol_02(index, keys)
+    alone = np.concatenate([sobol_02(index[i:i + 1], keys[i:i + 1]) for i in range(300)])
+    np.testing.assert_array_equal(alone, together)
+    # a hand-computed case: one key, index 16 alone against indices 0..31
+    key = np.array([11], dtype=np.uint64)
+    np.testing.assert_array_equal(sobol_02(np.array([16]), key),
+                                  sobol_02(np.arange(32), np.repeat(key, 32))[16:17])

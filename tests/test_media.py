@@ -16,6 +16,7 @@ from rtmesh.camera import Camera
 from rtmesh.integrator import Integrator
 from rtmesh.materials import Material, MaterialTable
 from rtmesh.media import Media, coincident_faces
+from rtmesh.motion import Motion
 from rtmesh.scene import Scene
 from rtmesh.vecmath import fresnel_schlick, refract
 
@@ -309,3 +310,16 @@ def test_slabs_of_glass_in_water_shift_the_floor_by_snells_law():
     # the test can tell: with the water under the glass taken for air, many pixels flip
     stack_free = landing_x([(0.5, WATER), (1.0, GLASS), (0.5, 1.0), (0.5, 1.0)])
     assert ((stack_free < 0) != (x < 0)).sum() > 50
+
+
+def test_camera_inside_a_moving_glass_ball_is_found_where_the_shutter_opens():
+    # the ball rests at the origin, but moves 3 units along x and turns half a turn per unit
+    # time: when the shutter opens at t = 1 it is centred at x = 3, around the camera, and
+    # its faces point the other way round from their rest pose
+    ball = part("glass", icosphere(3, 1.0), 0)
+    ball.motion = Motion([3.0, 0.0, 0.0], [0.0, 0.0, 1.0], 180.0, centre=[0.0, 0.0, 0.0])
+    camera = Camera([3.0, 0.1, 0.2], [3.0, 1.0, 0.2], [0.0, 0.0, 1.0], 40.0, shutter=(1.0, 1.2))
+    scene = Scene.from_parts([ball], [glass(0.5)], [], camera, background=np.ones(3))
+    assert list(Integrator(scene, settings())._camera_medium) == [0, -1, -1, -1]
+    scene.camera = Camera([0.0, 0.1, 0.2], [0.0, 1.0, 0.2], [0.0, 0.0, 1.0], 40.0, shutter=(1.0, 1.2))
+    assert (Integrator(scene, settings())._camera_medium == -1).all()

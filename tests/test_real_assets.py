@@ -1,5 +1,6 @@
-"""Real mesh files (copies in tests/data of ../shared/assets/real): each renders with its
-materials and textures, or fails with one line and exit status 2."""
+"""Real mesh files (copies in tests/data of ../shared/assets/real, the bunny in
+assets/meshes): each renders with its materials and textures, or fails with one line and exit
+status 2."""
 
 import glob
 import os
@@ -14,7 +15,9 @@ from rtmesh.cli import main
 from rtmesh.errors import MeshError
 
 DATA = os.path.join(os.path.dirname(__file__), "data")
-SHARED = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "assets", "real")
+# every real file: the copies in tests/data plus the bundled bunny (the same file)
+REAL_FILES = sorted(glob.glob(os.path.join(DATA, "*.obj")) + glob.glob(os.path.join(DATA, "*.glb"))
+                    + [os.path.join(os.path.dirname(__file__), "..", "assets", "meshes", "bunny.ply")])
 TINY = dict(width=40, height=40, spp=1, threads=1)
 
 
@@ -108,10 +111,15 @@ def test_empty_obj_is_a_clear_error():
         load_scene(os.path.join(DATA, "empty.obj"))
 
 
-@pytest.mark.skipif(not os.path.isdir(SHARED), reason="shared real assets not present")
-@pytest.mark.parametrize("path", sorted(p for p in glob.glob(os.path.join(SHARED, "*"))
-                                        if p.endswith((".obj", ".glb", ".ply"))))
-def test_shared_real_asset_renders_or_fails_with_one_line(path, tmp_path, capsys):
+def test_real_files_are_all_here():
+    names = {os.path.basename(p) for p in REAL_FILES}
+    assert names == {"BoxTextured.glb", "Duck.glb", "bunny.ply", "empty.obj", "fandisk.obj",
+                     "fuze.obj", "monkey.glb", "nancolor.obj", "notenoughindices.obj",
+                     "quadknot.obj", "rabbit.obj", "textured_tetrahedron.obj"}
+
+
+@pytest.mark.parametrize("path", REAL_FILES, ids=os.path.basename)
+def test_real_asset_renders_or_fails_with_one_line(path, tmp_path, capsys):
     # every real file either renders (exit 0) or is a one-line error (exit 2); in-process
     # (the subprocess tests above check the same path once, without the start-up cost)
     code = main(["render", path, "-o", str(tmp_path / "x.png"), "--width", "24", "--height", "24",

@@ -10,7 +10,7 @@ with the geometry scaled and moved far from the origin (Accel does not re-centre
 import numpy as np
 import pytest
 
-from rtmesh.accel import Accel, offset_ray_origins
+from rtmesh.accel import Accel, float32_ulp, offset_ray_origins
 
 from scenes import (box, icosphere, pixel_centre_rays, ray_sphere_distances, render,
                     sphere_on_floor_scene)
@@ -304,3 +304,12 @@ def test_scene_far_from_the_origin_renders_like_the_scene_at_the_origin():
     differing = np.abs(far - near) > 1e-4 * (near.max())
     assert differing.mean() < 0.002
     assert np.abs(far - near).mean() < 1e-5
+
+
+def test_float32_ulp_is_numpy_spacing_for_normal_floats():
+    rng = np.random.default_rng(3)
+    x = (rng.normal(size=(1000, 3)) * 10.0 ** rng.integers(-30, 30, size=(1000, 3))).astype(np.float32)
+    x = np.concatenate([x, np.float32([[1.0, -2.0, 2.0 ** -126], [3e38, -0.5, 1e-20]])])
+    assert np.array_equal(float32_ulp(x), np.spacing(np.abs(x)))
+    assert float32_ulp(np.asfortranarray(x)).flags.f_contiguous
+    assert float32_ulp(np.float32([0.0]))[0] == 0.0
