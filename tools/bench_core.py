@@ -168,10 +168,11 @@ def write_section(text, section=SECTION):
     old = DOC.read_text() if DOC.exists() else "# Benchmarks\n"
     pattern = re.compile(rf"^## {re.escape(section)}\n.*?(?=^## |\Z)", re.S | re.M)
     if pattern.search(old):
-        new = pattern.sub(lambda _: text, old)
+        # the pattern takes the blank line before the next section with it: put it back
+        new = pattern.sub(lambda _: text.rstrip("\n") + "\n\n", old)
     else:
         new = old.rstrip("\n") + "\n\n" + text
-    DOC.write_text(new)
+    DOC.write_text(new.rstrip("\n") + "\n")
 
 
 def publish(text, section=SECTION, write=True):
