@@ -8,6 +8,8 @@ from rtmesh.lowdiscrepancy import nested_uniform_scramble, reverse_bits, sobol_0
 
 def test_reverse_bits_matches_scalar_reference():
     values = np.array([0, 1, 2, 0x80000000, 0x12345678, 0xFFFFFFFF, 0xDEADBEEF], dtype=np.uint32)
+    values = np.concatenate([values, np.random.default_rng(2).integers(0, 2 ** 32, 500, dtype=np.uint64)
+                             .astype(np.uint32)])
     expected = [int(f"{int(v):032b}"[::-1], 2) for v in values]
     assert reverse_bits(values).tolist() == expected
 
@@ -79,3 +81,21 @@ def test_a_point_does_not_depend_on_the_other_indices_in_the_call():
     key = np.array([11], dtype=np.uint64)
     np.testing.assert_array_equal(sobol_02(np.array([16]), key),
                                   sobol_02(np.arange(32), np.repeat(key, 32))[16:17])
+
+
+def test_generator_matrix_products_match_a_bit_by_bit_reference():
+    # the byte tables must give exactly the GF(2) product of the index bits with the
+    # matrix columns, for indices using all 32 bits (scrambled indices do)
+    from rtmesh.lowdiscrepancy import _SOBOL1, _SOBOL1_TABLES, _VDC, _VDC_TABLES, _sobol_bits
+
+    index = np.random.default_rng(5).integers(0, 2 ** 32, 2000, dtype=np.uint64).astype(np.uint32)
+    index[:3] = [0, 1, 2 ** 32 - 1]
+    for matrix, tables in ((_VDC, _VDC_TABLES), (_SOBOL1, _SOBOL1_TABLES)):
+        expected = []
+        for i in index.tolist():
+            acc = 0
+            for k in range(32):
+                if i >> k & 1:
+                    acc ^= int(matrix[k])
+            expected.append(acc)
+        assert np.array_equal(_sobol_bits(index, tables), np.array(expected, dtype=np.uint32))
