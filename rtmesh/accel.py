@@ -86,8 +86,11 @@ def offset_ray_origins(points, normals, dtype=np.float64, scale=1.0, directions=
     # back its old value, so the point leaves every plane through it that the ray moves
     # away from (an addition of at least one ulp always lands on another float)
     step = move * distance[:, None]
-    step += np.sign(move) * ulp
-    return (p + step).astype(dtype, copy=False)
+    # in place on temporaries this function owns: fewer (n, 3) arrays to allocate (but
+    # not np.sign: NumPy's in-place sign is several times slower than a fresh one)
+    step += np.multiply(np.sign(move), ulp, out=ulp)
+    p += step
+    return p.astype(dtype, copy=False)
 
 
 def float32_ulp(x):
@@ -107,7 +110,9 @@ def float32_ulp(x):
         Laid out like ``x``.
     """
     exponent_bits = x.view(np.int32) & np.int32(0x7F800000)  # drops sign and mantissa
-    return exponent_bits.view(np.float32) * np.float32(2.0 ** -23)
+    ulp = exponent_bits.view(np.float32)
+    ulp *= np.float32(2.0 ** -23)  # in place on the fresh array
+    return ulp
 
 
 class Hits:

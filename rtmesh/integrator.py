@@ -731,6 +731,10 @@ class Integrator:
             value = reflectance(wi, lit)
             # origins only for the lit rows, offset along the normal and the shadow ray
             p_j, wi_j = take_rows(p, j), take_rows(wi, j)
+            if srf.time is None:
+                # converted to float32 once, for the offset and for Embree (motion blur
+                # moves the rays into the movers' rest frames in float64: not there)
+                wi_j = wi_j.astype(np.float32)
             origins = offset_ray_origins(p_j, take_rows(ng, j), np.float32, self.offset_scale, wi_j)
             clock.lap("shade")
             occluded = self._occluded(origins, wi_j, distance[j] * _SHADOW_SHORTEN,
@@ -740,8 +744,9 @@ class Integrator:
             visible = np.zeros(k, dtype=bool)
             visible[j] = ~occluded
             np.multiply(value, incident, out=value)
-            contribution = np.where(visible[:, None], value, 0.0)
-            total = contribution if total is None else total + contribution
+            # shadowed and unlit rows get 0 in place (no new (k, 3) array)
+            np.copyto(value, 0.0, where=~visible[:, None])
+            total = value if total is None else np.add(total, value, out=total)
         if self.stages["area_lights"]:
             pixel, sample_in_pixel = keys
             sample = take_rows(srf.sample, rows)

@@ -52,7 +52,7 @@ class PointLight:
         distance = norm(to_light)
         # a light sitting exactly on a point lights it from nowhere: direction 0, term 0
         safe = np.where(distance > 0.0, distance, np.inf)
-        wi = to_light / safe[:, None]
+        wi = np.divide(to_light, safe[:, None], out=to_light)  # in place: one temporary fewer
         # component-major like the points (see rtmesh.batches): the shading arithmetic
         # that combines the two then runs on contiguous columns
         incident = component_major(self.intensity[:, None] / (safe * safe))
@@ -144,7 +144,7 @@ class SpotLight:
         to_light = self.position[None, :] - points
         distance = norm(to_light)
         safe = np.where(distance > 0.0, distance, np.inf)
-        wi = to_light / safe[:, None]
+        wi = np.divide(to_light, safe[:, None], out=to_light)  # in place: one temporary fewer
         cone = self.falloff(-(wi @ self.direction))
         incident = component_major(self.intensity[:, None] * (cone / (safe * safe)))
         return wi, distance, incident
