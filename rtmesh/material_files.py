@@ -366,11 +366,14 @@ def gltf_material(pbr, json_material=None, name="gltf"):
             absorption = -np.log(tint) / distance
     mode = f["mode"]
     texture = None
+    wraps = (json_material or {}).get(WRAP_KEY, {})
     if pbr.baseColorTexture is not None:
-        texture = Texture.from_pil(pbr.baseColorTexture, srgb=True, name=f"{name} baseColorTexture")
+        texture = Texture.from_pil(pbr.baseColorTexture, srgb=True, name=f"{name} baseColorTexture",
+                                   wrap=wraps.get("baseColorTexture", "repeat"))
     normal = None
     if pbr.normalTexture is not None:
-        normal = Texture.from_pil(pbr.normalTexture, srgb=False, name=f"{name} normalTexture")
+        normal = Texture.from_pil(pbr.normalTexture, srgb=False, name=f"{name} normalTexture",
+                                  wrap=wraps.get("normalTexture", "repeat"))
     not_transmitted = 1.0 - transmission.max()
     return Material(
         name=pbr.name or name,
@@ -394,10 +397,34 @@ def gltf_material(pbr, json_material=None, name="gltf"):
     )
 
 
+# glTF sampler wrap modes (the OpenGL enums) as Texture wrap modes; glTF's default is REPEAT
+_GLTF_WRAP = {33071: "clamp", 33648: "mirror", 10497: "repeat"}
+# where gltf_json_materials puts each texture's (u, v) wrap modes in a material object
+WRAP_KEY = "rtmesh:wrap"
+
+
+def _texture_wrap(doc, texture_info):
+    """(wrap_u, wrap_v) of a glTF textureInfo through its texture's sampler."""
+    try:
+        texture = doc["textures"][texture_info["index"]]
+        sampler = doc["samplers"][texture["sampler"]] if "sampler" in texture else {}
+    except (KeyError, IndexError, TypeError):
+        return ("repeat", "repeat")
+    return tuple(_GLTF_WRAP.get(sampler.get(axis, 10497), "repeat") for axis in ("wrapS", "wrapT"))
+
+
 def gltf_json_materials(doc):
-    """``{material name: material object}`` of a glTF JSON document (unnamed ones skipped)."""
+    """``{material name: material object}`` of a glTF JSON document (unnamed ones skipped).
+
+    Each object is a copy with the wrap modes of its base-colour and normal textures under
+    :data:`WRAP_KEY` (``{"baseColorTexture": (u, v), ...}``), read from the samplers, which
+    trimesh does not keep.
+    """
     out = {}
     for material in doc.get("materials", []) or []:
         if isinstance(material, dict) and isinstance(material.get("name"), str):
-            out[material["name"]] = material
+            infos = {"baseColorTexture": (material.get("pbrMetallicRoughness") or {}).get("baseColorTexture"),
+                     "normalTexture": material.get("normalTexture")}
+            wraps = {slot: _texture_wrap(doc, info) for slot, info in infos.items() if isinstance(info, dict)}
+            out[material["name"]] = {**material, WRAP_KEY: wraps}
     return out

@@ -20,8 +20,9 @@ class Texture:
     ----------
     pixels : (h, w, c) float
         Texel values, row 0 at the top of the image; already linear.
-    wrap : {"repeat", "clamp", "mirror"}
-        What UVs outside [0, 1] read.
+    wrap : {"repeat", "clamp", "mirror"} or (str, str)
+        What UVs outside [0, 1] read: one mode for both axes, or a mode for u and one for v
+        (glTF samplers set ``wrapS`` and ``wrapT`` apart).
     name : str
         For messages.
 
@@ -33,13 +34,16 @@ class Texture:
     """
 
     def __init__(self, pixels, wrap="repeat", name="texture"):
-        if wrap not in WRAP_MODES:
-            raise ValueError(f"unknown wrap mode {wrap!r}; expected one of {', '.join(WRAP_MODES)}")
+        modes = (wrap, wrap) if isinstance(wrap, str) else tuple(wrap)
+        if len(modes) != 2 or any(mode not in WRAP_MODES for mode in modes):
+            raise ValueError(f"unknown wrap mode {wrap!r}; expected one of {', '.join(WRAP_MODES)}"
+                             " or a pair of them")
         pixels = np.asarray(pixels, dtype=np.float64)
         if pixels.ndim == 2:
             pixels = pixels[:, :, None]
         self.pixels = pixels
         self.wrap = wrap
+        self.wrap_u, self.wrap_v = modes
         self.name = name
 
     @classmethod
@@ -70,10 +74,11 @@ class Texture:
     def channels(self):
         return self.pixels.shape[2]
 
-    def _wrap(self, i, size):
-        if self.wrap == "repeat":
+    @staticmethod
+    def _wrap(i, size, mode):
+        if mode == "repeat":
             return np.mod(i, size)
-        if self.wrap == "clamp":
+        if mode == "clamp":
             return np.clip(i, 0, size - 1)
         period = np.mod(i, 2 * size)
         return np.where(period < size, period, 2 * size - 1 - period)
@@ -95,8 +100,8 @@ class Texture:
         x0, y0 = np.floor(x), np.floor(y)
         fx, fy = (x - x0)[:, None], (y - y0)[:, None]
         x0, y0 = x0.astype(np.int64), y0.astype(np.int64)
-        xs = (self._wrap(x0, w), self._wrap(x0 + 1, w))
-        ys = (self._wrap(y0, h), self._wrap(y0 + 1, h))
+        xs = (self._wrap(x0, w, self.wrap_u), self._wrap(x0 + 1, w, self.wrap_u))
+        ys = (self._wrap(y0, h, self.wrap_v), self._wrap(y0 + 1, h, self.wrap_v))
         p = self.pixels
         top = p[ys[0], xs[0]] * (1.0 - fx) + p[ys[0], xs[1]] * fx
         bottom = p[ys[1], xs[0]] * (1.0 - fx) + p[ys[1], xs[1]] * fx

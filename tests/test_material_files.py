@@ -208,3 +208,24 @@ def test_smoothing_by_angle_keeps_the_material_and_carries_uvs():
     assert len(part.vertices) > len(box.vertices)  # split at the 90 degree creases
     np.testing.assert_allclose(materials[0].diffuse, np.round(np.array([0.2, 0.4, 0.6]) * 255) / 255)
     np.testing.assert_allclose(part.uv, part.vertices[:, :2] + 0.5)
+
+
+def test_gltf_sampler_wrap_modes_reach_the_textures():
+    # glTF keeps wrapS / wrapT in samplers, which trimesh drops: read from the JSON
+    from rtmesh.material_files import WRAP_KEY, gltf_json_materials
+
+    doc = {"samplers": [{"wrapS": 33071, "wrapT": 33648}, {}],
+           "textures": [{"source": 0, "sampler": 0}, {"source": 0, "sampler": 1}, {"source": 0}],
+           "materials": [{"name": "a", "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}},
+                          "normalTexture": {"index": 1}},
+                         {"name": "b", "pbrMetallicRoughness": {"baseColorTexture": {"index": 2}}},
+                         {"name": "c", "pbrMetallicRoughness": {"baseColorTexture": {"index": 9}}}]}
+    materials = gltf_json_materials(doc)
+    assert materials["a"][WRAP_KEY] == {"baseColorTexture": ("clamp", "mirror"),
+                                        "normalTexture": ("repeat", "repeat")}
+    assert materials["b"][WRAP_KEY] == {"baseColorTexture": ("repeat", "repeat")}
+    assert materials["c"][WRAP_KEY] == {"baseColorTexture": ("repeat", "repeat")}  # bad index
+    image = Image.new("RGB", (2, 2), (200, 100, 50))
+    m = gltf_material(pbr(baseColorTexture=image, normalTexture=image), materials["a"])
+    assert (m.diffuse_texture.wrap_u, m.diffuse_texture.wrap_v) == ("clamp", "mirror")
+    assert (m.normal_texture.wrap_u, m.normal_texture.wrap_v) == ("repeat", "repeat")

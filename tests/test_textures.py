@@ -56,3 +56,19 @@ def test_srgb_texels_are_decoded_to_linear_and_alpha_is_not():
     assert value[3] == pytest.approx(srgb)  # alpha stays linear
     data = Texture.from_8bit(texels, srgb=False).sample(np.array([[0.5, 0.5]]))[0]
     assert data[1] == pytest.approx(srgb)
+
+
+def test_wrap_modes_apply_per_axis():
+    # u repeats, v clamps: one texel past the right edge reads column 0, one texel above
+    # the top row reads row 0 again (clamped), not row 1 (repeated)
+    texture = Texture(PIXELS, wrap=("repeat", "clamp"))
+    right_of_image = np.array([uv_of_texel(3, 0)])
+    above_image = np.array([uv_of_texel(1, -1)])
+    assert texture.sample(right_of_image)[0, 0] == PIXELS[0, 0]
+    assert texture.sample(above_image)[0, 0] == PIXELS[0, 1]
+    assert Texture(PIXELS, wrap=("clamp", "repeat")).sample(above_image)[0, 0] == PIXELS[1, 1]
+
+
+def test_unknown_wrap_mode_is_an_error():
+    with pytest.raises(ValueError, match="wrap mode"):
+        Texture(PIXELS, wrap=("repeat", "tile"))
