@@ -46,6 +46,7 @@ import numpy as np
 
 from .accel import offset_ray_origins
 from .batches import STACK_DEPTH
+from .vecmath import dot
 
 # Probe directions for the camera's medium: a few directions with no simple rational
 # relation to the axes (so they do not run along the edges of axis-aligned models), spread
@@ -204,7 +205,7 @@ class Media:
             travelled[active] += t
             d = directions[active]
             d_rest = d if to_rest is None else to_rest(prim, d)
-            leaving = np.einsum("ij,ij->i", d_rest, self.face_normals[prim]) > 0.0
+            leaving = dot(d_rest, self.face_normals[prim]) > 0.0
             crossed = [(prim, leaving)]
             if self.any_twins:
                 twin = self.twin.take(prim)
