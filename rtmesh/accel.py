@@ -15,8 +15,8 @@ import numpy as np
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
-from .batches import component_major, take_rows
-from .vecmath import dot
+from .batches import take_rows
+from . import kernels
 
 # The origin offset (see offset_ray_origins).  A spawned ray must start clear of the surface
 # it leaves, by more than two errors (in the spirit of Waechter & Binder, "A Fast and Robust
@@ -31,11 +31,8 @@ from .vecmath import dot
 # the point's own magnitude and the scene's size, so the offset stays a tiny fraction of
 # any object even far from the origin (the former fixed 256-ulp offset was ~2 units at
 # |x| ~ 1e5, more than a unit object, which rays then tunnelled through).
-_ULPS = np.float32(4.0)
-_EXTENT_EPSILONS = np.float32(16.0 * np.finfo(np.float32).eps)
-# How far a ray's origin also moves along its own direction, relative to the normal offset
-# (see offset_ray_origins: it clears the neighbouring faces at edges and vertices).
-_DIRECTION_SHARE = np.float32(0.25)
+# The constants (ULPS = 4, EXTENT_EPSILONS = 16 eps32, DIRECTION_SHARE = 1/4) and the arithmetic
+# are in rtmesh.kernels, which applies them one row at a time.
 
 
 def offset_ray_origins(points, normals, dtype=np.float64, scale=1.0, directions=None):
@@ -75,22 +72,10 @@ def offset_ray_origins(points, normals, dtype=np.float64, scale=1.0, directions=
         Offset origins, laid out like ``points``; every value is exactly representable in
         float32, so handing them to Embree does not round them back onto the surface.
     """
-    p = points.astype(np.float32)
-    n = normals.astype(np.float32)
-    ulp = float32_ulp(p)
-    distance = _ULPS * dot(np.abs(n), ulp) + _EXTENT_EPSILONS * np.float32(scale)
-    move = n
-    if directions is not None:
-        move = n + _DIRECTION_SHARE * directions.astype(np.float32)
-    # one more ulp in every coordinate the offset changes: float32 rounding cannot give it
-    # back its old value, so the point leaves every plane through it that the ray moves
-    # away from (an addition of at least one ulp always lands on another float)
-    step = move * distance[:, None]
-    # in place on temporaries this function owns: fewer (n, 3) arrays to allocate (but
-    # not np.sign: NumPy's in-place sign is several times slower than a fresh one)
-    step += np.multiply(np.sign(move), ulp, out=ulp)
-    p += step
-    return p.astype(dtype, copy=False)
+    no_directions = np.zeros((0, 3), dtype=np.float32)
+    origins = kernels.offset_origins(points, normals, no_directions if directions is None else directions,
+                                     np.float32(scale))
+    return origins.astype(dtype, copy=False)
 
 
 def float32_ulp(x):
@@ -109,10 +94,7 @@ def float32_ulp(x):
     (...) float32
         Laid out like ``x``.
     """
-    exponent_bits = x.view(np.int32) & np.int32(0x7F800000)  # drops sign and mantissa
-    ulp = exponent_bits.view(np.float32)
-    ulp *= np.float32(2.0 ** -23)  # in place on the fresh array
-    return ulp
+    return kernels.ulp32(x)
 
 
 class Hits:

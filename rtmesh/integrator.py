@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .accel import Accel, barycentric_interpolate, corner_table, offset_ray_origins
+from .accel import Accel, corner_table, offset_ray_origins
 from .area_lights import AreaLighting, emissive_mesh_light, is_area_light
 from .adaptive import render_rounds
 from .aov import DERIVED_PASSES, PassRecorder, derived_pass
@@ -42,9 +42,11 @@ from .motion import MotionAccel, blurs, object_motions, scene_at_time, swept_bou
 from .sampling import (Dim, decorrelated_points, pixel_offsets, square_to_cosine_hemisphere,
                        stratified_values)
 from .settings import RenderStats
-from .vecmath import (dot, face_viewer, fresnel_dielectric, fresnel_schlick, normalize, orthonormal_basis,
-                      reflect, refract)
-from .materials import ALPHA_MODES, blinn_phong_highlight, lambert
+from .vecmath import (dot, face_viewer, fresnel_dielectric, fresnel_schlick, orthonormal_basis, reflect,
+                      refract)
+from .materials import ALPHA_MODES
+from .kernels import (add_unoccluded, light_highlights, light_samples, surface_records,
+                      surface_reflectance)
 from .texturing import SurfaceTextures
 from .cutouts import CutoutAccel
 
@@ -60,6 +62,8 @@ CHUNKS_IN_FLIGHT_PER_THREAD = 2
 # Shadow rays to point and spot lights stop this fraction short of the light, so a light
 # placed exactly on a surface does not count that surface as an occluder.
 _SHADOW_SHORTEN = 1.0 - 1e-5
+# an empty (0, 3) array stands for "none" in the kernels' optional vector arguments
+_NO_VECTORS = np.zeros((0, 3))
 # smallest chunk (pixel samples) the thread balancing of Integrator.render_samples makes
 _MIN_CHUNK_SAMPLES = 2048
 
@@ -243,7 +247,13 @@ class Integrator:
         self._specular = component_major(m.specular.T)
         self._emission = component_major(m.emission.T)
         self._ambient_light = component_major((m.ambient * scene.ambient).T)
+        # the highlight's exponent per material; negative: no highlight
+        self._highlight_exponent = np.where(self._has_specular, m.shininess, -1.0)
+        self._light_parameters = [light.kernel_parameters() for light in self.lights]
+        self._offset_scale32 = np.float32(self.offset_scale)
         self._faces, self._vertex_normals = self._face_tables()
+        self._smooth = (np.zeros(len(scene.faces), dtype=bool) if scene.smooth is None
+                        else np.ascontiguousarray(scene.smooth, dtype=bool))
         # gathers with int32 indices are ~10x slower in NumPy than with intp ones
         self._material_id = scene.material_id.astype(np.intp)
 
@@ -278,26 +288,25 @@ class Integrator:
         self._camera_absorbs = bool((self.media.absorption[self._camera_medium[0]] > 0).any())
 
     def _face_tables(self):
-        """What shading reads per hit triangle, packed so that one gather fetches it.
+        """What shading reads per hit triangle, packed so that one row holds it.
 
         Returns
         -------
         faces : (F, 12) float64
-            Component-major columns: the triangle ``[v0, v1 - v0, v2 - v0]`` as Embree saw
-            it (:attr:`Accel.triangles`, ready for :func:`barycentric_interpolate`) and the
+            Row-major (the surface kernel reads whole rows): the triangle
+            ``[v0, v1 - v0, v2 - v0]`` as Embree saw it (:attr:`Accel.triangles`) and the
             unit geometric normal.
-        vertex_normals : (F, 9) float64 or None
-            Component-major ``[n0, n1 - n0, n2 - n0]`` of each face's vertex normals, for
-            :func:`barycentric_interpolate`; gathered only for hits on smooth faces.
+        vertex_normals : (F, 9) float64
+            Row-major ``[n0, n1 - n0, n2 - n0]`` of each face's vertex normals; ``(0, 9)``
+            without smooth shading.
         """
         sc = self.scene
-        faces = np.zeros((12, len(sc.faces)))
-        faces[:9] = self.accel.triangles.T  # rows of a component-major table: plain copies
-        faces[9:] = sc.face_normals.T
-        faces = faces.T
+        faces = np.empty((len(sc.faces), 12))
+        faces[:, :9] = self.accel.triangles
+        faces[:, 9:] = sc.face_normals
         if not self.stages["smooth_normals"]:
-            return faces, None
-        return faces, corner_table(sc.vertex_normals, sc.faces)
+            return faces, np.zeros((0, 9))
+        return faces, np.ascontiguousarray(corner_table(sc.vertex_normals, sc.faces))
 
     # ---------------------------------------------------------------- whole image
     def render(self, progress=None):
@@ -584,61 +593,38 @@ class Integrator:
         return next_rays
 
     def _surfaces(self, rays, hits, rows, sample_time=None):
-        """Hit points, normals facing the incoming ray, and material ids of the hit ``rows``.
+        """Hit points, normals facing the incoming ray, and material ids of the hit ``rows``
+        (see :func:`rtmesh.kernels.surface_records`).
 
         With motion blur, points and normals are formed on the rest pose of the object hit
         and moved to the ray's time at the end (see :mod:`rtmesh.motion`).
         """
         srf = _Surfaces()
-        prim = take_rows(hits.prim, rows).astype(np.intp)
-        u, v = take_rows(hits.u, rows), take_rows(hits.v, rows)
-        face = take_rows(self._faces, prim)
-        srf.p = barycentric_interpolate(face[:, 0:9], u, v)
         srf.sample = take_rows(rays.sample, rows)
-        srf.d = take_rows(rays.directions, rows)
         srf.time = None if sample_time is None else sample_time[srf.sample]
-        ng = face[:, 9:12]
-        d = srf.d if srf.time is None else self.motion.directions_to_rest(prim, srf.time, srf.d)
-        srf.front = dot(d, ng) < 0.0
-        flip = np.where(srf.front, 1.0, -1.0)
-        srf.ng = ng * flip[:, None]
-        srf.mat = self._material_id.take(prim)
-        srf.prim = prim
-        if self.stages["smooth_normals"]:
-            srf.ns = self._shading_normals(prim, u, v, flip, srf.ng)
-        else:
-            srf.ns = srf.ng
+        view = _NO_VECTORS
+        if srf.time is not None:
+            view = self.motion.directions_to_rest(take_rows(hits.prim, rows).astype(np.intp), srf.time,
+                                                  take_rows(rays.directions, rows))
+        normal_maps = self.stages["normal_maps"]
+        # the shading-normal terminator fix (see face_viewer) runs in the kernel unless
+        # normal maps, applied below, change the normals after it
+        (srf.p, srf.ng, srf.ns, srf.d, srf.front, srf.mat, srf.prim, u, v) = surface_records(
+            hits.prim, hits.u, hits.v, np.arange(len(hits)) if rows is None else rows, rays.directions,
+            view, self._faces, self._vertex_normals, self._smooth, self._material_id,
+            self.stages["smooth_normals"] and not normal_maps)
         srf.tints = None
         if self.stages["textures"]:
-            srf.tints = self.textures.tints(prim, u, v, srf.mat)
-            if self.stages["normal_maps"]:
-                srf.ns = self.textures.normal_mapped(srf.ns, prim, u, v, srf.mat, flip)
-        if self.stages["smooth_normals"] or self.stages["normal_maps"]:
-            # the shading-normal terminator: no normal facing away from the viewer or
-            # below the real surface (see face_viewer)
-            srf.ns = face_viewer(srf.ns, srf.ng, d)  # rest frame, like ns and ng
+            srf.tints = self.textures.tints(srf.prim, u, v, srf.mat)
+            if normal_maps:
+                flip = np.where(srf.front, 1.0, -1.0)
+                srf.ns = self.textures.normal_mapped(srf.ns, srf.prim, u, v, srf.mat, flip)
+                # in the rest frame, like ns and ng
+                srf.ns = face_viewer(srf.ns, srf.ng, srf.d if srf.time is None else view)
         if srf.time is not None:
-            srf.p, srf.ng, srf.ns = self.motion.surfaces_to_world(prim, srf.time, srf.p, srf.ng,
+            srf.p, srf.ng, srf.ns = self.motion.surfaces_to_world(srf.prim, srf.time, srf.p, srf.ng,
                                                                   srf.ns)
         return srf
-
-    def _shading_normals(self, prim, u, v, flip, ng):
-        """Interpolated vertex normals on smooth faces, ``ng`` elsewhere; (k, 3).
-
-        Only the rows on smooth faces are interpolated.  An interpolated normal on the other
-        side of the surface than ``ng`` (possible near silhouettes), or not finite (zero or
-        broken vertex normals), is left for :func:`face_viewer` to replace with ``ng``.
-        """
-        smooth_face = self.scene.smooth.take(prim)
-        rows = None if smooth_face.all() else np.flatnonzero(smooth_face)
-        if rows is not None and not len(rows):
-            return ng
-        corner_and_edges = take_rows(self._vertex_normals, take_rows(prim, rows))
-        ns = normalize(barycentric_interpolate(corner_and_edges, take_rows(u, rows), take_rows(v, rows)),
-                       scale=take_rows(flip, rows))
-        if rows is None:
-            return ns
-        return _put_rows(ng.copy(order="K"), rows, ns)
 
     def _local_shading(self, srf, depth, ao_pass, keys, stats, clock):
         """Emission, ambient (with AO) and direct light with shadows; (k, 3) or None."""
@@ -676,8 +662,9 @@ class Integrator:
         return local
 
     def _direct_light(self, srf, depth, keys, stats, clock):
-        """Blinn-Phong light from every light: one shadow ray per lit (hit, point-like light),
-        ``light_samples`` per (hit, area light) (see :mod:`rtmesh.area_lights`).
+        """Blinn-Phong light from every light: one shadow ray per lit (hit, point-like light)
+        (see :func:`rtmesh.kernels.light_samples`), ``light_samples`` per (hit, area light)
+        (see :mod:`rtmesh.area_lights`).
 
         Returns
         -------
@@ -688,76 +675,47 @@ class Integrator:
         rows = None if shaded.all() else np.flatnonzero(shaded)
         if rows is not None and not len(rows):
             return None
-        p, ng, ns, d, mat = (take_rows(a, rows) for a in (srf.p, srf.ng, srf.ns, srf.d, srf.mat))
-        k = len(mat)
-        kd = take_rows(self._diffuse, mat)
+        # per-row colours and exponents: the kernels then read contiguous rows
+        mat = take_rows(srf.mat, rows)
+        kd, ks = take_rows(self._diffuse, mat), take_rows(self._specular, mat)
         tints = srf.tints
         if tints is not None and tints.diffuse is not None:
             kd = kd * take_rows(tints.diffuse, rows)
-        ks = self._specular
         if tints is not None and tints.specular is not None:
-            # per-hit specular colours: gathered with the hit rows instead of by material
-            ks = take_rows(self._specular, srf.mat) * tints.specular
-        # the highlight (with its costly power) only where a material has one
-        spec_rows = None
-        if self.stages["specular"]:
-            has_specular = self._has_specular.take(mat)
-            spec_rows = None if has_specular.all() else np.flatnonzero(has_specular)
-
-        def reflectance(wi, lit):
-            """Blinn-Phong factor toward unit directions ``wi``; highlights only where ``lit``."""
-            cos_i = dot(ns, wi)
-            value = lambert(cos_i, kd)
-            if self.stages["specular"]:
-                s = spec_rows if spec_rows is None else spec_rows[lit[spec_rows]]
-                mat_s = take_rows(mat, s)
-                highlight = blinn_phong_highlight(
-                    take_rows(ns, s), -take_rows(d, s), take_rows(wi, s), take_rows(cos_i, s),
-                    take_rows(self._specular, mat_s) if ks is self._specular
-                    else take_rows(take_rows(ks, rows), s),
-                    self.scene.materials.shininess[mat_s])
-                value = _add_rows(value, s, highlight)
-            return value
-
+            ks = ks * take_rows(tints.specular, rows)
+        exponent = self._highlight_exponent.take(mat)
+        p, ng, ns, d = (take_rows(a, rows) for a in (srf.p, srf.ng, srf.ns, srf.d))
         total = None
-        for light in self.lights:
-            wi, distance, incident = light.illuminate(p)
-            # only lights on the side the ray came from can light this point (no leaks
-            # through the surface), and only where the light reaches at all
-            lit = (dot(wi, ng) > 0.0) & (incident > 0.0).any(axis=1)
-            j = np.flatnonzero(lit)
-            if not len(j):
+        for light in self._light_parameters:
+            cosine, power_exponent = light_highlights(light, p, ng, ns, d, exponent)
+            power = np.power(cosine, power_exponent, out=cosine)  # NumPy's pow is vectorised
+            lit, value, origins, directions, t_max = light_samples(
+                light, p, ng, ns, d, kd, ks, power, self._offset_scale32, _SHADOW_SHORTEN)
+            if not len(lit):
                 continue
-            value = reflectance(wi, lit)
-            # origins only for the lit rows, offset along the normal and the shadow ray
-            p_j, wi_j = take_rows(p, j), take_rows(wi, j)
-            if srf.time is None:
-                # converted to float32 once, for the offset and for Embree (motion blur
-                # moves the rays into the movers' rest frames in float64: not there)
-                wi_j = wi_j.astype(np.float32)
-            origins = offset_ray_origins(p_j, take_rows(ng, j), np.float32, self.offset_scale, wi_j)
+            lit = take_rows(rows, lit) if rows is not None else lit
             clock.lap("shade")
-            occluded = self._occluded(origins, wi_j, distance[j] * _SHADOW_SHORTEN,
-                                      _time_rows(srf.time, rows, j))
-            stats.rays["shadow"] += len(j)
+            occluded = self._occluded(origins, directions, t_max, _time_rows(srf.time, lit))
+            stats.rays["shadow"] += len(lit)
             clock.lap("shadow")
-            visible = np.zeros(k, dtype=bool)
-            visible[j] = ~occluded
-            np.multiply(value, incident, out=value)
-            # shadowed and unlit rows get 0 in place (no new (k, 3) array)
-            np.copyto(value, 0.0, where=~visible[:, None])
-            total = value if total is None else np.add(total, value, out=total)
+            if total is None:
+                total = np.zeros((len(srf.mat), 3), order="F")
+            add_unoccluded(total, lit, value, occluded)
         if self.stages["area_lights"]:
+
+            def reflectance(wi, lit):
+                """Blinn-Phong factor toward unit directions ``wi``; highlights only where ``lit``."""
+                return surface_reflectance(ns, d, wi, lit, kd, ks, exponent)
+
             pixel, sample_in_pixel = keys
             sample = take_rows(srf.sample, rows)
-            area = self.area_lighting.direct(p, ng, reflectance, pixel[sample],
-                                             sample_in_pixel[sample], depth, stats, clock,
-                                             _time_rows(srf.time, rows))
+            area = self.area_lighting.direct(p, ng, reflectance, pixel[sample], sample_in_pixel[sample], depth,
+                                             stats, clock, _time_rows(srf.time, rows))
             if area is not None:
-                total = area if total is None else total + area
-        if total is None or rows is None:
-            return total
-        return _put_rows(np.zeros((len(srf.mat), 3), order="F"), rows, total)
+                if total is None:
+                    total = np.zeros((len(srf.mat), 3), order="F")
+                _add_rows(total, rows, area)
+        return total
 
     def _ambient_occlusion(self, srf, depth, keys, stats):
         """Fraction of cosine-weighted hemisphere rays that escape within ``ao_distance``."""

@@ -10,9 +10,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .batches import component_major
+from . import kernels
 from .materials import as_colour
-from .vecmath import norm
+
+
+def _parameters(kind, position=(0.0, 0.0, 0.0), direction=(0.0, 0.0, 0.0), power=(0.0, 0.0, 0.0),
+                cos_inner=1.0, cos_outer=1.0):
+    """A light packed for :mod:`rtmesh.kernels`: ``[kind, position (3), direction (3),
+    power (3), cos_inner, cos_outer]``, (12,) float64."""
+    return np.concatenate([[kind], position, direction, power, [cos_inner, cos_outer]]).astype(np.float64)
 
 
 @dataclass
@@ -48,15 +54,11 @@ class PointLight:
         incident : (k, 3) float
             ``intensity / distance^2`` (inverse-square falloff).
         """
-        to_light = self.position[None, :] - points
-        distance = norm(to_light)
-        # a light sitting exactly on a point lights it from nowhere: direction 0, term 0
-        safe = np.where(distance > 0.0, distance, np.inf)
-        wi = np.divide(to_light, safe[:, None], out=to_light)  # in place: one temporary fewer
-        # component-major like the points (see rtmesh.batches): the shading arithmetic
-        # that combines the two then runs on contiguous columns
-        incident = component_major(self.intensity[:, None] / (safe * safe))
-        return wi, distance, incident
+        return kernels.illuminate(self.kernel_parameters(), np.asarray(points, dtype=np.float64))
+
+    def kernel_parameters(self):
+        """The light packed for :mod:`rtmesh.kernels` (12,)."""
+        return _parameters(kernels.POINT, self.position, power=self.intensity)
 
     @property
     def is_black(self):
@@ -88,9 +90,11 @@ class DirectionalLight:
 
     def illuminate(self, points):
         """See :meth:`PointLight.illuminate`; the distance is ``inf``."""
-        k = len(points)
-        wi = np.broadcast_to(-self.direction, (k, 3))
-        return wi, np.full(k, np.inf), np.broadcast_to(self.irradiance, (k, 3))
+        return kernels.illuminate(self.kernel_parameters(), np.asarray(points, dtype=np.float64))
+
+    def kernel_parameters(self):
+        """The light packed for :mod:`rtmesh.kernels` (12,)."""
+        return _parameters(kernels.DIRECTIONAL, direction=self.direction, power=self.irradiance)
 
     @property
     def is_black(self):
@@ -130,24 +134,15 @@ class SpotLight:
         if not 0.0 <= self.inner_angle <= self.outer_angle <= 180.0:
             raise ValueError("spot light needs 0 <= inner_angle <= outer_angle <= 180")
 
-    def falloff(self, cos_angle):
-        """Cone falloff in [0, 1] for the cosine of the angle from the axis, (k,) -> (k,)."""
-        cos_inner = np.cos(np.radians(self.inner_angle))
-        cos_outer = np.cos(np.radians(self.outer_angle))
-        if cos_inner - cos_outer <= 0.0:
-            return (cos_angle >= cos_outer).astype(np.float64)
-        x = np.clip((cos_angle - cos_outer) / (cos_inner - cos_outer), 0.0, 1.0)
-        return x * x * (3.0 - 2.0 * x)
-
     def illuminate(self, points):
-        """See :meth:`PointLight.illuminate`; the incident term includes the cone falloff."""
-        to_light = self.position[None, :] - points
-        distance = norm(to_light)
-        safe = np.where(distance > 0.0, distance, np.inf)
-        wi = np.divide(to_light, safe[:, None], out=to_light)  # in place: one temporary fewer
-        cone = self.falloff(-(wi @ self.direction))
-        incident = component_major(self.intensity[:, None] * (cone / (safe * safe)))
-        return wi, distance, incident
+        """See :meth:`PointLight.illuminate`; the incident term includes the cone falloff,
+        a smoothstep in cos(angle) from the axis between the outer and the inner angle."""
+        return kernels.illuminate(self.kernel_parameters(), np.asarray(points, dtype=np.float64))
+
+    def kernel_parameters(self):
+        """The light packed for :mod:`rtmesh.kernels` (12,)."""
+        return _parameters(kernels.SPOT, self.position, self.direction, self.intensity,
+                           np.cos(np.radians(self.inner_angle)), np.cos(np.radians(self.outer_angle)))
 
     @property
     def is_black(self):

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .vecmath import dot, norm
+from . import kernels
 
 
 def as_colour(value):
@@ -204,9 +204,11 @@ def blinn_phong(n, wo, wi, diffuse, specular, shininess):
         Unit shading normals.
     wo, wi : (k, 3) float
         Unit directions toward the viewer and toward the light.
-    diffuse, specular : (k, 3) float
-        kd and ks.
-    shininess : (k,) float
+    diffuse : (k, 3) float
+        kd.
+    specular : (k, 3) float or None
+        ks; None for no highlight.
+    shininess : (k,) float or None
         Specular exponent.
 
     Returns
@@ -215,55 +217,12 @@ def blinn_phong(n, wo, wi, diffuse, specular, shininess):
         ``kd * max(0, n.wi) + ks * max(0, n.h)^shininess`` (the specular term only where
         ``n.wi > 0``), to be multiplied by the light's intensity / distance^2 or irradiance.
     """
-    cos_i = dot(n, wi)
-    value = lambert(cos_i, diffuse)
-    if specular is not None:
-        value = value + blinn_phong_highlight(n, wo, wi, cos_i, specular, shininess)
-    return value
-
-
-def lambert(cos_i, diffuse):
-    """The diffuse part of :func:`blinn_phong`.
-
-    Parameters
-    ----------
-    cos_i : (k,) float
-        ``n . wi``, cosine between the shading normal and the direction to the light.
-    diffuse : (k, 3) float
-        kd.
-
-    Returns
-    -------
-    (k, 3) float
-        ``kd * max(0, cos_i)``, laid out like ``diffuse``.
-    """
-    return diffuse * np.maximum(cos_i, 0.0)[:, None]
-
-
-def blinn_phong_highlight(n, wo, wi, cos_i, specular, shininess):
-    """The specular part of :func:`blinn_phong`.
-
-    Parameters
-    ----------
-    n : (k, 3) float
-        Unit shading normals.
-    wo, wi : (k, 3) float
-        Unit directions toward the viewer and toward the light.
-    cos_i : (k,) float
-        ``n . wi``; no highlight where it is <= 0 (light below the shading horizon).
-    specular : (k, 3) float
-        ks.
-    shininess : (k,) float
-        Specular exponent.
-
-    Returns
-    -------
-    (k, 3) float
-        ``ks * max(0, n.h)^shininess`` with ``h`` the half vector, laid out like ``n``.
-    """
-    h = wo + wi
-    h_len = norm(h)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        cos_h = dot(n, h) / h_len
-    cos_h = np.where((cos_i > 0.0) & (h_len > 0), np.maximum(cos_h, 0.0), 0.0)
-    return specular * (cos_h ** shininess)[:, None]
+    n = np.asarray(n, dtype=np.float64)
+    wo, wi, diffuse = (np.broadcast_to(np.asarray(a, dtype=np.float64), n.shape) for a in (wo, wi, diffuse))
+    if specular is None:
+        # empty arrays tell the kernel there is no highlight
+        specular, shininess = np.zeros((0, 3)), np.zeros(0)
+    else:
+        specular = np.broadcast_to(np.asarray(specular, dtype=np.float64), n.shape)
+        shininess = np.broadcast_to(np.asarray(shininess, dtype=np.float64), n.shape[:1])
+    return kernels.blinn_phong(n, wo, wi, diffuse, specular, shininess)

@@ -7,6 +7,8 @@ surface, ``n`` is a unit normal.
 
 import numpy as np
 
+from . import kernels
+
 
 def dot(a, b):
     """Row-wise dot product.
@@ -211,11 +213,6 @@ def orthonormal_basis(n):
     return t, b
 
 
-# Smallest cosine between a bent shading normal and the direction to the viewer: enough to
-# keep the Blinn-Phong half vector and the mirror direction well defined.
-_VIEW_COSINE = 1e-2
-
-
 def face_viewer(ns, ng, d):
     """Shading normals that face the viewer: the shading-normal terminator fix.
 
@@ -224,7 +221,7 @@ def face_viewer(ns, ng, d):
     mirror direction point into the surface) or lights the surface from below.  Normals
     on the wrong side of the geometric normal are replaced by it; normals that face away
     from the viewer are bent toward the viewer, within the plane of the normal and the view
-    direction, until ``ns . wo = 0.01`` (before normalising): the smallest change that
+    direction, until ``ns . wo = 0.01`` (:data:`rtmesh.kernels.VIEW_COSINE`, before normalising): the smallest change that
     fixes them, and none for every other normal.  Light leaks are stopped separately: a
     light counts only when it is on the geometric side the ray came from.
 
@@ -239,18 +236,7 @@ def face_viewer(ns, ng, d):
 
     Returns
     -------
-    (k, 3) float
-        ``ns`` itself when no row needs a change, else a corrected copy.
+    (k, 3) float64
+        A corrected copy, component-major; rows that need no change are copied as they are.
     """
-    cos_o = -dot(ns, d)
-    bad = (cos_o < _VIEW_COSINE) | ~(dot(ns, ng) > 0.0)
-    if not bad.any():
-        return ns
-    rows = np.flatnonzero(bad)
-    n = ns[rows]
-    n = np.where((dot(n, ng[rows]) > 0.0)[:, None], n, ng[rows])
-    wo = -d[rows]
-    c = np.maximum(_VIEW_COSINE - dot(n, wo), 0.0)
-    out = np.array(ns, order="K", copy=True)
-    out[rows] = normalize(n + c[:, None] * wo)
-    return out
+    return kernels.face_viewer(ns, ng, d)

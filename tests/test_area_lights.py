@@ -21,12 +21,11 @@ from rtmesh.area_lights import AreaLighting, DiskLight, QuadLight, emissive_mesh
 from rtmesh.camera import Camera
 from rtmesh.errors import SceneError
 from rtmesh.lights import PointLight
-from rtmesh.materials import Material, lambert
+from rtmesh.materials import Material, blinn_phong
 from rtmesh.sampling import Dim, decorrelated_points, square_to_uniform_triangle, uniform_triangle_to_square
 from rtmesh.scene import Scene
 from rtmesh.scene_file import scene_from_dict
 from rtmesh.settings import RenderStats
-from rtmesh.vecmath import dot
 
 from scenes import floor_quad, part, pixel_centre_rays, quad, render, settings
 
@@ -93,7 +92,7 @@ def direct_light(lights, points, normal=(0.0, 0.0, 1.0), blockers=(), samples=64
     diffuse = np.full((k, 3), kd)
 
     def reflectance(wi, lit):
-        return lambert(dot(ng, wi), diffuse)
+        return blinn_phong(ng, ng, wi, diffuse, None, None)  # Lambert: no highlight
 
     stats = RenderStats()
     value = lighting.direct(points, ng, reflectance, np.arange(k), np.zeros(k, np.int64), 0,

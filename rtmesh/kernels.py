@@ -1,0 +1,543 @@
+"""Compiled per-hit kernels: the inner loops of shading, one pass per hit.
+
+NumPy shading costs one pass over memory, one temporary and one Python call per operation;
+on the benchmark scene the ~150 NumPy calls per chunk of a frame cost almost as much as
+tracing the rays, and with several threads they queue for the GIL.  The kernels here do a
+hit's whole surface record, or a whole (hit, light) pair, in one loop that numba compiles:
+
+* ``nogil``: chunk threads run them side by side, like Embree's queries;
+* ``cache``: the machine code is kept on disk next to this file, so only the first run
+  after an install pays the compile;
+* ``error_model="numpy"``: a division by zero gives inf or NaN as in NumPy, never an
+  exception;
+* no ``fastmath``: no reassociation or fused multiply-adds, so each formula rounds as
+  written, the same on every machine and for every chunk and thread count.
+
+Every function with an ``_`` prefix is one row's arithmetic, inlined into the array
+kernels that use it; all compiled code lives in this one module because numba's disk
+cache does not notice changes to jitted functions imported from other files.
+
+Arrays of 3-vectors are ``(n, 3)``; results are component-major (see
+:mod:`rtmesh.batches`) unless said otherwise, as the NumPy code that reads them is fastest
+on that layout.
+"""
+
+import math
+
+import numba
+import numpy as np
+from numba import types
+from numba.extending import intrinsic
+
+_COMPILE = dict(nogil=True, cache=True, error_model="numpy")
+kernel = numba.njit(**_COMPILE)
+_row = numba.njit(**_COMPILE)
+
+# ------------------------------------------------------------------ float32 offsets
+# See rtmesh.accel for the reasoning behind the origin offset and its constants.
+ULPS = np.float32(4.0)
+EXTENT_EPSILONS = np.float32(16.0 * np.finfo(np.float32).eps)
+DIRECTION_SHARE = np.float32(0.25)
+_F32_ZERO, _F32_ONE = np.float32(0.0), np.float32(1.0)
+_F32_MAX = float(np.finfo(np.float32).max)
+
+
+@intrinsic
+def _float32_bits(typingctx, x):
+    """The bits of a float32 as an int32 (a free reinterpretation, like ``ndarray.view``)."""
+    if x != types.float32:
+        return None
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], context.get_value_type(types.int32))
+
+    return types.int32(types.float32), codegen
+
+
+@intrinsic
+def _float32_from_bits(typingctx, bits):
+    """The float32 whose bits are the low 32 bits of the integer ``bits``."""
+    if not isinstance(bits, types.Integer):
+        return None
+
+    def codegen(context, builder, signature, args):
+        low = builder.trunc(args[0], context.get_value_type(types.int32)) if bits.bitwidth > 32 else args[0]
+        return builder.bitcast(low, context.get_value_type(types.float32))
+
+    return types.float32(bits), codegen
+
+
+_EXPONENT_MASK = np.int32(0x7F800000)
+_ULP_SCALE = np.float32(2.0 ** -23)
+
+
+@_row
+def _ulp32(x):
+    """Spacing of float32 numbers at float32 ``x``, read from the exponent bits
+    (``2**(e - 23)``); 0 for zeros and subnormals."""
+    return _float32_from_bits(_float32_bits(x) & _EXPONENT_MASK) * _ULP_SCALE
+
+
+@numba.vectorize(["float32(float32)"], nopython=True, cache=True)
+def ulp32(x):
+    """Spacing of float32 numbers at each element (a ufunc: any shape and layout).
+
+    ``np.spacing(abs(x))`` for normal floats; 0 for zeros and subnormals.
+    """
+    return _ulp32(x)
+
+
+@_row
+def _sign32(x):
+    if x > 0:
+        return _F32_ONE
+    if x < 0:
+        return -_F32_ONE
+    return _F32_ZERO
+
+
+@_row
+def _offset(px, py, pz, nx, ny, nz, dx, dy, dz, scale):
+    """One point moved off its surface (see :func:`offset_origins`); float32 ``(x, y, z)``.
+
+    ``d`` is the float32 ray direction, or zeros for a normal-only offset.
+    """
+    px, py, pz = np.float32(px), np.float32(py), np.float32(pz)
+    nx, ny, nz = np.float32(nx), np.float32(ny), np.float32(nz)
+    ux, uy, uz = _ulp32(px), _ulp32(py), _ulp32(pz)
+    distance = ULPS * ((abs(nx) * ux + abs(ny) * uy) + abs(nz) * uz) + EXTENT_EPSILONS * scale
+    mx = nx + DIRECTION_SHARE * np.float32(dx)
+    my = ny + DIRECTION_SHARE * np.float32(dy)
+    mz = nz + DIRECTION_SHARE * np.float32(dz)
+    # plus one ulp in every coordinate that moves: rounding cannot give the old value back
+    return (px + (mx * distance + _sign32(mx) * ux),
+            py + (my * distance + _sign32(my) * uy),
+            pz + (mz * distance + _sign32(mz) * uz))
+
+
+@kernel
+def offset_origins(points, normals, directions, scale):
+    """Ray origins moved off a surface; see :func:`rtmesh.accel.offset_ray_origins`.
+
+    Parameters
+    ----------
+    points, normals : (n, 3) float
+    directions : (n, 3) float or (0, 3)
+        Directions of the rays, or an empty array for a normal-only offset.
+    scale : float32
+        Scene size.
+
+    Returns
+    -------
+    (n, 3) float32
+        Component-major.
+    """
+    n = len(points)
+    out = np.empty((3, n), np.float32)
+    along = len(directions) > 0
+    for i in range(n):
+        dx = directions[i, 0] if along else 0.0
+        dy = directions[i, 1] if along else 0.0
+        dz = directions[i, 2] if along else 0.0
+        out[0, i], out[1, i], out[2, i] = _offset(points[i, 0], points[i, 1], points[i, 2],
+                                                  normals[i, 0], normals[i, 1], normals[i, 2],
+                                                  dx, dy, dz, scale)
+    return out.T
+
+
+# ------------------------------------------------------------------ vectors
+@_row
+def _dot(ax, ay, az, bx, by, bz):
+    # (x + y) + z, the order rtmesh.vecmath.dot sums in
+    return (ax * bx + ay * by) + az * bz
+
+
+@_row
+def _normalized(x, y, z, scale):
+    """``(x, y, z) * scale / length``; zero stays zero."""
+    length = math.sqrt(_dot(x, y, z, x, y, z))
+    inv = (1.0 / length if length > 0.0 else 0.0) * scale
+    return x * inv, y * inv, z * inv
+
+
+# Smallest cosine between a bent shading normal and the direction to the viewer: enough to
+# keep the Blinn-Phong half vector and the mirror direction well defined.
+VIEW_COSINE = 1e-2
+
+
+@_row
+def _face_viewer(sx, sy, sz, gx, gy, gz, dx, dy, dz):
+    """One shading normal made to face the viewer; see :func:`rtmesh.vecmath.face_viewer`."""
+    cos_o = -_dot(sx, sy, sz, dx, dy, dz)
+    above = _dot(sx, sy, sz, gx, gy, gz) > 0.0
+    if cos_o >= VIEW_COSINE and above:
+        return sx, sy, sz
+    if not above:
+        sx, sy, sz = gx, gy, gz
+    c = max(VIEW_COSINE - _dot(sx, sy, sz, -dx, -dy, -dz), 0.0)
+    return _normalized(sx - c * dx, sy - c * dy, sz - c * dz, 1.0)
+
+
+@kernel
+def face_viewer(ns, ng, d):
+    """Shading normals that face the viewer; see :func:`rtmesh.vecmath.face_viewer`.
+
+    Returns
+    -------
+    (k, 3) float64
+        A new, component-major array.
+    """
+    k = len(ns)
+    out = np.empty((3, k))
+    for i in range(k):
+        out[0, i], out[1, i], out[2, i] = _face_viewer(ns[i, 0], ns[i, 1], ns[i, 2],
+                                                       ng[i, 0], ng[i, 1], ng[i, 2],
+                                                       d[i, 0], d[i, 1], d[i, 2])
+    return out.T
+
+
+# ------------------------------------------------------------------ surfaces
+@kernel
+def surface_records(prim_all, u_all, v_all, rows, directions, view, faces, vertex_normals,
+                    smooth, material_id, fix_terminator):
+    """Hit points, facing normals and materials of the hit rows of a ray batch.
+
+    Parameters
+    ----------
+    prim_all : (n,) int
+        Triangle hit by each ray of the batch.
+    u_all, v_all : (n,) float
+        Barycentric weights of vertices 1 and 2.
+    rows : (k,) intp
+        The rows of the batch that hit a triangle.
+    directions : (n, 3) float
+        Unit ray directions of the batch.
+    view : (k, 3) float or (0, 3)
+        Directions of the hit rows in the frame of the triangles (motion blur), or empty
+        when that is ``directions``.
+    faces : (F, 12) float64, row-major
+        Per face ``[v0, v1 - v0, v2 - v0, unit geometric normal]``.
+    vertex_normals : (F, 9) float64, row-major, or (0, 9)
+        Per face ``[n0, n1 - n0, n2 - n0]`` of the vertex normals; empty without smooth
+        shading.
+    smooth : (F,) bool
+        Faces that interpolate their vertex normals.
+    material_id : (F,) intp
+    fix_terminator : bool
+        Apply :func:`face_viewer` to the shading normals (smooth shading without normal
+        maps; with normal maps it runs after them).
+
+    Returns
+    -------
+    p : (k, 3) float64
+        ``v0 + u (v1 - v0) + v (v2 - v0)`` on the float32 triangle Embree traced.
+    ng, ns : (k, 3) float64
+        Unit geometric and shading normals, flipped to the side the ray came from; ``ns``
+        is ``ng`` on flat faces, and an interpolated normal of zero length stays zero
+        (:func:`face_viewer` replaces it).
+    d : (k, 3) float64
+        Directions of the hit rows.
+    front : (k,) bool
+        The ray arrived on the outer (counter-clockwise) side.
+    mat, prim : (k,) intp
+    u, v : (k,) float64
+    """
+    k = len(rows)
+    p, ng, ns, d = np.empty((3, k)), np.empty((3, k)), np.empty((3, k)), np.empty((3, k))
+    front = np.empty(k, np.bool_)
+    mat, prim = np.empty(k, np.intp), np.empty(k, np.intp)
+    u, v = np.empty(k), np.empty(k)
+    rest_frame = len(view) > 0
+    has_smooth = len(vertex_normals) > 0
+    for i in range(k):
+        r = rows[i]
+        f = np.intp(prim_all[r])
+        a, b = np.float64(u_all[r]), np.float64(v_all[r])
+        prim[i], u[i], v[i], mat[i] = f, a, b, material_id[f]
+        for c in range(3):
+            # (u e1 + v0) + v e2: the order of rtmesh.accel.barycentric_interpolate
+            p[c, i] = (faces[f, 3 + c] * a + faces[f, c]) + faces[f, 6 + c] * b
+            d[c, i] = directions[r, c]
+        vx, vy, vz = (view[i, 0], view[i, 1], view[i, 2]) if rest_frame else (d[0, i], d[1, i], d[2, i])
+        gx, gy, gz = faces[f, 9], faces[f, 10], faces[f, 11]
+        front[i] = _dot(vx, vy, vz, gx, gy, gz) < 0.0
+        flip = 1.0 if front[i] else -1.0
+        gx, gy, gz = gx * flip, gy * flip, gz * flip
+        ng[0, i], ng[1, i], ng[2, i] = gx, gy, gz
+        sx, sy, sz = gx, gy, gz
+        if has_smooth and smooth[f]:
+            sx, sy, sz = _normalized(
+                (vertex_normals[f, 3] * a + vertex_normals[f, 0]) + vertex_normals[f, 6] * b,
+                (vertex_normals[f, 4] * a + vertex_normals[f, 1]) + vertex_normals[f, 7] * b,
+                (vertex_normals[f, 5] * a + vertex_normals[f, 2]) + vertex_normals[f, 8] * b,
+                flip)
+        if fix_terminator:
+            sx, sy, sz = _face_viewer(sx, sy, sz, gx, gy, gz, vx, vy, vz)
+        ns[0, i], ns[1, i], ns[2, i] = sx, sy, sz
+    return p.T, ng.T, ns.T, d.T, front, mat, prim, u, v
+
+
+# ------------------------------------------------------------------ lights
+POINT, DIRECTIONAL, SPOT = 0, 1, 2
+
+
+@_row
+def _illuminate(light, px, py, pz):
+    """Direction, distance and incident term of one light at one point.
+
+    ``light`` is a light's :meth:`kernel_parameters` row: ``[kind, position (3),
+    direction (3), power (3), cos_inner, cos_outer]``.  Returns ``(wx, wy, wz, distance,
+    er, eg, eb)``.  Every kind is formed and the light's own picked by selects, not
+    branches, so that the loops calling this vectorise.
+    """
+    kind = light[0]
+    directional, spot = kind == DIRECTIONAL, kind == SPOT
+    tx, ty, tz = light[1] - px, light[2] - py, light[3] - pz
+    distance = math.sqrt(_dot(tx, ty, tz, tx, ty, tz))
+    # a light sitting exactly on a point lights it from nowhere: direction 0, term 0
+    safe = distance if distance > 0.0 else np.inf
+    wx, wy, wz = tx / safe, ty / safe, tz / safe
+    square = safe * safe
+    # the spot's cone: a smoothstep in cos(angle) between the outer and the inner angle
+    # (a step when they are equal)
+    cos_angle = -_dot(wx, wy, wz, light[4], light[5], light[6])
+    cos_inner, cos_outer = light[10], light[11]
+    x = min(max((cos_angle - cos_outer) / (cos_inner - cos_outer), 0.0), 1.0)
+    step = 1.0 if cos_angle >= cos_outer else 0.0
+    cone = x * x * (3.0 - 2.0 * x) if cos_inner - cos_outer > 0.0 else step
+    falloff = cone / square
+    # point: intensity / distance^2; spot: intensity * (cone / distance^2); directional:
+    # the irradiance, from -direction, infinitely far
+    er = light[7] if directional else (light[7] * falloff if spot else light[7] / square)
+    eg = light[8] if directional else (light[8] * falloff if spot else light[8] / square)
+    eb = light[9] if directional else (light[9] * falloff if spot else light[9] / square)
+    return (-light[4] if directional else wx, -light[5] if directional else wy,
+            -light[6] if directional else wz, np.inf if directional else distance, er, eg, eb)
+
+
+@kernel
+def illuminate(light, points):
+    """Direction toward a light, distance and incident term at each point.
+
+    Parameters
+    ----------
+    light : (12,) float64
+        The light's :meth:`kernel_parameters`.
+    points : (k, 3) float
+
+    Returns
+    -------
+    wi : (k, 3) float64
+    distance : (k,) float64
+    incident : (k, 3) float64
+    """
+    k = len(points)
+    wi, distance, incident = np.empty((3, k)), np.empty(k), np.empty((3, k))
+    for i in range(k):
+        (wi[0, i], wi[1, i], wi[2, i], distance[i],
+         incident[0, i], incident[1, i], incident[2, i]) = _illuminate(light, points[i, 0],
+                                                                       points[i, 1], points[i, 2])
+    return wi.T, distance, incident.T
+
+
+# ------------------------------------------------------------------ Blinn-Phong
+# The factor is kd max(0, n.wi) + ks max(0, n.h)^shininess (the highlight only where
+# n.wi > 0 and the material has one).  The power is the one operation LLVM cannot vectorise
+# (a libm call, ~20 ns); on the hot path (light_samples) the cosines are formed first and
+# NumPy, which has SIMD pow, raises them, and everything else is vectorised by LLVM.
+
+
+@_row
+def _highlight_cosine(nx, ny, nz, ox, oy, oz, wx, wy, wz):
+    """``max(0, n.h)`` with ``h`` the normalised ``wo + wi``; 0 where ``n.wi <= 0`` (light
+    below the shading horizon) or ``wo + wi = 0``."""
+    hx, hy, hz = ox + wx, oy + wy, oz + wz
+    h_len = math.sqrt(_dot(hx, hy, hz, hx, hy, hz))
+    cos_h = max(_dot(nx, ny, nz, hx, hy, hz) / h_len, 0.0)
+    return cos_h if (_dot(nx, ny, nz, wx, wy, wz) > 0.0) & (h_len > 0.0) else 0.0
+
+
+@_row
+def _blinn_phong(kd0, kd1, kd2, ks0, ks1, ks2, cos_i, power):
+    """``kd max(0, cos_i) + ks power`` per channel (``power``: the raised highlight cosine,
+    0 without a highlight)."""
+    lam = max(cos_i, 0.0)
+    return kd0 * lam + ks0 * power, kd1 * lam + ks1 * power, kd2 * lam + ks2 * power
+
+
+@kernel
+def blinn_phong(n, wo, wi, diffuse, specular, shininess):
+    """Blinn-Phong factor per row; see :func:`rtmesh.materials.blinn_phong`.
+
+    ``specular`` and ``shininess`` may be empty (``(0, 3)``, ``(0,)``): no highlight.
+    """
+    k = len(n)
+    out = np.empty((3, k))
+    highlight = len(specular) > 0
+    for i in range(k):
+        power, ks0, ks1, ks2 = 0.0, 0.0, 0.0, 0.0
+        if highlight:
+            power = _highlight_cosine(n[i, 0], n[i, 1], n[i, 2], wo[i, 0], wo[i, 1], wo[i, 2],
+                                      wi[i, 0], wi[i, 1], wi[i, 2]) ** shininess[i]
+            ks0, ks1, ks2 = specular[i, 0], specular[i, 1], specular[i, 2]
+        out[0, i], out[1, i], out[2, i] = _blinn_phong(
+            diffuse[i, 0], diffuse[i, 1], diffuse[i, 2], ks0, ks1, ks2,
+            _dot(n[i, 0], n[i, 1], n[i, 2], wi[i, 0], wi[i, 1], wi[i, 2]), power)
+    return out.T
+
+
+@kernel
+def surface_reflectance(ns, d, wi, lit, kd, ks, exponent):
+    """Blinn-Phong factor of hits toward unit directions ``wi``.
+
+    Parameters
+    ----------
+    ns, d : (k, 3) float
+        Shading normals and incoming ray directions.
+    wi : (k, 3) float
+        Directions toward the light.
+    lit : (k,) bool
+        Rows that get a highlight (elsewhere only the diffuse term is formed).
+    kd, ks : (k, 3) float
+        Diffuse and specular colours.
+    exponent : (k,) float
+        Shininess, negative for materials without a highlight.
+
+    Returns
+    -------
+    (k, 3) float64
+    """
+    k = len(ns)
+    out = np.empty((3, k))
+    for i in range(k):
+        power = 0.0
+        if lit[i] and exponent[i] >= 0.0:
+            power = _highlight_cosine(ns[i, 0], ns[i, 1], ns[i, 2], -d[i, 0], -d[i, 1], -d[i, 2],
+                                      wi[i, 0], wi[i, 1], wi[i, 2]) ** exponent[i]
+        out[0, i], out[1, i], out[2, i] = _blinn_phong(
+            kd[i, 0], kd[i, 1], kd[i, 2], ks[i, 0], ks[i, 1], ks[i, 2],
+            _dot(ns[i, 0], ns[i, 1], ns[i, 2], wi[i, 0], wi[i, 1], wi[i, 2]), power)
+    return out.T
+
+
+# ------------------------------------------------------------------ point-like lights
+@_row
+def _reaches(wx, wy, wz, er, eg, eb, gx, gy, gz):
+    """Whether a light with direction ``w`` and incident term ``e`` (see :func:`_illuminate`)
+    lights a point with geometric normal ``g``: it is on the side the ray came from
+    (``wi . ng > 0``: no leaks through the surface) and its term is not zero."""
+    # bitwise operators: short-circuits are branches, which stop vectorisation
+    return (_dot(wx, wy, wz, gx, gy, gz) > 0.0) & ((er > 0.0) | (eg > 0.0) | (eb > 0.0))
+
+
+@kernel
+def light_highlights(light, p, ng, ns, d, exponent):
+    """The highlight cosines and exponents of one point-like light, for NumPy to raise.
+
+    Parameters
+    ----------
+    light : (12,) float64
+        The light's :meth:`kernel_parameters`.
+    p, ng, ns, d : (k, 3) float64
+        Surface records: points, geometric and shading normals, incoming directions.
+    exponent : (k,) float64
+        Shininess, negative for materials without a highlight.
+
+    Returns
+    -------
+    cosine, power_exponent : (k,) float64
+        ``cosine ** power_exponent`` is the highlight's power at each row: ``max(0, n.h)``
+        and the shininess where the light reaches a material with a highlight, 0 and 1 (a
+        power of 0) elsewhere.
+    """
+    k = len(p)
+    cosine, power_exponent = np.empty(k), np.empty(k)
+    for i in range(k):
+        wx, wy, wz, _, er, eg, eb = _illuminate(light, p[i, 0], p[i, 1], p[i, 2])
+        highlight = _reaches(wx, wy, wz, er, eg, eb, ng[i, 0], ng[i, 1], ng[i, 2]) & (exponent[i] >= 0.0)
+        c = _highlight_cosine(ns[i, 0], ns[i, 1], ns[i, 2], -d[i, 0], -d[i, 1], -d[i, 2], wx, wy, wz)
+        cosine[i] = c if highlight else 0.0
+        power_exponent[i] = exponent[i] if highlight else 1.0
+    return cosine, power_exponent
+
+
+# rows per block of light_samples: its scratch arrays (~40 bytes a row) stay in L1
+_BLOCK = 256
+
+
+@kernel
+def light_samples(light, p, ng, ns, d, kd, ks, power, scale, shorten):
+    """One point-like light at every hit: what each lit hit receives, and its shadow ray.
+
+    Parameters
+    ----------
+    light : (12,) float64
+        The light's :meth:`kernel_parameters`.
+    p, ng, ns, d : (k, 3) float64
+        Surface records: points, geometric and shading normals, incoming directions.
+    kd, ks : (k, 3) float64
+        Diffuse and specular colours.
+    power : (k,) float64
+        The raised highlight cosines (see :func:`light_highlights`).
+    scale : float32
+        Scene size, for the origin offset.
+    shorten : float
+        Shadow rays end this fraction of the way to the light.
+
+    Returns
+    -------
+    lit : (j,) intp
+        The lit rows.
+    value : (j, 3) float64
+        Blinn-Phong factor times incident term: the light each lit row gets if its shadow
+        ray is clear.
+    origins, directions : (j, 3) float32
+        Row-major shadow rays, origins offset off the surface.
+    t_max : (j,) float32
+        Shadow ray lengths (clamped to the float32 range).
+    """
+    k = len(p)
+    lit = np.empty(k, np.intp)
+    value = np.empty((k, 3))
+    origins, directions = np.empty((k, 3), np.float32), np.empty((k, 3), np.float32)
+    t_max = np.empty(k, np.float32)
+    # every row of a block is formed by a loop without branches, which LLVM vectorises;
+    # a second loop keeps the lit rows
+    block_value, block_ray = np.empty((3, _BLOCK)), np.empty((6, _BLOCK), np.float32)
+    block_length, block_lit = np.empty(_BLOCK, np.float32), np.empty(_BLOCK, np.bool_)
+    j = 0
+    for start in range(0, k, _BLOCK):
+        n = min(_BLOCK, k - start)
+        for b in range(n):
+            i = start + b
+            wx, wy, wz, distance, er, eg, eb = _illuminate(light, p[i, 0], p[i, 1], p[i, 2])
+            block_lit[b] = _reaches(wx, wy, wz, er, eg, eb, ng[i, 0], ng[i, 1], ng[i, 2])
+            f0, f1, f2 = _blinn_phong(kd[i, 0], kd[i, 1], kd[i, 2], ks[i, 0], ks[i, 1], ks[i, 2],
+                                      _dot(ns[i, 0], ns[i, 1], ns[i, 2], wx, wy, wz), power[i])
+            block_value[0, b], block_value[1, b], block_value[2, b] = f0 * er, f1 * eg, f2 * eb
+            # the shadow ray's direction in float32, as Embree will see it, also sets the offset
+            dx, dy, dz = np.float32(wx), np.float32(wy), np.float32(wz)
+            block_ray[0, b], block_ray[1, b], block_ray[2, b] = _offset(
+                p[i, 0], p[i, 1], p[i, 2], ng[i, 0], ng[i, 1], ng[i, 2], dx, dy, dz, scale)
+            block_ray[3, b], block_ray[4, b], block_ray[5, b] = dx, dy, dz
+            block_length[b] = np.float32(min(distance * shorten, _F32_MAX))
+        for b in range(n):
+            if block_lit[b]:
+                for c in range(3):
+                    value[j, c] = block_value[c, b]
+                    origins[j, c] = block_ray[c, b]
+                    directions[j, c] = block_ray[3 + c, b]
+                t_max[j] = block_length[b]
+                lit[j] = start + b
+                j += 1
+    return lit[:j], value[:j], origins[:j], directions[:j], t_max[:j]
+
+
+@kernel
+def add_unoccluded(total, rows, value, occluded):
+    """``total[rows[i]] += value[i]`` for every ``i`` whose shadow ray is clear."""
+    for i in range(len(rows)):
+        if not occluded[i]:
+            r = rows[i]
+            for c in range(3):
+                total[r, c] += value[i, c]
