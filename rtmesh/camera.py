@@ -4,9 +4,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .batches import component_major
+from . import kernels
 from .sampling import square_to_uniform_disk_concentric
-from .vecmath import normalize
 
 
 @dataclass
@@ -101,45 +100,21 @@ class Camera:
         tan_half = np.tan(np.radians(self.fov) * 0.5)
         aspect = width / height
         # image-plane coordinates at unit distance along forward, each an affine map of one
-        # film coordinate (two passes instead of five)
-        sx = film_xy[:, 0] * (2.0 * tan_half * aspect / width) - tan_half * aspect
-        sy = film_xy[:, 1] * (-2.0 * tan_half / height) + tan_half
-        n = len(film_xy)
+        # film coordinate
+        image_plane = np.array([2.0 * tan_half * aspect / width, -tan_half * aspect,
+                                -2.0 * tan_half / height, tan_half])
+        disk = np.zeros((0, 2))
         if self.aperture > 0.0 and lens_uv is not None:
-            # thin lens: every ray through a film point meets the pinhole ray on the plane of
-            # focus, so that plane is sharp and everything else blurs with distance from it.
-            # d has a forward component of exactly 1, so position + focus * d lies on the
-            # plane at depth `focus` (a normalised d would focus on a sphere instead, and
-            # blur the off-axis parts of the focus plane)
-            d = component_major(forward[:, None] + right[:, None] * sx + up[:, None] * sy)
-            focus_points = self.position + d * self.focus
+            # thin lens: rays start on the aperture and meet on the plane of focus, so that
+            # plane is sharp and everything else blurs with distance from it
             disk = square_to_uniform_disk_concentric(lens_uv) * (0.5 * self.aperture)
-            origins = (
-                self.position[None, :]
-                + disk[:, :1] * right[None, :]
-                + disk[:, 1:] * up[None, :]
-            )
-            return origins, normalize(focus_points - origins)
-        # forward, right and up are orthonormal, so |forward + sx right + sy up|^2 is
-        # 1 + sx^2 + sy^2: the direction is normalised without forming its length from the
-        # three components (the rounding differs from normalize() by an ulp or so)
-        inv_length = sx * sx
-        inv_length += sy * sy
-        inv_length += 1.0
-        np.sqrt(inv_length, out=inv_length)
-        np.divide(1.0, inv_length, out=inv_length)
-        sx *= inv_length
-        sy *= inv_length
-        # built component-major (one contiguous row per component; see rtmesh.batches)
-        d = np.empty((3, n))
-        scratch = np.empty(n)
-        for c in range(3):
-            np.multiply(inv_length, forward[c], out=d[c])
-            d[c] += np.multiply(sx, right[c], out=scratch)
-            d[c] += np.multiply(sy, up[c], out=scratch)
-        # every ray starts at the eye: a read-only broadcast row, which the Accel hands to
-        # Embree without materialising it
-        return np.broadcast_to(self.position, (n, 3)), d.T
+        origins, directions = kernels.camera_rays(np.asarray(film_xy, dtype=np.float64), disk, self.position,
+                                                  forward, right, up, image_plane, self.focus)
+        if not len(disk):
+            # every ray starts at the eye: a read-only broadcast row, which the Accel hands
+            # to Embree without materialising it
+            origins = np.broadcast_to(self.position, directions.shape)
+        return origins, directions
 
 
 def _cross(a, b):

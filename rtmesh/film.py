@@ -2,6 +2,7 @@
 
 import numpy as np
 
+from . import kernels
 from .batches import rows_as_float32
 
 TONEMAPS = ("clamp", "reinhard", "aces")
@@ -72,10 +73,9 @@ class Film:
         # whatever the tile size or thread count (bit-identical renders)
         mean_passes = self._keep_min_and_first(px, passes, lambda v: v.min(axis=1),
                                                lambda v: v[:, 0])
+        index = px if isinstance(px, np.ndarray) else np.arange(px.start, px.stop)
+        kernels.accumulate_samples(self.sum, self.sum_sq, index, radiance)
         for s in range(spp):
-            r = radiance[:, s]
-            self.sum[px] += r
-            self.sum_sq[px] += r * r
             for name, values in mean_passes.items():
                 self.pass_sums[name][px] += values[:, s]
         self.count[px] += spp

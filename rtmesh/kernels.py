@@ -196,6 +196,58 @@ def face_viewer(ns, ng, d):
     return out.T
 
 
+# ------------------------------------------------------------------ camera
+@kernel
+def camera_rays(film_xy, disk, position, forward, right, up, image_plane, focus):
+    """Primary rays through film positions; see :meth:`rtmesh.camera.Camera.generate_rays`.
+
+    Parameters
+    ----------
+    film_xy : (n, 2) float
+        Film positions in pixels.
+    disk : (n, 2) float or (0, 2)
+        Lens positions (points on the aperture disk, scene units, in the right/up plane);
+        empty for a pinhole camera.
+    position, forward, right, up : (3,) float64
+        Eye and camera frame.
+    image_plane : (4,) float64
+        ``(ax, bx, ay, by)``: the image-plane coordinates at unit distance along
+        ``forward`` are ``sx = x ax + bx`` and ``sy = y ay + by``.
+    focus : float
+        Focus distance (thin lens).
+
+    Returns
+    -------
+    origins : (n, 3) float64, or (0, 3) for a pinhole camera (every ray starts at the eye)
+    directions : (n, 3) float64
+        Unit directions, component-major.
+    """
+    n = len(film_xy)
+    lens = len(disk) > 0
+    origins = np.empty((3, n if lens else 0))
+    d = np.empty((3, n))
+    for i in range(n):
+        sx = film_xy[i, 0] * image_plane[0] + image_plane[1]
+        sy = film_xy[i, 1] * image_plane[2] + image_plane[3]
+        if lens:
+            # every ray through a film point meets the pinhole ray on the plane of focus: the
+            # unnormalised pinhole direction has a forward component of exactly 1, so
+            # position + focus * direction lies on the plane at depth `focus`
+            for c in range(3):
+                toward = (forward[c] + right[c] * sx) + up[c] * sy
+                origins[c, i] = (position[c] + disk[i, 0] * right[c]) + disk[i, 1] * up[c]
+                d[c, i] = (position[c] + toward * focus) - origins[c, i]
+            d[0, i], d[1, i], d[2, i] = _normalized(d[0, i], d[1, i], d[2, i], 1.0)
+        else:
+            # forward, right and up are orthonormal, so the squared length of
+            # forward + sx right + sy up is 1 + sx^2 + sy^2
+            inv = 1.0 / math.sqrt((sx * sx + sy * sy) + 1.0)
+            sx, sy = sx * inv, sy * inv
+            for c in range(3):
+                d[c, i] = (inv * forward[c] + sx * right[c]) + sy * up[c]
+    return origins.T, d.T
+
+
 # ------------------------------------------------------------------ surfaces
 @kernel
 def surface_records(prim_all, u_all, v_all, rows, directions, view, faces, vertex_normals,
@@ -541,3 +593,27 @@ def add_unoccluded(total, rows, value, occluded):
             r = rows[i]
             for c in range(3):
                 total[r, c] += value[i, c]
+
+
+# ------------------------------------------------------------------ film
+@kernel
+def accumulate_samples(total, total_sq, pixels, radiance):
+    """Add samples and their squares to per-pixel sums, each pixel's samples in order.
+
+    Parameters
+    ----------
+    total, total_sq : (P, 3) float64
+        Sums over samples of radiance and of radiance squared (updated in place).
+    pixels : (m,) int
+        Distinct pixel indices.
+    radiance : (m, spp, 3) float
+        The new samples of each pixel.
+    """
+    for i in range(len(pixels)):
+        px = pixels[i]
+        for s in range(radiance.shape[1]):
+            for c in range(3):
+                r = radiance[i, s, c]
+                total[px, c] += r
+                total_sq[px, c] += r * r
+
