@@ -99,7 +99,7 @@ class _Surfaces:
     where it is needed) are (k, 3) component-major arrays (see :mod:`rtmesh.batches`).
     ``ng`` and ``ns`` are flipped to the side the ray came from; ``front`` says whether
     that is the outer side of the triangle (counter-clockwise winding).  ``mat`` (intp) is
-    the material, ``prim`` (intp) the face hit, ``sample`` the pixel sample each hit
+    the material, ``prim`` (int) the face hit, ``sample`` the pixel sample each hit
     contributes to, ``time`` (float, None without motion blur) the time of the ray (see
     :mod:`rtmesh.motion`).  ``tints`` (:class:`rtmesh.texturing.Tints` or None) holds the
     texture and vertex-colour multipliers of the material colours.
@@ -609,12 +609,15 @@ class Integrator:
         normal_maps = self.stages["normal_maps"]
         # the shading-normal terminator fix (see face_viewer) runs in the kernel unless
         # normal maps, applied below, change the normals after it
-        (srf.p, srf.ng, srf.ns, srf.d, srf.front, srf.mat, srf.prim, u, v) = surface_records(
+        srf.p, srf.ng, srf.ns, srf.front, srf.mat = surface_records(
             hits.prim, hits.u, hits.v, np.arange(len(hits)) if rows is None else rows, rays.directions,
             view, self._faces, self._vertex_normals, self._smooth, self._material_id,
             self.stages["smooth_normals"] and not normal_maps)
+        srf.d = take_rows(rays.directions, rows)
+        srf.prim = take_rows(hits.prim, rows)
         srf.tints = None
         if self.stages["textures"]:
+            u, v = take_rows(hits.u, rows), take_rows(hits.v, rows)
             srf.tints = self.textures.tints(srf.prim, u, v, srf.mat)
             if normal_maps:
                 flip = np.where(srf.front, 1.0, -1.0)

@@ -287,30 +287,34 @@ def surface_records(prim_all, u_all, v_all, rows, directions, view, faces, verte
         Unit geometric and shading normals, flipped to the side the ray came from; ``ns``
         is ``ng`` on flat faces, and an interpolated normal of zero length stays zero
         (:func:`face_viewer` replaces it).
-    d : (k, 3) float64
-        Directions of the hit rows.
     front : (k,) bool
         The ray arrived on the outer (counter-clockwise) side.
-    mat, prim : (k,) intp
-    u, v : (k,) float64
+    mat : (k,) intp
+
+    Notes
+    -----
+    The kernel is bound by the memory it writes (~80 bytes a hit), so what the caller can
+    take by itself (the directions, primitives and barycentrics of the rows) is not
+    copied here.
     """
     k = len(rows)
-    p, ng, ns, d = np.empty((3, k)), np.empty((3, k)), np.empty((3, k)), np.empty((3, k))
+    p, ng, ns = np.empty((3, k)), np.empty((3, k)), np.empty((3, k))
     front = np.empty(k, np.bool_)
-    mat, prim = np.empty(k, np.intp), np.empty(k, np.intp)
-    u, v = np.empty(k), np.empty(k)
+    mat = np.empty(k, np.intp)
     rest_frame = len(view) > 0
     has_smooth = len(vertex_normals) > 0
     for i in range(k):
         r = rows[i]
         f = np.intp(prim_all[r])
         a, b = np.float64(u_all[r]), np.float64(v_all[r])
-        prim[i], u[i], v[i], mat[i] = f, a, b, material_id[f]
+        mat[i] = material_id[f]
         for c in range(3):
             # (u e1 + v0) + v e2: the order of rtmesh.accel.barycentric_interpolate
             p[c, i] = (faces[f, 3 + c] * a + faces[f, c]) + faces[f, 6 + c] * b
-            d[c, i] = directions[r, c]
-        vx, vy, vz = (view[i, 0], view[i, 1], view[i, 2]) if rest_frame else (d[0, i], d[1, i], d[2, i])
+        if rest_frame:
+            vx, vy, vz = view[i, 0], view[i, 1], view[i, 2]
+        else:
+            vx, vy, vz = directions[r, 0], directions[r, 1], directions[r, 2]
         gx, gy, gz = faces[f, 9], faces[f, 10], faces[f, 11]
         front[i] = _dot(vx, vy, vz, gx, gy, gz) < 0.0
         flip = 1.0 if front[i] else -1.0
@@ -326,7 +330,7 @@ def surface_records(prim_all, u_all, v_all, rows, directions, view, faces, verte
         if fix_terminator:
             sx, sy, sz = _face_viewer(sx, sy, sz, gx, gy, gz, vx, vy, vz)
         ns[0, i], ns[1, i], ns[2, i] = sx, sy, sz
-    return p.T, ng.T, ns.T, d.T, front, mat, prim, u, v
+    return p.T, ng.T, ns.T, front, mat
 
 
 # ------------------------------------------------------------------ lights
