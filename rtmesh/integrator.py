@@ -45,8 +45,7 @@ from .settings import RenderStats
 from .vecmath import (dot, face_viewer, fresnel_dielectric, fresnel_schlick, orthonormal_basis, reflect,
                       refract)
 from .materials import ALPHA_MODES
-from .kernels import (add_unoccluded, light_highlights, light_samples, surface_records,
-                      surface_reflectance)
+from .kernels import add_unoccluded, light_samples, surface_records, surface_reflectance
 from .texturing import SurfaceTextures
 from .cutouts import CutoutAccel
 
@@ -678,22 +677,16 @@ class Integrator:
         rows = None if shaded.all() else np.flatnonzero(shaded)
         if rows is not None and not len(rows):
             return None
-        # per-row colours and exponents: the kernels then read contiguous rows
-        mat = take_rows(srf.mat, rows)
-        kd, ks = take_rows(self._diffuse, mat), take_rows(self._specular, mat)
         tints = srf.tints
-        if tints is not None and tints.diffuse is not None:
-            kd = kd * take_rows(tints.diffuse, rows)
-        if tints is not None and tints.specular is not None:
-            ks = ks * take_rows(tints.specular, rows)
-        exponent = self._highlight_exponent.take(mat)
+        tint_d, tint_s = (_NO_VECTORS if t is None else take_rows(t, rows)
+                          for t in ((None, None) if tints is None else (tints.diffuse, tints.specular)))
+        materials = (take_rows(srf.mat, rows), self._diffuse, tint_d, self._specular, tint_s,
+                     self._highlight_exponent)
         p, ng, ns, d = (take_rows(a, rows) for a in (srf.p, srf.ng, srf.ns, srf.d))
         total = None
         for light in self._light_parameters:
-            cosine, power_exponent = light_highlights(light, p, ng, ns, d, exponent)
-            power = np.power(cosine, power_exponent, out=cosine)  # NumPy's pow is vectorised
-            lit, value, origins, directions, t_max = light_samples(
-                light, p, ng, ns, d, kd, ks, power, self._offset_scale32, _SHADOW_SHORTEN)
+            lit, value, origins, directions, t_max = light_samples(light, p, ng, ns, d, *materials,
+                                                                   self._offset_scale32, _SHADOW_SHORTEN)
             if not len(lit):
                 continue
             lit = take_rows(rows, lit) if rows is not None else lit
@@ -708,7 +701,7 @@ class Integrator:
 
             def reflectance(wi, lit):
                 """Blinn-Phong factor toward unit directions ``wi``; highlights only where ``lit``."""
-                return surface_reflectance(ns, d, wi, lit, kd, ks, exponent)
+                return surface_reflectance(ns, d, wi, lit, *materials)
 
             pixel, sample_in_pixel = keys
             sample = take_rows(srf.sample, rows)

@@ -442,8 +442,26 @@ def blinn_phong(n, wo, wi, diffuse, specular, shininess):
     return out.T
 
 
+@_row
+def _colour(table, m, tint, r, c):
+    """Channel ``c`` of material ``m``'s colour in ``table``, times row ``r``'s texture tint
+    where there is one (an empty ``tint``: none)."""
+    value = table[m, c]
+    return value * tint[r, c] if len(tint) else value
+
+
+@_row
+def _shade(r, m, cos_i, cos_h, diffuse, tint_d, specular, tint_s, exponent):
+    """Blinn-Phong factor of hit row ``r`` with material ``m`` from the two cosines."""
+    power = cos_h ** exponent[m] if exponent[m] >= 0.0 else 0.0
+    return _blinn_phong(_colour(diffuse, m, tint_d, r, 0), _colour(diffuse, m, tint_d, r, 1),
+                        _colour(diffuse, m, tint_d, r, 2), _colour(specular, m, tint_s, r, 0),
+                        _colour(specular, m, tint_s, r, 1), _colour(specular, m, tint_s, r, 2),
+                        cos_i, power)
+
+
 @kernel
-def surface_reflectance(ns, d, wi, lit, kd, ks, exponent):
+def surface_reflectance(ns, d, wi, lit, mat, diffuse, tint_d, specular, tint_s, exponent):
     """Blinn-Phong factor of hits toward unit directions ``wi``.
 
     Parameters
@@ -454,9 +472,12 @@ def surface_reflectance(ns, d, wi, lit, kd, ks, exponent):
         Directions toward the light.
     lit : (k,) bool
         Rows that get a highlight (elsewhere only the diffuse term is formed).
-    kd, ks : (k, 3) float
-        Diffuse and specular colours.
-    exponent : (k,) float
+    mat : (k,) intp
+    diffuse, specular : (M, 3) float64
+        Material colours.
+    tint_d, tint_s : (k, 3) float or (0, 3)
+        Texture tints of the colours, or empty.
+    exponent : (M,) float64
         Shininess, negative for materials without a highlight.
 
     Returns
@@ -466,13 +487,13 @@ def surface_reflectance(ns, d, wi, lit, kd, ks, exponent):
     k = len(ns)
     out = np.empty((3, k))
     for i in range(k):
-        power = 0.0
-        if lit[i] and exponent[i] >= 0.0:
-            power = _highlight_cosine(ns[i, 0], ns[i, 1], ns[i, 2], -d[i, 0], -d[i, 1], -d[i, 2],
-                                      wi[i, 0], wi[i, 1], wi[i, 2]) ** exponent[i]
-        out[0, i], out[1, i], out[2, i] = _blinn_phong(
-            kd[i, 0], kd[i, 1], kd[i, 2], ks[i, 0], ks[i, 1], ks[i, 2],
-            _dot(ns[i, 0], ns[i, 1], ns[i, 2], wi[i, 0], wi[i, 1], wi[i, 2]), power)
+        cos_h = 0.0
+        if lit[i]:
+            cos_h = _highlight_cosine(ns[i, 0], ns[i, 1], ns[i, 2], -d[i, 0], -d[i, 1], -d[i, 2],
+                                      wi[i, 0], wi[i, 1], wi[i, 2])
+        out[0, i], out[1, i], out[2, i] = _shade(
+            i, mat[i], _dot(ns[i, 0], ns[i, 1], ns[i, 2], wi[i, 0], wi[i, 1], wi[i, 2]),
+            cos_h, diffuse, tint_d, specular, tint_s, exponent)
     return out.T
 
 
@@ -486,43 +507,12 @@ def _reaches(wx, wy, wz, er, eg, eb, gx, gy, gz):
     return (_dot(wx, wy, wz, gx, gy, gz) > 0.0) & ((er > 0.0) | (eg > 0.0) | (eb > 0.0))
 
 
-@kernel
-def light_highlights(light, p, ng, ns, d, exponent):
-    """The highlight cosines and exponents of one point-like light, for NumPy to raise.
-
-    Parameters
-    ----------
-    light : (12,) float64
-        The light's :meth:`kernel_parameters`.
-    p, ng, ns, d : (k, 3) float64
-        Surface records: points, geometric and shading normals, incoming directions.
-    exponent : (k,) float64
-        Shininess, negative for materials without a highlight.
-
-    Returns
-    -------
-    cosine, power_exponent : (k,) float64
-        ``cosine ** power_exponent`` is the highlight's power at each row: ``max(0, n.h)``
-        and the shininess where the light reaches a material with a highlight, 0 and 1 (a
-        power of 0) elsewhere.
-    """
-    k = len(p)
-    cosine, power_exponent = np.empty(k), np.empty(k)
-    for i in range(k):
-        wx, wy, wz, _, er, eg, eb = _illuminate(light, p[i, 0], p[i, 1], p[i, 2])
-        highlight = _reaches(wx, wy, wz, er, eg, eb, ng[i, 0], ng[i, 1], ng[i, 2]) & (exponent[i] >= 0.0)
-        c = _highlight_cosine(ns[i, 0], ns[i, 1], ns[i, 2], -d[i, 0], -d[i, 1], -d[i, 2], wx, wy, wz)
-        cosine[i] = c if highlight else 0.0
-        power_exponent[i] = exponent[i] if highlight else 1.0
-    return cosine, power_exponent
-
-
-# rows per block of light_samples: its scratch arrays (~40 bytes a row) stay in L1
+# rows per block of light_samples: its scratch arrays (~60 bytes a row) stay in L1
 _BLOCK = 256
 
 
 @kernel
-def light_samples(light, p, ng, ns, d, kd, ks, power, scale, shorten):
+def light_samples(light, p, ng, ns, d, mat, diffuse, tint_d, specular, tint_s, exponent, scale, shorten):
     """One point-like light at every hit: what each lit hit receives, and its shadow ray.
 
     Parameters
@@ -531,10 +521,13 @@ def light_samples(light, p, ng, ns, d, kd, ks, power, scale, shorten):
         The light's :meth:`kernel_parameters`.
     p, ng, ns, d : (k, 3) float64
         Surface records: points, geometric and shading normals, incoming directions.
-    kd, ks : (k, 3) float64
-        Diffuse and specular colours.
-    power : (k,) float64
-        The raised highlight cosines (see :func:`light_highlights`).
+    mat : (k,) intp
+    diffuse, specular : (M, 3) float64
+        Material colours.
+    tint_d, tint_s : (k, 3) float or (0, 3)
+        Texture tints of the colours, or empty.
+    exponent : (M,) float64
+        Shininess, negative for materials without a highlight.
     scale : float32
         Scene size, for the origin offset.
     shorten : float
@@ -551,15 +544,21 @@ def light_samples(light, p, ng, ns, d, kd, ks, power, scale, shorten):
         Row-major shadow rays, origins offset off the surface.
     t_max : (j,) float32
         Shadow ray lengths (clamped to the float32 range).
+
+    Notes
+    -----
+    A block of rows is formed by a loop without branches, gathers or calls, which LLVM
+    vectorises: the geometry, the cosines and the shadow rays.  A second loop over the
+    block keeps the lit rows and adds what needs a gather (the material colours) or a
+    call (the highlight's power, only on materials that have one).
     """
     k = len(p)
     lit = np.empty(k, np.intp)
     value = np.empty((k, 3))
     origins, directions = np.empty((k, 3), np.float32), np.empty((k, 3), np.float32)
     t_max = np.empty(k, np.float32)
-    # every row of a block is formed by a loop without branches, which LLVM vectorises;
-    # a second loop keeps the lit rows
-    block_value, block_ray = np.empty((3, _BLOCK)), np.empty((6, _BLOCK), np.float32)
+    block_incident, block_cos = np.empty((3, _BLOCK)), np.empty((2, _BLOCK))
+    block_ray = np.empty((6, _BLOCK), np.float32)
     block_length, block_lit = np.empty(_BLOCK, np.float32), np.empty(_BLOCK, np.bool_)
     j = 0
     for start in range(0, k, _BLOCK):
@@ -568,9 +567,10 @@ def light_samples(light, p, ng, ns, d, kd, ks, power, scale, shorten):
             i = start + b
             wx, wy, wz, distance, er, eg, eb = _illuminate(light, p[i, 0], p[i, 1], p[i, 2])
             block_lit[b] = _reaches(wx, wy, wz, er, eg, eb, ng[i, 0], ng[i, 1], ng[i, 2])
-            f0, f1, f2 = _blinn_phong(kd[i, 0], kd[i, 1], kd[i, 2], ks[i, 0], ks[i, 1], ks[i, 2],
-                                      _dot(ns[i, 0], ns[i, 1], ns[i, 2], wx, wy, wz), power[i])
-            block_value[0, b], block_value[1, b], block_value[2, b] = f0 * er, f1 * eg, f2 * eb
+            block_incident[0, b], block_incident[1, b], block_incident[2, b] = er, eg, eb
+            block_cos[0, b] = _dot(ns[i, 0], ns[i, 1], ns[i, 2], wx, wy, wz)
+            block_cos[1, b] = _highlight_cosine(ns[i, 0], ns[i, 1], ns[i, 2], -d[i, 0], -d[i, 1], -d[i, 2],
+                                                wx, wy, wz)
             # the shadow ray's direction in float32, as Embree will see it, also sets the offset
             dx, dy, dz = np.float32(wx), np.float32(wy), np.float32(wz)
             block_ray[0, b], block_ray[1, b], block_ray[2, b] = _offset(
@@ -578,14 +578,20 @@ def light_samples(light, p, ng, ns, d, kd, ks, power, scale, shorten):
             block_ray[3, b], block_ray[4, b], block_ray[5, b] = dx, dy, dz
             block_length[b] = np.float32(min(distance * shorten, _F32_MAX))
         for b in range(n):
-            if block_lit[b]:
-                for c in range(3):
-                    value[j, c] = block_value[c, b]
-                    origins[j, c] = block_ray[c, b]
-                    directions[j, c] = block_ray[3 + c, b]
-                t_max[j] = block_length[b]
-                lit[j] = start + b
-                j += 1
+            if not block_lit[b]:
+                continue
+            i = start + b
+            f0, f1, f2 = _shade(i, mat[i], block_cos[0, b], block_cos[1, b], diffuse, tint_d, specular,
+                                tint_s, exponent)
+            value[j, 0] = f0 * block_incident[0, b]
+            value[j, 1] = f1 * block_incident[1, b]
+            value[j, 2] = f2 * block_incident[2, b]
+            for c in range(3):
+                origins[j, c] = block_ray[c, b]
+                directions[j, c] = block_ray[3 + c, b]
+            t_max[j] = block_length[b]
+            lit[j] = i
+            j += 1
     return lit[:j], value[:j], origins[:j], directions[:j], t_max[:j]
 
 
