@@ -321,16 +321,18 @@ def _stratified(sampler, seed, pixel, sample, spp, dimension, ray, rays, dims):
     if dims == 1:
         jitter = uniform(seed, pixel, index, dimension)
         return ((ray * spp + stratum) + jitter) * (1.0 / (rays * spp))
-    if sampler == "regular" and dimension == Dim.PIXEL:
-        jitter = 0.5
-    else:
-        jitter = uniform2(seed, pixel, index, dimension)
+    size = np.array([cx * sx, cy * sy], dtype=np.float64)
+    if sampler == "regular" and dimension == Dim.PIXEL and rays == 1:
+        # the stratum centres: the same spp points in every pixel, formed once per call
+        # and gathered (the same arithmetic as below, on spp rows instead of n)
+        return take_rows(component_major(((table + 0.5) / size).T), stratum)
+    jitter = uniform2(seed, pixel, index, dimension)
     corner = take_rows(table, stratum)
     if rays > 1:
         ray = np.asarray(ray, dtype=np.int64)
         cell = np.stack([ray % cx * sx, ray // cx * sy]).astype(np.float64)
         corner = corner + (component_major(cell) if ray.ndim else cell)
-    return (corner + jitter) / np.array([cx * sx, cy * sy], dtype=np.float64)
+    return (corner + jitter) / size
 
 
 def square_to_uniform_disk_concentric(u):
