@@ -172,7 +172,7 @@ class Film:
 
     def image(self):
         """(height, width, 3) float32: mean radiance per pixel (box filter)."""
-        return self._to_image(lambda px: self.sum[px] / self._divisor(px), 3)
+        return kernels.mean_image(self.sum, self.count).reshape(self.height, self.width, 3)
 
     def _variance_of_mean_rows(self, px):
         """(m, 3) float64: :meth:`variance_of_mean` of the pixels ``px``."""
@@ -276,7 +276,7 @@ class Film:
         values = self.pass_sums[name]
         reduction = self.pass_reductions[name]
         if reduction == "mean":
-            return self._to_image(lambda px: values[px] / self._divisor(px), values.shape[1])
+            return kernels.mean_image(values, self.count).reshape(self.height, self.width, values.shape[1])
         if reduction == "min":
             return self._to_image(lambda px: np.where(np.isfinite(values[px]), values[px], 0.0),
                                   values.shape[1])

@@ -52,10 +52,10 @@ from .cutouts import CutoutAccel
 log = logging.getLogger(__name__)
 
 # At most this many chunks per thread are in flight (running, queued, or finished and not yet
-# on the film).  With every chunk submitted at once the finished results stay referenced
-# until the end, and memory grows with resolution x spp instead of staying a few chunk
-# sizes; two per thread keep every thread busy while the calling thread adds results to
-# the film.
+# merged into the render's statistics).  Submitting every chunk at once would queue work
+# items (and their pixel index arrays) for the whole image, growing with resolution x spp;
+# two per thread keep every thread busy.  Each thread adds its own chunks to the film, so
+# a chunk's radiance is freed as soon as it is on the film.
 CHUNKS_IN_FLIGHT_PER_THREAD = 2
 
 # Shadow rays to point and spot lights stop this fraction short of the light, so a light
@@ -65,6 +65,12 @@ _SHADOW_SHORTEN = 1.0 - 1e-5
 _NO_VECTORS = np.zeros((0, 3))
 # smallest chunk (pixel samples) the thread balancing of Integrator.render_samples makes
 _MIN_CHUNK_SAMPLES = 2048
+# Chunks per thread the balancing aims for.  Chunks differ in cost (rows of sky against
+# rows of geometry), and a thread that draws the last expensive chunk works on alone:
+# with 8 chunks per thread a 512x512 frame on 2 threads ends within ~1/16 of the work
+# instead of ~1/8 (measured: the chunk phase speeds up 1.82x from 1 to 2 threads with 16
+# chunks against ~1.7x with 8).
+_CHUNKS_PER_THREAD = 8
 
 
 @dataclass
@@ -371,11 +377,12 @@ class Integrator:
             total = int(counts.sum())
         chunk_samples = s.chunk_samples
         if s.thread_count > 1:
-            # at least four chunks per thread when there is enough work, so that a small
-            # adaptive round (or the last chunk of a small image) does not leave threads
-            # idle; never below _MIN_CHUNK_SAMPLES, where the fixed cost of a chunk's
-            # stages would show.  The image does not depend on the chunk size.
-            chunk_samples = min(chunk_samples, max(_MIN_CHUNK_SAMPLES, -(-total // (4 * s.thread_count))))
+            # at least _CHUNKS_PER_THREAD chunks per thread when there is enough work, so
+            # that a small image or adaptive round does not leave threads idle while the
+            # last chunks finish; never below _MIN_CHUNK_SAMPLES, where the fixed cost of a
+            # chunk's stages would show.  The image does not depend on the chunk size.
+            chunk_samples = min(chunk_samples,
+                                max(_MIN_CHUNK_SAMPLES, -(-total // (_CHUNKS_PER_THREAD * s.thread_count))))
         if uniform:
             # made as they are submitted: a list would grow with resolution x spp (a 4K
             # image at 64 spp has 16200 chunks)
@@ -388,9 +395,12 @@ class Integrator:
                       for a, b in _ragged_chunks(counts, chunk_samples)]
             n_chunks = len(chunks)
 
-        def finish(chunk, result, done):
+        def render_and_add(chunk):
+            """Render a chunk and add it to the film, on the thread that rendered it: the
+            chunks of a call never share a pixel, so the threads add into different pixels
+            and each pixel's sum is formed by one thread, in sample order."""
             pixels = chunk[0]
-            radiance, passes, chunk_stats = result
+            radiance, passes, chunk_stats = self.render_chunk(*chunk)
             t0 = time.perf_counter()
             # a run of consecutive pixels (every chunk of a uniform render) is a slice:
             # cheaper to add into than a gather-scatter through an index array
@@ -400,28 +410,30 @@ class Integrator:
                 contiguous = pixels[-1] - pixels[0] == len(pixels) - 1
                 film.add_tile(slice(pixels[0], pixels[-1] + 1) if contiguous else pixels, radiance, passes)
             chunk_stats.stage_seconds["film"] += time.perf_counter() - t0
+            return chunk_stats
+
+        def finish(chunk_stats, done):
             stats.merge(chunk_stats)
             if progress is not None:
                 progress(done, n_chunks)
 
         if s.thread_count == 1 or n_chunks == 1:
             for i, chunk in enumerate(chunks):
-                finish(chunk, self.render_chunk(*chunk), i + 1)
+                finish(render_and_add(chunk), i + 1)
             return
         # a bounded window of chunks (see CHUNKS_IN_FLIGHT_PER_THREAD)
         in_flight = CHUNKS_IN_FLIGHT_PER_THREAD * s.thread_count
         pending = deque()
 
         def finish_oldest(submitted):
-            # results are added in chunk order; pixels never overlap, so order only
-            # matters for the stats, which are sums of integers and timings
-            chunk, future = pending.popleft()
-            finish(chunk, future.result(), submitted - len(pending))
+            # stats are merged in chunk order (sums of integers and timings)
+            future = pending.popleft()
+            finish(future.result(), submitted - len(pending))
 
         with ThreadPoolExecutor(max_workers=s.thread_count) as pool:
             try:
                 for submitted, chunk in enumerate(chunks, 1):
-                    pending.append((chunk, pool.submit(self.render_chunk, *chunk)))
+                    pending.append(pool.submit(render_and_add, chunk))
                     if len(pending) >= in_flight:
                         finish_oldest(submitted)
                 while pending:
@@ -429,7 +441,7 @@ class Integrator:
             except BaseException:
                 # Ctrl-C or a failing chunk: drop the chunks not yet started instead of
                 # rendering the rest of the image before giving up
-                for _, future in pending:
+                for future in pending:
                     future.cancel()
                 raise
 

@@ -627,3 +627,27 @@ def accumulate_samples(total, total_sq, pixels, radiance):
                 total[px, c] += r
                 total_sq[px, c] += r * r
 
+
+@kernel
+def mean_image(total, count):
+    """Per-pixel means of sample sums, as float32 rows.
+
+    Parameters
+    ----------
+    total : (P, k) float64
+        Sums over each pixel's samples.
+    count : (P,) int
+        Samples per pixel; pixels without any give 0.
+
+    Returns
+    -------
+    (P, k) float32
+        Row-major ``total / max(count, 1)``.
+    """
+    out = np.empty(total.shape, np.float32)
+    for i in range(total.shape[0]):
+        n = np.float64(max(count[i], 1))
+        for c in range(total.shape[1]):
+            out[i, c] = np.float32(total[i, c] / n)
+    return out
+
