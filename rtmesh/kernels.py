@@ -645,9 +645,10 @@ def mean_image(total, count):
         Row-major ``total / max(count, 1)``.
     """
     out = np.empty(total.shape, np.float32)
-    for i in range(total.shape[0]):
-        n = np.float64(max(count[i], 1))
-        for c in range(total.shape[1]):
-            out[i, c] = np.float32(total[i, c] / n)
+    # channel by channel: the sums are stored component-major, so the reads are
+    # contiguous and the loop vectorises
+    for c in range(total.shape[1]):
+        for i in range(total.shape[0]):
+            out[i, c] = np.float32(total[i, c] / np.float64(max(count[i], 1)))
     return out
 
