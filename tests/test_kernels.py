@@ -1,0 +1,172 @@
+"""The compiled kernels (rtmesh.kernels) against small scalar references written from the
+formulas, row by row in plain Python."""
+
+import math
+
+import numpy as np
+import pytest
+
+from rtmesh import kernels
+from rtmesh.accel import offset_ray_origins
+from rtmesh.lights import DirectionalLight, PointLight, SpotLight
+from rtmesh.vecmath import face_viewer
+
+
+def unit_rows(rng, n):
+    v = rng.normal(size=(n, 3))
+    return v / np.linalg.norm(v, axis=1)[:, None]
+
+
+def scalar_light(light, p):
+    """Direction, distance and incident term of a light at one point, from the formulas."""
+    if isinstance(light, DirectionalLight):
+        return -light.direction, math.inf, light.irradiance
+    to = light.position - p
+    d = math.sqrt(float(to @ to))
+    wi = to / d
+    e = light.intensity / (d * d)
+    if isinstance(light, SpotLight):
+        cos_angle = -float(wi @ light.direction)
+        lo, hi = math.cos(math.radians(light.outer_angle)), math.cos(math.radians(light.inner_angle))
+        x = min(max((cos_angle - lo) / (hi - lo), 0.0), 1.0)
+        e = light.intensity * (x * x * (3 - 2 * x) / (d * d))
+    return wi, d, e
+
+
+def scalar_blinn_phong(ns, wo, wi, kd, ks, shininess):
+    cos_i = float(ns @ wi)
+    value = kd * max(cos_i, 0.0)
+    if shininess >= 0 and cos_i > 0:
+        h = wo + wi
+        value = value + ks * max(float(ns @ h) / math.sqrt(float(h @ h)), 0.0) ** shininess
+    return value
+
+
+@pytest.mark.parametrize("light", [
+    PointLight([0.3, -0.2, 2.0], [40.0, 20.0, 10.0]),
+    DirectionalLight([0.2, 0.1, -1.0], [2.0, 1.0, 0.5]),
+    SpotLight([0.0, 0.0, 3.0], [0.1, 0.0, -1.0], [30.0, 30.0, 30.0], 15.0, 40.0),
+])
+def test_light_samples_match_the_scalar_formulas(light):
+    rng = np.random.default_rng(7)
+    n = 400
+    p = np.asfortranarray(rng.uniform(-1, 1, size=(n, 3)))
+    ng = np.asfortranarray(unit_rows(rng, n))
+    # shading normals near the geometric ones; view directions from the normals' side
+    ns = unit_rows(rng, n) * 0.3 + ng
+    ns = np.asfortranarray(ns / np.linalg.norm(ns, axis=1)[:, None])
+    d = np.asfortranarray(-unit_rows(rng, n) * 0.2 - ng)
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    mat = rng.integers(0, 3, n).astype(np.intp)
+    diffuse = np.array([[0.7, 0.5, 0.3], [0.2, 0.8, 0.4], [0.9, 0.9, 0.9]])
+    specular = np.array([[0.3, 0.3, 0.3], [0.0, 0.0, 0.0], [0.5, 0.2, 0.1]])
+    exponent = np.array([50.0, -1.0, 7.5])  # the middle material has no highlight
+    tint = rng.uniform(0.2, 1.0, size=(n, 3))
+    lit, value, origins, directions, t_max = kernels.light_samples(
+        light.kernel_parameters(), p, ng, ns, d, mat, diffuse, tint, specular, np.zeros((0, 3)), exponent,
+        np.float32(2.0), 1.0 - 1e-5)
+    expected_lit = []
+    for i in range(n):
+        wi, dist, e = scalar_light(light, p[i])
+        if not (wi @ ng[i] > 0 and (e > 0).any()):
+            continue
+        expected_lit.append(i)
+        j = len(expected_lit) - 1
+        f = scalar_blinn_phong(ns[i], -d[i], wi, diffuse[mat[i]] * tint[i], specular[mat[i]], exponent[mat[i]])
+        np.testing.assert_allclose(value[j], f * e, rtol=1e-12, atol=1e-300)
+        np.testing.assert_allclose(directions[j], wi.astype(np.float32), rtol=1e-7)
+        assert t_max[j] == np.float32(min(dist * (1.0 - 1e-5), np.finfo(np.float32).max))
+    np.testing.assert_array_equal(lit, expected_lit)
+    assert 0 < len(lit) < n  # both branches exercised
+    # the shadow-ray origins are the offset every spawned ray gets
+    np.testing.assert_array_equal(
+        origins, offset_ray_origins(p[lit], ng[lit], np.float32, 2.0, directions.astype(np.float64)))
+
+
+def test_light_kernel_and_illuminate_agree():
+    """lights' illuminate() (the public form) runs the same row arithmetic."""
+    rng = np.random.default_rng(1)
+    light = SpotLight([0.0, 0.0, 3.0], [0.0, 0.2, -1.0], [5.0, 6.0, 7.0], 10.0, 35.0)
+    points = rng.uniform(-2, 2, size=(200, 3))
+    wi, distance, incident = light.illuminate(points)
+    for i in range(len(points)):
+        w, dist, e = scalar_light(light, points[i])
+        np.testing.assert_allclose(wi[i], w, rtol=1e-12)
+        assert distance[i] == pytest.approx(dist, rel=1e-12)
+        np.testing.assert_allclose(incident[i], e, rtol=1e-12, atol=1e-300)
+
+
+def test_surface_records_match_the_formulas():
+    rng = np.random.default_rng(3)
+    n_faces, n = 50, 500
+    v0, e1, e2 = rng.normal(size=(3, n_faces, 3))
+    normal = np.cross(e1, e2)
+    normal /= np.linalg.norm(normal, axis=1)[:, None]
+    faces = np.ascontiguousarray(np.concatenate([v0, e1, e2, normal], axis=1))
+    n0 = normal + 0.2 * rng.normal(size=(n_faces, 3))
+    dn1, dn2 = 0.2 * rng.normal(size=(2, n_faces, 3))
+    vertex_normals = np.ascontiguousarray(np.concatenate([n0, dn1, dn2], axis=1))
+    smooth = rng.uniform(size=n_faces) < 0.7
+    material_id = rng.integers(0, 4, n_faces).astype(np.intp)
+    prim = rng.integers(-1, n_faces, 2 * n).astype(np.int32)
+    u, v = rng.uniform(0, 0.5, size=(2, 2 * n))
+    directions = np.asfortranarray(unit_rows(rng, 2 * n))
+    rows = np.flatnonzero(prim >= 0)
+    for fix in (False, True):
+        p, ng, ns, front, mat = kernels.surface_records(prim, u, v, rows, directions, np.zeros((0, 3)), faces,
+                                                        vertex_normals, smooth, material_id, fix)
+        f, a, b, dr = prim[rows], u[rows], v[rows], directions[rows]
+        np.testing.assert_allclose(p, v0[f] + a[:, None] * e1[f] + b[:, None] * e2[f], rtol=1e-12, atol=1e-12)
+        sign = np.where((dr * normal[f]).sum(axis=1) < 0, 1.0, -1.0)
+        np.testing.assert_array_equal(front, sign > 0)
+        np.testing.assert_array_equal(ng, normal[f] * sign[:, None])
+        np.testing.assert_array_equal(mat, material_id[f])
+        interpolated = n0[f] + a[:, None] * dn1[f] + b[:, None] * dn2[f]
+        interpolated /= np.linalg.norm(interpolated, axis=1)[:, None]
+        expected = np.where(smooth[f][:, None], interpolated * sign[:, None], ng)
+        if fix:
+            expected = face_viewer(expected, ng, dr)
+        np.testing.assert_allclose(ns, expected, rtol=1e-12, atol=1e-15)
+
+
+def test_face_viewer_is_a_no_op_on_normals_that_face_the_viewer():
+    ng = np.tile([0.0, 0.0, 1.0], (3, 1))
+    d = np.array([[0.0, 0.6, -0.8], [0.0, 0.0, -1.0], [0.6, 0.0, -0.8]])
+    ns = np.array([[0.0, 0.0, 1.0], [0.6, 0.0, 0.8], [0.0, 0.6, 0.8]])
+    np.testing.assert_array_equal(face_viewer(ns, ng, d), ns)
+
+
+def test_pinhole_and_thin_lens_camera_rays():
+    rng = np.random.default_rng(5)
+    n = 300
+    film = rng.uniform(0, 64, size=(n, 2))
+    forward, right, up = np.eye(3)[[2, 0, 1]]
+    position = np.array([1.0, 2.0, 3.0])
+    plane = np.array([0.02, -0.64, -0.02, 0.64])
+    origins, d = kernels.camera_rays(film, np.zeros((0, 2)), position, forward, right, up, plane, 5.0)
+    assert origins.shape == (0, 3)
+    sx, sy = film[:, 0] * plane[0] + plane[1], film[:, 1] * plane[2] + plane[3]
+    expected = forward + sx[:, None] * right + sy[:, None] * up
+    np.testing.assert_allclose(d, expected / np.linalg.norm(expected, axis=1)[:, None], rtol=1e-14)
+    # thin lens: every ray through a film point meets the pinhole ray on the plane of focus
+    disk = rng.uniform(-0.1, 0.1, size=(n, 2))
+    origins, d_lens = kernels.camera_rays(film, disk, position, forward, right, up, plane, 5.0)
+    np.testing.assert_allclose(origins, position + disk[:, :1] * right + disk[:, 1:] * up, rtol=1e-14)
+    t = 5.0 / (d_lens @ forward)
+    np.testing.assert_allclose(origins + t[:, None] * d_lens, position + 5.0 * expected, rtol=1e-12)
+
+
+def test_film_sums_and_means():
+    rng = np.random.default_rng(2)
+    total, total_sq = np.zeros((10, 3), order="F"), np.zeros((10, 3), order="F")
+    radiance = rng.uniform(size=(4, 3, 3))
+    pixels = np.array([7, 2, 5, 0])
+    kernels.accumulate_samples(total, total_sq, pixels, radiance)
+    np.testing.assert_allclose(total[pixels], radiance.sum(axis=1), rtol=1e-15)
+    np.testing.assert_allclose(total_sq[pixels], (radiance ** 2).sum(axis=1), rtol=1e-15)
+    count = np.zeros(10, np.int64)
+    count[pixels] = 3
+    means = kernels.mean_image(total, count)
+    assert means.dtype == np.float32
+    np.testing.assert_array_equal(means[pixels], (radiance.sum(axis=1) / 3).astype(np.float32))
+    assert not means[[1, 3, 4, 6, 8, 9]].any()  # no samples: 0
