@@ -45,7 +45,7 @@ from .settings import RenderStats
 from .vecmath import (dot, face_viewer, fresnel_dielectric, fresnel_schlick, orthonormal_basis, reflect,
                       refract)
 from .materials import ALPHA_MODES
-from .kernels import add_unoccluded, light_samples, surface_records, surface_reflectance
+from .kernels import add_light, light_samples, surface_records, surface_reflectance
 from .texturing import SurfaceTextures
 from .cutouts import CutoutAccel
 
@@ -697,18 +697,19 @@ class Integrator:
         p, ng, ns, d = (take_rows(a, rows) for a in (srf.p, srf.ng, srf.ns, srf.d))
         total = None
         for light in self._light_parameters:
-            lit, value, origins, directions, t_max = light_samples(light, p, ng, ns, d, *materials,
-                                                                   self._offset_scale32, _SHADOW_SHORTEN)
+            lit, origins, directions, t_max, cos_i, highlight, power_exponent, incident = light_samples(
+                light, p, ng, ns, d, materials[0], self._highlight_exponent, self._offset_scale32, _SHADOW_SHORTEN)
             if not len(lit):
                 continue
-            lit = take_rows(rows, lit) if rows is not None else lit
+            target = take_rows(rows, lit) if rows is not None else lit
             clock.lap("shade")
-            occluded = self._occluded(origins, directions, t_max, _time_rows(srf.time, lit))
+            occluded = self._occluded(origins, directions, t_max, _time_rows(srf.time, target))
             stats.rays["shadow"] += len(lit)
             clock.lap("shadow")
             if total is None:
                 total = np.zeros((len(srf.mat), 3), order="F")
-            add_unoccluded(total, lit, value, occluded)
+            power = np.power(highlight, power_exponent, out=highlight)  # NumPy's pow is vectorised
+            add_light(total, target, lit, occluded, cos_i, power, incident, *materials[:5])
         if self.stages["area_lights"]:
 
             def reflectance(wi, lit):

@@ -507,13 +507,14 @@ def _reaches(wx, wy, wz, er, eg, eb, gx, gy, gz):
     return (_dot(wx, wy, wz, gx, gy, gz) > 0.0) & ((er > 0.0) | (eg > 0.0) | (eb > 0.0))
 
 
-# rows per block of light_samples: its scratch arrays (~60 bytes a row) stay in L1
+# rows per block of light_samples: its scratch arrays (~70 bytes a row) stay in L1
 _BLOCK = 256
 
 
 @kernel
-def light_samples(light, p, ng, ns, d, mat, diffuse, tint_d, specular, tint_s, exponent, scale, shorten):
-    """One point-like light at every hit: what each lit hit receives, and its shadow ray.
+def light_samples(light, p, ng, ns, d, mat, exponent, scale, shorten):
+    """One point-like light at every hit: the lit hits, their shadow rays, and what shading
+    them needs once the shadow rays are traced (see :func:`add_light`).
 
     Parameters
     ----------
@@ -522,12 +523,8 @@ def light_samples(light, p, ng, ns, d, mat, diffuse, tint_d, specular, tint_s, e
     p, ng, ns, d : (k, 3) float64
         Surface records: points, geometric and shading normals, incoming directions.
     mat : (k,) intp
-    diffuse, specular : (M, 3) float64
-        Material colours.
-    tint_d, tint_s : (k, 3) float or (0, 3)
-        Texture tints of the colours, or empty.
     exponent : (M,) float64
-        Shininess, negative for materials without a highlight.
+        Shininess per material, negative for materials without a highlight.
     scale : float32
         Scene size, for the origin offset.
     shorten : float
@@ -536,27 +533,31 @@ def light_samples(light, p, ng, ns, d, mat, diffuse, tint_d, specular, tint_s, e
     Returns
     -------
     lit : (j,) intp
-        The lit rows.
-    value : (j, 3) float64
-        Blinn-Phong factor times incident term: the light each lit row gets if its shadow
-        ray is clear.
+        The lit rows: the light is on the side the ray came from and reaches them.
     origins, directions : (j, 3) float32
         Row-major shadow rays, origins offset off the surface.
     t_max : (j,) float32
         Shadow ray lengths (clamped to the float32 range).
+    cos_i : (j,) float64
+        ``ns . wi``.
+    highlight, power_exponent : (j,) float64
+        ``highlight ** power_exponent`` is the highlight's power: ``max(0, ns . h)`` and
+        the shininess on materials with a highlight, 0 and 1 elsewhere.  Left for NumPy
+        to raise: its pow is vectorised, where a compiled loop calls libm once a row.
+    incident : (j, 3) float64
+        The light's incident term.
 
     Notes
     -----
     A block of rows is formed by a loop without branches, gathers or calls, which LLVM
-    vectorises: the geometry, the cosines and the shadow rays.  A second loop over the
-    block keeps the lit rows and adds what needs a gather (the material colours) or a
-    call (the highlight's power, only on materials that have one).
+    vectorises; a second loop over the block keeps the lit rows.
     """
     k = len(p)
     lit = np.empty(k, np.intp)
-    value = np.empty((k, 3))
     origins, directions = np.empty((k, 3), np.float32), np.empty((k, 3), np.float32)
     t_max = np.empty(k, np.float32)
+    cos_i, highlight, power_exponent = np.empty(k), np.empty(k), np.empty(k)
+    incident = np.empty((k, 3))
     block_incident, block_cos = np.empty((3, _BLOCK)), np.empty((2, _BLOCK))
     block_ray = np.empty((6, _BLOCK), np.float32)
     block_length, block_lit = np.empty(_BLOCK, np.float32), np.empty(_BLOCK, np.bool_)
@@ -581,28 +582,57 @@ def light_samples(light, p, ng, ns, d, mat, diffuse, tint_d, specular, tint_s, e
             if not block_lit[b]:
                 continue
             i = start + b
-            f0, f1, f2 = _shade(i, mat[i], block_cos[0, b], block_cos[1, b], diffuse, tint_d, specular,
-                                tint_s, exponent)
-            value[j, 0] = f0 * block_incident[0, b]
-            value[j, 1] = f1 * block_incident[1, b]
-            value[j, 2] = f2 * block_incident[2, b]
             for c in range(3):
                 origins[j, c] = block_ray[c, b]
                 directions[j, c] = block_ray[3 + c, b]
+                incident[j, c] = block_incident[c, b]
             t_max[j] = block_length[b]
+            cos_i[j] = block_cos[0, b]
+            e = exponent[mat[i]]
+            highlight[j] = block_cos[1, b] if e >= 0.0 else 0.0
+            power_exponent[j] = e if e >= 0.0 else 1.0
             lit[j] = i
             j += 1
-    return lit[:j], value[:j], origins[:j], directions[:j], t_max[:j]
+    return (lit[:j], origins[:j], directions[:j], t_max[:j], cos_i[:j], highlight[:j], power_exponent[:j],
+            incident[:j])
 
 
 @kernel
-def add_unoccluded(total, rows, value, occluded):
-    """``total[rows[i]] += value[i]`` for every ``i`` whose shadow ray is clear."""
-    for i in range(len(rows)):
-        if not occluded[i]:
-            r = rows[i]
-            for c in range(3):
-                total[r, c] += value[i, c]
+def add_light(total, target, lit, occluded, cos_i, power, incident, mat, diffuse, tint_d, specular,
+              tint_s):
+    """Add one light's Blinn-Phong term to the lit rows whose shadow rays are clear.
+
+    Parameters
+    ----------
+    total : (K, 3) float64
+        Accumulated direct light (updated in place).
+    target : (j,) intp
+        Row of ``total`` for each lit row.
+    lit : (j,) intp
+        The lit rows of ``mat`` and the tints (see :func:`light_samples`).
+    occluded : (j,) bool
+        Shadow-ray results.
+    cos_i, power : (j,) float64
+        ``ns . wi`` and the raised highlight cosine.
+    incident : (j, 3) float64
+    mat : (k,) intp
+    diffuse, specular : (M, 3) float64
+        Material colours.
+    tint_d, tint_s : (k, 3) float or (0, 3)
+        Texture tints of the colours, or empty.
+    """
+    for j in range(len(lit)):
+        if occluded[j]:
+            continue
+        i, r = lit[j], target[j]
+        m = mat[i]
+        f0, f1, f2 = _blinn_phong(_colour(diffuse, m, tint_d, i, 0), _colour(diffuse, m, tint_d, i, 1),
+                                  _colour(diffuse, m, tint_d, i, 2), _colour(specular, m, tint_s, i, 0),
+                                  _colour(specular, m, tint_s, i, 1), _colour(specular, m, tint_s, i, 2),
+                                  cos_i[j], power[j])
+        total[r, 0] += f0 * incident[j, 0]
+        total[r, 1] += f1 * incident[j, 1]
+        total[r, 2] += f2 * incident[j, 2]
 
 
 # ------------------------------------------------------------------ film

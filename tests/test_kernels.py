@@ -62,21 +62,29 @@ def test_light_samples_match_the_scalar_formulas(light):
     specular = np.array([[0.3, 0.3, 0.3], [0.0, 0.0, 0.0], [0.5, 0.2, 0.1]])
     exponent = np.array([50.0, -1.0, 7.5])  # the middle material has no highlight
     tint = rng.uniform(0.2, 1.0, size=(n, 3))
-    lit, value, origins, directions, t_max = kernels.light_samples(
-        light.kernel_parameters(), p, ng, ns, d, mat, diffuse, tint, specular, np.zeros((0, 3)), exponent,
-        np.float32(2.0), 1.0 - 1e-5)
+    lit, origins, directions, t_max, cos_i, highlight, power_exponent, incident = kernels.light_samples(
+        light.kernel_parameters(), p, ng, ns, d, mat, exponent, np.float32(2.0), 1.0 - 1e-5)
+    # the Blinn-Phong term goes to the rows whose shadow rays are clear
+    occluded = np.zeros(len(lit), dtype=bool)
+    occluded[::5] = True
+    total = np.zeros((n, 3))
+    kernels.add_light(total, lit, lit, occluded, cos_i, np.power(highlight, power_exponent), incident, mat,
+                      diffuse, tint, specular, np.zeros((0, 3)))
     expected_lit = []
+    expected_total = np.zeros((n, 3))
     for i in range(n):
         wi, dist, e = scalar_light(light, p[i])
         if not (wi @ ng[i] > 0 and (e > 0).any()):
             continue
         expected_lit.append(i)
         j = len(expected_lit) - 1
-        f = scalar_blinn_phong(ns[i], -d[i], wi, diffuse[mat[i]] * tint[i], specular[mat[i]], exponent[mat[i]])
-        np.testing.assert_allclose(value[j], f * e, rtol=1e-12, atol=1e-300)
+        if j % 5:
+            expected_total[i] = e * scalar_blinn_phong(ns[i], -d[i], wi, diffuse[mat[i]] * tint[i],
+                                                       specular[mat[i]], exponent[mat[i]])
         np.testing.assert_allclose(directions[j], wi.astype(np.float32), rtol=1e-7)
         assert t_max[j] == np.float32(min(dist * (1.0 - 1e-5), np.finfo(np.float32).max))
     np.testing.assert_array_equal(lit, expected_lit)
+    np.testing.assert_allclose(total, expected_total, rtol=1e-12, atol=1e-300)
     assert 0 < len(lit) < n  # both branches exercised
     # the shadow-ray origins are the offset every spawned ray gets
     np.testing.assert_array_equal(
