@@ -186,9 +186,8 @@ class Accel:
             return Hits(empty, np.zeros(0, np.int32), empty, empty)
         result = self._scene.run(_embree_rays(origins), _embree_rays(directions), output=1)
         prim = result["primID"]
-        t = result["tfar"].astype(np.float64)
-        t[prim < 0] = np.inf
-        return Hits(t, prim, result["u"].astype(np.float64), result["v"].astype(np.float64))
+        t, u, v = kernels.closest_hits(result["tfar"], prim, result["u"], result["v"])
+        return Hits(t, prim, u, v)
 
     def occluded(self, origins, directions, t_max, rows=None):
         """Whether anything lies on each ray between its origin and ``t_max``.

@@ -196,6 +196,29 @@ def face_viewer(ns, ng, d):
     return out.T
 
 
+# ------------------------------------------------------------------ Embree results
+@kernel
+def closest_hits(t_far, prim, u, v):
+    """Embree's float32 closest-hit results as float64, with ``inf`` for the misses.
+
+    Parameters
+    ----------
+    t_far, u, v : (n,) float32
+    prim : (n,) int32
+        Triangle hit, -1 for a miss.
+
+    Returns
+    -------
+    t, u, v : (n,) float64
+    """
+    n = len(prim)
+    t64, u64, v64 = np.empty(n), np.empty(n), np.empty(n)
+    for i in range(n):
+        t64[i] = np.float64(t_far[i]) if prim[i] >= 0 else np.inf
+        u64[i], v64[i] = np.float64(u[i]), np.float64(v[i])
+    return t64, u64, v64
+
+
 # ------------------------------------------------------------------ camera
 @kernel
 def camera_rays(film_xy, disk, position, forward, right, up, image_plane, focus):
