@@ -77,18 +77,21 @@ class Camera:
             return float(self.focus_distance)
         return float(np.linalg.norm(self.look_at - self.position))
 
-    def generate_rays(self, film_xy, width, height, lens_uv=None):
+    def generate_rays(self, film_xy, width, height, lens_uv=None, pixels=None):
         """Primary rays through continuous film positions.
 
         Parameters
         ----------
         film_xy : (n, 2) float
             Film positions in pixels: x in [0, width) to the right, y in [0, height)
-            downwards (row 0 is the top of the image).
+            downwards (row 0 is the top of the image); with ``pixels``, positions inside
+            those pixels (from their top-left corners).
         width, height : int
             Image size in pixels.
         lens_uv : (n, 2) float, optional
             Uniform samples in [0, 1)^2 for the aperture; ignored for a pinhole camera.
+        pixels : (n,) int, optional
+            Linear index (``row * width + column``) of the pixel of each ray.
 
         Returns
         -------
@@ -108,8 +111,9 @@ class Camera:
             # thin lens: rays start on the aperture and meet on the plane of focus, so that
             # plane is sharp and everything else blurs with distance from it
             disk = square_to_uniform_disk_concentric(lens_uv) * (0.5 * self.aperture)
-        origins, directions = kernels.camera_rays(np.asarray(film_xy, dtype=np.float64), disk, self.position,
-                                                  forward, right, up, image_plane, self.focus)
+        origins, directions = kernels.camera_rays(
+            np.asarray(film_xy, dtype=np.float64), np.zeros(0, np.int64) if pixels is None else pixels, width,
+            disk, self.position, forward, right, up, image_plane, self.focus)
         if not len(disk):
             # every ray starts at the eye: a read-only broadcast row, which the Accel hands
             # to Embree without materialising it

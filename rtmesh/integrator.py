@@ -496,10 +496,7 @@ class Integrator:
             pixel = np.repeat(pixels, spp) if spp > 1 else pixels
             sample_in_pixel = np.tile(np.arange(first_sample, first_sample + spp, dtype=np.int64), m)
         # every dimension is stratified in sets of the settings' spp, whatever the round
-        film_xy = pixel_offsets(s.sampler, s.seed, pixel, sample_in_pixel, s.spp)
-        row = pixel // s.width
-        film_xy[:, 0] += pixel - row * s.width
-        film_xy[:, 1] += row
+        in_pixel = pixel_offsets(s.sampler, s.seed, pixel, sample_in_pixel, s.spp)
         lens_uv = None
         if self.stages["lens"]:
             lens_uv = decorrelated_points(s.sampler, s.seed, pixel, sample_in_pixel, s.spp,
@@ -510,7 +507,7 @@ class Integrator:
             t_open, t_close = self.camera.shutter
             u = stratified_values(s.sampler, s.seed, pixel, sample_in_pixel, s.spp, Dim.TIME)
             sample_time = t_open + (t_close - t_open) * u
-        origins, directions = self.camera.generate_rays(film_xy, s.width, s.height, lens_uv)
+        origins, directions = self.camera.generate_rays(in_pixel, s.width, s.height, lens_uv, pixel)
         # camera rays have unit throughput: a read-only broadcast costs nothing, and
         # _shade does not multiply by it at depth 0
         # (inside an absorbing medium they lose light on the way: then a real array)

@@ -221,13 +221,18 @@ def closest_hits(t_far, prim, u, v):
 
 # ------------------------------------------------------------------ camera
 @kernel
-def camera_rays(film_xy, disk, position, forward, right, up, image_plane, focus):
+def camera_rays(film_xy, pixels, width, disk, position, forward, right, up, image_plane, focus):
     """Primary rays through film positions; see :meth:`rtmesh.camera.Camera.generate_rays`.
 
     Parameters
     ----------
     film_xy : (n, 2) float
-        Film positions in pixels.
+        Film positions in pixels, or positions inside ``pixels``.
+    pixels : (n,) int or (0,)
+        Linear pixel index (``row * width + column``) of each ray, or empty when
+        ``film_xy`` holds whole-film positions.
+    width : int
+        Image width in pixels.
     disk : (n, 2) float or (0, 2)
         Lens positions (points on the aperture disk, scene units, in the right/up plane);
         empty for a pinhole camera.
@@ -246,12 +251,16 @@ def camera_rays(film_xy, disk, position, forward, right, up, image_plane, focus)
         Unit directions, component-major.
     """
     n = len(film_xy)
-    lens = len(disk) > 0
+    lens, in_pixels = len(disk) > 0, len(pixels) > 0
     origins = np.empty((3, n if lens else 0))
     d = np.empty((3, n))
     for i in range(n):
-        sx = film_xy[i, 0] * image_plane[0] + image_plane[1]
-        sy = film_xy[i, 1] * image_plane[2] + image_plane[3]
+        x, y = film_xy[i, 0], film_xy[i, 1]
+        if in_pixels:
+            row = pixels[i] // width
+            x, y = x + (pixels[i] - row * width), y + row
+        sx = x * image_plane[0] + image_plane[1]
+        sy = y * image_plane[2] + image_plane[3]
         if lens:
             # every ray through a film point meets the pinhole ray on the plane of focus: the
             # unnormalised pinhole direction has a forward component of exactly 1, so

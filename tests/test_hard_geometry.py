@@ -29,7 +29,9 @@ class OrthographicCamera(Camera):
 
     half_width: float = 1.0
 
-    def generate_rays(self, film_xy, width, height, lens_uv=None):
+    def generate_rays(self, film_xy, width, height, lens_uv=None, pixels=None):
+        if pixels is not None:  # positions inside the pixels
+            film_xy = film_xy + np.column_stack([pixels % width, pixels // width])
         forward, right, up = self.frame()
         pitch = 2.0 * self.half_width / width
         sx = (film_xy[:, 0] - 0.5 * width) * pitch

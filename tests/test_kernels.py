@@ -151,14 +151,21 @@ def test_pinhole_and_thin_lens_camera_rays():
     forward, right, up = np.eye(3)[[2, 0, 1]]
     position = np.array([1.0, 2.0, 3.0])
     plane = np.array([0.02, -0.64, -0.02, 0.64])
-    origins, d = kernels.camera_rays(film, np.zeros((0, 2)), position, forward, right, up, plane, 5.0)
+    whole_film = np.zeros(0, np.int64)
+    origins, d = kernels.camera_rays(film, whole_film, 64, np.zeros((0, 2)), position, forward, right, up,
+                                     plane, 5.0)
     assert origins.shape == (0, 3)
     sx, sy = film[:, 0] * plane[0] + plane[1], film[:, 1] * plane[2] + plane[3]
     expected = forward + sx[:, None] * right + sy[:, None] * up
     np.testing.assert_allclose(d, expected / np.linalg.norm(expected, axis=1)[:, None], rtol=1e-14)
+    # the same rays from pixel indices and positions inside the pixels
+    pixels = np.floor(film[:, 1]).astype(np.int64) * 64 + np.floor(film[:, 0]).astype(np.int64)
+    _, d_pixels = kernels.camera_rays(film - np.floor(film), pixels, 64, np.zeros((0, 2)), position, forward,
+                                      right, up, plane, 5.0)
+    np.testing.assert_allclose(d_pixels, d, rtol=1e-13)
     # thin lens: every ray through a film point meets the pinhole ray on the plane of focus
     disk = rng.uniform(-0.1, 0.1, size=(n, 2))
-    origins, d_lens = kernels.camera_rays(film, disk, position, forward, right, up, plane, 5.0)
+    origins, d_lens = kernels.camera_rays(film, whole_film, 64, disk, position, forward, right, up, plane, 5.0)
     np.testing.assert_allclose(origins, position + disk[:, :1] * right + disk[:, 1:] * up, rtol=1e-14)
     t = 5.0 / (d_lens @ forward)
     np.testing.assert_allclose(origins + t[:, None] * d_lens, position + 5.0 * expected, rtol=1e-12)
