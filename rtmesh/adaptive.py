@@ -43,7 +43,7 @@ import numpy as np
 from .settings import RoundStats
 
 
-def render_rounds(integrator, film, stats, progress=None):
+def render_rounds(integrator, film, stats, progress=None, pool=None):
     """Render into ``film`` in rounds until the settings' stopping rule says so.
 
     Parameters
@@ -56,6 +56,8 @@ def render_rounds(integrator, film, stats, progress=None):
         Receives the ray counts, ``rounds`` and ``stop_reason``.
     progress : callable, optional
         ``progress(chunks_done, chunks_total)``, restarted every round.
+    pool : concurrent.futures.ThreadPoolExecutor, optional
+        The render's threads, shared by the rounds.
     """
     s = integrator.settings
     start = time.perf_counter()
@@ -65,7 +67,7 @@ def render_rounds(integrator, film, stats, progress=None):
     # a range, not an index array: each chunk makes its own small slice of it, so memory
     # beyond the film does not grow with the image (8 bytes a pixel at 4K is 66 MB)
     all_pixels = range(film.count.size)
-    error = _run_round(integrator, film, stats, all_pixels, 0, s.spp, s.target_error, progress)
+    error = _run_round(integrator, film, stats, all_pixels, 0, s.spp, s.target_error, progress, pool)
     if not s.adaptive:
         stats.stop_reason = "uniform"
         return
@@ -92,7 +94,7 @@ def render_rounds(integrator, film, stats, progress=None):
         # one batch for the whole round, each pixel continuing its own sequence from its
         # count (splitting the round by count made small batches, which cost more per sample)
         error = _run_round(integrator, film, stats, pixels, film.count[pixels], new,
-                           s.target_error, progress)
+                           s.target_error, progress, pool)
         if cut:
             stats.stop_reason = "time_limit"
             return
@@ -151,11 +153,11 @@ def _within_budget(pixels, new, error, stats, seconds_left):
     return pixels[fits], new[fits]
 
 
-def _run_round(integrator, film, stats, pixels, first_sample, spp, target, progress):
+def _run_round(integrator, film, stats, pixels, first_sample, spp, target, progress, pool=None):
     """Render one round (see :meth:`~rtmesh.integrator.Integrator.render_samples`) and
     record it; returns the pixels' display errors after it, (n,) float."""
     t0 = time.perf_counter()
-    integrator.render_samples(film, pixels, first_sample, spp, stats, progress)
+    integrator.render_samples(film, pixels, first_sample, spp, stats, progress, pool)
     seconds = time.perf_counter() - t0
     # len(), not np.shape(): the shape of a range is found by building its array
     samples = len(pixels) * spp if np.ndim(spp) == 0 else int(np.sum(spp))

@@ -13,6 +13,8 @@ ERROR_FLOOR = 0.01
 # overhead is invisible (~500 blocks at 4K), small enough that the few temporaries alive
 # at once stay a small fraction of any sizeable film.
 BLOCK_PIXELS = 16384
+# blocks of Film.image on a thread pool: a few per thread balance any small thread count
+_MEAN_BLOCKS = 8
 
 
 class Film:
@@ -170,9 +172,30 @@ class Film:
             out[px] = rows_as_float32(per_block(px))
         return out.reshape(self.height, self.width, channels)
 
-    def image(self):
-        """(height, width, 3) float32: mean radiance per pixel (box filter)."""
-        return kernels.mean_image(self.sum, self.count).reshape(self.height, self.width, 3)
+    def image(self, pool=None):
+        """(height, width, 3) float32: mean radiance per pixel (box filter).
+
+        Parameters
+        ----------
+        pool : concurrent.futures.Executor, optional
+            Threads to average blocks of pixels on (the kernel runs without the GIL): the
+            last serial pass of a render otherwise.
+        """
+        return self._means(self.sum, pool).reshape(self.height, self.width, 3)
+
+    def _means(self, sums, pool=None):
+        """(P, k) float32: ``sums / max(count, 1)`` per pixel, in blocks on ``pool``."""
+        out = np.empty(sums.shape, dtype=np.float32)
+        if pool is None:
+            kernels.mean_image(sums, self.count, out)
+            return out
+        bounds = np.linspace(0, len(out), _MEAN_BLOCKS + 1).astype(int)
+
+        def block(a, b):
+            kernels.mean_image(sums[a:b], self.count[a:b], out[a:b])
+
+        list(pool.map(block, bounds[:-1], bounds[1:]))
+        return out
 
     def _variance_of_mean_rows(self, px):
         """(m, 3) float64: :meth:`variance_of_mean` of the pixels ``px``."""
@@ -276,7 +299,7 @@ class Film:
         values = self.pass_sums[name]
         reduction = self.pass_reductions[name]
         if reduction == "mean":
-            return kernels.mean_image(values, self.count).reshape(self.height, self.width, values.shape[1])
+            return self._means(values).reshape(self.height, self.width, values.shape[1])
         if reduction == "min":
             return self._to_image(lambda px: np.where(np.isfinite(values[px]), values[px], 0.0),
                                   values.shape[1])

@@ -18,6 +18,7 @@ Before rendering, :class:`Integrator` looks at the scene and the settings and en
 the stages that can contribute (see :attr:`Integrator.stages`).
 """
 
+import contextlib
 import ctypes
 import dataclasses
 import functools
@@ -333,7 +334,10 @@ class Integrator:
         film = Film(s.width, s.height, self.passes.film_passes())
         stats = RenderStats(threads=s.thread_count, pixels=s.width * s.height)
         stats.stages_enabled = [name for name, on in self.stages.items() if on]
-        render_rounds(self, film, stats, progress)
+        # one pool for the whole render: its rounds and the final image
+        with _thread_pool(s.thread_count) as pool:
+            render_rounds(self, film, stats, progress, pool)
+            image = film.image(pool)
         if self.cutouts is not None:
             stats.rays["cutout"] += self.cutouts.layers_traced
         stats.wall_seconds = time.perf_counter() - start
@@ -343,9 +347,9 @@ class Integrator:
         passes.update({name: derived_pass(name, film) for name in s.passes if name in DERIVED_PASSES})
         passes = {name: passes[name] for name in s.passes if name in passes}  # order asked for
         alpha = film.pass_image("alpha") if self.background.transparent else None
-        return RenderResult(film.image(), passes, stats, film, alpha)
+        return RenderResult(image, passes, stats, film, alpha)
 
-    def render_samples(self, film, pixels, first_sample, spp, stats, progress=None):
+    def render_samples(self, film, pixels, first_sample, spp, stats, progress=None, pool=None):
         """Render samples of a set of pixels into ``film``, in chunks on the threads.
 
         Parameters
@@ -366,6 +370,8 @@ class Integrator:
             Ray counts and stage times are added to it.
         progress : callable, optional
             ``progress(chunks_done, chunks_total)``.
+        pool : concurrent.futures.ThreadPoolExecutor, optional
+            Threads to render on (one of ``thread_count`` workers is made if not given).
         """
         s = self.settings
         uniform = np.ndim(spp) == 0 and np.ndim(first_sample) == 0
@@ -430,7 +436,7 @@ class Integrator:
             future = pending.popleft()
             finish(future.result(), submitted - len(pending))
 
-        with ThreadPoolExecutor(max_workers=s.thread_count) as pool:
+        with _thread_pool(s.thread_count, pool) as pool:
             try:
                 for submitted, chunk in enumerate(chunks, 1):
                     pending.append(pool.submit(render_and_add, chunk))
@@ -932,6 +938,14 @@ def _keep_freed_memory():
     m_trim_threshold, m_mmap_threshold = -1, -3  # from glibc's malloc.h
     mallopt(m_mmap_threshold, 32 << 20)
     mallopt(m_trim_threshold, 256 << 20)
+
+
+def _thread_pool(threads, pool=None):
+    """A context giving ``pool`` if there is one, else a new pool of ``threads`` workers
+    (shut down on exit), or None for one thread."""
+    if pool is not None or threads == 1:
+        return contextlib.nullcontext(pool)
+    return ThreadPoolExecutor(max_workers=threads)
 
 
 class _Clock:

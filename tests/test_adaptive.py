@@ -153,9 +153,9 @@ def test_an_adaptive_round_is_one_batch_across_sample_counts(monkeypatch):
     calls = []
     render_samples = Integrator.render_samples
 
-    def spy(self, film, pixels, first_sample, spp, stats, progress=None):
+    def spy(self, film, pixels, first_sample, spp, stats, progress=None, pool=None):
         calls.append((np.ndim(spp), bool(np.all(first_sample == film.count[pixels]))))
-        render_samples(self, film, pixels, first_sample, spp, stats, progress)
+        render_samples(self, film, pixels, first_sample, spp, stats, progress, pool)
 
     monkeypatch.setattr(Integrator, "render_samples", spy)
     result = adaptive(sampler="sobol", target_error=0.005, max_spp=64)
@@ -234,8 +234,8 @@ def sample_clock(monkeypatch):
     monkeypatch.setattr("rtmesh.adaptive.time", types.SimpleNamespace(perf_counter=lambda: clock.now))
     render_samples = Integrator.render_samples
 
-    def timed(self, film, pixels, first_sample, spp, stats, progress=None):
-        render_samples(self, film, pixels, first_sample, spp, stats, progress)
+    def timed(self, film, pixels, first_sample, spp, stats, progress=None, pool=None):
+        render_samples(self, film, pixels, first_sample, spp, stats, progress, pool)
         clock.now += 1e-6 * np.sum(np.broadcast_to(spp, np.shape(pixels)))
 
     monkeypatch.setattr(Integrator, "render_samples", timed)
