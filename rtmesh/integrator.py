@@ -23,6 +23,7 @@ import ctypes
 import dataclasses
 import functools
 import logging
+import sys
 import time
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
@@ -335,7 +336,7 @@ class Integrator:
         stats = RenderStats(threads=s.thread_count, pixels=s.width * s.height)
         stats.stages_enabled = [name for name, on in self.stages.items() if on]
         # one pool for the whole render: its rounds and the final image
-        with _thread_pool(s.thread_count) as pool:
+        with _thread_pool(s.thread_count) as pool, _gil_handoff(s.thread_count):
             render_rounds(self, film, stats, progress, pool)
             image = film.image(pool)
         if self.cutouts is not None:
@@ -946,6 +947,28 @@ def _thread_pool(threads, pool=None):
     if pool is not None or threads == 1:
         return contextlib.nullcontext(pool)
     return ThreadPoolExecutor(max_workers=threads)
+
+
+# GIL switch interval while a render's threads run, seconds (CPython's default is 5 ms).
+# A thread coming back from Embree or a kernel (both run without the GIL) waits for the
+# GIL until its holder releases it or the interval runs out; with the default, 2 threads
+# rendered a 512x512 frame ~1.55x faster than one, with 0.5 ms ~1.65x (0.1 ms: no better).
+_RENDER_SWITCH_INTERVAL = 5e-4
+
+
+@contextlib.contextmanager
+def _gil_handoff(threads):
+    """Shorten the GIL switch interval for the duration of a multi-threaded render (it is
+    process-wide: the caller's value is restored on exit)."""
+    if threads == 1:
+        yield
+        return
+    previous = sys.getswitchinterval()
+    sys.setswitchinterval(min(previous, _RENDER_SWITCH_INTERVAL))
+    try:
+        yield
+    finally:
+        sys.setswitchinterval(previous)
 
 
 class _Clock:
