@@ -25,8 +25,7 @@ import functools
 import logging
 import sys
 import time
-from collections import deque
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from dataclasses import dataclass
 
 import numpy as np
@@ -428,23 +427,30 @@ class Integrator:
             for i, chunk in enumerate(chunks):
                 finish(render_and_add(chunk), i + 1)
             return
-        # a bounded window of chunks (see CHUNKS_IN_FLIGHT_PER_THREAD)
+        # a bounded window of chunks (see CHUNKS_IN_FLIGHT_PER_THREAD), refilled as soon as
+        # any chunk finishes: waiting for the oldest would leave a thread idle whenever the
+        # chunk ahead of it in the queue is a slow one (rows of geometry against rows of sky)
         in_flight = CHUNKS_IN_FLIGHT_PER_THREAD * s.thread_count
-        pending = deque()
+        pending = set()
+        done_count = 0
 
-        def finish_oldest(submitted):
-            # stats are merged in chunk order (sums of integers and timings)
-            future = pending.popleft()
-            finish(future.result(), submitted - len(pending))
+        def finish_some():
+            nonlocal done_count
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for future in done:
+                pending.remove(future)
+                done_count += 1
+                # stats are sums of integers and timings: the order they come in is free
+                finish(future.result(), done_count)
 
         with _thread_pool(s.thread_count, pool) as pool:
             try:
-                for submitted, chunk in enumerate(chunks, 1):
-                    pending.append(pool.submit(render_and_add, chunk))
+                for chunk in chunks:
+                    pending.add(pool.submit(render_and_add, chunk))
                     if len(pending) >= in_flight:
-                        finish_oldest(submitted)
+                        finish_some()
                 while pending:
-                    finish_oldest(n_chunks)
+                    finish_some()
             except BaseException:
                 # Ctrl-C or a failing chunk: drop the chunks not yet started instead of
                 # rendering the rest of the image before giving up
