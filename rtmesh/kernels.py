@@ -254,11 +254,16 @@ def camera_rays(film_xy, pixels, width, disk, position, forward, right, up, imag
     lens, in_pixels = len(disk) > 0, len(pixels) > 0
     origins = np.empty((3, n if lens else 0))
     d = np.empty((3, n))
+    inverse_width = 1.0 / width
     for i in range(n):
         x, y = film_xy[i, 0], film_xy[i, 1]
         if in_pixels:
-            row = pixels[i] // width
-            x, y = x + (pixels[i] - row * width), y + row
+            # the row by a float product and a one-step correction: an integer division a
+            # ray would keep the loop from vectorising
+            row = np.int64(pixels[i] * inverse_width)
+            row += (row + 1) * width <= pixels[i]
+            row -= row * width > pixels[i]
+            x, y = x + np.float64(pixels[i] - row * width), y + np.float64(row)
         sx = x * image_plane[0] + image_plane[1]
         sy = y * image_plane[2] + image_plane[3]
         if lens:

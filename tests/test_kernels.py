@@ -186,3 +186,18 @@ def test_film_sums_and_means():
     assert means.dtype == np.float32
     np.testing.assert_allclose(means[pixels], radiance.sum(axis=1) / 3, rtol=1e-7)
     assert not means[[1, 3, 4, 6, 8, 9]].any()  # no samples: 0
+
+
+@pytest.mark.parametrize("width", [1, 3, 640, 3840, 65535])
+def test_camera_rays_find_the_row_and_column_of_every_pixel_index(width):
+    """The kernel splits pixel indices into rows and columns without integer division:
+    check the rows' first and last pixels and random ones."""
+    rng = np.random.default_rng(width)
+    rows = np.arange(1, 60)
+    pixels = np.unique(np.concatenate([rows * width, rows * width - 1, rng.integers(0, width * 70000, 2000)]))
+    # image plane (1, 0, 1, 0): sx is the film x, sy the film y, direction ~ (sx, sy, 1)
+    _, d = kernels.camera_rays(np.zeros((len(pixels), 2)), pixels, width, np.zeros((0, 2)), np.zeros(3),
+                               np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]),
+                               np.array([1.0, 0.0, 1.0, 0.0]), 1.0)
+    np.testing.assert_allclose(d[:, 0] / d[:, 2], pixels % width, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(d[:, 1] / d[:, 2], pixels // width, rtol=1e-12, atol=1e-9)

@@ -226,6 +226,15 @@ def main():
     n_cam, n_shadow = len(camera_rays[0]), len(shadow_rays[0])
     overhead = median["rtmesh, 1 thread"] / median["raw embreex run(), 1 thread"]
     speedup = median["rtmesh, 1 thread"] / median["rtmesh, 2 threads"]
+    # the same ratios within each interleaved run: their spread shows how much a shared
+    # machine's speed moved during the measurement
+    t = {name: np.array(v) for name, v in times.items()}
+    per_run = {
+        "overhead": t["rtmesh, 1 thread"] / t["raw embreex run(), 1 thread"],
+        "speedup": t["rtmesh, 1 thread"] / t["rtmesh, 2 threads"],
+        "embree speedup": t["raw embreex run(), 1 thread"] / t["raw embreex run(), 2 threads"],
+    }
+    spread = {k: f"{np.median(v):.2f} ({v.min():.2f}-{v.max():.2f})" for k, v in per_run.items()}
     rows = [f"| {name} | {1e3 * t:.1f} | {1e3 * best[name]:.1f} | {(n_cam + n_shadow) / t / 1e6:.2f} |"
             for name, t in median.items()]
     stage_text = ", ".join(f"{k} {1e3 * v:.1f}" for k, v in stage_median.items() if v > 0)
@@ -251,6 +260,9 @@ def main():
         f"from best times {best['rtmesh, 1 thread'] / best['raw embreex run(), 1 thread']:.2f}",
         f"- rtmesh 1 thread / rtmesh 2 threads: **{speedup:.2f}** (target >= 1.8); "
         f"raw Embree 1 / 2 threads: {median['raw embreex run(), 1 thread'] / median['raw embreex run(), 2 threads']:.2f}",
+        f"- Per-run ratios, median (range) over the {args.runs} interleaved runs: rtmesh / raw Embree "
+        f"{spread['overhead']}; rtmesh 2-thread speed-up {spread['speedup']}; raw Embree 2-thread "
+        f"speed-up {spread['embree speedup']}",
         f"- rtmesh 1-thread stage times, ms: {stage_text}",
         "",
     ])
