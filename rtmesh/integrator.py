@@ -46,7 +46,7 @@ from .settings import RenderStats
 from .vecmath import (dot, face_viewer, fresnel_dielectric, fresnel_schlick, orthonormal_basis, reflect,
                       refract)
 from .materials import ALPHA_MODES
-from .kernels import add_light, light_samples, surface_records, surface_reflectance
+from .kernels import add_light, highlight_thresholds, light_samples, surface_records, surface_reflectance
 from .texturing import SurfaceTextures
 from .cutouts import CutoutAccel
 
@@ -255,6 +255,7 @@ class Integrator:
         self._ambient_light = component_major((m.ambient * scene.ambient).T)
         # the highlight's exponent per material; negative: no highlight
         self._highlight_exponent = np.where(self._has_specular, m.shininess, -1.0)
+        self._highlight_from = highlight_thresholds(self._highlight_exponent)
         self._light_parameters = [light.kernel_parameters() for light in self.lights]
         self._offset_scale32 = np.float32(self.offset_scale)
         self._faces, self._vertex_normals = self._face_tables()
@@ -707,8 +708,9 @@ class Integrator:
         p, ng, ns, d = (take_rows(a, rows) for a in (srf.p, srf.ng, srf.ns, srf.d))
         total = None
         for light in self._light_parameters:
-            lit, origins, directions, t_max, cos_i, highlight, power_exponent, incident = light_samples(
-                light, p, ng, ns, d, materials[0], self._highlight_exponent, self._offset_scale32, _SHADOW_SHORTEN)
+            (lit, origins, directions, t_max, cos_i, incident, highlight_rows, highlight,
+             power_exponent) = light_samples(light, p, ng, ns, d, materials[0], self._highlight_exponent,
+                                             self._highlight_from, self._offset_scale32, _SHADOW_SHORTEN)
             if not len(lit):
                 continue
             target = take_rows(rows, lit) if rows is not None else lit
@@ -719,7 +721,7 @@ class Integrator:
             if total is None:
                 total = np.zeros((len(srf.mat), 3), order="F")
             power = np.power(highlight, power_exponent, out=highlight)  # NumPy's pow is vectorised
-            add_light(total, target, lit, occluded, cos_i, power, incident, *materials[:5])
+            add_light(total, target, lit, occluded, cos_i, incident, highlight_rows, power, *materials[:5])
         if self.stages["area_lights"]:
 
             def reflectance(wi, lit):

@@ -549,7 +549,7 @@ _BLOCK = 256
 
 
 @kernel
-def light_samples(light, p, ng, ns, d, mat, exponent, scale, shorten):
+def light_samples(light, p, ng, ns, d, mat, exponent, visible_from, scale, shorten):
     """One point-like light at every hit: the lit hits, their shadow rays, and what shading
     them needs once the shadow rays are traced (see :func:`add_light`).
 
@@ -562,6 +562,9 @@ def light_samples(light, p, ng, ns, d, mat, exponent, scale, shorten):
     mat : (k,) intp
     exponent : (M,) float64
         Shininess per material, negative for materials without a highlight.
+    visible_from : (M,) float64
+        Per material, the smallest highlight cosine whose power is kept (see
+        :func:`highlight_thresholds`).
     scale : float32
         Scene size, for the origin offset.
     shorten : float
@@ -577,12 +580,16 @@ def light_samples(light, p, ng, ns, d, mat, exponent, scale, shorten):
         Shadow ray lengths (clamped to the float32 range).
     cos_i : (j,) float64
         ``ns . wi``.
-    highlight, power_exponent : (j,) float64
-        ``highlight ** power_exponent`` is the highlight's power: ``max(0, ns . h)`` and
-        the shininess on materials with a highlight, 0 and 1 elsewhere.  Left for NumPy
-        to raise: its pow is vectorised, where a compiled loop calls libm once a row.
     incident : (j, 3) float64
         The light's incident term.
+    highlight_rows : (h,) intp
+        The lit rows (indices into the arrays above) with a highlight worth raising.
+    highlight, power_exponent : (h,) float64
+        ``highlight ** power_exponent`` is the highlight's power there (``max(0, ns . h)``
+        and the shininess); it is 0 on the other lit rows.  Left for NumPy to raise: its
+        pow is vectorised where a compiled loop calls libm once a row, but only for
+        ordinary operands: a zero base or an underflowing power takes a slow path (tens of
+        times slower), so those rows are not handed to it.
 
     Notes
     -----
@@ -593,12 +600,12 @@ def light_samples(light, p, ng, ns, d, mat, exponent, scale, shorten):
     lit = np.empty(k, np.intp)
     origins, directions = np.empty((k, 3), np.float32), np.empty((k, 3), np.float32)
     t_max = np.empty(k, np.float32)
-    cos_i, highlight, power_exponent = np.empty(k), np.empty(k), np.empty(k)
-    incident = np.empty((k, 3))
+    cos_i, incident = np.empty(k), np.empty((k, 3))
+    highlight_rows, highlight, power_exponent = np.empty(k, np.intp), np.empty(k), np.empty(k)
     block_incident, block_cos = np.empty((3, _BLOCK)), np.empty((2, _BLOCK))
     block_ray = np.empty((6, _BLOCK), np.float32)
     block_length, block_lit = np.empty(_BLOCK, np.float32), np.empty(_BLOCK, np.bool_)
-    j = 0
+    j = h = 0
     for start in range(0, k, _BLOCK):
         n = min(_BLOCK, k - start)
         for b in range(n):
@@ -625,18 +632,44 @@ def light_samples(light, p, ng, ns, d, mat, exponent, scale, shorten):
                 incident[j, c] = block_incident[c, b]
             t_max[j] = block_length[b]
             cos_i[j] = block_cos[0, b]
-            e = exponent[mat[i]]
-            highlight[j] = block_cos[1, b] if e >= 0.0 else 0.0
-            power_exponent[j] = e if e >= 0.0 else 1.0
+            m = mat[i]
+            e = exponent[m]
+            # a power of 0 is 1 whatever the cosine (0 ** 0 included)
+            c = 1.0 if e == 0.0 else block_cos[1, b]
+            if e >= 0.0 and c > 0.0 and c >= visible_from[m]:
+                highlight_rows[h], highlight[h], power_exponent[h] = j, c, e
+                h += 1
             lit[j] = i
             j += 1
-    return (lit[:j], origins[:j], directions[:j], t_max[:j], cos_i[:j], highlight[:j], power_exponent[:j],
-            incident[:j])
+    return (lit[:j], origins[:j], directions[:j], t_max[:j], cos_i[:j], incident[:j], highlight_rows[:h],
+            highlight[:h], power_exponent[:h])
+
+
+def highlight_thresholds(exponent):
+    """Per material, the smallest highlight cosine whose power :func:`light_samples` keeps.
+
+    Below ``2 ** (-1000 / shininess)`` the power is under ``2 ** -1000`` (1e-301), nothing
+    an image can show, and NumPy's pow would take its slow underflow path; 0 for a
+    shininess of 0 (a power of 1), inf without a highlight.
+
+    Parameters
+    ----------
+    exponent : (M,) float
+        Shininess, negative without a highlight.
+
+    Returns
+    -------
+    (M,) float64
+    """
+    exponent = np.asarray(exponent, dtype=np.float64)
+    with np.errstate(divide="ignore"):
+        threshold = np.exp2(-1000.0 / exponent)
+    return np.where(exponent > 0.0, threshold, np.where(exponent == 0.0, 0.0, np.inf))
 
 
 @kernel
-def add_light(total, target, lit, occluded, cos_i, power, incident, mat, diffuse, tint_d, specular,
-              tint_s):
+def add_light(total, target, lit, occluded, cos_i, incident, highlight_rows, power, mat, diffuse, tint_d,
+              specular, tint_s):
     """Add one light's Blinn-Phong term to the lit rows whose shadow rays are clear.
 
     Parameters
@@ -649,16 +682,25 @@ def add_light(total, target, lit, occluded, cos_i, power, incident, mat, diffuse
         The lit rows of ``mat`` and the tints (see :func:`light_samples`).
     occluded : (j,) bool
         Shadow-ray results.
-    cos_i, power : (j,) float64
-        ``ns . wi`` and the raised highlight cosine.
+    cos_i : (j,) float64
+        ``ns . wi``.
     incident : (j, 3) float64
+    highlight_rows : (h,) intp
+        Ascending lit rows with a highlight.
+    power : (h,) float64
+        The raised highlight cosine of those rows (0 on the others).
     mat : (k,) intp
     diffuse, specular : (M, 3) float64
         Material colours.
     tint_d, tint_s : (k, 3) float or (0, 3)
         Texture tints of the colours, or empty.
     """
+    q = 0  # next highlight row: both lists are ascending
     for j in range(len(lit)):
+        highlight = 0.0
+        if q < len(highlight_rows) and highlight_rows[q] == j:
+            highlight = power[q]
+            q += 1
         if occluded[j]:
             continue
         i, r = lit[j], target[j]
@@ -666,7 +708,7 @@ def add_light(total, target, lit, occluded, cos_i, power, incident, mat, diffuse
         f0, f1, f2 = _blinn_phong(_colour(diffuse, m, tint_d, i, 0), _colour(diffuse, m, tint_d, i, 1),
                                   _colour(diffuse, m, tint_d, i, 2), _colour(specular, m, tint_s, i, 0),
                                   _colour(specular, m, tint_s, i, 1), _colour(specular, m, tint_s, i, 2),
-                                  cos_i[j], power[j])
+                                  cos_i[j], highlight)
         total[r, 0] += f0 * incident[j, 0]
         total[r, 1] += f1 * incident[j, 1]
         total[r, 2] += f2 * incident[j, 2]

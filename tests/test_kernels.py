@@ -62,14 +62,15 @@ def test_light_samples_match_the_scalar_formulas(light):
     specular = np.array([[0.3, 0.3, 0.3], [0.0, 0.0, 0.0], [0.5, 0.2, 0.1]])
     exponent = np.array([50.0, -1.0, 7.5])  # the middle material has no highlight
     tint = rng.uniform(0.2, 1.0, size=(n, 3))
-    lit, origins, directions, t_max, cos_i, highlight, power_exponent, incident = kernels.light_samples(
-        light.kernel_parameters(), p, ng, ns, d, mat, exponent, np.float32(2.0), 1.0 - 1e-5)
+    (lit, origins, directions, t_max, cos_i, incident, highlight_rows, highlight,
+     power_exponent) = kernels.light_samples(light.kernel_parameters(), p, ng, ns, d, mat, exponent,
+                                             kernels.highlight_thresholds(exponent), np.float32(2.0), 1.0 - 1e-5)
     # the Blinn-Phong term goes to the rows whose shadow rays are clear
     occluded = np.zeros(len(lit), dtype=bool)
     occluded[::5] = True
     total = np.zeros((n, 3))
-    kernels.add_light(total, lit, lit, occluded, cos_i, np.power(highlight, power_exponent), incident, mat,
-                      diffuse, tint, specular, np.zeros((0, 3)))
+    kernels.add_light(total, lit, lit, occluded, cos_i, incident, highlight_rows,
+                      np.power(highlight, power_exponent), mat, diffuse, tint, specular, np.zeros((0, 3)))
     expected_lit = []
     expected_total = np.zeros((n, 3))
     for i in range(n):
@@ -86,6 +87,7 @@ def test_light_samples_match_the_scalar_formulas(light):
     np.testing.assert_array_equal(lit, expected_lit)
     np.testing.assert_allclose(total, expected_total, rtol=1e-12, atol=1e-300)
     assert 0 < len(lit) < n  # both branches exercised
+    assert 0 < len(highlight_rows) < len(lit)
     # the shadow-ray origins are the offset every spawned ray gets
     np.testing.assert_array_equal(
         origins, offset_ray_origins(p[lit], ng[lit], np.float32, 2.0, directions.astype(np.float64)))
@@ -201,3 +203,30 @@ def test_camera_rays_find_the_row_and_column_of_every_pixel_index(width):
                                np.array([1.0, 0.0, 1.0, 0.0]), 1.0)
     np.testing.assert_allclose(d[:, 0] / d[:, 2], pixels % width, rtol=1e-12, atol=1e-9)
     np.testing.assert_allclose(d[:, 1] / d[:, 2], pixels // width, rtol=1e-12, atol=1e-9)
+
+
+def test_highlight_powers_below_float64_range_are_dropped_and_shininess_zero_is_one():
+    exponent = np.array([5000.0, 0.0, -1.0])
+    threshold = kernels.highlight_thresholds(exponent)
+    assert threshold[0] ** 5000.0 == pytest.approx(2.0 ** -1000, rel=1e-9)
+    assert threshold[1] == 0.0 and threshold[2] == np.inf
+    # one point, light straight above, viewer at grazing angles: highlight cosines from ~1 to ~0
+    n = 64
+    angles = np.linspace(0.0, 1.55, n)
+    d = np.asfortranarray(np.column_stack([np.sin(angles), np.zeros(n), -np.cos(angles)]))
+    p = np.zeros((n, 3), order="F")
+    up = np.asfortranarray(np.tile([0.0, 0.0, 1.0], (n, 1)))
+    light = PointLight([0.0, 0.0, 1.0], [1.0, 1.0, 1.0]).kernel_parameters()
+    for m in range(3):
+        mat = np.full(n, m, dtype=np.intp)
+        lit, *_, cos_i, incident, rows, highlight, power_exponent = kernels.light_samples(
+            light, p, up, up, d, mat, exponent, threshold, np.float32(1.0), 1.0)
+        assert len(lit) == n
+        if m == 0:
+            assert (highlight ** 5000.0 >= 2.0 ** -1000).all() and 0 < len(rows) < n
+        elif m == 1:
+            np.testing.assert_array_equal(rows, np.arange(n))  # every lit row: power 1
+            np.testing.assert_array_equal(highlight ** power_exponent, 1.0)
+        else:
+            assert not len(rows)
+
