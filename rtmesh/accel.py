@@ -69,7 +69,7 @@ def offset_ray_origins(points, normals, dtype=np.float64, scale=1.0, directions=
     Returns
     -------
     (n, 3) float64 or float32
-        Offset origins, laid out like ``points``; every value is exactly representable in
+        Offset origins, component-major; every value is exactly representable in
         float32, so handing them to Embree does not round them back onto the surface.
     """
     no_directions = np.zeros((0, 3), dtype=np.float32)

@@ -9,10 +9,10 @@ on whole ray batches (no per-ray Python loop)::
                 -> film
 
 Rays carry the index of the sample they belong to and their throughput; contributions go
-back to the sample by scattering.  Chunks run on a thread pool (Embree and NumPy release
-the GIL).  Every random number is a function of (seed, pixel, sample, dimension), and each
-pixel is rendered whole inside one chunk, so the image is bit-identical whatever the thread
-count and chunk size.
+back to the sample by scattering.  Chunks run on a thread pool (Embree, NumPy and the
+compiled kernels of :mod:`rtmesh.kernels` release the GIL).  Every random number is a
+function of (seed, pixel, sample, dimension), and each pixel is rendered whole inside one
+chunk, so the image is bit-identical whatever the thread count and chunk size.
 
 Before rendering, :class:`Integrator` looks at the scene and the settings and enables only
 the stages that can contribute (see :attr:`Integrator.stages`).
@@ -903,14 +903,6 @@ def _scatter_add(target, index, values, unique=False):
     else:
         for c in range(target.shape[1]):
             np.add.at(target[:, c], index, values[:, c])
-
-
-def _put_rows(target, rows, values):
-    """``target[rows] = values`` column by column (see :func:`_add_rows`); returns ``target``."""
-    for c in range(target.shape[1]):
-        column = target[:, c]
-        column[rows] = values[:, c]
-    return target
 
 
 def _add_rows(target, rows, values):
