@@ -27,6 +27,10 @@ class Film:
         Name and channel count of each extra pass (e.g. ``{"ao": 1}``), optionally with
         how a pixel's samples are reduced: ``"mean"`` (the default), ``"first"`` (the
         pixel's first sample, e.g. integer ids) or ``"min"`` (e.g. the nearest depth).
+    zeroed : bool
+        Clear the sums up front.  False is for a caller that adds every pixel through
+        :meth:`add_tile` before reading anything (its first samples are assigned);
+        :meth:`add_samples` adds to what is there.
 
     Attributes
     ----------
@@ -41,11 +45,16 @@ class Film:
     pass_reductions : dict of str to str
     """
 
-    def __init__(self, width, height, passes=None):
+    def __init__(self, width, height, passes=None, zeroed=True):
         self.width, self.height = int(width), int(height)
         n = self.width * self.height
-        self.sum = np.zeros((n, 3), order="F")
-        self.sum_sq = np.zeros((n, 3), order="F")
+        # Without ``zeroed`` the sums start as they are in memory: a pixel's first samples
+        # are assigned, not added (add_tile), so a render whose first round covers every
+        # pixel (rtmesh.adaptive) skips a serial pass clearing 48 bytes a pixel and the
+        # threads that render the pixels write them once.
+        empty = np.zeros if zeroed else np.empty
+        self.sum = empty((n, 3), order="F")
+        self.sum_sq = empty((n, 3), order="F")
         self.count = np.zeros(n, dtype=np.int64)
         specs = {name: (v, "mean") if isinstance(v, int) else tuple(v) for name, v in (passes or {}).items()}
         self.pass_reductions = {name: reduction for name, (_, reduction) in specs.items()}
@@ -76,7 +85,7 @@ class Film:
         mean_passes = self._keep_min_and_first(px, passes, lambda v: v.min(axis=1),
                                                lambda v: v[:, 0])
         index = px if isinstance(px, np.ndarray) else np.arange(px.start, px.stop)
-        kernels.accumulate_samples(self.sum, self.sum_sq, index, radiance)
+        kernels.accumulate_samples(self.sum, self.sum_sq, self.count, index, radiance)
         for s in range(spp):
             for name, values in mean_passes.items():
                 self.pass_sums[name][px] += values[:, s]

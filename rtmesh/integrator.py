@@ -332,7 +332,8 @@ class Integrator:
         """
         s = self.settings
         start = time.perf_counter()
-        film = Film(s.width, s.height, self.passes.film_passes())
+        # the first round renders every pixel (rtmesh.adaptive): the sums need no clearing
+        film = Film(s.width, s.height, self.passes.film_passes(), zeroed=False)
         stats = RenderStats(threads=s.thread_count, pixels=s.width * s.height)
         stats.stages_enabled = [name for name, on in self.stages.items() if on]
         # one pool for the whole render: its rounds and the final image

@@ -716,13 +716,18 @@ def add_light(total, target, lit, occluded, cos_i, incident, highlight_rows, pow
 
 # ------------------------------------------------------------------ film
 @kernel
-def accumulate_samples(total, total_sq, pixels, radiance):
+def accumulate_samples(total, total_sq, count, pixels, radiance):
     """Add samples and their squares to per-pixel sums, each pixel's samples in order.
+
+    A pixel without samples so far (``count`` 0) takes its first sample by assignment, so
+    the sums need not be zeroed beforehand (see :class:`rtmesh.film.Film`).
 
     Parameters
     ----------
     total, total_sq : (P, 3) float64
         Sums over samples of radiance and of radiance squared (updated in place).
+    count : (P,) int
+        Samples per pixel before these (not updated here).
     pixels : (m,) int
         Distinct pixel indices.
     radiance : (m, spp, 3) float
@@ -730,7 +735,14 @@ def accumulate_samples(total, total_sq, pixels, radiance):
     """
     for i in range(len(pixels)):
         px = pixels[i]
-        for s in range(radiance.shape[1]):
+        first = 0
+        if count[px] == 0:
+            for c in range(3):
+                r = radiance[i, 0, c]
+                total[px, c] = r
+                total_sq[px, c] = r * r
+            first = 1
+        for s in range(first, radiance.shape[1]):
             for c in range(3):
                 r = radiance[i, s, c]
                 total[px, c] += r

@@ -178,10 +178,12 @@ def test_film_sums_and_means():
     total, total_sq = np.zeros((10, 3), order="F"), np.zeros((10, 3), order="F")
     radiance = rng.uniform(size=(4, 3, 3))
     pixels = np.array([7, 2, 5, 0])
-    kernels.accumulate_samples(total, total_sq, pixels, radiance)
+    count = np.zeros(10, np.int64)
+    count[pixels[:2]] = 1  # these two add to what is there, the others start from nothing
+    total[pixels[2:]] = total_sq[pixels[2:]] = np.nan
+    kernels.accumulate_samples(total, total_sq, count, pixels, radiance)
     np.testing.assert_allclose(total[pixels], radiance.sum(axis=1), rtol=1e-15)
     np.testing.assert_allclose(total_sq[pixels], (radiance ** 2).sum(axis=1), rtol=1e-15)
-    count = np.zeros(10, np.int64)
     count[pixels] = 3
     means = np.full((10, 3), np.nan, dtype=np.float32)
     kernels.mean_image(total, count, means)
