@@ -77,7 +77,7 @@ class Camera:
             return float(self.focus_distance)
         return float(np.linalg.norm(self.look_at - self.position))
 
-    def generate_rays(self, film_xy, width, height, lens_uv=None, pixels=None):
+    def generate_rays(self, film_xy, width, height, lens_uv=None, pixels=None, frame=None):
         """Primary rays through continuous film positions.
 
         Parameters
@@ -92,6 +92,8 @@ class Camera:
             Uniform samples in [0, 1)^2 for the aperture; ignored for a pinhole camera.
         pixels : (n,) int, optional
             Linear index (``row * width + column``) of the pixel of each ray.
+        frame : tuple of three (3,) float, optional
+            :meth:`frame`, if the caller has it already.
 
         Returns
         -------
@@ -99,7 +101,7 @@ class Camera:
         directions : (n, 3) float64
             Unit directions, component-major (see :mod:`rtmesh.batches`).
         """
-        forward, right, up = self.frame()
+        forward, right, up = self.frame() if frame is None else frame
         tan_half = np.tan(np.radians(self.fov) * 0.5)
         aspect = width / height
         # image-plane coordinates at unit distance along forward, each an affine map of one

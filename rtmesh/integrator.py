@@ -198,7 +198,8 @@ class Integrator:
                                        self.textures, self.offset_scale, settings.seed)
             self.accel = self.cutouts
         self.camera = _translated(scene.camera, self.shift)
-        self.camera.frame()  # fail early on a degenerate camera
+        # formed once (and failing early on a degenerate camera), not for every chunk
+        self._camera_frame = self.camera.frame()
         lights = [_translated(light, self.shift) for light in scene.lights if not light.is_black]
         self.lights = [light for light in lights if not is_area_light(light)]
         area_lights = [light for light in lights if is_area_light(light)]
@@ -509,7 +510,8 @@ class Integrator:
         else:
             n = m * spp
             pixel = np.repeat(pixels, spp) if spp > 1 else pixels
-            sample_in_pixel = np.tile(np.arange(first_sample, first_sample + spp, dtype=np.int64), m)
+            sample_in_pixel = (np.full(m, first_sample, dtype=np.int64) if spp == 1 else
+                               np.tile(np.arange(first_sample, first_sample + spp, dtype=np.int64), m))
         # every dimension is stratified in sets of the settings' spp, whatever the round
         in_pixel = pixel_offsets(s.sampler, s.seed, pixel, sample_in_pixel, s.spp)
         lens_uv = None
@@ -522,7 +524,8 @@ class Integrator:
             t_open, t_close = self.camera.shutter
             u = stratified_values(s.sampler, s.seed, pixel, sample_in_pixel, s.spp, Dim.TIME)
             sample_time = t_open + (t_close - t_open) * u
-        origins, directions = self.camera.generate_rays(in_pixel, s.width, s.height, lens_uv, pixel)
+        origins, directions = self.camera.generate_rays(in_pixel, s.width, s.height, lens_uv, pixel,
+                                                        self._camera_frame)
         # camera rays have unit throughput: a read-only broadcast costs nothing, and
         # _shade does not multiply by it at depth 0
         # (inside an absorbing medium they lose light on the way: then a real array)

@@ -29,7 +29,7 @@ class OrthographicCamera(Camera):
 
     half_width: float = 1.0
 
-    def generate_rays(self, film_xy, width, height, lens_uv=None, pixels=None):
+    def generate_rays(self, film_xy, width, height, lens_uv=None, pixels=None, frame=None):
         if pixels is not None:  # positions inside the pixels
             film_xy = film_xy + np.column_stack([pixels % width, pixels // width])
         forward, right, up = self.frame()
