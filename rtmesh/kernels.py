@@ -6,15 +6,16 @@ tracing the rays, and with several threads they queue for the GIL.  The kernels 
 hit's whole surface record, or a whole (hit, light) pair, in one loop that numba compiles:
 
 * ``nogil``: chunk threads run them side by side, like Embree's queries;
-* ``cache``: the machine code is kept on disk next to this file, so only the first run
-  after an install pays the compile;
+* ``cache``: the machine code is kept on disk next to this file (or in the user's cache
+  directory), so only the first run after an install pays the compile (see
+  :func:`cached`);
 * ``error_model="numpy"``: a division by zero gives inf or NaN as in NumPy, never an
   exception;
 * no ``fastmath``: no reassociation or fused multiply-adds, so each formula rounds as
   written, the same on every machine and for every chunk and thread count.
 
-Every function with an ``_`` prefix is one row's arithmetic, inlined into the array
-kernels that use it; all compiled code lives in this one module because numba's disk
+Every function with an ``_`` prefix is one row's arithmetic, which LLVM inlines into the
+array kernels that call it; all compiled code lives in this one module because numba's disk
 cache does not notice changes to jitted functions imported from other files.
 
 Arrays of 3-vectors are ``(n, 3)``; results are component-major (see
@@ -29,9 +30,35 @@ import numpy as np
 from numba import types
 from numba.extending import intrinsic
 
-_COMPILE = dict(nogil=True, cache=True, error_model="numpy")
-kernel = numba.njit(**_COMPILE)
-_row = numba.njit(**_COMPILE)
+
+
+def cached(compiler):
+    """Apply a numba decorator with ``cache=True``, or without it where no cache directory
+    is writable (numba tries the package's ``__pycache__``, then the user's cache
+    directory, and raises RuntimeError at import otherwise, e.g. a read-only install
+    with a read-only home): the kernels then compile on every run instead.
+
+    Parameters
+    ----------
+    compiler : callable
+        ``compiler(cache=...)`` returns a numba decorator.
+
+    Returns
+    -------
+    callable
+        A decorator.
+    """
+    def decorate(function):
+        try:
+            return compiler(cache=True)(function)
+        except RuntimeError:
+            return compiler(cache=False)(function)
+
+    return decorate
+
+
+kernel = cached(lambda cache: numba.njit(nogil=True, error_model="numpy", cache=cache))
+_row = kernel  # the same compiler, named for the one-row helpers
 
 # ------------------------------------------------------------------ float32 offsets
 # See rtmesh.accel for the reasoning behind the origin offset and its constants.
@@ -78,7 +105,7 @@ def _ulp32(x):
     return _float32_from_bits(_float32_bits(x) & _EXPONENT_MASK) * _ULP_SCALE
 
 
-@numba.vectorize(["float32(float32)"], nopython=True, cache=True)
+@cached(lambda cache: numba.vectorize(["float32(float32)"], nopython=True, cache=cache))
 def ulp32(x):
     """Spacing of float32 numbers at each element (a ufunc: any shape and layout).
 

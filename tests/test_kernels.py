@@ -232,3 +232,16 @@ def test_highlight_powers_below_float64_range_are_dropped_and_shininess_zero_is_
         else:
             assert not len(rows)
 
+
+
+def test_kernels_compile_without_a_writable_cache_directory():
+    """A function numba cannot cache (here: its source file does not exist, as for a
+    read-only install with a read-only home, where numba finds no cache locator) is
+    compiled uncached instead of failing at import."""
+    namespace = {}
+    exec("def twice(x):\n    return 2.0 * x\n", namespace)  # source file "<string>"
+    import numba
+    with pytest.raises(RuntimeError, match="cannot cache"):
+        numba.njit(cache=True)(namespace["twice"])
+    twice = kernels.kernel(namespace["twice"])
+    assert twice(1.5) == 3.0
