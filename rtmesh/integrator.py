@@ -24,6 +24,7 @@ import dataclasses
 import functools
 import logging
 import sys
+import threading
 import time
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from dataclasses import dataclass
@@ -960,19 +961,35 @@ def _thread_pool(threads, pool=None):
 _RENDER_SWITCH_INTERVAL = 5e-4
 
 
+_handoff_lock = threading.Lock()
+_handoff_renders = 0  # multi-threaded renders running now
+_handoff_previous = None  # the switch interval before the first of them
+
+
 @contextlib.contextmanager
 def _gil_handoff(threads):
-    """Shorten the GIL switch interval for the duration of a multi-threaded render (it is
-    process-wide: the caller's value is restored on exit)."""
+    """Shorten the GIL switch interval while multi-threaded renders run.
+
+    It is process-wide: the first render to start sets it and the last to finish restores
+    the caller's value, so renders running side by side (from several threads of the
+    caller) do not leave it changed.
+    """
+    global _handoff_renders, _handoff_previous
     if threads == 1:
         yield
         return
-    previous = sys.getswitchinterval()
-    sys.setswitchinterval(min(previous, _RENDER_SWITCH_INTERVAL))
+    with _handoff_lock:
+        if _handoff_renders == 0:
+            _handoff_previous = sys.getswitchinterval()
+            sys.setswitchinterval(min(_handoff_previous, _RENDER_SWITCH_INTERVAL))
+        _handoff_renders += 1
     try:
         yield
     finally:
-        sys.setswitchinterval(previous)
+        with _handoff_lock:
+            _handoff_renders -= 1
+            if _handoff_renders == 0:
+                sys.setswitchinterval(_handoff_previous)
 
 
 class _Clock:

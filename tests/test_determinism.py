@@ -93,3 +93,33 @@ def test_regular_sampler_without_ao_ignores_the_seed():
     first = render(every_stage_scene(), seed=1, **settings)
     second = render(every_stage_scene(), seed=2, **settings)
     np.testing.assert_array_equal(first.image, second.image)
+
+
+def test_renders_on_threads_restore_the_gil_switch_interval_even_side_by_side():
+    """Multi-threaded renders shorten the (process-wide) GIL switch interval while they run
+    and leave the caller's value behind, also when two run at once from two threads."""
+    import sys
+    import threading
+
+    from rtmesh.integrator import Integrator
+    from scenes import settings, sphere_on_floor_scene
+
+    scene = sphere_on_floor_scene()
+    previous = sys.getswitchinterval()
+    seen = []
+
+    def progress(done, total):
+        seen.append(sys.getswitchinterval())
+
+    try:
+        sys.setswitchinterval(0.004)
+        integrator = Integrator(scene, settings(threads=2, width=64, height=48))
+        threads = [threading.Thread(target=integrator.render, args=(progress,)) for _ in range(2)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        assert seen and max(seen) <= 0.0005 + 1e-12
+        assert sys.getswitchinterval() == pytest.approx(0.004)
+    finally:
+        sys.setswitchinterval(previous)
