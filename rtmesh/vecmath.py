@@ -221,8 +221,8 @@ def face_viewer(ns, ng, d):
     mirror direction point into the surface) or lights the surface from below.  Normals
     on the wrong side of the geometric normal are replaced by it; normals that face away
     from the viewer are bent toward the viewer, within the plane of the normal and the view
-    direction, until ``ns . wo = 0.01`` (:data:`rtmesh.kernels.VIEW_COSINE`, before normalising): the smallest change that
-    fixes them, and none for every other normal.  Light leaks are stopped separately: a
+    direction, until ``ns . wo = 0.01`` (:data:`rtmesh.kernels.VIEW_COSINE`, before
+    normalising): the smallest change that fixes them, and none for every other normal.  Light leaks are stopped separately: a
     light counts only when it is on the geometric side the ray came from.
 
     Parameters
