@@ -629,10 +629,11 @@ class Integrator:
         srf = _Surfaces()
         srf.sample = take_rows(rays.sample, rows)
         srf.time = None if sample_time is None else sample_time[srf.sample]
+        srf.d = take_rows(rays.directions, rows)
+        srf.prim = take_rows(hits.prim, rows)
         view = _NO_VECTORS
         if srf.time is not None:
-            view = self.motion.directions_to_rest(take_rows(hits.prim, rows).astype(np.intp), srf.time,
-                                                  take_rows(rays.directions, rows))
+            view = self.motion.directions_to_rest(srf.prim.astype(np.intp), srf.time, srf.d)
         normal_maps = self.stages["normal_maps"]
         # the shading-normal terminator fix (see face_viewer) runs in the kernel unless
         # normal maps, applied below, change the normals after it
@@ -640,8 +641,6 @@ class Integrator:
             hits.prim, hits.u, hits.v, np.arange(len(hits)) if rows is None else rows, rays.directions,
             view, self._faces, self._vertex_normals, self._smooth, self._material_id,
             self.stages["smooth_normals"] and not normal_maps)
-        srf.d = take_rows(rays.directions, rows)
-        srf.prim = take_rows(hits.prim, rows)
         srf.tints = None
         if self.stages["textures"]:
             u, v = take_rows(hits.u, rows), take_rows(hits.v, rows)

@@ -515,9 +515,9 @@ def _colour(table, m, tint, r, c):
 
 
 @_row
-def _shade(r, m, cos_i, cos_h, diffuse, tint_d, specular, tint_s, exponent):
-    """Blinn-Phong factor of hit row ``r`` with material ``m`` from the two cosines."""
-    power = cos_h ** exponent[m] if exponent[m] >= 0.0 else 0.0
+def _shade(r, m, cos_i, power, diffuse, tint_d, specular, tint_s):
+    """Blinn-Phong factor of hit row ``r`` with material ``m`` (and the row's tints) from
+    ``n . wi`` and the raised highlight cosine (0 without a highlight)."""
     return _blinn_phong(_colour(diffuse, m, tint_d, r, 0), _colour(diffuse, m, tint_d, r, 1),
                         _colour(diffuse, m, tint_d, r, 2), _colour(specular, m, tint_s, r, 0),
                         _colour(specular, m, tint_s, r, 1), _colour(specular, m, tint_s, r, 2),
@@ -551,13 +551,14 @@ def surface_reflectance(ns, d, wi, lit, mat, diffuse, tint_d, specular, tint_s, 
     k = len(ns)
     out = np.empty((3, k))
     for i in range(k):
-        cos_h = 0.0
-        if lit[i]:
-            cos_h = _highlight_cosine(ns[i, 0], ns[i, 1], ns[i, 2], -d[i, 0], -d[i, 1], -d[i, 2],
-                                      wi[i, 0], wi[i, 1], wi[i, 2])
+        m = mat[i]
+        power = 0.0
+        if lit[i] and exponent[m] >= 0.0:
+            power = _highlight_cosine(ns[i, 0], ns[i, 1], ns[i, 2], -d[i, 0], -d[i, 1], -d[i, 2],
+                                      wi[i, 0], wi[i, 1], wi[i, 2]) ** exponent[m]
         out[0, i], out[1, i], out[2, i] = _shade(
-            i, mat[i], _dot(ns[i, 0], ns[i, 1], ns[i, 2], wi[i, 0], wi[i, 1], wi[i, 2]),
-            cos_h, diffuse, tint_d, specular, tint_s, exponent)
+            i, m, _dot(ns[i, 0], ns[i, 1], ns[i, 2], wi[i, 0], wi[i, 1], wi[i, 2]), power,
+            diffuse, tint_d, specular, tint_s)
     return out.T
 
 
@@ -731,11 +732,7 @@ def add_light(total, target, lit, occluded, cos_i, incident, highlight_rows, pow
         if occluded[j]:
             continue
         i, r = lit[j], target[j]
-        m = mat[i]
-        f0, f1, f2 = _blinn_phong(_colour(diffuse, m, tint_d, i, 0), _colour(diffuse, m, tint_d, i, 1),
-                                  _colour(diffuse, m, tint_d, i, 2), _colour(specular, m, tint_s, i, 0),
-                                  _colour(specular, m, tint_s, i, 1), _colour(specular, m, tint_s, i, 2),
-                                  cos_i[j], highlight)
+        f0, f1, f2 = _shade(i, mat[i], cos_i[j], highlight, diffuse, tint_d, specular, tint_s)
         total[r, 0] += f0 * incident[j, 0]
         total[r, 1] += f1 * incident[j, 1]
         total[r, 2] += f2 * incident[j, 2]
