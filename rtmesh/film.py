@@ -31,6 +31,10 @@ class Film:
         Clear the sums up front.  False is for a caller that adds every pixel through
         :meth:`add_tile` before reading anything (its first samples are assigned);
         :meth:`add_samples` adds to what is there.
+    one_pass : bool
+        Every pixel is added exactly once, by :meth:`add_tile` (a render without later
+        rounds): each add also writes its pixels' image values, on the thread that adds
+        them, and :meth:`image` returns those instead of making a pass over the film.
 
     Attributes
     ----------
@@ -45,7 +49,7 @@ class Film:
     pass_reductions : dict of str to str
     """
 
-    def __init__(self, width, height, passes=None, zeroed=True):
+    def __init__(self, width, height, passes=None, zeroed=True, one_pass=False):
         self.width, self.height = int(width), int(height)
         n = self.width * self.height
         # Without ``zeroed`` the sums start as they are in memory: a pixel's first samples
@@ -56,6 +60,7 @@ class Film:
         self.sum = empty((n, 3), order="F")
         self.sum_sq = empty((n, 3), order="F")
         self.count = np.zeros(n, dtype=np.int64)
+        self._image = np.empty((n, 3), dtype=np.float32) if one_pass else None
         specs = {name: (v, "mean") if isinstance(v, int) else tuple(v) for name, v in (passes or {}).items()}
         self.pass_reductions = {name: reduction for name, (_, reduction) in specs.items()}
         # a min pass starts above every sample; +inf left over means "no sample"
@@ -90,6 +95,15 @@ class Film:
             for name, values in mean_passes.items():
                 self.pass_sums[name][px] += values[:, s]
         self.count[px] += spp
+        if self._image is not None:
+            # the pixels are final (one_pass): their image values are written now, while
+            # the sums are in cache, instead of in a serial pass after the render
+            if isinstance(px, slice):
+                kernels.mean_image(self.sum[px], self.count[px], self._image[px])
+            else:
+                means = np.empty((len(px), 3), dtype=np.float32)
+                kernels.mean_image(self.sum[px], self.count[px], means)
+                self._image[px] = means
 
     def add_samples(self, pixels, counts, radiance, passes=None):
         """Add a different number of samples to each of a set of pixels.
@@ -188,8 +202,11 @@ class Film:
         ----------
         pool : concurrent.futures.Executor, optional
             Threads to average blocks of pixels on (the kernel runs without the GIL): the
-            last serial pass of a render otherwise.
+            last serial pass of a render otherwise.  Not used by a ``one_pass`` film,
+            whose image is written as the pixels are added.
         """
+        if self._image is not None:
+            return self._image.reshape(self.height, self.width, 3)
         return self._means(self.sum, pool).reshape(self.height, self.width, 3)
 
     def _means(self, sums, pool=None):

@@ -26,7 +26,7 @@ import logging
 import sys
 import threading
 import time
-from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
+from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
 from dataclasses import dataclass
 
 import numpy as np
@@ -53,26 +53,20 @@ from .cutouts import CutoutAccel
 
 log = logging.getLogger(__name__)
 
-# At most this many chunks per thread are in flight (running, queued, or finished and not yet
-# merged into the render's statistics).  Submitting every chunk at once would queue work
-# items (and their pixel index arrays) for the whole image, growing with resolution x spp;
-# two per thread keep every thread busy.  Each thread adds its own chunks to the film, so
-# a chunk's radiance is freed as soon as it is on the film.
-CHUNKS_IN_FLIGHT_PER_THREAD = 2
-
 # Shadow rays to point and spot lights stop this fraction short of the light, so a light
 # placed exactly on a surface does not count that surface as an occluder.
 _SHADOW_SHORTEN = 1.0 - 1e-5
 # an empty (0, 3) array stands for "none" in the kernels' optional vector arguments
 _NO_VECTORS = np.zeros((0, 3))
-# smallest chunk (pixel samples) the thread balancing of Integrator.render_samples makes
+# Smallest chunk (pixel samples) of a multi-threaded render, unless the settings' chunk
+# size is smaller: below it the fixed cost of a chunk's stages (~0.2 ms of Python) shows.
 _MIN_CHUNK_SAMPLES = 2048
-# Chunks per thread the balancing aims for.  Chunks differ in cost (rows of sky against
-# rows of geometry), and a thread that draws the last expensive chunk works on alone, but
-# every chunk also costs ~0.2 ms of Python.  Measured on 2 threads, 512x512 (one
-# interleaved run each): the chunk phase alone sped up 1.80x with 8 chunks, 1.89x with 16;
-# whole frames with 4 / 8 / 16 chunks per thread took 52.3 / 52.0 / 57.3 ms (medians).
-_CHUNKS_PER_THREAD = 8
+# Chunks of a multi-threaded render shrink towards the end ("guided" scheduling): each
+# takes 1 / (_GUIDE * threads) of the samples left.  Chunks differ in cost (rows of sky
+# against rows of geometry) and a thread that draws the last long chunk works on alone;
+# small last chunks let the threads finish together, large first ones keep the number of
+# chunks (and their Python cost) low.  See _chunk_starts.
+_GUIDE = 2
 
 
 @dataclass
@@ -115,27 +109,114 @@ class _Surfaces:
     __slots__ = ("p", "ng", "ns", "d", "front", "mat", "prim", "sample", "time", "tints")
 
 
-def _ragged_chunks(counts, chunk_samples):
-    """Cut a run of pixels with ``counts`` samples each into chunks of about
-    ``chunk_samples`` samples, never splitting a pixel.
+def _chunk_starts(total, chunk_samples, threads):
+    """Where the chunks of a batch of ``total`` pixel samples start, in samples.
+
+    One thread takes chunks of ``chunk_samples``.  Several threads take chunks of
+    ``1 / (_GUIDE * threads)`` of the samples left, between ``_MIN_CHUNK_SAMPLES`` and
+    ``chunk_samples``, so the last chunks are small and the threads end close together.
+    The image does not depend on the chunks.
 
     Parameters
     ----------
-    counts : (m,) int array
+    total : int
     chunk_samples : int
+        Largest chunk (it bounds the memory of a chunk).
+    threads : int
+
+    Returns
+    -------
+    (k,) int64
+        Ascending sample positions, the first 0 (none for ``total == 0``).
+    """
+    if threads == 1:
+        return np.arange(0, total, chunk_samples, dtype=np.int64)
+    starts, position = [], 0
+    while position < total:
+        starts.append(position)
+        guided = -(-(total - position) // (_GUIDE * threads))
+        position += min(chunk_samples, max(_MIN_CHUNK_SAMPLES, guided))
+    return np.array(starts, dtype=np.int64)
+
+
+def _pixel_chunks(spp, n_pixels, chunk_samples, threads):
+    """Cut a run of pixels into chunks at :func:`_chunk_starts`, never splitting a pixel.
+
+    A chunk starts at the first pixel whose samples begin at or after its cut, so a chunk
+    holds at most ``chunk_samples + max(spp) - 1`` samples.
+
+    Parameters
+    ----------
+    spp : int or (n_pixels,) int array
+        Samples of every pixel, or of each.
+    n_pixels : int
+    chunk_samples, threads : int
+        See :func:`_chunk_starts`.
 
     Returns
     -------
     list of (int, int)
-        ``(start, stop)`` pixel ranges covering ``0 .. m`` in order.
+        ``(start, stop)`` pixel ranges covering ``0 .. n_pixels`` in order.
     """
-    if not len(counts):
-        return []
-    before = np.cumsum(counts) - counts  # samples ahead of each pixel
-    # a chunk starts at the first pixel whose samples begin at or after each multiple
-    starts = np.unique(np.searchsorted(before, np.arange(0, max(int(before[-1]), 0) + 1, chunk_samples)))
-    stops = np.append(starts[1:], len(counts))
-    return list(zip(starts.tolist(), stops.tolist()))
+    if np.ndim(spp) == 0:
+        cuts = _chunk_starts(n_pixels * spp, chunk_samples, threads)
+        starts = np.unique(-(-cuts // spp))
+    else:
+        before = np.cumsum(spp) - spp  # samples ahead of each pixel
+        total = int(before[-1] + spp[-1]) if n_pixels else 0
+        starts = np.unique(np.searchsorted(before, _chunk_starts(total, chunk_samples, threads)))
+    starts = starts[starts < n_pixels]  # a cut inside the last pixel starts no chunk
+    return list(zip(starts.tolist(), starts[1:].tolist() + [n_pixels]))
+
+
+def _run_on_threads(work, bounds, threads, pool, stats, progress=None):
+    """Run ``work(a, b)`` for every ``(a, b)`` of ``bounds`` on ``threads`` workers of
+    ``pool``, adding the returned :class:`RenderStats` into ``stats``.
+
+    Each worker takes the next chunk itself as soon as it is done with one, and sums its
+    own statistics: the calling thread only waits, instead of waking up (and taking the
+    GIL from the workers) for every chunk.  Progress is polled ten times a second.  When a
+    chunk fails or the caller is interrupted (Ctrl-C), the workers stop after their
+    current chunk and the exception is raised.
+    """
+    lock = threading.Lock()
+    state = {"next": 0, "done": 0, "stop": False}
+
+    def worker():
+        own = RenderStats()
+        while True:
+            with lock:
+                i = state["next"]
+                if state["stop"] or i == len(bounds):
+                    return own
+                state["next"] = i + 1
+            try:
+                own.merge(work(*bounds[i]))
+            except BaseException:
+                state["stop"] = True
+                raise
+            with lock:
+                state["done"] += 1
+
+    futures = [pool.submit(worker) for _ in range(threads)]
+    try:
+        shown = 0
+        while True:
+            finished, running = wait(futures, timeout=None if progress is None else 0.1,
+                                     return_when=FIRST_EXCEPTION)
+            for future in finished:
+                future.result()  # raises a worker's exception
+            if progress is not None and state["done"] > shown:
+                shown = state["done"]
+                progress(shown, len(bounds))
+            if not running:
+                break
+    except BaseException:
+        state["stop"] = True
+        wait(futures)
+        raise
+    for future in futures:
+        stats.merge(future.result())
 
 
 def _translated(obj, shift):
@@ -334,8 +415,9 @@ class Integrator:
         """
         s = self.settings
         start = time.perf_counter()
-        # the first round renders every pixel (rtmesh.adaptive): the sums need no clearing
-        film = Film(s.width, s.height, self.passes.film_passes(), zeroed=False)
+        # the first round renders every pixel (rtmesh.adaptive): the sums need no clearing;
+        # without later rounds every pixel is added once, and its image value with it
+        film = Film(s.width, s.height, self.passes.film_passes(), zeroed=False, one_pass=not s.adaptive)
         stats = RenderStats(threads=s.thread_count, pixels=s.width * s.height)
         stats.stages_enabled = [name for name, on in self.stages.items() if on]
         # one pool for the whole render: its rounds and the final image
@@ -345,7 +427,7 @@ class Integrator:
         if self.cutouts is not None:
             stats.rays["cutout"] += self.cutouts.layers_traced
         stats.wall_seconds = time.perf_counter() - start
-        stats.samples = int(film.count.sum())
+        stats.samples = sum(r.samples for r in stats.rounds)
         stats.relative_error = film.relative_error()
         passes = {name: film.pass_image(name) for name in film.pass_sums if name in s.passes}
         passes.update({name: derived_pass(name, film) for name in s.passes if name in DERIVED_PASSES})
@@ -367,7 +449,8 @@ class Integrator:
             New samples per pixel: a number for all (a uniform render, or an adaptive
             round's first), or one per pixel (a later adaptive round, where pixels at
             different counts each double theirs).  Either way the round is one batch,
-            cut into chunks of about ``chunk_samples`` samples; a chunk never splits a
+            cut into chunks of at most about ``chunk_samples`` samples (smaller towards
+            the end on several threads, see :func:`_chunk_starts`); a chunk never splits a
             pixel's samples, so each pixel's sum is formed in sample order whatever the
             chunking and thread count.
         stats : RenderStats
@@ -379,88 +462,44 @@ class Integrator:
         """
         s = self.settings
         uniform = np.ndim(spp) == 0 and np.ndim(first_sample) == 0
-        if uniform:
-            total = len(pixels) * spp  # pixels may be a range (a whole uniform image)
-        else:
+        # pixels may be a range (a whole uniform image): each chunk takes its slice of it, so
+        # no index array of the whole image is made
+        if not uniform:
             pixels = np.asarray(pixels, dtype=np.int64)
             counts = np.broadcast_to(np.asarray(spp, dtype=np.int64), pixels.shape)
-            total = int(counts.sum())
-        chunk_samples = s.chunk_samples
-        if s.thread_count > 1:
-            # at least _CHUNKS_PER_THREAD chunks per thread when there is enough work, so
-            # that a small image or adaptive round does not leave threads idle while the
-            # last chunks finish; never below _MIN_CHUNK_SAMPLES, where the fixed cost of a
-            # chunk's stages would show.  The image does not depend on the chunk size.
-            chunk_samples = min(chunk_samples,
-                                max(_MIN_CHUNK_SAMPLES, -(-total // (_CHUNKS_PER_THREAD * s.thread_count))))
-        if uniform:
-            # made as they are submitted: a list would grow with resolution x spp (a 4K
-            # image at 64 spp has 16200 chunks)
-            per_chunk = max(1, chunk_samples // spp)
-            n_chunks = -(-len(pixels) // per_chunk)
-            chunks = ((pixels[i:i + per_chunk], first_sample, spp) for i in range(0, len(pixels), per_chunk))
-        else:
             first = np.broadcast_to(np.asarray(first_sample, dtype=np.int64), pixels.shape)
-            chunks = [(pixels[a:b], first[a:b], counts[a:b])
-                      for a, b in _ragged_chunks(counts, chunk_samples)]
-            n_chunks = len(chunks)
+        bounds = _pixel_chunks(spp if uniform else counts, len(pixels), s.chunk_samples, s.thread_count)
+        n_chunks = len(bounds)
 
-        def render_and_add(chunk):
-            """Render a chunk and add it to the film, on the thread that rendered it: the
-            chunks of a call never share a pixel, so the threads add into different pixels
-            and each pixel's sum is formed by one thread, in sample order."""
-            pixels = chunk[0]
+        def render_and_add(a, b):
+            """Render the pixels ``a .. b - 1`` of the call and add them to the film, on
+            the thread that rendered them: the chunks of a call never share a pixel, so
+            each pixel's sum is formed by one thread, in sample order."""
+            if uniform:
+                chunk = (pixels[a:b], first_sample, spp)
+            else:
+                chunk = (pixels[a:b], first[a:b], counts[a:b])
             radiance, passes, chunk_stats = self.render_chunk(*chunk)
             t0 = time.perf_counter()
-            # a run of consecutive pixels (every chunk of a uniform render) is a slice:
-            # cheaper to add into than a gather-scatter through an index array
-            if not uniform:
-                film.add_samples(pixels, chunk[2], radiance, passes)
+            if uniform:
+                # a run of consecutive pixels (every chunk of a whole image) is a slice:
+                # cheaper to add into than a gather-scatter through an index array
+                px = chunk[0]
+                contiguous = px[-1] - px[0] == len(px) - 1
+                film.add_tile(slice(px[0], px[-1] + 1) if contiguous else px, radiance, passes)
             else:
-                contiguous = pixels[-1] - pixels[0] == len(pixels) - 1
-                film.add_tile(slice(pixels[0], pixels[-1] + 1) if contiguous else pixels, radiance, passes)
+                film.add_samples(chunk[0], chunk[2], radiance, passes)
             chunk_stats.stage_seconds["film"] += time.perf_counter() - t0
             return chunk_stats
 
-        def finish(chunk_stats, done):
-            stats.merge(chunk_stats)
-            if progress is not None:
-                progress(done, n_chunks)
-
         if s.thread_count == 1 or n_chunks == 1:
-            for i, chunk in enumerate(chunks):
-                finish(render_and_add(chunk), i + 1)
+            for i, (a, b) in enumerate(bounds):
+                stats.merge(render_and_add(a, b))
+                if progress is not None:
+                    progress(i + 1, n_chunks)
             return
-        # a bounded window of chunks (see CHUNKS_IN_FLIGHT_PER_THREAD), refilled as soon as
-        # any chunk finishes: waiting for the oldest would leave a thread idle whenever the
-        # chunk ahead of it in the queue is a slow one (rows of geometry against rows of sky)
-        in_flight = CHUNKS_IN_FLIGHT_PER_THREAD * s.thread_count
-        pending = set()
-        done_count = 0
-
-        def finish_some():
-            nonlocal done_count
-            done, _ = wait(pending, return_when=FIRST_COMPLETED)
-            for future in done:
-                pending.remove(future)
-                done_count += 1
-                # stats are sums of integers and timings: the order they come in is free
-                finish(future.result(), done_count)
-
         with _thread_pool(s.thread_count, pool) as pool:
-            try:
-                for chunk in chunks:
-                    pending.add(pool.submit(render_and_add, chunk))
-                    if len(pending) >= in_flight:
-                        finish_some()
-                while pending:
-                    finish_some()
-            except BaseException:
-                # Ctrl-C or a failing chunk: drop the chunks not yet started instead of
-                # rendering the rest of the image before giving up
-                for future in pending:
-                    future.cancel()
-                raise
+            _run_on_threads(render_and_add, bounds, s.thread_count, pool, stats, progress)
 
     # ---------------------------------------------------------------- one chunk
     def render_chunk(self, pixels, first_sample, spp):

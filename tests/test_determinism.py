@@ -123,3 +123,37 @@ def test_renders_on_threads_restore_the_gil_switch_interval_even_side_by_side():
         assert sys.getswitchinterval() == pytest.approx(0.004)
     finally:
         sys.setswitchinterval(previous)
+
+
+def test_progress_on_threads_counts_up_to_every_chunk():
+    from rtmesh.integrator import Integrator
+    from scenes import settings, sphere_on_floor_scene
+
+    seen = []
+    integrator = Integrator(sphere_on_floor_scene(), settings(threads=2, width=64, height=48, chunk_samples=300))
+    integrator.render(lambda done, total: seen.append((done, total)))
+    totals = {total for _, total in seen}
+    assert len(totals) == 1 and totals.pop() > 2
+    assert seen[-1][0] == seen[-1][1]
+    assert all(a[0] < b[0] for a, b in zip(seen, seen[1:]))
+
+
+def test_a_failing_chunk_on_threads_raises_and_stops_the_other_workers(monkeypatch):
+    from rtmesh.integrator import Integrator
+    from scenes import settings, sphere_on_floor_scene
+
+    integrator = Integrator(sphere_on_floor_scene(), settings(threads=2, width=64, height=48, chunk_samples=64))
+    started = []
+    render_chunk = Integrator.render_chunk
+
+    def failing(self, pixels, first_sample, spp):
+        started.append(len(pixels))
+        if len(started) == 3:
+            raise RuntimeError("chunk failed")
+        return render_chunk(self, pixels, first_sample, spp)
+
+    monkeypatch.setattr(Integrator, "render_chunk", failing)
+    with pytest.raises(RuntimeError, match="chunk failed"):
+        integrator.render()
+    # 48 chunks: after the failure each worker finishes at most the chunk it is on
+    assert len(started) <= 4

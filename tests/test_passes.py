@@ -225,6 +225,19 @@ def test_passes_are_bit_identical_across_threads_and_chunk_sizes():
 
 
 # ---------------------------------------------------------------- film reductions
+def test_one_pass_film_writes_each_tiles_image_values_as_it_is_added():
+    rng = np.random.default_rng(3)
+    radiance = rng.random((6 * 5, 3, 3))
+    lazy, eager = Film(6, 5), Film(6, 5, zeroed=False, one_pass=True)
+    lazy.add_tile(0, radiance)
+    # tiles in any order, one of them given by an index array
+    eager.add_tile(slice(20, 30), radiance[20:])
+    eager.add_tile(np.array([0, 1, 2, 3, 4, 5, 6, 7, 8, 9]), radiance[:10])
+    eager.add_tile(slice(10, 20), radiance[10:20])
+    np.testing.assert_array_equal(eager.image(), lazy.image())
+    np.testing.assert_allclose(eager.image().reshape(-1, 3), radiance.mean(axis=1), rtol=1e-6)
+
+
 def test_film_first_keeps_sample_zero_across_rounds_and_min_keeps_the_smallest():
     film = Film(2, 1, {"id": (1, "first"), "z": (1, "min"), "m": 1})
     film.add_tile(slice(0, 2), np.zeros((2, 2, 3)),
