@@ -157,3 +157,23 @@ def test_a_failing_chunk_on_threads_raises_and_stops_the_other_workers(monkeypat
         integrator.render()
     # 48 chunks: after the failure each worker finishes at most the chunk it is on
     assert len(started) <= 4
+
+
+def test_render_threads_are_kept_between_renders_and_made_anew_in_a_forked_child():
+    import os
+
+    from rtmesh.integrator import _thread_pool
+
+    pool = _thread_pool(2)
+    assert _thread_pool(2) is pool and _thread_pool(1) is None
+    assert pool.submit(lambda: 7).result(timeout=10) == 7
+    child = os.fork()
+    if child == 0:  # the child has none of the parent's threads: its pool must be new
+        try:
+            fresh = _thread_pool(2)
+            ok = fresh is not pool and fresh.submit(lambda: 7).result(timeout=10) == 7
+        except BaseException:
+            ok = False
+        os._exit(0 if ok else 1)
+    _, status = os.waitpid(child, 0)
+    assert os.waitstatus_to_exitcode(status) == 0
