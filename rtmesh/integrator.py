@@ -60,8 +60,14 @@ _SHADOW_SHORTEN = 1.0 - 1e-5
 # an empty (0, 3) array stands for "none" in the kernels' optional vector arguments
 _NO_VECTORS = np.zeros((0, 3))
 # Smallest chunk (pixel samples) of a multi-threaded render, unless the settings' chunk
-# size is smaller: below it the fixed cost of a chunk's stages (~0.2 ms of Python) shows.
-_MIN_CHUNK_SAMPLES = 2048
+# size is smaller.  Every chunk costs Python between its kernel calls, and on several
+# threads also waits for the GIL at those points: at 512x512 on 2 threads a chunk cost
+# ~0.6 ms of thread time more than on one thread (a schedule with tail chunks down to 2048
+# samples, 18 chunks, kept the threads 7 ms busier than 8 chunks of 32768).  Interleaved
+# runs of schedules on that frame: guided down to 2048, 4096, 8192 and 16384 samples gave
+# 1.82, 1.86, 1.91 and 1.93x over one thread, fixed 32768-sample chunks 1.91x (one run of
+# 25; in a slower phase of the machine 1.64-1.69x for all but the first).
+_MIN_CHUNK_SAMPLES = 8192
 # Chunks of a multi-threaded render shrink towards the end ("guided" scheduling): each
 # takes 1 / (_GUIDE * threads) of the samples left.  Chunks differ in cost (rows of sky
 # against rows of geometry) and a thread that draws the last long chunk works on alone;

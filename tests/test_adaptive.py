@@ -145,6 +145,7 @@ def test_chunks_on_several_threads_shrink_towards_the_end(spp):
     assert sizes.max() <= cap + spp and sizes[0] >= cap
     assert np.all(np.diff(sizes[:-1]) <= spp)  # never growing (up to a pixel's rounding)
     assert sizes[-2] <= _MIN_CHUNK_SAMPLES + spp and sizes[-1] <= _MIN_CHUNK_SAMPLES + spp
+    assert sizes[-2] < sizes[0] / 2
     # the same cuts for per-pixel counts as for one count for all
     assert _pixel_chunks(np.full(n, spp), n, cap, threads=2) == spans
     assert len(spans) <= n * spp // cap + 16  # the shrinking tail is short (geometric)
