@@ -15,8 +15,11 @@ import numpy as np
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
-from .batches import take_rows
+from .batches import repeated_row, take_rows
 from . import kernels
+
+_F32_MAX = float(np.finfo(np.float32).max)
+_F32_MAX32 = np.float32(_F32_MAX)
 
 # The origin offset (see offset_ray_origins).  A spawned ray must start clear of the surface
 # it leaves, by more than two errors (in the spirit of Waechter & Binder, "A Fast and Robust
@@ -212,7 +215,9 @@ class Accel:
             return np.zeros(0, dtype=bool)
         # embreex writes into the distance array it is given: always pass a fresh one.
         # float32 max stands in for inf, which Embree's robust mode handles less predictably.
-        t = np.minimum(t_max, np.finfo(np.float32).max).astype(np.float32)
+        # (one ufunc call for float32 input, as light_samples gives: this runs per chunk)
+        t = np.minimum(t_max, _F32_MAX if t_max.dtype != np.float32 else _F32_MAX32)
+        t = t if t.dtype == np.float32 else t.astype(np.float32)
         o, d = _embree_rays(origins, rows), _embree_rays(directions, rows)
         return self._scene.run(o, d, dists=t, query="OCCLUDED") != -1
 
@@ -260,7 +265,7 @@ def _embree_rays(array, rows=None):
     if array.strides[0] == 0 and rows is None:
         # one row broadcast to every ray (the origin of pinhole camera rays): Embree reads
         # rays through the strides, so it is converted once instead of materialised n times
-        return np.broadcast_to(array[:1].astype(np.float32), array.shape)
+        return repeated_row(array[0].astype(np.float32), len(array))
     return take_rows(array, rows).astype(np.float32, copy=False)
 
 

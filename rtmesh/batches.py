@@ -35,6 +35,26 @@ def component_major(components):
     return np.ascontiguousarray(components).T
 
 
+def repeated_row(row, n):
+    """A read-only ``(n, k)`` view of one row repeated ``n`` times (row stride 0).
+
+    What ``np.broadcast_to(row, (n, k))`` gives, for half its Python cost: it is made for
+    every chunk (camera origins, unit throughputs), with the GIL held.
+
+    Parameters
+    ----------
+    row : (k,) contiguous array
+    n : int
+
+    Returns
+    -------
+    (n, k) array
+    """
+    view = np.ndarray((n, row.shape[0]), dtype=row.dtype, buffer=row, strides=(0, row.itemsize))
+    view.flags.writeable = False
+    return view
+
+
 def take_rows(array, rows):
     """``array[rows]`` that keeps a component-major ``(n, k)`` array component-major.
 

@@ -1,10 +1,12 @@
 """Pinhole and thin-lens perspective cameras."""
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from . import kernels
+from .batches import repeated_row
 from .sampling import square_to_uniform_disk_concentric
 
 
@@ -75,7 +77,7 @@ class Camera:
         """Focus distance in scene units."""
         if self.focus_distance is not None:
             return float(self.focus_distance)
-        return float(np.linalg.norm(self.look_at - self.position))
+        return math.dist(self.look_at, self.position)
 
     def generate_rays(self, film_xy, width, height, lens_uv=None, pixels=None, frame=None):
         """Primary rays through continuous film positions.
@@ -117,9 +119,9 @@ class Camera:
             np.asarray(film_xy, dtype=np.float64), np.zeros(0, np.int64) if pixels is None else pixels, width,
             disk, self.position, forward, right, up, image_plane, self.focus)
         if not len(disk):
-            # every ray starts at the eye: a read-only broadcast row, which the Accel hands
+            # every ray starts at the eye: a read-only repeated row, which the Accel hands
             # to Embree without materialising it
-            origins = np.broadcast_to(self.position, directions.shape)
+            origins = repeated_row(np.ascontiguousarray(self.position, dtype=np.float64), len(directions))
         return origins, directions
 
 

@@ -37,7 +37,7 @@ from .area_lights import AreaLighting, emissive_mesh_light, is_area_light
 from .adaptive import render_rounds
 from .aov import DERIVED_PASSES, PassRecorder, derived_pass
 from .background import as_background
-from .batches import RayBatch, component_major, take_rows
+from .batches import RayBatch, component_major, repeated_row, take_rows
 from .film import Film
 from .glossy import sample_glossy_directions
 from .media import Media
@@ -59,6 +59,7 @@ log = logging.getLogger(__name__)
 _SHADOW_SHORTEN = 1.0 - 1e-5
 # an empty (0, 3) array stands for "none" in the kernels' optional vector arguments
 _NO_VECTORS = np.zeros((0, 3))
+_UNIT_THROUGHPUT = np.ones(3)
 # Smallest chunk (pixel samples) of a multi-threaded render, unless the settings' chunk
 # size is smaller.  Every chunk costs Python between its kernel calls, and on several
 # threads also waits for the GIL at those points: at 512x512 on 2 threads a chunk cost
@@ -543,7 +544,8 @@ class Integrator:
             pixels = np.arange(pixels.start, pixels.stop, pixels.step, dtype=np.int64)
         pixels = np.asarray(pixels, dtype=np.int64)
         m = len(pixels)
-        ragged = np.ndim(spp) > 0 or np.ndim(first_sample) > 0
+        # (isinstance, not np.ndim: this runs per chunk with the GIL held)
+        ragged = isinstance(spp, np.ndarray) or isinstance(first_sample, np.ndarray)
 
         # camera: one ray per pixel sample
         if ragged:
@@ -573,13 +575,13 @@ class Integrator:
             sample_time = t_open + (t_close - t_open) * u
         origins, directions = self.camera.generate_rays(in_pixel, s.width, s.height, lens_uv, pixel,
                                                         self._camera_frame)
-        # camera rays have unit throughput: a read-only broadcast costs nothing, and
+        # camera rays have unit throughput: a read-only repeated row costs nothing, and
         # _shade does not multiply by it at depth 0
         # (inside an absorbing medium they lose light on the way: then a real array)
         throughput = (np.ones((n, 3), order="F") if self._camera_absorbs
-                      else np.broadcast_to(1.0, (n, 3)))
+                      else repeated_row(_UNIT_THROUGHPUT, n))
         rays = RayBatch(origins, directions, np.arange(n, dtype=np.int64), throughput,
-                        np.broadcast_to(self._camera_medium, (n, len(self._camera_medium))))
+                        repeated_row(self._camera_medium, n))
         radiance = np.zeros((n, 3), order="F")
         aov = self.passes.buffers(n)
         stats.rays["camera"] += n

@@ -329,3 +329,14 @@ def test_face_viewer_bends_only_normals_facing_away_and_keeps_them_above_the_sur
     fine = ((ns * wo).sum(axis=1) >= 1e-2) & (ns[:, 2] > 0.0)
     np.testing.assert_array_equal(out[fine], ns[fine])  # the others are left alone
     assert (~fine).sum() > 100  # the test exercised the fix
+
+
+def test_repeated_row_is_a_read_only_broadcast_of_the_row():
+    from rtmesh.batches import repeated_row
+
+    for row in (np.array([0.5, -1.0, 2.0]), np.array([3, 1], dtype=np.int32), np.zeros(0, np.int32)):
+        view = repeated_row(row, 5)
+        np.testing.assert_array_equal(view, np.broadcast_to(row, (5, len(row))))
+        assert view.dtype == row.dtype and not view.flags.writeable
+        with pytest.raises(ValueError):
+            view[0] = 0
