@@ -27,7 +27,7 @@ import os
 import sys
 import threading
 import time
-from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
+from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass
 
 import numpy as np
@@ -178,19 +178,21 @@ def _pixel_chunks(spp, n_pixels, chunk_samples, threads):
 
 
 def _run_on_threads(work, bounds, threads, pool, stats, progress=None):
-    """Run ``work(a, b)`` for every ``(a, b)`` of ``bounds`` on ``threads`` workers of
-    ``pool``, adding the returned :class:`RenderStats` into ``stats``.
+    """Run ``work(a, b)`` for every ``(a, b)`` of ``bounds`` on the calling thread and
+    ``threads - 1`` workers of ``pool``, adding the returned :class:`RenderStats` into
+    ``stats``.
 
-    Each worker takes the next chunk itself as soon as it is done with one, and sums its
-    own statistics: the calling thread only waits, instead of waking up (and taking the
-    GIL from the workers) for every chunk.  Progress is polled ten times a second.  When a
-    chunk fails or the caller is interrupted (Ctrl-C), the workers stop after their
-    current chunk and the exception is raised.
+    Each thread takes the next chunk itself as soon as it is done with one and sums its own
+    statistics, so no thread wakes up for another's chunks.  The calling thread renders
+    too: it is running already, where a pool worker waits to be woken (on a virtual
+    machine an idle CPU can take long to wake), and it reports progress between its
+    chunks.  When a chunk fails or the caller is interrupted (Ctrl-C), the other threads
+    stop after their current chunk and the exception is raised.
     """
     lock = threading.Lock()
-    state = {"next": 0, "done": 0, "stop": False}
+    state = {"next": 0, "done": 0, "shown": 0, "stop": False}
 
-    def worker():
+    def worker(report=None):
         own = RenderStats()
         while True:
             with lock:
@@ -205,26 +207,22 @@ def _run_on_threads(work, bounds, threads, pool, stats, progress=None):
                 raise
             with lock:
                 state["done"] += 1
+                done = state["done"]
+            if report is not None:
+                report(done, len(bounds))
+                state["shown"] = done
 
-    futures = [pool.submit(worker) for _ in range(threads)]
+    futures = [pool.submit(worker) for _ in range(threads - 1)]
     try:
-        shown = 0
-        while True:
-            finished, running = wait(futures, timeout=None if progress is None else 0.1,
-                                     return_when=FIRST_EXCEPTION)
-            for future in finished:
-                future.result()  # raises a worker's exception
-            if progress is not None and state["done"] > shown:
-                shown = state["done"]
-                progress(shown, len(bounds))
-            if not running:
-                break
+        stats.merge(worker(progress))
+        for future in futures:
+            stats.merge(future.result())
     except BaseException:
         state["stop"] = True
         wait(futures)
         raise
-    for future in futures:
-        stats.merge(future.result())
+    if progress is not None and state["shown"] < len(bounds):
+        progress(len(bounds), len(bounds))  # the last chunks were the other threads'
 
 
 def _translated(obj, shift):
