@@ -15,6 +15,8 @@ ERROR_FLOOR = 0.01
 BLOCK_PIXELS = 16384
 # blocks of Film.image on a thread pool: a few per thread balance any small thread count
 _MEAN_BLOCKS = 8
+# "no image values" for kernels.accumulate_samples
+_NO_IMAGE = np.zeros((0, 3), dtype=np.float32)
 
 
 class Film:
@@ -90,20 +92,14 @@ class Film:
         mean_passes = self._keep_min_and_first(px, passes, lambda v: v.min(axis=1),
                                                lambda v: v[:, 0])
         index = px if isinstance(px, np.ndarray) else np.arange(px.start, px.stop)
-        kernels.accumulate_samples(self.sum, self.sum_sq, self.count, index, radiance)
+        # a one_pass film's pixels are final: their image values are written with the sums,
+        # on this thread, instead of in a serial pass after the render
+        kernels.accumulate_samples(self.sum, self.sum_sq, self.count, index, radiance,
+                                   _NO_IMAGE if self._image is None else self._image)
         for s in range(spp):
             for name, values in mean_passes.items():
                 self.pass_sums[name][px] += values[:, s]
         self.count[px] += spp
-        if self._image is not None:
-            # the pixels are final (one_pass): their image values are written now, while
-            # the sums are in cache, instead of in a serial pass after the render
-            if isinstance(px, slice):
-                kernels.mean_image(self.sum[px], self.count[px], self._image[px])
-            else:
-                means = np.empty((len(px), 3), dtype=np.float32)
-                kernels.mean_image(self.sum[px], self.count[px], means)
-                self._image[px] = means
 
     def add_samples(self, pixels, counts, radiance, passes=None):
         """Add a different number of samples to each of a set of pixels.

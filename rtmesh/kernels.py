@@ -740,11 +740,13 @@ def add_light(total, target, lit, occluded, cos_i, incident, highlight_rows, pow
 
 # ------------------------------------------------------------------ film
 @kernel
-def accumulate_samples(total, total_sq, count, pixels, radiance):
+def accumulate_samples(total, total_sq, count, pixels, radiance, image):
     """Add samples and their squares to per-pixel sums, each pixel's samples in order.
 
     A pixel without samples so far (``count`` 0) takes its first sample by assignment, so
-    the sums need not be zeroed beforehand (see :class:`rtmesh.film.Film`).
+    the sums need not be zeroed beforehand (see :class:`rtmesh.film.Film`).  With an
+    ``image``, each pixel's mean is written too, while its sums are in registers (a film
+    whose pixels are final once added, instead of a pass over the film at the end).
 
     Parameters
     ----------
@@ -756,7 +758,10 @@ def accumulate_samples(total, total_sq, count, pixels, radiance):
         Distinct pixel indices.
     radiance : (m, spp, 3) float
         The new samples of each pixel.
+    image : (P, 3) float32 or (0, 3)
+        Receives the added pixels' means, as :func:`mean_image` forms them; (0, 3): none.
     """
+    means = image.shape[0] > 0
     for i in range(len(pixels)):
         px = pixels[i]
         first = 0
@@ -771,6 +776,10 @@ def accumulate_samples(total, total_sq, count, pixels, radiance):
                 r = radiance[i, s, c]
                 total[px, c] += r
                 total_sq[px, c] += r * r
+        if means:
+            inverse = 1.0 / np.float64(count[px] + radiance.shape[1])
+            for c in range(3):
+                image[px, c] = np.float32(total[px, c] * inverse)
 
 
 @kernel

@@ -179,17 +179,24 @@ def test_film_sums_and_means():
     radiance = rng.uniform(size=(4, 3, 3))
     pixels = np.array([7, 2, 5, 0])
     count = np.zeros(10, np.int64)
-    count[pixels[:2]] = 1  # these two add to what is there, the others start from nothing
+    count[pixels[:2]] = 1  # these two add to what is there (a sample of 0), the others start from nothing
     total[pixels[2:]] = total_sq[pixels[2:]] = np.nan
-    kernels.accumulate_samples(total, total_sq, count, pixels, radiance)
+    kernels.accumulate_samples(total, total_sq, count, pixels, radiance, np.zeros((0, 3), np.float32))
     np.testing.assert_allclose(total[pixels], radiance.sum(axis=1), rtol=1e-15)
     np.testing.assert_allclose(total_sq[pixels], (radiance ** 2).sum(axis=1), rtol=1e-15)
-    count[pixels] = 3
+    count[pixels] += 3
     means = np.full((10, 3), np.nan, dtype=np.float32)
     kernels.mean_image(total, count, means)
     assert means.dtype == np.float32
-    np.testing.assert_allclose(means[pixels], radiance.sum(axis=1) / 3, rtol=1e-7)
+    np.testing.assert_allclose(means[pixels], radiance.sum(axis=1) / [[4], [4], [3], [3]], rtol=1e-7)
     assert not means[[1, 3, 4, 6, 8, 9]].any()  # no samples: 0
+    # the means written with the sums are mean_image's, bit for bit; other pixels untouched
+    count[pixels] -= 3
+    again = np.full((10, 3), -1.0, dtype=np.float32)
+    kernels.accumulate_samples(np.zeros((10, 3), order="F"), np.zeros((10, 3), order="F"), count, pixels,
+                               radiance, again)
+    np.testing.assert_array_equal(again[pixels], means[pixels])
+    assert (np.delete(again, pixels, axis=0) == -1).all()
 
 
 @pytest.mark.parametrize("width", [1, 3, 640, 3840, 65535])

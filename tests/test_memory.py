@@ -35,6 +35,7 @@ def chunk_phase(width, height, spp, progress_delay=0.001):
     integrator = Integrator(sphere_on_floor_scene(), settings(
         width=width, height=height, spp=spp, sampler="jittered", threads=THREADS,
         chunk_samples=CHUNK_SAMPLES))
+    integrator.render()  # compiles any kernel not yet compiled, outside the measurement
     return traced_render(integrator, progress_delay)["chunk_phase"]
 
 
