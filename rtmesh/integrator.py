@@ -48,7 +48,7 @@ from .settings import RenderStats
 from .vecmath import (dot, face_viewer, fresnel_dielectric, fresnel_schlick, orthonormal_basis, reflect,
                       refract)
 from .materials import ALPHA_MODES
-from .kernels import add_light, highlight_thresholds, light_samples, surface_records, surface_reflectance
+from .kernels import add_light, add_rows, highlight_thresholds, light_samples, surface_records, surface_reflectance
 from .texturing import SurfaceTextures
 from .cutouts import CutoutAccel
 
@@ -333,6 +333,7 @@ class Integrator:
         self._reflective = (m.mirror > 0).any(axis=1) | (m.transmission > 0).any(axis=1)
         self._transmissive = (m.transmission > 0).any(axis=1)
         self._shaded = ((m.diffuse > 0).any(axis=1) | (m.specular > 0).any(axis=1)) & ~m.unlit
+        self._all_shaded = bool(self._shaded.all())  # then no per-hit lookup is needed
         self._init_media(scene)
         self._fresnel = fresnel_exact_or_schlick(settings.fresnel)
         self._has_specular = (m.specular > 0).any(axis=1)
@@ -746,8 +747,7 @@ class Integrator:
         (k, 3) float64 or None
             Component-major; None when no hit has a material that reflects light.
         """
-        shaded = self._shaded[srf.mat]
-        rows = None if shaded.all() else np.flatnonzero(shaded)
+        rows = None if self._all_shaded else np.flatnonzero(self._shaded[srf.mat])
         if rows is not None and not len(rows):
             return None
         tints = srf.tints
@@ -962,10 +962,10 @@ def _add_rows(target, rows, values):
     """
     if rows is None:
         target += values
-        return target
-    for c in range(target.shape[1]):
-        column = target[:, c]
-        column[rows] += values[:, c]
+    else:
+        # one pass without temporaries (a NumPy fancy-index add gathers, adds and
+        # scatters each column)
+        add_rows(target, rows, values)
     return target
 
 

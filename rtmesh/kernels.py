@@ -783,6 +783,23 @@ def accumulate_samples(total, total_sq, count, pixels, radiance, image):
 
 
 @kernel
+def add_rows(target, rows, values):
+    """``target[rows] += values`` for distinct ``rows``.
+
+    Parameters
+    ----------
+    target : (n, k) float64
+        Updated in place.
+    rows : (m,) int
+        Distinct row indices.
+    values : (m, k) float
+    """
+    for c in range(target.shape[1]):
+        for i in range(len(rows)):
+            target[rows[i], c] += values[i, c]
+
+
+@kernel
 def mean_image(total, count, out):
     """Per-pixel means of sample sums, as float32 rows.
 

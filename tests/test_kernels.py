@@ -252,3 +252,13 @@ def test_kernels_compile_without_a_writable_cache_directory():
         numba.njit(cache=True)(namespace["twice"])
     twice = kernels.kernel(namespace["twice"])
     assert twice(1.5) == 3.0
+
+
+def test_add_rows_adds_into_the_given_rows_only():
+    rng = np.random.default_rng(5)
+    target = np.asfortranarray(rng.uniform(size=(9, 3)))
+    rows, values = np.array([8, 0, 4]), rng.uniform(size=(3, 3))
+    expected = target.copy()
+    expected[rows] += values
+    kernels.add_rows(target, rows, np.asfortranarray(values))
+    np.testing.assert_array_equal(target, expected)
