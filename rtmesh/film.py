@@ -69,6 +69,13 @@ class Film:
         self.pass_sums = {name: np.full((n, k), np.inf if reduction == "min" else 0.0)
                           for name, (k, reduction) in specs.items()}
 
+    @property
+    def nbytes(self):
+        """Bytes held by the film's arrays: sums, squares, counts, passes and, for a
+        ``one_pass`` film, the image it fills."""
+        arrays = [self.sum, self.sum_sq, self.count, *self.pass_sums.values()]
+        return sum(a.nbytes for a in arrays) + (0 if self._image is None else self._image.nbytes)
+
     def add_tile(self, pixels, radiance, passes=None):
         """Add the samples of a set of pixels.
 

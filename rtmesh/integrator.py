@@ -463,9 +463,12 @@ class Integrator:
         stats : RenderStats
             Ray counts and stage times are added to it.
         progress : callable, optional
-            ``progress(chunks_done, chunks_total)``.
+            ``progress(chunks_done, chunks_total)``, called on the calling thread between
+            the chunks it renders itself (keep it quick: the other threads do not wait for
+            it, but that thread does).
         pool : concurrent.futures.ThreadPoolExecutor, optional
-            Threads to render on (one of ``thread_count`` workers is made if not given).
+            Workers that render alongside the calling thread (the process's pool of
+            ``thread_count`` workers if not given, see :func:`_thread_pool`).
         """
         s = self.settings
         uniform = np.ndim(spp) == 0 and np.ndim(first_sample) == 0

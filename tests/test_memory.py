@@ -43,7 +43,8 @@ def test_chunk_phase_memory_does_not_grow_with_resolution_or_spp():
     # 32, 128 and 256 chunks; the samples of the last two would need 6 and 12 MB
     renders = {"128x128x4": chunk_phase(128, 128, 4), "256x128x8": chunk_phase(256, 128, 8),
                "64x64x128": chunk_phase(64, 64, 128)}
-    # at most two chunks per thread in flight, whatever the image and spp
+    # one chunk per thread in flight (each thread takes its next chunk when done with one),
+    # whatever the image and spp; the bound leaves room for a second
     bound = 2 * THREADS * CHUNK_SAMPLES * BYTES_PER_SAMPLE_IN_FLIGHT
     assert max(renders.values()) < bound, renders
     # twice the samples (and twice the chunks) at a quarter of the pixels: no growth

@@ -1,8 +1,9 @@
 """Peak memory of a render as resolution x spp rise: bounded by the chunk size, not the image.
 
-A render holds the film (per-pixel sums: 56 bytes per pixel, the only part that has to
-grow with the resolution) and, while chunks are rendered, the temporaries of at most two
-chunks per thread.  This tool renders the benchmark scene of ``tools/bench_core.py`` at
+A render holds the film (per-pixel sums: 56 bytes per pixel, plus the 12-byte float32
+image for a render without adaptive rounds, which fills it as chunks are added: the only
+part that has to grow with the resolution) and, while chunks are rendered, the temporaries
+of one chunk per thread.  This tool renders the benchmark scene of ``tools/bench_core.py`` at
 rising resolution x spp, each point in a fresh process, and reports
 
 * ``film``: bytes of the film's arrays;
@@ -10,7 +11,8 @@ rising resolution x spp, each point in a fresh process, and reports
   start of the render to the last chunk added to the film, minus the film: everything
   the chunks in flight hold.  It must stay flat as resolution x spp grows;
 * ``finish phase``: the peak while the image, the error estimate and the passes are formed
-  from the film, minus the film (the float32 image itself is 12 bytes per pixel);
+  from the film, minus the film (an adaptive render's float32 image is made here, 12
+  bytes per pixel);
 * ``peak RSS``: the process's maximum resident set size (``ru_maxrss``), and how much it
   grew during the render.
 
@@ -42,9 +44,8 @@ DEFAULT_POINTS = "512x512x1,512x512x16,1920x1080x4,3840x2160x1,3840x2160x4,3840x
 
 
 def film_bytes(film):
-    """Bytes held by a Film's accumulation arrays (sums, squares, counts, passes)."""
-    arrays = [film.sum, film.sum_sq, film.count, *film.pass_sums.values()]
-    return sum(a.nbytes for a in arrays)
+    """Bytes held by a Film (:attr:`rtmesh.film.Film.nbytes`)."""
+    return film.nbytes
 
 
 def traced_render(integrator, progress_delay=0.0):
