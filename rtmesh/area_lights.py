@@ -252,22 +252,30 @@ class MeshLight:
         Emitted radiance of each face; every face emits (some channel > 0).
     name : str
         What the triangles are, for messages.
+    tint : callable, optional
+        ``tint(faces, u, v)`` -> (k, 3) multipliers of the emission at points of the faces
+        given by their index among the triangles and barycentrics (emission textures), or
+        None where none of those faces has one; without it the faces emit uniformly.
+    mean_tint : (F, 3) float, optional
+        Each face's average of ``tint``, for choosing faces in proportion to their power.
     """
 
     two_sided = True
     visible = False  # seen as geometry through Embree, not by :meth:`AreaLighting.intersect`
 
-    def __init__(self, triangles, normals, emission, name="mesh"):
+    def __init__(self, triangles, normals, emission, name="mesh", tint=None, mean_tint=None):
         self.name = name
         self.triangles = component_major(np.asarray(triangles, dtype=np.float64).T)
         self.normals = component_major(np.asarray(normals, dtype=np.float64).T)
         self.emission = component_major(np.asarray(emission, dtype=np.float64).T)
+        self.tint = tint
         e1, e2 = self.triangles[:, 3:6], self.triangles[:, 6:9]
         face_area = 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
         self.area = float(face_area.sum())
         # faces are chosen in proportion to their power (area x mean emission): uniform by
         # area for a uniform emitter, and no samples wasted on dim faces of a mixed one
-        power = face_area * self.emission.mean(axis=1)
+        self._mean_emission = (self.emission if mean_tint is None else self.emission * mean_tint).mean(axis=1)
+        power = face_area * self._mean_emission
         self._cdf = np.cumsum(power)
         self._power = power
         self._total = float(self._cdf[-1])
@@ -286,7 +294,9 @@ class MeshLight:
         -------
         points, normals, radiance : (k, 3) float
         inverse_pdf : (k,) float
-            ``1 / pdf`` with respect to area: ``total power / mean emission of the face``.
+            ``1 / pdf`` with respect to area: ``total power / mean emission of the face``
+            (with a tint, the face's emission times its mean tint; the radiance is the
+            emission times the tint at the point).
         """
         x = u[:, 0] * self._total
         face = np.minimum(np.searchsorted(self._cdf, x, side="right"), len(self._cdf) - 1)
@@ -295,7 +305,10 @@ class MeshLight:
         b = square_to_uniform_triangle(np.stack([remapped, u[:, 1]], axis=1))
         points = barycentric_interpolate(take_rows(self.triangles, face), b[:, 0], b[:, 1])
         emission = take_rows(self.emission, face)
-        inverse_pdf = self._total / emission.mean(axis=1)
+        inverse_pdf = self._total / self._mean_emission[face]
+        tint = None if self.tint is None else self.tint(face, b[:, 0], b[:, 1])
+        if tint is not None:  # None: none of these faces has an emission texture
+            emission = emission * tint
         return points, take_rows(self.normals, face), emission, inverse_pdf
 
 
@@ -304,7 +317,7 @@ def is_area_light(light):
     return isinstance(light, (QuadLight, DiskLight, MeshLight))
 
 
-def emissive_mesh_light(triangles, normals, emission):
+def emissive_mesh_light(triangles, normals, emission, tint=None, mean_tint=None):
     """All emissive triangles of a scene as one :class:`MeshLight`, or None if there are none.
 
     One light, not one per object: each hit then sends ``light_samples`` shadow rays to
@@ -321,15 +334,24 @@ def emissive_mesh_light(triangles, normals, emission):
         Unit face normals.
     emission : (F, 3) float
         Emitted radiance of each face (its material's emission).
+    tint : callable, optional
+        ``tint(prim, u, v)`` -> (k, 3) multipliers of the emission at points of the scene's
+        faces ``prim`` (emission textures); see :class:`MeshLight`.
+    mean_tint : (F, 3) float, optional
+        Each face's average tint (required with ``tint``).
 
     Returns
     -------
     MeshLight or None
     """
     faces = np.flatnonzero((emission > 0.0).any(axis=1))
+    if tint is not None:
+        faces = faces[(emission[faces] * mean_tint[faces] > 0.0).any(axis=1)]  # all-black maps emit nothing
     if not len(faces):
         return None
-    return MeshLight(take_rows(triangles, faces), normals[faces], emission[faces], "emissive surfaces")
+    light_tint = None if tint is None else (lambda face, u, v: tint(faces[face], u, v))
+    return MeshLight(take_rows(triangles, faces), normals[faces], emission[faces], "emissive surfaces",
+                     light_tint, None if tint is None else mean_tint[faces])
 
 
 def light_dimension(depth, light_index, light_count):

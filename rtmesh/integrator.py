@@ -292,8 +292,16 @@ class Integrator:
         self.lights = [light for light in lights if not is_area_light(light)]
         area_lights = [light for light in lights if is_area_light(light)]
         if m.any_emission:
+            tint = mean_tint = None
+            if self.textures.emission_textured:
+                material_id = scene.material_id
+
+                def tint(prim, u, v):
+                    return self.textures.emission_tints(prim, u, v, material_id[prim])
+
+                mean_tint = self.textures.mean_emission_tints()[material_id]
             emitters = emissive_mesh_light(self.accel.triangles, scene.face_normals,
-                                           m.emission[scene.material_id])
+                                           m.emission[scene.material_id], tint, mean_tint)
             area_lights += [emitters] if emitters is not None else []
         self.area_lighting = (AreaLighting(area_lights, self.accel, self.settings, self.offset_scale)
                               if area_lights else None)
@@ -711,6 +719,8 @@ class Integrator:
         local = None
         if st["emission"]:
             local = take_rows(self._emission, srf.mat)
+            if srf.tints is not None and srf.tints.emission is not None:
+                local = local * srf.tints.emission
         tint = None if srf.tints is None else srf.tints.diffuse
         if st["unlit"]:
             # unlit materials show their (textured) colour as is

@@ -220,6 +220,10 @@ def mtl_material(statements, name, folder, cache=None, source="mtl"):
     if normal_texture is None:
         normal_texture = texture(("bump", "map_bump"), kind="bump")
     blended = not glass and (opacity < 1.0 or opacity_texture is not None)
+    # map_Ke multiplies Ke; an emission map without Ke shows the map's own colours
+    emission_texture = texture(("map_ke",))
+    if emission_texture is not None and emission is None:
+        emission = np.ones(3)
     return Material(
         name=name,
         diffuse=diffuse,
@@ -237,6 +241,7 @@ def mtl_material(statements, name, folder, cache=None, source="mtl"):
         specular_texture=texture(("map_ks",)) if has_specular else None,
         opacity_texture=opacity_texture,
         normal_texture=normal_texture,
+        emission_texture=emission_texture,
     )
 
 
@@ -374,6 +379,10 @@ def gltf_material(pbr, json_material=None, name="gltf"):
     if pbr.normalTexture is not None:
         normal = Texture.from_pil(pbr.normalTexture, srgb=False, name=f"{name} normalTexture",
                                   wrap=wraps.get("normalTexture", "repeat"))
+    glow = None
+    if pbr.emissiveTexture is not None and (emission > 0).any():  # glTF: factor x texture
+        glow = Texture.from_pil(pbr.emissiveTexture, srgb=True, name=f"{name} emissiveTexture",
+                                wrap=wraps.get("emissiveTexture", "repeat"))
     not_transmitted = 1.0 - transmission.max()
     return Material(
         name=pbr.name or name,
@@ -394,6 +403,7 @@ def gltf_material(pbr, json_material=None, name="gltf"):
         unlit="KHR_materials_unlit" in ext,
         diffuse_texture=texture,
         normal_texture=normal,
+        emission_texture=glow,
     )
 
 
@@ -424,7 +434,8 @@ def gltf_json_materials(doc):
     for material in doc.get("materials", []) or []:
         if isinstance(material, dict) and isinstance(material.get("name"), str):
             infos = {"baseColorTexture": (material.get("pbrMetallicRoughness") or {}).get("baseColorTexture"),
-                     "normalTexture": material.get("normalTexture")}
+                     "normalTexture": material.get("normalTexture"),
+                     "emissiveTexture": material.get("emissiveTexture")}
             wraps = {slot: _texture_wrap(doc, info) for slot, info in infos.items() if isinstance(info, dict)}
             out[material["name"]] = {**material, WRAP_KEY: wraps}
     return out

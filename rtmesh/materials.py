@@ -31,7 +31,7 @@ def as_colour(value):
 ALPHA_MODES = ("opaque", "mask", "blend")
 COLOUR_FIELDS = ("diffuse", "specular", "ambient", "mirror", "transmission", "absorption",
                  "emission")
-TEXTURE_FIELDS = ("diffuse_texture", "specular_texture", "opacity_texture", "normal_texture")
+TEXTURE_FIELDS = ("diffuse_texture", "specular_texture", "opacity_texture", "normal_texture", "emission_texture")
 
 
 @dataclass
@@ -77,11 +77,12 @@ class Material:
         (metals reflect in their own colour); see :mod:`rtmesh.texturing`.
     double_sided : bool
         Kept from glTF for reference; both sides of every triangle are always shaded.
-    diffuse_texture, specular_texture, opacity_texture, normal_texture : Texture or None
+    diffuse_texture, specular_texture, opacity_texture, normal_texture, emission_texture : Texture or None
         Image textures (:class:`rtmesh.textures.Texture`): base colour (multiplies
         ``diffuse`` and ``ambient``; its alpha multiplies ``opacity``), specular colour
-        (multiplies ``specular``), opacity (first channel multiplies ``opacity``) and a
-        tangent-space normal map.
+        (multiplies ``specular``), opacity (first channel multiplies ``opacity``), a
+        tangent-space normal map, and emitted colour (multiplies ``emission``, both where
+        the surface is seen and where it lights others).
     """
 
     name: str = "default"
@@ -105,6 +106,7 @@ class Material:
     specular_texture: object = None
     opacity_texture: object = None
     normal_texture: object = None
+    emission_texture: object = None
 
     def __post_init__(self):
         if self.alpha_mode not in ALPHA_MODES:

@@ -22,6 +22,7 @@ materials present in a batch, never over rays.
 import numpy as np
 
 from .batches import component_major, take_rows
+from .materials import TEXTURE_FIELDS
 from .vecmath import dot, normalize
 
 
@@ -82,18 +83,23 @@ def face_tangents(vertices, faces, uv):
     return np.concatenate([tangent, bitangent], axis=1)
 
 
+def _colour(texels):
+    """(k, 3) colours of texels with any channel count (grey from one or two channels)."""
+    return texels[:, :3] if texels.shape[1] >= 3 else np.repeat(texels[:, :1], 3, axis=1)
+
+
 class Tints:
     """Per-hit multipliers of the material colours; None means "all ones".
 
     Attributes
     ----------
-    diffuse, specular, mirror : (k, 3) float or None
+    diffuse, specular, mirror, emission : (k, 3) float or None
     """
 
-    __slots__ = ("diffuse", "specular", "mirror")
+    __slots__ = ("diffuse", "specular", "mirror", "emission")
 
-    def __init__(self, diffuse=None, specular=None, mirror=None):
-        self.diffuse, self.specular, self.mirror = diffuse, specular, mirror
+    def __init__(self, diffuse=None, specular=None, mirror=None, emission=None):
+        self.diffuse, self.specular, self.mirror, self.emission = diffuse, specular, mirror, emission
 
 
 class SurfaceTextures:
@@ -120,9 +126,8 @@ class SurfaceTextures:
         self.uv = None if scene.uv is None else corner_and_edges(scene.uv, scene.faces)
         self.colours = (None if scene.vertex_colors is None
                         else corner_and_edges(scene.vertex_colors, scene.faces))
-        self.textured = np.array([any(getattr(m, f) is not None for f in
-                                      ("diffuse_texture", "specular_texture", "opacity_texture",
-                                       "normal_texture")) for m in self.materials], dtype=bool)
+        self.textured = np.array([any(getattr(m, f) is not None for f in TEXTURE_FIELDS)
+                                  for m in self.materials], dtype=bool)
         self.normal_mapped_any = any(m.normal_texture is not None for m in self.materials)
         self.tangents = None
         if self.normal_mapped_any and scene.uv is not None:
@@ -170,8 +175,7 @@ class SurfaceTextures:
         uv = None
         for texture, rows, i in self._groups(mat, "diffuse_texture"):
             uv = self.uv_at(prim, u, v) if uv is None else uv
-            base = texture.sample(uv[rows])
-            base = np.repeat(base[:, :1], 3, axis=1) if base.shape[1] < 3 else base[:, :3]
+            base = _colour(texture.sample(uv[rows]))
             if diffuse is None:
                 diffuse = np.ones((k, 3))
             diffuse[rows] *= base
@@ -184,10 +188,45 @@ class SurfaceTextures:
                 mirror[rows] *= metal_tint
         for texture, rows, _ in self._groups(mat, "specular_texture"):
             uv = self.uv_at(prim, u, v) if uv is None else uv
-            texel = texture.sample(uv[rows])
             specular = np.ones((k, 3)) if specular is None else specular
-            specular[rows] *= texel[:, :3] if texel.shape[1] >= 3 else texel[:, :1]
-        return Tints(diffuse, specular, mirror)
+            specular[rows] *= _colour(texture.sample(uv[rows]))
+        return Tints(diffuse, specular, mirror, self.emission_tints(prim, u, v, mat, uv))
+
+    @property
+    def emission_textured(self):
+        """Whether any material's emission varies over its surface (a texture and UVs)."""
+        return self.uv is not None and any(m.emission_texture is not None for m in self.materials)
+
+    def emission_tints(self, prim, u, v, mat, uv=None):
+        """Multipliers of the materials' emission at points (their emission textures).
+
+        Parameters
+        ----------
+        prim, u, v, mat : (k,) arrays
+            As in :meth:`tints`.
+        uv : (k, 2) float, optional
+            :meth:`uv_at` of the points, if the caller has it.
+
+        Returns
+        -------
+        (k, 3) float or None
+            None when no point's material has an emission texture.
+        """
+        if self.uv is None:
+            return None
+        out = None
+        for texture, rows, _ in self._groups(mat, "emission_texture"):
+            uv = self.uv_at(prim, u, v) if uv is None else uv
+            out = np.ones((len(mat), 3)) if out is None else out
+            out[rows] = _colour(texture.sample(uv[rows]))
+        return out
+
+    def mean_emission_tints(self):
+        """(m, 3) float: per material, the mean of its emission texture over the image (ones
+        without one): what a triangle emits on average, for choosing where to sample."""
+        return np.array([np.ones(3) if m.emission_texture is None else
+                         _colour(m.emission_texture.pixels.reshape(-1, m.emission_texture.channels)).mean(axis=0)
+                         for m in self.materials]).reshape(-1, 3)
 
     def opacities(self, prim, u, v, mat):
         """Opacity of hits in [0, 1] (see the module notes).

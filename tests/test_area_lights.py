@@ -802,3 +802,87 @@ def test_shipped_soft_shadow_scene_renders():
     assert result.stats.rays["area_shadow"] > 0 and result.stats.rays["shadow"] == 0
     # the visible quad light is in the top-left corner of the frame, at its full radiance
     assert result.image[:4, :6].max() == pytest.approx(9.0, rel=1e-6)
+
+
+# ---------------------------------------------------------------- emission textures
+def _textured_lamp(texels, height=1.5):
+    """A 1 x 1 emissive square facing down at ``height`` whose UVs are (x + 0.5, y + 0.5),
+    with an emission texture of ``texels`` ((h, w) image, clamped)."""
+    from rtmesh.scene import MeshPart
+    from rtmesh.textures import Texture
+
+    corners = np.array([[-0.5, -0.5, height], [-0.5, 0.5, height], [0.5, 0.5, height], [0.5, -0.5, height]])
+    uv = corners[:, :2] + 0.5
+    lamp = MeshPart("lamp", corners, np.array([[0, 1, 2], [0, 2, 3]]), 1, uv=uv)
+    texture = Texture(np.asarray(texels, dtype=np.float64), wrap="clamp")
+    return lamp, texture
+
+
+def test_a_textured_emitter_is_seen_and_lights_with_its_texels():
+    # radiance 2 x a texture that is 0 at -x and 2 at +x (mean 1): seen from below, each
+    # half shows its texel; on the floor the light matches the integral of the textured
+    # radiance (midpoint rule), within 5 sigma of one sample's variance
+    lamp, texture = _textured_lamp([[0.0, 0.0, 2.0, 2.0]])
+    radiance = 2.0
+    materials = [Material("floor", diffuse=0.5),
+                 Material("lamp", diffuse=0.0, ambient=0.0, emission=radiance, emission_texture=texture)]
+    up = Camera([0.0, 0.0, 0.5], [0.0, 0.0, 1.5], [0.0, 1.0, 0.0], 60.0)
+    seen = render(Scene.from_parts([part("floor", floor_quad(20.0), 0), lamp], materials, [], up),
+                  width=16, height=16).image[..., 0]
+    # the camera looks up with +y up the image: +x is to the left in the image
+    assert seen[8, 12] == 0.0
+    assert seen[8, 3] == pytest.approx(radiance * 2.0, rel=1e-6)
+
+    camera = Camera([0.0, 0.0, 1.0], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0], 60.0)  # the floor under the lamp
+    n = 64
+    result = render(Scene.from_parts([part("floor", floor_quad(20.0), 0), lamp], materials, [], camera),
+                    width=24, height=16, light_samples=n)
+    origins, directions = pixel_centre_rays(camera, 24, 16)
+    down = directions[:, 2] < -0.02
+    t = -origins[:, 2] / np.where(down, directions[:, 2], -1.0)
+    x0, y0 = (origins[:, :2] + t[:, None] * directions[:, :2])[down].T
+    value = result.image[..., 0].reshape(-1)[down]
+    grid = 200
+    xs = -0.5 + (np.arange(grid) + 0.5) / grid
+    lx, ly = np.meshgrid(xs, xs, indexing="ij")
+    texel = texture.sample(np.column_stack([lx.ravel() + 0.5, ly.ravel() + 0.5]))[:, 0].reshape(grid, grid)
+    expected, sigma = [], []
+    for x, y in zip(x0, y0):
+        d2 = (lx - x) ** 2 + (ly - y) ** 2 + 1.5 ** 2
+        g = 1.5 * 1.5 / (d2 * d2)  # cos_s cos_l / d^2 for parallel planes 1.5 apart
+        sample = radiance * texel * g  # one sample's value / area (area 1, uniform by area)
+        mean = sample.mean()
+        expected.append(0.5 * mean)
+        sigma.append(0.5 * math.sqrt(((sample ** 2).mean() - mean ** 2) / n))
+    expected, sigma = np.array(expected), np.array(sigma)
+    assert (np.abs(value - expected) < 5 * sigma + 1e-6).all()
+    bright = x0 > 0.0  # the floor under the bright half
+    for rows in (bright, ~bright):
+        assert abs((value - expected)[rows].sum()) < 5 * math.sqrt((sigma[rows] ** 2).sum())
+    # these sums see the texture: a uniform emitter of the same mean (what ignoring the
+    # texture would give) is far outside their tolerance
+    flat = []
+    for x, y in zip(x0, y0):
+        d2 = (lx - x) ** 2 + (ly - y) ** 2 + 1.5 ** 2
+        flat.append(0.5 * radiance * (1.5 * 1.5 / (d2 * d2)).mean())
+    assert abs((np.array(flat) - expected)[bright].sum()) > 10 * math.sqrt((sigma[bright] ** 2).sum())
+
+
+def test_mesh_light_samples_take_the_texel_at_their_point():
+    lamp, texture = _textured_lamp([[0.0, 1.0], [3.0, 0.5]])
+    v = lamp.vertices
+    tri = np.array([np.concatenate([v[0], v[1] - v[0], v[2] - v[0]]),
+                    np.concatenate([v[0], v[2] - v[0], v[3] - v[0]])])
+
+    def tint(prim, u, w):
+        points = tri[prim, :3] + u[:, None] * tri[prim, 3:6] + w[:, None] * tri[prim, 6:9]
+        return texture.sample(points[:, :2] + 0.5)[:, [0, 0, 0]]
+
+    mean = texture.pixels.mean()
+    light = emissive_mesh_light(tri, np.tile(DOWN, (2, 1)), np.full((2, 3), 2.0), tint, np.full((2, 3), mean))
+    points, normals, emitted, inverse_pdf = light.sample(np.random.default_rng(4).random((500, 2)))
+    np.testing.assert_allclose(emitted[:, 1], 2.0 * texture.sample(points[:, :2] + 0.5)[:, 0], rtol=1e-12)
+    # uniform by area (both faces have the same mean tint): 1 / pdf = area x mean emission / mean emission
+    np.testing.assert_allclose(inverse_pdf, 1.0, rtol=1e-12)
+    # a map that is black everywhere makes no light at all
+    assert emissive_mesh_light(tri, np.tile(DOWN, (2, 1)), np.ones((2, 3)), tint, np.zeros((2, 3))) is None

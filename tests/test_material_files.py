@@ -80,6 +80,18 @@ def test_mtl_texture_maps_are_loaded_once_and_decoded(tmp_path):
     assert len(cache) == 4  # kd.png once per wrap mode, d.png, h.png
 
 
+def test_mtl_emission_map_multiplies_ke_or_stands_alone(tmp_path):
+    write_png(tmp_path / "ke.png", [[[255, 0, 0], [0, 0, 0]]])
+    with_ke = mtl_material({"ke": "2 2 2", "map_ke": "ke.png"}, "a", str(tmp_path))
+    np.testing.assert_allclose(with_ke.emission, 2.0)
+    np.testing.assert_allclose(with_ke.emission_texture.pixels[0], [[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    alone = mtl_material({"map_ke": "ke.png"}, "b", str(tmp_path))
+    np.testing.assert_allclose(alone.emission, 1.0)  # the map's own colours
+    assert alone.emission_texture is not None
+    plain = mtl_material({"ke": "1 1 1"}, "c", str(tmp_path))
+    assert plain.emission_texture is None
+
+
 # ---------------------------------------------------------------- glTF
 
 
@@ -229,3 +241,33 @@ def test_gltf_sampler_wrap_modes_reach_the_textures():
     m = gltf_material(pbr(baseColorTexture=image, normalTexture=image), materials["a"])
     assert (m.diffuse_texture.wrap_u, m.diffuse_texture.wrap_v) == ("clamp", "mirror")
     assert (m.normal_texture.wrap_u, m.normal_texture.wrap_v) == ("repeat", "repeat")
+
+
+def test_gltf_emissive_texture_multiplies_the_factor():
+    from rtmesh.material_files import WRAP_KEY, gltf_json_materials
+
+    image = Image.new("RGB", (2, 1), (255, 0, 0))
+    image.putpixel((1, 0), (0, 0, 0))
+    doc = {"samplers": [{"wrapS": 33071, "wrapT": 33071}], "textures": [{"source": 0, "sampler": 0}],
+           "materials": [{"name": "lamp", "emissiveFactor": [1.0, 0.5, 1.0], "emissiveTexture": {"index": 0}}]}
+    json_material = gltf_json_materials(doc)["lamp"]
+    assert json_material[WRAP_KEY]["emissiveTexture"] == ("clamp", "clamp")
+    m = gltf_material(pbr(emissiveTexture=image), json_material)
+    np.testing.assert_allclose(m.emission, [1.0, 0.5, 1.0])
+    np.testing.assert_allclose(m.emission_texture.pixels[0], [[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])  # sRGB decoded
+    assert m.emission_texture.wrap_u == "clamp"
+    # the spec's default factor is 0: the texture alone emits nothing
+    assert gltf_material(pbr(emissiveTexture=image)).emission_texture is None
+
+
+def test_an_emissive_texture_survives_a_glb_round_trip(tmp_path):
+    mesh = trimesh.creation.box()
+    uv = np.random.default_rng(0).random((len(mesh.vertices), 2))
+    image = Image.new("RGB", (4, 4), (255, 255, 255))
+    material = PBRMaterial(name="glow", emissiveFactor=[1.0, 1.0, 1.0], emissiveTexture=image)
+    mesh.visual = trimesh.visual.TextureVisuals(uv=uv, material=material)
+    path = tmp_path / "glow.glb"
+    mesh.export(path)
+    scene = load_mesh_scene(str(path))
+    glowing = [m for m in scene.materials.materials if m.emission_texture is not None]
+    assert len(glowing) == 1 and np.allclose(glowing[0].emission, 1.0)
