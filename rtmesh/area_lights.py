@@ -61,14 +61,17 @@ import numpy as np
 from .accel import barycentric_interpolate, offset_ray_origins
 from .batches import component_major, take_rows
 from .materials import as_colour
-from .sampling import (Dim, decorrelated_points, square_to_uniform_disk_concentric,
-                       square_to_uniform_triangle)
+from .sampling import (Dim, decorrelated_points, spherical_triangle_area, square_to_spherical_triangle,
+                       square_to_uniform_disk_concentric, square_to_uniform_triangle)
 from .vecmath import dot, orthonormal_basis
 
 # Rays meeting a visible light and a surface at the same distance (a light placed flush on a
 # ceiling) see the light: Embree's float32 distance to the surface carries a relative error
 # of a few 1e-7, so the light wins within this relative margin.
 _FLUSH_MARGIN = 1.0 + 1e-5
+# Emissive triangles seen under more than this solid angle (sr) are sampled uniformly in it
+# (see MeshLight.sample); smaller ones by area.  Arvo's angle sums keep ~10 digits at 1e-3 sr.
+SOLID_ANGLE_SAMPLING_FROM = 1e-3
 
 
 def _vec3(value, name):
@@ -122,7 +125,7 @@ class QuadLight:
     def is_black(self):
         return not (self.radiance > 0).any()
 
-    def sample(self, u):
+    def sample(self, u, p=None):
         """Points spread uniformly over the light.
 
         Parameters
@@ -130,6 +133,8 @@ class QuadLight:
         u : (k, 2) float
             Points in [0, 1)^2; ``u`` maps linearly onto the parallelogram, so strata of the
             square are equal parts of the light.
+        p : (k, 3) float, optional
+            The points being lit (not used: the light is sampled by area).
 
         Returns
         -------
@@ -218,7 +223,7 @@ class DiskLight:
     def is_black(self):
         return not (self.radiance > 0).any()
 
-    def sample(self, u):
+    def sample(self, u, p=None):
         """Points spread uniformly over the disk; see :meth:`QuadLight.sample`.
 
         The concentric map keeps the strata of ``u`` compact and of equal area on the disk.
@@ -284,11 +289,26 @@ class MeshLight:
     def is_black(self):
         return not self._total > 0.0
 
-    def sample(self, u):
-        """Points on the emitter, each face in proportion to its power, uniform on the face.
+    def sample(self, u, p=None):
+        """Points on the emitter, each face in proportion to its power; on the face uniform
+        in the solid angle it subtends from ``p`` where that is large, else uniform by area.
 
         The first coordinate picks the face and is then rescaled to [0, 1) within the face's
         share of the CDF, so one pair of numbers does both and stratification carries over.
+
+        A point close to a face sees it under a large solid angle, and samples uniform by
+        area would weigh its near part with ``1 / d^2``: rare, very bright values (fireflies
+        beside a lamp).  Uniform in solid angle (Arvo's spherical-triangle sampling) the
+        geometric factor is bounded by the face's solid angle.  Faces seen under less than
+        :data:`SOLID_ANGLE_SAMPLING_FROM` keep area sampling, which is as good there and
+        where Arvo's angle sums lose their precision.
+
+        Parameters
+        ----------
+        u : (k, 2) float
+            Points in [0, 1)^2.
+        p : (k, 3) float, optional
+            The points being lit; without them every face is sampled by area.
 
         Returns
         -------
@@ -302,14 +322,57 @@ class MeshLight:
         face = np.minimum(np.searchsorted(self._cdf, x, side="right"), len(self._cdf) - 1)
         start = self._cdf[face] - self._power[face]
         remapped = np.clip((x - start) / self._power[face], 0.0, np.nextafter(1.0, 0.0))
-        b = square_to_uniform_triangle(np.stack([remapped, u[:, 1]], axis=1))
-        points = barycentric_interpolate(take_rows(self.triangles, face), b[:, 0], b[:, 1])
+        square = np.stack([remapped, u[:, 1]], axis=1)
+        triangles = take_rows(self.triangles, face)
+        b = square_to_uniform_triangle(square)
+        points = barycentric_interpolate(triangles, b[:, 0], b[:, 1])
         emission = take_rows(self.emission, face)
         inverse_pdf = self._total / self._mean_emission[face]
+        if p is not None:
+            self._sample_solid_angle(p, square, triangles, face, points, b, inverse_pdf)
         tint = None if self.tint is None else self.tint(face, b[:, 0], b[:, 1])
         if tint is not None:  # None: none of these faces has an emission texture
             emission = emission * tint
         return points, take_rows(self.normals, face), emission, inverse_pdf
+
+
+    def _sample_solid_angle(self, p, square, triangles, face, points, b, inverse_pdf):
+        """Move the samples of faces seen under a large solid angle from ``p`` to points
+        uniform in that solid angle; updates ``points``, ``b`` and ``inverse_pdf`` in place.
+
+        The area density of such a point is ``P(face) |cos_l| / (omega d^2)``, with
+        ``P(face) = area x mean emission / total`` the chance of choosing the face.
+        """
+        v0 = triangles[:, 0:3]
+        e1, e2 = triangles[:, 3:6], triangles[:, 6:9]
+        corners = [v0 - p, v0 + e1 - p, v0 + e2 - p]
+        unit = [c / np.sqrt(np.maximum(dot(c, c), 1e-300))[:, None] for c in corners]
+        omega = spherical_triangle_area(*unit)
+        rows = np.flatnonzero(omega > SOLID_ANGLE_SAMPLING_FROM)
+        if not len(rows):
+            return
+        a, bb, c = (take_rows(x, rows) for x in unit)
+        w, omega = square_to_spherical_triangle(take_rows(square, rows), a, bb, c)
+        n = take_rows(self.normals, face[rows])
+        origin, e1r, e2r, v0r = take_rows(p, rows), take_rows(e1, rows), take_rows(e2, rows), take_rows(v0, rows)
+        cos = dot(w, n)
+        # where the direction meets the face's plane (inside the face up to rounding)
+        t = dot(v0r - origin, n) / np.where(cos != 0.0, cos, np.inf)
+        y = origin + t[:, None] * w
+        # barycentrics of y, for textured emission: least squares on the two edges
+        rel = y - v0r
+        d00, d01, d11 = dot(e1r, e1r), dot(e1r, e2r), dot(e2r, e2r)
+        d20, d21 = dot(rel, e1r), dot(rel, e2r)
+        det = d00 * d11 - d01 * d01
+        b1 = np.clip((d11 * d20 - d01 * d21) / det, 0.0, 1.0)
+        b2 = np.clip((d00 * d21 - d01 * d20) / det, 0.0, 1.0 - b1)
+        chance = self._power[face[rows]] / self._total
+        inverse = omega * t * t / (chance * np.abs(cos))
+        ok = np.isfinite(inverse) & (t > 0.0)  # else keep the area sample (a face seen edge-on)
+        rows, y, b1, b2, inverse = rows[ok], y[ok], b1[ok], b2[ok], inverse[ok]
+        points[rows] = y
+        b[rows, 0], b[rows, 1] = b1, b2
+        inverse_pdf[rows] = inverse
 
 
 def is_area_light(light):
@@ -437,7 +500,7 @@ class AreaLighting:
 
     def _one_sample(self, p, ng, reflectance, light, u, stats, clock, time=None):
         """One light sample per hit: ``V f L cos_l / (d^2 pdf_A)``, (k, 3) or None."""
-        y, n_light, radiance, inverse_pdf = light.sample(u)
+        y, n_light, radiance, inverse_pdf = light.sample(u, p)
         to_light = y - p
         distance2 = dot(to_light, to_light)
         distance = np.sqrt(distance2)

@@ -23,6 +23,7 @@ import numpy as np
 from .batches import component_major, take_rows
 from .hashing import GOLDEN, M1, mix64
 from .lowdiscrepancy import sobol_02
+from .vecmath import dot
 
 SAMPLERS = ("regular", "random", "jittered", "sobol")
 
@@ -435,6 +436,60 @@ def square_to_uniform_triangle(u):
     """
     s = np.sqrt(u[:, 0])
     return np.stack([s * (1.0 - u[:, 1]), s * u[:, 1]], axis=1)
+
+
+def spherical_triangle_area(a, b, c):
+    """Solid angle of the spherical triangles with unit-vector corners ``a, b, c``, (n,) sr.
+
+    Van Oosterom and Strackee's formula ``tan(omega / 2) = |a . (b x c)| / (1 + a.b + b.c
+    + c.a)``: no cancellation for small triangles, where the sum of the angles minus pi
+    loses every digit.
+    """
+    triple = np.abs(dot(a, np.cross(b, c)))
+    return 2.0 * np.arctan2(triple, 1.0 + dot(a, b) + dot(b, c) + dot(c, a))
+
+
+def square_to_spherical_triangle(u, a, b, c):
+    """Directions uniform over the spherical triangles with unit-vector corners ``a, b, c``.
+
+    Arvo's method ("Stratified sampling of spherical triangles", SIGGRAPH 1995): ``u0``
+    chooses the sub-triangle ``a, b, c'`` of area ``u0 * omega`` (``c'`` on the arc from
+    ``a`` to ``c``), ``u1`` a point on the arc from ``b`` to ``c'`` with the right density.
+    The map is continuous, so stratified ``u`` stay stratified.  For triangles of a tiny
+    solid angle the angle sums lose their digits: use it above ~1e-4 sr.
+
+    Parameters
+    ----------
+    u : (n, 2) float
+        Points in [0, 1)^2.
+    a, b, c : (n, 3) float
+        Unit corner directions.
+
+    Returns
+    -------
+    directions : (n, 3) float
+        Unit directions inside the triangles; density ``1 / omega`` per steradian.
+    omega : (n,) float
+        Solid angles (:func:`spherical_triangle_area`).
+    """
+    def unit(x):
+        return x / np.sqrt(np.maximum(dot(x, x), 1e-300))[:, None]
+
+    # the angle at corner a, between the great circles through a, b and a, c
+    n_ab, n_ac = unit(np.cross(a, b)), unit(np.cross(a, c))
+    alpha = np.arccos(np.clip(dot(n_ab, n_ac), -1.0, 1.0))
+    omega = spherical_triangle_area(a, b, c)
+    area = u[:, 0] * omega
+    s, t = np.sin(area - alpha), np.cos(area - alpha)
+    cos_alpha, sin_alpha = np.cos(alpha), np.sin(alpha)
+    uu = t - cos_alpha
+    vv = s + sin_alpha * dot(a, b)
+    denominator = (vv * s + uu * t) * sin_alpha
+    q = np.clip(((vv * t - uu * s) * cos_alpha - vv) / np.where(denominator != 0.0, denominator, 1.0), -1.0, 1.0)
+    c_new = q[:, None] * a + np.sqrt(np.maximum(1.0 - q * q, 0.0))[:, None] * unit(c - dot(c, a)[:, None] * a)
+    z = 1.0 - u[:, 1] * (1.0 - dot(c_new, b))
+    directions = z[:, None] * b + np.sqrt(np.maximum(1.0 - z * z, 0.0))[:, None] * unit(c_new - dot(c_new, b)[:, None] * b)
+    return unit(directions), omega
 
 
 def uniform_triangle_to_square(b):

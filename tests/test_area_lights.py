@@ -886,3 +886,33 @@ def test_mesh_light_samples_take_the_texel_at_their_point():
     np.testing.assert_allclose(inverse_pdf, 1.0, rtol=1e-12)
     # a map that is black everywhere makes no light at all
     assert emissive_mesh_light(tri, np.tile(DOWN, (2, 1)), np.ones((2, 3)), tint, np.zeros((2, 3))) is None
+
+
+def test_an_emitter_close_to_the_lit_point_gives_no_fireflies():
+    # a point 1e-3 below a 1 x 1 emissive square: sampled by area, one sample in a few
+    # thousand would land near it and weigh ~1e6; uniform in solid angle every sample's
+    # geometric weight cos_l / (d^2 pdf) is the triangle's solid angle over its chance,
+    # at most 2 pi / 0.5; the mean still matches the closed form
+    v = np.array([[-0.5, -0.5, 1.5], [-0.5, 0.5, 1.5], [0.5, 0.5, 1.5], [0.5, -0.5, 1.5]])
+    tri = np.array([np.concatenate([v[0], v[1] - v[0], v[2] - v[0]]),
+                    np.concatenate([v[0], v[2] - v[0], v[3] - v[0]])])
+    light = emissive_mesh_light(tri, np.tile(DOWN, (2, 1)), np.ones((2, 3)))
+    n = 4096
+    p = np.tile([0.1, 0.05, 1.5 - 1e-3], (n, 1))
+    u = decorrelated_points("jittered", 0, np.zeros(n, np.int64), np.arange(n), n, Dim.LIGHT)
+    y, normals, radiance, inverse_pdf = light.sample(u, p)
+    to_light = y - p
+    d2 = (to_light ** 2).sum(axis=1)
+    cos_l = np.abs(to_light[:, 2]) / np.sqrt(d2)
+    cos_s = to_light[:, 2] / np.sqrt(d2)
+    weight = cos_l * inverse_pdf / d2
+    assert weight.max() < 4 * np.pi + 1e-9
+    estimate = (cos_s * weight).mean()
+    exact = rectangle_integral(-0.6, 0.4, -0.55, 0.45, 1e-3)
+    assert estimate == pytest.approx(exact, rel=1e-3)
+    # the points lie on the square (where shadow rays aim)
+    np.testing.assert_allclose(y[:, 2], 1.5, atol=1e-12)
+    assert (np.abs(y[:, :2]) <= 0.5 + 1e-12).all()
+    # far away the faces keep area sampling: the same points as without p
+    far = np.tile([0.0, 0.0, -100.0], (n, 1))
+    np.testing.assert_array_equal(light.sample(u, far)[0], light.sample(u)[0])

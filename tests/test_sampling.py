@@ -391,3 +391,33 @@ def test_sobol_pixel_samples_are_stratified_in_every_elementary_interval():
             assert sorted(cells.astype(int).tolist()) == list(range(16))
     # pixels are scrambled independently
     assert len(np.unique(offsets[:, 0, 0])) == pixels
+
+
+@pytest.mark.parametrize("flip", [False, True])
+def test_spherical_triangle_directions_are_uniform_inside_it(flip):
+    from rtmesh.sampling import spherical_triangle_area, square_to_spherical_triangle
+
+    corners = [np.array(v, dtype=float) / np.linalg.norm(v) for v in ([1.0, 0.2, 0.3], [0.1, 1.0, 0.2], [0.3, 0.1, 1.0])]
+    if flip:  # the winding does not matter
+        corners = corners[::-1]
+    n = 100_000
+    a, b, c = (np.tile(x, (n, 1)) for x in corners)
+    d, omega = square_to_spherical_triangle(np.random.default_rng(3).random((n, 2)), a, b, c)
+    np.testing.assert_allclose(np.linalg.norm(d, axis=1), 1.0, atol=1e-12)
+    # inside: on the inner side of the three great circles
+    A, B, C = corners
+    for p, q, r in ((A, B, C), (B, C, A), (C, A, B)):
+        assert (d @ np.cross(p, q) * np.dot(np.cross(p, q), r) >= -1e-12).all()
+    # uniform: each of three sub-triangles (split at the centroid direction) gets its share
+    m = (A + B + C) / np.linalg.norm(A + B + C)
+    total = omega[0]
+    for p, q in ((A, B), (B, C), (C, A)):
+        share = spherical_triangle_area(p[None], q[None], m[None])[0] / total
+        inside = ((d @ np.cross(p, m)) * np.dot(np.cross(p, m), q) >= 0) & ((d @ np.cross(m, q)) * np.dot(np.cross(m, q), p) >= 0)
+        assert abs(inside.mean() - share) < 5 * np.sqrt(share * (1 - share) / n)
+    # the solid angle: an octant is pi / 2; a tiny triangle keeps its digits (area / d^2)
+    octant = spherical_triangle_area(*(np.eye(3)[i][None] for i in range(3)))
+    assert octant[0] == pytest.approx(np.pi / 2, rel=1e-14)
+    tiny = np.array([[0.0, 0.0, 1.0], [1e-6, 0.0, 1.0], [0.0, 1e-6, 1.0]])
+    tiny /= np.linalg.norm(tiny, axis=1)[:, None]
+    assert spherical_triangle_area(*(t[None] for t in tiny))[0] == pytest.approx(0.5e-12, rel=1e-5)
