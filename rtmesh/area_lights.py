@@ -277,6 +277,11 @@ class MeshLight:
         e1, e2 = self.triangles[:, 3:6], self.triangles[:, 6:9]
         face_area = 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
         self.area = float(face_area.sum())
+        # a sphere around each face (centroid, farthest corner): its solid angle bounds the
+        # face's, so faces far from a point are known to be small without the exact formula
+        self._centroids = self.triangles[:, 0:3] + (e1 + e2) / 3.0
+        corners = np.stack([np.zeros_like(e1), e1, e2]) - (e1 + e2) / 3.0
+        self._radii = np.sqrt((corners ** 2).sum(axis=2).max(axis=0))
         # faces are chosen in proportion to their power (area x mean emission): uniform by
         # area for a uniform emitter, and no samples wasted on dim faces of a mixed one
         self._mean_emission = (self.emission if mean_tint is None else self.emission * mean_tint).mean(axis=1)
@@ -343,15 +348,28 @@ class MeshLight:
         The area density of such a point is ``P(face) |cos_l| / (omega d^2)``, with
         ``P(face) = area x mean emission / total`` the chance of choosing the face.
         """
-        v0 = triangles[:, 0:3]
-        e1, e2 = triangles[:, 3:6], triangles[:, 6:9]
-        corners = [v0 - p, v0 + e1 - p, v0 + e2 - p]
+        # which faces are seen under more than the threshold depends on p and the face
+        # only (never on the sample, which would change the density): the bounding sphere
+        # rules out the far ones cheaply, the exact solid angle decides for the rest
+        offset = take_rows(self._centroids, face) - p
+        distance = np.sqrt(dot(offset, offset))
+        radius = self._radii[face]
+        gap = np.maximum(distance - radius, 0.0)
+        cap = 2.0 * np.pi * (1.0 - gap / np.sqrt(gap * gap + radius * radius))  # >= the face's
+        near = np.flatnonzero(cap > SOLID_ANGLE_SAMPLING_FROM)
+        if not len(near):
+            return
+        v0 = take_rows(triangles[:, 0:3], near)
+        e1n, e2n, pn = take_rows(triangles[:, 3:6], near), take_rows(triangles[:, 6:9], near), take_rows(p, near)
+        corners = [v0 - pn, v0 + e1n - pn, v0 + e2n - pn]
         unit = [c / np.sqrt(np.maximum(dot(c, c), 1e-300))[:, None] for c in corners]
         omega = spherical_triangle_area(*unit)
-        rows = np.flatnonzero(omega > SOLID_ANGLE_SAMPLING_FROM)
-        if not len(rows):
+        keep = np.flatnonzero(omega > SOLID_ANGLE_SAMPLING_FROM)
+        if not len(keep):
             return
-        a, bb, c = (take_rows(x, rows) for x in unit)
+        rows = near[keep]
+        v0, e1, e2 = triangles[:, 0:3], triangles[:, 3:6], triangles[:, 6:9]
+        a, bb, c = (take_rows(x, keep) for x in unit)
         w, omega = square_to_spherical_triangle(take_rows(square, rows), a, bb, c)
         n = take_rows(self.normals, face[rows])
         origin, e1r, e2r, v0r = take_rows(p, rows), take_rows(e1, rows), take_rows(e2, rows), take_rows(v0, rows)
