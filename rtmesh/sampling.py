@@ -492,6 +492,22 @@ def square_to_spherical_triangle(u, a, b, c):
     return unit(directions), omega
 
 
+def spherical_triangle_to_square(directions, a, b, c):
+    """Inverse of :func:`square_to_spherical_triangle`: directions inside the spherical
+    triangles ``a, b, c`` back to ``u``, (n, 3) -> (n, 2).
+
+    ``c'`` is where the great circle through ``b`` and the direction meets the arc from
+    ``a`` to ``c``; ``u0`` is the area of ``a, b, c'`` over the whole, ``u1`` the position
+    of the direction on the arc from ``b`` to ``c'``.
+    """
+    c_new = np.cross(np.cross(b, directions), np.cross(a, c))
+    c_new /= np.sqrt(np.maximum(dot(c_new, c_new), 1e-300))[:, None]
+    c_new *= np.where(dot(c_new, a + c) < 0.0, -1.0, 1.0)[:, None]  # the one between a and c
+    u0 = spherical_triangle_area(a, b, c_new) / spherical_triangle_area(a, b, c)
+    u1 = (1.0 - dot(directions, b)) / np.maximum(1.0 - dot(c_new, b), 1e-300)
+    return np.stack([u0, u1], axis=1)
+
+
 def uniform_triangle_to_square(b):
     """Inverse of :func:`square_to_uniform_triangle`, (n, 2) -> (n, 2)."""
     total = b[:, 0] + b[:, 1]

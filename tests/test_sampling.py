@@ -415,6 +415,12 @@ def test_spherical_triangle_directions_are_uniform_inside_it(flip):
         share = spherical_triangle_area(p[None], q[None], m[None])[0] / total
         inside = ((d @ np.cross(p, m)) * np.dot(np.cross(p, m), q) >= 0) & ((d @ np.cross(m, q)) * np.dot(np.cross(m, q), p) >= 0)
         assert abs(inside.mean() - share) < 5 * np.sqrt(share * (1 - share) / n)
+    # the map is a bijection: its inverse gives the square points back
+    from rtmesh.sampling import spherical_triangle_to_square
+    u = np.random.default_rng(4).random((1000, 2))
+    back = spherical_triangle_to_square(square_to_spherical_triangle(u, a[:1000], b[:1000], c[:1000])[0],
+                                        a[:1000], b[:1000], c[:1000])
+    np.testing.assert_allclose(back, u, atol=1e-7)
     # the solid angle: an octant is pi / 2; a tiny triangle keeps its digits (area / d^2)
     octant = spherical_triangle_area(*(np.eye(3)[i][None] for i in range(3)))
     assert octant[0] == pytest.approx(np.pi / 2, rel=1e-14)
