@@ -134,7 +134,10 @@ class QuadLight:
             Points in [0, 1)^2; ``u`` maps linearly onto the parallelogram, so strata of the
             square are equal parts of the light.
         p : (k, 3) float, optional
-            The points being lit (not used: the light is sampled by area).
+            The points being lit (not used: the light is sampled by area).  Sampling its
+            two triangles uniformly in solid angle (as :class:`MeshLight` does) lowered the
+            error at 4-64 samples but slowed Sobol's convergence across shadow edges
+            (RMSE slope -0.75 instead of -1); a spherical-rectangle warp would keep it.
 
         Returns
         -------
