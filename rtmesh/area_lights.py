@@ -343,7 +343,6 @@ class MeshLight:
             emission = emission * tint
         return points, take_rows(self.normals, face), emission, inverse_pdf
 
-
     def _sample_solid_angle(self, p, square, triangles, face, points, b, inverse_pdf):
         """Move the samples of faces seen under a large solid angle from ``p`` to points
         uniform in that solid angle; updates ``points``, ``b`` and ``inverse_pdf`` in place.
@@ -362,9 +361,9 @@ class MeshLight:
         near = np.flatnonzero(cap > SOLID_ANGLE_SAMPLING_FROM)
         if not len(near):
             return
-        v0 = take_rows(triangles[:, 0:3], near)
-        e1n, e2n, pn = take_rows(triangles[:, 3:6], near), take_rows(triangles[:, 6:9], near), take_rows(p, near)
-        corners = [v0 - pn, v0 + e1n - pn, v0 + e2n - pn]
+        v0n, e1n, e2n = (take_rows(triangles[:, k:k + 3], near) for k in (0, 3, 6))
+        pn = take_rows(p, near)
+        corners = [v0n - pn, v0n + e1n - pn, v0n + e2n - pn]
         unit = [c / np.sqrt(np.maximum(dot(c, c), 1e-300))[:, None] for c in corners]
         omega = spherical_triangle_area(*unit)
         keep = np.flatnonzero(omega > SOLID_ANGLE_SAMPLING_FROM)
