@@ -19,7 +19,6 @@ from .batches import repeated_row, take_rows
 from . import kernels
 
 _F32_MAX = float(np.finfo(np.float32).max)
-_F32_MAX32 = np.float32(_F32_MAX)
 
 # The origin offset (see offset_ray_origins).  A spawned ray must start clear of the surface
 # it leaves, by more than two errors (in the spirit of Waechter & Binder, "A Fast and Robust
@@ -215,9 +214,8 @@ class Accel:
             return np.zeros(0, dtype=bool)
         # embreex writes into the distance array it is given: always pass a fresh one.
         # float32 max stands in for inf, which Embree's robust mode handles less predictably.
-        # (one ufunc call for float32 input, as light_samples gives: this runs per chunk)
-        t = np.minimum(t_max, _F32_MAX if t_max.dtype != np.float32 else _F32_MAX32)
-        t = t if t.dtype == np.float32 else t.astype(np.float32)
+        # (for float32 input, as light_samples gives, one ufunc call: this runs per chunk)
+        t = np.minimum(t_max, _F32_MAX).astype(np.float32, copy=False)
         o, d = _embree_rays(origins, rows), _embree_rays(directions, rows)
         return self._scene.run(o, d, dists=t, query="OCCLUDED") != -1
 

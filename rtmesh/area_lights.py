@@ -63,7 +63,7 @@ from .batches import component_major, take_rows
 from .materials import as_colour
 from .sampling import (Dim, decorrelated_points, spherical_triangle_area, square_to_spherical_triangle,
                        square_to_uniform_disk_concentric, square_to_uniform_triangle)
-from .vecmath import dot, orthonormal_basis
+from .vecmath import dot, normalize, orthonormal_basis
 
 # Rays meeting a visible light and a surface at the same distance (a light placed flush on a
 # ceiling) see the light: Embree's float32 distance to the surface carries a relative error
@@ -364,7 +364,7 @@ class MeshLight:
         v0n, e1n, e2n = (take_rows(triangles[:, k:k + 3], near) for k in (0, 3, 6))
         pn = take_rows(p, near)
         corners = [v0n - pn, v0n + e1n - pn, v0n + e2n - pn]
-        unit = [c / np.sqrt(np.maximum(dot(c, c), 1e-300))[:, None] for c in corners]
+        unit = [normalize(c) for c in corners]
         omega = spherical_triangle_area(*unit)
         keep = np.flatnonzero(omega > SOLID_ANGLE_SAMPLING_FROM)
         if not len(keep):

@@ -23,7 +23,7 @@ import numpy as np
 from .batches import component_major, take_rows
 from .hashing import GOLDEN, M1, mix64
 from .lowdiscrepancy import sobol_02
-from .vecmath import dot
+from .vecmath import dot, normalize
 
 SAMPLERS = ("regular", "random", "jittered", "sobol")
 
@@ -472,11 +472,8 @@ def square_to_spherical_triangle(u, a, b, c):
     omega : (n,) float
         Solid angles (:func:`spherical_triangle_area`).
     """
-    def unit(x):
-        return x / np.sqrt(np.maximum(dot(x, x), 1e-300))[:, None]
-
     # the angle at corner a, between the great circles through a, b and a, c
-    n_ab, n_ac = unit(np.cross(a, b)), unit(np.cross(a, c))
+    n_ab, n_ac = normalize(np.cross(a, b)), normalize(np.cross(a, c))
     alpha = np.arccos(np.clip(dot(n_ab, n_ac), -1.0, 1.0))
     omega = spherical_triangle_area(a, b, c)
     area = u[:, 0] * omega
@@ -486,10 +483,10 @@ def square_to_spherical_triangle(u, a, b, c):
     vv = s + sin_alpha * dot(a, b)
     denominator = (vv * s + uu * t) * sin_alpha
     q = np.clip(((vv * t - uu * s) * cos_alpha - vv) / np.where(denominator != 0.0, denominator, 1.0), -1.0, 1.0)
-    c_new = q[:, None] * a + np.sqrt(np.maximum(1.0 - q * q, 0.0))[:, None] * unit(c - dot(c, a)[:, None] * a)
+    c_new = q[:, None] * a + np.sqrt(np.maximum(1.0 - q * q, 0.0))[:, None] * normalize(c - dot(c, a)[:, None] * a)
     z = 1.0 - u[:, 1] * (1.0 - dot(c_new, b))
-    directions = z[:, None] * b + np.sqrt(np.maximum(1.0 - z * z, 0.0))[:, None] * unit(c_new - dot(c_new, b)[:, None] * b)
-    return unit(directions), omega
+    directions = z[:, None] * b + np.sqrt(np.maximum(1.0 - z * z, 0.0))[:, None] * normalize(c_new - dot(c_new, b)[:, None] * b)
+    return normalize(directions), omega
 
 
 def spherical_triangle_to_square(directions, a, b, c):
@@ -500,8 +497,7 @@ def spherical_triangle_to_square(directions, a, b, c):
     ``a`` to ``c``; ``u0`` is the area of ``a, b, c'`` over the whole, ``u1`` the position
     of the direction on the arc from ``b`` to ``c'``.
     """
-    c_new = np.cross(np.cross(b, directions), np.cross(a, c))
-    c_new /= np.sqrt(np.maximum(dot(c_new, c_new), 1e-300))[:, None]
+    c_new = normalize(np.cross(np.cross(b, directions), np.cross(a, c)))
     c_new *= np.where(dot(c_new, a + c) < 0.0, -1.0, 1.0)[:, None]  # the one between a and c
     u0 = spherical_triangle_area(a, b, c_new) / spherical_triangle_area(a, b, c)
     u1 = (1.0 - dot(directions, b)) / np.maximum(1.0 - dot(c_new, b), 1e-300)
