@@ -366,17 +366,20 @@ class Integrator:
         """Medium stacks (see :mod:`rtmesh.media`), only for scenes that refract.
 
         Sets ``media`` (None without transmissive materials), ``_camera_medium`` (the
-        camera's stack, ``(STACK_DEPTH,)``; ``(0,)`` without media) and ``_camera_absorbs``
-        (camera rays lose light before their first hit, so their throughput is not 1).
+        camera's stack, ``(STACK_DEPTH,)``; ``(0,)`` without media), ``_camera_absorbs``
+        (camera rays lose light before their first hit, so their throughput is not 1) and
+        ``_absorbing_medium`` (bool by medium id, the last entry, -1, for the outside).
         """
         m = scene.materials
         self.media = None
         self._camera_medium = np.zeros(0, dtype=np.int32)
         self._camera_absorbs = False
+        self._absorbing_medium = np.zeros(1, dtype=bool)
         if not m.any_transmission:
             return
         self.media = Media(m, scene.material_id, scene.vertices, scene.faces,
                            scene.face_normals)
+        self._absorbing_medium = (self.media.absorption > 0).any(axis=1)
         trace, to_rest = self.accel.intersect, None
         if self.motion is not None:
             # the camera's media when the shutter opens
@@ -585,9 +588,9 @@ class Integrator:
             sample_time = t_open + (t_close - t_open) * u
         origins, directions = self.camera.generate_rays(in_pixel, s.width, s.height, lens_uv, pixel,
                                                         self._camera_frame)
-        # camera rays have unit throughput: a read-only repeated row costs nothing, and
-        # _shade does not multiply by it at depth 0
-        # (inside an absorbing medium they lose light on the way: then a real array)
+        # camera rays have unit throughput: a read-only repeated row costs nothing; _shade
+        # does not multiply by it at depth 0 and absorbs only on rows in an absorbing
+        # medium (inside one, camera rays lose light on the way: then a real array)
         throughput = (np.ones((n, 3), order="F") if self._camera_absorbs
                       else repeated_row(_UNIT_THROUGHPUT, n))
         rays = RayBatch(origins, directions, np.arange(n, dtype=np.int64), throughput,
@@ -629,16 +632,20 @@ class Integrator:
             on_light = self.area_lighting.intersect(rays.origins, rays.directions, hits)
         hit = hits.prim >= 0
 
-        # absorption: rays inside a medium lose light over the distance they travelled
+        # absorption: rays inside an absorbing medium lose light over the distance they
+        # travelled.  Only those rows are written: the others would be multiplied by 1.0
+        # (no change), and camera rays in a clear medium share the read-only unit row.
         if self.stages["absorption"]:
             medium = rays.medium[:, 0]
-            inside = medium >= 0
-            if inside.any():
-                sigma = m.absorption[medium[inside]]
-                t = hits.t[inside][:, None]
-                # exp(-0 * inf) would be NaN for a non-absorbing medium left through a hole
+            # -1 (outside every medium) maps to the last entry, which is False
+            absorbing = np.flatnonzero(self._absorbing_medium[medium])
+            if len(absorbing):
+                sigma = m.absorption[medium[absorbing]]
+                t = hits.t[absorbing][:, None]
+                # exp(-0 * inf) would be NaN for a channel that does not absorb, on a ray
+                # that left the medium through a hole
                 with np.errstate(invalid="ignore"):
-                    rays.throughput[inside] *= np.where(sigma > 0, np.exp(-sigma * t), 1.0)
+                    rays.throughput[absorbing] *= np.where(sigma > 0, np.exp(-sigma * t), 1.0)
 
         if on_light is not None and len(on_light[0]):
             ended, emitted = on_light

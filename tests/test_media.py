@@ -7,6 +7,7 @@ values.
 """
 
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -323,3 +324,25 @@ def test_camera_inside_a_moving_glass_ball_is_found_where_the_shutter_opens():
     assert list(Integrator(scene, settings())._camera_medium) == [0, -1, -1, -1]
     scene.camera = Camera([0.0, 0.1, 0.2], [0.0, 1.0, 0.2], [0.0, 0.0, 1.0], 40.0, shutter=(1.0, 1.2))
     assert (Integrator(scene, settings())._camera_medium == -1).all()
+
+
+def test_camera_inside_clear_glass_with_an_absorbing_ball_in_view():
+    # Regression: camera rays start in the clear glass box, so their throughput is the
+    # shared read-only unit row; the absorption step must leave the rows of media that do
+    # not absorb alone (it raised "assignment destination is read-only").  Head on, the
+    # centre ray leaves the box and crosses 2 units of the absorbing ball: three refractions.
+    sigma = np.array([0.3, 0.1, 0.0])
+    camera = Camera([0.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], 40.0)
+    parts = [part("clear", box((2.0, 2.0, 2.0)), 0),
+             part("ball", icosphere(4, 1.0, (0.0, 4.0, 0.0)), 1, smooth=True)]
+    scene = Scene.from_parts(parts, [glass(name="clear"), glass(sigma, name="tinted")], [], camera,
+                             background=AHEAD)
+    integrator = Integrator(scene, settings())
+    assert list(integrator._camera_medium) == [0, -1, -1, -1] and not integrator._camera_absorbs
+    # max depth 3: a path with a reflection cannot turn ahead again, so it sees the black sky
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        result = render(scene, width=33, height=33, max_depth=3, cutoff=0.0)
+    assert result.image.max() > 0.5
+    expected = normal_incidence_transmittance(GLASS) ** 3 * np.exp(-2.0 * sigma)
+    np.testing.assert_allclose(result.image[16, 16], expected, rtol=2e-3)
