@@ -22,7 +22,7 @@ import time
 from collections import deque
 from multiprocessing.connection import wait
 
-from . import batch_worker
+from . import batch_worker, runtime
 from .batch_worker import run_job
 from .errors import RtmeshError
 
@@ -180,6 +180,8 @@ def _worker_main(conn, memory_limit, parent_pid):
     # warnings about a single asset's oddities would scramble the batch's progress bar
     logging.basicConfig(level=logging.ERROR)
     logging.getLogger("trimesh").setLevel(logging.ERROR)
+    # the process exists to render: tune it for that (allocator, GIL, kept threads)
+    runtime.tune_process()
     conn.send(("ready", None))
     while True:
         try:
@@ -296,5 +298,7 @@ def run_dask(jobs, scheduler, on_image, on_job, time_limit=None, retries=2):
 
 def _dask_task(job, time_limit):
     """The function a Dask worker runs for one asset."""
+    # a worker of an rtmesh batch renders: tune its process for that (once; idempotent)
+    runtime.tune_process()
     deadline = time.monotonic() + time_limit if time_limit else None
     return run_job(job, deadline=deadline)

@@ -6,7 +6,7 @@ import os
 import sys
 import time
 
-from . import __version__
+from . import __version__, runtime
 from .api import load_scene
 from .errors import RtmeshError
 from .film import TONEMAPS
@@ -197,6 +197,8 @@ def cmd_render(args):
         "fresnel": args.fresnel, "exposure": args.exposure, "tonemap": args.tonemap,
     }
     background = None if args.background is None else background_from_option(args.background)
+    # the command owns its process: tune it for rendering (allocator, GIL, kept threads)
+    runtime.tune_process()
     scene, settings = load_scene(args.input, **overrides)
     if background is not None:
         scene.background = background

@@ -15,23 +15,22 @@ function of (seed, pixel, sample, dimension), and each pixel is rendered whole i
 chunk, so the image is bit-identical whatever the thread count and chunk size.
 
 Before rendering, :class:`Integrator` looks at the scene and the settings and enables only
-the stages that can contribute (see :attr:`Integrator.stages`).
+the stages that can contribute (see :attr:`Integrator.stages`).  Building and running it
+changes no process-wide state: the tuning for rendering processes (allocator, GIL switch
+interval, kept thread pools) is :mod:`rtmesh.runtime`'s, turned on by the programs that
+own their process.
 """
 
-import contextlib
-import ctypes
 import dataclasses
-import functools
 import logging
-import os
-import sys
 import threading
 import time
-from concurrent.futures import ThreadPoolExecutor, wait
+from concurrent.futures import wait
 from dataclasses import dataclass
 
 import numpy as np
 
+from . import runtime
 from .accel import Accel, corner_table, offset_ray_origins
 from .area_lights import AreaLighting, emissive_mesh_light, is_area_light
 from .adaptive import render_rounds
@@ -249,7 +248,6 @@ class Integrator:
     """
 
     def __init__(self, scene, settings):
-        _keep_freed_memory()
         self.settings = settings.validate()
         if object_motions(scene) and not blurs(scene):
             # an instantaneous shutter: moving objects stand still where the shutter finds them
@@ -417,7 +415,7 @@ class Integrator:
         return faces, np.ascontiguousarray(corner_table(sc.vertex_normals, sc.faces))
 
     # ---------------------------------------------------------------- whole image
-    def render(self, progress=None):
+    def render(self, progress=None, pool=None):
         """Render the image: at ``spp`` samples per pixel, or adaptively in rounds when the
         settings ask for it (see :mod:`rtmesh.adaptive`).
 
@@ -426,6 +424,12 @@ class Integrator:
         progress : callable, optional
             Called as ``progress(chunks_done, chunks_total)`` from the calling thread
             (per round, for an adaptive render).
+        pool : concurrent.futures.ThreadPoolExecutor, optional
+            Workers that render alongside the calling thread when ``thread_count`` is
+            above 1 (left running).  Without one, the render makes ``thread_count``
+            workers and joins them at the end, or, in a process tuned by
+            :func:`rtmesh.runtime.tune_process`, uses the process's kept pool.  The image
+            does not depend on the pool.
 
         Returns
         -------
@@ -438,10 +442,11 @@ class Integrator:
         film = Film(s.width, s.height, self.passes.film_passes(), zeroed=False, one_pass=not s.adaptive)
         stats = RenderStats(threads=s.thread_count, pixels=s.width * s.height)
         stats.stages_enabled = [name for name, on in self.stages.items() if on]
-        pool = _thread_pool(s.thread_count)
-        with _gil_handoff(s.thread_count):
-            render_rounds(self, film, stats, progress, pool)
-            image = film.image(pool)
+        # threads of its own and the caller's switch interval, unless the process is tuned
+        # for rendering (rtmesh.runtime): then its kept pool and a short interval
+        with runtime.render_pool(s.thread_count, pool) as workers, runtime.gil_handoff(s.thread_count):
+            render_rounds(self, film, stats, progress, workers)
+            image = film.image(workers)
         if self.cutouts is not None:
             stats.rays["cutout"] += self.cutouts.layers_traced
         stats.wall_seconds = time.perf_counter() - start
@@ -478,8 +483,8 @@ class Integrator:
             the chunks it renders itself (keep it quick: the other threads do not wait for
             it, but that thread does).
         pool : concurrent.futures.ThreadPoolExecutor, optional
-            Workers that render alongside the calling thread (the process's pool of
-            ``thread_count`` workers if not given, see :func:`_thread_pool`).
+            Workers that render alongside the calling thread (if not given, those of
+            :func:`rtmesh.runtime.render_pool` for this call).
         """
         s = self.settings
         uniform = np.ndim(spp) == 0 and np.ndim(first_sample) == 0
@@ -519,8 +524,8 @@ class Integrator:
                 if progress is not None:
                     progress(i + 1, n_chunks)
             return
-        _run_on_threads(render_and_add, bounds, s.thread_count, _thread_pool(s.thread_count, pool),
-                        stats, progress)
+        with runtime.render_pool(s.thread_count, pool) as workers:
+            _run_on_threads(render_and_add, bounds, s.thread_count, workers, stats, progress)
 
     # ---------------------------------------------------------------- one chunk
     def render_chunk(self, pixels, first_sample, spp):
@@ -987,90 +992,6 @@ def _add_rows(target, rows, values):
         # scatters each column)
         add_rows(target, rows, values)
     return target
-
-
-@functools.cache
-def _keep_freed_memory():
-    """Stop glibc from handing the memory of freed temporaries back to the kernel.
-
-    A chunk of samples allocates and frees a few hundred temporaries of up to a few MB.
-    With glibc's default, adaptive thresholds, blocks that size are mmap'ed or trimmed off
-    the heap when freed, and every new one is faulted in again page by page: ~20000 page
-    faults per 512x512 frame, a third of the render time, and with several threads they
-    queue on the kernel's memory-map lock, so threads barely speed the render up.  Blocks up
-    to 32 MB (the largest chunk temporary is ~6 MB) now come from the heap, and the heap is
-    trimmed only above 256 MB of free memory.  Process-wide and done once; a no-op where
-    the C library is not glibc.
-    """
-    try:
-        mallopt = ctypes.CDLL(None).mallopt
-    except (OSError, AttributeError):
-        return
-    m_trim_threshold, m_mmap_threshold = -1, -3  # from glibc's malloc.h
-    mallopt(m_mmap_threshold, 32 << 20)
-    mallopt(m_trim_threshold, 256 << 20)
-
-
-_pools = {}  # thread count -> the process's ThreadPoolExecutor of that many workers
-_pools_lock = threading.Lock()
-# a forked child has the pools but none of their threads: it makes its own
-os.register_at_fork(after_in_child=_pools.clear)
-
-
-def _thread_pool(threads, pool=None):
-    """The workers to render on: ``pool`` if given, else the process's pool of ``threads``
-    workers (made on first use and kept), or None for one thread.
-
-    The pool outlives the render, as the thread pools of Embree, OpenMP or TBB do.  Threads
-    made afresh for every render were slower: measured at 512x512 on 2 threads, a render
-    following a 1-thread render took 43.7 ms with new threads and 38.2 ms with kept ones
-    (medians of 15; back to back both took 38 ms).  Renders running side by side share the
-    pool: their chunks queue for the same workers instead of oversubscribing the cores.
-    """
-    if pool is not None or threads == 1:
-        return pool
-    with _pools_lock:
-        if threads not in _pools:
-            _pools[threads] = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="rtmesh-render")
-        return _pools[threads]
-
-
-# GIL switch interval while a render's threads run, seconds (CPython's default is 5 ms).
-# A thread coming back from Embree or a kernel (both run without the GIL) waits for the
-# GIL until its holder releases it or the interval runs out; with the default, 2 threads
-# rendered a 512x512 frame ~1.55x faster than one, with 0.5 ms ~1.65x (0.1 ms: no better).
-_RENDER_SWITCH_INTERVAL = 5e-4
-
-
-_handoff_lock = threading.Lock()
-_handoff_renders = 0  # multi-threaded renders running now
-_handoff_previous = None  # the switch interval before the first of them
-
-
-@contextlib.contextmanager
-def _gil_handoff(threads):
-    """Shorten the GIL switch interval while multi-threaded renders run.
-
-    It is process-wide: the first render to start sets it and the last to finish restores
-    the caller's value, so renders running side by side (from several threads of the
-    caller) do not leave it changed.
-    """
-    global _handoff_renders, _handoff_previous
-    if threads == 1:
-        yield
-        return
-    with _handoff_lock:
-        if _handoff_renders == 0:
-            _handoff_previous = sys.getswitchinterval()
-            sys.setswitchinterval(min(_handoff_previous, _RENDER_SWITCH_INTERVAL))
-        _handoff_renders += 1
-    try:
-        yield
-    finally:
-        with _handoff_lock:
-            _handoff_renders -= 1
-            if _handoff_renders == 0:
-                sys.setswitchinterval(_handoff_previous)
 
 
 class _Clock:

@@ -95,15 +95,19 @@ def test_regular_sampler_without_ao_ignores_the_seed():
     np.testing.assert_array_equal(first.image, second.image)
 
 
-def test_renders_on_threads_restore_the_gil_switch_interval_even_side_by_side():
-    """Multi-threaded renders shorten the (process-wide) GIL switch interval while they run
-    and leave the caller's value behind, also when two run at once from two threads."""
+def test_renders_on_threads_restore_the_gil_switch_interval_even_side_by_side(monkeypatch):
+    """In a tuned process multi-threaded renders shorten the (process-wide) GIL switch
+    interval while they run and leave the caller's value behind, also when two run at once
+    from two threads."""
     import sys
     import threading
 
+    from rtmesh import runtime
     from rtmesh.integrator import Integrator
     from scenes import settings, sphere_on_floor_scene
 
+    monkeypatch.setattr(runtime, "_tuned", runtime._tuned)  # untuned again afterwards
+    runtime.tune_process()
     scene = sphere_on_floor_scene()
     previous = sys.getswitchinterval()
     seen = []
@@ -119,7 +123,7 @@ def test_renders_on_threads_restore_the_gil_switch_interval_even_side_by_side():
             t.start()
         for t in threads:
             t.join()
-        assert seen and max(seen) <= 0.0005 + 1e-12
+        assert seen and max(seen) <= runtime.RENDER_SWITCH_INTERVAL + 1e-12
         assert sys.getswitchinterval() == pytest.approx(0.004)
     finally:
         sys.setswitchinterval(previous)
@@ -159,18 +163,18 @@ def test_a_failing_chunk_on_threads_raises_and_stops_the_other_workers(monkeypat
     assert len(started) <= 4
 
 
-def test_render_threads_are_kept_between_renders_and_made_anew_in_a_forked_child():
+def test_kept_render_threads_are_made_anew_in_a_forked_child():
     import os
 
-    from rtmesh.integrator import _thread_pool
+    from rtmesh import runtime
 
-    pool = _thread_pool(2)
-    assert _thread_pool(2) is pool and _thread_pool(1) is None
+    pool = runtime._kept_pool(2)
+    assert runtime._kept_pool(2) is pool
     assert pool.submit(lambda: 7).result(timeout=10) == 7
     child = os.fork()
     if child == 0:  # the child has none of the parent's threads: its pool must be new
         try:
-            fresh = _thread_pool(2)
+            fresh = runtime._kept_pool(2)
             ok = fresh is not pool and fresh.submit(lambda: 7).result(timeout=10) == 7
         except BaseException:
             ok = False

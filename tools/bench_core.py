@@ -17,7 +17,9 @@ the most two threads can speed this work up on this machine at this time; on a s
 virtual machine it moves with the neighbours' load.
 
 Timings are medians over ``--runs`` runs after a warm-up; the measurements are
-interleaved run by run so that a noisy, shared machine slows them alike.
+interleaved run by run so that a noisy, shared machine slows them alike.  The process is
+tuned as the ``rtmesh`` command tunes its own (:func:`rtmesh.runtime.tune_process`: kept
+render threads, a short GIL switch interval while they run, glibc keeping freed memory).
 
 Usage::
 
@@ -39,7 +41,8 @@ from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
 from rtmesh.camera import Camera
-from rtmesh.integrator import Integrator, _gil_handoff
+from rtmesh import runtime
+from rtmesh.integrator import Integrator
 from rtmesh.lights import PointLight
 from rtmesh.materials import Material
 from rtmesh.scene import MeshPart, Scene
@@ -196,6 +199,8 @@ def main():
     parser.add_argument("--runs", type=int, default=7, help="timed runs per measurement (>= 5 advised)")
     parser.add_argument("--no-write", action="store_true", help="print only; leave docs/BENCHMARKS.md alone")
     args = parser.parse_args()
+    # measure rtmesh as the rtmesh command runs it: in a process tuned for rendering
+    runtime.tune_process()
 
     scene = benchmark_scene()
     integrators = {
@@ -216,7 +221,7 @@ def main():
 
     def side_by_side():
         # the switch interval of a multi-threaded render, so that only the sharing differs
-        with _gil_handoff(2):
+        with runtime.gil_handoff(2):
             list(pair_pool.map(lambda integrator: integrator.render(), pair))
 
     measurements = {
