@@ -2,12 +2,17 @@
 
 Builds the benchmark scene in code (an icosphere of 20480 smooth-shaded triangles on a
 ground quad, one point light), renders it with rtmesh at 1 and 2 threads, and times raw
-embreex ``run()`` on exactly the rays rtmesh traced (camera rays and shadow rays, recorded
-from the render through the Accel), at 1 thread and at 2 threads splitting the rays.
-Prints a table and two ratios and writes them to ``docs/BENCHMARKS.md``:
+Embree on exactly the rays rtmesh traced (camera rays and shadow rays, recorded from the
+render through the Accel), at 1 thread and at 2 threads splitting the rays: once as the
+very packet queries rtmesh made (the same batches through
+:func:`rtmesh.embree_packets.intersect_rays` and :func:`~rtmesh.embree_packets.occluded_rays`),
+and once through embreex ``run()``, one ray at a time.
+Prints a table and three ratios and writes them to ``docs/BENCHMARKS.md``:
 
-* rtmesh 1 thread / raw Embree 1 thread: the overhead of everything that is not tracing
-  (target: <= 1.5);
+* rtmesh 1 thread / its packet queries alone, 1 thread: the overhead of everything that is
+  not tracing (target: <= 1.3);
+* rtmesh 1 thread / raw embreex ``run()`` 1 thread: the former overhead ratio, against
+  single-ray tracing;
 * rtmesh 1 thread / rtmesh 2 threads: the thread speed-up (target: >= 1.8).
 
 A fifth measurement shows what the machine gives two threads at all: two independent
@@ -41,7 +46,7 @@ from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
 from rtmesh.camera import Camera
-from rtmesh import runtime
+from rtmesh import embree_packets, runtime
 from rtmesh.integrator import Integrator
 from rtmesh.lights import PointLight
 from rtmesh.materials import Material
@@ -80,18 +85,22 @@ class RayRecorder:
     def __init__(self, accel):
         self.accel = accel
         self.camera, self.shadow = [], []
+        self.calls = []  # ("intersect", o, d) or ("occluded", o, d, t): each query as made
 
     def __enter__(self):
         accel, intersect, occluded = self.accel, self.accel.intersect, self.accel.occluded
 
         def recording_intersect(origins, directions):
             self.camera.append((np.asarray(origins, np.float32), np.asarray(directions, np.float32)))
+            self.calls.append(("intersect", np.array(origins), np.array(directions)))
             return intersect(origins, directions)
 
         def recording_occluded(origins, directions, t_max, rows=None):
             pick = (lambda a: a) if rows is None else (lambda a: a[rows])
             t = np.minimum(pick(t_max), np.finfo(np.float32).max).astype(np.float32)
             self.shadow.append((pick(origins).astype(np.float32), pick(directions).astype(np.float32), t))
+            self.calls.append(("occluded", np.array(origins), np.array(directions), np.array(t_max),
+                               np.arange(len(t_max)) if rows is None else np.asarray(rows, np.int64)))
             return occluded(origins, directions, t_max, rows)
 
         accel.intersect, accel.occluded = recording_intersect, recording_occluded
@@ -136,6 +145,29 @@ def raw_embree_runner(accel, camera_rays, shadow_rays, threads):
         def run():
             list(pool.map(trace, shares))
     return run
+
+
+def packet_runner(accel, calls, threads):
+    """A function that makes the recorded queries again, straight through the packet
+    kernels on the render's own Embree scene (with several threads, the calls are dealt
+    out in turn)."""
+    library = embree_packets.packet_library()
+    flags = embree_packets.RTC_RAY_QUERY_FLAG_COHERENT
+    handle = accel._shared.handle
+
+    def trace(share):
+        for call in share:
+            if call[0] == "intersect":
+                embree_packets.intersect_rays(library.intersect16, handle, call[1], call[2], flags)
+            else:
+                embree_packets.occluded_rays(library.occluded16, handle, call[1], call[2], call[3],
+                                             call[4], flags)
+
+    shares = [calls[i::threads] for i in range(threads)]
+    if threads == 1:
+        return lambda: trace(shares[0])
+    pool = ThreadPoolExecutor(max_workers=threads)
+    return lambda: list(pool.map(trace, shares))
 
 
 def seconds(fn):
@@ -215,6 +247,8 @@ def main():
     assert len(camera_rays[0]) == args.width * args.height
     assert len(shadow_rays[0]) == reference.stats.rays["shadow"]
     raw = {threads: raw_embree_runner(one.accel, camera_rays, shadow_rays, threads) for threads in (1, 2)}
+    packets = {threads: packet_runner(one.accel, recorder.calls, threads) for threads in (1, 2)} \
+        if one.accel.packets else {}
 
     pair_pool = ThreadPoolExecutor(max_workers=2)
     pair = [integrators[1], Integrator(scene, integrators[1].settings)]
@@ -231,6 +265,9 @@ def main():
         "raw embreex run(), 2 threads": raw[2],
         "two 1-thread renders side by side": side_by_side,
     }
+    if packets:
+        measurements["rtmesh's packet queries alone, 1 thread"] = packets[1]
+        measurements["rtmesh's packet queries alone, 2 threads"] = packets[2]
     for fn in measurements.values():  # warm-up
         fn()
     times = {name: [] for name in measurements}
@@ -245,6 +282,8 @@ def main():
 
     n_cam, n_shadow = len(camera_rays[0]), len(shadow_rays[0])
     overhead = median["rtmesh, 1 thread"] / median["raw embreex run(), 1 thread"]
+    packet_key = "rtmesh's packet queries alone, 1 thread"
+    packet_overhead = median["rtmesh, 1 thread"] / median[packet_key] if packets else float("nan")
     speedup = median["rtmesh, 1 thread"] / median["rtmesh, 2 threads"]
     # the same ratios within each interleaved run: their spread shows how much a shared
     # machine's speed moved during the measurement
@@ -254,6 +293,7 @@ def main():
         "speedup": t["rtmesh, 1 thread"] / t["rtmesh, 2 threads"],
         "embree speedup": t["raw embreex run(), 1 thread"] / t["raw embreex run(), 2 threads"],
         "capacity": 2 * t["rtmesh, 1 thread"] / t["two 1-thread renders side by side"],
+        "packet overhead": t["rtmesh, 1 thread"] / t[packet_key] if packets else np.full(args.runs, np.nan),
     }
     capacity = 2 * median["rtmesh, 1 thread"] / median["two 1-thread renders side by side"]
     spread = {k: f"{np.median(v):.2f} ({v.min():.2f}-{v.max():.2f})" for k, v in per_run.items()}
@@ -271,15 +311,19 @@ def main():
         f"- Scene: icosphere (5 subdivisions, 20480 smooth triangles) on a 2-triangle ground quad, "
         f"one point light, {args.width}x{args.height}, 1 spp (regular sampler), max depth 5 "
         f"(no reflective materials, so only camera and shadow rays)",
-        f"- Rays: {n_cam} camera + {n_shadow} shadow; raw embreex traces exactly these "
-        f"(recorded from the render), 2 threads each take half",
-        f"- Median of {args.runs} runs after a warm-up, the five measurements interleaved",
+        f"- Rays: {n_cam} camera + {n_shadow} shadow; raw Embree traces exactly these "
+        f"(recorded from the render): as rtmesh's packet queries (the same batches; 2 threads take "
+        f"every other batch) and through embreex run() (2 threads each take half)",
+        f"- Median of {args.runs} runs after a warm-up, the measurements interleaved",
         "",
         "| measurement | median ms | best ms | Mrays/s (median) |",
         "|---|---:|---:|---:|",
         *rows,
         "",
-        f"- rtmesh 1 thread / raw Embree 1 thread: **{overhead:.2f}** (target <= 1.5); "
+        f"- Tracing: {'Embree 16-wide packets (coherent)' if packets else 'embreex run() (packets unavailable)'}",
+        f"- rtmesh 1 thread / its packet queries alone, 1 thread: **{packet_overhead:.2f}** (target <= 1.3); "
+        f"per run {spread['packet overhead']}",
+        f"- rtmesh 1 thread / raw embreex run() 1 thread (the former ratio): **{overhead:.2f}**; "
         f"from best times {best['rtmesh, 1 thread'] / best['raw embreex run(), 1 thread']:.2f}",
         f"- rtmesh 1 thread / rtmesh 2 threads: **{speedup:.2f}** (target >= 1.8); "
         f"raw Embree 1 / 2 threads: {median['raw embreex run(), 1 thread'] / median['raw embreex run(), 2 threads']:.2f}",
