@@ -29,10 +29,9 @@ import logging
 import os
 import threading
 
-import numba
 import numpy as np
 
-from .kernels import cached
+from .compiled import kernel
 
 log = logging.getLogger(__name__)
 
@@ -297,7 +296,6 @@ class SharedScene:
 
 
 # ------------------------------------------------------------------ kernels
-kernel = cached(lambda cache: numba.njit(nogil=True, error_model="numpy", cache=cache))
 
 
 @kernel

@@ -3,20 +3,11 @@
 NumPy shading costs one pass over memory, one temporary and one Python call per operation;
 on the benchmark scene the ~150 NumPy calls per chunk of a frame cost almost as much as
 tracing the rays, and with several threads they queue for the GIL.  The kernels here do a
-hit's whole surface record, or a whole (hit, light) pair, in one loop that numba compiles:
-
-* ``nogil``: chunk threads run them side by side, like Embree's queries;
-* ``cache``: the machine code is kept on disk next to this file (or in the user's cache
-  directory), so only the first run after an install pays the compile (see
-  :func:`cached`);
-* ``error_model="numpy"``: a division by zero gives inf or NaN as in NumPy, never an
-  exception;
-* no ``fastmath``: no reassociation or fused multiply-adds, so each formula rounds as
-  written, the same on every machine and for every chunk and thread count.
+hit's whole surface record, or a whole (hit, light) pair, in one loop that numba compiles
+(nogil, cached on disk, no fastmath: see :func:`rtmesh.compiled.kernel`).
 
 Every function with an ``_`` prefix is one row's arithmetic, which LLVM inlines into the
-array kernels that call it; all compiled code lives in this one module because numba's disk
-cache does not notice changes to jitted functions imported from other files.
+array kernels that call it.
 
 Arrays of 3-vectors are ``(n, 3)``; results are component-major (see
 :mod:`rtmesh.batches`) unless said otherwise, as the NumPy code that reads them is fastest
@@ -30,34 +21,8 @@ import numpy as np
 from numba import types
 from numba.extending import intrinsic
 
+from .compiled import cached, kernel
 
-
-def cached(compiler):
-    """Apply a numba decorator with ``cache=True``, or without it where no cache directory
-    is writable (numba tries the package's ``__pycache__``, then the user's cache
-    directory, and raises RuntimeError at import otherwise, e.g. a read-only install
-    with a read-only home): the kernels then compile on every run instead.
-
-    Parameters
-    ----------
-    compiler : callable
-        ``compiler(cache=...)`` returns a numba decorator.
-
-    Returns
-    -------
-    callable
-        A decorator.
-    """
-    def decorate(function):
-        try:
-            return compiler(cache=True)(function)
-        except RuntimeError:
-            return compiler(cache=False)(function)
-
-    return decorate
-
-
-kernel = cached(lambda cache: numba.njit(nogil=True, error_model="numpy", cache=cache))
 _row = kernel  # the same compiler, named for the one-row helpers
 
 # ------------------------------------------------------------------ float32 offsets
@@ -247,6 +212,31 @@ def closest_hits(t_far, prim, u, v):
 
 
 # ------------------------------------------------------------------ camera
+@_row
+def _image_plane_point(x, y, pixel, width, inverse_width, image_plane):
+    """Image-plane coordinates ``(sx, sy)`` at unit distance along the camera's forward axis
+    of film position ``(x, y)``, given in pixels, or inside pixel ``pixel`` (when >= 0)."""
+    if pixel >= 0:
+        # the row by a float product and a one-step correction: an integer division a
+        # ray would keep the loop from vectorising
+        row = np.int64(pixel * inverse_width)
+        row += (row + 1) * width <= pixel
+        row -= row * width > pixel
+        x, y = x + np.float64(pixel - row * width), y + np.float64(row)
+    return x * image_plane[0] + image_plane[1], y * image_plane[2] + image_plane[3]
+
+
+@_row
+def _pinhole_direction(sx, sy, forward, right, up):
+    """Unit direction of the pinhole ray through image-plane point ``(sx, sy)``."""
+    # forward, right and up are orthonormal, so the squared length of
+    # forward + sx right + sy up is 1 + sx^2 + sy^2
+    inv = 1.0 / math.sqrt((sx * sx + sy * sy) + 1.0)
+    sx, sy = sx * inv, sy * inv
+    return ((inv * forward[0] + sx * right[0]) + sy * up[0], (inv * forward[1] + sx * right[1]) + sy * up[1],
+            (inv * forward[2] + sx * right[2]) + sy * up[2])
+
+
 @kernel
 def camera_rays(film_xy, pixels, width, disk, position, forward, right, up, image_plane, focus):
     """Primary rays through film positions; see :meth:`rtmesh.camera.Camera.generate_rays`.
@@ -283,16 +273,8 @@ def camera_rays(film_xy, pixels, width, disk, position, forward, right, up, imag
     d = np.empty((3, n))
     inverse_width = 1.0 / width
     for i in range(n):
-        x, y = film_xy[i, 0], film_xy[i, 1]
-        if in_pixels:
-            # the row by a float product and a one-step correction: an integer division a
-            # ray would keep the loop from vectorising
-            row = np.int64(pixels[i] * inverse_width)
-            row += (row + 1) * width <= pixels[i]
-            row -= row * width > pixels[i]
-            x, y = x + np.float64(pixels[i] - row * width), y + np.float64(row)
-        sx = x * image_plane[0] + image_plane[1]
-        sy = y * image_plane[2] + image_plane[3]
+        sx, sy = _image_plane_point(film_xy[i, 0], film_xy[i, 1], pixels[i] if in_pixels else -1, width,
+                                    inverse_width, image_plane)
         if lens:
             # every ray through a film point meets the pinhole ray on the plane of focus: the
             # unnormalised pinhole direction has a forward component of exactly 1, so
@@ -303,16 +285,36 @@ def camera_rays(film_xy, pixels, width, disk, position, forward, right, up, imag
                 d[c, i] = (position[c] + toward * focus) - origins[c, i]
             d[0, i], d[1, i], d[2, i] = _normalized(d[0, i], d[1, i], d[2, i], 1.0)
         else:
-            # forward, right and up are orthonormal, so the squared length of
-            # forward + sx right + sy up is 1 + sx^2 + sy^2
-            inv = 1.0 / math.sqrt((sx * sx + sy * sy) + 1.0)
-            sx, sy = sx * inv, sy * inv
-            for c in range(3):
-                d[c, i] = (inv * forward[c] + sx * right[c]) + sy * up[c]
+            d[0, i], d[1, i], d[2, i] = _pinhole_direction(sx, sy, forward, right, up)
     return origins.T, d.T
 
 
 # ------------------------------------------------------------------ surfaces
+@_row
+def _surface_record(f, a, b, vx, vy, vz, faces, vertex_normals, smooth, fix_terminator):
+    """One hit's surface record (see :func:`surface_records`): face ``f`` at barycentrics
+    ``(a, b)``, seen along ``(vx, vy, vz)``; ``smooth``: interpolate the vertex normals.
+    Returns ``(px, py, pz, gx, gy, gz, sx, sy, sz, front)``."""
+    # (u e1 + v0) + v e2: the order of rtmesh.accel.barycentric_interpolate
+    px = (faces[f, 3] * a + faces[f, 0]) + faces[f, 6] * b
+    py = (faces[f, 4] * a + faces[f, 1]) + faces[f, 7] * b
+    pz = (faces[f, 5] * a + faces[f, 2]) + faces[f, 8] * b
+    gx, gy, gz = faces[f, 9], faces[f, 10], faces[f, 11]
+    front = _dot(vx, vy, vz, gx, gy, gz) < 0.0
+    flip = 1.0 if front else -1.0
+    gx, gy, gz = gx * flip, gy * flip, gz * flip
+    sx, sy, sz = gx, gy, gz
+    if smooth:
+        sx, sy, sz = _normalized(
+            (vertex_normals[f, 3] * a + vertex_normals[f, 0]) + vertex_normals[f, 6] * b,
+            (vertex_normals[f, 4] * a + vertex_normals[f, 1]) + vertex_normals[f, 7] * b,
+            (vertex_normals[f, 5] * a + vertex_normals[f, 2]) + vertex_normals[f, 8] * b,
+            flip)
+    if fix_terminator:
+        sx, sy, sz = _face_viewer(sx, sy, sz, gx, gy, gz, vx, vy, vz)
+    return px, py, pz, gx, gy, gz, sx, sy, sz, front
+
+
 @kernel
 def surface_records(prim_all, u_all, v_all, rows, directions, view, faces, vertex_normals,
                     smooth, material_id, fix_terminator):
@@ -370,30 +372,14 @@ def surface_records(prim_all, u_all, v_all, rows, directions, view, faces, verte
     for i in range(k):
         r = rows[i]
         f = np.intp(prim_all[r])
-        a, b = np.float64(u_all[r]), np.float64(v_all[r])
         mat[i] = material_id[f]
-        for c in range(3):
-            # (u e1 + v0) + v e2: the order of rtmesh.accel.barycentric_interpolate
-            p[c, i] = (faces[f, 3 + c] * a + faces[f, c]) + faces[f, 6 + c] * b
         if rest_frame:
             vx, vy, vz = view[i, 0], view[i, 1], view[i, 2]
         else:
             vx, vy, vz = directions[r, 0], directions[r, 1], directions[r, 2]
-        gx, gy, gz = faces[f, 9], faces[f, 10], faces[f, 11]
-        front[i] = _dot(vx, vy, vz, gx, gy, gz) < 0.0
-        flip = 1.0 if front[i] else -1.0
-        gx, gy, gz = gx * flip, gy * flip, gz * flip
-        ng[0, i], ng[1, i], ng[2, i] = gx, gy, gz
-        sx, sy, sz = gx, gy, gz
-        if has_smooth and smooth[f]:
-            sx, sy, sz = _normalized(
-                (vertex_normals[f, 3] * a + vertex_normals[f, 0]) + vertex_normals[f, 6] * b,
-                (vertex_normals[f, 4] * a + vertex_normals[f, 1]) + vertex_normals[f, 7] * b,
-                (vertex_normals[f, 5] * a + vertex_normals[f, 2]) + vertex_normals[f, 8] * b,
-                flip)
-        if fix_terminator:
-            sx, sy, sz = _face_viewer(sx, sy, sz, gx, gy, gz, vx, vy, vz)
-        ns[0, i], ns[1, i], ns[2, i] = sx, sy, sz
+        (p[0, i], p[1, i], p[2, i], ng[0, i], ng[1, i], ng[2, i], ns[0, i], ns[1, i], ns[2, i],
+         front[i]) = _surface_record(f, np.float64(u_all[r]), np.float64(v_all[r]), vx, vy, vz, faces,
+                                     vertex_normals, has_smooth and smooth[f], fix_terminator)
     return p.T, ng.T, ns.T, front, mat
 
 
