@@ -40,8 +40,8 @@ log = logging.getLogger(__name__)
 VERIFIED_VERSIONS = ((4, 4),)
 
 LANES = 16
-_RAY_WORDS = 12  # RTCRay: org xyz, tnear, dir xyz, time, tfar, mask, id, flags
-_RAYHIT_WORDS = 21  # + RTCHit: Ng xyz, u, v, primID, geomID, instID, instPrimID
+RAY_WORDS = 12  # RTCRay: org xyz, tnear, dir xyz, time, tfar, mask, id, flags
+RAYHIT_WORDS = 21  # + RTCHit: Ng xyz, u, v, primID, geomID, instID, instPrimID
 _ALIGN_WORDS = 16  # 64 bytes: Embree's packets must be aligned to their width
 # word offsets of the fields, in units of LANES
 ORG, TNEAR, DIR, TIME, TFAR, MASK, RAY_ID, FLAGS = 0, 3, 4, 7, 8, 9, 10, 11
@@ -299,7 +299,7 @@ class SharedScene:
 
 
 @kernel
-def _aligned_words(n, dtype):
+def aligned_words(n, dtype):
     """A zeroed array of ``n`` 4-byte words starting on a 64-byte boundary."""
     raw = np.zeros(n + _ALIGN_WORDS, dtype)
     skip = ((-raw.ctypes.data) % 64) // 4
@@ -307,36 +307,57 @@ def _aligned_words(n, dtype):
 
 
 @kernel
-def _arguments(flags):
+def query_arguments(flags):
     """``RTCIntersectArguments`` / ``RTCOccludedArguments`` (32 bytes): query flags, all
     features, and NULL context, filter and callback."""
-    args = _aligned_words(8, np.int32)
+    args = aligned_words(8, np.int32)
     args[0] = flags
     args[1] = _RTC_FEATURE_FLAG_ALL
     return args
 
 
 @kernel
+def set_lane(ray, words, lane, ox, oy, oz, dx, dy, dz, tfar):
+    """Write one ray into lane ``lane`` of a packet (tnear 0, time 0, all masks).
+
+    The coordinates are rounded to float32 (to nearest, as NumPy's ``astype`` does), and
+    direction components below :data:`MIN_RCP_INPUT` become 0.
+    """
+    ray[ORG * LANES + lane] = np.float32(ox)
+    ray[(ORG + 1) * LANES + lane] = np.float32(oy)
+    ray[(ORG + 2) * LANES + lane] = np.float32(oz)
+    for c, value in ((0, dx), (1, dy), (2, dz)):
+        d = np.float32(value)
+        ray[(DIR + c) * LANES + lane] = _F32_ZERO if abs(d) < MIN_RCP_INPUT else d
+    ray[TFAR * LANES + lane] = np.float32(tfar)
+    ray[TNEAR * LANES + lane] = _F32_ZERO
+    ray[TIME * LANES + lane] = _F32_ZERO
+    words[MASK * LANES + lane] = -1
+    words[RAY_ID * LANES + lane] = 0
+    words[FLAGS * LANES + lane] = 0
+
+
+@kernel
+def clear_hit(words, lane):
+    """Mark lane ``lane`` of a ``RTCRayHit16`` packet as not hitting anything yet."""
+    words[GEOM_ID * LANES + lane] = _INVALID_ID
+    words[PRIM_ID * LANES + lane] = _INVALID_ID
+    words[INST_ID * LANES + lane] = _INVALID_ID
+    words[INST_PRIM_ID * LANES + lane] = _INVALID_ID
+
+
+@kernel
 def _load_rays(ray, words, valid, origins, directions, rows, start, count, tfar):
-    """Fill a packet's ray part (tnear 0, time 0) with rays ``rows[start:start + count]``
-    (or ``start ..`` without rows); lanes past ``count`` are marked invalid."""
+    """Fill a packet's ray part with rays ``rows[start:start + count]`` (or ``start ..``
+    without rows); lanes past ``count`` are marked invalid."""
     for lane in range(LANES):
         if lane < count:
             i = rows[start + lane] if len(rows) else start + lane
-            for c in range(3):
-                # float64 -> float32 rounds to nearest, as NumPy's astype does
-                ray[(ORG + c) * LANES + lane] = np.float32(origins[i, c])
-                d = np.float32(directions[i, c])
-                ray[(DIR + c) * LANES + lane] = _F32_ZERO if abs(d) < MIN_RCP_INPUT else d
-            ray[TFAR * LANES + lane] = tfar[i] if len(tfar) else DEFAULT_TFAR
+            set_lane(ray, words, lane, origins[i, 0], origins[i, 1], origins[i, 2], directions[i, 0],
+                     directions[i, 1], directions[i, 2], tfar[i] if len(tfar) else DEFAULT_TFAR)
             valid[lane] = -1
         else:
             valid[lane] = 0
-        ray[TNEAR * LANES + lane] = np.float32(0.0)
-        ray[TIME * LANES + lane] = np.float32(0.0)
-        words[MASK * LANES + lane] = -1
-        words[RAY_ID * LANES + lane] = 0
-        words[FLAGS * LANES + lane] = 0
 
 
 @kernel
@@ -345,10 +366,7 @@ def _intersect_packet(intersect16, scene, ray, words, valid, args, origins, dire
     _load_rays(ray, words, valid, origins, directions, np.empty(0, np.int64), start, count,
                np.empty(0, np.float32))
     for lane in range(LANES):
-        words[GEOM_ID * LANES + lane] = _INVALID_ID
-        words[PRIM_ID * LANES + lane] = _INVALID_ID
-        words[INST_ID * LANES + lane] = _INVALID_ID
-        words[INST_PRIM_ID * LANES + lane] = _INVALID_ID
+        clear_hit(words, lane)
     intersect16(valid.ctypes.data, scene, ray.ctypes.data, args.ctypes.data)
 
 
@@ -382,10 +400,10 @@ def intersect_rays(intersect16, scene, origins, directions, flags):
     prim = np.empty(n, np.int32)
     u = np.empty(n)
     v = np.empty(n)
-    ray = _aligned_words(_RAYHIT_WORDS * LANES, np.float32)
+    ray = aligned_words(RAYHIT_WORDS * LANES, np.float32)
     words = ray.view(np.int32)
-    valid = _aligned_words(LANES, np.int32)
-    args = _arguments(flags)
+    valid = aligned_words(LANES, np.int32)
+    args = query_arguments(flags)
     for start in range(0, n, LANES):
         count = min(LANES, n - start)
         _intersect_packet(intersect16, scene, ray, words, valid, args, origins, directions, start, count)
@@ -434,10 +452,10 @@ def occluded_rays(occluded16, scene, origins, directions, t_max, rows, flags):
         x = t_max[i]
         tfar[i] = np.float32(_F32_MAX if x > _F32_MAX else x)
     blocked = np.empty(n, np.bool_)
-    ray = _aligned_words(_RAY_WORDS * LANES, np.float32)
+    ray = aligned_words(RAY_WORDS * LANES, np.float32)
     words = ray.view(np.int32)
-    valid = _aligned_words(LANES, np.int32)
-    args = _arguments(flags)
+    valid = aligned_words(LANES, np.int32)
+    args = query_arguments(flags)
     for start in range(0, n, LANES):
         count = min(LANES, n - start)
         _load_rays(ray, words, valid, origins, directions, rows, start, count, tfar)
@@ -456,20 +474,20 @@ def _probe_packets(intersect16, scene, origins, directions):
     prim = np.empty(n, np.int32)
     u = np.empty(n, np.float32)
     v = np.empty(n, np.float32)
-    guarded = _aligned_words(_RAYHIT_WORDS * LANES + 64, np.float32)
+    guarded = aligned_words(RAYHIT_WORDS * LANES + 64, np.float32)
     guard_words = guarded.view(np.int32)
-    ray = guarded[:_RAYHIT_WORDS * LANES]
+    ray = guarded[:RAYHIT_WORDS * LANES]
     words = ray.view(np.int32)
-    valid = _aligned_words(LANES, np.int32)
-    args = _arguments(RTC_RAY_QUERY_FLAG_COHERENT)
+    valid = aligned_words(LANES, np.int32)
+    args = query_arguments(RTC_RAY_QUERY_FLAG_COHERENT)
     guard = 0x5EED5EED
     intact = True
     for start in range(0, n, LANES):
         count = min(LANES, n - start)
-        for w in range(_RAYHIT_WORDS * LANES, _RAYHIT_WORDS * LANES + 64):
+        for w in range(RAYHIT_WORDS * LANES, RAYHIT_WORDS * LANES + 64):
             guard_words[w] = guard
         _intersect_packet(intersect16, scene, ray, words, valid, args, origins, directions, start, count)
-        for w in range(_RAYHIT_WORDS * LANES, _RAYHIT_WORDS * LANES + 64):
+        for w in range(RAYHIT_WORDS * LANES, RAYHIT_WORDS * LANES + 64):
             intact = intact and guard_words[w] == guard
         for lane in range(count):
             i = start + lane

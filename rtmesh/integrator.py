@@ -47,15 +47,14 @@ from .settings import RenderStats
 from .vecmath import (dot, face_viewer, fresnel_dielectric, fresnel_schlick, orthonormal_basis, reflect,
                       refract)
 from .materials import ALPHA_MODES
-from .kernels import add_light, add_rows, highlight_thresholds, light_samples, surface_records, surface_reflectance
+from .kernels import (SHADOW_SHORTEN, add_light, add_rows, highlight_thresholds, light_samples, surface_records,
+                      surface_reflectance)
+from .direct_stage import DirectStage
 from .texturing import SurfaceTextures
 from .cutouts import CutoutAccel
 
 log = logging.getLogger(__name__)
 
-# Shadow rays to point and spot lights stop this fraction short of the light, so a light
-# placed exactly on a surface does not count that surface as an occluder.
-_SHADOW_SHORTEN = 1.0 - 1e-5
 # an empty (0, 3) array stands for "none" in the kernels' optional vector arguments
 _NO_VECTORS = np.zeros((0, 3))
 _UNIT_THROUGHPUT = np.ones(3)
@@ -359,6 +358,9 @@ class Integrator:
                         else np.ascontiguousarray(scene.smooth, dtype=bool))
         # gathers with int32 indices are ~10x slower in NumPy than with intp ones
         self._material_id = scene.material_id.astype(np.intp)
+        # scenes that need only direct light take one compiled stage per chunk
+        self.direct_stage = DirectStage.plan(self)
+        self.stages["fused_direct"] = self.direct_stage is not None
 
     def _init_media(self, scene):
         """Medium stacks (see :mod:`rtmesh.media`), only for scenes that refract.
@@ -581,6 +583,11 @@ class Integrator:
                                np.tile(np.arange(first_sample, first_sample + spp, dtype=np.int64), m))
         # every dimension is stratified in sets of the settings' spp, whatever the round
         in_pixel = pixel_offsets(s.sampler, s.seed, pixel, sample_in_pixel, s.spp)
+        if self.direct_stage is not None:
+            clock.lap("camera")
+            radiance = self.direct_stage.render(in_pixel, pixel, stats)
+            clock.lap("direct")
+            return (radiance, None, stats) if ragged else (radiance.reshape(m, spp, 3), None, stats)
         lens_uv = None
         if self.stages["lens"]:
             lens_uv = decorrelated_points(s.sampler, s.seed, pixel, sample_in_pixel, s.spp,
@@ -785,7 +792,7 @@ class Integrator:
         for light in self._light_parameters:
             (lit, origins, directions, t_max, cos_i, incident, highlight_rows, highlight,
              power_exponent) = light_samples(light, p, ng, ns, d, materials[0], self._highlight_exponent,
-                                             self._highlight_from, self._offset_scale32, _SHADOW_SHORTEN)
+                                             self._highlight_from, self._offset_scale32, SHADOW_SHORTEN)
             if not len(lit):
                 continue
             target = take_rows(rows, lit) if rows is not None else lit

@@ -558,6 +558,9 @@ def _reaches(wx, wy, wz, er, eg, eb, gx, gy, gz):
     return (_dot(wx, wy, wz, gx, gy, gz) > 0.0) & ((er > 0.0) | (eg > 0.0) | (eb > 0.0))
 
 
+# Shadow rays to point and spot lights stop this fraction short of the light, so a light
+# placed exactly on a surface does not count that surface as an occluder.
+SHADOW_SHORTEN = 1.0 - 1e-5
 # rows per block of light_samples: its scratch arrays (~70 bytes a row) stay in L1
 _BLOCK = 256
 

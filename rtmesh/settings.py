@@ -140,7 +140,7 @@ class RenderSettings:
 # "shadow": one per (hit, point/spot/directional light); "area_shadow": light_samples per
 # (hit, area light or emissive object); "cutout": rays traced again beyond a cut-out surface
 RAY_KINDS = ("camera", "shadow", "area_shadow", "reflection", "refraction", "ao", "cutout")
-STAGES = ("camera", "intersect", "shade", "passes", "shadow", "ao", "spawn", "film")
+STAGES = ("camera", "intersect", "shade", "passes", "shadow", "ao", "spawn", "direct", "film")
 
 
 @dataclass

@@ -1,0 +1,402 @@
+"""The fused direct-lighting stage: from film samples to radiance in compiled code.
+
+For scenes that need nothing but camera rays, surfaces, emission, ambient light and
+point-like lights with hard shadows (the common case of asset thumbnails and of the peer
+benchmark), the general wavefront (one NumPy call or kernel per stage and chunk, with the
+rays and surface records written out between them) spends most of its non-tracing time
+moving those records through memory.  Here one kernel does a whole chunk, 16 samples at a
+time: camera rays, one ``rtcIntersect16`` packet, surface records, and for each light the
+shadow rays of the lit samples as one ``rtcOccluded16`` packet; the rays and records of a
+packet never leave the kernel's scratch arrays.
+
+The arithmetic is the general path's, row for row: the same row helpers of
+:mod:`rtmesh.kernels` (camera, surface record, light, Blinn-Phong, origin offset) and of
+:mod:`rtmesh.embree_packets` (lanes of a packet), in the same order, so the images are
+bit-identical to the general path's (tested).  The one operation the general path leaves
+to NumPy, raising highlight cosines to the shininess (NumPy's vectorised ``pow``, which can
+round differently from the ``pow`` a compiled loop calls), stays with NumPy: samples with a
+highlight are finished by a second kernel after NumPy has raised their cosines.
+
+:meth:`DirectStage.plan` decides whether a render can use the stage; everything it does not
+handle (textures, passes, reflection and refraction, media, area lights, ambient
+occlusion, depth of field, motion blur, cut-outs, environment backgrounds, single-ray
+tracing) keeps the general path.
+"""
+
+import numpy as np
+
+from . import embree_packets as ep
+from .accel import Accel
+from .background import SolidBackground
+from .compiled import kernel
+from .kernels import (SHADOW_SHORTEN, _dot, _highlight_cosine, _illuminate, _image_plane_point, _offset,
+                      _pinhole_direction, _reaches, _shade, _surface_record)
+
+_F32_MAX = float(np.finfo(np.float32).max)
+_NO_TINT = np.zeros((0, 3))
+LANES = ep.LANES
+# samples per block: four packets, so the arithmetic of a block's samples runs in vector
+# loops long enough for AVX-512, while the block's records stay in L1
+PACKETS = 4
+BLOCK = PACKETS * LANES
+_PACKET_BYTES = 4 * ep.RAYHIT_WORDS * LANES
+_SHADOW_BYTES = 4 * ep.RAY_WORDS * LANES
+
+
+class DirectStage:
+    """The tables the fused kernel reads, formed once per render.
+
+    Build it with :meth:`plan`.
+    """
+
+    def __init__(self, integrator):
+        it = integrator
+        accel = it.accel
+        m = it.scene.materials
+        library = ep.packet_library()
+        self._queries = (library.intersect16, library.occluded16, accel._shared.handle,
+                         ep.RTC_RAY_QUERY_FLAG_COHERENT)
+        camera, s = it.camera, it.settings
+        forward, right, up = it._camera_frame
+        tan_half = np.tan(np.radians(camera.fov) * 0.5)
+        aspect = s.width / s.height
+        # as Camera.generate_rays forms it
+        image_plane = np.array([2.0 * tan_half * aspect / s.width, -tan_half * aspect,
+                                -2.0 * tan_half / s.height, tan_half])
+        self._camera = (s.width, image_plane, np.ascontiguousarray(camera.position, dtype=np.float64),
+                        forward, right, up)
+        st = it.stages
+        self._surfaces = (it._faces, it._vertex_normals, it._smooth, it._material_id,
+                          st["smooth_normals"] and not st["normal_maps"])
+        # emission + ambient per material, as the general path adds them per hit
+        base = np.zeros((len(m.diffuse), 3))
+        if st["emission"]:
+            base = np.ascontiguousarray(m.emission, dtype=np.float64)
+        if st["ambient"]:
+            ambient = np.ascontiguousarray(it._ambient_light)
+            base = ambient if not st["emission"] else base + ambient
+        self._base = np.ascontiguousarray(base)
+        lights = it._light_parameters if st["lights"] else []
+        self._lights = np.array(lights, dtype=np.float64).reshape(len(lights), 12)
+        self._materials = (np.ascontiguousarray(it._shaded), np.ascontiguousarray(it._diffuse),
+                           np.ascontiguousarray(it._specular), it._highlight_exponent, it._highlight_from)
+        background = it.background
+        self._background = (np.ascontiguousarray(background.colour) if st["background"] else np.zeros(3))
+        self._offset_scale = it._offset_scale32
+
+    @classmethod
+    def plan(cls, integrator):
+        """The stage for this render, or None where the general path must run.
+
+        Parameters
+        ----------
+        integrator : rtmesh.integrator.Integrator
+            After its tables and stages are formed.
+
+        Returns
+        -------
+        DirectStage or None
+        """
+        it = integrator
+        st = it.stages
+        needs_general = ("area_lights", "area_light_visibility", "textures", "normal_maps", "cutouts",
+                         "unlit", "reflection", "glossy", "refraction", "absorption", "passes", "ao", "lens",
+                         "motion")
+        if any(st[name] for name in needs_general):
+            return None
+        if type(it.accel) is not Accel or not it.accel.packets or it.media is not None:
+            return None
+        background = it.background
+        if st["background"] and not (isinstance(background, SolidBackground) and not background.transparent):
+            return None
+        return cls(integrator)
+
+    def render(self, film_xy, pixel, stats):
+        """Radiance of camera samples.
+
+        Parameters
+        ----------
+        film_xy : (n, 2) float64
+            Positions inside the pixels (from their top-left corners).
+        pixel : (n,) int64
+            Linear pixel index of each sample.
+        stats : RenderStats
+            Camera and shadow ray counts are added to it.
+
+        Returns
+        -------
+        (n, 3) float64
+            Component-major, as the general path's radiance.
+        """
+        shaded, diffuse, specular, exponent, visible_from = self._materials
+        radiance, shadow_rays, records = direct_samples(
+            *self._queries, np.ascontiguousarray(film_xy, dtype=np.float64), pixel, *self._camera,
+            *self._surfaces, self._base, self._background, self._lights, shaded, diffuse, specular, exponent,
+            visible_from, self._offset_scale, SHADOW_SHORTEN)
+        sample, mat, cos_i, incident, cosine, power_exponent, highlight = records
+        if len(sample):
+            # NumPy raises the highlight cosines, as in the general path (its pow is vectorised)
+            power = np.zeros(len(sample))
+            power[highlight] = np.power(cosine[highlight], power_exponent[highlight])
+            finish_highlights(radiance, self._base, sample, mat, cos_i, incident, power, diffuse, specular)
+        stats.rays["camera"] += len(pixel)
+        stats.rays["shadow"] += shadow_rays
+        return radiance
+
+
+@kernel
+def direct_samples(intersect16, occluded16, scene, flags, film_xy, pixel, width, image_plane, position,
+                   forward, right, up, faces, vertex_normals, smooth, material_id, fix_terminator, base,
+                   background, lights, shaded, diffuse, specular, exponent, visible_from, scale, shorten):
+    """Radiance of camera samples with direct light, in blocks of :data:`BLOCK` samples.
+
+    Parameters
+    ----------
+    intersect16, occluded16 : ctypes function objects
+    scene : int
+        The committed ``RTCScene``.
+    flags : int
+        Query flags (coherent).
+    film_xy : (n, 2) float64
+        Positions inside the pixels.
+    pixel : (n,) int64
+    width : int
+    image_plane : (4,) float64
+    position, forward, right, up : (3,) float64
+        The camera (see :func:`rtmesh.kernels.camera_rays`).
+    faces, vertex_normals, smooth, material_id, fix_terminator
+        As for :func:`rtmesh.kernels.surface_records`.
+    base : (M, 3) float64
+        Emission plus ambient light per material.
+    background : (3,) float64
+        Radiance of rays that miss.
+    lights : (L, 12) float64
+        Point-like lights (:meth:`kernel_parameters` rows).
+    shaded : (M,) bool
+        Materials that reflect light.
+    diffuse, specular : (M, 3) float64
+    exponent, visible_from : (M,) float64
+        Shininess (negative: no highlight) and the smallest highlight cosine kept.
+    scale : float32
+        Scene size, for the origin offset.
+    shorten : float
+        Shadow rays end this fraction of the way to the light.
+
+    Returns
+    -------
+    radiance : (n, 3) float64
+        Component-major; final except for the samples in ``records``, which hold
+        ``base`` of their material until :func:`finish_highlights` runs.
+    shadow_rays : int
+    records : tuple of arrays
+        For the samples with a highlight from a light that reaches them, one record per
+        (sample, unshadowed light), in light order: sample, material, ``ns . wi``, incident
+        term (r, 3), highlight cosine, shininess, and whether the highlight is raised.
+
+    Notes
+    -----
+    Each step of a block is one loop over its samples without early exits (misses are
+    computed on face 0 and ignored), so that LLVM vectorises the arithmetic; the packets
+    of a block lie side by side in one buffer (each 64-byte aligned), and sample ``b`` of
+    the block is lane ``b % 16`` of packet ``b // 16``.
+    """
+    n = len(pixel)
+    n_lights = len(lights)
+    has_smooth = len(vertex_normals) > 0
+    radiance = np.empty((3, n))
+    inverse_width = 1.0 / width
+    rays = ep.aligned_words(PACKETS * ep.RAYHIT_WORDS * LANES, np.float32)
+    words = rays.view(np.int32)
+    shadow = ep.aligned_words(PACKETS * ep.RAY_WORDS * LANES, np.float32)
+    shadow_words = shadow.view(np.int32)
+    valid = ep.aligned_words(BLOCK, np.int32)
+    shadow_valid = ep.aligned_words(BLOCK, np.int32)
+    args = ep.query_arguments(flags)
+    # per sample of the block: direction, surface record, material
+    d = np.empty((3, BLOCK))
+    srf = np.empty((9, BLOCK))
+    mat = np.empty(BLOCK, np.intp)
+    hit = np.empty(BLOCK, np.bool_)
+    # per light and sample: the light sample and its fate
+    lit = np.empty(BLOCK, np.bool_)
+    shadow_ray = np.empty((7, BLOCK), np.float32)  # origin, direction, length
+    cos_i = np.empty((n_lights, BLOCK))
+    incident = np.empty((n_lights, 3, BLOCK))
+    cosine = np.empty((n_lights, BLOCK))
+    raised = np.empty((n_lights, BLOCK), np.bool_)
+    reaches = np.zeros((n_lights, BLOCK), np.bool_)  # lit and not shadowed
+    capacity = n * n_lights
+    rec_sample = np.empty(capacity, np.int64)
+    rec_mat = np.empty(capacity, np.intp)
+    rec_cos = np.empty(capacity)
+    rec_incident = np.empty((capacity, 3))
+    rec_cosine = np.empty(capacity)
+    rec_exponent = np.empty(capacity)
+    rec_raised = np.empty(capacity, np.bool_)
+    records = 0
+    shadow_rays = 0
+    for start in range(0, n, BLOCK):
+        count = min(BLOCK, n - start)
+        # camera rays (rtmesh.kernels.camera_rays, pinhole); lanes past the end repeat sample 0
+        for b in range(BLOCK):
+            i = start + b if b < count else start
+            sx, sy = _image_plane_point(film_xy[i, 0], film_xy[i, 1], pixel[i], width, inverse_width,
+                                        image_plane)
+            d[0, b], d[1, b], d[2, b] = _pinhole_direction(sx, sy, forward, right, up)
+            valid[b] = -1 if b < count else 0
+        for q in range(PACKETS):
+            for lane in range(LANES):
+                b = q * LANES + lane
+                at = q * ep.RAYHIT_WORDS * LANES + lane
+                ep.set_lane(rays, words, at, position[0], position[1], position[2], d[0, b], d[1, b], d[2, b],
+                            ep.DEFAULT_TFAR)
+                ep.clear_hit(words, at)
+        for q in range((count + LANES - 1) // LANES):
+            intersect16(valid.ctypes.data + 64 * q, scene, rays.ctypes.data + _PACKET_BYTES * q,
+                        args.ctypes.data)
+        # surface records (rtmesh.kernels.surface_records); misses use face 0
+        for b in range(count):
+            at = _hit_lane(b)
+            hit[b] = words[ep.GEOM_ID * LANES + at] != -1
+            f = np.intp(words[ep.PRIM_ID * LANES + at]) if hit[b] else np.intp(0)
+            mat[b] = material_id[f]
+            interpolate = has_smooth & smooth[f]
+            (srf[0, b], srf[1, b], srf[2, b], srf[3, b], srf[4, b], srf[5, b], srf[6, b], srf[7, b], srf[8, b],
+             _) = _surface_record(f, np.float64(rays[ep.U * LANES + at]), np.float64(rays[ep.V * LANES + at]),
+                                  d[0, b], d[1, b], d[2, b], faces, vertex_normals, interpolate, fix_terminator)
+        # each light: samples (rtmesh.kernels.light_samples) and the shadow packets
+        for k in range(n_lights):
+            light = lights[k]
+            for b in range(count):
+                # no branches, gathers or calls: LLVM vectorises this loop (as light_samples')
+                px, py, pz = srf[0, b], srf[1, b], srf[2, b]
+                gx, gy, gz = srf[3, b], srf[4, b], srf[5, b]
+                nx, ny, nz = srf[6, b], srf[7, b], srf[8, b]
+                wx, wy, wz, distance, er, eg, eb = _illuminate(light, px, py, pz)
+                lit[b] = _reaches(wx, wy, wz, er, eg, eb, gx, gy, gz)
+                cos_i[k, b] = _dot(nx, ny, nz, wx, wy, wz)
+                incident[k, 0, b], incident[k, 1, b], incident[k, 2, b] = er, eg, eb
+                cosine[k, b] = _highlight_cosine(nx, ny, nz, -d[0, b], -d[1, b], -d[2, b], wx, wy, wz)
+                # the shadow ray's direction in float32, as Embree will see it, also sets the offset
+                dx, dy, dz = np.float32(wx), np.float32(wy), np.float32(wz)
+                shadow_ray[0, b], shadow_ray[1, b], shadow_ray[2, b] = _offset(px, py, pz, gx, gy, gz, dx, dy, dz,
+                                                                               scale)
+                shadow_ray[3, b], shadow_ray[4, b], shadow_ray[5, b] = dx, dy, dz
+                shadow_ray[6, b] = np.float32(min(distance * shorten, _F32_MAX))
+            for q in range(PACKETS):
+                for lane in range(LANES):
+                    b = q * LANES + lane
+                    ep.set_lane(shadow, shadow_words, q * ep.RAY_WORDS * LANES + lane, shadow_ray[0, b],
+                                shadow_ray[1, b], shadow_ray[2, b], shadow_ray[3, b], shadow_ray[4, b],
+                                shadow_ray[5, b], shadow_ray[6, b])
+            for b in range(BLOCK):
+                on = b < count and hit[b] and shaded[mat[b]] and lit[b]
+                shadow_valid[b] = -1 if on else 0
+                if on:
+                    m = mat[b]
+                    e = exponent[m]
+                    # a power of 0 is 1 whatever the cosine (0 ** 0 included)
+                    c = 1.0 if e == 0.0 else cosine[k, b]
+                    cosine[k, b] = c
+                    raised[k, b] = e >= 0.0 and c > 0.0 and c >= visible_from[m]
+            for q in range((count + LANES - 1) // LANES):
+                if _any_valid(shadow_valid, q):
+                    occluded16(shadow_valid.ctypes.data + 64 * q, scene, shadow.ctypes.data + _SHADOW_BYTES * q,
+                               args.ctypes.data)
+            for b in range(count):
+                on = shadow_valid[b] != 0
+                shadow_rays += on
+                # Embree marks an occluded ray by setting its tfar to -inf
+                reaches[k, b] = on and shadow[ep.TFAR * LANES + _ray_lane(b)] != -np.inf
+        # add up (rtmesh.kernels.add_light, then the general path's sums)
+        for b in range(count):
+            i = start + b
+            if not hit[b]:
+                for c in range(3):
+                    radiance[c, i] = 0.0 + background[c]
+                continue
+            m = mat[b]
+            deferred = False
+            for k in range(n_lights):
+                deferred = deferred or (reaches[k, b] and raised[k, b])
+            if deferred:
+                for k in range(n_lights):
+                    if reaches[k, b]:
+                        rec_sample[records], rec_mat[records] = i, m
+                        rec_cos[records] = cos_i[k, b]
+                        for c in range(3):
+                            rec_incident[records, c] = incident[k, c, b]
+                        rec_cosine[records], rec_exponent[records] = cosine[k, b], exponent[m]
+                        rec_raised[records] = raised[k, b]
+                        records += 1
+                for c in range(3):
+                    radiance[c, i] = base[m, c]
+                continue
+            d0 = d1 = d2 = 0.0
+            for k in range(n_lights):
+                if reaches[k, b]:
+                    f0, f1, f2 = _shade(0, m, cos_i[k, b], 0.0, diffuse, _NO_TINT, specular, _NO_TINT)
+                    d0 += f0 * incident[k, 0, b]
+                    d1 += f1 * incident[k, 1, b]
+                    d2 += f2 * incident[k, 2, b]
+            radiance[0, i] = 0.0 + (base[m, 0] + d0)
+            radiance[1, i] = 0.0 + (base[m, 1] + d1)
+            radiance[2, i] = 0.0 + (base[m, 2] + d2)
+    return radiance.T, shadow_rays, (rec_sample[:records], rec_mat[:records], rec_cos[:records],
+                                     rec_incident[:records], rec_cosine[:records], rec_exponent[:records],
+                                     rec_raised[:records])
+
+
+@kernel
+def _hit_lane(b):
+    """Word offset of sample ``b`` of a block in the ``RTCRayHit16`` packets (field 0)."""
+    return (b >> 4) * (ep.RAYHIT_WORDS * LANES) + (b & 15)
+
+
+@kernel
+def _ray_lane(b):
+    """Word offset of sample ``b`` of a block in the ``RTCRay16`` packets (field 0)."""
+    return (b >> 4) * (ep.RAY_WORDS * LANES) + (b & 15)
+
+
+@kernel
+def _any_valid(valid, q):
+    """Whether packet ``q`` of a block has an active lane."""
+    for lane in range(LANES * q, LANES * q + LANES):
+        if valid[lane]:
+            return True
+    return False
+
+
+@kernel
+def finish_highlights(radiance, base, sample, mat, cos_i, incident, power, diffuse, specular):
+    """Radiance of the samples :func:`direct_samples` left for their highlights.
+
+    Parameters
+    ----------
+    radiance : (n, 3) float64
+        Updated in place at the rows in ``sample``.
+    base : (M, 3) float64
+    sample, mat : (r,) int
+        Each record's sample and material; a sample's records are consecutive, in light
+        order.
+    cos_i : (r,) float64
+    incident : (r, 3) float64
+    power : (r,) float64
+        The raised highlight cosine (0 where there is no highlight).
+    diffuse, specular : (M, 3) float64
+    """
+    j = 0
+    r = len(sample)
+    while j < r:
+        i, m = sample[j], mat[j]
+        d0 = d1 = d2 = 0.0
+        while j < r and sample[j] == i:
+            f0, f1, f2 = _shade(0, m, cos_i[j], power[j], diffuse, _NO_TINT, specular, _NO_TINT)
+            d0 += f0 * incident[j, 0]
+            d1 += f1 * incident[j, 1]
+            d2 += f2 * incident[j, 2]
+            j += 1
+        radiance[i, 0] = 0.0 + (base[m, 0] + d0)
+        radiance[i, 1] = 0.0 + (base[m, 1] + d1)
+        radiance[i, 2] = 0.0 + (base[m, 2] + d2)

@@ -1,0 +1,102 @@
+"""The fused direct-lighting stage renders exactly what the general wavefront renders."""
+
+import numpy as np
+import pytest
+
+from rtmesh import embree_packets
+from rtmesh.background import GradientBackground
+from rtmesh.camera import Camera
+from rtmesh.integrator import Integrator
+from rtmesh.lights import DirectionalLight, PointLight, SpotLight
+from rtmesh.materials import Material
+from rtmesh.scene import Scene
+
+from scenes import assert_finite, box, floor_quad, icosphere, part, settings, sphere_on_floor_scene
+
+pytestmark = pytest.mark.skipif(embree_packets.packet_library() is None,
+                                reason="the fused stage traces Embree packets")
+
+
+def lit_scene(background=None, ambient=None):
+    """Smooth and flat meshes, highlights of every kind (none, shininess 0, ordinary, huge),
+    a black object that reflects nothing, and one light of each point-like kind.  (An
+    emissive material makes its mesh an area light, which the fused stage leaves to the
+    general path.)"""
+    parts = [part("ball", icosphere(3, 1.0, (0.0, 0.0, 1.0)), 0, smooth=True),
+             part("box", box((1.0, 1.0, 1.5), (1.8, 0.5, 0.75)), 1),
+             part("floor", floor_quad(6.0), 2),
+             part("soot", icosphere(1, 0.3, (-1.5, 1.0, 0.4)), 3)]
+    materials = [Material("ball", diffuse=[0.6, 0.3, 0.2], specular=0.5, shininess=40.0),
+                 Material("box", diffuse=0.5, specular=[0.2, 0.4, 0.6], shininess=0.0),
+                 Material("floor", diffuse=0.5, specular=0.3, shininess=5000.0),
+                 Material("soot", diffuse=0.0, ambient=[0.3, 0.2, 0.1])]
+    lights = [PointLight([2.0, -1.0, 6.0], 30.0),
+              DirectionalLight([-0.3, 0.4, -1.0], [0.4, 0.5, 0.6]),
+              SpotLight([-2.0, -3.0, 4.0], [0.4, 0.6, -0.7], [40.0, 30.0, 20.0], 10.0, 25.0)]
+    camera = Camera([0.5, -6.0, 4.0], [0.3, 0.0, 0.6], [0.0, 0.0, 1.0], 45.0)
+    return Scene.from_parts(parts, materials, lights, camera, ambient=ambient, background=background)
+
+
+def render_both(scene, **overrides):
+    fused = Integrator(scene, settings(**overrides))
+    assert fused.direct_stage is not None
+    general = Integrator(scene, settings(**overrides))
+    general.direct_stage = None
+    a, b = fused.render(), general.render()
+    assert_finite(a)
+    return a, b
+
+
+def assert_same(a, b):
+    np.testing.assert_array_equal(a.image, b.image)
+    assert a.stats.rays == b.stats.rays
+    assert a.stats.samples == b.stats.samples
+
+
+@pytest.mark.parametrize("sampler", ["regular", "random", "jittered", "sobol"])
+@pytest.mark.parametrize("spp", [1, 3])
+def test_fused_stage_matches_the_general_path(sampler, spp):
+    a, b = render_both(lit_scene(), width=37, height=29, spp=spp, sampler=sampler)
+    assert_same(a, b)
+    assert a.image.max() > 0.1  # lit, not a black frame
+
+
+def test_ambient_and_a_solid_background():
+    scene = lit_scene(background=[0.2, 0.3, 0.4], ambient=[0.05, 0.1, 0.02])
+    a, b = render_both(scene, width=40, height=30, spp=2)
+    assert_same(a, b)
+    assert (a.image[0, 0] > 0).all()  # the corner sees the background
+
+
+def test_adaptive_rounds():
+    a, b = render_both(lit_scene(), width=24, height=20, spp=2, target_error=0.02, max_spp=32)
+    assert_same(a, b)
+    assert len(a.stats.rounds) > 1
+
+
+def test_thread_count_does_not_change_the_image():
+    scene = sphere_on_floor_scene(smooth=True)
+    one = Integrator(scene, settings(width=64, height=48, spp=2, threads=1)).render()
+    two = Integrator(scene, settings(width=64, height=48, spp=2, threads=2, chunk_samples=1000)).render()
+    np.testing.assert_array_equal(one.image, two.image)
+
+
+def test_scenes_needing_more_take_the_general_path():
+    scene = lit_scene()
+    assert Integrator(scene, settings()).stages["fused_direct"]
+    assert Integrator(scene, settings(passes=("depth",))).direct_stage is None
+    # ambient occlusion only where there is ambient light to occlude
+    assert Integrator(scene, settings(ao_samples=2)).direct_stage is not None
+    assert Integrator(lit_scene(ambient=[0.1, 0.1, 0.1]), settings(ao_samples=2)).direct_stage is None
+    gradient = lit_scene(background=GradientBackground([0.1, 0.1, 0.1], [0.5, 0.6, 0.9]))
+    assert Integrator(gradient, settings()).direct_stage is None
+    lamp = lit_scene()
+    lamp.materials = type(lamp.materials)(
+        [Material("ball", emission=1.0), Material("box"), Material("floor"), Material("soot")])
+    assert Integrator(lamp, settings()).direct_stage is None  # an emissive mesh is an area light
+    mirror = lit_scene()
+    mirror.materials = type(mirror.materials)(
+        [Material("ball", diffuse=0.2, mirror=0.5), Material("box"), Material("floor"), Material("soot")])
+    assert Integrator(mirror, settings()).direct_stage is None
+    # a mirror with no bounces left renders direct light only
+    assert Integrator(mirror, settings(max_depth=0)).direct_stage is not None
