@@ -1,4 +1,4 @@
-"""Vertex normals for smooth shading, split along creases, computed with whole-array NumPy.
+"""Vertex normals for smooth shading, split along creases.
 
 A mesh file without normals is shaded smooth where its surface bends gently and flat
 across sharp edges.  Every corner of every face takes part: two corners at the same vertex
@@ -9,17 +9,21 @@ a face is its angle at the vertex, so a normal does not depend on how a flat reg
 triangulated).
 
 This replaces trimesh's ``smooth_shaded``, which cuts the whole mesh into connected smooth
-patches and builds a new mesh (and visual) from them: with its vertex normals about three
-times slower on a million triangles (3.9 s against 1.4 s here), and it loses the material
-of glTF primitives.  The results differ in two corner cases: trimesh also cuts out large
-coplanar facets (more than a tenth of the area), which here share normals with neighbours
-bending less than the crease angle; and two fans meeting only at a vertex stay apart here
-even when a path over the surface joins them.
+patches and builds a new mesh (and visual) from them: with its vertex normals 3.9 s on a
+million triangles, against 0.2 s here, and it loses the material of glTF primitives.  The
+passes over the faces are compiled (:mod:`rtmesh.build_kernels`): faces meeting across an
+edge are found by a counting sort on the edges' vertices and the corners grouped by a
+union-find, where a sort and SciPy's connected components took 1.3 s.
+
+The results differ from trimesh's in two corner cases: trimesh also cuts out large coplanar
+facets (more than a tenth of the area), which here share normals with neighbours bending
+less than the crease angle; and two fans meeting only at a vertex stay apart here even when
+a path over the surface joins them.
 """
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
+
+from . import build_kernels
 
 # trimesh's default for smooth_shaded: faces meeting at less than 20 degrees look smooth
 CREASE_ANGLE = np.radians(20.0)
@@ -40,16 +44,13 @@ def face_normals_and_corner_angles(vertices, faces):
     angles : (F, 3) float64
         Interior angle at each corner, radians; zero for zero-area faces.
     """
-    p0, p1, p2 = (np.asarray(vertices, dtype=np.float64)[faces[:, k]] for k in range(3))
-    e01, e12, e20 = p1 - p0, p2 - p1, p0 - p2
-    cross = np.cross(e01, -e20)
-    double_area = np.sqrt(np.einsum("ij,ij->i", cross, cross))
-    normals = cross / np.where(double_area > 0.0, double_area, np.inf)[:, None]
+    vertices = np.ascontiguousarray(vertices, dtype=np.float64)
+    faces = _checked(faces, len(vertices))
     # the angle at a corner is atan2(|a x b|, a . b) for its two edges a, b, and |a x b| is
-    # twice the area at every corner: one cross product serves all three
-    angles = np.stack([np.arctan2(double_area, -np.einsum("ij,ij->i", e01, e20)),
-                       np.arctan2(double_area, -np.einsum("ij,ij->i", e12, e01)),
-                       np.arctan2(double_area, -np.einsum("ij,ij->i", e20, e12))], axis=1)
+    # twice the area at every corner: one cross product serves all three.  The kernel
+    # forms the products in one pass; the arc tangents are NumPy's (vectorised) ones
+    normals, double_area, dots = build_kernels.face_normals_and_dots(vertices, faces)
+    angles = np.stack([np.arctan2(double_area, dots[k]) for k in range(3)], axis=1)
     angles[double_area == 0.0] = 0.0
     return normals, angles
 
@@ -80,40 +81,47 @@ def smooth_vertex_normals(vertices, faces, crease_angle=CREASE_ANGLE):
         per-vertex attributes such as texture coordinates and colours.
     """
     vertices = np.asarray(vertices, dtype=np.float64)
-    faces = np.asarray(faces, dtype=np.intp).reshape(-1, 3)
+    faces = _checked(np.asarray(faces, dtype=np.intp), len(vertices))
     n_faces = len(faces)
     face_normal, angle = face_normals_and_corner_angles(vertices, faces)
 
-    # every edge of every face, as "slot" 3 * face + k running from corner k to corner k+1
-    start = faces.ravel()
-    end = faces[:, [1, 2, 0]].ravel()
-    key = np.minimum(start, end) * len(vertices) + np.maximum(start, end)
-    order = np.argsort(key)  # ties (non-manifold edges) in any order: any pairing is fine
-    shared = key[order[1:]] == key[order[:-1]]
-    # faces meeting across an edge (consecutive slots of a non-manifold edge pair up too)
-    slot_a, slot_b = order[:-1][shared], order[1:][shared]
-    face_a, face_b = slot_a // 3, slot_b // 3
-    if crease_angle is not None:
-        smooth = np.einsum("ij,ij->i", face_normal[face_a], face_normal[face_b]) > np.cos(crease_angle)
+    # every edge of every face, as "slot" 3 * face + k running from corner k to corner k+1;
+    # faces meeting across an edge, found by a counting sort on the edges' lower vertex
+    pairs, manifold = build_kernels.edge_pairs(faces, len(vertices))
+    if manifold:
+        slot_a, slot_b = pairs
     else:
-        smooth = np.ones(len(slot_a), dtype=bool)
-    slot_a, slot_b = slot_a[smooth], slot_b[smooth]
-    # join the corners holding the edge's two vertices in both faces: the corner of face b
-    # holding the start vertex of slot a is slot b's start or end, whatever the windings
-    a_start, a_end = slot_a, 3 * (slot_a // 3) + (slot_a + 1) % 3
-    b_next = 3 * (slot_b // 3) + (slot_b + 1) % 3
-    same_way = start[slot_b] == start[slot_a]
-    b_start = np.where(same_way, slot_b, b_next)
-    b_end = np.where(same_way, b_next, slot_b)
-    links = np.concatenate([a_start, a_end]), np.concatenate([b_start, b_end])
-    graph = coo_matrix((np.ones(len(links[0]), dtype=np.int8), links), shape=(3 * n_faces, 3 * n_faces))
-    n_groups, group = connected_components(graph, directed=False)
+        slot_a, slot_b = _sorted_edge_pairs(faces, len(vertices))
+    # join the corners holding the edge's two vertices in both faces (where the faces
+    # bend less than the crease angle), and number the connected groups of corners
+    min_cosine = np.cos(crease_angle) if crease_angle is not None else 0.0
+    group, n_groups = build_kernels.corner_groups(faces, face_normal, slot_a, slot_b, float(min_cosine),
+                                                  crease_angle is None)
 
     # one output vertex per group of corners, at the position of its input vertex
-    source = np.zeros(n_groups, dtype=np.intp)
-    source[group] = start
-    weighted = (face_normal[:, None, :] * angle[:, :, None]).reshape(-1, 3)
-    normal_sum = np.stack([np.bincount(group, weighted[:, c], minlength=n_groups) for c in range(3)], axis=1)
-    length = np.sqrt(np.einsum("ij,ij->i", normal_sum, normal_sum))
-    normals = normal_sum / np.where(length > 0.0, length, np.inf)[:, None]
-    return vertices[source], group.reshape(n_faces, 3).astype(np.intp), normals, source
+    normals, source = build_kernels.group_normals(group, n_groups, faces, face_normal, angle)
+    return vertices[source], group.reshape(n_faces, 3), normals, source
+
+
+def _sorted_edge_pairs(faces, n_vertices):
+    """Slots sharing an edge, paired in sorted order (edges of three faces or more too).
+
+    Sorting the slots by edge and pairing each with the next of the same edge: a
+    non-manifold edge's faces join their neighbours in that order (ties in any order, as
+    ``np.argsort`` leaves them).
+    """
+    start = faces.ravel()
+    end = faces[:, [1, 2, 0]].ravel()
+    key = np.minimum(start, end) * n_vertices + np.maximum(start, end)
+    order = np.argsort(key)
+    shared = key[order[1:]] == key[order[:-1]]
+    return order[:-1][shared], order[1:][shared]
+
+
+def _checked(faces, n_vertices):
+    """``faces`` as ``(F, 3)``; IndexError if an index is not a vertex (the compiled passes
+    do not check their indices)."""
+    faces = np.asarray(faces).reshape(-1, 3)
+    if len(faces) and (faces.min() < 0 or faces.max() >= n_vertices):
+        raise IndexError(f"face indices outside 0..{n_vertices - 1}")
+    return faces
