@@ -262,3 +262,81 @@ def group_normals(group, n_groups, faces, face_normal, angle):
         d = length if length > 0.0 else math.inf
         total[g, 0], total[g, 1], total[g, 2] = x / d, y / d, z / d
     return total, source
+
+
+# ---------------------------------------------------------------- importers
+_EMPTY = -1
+# odd multipliers for the hash of a row (int64 products wrap around)
+_HASH_A, _HASH_B, _HASH_C = (np.int64(0x1E3779B97F4A7C15), np.int64(0x632BE59BD9B4E019),
+                             np.int64(0x165667B19E3779F9))
+
+
+@kernel
+def rows_distinct(keys):
+    """Whether the rows of an integer array are pairwise different.
+
+    Parameters
+    ----------
+    keys : (n, 3) int64
+        E.g. vertex positions rounded to the precision at which trimesh merges vertices.
+
+    Returns
+    -------
+    bool
+
+    Notes
+    -----
+    One pass with an open-addressing hash table (linear probing, at most half full) in
+    place of the sort trimesh's ``unique_rows`` does.
+    """
+    n = keys.shape[0]
+    size = 1
+    while size < 2 * n:
+        size *= 2
+    mask = size - 1
+    table = np.full(size, _EMPTY, dtype=np.int64)
+    for i in range(n):
+        a, b, c = keys[i, 0], keys[i, 1], keys[i, 2]
+        h = a * _HASH_A + b * _HASH_B + c * _HASH_C
+        h ^= h >> 29
+        slot = h & mask
+        while True:
+            j = table[slot]
+            if j == _EMPTY:
+                table[slot] = i
+                break
+            if keys[j, 0] == a and keys[j, 1] == b and keys[j, 2] == c:
+                return False
+            slot = (slot + 1) & mask
+    return True
+
+
+@kernel
+def referenced_and_finite(vertices, faces):
+    """Whether every vertex is used by a face and every coordinate is finite.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float
+    faces : (F, 3) int
+
+    Returns
+    -------
+    bool
+    """
+    n = vertices.shape[0]
+    for i in range(n):
+        for c in range(3):
+            if not math.isfinite(vertices[i, c]):
+                return False
+    used = np.zeros(n, dtype=np.bool_)
+    count = 0
+    for f in range(faces.shape[0]):
+        for k in range(3):
+            j = faces[f, k]
+            if j < 0 or j >= n:
+                return False
+            if not used[j]:
+                used[j] = True
+                count += 1
+    return count == n

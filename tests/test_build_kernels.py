@@ -8,6 +8,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from rtmesh import build_kernels
+from rtmesh.importers import _merge_keeps_everything, load_trimesh, parts_from_trimesh
 from rtmesh.smoothing import face_normals_and_corner_angles, smooth_vertex_normals
 from scenes import icosphere
 
@@ -140,3 +141,86 @@ def test_smoothing_rejects_indices_that_are_not_vertices():
         wrong[5, 1] = bad
         with pytest.raises(IndexError):
             smooth_vertex_normals(vertices, wrong)
+
+
+# ---------------------------------------------------------------- loading
+def test_rows_distinct_and_referenced_and_finite():
+    rng = np.random.default_rng(3)
+    keys = rng.integers(-10**9, 10**9, size=(5000, 3))
+    assert build_kernels.rows_distinct(keys)
+    keys[4321] = keys[17]
+    assert not build_kernels.rows_distinct(keys)
+    # rows differing in one column only, and equal sums
+    assert build_kernels.rows_distinct(np.array([[1, 2, 3], [1, 2, 4], [3, 2, 1], [2, 1, 3]]))
+    assert build_kernels.rows_distinct(np.zeros((0, 3), dtype=np.int64))
+    vertices = rng.normal(size=(4, 3))
+    faces = np.array([[0, 1, 2], [0, 2, 3]])
+    assert build_kernels.referenced_and_finite(vertices, faces)
+    assert not build_kernels.referenced_and_finite(vertices, faces[:1])  # vertex 3 unused
+    vertices[1, 2] = np.inf
+    assert not build_kernels.referenced_and_finite(vertices, faces)
+
+
+def write_meshes(folder):
+    """Files in every non-glTF format: duplicate vertices (STL, a polygon soup as OBJ),
+    texture coordinates, a second object, normals in the file, a NaN vertex."""
+    sphere = icosphere(2)
+    paths = []
+    for ext in ("stl", "ply", "off", "obj"):
+        path = folder / f"sphere.{ext}"
+        sphere.export(path)
+        paths.append(path)
+    soup = folder / "soup.obj"
+    lines = ["mtllib soup.mtl", "o box", "usemtl red"]
+    box = trimesh.creation.box()
+    lines += ["v %r %r %r" % tuple(map(float, p)) for p in box.vertices]
+    lines += ["vt %r %r" % tuple(map(float, p)) for p in np.random.default_rng(0).random((8, 2))]
+    lines += [f"f {a + 1}/{a + 1} {b + 1}/{b + 1} {c + 1}/{c + 1}" for a, b, c in box.faces]
+    lines += ["o ball", "usemtl blue"]
+    moved = sphere.vertices + [3.0, 0.0, 0.0]
+    lines += ["v %r %r %r" % tuple(map(float, moved[i])) for i in sphere.faces.ravel()]
+    lines += [f"f {9 + 3 * k} {10 + 3 * k} {11 + 3 * k}" for k in range(len(sphere.faces))]
+    lines += ["v nan 0 0", "f 1 2 %d" % (9 + 3 * len(sphere.faces))]
+    soup.write_text("\n".join(lines) + "\n")
+    (folder / "soup.mtl").write_text("newmtl red\nKd 0.8 0.1 0.1\nnewmtl blue\nKd 0.1 0.1 0.8\n")
+    with_normals = folder / "normals.ply"
+    with_normals.write_bytes(trimesh.exchange.ply.export_ply(sphere, vertex_normal=True))
+    return paths + [soup, with_normals]
+
+
+def test_loading_gives_the_meshes_trimesh_gives(tmp_path):
+    for path in write_meshes(tmp_path):
+        expected = trimesh.load(path, force="scene")
+        loaded = load_trimesh(path)
+        assert list(loaded.geometry) == list(expected.geometry)
+        for name, mesh in expected.geometry.items():
+            got = loaded.geometry[name]
+            assert_identical([got.vertices, got.faces], [mesh.vertices, mesh.faces])
+            assert got.metadata.get("processed") == mesh.metadata.get("processed")
+            for attribute in ("uv",):
+                a, b = getattr(got.visual, attribute, None), getattr(mesh.visual, attribute, None)
+                assert (a is None) == (b is None)
+                if a is not None:
+                    assert_identical([a], [b])
+            assert ("vertex_normals" in got._cache.cache) == ("vertex_normals" in mesh._cache.cache)
+            if "vertex_normals" in mesh._cache.cache:
+                assert_identical([got.vertex_normals], [mesh.vertex_normals])
+        # and the parts rtmesh builds from them
+        for got, part in zip(parts_from_trimesh(loaded)[0], parts_from_trimesh(expected)[0], strict=True):
+            assert_identical([got.vertices, got.faces, got.vertex_normals],
+                             [part.vertices, part.faces, part.vertex_normals])
+
+
+def test_trimesh_processing_runs_only_where_it_changes_something(tmp_path):
+    sphere = icosphere(2)
+    sphere.export(tmp_path / "sphere.ply")
+    sphere.export(tmp_path / "sphere.stl")  # STL repeats each vertex in every face
+    unique = trimesh.load(tmp_path / "sphere.ply", process=False)
+    assert _merge_keeps_everything(unique)
+    assert not _merge_keeps_everything(trimesh.load(tmp_path / "sphere.stl", process=False))
+    unused = trimesh.Trimesh(np.vstack([sphere.vertices, [[5.0, 5.0, 5.0]]]), sphere.faces, process=False)
+    assert not _merge_keeps_everything(unused)
+    # within trimesh's merge tolerance of another vertex
+    near = sphere.vertices.copy()
+    near[1] = near[0] + 1e-12
+    assert not _merge_keeps_everything(trimesh.Trimesh(near, sphere.faces, process=False))
