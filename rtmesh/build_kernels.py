@@ -340,3 +340,173 @@ def referenced_and_finite(vertices, faces):
                 used[j] = True
                 count += 1
     return count == n
+
+
+# ---------------------------------------------------------------- placing and flattening parts
+@kernel
+def finite_without_negative_zero(values):
+    """Whether every value is finite and none is -0.0.
+
+    Such vectors come out of a product with the identity matrix unchanged, however the
+    product's sums are ordered (``x + 0 = x``; only ``-0 + 0`` would turn a zero's sign).
+
+    Parameters
+    ----------
+    values : (n, 3) float64
+
+    Returns
+    -------
+    bool
+    """
+    for i in range(values.shape[0]):
+        for c in range(3):
+            x = values[i, c]
+            if not math.isfinite(x) or (x == 0.0 and math.copysign(1.0, x) < 0.0):
+                return False
+    return True
+
+
+@kernel
+def finite_faces(vertices, faces):
+    """Faces whose three vertices are finite: ``np.isfinite(v).all(1)[faces].all(1)``.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float
+    faces : (F, 3) int
+
+    Returns
+    -------
+    (F,) bool
+    """
+    n = vertices.shape[0]
+    finite = np.empty(n, dtype=np.bool_)
+    for i in range(n):
+        finite[i] = (math.isfinite(vertices[i, 0]) and math.isfinite(vertices[i, 1])
+                     and math.isfinite(vertices[i, 2]))
+    keep = np.empty(faces.shape[0], dtype=np.bool_)
+    for f in range(faces.shape[0]):
+        keep[f] = finite[faces[f, 0]] and finite[faces[f, 1]] and finite[faces[f, 2]]
+    return keep
+
+
+@kernel
+def face_crosses(vertices, faces):
+    """Per face the unit normal ``cross(v1 - v0, v2 - v0) / |cross|`` and ``|cross|``
+    (``np.linalg.norm``), twice the face's area.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float64
+    faces : (F, 3) int
+
+    Returns
+    -------
+    normal : (F, 3) float64
+        Not finite where the length is zero.
+    length : (F,) float64
+    """
+    n = faces.shape[0]
+    normal = np.empty((n, 3))
+    length = np.empty(n)
+    for f in range(n):
+        i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
+        ax = vertices[i1, 0] - vertices[i0, 0]
+        ay = vertices[i1, 1] - vertices[i0, 1]
+        az = vertices[i1, 2] - vertices[i0, 2]
+        bx = vertices[i2, 0] - vertices[i0, 0]
+        by = vertices[i2, 1] - vertices[i0, 1]
+        bz = vertices[i2, 2] - vertices[i0, 2]
+        cx = ay * bz - az * by
+        cy = az * bx - ax * bz
+        cz = ax * by - ay * bx
+        d = _norm(cx, cy, cz)
+        normal[f, 0], normal[f, 1], normal[f, 2] = cx / d, cy / d, cz / d
+        length[f] = d
+    return normal, length
+
+
+@kernel
+def unit_rows(vectors, faces):
+    """Unit vertex normals and the faces whose three normals are usable.
+
+    Parameters
+    ----------
+    vectors : (V, 3) float64
+    faces : (F, 3) int
+
+    Returns
+    -------
+    unit : (V, 3) float64
+        ``vectors / np.linalg.norm(vectors, axis=1)`` where that length is finite and
+        positive, else zero.
+    usable : (F,) bool
+        Faces whose three vertices have a finite, positive length.
+    """
+    n = vectors.shape[0]
+    unit = np.empty((n, 3))
+    good = np.empty(n, dtype=np.bool_)
+    for i in range(n):
+        x, y, z = vectors[i, 0], vectors[i, 1], vectors[i, 2]
+        length = _norm(x, y, z)
+        good[i] = math.isfinite(length) and length > 0.0
+        if good[i]:
+            unit[i, 0], unit[i, 1], unit[i, 2] = x / length, y / length, z / length
+        else:
+            unit[i, 0] = unit[i, 1] = unit[i, 2] = 0.0
+    usable = np.empty(faces.shape[0], dtype=np.bool_)
+    for f in range(faces.shape[0]):
+        usable[f] = good[faces[f, 0]] and good[faces[f, 1]] and good[faces[f, 2]]
+    return unit, usable
+
+
+# ---------------------------------------------------------------- integrator tables
+@kernel
+def face_rows(triangles, face_normals):
+    """Per face the triangle's 9 values and its normal, row-major ``(F, 12)``.
+
+    Parameters
+    ----------
+    triangles : (F, 9) float64
+        Any layout (e.g. :attr:`rtmesh.accel.Accel.triangles`, component-major).
+    face_normals : (F, 3) float64
+
+    Returns
+    -------
+    (F, 12) float64
+    """
+    n = triangles.shape[0]
+    out = np.empty((n, 12))
+    for f in range(n):
+        for c in range(9):
+            out[f, c] = triangles[f, c]
+        for c in range(3):
+            out[f, 9 + c] = face_normals[f, c]
+    return out
+
+
+@kernel
+def corner_rows(values, faces):
+    """Row-major ``[value0, value1 - value0, value2 - value0]`` per face, ``(F, 9)``.
+
+    The values of :func:`rtmesh.accel.corner_table`, laid out row by row.
+
+    Parameters
+    ----------
+    values : (V, 3) float64
+    faces : (F, 3) int
+
+    Returns
+    -------
+    (F, 9) float64
+    """
+    n = faces.shape[0]
+    out = np.empty((n, 9))
+    for f in range(n):
+        i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
+        for c in range(3):
+            first = values[i0, c]
+            out[f, c] = first
+            out[f, 3 + c] = values[i1, c] - first
+            out[f, 6 + c] = values[i2, c] - first
+    return out

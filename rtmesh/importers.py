@@ -269,10 +269,14 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
         if np.linalg.det(matrix[:3, :3]) < 0:
             faces = faces[:, ::-1]  # a mirroring transform flips the winding
         if normals is not None:
-            # normals transform with the inverse transpose of the linear part
+            # normals transform with the inverse transpose of the linear part; the identity
+            # leaves finite normals as they are (unless a -0.0 would turn +0.0), so a mesh
+            # placed as it is skips the product
             normal_matrix = np.linalg.inv(matrix[:3, :3]).T
-            with np.errstate(invalid="ignore"):
-                normals = normals @ normal_matrix.T
+            if not (np.array_equal(normal_matrix, np.eye(3))
+                    and build_kernels.finite_without_negative_zero(normals)):
+                with np.errstate(invalid="ignore"):
+                    normals = normals @ normal_matrix.T
         if material is None:
             key = id(getattr(visual, "material", visual))
             if key not in material_ids:

@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import build_kernels
 from .camera import Camera, frame_bounds
 from .errors import MeshError
 from .lights import DirectionalLight
@@ -151,26 +152,26 @@ class Scene:
                 raise MeshError(f"{source}: object '{part.name}' has face indices out of range")
             if part.material < 0 or part.material >= len(materials):
                 raise MeshError(f"{source}: object '{part.name}' uses unknown material {part.material}")
-            keep = np.isfinite(v).all(axis=1)[f].all(axis=1)
+            # one compiled pass each (see rtmesh.build_kernels): the finite-vertex test, and
+            # cross(v1 - v0, v2 - v0) over its length, rounded as NumPy rounds them
+            keep = build_kernels.finite_faces(v, f)
             if not keep.all():
                 log.warning("%s: object '%s': dropped %d faces with NaN/Inf vertices",
                             source, part.name, int((~keep).sum()))
-            f = f[keep]
-            tri = v[f]
-            cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-            area2 = np.linalg.norm(cross, axis=1)
+                f = f[keep]
+            face_normals, area2 = build_kernels.face_crosses(v, f)
             nondegenerate = area2 > 0.0
             if not nondegenerate.all():
                 log.warning("%s: object '%s': dropped %d zero-area faces",
                             source, part.name, int((~nondegenerate).sum()))
-            f, cross, area2 = f[nondegenerate], cross[nondegenerate], area2[nondegenerate]
+                f, face_normals = f[nondegenerate], face_normals[nondegenerate]
             if not len(f):
                 log.warning("%s: object '%s' has no renderable triangles; skipped", source, part.name)
                 continue
             # non-finite vertices that no face uses are harmless but must not reach Embree
             vertices.append(np.where(np.isfinite(v), v, 0.0))
             faces.append(f + offset)
-            normals.append(cross / area2[:, None])
+            normals.append(face_normals)
             vn, face_smooth = _unit_vertex_normals(part.vertex_normals, v, f)
             vnormals.append(vn)
             smooth.append(face_smooth)
@@ -266,11 +267,11 @@ def _unit_vertex_normals(vertex_normals, vertices, faces):
     """
     if vertex_normals is None:
         return np.zeros_like(vertices), np.zeros(len(faces), dtype=bool)
-    vn = np.asarray(vertex_normals, dtype=np.float64).reshape(-1, 3)
-    length = np.linalg.norm(vn, axis=1)
-    good = np.isfinite(length) & (length > 0.0)
-    vn = np.where(good[:, None], vn / np.where(good, length, 1.0)[:, None], 0.0)
-    return vn, good[faces].all(axis=1)
+    vn = np.ascontiguousarray(vertex_normals, dtype=np.float64).reshape(-1, 3)
+    if len(vn) < len(vertices) and len(faces) and faces.max() >= len(vn):
+        raise IndexError(f"{len(vn)} vertex normals for faces using {faces.max() + 1} vertices")
+    # vn / |vn| where the length is finite and positive, else 0, in one compiled pass
+    return build_kernels.unit_rows(vn, faces)
 
 
 def default_lights(camera):

@@ -8,7 +8,11 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from rtmesh import build_kernels
+from rtmesh.accel import corner_table
 from rtmesh.importers import _merge_keeps_everything, load_trimesh, parts_from_trimesh
+from rtmesh.integrator import Integrator
+from rtmesh.scene import MeshPart, Scene
+from rtmesh.settings import RenderSettings
 from rtmesh.smoothing import face_normals_and_corner_angles, smooth_vertex_normals
 from scenes import icosphere
 
@@ -224,3 +228,56 @@ def test_trimesh_processing_runs_only_where_it_changes_something(tmp_path):
     near = sphere.vertices.copy()
     near[1] = near[0] + 1e-12
     assert not _merge_keeps_everything(trimesh.Trimesh(near, sphere.faces, process=False))
+
+
+# ---------------------------------------------------------------- placing and flattening parts
+@pytest.mark.parametrize("name", ["noisy sphere", "degenerate", "random soup (non-manifold)"])
+def test_face_normals_finite_faces_and_unit_normals_match_numpy(name):
+    vertices, faces = MESHES[name]()
+    vertices = vertices.copy()
+    vertices[5] = np.nan
+    keep = np.isfinite(vertices).all(axis=1)[faces].all(axis=1)
+    assert_identical([build_kernels.finite_faces(vertices, faces)], [keep])
+    tri = vertices[faces]
+    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    area2 = np.linalg.norm(cross, axis=1)
+    normal, length = build_kernels.face_crosses(vertices, faces)
+    assert_identical([length], [area2])
+    good = area2 > 0.0
+    assert_identical([normal[good]], [cross[good] / area2[good][:, None]])
+    rng = np.random.default_rng(1)
+    vn = rng.normal(size=vertices.shape)
+    vn[3] = 0.0
+    vn[4, 1] = np.inf
+    vn[6] = -0.0
+    length = np.linalg.norm(vn, axis=1)
+    usable = np.isfinite(length) & (length > 0.0)
+    unit = np.where(usable[:, None], vn / np.where(usable, length, 1.0)[:, None], 0.0)
+    assert_identical(build_kernels.unit_rows(vn, faces), [unit, usable[faces].all(axis=1)])
+
+
+def test_finite_without_negative_zero():
+    assert build_kernels.finite_without_negative_zero(np.array([[0.0, 1.0, -2.0]]))
+    assert not build_kernels.finite_without_negative_zero(np.array([[0.0, -0.0, 1.0]]))
+    assert not build_kernels.finite_without_negative_zero(np.array([[np.nan, 0.0, 1.0]]))
+    rng = np.random.default_rng(2)
+    normals = rng.normal(size=(1000, 3))
+    normals[::7, 1] = 0.0
+    # what the importer relies on when it skips the identity: the product changes nothing
+    assert_identical([normals @ np.eye(3).T], [normals])
+
+
+# ---------------------------------------------------------------- integrator tables
+def test_face_tables_are_the_corner_tables_row_by_row():
+    vertices, faces, normals, _ = smooth_vertex_normals(*noisy_sphere())
+    parts = [MeshPart("ball", vertices, faces, vertex_normals=normals)]
+    scene = Scene.from_parts(parts)
+    integrator = Integrator(scene, RenderSettings(width=8, height=8, spp=1))
+    expected = np.empty((len(scene.faces), 12))
+    expected[:, :9] = integrator.accel.triangles
+    expected[:, 9:] = scene.face_normals
+    assert_identical([integrator._faces], [expected])
+    assert integrator._faces.flags.c_contiguous
+    expected = np.ascontiguousarray(corner_table(scene.vertex_normals, scene.faces))
+    assert_identical([integrator._vertex_normals], [expected])
+    assert integrator._vertex_normals.flags.c_contiguous
