@@ -267,22 +267,7 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, pixel, width,
         # each light: samples (rtmesh.kernels.light_samples) and the shadow packets
         for k in range(n_lights):
             light = lights[k]
-            for b in range(count):
-                # no branches, gathers or calls: LLVM vectorises this loop (as light_samples')
-                px, py, pz = srf[0, b], srf[1, b], srf[2, b]
-                gx, gy, gz = srf[3, b], srf[4, b], srf[5, b]
-                nx, ny, nz = srf[6, b], srf[7, b], srf[8, b]
-                wx, wy, wz, distance, er, eg, eb = _illuminate(light, px, py, pz)
-                lit[b] = _reaches(wx, wy, wz, er, eg, eb, gx, gy, gz)
-                cos_i[k, b] = _dot(nx, ny, nz, wx, wy, wz)
-                incident[k, 0, b], incident[k, 1, b], incident[k, 2, b] = er, eg, eb
-                cosine[k, b] = _highlight_cosine(nx, ny, nz, -d[0, b], -d[1, b], -d[2, b], wx, wy, wz)
-                # the shadow ray's direction in float32, as Embree will see it, also sets the offset
-                dx, dy, dz = np.float32(wx), np.float32(wy), np.float32(wz)
-                shadow_ray[0, b], shadow_ray[1, b], shadow_ray[2, b] = _offset(px, py, pz, gx, gy, gz, dx, dy, dz,
-                                                                               scale)
-                shadow_ray[3, b], shadow_ray[4, b], shadow_ray[5, b] = dx, dy, dz
-                shadow_ray[6, b] = np.float32(min(distance * shorten, _F32_MAX))
+            _light_block(light, srf, d, count, lit, cos_i[k], incident[k], cosine[k], shadow_ray, scale, shorten)
             for q in range(PACKETS):
                 for lane in range(LANES):
                     b = q * LANES + lane
@@ -345,6 +330,28 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, pixel, width,
     return radiance.T, shadow_rays, (rec_sample[:records], rec_mat[:records], rec_cos[:records],
                                      rec_incident[:records], rec_cosine[:records], rec_exponent[:records],
                                      rec_raised[:records])
+
+
+@kernel
+def _light_block(light, srf, d, count, lit, cos_i, incident, cosine, shadow_ray, scale, shorten):
+    """One light at the first ``count`` surface records of a block (the arithmetic of
+    :func:`rtmesh.kernels.light_samples`): whether it reaches them, ``ns . wi``, the
+    incident term, the highlight cosine and the shadow ray (offset origin, float32
+    direction, length).  No branches, gathers or calls: LLVM vectorises the loop."""
+    for b in range(count):
+        px, py, pz = srf[0, b], srf[1, b], srf[2, b]
+        gx, gy, gz = srf[3, b], srf[4, b], srf[5, b]
+        nx, ny, nz = srf[6, b], srf[7, b], srf[8, b]
+        wx, wy, wz, distance, er, eg, eb = _illuminate(light, px, py, pz)
+        lit[b] = _reaches(wx, wy, wz, er, eg, eb, gx, gy, gz)
+        cos_i[b] = _dot(nx, ny, nz, wx, wy, wz)
+        incident[0, b], incident[1, b], incident[2, b] = er, eg, eb
+        cosine[b] = _highlight_cosine(nx, ny, nz, -d[0, b], -d[1, b], -d[2, b], wx, wy, wz)
+        # the shadow ray's direction in float32, as Embree will see it, also sets the offset
+        dx, dy, dz = np.float32(wx), np.float32(wy), np.float32(wz)
+        shadow_ray[0, b], shadow_ray[1, b], shadow_ray[2, b] = _offset(px, py, pz, gx, gy, gz, dx, dy, dz, scale)
+        shadow_ray[3, b], shadow_ray[4, b], shadow_ray[5, b] = dx, dy, dz
+        shadow_ray[6, b] = np.float32(min(distance * shorten, _F32_MAX))
 
 
 @kernel
