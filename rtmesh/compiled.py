@@ -87,6 +87,26 @@ def kernel(function):
     return _with_package_cache(numba.njit(nogil=True, error_model="numpy")(function))
 
 
+def fix_signatures(dispatcher, signatures):
+    """Compile ``dispatcher`` for exactly these signatures (from the disk cache where it
+    holds them) and for no others.
+
+    A kernel called with arrays of several layouts (C, Fortran, strided, broadcast) or
+    dtypes is otherwise compiled once for each combination met, each costing a second or
+    more on the first run; with signatures of any-layout arrays, every call converts to one
+    of them instead.  Callers must pass arguments those signatures accept.
+
+    Parameters
+    ----------
+    dispatcher : numba dispatcher
+        A :func:`kernel`.
+    signatures : sequence of tuples of numba types
+    """
+    for signature in signatures:
+        dispatcher.compile(tuple(signature))
+    dispatcher.disable_compile()
+
+
 def cached(compiler):
     """Apply a numba decorator with ``cache=True``, or without it where no cache directory
     is writable (the ufunc builder's own cache, for :func:`numba.vectorize`: a ufunc calls

@@ -30,8 +30,9 @@ import os
 import threading
 
 import numpy as np
+from numba import types
 
-from .compiled import kernel
+from .compiled import fix_signatures, kernel
 
 log = logging.getLogger(__name__)
 
@@ -195,12 +196,55 @@ def packet_library():
             return _library
         _library_checked = True
         _library, reason = _open_verified()
+        if _library is not None:
+            _fix_query_signatures()
         if _library is None:
             log.info("tracing with embreex run(), one ray at a time: %s", reason)
         else:
             log.info("tracing with Embree %s 16-wide packets (%s)",
                      ".".join(map(str, _library.version)), _library.path)
         return _library
+
+
+def _fix_query_signatures():
+    """The query kernels take rays of either precision in any layout (see
+    :func:`canonical_rays`): one compiled version per precision."""
+    query = numba_typeof_query()
+    # read-only views: writable arrays convert to them, and read-only ones (a camera's
+    # repeated origin row) are accepted as they are
+    rows = types.Array(types.int64, 1, "A", readonly=True)
+    closest, any_hit = [], []
+    for float_type in (types.float64, types.float32):
+        vectors = types.Array(float_type, 2, "A", readonly=True)
+        lengths = types.Array(float_type, 1, "A", readonly=True)
+        closest.append((query, types.int64, vectors, vectors, types.int64))
+        any_hit.append((query, types.int64, vectors, vectors, lengths, rows, types.int64))
+    fix_signatures(intersect_rays, closest)
+    fix_signatures(occluded_rays, any_hit)
+
+
+def numba_typeof_query():
+    """numba's type of the ctypes prototype of the packet queries (the same for any
+    address)."""
+    import numba
+
+    return numba.typeof(_PACKET_QUERY(0))
+
+
+def canonical_rays(*arrays):
+    """Ray arrays in one precision for the query kernels: float32 if any is float32
+    (converting a float64 one rounds to nearest, as the kernels would), else float64.
+
+    Parameters
+    ----------
+    *arrays : float arrays
+
+    Returns
+    -------
+    tuple of arrays
+    """
+    wanted = np.float32 if any(a.dtype == np.float32 for a in arrays) else np.float64
+    return tuple(a if a.dtype == wanted else a.astype(wanted) for a in arrays)
 
 
 def _open_verified():
@@ -239,8 +283,8 @@ def _probe(library):
     TriangleMesh(reference, vertices, faces)
     expected = reference.run(origins, directions.astype(np.float32), output=1)
     with SharedScene(library, vertices, faces) as scene:
-        # the packet is traced in a buffer with guard words after it: Embree must not touch them
-        t, prim, u, v, guard_intact = _probe_packets(library.intersect16, scene.handle, origins, directions)
+        t, prim, u, v, guard_intact = _probe_packets(library, scene.handle, origins,
+                                                     directions.astype(np.float32))
     if not guard_intact:
         return "Embree wrote past the 16-wide packet: its layout differs from the one rtmesh expects"
     hit = expected["primID"] >= 0
@@ -250,6 +294,55 @@ def _probe(library):
             and np.array_equal(u[hit], expected["u"][hit]) and np.array_equal(v[hit], expected["v"][hit])):
         return "packet and single-ray hits differ on the probe scene"
     return None
+
+
+def _probe_packets(library, scene, origins, directions):
+    """Trace float32 rays 16 at a time through ctypes calls (no compiled code: the probe
+    runs before the kernels are trusted), each packet followed by 64 guard words.
+
+    Returns
+    -------
+    t, u, v : (n,) float32
+    prim : (n,) int32
+        -1 for misses.
+    guard_intact : bool
+        Embree left every guard word alone.
+    """
+    n = len(origins)
+    t, u, v = (np.empty(n, np.float32) for _ in range(3))
+    prim = np.empty(n, np.int32)
+    words = RAYHIT_WORDS * LANES
+    guard = np.int32(0x5EED5EED)
+    raw = np.zeros(words + 64 + _ALIGN_WORDS, np.float32)
+    skip = ((-raw.ctypes.data) % 64) // 4
+    buffer = raw[skip:skip + words + 64]
+    ints = buffer.view(np.int32)
+    packet = buffer[:words].reshape(RAYHIT_WORDS, LANES)
+    fields = packet.view(np.int32)
+    raw_valid = np.zeros(LANES + _ALIGN_WORDS, np.int32)
+    valid = raw_valid[((-raw_valid.ctypes.data) % 64) // 4:][:LANES]
+    raw_args = np.zeros(8 + _ALIGN_WORDS, np.int32)
+    args = raw_args[((-raw_args.ctypes.data) % 64) // 4:][:8]
+    args[0], args[1] = RTC_RAY_QUERY_FLAG_COHERENT, _RTC_FEATURE_FLAG_ALL
+    intact = True
+    for start in range(0, n, LANES):
+        count = min(LANES, n - start)
+        rows = slice(start, start + count)
+        ints[words:] = guard
+        packet[:] = 0.0
+        packet[ORG:ORG + 3, :count] = origins[rows].T
+        packet[DIR:DIR + 3, :count] = directions[rows].T
+        packet[TFAR, :count] = DEFAULT_TFAR
+        fields[MASK] = -1
+        fields[GEOM_ID:INST_PRIM_ID + 1] = _INVALID_ID
+        valid[:] = 0
+        valid[:count] = -1
+        library.intersect16(valid.ctypes.data, scene, buffer.ctypes.data, args.ctypes.data)
+        intact = intact and bool((ints[words:] == guard).all())
+        hit = fields[GEOM_ID, :count] != _INVALID_ID
+        prim[rows] = np.where(hit, fields[PRIM_ID, :count], -1)
+        t[rows], u[rows], v[rows] = packet[TFAR, :count], packet[U, :count], packet[V, :count]
+    return t, prim, u, v, intact
 
 
 class SharedScene:
@@ -464,36 +557,3 @@ def occluded_rays(occluded16, scene, origins, directions, t_max, rows, flags):
             # Embree marks an occluded ray by setting its tfar to -inf
             blocked[start + lane] = ray[TFAR * LANES + lane] == -np.inf
     return blocked
-
-
-@kernel
-def _probe_packets(intersect16, scene, origins, directions):
-    """:func:`intersect_rays` in float32, with 64 guard words after the packet."""
-    n = origins.shape[0]
-    t = np.empty(n, np.float32)
-    prim = np.empty(n, np.int32)
-    u = np.empty(n, np.float32)
-    v = np.empty(n, np.float32)
-    guarded = aligned_words(RAYHIT_WORDS * LANES + 64, np.float32)
-    guard_words = guarded.view(np.int32)
-    ray = guarded[:RAYHIT_WORDS * LANES]
-    words = ray.view(np.int32)
-    valid = aligned_words(LANES, np.int32)
-    args = query_arguments(RTC_RAY_QUERY_FLAG_COHERENT)
-    guard = 0x5EED5EED
-    intact = True
-    for start in range(0, n, LANES):
-        count = min(LANES, n - start)
-        for w in range(RAYHIT_WORDS * LANES, RAYHIT_WORDS * LANES + 64):
-            guard_words[w] = guard
-        _intersect_packet(intersect16, scene, ray, words, valid, args, origins, directions, start, count)
-        for w in range(RAYHIT_WORDS * LANES, RAYHIT_WORDS * LANES + 64):
-            intact = intact and guard_words[w] == guard
-        for lane in range(count):
-            i = start + lane
-            hit = words[GEOM_ID * LANES + lane] != _INVALID_ID
-            prim[i] = words[PRIM_ID * LANES + lane] if hit else -1
-            t[i] = ray[TFAR * LANES + lane]
-            u[i] = ray[U * LANES + lane]
-            v[i] = ray[V * LANES + lane]
-    return t, prim, u, v, intact
