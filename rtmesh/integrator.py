@@ -23,9 +23,7 @@ own their process.
 
 import dataclasses
 import logging
-import threading
 import time
-from concurrent.futures import wait
 from dataclasses import dataclass
 
 import numpy as np
@@ -42,6 +40,7 @@ from .film import Film
 from .glossy import sample_glossy_directions
 from .media import Media
 from .motion import MotionAccel, blurs, object_motions, scene_at_time, swept_bounds
+from .scheduler import pixel_chunks, run_on_threads
 from .sampling import (Dim, decorrelated_points, pixel_offsets, square_to_cosine_hemisphere,
                        stratified_values)
 from .settings import RenderStats
@@ -59,21 +58,6 @@ log = logging.getLogger(__name__)
 # an empty (0, 3) array stands for "none" in the kernels' optional vector arguments
 _NO_VECTORS = np.zeros((0, 3))
 _UNIT_THROUGHPUT = np.ones(3)
-# Smallest chunk (pixel samples) of a multi-threaded render, unless the settings' chunk
-# size is smaller.  Every chunk costs Python between its kernel calls, and on several
-# threads also waits for the GIL at those points: at 512x512 on 2 threads a chunk cost
-# ~0.6 ms of thread time more than on one thread (a schedule with tail chunks down to 2048
-# samples, 18 chunks, kept the threads 7 ms busier than 8 chunks of 32768).  Interleaved
-# runs of schedules on that frame: guided down to 2048, 4096, 8192 and 16384 samples gave
-# 1.82, 1.86, 1.91 and 1.93x over one thread, fixed 32768-sample chunks 1.91x (one run of
-# 25; in a slower phase of the machine 1.64-1.69x for all but the first).
-_MIN_CHUNK_SAMPLES = 8192
-# Chunks of a multi-threaded render shrink towards the end ("guided" scheduling): each
-# takes 1 / (_GUIDE * threads) of the samples left.  Chunks differ in cost (rows of sky
-# against rows of geometry) and a thread that draws the last long chunk works on alone;
-# small last chunks let the threads finish together, large first ones keep the number of
-# chunks (and their Python cost) low.  See _chunk_starts.
-_GUIDE = 2
 
 
 @dataclass
@@ -114,114 +98,6 @@ class _Surfaces:
     """
 
     __slots__ = ("p", "ng", "ns", "d", "front", "mat", "prim", "sample", "time", "tints")
-
-
-def _chunk_starts(total, chunk_samples, threads):
-    """Where the chunks of a batch of ``total`` pixel samples start, in samples.
-
-    One thread takes chunks of ``chunk_samples``.  Several threads take chunks of
-    ``1 / (_GUIDE * threads)`` of the samples left, between ``_MIN_CHUNK_SAMPLES`` and
-    ``chunk_samples``, so the last chunks are small and the threads end close together.
-    The image does not depend on the chunks.
-
-    Parameters
-    ----------
-    total : int
-    chunk_samples : int
-        Largest chunk (it bounds the memory of a chunk).
-    threads : int
-
-    Returns
-    -------
-    (k,) int64
-        Ascending sample positions, the first 0 (none for ``total == 0``).
-    """
-    if threads == 1:
-        return np.arange(0, total, chunk_samples, dtype=np.int64)
-    starts, position = [], 0
-    while position < total:
-        starts.append(position)
-        guided = -(-(total - position) // (_GUIDE * threads))
-        position += min(chunk_samples, max(_MIN_CHUNK_SAMPLES, guided))
-    return np.array(starts, dtype=np.int64)
-
-
-def _pixel_chunks(spp, n_pixels, chunk_samples, threads):
-    """Cut a run of pixels into chunks at :func:`_chunk_starts`, never splitting a pixel.
-
-    A chunk starts at the first pixel whose samples begin at or after its cut, so a chunk
-    holds at most ``chunk_samples + max(spp) - 1`` samples.
-
-    Parameters
-    ----------
-    spp : int or (n_pixels,) int array
-        Samples of every pixel, or of each.
-    n_pixels : int
-    chunk_samples, threads : int
-        See :func:`_chunk_starts`.
-
-    Returns
-    -------
-    list of (int, int)
-        ``(start, stop)`` pixel ranges covering ``0 .. n_pixels`` in order.
-    """
-    if np.ndim(spp) == 0:
-        cuts = _chunk_starts(n_pixels * spp, chunk_samples, threads)
-        starts = np.unique(-(-cuts // spp))
-    else:
-        before = np.cumsum(spp) - spp  # samples ahead of each pixel
-        total = int(before[-1] + spp[-1]) if n_pixels else 0
-        starts = np.unique(np.searchsorted(before, _chunk_starts(total, chunk_samples, threads)))
-    starts = starts[starts < n_pixels]  # a cut inside the last pixel starts no chunk
-    return list(zip(starts.tolist(), starts[1:].tolist() + [n_pixels]))
-
-
-def _run_on_threads(work, bounds, threads, pool, stats, progress=None):
-    """Run ``work(a, b)`` for every ``(a, b)`` of ``bounds`` on the calling thread and
-    ``threads - 1`` workers of ``pool``, adding the returned :class:`RenderStats` into
-    ``stats``.
-
-    Each thread takes the next chunk itself as soon as it is done with one and sums its own
-    statistics, so no thread wakes up for another's chunks.  The calling thread renders
-    too: it is running already, where a pool worker waits to be woken (on a virtual
-    machine an idle CPU can take long to wake), and it reports progress between its
-    chunks.  When a chunk fails or the caller is interrupted (Ctrl-C), the other threads
-    stop after their current chunk and the exception is raised.
-    """
-    lock = threading.Lock()
-    state = {"next": 0, "done": 0, "shown": 0, "stop": False}
-
-    def worker(report=None):
-        own = RenderStats()
-        while True:
-            with lock:
-                i = state["next"]
-                if state["stop"] or i == len(bounds):
-                    return own
-                state["next"] = i + 1
-            try:
-                own.merge(work(*bounds[i]))
-            except BaseException:
-                state["stop"] = True
-                raise
-            with lock:
-                state["done"] += 1
-                done = state["done"]
-            if report is not None:
-                report(done, len(bounds))
-                state["shown"] = done
-
-    futures = [pool.submit(worker) for _ in range(threads - 1)]
-    try:
-        stats.merge(worker(progress))
-        for future in futures:
-            stats.merge(future.result())
-    except BaseException:
-        state["stop"] = True
-        wait(futures)
-        raise
-    if progress is not None and state["shown"] < len(bounds):
-        progress(len(bounds), len(bounds))  # the last chunks were the other threads'
 
 
 def _translated(obj, shift):
@@ -476,7 +352,7 @@ class Integrator:
             round's first), or one per pixel (a later adaptive round, where pixels at
             different counts each double theirs).  Either way the round is one batch,
             cut into chunks of at most about ``chunk_samples`` samples (smaller towards
-            the end on several threads, see :func:`_chunk_starts`); a chunk never splits a
+            the end on several threads, see :func:`rtmesh.scheduler.chunk_starts`); a chunk never splits a
             pixel's samples, so each pixel's sum is formed in sample order whatever the
             chunking and thread count.
         stats : RenderStats
@@ -497,7 +373,7 @@ class Integrator:
             pixels = np.asarray(pixels, dtype=np.int64)
             counts = np.broadcast_to(np.asarray(spp, dtype=np.int64), pixels.shape)
             first = np.broadcast_to(np.asarray(first_sample, dtype=np.int64), pixels.shape)
-        bounds = _pixel_chunks(spp if uniform else counts, len(pixels), s.chunk_samples, s.thread_count)
+        bounds = pixel_chunks(spp if uniform else counts, len(pixels), s.chunk_samples, s.thread_count)
         n_chunks = len(bounds)
 
         def render_and_add(a, b):
@@ -528,7 +404,7 @@ class Integrator:
                     progress(i + 1, n_chunks)
             return
         with runtime.render_pool(s.thread_count, pool) as workers:
-            _run_on_threads(render_and_add, bounds, s.thread_count, workers, stats, progress)
+            run_on_threads(render_and_add, bounds, s.thread_count, workers, stats, progress)
 
     # ---------------------------------------------------------------- one chunk
     def render_chunk(self, pixels, first_sample, spp):

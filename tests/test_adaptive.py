@@ -122,9 +122,9 @@ def test_film_adds_ragged_samples_like_tiles_pixel_by_pixel():
 @pytest.mark.parametrize("counts, chunk", [([4, 8, 16, 4, 4, 64, 1], 10), ([3] * 10, 6), ([5], 100),
                                            ([2, 2, 2], 1)])
 def test_pixel_chunks_cover_the_pixels_without_splitting_one(counts, chunk):
-    from rtmesh.integrator import _pixel_chunks
+    from rtmesh.scheduler import pixel_chunks
     counts = np.array(counts)
-    spans = _pixel_chunks(counts, len(counts), chunk, threads=1)
+    spans = pixel_chunks(counts, len(counts), chunk, threads=1)
     assert spans[0][0] == 0 and spans[-1][1] == len(counts)
     assert all(a < b and b == c for (a, b), (c, _) in zip(spans, spans[1:]))
     # each chunk starts at the first pixel whose samples begin past a multiple of chunk
@@ -136,18 +136,18 @@ def test_pixel_chunks_cover_the_pixels_without_splitting_one(counts, chunk):
 @pytest.mark.parametrize("spp", [1, 3])
 def test_chunks_on_several_threads_shrink_towards_the_end(spp):
     # guided chunks: 1 / (2 x threads) of what is left, between the minimum and the cap
-    from rtmesh.integrator import _MIN_CHUNK_SAMPLES, _pixel_chunks
+    from rtmesh.scheduler import MIN_CHUNK_SAMPLES, pixel_chunks
     n, cap = 512 * 512, 32768
-    spans = _pixel_chunks(spp, n, cap, threads=2)
+    spans = pixel_chunks(spp, n, cap, threads=2)
     sizes = np.array([(b - a) * spp for a, b in spans])
     assert spans[0][0] == 0 and spans[-1][1] == n
     assert all(b == c for (_, b), (c, _) in zip(spans, spans[1:]))
     assert sizes.max() <= cap + spp and sizes[0] >= cap
     assert np.all(np.diff(sizes[:-1]) <= spp)  # never growing (up to a pixel's rounding)
-    assert sizes[-2] <= _MIN_CHUNK_SAMPLES + spp and sizes[-1] <= _MIN_CHUNK_SAMPLES + spp
+    assert sizes[-2] <= MIN_CHUNK_SAMPLES + spp and sizes[-1] <= MIN_CHUNK_SAMPLES + spp
     assert sizes[-2] < sizes[0] / 2
     # the same cuts for per-pixel counts as for one count for all
-    assert _pixel_chunks(np.full(n, spp), n, cap, threads=2) == spans
+    assert pixel_chunks(np.full(n, spp), n, cap, threads=2) == spans
     assert len(spans) <= n * spp // cap + 16  # the shrinking tail is short (geometric)
 
 
