@@ -65,23 +65,23 @@ class DirectStage:
                                 -2.0 * tan_half / s.height, tan_half])
         self._camera = (s.width, image_plane, np.ascontiguousarray(camera.position, dtype=np.float64),
                         forward, right, up)
-        st = it.stages
+        st = it.plan
         self._surfaces = (it._faces, it._vertex_normals, it._smooth, it._material_id,
-                          st["smooth_normals"] and not st["normal_maps"])
+                          st.smooth_normals and not st.normal_maps)
         # emission + ambient per material, as the general path adds them per hit
         base = np.zeros((len(m.diffuse), 3))
-        if st["emission"]:
+        if st.emission:
             base = np.ascontiguousarray(m.emission, dtype=np.float64)
-        if st["ambient"]:
+        if st.ambient:
             ambient = np.ascontiguousarray(it._ambient_light)
-            base = ambient if not st["emission"] else base + ambient
+            base = ambient if not st.emission else base + ambient
         self._base = np.ascontiguousarray(base)
-        lights = it._light_parameters if st["lights"] else []
+        lights = it._light_parameters if st.lights else []
         self._lights = np.array(lights, dtype=np.float64).reshape(len(lights), 12)
         self._materials = (np.ascontiguousarray(it._shaded), np.ascontiguousarray(it._diffuse),
                            np.ascontiguousarray(it._specular), it._highlight_exponent, it._highlight_from)
         background = it.background
-        self._background = (np.ascontiguousarray(background.colour) if st["background"] else np.zeros(3))
+        self._background = (np.ascontiguousarray(background.colour) if st.background else np.zeros(3))
         self._offset_scale = it._offset_scale32
 
     @classmethod
@@ -98,16 +98,16 @@ class DirectStage:
         DirectStage or None
         """
         it = integrator
-        st = it.stages
+        st = it.plan
         needs_general = ("area_lights", "area_light_visibility", "textures", "normal_maps", "cutouts",
                          "unlit", "reflection", "glossy", "refraction", "absorption", "passes", "ao", "lens",
                          "motion")
-        if any(st[name] for name in needs_general):
+        if any(getattr(st, name) for name in needs_general):
             return None
         if type(it.accel) is not Accel or not it.accel.packets or it.media is not None:
             return None
         background = it.background
-        if st["background"] and not (isinstance(background, SolidBackground) and not background.transparent):
+        if st.background and not (isinstance(background, SolidBackground) and not background.transparent):
             return None
         return cls(integrator)
 

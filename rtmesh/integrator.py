@@ -15,7 +15,7 @@ function of (seed, pixel, sample, dimension), and each pixel is rendered whole i
 chunk, so the image is bit-identical whatever the thread count and chunk size.
 
 Before rendering, :class:`Integrator` looks at the scene and the settings and enables only
-the stages that can contribute (see :attr:`Integrator.stages`).  Building and running it
+the stages that can contribute (see :attr:`Integrator.plan`).  Building and running it
 changes no process-wide state: the tuning for rendering processes (allocator, GIL switch
 interval, kept thread pools) is :mod:`rtmesh.runtime`'s, turned on by the programs that
 own their process.
@@ -40,6 +40,7 @@ from .film import Film
 from .glossy import sample_glossy_directions
 from .media import Media
 from .motion import MotionAccel, blurs, object_motions, scene_at_time, swept_bounds
+from .render_plan import RenderPlan
 from .scheduler import pixel_chunks, run_on_threads
 from .sampling import (Dim, decorrelated_points, pixel_offsets, square_to_cosine_hemisphere,
                        stratified_values)
@@ -119,7 +120,7 @@ class Integrator:
 
     Attributes
     ----------
-    stages : dict of str to bool
+    plan : RenderPlan
         Which optional stages this scene and these settings need.
     """
 
@@ -189,28 +190,28 @@ class Integrator:
                                    self.camera, self.shift)
         # the AO pass alone asks for 16 rays per camera hit unless ao_samples says otherwise
         self.ao_samples = settings.ao_samples or (16 if "ao" in settings.passes else 0)
-        self.stages = {
-            "emission": m.any_emission,
-            "ambient": ambient_on,
-            "lights": bool(self.lights) and shaded_any,
-            "area_lights": self.area_lighting is not None and shaded_any,
-            "area_light_visibility": self.area_lighting is not None and bool(self.area_lighting.visible),
-            "specular": m.any_specular,
-            "smooth_normals": scene.vertex_normals is not None,
-            "textures": bool(self.textures),
-            "normal_maps": self.textures.tangents is not None,
-            "cutouts": self.cutouts is not None,
-            "unlit": m.any_unlit,
-            "reflection": settings.max_depth > 0 and (m.any_mirror or m.any_transmission),
-            "glossy": settings.max_depth > 0 and m.any_glossy,
-            "refraction": settings.max_depth > 0 and m.any_transmission,
-            "absorption": m.any_absorption,
-            "background": not self.background.is_black,
-            "passes": bool(self.passes),
-            "ao": self.ao_samples > 0 and (ambient_on or "ao" in settings.passes),
-            "lens": self.camera.aperture > 0.0,
-            "motion": self.motion is not None,
-        }
+        self.plan = RenderPlan(
+            emission=m.any_emission,
+            ambient=ambient_on,
+            lights=bool(self.lights) and shaded_any,
+            area_lights=self.area_lighting is not None and shaded_any,
+            area_light_visibility=self.area_lighting is not None and bool(self.area_lighting.visible),
+            specular=m.any_specular,
+            smooth_normals=scene.vertex_normals is not None,
+            textures=bool(self.textures),
+            normal_maps=self.textures.tangents is not None,
+            cutouts=self.cutouts is not None,
+            unlit=m.any_unlit,
+            reflection=settings.max_depth > 0 and (m.any_mirror or m.any_transmission),
+            glossy=settings.max_depth > 0 and m.any_glossy,
+            refraction=settings.max_depth > 0 and m.any_transmission,
+            absorption=m.any_absorption,
+            background=not self.background.is_black,
+            passes=bool(self.passes),
+            ao=self.ao_samples > 0 and (ambient_on or "ao" in settings.passes),
+            lens=self.camera.aperture > 0.0,
+            motion=self.motion is not None,
+        )
         # per-material flags, looked up per hit
         self._reflective = (m.mirror > 0).any(axis=1) | (m.transmission > 0).any(axis=1)
         self._transmissive = (m.transmission > 0).any(axis=1)
@@ -237,7 +238,7 @@ class Integrator:
         self._material_id = scene.material_id.astype(np.intp)
         # scenes that need only direct light take one compiled stage per chunk
         self.direct_stage = DirectStage.plan(self)
-        self.stages["fused_direct"] = self.direct_stage is not None
+        self.plan = dataclasses.replace(self.plan, fused_direct=self.direct_stage is not None)
 
     def _init_media(self, scene):
         """Medium stacks (see :mod:`rtmesh.media`), only for scenes that refract.
@@ -289,7 +290,7 @@ class Integrator:
         # compiled passes writing the rows directly (filling the columns of a row-major
         # table from component-major ones took NumPy ~0.5 s on a million faces)
         faces = face_rows(self.accel.triangles, sc.face_normals)
-        if not self.stages["smooth_normals"]:
+        if not self.plan.smooth_normals:
             return faces, np.zeros((0, 9))
         return faces, corner_rows(sc.vertex_normals, sc.faces)
 
@@ -320,7 +321,7 @@ class Integrator:
         # without later rounds every pixel is added once, and its image value with it
         film = Film(s.width, s.height, self.passes.film_passes(), zeroed=False, one_pass=not s.adaptive)
         stats = RenderStats(threads=s.thread_count, pixels=s.width * s.height)
-        stats.stages_enabled = [name for name, on in self.stages.items() if on]
+        stats.stages_enabled = self.plan.enabled()
         # threads of its own and the caller's switch interval, unless the process is tuned
         # for rendering (rtmesh.runtime): then its kept pool and a short interval
         with runtime.render_pool(s.thread_count, pool) as workers, runtime.gil_handoff(s.thread_count):
@@ -466,11 +467,11 @@ class Integrator:
             clock.lap("direct")
             return (radiance, None, stats) if ragged else (radiance.reshape(m, spp, 3), None, stats)
         lens_uv = None
-        if self.stages["lens"]:
+        if self.plan.lens:
             lens_uv = decorrelated_points(s.sampler, s.seed, pixel, sample_in_pixel, s.spp,
                                           Dim.LENS)
         sample_time = None
-        if self.stages["motion"]:
+        if self.plan.motion:
             # one time per camera sample, stratified per pixel; its rays all inherit it
             t_open, t_close = self.camera.shutter
             u = stratified_values(s.sampler, s.seed, pixel, sample_in_pixel, s.spp, Dim.TIME)
@@ -517,14 +518,14 @@ class Integrator:
 
         # area lights seen directly: rays meeting one before any surface end there
         on_light = None
-        if self.stages["area_light_visibility"]:
+        if self.plan.area_light_visibility:
             on_light = self.area_lighting.intersect(rays.origins, rays.directions, hits)
         hit = hits.prim >= 0
 
         # absorption: rays inside an absorbing medium lose light over the distance they
         # travelled.  Only those rows are written: the others would be multiplied by 1.0
         # (no change), and camera rays in a clear medium share the read-only unit row.
-        if self.stages["absorption"]:
+        if self.plan.absorption:
             medium = rays.medium[:, 0]
             # -1 (outside every medium) maps to the last entry, which is False
             absorbing = np.flatnonzero(self._absorbing_medium[medium])
@@ -543,7 +544,7 @@ class Integrator:
 
         # misses: rays leaving the scene see the background
         n_hit = int(np.count_nonzero(hit))
-        if self.stages["background"] and n_hit < len(hit):
+        if self.plan.background and n_hit < len(hit):
             miss = np.flatnonzero(hits.prim == -1)  # -2: ended on an area light
             seen = self.background.radiance(take_rows(rays.directions, miss))
             _scatter_add(radiance, rays.sample[miss], take_rows(rays.throughput, miss) * seen,
@@ -555,7 +556,7 @@ class Integrator:
         rows = None if n_hit == len(hit) else np.flatnonzero(hit)
         srf = self._surfaces(rays, hits, rows, sample_time)
         clock.lap("shade")
-        if primary and self.stages["passes"]:
+        if primary and self.plan.passes:
             self.passes.record(aov, srf, hits, rows)
             clock.lap("passes")
 
@@ -567,7 +568,7 @@ class Integrator:
                          unique=primary)
         clock.lap("shade")
 
-        if depth >= self.settings.max_depth or not self.stages["reflection"]:
+        if depth >= self.settings.max_depth or not self.plan.reflection:
             return RayBatch.empty()
         next_rays = self._spawn(srf, rays.subset(rows), depth, keys, stats)
         clock.lap("spawn")
@@ -588,15 +589,15 @@ class Integrator:
         view = _NO_VECTORS
         if srf.time is not None:
             view = self.motion.directions_to_rest(srf.prim.astype(np.intp), srf.time, srf.d)
-        normal_maps = self.stages["normal_maps"]
+        normal_maps = self.plan.normal_maps
         # the shading-normal terminator fix (see face_viewer) runs in the kernel unless
         # normal maps, applied below, change the normals after it
         srf.p, srf.ng, srf.ns, srf.front, srf.mat = surface_records(
             hits.prim, hits.u, hits.v, np.arange(len(hits)) if rows is None else rows, rays.directions,
             view, self._faces, self._vertex_normals, self._smooth, self._material_id,
-            self.stages["smooth_normals"] and not normal_maps)
+            self.plan.smooth_normals and not normal_maps)
         srf.tints = None
-        if self.stages["textures"]:
+        if self.plan.textures:
             u, v = take_rows(hits.u, rows), take_rows(hits.v, rows)
             srf.tints = self.textures.tints(srf.prim, u, v, srf.mat)
             if normal_maps:
@@ -611,14 +612,14 @@ class Integrator:
 
     def _local_shading(self, srf, depth, ao_pass, keys, stats, clock):
         """Emission, ambient (with AO) and direct light with shadows; (k, 3) or None."""
-        st = self.stages
+        st = self.plan
         local = None
-        if st["emission"]:
+        if st.emission:
             local = take_rows(self._emission, srf.mat)
             if srf.tints is not None and srf.tints.emission is not None:
                 local = local * srf.tints.emission
         tint = None if srf.tints is None else srf.tints.diffuse
-        if st["unlit"]:
+        if st.unlit:
             # unlit materials show their (textured) colour as is
             unlit = self.scene.materials.unlit.take(srf.mat)
             if unlit.any():
@@ -627,12 +628,12 @@ class Integrator:
                 local = shown if local is None else local + shown
 
         ao = None
-        if st["ao"] and (st["ambient"] or (depth == 0 and ao_pass is not None)):
+        if st.ao and (st.ambient or (depth == 0 and ao_pass is not None)):
             ao = self._ambient_occlusion(srf, depth, keys, stats)
             if depth == 0 and ao_pass is not None:
                 ao_pass[srf.sample, 0] = ao
             clock.lap("ao")
-        if st["ambient"]:
+        if st.ambient:
             amb = take_rows(self._ambient_light, srf.mat)
             if tint is not None:
                 amb = amb * tint
@@ -640,7 +641,7 @@ class Integrator:
                 amb = amb * ao[:, None]
             local = amb if local is None else local + amb
 
-        if st["lights"] or st["area_lights"]:
+        if st.lights or st.area_lights:
             direct = self._direct_light(srf, depth, keys, stats, clock)
             if direct is not None:
                 local = direct if local is None else local + direct
@@ -681,7 +682,7 @@ class Integrator:
                 total = np.zeros((len(srf.mat), 3), order="F")
             power = np.power(highlight, power_exponent, out=highlight)  # NumPy's pow is vectorised
             add_light(total, target, lit, occluded, cos_i, incident, highlight_rows, power, *materials[:5])
-        if self.stages["area_lights"]:
+        if self.plan.area_lights:
 
             def reflectance(wi, lit):
                 """Blinn-Phong factor toward unit directions ``wi``; highlights only where ``lit``."""
@@ -739,7 +740,7 @@ class Integrator:
         batches = []
 
         refract_batch = None
-        if self.stages["refraction"]:
+        if self.plan.refraction:
             trans = self._transmissive[mat]
             j = np.flatnonzero(trans)
             if len(j):
@@ -779,7 +780,7 @@ class Integrator:
             below = dot(wr, ng[keep]) <= 0.0
             if below.any():
                 wr[below] = reflect(wo[keep][below], ng[keep][below])
-            if self.stages["glossy"]:
+            if self.plan.glossy:
                 wr = self._glossy(wr, ng[keep], mat[keep], srf.sample[idx[keep]], depth, keys)
             batches.append(RayBatch(
                 offset_ray_origins(srf.p[idx[keep]], ng[keep], scale=self.offset_scale, directions=wr),

@@ -83,7 +83,7 @@ def test_thread_count_does_not_change_the_image():
 
 def test_scenes_needing_more_take_the_general_path():
     scene = lit_scene()
-    assert Integrator(scene, settings()).stages["fused_direct"]
+    assert Integrator(scene, settings()).plan.fused_direct
     assert Integrator(scene, settings(passes=("depth",))).direct_stage is None
     # ambient occlusion only where there is ambient light to occlude
     assert Integrator(scene, settings(ao_samples=2)).direct_stage is not None

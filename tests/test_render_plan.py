@@ -1,0 +1,26 @@
+"""The render plan is a frozen record of the stages a render needs."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from rtmesh.integrator import Integrator
+from rtmesh.render_plan import RenderPlan
+
+from scenes import settings, sphere_on_floor_scene
+
+
+def test_plan_is_frozen_and_lists_what_runs():
+    plan = RenderPlan(lights=1, background=np.bool_(True))
+    assert plan.enabled() == ["lights", "background"]
+    assert plan.lights is True
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        plan.lights = False
+
+
+def test_a_render_reports_its_plan():
+    integrator = Integrator(sphere_on_floor_scene(smooth=True), settings(width=8, height=8))
+    assert integrator.plan.smooth_normals and integrator.plan.lights and not integrator.plan.reflection
+    result = integrator.render()
+    assert result.stats.stages_enabled == integrator.plan.enabled()
