@@ -374,7 +374,7 @@ class Integrator:
             pixels = np.asarray(pixels, dtype=np.int64)
             counts = np.broadcast_to(np.asarray(spp, dtype=np.int64), pixels.shape)
             first = np.broadcast_to(np.asarray(first_sample, dtype=np.int64), pixels.shape)
-        bounds = pixel_chunks(spp if uniform else counts, len(pixels), s.chunk_samples, s.thread_count)
+        bounds = pixel_chunks(spp if uniform else counts, len(pixels), s.chunk_samples)
         n_chunks = len(bounds)
 
         def render_and_add(a, b):

@@ -1,9 +1,13 @@
 """The scheduler: cutting a round of pixel samples into chunks and running them on threads.
 
 A chunk is a run of whole pixels (never a pixel split between chunks), so each pixel's
-sum is formed by one thread in sample order and the image does not depend on the chunks
-or the thread count.  The threads pull their next chunk themselves; the calling thread
-renders chunks too and reports progress between them.
+sum is formed by one thread in sample order.  The chunks do not depend on the thread
+count either: Embree's packet traversal reports, of two triangles hit at exactly the same
+distance (coplanar overlapping faces), the one its traversal of the whole packet meets
+first, so such a ray's hit can depend on the other rays traced with it, which come from
+its chunk.  With the same chunks for every thread count, the same rays share packets and
+the image is bit-identical for any thread count.  The threads pull their next chunk
+themselves; the calling thread renders chunks too and reports progress between them.
 """
 
 import threading
@@ -22,45 +26,43 @@ from .settings import RenderStats
 # 1.82, 1.86, 1.91 and 1.93x over one thread, fixed 32768-sample chunks 1.91x (one run of
 # 25; in a slower phase of the machine 1.64-1.69x for all but the first).
 MIN_CHUNK_SAMPLES = 8192
-# Chunks of a multi-threaded render shrink towards the end ("guided" scheduling): each
-# takes 1 / (GUIDE * threads) of the samples left.  Chunks differ in cost (rows of sky
-# against rows of geometry) and a thread that draws the last long chunk works on alone;
-# small last chunks let the threads finish together, large first ones keep the number of
-# chunks (and their Python cost) low.  See chunk_starts.
+# Chunks shrink towards the end ("guided" scheduling): each takes 1 / (GUIDE *
+# SCHEDULE_THREADS) of the samples left.  Chunks differ in cost (rows of sky against rows
+# of geometry) and a thread that draws the last long chunk works on alone; small last
+# chunks let the threads finish together, large first ones keep the number of chunks (and
+# their Python cost) low.  The schedule is the one measured best for two threads, whatever
+# the thread count (see the module docstring for why it may not depend on it).
 GUIDE = 2
+SCHEDULE_THREADS = 2
 
 
-def chunk_starts(total, chunk_samples, threads):
+def chunk_starts(total, chunk_samples):
     """Where the chunks of a batch of ``total`` pixel samples start, in samples.
 
-    One thread takes chunks of ``chunk_samples``.  Several threads take chunks of
-    ``1 / (GUIDE * threads)`` of the samples left, between ``MIN_CHUNK_SAMPLES`` and
-    ``chunk_samples``, so the last chunks are small and the threads end close together.
-    The image does not depend on the chunks.
+    Each chunk takes ``1 / (GUIDE * SCHEDULE_THREADS)`` of the samples left, between
+    ``MIN_CHUNK_SAMPLES`` and ``chunk_samples``, so the last chunks are small and the
+    threads end close together.
 
     Parameters
     ----------
     total : int
     chunk_samples : int
         Largest chunk (it bounds the memory of a chunk).
-    threads : int
 
     Returns
     -------
     (k,) int64
         Ascending sample positions, the first 0 (none for ``total == 0``).
     """
-    if threads == 1:
-        return np.arange(0, total, chunk_samples, dtype=np.int64)
     starts, position = [], 0
     while position < total:
         starts.append(position)
-        guided = -(-(total - position) // (GUIDE * threads))
+        guided = -(-(total - position) // (GUIDE * SCHEDULE_THREADS))
         position += min(chunk_samples, max(MIN_CHUNK_SAMPLES, guided))
     return np.array(starts, dtype=np.int64)
 
 
-def pixel_chunks(spp, n_pixels, chunk_samples, threads):
+def pixel_chunks(spp, n_pixels, chunk_samples):
     """Cut a run of pixels into chunks at :func:`chunk_starts`, never splitting a pixel.
 
     A chunk starts at the first pixel whose samples begin at or after its cut, so a chunk
@@ -71,7 +73,7 @@ def pixel_chunks(spp, n_pixels, chunk_samples, threads):
     spp : int or (n_pixels,) int array
         Samples of every pixel, or of each.
     n_pixels : int
-    chunk_samples, threads : int
+    chunk_samples : int
         See :func:`chunk_starts`.
 
     Returns
@@ -80,12 +82,12 @@ def pixel_chunks(spp, n_pixels, chunk_samples, threads):
         ``(start, stop)`` pixel ranges covering ``0 .. n_pixels`` in order.
     """
     if np.ndim(spp) == 0:
-        cuts = chunk_starts(n_pixels * spp, chunk_samples, threads)
+        cuts = chunk_starts(n_pixels * spp, chunk_samples)
         starts = np.unique(-(-cuts // spp))
     else:
         before = np.cumsum(spp) - spp  # samples ahead of each pixel
         total = int(before[-1] + spp[-1]) if n_pixels else 0
-        starts = np.unique(np.searchsorted(before, chunk_starts(total, chunk_samples, threads)))
+        starts = np.unique(np.searchsorted(before, chunk_starts(total, chunk_samples)))
     starts = starts[starts < n_pixels]  # a cut inside the last pixel starts no chunk
     return list(zip(starts.tolist(), starts[1:].tolist() + [n_pixels]))
 

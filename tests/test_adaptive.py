@@ -124,7 +124,7 @@ def test_film_adds_ragged_samples_like_tiles_pixel_by_pixel():
 def test_pixel_chunks_cover_the_pixels_without_splitting_one(counts, chunk):
     from rtmesh.scheduler import pixel_chunks
     counts = np.array(counts)
-    spans = pixel_chunks(counts, len(counts), chunk, threads=1)
+    spans = pixel_chunks(counts, len(counts), chunk)
     assert spans[0][0] == 0 and spans[-1][1] == len(counts)
     assert all(a < b and b == c for (a, b), (c, _) in zip(spans, spans[1:]))
     # each chunk starts at the first pixel whose samples begin past a multiple of chunk
@@ -134,11 +134,11 @@ def test_pixel_chunks_cover_the_pixels_without_splitting_one(counts, chunk):
 
 
 @pytest.mark.parametrize("spp", [1, 3])
-def test_chunks_on_several_threads_shrink_towards_the_end(spp):
-    # guided chunks: 1 / (2 x threads) of what is left, between the minimum and the cap
+def test_chunks_shrink_towards_the_end(spp):
+    # guided chunks: 1 / (GUIDE x SCHEDULE_THREADS) of what is left, between the minimum and the cap
     from rtmesh.scheduler import MIN_CHUNK_SAMPLES, pixel_chunks
     n, cap = 512 * 512, 32768
-    spans = pixel_chunks(spp, n, cap, threads=2)
+    spans = pixel_chunks(spp, n, cap)
     sizes = np.array([(b - a) * spp for a, b in spans])
     assert spans[0][0] == 0 and spans[-1][1] == n
     assert all(b == c for (_, b), (c, _) in zip(spans, spans[1:]))
@@ -147,7 +147,7 @@ def test_chunks_on_several_threads_shrink_towards_the_end(spp):
     assert sizes[-2] <= MIN_CHUNK_SAMPLES + spp and sizes[-1] <= MIN_CHUNK_SAMPLES + spp
     assert sizes[-2] < sizes[0] / 2
     # the same cuts for per-pixel counts as for one count for all
-    assert pixel_chunks(np.full(n, spp), n, cap, threads=2) == spans
+    assert pixel_chunks(np.full(n, spp), n, cap) == spans
     assert len(spans) <= n * spp // cap + 16  # the shrinking tail is short (geometric)
 
 
