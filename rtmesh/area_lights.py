@@ -387,7 +387,10 @@ class MeshLight:
         b1 = np.clip((d11 * d20 - d01 * d21) / det, 0.0, 1.0)
         b2 = np.clip((d00 * d21 - d01 * d20) / det, 0.0, 1.0 - b1)
         chance = self._power[face[rows]] / self._total
-        inverse = omega * t * t / (chance * np.abs(cos))
+        # a direction in the face's plane (cos 0: a point in that plane, e.g. on the face
+        # itself) gives no solid-angle sample: inf, not 0 / 0, and the area sample is kept
+        inverse = np.divide(omega * t * t, chance * np.abs(cos), out=np.full(len(cos), np.inf),
+                            where=cos != 0.0)
         ok = np.isfinite(inverse) & (t > 0.0)  # else keep the area sample (a face seen edge-on)
         rows, y, b1, b2, inverse = rows[ok], y[ok], b1[ok], b2[ok], inverse[ok]
         points[rows] = y

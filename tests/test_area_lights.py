@@ -916,3 +916,19 @@ def test_an_emitter_close_to_the_lit_point_gives_no_fireflies():
     # far away the faces keep area sampling: the same points as without p
     far = np.tile([0.0, 0.0, -100.0], (n, 1))
     np.testing.assert_array_equal(light.sample(u, far)[0], light.sample(u)[0])
+
+
+def test_a_point_on_an_emissive_triangle_does_not_sample_its_own_plane_by_zero_over_zero():
+    """A camera ray hitting an emissive triangle lights that point by the emissive triangles,
+    its own among them: every direction drawn in its solid angle (2 pi, the point is in its
+    plane) lies in the plane, cos = 0, and the sample must be dropped without 0 / 0."""
+    import warnings
+    from rtmesh.scene import MeshPart
+    parts = [MeshPart("tri", np.array([[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]]),
+                      np.array([[0, 1, 2]]), 0, None)]
+    scene = Scene.from_parts(parts, [Material("lamp", emission=1.0)], [],
+                             Camera([0.0, 0.0, 3.0], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0], 45.0))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        result = render(scene, width=8, height=8)
+    assert result.image.max() == pytest.approx(1.0)

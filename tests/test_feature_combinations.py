@@ -217,17 +217,6 @@ def without_known_defects(d):
         for m in [o["material"] for o in d["objects"]] + [d["floor"] or {}]:
             for key in CUTOUT_KEYS:
                 m.pop(key, None)
-    for o in d["objects"]:
-        if o["slot"] in ("block", "card") and o["material"]["kind"] == "emissive":
-            # KNOWN DEFECT: a point on an emissive triangle samples that same triangle by
-            # solid angle (2 pi: the point is in its plane), so every direction drawn lies
-            # in the triangle's plane; where the plane is axis-aligned (the block's sides,
-            # the card) cos is exactly 0 and area_lights._sample_solid_angle divides 0 by 0:
-            # "RuntimeWarning: invalid value encountered in divide".  Emission is still
-            # drawn on the ball (and on the glowing inner ball).
-            o["material"]["kind"] = "diffuse"
-            o["material"].pop("emission")
-            o["material"].pop("emission_texture", None)
     return d
 
 
