@@ -197,7 +197,7 @@ class Accel:
         # represents exactly: the table still describes exactly the triangles Embree saw.
         self.triangles = corner_table(self.vertices, self.faces)
 
-    def intersect(self, origins, directions):
+    def intersect(self, origins, directions, time=None):
         """Closest hit of each ray.
 
         Parameters
@@ -205,6 +205,10 @@ class Accel:
         origins : (n, 3) float
         directions : (n, 3) float
             Unit directions.
+        time : (n,) float, optional
+            Each ray's time; a static scene stands still, so it is not read (the argument
+            makes the query interface that of :class:`rtmesh.motion.MotionAccel` and
+            :class:`rtmesh.cutouts.CutoutAccel`).
 
         Returns
         -------
@@ -224,7 +228,7 @@ class Accel:
         t, u, v = kernels.closest_hits(result["tfar"], prim, result["u"], result["v"])
         return Hits(t, prim, u, v)
 
-    def occluded(self, origins, directions, t_max, rows=None):
+    def occluded(self, origins, directions, t_max, rows=None, time=None):
         """Whether anything lies on each ray between its origin and ``t_max``.
 
         Parameters
@@ -236,6 +240,8 @@ class Accel:
             Segment length; ``inf`` for rays to infinitely distant lights.
         rows : (k,) int, optional
             Trace only these rays (the gather is fused with the float32 conversion).
+        time : (n,) float, optional
+            Not read (see :meth:`intersect`).
 
         Returns
         -------

@@ -58,7 +58,9 @@ class CutoutAccel:
 
     Parameters
     ----------
-    accel : Accel
+    accel : Accel or rtmesh.motion.MotionAccel
+        The scene; with a :class:`~rtmesh.motion.MotionAccel` the queries take each ray's
+        time, and the rays re-traced beyond a cut-out start where the surface stands then.
     face_normals : (F, 3) float
         Unit geometric normals (for the offset of re-traced rays).
     material_id : (F,) int
@@ -119,31 +121,35 @@ class CutoutAccel:
             through[b] = u >= alpha[b]
         return through
 
-    def _beyond(self, hits, rows, directions):
+    def _beyond(self, hits, rows, directions, time):
         """Origins just past the hits ``rows``, on the side their rays head to."""
         prim = hits.prim[rows].astype(np.intp)
         p = barycentric_interpolate(take_rows(self.triangles, prim), hits.u[rows], hits.v[rows])
         d = take_rows(directions, rows)
         ng = self.face_normals[prim]
+        if time is not None:
+            # the triangles and normals are the rest pose: move them to the rays' time
+            p, ng, _ = self.accel.surfaces_to_world(prim, time[rows], p, ng.copy(), ng)
         ng = ng * np.where((ng * d).sum(axis=1) < 0.0, -1.0, 1.0)[:, None]
         return offset_ray_origins(p, ng, np.float64, self.offset_scale, d)
 
-    def intersect(self, origins, directions):
+    def intersect(self, origins, directions, time=None):
         """Closest hit of each ray that does not let it through; see :meth:`Accel.intersect`."""
-        hits = self.accel.intersect(origins, directions)
-        return self._resolve(hits, origins, directions, t_max=None)
+        hits = self._hits_from(origins, directions, None, time)
+        return self._resolve(hits, origins, directions, None, time)
 
-    def occluded(self, origins, directions, t_max, rows=None):
+    def occluded(self, origins, directions, t_max, rows=None, time=None):
         """Whether an opaque part of a surface lies on each segment; see :meth:`Accel.occluded`."""
         if rows is not None:
             origins, directions, t_max = take_rows(origins, rows), take_rows(directions, rows), t_max[rows]
+            time = None if time is None else time[rows]
         if len(t_max) == 0:
             return np.zeros(0, dtype=bool)
         # closest hits up to t_max: the first surface decides whether to look further
-        hits = self._hits_from(origins, directions, t_max)
-        return self._resolve(hits, origins, directions, t_max).prim >= 0
+        hits = self._hits_from(origins, directions, t_max, time)
+        return self._resolve(hits, origins, directions, t_max, time).prim >= 0
 
-    def _resolve(self, hits, origins, directions, t_max):
+    def _resolve(self, hits, origins, directions, t_max, time):
         """Re-trace the rays whose hit lets them through until each stops or escapes."""
         keys = None
         travelled = np.zeros(len(hits))
@@ -159,9 +165,10 @@ class CutoutAccel:
             through = on_cutout[self.passes(hits, on_cutout, keys, layer)]
             if not len(through) or layer == MAX_LAYERS:
                 break  # too deep: stop at this surface (a shadow ray counts as occluded)
-            start = self._beyond(hits, through, directions)
+            start = self._beyond(hits, through, directions, time)
             step = self._hits_from(start, take_rows(directions, through),
-                                   None if t_max is None else t_max[through] - travelled[through] - hits.t[through])
+                                   None if t_max is None else t_max[through] - travelled[through] - hits.t[through],
+                                   None if time is None else time[through])
             retraced += len(through)
             travelled[through] += hits.t[through]
             hits.prim[through], hits.u[through], hits.v[through] = step.prim, step.u, step.v
@@ -172,9 +179,9 @@ class CutoutAccel:
         hits.t = hits.t + travelled
         return hits
 
-    def _hits_from(self, origins, directions, t_max):
-        """Closest hits, as misses beyond ``t_max`` (None: no limit)."""
-        hits = self.accel.intersect(origins, directions)
+    def _hits_from(self, origins, directions, t_max, time):
+        """Closest hits (at the rays' ``time``), as misses beyond ``t_max`` (None: no limit)."""
+        hits = self.accel.intersect(origins, directions, time)
         if t_max is not None:
             hits.prim = np.where(hits.t > t_max, -1, hits.prim)
         return hits

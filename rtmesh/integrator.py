@@ -152,10 +152,9 @@ class Integrator:
         # textures and vertex colours, looked up per hit only where the scene has them
         self.textures = SurfaceTextures(scene)
         self.cutouts = None
-        if m.any_cutout and self.motion is not None:
-            log.warning("cut-out (alpha mask/blend) materials render opaque with motion blur")
-        elif m.any_cutout:
-            # every query (camera, secondary, shadow, area-light, AO rays) sees the cut-outs
+        if m.any_cutout:
+            # every query (camera, secondary, shadow, area-light, AO rays) sees the cut-outs,
+            # at each ray's time when objects move
             self.cutouts = CutoutAccel(self.accel, scene.face_normals, scene.material_id, m.cutout,
                                        m.alpha_mode == ALPHA_MODES.index("blend"), m.alpha_cutoff,
                                        self.textures, self.offset_scale, settings.seed)
@@ -265,7 +264,7 @@ class Integrator:
                 return np.full(n, self.camera.shutter[0])
 
             def trace(origins, directions):
-                return self.motion.intersect(origins, directions, at_open(len(origins)))
+                return self.accel.intersect(origins, directions, at_open(len(origins)))
 
             def to_rest(prim, directions):
                 return self.motion.directions_to_rest(prim, at_open(len(prim)), directions)
@@ -494,11 +493,8 @@ class Integrator:
         for depth in range(s.max_depth + 1):
             if not len(rays):
                 break
-            if sample_time is None:
-                hits = self.accel.intersect(rays.origins, rays.directions)
-            else:
-                hits = self.motion.intersect(rays.origins, rays.directions,
-                                             sample_time[rays.sample])
+            hits = self.accel.intersect(rays.origins, rays.directions,
+                                        None if sample_time is None else sample_time[rays.sample])
             clock.lap("intersect")
             rays = self._shade(rays, hits, depth, radiance, aov, keys, stats, clock, sample_time)
 
@@ -720,9 +716,7 @@ class Integrator:
 
     def _occluded(self, origins, directions, t_max, time):
         """Shadow-ray query; with motion blur the moving objects stand where ``time`` says."""
-        if time is None:
-            return self.accel.occluded(origins, directions, t_max)
-        return self.motion.occluded(origins, directions, t_max, time=time)
+        return self.accel.occluded(origins, directions, t_max, time=time)
 
     def _spawn(self, srf, rays, depth, keys, stats):
         """Mirror (or glossy) reflection and refraction rays with their throughput weights."""

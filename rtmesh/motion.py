@@ -337,19 +337,23 @@ class MotionAccel:
             triangles[:, mover.faces] = mover.accel.triangles.T
         self.triangles = component_major(triangles)
 
-    def intersect(self, origins, directions, time):
+    def intersect(self, origins, directions, time=None):
         """Closest hit of each ray with the scene at the ray's time.
 
         Parameters
         ----------
         origins, directions : (n, 3) float
         time : (n,) float
+            Time of each ray (required; the default only keeps the argument order of
+            :meth:`rtmesh.accel.Accel.intersect`).
 
         Returns
         -------
         Hits
             ``prim`` is the global face index; ``t`` the world distance.
         """
+        if time is None:
+            raise ValueError("a scene with moving objects is traced at each ray's time")
         n = len(directions)
         if self.static is not None:
             hits = self.static.intersect(origins, directions)
@@ -391,6 +395,8 @@ class MotionAccel:
         -------
         (n,) or (k,) bool
         """
+        if time is None:
+            raise ValueError("a scene with moving objects is traced at each ray's time")
         if rows is not None:
             origins, directions = take_rows(origins, rows), take_rows(directions, rows)
             t_max, time = t_max[rows], time[rows]

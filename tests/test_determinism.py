@@ -181,3 +181,25 @@ def test_kept_render_threads_are_made_anew_in_a_forked_child():
         os._exit(0 if ok else 1)
     _, status = os.waitpid(child, 0)
     assert os.waitstatus_to_exitcode(status) == 0
+
+
+def test_chunks_are_the_same_for_every_thread_count(monkeypatch):
+    """Where two coplanar overlapping triangles are hit at exactly the same distance,
+    Embree's packet traversal may report either, depending on the other rays of the packet,
+    which come from the ray's chunk: the chunks must not depend on the thread count (see
+    rtmesh.scheduler)."""
+    from rtmesh.integrator import Integrator
+    seen = {}
+    real = Integrator.render_chunk
+
+    def recording(self, pixels, first_sample, spp):
+        seen[self.settings.thread_count].append((int(pixels[0]), len(pixels)))
+        return real(self, pixels, first_sample, spp)
+
+    monkeypatch.setattr(Integrator, "render_chunk", recording)
+    for threads in (1, 2):
+        seen[threads] = []
+        # 96 x 72 x 3 samples: more than the smallest guided chunk, so the schedule has a tail
+        render(every_stage_scene(), threads=threads, width=96, height=72, spp=3)
+    assert len(seen[1]) > 2
+    assert sorted(seen[1]) == sorted(seen[2])
