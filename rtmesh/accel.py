@@ -220,7 +220,7 @@ class Accel:
             return Hits(empty, np.zeros(0, np.int32), empty, empty)
         if self.packets:
             t, prim, u, v = embree_packets.intersect_rays(self._intersect16, self._shared.handle,
-                                                          *embree_packets.canonical_rays(origins, directions),
+                                                          *embree_packets.closest_rays(origins, directions),
                                                           _PACKET_FLAGS)
             return Hits(t, prim, u, v)
         result = self._scene.run(_embree_rays(origins), _embree_rays(directions), output=1)
@@ -249,7 +249,7 @@ class Accel:
         """
         if self.packets:
             rows = _NO_ROWS if rows is None else np.asarray(rows, dtype=np.int64)
-            o, d, t = embree_packets.canonical_rays(origins, directions, np.asarray(t_max))
+            o, d, t = embree_packets.shadow_rays(origins, directions, t_max)
             return embree_packets.occluded_rays(self._occluded16, self._shared.handle, o, d, t, rows,
                                                 _PACKET_FLAGS)
         if rows is not None:

@@ -27,9 +27,9 @@ import math
 
 import numpy as np
 
-from .compiled import kernel
+from .compiled import kernel, row
 
-_row = kernel  # the same compiler, named for the one-row helpers
+_row = row  # one-row helpers: compiled into the kernels that call them
 
 
 @_row

@@ -107,6 +107,14 @@ def fix_signatures(dispatcher, signatures):
     dispatcher.disable_compile()
 
 
+def row(function):
+    """Compile ``function`` as a one-row helper of kernels: like :func:`kernel`, but
+    callable only from compiled code (no CPython wrapper) and not cached by itself (the
+    kernels that call it are cached with it inlined), which saves compile time on the
+    first run."""
+    return numba.njit(nogil=True, error_model="numpy", no_cpython_wrapper=True)(function)
+
+
 def cached(compiler):
     """Apply a numba decorator with ``cache=True``, or without it where no cache directory
     is writable (the ufunc builder's own cache, for :func:`numba.vectorize`: a ufunc calls

@@ -28,7 +28,7 @@ import numpy as np
 from . import embree_packets as ep
 from .accel import Accel
 from .background import SolidBackground
-from .compiled import kernel
+from .compiled import kernel, row
 from .kernels import (SHADOW_SHORTEN, _dot, _highlight_cosine, _illuminate, _image_plane_point, _offset,
                       _pinhole_direction, _reaches, _shade, _surface_record)
 
@@ -332,7 +332,7 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, pixel, width,
                                      rec_raised[:records])
 
 
-@kernel
+@row
 def _light_block(light, srf, d, count, lit, cos_i, incident, cosine, shadow_ray, scale, shorten):
     """One light at the first ``count`` surface records of a block (the arithmetic of
     :func:`rtmesh.kernels.light_samples`): whether it reaches them, ``ns . wi``, the
@@ -354,19 +354,19 @@ def _light_block(light, srf, d, count, lit, cos_i, incident, cosine, shadow_ray,
         shadow_ray[6, b] = np.float32(min(distance * shorten, _F32_MAX))
 
 
-@kernel
+@row
 def _hit_lane(b):
     """Word offset of sample ``b`` of a block in the ``RTCRayHit16`` packets (field 0)."""
     return (b >> 4) * (ep.RAYHIT_WORDS * LANES) + (b & 15)
 
 
-@kernel
+@row
 def _ray_lane(b):
     """Word offset of sample ``b`` of a block in the ``RTCRay16`` packets (field 0)."""
     return (b >> 4) * (ep.RAY_WORDS * LANES) + (b & 15)
 
 
-@kernel
+@row
 def _any_valid(valid, q):
     """Whether packet ``q`` of a block has an active lane."""
     for lane in range(LANES * q, LANES * q + LANES):

@@ -32,7 +32,7 @@ import threading
 import numpy as np
 from numba import types
 
-from .compiled import fix_signatures, kernel
+from .compiled import fix_signatures, kernel, row
 
 log = logging.getLogger(__name__)
 
@@ -207,20 +207,17 @@ def packet_library():
 
 
 def _fix_query_signatures():
-    """The query kernels take rays of either precision in any layout (see
-    :func:`canonical_rays`): one compiled version per precision."""
+    """One compiled version of each query kernel (see :func:`closest_rays` and
+    :func:`shadow_rays` for the arguments they take)."""
     query = numba_typeof_query()
     # read-only views: writable arrays convert to them, and read-only ones (a camera's
     # repeated origin row) are accepted as they are
     rows = types.Array(types.int64, 1, "A", readonly=True)
-    closest, any_hit = [], []
-    for float_type in (types.float64, types.float32):
-        vectors = types.Array(float_type, 2, "A", readonly=True)
-        lengths = types.Array(float_type, 1, "A", readonly=True)
-        closest.append((query, types.int64, vectors, vectors, types.int64))
-        any_hit.append((query, types.int64, vectors, vectors, lengths, rows, types.int64))
-    fix_signatures(intersect_rays, closest)
-    fix_signatures(occluded_rays, any_hit)
+    vectors64 = types.Array(types.float64, 2, "A", readonly=True)
+    vectors32 = types.Array(types.float32, 2, "A", readonly=True)
+    lengths32 = types.Array(types.float32, 1, "A", readonly=True)
+    fix_signatures(intersect_rays, [(query, types.int64, vectors64, vectors64, types.int64)])
+    fix_signatures(occluded_rays, [(query, types.int64, vectors32, vectors32, lengths32, rows, types.int64)])
 
 
 def numba_typeof_query():
@@ -231,20 +228,40 @@ def numba_typeof_query():
     return numba.typeof(_PACKET_QUERY(0))
 
 
-def canonical_rays(*arrays):
-    """Ray arrays in one precision for the query kernels: float32 if any is float32
-    (converting a float64 one rounds to nearest, as the kernels would), else float64.
+def closest_rays(origins, directions):
+    """Closest-hit rays as :func:`intersect_rays` takes them: float64 (float32 input is
+    widened exactly; the kernel rounds every coordinate to float32 as Embree needs it).
 
     Parameters
     ----------
-    *arrays : float arrays
+    origins, directions : (n, 3) float, any layout
 
     Returns
     -------
-    tuple of arrays
+    origins, directions : (n, 3) float64
     """
-    wanted = np.float32 if any(a.dtype == np.float32 for a in arrays) else np.float64
-    return tuple(a if a.dtype == wanted else a.astype(wanted) for a in arrays)
+    return (np.asarray(origins, dtype=np.float64), np.asarray(directions, dtype=np.float64))
+
+
+def shadow_rays(origins, directions, t_max):
+    """Shadow rays as :func:`occluded_rays` takes them: float32, the precision Embree traces
+    in (rounding to nearest, as the kernel would); lengths clamped to the largest float32
+    first, so no length overflows the conversion.
+
+    Parameters
+    ----------
+    origins, directions : (n, 3) float, any layout
+    t_max : (n,) float
+
+    Returns
+    -------
+    origins, directions : (n, 3) float32
+    t_max : (n,) float32
+    """
+    t_max = np.asarray(t_max)
+    if t_max.dtype != np.float32:
+        t_max = np.minimum(t_max, _F32_MAX).astype(np.float32)
+    return (np.asarray(origins, dtype=np.float32), np.asarray(directions, dtype=np.float32), t_max)
 
 
 def _open_verified():
@@ -391,7 +408,7 @@ class SharedScene:
 # ------------------------------------------------------------------ kernels
 
 
-@kernel
+@row
 def aligned_words(n, dtype):
     """A zeroed array of ``n`` 4-byte words starting on a 64-byte boundary."""
     raw = np.zeros(n + _ALIGN_WORDS, dtype)
@@ -399,7 +416,7 @@ def aligned_words(n, dtype):
     return raw[skip:skip + n]
 
 
-@kernel
+@row
 def query_arguments(flags):
     """``RTCIntersectArguments`` / ``RTCOccludedArguments`` (32 bytes): query flags, all
     features, and NULL context, filter and callback."""
@@ -409,7 +426,7 @@ def query_arguments(flags):
     return args
 
 
-@kernel
+@row
 def set_lane(ray, words, lane, ox, oy, oz, dx, dy, dz, tfar):
     """Write one ray into lane ``lane`` of a packet (tnear 0, time 0, all masks).
 
@@ -430,7 +447,7 @@ def set_lane(ray, words, lane, ox, oy, oz, dx, dy, dz, tfar):
     words[FLAGS * LANES + lane] = 0
 
 
-@kernel
+@row
 def clear_hit(words, lane):
     """Mark lane ``lane`` of a ``RTCRayHit16`` packet as not hitting anything yet."""
     words[GEOM_ID * LANES + lane] = _INVALID_ID
@@ -439,7 +456,7 @@ def clear_hit(words, lane):
     words[INST_PRIM_ID * LANES + lane] = _INVALID_ID
 
 
-@kernel
+@row
 def _load_rays(ray, words, valid, origins, directions, rows, start, count, tfar):
     """Fill a packet's ray part with rays ``rows[start:start + count]`` (or ``start ..``
     without rows); lanes past ``count`` are marked invalid."""
@@ -453,7 +470,7 @@ def _load_rays(ray, words, valid, origins, directions, rows, start, count, tfar)
             valid[lane] = 0
 
 
-@kernel
+@row
 def _intersect_packet(intersect16, scene, ray, words, valid, args, origins, directions, start, count):
     """Trace rays ``start .. start + count - 1`` as one packet; the hits are left in it."""
     _load_rays(ray, words, valid, origins, directions, np.empty(0, np.int64), start, count,

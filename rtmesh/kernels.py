@@ -21,9 +21,9 @@ import numpy as np
 from numba import types
 from numba.extending import intrinsic
 
-from .compiled import cached, kernel
+from .compiled import cached, kernel, row
 
-_row = kernel  # the same compiler, named for the one-row helpers
+_row = row  # one-row helpers: compiled into the kernels that call them
 
 # ------------------------------------------------------------------ float32 offsets
 # See rtmesh.accel for the reasoning behind the origin offset and its constants.

@@ -159,10 +159,10 @@ def packet_runner(accel, calls, threads):
         for call in share:
             if call[0] == "intersect":
                 embree_packets.intersect_rays(library.intersect16, handle,
-                                              *embree_packets.canonical_rays(call[1], call[2]), flags)
+                                              *embree_packets.closest_rays(call[1], call[2]), flags)
             else:
                 embree_packets.occluded_rays(library.occluded16, handle,
-                                             *embree_packets.canonical_rays(call[1], call[2], call[3]),
+                                             *embree_packets.shadow_rays(call[1], call[2], call[3]),
                                              call[4], flags)
 
     shares = [calls[i::threads] for i in range(threads)]
