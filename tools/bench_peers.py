@@ -17,7 +17,15 @@ pure Lambert with albedo 0.7 everywhere (no specular, no ambient, no reflections
    measured spp).  The lighting models are matched: rtmesh's Lambert term is
    ``kd I cos / d^2``, Mitsuba's diffuse BSDF is ``albedo / pi``, so Mitsuba's point light
    gets the intensity ``pi I``.  Before anything is timed, the two references must agree.
+   rtmesh with adaptive sampling (Sobol, ``--adaptive-spp`` samples in the first round,
+   one render per ``--adaptive-targets`` value) is measured against the same reference and
+   set beside Mitsuba's uniform renders; the 0.1 % level needs a sweep to 256 spp
+   (``--spp 1,4,16,64,256``) for the uniform renders to reach it.
 3. **Threads**: rtmesh at 1 and 2 threads on the same render.
+
+rtmesh runs in a process tuned as the ``rtmesh`` command tunes its own
+(:func:`rtmesh.runtime.tune_process`), and traces with Embree's packet queries unless
+``RTMESH_EMBREE=run`` is set (embreex ``run()``, one ray at a time); the report says which.
 
 Mitsuba runs in its own venv (``sh tools/peers_setup.sh``, default ``/tmp/peers-venv``),
 through ``tools/peers_mitsuba.py``; it is never a dependency of rtmesh.  Without the venv the
@@ -27,6 +35,7 @@ one run.
 Usage::
 
     python tools/bench_peers.py [--runs 5] [--spp 1,4,16,64] [--reference-spp 1024]
+                                [--adaptive-targets 0.2,0.1,0.05,0.03,0.02] [--adaptive-spp 4]
                                 [--venv /tmp/peers-venv] [--no-write]
 """
 
@@ -47,13 +56,14 @@ from embreex.mesh_construction import TriangleMesh
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from bench_core import machine, publish, seconds  # noqa: E402
 
+from rtmesh import runtime  # noqa: E402
 from rtmesh.accel import Accel  # noqa: E402
 from rtmesh.camera import Camera  # noqa: E402
 from rtmesh.integrator import Integrator  # noqa: E402
 from rtmesh.lights import PointLight  # noqa: E402
 from rtmesh.materials import Material  # noqa: E402
 from rtmesh.scene import MeshPart, Scene  # noqa: E402
-from rtmesh.settings import RenderSettings  # noqa: E402
+from rtmesh.settings import DEFAULT_MAX_SPP, RenderSettings  # noqa: E402
 
 SECTION = "Against peers: trimesh, raw Embree, Mitsuba 3"
 WORKER = os.path.join(os.path.dirname(os.path.abspath(__file__)), "peers_mitsuba.py")
@@ -62,7 +72,8 @@ ALBEDO = 0.7
 LIGHT_POSITION = [3.0, -3.0, 6.0]
 LIGHT_INTENSITY = 40.0  # W/sr in rtmesh's Lambert model (kd I cos / d^2)
 CAMERA = dict(position=[0.0, -4.0, 2.5], look_at=[0.0, 0.0, 0.8], up=[0.0, 0.0, 1.0], fov=45.0)
-TARGETS = (0.02, 0.01, 0.005, 0.0025)  # relative RMSE at which times are compared
+TARGETS = (0.02, 0.01, 0.005, 0.0025, 0.001)  # relative RMSE at which times are compared
+ADAPTIVE_TARGETS = (0.2, 0.1, 0.05, 0.03, 0.02)  # rtmesh target_error values of the adaptive sweep
 VARIANTS = ("llvm_ad_rgb", "scalar_rgb")
 
 
@@ -148,7 +159,8 @@ def intersection(scene, width, height, runs):
     for _ in range(runs):
         for name, fn in tasks.items():
             times[name].append(seconds(fn))
-    return {name: float(np.median(t)) for name, t in times.items()}, len(origins), agree, intersector
+    return ({name: float(np.median(t)) for name, t in times.items()}, len(origins), agree, intersector,
+            accel.packets)
 
 
 # ---------------------------------------------------------------- 2. equal error
@@ -167,6 +179,65 @@ def rtmesh_sweep(scene, width, height, spps, runs, threads=2):
         out[spp] = (image, float(np.median(times)))
         print(f"rtmesh spp {spp}: median {out[spp][1]:.3f} s", flush=True)
     return out
+
+
+def rtmesh_adaptive_sweep(scene, width, height, targets, spp, runs, threads=2):
+    """Images, median times and mean samples per pixel of adaptive rtmesh renders.
+
+    Parameters
+    ----------
+    scene : rtmesh.scene.Scene
+    width, height : int
+        Image size in pixels.
+    targets : list of float
+        ``target_error`` of each render (rtmesh's estimated display error per pixel, see
+        :class:`rtmesh.settings.RenderSettings`), one render setting per value.
+    spp : int
+        Samples per pixel of the first round.
+    runs : int
+        Timed renders per setting, after one warm-up.
+    threads : int, optional
+
+    Returns
+    -------
+    dict of float to tuple
+        ``target -> (image, median seconds, mean spp)``; the sampler is Sobol, whose
+        prefixes stay stratified across rounds (see :mod:`rtmesh.adaptive`), and no time
+        limit is set, so every run of a setting takes the same samples.
+    """
+    out = {}
+    for target in targets:
+        integrator = Integrator(scene, RenderSettings(width=width, height=height, spp=spp, sampler="sobol",
+                                                      threads=threads, seed=0, target_error=target))
+        integrator.render()
+        times, result = [], None
+        for _ in range(runs):
+            start = time.perf_counter()
+            result = integrator.render()
+            times.append(time.perf_counter() - start)
+        out[target] = (result.image, float(np.median(times)), result.stats.mean_spp)
+        print(f"rtmesh adaptive target_error {target:g}: median {out[target][1]:.3f} s, "
+              f"{out[target][2]:.1f} spp on average", flush=True)
+    return out
+
+
+def throughput_rows(spps, runs, pixels):
+    """Markdown rows of millions of camera samples per second, one per renderer.
+
+    Parameters
+    ----------
+    spps : list of int
+    runs : dict of str to dict
+        ``renderer -> {spp: (image, median seconds)}``.
+    pixels : int
+        Pixels in the image.
+
+    Returns
+    -------
+    list of str
+    """
+    return [f"| {name} | " + " | ".join(f"{pixels * spp / r[spp][1] / 1e6:.1f}" for spp in spps) + " |"
+            for name, r in runs.items()]
 
 
 def mitsuba_sweep(python, spec_path, variant, spps, runs, reference_spp, folder):
@@ -236,6 +307,10 @@ def equal_error(meshes, scene, args, folder):
     for name in runs:
         cells = [f"{t:.3f} / {e:.2%}" for t, e in zip(times[name], errors[name])]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    lines += ["", "Camera samples per second (millions), from the same medians:", "",
+              "| renderer | " + " | ".join(f"{s} spp" for s in args.spp) + " |",
+              "|---|" + "---:|" * len(args.spp),
+              *throughput_rows(args.spp, runs, args.width * args.height)]
     lines += ["", "Time to reach a relative RMSE (log-log interpolated; ratio = other / rtmesh):", "",
               "| rel. RMSE | " + " | ".join(runs) + " | " +
               " | ".join(f"{name} / rtmesh" for name in list(runs)[1:]) + " |",
@@ -252,6 +327,35 @@ def equal_error(meshes, scene, args, folder):
             key[(name, target)] = ratio
         lines.append(f"| {100 * target:g}% | " + " | ".join(cells) + " | " + " | ".join(ratios) + " |")
     key["mean_difference"], key["reference_rmse"] = mean_difference, reference_rmse
+
+    # rtmesh with adaptive sampling, against the same reference, beside Mitsuba's uniform renders
+    adaptive = rtmesh_adaptive_sweep(scene, args.width, args.height, args.adaptive_targets,
+                                     args.adaptive_spp, args.runs)
+    adaptive_errors = [relative_rmse(adaptive[target][0], reference) for target in args.adaptive_targets]
+    adaptive_times = [adaptive[target][1] for target in args.adaptive_targets]
+    lines += ["", f"rtmesh with adaptive sampling (2 threads, Sobol, {args.adaptive_spp} spp in the first "
+              f"round, `max_spp` {DEFAULT_MAX_SPP}, one render per `target_error`; Mitsuba's `direct` has no "
+              "adaptive sampling and stays uniform):", "",
+              "| target_error | mean spp | s | rel. RMSE | M samples/s |", "|---:|---:|---:|---:|---:|"]
+    for target, error in zip(args.adaptive_targets, adaptive_errors):
+        _, render_seconds, mean_spp = adaptive[target]
+        lines.append(f"| {target:g} | {mean_spp:.1f} | {render_seconds:.3f} | {error:.3%} | "
+                     f"{args.width * args.height * mean_spp / render_seconds / 1e6:.1f} |")
+
+    # the issue's direction: rtmesh's time over Mitsuba llvm's, at equal error
+    lines += ["", "Equal-error time ratios the other way round (rtmesh / Mitsuba llvm_ad_rgb; "
+              "below 1 rtmesh is faster):", "",
+              "| rel. RMSE | rtmesh uniform / llvm | rtmesh adaptive / llvm | rtmesh adaptive (s) |",
+              "|---:|---:|---:|---:|"]
+    for target in TARGETS:
+        llvm_time = time_to_error(args.spp, times["Mitsuba llvm_ad_rgb"], errors["Mitsuba llvm_ad_rgb"], target)
+        uniform_time = time_to_error(args.spp, times["rtmesh (2 threads)"], errors["rtmesh (2 threads)"], target)
+        adaptive_time = time_to_error(args.adaptive_targets, adaptive_times, adaptive_errors, target)
+        cells = [uniform_time / llvm_time if uniform_time and llvm_time else None,
+                 adaptive_time / llvm_time if adaptive_time and llvm_time else None]
+        key[("rtmesh uniform / llvm", target)], key[("rtmesh adaptive / llvm", target)] = cells
+        lines.append(f"| {100 * target:g}% | " + " | ".join(f"{c:.2f}" if c else "n/a" for c in cells) +
+                     f" | {f'{adaptive_time:.3f}' if adaptive_time else 'n/a'} |")
     return lines, key
 
 
@@ -278,14 +382,21 @@ def main():
     parser.add_argument("--spp", default="1,4,16,64", help="spp sweep (squares: Mitsuba's stratified sampler)")
     parser.add_argument("--reference-spp", type=int, default=1024)
     parser.add_argument("--thread-spp", type=int, default=16)
+    parser.add_argument("--adaptive-targets", default=",".join(map(str, ADAPTIVE_TARGETS)),
+                        help="target_error values of rtmesh's adaptive renders, decreasing")
+    parser.add_argument("--adaptive-spp", type=int, default=4, help="first-round spp of the adaptive renders")
     parser.add_argument("--venv", default="/tmp/peers-venv")
     parser.add_argument("--no-write", action="store_true", help="print only; leave docs/BENCHMARKS.md alone")
     args = parser.parse_args()
     args.spp = [int(s) for s in args.spp.split(",")]
+    args.adaptive_targets = [float(s) for s in args.adaptive_targets.split(",")]
+    # measure rtmesh as the rtmesh command runs it: in a process tuned for rendering
+    runtime.tune_process()
+    machine_at_start = machine()  # its load average is the one before the measurements
 
     meshes = peer_meshes()
     scene = peer_scene(meshes)
-    hits, n_rays, agree, intersector = intersection(scene, args.width, args.height, args.runs)
+    hits, n_rays, agree, intersector, packets = intersection(scene, args.width, args.height, args.runs)
     print(hits, flush=True)
     with tempfile.TemporaryDirectory() as folder:
         error_lines, key = equal_error(meshes, scene, args, folder)
@@ -296,19 +407,25 @@ def main():
             for name, t in hits.items()]
     words = ["python tools/bench_peers.py"]
     defaults = {"width": 512, "height": 512, "runs": 5, "reference_spp": 1024, "thread_spp": 16,
-                "venv": "/tmp/peers-venv"}
+                "adaptive_spp": 4, "venv": "/tmp/peers-venv"}
     for name, default in defaults.items():
         if getattr(args, name) != default:
             words.append(f"--{name.replace('_', '-')} {getattr(args, name)}")
     if args.spp != [1, 4, 16, 64]:
         words.append("--spp " + ",".join(map(str, args.spp)))
+    if args.adaptive_targets != list(ADAPTIVE_TARGETS):
+        words.append("--adaptive-targets " + ",".join(f"{t:g}" for t in args.adaptive_targets))
+    tracing = ("Embree 16-wide packet queries" if packets else
+               "embreex `run()`, one ray at a time" +
+               (" (`RTMESH_EMBREE=run`)" if os.environ.get("RTMESH_EMBREE", "").strip().lower() == "run" else ""))
     text = "\n".join([
         f"## {SECTION}",
         "",
         "Commands: `sh tools/peers_setup.sh` (once: Mitsuba in its own venv, LLVM 19 from apt), "
         f"then `{' '.join(words)}`",
         "",
-        f"- Machine: {machine()}; shared with other jobs while measuring (expect 10-20 % noise "
+        f"- Machine: {machine_at_start}, {os.getloadavg()[0]:.1f} at the end; shared with other "
+        "jobs while measuring (expect 10-20 % noise "
         "on absolute times; the ratios come from one run, measurements interleaved where they "
         "run in one process)",
         f"- Date: {datetime.date.today().isoformat()}; medians of {args.runs} runs after a warm-up",
@@ -316,6 +433,7 @@ def main():
         f"ground quad, point light at (3, -3, 6), {args.width}x{args.height}, Lambert albedo "
         f"{ALBEDO}; rtmesh intensity {LIGHT_INTENSITY:g} W/sr with kd I cos / d^2, Mitsuba "
         f"intensity pi x {LIGHT_INTENSITY:g} with its albedo / pi diffuse BSDF",
+        f"- rtmesh traces with {tracing}, in a process tuned as the `rtmesh` command tunes its own",
         "",
         f"### Intersection only: {n_rays} pixel-centre camera rays, closest hit, 1 thread",
         "",
