@@ -40,7 +40,7 @@ import time
 
 import numpy as np
 
-from .settings import RoundStats
+from .stats import RoundStats
 
 
 def render_rounds(integrator, film, stats, progress=None, pool=None):

@@ -23,7 +23,7 @@ import os
 import numpy as np
 
 from .errors import SceneError
-from .film import srgb_to_linear
+from .colour import srgb_to_linear
 from .textures import Texture
 
 BACKGROUND_TYPES = ("solid", "gradient", "environment", "transparent")

@@ -9,7 +9,7 @@ import time
 from . import __version__, runtime
 from .api import load_scene
 from .errors import RtmeshError
-from .film import TONEMAPS
+from .colour import TONEMAPS
 from .aov import display_values
 from .background import background_from_option
 from .image_io import check_output_path, write_display_image, write_image

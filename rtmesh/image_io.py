@@ -13,7 +13,7 @@ import OpenImageIO as oiio
 
 from .aov import exr_channel_names
 from .errors import OutputError
-from .film import linear_to_srgb, tonemap
+from .colour import linear_to_srgb, tonemap
 
 FLOAT_FORMATS = (".exr",)
 DISPLAY_FORMATS = (".png", ".jpg", ".jpeg")
@@ -65,7 +65,7 @@ def write_image(path, image, passes=None, exposure=0.0, operator="reinhard", alp
     exposure : float
         Stops, for 8-bit formats.
     operator : str
-        Tone-mapping operator for 8-bit formats (see :func:`rtmesh.film.tonemap`).
+        Tone-mapping operator for 8-bit formats (see :func:`rtmesh.colour.tonemap`).
     alpha : (h, w) or (h, w, 1) float, optional
         Coverage of a render on a transparent background; ``image`` is premultiplied by it.
         EXR stores it as channel ``A`` (premultiplied RGBA, the OpenEXR convention); PNG as

@@ -8,7 +8,7 @@ import trimesh
 
 from . import build_kernels
 from .errors import MeshError
-from .film import srgb_to_linear
+from .colour import srgb_to_linear
 from .gltf_scene import GLTF_EXTENSIONS, file_cameras_and_lights, read_gltf_json
 from .material_files import gltf_json_materials, gltf_material, mtl_material, obj_materials
 from .materials import Material

@@ -44,7 +44,7 @@ from .render_plan import RenderPlan
 from .scheduler import pixel_chunks, run_on_threads
 from .sampling import (Dim, decorrelated_points, pixel_offsets, square_to_cosine_hemisphere,
                        stratified_values)
-from .settings import RenderStats
+from .stats import RenderStats
 from .vecmath import (dot, face_viewer, fresnel_dielectric, fresnel_schlick, orthonormal_basis, reflect,
                       refract)
 from .materials import ALPHA_MODES

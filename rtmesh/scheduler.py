@@ -15,7 +15,7 @@ from concurrent.futures import wait
 
 import numpy as np
 
-from .settings import RenderStats
+from .stats import RenderStats
 
 # Smallest chunk (pixel samples) of a multi-threaded render, unless the settings' chunk
 # size is smaller.  Every chunk costs Python between its kernel calls, and on several

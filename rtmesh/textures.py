@@ -5,7 +5,7 @@ import os
 import numpy as np
 
 from .errors import MeshError, RtmeshError
-from .film import srgb_to_linear
+from .colour import srgb_to_linear
 
 # formats whose values are linear already (everything else is 8/16-bit display-encoded)
 _LINEAR_FORMATS = (".exr", ".hdr")

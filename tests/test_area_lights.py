@@ -25,7 +25,7 @@ from rtmesh.materials import Material, blinn_phong
 from rtmesh.sampling import Dim, decorrelated_points, square_to_uniform_triangle, uniform_triangle_to_square
 from rtmesh.scene import Scene
 from rtmesh.scene_file import scene_from_dict
-from rtmesh.settings import RenderStats
+from rtmesh.stats import RenderStats
 
 from scenes import floor_quad, part, pixel_centre_rays, quad, render, settings
 
