@@ -29,11 +29,14 @@ from . import embree_packets as ep
 from .accel import Accel
 from .background import SolidBackground
 from .compiled import kernel, row
+from .pixel_samples import PixelSampler, pixel_position
+from .sampling import pixel_offsets
 from .kernels import (SHADOW_SHORTEN, _dot, _highlight_cosine, _illuminate, _image_plane_point, _offset,
                       _pinhole_direction, _reaches, _shade, _surface_record)
 
 _F32_MAX = float(np.finfo(np.float32).max)
 _NO_TINT = np.zeros((0, 3))
+_NO_POSITIONS = np.zeros((0, 2))
 LANES = ep.LANES
 # samples per block: four packets, so the arithmetic of a block's samples runs in vector
 # loops long enough for AVX-512, while the block's records stay in L1
@@ -83,6 +86,11 @@ class DirectStage:
         background = it.background
         self._background = (np.ascontiguousarray(background.colour) if st.background else np.zeros(3))
         self._offset_scale = it._offset_scale32
+        self._settings = s
+        # the sample positions are formed in the kernel, except for the Sobol sampler's
+        self._sampler = PixelSampler.for_settings(s)
+        sampler = self._sampler or PixelSampler("regular", 0, 1)
+        self._sampler_arrays = (sampler.code, sampler.keys, sampler.corners, sampler.size, sampler.spp)
 
     @classmethod
     def plan(cls, integrator):
@@ -111,15 +119,15 @@ class DirectStage:
             return None
         return cls(integrator)
 
-    def render(self, film_xy, pixel, stats):
+    def render(self, pixel, sample, stats):
         """Radiance of camera samples.
 
         Parameters
         ----------
-        film_xy : (n, 2) float64
-            Positions inside the pixels (from their top-left corners).
         pixel : (n,) int64
             Linear pixel index of each sample.
+        sample : (n,) int64
+            Index of each sample within its pixel (global across adaptive rounds).
         stats : RenderStats
             Camera and shadow ray counts are added to it.
 
@@ -129,8 +137,12 @@ class DirectStage:
             Component-major, as the general path's radiance.
         """
         shaded, diffuse, specular, exponent, visible_from = self._materials
+        s = self._settings
+        film_xy = (_NO_POSITIONS if self._sampler is not None else
+                   np.ascontiguousarray(pixel_offsets(s.sampler, s.seed, pixel, sample, s.spp)))
         radiance, shadow_rays, records = direct_samples(
-            *self._queries, np.ascontiguousarray(film_xy, dtype=np.float64), pixel, *self._camera,
+            *self._queries, film_xy, *self._sampler_arrays, pixel, np.ascontiguousarray(sample, dtype=np.int64),
+            *self._camera,
             *self._surfaces, self._base, self._background, self._lights, shaded, diffuse, specular, exponent,
             visible_from, self._offset_scale, SHADOW_SHORTEN)
         sample, mat, cos_i, incident, cosine, power_exponent, highlight = records
@@ -145,9 +157,10 @@ class DirectStage:
 
 
 @kernel
-def direct_samples(intersect16, occluded16, scene, flags, film_xy, pixel, width, image_plane, position,
-                   forward, right, up, faces, vertex_normals, smooth, material_id, fix_terminator, base,
-                   background, lights, shaded, diffuse, specular, exponent, visible_from, scale, shorten):
+def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys, corners, size, spp, pixel,
+                   sample, width, image_plane, position, forward, right, up, faces, vertex_normals, smooth,
+                   material_id, fix_terminator, base, background, lights, shaded, diffuse, specular, exponent,
+                   visible_from, scale, shorten):
     """Radiance of camera samples with direct light, in blocks of :data:`BLOCK` samples.
 
     Parameters
@@ -157,9 +170,12 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, pixel, width,
         The committed ``RTCScene``.
     flags : int
         Query flags (coherent).
-    film_xy : (n, 2) float64
-        Positions inside the pixels.
-    pixel : (n,) int64
+    film_xy : (n, 2) float64 or (0, 2)
+        Positions inside the pixels, or empty: formed here by :func:`pixel_position`.
+    sampler, keys, corners, size, spp
+        The :class:`rtmesh.pixel_samples.PixelSampler` arrays.
+    pixel, sample : (n,) int64
+        Pixel and sample index of each sample.
     width : int
     image_plane : (4,) float64
     position, forward, right, up : (3,) float64
@@ -240,8 +256,11 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, pixel, width,
         # camera rays (rtmesh.kernels.camera_rays, pinhole); lanes past the end repeat sample 0
         for b in range(BLOCK):
             i = start + b if b < count else start
-            sx, sy = _image_plane_point(film_xy[i, 0], film_xy[i, 1], pixel[i], width, inverse_width,
-                                        image_plane)
+            if len(film_xy):
+                x, y = film_xy[i, 0], film_xy[i, 1]
+            else:
+                x, y = pixel_position(sampler, keys, corners, size, spp, pixel[i], sample[i])
+            sx, sy = _image_plane_point(x, y, pixel[i], width, inverse_width, image_plane)
             d[0, b], d[1, b], d[2, b] = _pinhole_direction(sx, sy, forward, right, up)
             valid[b] = -1 if b < count else 0
         for q in range(PACKETS):

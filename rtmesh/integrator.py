@@ -458,13 +458,14 @@ class Integrator:
             pixel = np.repeat(pixels, spp) if spp > 1 else pixels
             sample_in_pixel = (np.full(m, first_sample, dtype=np.int64) if spp == 1 else
                                np.tile(np.arange(first_sample, first_sample + spp, dtype=np.int64), m))
-        # every dimension is stratified in sets of the settings' spp, whatever the round
-        in_pixel = pixel_offsets(s.sampler, s.seed, pixel, sample_in_pixel, s.spp)
         if self.direct_stage is not None:
+            # the stage forms the sample positions itself (see rtmesh.pixel_samples)
             clock.lap("camera")
-            radiance = self.direct_stage.render(in_pixel, pixel, stats)
+            radiance = self.direct_stage.render(pixel, sample_in_pixel, stats)
             clock.lap("direct")
             return (radiance, None, stats) if ragged else (radiance.reshape(m, spp, 3), None, stats)
+        # every dimension is stratified in sets of the settings' spp, whatever the round
+        in_pixel = pixel_offsets(s.sampler, s.seed, pixel, sample_in_pixel, s.spp)
         lens_uv = None
         if self.plan.lens:
             lens_uv = decorrelated_points(s.sampler, s.seed, pixel, sample_in_pixel, s.spp,

@@ -4,9 +4,12 @@ Each scene of ``assets/`` (the showcase, the effects scenes, glass_edges, passes
 rendered at its own settings by this checkout and by the revision given with ``--against``
 (checked out once into a temporary git worktree and imported from there), in separate
 processes, alternating between the two, ``--runs`` times each after a warm-up render that
-compiles the kernels.  Only the render is timed (``stats.wall_seconds``: no start-up, no
-scene loading, no image writing).  Prints a table of median times and speed-ups, and
-whether the two images are bit-identical.
+compiles the kernels.  Each process is tuned as the ``rtmesh`` command tunes its own
+(:func:`rtmesh.runtime.tune_process` where the revision has it; older revisions tuned
+every process as they built a renderer).  Only the render is timed
+(``stats.wall_seconds``: no start-up, no scene loading, no image writing).  Prints a table
+of median times and speed-ups, and how far apart the two images are (relative RMSE; 0 for
+bit-identical images).
 
 Usage::
 
@@ -29,27 +32,38 @@ SCENES = ["assets/showcase.toml", "assets/glass_edges.toml", "assets/passes.toml
 
 # one render in a fresh process: JSON with the render time and a digest of the image
 CHILD = r"""
-import hashlib, json, sys
+import dataclasses, json, sys
+import numpy as np
+try:
+    from rtmesh import runtime
+    runtime.tune_process()
+except ImportError:
+    pass
 from rtmesh.api import load_scene
 from rtmesh.integrator import Integrator
-import dataclasses
-path, threads, scale = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
+path, threads, scale, image_path = sys.argv[1], int(sys.argv[2]), float(sys.argv[3]), sys.argv[4]
 scene, settings = load_scene(path)
 settings = dataclasses.replace(settings, threads=threads, width=max(1, round(settings.width * scale)),
                                height=max(1, round(settings.height * scale)))
 result = Integrator(scene, settings).render()
-print(json.dumps({"seconds": result.stats.wall_seconds,
-                  "digest": hashlib.sha256(result.image.tobytes()).hexdigest()}))
+np.save(image_path, result.image)
+print(json.dumps({"seconds": result.stats.wall_seconds}))
 """
 
 
-def render_once(source, scene, threads, scale):
-    """Render ``scene`` with the rtmesh found under ``source``; (seconds, image digest)."""
+def render_once(source, scene, threads, scale, image_path):
+    """Render ``scene`` with the rtmesh found under ``source``, keeping the image in
+    ``image_path`` (.npy); the render's seconds."""
     env = dict(os.environ, PYTHONPATH=str(source))
-    done = subprocess.run([sys.executable, "-c", CHILD, str(ROOT / scene), str(threads), str(scale)],
-                          env=env, capture_output=True, text=True, check=True, cwd=source)
-    out = json.loads(done.stdout.strip().splitlines()[-1])
-    return out["seconds"], out["digest"]
+    done = subprocess.run([sys.executable, "-c", CHILD, str(ROOT / scene), str(threads), str(scale),
+                           str(image_path)], env=env, capture_output=True, text=True, check=True, cwd=source)
+    return json.loads(done.stdout.strip().splitlines()[-1])["seconds"]
+
+
+def relative_rmse(a, b):
+    """RMSE of ``a - b`` relative to the RMS of ``b`` (0 for identical images)."""
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    return float(np.sqrt(np.mean((a - b) ** 2)) / max(np.sqrt(np.mean(b ** 2)), 1e-30))
 
 
 def main():
@@ -67,22 +81,23 @@ def main():
             rows = []
             for scene in SCENES:
                 times = {"this": [], "other": []}
-                digests = {}
+                images = {key: Path(folder) / f"{key}.npy" for key in times}
                 for source, key in ((ROOT, "this"), (other, "other")):  # warm-up: compile, cache
-                    digests[key] = render_once(source, scene, args.threads, args.scale)[1]
+                    render_once(source, scene, args.threads, args.scale, images[key])
+                difference = relative_rmse(np.load(images["this"]), np.load(images["other"]))
                 for _ in range(args.runs):
                     for source, key in ((ROOT, "this"), (other, "other")):
-                        times[key].append(render_once(source, scene, args.threads, args.scale)[0])
+                        times[key].append(render_once(source, scene, args.threads, args.scale, images[key]))
                 this, then = float(np.median(times["this"])), float(np.median(times["other"]))
-                same = "yes" if digests["this"] == digests["other"] else "no"
-                rows.append(f"| {scene} | {1e3 * then:.0f} | {1e3 * this:.0f} | {then / this:.2f} | {same} |")
+                rows.append(f"| {scene} | {1e3 * then:.0f} | {1e3 * this:.0f} | {then / this:.2f} | "
+                            f"{difference:.2g} |")
                 print(rows[-1], flush=True)
         finally:
             subprocess.run(["git", "worktree", "remove", "--force", str(other)], cwd=ROOT, check=False)
     print()
     print(f"Render times, ms (medians of {args.runs}, {args.threads} threads, scale {args.scale}); "
           f"{args.against} against this checkout:")
-    print(f"| scene | {args.against} | this | speed-up | same image |")
+    print(f"| scene | {args.against} | this | speed-up | image difference (rel. RMSE) |")
     print("|---|---:|---:|---:|---|")
     print("\n".join(rows))
 

@@ -1,0 +1,26 @@
+"""The compiled pixel sample positions equal NumPy's, bit for bit."""
+
+import numpy as np
+import pytest
+
+from rtmesh.pixel_samples import PixelSampler, pixel_positions
+from rtmesh.sampling import pixel_offsets
+
+
+@pytest.mark.parametrize("sampler", ["regular", "jittered", "random"])
+@pytest.mark.parametrize("spp", [1, 2, 3, 4, 6, 16])
+@pytest.mark.parametrize("seed", [0, 7, -3, 2 ** 63 + 5])
+def test_compiled_pixel_positions_equal_numpy(sampler, spp, seed):
+    rng = np.random.default_rng(spp)
+    pixel = rng.integers(0, 10 ** 7, 500)
+    sample = rng.integers(0, 4 * spp, 500)  # adaptive rounds continue past the first spp
+    expected = pixel_offsets(sampler, seed, pixel, sample, spp)
+    s = PixelSampler(sampler, seed, spp)
+    got = pixel_positions(s.code, s.keys, s.corners, s.size, s.spp, pixel, sample)
+    np.testing.assert_array_equal(got, expected)
+
+
+def test_sobol_has_no_compiled_twin():
+    from rtmesh.settings import RenderSettings
+    assert PixelSampler.for_settings(RenderSettings(sampler="sobol")) is None
+    assert PixelSampler.for_settings(RenderSettings(sampler="jittered", spp=4)).spp == 4
