@@ -23,7 +23,7 @@ from numba.core import caching
 # Every module of the package that defines compiled code; tests/test_compiled.py checks
 # that none is missing.
 KERNEL_MODULES = ("compiled.py", "kernels.py", "embree_packets.py", "direct_stage.py", "build_kernels.py",
-                  "pixel_samples.py")
+                  "pixel_samples.py", "hashing.py")
 _PACKAGE = os.path.dirname(os.path.abspath(__file__))
 
 

@@ -221,13 +221,8 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     has_smooth = len(vertex_normals) > 0
     radiance = np.empty((3, n))
     inverse_width = 1.0 / width
-    rays = ep.aligned_words(PACKETS * ep.RAYHIT_WORDS * LANES, np.float32)
-    words = rays.view(np.int32)
-    shadow = ep.aligned_words(PACKETS * ep.RAY_WORDS * LANES, np.float32)
-    shadow_words = shadow.view(np.int32)
-    valid = ep.aligned_words(BLOCK, np.int32)
-    shadow_valid = ep.aligned_words(BLOCK, np.int32)
-    args = ep.query_arguments(flags)
+    rays, words, valid, args = ep.packet_buffers(ep.RAYHIT_WORDS, PACKETS, flags)
+    shadow, shadow_words, shadow_valid, _ = ep.packet_buffers(ep.RAY_WORDS, PACKETS, flags)
     # per sample of the block: direction, surface record, material
     d = np.empty((3, BLOCK))
     srf = np.empty((9, BLOCK))

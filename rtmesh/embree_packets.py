@@ -427,6 +427,32 @@ def query_arguments(flags):
 
 
 @row
+def packet_buffers(fields, packets, flags):
+    """Scratch for ``packets`` packets side by side, each 64-byte aligned.
+
+    Parameters
+    ----------
+    fields : int
+        Words per lane: :data:`RAYHIT_WORDS` for closest-hit queries, :data:`RAY_WORDS` for
+        occlusion.
+    packets : int
+    flags : int
+        Query flags.
+
+    Returns
+    -------
+    rays : (packets * fields * LANES,) float32
+    words : the same memory as int32
+    valid : (packets * LANES,) int32
+        Lane masks, packet ``q``'s at ``q * LANES``.
+    args : (8,) int32
+        The query arguments (:func:`query_arguments`).
+    """
+    rays = aligned_words(packets * fields * LANES, np.float32)
+    return rays, rays.view(np.int32), aligned_words(packets * LANES, np.int32), query_arguments(flags)
+
+
+@row
 def set_lane(ray, words, lane, ox, oy, oz, dx, dy, dz, tfar):
     """Write one ray into lane ``lane`` of a packet (tnear 0, time 0, all masks).
 
@@ -510,10 +536,7 @@ def intersect_rays(intersect16, scene, origins, directions, flags):
     prim = np.empty(n, np.int32)
     u = np.empty(n)
     v = np.empty(n)
-    ray = aligned_words(RAYHIT_WORDS * LANES, np.float32)
-    words = ray.view(np.int32)
-    valid = aligned_words(LANES, np.int32)
-    args = query_arguments(flags)
+    ray, words, valid, args = packet_buffers(RAYHIT_WORDS, 1, flags)
     for start in range(0, n, LANES):
         count = min(LANES, n - start)
         _intersect_packet(intersect16, scene, ray, words, valid, args, origins, directions, start, count)
@@ -562,10 +585,7 @@ def occluded_rays(occluded16, scene, origins, directions, t_max, rows, flags):
         x = t_max[i]
         tfar[i] = np.float32(_F32_MAX if x > _F32_MAX else x)
     blocked = np.empty(n, np.bool_)
-    ray = aligned_words(RAY_WORDS * LANES, np.float32)
-    words = ray.view(np.int32)
-    valid = aligned_words(LANES, np.int32)
-    args = query_arguments(flags)
+    ray, words, valid, args = packet_buffers(RAY_WORDS, 1, flags)
     for start in range(0, n, LANES):
         count = min(LANES, n - start)
         _load_rays(ray, words, valid, origins, directions, rows, start, count, tfar)

@@ -1,14 +1,19 @@
 """The 64-bit integer hash behind every random number in rtmesh."""
 
 import numpy as np
+from numba.extending import register_jitable
 
 M1 = np.uint64(0xBF58476D1CE4E5B9)
 M2 = np.uint64(0x94D049BB133111EB)
 GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 
 
+@register_jitable
 def mix64(x):
     """SplitMix64 finaliser: a bijective 64-bit mix with full avalanche.
+
+    Plain NumPy when called from Python; compiled code (:mod:`rtmesh.pixel_samples`) calls
+    the same function, compiled for one uint64.
 
     Parameters
     ----------

@@ -11,7 +11,7 @@ stays in NumPy: its scrambling tables are not worth a second implementation.
 import numpy as np
 
 from .compiled import kernel, row
-from .hashing import GOLDEN, M1, M2
+from .hashing import GOLDEN, M1, mix64
 from .sampling import Dim, _cell_grids
 
 REGULAR, JITTERED, RANDOM = 0, 1, 2
@@ -49,7 +49,7 @@ class PixelSampler:
         self.code = SAMPLER_CODES[sampler]
         self.spp = int(spp)
         with np.errstate(over="ignore"):  # the products wrap modulo 2**64 by design
-            self.keys = np.array([_mix64(np.uint64(seed & 0xFFFFFFFFFFFFFFFF) * GOLDEN + np.uint64(d))
+            self.keys = np.array([mix64(np.uint64(seed & 0xFFFFFFFFFFFFFFFF) * GOLDEN + np.uint64(d))
                                   for d in (Dim.PIXEL, Dim.PIXEL + 1)], dtype=np.uint64)
         (cx, cy), (sx, sy), table = _cell_grids(1, self.spp, 2)
         self.size = np.array([cx * sx, cy * sy], dtype=np.float64)
@@ -65,30 +65,11 @@ class PixelSampler:
         return cls(settings.sampler, settings.seed, settings.spp)
 
 
-def _mix64(x):
-    """:func:`rtmesh.hashing.mix64` of one uint64 (NumPy scalars, for the set-up)."""
-    x = x ^ (x >> np.uint64(30))
-    x = x * M1
-    x = x ^ (x >> np.uint64(27))
-    x = x * M2
-    return x ^ (x >> np.uint64(31))
-
-
-@row
-def _mix(x):
-    """SplitMix64 finaliser (:func:`rtmesh.hashing.mix64`) of one uint64."""
-    x = x ^ (x >> np.uint64(30))
-    x = x * M1
-    x = x ^ (x >> np.uint64(27))
-    x = x * M2
-    return x ^ (x >> np.uint64(31))
-
-
 @row
 def _uniform(key, pixel, sample):
     """:func:`rtmesh.sampling.uniform` for one (dimension key, pixel, sample)."""
-    sequence = _mix(key ^ (np.uint64(pixel) * GOLDEN))
-    x = _mix(sequence ^ (np.uint64(sample) * M1 + _ONE))
+    sequence = mix64(key ^ (np.uint64(pixel) * GOLDEN))
+    x = mix64(sequence ^ (np.uint64(sample) * M1 + _ONE))
     return np.float64(x >> np.uint64(11)) * _TO_UNIT
 
 
