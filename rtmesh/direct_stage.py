@@ -134,7 +134,7 @@ class DirectStage:
         Returns
         -------
         (n, 3) float64
-            Component-major, as the general path's radiance.
+            Row-major.
         """
         shaded, diffuse, specular, exponent, visible_from = self._materials
         s = self._settings
@@ -201,7 +201,7 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     Returns
     -------
     radiance : (n, 3) float64
-        Component-major; final except for the samples in ``records``, which hold
+        Row-major; final except for the samples in ``records``, which hold
         ``base`` of their material until :func:`finish_highlights` runs.
     shadow_rays : int
     records : tuple of arrays
@@ -219,7 +219,8 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     n = len(pixel)
     n_lights = len(lights)
     has_smooth = len(vertex_normals) > 0
-    radiance = np.empty((3, n))
+    # row-major, so that the integrator's (pixels, spp, 3) view of it is not a copy
+    radiance = np.empty((n, 3))
     inverse_width = 1.0 / width
     rays, words, valid, args = ep.packet_buffers(ep.RAYHIT_WORDS, PACKETS, flags)
     shadow, shadow_words, shadow_valid, _ = ep.packet_buffers(ep.RAY_WORDS, PACKETS, flags)
@@ -312,7 +313,7 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
             i = start + b
             if not hit[b]:
                 for c in range(3):
-                    radiance[c, i] = 0.0 + background[c]
+                    radiance[i, c] = 0.0 + background[c]
                 continue
             m = mat[b]
             deferred = False
@@ -329,7 +330,7 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
                         rec_raised[records] = raised[k, b]
                         records += 1
                 for c in range(3):
-                    radiance[c, i] = base[m, c]
+                    radiance[i, c] = base[m, c]
                 continue
             d0 = d1 = d2 = 0.0
             for k in range(n_lights):
@@ -338,10 +339,10 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
                     d0 += f0 * incident[k, 0, b]
                     d1 += f1 * incident[k, 1, b]
                     d2 += f2 * incident[k, 2, b]
-            radiance[0, i] = 0.0 + (base[m, 0] + d0)
-            radiance[1, i] = 0.0 + (base[m, 1] + d1)
-            radiance[2, i] = 0.0 + (base[m, 2] + d2)
-    return radiance.T, shadow_rays, (rec_sample[:records], rec_mat[:records], rec_cos[:records],
+            radiance[i, 0] = 0.0 + (base[m, 0] + d0)
+            radiance[i, 1] = 0.0 + (base[m, 1] + d1)
+            radiance[i, 2] = 0.0 + (base[m, 2] + d2)
+    return radiance, shadow_rays, (rec_sample[:records], rec_mat[:records], rec_cos[:records],
                                      rec_incident[:records], rec_cosine[:records], rec_exponent[:records],
                                      rec_raised[:records])
 
