@@ -60,6 +60,7 @@ import numpy as np
 
 from .accel import barycentric_interpolate, offset_ray_origins
 from .batches import component_major, take_rows
+from .light_types import LightType, aim
 from .materials import as_colour
 from .sampling import (Dim, decorrelated_points, spherical_triangle_area, square_to_spherical_triangle,
                        square_to_uniform_disk_concentric, square_to_uniform_triangle)
@@ -396,6 +397,14 @@ class MeshLight:
         points[rows] = y
         b[rows, 0], b[rows, 1] = b1, b2
         inverse_pdf[rows] = inverse
+
+
+QUAD = LightType("quad", {"position": "vec3", "edge1": "vec3", "edge2": "vec3", "radiance": "colour",
+                         "visible": "bool"}, ("position", "edge1", "edge2", "radiance"),
+                 lambda v: QuadLight(v["position"], v["edge1"], v["edge2"], v["radiance"], v.get("visible", True)))
+DISK = LightType("disk", {"position": "vec3", "direction": "vec3", "look_at": "vec3", "radius": "positive",
+                         "radiance": "colour", "visible": "bool"}, ("position", "radius", "radiance"),
+                 lambda v: DiskLight(v["position"], aim(v, "disk"), v["radius"], v["radiance"], v.get("visible", True)))
 
 
 def is_area_light(light):

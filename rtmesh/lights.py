@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import kernels
+from .light_types import LightType, aim
 from .materials import as_colour
 
 
@@ -147,3 +148,14 @@ class SpotLight:
     @property
     def is_black(self):
         return not (self.intensity > 0).any()
+
+
+POINT = LightType("point", {"position": "vec3", "intensity": "colour"}, ("position", "intensity"),
+                  lambda v: PointLight(v["position"], v["intensity"]))
+DIRECTIONAL = LightType("directional", {"direction": "vec3", "irradiance": "colour"}, ("direction", "irradiance"),
+                        lambda v: DirectionalLight(v["direction"], v["irradiance"]))
+SPOT = LightType("spot", {"position": "vec3", "direction": "vec3", "look_at": "vec3", "intensity": "colour",
+                          "inner_angle": "non_negative", "outer_angle": "non_negative"},
+                 ("position", "intensity"),
+                 lambda v: SpotLight(v["position"], aim(v, "spot"), v["intensity"], v.get("inner_angle", 20.0),
+                                     v.get("outer_angle", 30.0)))

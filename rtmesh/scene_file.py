@@ -23,8 +23,7 @@ from .camera import Camera
 from .errors import RtmeshError, SceneError
 from .gltf_scene import file_cameras_and_lights
 from .importers import load_trimesh, parts_from_trimesh
-from .area_lights import DiskLight, QuadLight
-from .lights import DirectionalLight, PointLight, SpotLight
+from .light_registry import LIGHT_TYPES
 from .materials import Material
 from .motion import Motion
 from .scene import MeshPart, Scene
@@ -161,20 +160,16 @@ OBJECT_KEYS = {
     "motion": _table,
 }
 MOTION_KEYS = {"translate": _vec3, "rotate_axis": _vec3, "rotate_degrees": _float}
-LIGHT_KEYS = {
-    "type": _one_of("point", "directional", "spot", "quad", "disk"),
-    "position": _vec3, "direction": _vec3, "look_at": _vec3,
-    "intensity": _colour, "irradiance": _colour,
-    "inner_angle": _non_negative, "outer_angle": _non_negative,
-    "edge1": _vec3, "edge2": _vec3, "radius": _positive, "radiance": _colour, "visible": _bool,
-}
-LIGHT_REQUIRED = {
-    "point": ("position", "intensity"),
-    "directional": ("direction", "irradiance"),
-    "spot": ("position", "intensity"),
-    "quad": ("position", "edge1", "edge2", "radiance"),
-    "disk": ("position", "radius", "radiance"),
-}
+# the keys of every registered light type, read by their kind (see rtmesh.light_types)
+_KEY_READERS = {"vec3": _vec3, "colour": _colour, "positive": _positive, "non_negative": _non_negative,
+                "bool": _bool}
+
+
+def light_keys():
+    """The keys a ``[[lights]]`` table may have, with their readers, from the registry."""
+    return {"type": _one_of(*LIGHT_TYPES),
+            **{key: _KEY_READERS[kind] for t in LIGHT_TYPES.values() for key, kind in t.keys.items()}}
+
 BACKGROUND_KEYS = {
     "type": _one_of(*BACKGROUND_TYPES), "colour": _colour, "top": _colour, "bottom": _colour,
     "file": _str, "rotation": _float, "intensity": _non_negative,
@@ -320,7 +315,8 @@ def scene_from_dict(doc, source="scene", base_dir=".", overrides=None):
 
     lights = None
     if "lights" in doc:
-        lights = [_light(r, r.fields(t, LIGHT_KEYS, f"lights[{i}]"), f"lights[{i}]")
+        keys = light_keys()
+        lights = [_light(r, r.fields(t, keys, f"lights[{i}]"), f"lights[{i}]")
                   for i, t in enumerate(r.array_of_tables(doc["lights"], "lights"))]
     if file_lights:
         # a glTF file's own lights join the scene file's (and replace the default rig)
@@ -480,38 +476,20 @@ def _motion(r, table, where):
 
 
 def _light(r, values, where):
+    """A light from its read ``[[lights]]`` table, through its type's registry entry."""
     kind = values.get("type")
     if kind is None:
-        raise r.error(f"{where}.type", "missing (point, directional, spot, quad or disk)")
-    allowed = {"point": {"type", "position", "intensity"},
-               "directional": {"type", "direction", "irradiance"},
-               "spot": {"type", "position", "direction", "look_at", "intensity", "inner_angle",
-                        "outer_angle"},
-               "quad": {"type", "position", "edge1", "edge2", "radiance", "visible"},
-               "disk": {"type", "position", "direction", "look_at", "radius", "radiance",
-                        "visible"}}[kind]
+        names = list(LIGHT_TYPES)
+        raise r.error(f"{where}.type", f"missing ({', '.join(names[:-1])} or {names[-1]})")
+    light_type = LIGHT_TYPES[kind]
     for key in values:
-        if key not in allowed:
+        if key != "type" and key not in light_type.keys:
             raise r.error(f"{where}.{key}", f"does not apply to a {kind} light")
-    for key in LIGHT_REQUIRED[kind]:
+    for key in light_type.required:
         if key not in values:
-            raise r.error(f"{where}.{key}", f"missing (a {kind} light needs {', '.join(LIGHT_REQUIRED[kind])})")
+            raise r.error(f"{where}.{key}", f"missing (a {kind} light needs {', '.join(light_type.required)})")
     try:
-        if kind == "point":
-            return PointLight(values["position"], values["intensity"])
-        if kind == "directional":
-            return DirectionalLight(values["direction"], values["irradiance"])
-        if kind == "quad":
-            return QuadLight(values["position"], values["edge1"], values["edge2"],
-                             values["radiance"], values.get("visible", True))
-        if ("direction" in values) == ("look_at" in values):
-            raise ValueError(f"a {kind} light needs exactly one of direction or look_at")
-        direction = values.get("direction", values.get("look_at", 0) - values["position"])
-        if kind == "disk":
-            return DiskLight(values["position"], direction, values["radius"], values["radiance"],
-                             values.get("visible", True))
-        return SpotLight(values["position"], direction, values["intensity"],
-                         values.get("inner_angle", 20.0), values.get("outer_angle", 30.0))
+        return light_type.build(values)
     except ValueError as exc:
         raise r.error(where, str(exc)) from None
 

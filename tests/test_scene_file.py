@@ -102,12 +102,32 @@ def test_command_line_overrides_scene_settings():
 
 
 @pytest.mark.parametrize("table", ["RENDER_KEYS", "CAMERA_KEYS", "ENVIRONMENT_KEYS", "MATERIAL_KEYS",
-                                   "OBJECT_KEYS", "MOTION_KEYS", "LIGHT_KEYS", "BACKGROUND_KEYS"])
+                                   "OBJECT_KEYS", "MOTION_KEYS", "light_keys", "BACKGROUND_KEYS"])
 def test_every_scene_key_is_documented(table):
     # docs/SCENE_FORMAT.md promises to list every key: a key added to the schema without
     # its documentation fails here
     import rtmesh.scene_file as scene_file
 
     doc = (Path(__file__).resolve().parent.parent / "docs" / "SCENE_FORMAT.md").read_text()
-    missing = [key for key in getattr(scene_file, table) if f"`{key}`" not in doc]
+    keys = getattr(scene_file, table)
+    missing = [key for key in (keys() if callable(keys) else keys) if f"`{key}`" not in doc]
     assert not missing, f"{table} keys missing from docs/SCENE_FORMAT.md: {missing}"
+
+
+def test_a_registered_light_type_is_read_from_scene_files_without_touching_the_reader(monkeypatch):
+    """A new light is its module plus its registry entry: the scene-file reader takes its
+    keys, required keys and builder from the registry."""
+    from rtmesh import light_registry, scene_file
+    from rtmesh.light_types import LightType
+
+    lamp = LightType("lamp", {"position": "vec3", "watts": "non_negative"}, ("position",),
+                     lambda v: PointLight(v["position"], v.get("watts", 1.0) / 10.0))
+    monkeypatch.setitem(light_registry.LIGHT_TYPES, "lamp", lamp)
+    assert scene_file.LIGHT_TYPES is light_registry.LIGHT_TYPES
+    scene, _ = scene_from_dict(with_(lights=[{"type": "lamp", "position": [1, 2, 3], "watts": 40}]))
+    (light,) = scene.lights
+    assert isinstance(light, PointLight) and np.allclose(light.intensity, 4.0)
+    with pytest.raises(SceneError, match=r"lights\[0\]\.watts: expected a"):
+        scene_from_dict(with_(lights=[{"type": "lamp", "position": [1, 2, 3], "watts": "x"}]))
+    with pytest.raises(SceneError, match=r"lights\[0\]\.intensity: does not apply to a lamp light"):
+        scene_from_dict(with_(lights=[{"type": "lamp", "position": [1, 2, 3], "intensity": 1}]))
