@@ -39,8 +39,8 @@ what makes penumbrae smooth at small N.  Its variance grows only for points clos
 light than the light's own size, where ``1 / d^2`` varies strongly over the light;
 solid-angle sampling (Urena et al. 2013 for rectangles) would remove that.
 
-The sample points come from the render's sampler (:func:`rtmesh.sampling.decorrelated_points`,
-keyed by seed, pixel, sample, ray and dimension), in dimensions from :attr:`Dim.LIGHT` upward:
+The sample points come from the render's sampler (:meth:`rtmesh.sampler.Sampler.area_light`,
+keyed by seed, pixel, sample, ray and dimension), in dimensions from :attr:`rtmesh.sampling.Dim.LIGHT` upward:
 the ``spp * N`` points a pixel's samples send to one light are one stratified set, and the
 ``N`` of each hit are stratified among themselves.
 
@@ -62,8 +62,9 @@ from .accel import barycentric_interpolate, offset_ray_origins
 from .batches import component_major, take_rows
 from .light_types import LightType, aim
 from .materials import as_colour
-from .sampling import (Dim, decorrelated_points, spherical_triangle_area, square_to_spherical_triangle,
-                       square_to_uniform_disk_concentric, square_to_uniform_triangle)
+from .sampler import Sampler
+from .sampling import (spherical_triangle_area, square_to_spherical_triangle, square_to_uniform_disk_concentric,
+                       square_to_uniform_triangle)
 from .vecmath import dot, normalize, orthonormal_basis
 
 # Rays meeting a visible light and a surface at the same distance (a light placed flush on a
@@ -449,17 +450,6 @@ def emissive_mesh_light(triangles, normals, emission, tint=None, mean_tint=None)
                      light_tint, None if tint is None else mean_tint[faces])
 
 
-def light_dimension(depth, light_index, light_count):
-    """First sample dimension of one light's samples at one path depth.
-
-    Each (depth, light) pair gets its own pair of dimensions from :attr:`Dim.LIGHT` upward,
-    so the samples of different lights and bounces are independent.  The 2^23 pairs below
-    the next reserved range wrap around (only past millions of lights x bounces).
-    """
-    pair = (depth * light_count + light_index) % (1 << 23)
-    return int(Dim.LIGHT) + 2 * pair
-
-
 class AreaLighting:
     """Soft shadows and camera visibility of a scene's area lights.
 
@@ -480,9 +470,7 @@ class AreaLighting:
         self.lights = list(lights)
         self.accel = accel
         self.samples = settings.light_samples
-        self.sampler = settings.sampler
-        self.seed = settings.seed
-        self.spp = settings.spp
+        self.sampler = Sampler.for_settings(settings)
         self.offset_scale = offset_scale
         self.visible = [light for light in self.lights if light.visible]
 
@@ -519,10 +507,8 @@ class AreaLighting:
         n = self.samples
         total = None
         for light_index, light in enumerate(self.lights):
-            dimension = light_dimension(depth, light_index, len(self.lights))
             for j in range(n):
-                u = decorrelated_points(self.sampler, self.seed, pixel, sample, self.spp, dimension,
-                                        j, n)
+                u = self.sampler.area_light(pixel, sample, depth, light_index, len(self.lights), j, n)
                 contribution = self._one_sample(p, ng, reflectance, light, u, stats, clock, time)
                 if contribution is not None:
                     total = contribution if total is None else total + contribution

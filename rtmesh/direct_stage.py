@@ -30,7 +30,6 @@ from .accel import Accel
 from .background import SolidBackground
 from .compiled import kernel, row
 from .pixel_samples import PixelSampler, pixel_position
-from .sampling import pixel_offsets
 from .kernels import (SHADOW_SHORTEN, _dot, _highlight_cosine, _illuminate, _image_plane_point, _offset,
                       _pinhole_direction, _reaches, _shade, _surface_record)
 
@@ -86,10 +85,10 @@ class DirectStage:
         background = it.background
         self._background = (np.ascontiguousarray(background.colour) if st.background else np.zeros(3))
         self._offset_scale = it._offset_scale32
-        self._settings = s
+        self._sampler = it.sampler
         # the sample positions are formed in the kernel, except for the Sobol sampler's
-        self._sampler = PixelSampler.for_settings(s)
-        sampler = self._sampler or PixelSampler("regular", 0, 1)
+        self._pixel_sampler = PixelSampler.for_settings(s)
+        sampler = self._pixel_sampler or PixelSampler("regular", 0, 1)
         self._sampler_arrays = (sampler.code, sampler.keys, sampler.corners, sampler.size, sampler.spp)
 
     @classmethod
@@ -137,9 +136,8 @@ class DirectStage:
             Row-major.
         """
         shaded, diffuse, specular, exponent, visible_from = self._materials
-        s = self._settings
-        film_xy = (_NO_POSITIONS if self._sampler is not None else
-                   np.ascontiguousarray(pixel_offsets(s.sampler, s.seed, pixel, sample, s.spp)))
+        film_xy = (_NO_POSITIONS if self._pixel_sampler is not None else
+                   np.ascontiguousarray(self._sampler.pixel(pixel, sample)))
         radiance, shadow_rays, records = direct_samples(
             *self._queries, film_xy, *self._sampler_arrays, pixel, np.ascontiguousarray(sample, dtype=np.int64),
             *self._camera,

@@ -41,9 +41,9 @@ from .glossy import sample_glossy_directions
 from .media import Media
 from .motion import MotionAccel, blurs, object_motions, scene_at_time, swept_bounds
 from .render_plan import RenderPlan
+from .sampler import Sampler
 from .scheduler import pixel_chunks, run_on_threads
-from .sampling import (Dim, decorrelated_points, pixel_offsets, square_to_cosine_hemisphere,
-                       stratified_values)
+from .sampling import square_to_cosine_hemisphere
 from .stats import RenderStats
 from .vecmath import (dot, face_viewer, fresnel_dielectric, fresnel_schlick, orthonormal_basis, reflect,
                       refract)
@@ -126,6 +126,7 @@ class Integrator:
 
     def __init__(self, scene, settings):
         self.settings = settings.validate()
+        self.sampler = Sampler.for_settings(self.settings)
         if object_motions(scene) and not blurs(scene):
             # an instantaneous shutter: moving objects stand still where the shutter finds them
             scene = scene_at_time(scene, scene.camera.shutter[0])
@@ -465,16 +466,15 @@ class Integrator:
             clock.lap("direct")
             return (radiance, None, stats) if ragged else (radiance.reshape(m, spp, 3), None, stats)
         # every dimension is stratified in sets of the settings' spp, whatever the round
-        in_pixel = pixel_offsets(s.sampler, s.seed, pixel, sample_in_pixel, s.spp)
+        in_pixel = self.sampler.pixel(pixel, sample_in_pixel)
         lens_uv = None
         if self.plan.lens:
-            lens_uv = decorrelated_points(s.sampler, s.seed, pixel, sample_in_pixel, s.spp,
-                                          Dim.LENS)
+            lens_uv = self.sampler.lens(pixel, sample_in_pixel)
         sample_time = None
         if self.plan.motion:
             # one time per camera sample, stratified per pixel; its rays all inherit it
             t_open, t_close = self.camera.shutter
-            u = stratified_values(s.sampler, s.seed, pixel, sample_in_pixel, s.spp, Dim.TIME)
+            u = self.sampler.time(pixel, sample_in_pixel)
             sample_time = t_open + (t_close - t_open) * u
         origins, directions = self.camera.generate_rays(in_pixel, s.width, s.height, lens_uv, pixel,
                                                         self._camera_frame)
@@ -703,11 +703,10 @@ class Integrator:
         t, b = orthonormal_basis(srf.ng)
         px, sp = pixel[srf.sample], sample_in_pixel[srf.sample]
         free = np.zeros(k)
-        s = self.settings
         # the spp * n_ao rays of a pixel's samples are one stratified set of the render's
         # sampler, and the n_ao of each hit are stratified among themselves
         for i in range(n_ao):
-            u = decorrelated_points(s.sampler, s.seed, px, sp, s.spp, Dim.AO + 2 * depth, i, n_ao)
+            u = self.sampler.ambient_occlusion(px, sp, depth, i, n_ao)
             w = square_to_cosine_hemisphere(u)
             d = t * w[:, :1] + b * w[:, 1:2] + srf.ng * w[:, 2:3]
             origins = offset_ray_origins(srf.p, srf.ng, np.float32, self.offset_scale, d)
@@ -802,7 +801,7 @@ class Integrator:
         sample : (k,) int
             Pixel sample of each ray (within the chunk), keying its random numbers.
         depth : int
-            Depth of the hit; the spawned rays use dimensions ``Dim.GLOSSY + 2 * depth``.
+            Depth of the hit (the sampler's glossy dimensions of that depth).
         keys : (pixel, sample_in_pixel)
 
         Returns
@@ -815,10 +814,8 @@ class Integrator:
         if not len(rough):
             return mirror
         pixel, sample_in_pixel = keys
-        s = self.settings
         key_rows = sample.take(rough)
-        u = decorrelated_points(s.sampler, s.seed, pixel.take(key_rows),
-                                sample_in_pixel.take(key_rows), s.spp, Dim.GLOSSY + 2 * depth)
+        u = self.sampler.glossy(pixel.take(key_rows), sample_in_pixel.take(key_rows), depth)
         mirror[rough] = sample_glossy_directions(take_rows(mirror, rough), take_rows(ng, rough),
                                                  roughness.take(rough), u)
         return mirror

@@ -35,7 +35,7 @@ class Dim(IntEnum):
     LENS = 2  # (u, v) on the thin-lens aperture
     TIME = 4  # time in the shutter interval (one number; dimension 5 is unused)
     AO = 16  # first of the ambient-occlusion dimensions; AO rays at depth d use AO + 2*d
-    LIGHT = 1 << 24  # first of the area-light dimensions (see rtmesh.area_lights.light_dimension)
+    LIGHT = 1 << 24  # first of the area-light dimensions (see rtmesh.sampler.light_dimension)
     GLOSSY = 1 << 25  # glossy-reflection directions; the rays spawned at depth d use GLOSSY + 2*d
     ALPHA = 1 << 26  # stochastic transparency of cut-outs, keyed by the ray (see rtmesh.cutouts)
 

@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 
 from rtmesh.accel import Accel
-from rtmesh.area_lights import AreaLighting, DiskLight, QuadLight, emissive_mesh_light, light_dimension
+from rtmesh.area_lights import AreaLighting, DiskLight, QuadLight, emissive_mesh_light
+from rtmesh.sampler import light_dimension
 from rtmesh.camera import Camera
 from rtmesh.errors import SceneError
 from rtmesh.lights import PointLight
@@ -445,8 +446,7 @@ def test_area_light_and_ao_points_of_a_pixel_are_one_stratified_set(sampler, mon
     # spp = 4 camera samples per pixel x 4 rays per hit: the 16 points a pixel's samples
     # send to the light (and the 16 ambient-occlusion directions) fill every stratum of the
     # 4 x 4 grid once (for Sobol every elementary interval), as the renderer draws them
-    import rtmesh.area_lights
-    import rtmesh.integrator
+    import rtmesh.sampler
     drawn = []
 
     def recording(module):
@@ -457,8 +457,7 @@ def test_area_light_and_ao_points_of_a_pixel_are_one_stratified_set(sampler, mon
             drawn.append((dimension, np.array(pixel), np.array(sample), ray, np.array(u)))
             return u
         monkeypatch.setattr(module, "decorrelated_points", draw)
-    recording(rtmesh.area_lights)
-    recording(rtmesh.integrator)
+    recording(rtmesh.sampler)  # every stage draws its points through the render's Sampler
     camera = Camera([0.0, 0.0, 1.0], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0], 30.0)
     scene = Scene.from_parts([part("floor", floor_quad(20.0))], [Material("f")], [ceiling_quad()], camera)
     width = height = 3
