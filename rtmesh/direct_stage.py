@@ -228,8 +228,6 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     mat = np.empty(BLOCK, np.intp)
     hit = np.empty(BLOCK, np.bool_)
     # per light and sample: the light sample and its fate
-    lit = np.empty(BLOCK, np.bool_)
-    shadow_ray = np.empty((7, BLOCK), np.float32)  # origin, direction, length
     cos_i = np.empty((n_lights, BLOCK))
     incident = np.empty((n_lights, 3, BLOCK))
     cosine = np.empty((n_lights, BLOCK))
@@ -280,7 +278,11 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
         # each light: samples (rtmesh.kernels.light_samples) and the shadow packets
         for k in range(n_lights):
             light = lights[k]
-            _light_block(light, srf, d, count, lit, cos_i[k], incident[k], cosine[k], shadow_ray, scale, shorten)
+            lit, values, shadow_ray = _light_block(light, srf, d, count, scale, shorten)
+            for b in range(count):
+                cos_i[k, b] = values[0, b]
+                incident[k, 0, b], incident[k, 1, b], incident[k, 2, b] = values[1, b], values[2, b], values[3, b]
+                cosine[k, b] = values[4, b]
             for q in range(PACKETS):
                 for lane in range(LANES):
                     b = q * LANES + lane
@@ -346,25 +348,43 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
 
 
 @row
-def _light_block(light, srf, d, count, lit, cos_i, incident, cosine, shadow_ray, scale, shorten):
+def _light_block(light, srf, d, count, scale, shorten):
     """One light at the first ``count`` surface records of a block (the arithmetic of
-    :func:`rtmesh.kernels.light_samples`): whether it reaches them, ``ns . wi``, the
-    incident term, the highlight cosine and the shadow ray (offset origin, float32
-    direction, length).  No branches, gathers or calls: LLVM vectorises the loop."""
+    :func:`rtmesh.kernels.light_samples`).
+
+    Returns
+    -------
+    lit : (BLOCK,) bool
+        The light reaches the point (it is on the side the ray came from, its term is not 0).
+    values : (5, BLOCK) float64
+        ``ns . wi``, the incident term (3 rows) and the highlight cosine.
+    shadow_ray : (7, BLOCK) float32
+        Offset origin, float32 direction and length of the shadow ray.
+
+    Notes
+    -----
+    The loop has no branches, gathers or calls, and its outputs are made here with the
+    constant size of a block: only then does LLVM vectorise it (with output arrays passed
+    in, or sized at run time, it stays scalar, about twice as slow).
+    """
+    lit = np.empty(BLOCK, np.bool_)
+    values = np.empty((5, BLOCK))
+    shadow_ray = np.empty((7, BLOCK), np.float32)
     for b in range(count):
         px, py, pz = srf[0, b], srf[1, b], srf[2, b]
         gx, gy, gz = srf[3, b], srf[4, b], srf[5, b]
         nx, ny, nz = srf[6, b], srf[7, b], srf[8, b]
         wx, wy, wz, distance, er, eg, eb = _illuminate(light, px, py, pz)
         lit[b] = _reaches(wx, wy, wz, er, eg, eb, gx, gy, gz)
-        cos_i[b] = _dot(nx, ny, nz, wx, wy, wz)
-        incident[0, b], incident[1, b], incident[2, b] = er, eg, eb
-        cosine[b] = _highlight_cosine(nx, ny, nz, -d[0, b], -d[1, b], -d[2, b], wx, wy, wz)
+        values[0, b] = _dot(nx, ny, nz, wx, wy, wz)
+        values[1, b], values[2, b], values[3, b] = er, eg, eb
+        values[4, b] = _highlight_cosine(nx, ny, nz, -d[0, b], -d[1, b], -d[2, b], wx, wy, wz)
         # the shadow ray's direction in float32, as Embree will see it, also sets the offset
         dx, dy, dz = np.float32(wx), np.float32(wy), np.float32(wz)
         shadow_ray[0, b], shadow_ray[1, b], shadow_ray[2, b] = _offset(px, py, pz, gx, gy, gz, dx, dy, dz, scale)
         shadow_ray[3, b], shadow_ray[4, b], shadow_ray[5, b] = dx, dy, dz
         shadow_ray[6, b] = np.float32(min(distance * shorten, _F32_MAX))
+    return lit, values, shadow_ray
 
 
 @row
