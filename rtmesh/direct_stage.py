@@ -219,11 +219,9 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     has_smooth = len(vertex_normals) > 0
     # row-major, so that the integrator's (pixels, spp, 3) view of it is not a copy
     radiance = np.empty((n, 3))
-    inverse_width = 1.0 / width
     rays, words, valid, args = ep.packet_buffers(ep.RAYHIT_WORDS, PACKETS, flags)
     shadow, shadow_words, shadow_valid, _ = ep.packet_buffers(ep.RAY_WORDS, PACKETS, flags)
     # per sample of the block: direction, surface record, material
-    d = np.empty((3, BLOCK))
     srf = np.empty((9, BLOCK))
     mat = np.empty(BLOCK, np.intp)
     hit = np.empty(BLOCK, np.bool_)
@@ -246,14 +244,9 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     for start in range(0, n, BLOCK):
         count = min(BLOCK, n - start)
         # camera rays (rtmesh.kernels.camera_rays, pinhole); lanes past the end repeat sample 0
+        d = _camera_block(film_xy, sampler, keys, corners, size, spp, pixel, sample, start, count, width,
+                          image_plane, forward, right, up)
         for b in range(BLOCK):
-            i = start + b if b < count else start
-            if len(film_xy):
-                x, y = film_xy[i, 0], film_xy[i, 1]
-            else:
-                x, y = pixel_position(sampler, keys, corners, size, spp, pixel[i], sample[i])
-            sx, sy = _image_plane_point(x, y, pixel[i], width, inverse_width, image_plane)
-            d[0, b], d[1, b], d[2, b] = _pinhole_direction(sx, sy, forward, right, up)
             valid[b] = -1 if b < count else 0
         for q in range(PACKETS):
             for lane in range(LANES):
@@ -345,6 +338,26 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     return radiance, shadow_rays, (rec_sample[:records], rec_mat[:records], rec_cos[:records],
                                      rec_incident[:records], rec_cosine[:records], rec_exponent[:records],
                                      rec_raised[:records])
+
+
+@row
+def _camera_block(film_xy, sampler, keys, corners, size, spp, pixel, sample, start, count, width, image_plane,
+                  forward, right, up):
+    """Unit directions (3, BLOCK) of the camera rays of samples ``start .. start + count - 1``
+    (lanes past the end repeat sample ``start``), as :func:`rtmesh.kernels.camera_rays`
+    makes them for a pinhole; positions from ``film_xy``, or formed here when it is empty.
+    The output has the block's constant size, for LLVM (see :func:`_light_block`)."""
+    d = np.empty((3, BLOCK))
+    inverse_width = 1.0 / width
+    for b in range(BLOCK):
+        i = start + b if b < count else start
+        if len(film_xy):
+            x, y = film_xy[i, 0], film_xy[i, 1]
+        else:
+            x, y = pixel_position(sampler, keys, corners, size, spp, pixel[i], sample[i])
+        sx, sy = _image_plane_point(x, y, pixel[i], width, inverse_width, image_plane)
+        d[0, b], d[1, b], d[2, b] = _pinhole_direction(sx, sy, forward, right, up)
+    return d
 
 
 @row
