@@ -243,12 +243,13 @@ class Film:
 
     def _pixel_error_rows(self, px, floor, power):
         """(m,) float64: mean over channels of the pixels' standard error divided by
-        ``(|mean| + floor) ** power``; NaN below two samples."""
-        mean = self.sum[px] / self._divisor(px)
-        std_err = np.sqrt(self._variance_of_mean_rows(px))
-        scale = np.abs(mean) + floor
-        error = np.mean(std_err / (scale if power == 1 else np.sqrt(scale)), axis=1)
-        return np.where(self.count[px] >= 2, error, np.nan)
+        ``(|mean| + floor) ** power`` (``power`` 1 or 0.5); NaN below two samples.
+
+        ``px`` is a slice of pixels (see :meth:`_blocks`); one compiled pass
+        (:func:`rtmesh.kernels.pixel_errors`), which adaptive sampling runs over the whole
+        film after every round.
+        """
+        return kernels.pixel_errors(self.sum, self.sum_sq, self.count, px.start, px.stop, floor, power != 1)
 
     def _per_pixel(self, floor, power):
         """(height * width,) float64 :meth:`_pixel_error_rows` of every pixel, block by

@@ -807,3 +807,49 @@ def mean_image(total, count, out):
         inverse = 1.0 / np.float64(max(count[i], 1))
         for c in range(total.shape[1]):
             out[i, c] = np.float32(total[i, c] * inverse)
+
+
+@kernel
+def pixel_errors(total, total_sq, count, start, stop, floor, display):
+    """Per-pixel standard error of the mean, relative to the pixel's brightness, for the
+    pixels ``start .. stop - 1`` (see :meth:`rtmesh.film.Film.pixel_relative_error` and
+    :meth:`~rtmesh.film.Film.pixel_display_error`).
+
+    Each value is formed as the NumPy expressions of ``Film`` formed it, operation for
+    operation (sample variance, clamped at 0, over ``n``; its square root; divided by
+    ``|mean| + floor`` or its square root; the three channels summed in order and divided
+    by 3), in one pass instead of a dozen passes over the film.
+
+    Parameters
+    ----------
+    total, total_sq : (P, 3) float64
+        Per-pixel sums of the samples and of their squares.
+    count : (P,) int
+        Samples per pixel.
+    start, stop : int
+    floor : float
+    display : bool
+        Divide by ``sqrt(|mean| + floor)`` (the display scale) instead of ``|mean| + floor``.
+
+    Returns
+    -------
+    (stop - start,) float64
+        NaN for pixels with fewer than two samples.
+    """
+    out = np.empty(stop - start)
+    for j in range(stop - start):
+        i = start + j
+        n = np.float64(count[i])
+        at_least_one = max(n, 1.0)
+        error = 0.0
+        for c in range(3):
+            mean = total[i, c] / at_least_one
+            variance = (total_sq[i, c] - n * mean * mean) / max(n - 1.0, 1.0)
+            # np.maximum(variance, 0) keeps a NaN; np.where(n > 1, ..., 0)
+            clamped = variance if (variance >= 0.0) | (variance != variance) else 0.0
+            std_err = math.sqrt((clamped if n > 1.0 else 0.0) / at_least_one)
+            scale = abs(mean) + floor
+            term = std_err / (math.sqrt(scale) if display else scale)
+            error = term if c == 0 else error + term
+        out[j] = error / 3.0 if count[i] >= 2 else np.nan
+    return out

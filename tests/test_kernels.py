@@ -262,3 +262,24 @@ def test_add_rows_adds_into_the_given_rows_only():
     expected[rows] += values
     kernels.add_rows(target, rows, np.asfortranarray(values))
     np.testing.assert_array_equal(target, expected)
+
+
+@pytest.mark.parametrize("display", [False, True])
+def test_pixel_errors_equal_the_numpy_expressions(display):
+    """The compiled per-pixel error equals the film's former NumPy expressions bit for bit,
+    over pixels with 0, 1 and more samples, zero sums and NaN-free noise."""
+    rng = np.random.default_rng(1)
+    n = 5000
+    count = rng.integers(0, 6, n)
+    total = rng.exponential(1.0, (n, 3)) * count[:, None]
+    total_sq = total ** 2 / np.maximum(count, 1)[:, None] * rng.uniform(0.5, 2.0, (n, 3))
+    total[::7] = total_sq[::7] = 0.0
+    floor = 0.01
+    nf = count[:, None].astype(np.float64)
+    mean = total / np.maximum(nf, 1)
+    var = (total_sq - nf * mean * mean) / np.maximum(nf - 1, 1)
+    std_err = np.sqrt(np.where(nf > 1, np.maximum(var, 0.0), 0.0) / np.maximum(nf, 1))
+    scale = np.abs(mean) + floor
+    expected = np.where(count >= 2, np.mean(std_err / (np.sqrt(scale) if display else scale), axis=1), np.nan)
+    got = kernels.pixel_errors(np.asfortranarray(total), np.asfortranarray(total_sq), count, 0, n, floor, display)
+    np.testing.assert_array_equal(got, expected)
