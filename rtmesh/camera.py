@@ -79,6 +79,25 @@ class Camera:
             return float(self.focus_distance)
         return math.dist(self.look_at, self.position)
 
+    def image_plane(self, width, height):
+        """The map from film positions to the image plane at unit distance along forward.
+
+        Parameters
+        ----------
+        width, height : int
+            Image size in pixels.
+
+        Returns
+        -------
+        (4,) float64
+            ``(ax, bx, ay, by)``: film position ``(x, y)`` (pixels, y down) lies at
+            ``sx = x ax + bx``, ``sy = y ay + by`` on the plane, each an affine map of one
+            film coordinate.
+        """
+        tan_half = np.tan(np.radians(self.fov) * 0.5)
+        aspect = width / height
+        return np.array([2.0 * tan_half * aspect / width, -tan_half * aspect, -2.0 * tan_half / height, tan_half])
+
     def generate_rays(self, film_xy, width, height, lens_uv=None, pixels=None, frame=None):
         """Primary rays through continuous film positions.
 
@@ -104,12 +123,7 @@ class Camera:
             Unit directions, component-major (see :mod:`rtmesh.batches`).
         """
         forward, right, up = self.frame() if frame is None else frame
-        tan_half = np.tan(np.radians(self.fov) * 0.5)
-        aspect = width / height
-        # image-plane coordinates at unit distance along forward, each an affine map of one
-        # film coordinate
-        image_plane = np.array([2.0 * tan_half * aspect / width, -tan_half * aspect,
-                                -2.0 * tan_half / height, tan_half])
+        image_plane = self.image_plane(width, height)
         disk = np.zeros((0, 2))
         if self.aperture > 0.0 and lens_uv is not None:
             # thin lens: rays start on the aperture and meet on the plane of focus, so that

@@ -126,10 +126,10 @@ class CutoutAccel:
         prim = hits.prim[rows].astype(np.intp)
         p = barycentric_interpolate(take_rows(self.triangles, prim), hits.u[rows], hits.v[rows])
         d = take_rows(directions, rows)
-        ng = self.face_normals[prim]
+        ng = self.face_normals[prim]  # a gathered copy, which may be changed in place
         if time is not None:
             # the triangles and normals are the rest pose: move them to the rays' time
-            p, ng, _ = self.accel.surfaces_to_world(prim, time[rows], p, ng.copy(), ng)
+            p, ng, _ = self.accel.surfaces_to_world(prim, time[rows], p, ng, ng)
         ng = ng * np.where((ng * d).sum(axis=1) < 0.0, -1.0, 1.0)[:, None]
         return offset_ray_origins(p, ng, np.float64, self.offset_scale, d)
 

@@ -4,10 +4,10 @@ For scenes that need nothing but camera rays, surfaces, emission, ambient light 
 point-like lights with hard shadows (the common case of asset thumbnails and of the peer
 benchmark), the general wavefront (one NumPy call or kernel per stage and chunk, with the
 rays and surface records written out between them) spends most of its non-tracing time
-moving those records through memory.  Here one kernel does a whole chunk, 16 samples at a
-time: camera rays, one ``rtcIntersect16`` packet, surface records, and for each light the
-shadow rays of the lit samples as one ``rtcOccluded16`` packet; the rays and records of a
-packet never leave the kernel's scratch arrays.
+moving those records through memory.  Here one kernel does a whole chunk, in blocks of
+64 samples (four 16-wide packets): sample positions, camera rays, ``rtcIntersect16``,
+surface records, and for each light the shadow rays of the lit samples through
+``rtcOccluded16``; the rays and records of a block never leave the kernel's scratch arrays.
 
 The arithmetic is the general path's, row for row: the same row helpers of
 :mod:`rtmesh.kernels` (camera, surface record, light, Blinn-Phong, origin offset) and of
@@ -41,7 +41,7 @@ LANES = ep.LANES
 # loops long enough for AVX-512, while the block's records stay in L1
 PACKETS = 4
 BLOCK = PACKETS * LANES
-_PACKET_BYTES = 4 * ep.RAYHIT_WORDS * LANES
+_PACKET_BYTES = 4 * ep.RAYHIT_WORDS * LANES  # 4-byte words
 _SHADOW_BYTES = 4 * ep.RAY_WORDS * LANES
 
 
@@ -60,13 +60,8 @@ class DirectStage:
                          ep.RTC_RAY_QUERY_FLAG_COHERENT)
         camera, s = it.camera, it.settings
         forward, right, up = it._camera_frame
-        tan_half = np.tan(np.radians(camera.fov) * 0.5)
-        aspect = s.width / s.height
-        # as Camera.generate_rays forms it
-        image_plane = np.array([2.0 * tan_half * aspect / s.width, -tan_half * aspect,
-                                -2.0 * tan_half / s.height, tan_half])
-        self._camera = (s.width, image_plane, np.ascontiguousarray(camera.position, dtype=np.float64),
-                        forward, right, up)
+        self._camera = (s.width, camera.image_plane(s.width, s.height),
+                        np.ascontiguousarray(camera.position, dtype=np.float64), forward, right, up)
         st = it.plan
         self._surfaces = (it._faces, it._vertex_normals, it._smooth, it._material_id,
                           st.smooth_normals and not st.normal_maps)
@@ -209,10 +204,11 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
 
     Notes
     -----
-    Each step of a block is one loop over its samples without early exits (misses are
-    computed on face 0 and ignored), so that LLVM vectorises the arithmetic; the packets
-    of a block lie side by side in one buffer (each 64-byte aligned), and sample ``b`` of
-    the block is lane ``b % 16`` of packet ``b // 16``.
+    Misses are computed on face 0 and ignored, so the steps of a block loop over its samples
+    without early exits.  Of those loops LLVM vectorises the light step
+    (:func:`_light_block`); the camera and surface steps stay scalar.  The packets of a
+    block lie side by side in one buffer (each 64-byte aligned), and sample ``b`` of the
+    block is lane ``b % 16`` of packet ``b // 16``.
     """
     n = len(pixel)
     n_lights = len(lights)
@@ -328,13 +324,9 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
             d0 = d1 = d2 = 0.0
             for k in range(n_lights):
                 if reaches[k, b]:
-                    f0, f1, f2 = _shade(0, m, cos_i[k, b], 0.0, diffuse, _NO_TINT, specular, _NO_TINT)
-                    d0 += f0 * incident[k, 0, b]
-                    d1 += f1 * incident[k, 1, b]
-                    d2 += f2 * incident[k, 2, b]
-            radiance[i, 0] = 0.0 + (base[m, 0] + d0)
-            radiance[i, 1] = 0.0 + (base[m, 1] + d1)
-            radiance[i, 2] = 0.0 + (base[m, 2] + d2)
+                    d0, d1, d2 = _add_light(d0, d1, d2, m, cos_i[k, b], 0.0, incident[k, 0, b], incident[k, 1, b],
+                                            incident[k, 2, b], diffuse, specular)
+            _store(radiance, i, base, m, d0, d1, d2)
     return radiance, shadow_rays, (rec_sample[:records], rec_mat[:records], rec_cos[:records],
                                      rec_incident[:records], rec_cosine[:records], rec_exponent[:records],
                                      rec_raised[:records])
@@ -401,6 +393,24 @@ def _light_block(light, srf, d, count, scale, shorten):
 
 
 @row
+def _add_light(d0, d1, d2, m, cos_i, power, e0, e1, e2, diffuse, specular):
+    """The direct light ``(d0, d1, d2)`` plus one light's Blinn-Phong term on material ``m``
+    (``power``: the raised highlight cosine, 0 without one; ``e``: its incident term), as
+    :func:`rtmesh.kernels.add_light` adds it."""
+    f0, f1, f2 = _shade(0, m, cos_i, power, diffuse, _NO_TINT, specular, _NO_TINT)
+    return d0 + f0 * e0, d1 + f1 * e1, d2 + f2 * e2
+
+
+@row
+def _store(radiance, i, base, m, d0, d1, d2):
+    """Sample ``i``'s radiance: its material's emission and ambient light plus the direct
+    light, added to 0 as the general path adds a hit's local shading to its radiance."""
+    radiance[i, 0] = 0.0 + (base[m, 0] + d0)
+    radiance[i, 1] = 0.0 + (base[m, 1] + d1)
+    radiance[i, 2] = 0.0 + (base[m, 2] + d2)
+
+
+@row
 def _hit_lane(b):
     """Word offset of sample ``b`` of a block in the ``RTCRayHit16`` packets (field 0)."""
     return (b >> 4) * (ep.RAYHIT_WORDS * LANES) + (b & 15)
@@ -445,11 +455,7 @@ def finish_highlights(radiance, base, sample, mat, cos_i, incident, power, diffu
         i, m = sample[j], mat[j]
         d0 = d1 = d2 = 0.0
         while j < r and sample[j] == i:
-            f0, f1, f2 = _shade(0, m, cos_i[j], power[j], diffuse, _NO_TINT, specular, _NO_TINT)
-            d0 += f0 * incident[j, 0]
-            d1 += f1 * incident[j, 1]
-            d2 += f2 * incident[j, 2]
+            d0, d1, d2 = _add_light(d0, d1, d2, m, cos_i[j], power[j], incident[j, 0], incident[j, 1],
+                                    incident[j, 2], diffuse, specular)
             j += 1
-        radiance[i, 0] = 0.0 + (base[m, 0] + d0)
-        radiance[i, 1] = 0.0 + (base[m, 1] + d1)
-        radiance[i, 2] = 0.0 + (base[m, 2] + d2)
+        _store(radiance, i, base, m, d0, d1, d2)

@@ -258,9 +258,8 @@ def shadow_rays(origins, directions, t_max):
     origins, directions : (n, 3) float32
     t_max : (n,) float32
     """
-    t_max = np.asarray(t_max)
-    if t_max.dtype != np.float32:
-        t_max = np.minimum(t_max, _F32_MAX).astype(np.float32)
+    # np.minimum keeps a NaN (as the kernel did) and keeps float32 input float32
+    t_max = np.minimum(t_max, _F32_MAX).astype(np.float32, copy=False)
     return (np.asarray(origins, dtype=np.float32), np.asarray(directions, dtype=np.float32), t_max)
 
 
@@ -330,16 +329,19 @@ def _probe_packets(library, scene, origins, directions):
     prim = np.empty(n, np.int32)
     words = RAYHIT_WORDS * LANES
     guard = np.int32(0x5EED5EED)
-    raw = np.zeros(words + 64 + _ALIGN_WORDS, np.float32)
-    skip = ((-raw.ctypes.data) % 64) // 4
-    buffer = raw[skip:skip + words + 64]
+
+    def aligned(count, dtype):
+        """:func:`aligned_words` for NumPy (that one is compiled-only)."""
+        raw = np.zeros(count + _ALIGN_WORDS, dtype)
+        skip = ((-raw.ctypes.data) % 64) // 4
+        return raw[skip:skip + count]
+
+    buffer = aligned(words + 64, np.float32)
     ints = buffer.view(np.int32)
     packet = buffer[:words].reshape(RAYHIT_WORDS, LANES)
     fields = packet.view(np.int32)
-    raw_valid = np.zeros(LANES + _ALIGN_WORDS, np.int32)
-    valid = raw_valid[((-raw_valid.ctypes.data) % 64) // 4:][:LANES]
-    raw_args = np.zeros(8 + _ALIGN_WORDS, np.int32)
-    args = raw_args[((-raw_args.ctypes.data) % 64) // 4:][:8]
+    valid = aligned(LANES, np.int32)
+    args = aligned(8, np.int32)
     args[0], args[1] = RTC_RAY_QUERY_FLAG_COHERENT, _RTC_FEATURE_FLAG_ALL
     intact = True
     for start in range(0, n, LANES):
@@ -516,8 +518,8 @@ def intersect_rays(intersect16, scene, origins, directions, flags):
         :attr:`PacketLibrary.intersect16`.
     scene : int
         A committed ``RTCScene``.
-    origins, directions : (n, 3) float64 or float32, any strides
-        Rays (unit directions), rounded to float32 here.
+    origins, directions : (n, 3) float64, any strides
+        Rays (unit directions), rounded to float32 here (see :func:`closest_rays`).
     flags : int
         ``RTC_RAY_QUERY_FLAG_COHERENT`` for rays that travel together (camera rays of
         neighbouring samples), else ``RTC_RAY_QUERY_FLAG_INCOHERENT``.
@@ -564,10 +566,10 @@ def occluded_rays(occluded16, scene, origins, directions, t_max, rows, flags):
     occluded16 : ctypes function object
         :attr:`PacketLibrary.occluded16`.
     scene : int
-    origins, directions : (n, 3) float64 or float32, any strides
-    t_max : (n,) float64 or float32
-        Segment lengths (``inf`` for rays to infinitely distant lights), clamped to the
-        largest float32 (as for ``run()``, whose robust mode handles that better than inf).
+    origins, directions : (n, 3) float32, any strides
+    t_max : (n,) float32
+        Segment lengths, already clamped to the largest float32 (see :func:`shadow_rays`:
+        ``run()``'s robust mode handles that better than inf).
     rows : (k,) int64
         Trace only these rays; empty: all.
     flags : int
@@ -578,17 +580,11 @@ def occluded_rays(occluded16, scene, origins, directions, t_max, rows, flags):
     (n,) or (k,) bool
     """
     n = len(rows) if len(rows) else origins.shape[0]
-    tfar = np.empty(origins.shape[0], np.float32)
-    for j in range(n):
-        i = rows[j] if len(rows) else j
-        # min() keeps a NaN as NaN, as np.minimum does
-        x = t_max[i]
-        tfar[i] = np.float32(_F32_MAX if x > _F32_MAX else x)
     blocked = np.empty(n, np.bool_)
     ray, words, valid, args = packet_buffers(RAY_WORDS, 1, flags)
     for start in range(0, n, LANES):
         count = min(LANES, n - start)
-        _load_rays(ray, words, valid, origins, directions, rows, start, count, tfar)
+        _load_rays(ray, words, valid, origins, directions, rows, start, count, t_max)
         occluded16(valid.ctypes.data, scene, ray.ctypes.data, args.ctypes.data)
         for lane in range(count):
             # Embree marks an occluded ray by setting its tfar to -inf

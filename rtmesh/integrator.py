@@ -11,8 +11,9 @@ on whole ray batches (no per-ray Python loop)::
 Rays carry the index of the sample they belong to and their throughput; contributions go
 back to the sample by scattering.  Chunks run on a thread pool (Embree, NumPy and the
 compiled kernels of :mod:`rtmesh.kernels` release the GIL).  Every random number is a
-function of (seed, pixel, sample, dimension), and each pixel is rendered whole inside one
-chunk, so the image is bit-identical whatever the thread count and chunk size.
+function of (seed, pixel, sample, dimension), each pixel is rendered whole inside one
+chunk, and the chunks do not depend on the thread count (see :mod:`rtmesh.scheduler`), so
+the image is bit-identical whatever the thread count.
 
 Before rendering, :class:`Integrator` looks at the scene and the settings and enables only
 the stages that can contribute (see :attr:`Integrator.plan`).  Building and running it
@@ -672,7 +673,7 @@ class Integrator:
                 continue
             target = take_rows(rows, lit) if rows is not None else lit
             clock.lap("shade")
-            occluded = self._occluded(origins, directions, t_max, _time_rows(srf.time, target))
+            occluded = self.accel.occluded(origins, directions, t_max, time=_time_rows(srf.time, target))
             stats.rays["shadow"] += len(lit)
             clock.lap("shadow")
             if total is None:
@@ -710,13 +711,9 @@ class Integrator:
             w = square_to_cosine_hemisphere(u)
             d = t * w[:, :1] + b * w[:, 1:2] + srf.ng * w[:, 2:3]
             origins = offset_ray_origins(srf.p, srf.ng, np.float32, self.offset_scale, d)
-            free += ~self._occluded(origins, d, np.full(k, self.ao_distance), srf.time)
+            free += ~self.accel.occluded(origins, d, np.full(k, self.ao_distance), time=srf.time)
         stats.rays["ao"] += k * n_ao
         return free / n_ao
-
-    def _occluded(self, origins, directions, t_max, time):
-        """Shadow-ray query; with motion blur the moving objects stand where ``time`` says."""
-        return self.accel.occluded(origins, directions, t_max, time=time)
 
     def _spawn(self, srf, rays, depth, keys, stats):
         """Mirror (or glossy) reflection and refraction rays with their throughput weights."""
