@@ -5,12 +5,12 @@ import os
 
 import trimesh
 
-from .errors import SceneError
-from .importers import load_mesh_scene, scene_from_trimesh
-from .integrator import Integrator
-from .scene import Scene
-from .scene_file import read_scene_file
-from .settings import RenderSettings
+from rtmesh.core.errors import SceneError
+from rtmesh.loaders.importers import load_mesh_scene, scene_from_trimesh
+from rtmesh.loaders.scene_file import read_scene_file
+from rtmesh.rendering.integrator import Integrator
+from rtmesh.rendering.settings import RenderSettings
+from rtmesh.scene.model import Scene
 
 SCENE_EXTENSIONS = (".toml",)
 

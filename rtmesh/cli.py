@@ -6,16 +6,18 @@ import os
 import sys
 import time
 
-from . import __version__, runtime
-from .api import load_scene
-from .errors import RtmeshError
-from .colour import TONEMAPS
-from .aov import display_values
-from .background import background_from_option
-from .image_io import check_output_path, write_display_image, write_image
-from .integrator import Integrator
-from .sampling import SAMPLERS
-from .settings import FRESNEL_MODES, PASSES
+from rtmesh import __version__
+from rtmesh.core import runtime
+from rtmesh.core.errors import RtmeshError
+from rtmesh.io.colour import TONEMAPS
+from rtmesh.io.images import check_output_path, write_display_image, write_image
+from rtmesh.io.passes import display_values
+from rtmesh.rendering.integrator import Integrator
+from rtmesh.rendering.settings import FRESNEL_MODES, PASSES
+from rtmesh.sampling.patterns import SAMPLERS
+from rtmesh.scene.background import background_from_option
+
+from rtmesh.api import load_scene
 
 EXIT_USER_ERROR = 2
 
@@ -112,7 +114,7 @@ def _bytes(text):
 
 
 def _add_batch_parser(commands):
-    from .batch import FORMATS, VIEWS
+    from rtmesh.batch.runner import FORMATS, VIEWS
 
     p = commands.add_parser(
         "batch", help="render many mesh files (folders, manifests) to images, resumably",
@@ -240,7 +242,7 @@ def summary_line(output, settings, st):
 
 
 def cmd_batch(args):
-    from .batch import batch_convert
+    from rtmesh.batch.runner import batch_convert
 
     report = batch_convert(
         args.inputs, args.output, width=args.width, height=args.height, spp=args.spp,

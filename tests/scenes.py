@@ -10,12 +10,12 @@ import math
 import numpy as np
 import trimesh
 
-from rtmesh.camera import Camera
-from rtmesh.integrator import Integrator
-from rtmesh.lights import PointLight
-from rtmesh.materials import Material
-from rtmesh.scene import MeshPart, Scene
-from rtmesh.settings import RenderSettings
+from rtmesh.lights.point_lights import PointLight
+from rtmesh.materials.table import Material
+from rtmesh.rendering.integrator import Integrator
+from rtmesh.rendering.settings import RenderSettings
+from rtmesh.scene.camera import Camera
+from rtmesh.scene.model import MeshPart, Scene
 
 
 # ---------------------------------------------------------------- geometry builders

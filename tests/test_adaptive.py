@@ -8,21 +8,20 @@ import types
 
 import numpy as np
 import pytest
-
-from rtmesh.adaptive import dilate
-from rtmesh.camera import Camera
-from rtmesh.cli import main
-from rtmesh.errors import SceneError
-from rtmesh.film import Film
-from rtmesh.integrator import Integrator
-from rtmesh.lights import DirectionalLight
-from rtmesh.materials import Material
-from rtmesh.sampling import pixel_offsets
-from rtmesh.scene import Scene
-from rtmesh.scene_file import scene_from_dict
-from rtmesh.settings import RenderSettings
-
 from scenes import floor_quad, part, render, settings, sphere_on_floor_scene
+
+from rtmesh.cli import main
+from rtmesh.core.errors import SceneError
+from rtmesh.lights.point_lights import DirectionalLight
+from rtmesh.loaders.scene_file import scene_from_dict
+from rtmesh.materials.table import Material
+from rtmesh.rendering.adaptive import dilate
+from rtmesh.rendering.film import Film
+from rtmesh.rendering.integrator import Integrator
+from rtmesh.rendering.settings import RenderSettings
+from rtmesh.sampling.patterns import pixel_offsets
+from rtmesh.scene.camera import Camera
+from rtmesh.scene.model import Scene
 
 SPHERE = sphere_on_floor_scene()
 
@@ -122,7 +121,7 @@ def test_film_adds_ragged_samples_like_tiles_pixel_by_pixel():
 @pytest.mark.parametrize("counts, chunk", [([4, 8, 16, 4, 4, 64, 1], 10), ([3] * 10, 6), ([5], 100),
                                            ([2, 2, 2], 1)])
 def test_pixel_chunks_cover_the_pixels_without_splitting_one(counts, chunk):
-    from rtmesh.scheduler import pixel_chunks
+    from rtmesh.rendering.scheduler import pixel_chunks
     counts = np.array(counts)
     spans = pixel_chunks(counts, len(counts), chunk)
     assert spans[0][0] == 0 and spans[-1][1] == len(counts)
@@ -136,7 +135,7 @@ def test_pixel_chunks_cover_the_pixels_without_splitting_one(counts, chunk):
 @pytest.mark.parametrize("spp", [1, 3])
 def test_chunks_shrink_towards_the_end(spp):
     # guided chunks: 1 / (GUIDE x SCHEDULE_THREADS) of what is left, between the minimum and the cap
-    from rtmesh.scheduler import MIN_CHUNK_SAMPLES, pixel_chunks
+    from rtmesh.rendering.scheduler import MIN_CHUNK_SAMPLES, pixel_chunks
     n, cap = 512 * 512, 32768
     spans = pixel_chunks(spp, n, cap)
     sizes = np.array([(b - a) * spp for a, b in spans])
@@ -247,9 +246,9 @@ def test_max_spp_caps_every_pixel():
 
 @pytest.fixture
 def sample_clock(monkeypatch):
-    """A simulated clock for rtmesh.adaptive on which every camera sample takes 1 us."""
+    """A simulated clock for rtmesh.rendering.adaptive on which every camera sample takes 1 us."""
     clock = types.SimpleNamespace(now=0.0)
-    monkeypatch.setattr("rtmesh.adaptive.time", types.SimpleNamespace(perf_counter=lambda: clock.now))
+    monkeypatch.setattr("rtmesh.rendering.adaptive.time", types.SimpleNamespace(perf_counter=lambda: clock.now))
     render_samples = Integrator.render_samples
 
     def timed(self, film, pixels, first_sample, spp, stats, progress=None, pool=None):
@@ -308,7 +307,7 @@ def test_variance_and_spp_passes_come_from_the_film():
 
 
 def test_cli_writes_variance_and_spp_channels_and_reports_rounds(tmp_path, capsys):
-    from rtmesh.image_io import read_image
+    from rtmesh.io.images import read_image
     scene = tmp_path / "s.toml"
     scene.write_text('[render]\nwidth = 24\nheight = 16\nspp = 4\n'
                      '[camera]\nposition = [0.0, -4.0, 2.0]\nlook_at = [0.0, 0.0, 0.5]\nup = [0.0, 0.0, 1.0]\n'

@@ -10,15 +10,13 @@ import math
 
 import numpy as np
 import pytest
+from scenes import icosphere, part, pixel_centre_rays, ray_sphere_distance, ray_sphere_distances, render
 
-from rtmesh.accel import Accel
-from rtmesh.camera import Camera
-from rtmesh.lights import DirectionalLight, PointLight
-from rtmesh.materials import Material
-from rtmesh.scene import Scene
-
-from scenes import (icosphere, part, pixel_centre_rays, ray_sphere_distance, ray_sphere_distances,
-                    render)
+from rtmesh.geometry.accel import Accel
+from rtmesh.lights.point_lights import DirectionalLight, PointLight
+from rtmesh.materials.table import Material
+from rtmesh.scene.camera import Camera
+from rtmesh.scene.model import Scene
 
 CENTRE = np.array([0.3, -0.2, 0.1])
 RADIUS = 1.5

@@ -1,7 +1,7 @@
 """Area lights and soft shadows against closed forms.
 
 The shading model's diffuse value under a light is ``kd * E`` with ``E`` the physical
-irradiance (for a point light ``E = I cos / d^2``, no 1/pi; see rtmesh.materials).  An area
+irradiance (for a point light ``E = I cos / d^2``, no 1/pi; see rtmesh.materials.table).  An area
 light of radiance ``L`` is a sum of point lights ``dI = L cos_l dA``, so under it the
 diffuse value is ``kd * integral L cos_s cos_l / d^2 dA``: on the axis of a disk of radius
 ``r`` at height ``h``, ``kd * pi * L * r^2 / (r^2 + h^2)``.
@@ -15,20 +15,20 @@ import math
 
 import numpy as np
 import pytest
-
-from rtmesh.accel import Accel
-from rtmesh.area_lights import AreaLighting, DiskLight, QuadLight, emissive_mesh_light
-from rtmesh.sampler import light_dimension
-from rtmesh.camera import Camera
-from rtmesh.errors import SceneError
-from rtmesh.lights import PointLight
-from rtmesh.materials import Material, blinn_phong
-from rtmesh.sampling import Dim, decorrelated_points, square_to_uniform_triangle, uniform_triangle_to_square
-from rtmesh.scene import Scene
-from rtmesh.scene_file import scene_from_dict
-from rtmesh.stats import RenderStats
-
 from scenes import floor_quad, part, pixel_centre_rays, quad, render, settings
+
+from rtmesh.core.errors import SceneError
+from rtmesh.geometry.accel import Accel
+from rtmesh.lights.area_lights import AreaLighting, DiskLight, QuadLight, emissive_mesh_light
+from rtmesh.lights.point_lights import PointLight
+from rtmesh.loaders.scene_file import scene_from_dict
+from rtmesh.materials.table import Material, blinn_phong
+from rtmesh.rendering.stats import RenderStats
+from rtmesh.sampling.patterns import Dim, decorrelated_points
+from rtmesh.sampling.sampler import light_dimension
+from rtmesh.sampling.warps import square_to_uniform_triangle, uniform_triangle_to_square
+from rtmesh.scene.camera import Camera
+from rtmesh.scene.model import Scene
 
 DOWN = np.array([0.0, 0.0, -1.0])
 
@@ -446,7 +446,7 @@ def test_area_light_and_ao_points_of_a_pixel_are_one_stratified_set(sampler, mon
     # spp = 4 camera samples per pixel x 4 rays per hit: the 16 points a pixel's samples
     # send to the light (and the 16 ambient-occlusion directions) fill every stratum of the
     # 4 x 4 grid once (for Sobol every elementary interval), as the renderer draws them
-    import rtmesh.sampler
+    import rtmesh.sampling.sampler
     drawn = []
 
     def recording(module):
@@ -457,7 +457,7 @@ def test_area_light_and_ao_points_of_a_pixel_are_one_stratified_set(sampler, mon
             drawn.append((dimension, np.array(pixel), np.array(sample), ray, np.array(u)))
             return u
         monkeypatch.setattr(module, "decorrelated_points", draw)
-    recording(rtmesh.sampler)  # every stage draws its points through the render's Sampler
+    recording(rtmesh.sampling.sampler)  # every stage draws its points through the render's Sampler
     camera = Camera([0.0, 0.0, 1.0], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0], 30.0)
     scene = Scene.from_parts([part("floor", floor_quad(20.0))], [Material("f")], [ceiling_quad()], camera)
     width = height = 3
@@ -792,7 +792,7 @@ def test_light_samples_flag_sets_the_shadow_rays_per_hit(tmp_path, capsys):
 def test_shipped_soft_shadow_scene_renders():
     import os
 
-    from rtmesh.scene_file import read_scene_file
+    from rtmesh.loaders.scene_file import read_scene_file
 
     path = os.path.join(os.path.dirname(__file__), "..", "assets", "effects", "soft_shadow.toml")
     scene, _ = read_scene_file(path)
@@ -807,8 +807,8 @@ def test_shipped_soft_shadow_scene_renders():
 def _textured_lamp(texels, height=1.5):
     """A 1 x 1 emissive square facing down at ``height`` whose UVs are (x + 0.5, y + 0.5),
     with an emission texture of ``texels`` ((h, w) image, clamped)."""
-    from rtmesh.scene import MeshPart
-    from rtmesh.textures import Texture
+    from rtmesh.scene.model import MeshPart
+    from rtmesh.scene.texture_images import Texture
 
     corners = np.array([[-0.5, -0.5, height], [-0.5, 0.5, height], [0.5, 0.5, height], [0.5, -0.5, height]])
     uv = corners[:, :2] + 0.5
@@ -922,7 +922,8 @@ def test_a_point_on_an_emissive_triangle_does_not_sample_its_own_plane_by_zero_o
     its own among them: every direction drawn in its solid angle (2 pi, the point is in its
     plane) lies in the plane, cos = 0, and the sample must be dropped without 0 / 0."""
     import warnings
-    from rtmesh.scene import MeshPart
+
+    from rtmesh.scene.model import MeshPart
     parts = [MeshPart("tri", np.array([[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]]),
                       np.array([[0, 1, 2]]), 0, None)]
     scene = Scene.from_parts(parts, [Material("lamp", emission=1.0)], [],

@@ -7,18 +7,17 @@ import os
 
 import numpy as np
 import pytest
-
-from rtmesh.background import (EnvironmentBackground, GradientBackground, TransparentBackground,
-                               latlong_directions, read_environment)
-from rtmesh.camera import Camera
-from rtmesh.cli import main
-from rtmesh.errors import SceneError
-from rtmesh.image_io import read_image
-from rtmesh.materials import Material
-from rtmesh.scene import Scene
-from rtmesh.scene_file import scene_from_dict
-
 from scenes import part, pixel_centre_rays, quad, render
+
+from rtmesh.cli import main
+from rtmesh.core.errors import SceneError
+from rtmesh.io.images import read_image
+from rtmesh.loaders.scene_file import scene_from_dict
+from rtmesh.materials.table import Material
+from rtmesh.scene.background import (EnvironmentBackground, GradientBackground, TransparentBackground,
+                                     latlong_directions, read_environment)
+from rtmesh.scene.camera import Camera
+from rtmesh.scene.model import Scene
 
 ASSETS = os.path.join(os.path.dirname(__file__), "..", "assets")
 SKY = os.path.join(ASSETS, "environments", "sky.exr")
@@ -240,9 +239,10 @@ def test_corrupt_environment_file_is_an_error(tmp_path):
 
 
 def test_shipped_passes_scene_renders_with_its_environment():
-    from rtmesh.api import load_scene
-    from rtmesh.integrator import Integrator
     from scenes import assert_finite
+
+    from rtmesh.api import load_scene
+    from rtmesh.rendering.integrator import Integrator
 
     scene, settings = load_scene(os.path.join(ASSETS, "passes.toml"), width=32, height=24, spp=1,
                                  threads=1, passes=("depth",))

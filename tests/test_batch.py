@@ -18,11 +18,11 @@ import pytest
 import trimesh
 
 import rtmesh
-from rtmesh.batch import REPORT_NAME
-from rtmesh.batch_inputs import InputError, discover
-from rtmesh.batch_ledger import LEDGER_NAME, Ledger
+from rtmesh.batch.inputs import InputError, discover
+from rtmesh.batch.ledger import LEDGER_NAME, Ledger
+from rtmesh.batch.runner import REPORT_NAME
 from rtmesh.cli import main
-from rtmesh.image_io import read_image
+from rtmesh.io.images import read_image
 
 HERE = os.path.dirname(__file__)
 DATA = os.path.join(HERE, "data")

@@ -1,20 +1,20 @@
-"""The compiled scene-build passes (rtmesh.build_kernels) give the arrays the NumPy code they
+"""The compiled scene-build passes (rtmesh.geometry.build_kernels) give the arrays the NumPy code they
 replace gave, to the bit (zero signs included), so that no image changes."""
 
 import numpy as np
 import pytest
 import trimesh
+from scenes import icosphere
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from rtmesh import build_kernels
-from rtmesh.accel import corner_table
-from rtmesh.importers import _merge_keeps_everything, load_trimesh, parts_from_trimesh
-from rtmesh.integrator import Integrator
-from rtmesh.scene import MeshPart, Scene
-from rtmesh.settings import RenderSettings
-from rtmesh.smoothing import face_normals_and_corner_angles, smooth_vertex_normals
-from scenes import icosphere
+from rtmesh.geometry import build_kernels
+from rtmesh.geometry.accel import corner_table
+from rtmesh.geometry.smoothing import face_normals_and_corner_angles, smooth_vertex_normals
+from rtmesh.loaders.importers import _merge_keeps_everything, load_trimesh, parts_from_trimesh
+from rtmesh.rendering.integrator import Integrator
+from rtmesh.rendering.settings import RenderSettings
+from rtmesh.scene.model import MeshPart, Scene
 
 
 # ---------------------------------------------------------------- the NumPy formulations

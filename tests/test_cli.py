@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from rtmesh.cli import main
-from rtmesh.image_io import read_image
+from rtmesh.io.images import read_image
 
 HERE = os.path.dirname(__file__)
 DATA = os.path.join(HERE, "data")
@@ -129,7 +129,7 @@ def test_scene_file_error_names_file_and_key(tmp_path):
 def test_failed_write_keeps_existing_image_and_leaves_no_temporary(scene_file, tmp_path, monkeypatch):
     out = tmp_path / "keep.png"
     out.write_bytes(b"previous image")
-    import rtmesh.image_io as image_io
+    import rtmesh.io.images as image_io
 
     class Failing:
         @staticmethod

@@ -4,14 +4,17 @@ import pathlib
 import re
 import shutil
 
-from rtmesh import compiled, embree_packets, kernels
+from rtmesh.core import compiled
+from rtmesh.geometry import embree_packets
+from rtmesh.shading import kernels
 
-PACKAGE = pathlib.Path(compiled.__file__).parent
+PACKAGE = pathlib.Path(compiled.__file__).parent.parent
 
 
 def test_every_module_with_kernels_is_stamped():
-    with_kernels = {path.name for path in PACKAGE.glob("*.py")
-                    if re.search(r"^from \.compiled import|^import numba|^from numba", path.read_text(), re.M)}
+    with_kernels = {path.relative_to(PACKAGE).as_posix() for path in PACKAGE.rglob("*.py")
+                    if re.search(r"^from rtmesh\.core\.compiled import|^import numba|^from numba", path.read_text(), re.M)}
+    assert "shading/kernels.py" in with_kernels
     assert with_kernels <= set(compiled.KERNEL_MODULES)
 
 
@@ -23,6 +26,7 @@ def test_kernels_are_cached_under_the_package_stamp():
 
 def test_the_stamp_changes_with_any_kernel_module(tmp_path, monkeypatch):
     for name in compiled.KERNEL_MODULES:
+        (tmp_path / name).parent.mkdir(exist_ok=True)
         shutil.copy(PACKAGE / name, tmp_path / name)
     monkeypatch.setattr(compiled, "_PACKAGE", str(tmp_path))
     stamps = []

@@ -3,15 +3,15 @@
 import numpy as np
 import pytest
 
-from rtmesh.accel import Accel
 from rtmesh.api import render
-from rtmesh.camera import Camera
-from rtmesh.cutouts import CutoutAccel
-from rtmesh.lights import DirectionalLight
-from rtmesh.materials import Material
-from rtmesh.scene import MeshPart, Scene
-from rtmesh.textures import Texture
-from rtmesh.texturing import SurfaceTextures
+from rtmesh.geometry.accel import Accel
+from rtmesh.geometry.cutouts import CutoutAccel
+from rtmesh.lights.point_lights import DirectionalLight
+from rtmesh.materials.table import Material
+from rtmesh.rendering.surface_textures import SurfaceTextures
+from rtmesh.scene.camera import Camera
+from rtmesh.scene.model import MeshPart, Scene
+from rtmesh.scene.texture_images import Texture
 
 N = 4  # checker texels per side
 SIZE = 32  # image pixels per side: 8 pixels per texel
@@ -142,7 +142,7 @@ def test_normal_map_tilts_the_shading_normal_along_the_uv_tangent():
 def moving_card_scene(card):
     """``card`` (a material) on a square moving 0.25 along +x while the shutter is open,
     over a blue background, seen head-on."""
-    from rtmesh.motion import Motion
+    from rtmesh.geometry.motion import Motion
     moving = plane("card")
     moving.motion = Motion(np.array([0.25, 0.0, 0.0]))
     camera = Camera(np.array([0.0, 0.0, 1.0]), np.zeros(3), np.array([0.0, 1.0, 0.0]), fov=90.0,

@@ -14,11 +14,11 @@ focus plane, or ``A |d - f| / (d f) * H / (2 tan(fov / 2))`` pixels.  At d = f i
 
 import numpy as np
 import pytest
-
-from rtmesh.camera import Camera
-from rtmesh.materials import Material
-from rtmesh.scene import Scene
 from scenes import part, quad, render
+
+from rtmesh.materials.table import Material
+from rtmesh.scene.camera import Camera
+from rtmesh.scene.model import Scene
 
 WIDTH, HEIGHT = 96, 12
 # the image spans sx in [-0.6, 0.6] (80 pixels per image-plane unit)

@@ -2,13 +2,12 @@
 
 import numpy as np
 import pytest
-
-from rtmesh.camera import Camera
-from rtmesh.lights import PointLight
-from rtmesh.materials import Material
-from rtmesh.scene import Scene
-
 from scenes import box, floor_quad, icosphere, part, render
+
+from rtmesh.lights.point_lights import PointLight
+from rtmesh.materials.table import Material
+from rtmesh.scene.camera import Camera
+from rtmesh.scene.model import Scene
 
 
 def every_stage_scene(aperture=0.0):
@@ -102,9 +101,10 @@ def test_renders_on_threads_restore_the_gil_switch_interval_even_side_by_side(mo
     import sys
     import threading
 
-    from rtmesh import runtime
-    from rtmesh.integrator import Integrator
     from scenes import settings, sphere_on_floor_scene
+
+    from rtmesh.core import runtime
+    from rtmesh.rendering.integrator import Integrator
 
     monkeypatch.setattr(runtime, "_tuned", runtime._tuned)  # untuned again afterwards
     runtime.tune_process()
@@ -130,8 +130,9 @@ def test_renders_on_threads_restore_the_gil_switch_interval_even_side_by_side(mo
 
 
 def test_progress_on_threads_counts_up_to_every_chunk():
-    from rtmesh.integrator import Integrator
     from scenes import settings, sphere_on_floor_scene
+
+    from rtmesh.rendering.integrator import Integrator
 
     seen = []
     integrator = Integrator(sphere_on_floor_scene(), settings(threads=2, width=64, height=48, chunk_samples=300))
@@ -143,8 +144,9 @@ def test_progress_on_threads_counts_up_to_every_chunk():
 
 
 def test_a_failing_chunk_on_threads_raises_and_stops_the_other_workers(monkeypatch):
-    from rtmesh.integrator import Integrator
     from scenes import settings, sphere_on_floor_scene
+
+    from rtmesh.rendering.integrator import Integrator
 
     integrator = Integrator(sphere_on_floor_scene(), settings(threads=2, width=64, height=48, chunk_samples=64))
     started = []
@@ -166,7 +168,7 @@ def test_a_failing_chunk_on_threads_raises_and_stops_the_other_workers(monkeypat
 def test_kept_render_threads_are_made_anew_in_a_forked_child():
     import os
 
-    from rtmesh import runtime
+    from rtmesh.core import runtime
 
     pool = runtime._kept_pool(2)
     assert runtime._kept_pool(2) is pool
@@ -187,8 +189,8 @@ def test_chunks_are_the_same_for_every_thread_count(monkeypatch):
     """Where two coplanar overlapping triangles are hit at exactly the same distance,
     Embree's packet traversal may report either, depending on the other rays of the packet,
     which come from the ray's chunk: the chunks must not depend on the thread count (see
-    rtmesh.scheduler)."""
-    from rtmesh.integrator import Integrator
+    rtmesh.rendering.scheduler)."""
+    from rtmesh.rendering.integrator import Integrator
     seen = {}
     real = Integrator.render_chunk
 

@@ -2,16 +2,15 @@
 
 import numpy as np
 import pytest
-
-from rtmesh import embree_packets
-from rtmesh.background import GradientBackground
-from rtmesh.camera import Camera
-from rtmesh.integrator import Integrator
-from rtmesh.lights import DirectionalLight, PointLight, SpotLight
-from rtmesh.materials import Material
-from rtmesh.scene import Scene
-
 from scenes import assert_finite, box, floor_quad, icosphere, part, settings, sphere_on_floor_scene
+
+from rtmesh.geometry import embree_packets
+from rtmesh.lights.point_lights import DirectionalLight, PointLight, SpotLight
+from rtmesh.materials.table import Material
+from rtmesh.rendering.integrator import Integrator
+from rtmesh.scene.background import GradientBackground
+from rtmesh.scene.camera import Camera
+from rtmesh.scene.model import Scene
 
 pytestmark = pytest.mark.skipif(embree_packets.packet_library() is None,
                                 reason="the fused stage traces Embree packets")

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from rtmesh import embree_packets
-from rtmesh.accel import Accel
+from rtmesh.geometry import embree_packets
+from rtmesh.geometry.accel import Accel
 
 pytestmark = pytest.mark.skipif(embree_packets.packet_library() is None,
                                 reason="Embree packets are verified only for Embree 4.4")
@@ -93,7 +93,7 @@ def test_empty_batches(twins):
 def test_hits_do_not_depend_on_how_rays_are_grouped_into_packets(twins):
     """Without ties (no coplanar overlapping triangles) a ray's hit does not depend on the
     other rays of its packet.  (With ties it can: the scheduler keeps the chunks, and so the
-    packets, the same for every thread count; see rtmesh.scheduler.)"""
+    packets, the same for every thread count; see rtmesh.rendering.scheduler.)"""
     packets, _ = twins
     origins, directions = _rays(4099, seed=5)
     expected = packets.intersect(origins, directions)
@@ -120,7 +120,7 @@ def test_the_probe_accepts_this_library():
 def test_environment_chooses_the_path_and_one_log_line_says_which(path):
     env = dict(os.environ, RTMESH_EMBREE="run" if path == "run" else "")
     code = ("import logging; logging.basicConfig(level=logging.INFO, format='%(message)s');"
-            "from rtmesh.accel import Accel; import numpy as np;"
+            "from rtmesh.geometry.accel import Accel; import numpy as np;"
             "a = Accel(np.eye(3), [[0, 1, 2]]); print('packets' if a.packets else 'run')")
     done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
     assert done.stdout.strip() == path

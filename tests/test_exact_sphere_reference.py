@@ -16,8 +16,8 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tools"))
 from analytic_sphere import AnalyticSphere, intersect_sphere, render_analytic_image  # noqa: E402
 from sphere_study import AMBIENT, BACKGROUND, CAMERA, CASES, LIGHTS, icosphere_scene  # noqa: E402
 
-from rtmesh.integrator import Integrator  # noqa: E402
-from rtmesh.settings import RenderSettings  # noqa: E402
+from rtmesh.rendering.integrator import Integrator  # noqa: E402
+from rtmesh.rendering.settings import RenderSettings  # noqa: E402
 
 SIZE = 64
 

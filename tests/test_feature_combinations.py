@@ -38,21 +38,22 @@ import warnings
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, Phase, event, given, settings as hypothesis_settings, strategies as st
-
-from rtmesh.area_lights import DiskLight, QuadLight
-from rtmesh.aov import PASS_NAMES
-from rtmesh.background import EnvironmentBackground, GradientBackground, TransparentBackground
-from rtmesh.camera import Camera
-from rtmesh.integrator import Integrator
-from rtmesh.lights import DirectionalLight, PointLight, SpotLight
-from rtmesh.materials import Material, as_colour
-from rtmesh.motion import Motion
-from rtmesh.sampling import SAMPLERS
-from rtmesh.scene import MeshPart, Scene
-from rtmesh.textures import Texture
-
+from hypothesis import HealthCheck, Phase, event, given
+from hypothesis import settings as hypothesis_settings
+from hypothesis import strategies as st
 from scenes import assert_finite, box, icosphere, settings
+
+from rtmesh.geometry.motion import Motion
+from rtmesh.io.passes import PASS_NAMES
+from rtmesh.lights.area_lights import DiskLight, QuadLight
+from rtmesh.lights.point_lights import DirectionalLight, PointLight, SpotLight
+from rtmesh.materials.table import Material, as_colour
+from rtmesh.rendering.integrator import Integrator
+from rtmesh.sampling.patterns import SAMPLERS
+from rtmesh.scene.background import EnvironmentBackground, GradientBackground, TransparentBackground
+from rtmesh.scene.camera import Camera
+from rtmesh.scene.model import MeshPart, Scene
+from rtmesh.scene.texture_images import Texture
 
 WIDTH, HEIGHT = 16, 12
 WRAPS = ("repeat", "clamp", "mirror")
@@ -196,7 +197,7 @@ def render_settings(draw):
         s["max_spp"] = draw(st.sampled_from([spp, 2 * spp, 4 * spp]))
     # the chunk size of both renders: small, so both threads take several chunks (which of
     # two coplanar overlapping triangles a ray reports may depend on the rays sharing its
-    # Embree packet, hence on the chunks: see rtmesh.scheduler)
+    # Embree packet, hence on the chunks: see rtmesh.rendering.scheduler)
     s["chunk_samples"] = draw(st.integers(16, 200))
     return s
 

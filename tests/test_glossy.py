@@ -2,18 +2,18 @@
 
 import numpy as np
 import pytest
+from scenes import floor_quad, icosphere, part, render, settings
 from scipy import integrate, stats
 
-from rtmesh.camera import Camera
-from rtmesh.errors import SceneError
-from rtmesh.glossy import (phong_lobe_to_square, roughness_exponent, sample_glossy_directions,
-                           square_to_phong_lobe, square_to_phong_lobe_pdf)
-from rtmesh.integrator import Integrator
-from rtmesh.materials import Material
-from rtmesh.sampling import Dim, decorrelated_points
-from rtmesh.scene import Scene
-from rtmesh.scene_file import scene_from_dict
-from scenes import floor_quad, icosphere, part, render, settings
+from rtmesh.core.errors import SceneError
+from rtmesh.loaders.scene_file import scene_from_dict
+from rtmesh.materials.glossy import (phong_lobe_to_square, roughness_exponent, sample_glossy_directions,
+                                     square_to_phong_lobe, square_to_phong_lobe_pdf)
+from rtmesh.materials.table import Material
+from rtmesh.rendering.integrator import Integrator
+from rtmesh.sampling.patterns import Dim, decorrelated_points
+from rtmesh.scene.camera import Camera
+from rtmesh.scene.model import Scene
 
 EXPONENTS = [0.0, 1.0, 7.5, 100.0, 1e4]
 

@@ -12,16 +12,15 @@ import math
 import numpy as np
 import pytest
 import trimesh
+from scenes import assert_finite
 
 from rtmesh.api import load_scene
-from rtmesh.errors import SceneError
-from rtmesh.gltf_scene import cameras_from_gltf, lights_from_gltf, node_world_transforms, read_gltf_json
-from rtmesh.importers import load_trimesh, parts_from_trimesh
-from rtmesh.integrator import Integrator
-from rtmesh.lights import DirectionalLight, PointLight, SpotLight
-from rtmesh.scene_file import scene_from_dict
-
-from scenes import assert_finite
+from rtmesh.core.errors import SceneError
+from rtmesh.lights.point_lights import DirectionalLight, PointLight, SpotLight
+from rtmesh.loaders.gltf_nodes import cameras_from_gltf, lights_from_gltf, node_world_transforms, read_gltf_json
+from rtmesh.loaders.importers import load_trimesh, parts_from_trimesh
+from rtmesh.loaders.scene_file import scene_from_dict
+from rtmesh.rendering.integrator import Integrator
 
 HALF = 0.1  # the cube's half side
 SQRT_HALF = math.sqrt(0.5)

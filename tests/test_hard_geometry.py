@@ -10,13 +10,12 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 import trimesh
-
-from rtmesh.camera import Camera
-from rtmesh.lights import PointLight
-from rtmesh.materials import Material
-from rtmesh.scene import MeshPart, Scene
-
 from scenes import box, floor_quad, part, quad, render
+
+from rtmesh.lights.point_lights import PointLight
+from rtmesh.materials.table import Material
+from rtmesh.scene.camera import Camera
+from rtmesh.scene.model import MeshPart, Scene
 
 
 @dataclass
@@ -48,7 +47,7 @@ def cube(lower, upper):
     """An axis-aligned box whose faces are split along the same diagonal on both sides.
 
     A face at x = c of one cube and the face at x = c of its neighbour are then the same two
-    triangles (wound oppositely), which rtmesh.media crosses as one interface; boxes split
+    triangles (wound oppositely), which rtmesh.rendering.media crosses as one interface; boxes split
     along different diagonals would only overlap.
     """
     lower, upper = np.asarray(lower, float), np.asarray(upper, float)

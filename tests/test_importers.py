@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from rtmesh.errors import MeshError
-from rtmesh.importers import load_mesh_scene, load_trimesh, material_from_trimesh, parts_from_trimesh
+from rtmesh.core.errors import MeshError
+from rtmesh.loaders.importers import load_mesh_scene, load_trimesh, material_from_trimesh, parts_from_trimesh
 
 DATA = os.path.join(os.path.dirname(__file__), "data")
 TRIANGLE_OBJ = "mtllib m.mtl\nusemtl m\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"
@@ -102,7 +102,7 @@ def test_nan_vertex_faces_are_dropped_with_a_warning(caplog):
     vertices[0] = np.nan
     broken = trimesh.Trimesh(vertices, mesh.faces, process=False)
     with caplog.at_level("WARNING"):
-        from rtmesh.importers import scene_from_trimesh
+        from rtmesh.loaders.importers import scene_from_trimesh
         scene = scene_from_trimesh(broken)
     assert "NaN/Inf" in caplog.text
     assert np.isfinite(scene.vertices).all()

@@ -8,15 +8,14 @@ import math
 
 import numpy as np
 import pytest
-
-from rtmesh.camera import Camera
-from rtmesh.integrator import Integrator
-from rtmesh.lights import DirectionalLight, PointLight
-from rtmesh.materials import Material
-from rtmesh.scene import Scene
-from rtmesh.vecmath import fresnel_dielectric, fresnel_schlick
-
 from scenes import box, floor_quad, icosphere, part, pixel_centre_rays, quad, render, settings
+
+from rtmesh.core.vecmath import fresnel_dielectric, fresnel_schlick
+from rtmesh.lights.point_lights import DirectionalLight, PointLight
+from rtmesh.materials.table import Material
+from rtmesh.rendering.integrator import Integrator
+from rtmesh.scene.camera import Camera
+from rtmesh.scene.model import Scene
 
 TOP_DOWN = Camera([0.0, 0.0, 5.0], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0], 40.0)
 

@@ -1,4 +1,4 @@
-"""The compiled kernels (rtmesh.kernels) against small scalar references written from the
+"""The compiled kernels (rtmesh.shading.kernels) against small scalar references written from the
 formulas, row by row in plain Python."""
 
 import math
@@ -6,10 +6,10 @@ import math
 import numpy as np
 import pytest
 
-from rtmesh import kernels
-from rtmesh.accel import offset_ray_origins
-from rtmesh.lights import DirectionalLight, PointLight, SpotLight
-from rtmesh.vecmath import face_viewer
+from rtmesh.geometry.accel import offset_ray_origins
+from rtmesh.lights.point_lights import DirectionalLight, PointLight, SpotLight
+from rtmesh.shading import kernels
+from rtmesh.shading.kernels import face_viewer
 
 
 def unit_rows(rng, n):

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from rtmesh.lowdiscrepancy import nested_uniform_scramble, reverse_bits, sobol_02
+from rtmesh.sampling.lowdiscrepancy import nested_uniform_scramble, reverse_bits, sobol_02
 
 
 def test_reverse_bits_matches_scalar_reference():
@@ -86,7 +86,7 @@ def test_a_point_does_not_depend_on_the_other_indices_in_the_call():
 def test_generator_matrix_products_match_a_bit_by_bit_reference():
     # the byte tables must give exactly the GF(2) product of the index bits with the
     # matrix columns, for indices using all 32 bits (scrambled indices do)
-    from rtmesh.lowdiscrepancy import _SOBOL1, _SOBOL1_TABLES, _VDC, _VDC_TABLES, _sobol_bits
+    from rtmesh.sampling.lowdiscrepancy import _SOBOL1, _SOBOL1_TABLES, _VDC, _VDC_TABLES, _sobol_bits
 
     index = np.random.default_rng(5).integers(0, 2 ** 32, 2000, dtype=np.uint64).astype(np.uint32)
     index[:3] = [0, 1, 2 ** 32 - 1]

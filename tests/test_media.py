@@ -1,4 +1,4 @@
-"""Nested dielectrics: the per-ray medium stack (rtmesh.media) against closed forms.
+"""Nested dielectrics: the per-ray medium stack (rtmesh.rendering.media) against closed forms.
 
 Glass in water, a camera inside glass (and inside glass inside water), interfaces between
 media of equal index, coincident glass/water surfaces, total internal reflection inside a
@@ -11,18 +11,16 @@ import warnings
 
 import numpy as np
 import pytest
+from scenes import box, icosphere, part, pixel_centre_rays, quad, ray_sphere_distances, render, settings
 
-from rtmesh.background import GradientBackground
-from rtmesh.camera import Camera
-from rtmesh.integrator import Integrator
-from rtmesh.materials import Material, MaterialTable
-from rtmesh.media import Media, coincident_faces
-from rtmesh.motion import Motion
-from rtmesh.scene import Scene
-from rtmesh.vecmath import fresnel_schlick, refract
-
-from scenes import (box, icosphere, part, pixel_centre_rays, quad, ray_sphere_distances, render,
-                    settings)
+from rtmesh.core.vecmath import fresnel_schlick, refract
+from rtmesh.geometry.motion import Motion
+from rtmesh.materials.table import Material, MaterialTable
+from rtmesh.rendering.integrator import Integrator
+from rtmesh.rendering.media import Media, coincident_faces
+from rtmesh.scene.background import GradientBackground
+from rtmesh.scene.camera import Camera
+from rtmesh.scene.model import Scene
 
 GLASS, WATER = 1.5, 1.33
 

@@ -16,11 +16,11 @@ import pytest
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tools"))
 from bench_memory import traced_render  # noqa: E402
-
-import rtmesh.film as film_module  # noqa: E402
-from rtmesh.film import Film  # noqa: E402
-from rtmesh.integrator import Integrator  # noqa: E402
 from scenes import settings, sphere_on_floor_scene  # noqa: E402
+
+import rtmesh.rendering.film as film_module  # noqa: E402
+from rtmesh.rendering.film import Film  # noqa: E402
+from rtmesh.rendering.integrator import Integrator  # noqa: E402
 
 CHUNK_SAMPLES = 2048
 THREADS = 2

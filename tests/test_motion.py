@@ -4,18 +4,18 @@ import dataclasses
 
 import numpy as np
 import pytest
-
-from rtmesh.accel import Accel
-from rtmesh.area_lights import QuadLight
-from rtmesh.camera import Camera
-from rtmesh.errors import SceneError
-from rtmesh.lights import PointLight
-from rtmesh.materials import Material
-from rtmesh.motion import Motion, MotionAccel, rotate, scene_at_time
-from rtmesh.sampling import Dim, shuffled_strata, stratified_values
-from rtmesh.scene import Scene
-from rtmesh.scene_file import scene_from_dict
 from scenes import box, floor_quad, icosphere, part, quad, render
+
+from rtmesh.core.errors import SceneError
+from rtmesh.geometry.accel import Accel
+from rtmesh.geometry.motion import Motion, MotionAccel, rotate, scene_at_time
+from rtmesh.lights.area_lights import QuadLight
+from rtmesh.lights.point_lights import PointLight
+from rtmesh.loaders.scene_file import scene_from_dict
+from rtmesh.materials.table import Material
+from rtmesh.sampling.patterns import Dim, shuffled_strata, stratified_values
+from rtmesh.scene.camera import Camera
+from rtmesh.scene.model import Scene
 
 
 # ---------------------------------------------------------------- the transforms

@@ -3,18 +3,17 @@ the film reductions, EXR channel names and PNG mappings behind them."""
 
 import numpy as np
 import pytest
-
-from rtmesh.aov import PASS_NAMES, display_values, exr_channel_names, id_colours, pass_width
-from rtmesh.camera import Camera
-from rtmesh.cli import main
-from rtmesh.film import Film
-from rtmesh.image_io import read_image
-from rtmesh.integrator import Integrator
-from rtmesh.materials import Material
-from rtmesh.sampling import pixel_offsets
-from rtmesh.scene import Scene
-
 from scenes import box, part, pixel_centre_rays, quad, render, settings
+
+from rtmesh.cli import main
+from rtmesh.io.images import read_image
+from rtmesh.io.passes import PASS_NAMES, display_values, exr_channel_names, id_colours, pass_width
+from rtmesh.materials.table import Material
+from rtmesh.rendering.film import Film
+from rtmesh.rendering.integrator import Integrator
+from rtmesh.sampling.patterns import pixel_offsets
+from rtmesh.scene.camera import Camera
+from rtmesh.scene.model import Scene
 
 LOOK_DOWN_Z = Camera([0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0], 60.0)
 

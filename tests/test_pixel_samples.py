@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from rtmesh.pixel_samples import PixelSampler, pixel_positions
-from rtmesh.sampling import pixel_offsets
+from rtmesh.sampling.patterns import pixel_offsets
+from rtmesh.sampling.pixel_samples import PixelSampler, pixel_positions
 
 
 @pytest.mark.parametrize("sampler", ["regular", "jittered", "random"])
@@ -21,6 +21,6 @@ def test_compiled_pixel_positions_equal_numpy(sampler, spp, seed):
 
 
 def test_sobol_has_no_compiled_twin():
-    from rtmesh.settings import RenderSettings
+    from rtmesh.rendering.settings import RenderSettings
     assert PixelSampler.for_settings(RenderSettings(sampler="sobol")) is None
     assert PixelSampler.for_settings(RenderSettings(sampler="jittered", spp=4)).spp == 4

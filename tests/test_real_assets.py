@@ -12,7 +12,7 @@ import pytest
 
 from rtmesh.api import load_scene, render
 from rtmesh.cli import main
-from rtmesh.errors import MeshError
+from rtmesh.core.errors import MeshError
 
 DATA = os.path.join(os.path.dirname(__file__), "data")
 # every real file: the copies in tests/data plus the bundled bunny (the same file)

@@ -4,11 +4,10 @@ import dataclasses
 
 import numpy as np
 import pytest
-
-from rtmesh.integrator import Integrator
-from rtmesh.render_plan import RenderPlan
-
 from scenes import settings, sphere_on_floor_scene
+
+from rtmesh.rendering.integrator import Integrator
+from rtmesh.rendering.render_plan import RenderPlan
 
 
 def test_plan_is_frozen_and_lists_what_runs():

@@ -1,4 +1,4 @@
-"""Process-wide tuning (rtmesh.runtime) is off in the library and on where it is turned on.
+"""Process-wide tuning (rtmesh.core.runtime) is off in the library and on where it is turned on.
 
 ``import rtmesh`` and rendering through the library change nothing process-wide (no GIL
 switch interval, no kept threads, no allocator setting); a tuned process keeps its render
@@ -12,12 +12,11 @@ import threading
 
 import numpy as np
 import pytest
-
-from rtmesh import runtime
-from rtmesh.integrator import Integrator
-
 from scenes import settings, sphere_on_floor_scene
 from test_determinism import SETTINGS, every_stage_scene
+
+from rtmesh.core import runtime
+from rtmesh.rendering.integrator import Integrator
 
 # Runs in a fresh interpreter: the test process may have been tuned by tests that call
 # the command line's main() in-process.
@@ -26,7 +25,7 @@ import sys, threading
 sys.path.insert(0, TESTS)
 sys.setswitchinterval(0.003)
 import rtmesh
-from rtmesh import runtime
+from rtmesh.core import runtime
 assert sys.getswitchinterval() == 0.003
 from scenes import settings, sphere_on_floor_scene
 seen = []

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from rtmesh.sampler import Sampler, light_dimension
-from rtmesh.sampling import Dim, decorrelated_points, pixel_offsets, stratified_values
+from rtmesh.sampling.patterns import Dim, decorrelated_points, pixel_offsets, stratified_values
+from rtmesh.sampling.sampler import Sampler, light_dimension
 
 
 @pytest.mark.parametrize("kind", ["regular", "random", "jittered", "sobol"])

@@ -1,15 +1,14 @@
-"""rtmesh.sampling: pixel patterns, the counter-based generator and the warps."""
+"""rtmesh.sampling.patterns: pixel patterns, the counter-based generator and the warps."""
 
 import numpy as np
 import pytest
 from scipy import stats
 
-from rtmesh.sampling import (SAMPLERS, Dim, cosine_hemisphere_to_square, decorrelated_points,
-                             pixel_offsets, square_to_cosine_hemisphere,
-                             square_to_cosine_hemisphere_pdf, square_to_uniform_disk_concentric,
-                             square_to_uniform_disk_concentric_pdf, strata_shape,
-                             stratified_values, uniform, uniform2,
-                             uniform_disk_concentric_to_square)
+from rtmesh.sampling.patterns import (SAMPLERS, Dim, decorrelated_points, pixel_offsets, strata_shape,
+                                      stratified_values, uniform, uniform2)
+from rtmesh.sampling.warps import (cosine_hemisphere_to_square, square_to_cosine_hemisphere,
+                                   square_to_cosine_hemisphere_pdf, square_to_uniform_disk_concentric,
+                                   square_to_uniform_disk_concentric_pdf, uniform_disk_concentric_to_square)
 
 SPPS = [1, 2, 4, 6, 9, 12, 16]
 
@@ -379,7 +378,7 @@ def test_cosine_hemisphere_samples_follow_their_pdf():
 
 
 def test_sobol_pixel_samples_are_stratified_in_every_elementary_interval():
-    from rtmesh.sampling import pixel_offsets
+    from rtmesh.sampling.patterns import pixel_offsets
 
     spp, pixels = 16, 50
     pixel = np.repeat(np.arange(pixels), spp)
@@ -395,7 +394,7 @@ def test_sobol_pixel_samples_are_stratified_in_every_elementary_interval():
 
 @pytest.mark.parametrize("flip", [False, True])
 def test_spherical_triangle_directions_are_uniform_inside_it(flip):
-    from rtmesh.sampling import spherical_triangle_area, square_to_spherical_triangle
+    from rtmesh.sampling.warps import spherical_triangle_area, square_to_spherical_triangle
 
     corners = [np.array(v, dtype=float) / np.linalg.norm(v) for v in ([1.0, 0.2, 0.3], [0.1, 1.0, 0.2], [0.3, 0.1, 1.0])]
     if flip:  # the winding does not matter
@@ -416,7 +415,7 @@ def test_spherical_triangle_directions_are_uniform_inside_it(flip):
         inside = ((d @ np.cross(p, m)) * np.dot(np.cross(p, m), q) >= 0) & ((d @ np.cross(m, q)) * np.dot(np.cross(m, q), p) >= 0)
         assert abs(inside.mean() - share) < 5 * np.sqrt(share * (1 - share) / n)
     # the map is a bijection: its inverse gives the square points back
-    from rtmesh.sampling import spherical_triangle_to_square
+    from rtmesh.sampling.warps import spherical_triangle_to_square
     u = np.random.default_rng(4).random((1000, 2))
     back = spherical_triangle_to_square(square_to_spherical_triangle(u, a[:1000], b[:1000], c[:1000])[0],
                                         a[:1000], b[:1000], c[:1000])

@@ -5,9 +5,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rtmesh.errors import SceneError
-from rtmesh.lights import DirectionalLight, PointLight, SpotLight
-from rtmesh.scene_file import read_scene_file, scene_from_dict
+from rtmesh.core.errors import SceneError
+from rtmesh.lights.point_lights import DirectionalLight, PointLight, SpotLight
+from rtmesh.loaders.scene_file import read_scene_file, scene_from_dict
 
 BASE = {
     "objects": [{"primitive": "icosphere", "subdivisions": 1}],
@@ -106,7 +106,7 @@ def test_command_line_overrides_scene_settings():
 def test_every_scene_key_is_documented(table):
     # docs/SCENE_FORMAT.md promises to list every key: a key added to the schema without
     # its documentation fails here
-    import rtmesh.scene_file as scene_file
+    import rtmesh.loaders.scene_file as scene_file
 
     doc = (Path(__file__).resolve().parent.parent / "docs" / "SCENE_FORMAT.md").read_text()
     keys = getattr(scene_file, table)
@@ -117,8 +117,8 @@ def test_every_scene_key_is_documented(table):
 def test_a_registered_light_type_is_read_from_scene_files_without_touching_the_reader(monkeypatch):
     """A new light is its module plus its registry entry: the scene-file reader takes its
     keys, required keys and builder from the registry."""
-    from rtmesh import light_registry, scene_file
-    from rtmesh.light_types import LightType
+    from rtmesh.lights.light_types import LightType
+    from rtmesh.loaders import light_registry, scene_file
 
     lamp = LightType("lamp", {"position": "vec3", "watts": "non_negative"}, ("position",),
                      lambda v: PointLight(v["position"], v.get("watts", 1.0) / 10.0))

@@ -9,11 +9,9 @@ with the geometry scaled and moved far from the origin (Accel does not re-centre
 
 import numpy as np
 import pytest
+from scenes import box, icosphere, pixel_centre_rays, ray_sphere_distances, render, sphere_on_floor_scene
 
-from rtmesh.accel import Accel, float32_ulp, offset_ray_origins
-
-from scenes import (box, icosphere, pixel_centre_rays, ray_sphere_distances, render,
-                    sphere_on_floor_scene)
+from rtmesh.geometry.accel import Accel, float32_ulp, offset_ray_origins
 
 SHAPES = {
     "icosphere": lambda: icosphere(3, 1.0),

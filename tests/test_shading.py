@@ -4,13 +4,12 @@ import math
 
 import numpy as np
 import pytest
-
-from rtmesh.camera import Camera
-from rtmesh.lights import DirectionalLight, PointLight, SpotLight
-from rtmesh.materials import Material, MaterialTable, blinn_phong
-from rtmesh.scene import Scene
-
 from scenes import box, floor_quad, part, pixel_centre_rays, render
+
+from rtmesh.lights.point_lights import DirectionalLight, PointLight, SpotLight
+from rtmesh.materials.table import Material, MaterialTable, blinn_phong
+from rtmesh.scene.camera import Camera
+from rtmesh.scene.model import Scene
 
 
 # ---------------------------------------------------------------- scalar references

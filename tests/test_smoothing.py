@@ -1,4 +1,4 @@
-"""Smooth vertex normals split at creases (rtmesh.smoothing) against closed forms and a scalar
+"""Smooth vertex normals split at creases (rtmesh.geometry.smoothing) against closed forms and a scalar
 reference."""
 
 import math
@@ -6,10 +6,10 @@ import math
 import numpy as np
 import pytest
 import trimesh
-
-from rtmesh.importers import parts_from_trimesh
-from rtmesh.smoothing import face_normals_and_corner_angles, smooth_vertex_normals
 from scenes import icosphere
+
+from rtmesh.geometry.smoothing import face_normals_and_corner_angles, smooth_vertex_normals
+from rtmesh.loaders.importers import parts_from_trimesh
 
 
 def corner_normals(faces, normals):

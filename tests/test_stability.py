@@ -6,12 +6,12 @@ Every render goes through ``scenes.render``, which fails on any NaN, Inf or nega
 
 import numpy as np
 import pytest
-
-from rtmesh.camera import Camera
-from rtmesh.lights import DirectionalLight, PointLight
-from rtmesh.materials import Material
-from rtmesh.scene import Scene
 from scenes import floor_quad, icosphere, part, quad, render
+
+from rtmesh.lights.point_lights import DirectionalLight, PointLight
+from rtmesh.materials.table import Material
+from rtmesh.scene.camera import Camera
+from rtmesh.scene.model import Scene
 
 
 def sphere_on_floor(shift=0.0, scale=1.0):

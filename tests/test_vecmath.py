@@ -1,4 +1,4 @@
-"""rtmesh.vecmath against closed forms and scalar textbook references."""
+"""rtmesh.core.vecmath against closed forms and scalar textbook references."""
 
 import math
 import warnings
@@ -6,8 +6,8 @@ import warnings
 import numpy as np
 import pytest
 
-from rtmesh.vecmath import (dot, fresnel_dielectric, fresnel_schlick, norm, normalize,
-                            orthonormal_basis, reflect, refract)
+from rtmesh.core.vecmath import (dot, fresnel_dielectric, fresnel_schlick, norm, normalize, orthonormal_basis,
+                                 reflect, refract)
 
 ETAS = [1.0 / 1.5, 1.0 / 1.33, 1.0 / 2.4, 1.5, 1.33, 2.4, 1.25]
 
@@ -312,7 +312,8 @@ def test_orthonormal_basis_at_exactly_minus_z_and_signed_zero():
 
 
 def test_face_viewer_bends_only_normals_facing_away_and_keeps_them_above_the_surface():
-    from rtmesh.vecmath import face_viewer, normalize
+    from rtmesh.core.vecmath import normalize
+    from rtmesh.shading.kernels import face_viewer
 
     rng = np.random.default_rng(3)
     n = 2000
@@ -332,7 +333,7 @@ def test_face_viewer_bends_only_normals_facing_away_and_keeps_them_above_the_sur
 
 
 def test_repeated_row_is_a_read_only_broadcast_of_the_row():
-    from rtmesh.batches import repeated_row
+    from rtmesh.core.rays import repeated_row
 
     for row in (np.array([0.5, -1.0, 2.0]), np.array([3, 1], dtype=np.int32), np.zeros(0, np.int32)):
         view = repeated_row(row, 5)

@@ -10,13 +10,12 @@ import math
 import numpy as np
 import pytest
 import trimesh
-
-from rtmesh.accel import Accel
-from rtmesh.camera import Camera
-from rtmesh.materials import Material
-from rtmesh.scene import Scene
-
 from scenes import box, icosphere, part, pixel_centre_rays, ray_sphere_distances, render
+
+from rtmesh.geometry.accel import Accel
+from rtmesh.materials.table import Material
+from rtmesh.scene.camera import Camera
+from rtmesh.scene.model import Scene
 
 VIEWS = 20
 WIDTH = HEIGHT = 40

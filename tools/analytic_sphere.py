@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rtmesh.materials import Material, blinn_phong
-from rtmesh.vecmath import dot, fresnel_dielectric, fresnel_schlick, normalize, reflect, refract
+from rtmesh.core.vecmath import dot, fresnel_dielectric, fresnel_schlick, normalize, reflect, refract
+from rtmesh.materials.table import Material, blinn_phong
 
 
 @dataclass

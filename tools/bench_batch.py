@@ -74,7 +74,7 @@ def make_collection(folder, count):
         # one file with no triangles is left out: this measures conversions, not failures
         target = os.path.join(folder, "real")
         shutil.copytree(REAL_ASSETS, target, ignore=shutil.ignore_patterns("empty.obj"))
-        real = sum(os.path.splitext(n)[1].lower() in rtmesh.importers.MESH_EXTENSIONS
+        real = sum(os.path.splitext(n)[1].lower() in rtmesh.loaders.importers.MESH_EXTENSIONS
                    for n in os.listdir(target))
     return faces, real
 

@@ -3,26 +3,26 @@
 Writes an icosphere (``--subdivisions 8``: 1,310,720 triangles) to a temporary PLY file
 without normals, then times, stage by stage, what ``rtmesh render mesh.ply`` does before
 its first ray, in a process tuned as that command tunes its own
-(:func:`rtmesh.runtime.tune_process`):
+(:func:`rtmesh.core.runtime.tune_process`):
 
-* ``load``: :func:`rtmesh.importers.load_trimesh`, of which ``trimesh.load`` is trimesh
+* ``load``: :func:`rtmesh.loaders.importers.load_trimesh`, of which ``trimesh.load`` is trimesh
   reading the PLY (with trimesh's processing, the vertex merge, where rtmesh leaves it to
-  trimesh) and the rest rtmesh's own (:func:`rtmesh.importers.process`);
-* ``parts``: :func:`rtmesh.importers.parts_from_trimesh`, of which ``smooth normals`` is
-  :func:`rtmesh.smoothing.smooth_vertex_normals` (normals split at creases) and the rest
+  trimesh) and the rest rtmesh's own (:func:`rtmesh.loaders.importers.process`);
+* ``parts``: :func:`rtmesh.loaders.importers.parts_from_trimesh`, of which ``smooth normals`` is
+  :func:`rtmesh.geometry.smoothing.smooth_vertex_normals` (normals split at creases) and the rest
   the world transform;
-* ``scene``: :meth:`rtmesh.scene.Scene.from_parts` (flattening, degenerate-face filter,
+* ``scene``: :meth:`rtmesh.scene.model.Scene.from_parts` (flattening, degenerate-face filter,
   face normals, auto camera);
-* ``integrator``: :class:`rtmesh.integrator.Integrator`, of which ``accel`` is the
-  :class:`rtmesh.accel.Accel` the integrator builds (float32 copies, Embree scene and BVH,
+* ``integrator``: :class:`rtmesh.rendering.integrator.Integrator`, of which ``accel`` is the
+  :class:`rtmesh.geometry.accel.Accel` the integrator builds (float32 copies, Embree scene and BVH,
   the float64 triangle table) and ``face tables`` the per-face rows shading reads.
 
 The stages inside a stage are timed in the same run by wrapping the functions named above
 (a sub-stage whose function is missing is left out).  To read Embree's share apart from
 rtmesh's, Embree's own work is measured apart on the same arrays, as the Accel did it:
 
-* with packet queries (:mod:`rtmesh.embree_packets`): ``embree scene``, the
-  :class:`~rtmesh.embree_packets.SharedScene` (padded float32 and uint32 copies, Embree's
+* with packet queries (:mod:`rtmesh.geometry.embree_packets`): ``embree scene``, the
+  :class:`~rtmesh.geometry.embree_packets.SharedScene` (padded float32 and uint32 copies, Embree's
   geometry over them, the commit that builds the BVH);
 * with embreex's ``run()``: ``embree upload`` (embreex ``TriangleMesh``, which copies the
   arrays into Embree's own buffers) and ``embree BVH`` (the commit on the first query);
@@ -53,20 +53,21 @@ from embreex.mesh_construction import TriangleMesh
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from bench_core import machine, publish  # noqa: E402
 
-import rtmesh.importers  # noqa: E402
-import rtmesh.integrator  # noqa: E402
-from rtmesh import embree_packets, runtime  # noqa: E402
-from rtmesh.importers import load_trimesh, parts_from_trimesh  # noqa: E402
-from rtmesh.integrator import Integrator  # noqa: E402
-from rtmesh.scene import Scene  # noqa: E402
-from rtmesh.settings import RenderSettings  # noqa: E402
+import rtmesh.loaders.importers  # noqa: E402
+import rtmesh.rendering.integrator  # noqa: E402
+from rtmesh.core import runtime
+from rtmesh.geometry import embree_packets  # noqa: E402
+from rtmesh.loaders.importers import load_trimesh, parts_from_trimesh  # noqa: E402
+from rtmesh.rendering.integrator import Integrator  # noqa: E402
+from rtmesh.rendering.settings import RenderSettings  # noqa: E402
+from rtmesh.scene.model import Scene  # noqa: E402
 
 SECTION = "Scene build time, 1M+ triangles"
 # (stage, sub-stage, where the sub-stage's function is looked up, its name there)
 SUB_STAGES = (
     ("load", "trimesh.load", trimesh, "load"),
-    ("parts", "smooth normals", rtmesh.importers, "smooth_vertex_normals"),
-    ("integrator", "accel", rtmesh.integrator, "Accel"),
+    ("parts", "smooth normals", rtmesh.loaders.importers, "smooth_vertex_normals"),
+    ("integrator", "accel", rtmesh.rendering.integrator, "Accel"),
     ("integrator", "face tables", Integrator, "_face_tables"),
 )
 STAGES = ("load", "parts", "scene", "integrator")

@@ -5,7 +5,7 @@ ground quad, one point light), renders it with rtmesh at 1 and 2 threads, and ti
 Embree on exactly the rays rtmesh traced (camera rays and shadow rays, recorded from the
 render through the Accel), at 1 thread and at 2 threads splitting the rays: once as the
 very packet queries rtmesh made (the same batches through
-:func:`rtmesh.embree_packets.intersect_rays` and :func:`~rtmesh.embree_packets.occluded_rays`),
+:func:`rtmesh.geometry.embree_packets.intersect_rays` and :func:`~rtmesh.geometry.embree_packets.occluded_rays`),
 and once through embreex ``run()``, one ray at a time.
 Prints a table and three ratios and writes them to ``docs/BENCHMARKS.md``:
 
@@ -23,7 +23,7 @@ virtual machine it moves with the neighbours' load.
 
 Timings are medians over ``--runs`` runs after a warm-up; the measurements are
 interleaved run by run so that a noisy, shared machine slows them alike.  The process is
-tuned as the ``rtmesh`` command tunes its own (:func:`rtmesh.runtime.tune_process`: kept
+tuned as the ``rtmesh`` command tunes its own (:func:`rtmesh.core.runtime.tune_process`: kept
 render threads, a short GIL switch interval while they run, glibc keeping freed memory).
 
 Usage::
@@ -45,13 +45,14 @@ import trimesh
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
-from rtmesh.camera import Camera
-from rtmesh import embree_packets, runtime
-from rtmesh.integrator import Integrator
-from rtmesh.lights import PointLight
-from rtmesh.materials import Material
-from rtmesh.scene import MeshPart, Scene
-from rtmesh.settings import RenderSettings
+from rtmesh.core import runtime
+from rtmesh.geometry import embree_packets
+from rtmesh.lights.point_lights import PointLight
+from rtmesh.materials.table import Material
+from rtmesh.rendering.integrator import Integrator
+from rtmesh.rendering.settings import RenderSettings
+from rtmesh.scene.camera import Camera
+from rtmesh.scene.model import MeshPart, Scene
 
 SECTION = "Core renderer vs raw Embree"
 DOC = Path(__file__).resolve().parent.parent / "docs" / "BENCHMARKS.md"

@@ -36,15 +36,15 @@ import tracemalloc
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from bench_core import benchmark_scene, machine, publish  # noqa: E402
 
-from rtmesh.integrator import Integrator  # noqa: E402
-from rtmesh.settings import RenderSettings  # noqa: E402
+from rtmesh.rendering.integrator import Integrator  # noqa: E402
+from rtmesh.rendering.settings import RenderSettings  # noqa: E402
 
 SECTION = "Peak memory against resolution x spp"
 DEFAULT_POINTS = "512x512x1,512x512x16,1920x1080x4,3840x2160x1,3840x2160x4,3840x2160x16,3840x2160x64"
 
 
 def film_bytes(film):
-    """Bytes held by a Film (:attr:`rtmesh.film.Film.nbytes`)."""
+    """Bytes held by a Film (:attr:`rtmesh.rendering.film.Film.nbytes`)."""
     return film.nbytes
 
 

@@ -24,7 +24,7 @@ pure Lambert with albedo 0.7 everywhere (no specular, no ambient, no reflections
 3. **Threads**: rtmesh at 1 and 2 threads on the same render.
 
 rtmesh runs in a process tuned as the ``rtmesh`` command tunes its own
-(:func:`rtmesh.runtime.tune_process`), and traces with Embree's packet queries unless
+(:func:`rtmesh.core.runtime.tune_process`), and traces with Embree's packet queries unless
 ``RTMESH_EMBREE=run`` is set (embreex ``run()``, one ray at a time); the report says which.
 
 Mitsuba runs in its own venv (``sh tools/peers_setup.sh``, default ``/tmp/peers-venv``),
@@ -56,14 +56,14 @@ from embreex.mesh_construction import TriangleMesh
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from bench_core import machine, publish, seconds  # noqa: E402
 
-from rtmesh import runtime  # noqa: E402
-from rtmesh.accel import Accel  # noqa: E402
-from rtmesh.camera import Camera  # noqa: E402
-from rtmesh.integrator import Integrator  # noqa: E402
-from rtmesh.lights import PointLight  # noqa: E402
-from rtmesh.materials import Material  # noqa: E402
-from rtmesh.scene import MeshPart, Scene  # noqa: E402
-from rtmesh.settings import DEFAULT_MAX_SPP, RenderSettings  # noqa: E402
+from rtmesh.core import runtime  # noqa: E402
+from rtmesh.geometry.accel import Accel  # noqa: E402
+from rtmesh.lights.point_lights import PointLight  # noqa: E402
+from rtmesh.materials.table import Material  # noqa: E402
+from rtmesh.rendering.integrator import Integrator  # noqa: E402
+from rtmesh.rendering.settings import DEFAULT_MAX_SPP, RenderSettings  # noqa: E402
+from rtmesh.scene.camera import Camera  # noqa: E402
+from rtmesh.scene.model import MeshPart, Scene  # noqa: E402
 
 SECTION = "Against peers: trimesh, raw Embree, Mitsuba 3"
 WORKER = os.path.join(os.path.dirname(os.path.abspath(__file__)), "peers_mitsuba.py")
@@ -186,12 +186,12 @@ def rtmesh_adaptive_sweep(scene, width, height, targets, spp, runs, threads=2):
 
     Parameters
     ----------
-    scene : rtmesh.scene.Scene
+    scene : rtmesh.scene.model.Scene
     width, height : int
         Image size in pixels.
     targets : list of float
         ``target_error`` of each render (rtmesh's estimated display error per pixel, see
-        :class:`rtmesh.settings.RenderSettings`), one render setting per value.
+        :class:`rtmesh.rendering.settings.RenderSettings`), one render setting per value.
     spp : int
         Samples per pixel of the first round.
     runs : int
@@ -202,7 +202,7 @@ def rtmesh_adaptive_sweep(scene, width, height, targets, spp, runs, threads=2):
     -------
     dict of float to tuple
         ``target -> (image, median seconds, mean spp)``; the sampler is Sobol, whose
-        prefixes stay stratified across rounds (see :mod:`rtmesh.adaptive`), and no time
+        prefixes stay stratified across rounds (see :mod:`rtmesh.rendering.adaptive`), and no time
         limit is set, so every run of a setting takes the same samples.
     """
     out = {}

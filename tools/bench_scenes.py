@@ -5,7 +5,7 @@ rendered at its own settings by this checkout and by the revision given with ``-
 (checked out once into a temporary git worktree and imported from there), in separate
 processes, alternating between the two, ``--runs`` times each after a warm-up render that
 compiles the kernels.  Each process is tuned as the ``rtmesh`` command tunes its own
-(:func:`rtmesh.runtime.tune_process` where the revision has it; older revisions tuned
+(:func:`rtmesh.core.runtime.tune_process` where the revision has it; older revisions tuned
 every process as they built a renderer).  Only the render is timed
 (``stats.wall_seconds``: no start-up, no scene loading, no image writing).  Prints a table
 of median times and speed-ups, and how far apart the two images are (relative RMSE; 0 for
@@ -35,12 +35,12 @@ CHILD = r"""
 import dataclasses, json, sys
 import numpy as np
 try:
-    from rtmesh import runtime
+    from rtmesh.core import runtime
     runtime.tune_process()
 except ImportError:
     pass
 from rtmesh.api import load_scene
-from rtmesh.integrator import Integrator
+from rtmesh.rendering.integrator import Integrator
 path, threads, scale, image_path = sys.argv[1], int(sys.argv[2]), float(sys.argv[3]), sys.argv[4]
 scene, settings = load_scene(path)
 settings = dataclasses.replace(settings, threads=threads, width=max(1, round(settings.width * scale)),

@@ -1,7 +1,7 @@
 """Write assets/environments/sky.exr: a small procedural sky (256 x 128, linear, half float).
 
 A blue zenith fading to a pale horizon, a darker ground, and a sun disk (half-angle 2.5
-degrees, radiance 60) with a soft glow, in the lat-long convention of rtmesh.background
+degrees, radiance 60) with a soft glow, in the lat-long convention of rtmesh.scene.background
 (+Y up).  Run from the repository root: ``python tools/make_sky.py``.
 """
 
@@ -12,7 +12,7 @@ import numpy as np
 import OpenImageIO as oiio
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
-from rtmesh.background import latlong_directions  # noqa: E402
+from rtmesh.scene.background import latlong_directions  # noqa: E402
 
 WIDTH, HEIGHT = 256, 128
 SUN = np.array([0.45, 0.55, -0.70])  # toward the sun: up and behind a camera looking down -Z

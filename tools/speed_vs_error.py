@@ -37,8 +37,8 @@ import time
 import numpy as np
 
 from rtmesh.api import load_scene
-from rtmesh.film import ERROR_FLOOR
-from rtmesh.integrator import Integrator
+from rtmesh.rendering.film import ERROR_FLOOR
+from rtmesh.rendering.integrator import Integrator
 
 ROOT = os.path.join(os.path.dirname(__file__), "..")
 # name: (scene file, width, height, reference spp, largest uniform spp)
@@ -52,7 +52,7 @@ SCENES = {
 }
 SAMPLERS = ("regular", "random", "jittered", "sobol")
 ADAPTIVE_SAMPLERS = ("sobol", "jittered")
-# display-scale errors, standard error / sqrt(mean + 0.01) (rtmesh.film.Film.pixel_display_error)
+# display-scale errors, standard error / sqrt(mean + 0.01) (rtmesh.rendering.film.Film.pixel_display_error)
 TARGETS = (0.08, 0.04, 0.02, 0.01)
 BASE_SPP = 4
 SOBOL_REACH = 4  # the uniform Sobol sweep goes to 4x the scene's largest uniform spp

@@ -23,12 +23,12 @@ import trimesh
 sys.path.insert(0, os.path.dirname(__file__))
 from analytic_sphere import AnalyticSphere, render_analytic_image  # noqa: E402
 
-from rtmesh.camera import Camera  # noqa: E402
-from rtmesh.integrator import Integrator  # noqa: E402
-from rtmesh.lights import PointLight  # noqa: E402
-from rtmesh.materials import Material  # noqa: E402
-from rtmesh.scene import MeshPart, Scene  # noqa: E402
-from rtmesh.settings import RenderSettings  # noqa: E402
+from rtmesh.lights.point_lights import PointLight  # noqa: E402
+from rtmesh.materials.table import Material  # noqa: E402
+from rtmesh.rendering.integrator import Integrator  # noqa: E402
+from rtmesh.rendering.settings import RenderSettings  # noqa: E402
+from rtmesh.scene.camera import Camera  # noqa: E402
+from rtmesh.scene.model import MeshPart, Scene  # noqa: E402
 
 CASES = {
     "lit": Material("lit", diffuse=[0.7, 0.5, 0.3], specular=0.4, shininess=60),

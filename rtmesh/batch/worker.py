@@ -1,0 +1,263 @@
+"""One batch job: load one asset, render its views, write its images.
+
+This module runs inside a worker (a local worker process or a Dask worker).  It never
+raises for a bad asset: every failure comes back as a result with the stage it happened in
+(``load``, ``render``, ``write``, ``time``, ``memory``), so the batch goes on.
+"""
+
+import os
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from rtmesh.core.errors import RtmeshError
+from rtmesh.io.images import write_image
+from rtmesh.loaders.importers import load_trimesh, parts_from_trimesh
+from rtmesh.materials.table import Material
+from rtmesh.rendering.integrator import Integrator
+from rtmesh.rendering.settings import RenderSettings
+from rtmesh.scene.camera import frame_bounds
+from rtmesh.scene.model import MeshPart, Scene, default_lights
+
+# Directions from the subject towards the camera, and the camera's up vector.  "iso" is the
+# automatic camera's direction (rtmesh.scene.camera.frame_bounds); top and bottom need another up
+# vector, since +Y is parallel to their view.
+VIEWS = {
+    "iso": ((0.6, 0.45, 1.0), (0.0, 1.0, 0.0)),
+    "front": ((0.0, 0.0, 1.0), (0.0, 1.0, 0.0)),
+    "back": ((0.0, 0.0, -1.0), (0.0, 1.0, 0.0)),
+    "left": ((-1.0, 0.0, 0.0), (0.0, 1.0, 0.0)),
+    "right": ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0)),
+    "top": ((0.0, 1.0, 0.0), (0.0, 0.0, -1.0)),
+    "bottom": ((0.0, -1.0, 0.0), (0.0, 0.0, 1.0)),
+}
+
+
+@dataclass(frozen=True)
+class View:
+    """Where one image is seen from.
+
+    Attributes
+    ----------
+    name : str
+        ``iso``, ``front``... or ``turn007`` for frame 7 of a turntable.
+    direction : (3,) tuple of float
+        From the centre of the asset's bounding sphere towards the camera.
+    up : (3,) tuple of float
+    light_direction : (3,) tuple of float
+        Camera direction the default light rig is placed for: the view's own for fixed views
+        (each is well lit), frame 0's for a turntable (lights stay put while the camera
+        orbits, so the shading moves across the object as it would on a real turntable).
+    """
+
+    name: str
+    direction: tuple
+    up: tuple = (0.0, 1.0, 0.0)
+    light_direction: tuple | None = None
+
+
+def fixed_view(name):
+    """The named fixed view (see ``VIEWS``); raises KeyError for an unknown name."""
+    direction, up = VIEWS[name]
+    return View(name, direction, up, direction)
+
+
+def turntable_views(frames):
+    """``frames`` views orbiting the vertical (+Y) axis at the ``iso`` view's elevation.
+
+    Frame 0 is the ``iso`` view; the camera moves counter-clockwise seen from above.
+    """
+    (x, y, z), up = VIEWS["iso"]
+    radius, start = np.hypot(x, z), np.arctan2(x, z)
+    views = []
+    for k in range(frames):
+        angle = start + 2.0 * np.pi * k / frames
+        direction = (float(radius * np.sin(angle)), y, float(radius * np.cos(angle)))
+        views.append(View(f"turn{k:03d}", direction, up, (x, y, z)))
+    return views
+
+
+@dataclass(frozen=True)
+class ImageTask:
+    """One image of an asset: a view, written in one or more formats.
+
+    Attributes
+    ----------
+    key : str
+        Ledger key: output path relative to the output folder, without extension.
+    view : View
+    files : tuple of str
+        Output files relative to the output folder, one per format.
+    fingerprint : str
+        Hash of everything the image depends on (input file, settings, view, formats).
+    """
+
+    key: str
+    view: View
+    files: tuple
+    fingerprint: str
+
+
+@dataclass(frozen=True)
+class AssetJob:
+    """Everything a worker needs to convert one asset; plain data, so it pickles.
+
+    Attributes
+    ----------
+    asset : str
+        Asset name (relative path, for messages and the report).
+    path : str
+        Absolute mesh path.
+    outdir : str
+        Absolute output folder (shared with the workers).
+    settings : dict
+        :class:`RenderSettings` fields.
+    images : tuple of ImageTask
+        The views still to do.
+    ground : bool
+        Put a grey ground plane under the asset (it catches the asset's shadow).
+    """
+
+    asset: str
+    path: str
+    outdir: str
+    settings: dict
+    images: tuple
+    ground: bool = False
+
+
+# set by a worker process that runs under an address-space limit, for the failure message
+MEMORY_LIMIT_NOTE = ""
+
+
+class TimeLimitExceeded(Exception):
+    """Raised inside a render when the job's deadline passes (cooperative time limit)."""
+
+
+def run_job(job, on_image=None, deadline=None):
+    """Convert one asset: load it once, then render and write each of its views.
+
+    Parameters
+    ----------
+    job : AssetJob
+    on_image : callable, optional
+        ``on_image(image_result)`` after each image's files are all written, so the caller
+        can record it at once.
+    deadline : float, optional
+        ``time.monotonic()`` value after which the job stops between render chunks (used
+        where the job cannot be killed from outside, as on a Dask worker).
+
+    Returns
+    -------
+    dict
+        ``asset``, ``seconds``, ``images``: one dict per image task with ``key``,
+        ``fingerprint``, ``status`` (``"done"`` or ``"failed"``), ``files``, ``seconds``, and
+        for failures ``stage`` and ``message`` (one line).
+    """
+    start = time.perf_counter()
+    results = []
+
+    def fail_all(tasks, stage, message):
+        for task in tasks:
+            results.append(_image_result(task, "failed", 0.0, stage=stage, message=message))
+            if on_image:
+                on_image(results[-1])
+
+    try:
+        settings = RenderSettings(**job.settings).validate()
+    except (TypeError, ValueError) as exc:
+        fail_all(job.images, "settings", str(exc))
+        return _job_result(job, results, start)
+    try:
+        parts, materials, bounds = _load(job)
+    except MemoryError:
+        fail_all(job.images, "memory", f"out of memory while loading{MEMORY_LIMIT_NOTE}")
+        return _job_result(job, results, start)
+    except Exception as exc:  # any failure of one asset is that asset's, not the batch's
+        fail_all(job.images, "load", _one_line(exc))
+        return _job_result(job, results, start)
+
+    for i, task in enumerate(job.images):
+        image_start = time.perf_counter()
+        stage = "render"
+        try:
+            _check_deadline(deadline)
+            scene = _scene_for_view(parts, materials, bounds, task.view, settings, job.ground)
+            result = Integrator(scene, settings).render(
+                progress=lambda done, total: _check_deadline(deadline))
+            stage = "write"
+            for name in task.files:
+                path = os.path.join(job.outdir, name)
+                os.makedirs(os.path.dirname(path), exist_ok=True)
+                write_image(path, result.image, result.passes, settings.exposure, settings.tonemap)
+            results.append(_image_result(task, "done", time.perf_counter() - image_start))
+        except TimeLimitExceeded:
+            fail_all(job.images[i:], "time", "time limit exceeded")
+            break
+        except MemoryError:
+            results.append(_image_result(task, "failed", time.perf_counter() - image_start,
+                                         stage="memory", message=f"out of memory during {stage}{MEMORY_LIMIT_NOTE}"))
+        except Exception as exc:
+            results.append(_image_result(task, "failed", time.perf_counter() - image_start,
+                                         stage=stage, message=_one_line(exc)))
+        if on_image:
+            on_image(results[-1])
+    return _job_result(job, results, start)
+
+
+def _load(job):
+    """Read the mesh once for all its views: parts, materials and the asset's bounds."""
+    parts, materials = parts_from_trimesh(load_trimesh(job.path), name=job.path)
+    # Scene.from_parts drops broken triangles and raises when nothing is left; build the
+    # scene once here so an empty asset fails at the load stage, and frame its clean bounds
+    bounds = Scene.from_parts(parts, materials, source=job.path).bounds
+    return parts, materials, bounds
+
+
+def _scene_for_view(parts, materials, bounds, view, settings, ground):
+    """The asset's scene, framed from ``view`` and lit by the default rig."""
+    aspect = settings.width / settings.height
+    camera = frame_bounds(bounds, aspect=aspect, direction=view.direction, up=view.up)
+    rig_camera = frame_bounds(bounds, aspect=aspect, direction=view.light_direction or view.direction,
+                              up=view.up)
+    parts, materials = list(parts), list(materials) or [Material()]
+    if ground:
+        parts.append(_ground_part(bounds, len(materials)))
+        materials.append(Material(name="ground", diffuse=np.full(3, 0.8)))
+    return Scene.from_parts(parts, materials, lights=default_lights(rig_camera), camera=camera,
+                            ambient=np.full(3, 0.05), source=view.name)
+
+
+def _ground_part(bounds, material):
+    """A square under the asset (+Y up), four bounding radii wide, facing up."""
+    centre = bounds.mean(axis=0)
+    half = 2.0 * max(float(np.linalg.norm(bounds[1] - bounds[0])), 1e-6)
+    # a hair below the lowest point so the asset's base does not z-fight with the plane
+    y = bounds[0, 1] - 1e-4 * half
+    x0, x1, z0, z1 = centre[0] - half, centre[0] + half, centre[2] - half, centre[2] + half
+    vertices = np.array([[x0, y, z0], [x1, y, z0], [x1, y, z1], [x0, y, z1]])
+    faces = np.array([[0, 2, 1], [0, 3, 2]])  # counter-clockwise seen from +Y
+    return MeshPart("ground", vertices, faces, material)
+
+
+def _check_deadline(deadline):
+    if deadline is not None and time.monotonic() > deadline:
+        raise TimeLimitExceeded()
+
+
+def _one_line(exc):
+    """An exception as one line of text (RtmeshError messages already name the file)."""
+    text = " ".join(str(exc).split())
+    if isinstance(exc, RtmeshError):
+        return text
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
+def _image_result(task, status, seconds, **fields):
+    return {"key": task.key, "fingerprint": task.fingerprint, "status": status,
+            "files": list(task.files), "seconds": round(seconds, 4), **fields}
+
+
+def _job_result(job, images, start):
+    return {"asset": job.asset, "seconds": round(time.perf_counter() - start, 4), "images": images}

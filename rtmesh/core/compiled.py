@@ -1,0 +1,141 @@
+"""numba compilation for rtmesh: one disk cache whose freshness covers every kernel module.
+
+numba keeps compiled machine code on disk and reuses it while the *function's own source
+file* is unchanged.  A kernel that calls a jitted function of another module would keep
+stale machine code after only that other module changed (an upgrade that touches one file,
+or a developer's edit).  rtmesh's kernels call each other across modules (a fused stage
+calls the packet tracing of :mod:`rtmesh.geometry.embree_packets` and the shading rows of
+:mod:`rtmesh.shading.kernels`), so their cache entries are stamped with one hash of all of
+:data:`KERNEL_MODULES` instead: a change to any of them recompiles all of them, once.
+
+Everything else is numba's own cache: the same directories (the package's
+``__pycache__``, else the user's cache directory, or ``NUMBA_CACHE_DIR``), file names and
+index format.
+"""
+
+import functools
+import hashlib
+import os
+
+import numba
+from numba.core import caching
+
+# Every module of the package that defines compiled code; tests/test_compiled.py checks
+# that none is missing.
+KERNEL_MODULES = ("core/compiled.py", "shading/kernels.py", "geometry/embree_packets.py", "rendering/direct_stage.py",
+                  "geometry/build_kernels.py", "sampling/pixel_samples.py", "sampling/hashing.py")
+# the rtmesh package directory: KERNEL_MODULES are paths relative to it
+_PACKAGE = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+@functools.cache
+def package_stamp():
+    """SHA-256 of the sources of :data:`KERNEL_MODULES`, read once per process."""
+    digest = hashlib.sha256()
+    for name in KERNEL_MODULES:
+        with open(os.path.join(_PACKAGE, name), "rb") as source:
+            digest.update(name.encode() + b"\0" + source.read())
+    return digest.digest()
+
+
+class _PackageStamp:
+    """Locator mix-in: the freshness of a cached kernel is that of every kernel module."""
+
+    def get_source_stamp(self):
+        return package_stamp()
+
+
+class _UserProvidedLocator(_PackageStamp, caching.UserProvidedCacheLocator):
+    pass
+
+
+class _InTreeLocator(_PackageStamp, caching.InTreeCacheLocator):
+    pass
+
+
+class _UserWideLocator(_PackageStamp, caching.UserWideCacheLocator):
+    pass
+
+
+class _PackageCacheImpl(caching.CompileResultCacheImpl):
+    _locator_classes = [_UserProvidedLocator, _InTreeLocator, _UserWideLocator]
+
+
+class _PackageCache(caching.FunctionCache):
+    _impl_class = _PackageCacheImpl
+
+
+def _with_package_cache(dispatcher):
+    """Give a jitted function the package-stamped disk cache, or none where no cache
+    directory is writable (a read-only install with a read-only home): it then compiles
+    on every run instead of failing at import."""
+    try:
+        # what Dispatcher.enable_caching() does, with the package's cache class
+        dispatcher._cache = _PackageCache(dispatcher.py_func)
+    except RuntimeError:
+        pass
+    return dispatcher
+
+
+def kernel(function):
+    """Compile ``function`` as an rtmesh kernel: nopython, without the GIL, cached.
+
+    * ``nogil``: chunk threads run kernels side by side, like Embree's queries;
+    * ``error_model="numpy"``: a division by zero gives inf or NaN as in NumPy, never an
+      exception;
+    * no ``fastmath``: no reassociation or fused multiply-adds, so each formula rounds as
+      written, the same on every machine and for every chunk and thread count.
+    """
+    return _with_package_cache(numba.njit(nogil=True, error_model="numpy")(function))
+
+
+def fix_signatures(dispatcher, signatures):
+    """Compile ``dispatcher`` for exactly these signatures (from the disk cache where it
+    holds them) and for no others.
+
+    A kernel called with arrays of several layouts (C, Fortran, strided, broadcast) or
+    dtypes is otherwise compiled once for each combination met, each costing a second or
+    more on the first run; with signatures of any-layout arrays, every call converts to one
+    of them instead.  Callers must pass arguments those signatures accept.
+
+    Parameters
+    ----------
+    dispatcher : numba dispatcher
+        A :func:`kernel`.
+    signatures : sequence of tuples of numba types
+    """
+    for signature in signatures:
+        dispatcher.compile(tuple(signature))
+    dispatcher.disable_compile()
+
+
+def row(function):
+    """Compile ``function`` as a one-row helper of kernels: like :func:`kernel`, but
+    callable only from compiled code (no CPython wrapper) and not cached by itself (the
+    kernels that call it are cached with it inlined), which saves compile time on the
+    first run."""
+    return numba.njit(nogil=True, error_model="numpy", no_cpython_wrapper=True)(function)
+
+
+def cached(compiler):
+    """Apply a numba decorator with ``cache=True``, or without it where no cache directory
+    is writable (the ufunc builder's own cache, for :func:`numba.vectorize`: a ufunc calls
+    no other kernel, so its own file's stamp is the right one).
+
+    Parameters
+    ----------
+    compiler : callable
+        ``compiler(cache=...)`` returns a numba decorator.
+
+    Returns
+    -------
+    callable
+        A decorator.
+    """
+    def decorate(function):
+        try:
+            return compiler(cache=True)(function)
+        except RuntimeError:
+            return compiler(cache=False)(function)
+
+    return decorate

@@ -1,0 +1,221 @@
+"""Image output through OpenImageIO: linear float EXR, 8-bit sRGB PNG/JPEG.
+
+Writes are atomic: the image goes to a temporary file in the destination folder and is
+renamed over the destination only once complete, so a failed or interrupted write never
+leaves a partial image (and never destroys an existing one).
+"""
+
+import os
+import tempfile
+
+import numpy as np
+import OpenImageIO as oiio
+
+from rtmesh.core.errors import OutputError
+from rtmesh.io.colour import linear_to_srgb, tonemap
+from rtmesh.io.passes import exr_channel_names
+
+FLOAT_FORMATS = (".exr",)
+DISPLAY_FORMATS = (".png", ".jpg", ".jpeg")
+
+
+def check_output_path(path):
+    """Fail early (before rendering) if ``path`` cannot be written.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+
+    Raises
+    ------
+    OutputError
+        Unknown extension, missing folder or a folder without write permission.
+    """
+    path = os.fspath(path)
+    ext = os.path.splitext(path)[1].lower()
+    if ext not in FLOAT_FORMATS + DISPLAY_FORMATS:
+        raise OutputError(
+            f"{path}: unsupported output format {ext or '(none)'!r}; use "
+            + ", ".join(FLOAT_FORMATS + DISPLAY_FORMATS)
+        )
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise OutputError(f"{path}: output folder {folder} does not exist")
+    if not os.access(folder, os.W_OK):
+        raise OutputError(f"{path}: output folder {folder} is not writable")
+    if os.path.isdir(path):
+        raise OutputError(f"{path}: is a folder, not a file name")
+
+
+def write_image(path, image, passes=None, exposure=0.0, operator="reinhard", alpha=None):
+    """Write a rendered image; the format follows the file extension.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        ``.exr`` is written as linear float32 with every pass as extra named channels;
+        ``.png``/``.jpg``/``.jpeg`` as 8-bit sRGB after exposure and tone mapping (passes
+        are not written to them).
+    image : (h, w, 3) float
+        Linear radiance.
+    passes : dict of str to (h, w) or (h, w, k) float, optional
+        Extra channels for EXR, one OpenEXR layer per pass named as in
+        :func:`rtmesh.io.passes.exr_channel_names` (``depth.Z``, ``normal.X``...); the ``alpha``
+        pass is the image's ``A`` channel.
+    exposure : float
+        Stops, for 8-bit formats.
+    operator : str
+        Tone-mapping operator for 8-bit formats (see :func:`rtmesh.io.colour.tonemap`).
+    alpha : (h, w) or (h, w, 1) float, optional
+        Coverage of a render on a transparent background; ``image`` is premultiplied by it.
+        EXR stores it as channel ``A`` (premultiplied RGBA, the OpenEXR convention); PNG as
+        straight (unassociated) alpha: the colour is divided by alpha before tone mapping.
+        JPEG has no alpha: the image is written over black.
+
+    Raises
+    ------
+    OutputError
+        If the file cannot be written; nothing is left at ``path`` (nor beside it).
+    """
+    check_output_path(path)
+    path = os.fspath(path)
+    ext = os.path.splitext(path)[1].lower()
+    image = np.asarray(image, dtype=np.float32)
+    h, w = image.shape[:2]
+    if alpha is not None:
+        alpha = np.asarray(alpha, dtype=np.float32).reshape(h, w, 1)
+    if ext in FLOAT_FORMATS:
+        passes = dict(passes or {})
+        if alpha is not None:
+            passes["alpha"] = alpha
+        channels, names = _exr_channels(image, passes)
+        spec = oiio.ImageSpec(w, h, len(names), oiio.FLOAT)
+        spec.channelnames = tuple(names)
+        if "A" in names:
+            spec.alpha_channel = names.index("A")
+        spec.attribute("compression", "zip")
+        pixels = channels
+    else:
+        straight_alpha = alpha is not None and ext == ".png"
+        if straight_alpha:
+            # PNG alpha is straight: un-premultiply (nothing to divide where alpha is 0)
+            image = np.where(alpha > 0, image / np.maximum(alpha, 1e-30), 0.0)
+        display = linear_to_srgb(tonemap(image, exposure, operator))
+        if straight_alpha:
+            display = np.concatenate([display, np.clip(alpha, 0.0, 1.0)], axis=2)
+        pixels, spec = _8bit(display, ext)
+    _write_atomically(path, spec, pixels)
+
+
+def write_display_image(path, display, srgb=False):
+    """Write display values in [0, 1] as an 8-bit image (a pass shown as a PNG).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        ``.png`` or ``.jpg``.
+    display : (h, w, 3) or (h, w, 4) float
+        Values in [0, 1], written as they are or sRGB-encoded.
+    srgb : bool
+        Encode the colour channels with the sRGB transfer function (linear colour data);
+        False writes data (normals, grey ramps) unchanged.
+
+    Raises
+    ------
+    OutputError
+    """
+    check_output_path(path)
+    path = os.fspath(path)
+    ext = os.path.splitext(path)[1].lower()
+    if ext not in DISPLAY_FORMATS:
+        raise OutputError(f"{path}: a pass image must be one of {', '.join(DISPLAY_FORMATS)}")
+    display = np.clip(np.asarray(display, dtype=np.float64), 0.0, 1.0)
+    if srgb:
+        display = np.concatenate([linear_to_srgb(display[:, :, :3]), display[:, :, 3:]], axis=2)
+    pixels, spec = _8bit(display, ext)
+    _write_atomically(path, spec, pixels)
+
+
+def _8bit(display, ext):
+    """Quantised pixels and the spec of an 8-bit image of display values in [0, 1]."""
+    h, w, c = display.shape
+    # round to nearest: 8-bit quantisation error at most half a step
+    pixels = np.round(display * 255.0).astype(np.uint8)
+    spec = oiio.ImageSpec(w, h, c, oiio.UINT8)
+    if c == 4:
+        spec.alpha_channel = 3
+    if ext in (".jpg", ".jpeg"):
+        if c == 4:
+            pixels, spec = pixels[:, :, :3].copy(), oiio.ImageSpec(w, h, 3, oiio.UINT8)
+        spec.attribute("Compression", "jpeg:95")
+    return np.ascontiguousarray(pixels), spec
+
+
+def _exr_channels(image, passes):
+    """Stack the RGB image and the passes into one (h, w, c) array with channel names.
+
+    The image's channels come first (R, G, B, then A when there is an ``alpha`` pass), then
+    every other pass in the order given.
+    """
+    arrays, names = [image], ["R", "G", "B"]
+    ordered = sorted(passes.items(), key=lambda item: item[0] != "alpha")
+    for name, values in ordered:
+        values = np.asarray(values, dtype=np.float32)
+        if values.ndim == 2:
+            values = values[:, :, None]
+        arrays.append(values)
+        names.extend(exr_channel_names(name, values.shape[2]))
+    return np.ascontiguousarray(np.concatenate(arrays, axis=2)), names
+
+
+def _write_atomically(path, spec, pixels):
+    folder = os.path.dirname(os.path.abspath(path))
+    base, ext = os.path.splitext(os.path.basename(path))
+    # same extension so OpenImageIO picks the right writer; hidden name so nothing half
+    # written is mistaken for a result
+    fd, tmp = tempfile.mkstemp(prefix=f".{base}.", suffix=f".tmp{ext}", dir=folder)
+    os.close(fd)
+    try:
+        out = oiio.ImageOutput.create(tmp)
+        if out is None:
+            raise OutputError(f"{path}: no image writer for {ext}: {oiio.geterror()}")
+        try:
+            if not out.open(tmp, spec):
+                raise OutputError(f"{path}: cannot write: {out.geterror() or oiio.geterror()}")
+            if not out.write_image(pixels):
+                raise OutputError(f"{path}: cannot write: {out.geterror() or oiio.geterror()}")
+        finally:
+            out.close()
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    # mkstemp creates 0600 files; give the image the permissions a normal file would get
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(path, 0o666 & ~umask)
+
+
+def read_image(path):
+    """Read an image as float32 (h, w, c) and its channel names.
+
+    8-bit images come back as stored (sRGB-encoded values in [0, 1]); EXR as linear floats.
+
+    Raises
+    ------
+    OutputError
+        If the file cannot be read.
+    """
+    path = os.fspath(path)
+    inp = oiio.ImageInput.open(path)
+    if inp is None:
+        raise OutputError(f"{path}: cannot read: {oiio.geterror()}")
+    try:
+        pixels = inp.read_image(oiio.FLOAT)
+        names = list(inp.spec().channelnames)
+    finally:
+        inp.close()
+    if pixels is None:
+        raise OutputError(f"{path}: cannot read pixels")
+    return np.asarray(pixels, dtype=np.float32), names

@@ -1,0 +1,408 @@
+"""Output passes (arbitrary output variables): the registry, the per-sample producers, and
+the 8-bit display mapping of each pass.
+
+A pass is described once, in :data:`REGISTRY`: its EXR channel names, how the film reduces
+a pixel's samples to one value, the value a camera ray that sees no surface contributes, and
+the producer that computes it from the hits of the camera rays.  The integrator only calls
+:meth:`PassRecorder.record` with those hits; everything else about passes lives here, so a
+new pass is a producer function and a registry entry (and a case in
+:func:`display_values` if its PNG needs more than the generic mapping).
+
+EXR naming (one OpenEXR layer per pass, ``layer.channel``)::
+
+    pass         channels                       reduction  value
+    ao           ao.Y                           mean       misses count as unoccluded (1)
+    depth        depth.Z                        min        z-depth; 0 where no sample hits
+    normal       normal.X normal.Y normal.Z     mean       world shading normal, camera side
+    albedo       albedo.R albedo.G albedo.B     mean       diffuse reflectance (tinted)
+    position     position.X position.Y position.Z  mean    world-space hit point
+    uv           uv.U uv.V                      mean       texture coordinates
+    object_id    object_id.id                   first      Scene.object_names index; -1 none
+    material_id  material_id.id                 first      material index; -1 none
+    alpha        A                              mean       camera-ray coverage (image alpha)
+    variance     variance.R variance.G variance.B  film   estimated variance of the pixel mean
+    spp          spp.Y                          film       samples taken in the pixel
+
+``variance`` and ``spp`` are derived passes (:data:`DERIVED_PASSES`): the film computes them
+from its per-pixel sums and sample counts after the render, nothing is recorded per sample.
+
+``mean`` averages every sample of the pixel, misses included with their miss value, so
+``normal``, ``albedo``, ``position`` and ``uv`` are premultiplied by coverage (divide by
+``A`` to un-premultiply).  ``first`` keeps the pixel's sample 0 (an average of two integer
+ids is no id).  ``min`` keeps the nearest surface any sample saw: an average of a near and a
+far depth at a silhouette is a distance where nothing is, and the nearest is what depth
+compositing needs.
+"""
+
+import colorsys
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+from rtmesh.core.rays import take_rows
+
+log = logging.getLogger(__name__)
+
+REDUCTIONS = ("mean", "first", "min")
+
+
+class CameraHits:
+    """What a producer may read about the camera rays that hit: one row per hit.
+
+    Attributes
+    ----------
+    srf : rtmesh.rendering.integrator._Surfaces
+        Shading records: ``p`` (hit points in the integrator's shifted frame), ``ns``
+        (shading normals facing the ray), ``mat`` (material ids), ``sample`` (camera-sample
+        rows), and ``tints`` where the scene has textures.
+    recorder : PassRecorder
+        Scene-wide tables (camera frame, shift, id tables).
+    """
+
+    __slots__ = ("srf", "recorder", "_hits", "_rows", "_prim")
+
+    def __init__(self, srf, hits, rows, recorder):
+        self.srf, self.recorder = srf, recorder
+        self._hits, self._rows, self._prim = hits, rows, None
+
+    @property
+    def prim(self):
+        """(k,) intp: the triangle each ray hit (gathered once, on first use)."""
+        if self._prim is None:
+            self._prim = take_rows(self._hits.prim, self._rows).astype(np.intp)
+        return self._prim
+
+    @property
+    def barycentrics(self):
+        """(k,) float, (k,) float: Embree's u and v of each hit."""
+        return take_rows(self._hits.u, self._rows), take_rows(self._hits.v, self._rows)
+
+
+# ---------------------------------------------------------------- producers
+# Each returns the pass values of the hits, (k, width) or (k,) for one channel, or a
+# scalar for all of them.
+
+def _depth(h):
+    # distance from the lens plane along the view axis: the same for a pinhole and a thin
+    # lens, whose ray origins all lie in that plane
+    rec = h.recorder
+    return (h.srf.p - rec.eye) @ rec.forward
+
+
+def _normal(h):
+    return h.srf.ns
+
+
+def _albedo(h):
+    values = take_rows(h.recorder.diffuse, h.srf.mat)
+    tints = getattr(h.srf, "tints", None)  # texture and vertex-colour multipliers
+    if tints is not None and getattr(tints, "diffuse", None) is not None:
+        values = values * tints.diffuse
+    return values
+
+
+def _position(h):
+    return h.srf.p + h.recorder.shift
+
+
+def _uv(h):
+    uv = h.recorder.uv
+    if uv is None:
+        return 0.0
+    corners = h.recorder.faces[h.prim]
+    u, v = h.barycentrics
+    uv0, uv1, uv2 = (uv[corners[:, i]] for i in range(3))
+    return uv0 + u[:, None] * (uv1 - uv0) + v[:, None] * (uv2 - uv0)
+
+
+def _object_id(h):
+    return h.recorder.object_id.take(h.prim)
+
+
+def _material_id(h):
+    return h.recorder.material_id.take(h.prim)
+
+
+def _covered(h):
+    return 1.0
+
+
+@dataclass(frozen=True)
+class PassSpec:
+    """One pass of the registry.
+
+    Attributes
+    ----------
+    name : str
+    channels : tuple of str
+        EXR channel names, written as ``name.channel`` (a channel ``A`` is the image's own
+        alpha channel and is written without the layer prefix).
+    reduction : {"mean", "first", "min"}
+        How the film combines a pixel's samples (see the module docstring).
+    miss : float
+        What a camera ray that hits nothing contributes.
+    producer : callable or None
+        ``producer(CameraHits) -> values`` for the camera rays that hit; None for a pass
+        another stage writes (``ao``: the integrator's AO stage).
+    doc : str
+        One line for the documentation.
+    """
+
+    name: str
+    channels: tuple
+    reduction: str
+    miss: float
+    producer: object
+    doc: str
+
+    @property
+    def width(self):
+        return len(self.channels)
+
+    def exr_names(self):
+        """EXR channel names of this pass, in order."""
+        return [c if c == "A" else f"{self.name}.{c}" for c in self.channels]
+
+
+REGISTRY = {
+    spec.name: spec for spec in (
+        PassSpec("ao", ("Y",), "mean", 1.0, None,
+                 "ambient occlusion: unoccluded fraction of the hemisphere"),
+        PassSpec("depth", ("Z",), "min", np.inf, _depth,
+                 "z-depth: distance along the view axis to the nearest hit"),
+        PassSpec("normal", ("X", "Y", "Z"), "mean", 0.0, _normal,
+                 "world-space unit shading normal facing the camera"),
+        PassSpec("albedo", ("R", "G", "B"), "mean", 0.0, _albedo,
+                 "diffuse reflectance (texture-tinted)"),
+        PassSpec("position", ("X", "Y", "Z"), "mean", 0.0, _position, "world-space hit point"),
+        PassSpec("uv", ("U", "V"), "mean", 0.0, _uv, "texture coordinates (0 without UVs)"),
+        PassSpec("object_id", ("id",), "first", -1.0, _object_id,
+                 "object index (Scene.object_names), -1 for none"),
+        PassSpec("material_id", ("id",), "first", -1.0, _material_id, "material index, -1 for none"),
+        PassSpec("alpha", ("A",), "mean", 0.0, _covered, "coverage of camera rays by geometry"),
+    )
+}
+
+
+@dataclass(frozen=True)
+class DerivedPass:
+    """A pass the film computes from its per-pixel sums after the render (not per sample).
+
+    Attributes
+    ----------
+    name : str
+    channels : tuple of str
+        EXR channel names, written as ``name.channel``.
+    compute : callable
+        ``compute(film) -> (height, width, k) float32``.
+    doc : str
+    """
+
+    name: str
+    channels: tuple
+    compute: object
+    doc: str
+
+
+DERIVED_PASSES = {
+    spec.name: spec for spec in (
+        DerivedPass("variance", ("R", "G", "B"), lambda film: film.variance_of_mean(),
+                    "estimated variance of each pixel's mean radiance (sample variance / spp)"),
+        DerivedPass("spp", ("Y",), lambda film: film.spp_image(), "samples taken in each pixel"),
+    )
+}
+PASS_NAMES = tuple(REGISTRY) + tuple(DERIVED_PASSES)
+
+
+def pass_width(name):
+    """Channels of the registry or derived pass ``name``."""
+    return REGISTRY[name].width if name in REGISTRY else len(DERIVED_PASSES[name].channels)
+
+
+def derived_pass(name, film):
+    """(height, width, k) float32: the derived pass ``name`` of ``film``."""
+    return DERIVED_PASSES[name].compute(film)
+
+
+def exr_channel_names(name, width):
+    """EXR channel names of a pass of ``width`` channels (registry or generic scheme)."""
+    if name in REGISTRY and REGISTRY[name].width == width:
+        return REGISTRY[name].exr_names()
+    channels = DERIVED_PASSES[name].channels if name in DERIVED_PASSES else None
+    if channels is None or len(channels) != width:
+        channels = ("Y",) if width == 1 else ("X", "Y", "Z") if width == 3 else tuple(map(str, range(width)))
+    return [f"{name}.{c}" for c in channels]
+
+
+class PassRecorder:
+    """Computes the requested passes for the camera rays of one render.
+
+    Parameters
+    ----------
+    scene : Scene
+    names : iterable of str
+        Passes to compute; names not in :data:`REGISTRY` are ignored (the film derives
+        them).  Nothing is computed for a pass that is not named.
+    camera : Camera
+        The camera in the integrator's shifted frame.
+    shift : (3,) float
+        The integrator's re-centring shift (world = shifted + ``shift``).
+    """
+
+    def __init__(self, scene, names, camera, shift):
+        self.names = tuple(n for n in dict.fromkeys(names) if n in REGISTRY)
+        self.specs = [REGISTRY[n] for n in self.names]
+        self.shift = np.asarray(shift, dtype=np.float64)
+        self.forward = camera.frame()[0]
+        self.eye = camera.position
+        self.faces = scene.faces
+        self.uv = getattr(scene, "uv", None)
+        if "uv" in self.names and self.uv is None:
+            log.warning("the uv pass is zero: the scene has no texture coordinates")
+        self.diffuse = scene.materials.diffuse
+        # exact float ids: every int32 index below 2^24 is a float32 integer
+        self.object_id = scene.object_id.astype(np.float64)
+        self.material_id = scene.material_id.astype(np.float64)
+
+    def __bool__(self):
+        return bool(self.names)
+
+    def film_passes(self):
+        """``{name: (channels, reduction)}`` for :class:`rtmesh.rendering.film.Film`."""
+        return {s.name: (s.width, s.reduction) for s in self.specs}
+
+    def buffers(self, n):
+        """Per-sample buffers for ``n`` camera rays, filled with each pass's miss value.
+
+        Returns
+        -------
+        dict of str to (n, k) float64
+        """
+        return {s.name: np.full((n, s.width), s.miss) for s in self.specs}
+
+    def record(self, buffers, srf, hits, rows):
+        """Write the passes of the camera rays that hit something.
+
+        Parameters
+        ----------
+        buffers : dict of str to (n, k) float
+            From :meth:`buffers`; rows are camera samples.
+        srf : rtmesh.rendering.integrator._Surfaces
+            Shading records of the hits (``sample`` gives their rows in ``buffers``).
+        hits : Hits
+            Embree hits of every camera ray.
+        rows : (k,) int or None
+            Rays of ``hits`` that hit, in the order of ``srf``; None when all did.
+        """
+        camera_hits = CameraHits(srf, hits, rows, self)
+        for spec in self.specs:
+            if spec.producer is None:
+                continue
+            values = np.asarray(spec.producer(camera_hits), dtype=np.float64)
+            if values.ndim == 1:
+                values = values[:, None]
+            buffers[spec.name][srf.sample] = values
+
+    def per_pixel(self, buffers, m, spp):
+        """Reshape the per-sample buffers to ``(m, spp, k)`` for :meth:`Film.add_tile`."""
+        return {name: b.reshape(m, spp, -1) for name, b in buffers.items()}
+
+    def per_sample(self, buffers, n):
+        """The per-sample buffers as ``(n, k)`` for :meth:`Film.add_samples`."""
+        return {name: b.reshape(n, -1) for name, b in buffers.items()}
+
+
+# ---------------------------------------------------------------- display (PNG) mapping
+
+
+def display_values(name, values, coverage=None):
+    """Map a pass to displayable values in [0, 1] for an 8-bit image.
+
+    Parameters
+    ----------
+    name : str
+        Pass name.
+    values : (h, w, k) float
+        The pass as the film returns it.
+    coverage : (h, w) float, optional
+        The alpha pass, when available: pixels with no coverage stay black in the
+        normalised passes (depth, position).
+
+    Returns
+    -------
+    display : (h, w, 3) float
+        In [0, 1].
+    srgb : bool
+        True when ``display`` is linear colour to be sRGB-encoded (albedo); False for data
+        written as is (normals as ``0.5 + 0.5 n``, grey ramps, id colours).
+
+    Notes
+    -----
+    ``normal``: ``0.5 + 0.5 n`` per component (the normal-map convention), black where
+    ``coverage`` is 0.  ``depth``: the
+    nearest covered depth white, the farthest dark grey (0.1), no hit black.  ``position``:
+    each axis normalised over the covered pixels' range.  ``uv``: (u, v, 0) wrapped to
+    [0, 1).  ``object_id``/``material_id``: a distinct colour per id (golden-ratio hues),
+    -1 black.  ``alpha``, ``ao``: grey.  Anything else: each channel divided by its maximum.
+    """
+    values = np.asarray(values, dtype=np.float64)
+    h, w, k = values.shape
+    if name == "depth" or name == "position":
+        covered = values.any(axis=2) if coverage is None else coverage > 0
+        out = np.zeros((h, w, k))
+        if covered.any():
+            lo = values[covered].min(axis=0)
+            hi = values[covered].max(axis=0)
+            span = np.where(hi > lo, hi - lo, 1.0)
+            x = (values - lo) / span
+            if name == "depth":
+                x = 1.0 - 0.9 * x  # near white, far dark grey; black stays "no hit"
+            out = np.where(covered[:, :, None], np.clip(x, 0.0, 1.0), 0.0)
+        return _rgb(out), False
+    if name == "normal":
+        shown = np.clip(0.5 + 0.5 * values, 0.0, 1.0)
+        if coverage is not None:  # no surface, no normal: black rather than mid grey
+            shown = np.where(coverage[:, :, None] > 0, shown, 0.0)
+        return shown, False
+    if name == "albedo":
+        return np.clip(values, 0.0, 1.0), True
+    if name == "uv":
+        return np.concatenate([np.mod(values, 1.0), np.zeros((h, w, 1))], axis=2), False
+    if name in ("object_id", "material_id"):
+        return id_colours(values[:, :, 0]), False
+    if name in ("alpha", "ao"):
+        return _rgb(np.clip(values, 0.0, 1.0)), False
+    top = np.abs(values).reshape(-1, k).max(axis=0)
+    return _rgb(np.clip(values / np.where(top > 0, top, 1.0), 0.0, 1.0)), False
+
+
+def id_colours(ids):
+    """Distinct colours for integer ids: hue steps of the golden ratio, id -1 black.
+
+    Parameters
+    ----------
+    ids : (h, w) float
+        Integer-valued ids.
+
+    Returns
+    -------
+    (h, w, 3) float in [0, 1]
+    """
+    ids = np.rint(ids).astype(np.int64)
+    unique = np.unique(ids)
+    # a small table of colours, one per id present (colorsys is scalar; ids are few)
+    table = np.array([(0.0, 0.0, 0.0) if i < 0 else
+                      colorsys.hsv_to_rgb((i * 0.6180339887498949) % 1.0, 0.65, 0.95)
+                      for i in unique])
+    return table[np.searchsorted(unique, ids)]
+
+
+def _rgb(values):
+    """A one-channel image as grey RGB, anything else cut or padded to three channels."""
+    k = values.shape[2]
+    if k == 1:
+        return np.repeat(values, 3, axis=2)
+    if k >= 3:
+        return values[:, :, :3]
+    return np.concatenate([values, np.zeros(values.shape[:2] + (3 - k,))], axis=2)

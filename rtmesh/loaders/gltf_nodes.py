@@ -1,0 +1,221 @@
+"""Cameras and KHR_lights_punctual lights of glTF files.
+
+trimesh reads a glTF file's meshes and node transforms but keeps at most one camera (and
+not its name) and no lights, so this module reads the file's JSON itself: it walks the
+node hierarchy of the default scene, composing each node's ``matrix`` or
+translation/rotation/scale with its parents' (the same world transforms trimesh gives the
+meshes), and turns every camera node and light node into an rtmesh camera or light.
+
+Conventions (glTF 2.0)
+----------------------
+* A camera looks down its node's -Z axis with +Y up.  Perspective cameras keep ``yfov``
+  as rtmesh's vertical field of view; ``aspectRatio`` is not used (the image's width and
+  height set the aspect) and ``znear``/``zfar`` are not used (rtmesh does not clip).
+  Orthographic cameras are skipped with a warning.
+* A light shines down its node's -Z axis.  KHR_lights_punctual gives intensities in
+  photometric units: candela (lm/sr) for point and spot lights, lux (lm/m^2) for
+  directional lights.  rtmesh renders them the way real-time glTF viewers (three.js,
+  Filament, Babylon) display them: a white Lambertian surface 1 m from a 1 cd light, or
+  under 1 lx, has radiance 1/pi.  rtmesh's diffuse term has no 1/pi (see
+  :mod:`rtmesh.materials.table`), so ``intensity = color * candela / pi`` and
+  ``irradiance = color * lux / pi``.  Spot cone angles (radians) become rtmesh's inner
+  and outer half-angles (degrees; rtmesh blends between them with a smoothstep in the
+  cosine where glTF suggests a squared linear ramp).  ``range`` is not used (rtmesh
+  lights fall off as 1/d^2 without a cut-off).
+"""
+
+import json
+import logging
+import math
+import os
+import struct
+
+import numpy as np
+
+from rtmesh.core.errors import MeshError
+from rtmesh.lights.point_lights import DirectionalLight, PointLight, SpotLight
+from rtmesh.scene.camera import Camera
+
+log = logging.getLogger(__name__)
+
+GLTF_EXTENSIONS = (".gltf", ".glb")
+_GLB_MAGIC = 0x46546C67  # "glTF"
+_JSON_CHUNK = 0x4E4F534A  # "JSON"
+
+
+def read_gltf_json(path):
+    """The JSON document of a ``.gltf`` or ``.glb`` file.
+
+    Raises
+    ------
+    MeshError
+        The file is not valid glTF JSON / GLB.
+    """
+    path = os.fspath(path)
+    try:
+        with open(path, "rb") as f:
+            data = f.read()
+        if path.lower().endswith(".glb"):
+            magic, _, _ = struct.unpack_from("<III", data, 0)
+            length, kind = struct.unpack_from("<II", data, 12)
+            if magic != _GLB_MAGIC or kind != _JSON_CHUNK:
+                raise ValueError("not a GLB file")
+            data = data[20:20 + length]
+        doc = json.loads(data.decode("utf-8"))
+        if not isinstance(doc, dict):
+            raise ValueError("the glTF JSON is not an object")
+        return doc
+    except (OSError, ValueError, struct.error, UnicodeDecodeError) as exc:
+        raise MeshError(f"{path}: cannot read glTF JSON: {exc}") from None
+
+
+def node_world_transforms(doc):
+    """World transform of every node of the default scene.
+
+    Parameters
+    ----------
+    doc : dict
+        glTF JSON.
+
+    Returns
+    -------
+    list of (int, (4, 4) float)
+        ``(node index, world matrix)`` in depth-first order from the scene's roots.
+    """
+    nodes = doc.get("nodes", [])
+    scenes = doc.get("scenes")
+    if scenes:
+        roots = scenes[doc.get("scene", 0)].get("nodes", [])
+    else:  # no scenes: every node that is nobody's child is a root
+        children = {c for n in nodes for c in n.get("children", [])}
+        roots = [i for i in range(len(nodes)) if i not in children]
+    out = []
+    stack = [(i, np.eye(4)) for i in reversed(roots)]
+    seen = set()
+    while stack:
+        index, parent = stack.pop()
+        if index in seen or not 0 <= index < len(nodes):
+            continue  # a cycle or a bad index: glTF forbids both; do not loop forever
+        seen.add(index)
+        world = parent @ _local_matrix(nodes[index])
+        out.append((index, world))
+        stack.extend((c, world) for c in reversed(nodes[index].get("children", [])))
+    return out
+
+
+def _local_matrix(node):
+    """A node's local transform: ``matrix`` (column-major) or T @ R @ S."""
+    if "matrix" in node:
+        return np.asarray(node["matrix"], dtype=np.float64).reshape(4, 4).T
+    x, y, z, w = node.get("rotation", (0.0, 0.0, 0.0, 1.0))
+    rotation = np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+    matrix = np.eye(4)
+    matrix[:3, :3] = rotation * np.asarray(node.get("scale", (1.0, 1.0, 1.0)), dtype=np.float64)[None, :]
+    matrix[:3, 3] = node.get("translation", (0.0, 0.0, 0.0))
+    return matrix
+
+
+def _frame(matrix):
+    """Position, forward (-Z) and up (+Y) of a node's world matrix, unit directions."""
+    position = matrix[:3, 3].copy()
+    forward = matrix[:3, :3] @ np.array([0.0, 0.0, -1.0])
+    up = matrix[:3, :3] @ np.array([0.0, 1.0, 0.0])
+    return position, forward / np.linalg.norm(forward), up / np.linalg.norm(up)
+
+
+def cameras_from_gltf(doc, transform=None, source="gltf"):
+    """Perspective cameras of the file's camera nodes.
+
+    Parameters
+    ----------
+    doc : dict
+        glTF JSON.
+    transform : (4, 4) float, optional
+        Applied after the nodes' world transforms (the scene file's object transform).
+    source : str
+        For warnings.
+
+    Returns
+    -------
+    list of (names, Camera)
+        ``names`` is a tuple of the names the camera answers to: the node's and the camera's.
+    """
+    transform = np.eye(4) if transform is None else np.asarray(transform, dtype=np.float64)
+    cameras = doc.get("cameras", [])
+    out = []
+    for index, world in node_world_transforms(doc):
+        node = doc["nodes"][index]
+        if "camera" not in node:
+            continue
+        spec = cameras[node["camera"]]
+        names = tuple(n for n in (node.get("name"), spec.get("name")) if n)
+        if spec.get("type") != "perspective" or "perspective" not in spec:
+            log.warning("%s: camera %s is %s, not perspective; skipped", source,
+                        names[0] if names else node["camera"], spec.get("type"))
+            continue
+        position, forward, up = _frame(transform @ world)
+        camera = Camera(position, position + forward, up,
+                        fov=math.degrees(float(spec["perspective"]["yfov"])))
+        out.append((names, camera))
+    return out
+
+
+def lights_from_gltf(doc, transform=None):
+    """rtmesh lights of the file's KHR_lights_punctual light nodes (see the module docstring
+    for the unit conversion).
+
+    Returns
+    -------
+    list of PointLight, SpotLight or DirectionalLight
+    """
+    transform = np.eye(4) if transform is None else np.asarray(transform, dtype=np.float64)
+    table = doc.get("extensions", {}).get("KHR_lights_punctual", {}).get("lights", [])
+    out = []
+    for index, world in node_world_transforms(doc):
+        ref = doc["nodes"][index].get("extensions", {}).get("KHR_lights_punctual")
+        if ref is None or not 0 <= ref.get("light", -1) < len(table):
+            continue
+        spec = table[ref["light"]]
+        position, direction, _ = _frame(transform @ world)
+        # photometric value -> rtmesh units: viewers show cd / d^2 * kd / pi; rtmesh has no 1/pi
+        power = np.asarray(spec.get("color", (1.0, 1.0, 1.0)), dtype=np.float64) * float(
+            spec.get("intensity", 1.0)) / math.pi
+        kind = spec.get("type")
+        if kind == "point":
+            out.append(PointLight(position, power))
+        elif kind == "directional":
+            out.append(DirectionalLight(direction, power))
+        elif kind == "spot":
+            cone = spec.get("spot", {})
+            inner = math.degrees(float(cone.get("innerConeAngle", 0.0)))
+            outer = math.degrees(float(cone.get("outerConeAngle", math.pi / 4.0)))
+            out.append(SpotLight(position, direction, power, inner, max(outer, inner)))
+    return out
+
+
+def file_cameras_and_lights(path, transform=None):
+    """Cameras and lights of a mesh file: empty lists unless it is glTF.
+
+    Returns
+    -------
+    cameras : list of (names, Camera)
+    lights : list
+
+    Raises
+    ------
+    MeshError
+        Unreadable glTF JSON or a malformed camera or light.
+    """
+    path = os.fspath(path)
+    if os.path.splitext(path)[1].lower() not in GLTF_EXTENSIONS:
+        return [], []
+    doc = read_gltf_json(path)
+    try:
+        return cameras_from_gltf(doc, transform, source=path), lights_from_gltf(doc, transform)
+    except (KeyError, IndexError, TypeError, ValueError, AttributeError) as exc:
+        # a camera or light entry that breaks the glTF schema (a bad index, a missing yfov)
+        raise MeshError(f"{path}: malformed glTF camera or light: {type(exc).__name__}: {exc}") from None

@@ -1,0 +1,441 @@
+"""Materials of mesh files: OBJ/MTL statements and glTF metallic-roughness, mapped onto
+rtmesh's :class:`~rtmesh.materials.table.Material`.
+
+The tables of docs/MATERIALS.md describe the mapping; the functions here are its only
+implementation.  MTL files are read here (trimesh keeps only ``map_Kd`` of the texture maps
+and drops a texture it cannot find without a word); glTF materials come from trimesh's
+``PBRMaterial`` (with the images it decoded) plus the extensions of the file's JSON, which
+trimesh does not keep.
+"""
+
+import logging
+import os
+import re
+
+import numpy as np
+
+from rtmesh.materials.table import Material
+from rtmesh.scene.texture_images import Texture, load_texture
+
+log = logging.getLogger(__name__)
+
+# ---------------------------------------------------------------- OBJ / MTL
+
+# illum models of the MTL specification -> (lit, specular, mirror, transmissive)
+ILLUM = {
+    0: (False, False, False, False),  # colour on, lighting off: Kd shown as is (unlit)
+    1: (True, False, False, False),  # diffuse only
+    2: (True, True, False, False),  # Blinn-Phong
+    3: (True, True, True, False),  # + ray-traced reflection (Ks)
+    4: (True, True, True, True),  # glass: reflection + transparency (1 - d)
+    5: (True, True, True, False),  # reflection with Fresnel (treated as mirror Ks)
+    6: (True, True, True, True),  # reflection + refraction (Ni)
+    7: (True, True, True, True),  # reflection + refraction with Fresnel
+    8: (True, True, True, False),  # reflection, not ray traced (treated as 3)
+    9: (True, True, True, True),  # glass, not ray traced (treated as 4)
+    10: (True, True, False, False),  # shadow matte (treated as 2)
+}
+# texture-map options and how many values follow each (the MTL specification's list)
+_MAP_OPTIONS = {"-blendu": 1, "-blendv": 1, "-bm": 1, "-boost": 1, "-cc": 1, "-clamp": 1,
+                "-imfchan": 1, "-mm": 2, "-o": 3, "-s": 3, "-t": 3, "-texres": 1}
+_MTLLIB = re.compile(rb"^[ \t]*mtllib[ \t]+(.+?)[ \t]*$", re.M)
+# a face statement with fewer than three vertex references
+_SHORT_FACE = re.compile(rb"^[ \t]*f(?:[ \t]+\S+){0,2}[ \t]*$", re.M)
+_NAN_VERTEX = re.compile(rb"^[ \t]*v[ \t][^\n]*\bnan\b", re.M | re.I)
+
+
+def scan_obj(path):
+    """What trimesh does not report about an OBJ file: its material libraries and defects.
+
+    Parameters
+    ----------
+    path : str
+
+    Returns
+    -------
+    mtl_paths : list of str
+        The ``mtllib`` files, resolved against the OBJ's folder (missing ones included).
+    short_faces : int
+        Face statements with fewer than three vertices (trimesh drops them silently).
+    nan_vertices : int
+        Vertex statements holding NaN (trimesh turns a NaN colour into black).
+    """
+    with open(path, "rb") as f:
+        text = f.read()
+    folder = os.path.dirname(os.path.abspath(path))
+    mtl_paths = [os.path.join(folder, m.decode("utf-8", "replace").strip()) for m in _MTLLIB.findall(text)]
+    return mtl_paths, len(_SHORT_FACE.findall(text)), len(_NAN_VERTEX.findall(text))
+
+
+def parse_mtl(path):
+    """The materials of an MTL file as raw statements.
+
+    Parameters
+    ----------
+    path : str
+
+    Returns
+    -------
+    dict of str to dict of str to str
+        Material name -> lower-case keyword -> the rest of its line (the last statement of
+        a keyword wins).
+    """
+    materials, current = {}, None
+    with open(path, "r", encoding="utf-8", errors="replace") as f:
+        for line in f:
+            line = line.split("#", 1)[0].strip()
+            if not line:
+                continue
+            key, _, rest = line.partition(" ") if " " in line else line.partition("\t")
+            key, rest = key.lower(), rest.strip()
+            if key == "newmtl":
+                current = materials.setdefault(rest, {})
+            elif current is not None:
+                current[key] = rest
+    return materials
+
+
+def _floats(statements, key, count):
+    """A float (count 1) or colour statement, or None if absent or malformed."""
+    text = statements.get(key)
+    if text is None:
+        return None
+    try:
+        values = np.array([float(x) for x in text.split()[:count]], dtype=np.float64)
+    except ValueError:
+        return None
+    if not len(values) or not np.isfinite(values).all():
+        return None
+    return float(values[0]) if count == 1 else np.resize(values, count)
+
+
+def map_statement(text):
+    """Split a texture-map statement into its file name and options.
+
+    Parameters
+    ----------
+    text : str
+        What follows the keyword, e.g. ``"-clamp on -bm 0.5 bricks normal.png"``.
+
+    Returns
+    -------
+    file_name : str
+        The rest after the options (it may hold spaces: ``fuze uv.jpg``).
+    options : dict of str to list of str
+    """
+    rest, options = text.strip(), {}
+    while True:
+        first = rest.split(None, 1)
+        if not first or first[0].lower() not in _MAP_OPTIONS:
+            break
+        count = _MAP_OPTIONS[first[0].lower()]
+        fields = rest.split(None, count + 1)
+        options[first[0].lower()] = fields[1:count + 1]
+        rest = fields[count + 1] if len(fields) > count + 1 else ""
+    return rest.strip(), options
+
+
+def _map_texture(statements, keys, folder, cache, srgb, source, kind="colour"):
+    """The texture of the first of ``keys`` present, or None (missing file: warning)."""
+    for key in keys:
+        if key in statements:
+            name, options = map_statement(statements[key])
+            if not name:
+                return None
+            path = name if os.path.isabs(name) else os.path.join(folder, name)
+            wrap = "clamp" if options.get("-clamp", ["off"])[0].lower() == "on" else "repeat"
+            if not os.path.isfile(path):
+                log.warning("%s: texture file %s not found (%s); using the factor colour",
+                            source, name, key)
+                return None
+            if kind == "bump":
+                strength = float(options.get("-bm", ["1"])[0])
+                return load_texture(path, srgb=False, wrap=wrap, cache=cache).height_to_normals(strength)
+            return load_texture(path, srgb=srgb, wrap=wrap, cache=cache)
+    return None
+
+
+def mtl_material(statements, name, folder, cache=None, source="mtl"):
+    """Map one MTL material onto rtmesh's model (see docs/MATERIALS.md).
+
+    Ka, Kd, Ks, Ke, Ns and Ni map to ambient, diffuse, specular, emission, shininess and
+    ior.  ``illum`` chooses lighting (0: unlit), highlights, mirror reflection (weight Ks)
+    and refraction (weight Tf, times 1 - d for the "glass" models 4 and 9).  Opacity is
+    ``d`` (1 = opaque); ``Tr`` is read only when ``d`` is absent, as ``1 - Tr``
+    (Assimp, three.js), except that ``Tr 1`` means opaque: MeshLab and others write Tr as
+    an opacity, and a model that vanishes is the worse failure.  Opacity below 1 on a
+    non-glass model is rendered as blended transparency; ``map_d`` does the same per texel.
+    ``Ns`` below 1 turns the highlight off: ``Ks 1 Ns 0`` (MeshLab's default) would
+    otherwise add the full specular colour to every lit point (Blender reads Ns 0 as
+    roughness 1, no visible highlight).
+
+    Parameters
+    ----------
+    statements : dict of str to str
+        One material of :func:`parse_mtl`.
+    name : str
+    folder : str
+        Folder that texture file names are resolved against.
+    cache : dict, optional
+        Textures already loaded, by (path, srgb, wrap); shared across the materials of a
+        file so that each image is read once.
+    source : str
+        For messages.
+
+    Returns
+    -------
+    Material
+    """
+    cache = {} if cache is None else cache
+    diffuse = _floats(statements, "kd", 3)
+    diffuse = np.full(3, 0.7) if diffuse is None else diffuse
+    ambient = _floats(statements, "ka", 3)
+    specular = _floats(statements, "ks", 3)
+    specular = np.zeros(3) if specular is None else specular
+    emission = _floats(statements, "ke", 3)
+    shininess = _floats(statements, "ns", 1)
+    shininess = 32.0 if shininess is None else shininess
+    illum_value = _floats(statements, "illum", 1)
+    illum = 2 if illum_value is None else int(illum_value)
+    lit, has_specular, has_mirror, transmissive = ILLUM.get(illum, ILLUM[2])
+    if shininess < 1.0:
+        has_specular = False
+    opacity = _floats(statements, "d", 1)
+    if opacity is None:
+        tr = _floats(statements, "tr", 1)
+        opacity = 1.0 if tr is None or tr >= 1.0 else 1.0 - tr
+    opacity = float(np.clip(opacity, 0.0, 1.0))
+    transmission = np.zeros(3)
+    glass = illum in (4, 9)
+    if transmissive:
+        tf = _floats(statements, "tf", 3)
+        transmission = tf if tf is not None else np.ones(3)
+        if glass:
+            # "transparency" models: how much passes is the dissolve
+            transmission = transmission * (1.0 - opacity)
+    texture = lambda keys, srgb=True, kind="colour": _map_texture(  # noqa: E731
+        statements, keys, folder, cache, srgb, source, kind)
+    opacity_texture = texture(("map_d",), srgb=False)
+    normal_texture = texture(("norm",), srgb=False)
+    if normal_texture is None:
+        normal_texture = texture(("bump", "map_bump"), kind="bump")
+    blended = not glass and (opacity < 1.0 or opacity_texture is not None)
+    # map_Ke multiplies Ke; an emission map without Ke shows the map's own colours
+    emission_texture = texture(("map_ke",))
+    if emission_texture is not None and emission is None:
+        emission = np.ones(3)
+    return Material(
+        name=name,
+        diffuse=diffuse,
+        ambient=diffuse if ambient is None else ambient,
+        specular=specular if has_specular else np.zeros(3),
+        shininess=float(np.clip(shininess, 1.0, 10000.0)),
+        mirror=specular if has_mirror else np.zeros(3),
+        transmission=np.clip(transmission, 0.0, 1.0),
+        ior=_floats(statements, "ni", 1) or 1.5,
+        emission=np.zeros(3) if emission is None else np.maximum(emission, 0.0),
+        unlit=not lit,
+        opacity=opacity if blended else 1.0,
+        alpha_mode="blend" if blended else "opaque",
+        diffuse_texture=texture(("map_kd",)),
+        specular_texture=texture(("map_ks",)) if has_specular else None,
+        opacity_texture=opacity_texture,
+        normal_texture=normal_texture,
+        emission_texture=emission_texture,
+    )
+
+
+def obj_materials(path):
+    """The materials of an OBJ file's MTL libraries, with warnings for what is missing.
+
+    Parameters
+    ----------
+    path : str
+        The OBJ file.
+
+    Returns
+    -------
+    materials : dict of str to Material
+    nan_vertices : int
+        Vertex statements holding NaN (see :func:`scan_obj`).
+    """
+    mtl_paths, short_faces, nan_vertices = scan_obj(path)
+    source = os.path.basename(path)
+    if short_faces:
+        log.warning("%s: %d faces with fewer than 3 vertices skipped", source, short_faces)
+    materials, cache = {}, {}
+    for mtl_path in mtl_paths:
+        if not os.path.isfile(mtl_path):
+            log.warning("%s: material library %s not found; its materials render in the "
+                        "default grey", source, os.path.basename(mtl_path))
+            continue
+        folder = os.path.dirname(mtl_path)
+        for name, statements in parse_mtl(mtl_path).items():
+            materials[name] = mtl_material(statements, name, folder, cache, source)
+    return materials, nan_vertices
+
+
+# ---------------------------------------------------------------- glTF
+
+
+def _factor(value, default):
+    """A glTF factor as a float64 array; trimesh's 8-bit colours rescaled to [0, 1]."""
+    if value is None:
+        return np.asarray(default, dtype=np.float64)
+    raw = np.asarray(value)
+    return raw.astype(np.float64) / 255.0 if raw.dtype.kind in "ui" else raw.astype(np.float64)
+
+
+def _gltf_factors(pbr, doc):
+    """The factors of a material: from the file's JSON when known (full precision), else
+    from trimesh's ``PBRMaterial`` (which keeps the base colour in 8 bits)."""
+    doc = doc or {}
+    mr = doc.get("pbrMetallicRoughness", {}) or {}
+
+    def pick(json_value, trimesh_value, default):
+        if json_value is not None:  # JSON numbers are factors in [0, 1], integers included
+            return np.asarray(json_value, dtype=np.float64)
+        return _factor(trimesh_value, default)
+
+    return dict(
+        base=pick(mr.get("baseColorFactor"), pbr.baseColorFactor, [1.0, 1.0, 1.0, 1.0]),
+        metallic=float(pick(mr.get("metallicFactor"), pbr.metallicFactor, 1.0)),
+        roughness=float(pick(mr.get("roughnessFactor"), pbr.roughnessFactor, 1.0)),
+        emission=pick(doc.get("emissiveFactor"), pbr.emissiveFactor, [0.0, 0.0, 0.0])[:3],
+        mode=str(doc.get("alphaMode") or pbr.alphaMode or "OPAQUE").lower(),
+        cutoff=float(pick(doc.get("alphaCutoff"), pbr.alphaCutoff, 0.5)),
+        double_sided=bool(doc.get("doubleSided", pbr.doubleSided)),
+        extensions=doc.get("extensions", {}) or {},
+    )
+
+
+def roughness_to_shininess(roughness):
+    """Blinn-Phong exponent with the highlight width of a GGX lobe of roughness ``r``.
+
+    ``2 / alpha^2 - 2`` with ``alpha = r^2`` (Walter et al. 2007's Beckmann-Phong
+    correspondence), clamped to [1, 10000]; ``r`` below 0.05 reads as 0.05.
+    """
+    r4 = max(float(roughness), 0.05) ** 4
+    return float(np.clip(2.0 / r4 - 2.0, 1.0, 10000.0))
+
+
+def gltf_material(pbr, json_material=None, name="gltf"):
+    """Map a glTF metallic-roughness material onto rtmesh's model (see docs/MATERIALS.md).
+
+    ``diffuse = base * (1 - metallic)``; ``specular = 0.04 (1 - metallic) + base * metallic``
+    with the exponent of :func:`roughness_to_shininess`; metals reflect with
+    ``mirror = base * metallic``, blurred by a glossy lobe of ``roughness = r^2`` radians
+    (the GGX alpha).  A metallic-roughness texture contributes its mean (this model has
+    per-material metallic and roughness only).  Alpha mode, cutoff and base-colour alpha
+    give the opacity; KHR_materials_transmission / ior / volume make a refracting
+    dielectric (transmission tinted by the base colour, absorption
+    ``-ln(attenuationColor) / attenuationDistance``); KHR_materials_emissive_strength
+    scales the emission; KHR_materials_unlit shows the base colour without lighting.
+
+    Parameters
+    ----------
+    pbr : trimesh.visual.material.PBRMaterial
+    json_material : dict, optional
+        The material's object in the file's JSON: its factors (full precision) and its
+        ``extensions``, which trimesh does not keep.
+    name : str
+        Used when the material has no name.
+
+    Returns
+    -------
+    Material
+    """
+    f = _gltf_factors(pbr, json_material)
+    ext = f["extensions"]
+    base = f["base"]
+    base = np.append(base, 1.0) if len(base) == 3 else np.resize(base, 4)
+    metallic, roughness = f["metallic"], f["roughness"]
+    if pbr.metallicRoughnessTexture is not None:
+        # glTF: roughness in green, metalness in blue, both linear
+        texels = Texture.from_pil(pbr.metallicRoughnessTexture, srgb=False).pixels
+        mean = texels.reshape(-1, texels.shape[2]).mean(axis=0)
+        if len(mean) >= 3:
+            roughness, metallic = roughness * mean[1], metallic * mean[2]
+    metallic, roughness = float(np.clip(metallic, 0, 1)), float(np.clip(roughness, 0, 1))
+    colour = base[:3]
+    emission = f["emission"] * float(ext.get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0))
+    transmission, ior, absorption = np.zeros(3), 1.5, np.zeros(3)
+    if "KHR_materials_ior" in ext:
+        ior = float(ext["KHR_materials_ior"].get("ior", 1.5)) or 1.5
+    if "KHR_materials_transmission" in ext:
+        transmission = float(ext["KHR_materials_transmission"].get("transmissionFactor", 0.0)) * colour
+        volume = ext.get("KHR_materials_volume", {})
+        distance = float(volume.get("attenuationDistance", np.inf))
+        tint = np.clip(np.asarray(volume.get("attenuationColor", [1.0, 1.0, 1.0]), dtype=np.float64), 1e-6, 1.0)
+        if np.isfinite(distance) and distance > 0:
+            absorption = -np.log(tint) / distance
+    mode = f["mode"]
+    texture = None
+    wraps = (json_material or {}).get(WRAP_KEY, {})
+    if pbr.baseColorTexture is not None:
+        texture = Texture.from_pil(pbr.baseColorTexture, srgb=True, name=f"{name} baseColorTexture",
+                                   wrap=wraps.get("baseColorTexture", "repeat"))
+    normal = None
+    if pbr.normalTexture is not None:
+        normal = Texture.from_pil(pbr.normalTexture, srgb=False, name=f"{name} normalTexture",
+                                  wrap=wraps.get("normalTexture", "repeat"))
+    glow = None
+    if pbr.emissiveTexture is not None and (emission > 0).any():  # glTF: factor x texture
+        glow = Texture.from_pil(pbr.emissiveTexture, srgb=True, name=f"{name} emissiveTexture",
+                                wrap=wraps.get("emissiveTexture", "repeat"))
+    not_transmitted = 1.0 - transmission.max()
+    return Material(
+        name=pbr.name or name,
+        diffuse=colour * (1.0 - metallic) * not_transmitted,
+        specular=0.04 * (1.0 - metallic) + colour * metallic,
+        shininess=roughness_to_shininess(roughness),
+        mirror=colour * metallic,
+        roughness=roughness ** 2,
+        metallic=metallic,
+        transmission=transmission,
+        ior=ior,
+        absorption=absorption,
+        emission=emission,
+        opacity=float(base[3]),
+        alpha_mode=mode if mode in ("mask", "blend") else "opaque",
+        alpha_cutoff=f["cutoff"],
+        double_sided=f["double_sided"],
+        unlit="KHR_materials_unlit" in ext,
+        diffuse_texture=texture,
+        normal_texture=normal,
+        emission_texture=glow,
+    )
+
+
+# glTF sampler wrap modes (the OpenGL enums) as Texture wrap modes; glTF's default is REPEAT
+_GLTF_WRAP = {33071: "clamp", 33648: "mirror", 10497: "repeat"}
+# where gltf_json_materials puts each texture's (u, v) wrap modes in a material object
+WRAP_KEY = "rtmesh:wrap"
+
+
+def _texture_wrap(doc, texture_info):
+    """(wrap_u, wrap_v) of a glTF textureInfo through its texture's sampler."""
+    try:
+        texture = doc["textures"][texture_info["index"]]
+        sampler = doc["samplers"][texture["sampler"]] if "sampler" in texture else {}
+    except (KeyError, IndexError, TypeError):
+        return ("repeat", "repeat")
+    return tuple(_GLTF_WRAP.get(sampler.get(axis, 10497), "repeat") for axis in ("wrapS", "wrapT"))
+
+
+def gltf_json_materials(doc):
+    """``{material name: material object}`` of a glTF JSON document (unnamed ones skipped).
+
+    Each object is a copy with the wrap modes of its base-colour and normal textures under
+    :data:`WRAP_KEY` (``{"baseColorTexture": (u, v), ...}``), read from the samplers, which
+    trimesh does not keep.
+    """
+    out = {}
+    for material in doc.get("materials", []) or []:
+        if isinstance(material, dict) and isinstance(material.get("name"), str):
+            infos = {"baseColorTexture": (material.get("pbrMetallicRoughness") or {}).get("baseColorTexture"),
+                     "normalTexture": material.get("normalTexture"),
+                     "emissiveTexture": material.get("emissiveTexture")}
+            wraps = {slot: _texture_wrap(doc, info) for slot, info in infos.items() if isinstance(info, dict)}
+            out[material["name"]] = {**material, WRAP_KEY: wraps}
+    return out

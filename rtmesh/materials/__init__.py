@@ -1,0 +1,1 @@
+"""Surface appearance: the material table and the reflection lobes sampled from it."""

@@ -1,0 +1,230 @@
+"""Materials: the Blinn-Phong surface model with mirror reflection and dielectric transmission.
+
+A material's reflected radiance toward ``wo`` under a light of incident radiance-like term
+``E`` (intensity / distance^2 for point lights, irradiance for directional lights) from
+``wi`` is::
+
+    L = emission + ambient * ambient_light * ao
+        + sum over lights of E * (diffuse * cos(theta_i) + specular * max(0, n.h)^shininess)
+
+(no 1/pi: ``diffuse`` is the classic Phong kd).  On top of that local term a material can
+spawn a mirror-reflected ray weighted by ``mirror`` (a colour: metals tint their
+reflections) and, when ``transmission`` > 0, behaves as a smooth dielectric of index
+``ior``: it reflects with the Fresnel weight ``F * transmission`` and refracts with
+``(1 - F) * transmission``; inside, light is attenuated by Beer-Lambert with ``absorption``
+(per scene unit).
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rtmesh.shading import kernels
+
+
+def as_colour(value):
+    """A colour from a number (grey) or three numbers, as a (3,) float64 array."""
+    a = np.asarray(value, dtype=np.float64)
+    return np.repeat(a, 3) if a.ndim == 0 else a.reshape(3)
+
+
+ALPHA_MODES = ("opaque", "mask", "blend")
+COLOUR_FIELDS = ("diffuse", "specular", "ambient", "mirror", "transmission", "absorption",
+                 "emission")
+TEXTURE_FIELDS = ("diffuse_texture", "specular_texture", "opacity_texture", "normal_texture", "emission_texture")
+
+
+@dataclass
+class Material:
+    """One surface material; colours are linear RGB.
+
+    Attributes
+    ----------
+    name : str
+    diffuse : (3,) float
+        Lambert reflectance kd.
+    specular : (3,) float
+        Blinn-Phong specular reflectance ks.
+    shininess : float
+        Blinn-Phong exponent (larger = smaller, sharper highlight).
+    ambient : (3,) float or None
+        Ambient reflectance ka; None means "same as diffuse".
+    mirror : (3,) float
+        Mirror reflectance kr (tinted for metals).
+    transmission : (3,) float
+        Fraction of light handled as a smooth dielectric; > 0 makes the material refract.
+    ior : float
+        Index of refraction of the interior.
+    absorption : (3,) float
+        Beer-Lambert absorption coefficient of the interior, 1 / scene unit.
+    emission : (3,) float
+        Emitted radiance.
+    roughness : float
+        Blur of the mirror (and dielectric) reflection: 0 is a perfect mirror, r > 0 a lobe
+        about r radians wide around the mirror direction (see :mod:`rtmesh.materials.glossy`).
+    opacity : float
+        Coverage in [0, 1] (MTL ``d``, glTF base-colour alpha); used by ``alpha_mode``.
+    alpha_mode : {"opaque", "mask", "blend"}
+        "opaque" ignores opacity; "mask" lets rays through where opacity < ``alpha_cutoff``;
+        "blend" lets them through with probability 1 - opacity (see :mod:`rtmesh.geometry.cutouts`).
+    alpha_cutoff : float
+        Threshold of the "mask" mode.
+    unlit : bool
+        Shows ``diffuse`` (times textures) as is, with no lighting, and lights nothing
+        (MTL ``illum 0``, glTF KHR_materials_unlit).
+    metallic : float
+        In [0, 1]: how much the base-colour texture also tints ``specular`` and ``mirror``
+        (metals reflect in their own colour); see :mod:`rtmesh.rendering.surface_textures`.
+    double_sided : bool
+        Kept from glTF for reference; both sides of every triangle are always shaded.
+    diffuse_texture, specular_texture, opacity_texture, normal_texture, emission_texture : Texture or None
+        Image textures (:class:`rtmesh.scene.texture_images.Texture`): base colour (multiplies
+        ``diffuse`` and ``ambient``; its alpha multiplies ``opacity``), specular colour
+        (multiplies ``specular``), opacity (first channel multiplies ``opacity``), a
+        tangent-space normal map, and emitted colour (multiplies ``emission``, both where
+        the surface is seen and where it lights others).
+    """
+
+    name: str = "default"
+    diffuse: np.ndarray = field(default_factory=lambda: np.full(3, 0.7))
+    specular: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    shininess: float = 32.0
+    ambient: np.ndarray | None = None
+    mirror: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    transmission: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    ior: float = 1.5
+    absorption: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    roughness: float = 0.0
+    opacity: float = 1.0
+    alpha_mode: str = "opaque"
+    alpha_cutoff: float = 0.5
+    unlit: bool = False
+    metallic: float = 0.0
+    double_sided: bool = False
+    diffuse_texture: object = None
+    specular_texture: object = None
+    opacity_texture: object = None
+    normal_texture: object = None
+    emission_texture: object = None
+
+    def __post_init__(self):
+        if self.alpha_mode not in ALPHA_MODES:
+            raise ValueError(f"unknown alpha mode {self.alpha_mode!r}; expected one of "
+                             + ", ".join(ALPHA_MODES))
+        for name in COLOUR_FIELDS:
+            value = getattr(self, name)
+            if value is not None:
+                setattr(self, name, as_colour(value))
+        if self.ambient is None:
+            self.ambient = self.diffuse.copy()
+
+
+class MaterialTable:
+    """The scene's materials as stacked arrays, indexed by material id.
+
+    Attributes
+    ----------
+    materials : list of Material
+    diffuse, specular, ambient, mirror, transmission, absorption, emission : (m, 3) float
+    shininess, ior, roughness, opacity, alpha_cutoff, metallic : (m,) float
+    alpha_mode : (m,) int
+        Index into :data:`ALPHA_MODES`.
+    unlit : (m,) bool
+    """
+
+    def __init__(self, materials):
+        self.materials = list(materials)
+        for name in COLOUR_FIELDS:
+            setattr(self, name, np.array([getattr(m, name) for m in self.materials], dtype=np.float64).reshape(-1, 3))
+        for name in ("shininess", "ior", "roughness", "opacity", "alpha_cutoff", "metallic"):
+            setattr(self, name, np.array([getattr(m, name) for m in self.materials], dtype=np.float64))
+        self.alpha_mode = np.array([ALPHA_MODES.index(m.alpha_mode) for m in self.materials], dtype=np.intp)
+        self.unlit = np.array([m.unlit for m in self.materials], dtype=bool)
+
+    def __len__(self):
+        return len(self.materials)
+
+    @property
+    def any_specular(self):
+        """True if any material has a specular highlight."""
+        return bool((self.specular > 0).any())
+
+    @property
+    def any_mirror(self):
+        """True if any material spawns mirror-reflection rays."""
+        return bool((self.mirror > 0).any())
+
+    @property
+    def any_transmission(self):
+        """True if any material refracts."""
+        return bool((self.transmission > 0).any())
+
+    @property
+    def any_glossy(self):
+        """True if any material blurs the reflection rays it spawns (roughness > 0)."""
+        reflects = (self.mirror > 0).any(axis=1) | (self.transmission > 0).any(axis=1)
+        return bool(((self.roughness > 0) & reflects).any())
+
+    @property
+    def any_texture(self):
+        """True if any material has an image texture."""
+        return any(getattr(m, name) is not None for m in self.materials for name in TEXTURE_FIELDS)
+
+    @property
+    def cutout(self):
+        """(m,) bool: materials that can let rays through (alpha mask or blend)."""
+        return self.alpha_mode != ALPHA_MODES.index("opaque")
+
+    @property
+    def any_cutout(self):
+        """True if any material can let rays through (see :mod:`rtmesh.geometry.cutouts`)."""
+        return bool(self.cutout.any())
+
+    @property
+    def any_unlit(self):
+        """True if any material shows its colour without lighting."""
+        return bool(self.unlit.any())
+
+    @property
+    def any_emission(self):
+        """True if any material emits."""
+        return bool((self.emission > 0).any())
+
+    @property
+    def any_absorption(self):
+        """True if any refracting material absorbs inside."""
+        return bool(((self.absorption > 0).any(axis=1) & (self.transmission > 0).any(axis=1)).any())
+
+
+def blinn_phong(n, wo, wi, diffuse, specular, shininess):
+    """Blinn-Phong reflected-radiance factor for unit incident light.
+
+    Parameters
+    ----------
+    n : (k, 3) float
+        Unit shading normals.
+    wo, wi : (k, 3) float
+        Unit directions toward the viewer and toward the light.
+    diffuse : (k, 3) float
+        kd.
+    specular : (k, 3) float or None
+        ks; None for no highlight.
+    shininess : (k,) float or None
+        Specular exponent.
+
+    Returns
+    -------
+    (k, 3) float
+        ``kd * max(0, n.wi) + ks * max(0, n.h)^shininess`` (the specular term only where
+        ``n.wi > 0``), to be multiplied by the light's intensity / distance^2 or irradiance.
+    """
+    n = np.asarray(n, dtype=np.float64)
+    wo, wi, diffuse = (np.broadcast_to(np.asarray(a, dtype=np.float64), n.shape) for a in (wo, wi, diffuse))
+    if specular is None:
+        # empty arrays tell the kernel there is no highlight
+        specular, shininess = np.zeros((0, 3)), np.zeros(0)
+    else:
+        specular = np.broadcast_to(np.asarray(specular, dtype=np.float64), n.shape)
+        shininess = np.broadcast_to(np.asarray(shininess, dtype=np.float64), n.shape[:1])
+    return kernels.blinn_phong(n, wo, wi, diffuse, specular, shininess)

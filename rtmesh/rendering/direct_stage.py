@@ -1,0 +1,461 @@
+"""The fused direct-lighting stage: from film samples to radiance in compiled code.
+
+For scenes that need nothing but camera rays, surfaces, emission, ambient light and
+point-like lights with hard shadows (the common case of asset thumbnails and of the peer
+benchmark), the general wavefront (one NumPy call or kernel per stage and chunk, with the
+rays and surface records written out between them) spends most of its non-tracing time
+moving those records through memory.  Here one kernel does a whole chunk, in blocks of
+64 samples (four 16-wide packets): sample positions, camera rays, ``rtcIntersect16``,
+surface records, and for each light the shadow rays of the lit samples through
+``rtcOccluded16``; the rays and records of a block never leave the kernel's scratch arrays.
+
+The arithmetic is the general path's, row for row: the same row helpers of
+:mod:`rtmesh.shading.kernels` (camera, surface record, light, Blinn-Phong, origin offset) and of
+:mod:`rtmesh.geometry.embree_packets` (lanes of a packet), in the same order, so the images are
+bit-identical to the general path's (tested).  The one operation the general path leaves
+to NumPy, raising highlight cosines to the shininess (NumPy's vectorised ``pow``, which can
+round differently from the ``pow`` a compiled loop calls), stays with NumPy: samples with a
+highlight are finished by a second kernel after NumPy has raised their cosines.
+
+:meth:`DirectStage.plan` decides whether a render can use the stage; everything it does not
+handle (textures, passes, reflection and refraction, media, area lights, ambient
+occlusion, depth of field, motion blur, cut-outs, environment backgrounds, single-ray
+tracing) keeps the general path.
+"""
+
+import numpy as np
+
+from rtmesh.core.compiled import kernel, row
+from rtmesh.geometry import embree_packets as ep
+from rtmesh.geometry.accel import Accel
+from rtmesh.sampling.pixel_samples import PixelSampler, pixel_position
+from rtmesh.scene.background import SolidBackground
+from rtmesh.shading.kernels import (SHADOW_SHORTEN, _dot, _highlight_cosine, _illuminate, _image_plane_point,
+                                    _offset, _pinhole_direction, _reaches, _shade, _surface_record)
+
+_F32_MAX = float(np.finfo(np.float32).max)
+_NO_TINT = np.zeros((0, 3))
+_NO_POSITIONS = np.zeros((0, 2))
+LANES = ep.LANES
+# samples per block: four packets, so the arithmetic of a block's samples runs in vector
+# loops long enough for AVX-512, while the block's records stay in L1
+PACKETS = 4
+BLOCK = PACKETS * LANES
+_PACKET_BYTES = 4 * ep.RAYHIT_WORDS * LANES  # 4-byte words
+_SHADOW_BYTES = 4 * ep.RAY_WORDS * LANES
+
+
+class DirectStage:
+    """The tables the fused kernel reads, formed once per render.
+
+    Build it with :meth:`plan`.
+    """
+
+    def __init__(self, integrator):
+        it = integrator
+        accel = it.accel
+        m = it.scene.materials
+        library = ep.packet_library()
+        self._queries = (library.intersect16, library.occluded16, accel._shared.handle,
+                         ep.RTC_RAY_QUERY_FLAG_COHERENT)
+        camera, s = it.camera, it.settings
+        forward, right, up = it._camera_frame
+        self._camera = (s.width, camera.image_plane(s.width, s.height),
+                        np.ascontiguousarray(camera.position, dtype=np.float64), forward, right, up)
+        st = it.plan
+        self._surfaces = (it._faces, it._vertex_normals, it._smooth, it._material_id,
+                          st.smooth_normals and not st.normal_maps)
+        # emission + ambient per material, as the general path adds them per hit
+        base = np.zeros((len(m.diffuse), 3))
+        if st.emission:
+            base = np.ascontiguousarray(m.emission, dtype=np.float64)
+        if st.ambient:
+            ambient = np.ascontiguousarray(it._ambient_light)
+            base = ambient if not st.emission else base + ambient
+        self._base = np.ascontiguousarray(base)
+        lights = it._light_parameters if st.lights else []
+        self._lights = np.array(lights, dtype=np.float64).reshape(len(lights), 12)
+        self._materials = (np.ascontiguousarray(it._shaded), np.ascontiguousarray(it._diffuse),
+                           np.ascontiguousarray(it._specular), it._highlight_exponent, it._highlight_from)
+        background = it.background
+        self._background = (np.ascontiguousarray(background.colour) if st.background else np.zeros(3))
+        self._offset_scale = it._offset_scale32
+        self._sampler = it.sampler
+        # the sample positions are formed in the kernel, except for the Sobol sampler's
+        self._pixel_sampler = PixelSampler.for_settings(s)
+        sampler = self._pixel_sampler or PixelSampler("regular", 0, 1)
+        self._sampler_arrays = (sampler.code, sampler.keys, sampler.corners, sampler.size, sampler.spp)
+
+    @classmethod
+    def plan(cls, integrator):
+        """The stage for this render, or None where the general path must run.
+
+        Parameters
+        ----------
+        integrator : rtmesh.rendering.integrator.Integrator
+            After its tables and stages are formed.
+
+        Returns
+        -------
+        DirectStage or None
+        """
+        it = integrator
+        st = it.plan
+        needs_general = ("area_lights", "area_light_visibility", "textures", "normal_maps", "cutouts",
+                         "unlit", "reflection", "glossy", "refraction", "absorption", "passes", "ao", "lens",
+                         "motion")
+        if any(getattr(st, name) for name in needs_general):
+            return None
+        if type(it.accel) is not Accel or not it.accel.packets or it.media is not None:
+            return None
+        background = it.background
+        if st.background and not (isinstance(background, SolidBackground) and not background.transparent):
+            return None
+        return cls(integrator)
+
+    def render(self, pixel, sample, stats):
+        """Radiance of camera samples.
+
+        Parameters
+        ----------
+        pixel : (n,) int64
+            Linear pixel index of each sample.
+        sample : (n,) int64
+            Index of each sample within its pixel (global across adaptive rounds).
+        stats : RenderStats
+            Camera and shadow ray counts are added to it.
+
+        Returns
+        -------
+        (n, 3) float64
+            Row-major.
+        """
+        shaded, diffuse, specular, exponent, visible_from = self._materials
+        film_xy = (_NO_POSITIONS if self._pixel_sampler is not None else
+                   np.ascontiguousarray(self._sampler.pixel(pixel, sample)))
+        radiance, shadow_rays, records = direct_samples(
+            *self._queries, film_xy, *self._sampler_arrays, pixel, np.ascontiguousarray(sample, dtype=np.int64),
+            *self._camera,
+            *self._surfaces, self._base, self._background, self._lights, shaded, diffuse, specular, exponent,
+            visible_from, self._offset_scale, SHADOW_SHORTEN)
+        sample, mat, cos_i, incident, cosine, power_exponent, highlight = records
+        if len(sample):
+            # NumPy raises the highlight cosines, as in the general path (its pow is vectorised)
+            power = np.zeros(len(sample))
+            power[highlight] = np.power(cosine[highlight], power_exponent[highlight])
+            finish_highlights(radiance, self._base, sample, mat, cos_i, incident, power, diffuse, specular)
+        stats.rays["camera"] += len(pixel)
+        stats.rays["shadow"] += shadow_rays
+        return radiance
+
+
+@kernel
+def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys, corners, size, spp, pixel,
+                   sample, width, image_plane, position, forward, right, up, faces, vertex_normals, smooth,
+                   material_id, fix_terminator, base, background, lights, shaded, diffuse, specular, exponent,
+                   visible_from, scale, shorten):
+    """Radiance of camera samples with direct light, in blocks of :data:`BLOCK` samples.
+
+    Parameters
+    ----------
+    intersect16, occluded16 : ctypes function objects
+    scene : int
+        The committed ``RTCScene``.
+    flags : int
+        Query flags (coherent).
+    film_xy : (n, 2) float64 or (0, 2)
+        Positions inside the pixels, or empty: formed here by :func:`pixel_position`.
+    sampler, keys, corners, size, spp
+        The :class:`rtmesh.sampling.pixel_samples.PixelSampler` arrays.
+    pixel, sample : (n,) int64
+        Pixel and sample index of each sample.
+    width : int
+    image_plane : (4,) float64
+    position, forward, right, up : (3,) float64
+        The camera (see :func:`rtmesh.shading.kernels.camera_rays`).
+    faces, vertex_normals, smooth, material_id, fix_terminator
+        As for :func:`rtmesh.shading.kernels.surface_records`.
+    base : (M, 3) float64
+        Emission plus ambient light per material.
+    background : (3,) float64
+        Radiance of rays that miss.
+    lights : (L, 12) float64
+        Point-like lights (:meth:`kernel_parameters` rows).
+    shaded : (M,) bool
+        Materials that reflect light.
+    diffuse, specular : (M, 3) float64
+    exponent, visible_from : (M,) float64
+        Shininess (negative: no highlight) and the smallest highlight cosine kept.
+    scale : float32
+        Scene size, for the origin offset.
+    shorten : float
+        Shadow rays end this fraction of the way to the light.
+
+    Returns
+    -------
+    radiance : (n, 3) float64
+        Row-major; final except for the samples in ``records``, which hold
+        ``base`` of their material until :func:`finish_highlights` runs.
+    shadow_rays : int
+    records : tuple of arrays
+        For the samples with a highlight from a light that reaches them, one record per
+        (sample, unshadowed light), in light order: sample, material, ``ns . wi``, incident
+        term (r, 3), highlight cosine, shininess, and whether the highlight is raised.
+
+    Notes
+    -----
+    Misses are computed on face 0 and ignored, so the steps of a block loop over its samples
+    without early exits.  Of those loops LLVM vectorises the light step
+    (:func:`_light_block`); the camera and surface steps stay scalar.  The packets of a
+    block lie side by side in one buffer (each 64-byte aligned), and sample ``b`` of the
+    block is lane ``b % 16`` of packet ``b // 16``.
+    """
+    n = len(pixel)
+    n_lights = len(lights)
+    has_smooth = len(vertex_normals) > 0
+    # row-major, so that the integrator's (pixels, spp, 3) view of it is not a copy
+    radiance = np.empty((n, 3))
+    rays, words, valid, args = ep.packet_buffers(ep.RAYHIT_WORDS, PACKETS, flags)
+    shadow, shadow_words, shadow_valid, _ = ep.packet_buffers(ep.RAY_WORDS, PACKETS, flags)
+    # per sample of the block: direction, surface record, material
+    srf = np.empty((9, BLOCK))
+    mat = np.empty(BLOCK, np.intp)
+    hit = np.empty(BLOCK, np.bool_)
+    # per light and sample: the light sample and its fate
+    cos_i = np.empty((n_lights, BLOCK))
+    incident = np.empty((n_lights, 3, BLOCK))
+    cosine = np.empty((n_lights, BLOCK))
+    raised = np.empty((n_lights, BLOCK), np.bool_)
+    reaches = np.zeros((n_lights, BLOCK), np.bool_)  # lit and not shadowed
+    capacity = n * n_lights
+    rec_sample = np.empty(capacity, np.int64)
+    rec_mat = np.empty(capacity, np.intp)
+    rec_cos = np.empty(capacity)
+    rec_incident = np.empty((capacity, 3))
+    rec_cosine = np.empty(capacity)
+    rec_exponent = np.empty(capacity)
+    rec_raised = np.empty(capacity, np.bool_)
+    records = 0
+    shadow_rays = 0
+    for start in range(0, n, BLOCK):
+        count = min(BLOCK, n - start)
+        # camera rays (rtmesh.shading.kernels.camera_rays, pinhole); lanes past the end repeat sample 0
+        d = _camera_block(film_xy, sampler, keys, corners, size, spp, pixel, sample, start, count, width,
+                          image_plane, forward, right, up)
+        for b in range(BLOCK):
+            valid[b] = -1 if b < count else 0
+        for q in range(PACKETS):
+            for lane in range(LANES):
+                b = q * LANES + lane
+                at = q * ep.RAYHIT_WORDS * LANES + lane
+                ep.set_lane(rays, words, at, position[0], position[1], position[2], d[0, b], d[1, b], d[2, b],
+                            ep.DEFAULT_TFAR)
+                ep.clear_hit(words, at)
+        for q in range((count + LANES - 1) // LANES):
+            intersect16(valid.ctypes.data + 64 * q, scene, rays.ctypes.data + _PACKET_BYTES * q,
+                        args.ctypes.data)
+        # surface records (rtmesh.shading.kernels.surface_records); misses use face 0
+        for b in range(count):
+            at = _hit_lane(b)
+            hit[b] = words[ep.GEOM_ID * LANES + at] != -1
+            f = np.intp(words[ep.PRIM_ID * LANES + at]) if hit[b] else np.intp(0)
+            mat[b] = material_id[f]
+            interpolate = has_smooth & smooth[f]
+            (srf[0, b], srf[1, b], srf[2, b], srf[3, b], srf[4, b], srf[5, b], srf[6, b], srf[7, b], srf[8, b],
+             _) = _surface_record(f, np.float64(rays[ep.U * LANES + at]), np.float64(rays[ep.V * LANES + at]),
+                                  d[0, b], d[1, b], d[2, b], faces, vertex_normals, interpolate, fix_terminator)
+        # each light: samples (rtmesh.shading.kernels.light_samples) and the shadow packets
+        for k in range(n_lights):
+            light = lights[k]
+            lit, values, shadow_ray = _light_block(light, srf, d, count, scale, shorten)
+            for b in range(count):
+                cos_i[k, b] = values[0, b]
+                incident[k, 0, b], incident[k, 1, b], incident[k, 2, b] = values[1, b], values[2, b], values[3, b]
+                cosine[k, b] = values[4, b]
+            for q in range(PACKETS):
+                for lane in range(LANES):
+                    b = q * LANES + lane
+                    ep.set_lane(shadow, shadow_words, q * ep.RAY_WORDS * LANES + lane, shadow_ray[0, b],
+                                shadow_ray[1, b], shadow_ray[2, b], shadow_ray[3, b], shadow_ray[4, b],
+                                shadow_ray[5, b], shadow_ray[6, b])
+            for b in range(BLOCK):
+                on = b < count and hit[b] and shaded[mat[b]] and lit[b]
+                shadow_valid[b] = -1 if on else 0
+                if on:
+                    m = mat[b]
+                    e = exponent[m]
+                    # a power of 0 is 1 whatever the cosine (0 ** 0 included)
+                    c = 1.0 if e == 0.0 else cosine[k, b]
+                    cosine[k, b] = c
+                    raised[k, b] = e >= 0.0 and c > 0.0 and c >= visible_from[m]
+            for q in range((count + LANES - 1) // LANES):
+                if _any_valid(shadow_valid, q):
+                    occluded16(shadow_valid.ctypes.data + 64 * q, scene, shadow.ctypes.data + _SHADOW_BYTES * q,
+                               args.ctypes.data)
+            for b in range(count):
+                on = shadow_valid[b] != 0
+                shadow_rays += on
+                # Embree marks an occluded ray by setting its tfar to -inf
+                reaches[k, b] = on and shadow[ep.TFAR * LANES + _ray_lane(b)] != -np.inf
+        # add up (rtmesh.shading.kernels.add_light, then the general path's sums)
+        for b in range(count):
+            i = start + b
+            if not hit[b]:
+                for c in range(3):
+                    radiance[i, c] = 0.0 + background[c]
+                continue
+            m = mat[b]
+            deferred = False
+            for k in range(n_lights):
+                deferred = deferred or (reaches[k, b] and raised[k, b])
+            if deferred:
+                for k in range(n_lights):
+                    if reaches[k, b]:
+                        rec_sample[records], rec_mat[records] = i, m
+                        rec_cos[records] = cos_i[k, b]
+                        for c in range(3):
+                            rec_incident[records, c] = incident[k, c, b]
+                        rec_cosine[records], rec_exponent[records] = cosine[k, b], exponent[m]
+                        rec_raised[records] = raised[k, b]
+                        records += 1
+                for c in range(3):
+                    radiance[i, c] = base[m, c]
+                continue
+            d0 = d1 = d2 = 0.0
+            for k in range(n_lights):
+                if reaches[k, b]:
+                    d0, d1, d2 = _add_light(d0, d1, d2, m, cos_i[k, b], 0.0, incident[k, 0, b], incident[k, 1, b],
+                                            incident[k, 2, b], diffuse, specular)
+            _store(radiance, i, base, m, d0, d1, d2)
+    return radiance, shadow_rays, (rec_sample[:records], rec_mat[:records], rec_cos[:records],
+                                     rec_incident[:records], rec_cosine[:records], rec_exponent[:records],
+                                     rec_raised[:records])
+
+
+@row
+def _camera_block(film_xy, sampler, keys, corners, size, spp, pixel, sample, start, count, width, image_plane,
+                  forward, right, up):
+    """Unit directions (3, BLOCK) of the camera rays of samples ``start .. start + count - 1``
+    (lanes past the end repeat sample ``start``), as :func:`rtmesh.shading.kernels.camera_rays`
+    makes them for a pinhole; positions from ``film_xy``, or formed here when it is empty.
+    The output has the block's constant size, for LLVM (see :func:`_light_block`)."""
+    d = np.empty((3, BLOCK))
+    inverse_width = 1.0 / width
+    for b in range(BLOCK):
+        i = start + b if b < count else start
+        if len(film_xy):
+            x, y = film_xy[i, 0], film_xy[i, 1]
+        else:
+            x, y = pixel_position(sampler, keys, corners, size, spp, pixel[i], sample[i])
+        sx, sy = _image_plane_point(x, y, pixel[i], width, inverse_width, image_plane)
+        d[0, b], d[1, b], d[2, b] = _pinhole_direction(sx, sy, forward, right, up)
+    return d
+
+
+@row
+def _light_block(light, srf, d, count, scale, shorten):
+    """One light at the first ``count`` surface records of a block (the arithmetic of
+    :func:`rtmesh.shading.kernels.light_samples`).
+
+    Returns
+    -------
+    lit : (BLOCK,) bool
+        The light reaches the point (it is on the side the ray came from, its term is not 0).
+    values : (5, BLOCK) float64
+        ``ns . wi``, the incident term (3 rows) and the highlight cosine.
+    shadow_ray : (7, BLOCK) float32
+        Offset origin, float32 direction and length of the shadow ray.
+
+    Notes
+    -----
+    The loop has no branches, gathers or calls, and its outputs are made here with the
+    constant size of a block: only then does LLVM vectorise it (with output arrays passed
+    in, or sized at run time, it stays scalar, about twice as slow).
+    """
+    lit = np.empty(BLOCK, np.bool_)
+    values = np.empty((5, BLOCK))
+    shadow_ray = np.empty((7, BLOCK), np.float32)
+    for b in range(count):
+        px, py, pz = srf[0, b], srf[1, b], srf[2, b]
+        gx, gy, gz = srf[3, b], srf[4, b], srf[5, b]
+        nx, ny, nz = srf[6, b], srf[7, b], srf[8, b]
+        wx, wy, wz, distance, er, eg, eb = _illuminate(light, px, py, pz)
+        lit[b] = _reaches(wx, wy, wz, er, eg, eb, gx, gy, gz)
+        values[0, b] = _dot(nx, ny, nz, wx, wy, wz)
+        values[1, b], values[2, b], values[3, b] = er, eg, eb
+        values[4, b] = _highlight_cosine(nx, ny, nz, -d[0, b], -d[1, b], -d[2, b], wx, wy, wz)
+        # the shadow ray's direction in float32, as Embree will see it, also sets the offset
+        dx, dy, dz = np.float32(wx), np.float32(wy), np.float32(wz)
+        shadow_ray[0, b], shadow_ray[1, b], shadow_ray[2, b] = _offset(px, py, pz, gx, gy, gz, dx, dy, dz, scale)
+        shadow_ray[3, b], shadow_ray[4, b], shadow_ray[5, b] = dx, dy, dz
+        shadow_ray[6, b] = np.float32(min(distance * shorten, _F32_MAX))
+    return lit, values, shadow_ray
+
+
+@row
+def _add_light(d0, d1, d2, m, cos_i, power, e0, e1, e2, diffuse, specular):
+    """The direct light ``(d0, d1, d2)`` plus one light's Blinn-Phong term on material ``m``
+    (``power``: the raised highlight cosine, 0 without one; ``e``: its incident term), as
+    :func:`rtmesh.shading.kernels.add_light` adds it."""
+    f0, f1, f2 = _shade(0, m, cos_i, power, diffuse, _NO_TINT, specular, _NO_TINT)
+    return d0 + f0 * e0, d1 + f1 * e1, d2 + f2 * e2
+
+
+@row
+def _store(radiance, i, base, m, d0, d1, d2):
+    """Sample ``i``'s radiance: its material's emission and ambient light plus the direct
+    light, added to 0 as the general path adds a hit's local shading to its radiance."""
+    radiance[i, 0] = 0.0 + (base[m, 0] + d0)
+    radiance[i, 1] = 0.0 + (base[m, 1] + d1)
+    radiance[i, 2] = 0.0 + (base[m, 2] + d2)
+
+
+@row
+def _hit_lane(b):
+    """Word offset of sample ``b`` of a block in the ``RTCRayHit16`` packets (field 0)."""
+    return (b >> 4) * (ep.RAYHIT_WORDS * LANES) + (b & 15)
+
+
+@row
+def _ray_lane(b):
+    """Word offset of sample ``b`` of a block in the ``RTCRay16`` packets (field 0)."""
+    return (b >> 4) * (ep.RAY_WORDS * LANES) + (b & 15)
+
+
+@row
+def _any_valid(valid, q):
+    """Whether packet ``q`` of a block has an active lane."""
+    for lane in range(LANES * q, LANES * q + LANES):
+        if valid[lane]:
+            return True
+    return False
+
+
+@kernel
+def finish_highlights(radiance, base, sample, mat, cos_i, incident, power, diffuse, specular):
+    """Radiance of the samples :func:`direct_samples` left for their highlights.
+
+    Parameters
+    ----------
+    radiance : (n, 3) float64
+        Updated in place at the rows in ``sample``.
+    base : (M, 3) float64
+    sample, mat : (r,) int
+        Each record's sample and material; a sample's records are consecutive, in light
+        order.
+    cos_i : (r,) float64
+    incident : (r, 3) float64
+    power : (r,) float64
+        The raised highlight cosine (0 where there is no highlight).
+    diffuse, specular : (M, 3) float64
+    """
+    j = 0
+    r = len(sample)
+    while j < r:
+        i, m = sample[j], mat[j]
+        d0 = d1 = d2 = 0.0
+        while j < r and sample[j] == i:
+            d0, d1, d2 = _add_light(d0, d1, d2, m, cos_i[j], power[j], incident[j, 0], incident[j, 1],
+                                    incident[j, 2], diffuse, specular)
+            j += 1
+        _store(radiance, i, base, m, d0, d1, d2)

@@ -1,0 +1,32 @@
+"""The 64-bit integer hash behind every random number in rtmesh."""
+
+import numpy as np
+from numba.extending import register_jitable
+
+M1 = np.uint64(0xBF58476D1CE4E5B9)
+M2 = np.uint64(0x94D049BB133111EB)
+GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+
+
+@register_jitable
+def mix64(x):
+    """SplitMix64 finaliser: a bijective 64-bit mix with full avalanche.
+
+    Plain NumPy when called from Python; compiled code (:mod:`rtmesh.sampling.pixel_samples`) calls
+    the same function, compiled for one uint64.
+
+    Parameters
+    ----------
+    x : (n,) uint64 or uint64
+
+    Returns
+    -------
+    (n,) uint64
+        Products wrap modulo 2**64, as the mix intends (callers silence NumPy's overflow
+        warning for scalars).
+    """
+    x = x ^ (x >> np.uint64(30))
+    x = x * M1
+    x = x ^ (x >> np.uint64(27))
+    x = x * M2
+    return x ^ (x >> np.uint64(31))

@@ -1,0 +1,96 @@
+"""Pixel sample positions in compiled code: the twin of :func:`rtmesh.sampling.patterns.pixel_offsets`
+for the regular, jittered and random samplers, for kernels that make camera rays.
+
+The arithmetic is that of :mod:`rtmesh.sampling.patterns` and :mod:`rtmesh.sampling.hashing`, operation for
+operation (64-bit integer hashing wraps in both; the float conversions and divisions are
+the same), so a kernel that forms its positions here renders bit for bit what it would
+render from positions formed by NumPy (tests/test_pixel_samples.py).  The Sobol sampler
+stays in NumPy: its scrambling tables are not worth a second implementation.
+"""
+
+import numpy as np
+
+from rtmesh.core.compiled import kernel, row
+from rtmesh.sampling.hashing import GOLDEN, M1, mix64
+from rtmesh.sampling.patterns import Dim, _cell_grids
+
+REGULAR, JITTERED, RANDOM = 0, 1, 2
+SAMPLER_CODES = {"regular": REGULAR, "jittered": JITTERED, "random": RANDOM}
+_ONE = np.uint64(1)
+_TO_UNIT = 1.0 / 9007199254740992.0  # 2 ** -53: the top 53 bits as a double in [0, 1)
+
+
+class PixelSampler:
+    """What :func:`pixel_position` needs for one render's sampler, formed once.
+
+    Parameters
+    ----------
+    sampler : {"regular", "jittered", "random"}
+    seed : int
+    spp : int
+        Samples per stratified set (the render's samples per pixel).
+
+    Attributes
+    ----------
+    code : int
+        :data:`REGULAR`, :data:`JITTERED` or :data:`RANDOM`.
+    spp : int
+    keys : (2,) uint64
+        The seed's key of the two pixel dimensions (``Dim.PIXEL`` and the next), before
+        the pixel is mixed in (see :func:`rtmesh.sampling.patterns.sequence_key`).
+    corners : (spp, 2) float64
+        Column and row of each stratum (jittered), or the stratum centres already divided
+        by the grid size (regular).
+    size : (2,) float64
+        Strata per row and per column.
+    """
+
+    def __init__(self, sampler, seed, spp):
+        self.code = SAMPLER_CODES[sampler]
+        self.spp = int(spp)
+        with np.errstate(over="ignore"):  # the products wrap modulo 2**64 by design
+            self.keys = np.array([mix64(np.uint64(seed & 0xFFFFFFFFFFFFFFFF) * GOLDEN + np.uint64(d))
+                                  for d in (Dim.PIXEL, Dim.PIXEL + 1)], dtype=np.uint64)
+        (cx, cy), (sx, sy), table = _cell_grids(1, self.spp, 2)
+        self.size = np.array([cx * sx, cy * sy], dtype=np.float64)
+        table = np.ascontiguousarray(table)
+        # regular: as rtmesh.sampling.patterns._stratified forms the stratum centres
+        self.corners = np.ascontiguousarray((table + 0.5) / self.size) if self.code == REGULAR else table
+
+    @classmethod
+    def for_settings(cls, settings):
+        """The sampler of ``settings``, or None where it has no compiled twin (Sobol)."""
+        if settings.sampler not in SAMPLER_CODES:
+            return None
+        return cls(settings.sampler, settings.seed, settings.spp)
+
+
+@row
+def _uniform(key, pixel, sample):
+    """:func:`rtmesh.sampling.patterns.uniform` for one (dimension key, pixel, sample)."""
+    sequence = mix64(key ^ (np.uint64(pixel) * GOLDEN))
+    x = mix64(sequence ^ (np.uint64(sample) * M1 + _ONE))
+    return np.float64(x >> np.uint64(11)) * _TO_UNIT
+
+
+@row
+def pixel_position(code, keys, corners, size, spp, pixel, sample):
+    """Sample ``sample`` of pixel ``pixel``: its offset ``(x, y)`` in [0, 1)^2 from the
+    pixel's top-left corner, as :func:`rtmesh.sampling.patterns.pixel_offsets` gives it."""
+    if code == RANDOM:
+        return _uniform(keys[0], pixel, sample), _uniform(keys[1], pixel, sample)
+    stratum = sample % spp if spp > 1 else 0
+    if code == REGULAR:
+        return corners[stratum, 0], corners[stratum, 1]
+    return ((corners[stratum, 0] + _uniform(keys[0], pixel, sample)) / size[0],
+            (corners[stratum, 1] + _uniform(keys[1], pixel, sample)) / size[1])
+
+
+@kernel
+def pixel_positions(code, keys, corners, size, spp, pixel, sample):
+    """:func:`pixel_position` of many samples, (n, 2) float64 (row-major)."""
+    n = len(pixel)
+    out = np.empty((n, 2))
+    for i in range(n):
+        out[i, 0], out[i, 1] = pixel_position(code, keys, corners, size, spp, pixel[i], sample[i])
+    return out

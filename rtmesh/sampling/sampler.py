@@ -1,0 +1,78 @@
+"""The render's sampler: one object bound to (kind, seed, spp) that owns the dimensions.
+
+Every random number of a render is a point of the render's sampler in some dimension (see
+:class:`rtmesh.sampling.patterns.Dim`).  Which dimension a stage draws from (the pixel, the lens,
+the shutter time, ambient occlusion and glossy lobes per path depth, each area light per
+path depth) is decided here and nowhere else, so stages ask for "the glossy points at
+depth 2" instead of passing the kind, the seed, the spp and a dimension sum around.
+"""
+
+from dataclasses import dataclass
+
+from rtmesh.sampling.patterns import Dim, decorrelated_points, pixel_offsets, stratified_values
+
+
+@dataclass(frozen=True)
+class Sampler:
+    """A render's sampler.
+
+    Parameters
+    ----------
+    kind : {"regular", "random", "jittered", "sobol"}
+    seed : int
+    spp : int
+        Samples per stratified set (the render's samples per pixel).
+
+    Notes
+    -----
+    Every method takes ``pixel`` and ``sample`` (linear pixel index and sample index within
+    the pixel, global across adaptive rounds), arrays of one length ``n``, and returns
+    points in [0, 1)^2 as ``(n, 2)`` float64 (component-major) or values in [0, 1) as
+    ``(n,)``: pure functions of (seed, pixel, sample, dimension).
+    """
+
+    kind: str
+    seed: int
+    spp: int
+
+    @classmethod
+    def for_settings(cls, settings):
+        """The sampler of a :class:`rtmesh.rendering.settings.RenderSettings`."""
+        return cls(settings.sampler, settings.seed, settings.spp)
+
+    def pixel(self, pixel, sample):
+        """Positions inside the pixel (see :func:`rtmesh.sampling.patterns.pixel_offsets`)."""
+        return pixel_offsets(self.kind, self.seed, pixel, sample, self.spp)
+
+    def lens(self, pixel, sample):
+        """Points on the thin-lens aperture (before the disk warp)."""
+        return decorrelated_points(self.kind, self.seed, pixel, sample, self.spp, Dim.LENS)
+
+    def time(self, pixel, sample):
+        """Times in the shutter interval, as fractions of it (one value per sample)."""
+        return stratified_values(self.kind, self.seed, pixel, sample, self.spp, Dim.TIME)
+
+    def ambient_occlusion(self, pixel, sample, depth, ray, rays):
+        """Directions of ambient-occlusion ray ``ray`` of ``rays`` per hit at path ``depth``."""
+        return decorrelated_points(self.kind, self.seed, pixel, sample, self.spp, Dim.AO + 2 * depth, ray, rays)
+
+    def glossy(self, pixel, sample, depth):
+        """Glossy-lobe directions of the rays spawned at path ``depth``."""
+        return decorrelated_points(self.kind, self.seed, pixel, sample, self.spp, Dim.GLOSSY + 2 * depth)
+
+    def area_light(self, pixel, sample, depth, light_index, light_count, ray, rays):
+        """Points on area light ``light_index`` of ``light_count`` for sample ``ray`` of
+        ``rays`` per hit at path ``depth`` (see :func:`light_dimension`)."""
+        return decorrelated_points(self.kind, self.seed, pixel, sample, self.spp,
+                                   light_dimension(depth, light_index, light_count), ray, rays)
+
+
+def light_dimension(depth, light_index, light_count):
+    """First sample dimension of one light's samples at one path depth.
+
+    Each (depth, light) pair gets its own pair of dimensions from :attr:`Dim.LIGHT` upward,
+    so the samples of different lights and bounces are independent.  The 2^23 pairs below
+    the next reserved range wrap around (only past millions of lights x bounces).
+    """
+    pair = (depth * light_count + light_index) % (1 << 23)
+    return int(Dim.LIGHT) + 2 * pair

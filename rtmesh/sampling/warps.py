@@ -1,0 +1,186 @@
+"""Warps: maps of the unit square onto disks, hemispheres, triangles and spherical triangles,
+with their densities and inverses.
+
+Each warp is area-preserving or has a closed-form density, so stratified points of the
+square (:mod:`rtmesh.sampling.patterns`) stay stratified on the target domain.
+"""
+
+import numpy as np
+
+from rtmesh.core.vecmath import dot, normalize
+
+
+def square_to_uniform_disk_concentric(u):
+    """Shirley-Chiu concentric map of the unit square onto the unit disk.
+
+    Area-preserving and low-distortion, so stratification of ``u`` survives the warp.
+
+    Parameters
+    ----------
+    u : (n, 2) float
+        Points in [0, 1)^2.
+
+    Returns
+    -------
+    (n, 2) float
+        Points in the unit disk; density 1/pi with respect to area.
+    """
+    a = 2.0 * u[:, 0] - 1.0
+    b = 2.0 * u[:, 1] - 1.0
+    use_a = np.abs(a) > np.abs(b)
+    r = np.where(use_a, a, b)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        phi = np.where(
+            use_a, (np.pi / 4.0) * (b / a), (np.pi / 2.0) - (np.pi / 4.0) * (a / b)
+        )
+    phi = np.nan_to_num(phi)  # a == b == 0 maps to the centre whatever phi is
+    return np.stack([r * np.cos(phi), r * np.sin(phi)], axis=1)
+
+
+def uniform_disk_concentric_to_square(d):
+    """Inverse of :func:`square_to_uniform_disk_concentric`, (n, 2) -> (n, 2).
+
+    Each of the four sectors of angle pi/2 around the axes came from one triangle of the
+    square between its centre and one side; there the side's coordinate is ``+-r`` and the
+    other is proportional to the angle from the sector's axis.
+    """
+    r = np.hypot(d[:, 0], d[:, 1])
+    # angle in [-pi/4, 7pi/4): sector k (0..3) is centred on the angle k pi/2
+    phi = np.arctan2(d[:, 1], d[:, 0])
+    phi = np.where(phi < -np.pi / 4.0, phi + 2.0 * np.pi, phi)
+    sector = np.clip(np.floor((phi + np.pi / 4.0) / (np.pi / 2.0)), 0, 3).astype(np.int64)
+    side = np.where(sector < 2, r, -r)  # +r for the sectors facing +x, +y; -r for -x, -y
+    along = (phi - sector * (np.pi / 2.0)) * side / (np.pi / 4.0)
+    a = np.where(sector % 2 == 0, side, -along)
+    b = np.where(sector % 2 == 0, along, side)
+    return np.stack([0.5 * (a + 1.0), 0.5 * (b + 1.0)], axis=1)
+
+
+def square_to_uniform_disk_concentric_pdf(d):
+    """Area density of :func:`square_to_uniform_disk_concentric`: ``1 / pi`` on the disk."""
+    return np.where((d * d).sum(axis=1) <= 1.0, 1.0 / np.pi, 0.0)
+
+
+def square_to_cosine_hemisphere(u):
+    """Cosine-weighted directions on the hemisphere around +z (Malley's method).
+
+    Parameters
+    ----------
+    u : (n, 2) float
+        Points in [0, 1)^2.
+
+    Returns
+    -------
+    (n, 3) float
+        Unit directions with z >= 0; density cos(theta)/pi with respect to solid angle.
+    """
+    d = square_to_uniform_disk_concentric(u)
+    z = np.sqrt(np.maximum(0.0, 1.0 - (d * d).sum(axis=1)))
+    return np.column_stack([d, z])
+
+
+def cosine_hemisphere_to_square(w):
+    """Inverse of :func:`square_to_cosine_hemisphere`, (n, 3) -> (n, 2)."""
+    return uniform_disk_concentric_to_square(w[:, :2])
+
+
+def square_to_cosine_hemisphere_pdf(w):
+    """Solid-angle density of :func:`square_to_cosine_hemisphere`: ``max(0, z) / pi``."""
+    return np.maximum(0.0, w[:, 2]) / np.pi
+
+
+def square_to_uniform_triangle(u):
+    """Uniform points on a triangle, as barycentric weights of its vertices 1 and 2.
+
+    ``(b1, b2) = sqrt(u0) * (1 - u1, u1)``: the Jacobian of the map is the constant 1/2, so
+    the density is uniform over the triangle, and the map is continuous, so stratified
+    ``u`` stay stratified on the triangle.
+
+    Parameters
+    ----------
+    u : (n, 2) float
+        Points in [0, 1)^2.
+
+    Returns
+    -------
+    (n, 2) float
+        Barycentric weights ``(b1, b2)`` with ``b1, b2 >= 0`` and ``b1 + b2 <= 1``
+        (see :func:`rtmesh.geometry.accel.barycentric_interpolate`); density ``1 / area`` with respect
+        to area on any triangle.
+    """
+    s = np.sqrt(u[:, 0])
+    return np.stack([s * (1.0 - u[:, 1]), s * u[:, 1]], axis=1)
+
+
+def spherical_triangle_area(a, b, c):
+    """Solid angle of the spherical triangles with unit-vector corners ``a, b, c``, (n,) sr.
+
+    Van Oosterom and Strackee's formula ``tan(omega / 2) = |a . (b x c)| / (1 + a.b + b.c
+    + c.a)``: no cancellation for small triangles, where the sum of the angles minus pi
+    loses every digit.
+    """
+    triple = np.abs(dot(a, np.cross(b, c)))
+    return 2.0 * np.arctan2(triple, 1.0 + dot(a, b) + dot(b, c) + dot(c, a))
+
+
+def square_to_spherical_triangle(u, a, b, c):
+    """Directions uniform over the spherical triangles with unit-vector corners ``a, b, c``.
+
+    Arvo's method ("Stratified sampling of spherical triangles", SIGGRAPH 1995): ``u0``
+    chooses the sub-triangle ``a, b, c'`` of area ``u0 * omega`` (``c'`` on the arc from
+    ``a`` to ``c``), ``u1`` a point on the arc from ``b`` to ``c'`` with the right density.
+    The map is continuous, so stratified ``u`` stay stratified.  For triangles of a tiny
+    solid angle the angle sums lose their digits: use it above ~1e-4 sr.
+
+    Parameters
+    ----------
+    u : (n, 2) float
+        Points in [0, 1)^2.
+    a, b, c : (n, 3) float
+        Unit corner directions.
+
+    Returns
+    -------
+    directions : (n, 3) float
+        Unit directions inside the triangles; density ``1 / omega`` per steradian.
+    omega : (n,) float
+        Solid angles (:func:`spherical_triangle_area`).
+    """
+    # the angle at corner a, between the great circles through a, b and a, c
+    n_ab, n_ac = normalize(np.cross(a, b)), normalize(np.cross(a, c))
+    alpha = np.arccos(np.clip(dot(n_ab, n_ac), -1.0, 1.0))
+    omega = spherical_triangle_area(a, b, c)
+    area = u[:, 0] * omega
+    s, t = np.sin(area - alpha), np.cos(area - alpha)
+    cos_alpha, sin_alpha = np.cos(alpha), np.sin(alpha)
+    uu = t - cos_alpha
+    vv = s + sin_alpha * dot(a, b)
+    denominator = (vv * s + uu * t) * sin_alpha
+    q = np.clip(((vv * t - uu * s) * cos_alpha - vv) / np.where(denominator != 0.0, denominator, 1.0), -1.0, 1.0)
+    c_new = q[:, None] * a + np.sqrt(np.maximum(1.0 - q * q, 0.0))[:, None] * normalize(c - dot(c, a)[:, None] * a)
+    z = 1.0 - u[:, 1] * (1.0 - dot(c_new, b))
+    directions = z[:, None] * b + np.sqrt(np.maximum(1.0 - z * z, 0.0))[:, None] * normalize(c_new - dot(c_new, b)[:, None] * b)
+    return normalize(directions), omega
+
+
+def spherical_triangle_to_square(directions, a, b, c):
+    """Inverse of :func:`square_to_spherical_triangle`: directions inside the spherical
+    triangles ``a, b, c`` back to ``u``, (n, 3) -> (n, 2).
+
+    ``c'`` is where the great circle through ``b`` and the direction meets the arc from
+    ``a`` to ``c``; ``u0`` is the area of ``a, b, c'`` over the whole, ``u1`` the position
+    of the direction on the arc from ``b`` to ``c'``.
+    """
+    c_new = normalize(np.cross(np.cross(b, directions), np.cross(a, c)))
+    c_new *= np.where(dot(c_new, a + c) < 0.0, -1.0, 1.0)[:, None]  # the one between a and c
+    u0 = spherical_triangle_area(a, b, c_new) / spherical_triangle_area(a, b, c)
+    u1 = (1.0 - dot(directions, b)) / np.maximum(1.0 - dot(c_new, b), 1e-300)
+    return np.stack([u0, u1], axis=1)
+
+
+def uniform_triangle_to_square(b):
+    """Inverse of :func:`square_to_uniform_triangle`, (n, 2) -> (n, 2)."""
+    total = b[:, 0] + b[:, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u1 = np.where(total > 0.0, b[:, 1] / total, 0.0)
+    return np.stack([total * total, u1], axis=1)

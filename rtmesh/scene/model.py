@@ -1,0 +1,298 @@
+"""The flattened scene: one triangle soup with per-face material and object ids."""
+
+import dataclasses
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rtmesh.core.errors import MeshError
+from rtmesh.geometry import build_kernels
+from rtmesh.lights.point_lights import DirectionalLight
+from rtmesh.materials.table import Material, MaterialTable
+from rtmesh.scene.camera import Camera, frame_bounds
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class MeshPart:
+    """One mesh placed in the scene, before flattening.
+
+    Attributes
+    ----------
+    name : str
+        Object name (for messages and the object-id pass).
+    vertices : (v, 3) float
+        World-space positions.
+    faces : (f, 3) int
+        Vertex indices, counter-clockwise seen from the outside.
+    material : int
+        Index into the scene's material list.
+    vertex_normals : (v, 3) float or None
+        Unit normals for smooth shading; None shades flat.
+    motion : rtmesh.geometry.motion.Motion or None
+        Rigid motion during the shutter (see :mod:`rtmesh.geometry.motion`); None stands still.
+    uv : (v, 2) float or None
+        Texture coordinates per vertex ((0, 0) the bottom-left corner of an image).
+    vertex_colors : (v, 4) float or None
+        Linear RGBA per vertex, multiplying the material's base colour and opacity.
+    """
+
+    name: str
+    vertices: np.ndarray
+    faces: np.ndarray
+    material: int = 0
+    vertex_normals: np.ndarray | None = None
+    motion: object = None
+    uv: np.ndarray | None = None
+    vertex_colors: np.ndarray | None = None
+
+
+@dataclass
+class Scene:
+    """Everything the renderer needs, as flat arrays.
+
+    Attributes
+    ----------
+    vertices : (V, 3) float64
+    faces : (F, 3) int32
+    face_normals : (F, 3) float64
+        Unit geometric normals from the winding order.
+    vertex_normals : (V, 3) float64 or None
+        Unit shading normals; None when no object is smooth-shaded.
+    smooth : (F,) bool or None
+        Which faces interpolate ``vertex_normals``; None when none do.
+    material_id : (F,) int32
+    object_id : (F,) int32
+    object_names : list of str
+    materials : MaterialTable
+    lights : list
+    camera : Camera
+    ambient : (3,) float
+        Ambient light colour multiplying every material's ``ambient`` reflectance.
+    background : (3,) float or background object
+        What rays that leave the scene see: a radiance, or one of the backgrounds of
+        :mod:`rtmesh.scene.background` (gradient, environment image, transparent).
+    motions : dict of int to rtmesh.geometry.motion.Motion
+        Motion of each moving object (by object index); static objects are absent.
+    uv : (V, 2) float64 or None
+        Texture coordinates per vertex; None when no object has any (objects without
+        them read (0, 0)).
+    vertex_colors : (V, 4) float64 or None
+        Linear RGBA per vertex; None when no object has any (the others read white).
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    face_normals: np.ndarray
+    vertex_normals: np.ndarray | None
+    smooth: np.ndarray | None
+    material_id: np.ndarray
+    object_id: np.ndarray
+    object_names: list
+    materials: MaterialTable
+    lights: list
+    camera: Camera
+    ambient: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    background: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    motions: dict = field(default_factory=dict)
+    uv: np.ndarray | None = None
+    vertex_colors: np.ndarray | None = None
+
+    @property
+    def bounds(self):
+        """(2, 3) float: axis-aligned bounds of the geometry."""
+        # a mask, not np.unique: sorting a million faces' indices takes seconds
+        used = np.zeros(len(self.vertices), dtype=bool)
+        used[self.faces.ravel()] = True
+        points = self.vertices if used.all() else self.vertices[used]
+        return np.stack([points.min(axis=0), points.max(axis=0)])
+
+    @classmethod
+    def from_parts(cls, parts, materials=None, lights=None, camera=None, ambient=None,
+                   background=None, source="scene", aspect=1.0):
+        """Flatten mesh parts into one scene, dropping faces that cannot render.
+
+        Faces that touch a non-finite vertex or have zero area are removed with a warning
+        naming the object; an object with nothing left is dropped; a scene with nothing left
+        is an error.
+
+        Parameters
+        ----------
+        parts : list of MeshPart
+        materials : list of Material, optional
+            Defaults to a single grey material.
+        lights : list, optional
+            Defaults to :func:`default_lights` (a three-light rig).
+        camera : Camera, optional
+            Defaults to one framing the bounds (:func:`rtmesh.scene.camera.frame_bounds`).
+        ambient : (3,) float, optional
+        background : (3,) float or background object, optional
+            A radiance, or a background of :mod:`rtmesh.scene.background`.
+        source : str
+            Where the parts came from, for error messages.
+        aspect : float
+            Image width / height the automatic camera frames the bounds for.
+
+        Raises
+        ------
+        MeshError
+            If no renderable triangle remains.
+        """
+        materials = list(materials) if materials else [Material()]
+        vertices, faces, normals, vnormals, smooth, mat_ids, obj_ids, names = ([] for _ in range(8))
+        uvs, colours = [], []
+        motions = {}
+        offset = 0
+        for part in parts:
+            v = np.asarray(part.vertices, dtype=np.float64).reshape(-1, 3)
+            f = np.asarray(part.faces, dtype=np.int64).reshape(-1, 3)
+            if len(f) and (f.min() < 0 or f.max() >= len(v)):
+                raise MeshError(f"{source}: object '{part.name}' has face indices out of range")
+            if part.material < 0 or part.material >= len(materials):
+                raise MeshError(f"{source}: object '{part.name}' uses unknown material {part.material}")
+            # one compiled pass each (see rtmesh.geometry.build_kernels): the finite-vertex test, and
+            # cross(v1 - v0, v2 - v0) over its length, rounded as NumPy rounds them
+            keep = build_kernels.finite_faces(v, f)
+            if not keep.all():
+                log.warning("%s: object '%s': dropped %d faces with NaN/Inf vertices",
+                            source, part.name, int((~keep).sum()))
+                f = f[keep]
+            face_normals, area2 = build_kernels.face_crosses(v, f)
+            nondegenerate = area2 > 0.0
+            if not nondegenerate.all():
+                log.warning("%s: object '%s': dropped %d zero-area faces",
+                            source, part.name, int((~nondegenerate).sum()))
+                f, face_normals = f[nondegenerate], face_normals[nondegenerate]
+            if not len(f):
+                log.warning("%s: object '%s' has no renderable triangles; skipped", source, part.name)
+                continue
+            # non-finite vertices that no face uses are harmless but must not reach Embree
+            vertices.append(np.where(np.isfinite(v), v, 0.0))
+            faces.append(f + offset)
+            normals.append(face_normals)
+            vn, face_smooth = _unit_vertex_normals(part.vertex_normals, v, f)
+            vnormals.append(vn)
+            smooth.append(face_smooth)
+            uvs.append(_vertex_attribute(part.uv, len(v), 2, 0.0, "texture coordinates",
+                                         source, part.name))
+            colours.append(_vertex_attribute(part.vertex_colors, len(v), 4, 1.0, "vertex colours",
+                                             source, part.name))
+            mat_ids.append(np.full(len(f), part.material, dtype=np.int32))
+            obj_ids.append(np.full(len(f), len(names), dtype=np.int32))
+            if part.motion is not None:
+                motions[len(names)] = _with_centre(part.motion, v[np.unique(f)])
+            names.append(part.name)
+            offset += len(v)
+        if not faces:
+            raise MeshError(f"{source}: nothing to render (no non-degenerate triangles with finite vertices)")
+        smooth_faces = np.concatenate(smooth)
+        if smooth_faces.any():
+            vertex_normals = np.concatenate(vnormals)
+        else:
+            # flat shading everywhere: no normal interpolation stage at all
+            vertex_normals, smooth_faces = None, None
+        uv = None if all(a is None for a in uvs) else np.concatenate(
+            [np.zeros((len(v), 2)) if a is None else a for v, a in zip(vertices, uvs)])
+        vertex_colors = None if all(a is None for a in colours) else np.concatenate(
+            [np.ones((len(v), 4)) if a is None else a for v, a in zip(vertices, colours)])
+        vertices = np.concatenate(vertices)
+        faces = np.concatenate(faces).astype(np.int32)
+        scene = cls(
+            vertices=vertices,
+            faces=faces,
+            face_normals=np.concatenate(normals),
+            vertex_normals=vertex_normals,
+            smooth=smooth_faces,
+            material_id=np.concatenate(mat_ids),
+            object_id=np.concatenate(obj_ids),
+            object_names=names,
+            materials=MaterialTable(materials),
+            lights=list(lights) if lights is not None else [],
+            camera=camera,
+            ambient=np.asarray(ambient if ambient is not None else np.zeros(3), dtype=np.float64),
+            background=(background if hasattr(background, "radiance") else
+                        np.asarray(background if background is not None else np.zeros(3), dtype=np.float64)),
+            motions=motions,
+            uv=uv,
+            vertex_colors=vertex_colors,
+        )
+        if camera is None:
+            scene.camera = frame_bounds(scene.bounds, aspect=aspect)
+        if lights is None:
+            scene.lights = default_lights(scene.camera)
+        return scene
+
+
+def _vertex_attribute(values, count, width, fill, what, source, name):
+    """A per-vertex attribute as ``(count, width)`` float64, or None if absent or unusable.
+
+    Non-finite entries are replaced by ``fill`` with a warning naming the object; an
+    attribute with the wrong number of rows is dropped with a warning.  Colours with three
+    channels get an opaque alpha.
+    """
+    if values is None:
+        return None
+    a = np.asarray(values, dtype=np.float64)
+    if a.ndim != 2 or len(a) != count or a.shape[1] not in (width, width - 1 if width == 4 else width):
+        log.warning("%s: object '%s': %s do not match the vertices; ignored", source, name, what)
+        return None
+    if a.shape[1] < width:
+        a = np.concatenate([a, np.full((len(a), width - a.shape[1]), 1.0)], axis=1)
+    finite = np.isfinite(a)
+    if not finite.all():
+        log.warning("%s: object '%s': %d non-finite %s replaced by %g", source, name,
+                    int((~finite.all(axis=1)).sum()), what, fill)
+        a = np.where(finite, a, fill)
+    return a
+
+
+def _with_centre(motion, points):
+    """``motion`` rotating about the centre of ``points``' bounds unless it has a centre."""
+    if motion.centre is not None:
+        return motion
+    return dataclasses.replace(motion, centre=0.5 * (points.min(axis=0) + points.max(axis=0)))
+
+
+def _unit_vertex_normals(vertex_normals, vertices, faces):
+    """Unit vertex normals and the faces that can use them.
+
+    Returns
+    -------
+    normals : (v, 3) float
+        Unit normals (zero rows where the input was unusable).
+    smooth : (f,) bool
+        True for faces whose three vertex normals are all usable; the others shade flat.
+    """
+    if vertex_normals is None:
+        return np.zeros_like(vertices), np.zeros(len(faces), dtype=bool)
+    vn = np.ascontiguousarray(vertex_normals, dtype=np.float64).reshape(-1, 3)
+    if len(vn) < len(vertices) and len(faces) and faces.max() >= len(vn):
+        raise IndexError(f"{len(vn)} vertex normals for faces using {faces.max() + 1} vertices")
+    # vn / |vn| where the length is finite and positive, else 0, in one compiled pass
+    return build_kernels.unit_rows(vn, faces)
+
+
+def default_lights(camera):
+    """A three-light rig (key, fill, rim) of directional lights placed relative to the camera.
+
+    Directional lights make the rig independent of the scene's scale.
+
+    Parameters
+    ----------
+    camera : Camera
+
+    Returns
+    -------
+    list of DirectionalLight
+    """
+    forward, right, up = camera.frame()
+    key = forward - 0.8 * right - 0.9 * up  # from upper left, in front of the subject
+    fill = forward + 0.9 * right - 0.2 * up  # from the right, weaker
+    rim = -forward - 0.3 * right - 0.8 * up  # from behind, separates the silhouette
+    return [
+        DirectionalLight(key, irradiance=np.full(3, 1.0)),
+        DirectionalLight(fill, irradiance=np.full(3, 0.35)),
+        DirectionalLight(rim, irradiance=np.full(3, 0.5)),
+    ]

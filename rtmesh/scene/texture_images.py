@@ -1,0 +1,175 @@
+"""Image textures: decoding to linear float and bilinear lookup with wrap modes."""
+
+import os
+
+import numpy as np
+
+from rtmesh.core.errors import MeshError, RtmeshError
+from rtmesh.io.colour import srgb_to_linear
+
+# formats whose values are linear already (everything else is 8/16-bit display-encoded)
+_LINEAR_FORMATS = (".exr", ".hdr")
+
+WRAP_MODES = ("repeat", "clamp", "mirror")
+
+
+class Texture:
+    """An image addressed by UV coordinates.
+
+    Parameters
+    ----------
+    pixels : (h, w, c) float
+        Texel values, row 0 at the top of the image; already linear.
+    wrap : {"repeat", "clamp", "mirror"} or (str, str)
+        What UVs outside [0, 1] read: one mode for both axes, or a mode for u and one for v
+        (glTF samplers set ``wrapS`` and ``wrapT`` apart).
+    name : str
+        For messages.
+
+    Notes
+    -----
+    UV (0, 0) is the bottom-left corner of the image and (1, 1) the top-right (the OBJ and
+    OpenGL convention; trimesh converts glTF's top-left origin to it).  Texel centres sit at
+    half-integer positions, so a UV at a texel centre reads that texel exactly.
+    """
+
+    def __init__(self, pixels, wrap="repeat", name="texture"):
+        modes = (wrap, wrap) if isinstance(wrap, str) else tuple(wrap)
+        if len(modes) != 2 or any(mode not in WRAP_MODES for mode in modes):
+            raise ValueError(f"unknown wrap mode {wrap!r}; expected one of {', '.join(WRAP_MODES)}"
+                             " or a pair of them")
+        pixels = np.asarray(pixels, dtype=np.float64)
+        if pixels.ndim == 2:
+            pixels = pixels[:, :, None]
+        self.pixels = pixels
+        self.wrap = wrap
+        self.wrap_u, self.wrap_v = modes
+        self.name = name
+
+    @classmethod
+    def from_8bit(cls, pixels, srgb=True, **options):
+        """A texture from 8-bit texels, sRGB-decoded for colour data.
+
+        Parameters
+        ----------
+        pixels : (h, w, c) uint8
+        srgb : bool
+            True for colour textures (base colour, diffuse); False for data (normals,
+            roughness), which are stored linearly.
+        """
+        values = np.asarray(pixels, dtype=np.float64) / 255.0
+        if srgb:
+            # alpha is always linear
+            colour = srgb_to_linear(values[..., :3])
+            values = np.concatenate([colour, values[..., 3:]], axis=-1)
+        return cls(values, **options)
+
+    @classmethod
+    def from_pil(cls, image, srgb=True, **options):
+        """A texture from a PIL image (as trimesh decodes them), keeping alpha if present."""
+        mode = "RGBA" if image.mode in ("RGBA", "LA", "PA") or "transparency" in image.info else "RGB"
+        return cls.from_8bit(np.asarray(image.convert(mode)), srgb=srgb, **options)
+
+    @property
+    def channels(self):
+        return self.pixels.shape[2]
+
+    @staticmethod
+    def _wrap(i, size, mode):
+        if mode == "repeat":
+            return np.mod(i, size)
+        if mode == "clamp":
+            return np.clip(i, 0, size - 1)
+        period = np.mod(i, 2 * size)
+        return np.where(period < size, period, 2 * size - 1 - period)
+
+    def sample(self, uv):
+        """Bilinearly filtered texel values at UV coordinates.
+
+        Parameters
+        ----------
+        uv : (k, 2) float
+
+        Returns
+        -------
+        (k, c) float64
+        """
+        h, w, _ = self.pixels.shape
+        x = uv[:, 0] * w - 0.5
+        y = (1.0 - uv[:, 1]) * h - 0.5  # v grows upward, rows grow downward
+        x0, y0 = np.floor(x), np.floor(y)
+        fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+        x0, y0 = x0.astype(np.int64), y0.astype(np.int64)
+        xs = (self._wrap(x0, w, self.wrap_u), self._wrap(x0 + 1, w, self.wrap_u))
+        ys = (self._wrap(y0, h, self.wrap_v), self._wrap(y0 + 1, h, self.wrap_v))
+        p = self.pixels
+        top = p[ys[0], xs[0]] * (1.0 - fx) + p[ys[0], xs[1]] * fx
+        bottom = p[ys[1], xs[0]] * (1.0 - fx) + p[ys[1], xs[1]] * fx
+        return top * (1.0 - fy) + bottom * fy
+
+    def height_to_normals(self, strength=1.0):
+        """A tangent-space normal map from this height map (first channel).
+
+        Central differences in texels, times ``strength`` (MTL ``-bm``): the normal of the
+        height field ``h(x, y)`` is ``(-dh/dx, -dh/dy, 1)`` normalised, with y growing with v
+        (up the image), stored as the usual ``0.5 + 0.5 n``.
+
+        Returns
+        -------
+        Texture
+            Linear, 3 channels.
+        """
+        height = self.pixels[:, :, 0] * float(strength)
+        dh_drow, dh_dx = np.gradient(height)
+        n = np.stack([-dh_dx, dh_drow, np.ones_like(height)], axis=2)  # rows grow downward
+        n /= np.linalg.norm(n, axis=2, keepdims=True)
+        return Texture(0.5 + 0.5 * n, wrap=self.wrap, name=f"{self.name} (normals)")
+
+
+def load_texture(path, srgb=True, wrap="repeat", cache=None):
+    """Read an image file as a :class:`Texture`, once per (path, srgb, wrap) in ``cache``.
+
+    Parameters
+    ----------
+    path : str
+    srgb : bool
+        Decode 8-bit colour channels from sRGB (colour maps); False for data maps.  EXR and
+        HDR files (read with OpenImageIO) are linear already; other formats are read with
+        PIL, 8 bits per channel.
+    wrap : str
+    cache : dict, optional
+
+    Raises
+    ------
+    MeshError
+        The file exists but cannot be decoded (one line naming it).
+    """
+    key = (os.path.abspath(path), srgb, wrap)
+    if cache is not None and key in cache:
+        return cache[key]
+    if os.path.splitext(path)[1].lower() not in _LINEAR_FORMATS:
+        # 8-bit images through PIL (trimesh's decoder): it reports a corrupt file as an
+        # exception, where libpng under OpenImageIO also prints to stderr
+        from PIL import Image, UnidentifiedImageError
+
+        try:
+            with Image.open(path) as image:
+                image.load()
+                return _cached(cache, key, Texture.from_pil(image, srgb=srgb, wrap=wrap,
+                                                            name=os.path.basename(path)))
+        except (OSError, UnidentifiedImageError, SyntaxError, ValueError) as exc:
+            raise MeshError(f"{path}: corrupt or unreadable texture ({exc})") from None
+    from rtmesh.io.images import read_image  # image_io imports the pass registry; keep this module light
+
+    try:
+        pixels, _ = read_image(path)
+    except RtmeshError as exc:
+        detail = str(exc).splitlines()[0].removeprefix(f"{path}: ")
+        raise MeshError(f"{path}: corrupt or unreadable texture ({detail})") from None
+    return _cached(cache, key, Texture(pixels, wrap=wrap, name=os.path.basename(path)))
+
+
+def _cached(cache, key, texture):
+    if cache is not None:
+        cache[key] = texture
+    return texture

@@ -1,0 +1,1 @@
+"""Compiled per-hit kernels of shading: surface records, light evaluation, Blinn-Phong, direct-light sums, film sums."""
