@@ -11,12 +11,11 @@ OpenImageIO writes the images.
 
 __version__ = "0.1.0"
 
+from rtmesh.api import load_scene, render  # noqa: E402
 from rtmesh.batch.runner import batch_convert  # noqa: E402
 from rtmesh.core.errors import MeshError, OutputError, RtmeshError, SceneError  # noqa: E402
 from rtmesh.io.images import read_image, write_image  # noqa: E402
 from rtmesh.rendering.settings import RenderSettings  # noqa: E402
-
-from rtmesh.api import load_scene, render  # noqa: E402
 
 __all__ = ["load_scene", "render", "batch_convert", "write_image", "read_image", "RenderSettings",
            "RtmeshError", "SceneError", "MeshError", "OutputError", "__version__"]

@@ -7,6 +7,7 @@ import sys
 import time
 
 from rtmesh import __version__
+from rtmesh.api import load_scene
 from rtmesh.core import runtime
 from rtmesh.core.errors import RtmeshError
 from rtmesh.io.colour import TONEMAPS
@@ -16,8 +17,6 @@ from rtmesh.rendering.integrator import Integrator
 from rtmesh.rendering.settings import FRESNEL_MODES, PASSES
 from rtmesh.sampling.patterns import SAMPLERS
 from rtmesh.scene.background import background_from_option
-
-from rtmesh.api import load_scene
 
 EXIT_USER_ERROR = 2
 

@@ -22,7 +22,8 @@ from rtmesh.geometry.accel import Accel
 from rtmesh.lights.area_lights import AreaLighting, DiskLight, QuadLight, emissive_mesh_light
 from rtmesh.lights.point_lights import PointLight
 from rtmesh.loaders.scene_file import scene_from_dict
-from rtmesh.materials.table import Material, blinn_phong
+from rtmesh.materials.blinn_phong import blinn_phong
+from rtmesh.materials.table import Material
 from rtmesh.rendering.stats import RenderStats
 from rtmesh.sampling.patterns import Dim, decorrelated_points
 from rtmesh.sampling.sampler import light_dimension

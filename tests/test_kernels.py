@@ -6,10 +6,13 @@ import math
 import numpy as np
 import pytest
 
+from rtmesh.core.compiled import kernel
 from rtmesh.geometry.accel import offset_ray_origins
 from rtmesh.lights.point_lights import DirectionalLight, PointLight, SpotLight
-from rtmesh.shading import kernels
-from rtmesh.shading.kernels import face_viewer
+from rtmesh.rendering import film_sums
+from rtmesh.scene import camera_rays
+from rtmesh.shading import direct_light, surfaces
+from rtmesh.shading.surfaces import face_viewer
 
 
 def unit_rows(rng, n):
@@ -63,13 +66,13 @@ def test_light_samples_match_the_scalar_formulas(light):
     exponent = np.array([50.0, -1.0, 7.5])  # the middle material has no highlight
     tint = rng.uniform(0.2, 1.0, size=(n, 3))
     (lit, origins, directions, t_max, cos_i, incident, highlight_rows, highlight,
-     power_exponent) = kernels.light_samples(light.kernel_parameters(), p, ng, ns, d, mat, exponent,
-                                             kernels.highlight_thresholds(exponent), np.float32(2.0), 1.0 - 1e-5)
+     power_exponent) = direct_light.light_samples(light.kernel_parameters(), p, ng, ns, d, mat, exponent,
+                                             direct_light.highlight_thresholds(exponent), np.float32(2.0), 1.0 - 1e-5)
     # the Blinn-Phong term goes to the rows whose shadow rays are clear
     occluded = np.zeros(len(lit), dtype=bool)
     occluded[::5] = True
     total = np.zeros((n, 3))
-    kernels.add_light(total, lit, lit, occluded, cos_i, incident, highlight_rows,
+    direct_light.add_light(total, lit, lit, occluded, cos_i, incident, highlight_rows,
                       np.power(highlight, power_exponent), mat, diffuse, tint, specular, np.zeros((0, 3)))
     expected_lit = []
     expected_total = np.zeros((n, 3))
@@ -123,7 +126,7 @@ def test_surface_records_match_the_formulas():
     directions = np.asfortranarray(unit_rows(rng, 2 * n))
     rows = np.flatnonzero(prim >= 0)
     for fix in (False, True):
-        p, ng, ns, front, mat = kernels.surface_records(prim, u, v, rows, directions, np.zeros((0, 3)), faces,
+        p, ng, ns, front, mat = surfaces.surface_records(prim, u, v, rows, directions, np.zeros((0, 3)), faces,
                                                         vertex_normals, smooth, material_id, fix)
         f, a, b, dr = prim[rows], u[rows], v[rows], directions[rows]
         np.testing.assert_allclose(p, v0[f] + a[:, None] * e1[f] + b[:, None] * e2[f], rtol=1e-12, atol=1e-12)
@@ -154,7 +157,7 @@ def test_pinhole_and_thin_lens_camera_rays():
     position = np.array([1.0, 2.0, 3.0])
     plane = np.array([0.02, -0.64, -0.02, 0.64])
     whole_film = np.zeros(0, np.int64)
-    origins, d = kernels.camera_rays(film, whole_film, 64, np.zeros((0, 2)), position, forward, right, up,
+    origins, d = camera_rays.camera_rays(film, whole_film, 64, np.zeros((0, 2)), position, forward, right, up,
                                      plane, 5.0)
     assert origins.shape == (0, 3)
     sx, sy = film[:, 0] * plane[0] + plane[1], film[:, 1] * plane[2] + plane[3]
@@ -162,12 +165,12 @@ def test_pinhole_and_thin_lens_camera_rays():
     np.testing.assert_allclose(d, expected / np.linalg.norm(expected, axis=1)[:, None], rtol=1e-14)
     # the same rays from pixel indices and positions inside the pixels
     pixels = np.floor(film[:, 1]).astype(np.int64) * 64 + np.floor(film[:, 0]).astype(np.int64)
-    _, d_pixels = kernels.camera_rays(film - np.floor(film), pixels, 64, np.zeros((0, 2)), position, forward,
+    _, d_pixels = camera_rays.camera_rays(film - np.floor(film), pixels, 64, np.zeros((0, 2)), position, forward,
                                       right, up, plane, 5.0)
     np.testing.assert_allclose(d_pixels, d, rtol=1e-13)
     # thin lens: every ray through a film point meets the pinhole ray on the plane of focus
     disk = rng.uniform(-0.1, 0.1, size=(n, 2))
-    origins, d_lens = kernels.camera_rays(film, whole_film, 64, disk, position, forward, right, up, plane, 5.0)
+    origins, d_lens = camera_rays.camera_rays(film, whole_film, 64, disk, position, forward, right, up, plane, 5.0)
     np.testing.assert_allclose(origins, position + disk[:, :1] * right + disk[:, 1:] * up, rtol=1e-14)
     t = 5.0 / (d_lens @ forward)
     np.testing.assert_allclose(origins + t[:, None] * d_lens, position + 5.0 * expected, rtol=1e-12)
@@ -181,19 +184,19 @@ def test_film_sums_and_means():
     count = np.zeros(10, np.int64)
     count[pixels[:2]] = 1  # these two add to what is there (a sample of 0), the others start from nothing
     total[pixels[2:]] = total_sq[pixels[2:]] = np.nan
-    kernels.accumulate_samples(total, total_sq, count, pixels, radiance, np.zeros((0, 3), np.float32))
+    film_sums.accumulate_samples(total, total_sq, count, pixels, radiance, np.zeros((0, 3), np.float32))
     np.testing.assert_allclose(total[pixels], radiance.sum(axis=1), rtol=1e-15)
     np.testing.assert_allclose(total_sq[pixels], (radiance ** 2).sum(axis=1), rtol=1e-15)
     count[pixels] += 3
     means = np.full((10, 3), np.nan, dtype=np.float32)
-    kernels.mean_image(total, count, means)
+    film_sums.mean_image(total, count, means)
     assert means.dtype == np.float32
     np.testing.assert_allclose(means[pixels], radiance.sum(axis=1) / [[4], [4], [3], [3]], rtol=1e-7)
     assert not means[[1, 3, 4, 6, 8, 9]].any()  # no samples: 0
     # the means written with the sums are mean_image's, bit for bit; other pixels untouched
     count[pixels] -= 3
     again = np.full((10, 3), -1.0, dtype=np.float32)
-    kernels.accumulate_samples(np.zeros((10, 3), order="F"), np.zeros((10, 3), order="F"), count, pixels,
+    film_sums.accumulate_samples(np.zeros((10, 3), order="F"), np.zeros((10, 3), order="F"), count, pixels,
                                radiance, again)
     np.testing.assert_array_equal(again[pixels], means[pixels])
     assert (np.delete(again, pixels, axis=0) == -1).all()
@@ -207,7 +210,7 @@ def test_camera_rays_find_the_row_and_column_of_every_pixel_index(width):
     rows = np.arange(1, 60)
     pixels = np.unique(np.concatenate([rows * width, rows * width - 1, rng.integers(0, width * 70000, 2000)]))
     # image plane (1, 0, 1, 0): sx is the film x, sy the film y, direction ~ (sx, sy, 1)
-    _, d = kernels.camera_rays(np.zeros((len(pixels), 2)), pixels, width, np.zeros((0, 2)), np.zeros(3),
+    _, d = camera_rays.camera_rays(np.zeros((len(pixels), 2)), pixels, width, np.zeros((0, 2)), np.zeros(3),
                                np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]),
                                np.array([1.0, 0.0, 1.0, 0.0]), 1.0)
     np.testing.assert_allclose(d[:, 0] / d[:, 2], pixels % width, rtol=1e-12, atol=1e-9)
@@ -216,7 +219,7 @@ def test_camera_rays_find_the_row_and_column_of_every_pixel_index(width):
 
 def test_highlight_powers_below_float64_range_are_dropped_and_shininess_zero_is_one():
     exponent = np.array([5000.0, 0.0, -1.0])
-    threshold = kernels.highlight_thresholds(exponent)
+    threshold = direct_light.highlight_thresholds(exponent)
     assert threshold[0] ** 5000.0 == pytest.approx(2.0 ** -1000, rel=1e-9)
     assert threshold[1] == 0.0 and threshold[2] == np.inf
     # one point, light straight above, viewer at grazing angles: highlight cosines from ~1 to ~0
@@ -228,7 +231,7 @@ def test_highlight_powers_below_float64_range_are_dropped_and_shininess_zero_is_
     light = PointLight([0.0, 0.0, 1.0], [1.0, 1.0, 1.0]).kernel_parameters()
     for m in range(3):
         mat = np.full(n, m, dtype=np.intp)
-        lit, *_, cos_i, incident, rows, highlight, power_exponent = kernels.light_samples(
+        lit, *_, cos_i, incident, rows, highlight, power_exponent = direct_light.light_samples(
             light, p, up, up, d, mat, exponent, threshold, np.float32(1.0), 1.0)
         assert len(lit) == n
         if m == 0:
@@ -250,7 +253,7 @@ def test_kernels_compile_without_a_writable_cache_directory():
     import numba
     with pytest.raises(RuntimeError, match="cannot cache"):
         numba.njit(cache=True)(namespace["twice"])
-    twice = kernels.kernel(namespace["twice"])
+    twice = kernel(namespace["twice"])
     assert twice(1.5) == 3.0
 
 
@@ -260,7 +263,7 @@ def test_add_rows_adds_into_the_given_rows_only():
     rows, values = np.array([8, 0, 4]), rng.uniform(size=(3, 3))
     expected = target.copy()
     expected[rows] += values
-    kernels.add_rows(target, rows, np.asfortranarray(values))
+    film_sums.add_rows(target, rows, np.asfortranarray(values))
     np.testing.assert_array_equal(target, expected)
 
 
@@ -281,5 +284,5 @@ def test_pixel_errors_equal_the_numpy_expressions(display):
     std_err = np.sqrt(np.where(nf > 1, np.maximum(var, 0.0), 0.0) / np.maximum(nf, 1))
     scale = np.abs(mean) + floor
     expected = np.where(count >= 2, np.mean(std_err / (np.sqrt(scale) if display else scale), axis=1), np.nan)
-    got = kernels.pixel_errors(np.asfortranarray(total), np.asfortranarray(total_sq), count, 0, n, floor, display)
+    got = film_sums.pixel_errors(np.asfortranarray(total), np.asfortranarray(total_sq), count, 0, n, floor, display)
     np.testing.assert_array_equal(got, expected)

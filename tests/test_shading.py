@@ -7,7 +7,8 @@ import pytest
 from scenes import box, floor_quad, part, pixel_centre_rays, render
 
 from rtmesh.lights.point_lights import DirectionalLight, PointLight, SpotLight
-from rtmesh.materials.table import Material, MaterialTable, blinn_phong
+from rtmesh.materials.blinn_phong import blinn_phong
+from rtmesh.materials.table import Material, MaterialTable
 from rtmesh.scene.camera import Camera
 from rtmesh.scene.model import Scene
 

@@ -313,7 +313,7 @@ def test_orthonormal_basis_at_exactly_minus_z_and_signed_zero():
 
 def test_face_viewer_bends_only_normals_facing_away_and_keeps_them_above_the_surface():
     from rtmesh.core.vecmath import normalize
-    from rtmesh.shading.kernels import face_viewer
+    from rtmesh.shading.surfaces import face_viewer
 
     rng = np.random.default_rng(3)
     n = 2000

@@ -14,7 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from rtmesh.core.vecmath import dot, fresnel_dielectric, fresnel_schlick, normalize, reflect, refract
-from rtmesh.materials.table import Material, blinn_phong
+from rtmesh.materials.blinn_phong import blinn_phong
+from rtmesh.materials.table import Material
 
 
 @dataclass

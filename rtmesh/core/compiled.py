@@ -5,8 +5,9 @@ file* is unchanged.  A kernel that calls a jitted function of another module wou
 stale machine code after only that other module changed (an upgrade that touches one file,
 or a developer's edit).  rtmesh's kernels call each other across modules (a fused stage
 calls the packet tracing of :mod:`rtmesh.geometry.embree_packets` and the shading rows of
-:mod:`rtmesh.shading.kernels`), so their cache entries are stamped with one hash of all of
-:data:`KERNEL_MODULES` instead: a change to any of them recompiles all of them, once.
+:mod:`rtmesh.shading.surfaces`), so their cache entries are stamped with one hash of every
+module with compiled code (:func:`kernel_modules`) instead: a change to any of them
+recompiles all of them, once.
 
 Everything else is numba's own cache: the same directories (the package's
 ``__pycache__``, else the user's cache directory, or ``NUMBA_CACHE_DIR``), file names and
@@ -16,23 +17,51 @@ index format.
 import functools
 import hashlib
 import os
+import re
 
 import numba
 from numba.core import caching
 
-# Every module of the package that defines compiled code; tests/test_compiled.py checks
-# that none is missing.
-KERNEL_MODULES = ("core/compiled.py", "shading/kernels.py", "geometry/embree_packets.py", "rendering/direct_stage.py",
-                  "geometry/build_kernels.py", "sampling/pixel_samples.py", "sampling/hashing.py")
-# the rtmesh package directory: KERNEL_MODULES are paths relative to it
+# the rtmesh package directory
 _PACKAGE = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+# what a module with compiled code imports
+_COMPILES = re.compile(rb"^(from rtmesh\.core\.compiled import|import numba|from numba)", re.M)
+
+
+def kernel_modules(package=None):
+    """Every module of the package that has compiled code: those that import this module
+    or numba, found by reading the sources (so a new light or material module with kernels
+    needs no list to be kept).
+
+    Parameters
+    ----------
+    package : str, optional
+        The package directory (default: rtmesh's).
+
+    Returns
+    -------
+    tuple of str
+        Paths relative to the package directory, ``/``-separated, sorted.
+    """
+    package = package or _PACKAGE
+    found = []
+    for folder, subfolders, files in os.walk(package):
+        subfolders[:] = sorted(d for d in subfolders if d != "__pycache__")
+        for name in files:
+            if name.endswith(".py"):
+                path = os.path.join(folder, name)
+                with open(path, "rb") as source:
+                    if _COMPILES.search(source.read()):
+                        found.append(os.path.relpath(path, package).replace(os.sep, "/"))
+    return tuple(sorted(found))
 
 
 @functools.cache
 def package_stamp():
-    """SHA-256 of the sources of :data:`KERNEL_MODULES`, read once per process."""
+    """SHA-256 of the sources of :func:`kernel_modules` (and their paths), read once per
+    process."""
     digest = hashlib.sha256()
-    for name in KERNEL_MODULES:
+    for name in kernel_modules():
         with open(os.path.join(_PACKAGE, name), "rb") as source:
             digest.update(name.encode() + b"\0" + source.read())
     return digest.digest()

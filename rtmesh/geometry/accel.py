@@ -19,10 +19,9 @@ from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
 from rtmesh.core.rays import repeated_row, take_rows
-from rtmesh.geometry import embree_packets
-from rtmesh.shading import kernels
+from rtmesh.geometry import embree_packets, float32_rays
+from rtmesh.geometry.float32_rays import F32_MAX
 
-_F32_MAX = float(np.finfo(np.float32).max)
 _NO_ROWS = np.zeros(0, dtype=np.int64)
 # Every query asks for Embree's coherent packet traversal.  Camera rays and shadow rays
 # toward one point light gain most (3-4x the rays per second of run(), see
@@ -87,7 +86,7 @@ def offset_ray_origins(points, normals, dtype=np.float64, scale=1.0, directions=
         float32, so handing them to Embree does not round them back onto the surface.
     """
     no_directions = np.zeros((0, 3), dtype=np.float32)
-    origins = kernels.offset_origins(points, normals, no_directions if directions is None else directions,
+    origins = float32_rays.offset_origins(points, normals, no_directions if directions is None else directions,
                                      np.float32(scale))
     return origins.astype(dtype, copy=False)
 
@@ -108,7 +107,7 @@ def float32_ulp(x):
     (...) float32
         Laid out like ``x``.
     """
-    return kernels.ulp32(x)
+    return float32_rays.ulp32(x)
 
 
 class Hits:
@@ -226,7 +225,7 @@ class Accel:
             return Hits(t, prim, u, v)
         result = self._scene.run(_embree_rays(origins), _embree_rays(directions), output=1)
         prim = result["primID"]
-        t, u, v = kernels.closest_hits(result["tfar"], prim, result["u"], result["v"])
+        t, u, v = float32_rays.closest_hits(result["tfar"], prim, result["u"], result["v"])
         return Hits(t, prim, u, v)
 
     def occluded(self, origins, directions, t_max, rows=None, time=None):
@@ -260,7 +259,7 @@ class Accel:
         # embreex writes into the distance array it is given: always pass a fresh one.
         # float32 max stands in for inf, which Embree's robust mode handles less predictably.
         # (for float32 input, as light_samples gives, one ufunc call: this runs per chunk)
-        t = np.minimum(t_max, _F32_MAX).astype(np.float32, copy=False)
+        t = np.minimum(t_max, F32_MAX).astype(np.float32, copy=False)
         o, d = _embree_rays(origins, rows), _embree_rays(directions, rows)
         return self._scene.run(o, d, dists=t, query="OCCLUDED") != -1
 

@@ -33,6 +33,7 @@ import numpy as np
 from numba import types
 
 from rtmesh.core.compiled import fix_signatures, kernel, row
+from rtmesh.geometry.float32_rays import F32_MAX
 
 log = logging.getLogger(__name__)
 
@@ -60,7 +61,6 @@ _RTC_DEVICE_PROPERTY_VERSION_PATCH = 3
 # the distance embreex gives closest-hit rays (run()'s default tfar): the same value keeps
 # both paths' hits identical
 DEFAULT_TFAR = np.float32(1e37)
-_F32_MAX = float(np.finfo(np.float32).max)
 _F32_ZERO = np.float32(0.0)
 # Direction components smaller than this (Embree's min_rcp_input) are given to Embree as 0.
 # Embree clamps 1/d of such components, and its coherent packet traversal then culls
@@ -259,7 +259,7 @@ def shadow_rays(origins, directions, t_max):
     t_max : (n,) float32
     """
     # np.minimum keeps a NaN (as the kernel did) and keeps float32 input float32
-    t_max = np.minimum(t_max, _F32_MAX).astype(np.float32, copy=False)
+    t_max = np.minimum(t_max, F32_MAX).astype(np.float32, copy=False)
     return (np.asarray(origins, dtype=np.float32), np.asarray(directions, dtype=np.float32), t_max)
 
 

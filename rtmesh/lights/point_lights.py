@@ -10,9 +10,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rtmesh.lights import point_light_rows
 from rtmesh.lights.light_types import LightType, aim
 from rtmesh.materials.table import as_colour
-from rtmesh.shading import kernels
 
 
 def _parameters(kind, position=(0.0, 0.0, 0.0), direction=(0.0, 0.0, 0.0), power=(0.0, 0.0, 0.0),
@@ -55,11 +55,11 @@ class PointLight:
         incident : (k, 3) float
             ``intensity / distance^2`` (inverse-square falloff).
         """
-        return kernels.illuminate(self.kernel_parameters(), np.asarray(points, dtype=np.float64))
+        return point_light_rows.illuminate(self.kernel_parameters(), np.asarray(points, dtype=np.float64))
 
     def kernel_parameters(self):
         """The light packed for :mod:`rtmesh.shading.kernels` (12,)."""
-        return _parameters(kernels.POINT, self.position, power=self.intensity)
+        return _parameters(point_light_rows.POINT, self.position, power=self.intensity)
 
     @property
     def is_black(self):
@@ -91,11 +91,11 @@ class DirectionalLight:
 
     def illuminate(self, points):
         """See :meth:`PointLight.illuminate`; the distance is ``inf``."""
-        return kernels.illuminate(self.kernel_parameters(), np.asarray(points, dtype=np.float64))
+        return point_light_rows.illuminate(self.kernel_parameters(), np.asarray(points, dtype=np.float64))
 
     def kernel_parameters(self):
         """The light packed for :mod:`rtmesh.shading.kernels` (12,)."""
-        return _parameters(kernels.DIRECTIONAL, direction=self.direction, power=self.irradiance)
+        return _parameters(point_light_rows.DIRECTIONAL, direction=self.direction, power=self.irradiance)
 
     @property
     def is_black(self):
@@ -138,11 +138,11 @@ class SpotLight:
     def illuminate(self, points):
         """See :meth:`PointLight.illuminate`; the incident term includes the cone falloff,
         a smoothstep in cos(angle) from the axis between the outer and the inner angle."""
-        return kernels.illuminate(self.kernel_parameters(), np.asarray(points, dtype=np.float64))
+        return point_light_rows.illuminate(self.kernel_parameters(), np.asarray(points, dtype=np.float64))
 
     def kernel_parameters(self):
         """The light packed for :mod:`rtmesh.shading.kernels` (12,)."""
-        return _parameters(kernels.SPOT, self.position, self.direction, self.intensity,
+        return _parameters(point_light_rows.SPOT, self.position, self.direction, self.intensity,
                            np.cos(np.radians(self.inner_angle)), np.cos(np.radians(self.outer_angle)))
 
     @property

@@ -19,8 +19,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rtmesh.shading import kernels
-
 
 def as_colour(value):
     """A colour from a number (grey) or three numbers, as a (3,) float64 array."""
@@ -195,36 +193,3 @@ class MaterialTable:
     def any_absorption(self):
         """True if any refracting material absorbs inside."""
         return bool(((self.absorption > 0).any(axis=1) & (self.transmission > 0).any(axis=1)).any())
-
-
-def blinn_phong(n, wo, wi, diffuse, specular, shininess):
-    """Blinn-Phong reflected-radiance factor for unit incident light.
-
-    Parameters
-    ----------
-    n : (k, 3) float
-        Unit shading normals.
-    wo, wi : (k, 3) float
-        Unit directions toward the viewer and toward the light.
-    diffuse : (k, 3) float
-        kd.
-    specular : (k, 3) float or None
-        ks; None for no highlight.
-    shininess : (k,) float or None
-        Specular exponent.
-
-    Returns
-    -------
-    (k, 3) float
-        ``kd * max(0, n.wi) + ks * max(0, n.h)^shininess`` (the specular term only where
-        ``n.wi > 0``), to be multiplied by the light's intensity / distance^2 or irradiance.
-    """
-    n = np.asarray(n, dtype=np.float64)
-    wo, wi, diffuse = (np.broadcast_to(np.asarray(a, dtype=np.float64), n.shape) for a in (wo, wi, diffuse))
-    if specular is None:
-        # empty arrays tell the kernel there is no highlight
-        specular, shininess = np.zeros((0, 3)), np.zeros(0)
-    else:
-        specular = np.broadcast_to(np.asarray(specular, dtype=np.float64), n.shape)
-        shininess = np.broadcast_to(np.asarray(shininess, dtype=np.float64), n.shape[:1])
-    return kernels.blinn_phong(n, wo, wi, diffuse, specular, shininess)

@@ -26,14 +26,18 @@ tracing) keeps the general path.
 import numpy as np
 
 from rtmesh.core.compiled import kernel, row
+from rtmesh.core.row_vectors import dot3
 from rtmesh.geometry import embree_packets as ep
 from rtmesh.geometry.accel import Accel
+from rtmesh.geometry.float32_rays import F32_MAX, offset_origin
+from rtmesh.lights.point_light_rows import illuminate_row
+from rtmesh.materials.blinn_phong import highlight_cosine, shade_row
 from rtmesh.sampling.pixel_samples import PixelSampler, pixel_position
 from rtmesh.scene.background import SolidBackground
-from rtmesh.shading.kernels import (SHADOW_SHORTEN, _dot, _highlight_cosine, _illuminate, _image_plane_point,
-                                    _offset, _pinhole_direction, _reaches, _shade, _surface_record)
+from rtmesh.scene.camera_rays import image_plane_point, pinhole_direction
+from rtmesh.shading.direct_light import SHADOW_SHORTEN, light_reaches
+from rtmesh.shading.surfaces import surface_record
 
-_F32_MAX = float(np.finfo(np.float32).max)
 _NO_TINT = np.zeros((0, 3))
 _NO_POSITIONS = np.zeros((0, 2))
 LANES = ep.LANES
@@ -262,7 +266,7 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
             mat[b] = material_id[f]
             interpolate = has_smooth & smooth[f]
             (srf[0, b], srf[1, b], srf[2, b], srf[3, b], srf[4, b], srf[5, b], srf[6, b], srf[7, b], srf[8, b],
-             _) = _surface_record(f, np.float64(rays[ep.U * LANES + at]), np.float64(rays[ep.V * LANES + at]),
+             _) = surface_record(f, np.float64(rays[ep.U * LANES + at]), np.float64(rays[ep.V * LANES + at]),
                                   d[0, b], d[1, b], d[2, b], faces, vertex_normals, interpolate, fix_terminator)
         # each light: samples (rtmesh.shading.kernels.light_samples) and the shadow packets
         for k in range(n_lights):
@@ -347,8 +351,8 @@ def _camera_block(film_xy, sampler, keys, corners, size, spp, pixel, sample, sta
             x, y = film_xy[i, 0], film_xy[i, 1]
         else:
             x, y = pixel_position(sampler, keys, corners, size, spp, pixel[i], sample[i])
-        sx, sy = _image_plane_point(x, y, pixel[i], width, inverse_width, image_plane)
-        d[0, b], d[1, b], d[2, b] = _pinhole_direction(sx, sy, forward, right, up)
+        sx, sy = image_plane_point(x, y, pixel[i], width, inverse_width, image_plane)
+        d[0, b], d[1, b], d[2, b] = pinhole_direction(sx, sy, forward, right, up)
     return d
 
 
@@ -379,16 +383,16 @@ def _light_block(light, srf, d, count, scale, shorten):
         px, py, pz = srf[0, b], srf[1, b], srf[2, b]
         gx, gy, gz = srf[3, b], srf[4, b], srf[5, b]
         nx, ny, nz = srf[6, b], srf[7, b], srf[8, b]
-        wx, wy, wz, distance, er, eg, eb = _illuminate(light, px, py, pz)
-        lit[b] = _reaches(wx, wy, wz, er, eg, eb, gx, gy, gz)
-        values[0, b] = _dot(nx, ny, nz, wx, wy, wz)
+        wx, wy, wz, distance, er, eg, eb = illuminate_row(light, px, py, pz)
+        lit[b] = light_reaches(wx, wy, wz, er, eg, eb, gx, gy, gz)
+        values[0, b] = dot3(nx, ny, nz, wx, wy, wz)
         values[1, b], values[2, b], values[3, b] = er, eg, eb
-        values[4, b] = _highlight_cosine(nx, ny, nz, -d[0, b], -d[1, b], -d[2, b], wx, wy, wz)
+        values[4, b] = highlight_cosine(nx, ny, nz, -d[0, b], -d[1, b], -d[2, b], wx, wy, wz)
         # the shadow ray's direction in float32, as Embree will see it, also sets the offset
         dx, dy, dz = np.float32(wx), np.float32(wy), np.float32(wz)
-        shadow_ray[0, b], shadow_ray[1, b], shadow_ray[2, b] = _offset(px, py, pz, gx, gy, gz, dx, dy, dz, scale)
+        shadow_ray[0, b], shadow_ray[1, b], shadow_ray[2, b] = offset_origin(px, py, pz, gx, gy, gz, dx, dy, dz, scale)
         shadow_ray[3, b], shadow_ray[4, b], shadow_ray[5, b] = dx, dy, dz
-        shadow_ray[6, b] = np.float32(min(distance * shorten, _F32_MAX))
+        shadow_ray[6, b] = np.float32(min(distance * shorten, F32_MAX))
     return lit, values, shadow_ray
 
 
@@ -397,7 +401,7 @@ def _add_light(d0, d1, d2, m, cos_i, power, e0, e1, e2, diffuse, specular):
     """The direct light ``(d0, d1, d2)`` plus one light's Blinn-Phong term on material ``m``
     (``power``: the raised highlight cosine, 0 without one; ``e``: its incident term), as
     :func:`rtmesh.shading.kernels.add_light` adds it."""
-    f0, f1, f2 = _shade(0, m, cos_i, power, diffuse, _NO_TINT, specular, _NO_TINT)
+    f0, f1, f2 = shade_row(0, m, cos_i, power, diffuse, _NO_TINT, specular, _NO_TINT)
     return d0 + f0 * e0, d1 + f1 * e1, d2 + f2 * e2
 
 

@@ -3,7 +3,7 @@
 import numpy as np
 
 from rtmesh.core.rays import rows_as_float32
-from rtmesh.shading import kernels
+from rtmesh.rendering import film_sums
 
 # added to a pixel's mean before dividing its standard error by it (relative errors)
 ERROR_FLOOR = 0.01
@@ -14,7 +14,7 @@ ERROR_FLOOR = 0.01
 BLOCK_PIXELS = 16384
 # blocks of Film.image on a thread pool: a few per thread balance any small thread count
 _MEAN_BLOCKS = 8
-# "no image values" for kernels.accumulate_samples
+# "no image values" for film_sums.accumulate_samples
 _NO_IMAGE = np.zeros((0, 3), dtype=np.float32)
 
 
@@ -100,7 +100,7 @@ class Film:
         index = px if isinstance(px, np.ndarray) else np.arange(px.start, px.stop)
         # a one_pass film's pixels are final: their image values are written with the sums,
         # on this thread, instead of in a serial pass after the render
-        kernels.accumulate_samples(self.sum, self.sum_sq, self.count, index, radiance,
+        film_sums.accumulate_samples(self.sum, self.sum_sq, self.count, index, radiance,
                                    _NO_IMAGE if self._image is None else self._image)
         for s in range(spp):
             for name, values in mean_passes.items():
@@ -215,12 +215,12 @@ class Film:
         """(P, k) float32: ``sums / max(count, 1)`` per pixel, in blocks on ``pool``."""
         out = np.empty(sums.shape, dtype=np.float32)
         if pool is None:
-            kernels.mean_image(sums, self.count, out)
+            film_sums.mean_image(sums, self.count, out)
             return out
         bounds = np.linspace(0, len(out), _MEAN_BLOCKS + 1).astype(int)
 
         def block(a, b):
-            kernels.mean_image(sums[a:b], self.count[a:b], out[a:b])
+            film_sums.mean_image(sums[a:b], self.count[a:b], out[a:b])
 
         list(pool.map(block, bounds[:-1], bounds[1:]))
         return out
@@ -246,10 +246,10 @@ class Film:
         ``(|mean| + floor) ** power`` (``power`` 1 or 0.5); NaN below two samples.
 
         ``px`` is a slice of pixels (see :meth:`_blocks`); one compiled pass
-        (:func:`rtmesh.shading.kernels.pixel_errors`), which adaptive sampling runs over the whole
+        (:func:`rtmesh.shading.film_sums.pixel_errors`), which adaptive sampling runs over the whole
         film after every round.
         """
-        return kernels.pixel_errors(self.sum, self.sum_sq, self.count, px.start, px.stop, floor, power != 1)
+        return film_sums.pixel_errors(self.sum, self.sum_sq, self.count, px.start, px.stop, floor, power != 1)
 
     def _per_pixel(self, floor, power):
         """(height * width,) float64 :meth:`_pixel_error_rows` of every pixel, block by

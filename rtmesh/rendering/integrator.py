@@ -38,11 +38,13 @@ from rtmesh.geometry.cutouts import CutoutAccel
 from rtmesh.geometry.motion import MotionAccel, blurs, object_motions, scene_at_time, swept_bounds
 from rtmesh.io.passes import DERIVED_PASSES, PassRecorder, derived_pass
 from rtmesh.lights.area_lights import AreaLighting, emissive_mesh_light, is_area_light
+from rtmesh.materials.blinn_phong import surface_reflectance
 from rtmesh.materials.glossy import sample_glossy_directions
 from rtmesh.materials.table import ALPHA_MODES
 from rtmesh.rendering.adaptive import render_rounds
 from rtmesh.rendering.direct_stage import DirectStage
 from rtmesh.rendering.film import Film
+from rtmesh.rendering.film_sums import add_rows
 from rtmesh.rendering.media import Media
 from rtmesh.rendering.render_plan import RenderPlan
 from rtmesh.rendering.scheduler import pixel_chunks, run_on_threads
@@ -51,8 +53,8 @@ from rtmesh.rendering.surface_textures import SurfaceTextures
 from rtmesh.sampling.sampler import Sampler
 from rtmesh.sampling.warps import square_to_cosine_hemisphere
 from rtmesh.scene.background import as_background
-from rtmesh.shading.kernels import (SHADOW_SHORTEN, add_light, add_rows, face_viewer, highlight_thresholds,
-                                    light_samples, surface_records, surface_reflectance)
+from rtmesh.shading.direct_light import SHADOW_SHORTEN, add_light, highlight_thresholds, light_samples
+from rtmesh.shading.surfaces import face_viewer, surface_records
 
 log = logging.getLogger(__name__)
 

@@ -7,7 +7,7 @@ import numpy as np
 
 from rtmesh.core.rays import repeated_row
 from rtmesh.sampling.warps import square_to_uniform_disk_concentric
-from rtmesh.shading import kernels
+from rtmesh.scene import camera_rays
 
 
 @dataclass
@@ -129,7 +129,7 @@ class Camera:
             # thin lens: rays start on the aperture and meet on the plane of focus, so that
             # plane is sharp and everything else blurs with distance from it
             disk = square_to_uniform_disk_concentric(lens_uv) * (0.5 * self.aperture)
-        origins, directions = kernels.camera_rays(
+        origins, directions = camera_rays.camera_rays(
             np.asarray(film_xy, dtype=np.float64), np.zeros(0, np.int64) if pixels is None else pixels, width,
             disk, self.position, forward, right, up, image_plane, self.focus)
         if not len(disk):

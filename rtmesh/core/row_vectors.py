@@ -1,0 +1,26 @@
+"""One-row vector arithmetic for compiled kernels (dot products, normalising), in the
+summation order of :mod:`rtmesh.core.vecmath`, so compiled and NumPy results agree bit for bit.
+"""
+
+import math
+
+from rtmesh.core.compiled import row
+
+
+# ------------------------------------------------------------------ vectors
+@row
+def dot3(ax, ay, az, bx, by, bz):
+    # (x + y) + z, the order rtmesh.core.vecmath.dot sums in
+    return (ax * bx + ay * by) + az * bz
+
+
+@row
+def normalized3(x, y, z, scale):
+    """``(x, y, z) * scale / length``; zero stays zero."""
+    length = math.sqrt(dot3(x, y, z, x, y, z))
+    inv = (1.0 / length if length > 0.0 else 0.0) * scale
+    return x * inv, y * inv, z * inv
+
+
+# Smallest cosine between a bent shading normal and the direction to the viewer: enough to
+# keep the Blinn-Phong half vector and the mirror direction well defined.

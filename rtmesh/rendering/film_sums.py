@@ -1,0 +1,137 @@
+"""The film's per-pixel sums in compiled code: adding samples in order, the mean image and the
+per-pixel error estimate (see :class:`rtmesh.rendering.film.Film`).
+"""
+
+import math
+
+import numpy as np
+
+from rtmesh.core.compiled import kernel
+
+
+# ------------------------------------------------------------------ film
+@kernel
+def accumulate_samples(total, total_sq, count, pixels, radiance, image):
+    """Add samples and their squares to per-pixel sums, each pixel's samples in order.
+
+    A pixel without samples so far (``count`` 0) takes its first sample by assignment, so
+    the sums need not be zeroed beforehand (see :class:`rtmesh.rendering.film.Film`).  With an
+    ``image``, each pixel's mean is written too, while its sums are in registers (a film
+    whose pixels are final once added, instead of a pass over the film at the end).
+
+    Parameters
+    ----------
+    total, total_sq : (P, 3) float64
+        Sums over samples of radiance and of radiance squared (updated in place).
+    count : (P,) int
+        Samples per pixel before these (not updated here).
+    pixels : (m,) int
+        Distinct pixel indices.
+    radiance : (m, spp, 3) float
+        The new samples of each pixel.
+    image : (P, 3) float32 or (0, 3)
+        Receives the added pixels' means, as :func:`mean_image` forms them; (0, 3): none.
+    """
+    means = image.shape[0] > 0
+    for i in range(len(pixels)):
+        px = pixels[i]
+        first = 0
+        if count[px] == 0:
+            for c in range(3):
+                r = radiance[i, 0, c]
+                total[px, c] = r
+                total_sq[px, c] = r * r
+            first = 1
+        for s in range(first, radiance.shape[1]):
+            for c in range(3):
+                r = radiance[i, s, c]
+                total[px, c] += r
+                total_sq[px, c] += r * r
+        if means:
+            inverse = 1.0 / np.float64(count[px] + radiance.shape[1])
+            for c in range(3):
+                image[px, c] = np.float32(total[px, c] * inverse)
+
+
+@kernel
+def add_rows(target, rows, values):
+    """``target[rows] += values`` for distinct ``rows``.
+
+    Parameters
+    ----------
+    target : (n, k) float64
+        Updated in place.
+    rows : (m,) int
+        Distinct row indices.
+    values : (m, k) float
+    """
+    for c in range(target.shape[1]):
+        for i in range(len(rows)):
+            target[rows[i], c] += values[i, c]
+
+
+@kernel
+def mean_image(total, count, out):
+    """Per-pixel means of sample sums, as float32 rows.
+
+    Parameters
+    ----------
+    total : (P, k) float64
+        Sums over each pixel's samples.
+    count : (P,) int
+        Samples per pixel; pixels without any give 0.
+    out : (P, k) float32
+        Receives ``total / max(count, 1)``.
+    """
+    for i in range(total.shape[0]):
+        # one division per pixel (the pass is bound by division throughput): the float64
+        # product differs from the quotient by at most an ulp, far below float32's
+        inverse = 1.0 / np.float64(max(count[i], 1))
+        for c in range(total.shape[1]):
+            out[i, c] = np.float32(total[i, c] * inverse)
+
+
+@kernel
+def pixel_errors(total, total_sq, count, start, stop, floor, display):
+    """Per-pixel standard error of the mean, relative to the pixel's brightness, for the
+    pixels ``start .. stop - 1`` (see :meth:`rtmesh.rendering.film.Film.pixel_relative_error` and
+    :meth:`~rtmesh.rendering.film.Film.pixel_display_error`).
+
+    Each value is formed as the NumPy expressions of ``Film`` formed it, operation for
+    operation (sample variance, clamped at 0, over ``n``; its square root; divided by
+    ``|mean| + floor`` or its square root; the three channels summed in order and divided
+    by 3), in one pass instead of a dozen passes over the film.
+
+    Parameters
+    ----------
+    total, total_sq : (P, 3) float64
+        Per-pixel sums of the samples and of their squares.
+    count : (P,) int
+        Samples per pixel.
+    start, stop : int
+    floor : float
+    display : bool
+        Divide by ``sqrt(|mean| + floor)`` (the display scale) instead of ``|mean| + floor``.
+
+    Returns
+    -------
+    (stop - start,) float64
+        NaN for pixels with fewer than two samples.
+    """
+    out = np.empty(stop - start)
+    for j in range(stop - start):
+        i = start + j
+        n = np.float64(count[i])
+        at_least_one = max(n, 1.0)
+        error = 0.0
+        for c in range(3):
+            mean = total[i, c] / at_least_one
+            variance = (total_sq[i, c] - n * mean * mean) / max(n - 1.0, 1.0)
+            # np.maximum(variance, 0) keeps a NaN; np.where(n > 1, ..., 0)
+            clamped = variance if (variance >= 0.0) | (variance != variance) else 0.0
+            std_err = math.sqrt((clamped if n > 1.0 else 0.0) / at_least_one)
+            scale = abs(mean) + floor
+            term = std_err / (math.sqrt(scale) if display else scale)
+            error = term if c == 0 else error + term
+        out[j] = error / 3.0 if count[i] >= 2 else np.nan
+    return out

@@ -1,0 +1,88 @@
+"""Camera rays in compiled code: image-plane points of film positions and pinhole or thin-lens
+directions (see :class:`rtmesh.scene.camera.Camera`).
+"""
+
+import math
+
+import numpy as np
+
+from rtmesh.core.compiled import kernel, row
+from rtmesh.core.row_vectors import normalized3
+
+
+# ------------------------------------------------------------------ camera
+@row
+def image_plane_point(x, y, pixel, width, inverse_width, image_plane):
+    """Image-plane coordinates ``(sx, sy)`` at unit distance along the camera's forward axis
+    of film position ``(x, y)``, given in pixels, or inside pixel ``pixel`` (when >= 0)."""
+    if pixel >= 0:
+        # the row by a float product and a one-step correction: an integer division a
+        # ray would keep the loop from vectorising
+        row = np.int64(pixel * inverse_width)
+        row += (row + 1) * width <= pixel
+        row -= row * width > pixel
+        x, y = x + np.float64(pixel - row * width), y + np.float64(row)
+    return x * image_plane[0] + image_plane[1], y * image_plane[2] + image_plane[3]
+
+
+@row
+def pinhole_direction(sx, sy, forward, right, up):
+    """Unit direction of the pinhole ray through image-plane point ``(sx, sy)``."""
+    # forward, right and up are orthonormal, so the squared length of
+    # forward + sx right + sy up is 1 + sx^2 + sy^2
+    inv = 1.0 / math.sqrt((sx * sx + sy * sy) + 1.0)
+    sx, sy = sx * inv, sy * inv
+    return ((inv * forward[0] + sx * right[0]) + sy * up[0], (inv * forward[1] + sx * right[1]) + sy * up[1],
+            (inv * forward[2] + sx * right[2]) + sy * up[2])
+
+
+@kernel
+def camera_rays(film_xy, pixels, width, disk, position, forward, right, up, image_plane, focus):
+    """Primary rays through film positions; see :meth:`rtmesh.scene.camera.Camera.generate_rays`.
+
+    Parameters
+    ----------
+    film_xy : (n, 2) float
+        Film positions in pixels, or positions inside ``pixels``.
+    pixels : (n,) int or (0,)
+        Linear pixel index (``row * width + column``) of each ray, or empty when
+        ``film_xy`` holds whole-film positions.
+    width : int
+        Image width in pixels.
+    disk : (n, 2) float or (0, 2)
+        Lens positions (points on the aperture disk, scene units, in the right/up plane);
+        empty for a pinhole camera.
+    position, forward, right, up : (3,) float64
+        Eye and camera frame.
+    image_plane : (4,) float64
+        ``(ax, bx, ay, by)``: the image-plane coordinates at unit distance along
+        ``forward`` are ``sx = x ax + bx`` and ``sy = y ay + by``.
+    focus : float
+        Focus distance (thin lens).
+
+    Returns
+    -------
+    origins : (n, 3) float64, or (0, 3) for a pinhole camera (every ray starts at the eye)
+    directions : (n, 3) float64
+        Unit directions, component-major.
+    """
+    n = len(film_xy)
+    lens, in_pixels = len(disk) > 0, len(pixels) > 0
+    origins = np.empty((3, n if lens else 0))
+    d = np.empty((3, n))
+    inverse_width = 1.0 / width
+    for i in range(n):
+        sx, sy = image_plane_point(film_xy[i, 0], film_xy[i, 1], pixels[i] if in_pixels else -1, width,
+                                    inverse_width, image_plane)
+        if lens:
+            # every ray through a film point meets the pinhole ray on the plane of focus: the
+            # unnormalised pinhole direction has a forward component of exactly 1, so
+            # position + focus * direction lies on the plane at depth `focus`
+            for c in range(3):
+                toward = (forward[c] + right[c] * sx) + up[c] * sy
+                origins[c, i] = (position[c] + disk[i, 0] * right[c]) + disk[i, 1] * up[c]
+                d[c, i] = (position[c] + toward * focus) - origins[c, i]
+            d[0, i], d[1, i], d[2, i] = normalized3(d[0, i], d[1, i], d[2, i], 1.0)
+        else:
+            d[0, i], d[1, i], d[2, i] = pinhole_direction(sx, sy, forward, right, up)
+    return origins.T, d.T

@@ -1,0 +1,192 @@
+"""Direct light from point-like lights in compiled code: the lit hits and their shadow rays
+(:func:`light_samples`), then, once the shadow rays are traced, the lights' Blinn-Phong
+terms (:func:`add_light`).
+"""
+
+
+import numpy as np
+
+from rtmesh.core.compiled import kernel, row
+from rtmesh.core.row_vectors import dot3
+from rtmesh.geometry.float32_rays import F32_MAX, offset_origin
+from rtmesh.lights.point_light_rows import illuminate_row
+from rtmesh.materials.blinn_phong import highlight_cosine, shade_row
+
+
+# ------------------------------------------------------------------ point-like lights
+@row
+def light_reaches(wx, wy, wz, er, eg, eb, gx, gy, gz):
+    """Whether a light with direction ``w`` and incident term ``e`` (see :func:`illuminate_row`)
+    lights a point with geometric normal ``g``: it is on the side the ray came from
+    (``wi . ng > 0``: no leaks through the surface) and its term is not zero."""
+    # bitwise operators: short-circuits are branches, which stop vectorisation
+    return (dot3(wx, wy, wz, gx, gy, gz) > 0.0) & ((er > 0.0) | (eg > 0.0) | (eb > 0.0))
+
+
+# Shadow rays to point and spot lights stop this fraction short of the light, so a light
+# placed exactly on a surface does not count that surface as an occluder.
+SHADOW_SHORTEN = 1.0 - 1e-5
+# rows per block of light_samples: its scratch arrays (~70 bytes a row) stay in L1
+_BLOCK = 256
+
+
+@kernel
+def light_samples(light, p, ng, ns, d, mat, exponent, visible_from, scale, shorten):
+    """One point-like light at every hit: the lit hits, their shadow rays, and what shading
+    them needs once the shadow rays are traced (see :func:`add_light`).
+
+    Parameters
+    ----------
+    light : (12,) float64
+        The light's :meth:`kernel_parameters`.
+    p, ng, ns, d : (k, 3) float64
+        Surface records: points, geometric and shading normals, incoming directions.
+    mat : (k,) intp
+    exponent : (M,) float64
+        Shininess per material, negative for materials without a highlight.
+    visible_from : (M,) float64
+        Per material, the smallest highlight cosine whose power is kept (see
+        :func:`highlight_thresholds`).
+    scale : float32
+        Scene size, for the origin offset.
+    shorten : float
+        Shadow rays end this fraction of the way to the light.
+
+    Returns
+    -------
+    lit : (j,) intp
+        The lit rows: the light is on the side the ray came from and reaches them.
+    origins, directions : (j, 3) float32
+        Row-major shadow rays, origins offset off the surface.
+    t_max : (j,) float32
+        Shadow ray lengths (clamped to the float32 range).
+    cos_i : (j,) float64
+        ``ns . wi``.
+    incident : (j, 3) float64
+        The light's incident term.
+    highlight_rows : (h,) intp
+        The lit rows (indices into the arrays above) with a highlight worth raising.
+    highlight, power_exponent : (h,) float64
+        ``highlight ** power_exponent`` is the highlight's power there (``max(0, ns . h)``
+        and the shininess); it is 0 on the other lit rows.  Left for NumPy to raise: its
+        pow is vectorised where a compiled loop calls libm once a row, but only for
+        ordinary operands: a zero base or an underflowing power takes a slow path (tens of
+        times slower), so those rows are not handed to it.
+
+    Notes
+    -----
+    A block of rows is formed by a loop without branches, gathers or calls, which LLVM
+    vectorises; a second loop over the block keeps the lit rows.
+    """
+    k = len(p)
+    lit = np.empty(k, np.intp)
+    origins, directions = np.empty((k, 3), np.float32), np.empty((k, 3), np.float32)
+    t_max = np.empty(k, np.float32)
+    cos_i, incident = np.empty(k), np.empty((k, 3))
+    highlight_rows, highlight, power_exponent = np.empty(k, np.intp), np.empty(k), np.empty(k)
+    block_incident, block_cos = np.empty((3, _BLOCK)), np.empty((2, _BLOCK))
+    block_ray = np.empty((6, _BLOCK), np.float32)
+    block_length, block_lit = np.empty(_BLOCK, np.float32), np.empty(_BLOCK, np.bool_)
+    j = h = 0
+    for start in range(0, k, _BLOCK):
+        n = min(_BLOCK, k - start)
+        for b in range(n):
+            i = start + b
+            wx, wy, wz, distance, er, eg, eb = illuminate_row(light, p[i, 0], p[i, 1], p[i, 2])
+            block_lit[b] = light_reaches(wx, wy, wz, er, eg, eb, ng[i, 0], ng[i, 1], ng[i, 2])
+            block_incident[0, b], block_incident[1, b], block_incident[2, b] = er, eg, eb
+            block_cos[0, b] = dot3(ns[i, 0], ns[i, 1], ns[i, 2], wx, wy, wz)
+            block_cos[1, b] = highlight_cosine(ns[i, 0], ns[i, 1], ns[i, 2], -d[i, 0], -d[i, 1], -d[i, 2],
+                                                wx, wy, wz)
+            # the shadow ray's direction in float32, as Embree will see it, also sets the offset
+            dx, dy, dz = np.float32(wx), np.float32(wy), np.float32(wz)
+            block_ray[0, b], block_ray[1, b], block_ray[2, b] = offset_origin(
+                p[i, 0], p[i, 1], p[i, 2], ng[i, 0], ng[i, 1], ng[i, 2], dx, dy, dz, scale)
+            block_ray[3, b], block_ray[4, b], block_ray[5, b] = dx, dy, dz
+            block_length[b] = np.float32(min(distance * shorten, F32_MAX))
+        for b in range(n):
+            if not block_lit[b]:
+                continue
+            i = start + b
+            for c in range(3):
+                origins[j, c] = block_ray[c, b]
+                directions[j, c] = block_ray[3 + c, b]
+                incident[j, c] = block_incident[c, b]
+            t_max[j] = block_length[b]
+            cos_i[j] = block_cos[0, b]
+            m = mat[i]
+            e = exponent[m]
+            # a power of 0 is 1 whatever the cosine (0 ** 0 included)
+            c = 1.0 if e == 0.0 else block_cos[1, b]
+            if e >= 0.0 and c > 0.0 and c >= visible_from[m]:
+                highlight_rows[h], highlight[h], power_exponent[h] = j, c, e
+                h += 1
+            lit[j] = i
+            j += 1
+    return (lit[:j], origins[:j], directions[:j], t_max[:j], cos_i[:j], incident[:j], highlight_rows[:h],
+            highlight[:h], power_exponent[:h])
+
+
+def highlight_thresholds(exponent):
+    """Per material, the smallest highlight cosine whose power :func:`light_samples` keeps.
+
+    Below ``2 ** (-1000 / shininess)`` the power is under ``2 ** -1000`` (1e-301), nothing
+    an image can show, and NumPy's pow would take its slow underflow path; 0 for a
+    shininess of 0 (a power of 1), inf without a highlight.
+
+    Parameters
+    ----------
+    exponent : (M,) float
+        Shininess, negative without a highlight.
+
+    Returns
+    -------
+    (M,) float64
+    """
+    exponent = np.asarray(exponent, dtype=np.float64)
+    with np.errstate(divide="ignore"):
+        threshold = np.exp2(-1000.0 / exponent)
+    return np.where(exponent > 0.0, threshold, np.where(exponent == 0.0, 0.0, np.inf))
+
+
+@kernel
+def add_light(total, target, lit, occluded, cos_i, incident, highlight_rows, power, mat, diffuse, tint_d,
+              specular, tint_s):
+    """Add one light's Blinn-Phong term to the lit rows whose shadow rays are clear.
+
+    Parameters
+    ----------
+    total : (K, 3) float64
+        Accumulated direct light (updated in place).
+    target : (j,) intp
+        Row of ``total`` for each lit row.
+    lit : (j,) intp
+        The lit rows of ``mat`` and the tints (see :func:`light_samples`).
+    occluded : (j,) bool
+        Shadow-ray results.
+    cos_i : (j,) float64
+        ``ns . wi``.
+    incident : (j, 3) float64
+    highlight_rows : (h,) intp
+        Ascending lit rows with a highlight.
+    power : (h,) float64
+        The raised highlight cosine of those rows (0 on the others).
+    mat : (k,) intp
+    diffuse, specular : (M, 3) float64
+        Material colours.
+    tint_d, tint_s : (k, 3) float or (0, 3)
+        Texture tints of the colours, or empty.
+    """
+    q = 0  # next highlight row: both lists are ascending
+    for j in range(len(lit)):
+        highlight = 0.0
+        if q < len(highlight_rows) and highlight_rows[q] == j:
+            highlight = power[q]
+            q += 1
+        if occluded[j]:
+            continue
+        i, r = lit[j], target[j]
+        f0, f1, f2 = shade_row(i, mat[i], cos_i[j], highlight, diffuse, tint_d, specular, tint_s)
+        total[r, 0] += f0 * incident[j, 0]
+        total[r, 1] += f1 * incident[j, 1]
+        total[r, 2] += f2 * incident[j, 2]

@@ -1,0 +1,156 @@
+"""Surface records in compiled code: hit points, geometric and shading normals of the hits of
+a batch of rays, and the shading-normal terminator fix.
+"""
+
+
+import numpy as np
+
+from rtmesh.core.compiled import kernel, row
+from rtmesh.core.row_vectors import dot3, normalized3
+
+VIEW_COSINE = 1e-2
+
+
+@row
+def face_viewer_row(sx, sy, sz, gx, gy, gz, dx, dy, dz):
+    """One shading normal made to face the viewer; see :func:`rtmesh.core.vecmath.face_viewer`."""
+    cos_o = -dot3(sx, sy, sz, dx, dy, dz)
+    above = dot3(sx, sy, sz, gx, gy, gz) > 0.0
+    if cos_o >= VIEW_COSINE and above:
+        return sx, sy, sz
+    if not above:
+        sx, sy, sz = gx, gy, gz
+    c = max(VIEW_COSINE - dot3(sx, sy, sz, -dx, -dy, -dz), 0.0)
+    return normalized3(sx - c * dx, sy - c * dy, sz - c * dz, 1.0)
+
+
+@kernel
+def face_viewer(ns, ng, d):
+    """Shading normals that face the viewer: the shading-normal terminator fix.
+
+    Interpolated (or normal-mapped) normals can lean away from the viewer near
+    silhouettes.  Shading with such a normal makes black speckles (the highlight and the
+    mirror direction point into the surface) or lights the surface from below.  Normals
+    on the wrong side of the geometric normal are replaced by it; normals that face away
+    from the viewer are bent toward the viewer, within the plane of the normal and the view
+    direction, until ``ns . wo = 0.01`` (:data:`VIEW_COSINE`, before normalising): the
+    smallest change that fixes them, and none for every other normal.  Light leaks are
+    stopped separately: a light counts only when it is on the geometric side the ray came
+    from.
+
+    Parameters
+    ----------
+    ns : (k, 3) float
+        Unit shading normals on the side the ray came from.
+    ng : (k, 3) float
+        Unit geometric normals, same side (``ng . d < 0``).
+    d : (k, 3) float
+        Unit incoming ray directions (``wo = -d``).
+
+    Returns
+    -------
+    (k, 3) float64
+        A corrected copy, component-major (a new array); rows that need no change are
+        copied as they are.
+    """
+    k = len(ns)
+    out = np.empty((3, k))
+    for i in range(k):
+        out[0, i], out[1, i], out[2, i] = face_viewer_row(ns[i, 0], ns[i, 1], ns[i, 2],
+                                                       ng[i, 0], ng[i, 1], ng[i, 2],
+                                                       d[i, 0], d[i, 1], d[i, 2])
+    return out.T
+
+
+# ------------------------------------------------------------------ surfaces
+@row
+def surface_record(f, a, b, vx, vy, vz, faces, vertex_normals, smooth, fix_terminator):
+    """One hit's surface record (see :func:`surface_records`): face ``f`` at barycentrics
+    ``(a, b)``, seen along ``(vx, vy, vz)``; ``smooth``: interpolate the vertex normals.
+    Returns ``(px, py, pz, gx, gy, gz, sx, sy, sz, front)``."""
+    # (u e1 + v0) + v e2: the order of rtmesh.geometry.accel.barycentric_interpolate
+    px = (faces[f, 3] * a + faces[f, 0]) + faces[f, 6] * b
+    py = (faces[f, 4] * a + faces[f, 1]) + faces[f, 7] * b
+    pz = (faces[f, 5] * a + faces[f, 2]) + faces[f, 8] * b
+    gx, gy, gz = faces[f, 9], faces[f, 10], faces[f, 11]
+    front = dot3(vx, vy, vz, gx, gy, gz) < 0.0
+    flip = 1.0 if front else -1.0
+    gx, gy, gz = gx * flip, gy * flip, gz * flip
+    sx, sy, sz = gx, gy, gz
+    if smooth:
+        sx, sy, sz = normalized3(
+            (vertex_normals[f, 3] * a + vertex_normals[f, 0]) + vertex_normals[f, 6] * b,
+            (vertex_normals[f, 4] * a + vertex_normals[f, 1]) + vertex_normals[f, 7] * b,
+            (vertex_normals[f, 5] * a + vertex_normals[f, 2]) + vertex_normals[f, 8] * b,
+            flip)
+    if fix_terminator:
+        sx, sy, sz = face_viewer_row(sx, sy, sz, gx, gy, gz, vx, vy, vz)
+    return px, py, pz, gx, gy, gz, sx, sy, sz, front
+
+
+@kernel
+def surface_records(prim_all, u_all, v_all, rows, directions, view, faces, vertex_normals,
+                    smooth, material_id, fix_terminator):
+    """Hit points, facing normals and materials of the hit rows of a ray batch.
+
+    Parameters
+    ----------
+    prim_all : (n,) int
+        Triangle hit by each ray of the batch.
+    u_all, v_all : (n,) float
+        Barycentric weights of vertices 1 and 2.
+    rows : (k,) intp
+        The rows of the batch that hit a triangle.
+    directions : (n, 3) float
+        Unit ray directions of the batch.
+    view : (k, 3) float or (0, 3)
+        Directions of the hit rows in the frame of the triangles (motion blur), or empty
+        when that is ``directions``.
+    faces : (F, 12) float64, row-major
+        Per face ``[v0, v1 - v0, v2 - v0, unit geometric normal]``.
+    vertex_normals : (F, 9) float64, row-major, or (0, 9)
+        Per face ``[n0, n1 - n0, n2 - n0]`` of the vertex normals; empty without smooth
+        shading.
+    smooth : (F,) bool
+        Faces that interpolate their vertex normals.
+    material_id : (F,) intp
+    fix_terminator : bool
+        Apply :func:`face_viewer` to the shading normals (smooth shading without normal
+        maps; with normal maps it runs after them).
+
+    Returns
+    -------
+    p : (k, 3) float64
+        ``v0 + u (v1 - v0) + v (v2 - v0)`` on the float32 triangle Embree traced.
+    ng, ns : (k, 3) float64
+        Unit geometric and shading normals, flipped to the side the ray came from; ``ns``
+        is ``ng`` on flat faces, and an interpolated normal of zero length stays zero
+        (:func:`face_viewer` replaces it).
+    front : (k,) bool
+        The ray arrived on the outer (counter-clockwise) side.
+    mat : (k,) intp
+
+    Notes
+    -----
+    The kernel is bound by the memory it writes (~80 bytes a hit), so what the caller can
+    take by itself (the directions, primitives and barycentrics of the rows) is not
+    copied here.
+    """
+    k = len(rows)
+    p, ng, ns = np.empty((3, k)), np.empty((3, k)), np.empty((3, k))
+    front = np.empty(k, np.bool_)
+    mat = np.empty(k, np.intp)
+    rest_frame = len(view) > 0
+    has_smooth = len(vertex_normals) > 0
+    for i in range(k):
+        r = rows[i]
+        f = np.intp(prim_all[r])
+        mat[i] = material_id[f]
+        if rest_frame:
+            vx, vy, vz = view[i, 0], view[i, 1], view[i, 2]
+        else:
+            vx, vy, vz = directions[r, 0], directions[r, 1], directions[r, 2]
+        (p[0, i], p[1, i], p[2, i], ng[0, i], ng[1, i], ng[2, i], ns[0, i], ns[1, i], ns[2, i],
+         front[i]) = surface_record(f, np.float64(u_all[r]), np.float64(v_all[r]), vx, vy, vz, faces,
+                                     vertex_normals, has_smooth and smooth[f], fix_terminator)
+    return p.T, ng.T, ns.T, front, mat
