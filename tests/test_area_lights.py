@@ -808,8 +808,8 @@ def test_shipped_soft_shadow_scene_renders():
 def _textured_lamp(texels, height=1.5):
     """A 1 x 1 emissive square facing down at ``height`` whose UVs are (x + 0.5, y + 0.5),
     with an emission texture of ``texels`` ((h, w) image, clamped)."""
+    from rtmesh.io.texture_images import Texture
     from rtmesh.scene.model import MeshPart
-    from rtmesh.scene.texture_images import Texture
 
     corners = np.array([[-0.5, -0.5, height], [-0.5, 0.5, height], [0.5, 0.5, height], [0.5, -0.5, height]])
     uv = corners[:, :2] + 0.5

@@ -6,12 +6,12 @@ import pytest
 from rtmesh.api import render
 from rtmesh.geometry.accel import Accel
 from rtmesh.geometry.cutouts import CutoutAccel
+from rtmesh.io.texture_images import Texture
 from rtmesh.lights.point_lights import DirectionalLight
 from rtmesh.materials.table import Material
 from rtmesh.rendering.surface_textures import SurfaceTextures
 from rtmesh.scene.camera import Camera
 from rtmesh.scene.model import MeshPart, Scene
-from rtmesh.scene.texture_images import Texture
 
 N = 4  # checker texels per side
 SIZE = 32  # image pixels per side: 8 pixels per texel

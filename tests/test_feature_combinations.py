@@ -45,6 +45,7 @@ from scenes import assert_finite, box, icosphere, settings
 
 from rtmesh.geometry.motion import Motion
 from rtmesh.io.passes import PASS_NAMES
+from rtmesh.io.texture_images import Texture
 from rtmesh.lights.area_lights import DiskLight, QuadLight
 from rtmesh.lights.point_lights import DirectionalLight, PointLight, SpotLight
 from rtmesh.materials.table import Material, as_colour
@@ -53,7 +54,6 @@ from rtmesh.sampling.patterns import SAMPLERS
 from rtmesh.scene.background import EnvironmentBackground, GradientBackground, TransparentBackground
 from rtmesh.scene.camera import Camera
 from rtmesh.scene.model import MeshPart, Scene
-from rtmesh.scene.texture_images import Texture
 
 WIDTH, HEIGHT = 16, 12
 WRAPS = ("repeat", "clamp", "mirror")

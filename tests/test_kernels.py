@@ -66,14 +66,15 @@ def test_light_samples_match_the_scalar_formulas(light):
     exponent = np.array([50.0, -1.0, 7.5])  # the middle material has no highlight
     tint = rng.uniform(0.2, 1.0, size=(n, 3))
     (lit, origins, directions, t_max, cos_i, incident, highlight_rows, highlight,
-     power_exponent) = direct_light.light_samples(light.kernel_parameters(), p, ng, ns, d, mat, exponent,
-                                             direct_light.highlight_thresholds(exponent), np.float32(2.0), 1.0 - 1e-5)
+     power_exponent) = direct_light.light_samples(*light.illuminate(p), p, ng, ns, d, mat, exponent,
+                                                  direct_light.highlight_thresholds(exponent), np.float32(2.0),
+                                                  1.0 - 1e-5)
     # the Blinn-Phong term goes to the rows whose shadow rays are clear
     occluded = np.zeros(len(lit), dtype=bool)
     occluded[::5] = True
     total = np.zeros((n, 3))
     direct_light.add_light(total, lit, lit, occluded, cos_i, incident, highlight_rows,
-                      np.power(highlight, power_exponent), mat, diffuse, tint, specular, np.zeros((0, 3)))
+                           np.power(highlight, power_exponent), mat, diffuse, tint, specular, np.zeros((0, 3)))
     expected_lit = []
     expected_total = np.zeros((n, 3))
     for i in range(n):
@@ -228,11 +229,11 @@ def test_highlight_powers_below_float64_range_are_dropped_and_shininess_zero_is_
     d = np.asfortranarray(np.column_stack([np.sin(angles), np.zeros(n), -np.cos(angles)]))
     p = np.zeros((n, 3), order="F")
     up = np.asfortranarray(np.tile([0.0, 0.0, 1.0], (n, 1)))
-    light = PointLight([0.0, 0.0, 1.0], [1.0, 1.0, 1.0]).kernel_parameters()
+    light = PointLight([0.0, 0.0, 1.0], [1.0, 1.0, 1.0]).illuminate(p)
     for m in range(3):
         mat = np.full(n, m, dtype=np.intp)
         lit, *_, cos_i, incident, rows, highlight, power_exponent = direct_light.light_samples(
-            light, p, up, up, d, mat, exponent, threshold, np.float32(1.0), 1.0)
+            *light, p, up, up, d, mat, exponent, threshold, np.float32(1.0), 1.0)
         assert len(lit) == n
         if m == 0:
             assert (highlight ** 5000.0 >= 2.0 ** -1000).all() and 0 < len(rows) < n

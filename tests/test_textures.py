@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from rtmesh.scene.texture_images import Texture
+from rtmesh.io.texture_images import Texture
 
 # a 2 x 3 (rows x columns) single-channel image, row 0 at the top
 PIXELS = np.array([[0.0, 1.0, 2.0],

@@ -8,7 +8,8 @@ is its module, its registry entry, its documentation and its tests.
 
 Key kinds name how the scene file's value is read: ``"vec3"`` (three numbers),
 ``"colour"`` (a number or three, linear), ``"positive"`` and ``"non_negative"`` (one
-number), ``"bool"``.
+number), ``"bool"``, ``"path"`` (a file name, relative to the scene file's folder; the
+builder gets it as a path it can open).
 """
 
 from dataclasses import dataclass
@@ -16,7 +17,7 @@ from typing import Callable
 
 import numpy as np
 
-KEY_KINDS = ("vec3", "colour", "positive", "non_negative", "bool")
+KEY_KINDS = ("vec3", "colour", "positive", "non_negative", "bool", "path")
 
 
 @dataclass(frozen=True)

@@ -1,5 +1,12 @@
 """Point, directional and spot lights in compiled code: one light's direction, distance and
-incident term at a point, from the row of floats :meth:`kernel_parameters` packs.
+incident term at a point, from its row of named fields.
+
+A light's row is one record of :data:`ROW` (kind, position, direction, power, cone
+cosines), handed to kernels as its 12 float64 words; kernels read the fields by the word
+indices derived from the record layout (:data:`POSITION`, ...), so the layout is written
+once, here.  Lights without a row (their own ``illuminate``) are as welcome: the general
+path asks every light for ``illuminate(points)``; only the fused direct-lighting stage
+needs a row.
 """
 
 import math
@@ -9,22 +16,48 @@ import numpy as np
 from rtmesh.core.compiled import kernel, row
 from rtmesh.core.row_vectors import dot3
 
-# ------------------------------------------------------------------ lights
 POINT, DIRECTIONAL, SPOT = 0, 1, 2
+# the fields of a light's row, in order; ``power`` is the intensity (W/sr, point and spot)
+# or the irradiance (W/m^2, directional), ``direction`` the way the light travels
+ROW = np.dtype([("kind", np.float64), ("position", np.float64, 3), ("direction", np.float64, 3),
+                ("power", np.float64, 3), ("cos_inner", np.float64), ("cos_outer", np.float64)])
+# word index of each field in a row (kernels read ``light[POSITION + 1]`` for position y)
+KIND, POSITION, DIRECTION, POWER, COS_INNER, COS_OUTER = (ROW.fields[name][1] // 8 for name in ROW.names)
+
+
+def pack_row(kind, position=(0.0, 0.0, 0.0), direction=(0.0, 0.0, 0.0), power=(0.0, 0.0, 0.0),
+             cos_inner=1.0, cos_outer=1.0):
+    """A light's row for the kernels.
+
+    Parameters
+    ----------
+    kind : {POINT, DIRECTIONAL, SPOT}
+    position, direction, power : (3,) float
+    cos_inner, cos_outer : float
+        Cosines of the spot cone's inner and outer half-angles.
+
+    Returns
+    -------
+    (12,) float64
+        The words of one :data:`ROW` record.
+    """
+    record = np.zeros(1, ROW)
+    record["kind"], record["position"], record["direction"] = kind, position, direction
+    record["power"], record["cos_inner"], record["cos_outer"] = power, cos_inner, cos_outer
+    return record.view(np.float64).copy()
 
 
 @row
 def illuminate_row(light, px, py, pz):
     """Direction, distance and incident term of one light at one point.
 
-    ``light`` is a light's :meth:`kernel_parameters` row: ``[kind, position (3),
-    direction (3), power (3), cos_inner, cos_outer]``.  Returns ``(wx, wy, wz, distance,
+    ``light`` is a light's row (:func:`pack_row`).  Returns ``(wx, wy, wz, distance,
     er, eg, eb)``.  Every kind is formed and the light's own picked by selects, not
     branches, so that the loops calling this vectorise.
     """
-    kind = light[0]
+    kind = light[KIND]
     directional, spot = kind == DIRECTIONAL, kind == SPOT
-    tx, ty, tz = light[1] - px, light[2] - py, light[3] - pz
+    tx, ty, tz = light[POSITION] - px, light[POSITION + 1] - py, light[POSITION + 2] - pz
     distance = math.sqrt(dot3(tx, ty, tz, tx, ty, tz))
     # a light sitting exactly on a point lights it from nowhere: direction 0, term 0
     safe = distance if distance > 0.0 else np.inf
@@ -32,19 +65,20 @@ def illuminate_row(light, px, py, pz):
     square = safe * safe
     # the spot's cone: a smoothstep in cos(angle) between the outer and the inner angle
     # (a step when they are equal)
-    cos_angle = -dot3(wx, wy, wz, light[4], light[5], light[6])
-    cos_inner, cos_outer = light[10], light[11]
+    cos_angle = -dot3(wx, wy, wz, light[DIRECTION], light[DIRECTION + 1], light[DIRECTION + 2])
+    cos_inner, cos_outer = light[COS_INNER], light[COS_OUTER]
     x = min(max((cos_angle - cos_outer) / (cos_inner - cos_outer), 0.0), 1.0)
     step = 1.0 if cos_angle >= cos_outer else 0.0
     cone = x * x * (3.0 - 2.0 * x) if cos_inner - cos_outer > 0.0 else step
     falloff = cone / square
     # point: intensity / distance^2; spot: intensity * (cone / distance^2); directional:
     # the irradiance, from -direction, infinitely far
-    er = light[7] if directional else (light[7] * falloff if spot else light[7] / square)
-    eg = light[8] if directional else (light[8] * falloff if spot else light[8] / square)
-    eb = light[9] if directional else (light[9] * falloff if spot else light[9] / square)
-    return (-light[4] if directional else wx, -light[5] if directional else wy,
-            -light[6] if directional else wz, np.inf if directional else distance, er, eg, eb)
+    pr, pg, pb = light[POWER], light[POWER + 1], light[POWER + 2]
+    er = pr if directional else (pr * falloff if spot else pr / square)
+    eg = pg if directional else (pg * falloff if spot else pg / square)
+    eb = pb if directional else (pb * falloff if spot else pb / square)
+    return (-light[DIRECTION] if directional else wx, -light[DIRECTION + 1] if directional else wy,
+            -light[DIRECTION + 2] if directional else wz, np.inf if directional else distance, er, eg, eb)
 
 
 @kernel
@@ -54,7 +88,7 @@ def illuminate(light, points):
     Parameters
     ----------
     light : (12,) float64
-        The light's :meth:`kernel_parameters`.
+        The light's row (:func:`pack_row`).
     points : (k, 3) float
 
     Returns

@@ -1,4 +1,5 @@
-"""Point, directional and spot lights.
+"""Point, directional and spot lights: delta lights with a compiled row
+(:mod:`rtmesh.lights.point_light_rows`); see :mod:`rtmesh.lights.interface`.
 
 Each light answers, for a batch of shading points, the unit direction toward it, the
 distance to it (``inf`` for directional lights) and the incident term ``E`` that multiplies
@@ -13,13 +14,6 @@ import numpy as np
 from rtmesh.lights import point_light_rows
 from rtmesh.lights.light_types import LightType, aim
 from rtmesh.materials.table import as_colour
-
-
-def _parameters(kind, position=(0.0, 0.0, 0.0), direction=(0.0, 0.0, 0.0), power=(0.0, 0.0, 0.0),
-                cos_inner=1.0, cos_outer=1.0):
-    """A light packed for :mod:`rtmesh.shading.kernels`: ``[kind, position (3), direction (3),
-    power (3), cos_inner, cos_outer]``, (12,) float64."""
-    return np.concatenate([[kind], position, direction, power, [cos_inner, cos_outer]]).astype(np.float64)
 
 
 @dataclass
@@ -55,11 +49,11 @@ class PointLight:
         incident : (k, 3) float
             ``intensity / distance^2`` (inverse-square falloff).
         """
-        return point_light_rows.illuminate(self.kernel_parameters(), np.asarray(points, dtype=np.float64))
+        return point_light_rows.illuminate(self.kernel_row(), np.asarray(points, dtype=np.float64))
 
-    def kernel_parameters(self):
-        """The light packed for :mod:`rtmesh.shading.kernels` (12,)."""
-        return _parameters(point_light_rows.POINT, self.position, power=self.intensity)
+    def kernel_row(self):
+        """The light's row for the kernels (:func:`rtmesh.lights.point_light_rows.pack_row`)."""
+        return point_light_rows.pack_row(point_light_rows.POINT, self.position, power=self.intensity)
 
     @property
     def is_black(self):
@@ -91,11 +85,12 @@ class DirectionalLight:
 
     def illuminate(self, points):
         """See :meth:`PointLight.illuminate`; the distance is ``inf``."""
-        return point_light_rows.illuminate(self.kernel_parameters(), np.asarray(points, dtype=np.float64))
+        return point_light_rows.illuminate(self.kernel_row(), np.asarray(points, dtype=np.float64))
 
-    def kernel_parameters(self):
-        """The light packed for :mod:`rtmesh.shading.kernels` (12,)."""
-        return _parameters(point_light_rows.DIRECTIONAL, direction=self.direction, power=self.irradiance)
+    def kernel_row(self):
+        """See :meth:`PointLight.kernel_row`."""
+        return point_light_rows.pack_row(point_light_rows.DIRECTIONAL, direction=self.direction,
+                                         power=self.irradiance)
 
     @property
     def is_black(self):
@@ -138,12 +133,12 @@ class SpotLight:
     def illuminate(self, points):
         """See :meth:`PointLight.illuminate`; the incident term includes the cone falloff,
         a smoothstep in cos(angle) from the axis between the outer and the inner angle."""
-        return point_light_rows.illuminate(self.kernel_parameters(), np.asarray(points, dtype=np.float64))
+        return point_light_rows.illuminate(self.kernel_row(), np.asarray(points, dtype=np.float64))
 
-    def kernel_parameters(self):
-        """The light packed for :mod:`rtmesh.shading.kernels` (12,)."""
-        return _parameters(point_light_rows.SPOT, self.position, self.direction, self.intensity,
-                           np.cos(np.radians(self.inner_angle)), np.cos(np.radians(self.outer_angle)))
+    def kernel_row(self):
+        """See :meth:`PointLight.kernel_row`."""
+        return point_light_rows.pack_row(point_light_rows.SPOT, self.position, self.direction, self.intensity,
+                                         np.cos(np.radians(self.inner_angle)), np.cos(np.radians(self.outer_angle)))
 
     @property
     def is_black(self):

@@ -10,11 +10,11 @@ from rtmesh.core.errors import MeshError
 from rtmesh.geometry import build_kernels
 from rtmesh.geometry.smoothing import CREASE_ANGLE, smooth_vertex_normals
 from rtmesh.io.colour import srgb_to_linear
+from rtmesh.io.texture_images import Texture
 from rtmesh.loaders.gltf_nodes import GLTF_EXTENSIONS, file_cameras_and_lights, read_gltf_json
 from rtmesh.loaders.material_files import gltf_json_materials, gltf_material, mtl_material, obj_materials
 from rtmesh.materials.table import Material
 from rtmesh.scene.model import MeshPart, Scene
-from rtmesh.scene.texture_images import Texture
 
 log = logging.getLogger(__name__)
 

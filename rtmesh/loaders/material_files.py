@@ -14,8 +14,8 @@ import re
 
 import numpy as np
 
+from rtmesh.io.texture_images import Texture, load_texture
 from rtmesh.materials.table import Material
-from rtmesh.scene.texture_images import Texture, load_texture
 
 log = logging.getLogger(__name__)
 

@@ -162,7 +162,7 @@ OBJECT_KEYS = {
 MOTION_KEYS = {"translate": _vec3, "rotate_axis": _vec3, "rotate_degrees": _float}
 # the keys of every registered light type, read by their kind (see rtmesh.lights.light_types)
 _KEY_READERS = {"vec3": _vec3, "colour": _colour, "positive": _positive, "non_negative": _non_negative,
-                "bool": _bool}
+                "bool": _bool, "path": _str}
 
 
 def light_keys():
@@ -316,7 +316,7 @@ def scene_from_dict(doc, source="scene", base_dir=".", overrides=None):
     lights = None
     if "lights" in doc:
         keys = light_keys()
-        lights = [_light(r, r.fields(t, keys, f"lights[{i}]"), f"lights[{i}]")
+        lights = [_light(r, r.fields(t, keys, f"lights[{i}]"), f"lights[{i}]", base_dir)
                   for i, t in enumerate(r.array_of_tables(doc["lights"], "lights"))]
     if file_lights:
         # a glTF file's own lights join the scene file's (and replace the default rig)
@@ -475,8 +475,9 @@ def _motion(r, table, where):
         raise r.error(where, str(exc)) from None
 
 
-def _light(r, values, where):
-    """A light from its read ``[[lights]]`` table, through its type's registry entry."""
+def _light(r, values, where, base_dir):
+    """A light from its read ``[[lights]]`` table, through its type's registry entry (file
+    names are taken relative to ``base_dir``, the scene file's folder)."""
     kind = values.get("type")
     if kind is None:
         names = list(LIGHT_TYPES)
@@ -488,6 +489,12 @@ def _light(r, values, where):
     for key in light_type.required:
         if key not in values:
             raise r.error(f"{where}.{key}", f"missing (a {kind} light needs {', '.join(light_type.required)})")
+    for key, key_kind in light_type.keys.items():
+        if key_kind == "path" and key in values:
+            path = os.path.join(base_dir, values[key])
+            if not os.path.isfile(path):
+                raise r.error(f"{where}.{key}", f"no such file: {path}")
+            values = {**values, key: path}
     try:
         return light_type.build(values)
     except ValueError as exc:

@@ -76,7 +76,7 @@ class Material:
     double_sided : bool
         Kept from glTF for reference; both sides of every triangle are always shaded.
     diffuse_texture, specular_texture, opacity_texture, normal_texture, emission_texture : Texture or None
-        Image textures (:class:`rtmesh.scene.texture_images.Texture`): base colour (multiplies
+        Image textures (:class:`rtmesh.io.texture_images.Texture`): base colour (multiplies
         ``diffuse`` and ``ambient``; its alpha multiplies ``opacity``), specular colour
         (multiplies ``specular``), opacity (first channel multiplies ``opacity``), a
         tangent-space normal map, and emitted colour (multiplies ``emission``, both where

@@ -30,7 +30,7 @@ from rtmesh.core.row_vectors import dot3
 from rtmesh.geometry import embree_packets as ep
 from rtmesh.geometry.accel import Accel
 from rtmesh.geometry.float32_rays import F32_MAX, offset_origin
-from rtmesh.lights.point_light_rows import illuminate_row
+from rtmesh.lights.point_light_rows import ROW, illuminate_row
 from rtmesh.materials.blinn_phong import highlight_cosine, shade_row
 from rtmesh.sampling.pixel_samples import PixelSampler, pixel_position
 from rtmesh.scene.background import SolidBackground
@@ -47,6 +47,8 @@ PACKETS = 4
 BLOCK = PACKETS * LANES
 _PACKET_BYTES = 4 * ep.RAYHIT_WORDS * LANES  # 4-byte words
 _SHADOW_BYTES = 4 * ep.RAY_WORDS * LANES
+# float64 words of a light row
+ROW_WORDS = ROW.itemsize // 8
 
 
 class DirectStage:
@@ -77,8 +79,8 @@ class DirectStage:
             ambient = np.ascontiguousarray(it._ambient_light)
             base = ambient if not st.emission else base + ambient
         self._base = np.ascontiguousarray(base)
-        lights = it._light_parameters if st.lights else []
-        self._lights = np.array(lights, dtype=np.float64).reshape(len(lights), 12)
+        rows = [light.kernel_row() for light in it.lights] if st.lights else []
+        self._lights = np.array(rows, dtype=np.float64).reshape(len(rows), ROW_WORDS)
         self._materials = (np.ascontiguousarray(it._shaded), np.ascontiguousarray(it._diffuse),
                            np.ascontiguousarray(it._specular), it._highlight_exponent, it._highlight_from)
         background = it.background
@@ -111,6 +113,9 @@ class DirectStage:
         if any(getattr(st, name) for name in needs_general):
             return None
         if type(it.accel) is not Accel or not it.accel.packets or it.media is not None:
+            return None
+        # lights without a compiled row are evaluated by the general path
+        if st.lights and any(light.kernel_row() is None for light in it.lights):
             return None
         background = it.background
         if st.background and not (isinstance(background, SolidBackground) and not background.transparent):
@@ -184,7 +189,7 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     background : (3,) float64
         Radiance of rays that miss.
     lights : (L, 12) float64
-        Point-like lights (:meth:`kernel_parameters` rows).
+        Point-like lights' rows (:func:`rtmesh.lights.point_light_rows.pack_row`).
     shaded : (M,) bool
         Materials that reflect light.
     diffuse, specular : (M, 3) float64

@@ -231,7 +231,6 @@ class Integrator:
         # the highlight's exponent per material; negative: no highlight
         self._highlight_exponent = np.where(self._has_specular, m.shininess, -1.0)
         self._highlight_from = highlight_thresholds(self._highlight_exponent)
-        self._light_parameters = [light.kernel_parameters() for light in self.lights]
         self._offset_scale32 = np.float32(self.offset_scale)
         self._faces, self._vertex_normals = self._face_tables()
         self._smooth = (np.zeros(len(scene.faces), dtype=bool) if scene.smooth is None
@@ -648,7 +647,7 @@ class Integrator:
 
     def _direct_light(self, srf, depth, keys, stats, clock):
         """Blinn-Phong light from every light: one shadow ray per lit (hit, point-like light)
-        (see :func:`rtmesh.shading.kernels.light_samples`), ``light_samples`` per (hit, area light)
+        (see :mod:`rtmesh.lights.interface`, :func:`rtmesh.shading.direct_light.light_samples`), ``light_samples`` per (hit, area light)
         (see :mod:`rtmesh.lights.area_lights`).
 
         Returns
@@ -666,10 +665,12 @@ class Integrator:
                      self._highlight_exponent)
         p, ng, ns, d = (take_rows(a, rows) for a in (srf.p, srf.ng, srf.ns, srf.d))
         total = None
-        for light in self._light_parameters:
+        for light in self.lights:
+            wi, distance, incident = light.illuminate(p)
             (lit, origins, directions, t_max, cos_i, incident, highlight_rows, highlight,
-             power_exponent) = light_samples(light, p, ng, ns, d, materials[0], self._highlight_exponent,
-                                             self._highlight_from, self._offset_scale32, SHADOW_SHORTEN)
+             power_exponent) = light_samples(wi, distance, incident, p, ng, ns, d, materials[0],
+                                             self._highlight_exponent, self._highlight_from, self._offset_scale32,
+                                             SHADOW_SHORTEN)
             if not len(lit):
                 continue
             target = take_rows(rows, lit) if rows is not None else lit

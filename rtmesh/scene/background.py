@@ -24,7 +24,7 @@ import numpy as np
 
 from rtmesh.core.errors import SceneError
 from rtmesh.io.colour import srgb_to_linear
-from rtmesh.scene.texture_images import Texture
+from rtmesh.io.texture_images import Texture
 
 BACKGROUND_TYPES = ("solid", "gradient", "environment", "transparent")
 # files whose values are linear radiance; anything else is taken as 8-bit sRGB
@@ -148,7 +148,7 @@ class EnvironmentBackground:
         -------
         (k, 2) float
             u in [0, 1] left to right (azimuth), v in [0, 1] bottom (-Y) to top (+Y), the
-            texture convention of :class:`rtmesh.scene.texture_images.Texture`.
+            texture convention of :class:`rtmesh.io.texture_images.Texture`.
         """
         x, y, z = directions[:, 0], directions[:, 1], directions[:, 2]
         # undo the environment's rotation about +Y: rotate the direction by -rotation

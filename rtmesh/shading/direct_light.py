@@ -9,14 +9,14 @@ import numpy as np
 from rtmesh.core.compiled import kernel, row
 from rtmesh.core.row_vectors import dot3
 from rtmesh.geometry.float32_rays import F32_MAX, offset_origin
-from rtmesh.lights.point_light_rows import illuminate_row
 from rtmesh.materials.blinn_phong import highlight_cosine, shade_row
 
 
 # ------------------------------------------------------------------ point-like lights
 @row
 def light_reaches(wx, wy, wz, er, eg, eb, gx, gy, gz):
-    """Whether a light with direction ``w`` and incident term ``e`` (see :func:`illuminate_row`)
+    """Whether a light with direction ``w`` and incident term ``e`` (see
+    :meth:`rtmesh.lights.interface.PointLikeLight.illuminate`)
     lights a point with geometric normal ``g``: it is on the side the ray came from
     (``wi . ng > 0``: no leaks through the surface) and its term is not zero."""
     # bitwise operators: short-circuits are branches, which stop vectorisation
@@ -31,14 +31,19 @@ _BLOCK = 256
 
 
 @kernel
-def light_samples(light, p, ng, ns, d, mat, exponent, visible_from, scale, shorten):
+def light_samples(wi, distance, incident_all, p, ng, ns, d, mat, exponent, visible_from, scale, shorten):
     """One point-like light at every hit: the lit hits, their shadow rays, and what shading
     them needs once the shadow rays are traced (see :func:`add_light`).
 
     Parameters
     ----------
-    light : (12,) float64
-        The light's :meth:`kernel_parameters`.
+    wi : (k, 3) float64
+        Unit directions toward the light (see
+        :meth:`rtmesh.lights.interface.PointLikeLight.illuminate`).
+    distance : (k,) float64
+        Distances to the light.
+    incident_all : (k, 3) float64
+        The light's incident term at each hit.
     p, ng, ns, d : (k, 3) float64
         Surface records: points, geometric and shading normals, incoming directions.
     mat : (k,) intp
@@ -92,7 +97,8 @@ def light_samples(light, p, ng, ns, d, mat, exponent, visible_from, scale, short
         n = min(_BLOCK, k - start)
         for b in range(n):
             i = start + b
-            wx, wy, wz, distance, er, eg, eb = illuminate_row(light, p[i, 0], p[i, 1], p[i, 2])
+            wx, wy, wz = wi[i, 0], wi[i, 1], wi[i, 2]
+            er, eg, eb = incident_all[i, 0], incident_all[i, 1], incident_all[i, 2]
             block_lit[b] = light_reaches(wx, wy, wz, er, eg, eb, ng[i, 0], ng[i, 1], ng[i, 2])
             block_incident[0, b], block_incident[1, b], block_incident[2, b] = er, eg, eb
             block_cos[0, b] = dot3(ns[i, 0], ns[i, 1], ns[i, 2], wx, wy, wz)
@@ -103,7 +109,7 @@ def light_samples(light, p, ng, ns, d, mat, exponent, visible_from, scale, short
             block_ray[0, b], block_ray[1, b], block_ray[2, b] = offset_origin(
                 p[i, 0], p[i, 1], p[i, 2], ng[i, 0], ng[i, 1], ng[i, 2], dx, dy, dz, scale)
             block_ray[3, b], block_ray[4, b], block_ray[5, b] = dx, dy, dz
-            block_length[b] = np.float32(min(distance * shorten, F32_MAX))
+            block_length[b] = np.float32(min(distance[i] * shorten, F32_MAX))
         for b in range(n):
             if not block_lit[b]:
                 continue
