@@ -5,7 +5,7 @@ from every feature the renderer has: Blinn-Phong, mirror, glossy, glass with and
 absorption, nested media, a camera inside glass (and inside glass inside water), emissive
 and unlit materials, textures (base colour with alpha, specular, normal and emission maps,
 every wrap mode), vertex colours, alpha cut-outs (mask and blend, textured alpha), object
-motion (translation and rotation) under open, closed and off-zero shutters, point, spot,
+motion (translation and rotation) under open, closed and off-zero shutters, point, spot, projector,
 directional, quad and disk lights, emissive objects, solid, gradient, environment and
 transparent backgrounds, ambient light and AO, depth of field, every pass, adaptive
 sampling (``target_error``; ``time_limit`` is left out: its rounds depend on the clock, so
@@ -48,6 +48,7 @@ from rtmesh.io.passes import PASS_NAMES
 from rtmesh.io.texture_images import Texture
 from rtmesh.lights.area_lights import DiskLight, QuadLight
 from rtmesh.lights.point_lights import DirectionalLight, PointLight, SpotLight
+from rtmesh.lights.projector import ProjectorLight
 from rtmesh.materials.table import Material, as_colour
 from rtmesh.rendering.integrator import Integrator
 from rtmesh.sampling.patterns import SAMPLERS
@@ -149,6 +150,8 @@ lights = st.lists(st.one_of(
     st.fixed_dictionaries({"type": st.just("point"), "intensity": st.sampled_from([5.0, [20.0, 10.0, 5.0]])}),
     st.fixed_dictionaries({"type": st.just("spot"), "intensity": st.sampled_from([10.0, 40.0]),
                            "angles": st.sampled_from([(0.0, 10.0), (20.0, 30.0), (45.0, 45.0)])}),
+    st.fixed_dictionaries({"type": st.just("projector"), "intensity": st.sampled_from([20.0, [30.0, 20.0, 10.0]]),
+                           "fov": st.sampled_from([25.0, 70.0]), "seed": st.integers(0, 3)}),
     st.fixed_dictionaries({"type": st.just("directional"), "irradiance": st.sampled_from([1.0, [2.0, 1.5, 1.0]]),
                            "direction": st.sampled_from([[0.0, 0.0, -1.0], [1.0, 2.0, -1.0]])}),
     st.fixed_dictionaries({"type": st.just("quad"), "radiance": st.sampled_from([2.0, [5.0, 4.0, 3.0]]),
@@ -341,6 +344,10 @@ def build_scene(d):
             inner, outer = light["angles"]
             scene_lights.append(SpotLight([-1.0, -2.0, 3.0], LOOK_AT - [-1.0, -2.0, 3.0], light["intensity"],
                                           inner, outer))
+        elif kind == "projector":
+            gobo = Texture(np.random.default_rng(light["seed"]).uniform(0.0, 1.0, (6, 9, 3)), wrap="clamp")
+            scene_lights.append(ProjectorLight([0.5, -2.5, 3.0], LOOK_AT - [0.5, -2.5, 3.0], light["intensity"],
+                                               gobo, light["fov"]))
         elif kind == "directional":
             scene_lights.append(DirectionalLight(light["direction"], light["irradiance"]))
         elif kind == "quad":

@@ -2,5 +2,6 @@
 
 from rtmesh.lights.area_lights import DISK, QUAD
 from rtmesh.lights.point_lights import DIRECTIONAL, POINT, SPOT
+from rtmesh.lights.projector import PROJECTOR
 
-LIGHT_TYPES = {t.name: t for t in (POINT, DIRECTIONAL, SPOT, QUAD, DISK)}
+LIGHT_TYPES = {t.name: t for t in (POINT, DIRECTIONAL, SPOT, PROJECTOR, QUAD, DISK)}

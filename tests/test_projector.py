@@ -1,0 +1,114 @@
+"""The projector light: an image projected from a pinhole, added as one light module."""
+
+import numpy as np
+import pytest
+from PIL import Image
+from scenes import floor_quad, part, render, settings
+
+from rtmesh.core.errors import SceneError
+from rtmesh.io.texture_images import Texture
+from rtmesh.lights.point_lights import SpotLight
+from rtmesh.lights.projector import ProjectorLight
+from rtmesh.loaders.scene_file import scene_from_dict
+from rtmesh.materials.table import Material
+from rtmesh.rendering.integrator import Integrator
+from rtmesh.scene.camera import Camera
+from rtmesh.scene.model import Scene
+
+# a 2x2 image: top-left red, top-right green, bottom-left blue, bottom-right white
+QUADRANTS = np.array([[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+                      [[0.0, 0.0, 1.0], [1.0, 1.0, 1.0]]])
+
+
+def projector_above_floor(image, fov=60.0, intensity=10.0):
+    """Projector 2 units above the floor z = 0, looking down, image up = +y."""
+    return ProjectorLight([0.0, 0.0, 2.0], [0.0, 0.0, -1.0], intensity, Texture(image, wrap="clamp"), fov,
+                          up=[0.0, 1.0, 0.0])
+
+
+def scalar_projection(light, point, image):
+    """Incident term of ``light`` at one point, by the pinhole model written out (nearest texel)."""
+    forward, right, up = light.frame()
+    offset = np.asarray(point, dtype=float) - light.position
+    depth = offset @ forward
+    if depth <= 0:
+        return np.zeros(3)
+    tan_half = np.tan(np.radians(light.fov) / 2)
+    height, width = image.shape[:2]
+    x = (offset @ right) / depth / (tan_half * width / height)  # -1 .. 1 across the image
+    y = (offset @ up) / depth / tan_half
+    if abs(x) > 1 or abs(y) > 1:
+        return np.zeros(3)
+    column = min(int((x + 1) / 2 * width), width - 1)
+    row = min(int((1 - y) / 2 * height), height - 1)  # image rows grow downward
+    return light.intensity * image[row, column] / (offset @ offset)
+
+
+def test_projector_lights_each_quadrant_of_the_floor_with_its_quadrant_of_the_image():
+    light = projector_above_floor(QUADRANTS)
+    # the 60-degree frustum meets the floor 2 units below within |x|, |y| < 2 tan(30 deg) = 1.15;
+    # points at the centres of the quadrants, away from the bilinear blend at the middle
+    points = np.array([[-0.8, 0.8, 0.0], [0.8, 0.8, 0.0], [-0.8, -0.8, 0.0], [0.8, -0.8, 0.0],
+                       [0.0, 1.3, 0.0], [3.0, 0.0, 0.0], [0.0, 0.0, 3.0]])
+    wi, distance, incident = light.illuminate(points)
+    for i, point in enumerate(points):
+        np.testing.assert_allclose(incident[i], scalar_projection(light, point, QUADRANTS), rtol=1e-12,
+                                   err_msg=f"point {point}")
+    assert (incident[4:] == 0).all()  # outside the frustum, and behind the projector
+    np.testing.assert_allclose(np.linalg.norm(wi, axis=1), 1.0)
+    np.testing.assert_allclose(distance, np.linalg.norm(points - light.position, axis=1))
+
+
+def test_a_white_projector_equals_a_spot_light_inside_its_frustum():
+    """With a white image, a projector is a spot light with a hard rectangular edge."""
+    projector = projector_above_floor(np.ones((4, 4, 3)), fov=90.0, intensity=[3.0, 2.0, 1.0])
+    spot = SpotLight([0.0, 0.0, 2.0], [0.0, 0.0, -1.0], [3.0, 2.0, 1.0], 89.0, 89.0)
+    rng = np.random.default_rng(3)
+    points = np.column_stack([rng.uniform(-1.9, 1.9, (200, 2)), np.zeros(200)])  # inside the 90-degree frustum
+    for got, expected in zip(projector.illuminate(points), spot.illuminate(points)):
+        np.testing.assert_allclose(got, expected, rtol=1e-12)
+
+
+def projector_scene(image):
+    vertices, faces = floor_quad(3.0)
+    camera = Camera([0.0, 0.0, 4.0], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0], 60.0)
+    light = projector_above_floor(image)
+    return Scene.from_parts([part("floor", (vertices, faces))], [Material("floor", diffuse=0.8)], [light], camera,
+                            ambient=0.0)
+
+
+def test_a_rendered_floor_shows_the_projected_image_upright():
+    """Camera above the projector, looking down with the same up: the picture appears as in
+    the image (red top left, white bottom right), lit only inside the frustum."""
+    scene = projector_scene(np.kron(QUADRANTS, np.ones((16, 16, 1))))  # 32x32: bilinear blends only mid-image
+    integrator = Integrator(scene, settings(width=64, height=64))
+    assert not integrator.plan.fused_direct  # no compiled row: the general path
+    image = render(scene, width=64, height=64).image
+    # the camera at z = 4 with fov 60 sees |x|, |y| < 2.31; the lit square |x|, |y| < 1.15
+    # is the middle half of the image; sample each quadrant's centre
+    top_left, top_right = image[24, 24], image[24, 40]
+    bottom_left, bottom_right = image[40, 24], image[40, 40]
+    assert top_left[0] > 0 and top_left[1] == top_left[2] == 0
+    assert top_right[1] > 0 and top_right[0] == top_right[2] == 0
+    assert bottom_left[2] > 0 and bottom_left[0] == bottom_left[1] == 0
+    assert (bottom_right > 0).all()
+    assert (image[2, 2] == 0).all() and (image[32, 2] == 0).all()  # outside the frustum: dark
+
+
+def test_scene_files_name_the_projector_and_its_image_relative_to_the_file(tmp_path):
+    Image.fromarray(np.uint8(QUADRANTS * 255)).save(tmp_path / "gobo.png")
+    doc = {"camera": {"position": [0, 0, 4], "look_at": [0, 0, 0]},
+           "objects": [{"primitive": "plane", "size": [6, 6]}],
+           "lights": [{"type": "projector", "position": [0, 0, 2], "look_at": [0, 0, 0], "intensity": 5,
+                       "image": "gobo.png", "fov": 40}]}
+    scene, _ = scene_from_dict(doc, base_dir=str(tmp_path))
+    (light,) = scene.lights
+    assert isinstance(light, ProjectorLight) and light.fov == 40.0
+    np.testing.assert_array_equal(light.image.pixels[0, 0, :3], [1.0, 0.0, 0.0])  # sRGB 255 -> 1
+    doc["lights"][0]["image"] = "missing.png"
+    with pytest.raises(SceneError, match=r"lights\[0\]\.image: no such file"):
+        scene_from_dict(doc, base_dir=str(tmp_path))
+    doc["lights"][0]["image"] = "gobo.png"
+    doc["lights"][0]["fov"] = 200
+    with pytest.raises(SceneError, match=r"lights\[0\]: projector fov must be in \(0, 180\)"):
+        scene_from_dict(doc, base_dir=str(tmp_path))
