@@ -150,7 +150,7 @@ def test_integrator_draws_glossy_directions_from_the_lobe_with_the_renders_sampl
     mirror = np.tile([0.0, 0.0, 1.0], (k, 1))
     ng = mirror.copy()
     mat = np.full(k, 1, dtype=np.intp)
-    wi = integrator._glossy(mirror.copy(), ng, mat, np.arange(k), 2, (pixel, sample_in_pixel))
+    wi = integrator.secondary_rays.glossy(mirror.copy(), ng, mat, np.arange(k), 2, (pixel, sample_in_pixel))
     n = roughness_exponent(0.25)
     u0 = 1.0 - wi[:, 2] ** (n + 1.0)
     counts, _ = np.histogram(u0, bins=20, range=(0, 1))

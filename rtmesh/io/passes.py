@@ -52,7 +52,7 @@ class CameraHits:
 
     Attributes
     ----------
-    srf : rtmesh.rendering.integrator._Surfaces
+    srf : rtmesh.rendering.chunk_state.SurfaceRecords
         Shading records: ``p`` (hit points in the integrator's shifted frame), ``ns``
         (shading normals facing the ray), ``mat`` (material ids), ``sample`` (camera-sample
         rows), and ``tints`` where the scene has textures.
@@ -288,7 +288,7 @@ class PassRecorder:
         ----------
         buffers : dict of str to (n, k) float
             From :meth:`buffers`; rows are camera samples.
-        srf : rtmesh.rendering.integrator._Surfaces
+        srf : rtmesh.rendering.chunk_state.SurfaceRecords
             Shading records of the hits (``sample`` gives their rows in ``buffers``).
         hits : Hits
             Embree hits of every camera ray.

@@ -8,9 +8,15 @@ on whole ray batches (no per-ray Python loop)::
                     refraction rays] repeated until max depth or no ray is left
                 -> film
 
+The surface, local-shading and secondary-ray stages are modules of their own
+(:mod:`~rtmesh.rendering.surface_stage`, :mod:`~rtmesh.rendering.local_shading`,
+:mod:`~rtmesh.rendering.secondary_rays`); a chunk's state travels through them in one
+:class:`~rtmesh.rendering.chunk_state.ChunkState`.  Scenes that need only direct light take
+the fused compiled stage instead (:mod:`~rtmesh.rendering.direct_stage`).
+
 Rays carry the index of the sample they belong to and their throughput; contributions go
 back to the sample by scattering.  Chunks run on a thread pool (Embree, NumPy and the
-compiled kernels of :mod:`rtmesh.shading.kernels` release the GIL).  Every random number is a
+compiled kernels release the GIL).  Every random number is a
 function of (seed, pixel, sample, dimension), each pixel is rendered whole inside one
 chunk, and the chunks do not depend on the thread count (see :mod:`rtmesh.rendering.scheduler`), so
 the image is bit-identical whatever the thread count.
@@ -31,30 +37,28 @@ import numpy as np
 
 from rtmesh.core import runtime
 from rtmesh.core.rays import RayBatch, component_major, repeated_row, take_rows
-from rtmesh.core.vecmath import dot, fresnel_dielectric, fresnel_schlick, orthonormal_basis, reflect, refract
-from rtmesh.geometry.accel import Accel, offset_ray_origins
+from rtmesh.geometry.accel import Accel
 from rtmesh.geometry.build_kernels import corner_rows, face_rows
 from rtmesh.geometry.cutouts import CutoutAccel
 from rtmesh.geometry.motion import MotionAccel, blurs, object_motions, scene_at_time, swept_bounds
 from rtmesh.io.passes import DERIVED_PASSES, PassRecorder, derived_pass
 from rtmesh.lights.area_lights import AreaLighting, emissive_mesh_light, is_area_light
-from rtmesh.materials.blinn_phong import surface_reflectance
-from rtmesh.materials.glossy import sample_glossy_directions
 from rtmesh.materials.table import ALPHA_MODES
 from rtmesh.rendering.adaptive import render_rounds
+from rtmesh.rendering.chunk_state import ChunkState, Clock, scatter_add
 from rtmesh.rendering.direct_stage import DirectStage
 from rtmesh.rendering.film import Film
-from rtmesh.rendering.film_sums import add_rows
+from rtmesh.rendering.local_shading import LocalShading
 from rtmesh.rendering.media import Media
 from rtmesh.rendering.render_plan import RenderPlan
 from rtmesh.rendering.scheduler import pixel_chunks, run_on_threads
+from rtmesh.rendering.secondary_rays import SecondaryRays
 from rtmesh.rendering.stats import RenderStats
+from rtmesh.rendering.surface_stage import SurfaceStage
 from rtmesh.rendering.surface_textures import SurfaceTextures
 from rtmesh.sampling.sampler import Sampler
-from rtmesh.sampling.warps import square_to_cosine_hemisphere
 from rtmesh.scene.background import as_background
-from rtmesh.shading.direct_light import SHADOW_SHORTEN, add_light, highlight_thresholds, light_samples
-from rtmesh.shading.surfaces import face_viewer, surface_records
+from rtmesh.shading.direct_light import highlight_thresholds
 
 log = logging.getLogger(__name__)
 
@@ -85,22 +89,6 @@ class RenderResult:
     stats: RenderStats
     film: Film
     alpha: np.ndarray | None = None
-
-
-class _Surfaces:
-    """Shading records of the rays that hit something (one row per hit).
-
-    ``p``, ``ng``, ``ns`` and ``d`` (the incoming ray direction; ``wo = -d`` is formed only
-    where it is needed) are (k, 3) component-major arrays (see :mod:`rtmesh.core.rays`).
-    ``ng`` and ``ns`` are flipped to the side the ray came from; ``front`` says whether
-    that is the outer side of the triangle (counter-clockwise winding).  ``mat`` (intp) is
-    the material, ``prim`` (int) the face hit, ``sample`` the pixel sample each hit
-    contributes to, ``time`` (float, None without motion blur) the time of the ray (see
-    :mod:`rtmesh.geometry.motion`).  ``tints`` (:class:`rtmesh.rendering.surface_textures.Tints` or None) holds the
-    texture and vertex-colour multipliers of the material colours.
-    """
-
-    __slots__ = ("p", "ng", "ns", "d", "front", "mat", "prim", "sample", "time", "tints")
 
 
 def _translated(obj, shift):
@@ -220,7 +208,6 @@ class Integrator:
         self._shaded = ((m.diffuse > 0).any(axis=1) | (m.specular > 0).any(axis=1)) & ~m.unlit
         self._all_shaded = bool(self._shaded.all())  # then no per-hit lookup is needed
         self._init_media(scene)
-        self._fresnel = fresnel_exact_or_schlick(settings.fresnel)
         self._has_specular = (m.specular > 0).any(axis=1)
         # per-material colours, component-major so that gathering them per hit keeps the
         # fast layout; the ambient term is the product of two constants, formed once
@@ -237,6 +224,10 @@ class Integrator:
                         else np.ascontiguousarray(scene.smooth, dtype=bool))
         # gathers with int32 indices are ~10x slower in NumPy than with intp ones
         self._material_id = scene.material_id.astype(np.intp)
+        # the general path's stages, each reading the tables above
+        self.surface_stage = SurfaceStage(self)
+        self.local_shading = LocalShading(self)
+        self.secondary_rays = SecondaryRays(self)
         # scenes that need only direct light take one compiled stage per chunk
         self.direct_stage = DirectStage.plan(self)
         self.plan = dataclasses.replace(self.plan, fused_direct=self.direct_stage is not None)
@@ -438,7 +429,7 @@ class Integrator:
         """
         s = self.settings
         stats = RenderStats()
-        clock = _Clock(stats.stage_seconds)
+        clock = Clock(stats.stage_seconds)
         if isinstance(pixels, range):
             pixels = np.arange(pixels.start, pixels.stop, pixels.step, dtype=np.int64)
         pixels = np.asarray(pixels, dtype=np.int64)
@@ -486,28 +477,28 @@ class Integrator:
                       else repeated_row(_UNIT_THROUGHPUT, n))
         rays = RayBatch(origins, directions, np.arange(n, dtype=np.int64), throughput,
                         repeated_row(self._camera_medium, n))
-        radiance = np.zeros((n, 3), order="F")
-        aov = self.passes.buffers(n)
+        chunk = ChunkState(np.zeros((n, 3), order="F"), self.passes.buffers(n), pixel, sample_in_pixel, stats,
+                           clock, sample_time)
         stats.rays["camera"] += n
         clock.lap("camera")
 
-        keys = (pixel, sample_in_pixel)
         for depth in range(s.max_depth + 1):
             if not len(rays):
                 break
             hits = self.accel.intersect(rays.origins, rays.directions,
                                         None if sample_time is None else sample_time[rays.sample])
             clock.lap("intersect")
-            rays = self._shade(rays, hits, depth, radiance, aov, keys, stats, clock, sample_time)
+            rays = self._shade(rays, hits, depth, chunk)
 
         if ragged:
-            return radiance, self.passes.per_sample(aov, n) or None, stats
-        passes = self.passes.per_pixel(aov, m, spp) or None
-        return radiance.reshape(m, spp, 3), passes, stats
+            return chunk.radiance, self.passes.per_sample(chunk.aov, n) or None, stats
+        passes = self.passes.per_pixel(chunk.aov, m, spp) or None
+        return chunk.radiance.reshape(m, spp, 3), passes, stats
 
     # ---------------------------------------------------------------- stages
-    def _shade(self, rays, hits, depth, radiance, aov, keys, stats, clock, sample_time=None):
+    def _shade(self, rays, hits, depth, chunk):
         """Shade one depth level; returns the rays of the next level."""
+        radiance = chunk.radiance
         m = self.scene.materials
         # camera rays (depth 0) are one per sample, in sample order, with unit throughput
         # unless the camera sits in an absorbing medium
@@ -537,7 +528,7 @@ class Integrator:
 
         if on_light is not None and len(on_light[0]):
             ended, emitted = on_light
-            _scatter_add(radiance, rays.sample[ended], take_rows(rays.throughput, ended) * emitted,
+            scatter_add(radiance, rays.sample[ended], take_rows(rays.throughput, ended) * emitted,
                          unique=primary)
 
         # misses: rays leaving the scene see the background
@@ -545,345 +536,32 @@ class Integrator:
         if self.plan.background and n_hit < len(hit):
             miss = np.flatnonzero(hits.prim == -1)  # -2: ended on an area light
             seen = self.background.radiance(take_rows(rays.directions, miss))
-            _scatter_add(radiance, rays.sample[miss], take_rows(rays.throughput, miss) * seen,
+            scatter_add(radiance, rays.sample[miss], take_rows(rays.throughput, miss) * seen,
                          unique=primary)
 
         if not n_hit:
             return RayBatch.empty()
         # the rows of the rays that hit; None when all did (no gathers needed)
         rows = None if n_hit == len(hit) else np.flatnonzero(hit)
-        srf = self._surfaces(rays, hits, rows, sample_time)
-        clock.lap("shade")
+        srf = self.surface_stage.records(rays, hits, rows, chunk.sample_time)
+        chunk.clock.lap("shade")
         if primary and self.plan.passes:
-            self.passes.record(aov, srf, hits, rows)
-            clock.lap("passes")
+            self.passes.record(chunk.aov, srf, hits, rows)
+            chunk.clock.lap("passes")
 
-        local = self._local_shading(srf, depth, aov.get("ao"), keys, stats, clock)
+        local = self.local_shading.shade(srf, depth, chunk)
         if local is not None:
             if not unit_throughput:
                 local = local * take_rows(rays.throughput, rows)
-            _scatter_add(radiance, None if primary and rows is None else srf.sample, local,
+            scatter_add(radiance, None if primary and rows is None else srf.sample, local,
                          unique=primary)
-        clock.lap("shade")
+        chunk.clock.lap("shade")
 
         if depth >= self.settings.max_depth or not self.plan.reflection:
             return RayBatch.empty()
-        next_rays = self._spawn(srf, rays.subset(rows), depth, keys, stats)
-        clock.lap("spawn")
+        next_rays = self.secondary_rays.spawn(srf, rays.subset(rows), depth, chunk)
+        chunk.clock.lap("spawn")
         return next_rays
-
-    def _surfaces(self, rays, hits, rows, sample_time=None):
-        """Hit points, normals facing the incoming ray, and material ids of the hit ``rows``
-        (see :func:`rtmesh.shading.kernels.surface_records`).
-
-        With motion blur, points and normals are formed on the rest pose of the object hit
-        and moved to the ray's time at the end (see :mod:`rtmesh.geometry.motion`).
-        """
-        srf = _Surfaces()
-        srf.sample = take_rows(rays.sample, rows)
-        srf.time = None if sample_time is None else sample_time[srf.sample]
-        srf.d = take_rows(rays.directions, rows)
-        srf.prim = take_rows(hits.prim, rows)
-        view = _NO_VECTORS
-        if srf.time is not None:
-            view = self.motion.directions_to_rest(srf.prim.astype(np.intp), srf.time, srf.d)
-        normal_maps = self.plan.normal_maps
-        # the shading-normal terminator fix (see face_viewer) runs in the kernel unless
-        # normal maps, applied below, change the normals after it
-        srf.p, srf.ng, srf.ns, srf.front, srf.mat = surface_records(
-            hits.prim, hits.u, hits.v, np.arange(len(hits)) if rows is None else rows, rays.directions,
-            view, self._faces, self._vertex_normals, self._smooth, self._material_id,
-            self.plan.smooth_normals and not normal_maps)
-        srf.tints = None
-        if self.plan.textures:
-            u, v = take_rows(hits.u, rows), take_rows(hits.v, rows)
-            srf.tints = self.textures.tints(srf.prim, u, v, srf.mat)
-            if normal_maps:
-                flip = np.where(srf.front, 1.0, -1.0)
-                srf.ns = self.textures.normal_mapped(srf.ns, srf.prim, u, v, srf.mat, flip)
-                # in the rest frame, like ns and ng
-                srf.ns = face_viewer(srf.ns, srf.ng, srf.d if srf.time is None else view)
-        if srf.time is not None:
-            srf.p, srf.ng, srf.ns = self.motion.surfaces_to_world(srf.prim, srf.time, srf.p, srf.ng,
-                                                                  srf.ns)
-        return srf
-
-    def _local_shading(self, srf, depth, ao_pass, keys, stats, clock):
-        """Emission, ambient (with AO) and direct light with shadows; (k, 3) or None."""
-        st = self.plan
-        local = None
-        if st.emission:
-            local = take_rows(self._emission, srf.mat)
-            if srf.tints is not None and srf.tints.emission is not None:
-                local = local * srf.tints.emission
-        tint = None if srf.tints is None else srf.tints.diffuse
-        if st.unlit:
-            # unlit materials show their (textured) colour as is
-            unlit = self.scene.materials.unlit.take(srf.mat)
-            if unlit.any():
-                shown = np.where(unlit[:, None], take_rows(self._diffuse, srf.mat), 0.0)
-                shown = shown if tint is None else shown * tint
-                local = shown if local is None else local + shown
-
-        ao = None
-        if st.ao and (st.ambient or (depth == 0 and ao_pass is not None)):
-            ao = self._ambient_occlusion(srf, depth, keys, stats)
-            if depth == 0 and ao_pass is not None:
-                ao_pass[srf.sample, 0] = ao
-            clock.lap("ao")
-        if st.ambient:
-            amb = take_rows(self._ambient_light, srf.mat)
-            if tint is not None:
-                amb = amb * tint
-            if ao is not None:
-                amb = amb * ao[:, None]
-            local = amb if local is None else local + amb
-
-        if st.lights or st.area_lights:
-            direct = self._direct_light(srf, depth, keys, stats, clock)
-            if direct is not None:
-                local = direct if local is None else local + direct
-        return local
-
-    def _direct_light(self, srf, depth, keys, stats, clock):
-        """Blinn-Phong light from every light: one shadow ray per lit (hit, point-like light)
-        (see :mod:`rtmesh.lights.interface`, :func:`rtmesh.shading.direct_light.light_samples`), ``light_samples`` per (hit, area light)
-        (see :mod:`rtmesh.lights.area_lights`).
-
-        Returns
-        -------
-        (k, 3) float64 or None
-            Component-major; None when no hit has a material that reflects light.
-        """
-        rows = None if self._all_shaded else np.flatnonzero(self._shaded[srf.mat])
-        if rows is not None and not len(rows):
-            return None
-        tints = srf.tints
-        tint_d, tint_s = (_NO_VECTORS if t is None else take_rows(t, rows)
-                          for t in ((None, None) if tints is None else (tints.diffuse, tints.specular)))
-        materials = (take_rows(srf.mat, rows), self._diffuse, tint_d, self._specular, tint_s,
-                     self._highlight_exponent)
-        p, ng, ns, d = (take_rows(a, rows) for a in (srf.p, srf.ng, srf.ns, srf.d))
-        total = None
-        for light in self.lights:
-            wi, distance, incident = light.illuminate(p)
-            (lit, origins, directions, t_max, cos_i, incident, highlight_rows, highlight,
-             power_exponent) = light_samples(wi, distance, incident, p, ng, ns, d, materials[0],
-                                             self._highlight_exponent, self._highlight_from, self._offset_scale32,
-                                             SHADOW_SHORTEN)
-            if not len(lit):
-                continue
-            target = take_rows(rows, lit) if rows is not None else lit
-            clock.lap("shade")
-            occluded = self.accel.occluded(origins, directions, t_max, time=_time_rows(srf.time, target))
-            stats.rays["shadow"] += len(lit)
-            clock.lap("shadow")
-            if total is None:
-                total = np.zeros((len(srf.mat), 3), order="F")
-            power = np.power(highlight, power_exponent, out=highlight)  # NumPy's pow is vectorised
-            add_light(total, target, lit, occluded, cos_i, incident, highlight_rows, power, *materials[:5])
-        if self.plan.area_lights:
-
-            def reflectance(wi, lit):
-                """Blinn-Phong factor toward unit directions ``wi``; highlights only where ``lit``."""
-                return surface_reflectance(ns, d, wi, lit, *materials)
-
-            pixel, sample_in_pixel = keys
-            sample = take_rows(srf.sample, rows)
-            area = self.area_lighting.direct(p, ng, reflectance, pixel[sample], sample_in_pixel[sample], depth,
-                                             stats, clock, _time_rows(srf.time, rows))
-            if area is not None:
-                if total is None:
-                    total = np.zeros((len(srf.mat), 3), order="F")
-                _add_rows(total, rows, area)
-        return total
-
-    def _ambient_occlusion(self, srf, depth, keys, stats):
-        """Fraction of cosine-weighted hemisphere rays that escape within ``ao_distance``."""
-        pixel, sample_in_pixel = keys
-        k = len(srf.mat)
-        n_ao = self.ao_samples
-        t, b = orthonormal_basis(srf.ng)
-        px, sp = pixel[srf.sample], sample_in_pixel[srf.sample]
-        free = np.zeros(k)
-        # the spp * n_ao rays of a pixel's samples are one stratified set of the render's
-        # sampler, and the n_ao of each hit are stratified among themselves
-        for i in range(n_ao):
-            u = self.sampler.ambient_occlusion(px, sp, depth, i, n_ao)
-            w = square_to_cosine_hemisphere(u)
-            d = t * w[:, :1] + b * w[:, 1:2] + srf.ng * w[:, 2:3]
-            origins = offset_ray_origins(srf.p, srf.ng, np.float32, self.offset_scale, d)
-            free += ~self.accel.occluded(origins, d, np.full(k, self.ao_distance), time=srf.time)
-        stats.rays["ao"] += k * n_ao
-        return free / n_ao
-
-    def _spawn(self, srf, rays, depth, keys, stats):
-        """Mirror (or glossy) reflection and refraction rays with their throughput weights."""
-        m = self.scene.materials
-        reflective = self._reflective[srf.mat]
-        if not reflective.any():
-            return RayBatch.empty()
-        idx = np.flatnonzero(reflective)
-        mat = srf.mat[idx]
-        wo, ng, ns = -srf.d[idx], srf.ng[idx], srf.ns[idx]
-        beta = rays.throughput[idx]
-        reflect_weight = m.mirror[mat]
-        if srf.tints is not None and srf.tints.mirror is not None:
-            reflect_weight = reflect_weight * srf.tints.mirror[idx]
-        batches = []
-
-        refract_batch = None
-        if self.plan.refraction:
-            trans = self._transmissive[mat]
-            j = np.flatnonzero(trans)
-            if len(j):
-                mat_j = mat[j]
-                # the index ratio and the media beyond come from the ray's medium stack
-                eta, beyond = self.media.cross(rays.medium[idx[j]], srf.prim[idx[j]],
-                                               srf.front[idx[j]])
-                cos_i = np.clip(dot(wo[j], ns[j]), 0.0, 1.0)
-                fresnel = self._fresnel(cos_i, eta)
-                wt, tir = refract(wo[j], ns[j], eta)
-                # a shading normal can bend the refracted ray back to the incoming side of
-                # the real surface; such rays cannot go through and are dropped
-                ok = ~tir & (dot(wt, ng[j]) < 0.0)
-                transmission = m.transmission[mat_j]
-                reflect_weight = reflect_weight.copy()
-                reflect_weight[j] += np.where(tir, 1.0, fresnel)[:, None] * transmission
-                w_t = (1.0 - fresnel)[:, None] * transmission
-                keep = ok & ((beta[j] * w_t).max(axis=1) >= self.settings.cutoff)
-                jk = j[keep]
-                if len(jk):
-                    refract_batch = RayBatch(
-                        offset_ray_origins(srf.p[idx[jk]], -ng[jk], scale=self.offset_scale,
-                                           directions=wt[keep]),
-                        wt[keep],
-                        rays.sample[idx[jk]],
-                        beta[jk] * w_t[keep],
-                        beyond[keep],
-                    )
-                    stats.rays["refraction"] += len(jk)
-
-        beta_r = beta * reflect_weight
-        keep = beta_r.max(axis=1) >= self.settings.cutoff
-        if keep.any():
-            wr = reflect(wo[keep], ns[keep])
-            # a shading normal can send the mirror direction under the real surface:
-            # fall back to the geometric mirror direction there
-            below = dot(wr, ng[keep]) <= 0.0
-            if below.any():
-                wr[below] = reflect(wo[keep][below], ng[keep][below])
-            if self.plan.glossy:
-                wr = self._glossy(wr, ng[keep], mat[keep], srf.sample[idx[keep]], depth, keys)
-            batches.append(RayBatch(
-                offset_ray_origins(srf.p[idx[keep]], ng[keep], scale=self.offset_scale, directions=wr),
-                wr,
-                rays.sample[idx[keep]],
-                beta_r[keep],
-                rays.medium[idx[keep]],
-            ))
-            stats.rays["reflection"] += int(keep.sum())
-        if refract_batch is not None:
-            batches.append(refract_batch)
-        return RayBatch.concatenate(batches)
-
-    def _glossy(self, mirror, ng, mat, sample, depth, keys):
-        """Reflection directions of rough materials, sampled in a lobe around the mirror.
-
-        Parameters
-        ----------
-        mirror : (k, 3) float
-            Mirror directions (above the surface); the rows of smooth materials are kept.
-        ng : (k, 3) float
-            Geometric normals on the side the rays leave toward.
-        mat : (k,) intp
-        sample : (k,) int
-            Pixel sample of each ray (within the chunk), keying its random numbers.
-        depth : int
-            Depth of the hit (the sampler's glossy dimensions of that depth).
-        keys : (pixel, sample_in_pixel)
-
-        Returns
-        -------
-        (k, 3) float
-            Weight unchanged (see :mod:`rtmesh.materials.glossy`).
-        """
-        roughness = self.scene.materials.roughness.take(mat)
-        rough = np.flatnonzero(roughness > 0.0)
-        if not len(rough):
-            return mirror
-        pixel, sample_in_pixel = keys
-        key_rows = sample.take(rough)
-        u = self.sampler.glossy(pixel.take(key_rows), sample_in_pixel.take(key_rows), depth)
-        mirror[rough] = sample_glossy_directions(take_rows(mirror, rough), take_rows(ng, rough),
-                                                 roughness.take(rough), u)
-        return mirror
-
-
-def _time_rows(time, *row_sets):
-    """``time`` gathered by successive row selections (None rows: all); None stays None."""
-    if time is None:
-        return None
-    for rows in row_sets:
-        time = take_rows(time, rows)
-    return time
-
-
-def fresnel_exact_or_schlick(mode):
-    """The Fresnel function for a ``fresnel`` setting."""
-    return fresnel_dielectric if mode == "exact" else fresnel_schlick
-
-
-def _scatter_add(target, index, values, unique=False):
-    """``target[index] += values`` with repeated indices accumulating, in index order.
-
-    Parameters
-    ----------
-    target : (n, 3) float
-    index : (k,) int or None
-        Rows of ``target``; None means all rows in order (``k == n``).
-    values : (k, 3) float
-    unique : bool
-        The caller guarantees no repeated index (e.g. camera rays, one per sample), so a
-        plain fancy-index add gives the same sums as the much slower ``np.add.at``.
-    """
-    if index is None:
-        target += values
-    elif unique:
-        _add_rows(target, index, values)
-    else:
-        for c in range(target.shape[1]):
-            np.add.at(target[:, c], index, values[:, c])
-
-
-def _add_rows(target, rows, values):
-    """``target[rows] += values`` for distinct ``rows`` (None: all rows); returns ``target``.
-
-    Column by column, so a component-major ``target`` is updated along contiguous columns.
-    """
-    if rows is None:
-        target += values
-    else:
-        # one pass without temporaries (a NumPy fancy-index add gathers, adds and
-        # scatters each column)
-        add_rows(target, rows, values)
-    return target
-
-
-class _Clock:
-    """Adds the time since the previous lap to a named stage."""
-
-    __slots__ = ("seconds", "last")
-
-    def __init__(self, seconds):
-        self.seconds = seconds
-        self.last = time.perf_counter()
-
-    def lap(self, stage):
-        now = time.perf_counter()
-        self.seconds[stage] += now - self.last
-        self.last = now
-
 
 def render(scene, settings, progress=None):
     """Render ``scene`` with ``settings``; see :meth:`Integrator.render`."""

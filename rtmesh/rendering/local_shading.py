@@ -1,0 +1,146 @@
+"""The local shading stage: what a hit sends back toward the ray without a new bounce.
+
+Emission, unlit colours, ambient light (with ambient occlusion), and direct light: every
+point-like light through its :meth:`~rtmesh.lights.interface.PointLikeLight.illuminate`,
+one shadow ray per lit hit (:func:`rtmesh.shading.direct_light.light_samples`), and the
+area lights (:mod:`rtmesh.lights.area_lights`).
+"""
+
+import numpy as np
+
+from rtmesh.core.rays import take_rows
+from rtmesh.core.vecmath import orthonormal_basis
+from rtmesh.geometry.accel import offset_ray_origins
+from rtmesh.materials.blinn_phong import surface_reflectance
+from rtmesh.rendering.chunk_state import add_rows_or_all, rows_at
+from rtmesh.sampling.warps import square_to_cosine_hemisphere
+from rtmesh.shading.direct_light import SHADOW_SHORTEN, add_light, light_samples
+
+# an empty (0, 3) array stands for "none" in the kernels' optional vector arguments
+_NO_VECTORS = np.zeros((0, 3))
+
+
+class LocalShading:
+    """Local shading for one integrator's scene (its lights, material tables, sampler).
+
+    Parameters
+    ----------
+    integrator : rtmesh.rendering.integrator.Integrator
+        After its tables are formed; the stage reads them.
+    """
+
+    def __init__(self, integrator):
+        self.it = integrator
+
+    def shade(self, srf, depth, chunk):
+        """Emission, ambient (with AO) and direct light with shadows; (k, 3) or None."""
+        it = self.it
+        ao_pass = chunk.aov.get("ao")
+        st = it.plan
+        local = None
+        if st.emission:
+            local = take_rows(it._emission, srf.mat)
+            if srf.tints is not None and srf.tints.emission is not None:
+                local = local * srf.tints.emission
+        tint = None if srf.tints is None else srf.tints.diffuse
+        if st.unlit:
+            # unlit materials show their (textured) colour as is
+            unlit = it.scene.materials.unlit.take(srf.mat)
+            if unlit.any():
+                shown = np.where(unlit[:, None], take_rows(it._diffuse, srf.mat), 0.0)
+                shown = shown if tint is None else shown * tint
+                local = shown if local is None else local + shown
+
+        ao = None
+        if st.ao and (st.ambient or (depth == 0 and ao_pass is not None)):
+            ao = self.ambient_occlusion(srf, depth, chunk)
+            if depth == 0 and ao_pass is not None:
+                ao_pass[srf.sample, 0] = ao
+            chunk.clock.lap("ao")
+        if st.ambient:
+            amb = take_rows(it._ambient_light, srf.mat)
+            if tint is not None:
+                amb = amb * tint
+            if ao is not None:
+                amb = amb * ao[:, None]
+            local = amb if local is None else local + amb
+
+        if st.lights or st.area_lights:
+            direct = self.direct_light(srf, depth, chunk)
+            if direct is not None:
+                local = direct if local is None else local + direct
+        return local
+
+    def direct_light(self, srf, depth, chunk):
+        """Blinn-Phong light from every light: one shadow ray per lit (hit, point-like light)
+        (see :mod:`rtmesh.lights.interface`, :func:`rtmesh.shading.direct_light.light_samples`), ``light_samples`` per (hit, area light)
+        (see :mod:`rtmesh.lights.area_lights`).
+
+        Returns
+        -------
+        (k, 3) float64 or None
+            Component-major; None when no hit has a material that reflects light.
+        """
+        it = self.it
+        rows = None if it._all_shaded else np.flatnonzero(it._shaded[srf.mat])
+        if rows is not None and not len(rows):
+            return None
+        tints = srf.tints
+        tint_d, tint_s = (_NO_VECTORS if t is None else take_rows(t, rows)
+                          for t in ((None, None) if tints is None else (tints.diffuse, tints.specular)))
+        materials = (take_rows(srf.mat, rows), it._diffuse, tint_d, it._specular, tint_s,
+                     it._highlight_exponent)
+        p, ng, ns, d = (take_rows(a, rows) for a in (srf.p, srf.ng, srf.ns, srf.d))
+        total = None
+        for light in it.lights:
+            wi, distance, incident = light.illuminate(p)
+            (lit, origins, directions, t_max, cos_i, incident, highlight_rows, highlight,
+             power_exponent) = light_samples(wi, distance, incident, p, ng, ns, d, materials[0],
+                                             it._highlight_exponent, it._highlight_from, it._offset_scale32,
+                                             SHADOW_SHORTEN)
+            if not len(lit):
+                continue
+            target = take_rows(rows, lit) if rows is not None else lit
+            chunk.clock.lap("shade")
+            occluded = it.accel.occluded(origins, directions, t_max, time=rows_at(srf.time, target))
+            chunk.stats.rays["shadow"] += len(lit)
+            chunk.clock.lap("shadow")
+            if total is None:
+                total = np.zeros((len(srf.mat), 3), order="F")
+            power = np.power(highlight, power_exponent, out=highlight)  # NumPy's pow is vectorised
+            add_light(total, target, lit, occluded, cos_i, incident, highlight_rows, power, *materials[:5])
+        if it.plan.area_lights:
+
+            def reflectance(wi, lit):
+                """Blinn-Phong factor toward unit directions ``wi``; highlights only where ``lit``."""
+                return surface_reflectance(ns, d, wi, lit, *materials)
+
+            pixel, sample_in_pixel = chunk.keys
+            sample = take_rows(srf.sample, rows)
+            area = it.area_lighting.direct(p, ng, reflectance, pixel[sample], sample_in_pixel[sample], depth,
+                                             chunk.stats, chunk.clock, rows_at(srf.time, rows))
+            if area is not None:
+                if total is None:
+                    total = np.zeros((len(srf.mat), 3), order="F")
+                add_rows_or_all(total, rows, area)
+        return total
+
+    def ambient_occlusion(self, srf, depth, chunk):
+        """Fraction of cosine-weighted hemisphere rays that escape within ``ao_distance``."""
+        it = self.it
+        pixel, sample_in_pixel = chunk.keys
+        k = len(srf.mat)
+        n_ao = it.ao_samples
+        t, b = orthonormal_basis(srf.ng)
+        px, sp = pixel[srf.sample], sample_in_pixel[srf.sample]
+        free = np.zeros(k)
+        # the spp * n_ao rays of a pixel's samples are one stratified set of the render's
+        # sampler, and the n_ao of each hit are stratified among themselves
+        for i in range(n_ao):
+            u = it.sampler.ambient_occlusion(px, sp, depth, i, n_ao)
+            w = square_to_cosine_hemisphere(u)
+            d = t * w[:, :1] + b * w[:, 1:2] + srf.ng * w[:, 2:3]
+            origins = offset_ray_origins(srf.p, srf.ng, np.float32, it.offset_scale, d)
+            free += ~it.accel.occluded(origins, d, np.full(k, it.ao_distance), time=srf.time)
+        chunk.stats.rays["ao"] += k * n_ao
+        return free / n_ao

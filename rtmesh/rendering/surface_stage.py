@@ -1,0 +1,63 @@
+"""The surface stage: shading records of the rays that hit (points, normals facing the
+incoming ray, materials, texture tints), with motion blur formed on the rest pose of the
+object hit and moved to the ray's time.
+"""
+
+import numpy as np
+
+from rtmesh.core.rays import take_rows
+from rtmesh.rendering.chunk_state import SurfaceRecords
+from rtmesh.shading.surfaces import face_viewer, surface_records
+
+# an empty (0, 3) array stands for "none" in the kernels' optional vector arguments
+_NO_VECTORS = np.zeros((0, 3))
+
+
+class SurfaceStage:
+    """Surface records for one integrator's scene (its face tables, textures, motion).
+
+    Parameters
+    ----------
+    integrator : rtmesh.rendering.integrator.Integrator
+        After its tables are formed; the stage reads them.
+    """
+
+    def __init__(self, integrator):
+        self.it = integrator
+
+    def records(self, rays, hits, rows, sample_time=None):
+        """Hit points, normals facing the incoming ray, and material ids of the hit ``rows``
+        (see :func:`rtmesh.shading.kernels.surface_records`).
+
+        With motion blur, points and normals are formed on the rest pose of the object hit
+        and moved to the ray's time at the end (see :mod:`rtmesh.geometry.motion`).
+        """
+        it = self.it
+        srf = SurfaceRecords()
+        srf.sample = take_rows(rays.sample, rows)
+        srf.time = None if sample_time is None else sample_time[srf.sample]
+        srf.d = take_rows(rays.directions, rows)
+        srf.prim = take_rows(hits.prim, rows)
+        view = _NO_VECTORS
+        if srf.time is not None:
+            view = it.motion.directions_to_rest(srf.prim.astype(np.intp), srf.time, srf.d)
+        normal_maps = it.plan.normal_maps
+        # the shading-normal terminator fix (see face_viewer) runs in the kernel unless
+        # normal maps, applied below, change the normals after it
+        srf.p, srf.ng, srf.ns, srf.front, srf.mat = surface_records(
+            hits.prim, hits.u, hits.v, np.arange(len(hits)) if rows is None else rows, rays.directions,
+            view, it._faces, it._vertex_normals, it._smooth, it._material_id,
+            it.plan.smooth_normals and not normal_maps)
+        srf.tints = None
+        if it.plan.textures:
+            u, v = take_rows(hits.u, rows), take_rows(hits.v, rows)
+            srf.tints = it.textures.tints(srf.prim, u, v, srf.mat)
+            if normal_maps:
+                flip = np.where(srf.front, 1.0, -1.0)
+                srf.ns = it.textures.normal_mapped(srf.ns, srf.prim, u, v, srf.mat, flip)
+                # in the rest frame, like ns and ng
+                srf.ns = face_viewer(srf.ns, srf.ng, srf.d if srf.time is None else view)
+        if srf.time is not None:
+            srf.p, srf.ng, srf.ns = it.motion.surfaces_to_world(srf.prim, srf.time, srf.p, srf.ng,
+                                                                  srf.ns)
+        return srf
