@@ -9,7 +9,8 @@ from rtmesh.core.errors import SceneError
 from rtmesh.loaders.scene_file import scene_from_dict
 from rtmesh.materials.glossy import (phong_lobe_to_square, roughness_exponent, sample_glossy_directions,
                                      square_to_phong_lobe, square_to_phong_lobe_pdf)
-from rtmesh.materials.table import Material
+from rtmesh.materials.specular import SpecularScattering
+from rtmesh.materials.table import Material, MaterialTable
 from rtmesh.rendering.integrator import Integrator
 from rtmesh.sampling.patterns import Dim, decorrelated_points
 from rtmesh.scene.camera import Camera
@@ -150,7 +151,11 @@ def test_integrator_draws_glossy_directions_from_the_lobe_with_the_renders_sampl
     mirror = np.tile([0.0, 0.0, 1.0], (k, 1))
     ng = mirror.copy()
     mat = np.full(k, 1, dtype=np.intp)
-    wi = integrator.secondary_rays.glossy(mirror.copy(), ng, mat, np.arange(k), 2, (pixel, sample_in_pixel))
+    reflection, _ = integrator.secondary_rays.scattering.sample(
+        mirror, mirror, ng, mat, None, None, lambda rows, weight: np.ones(len(weight), dtype=bool),
+        lambda rows: integrator.sampler.glossy(pixel.take(rows), sample_in_pixel.take(rows), 2))
+    wi = reflection.directions
+    np.testing.assert_array_equal(reflection.weight, 0.85)  # the lobe is sampled exactly: weight kr
     n = roughness_exponent(0.25)
     u0 = 1.0 - wi[:, 2] ** (n + 1.0)
     counts, _ = np.histogram(u0, bins=20, range=(0, 1))
@@ -180,3 +185,26 @@ def test_glossy_depth_of_field_render_is_bit_identical_across_threads_and_chunks
         two = render(scene, spp=4, sampler=sampler, threads=2, chunk_samples=200)
         assert {"glossy", "lens"} <= set(one.stats.stages_enabled)
         np.testing.assert_array_equal(one.image, two.image)
+
+
+def test_the_glossy_lobe_weight_is_its_value_over_its_density_and_the_density_integrates_to_one():
+    """SpecularScattering's three answers agree: sample's weight = evaluate / pdf, and pdf is
+    a density (its integral over the sphere, by uniform sphere sampling, is 1)."""
+    materials = MaterialTable([Material("default"), Material("rough", mirror=[0.8, 0.6, 0.4], roughness=0.3),
+                               Material("smooth", mirror=0.5)])
+    scattering = SpecularScattering(materials)
+    rng = np.random.default_rng(11)
+    k = 200_000
+    ns = np.tile([0.0, 0.0, 1.0], (k, 1))
+    wo = np.tile([0.6, 0.0, 0.8], (k, 1))
+    wi = rng.normal(size=(k, 3))
+    wi /= np.linalg.norm(wi, axis=1)[:, None]
+    rough, smooth = np.full(k, 1, dtype=np.intp), np.full(k, 2, dtype=np.intp)
+    pdf = scattering.pdf(wo, ns, rough, wi)
+    assert abs(pdf.mean() * 4.0 * np.pi - 1.0) < 0.02
+    value = scattering.evaluate(wo, ns, rough, wi)
+    inside = pdf > 0
+    np.testing.assert_allclose(value[inside] / pdf[inside, None], np.broadcast_to([0.8, 0.6, 0.4], value[inside].shape))
+    # a smooth mirror is a delta lobe: no value toward any other direction, infinite density
+    assert (scattering.evaluate(wo[:10], ns[:10], smooth[:10], wi[:10]) == 0).all()
+    assert np.isinf(scattering.pdf(wo[:10], ns[:10], smooth[:10], wi[:10])).all()

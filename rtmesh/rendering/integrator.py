@@ -203,8 +203,6 @@ class Integrator:
             motion=self.motion is not None,
         )
         # per-material flags, looked up per hit
-        self._reflective = (m.mirror > 0).any(axis=1) | (m.transmission > 0).any(axis=1)
-        self._transmissive = (m.transmission > 0).any(axis=1)
         self._shaded = ((m.diffuse > 0).any(axis=1) | (m.specular > 0).any(axis=1)) & ~m.unlit
         self._all_shaded = bool(self._shaded.all())  # then no per-hit lookup is needed
         self._init_media(scene)
