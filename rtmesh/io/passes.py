@@ -235,6 +235,37 @@ def exr_channel_names(name, width):
     return [f"{name}.{c}" for c in channels]
 
 
+class PassSink:
+    """The per-sample pass buffers of one chunk, written by pass name.
+
+    Every stage that produces a pass value writes it here (the camera-hit passes through
+    :meth:`PassRecorder.record`, the ambient-occlusion stage its ``ao``); a pass that was
+    not asked for has no buffer and :meth:`wants` says so, so its stage computes nothing.
+
+    Parameters
+    ----------
+    buffers : dict of str to (n, k) float64
+        Filled with each pass's miss value (see :meth:`PassRecorder.buffers`).
+    """
+
+    __slots__ = ("buffers",)
+
+    def __init__(self, buffers):
+        self.buffers = buffers
+
+    def __bool__(self):
+        return bool(self.buffers)
+
+    def wants(self, name):
+        """True when the pass ``name`` is recorded in this render."""
+        return name in self.buffers
+
+    def write(self, name, rows, values):
+        """Set pass ``name`` of the samples ``rows`` ((k,) int) to ``values`` ((k,) or (k, c))."""
+        values = np.asarray(values, dtype=np.float64)
+        self.buffers[name][rows] = values[:, None] if values.ndim == 1 else values
+
+
 class PassRecorder:
     """Computes the requested passes for the camera rays of one render.
 
@@ -277,16 +308,16 @@ class PassRecorder:
 
         Returns
         -------
-        dict of str to (n, k) float64
+        PassSink
         """
-        return {s.name: np.full((n, s.width), s.miss) for s in self.specs}
+        return PassSink({s.name: np.full((n, s.width), s.miss) for s in self.specs})
 
-    def record(self, buffers, srf, hits, rows):
+    def record(self, sink, srf, hits, rows):
         """Write the passes of the camera rays that hit something.
 
         Parameters
         ----------
-        buffers : dict of str to (n, k) float
+        sink : PassSink
             From :meth:`buffers`; rows are camera samples.
         srf : rtmesh.rendering.chunk_state.SurfaceRecords
             Shading records of the hits (``sample`` gives their rows in ``buffers``).
@@ -299,18 +330,15 @@ class PassRecorder:
         for spec in self.specs:
             if spec.producer is None:
                 continue
-            values = np.asarray(spec.producer(camera_hits), dtype=np.float64)
-            if values.ndim == 1:
-                values = values[:, None]
-            buffers[spec.name][srf.sample] = values
+            sink.write(spec.name, srf.sample, spec.producer(camera_hits))
 
-    def per_pixel(self, buffers, m, spp):
-        """Reshape the per-sample buffers to ``(m, spp, k)`` for :meth:`Film.add_tile`."""
-        return {name: b.reshape(m, spp, -1) for name, b in buffers.items()}
+    def per_pixel(self, sink, m, spp):
+        """The sink's buffers as ``(m, spp, k)`` for :meth:`Film.add_tile`."""
+        return {name: b.reshape(m, spp, -1) for name, b in sink.buffers.items()}
 
-    def per_sample(self, buffers, n):
-        """The per-sample buffers as ``(n, k)`` for :meth:`Film.add_samples`."""
-        return {name: b.reshape(n, -1) for name, b in buffers.items()}
+    def per_sample(self, sink, n):
+        """The sink's buffers as ``(n, k)`` for :meth:`Film.add_samples`."""
+        return {name: b.reshape(n, -1) for name, b in sink.buffers.items()}
 
 
 # ---------------------------------------------------------------- display (PNG) mapping

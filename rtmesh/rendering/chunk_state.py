@@ -22,8 +22,8 @@ class ChunkState:
     ----------
     radiance : (n, 3) float64
         Component-major radiance of the chunk's samples, added to by every stage.
-    aov : dict of str to (n, k) float64
-        Per-sample pass buffers (see :class:`rtmesh.io.passes.PassRecorder`).
+    passes : PassSink
+        Per-sample pass buffers, written by pass name (see :class:`rtmesh.io.passes.PassSink`).
     pixel, sample_in_pixel : (n,) int64
         Each sample's linear pixel index and its global index within the pixel: with the
         render's seed they key every random number of the sample.
@@ -35,10 +35,10 @@ class ChunkState:
         Shutter time of each sample (motion blur), None without.
     """
 
-    __slots__ = ("radiance", "aov", "pixel", "sample_in_pixel", "stats", "clock", "sample_time")
+    __slots__ = ("radiance", "passes", "pixel", "sample_in_pixel", "stats", "clock", "sample_time")
 
-    def __init__(self, radiance, aov, pixel, sample_in_pixel, stats, clock, sample_time=None):
-        self.radiance, self.aov = radiance, aov
+    def __init__(self, radiance, passes, pixel, sample_in_pixel, stats, clock, sample_time=None):
+        self.radiance, self.passes = radiance, passes
         self.pixel, self.sample_in_pixel = pixel, sample_in_pixel
         self.stats, self.clock, self.sample_time = stats, clock, sample_time
 

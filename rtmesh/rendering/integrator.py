@@ -489,8 +489,8 @@ class Integrator:
             rays = self._shade(rays, hits, depth, chunk)
 
         if ragged:
-            return chunk.radiance, self.passes.per_sample(chunk.aov, n) or None, stats
-        passes = self.passes.per_pixel(chunk.aov, m, spp) or None
+            return chunk.radiance, self.passes.per_sample(chunk.passes, n) or None, stats
+        passes = self.passes.per_pixel(chunk.passes, m, spp) or None
         return chunk.radiance.reshape(m, spp, 3), passes, stats
 
     # ---------------------------------------------------------------- stages
@@ -544,7 +544,7 @@ class Integrator:
         srf = self.surface_stage.records(rays, hits, rows, chunk.sample_time)
         chunk.clock.lap("shade")
         if primary and self.plan.passes:
-            self.passes.record(chunk.aov, srf, hits, rows)
+            self.passes.record(chunk.passes, srf, hits, rows)
             chunk.clock.lap("passes")
 
         local = self.local_shading.shade(srf, depth, chunk)

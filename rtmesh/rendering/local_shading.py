@@ -35,7 +35,7 @@ class LocalShading:
     def shade(self, srf, depth, chunk):
         """Emission, ambient (with AO) and direct light with shadows; (k, 3) or None."""
         it = self.it
-        ao_pass = chunk.aov.get("ao")
+        ao_pass = depth == 0 and chunk.passes.wants("ao")
         st = it.plan
         local = None
         if st.emission:
@@ -52,10 +52,10 @@ class LocalShading:
                 local = shown if local is None else local + shown
 
         ao = None
-        if st.ao and (st.ambient or (depth == 0 and ao_pass is not None)):
+        if st.ao and (st.ambient or ao_pass):
             ao = self.ambient_occlusion(srf, depth, chunk)
-            if depth == 0 and ao_pass is not None:
-                ao_pass[srf.sample, 0] = ao
+            if ao_pass:
+                chunk.passes.write("ao", srf.sample, ao)
             chunk.clock.lap("ao")
         if st.ambient:
             amb = take_rows(it._ambient_light, srf.mat)
