@@ -227,7 +227,7 @@ def test_passes_are_bit_identical_across_threads_and_chunk_sizes():
 def test_one_pass_film_writes_each_tiles_image_values_as_it_is_added():
     rng = np.random.default_rng(3)
     radiance = rng.random((6 * 5, 3, 3))
-    lazy, eager = Film(6, 5), Film(6, 5, zeroed=False, one_pass=True)
+    lazy, eager = Film(6, 5), Film(6, 5, one_pass=True)
     lazy.add_tile(0, radiance)
     # tiles in any order, one of them given by an index array
     eager.add_tile(slice(20, 30), radiance[20:])

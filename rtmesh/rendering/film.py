@@ -28,10 +28,6 @@ class Film:
         Name and channel count of each extra pass (e.g. ``{"ao": 1}``), optionally with
         how a pixel's samples are reduced: ``"mean"`` (the default), ``"first"`` (the
         pixel's first sample, e.g. integer ids) or ``"min"`` (e.g. the nearest depth).
-    zeroed : bool
-        Clear the sums up front.  False is for a caller that adds every pixel through
-        :meth:`add_tile` before reading anything (its first samples are assigned);
-        :meth:`add_samples` adds to what is there.
     one_pass : bool
         Every pixel is added exactly once, by :meth:`add_tile` (a render without later
         rounds): each add also writes its pixels' image values, on the thread that adds
@@ -50,16 +46,13 @@ class Film:
     pass_reductions : dict of str to str
     """
 
-    def __init__(self, width, height, passes=None, zeroed=True, one_pass=False):
+    def __init__(self, width, height, passes=None, one_pass=False):
         self.width, self.height = int(width), int(height)
         n = self.width * self.height
-        # Without ``zeroed`` the sums start as they are in memory: a pixel's first samples
-        # are assigned, not added (add_tile), so a render whose first round covers every
-        # pixel (rtmesh.rendering.adaptive) skips a serial pass clearing 48 bytes a pixel and the
-        # threads that render the pixels write them once.
-        empty = np.zeros if zeroed else np.empty
-        self.sum = empty((n, 3), order="F")
-        self.sum_sq = empty((n, 3), order="F")
+        # always cleared: for a large film np.zeros maps pages the kernel zeroes on first
+        # touch, which the threads that render the pixels do, so clearing costs no serial pass
+        self.sum = np.zeros((n, 3), order="F")
+        self.sum_sq = np.zeros((n, 3), order="F")
         self.count = np.zeros(n, dtype=np.int64)
         self._image = np.empty((n, 3), dtype=np.float32) if one_pass else None
         specs = {name: (v, "mean") if isinstance(v, int) else tuple(v) for name, v in (passes or {}).items()}

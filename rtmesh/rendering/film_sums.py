@@ -14,9 +14,8 @@ from rtmesh.core.compiled import kernel
 def accumulate_samples(total, total_sq, count, pixels, radiance, image):
     """Add samples and their squares to per-pixel sums, each pixel's samples in order.
 
-    A pixel without samples so far (``count`` 0) takes its first sample by assignment, so
-    the sums need not be zeroed beforehand (see :class:`rtmesh.rendering.film.Film`).  With an
-    ``image``, each pixel's mean is written too, while its sums are in registers (a film
+    The sums start at zero (:class:`rtmesh.rendering.film.Film` always clears them).  With
+    an ``image``, each pixel's mean is written too, while its sums are in registers (a film
     whose pixels are final once added, instead of a pass over the film at the end).
 
     Parameters
@@ -35,14 +34,7 @@ def accumulate_samples(total, total_sq, count, pixels, radiance, image):
     means = image.shape[0] > 0
     for i in range(len(pixels)):
         px = pixels[i]
-        first = 0
-        if count[px] == 0:
-            for c in range(3):
-                r = radiance[i, 0, c]
-                total[px, c] = r
-                total_sq[px, c] = r * r
-            first = 1
-        for s in range(first, radiance.shape[1]):
+        for s in range(radiance.shape[1]):
             for c in range(3):
                 r = radiance[i, s, c]
                 total[px, c] += r

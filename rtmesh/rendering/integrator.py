@@ -309,7 +309,7 @@ class Integrator:
         start = time.perf_counter()
         # the first round renders every pixel (rtmesh.rendering.adaptive): the sums need no clearing;
         # without later rounds every pixel is added once, and its image value with it
-        film = Film(s.width, s.height, self.passes.film_passes(), zeroed=False, one_pass=not s.adaptive)
+        film = Film(s.width, s.height, self.passes.film_passes(), one_pass=not s.adaptive)
         stats = RenderStats(threads=s.thread_count, pixels=s.width * s.height)
         stats.stages_enabled = self.plan.enabled()
         # threads of its own and the caller's switch interval, unless the process is tuned
