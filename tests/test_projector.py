@@ -112,3 +112,22 @@ def test_scene_files_name_the_projector_and_its_image_relative_to_the_file(tmp_p
     doc["lights"][0]["fov"] = 200
     with pytest.raises(SceneError, match=r"lights\[0\]: projector fov must be in \(0, 180\)"):
         scene_from_dict(doc, base_dir=str(tmp_path))
+
+
+def test_every_registered_light_type_builds_a_light_of_one_of_the_two_interfaces(tmp_path):
+    """The renderer sorts lights by interface (point-like: illuminate; area: sample and
+    intersect), so a registered type must build one or the other."""
+    from rtmesh.lights.area_lights import is_area_light
+    from rtmesh.lights.interface import AreaLight, PointLikeLight
+    from rtmesh.loaders.light_registry import LIGHT_TYPES
+
+    Image.fromarray(np.uint8(QUADRANTS * 255)).save(tmp_path / "gobo.png")
+    values = {"position": np.array([0.0, 0.0, 2.0]), "direction": np.array([0.0, 0.0, -1.0]),
+              "intensity": np.ones(3), "irradiance": np.ones(3), "radiance": np.ones(3), "radius": 0.5,
+              "edge1": np.array([1.0, 0.0, 0.0]), "edge2": np.array([0.0, 1.0, 0.0]),
+              "image": str(tmp_path / "gobo.png")}
+    for name, light_type in LIGHT_TYPES.items():
+        light = light_type.build({key: values[key] for key in light_type.keys if key in values})
+        point_like, area = isinstance(light, PointLikeLight), isinstance(light, AreaLight)
+        assert point_like != area, name
+        assert is_area_light(light) == area, name

@@ -61,6 +61,7 @@ import numpy as np
 from rtmesh.core.rays import component_major, take_rows
 from rtmesh.core.vecmath import dot, normalize, orthonormal_basis
 from rtmesh.geometry.accel import barycentric_interpolate, offset_ray_origins
+from rtmesh.lights.interface import AreaLight
 from rtmesh.lights.light_types import LightType, aim
 from rtmesh.materials.table import as_colour
 from rtmesh.sampling.sampler import Sampler
@@ -409,8 +410,9 @@ DISK = LightType("disk", {"position": "vec3", "direction": "vec3", "look_at": "v
 
 
 def is_area_light(light):
-    """True for the lights this module handles (they are sampled, not ``illuminate``-d)."""
-    return isinstance(light, (QuadLight, DiskLight, MeshLight))
+    """True for the lights this module's stage handles: those of the area-light interface
+    (:class:`rtmesh.lights.interface.AreaLight`: sampled, not ``illuminate``-d)."""
+    return isinstance(light, AreaLight)
 
 
 def emissive_mesh_light(triangles, normals, emission, tint=None, mean_tint=None):

@@ -1,4 +1,4 @@
-"""The interface every point-like (delta) light offers to the renderer.
+"""The interfaces lights offer to the renderer: point-like (delta) lights and area lights.
 
 A delta light reaches a shading point from exactly one direction, so it needs one sample
 and no pdf: what it answers for a batch of points is the direction toward it, the distance
@@ -9,8 +9,13 @@ offer a compiled row (:meth:`PointLikeLight.kernel_row`): the fused direct-light
 (:mod:`rtmesh.rendering.direct_stage`) then evaluates it inside its kernel; a render with a
 light that has no row runs the general path instead, with the same result.
 
-Area lights (quad, disk, emissive meshes: :mod:`rtmesh.lights.area_lights`) are sampled
-several times per point with a pdf and are handled by their own stage.
+Area lights (quad, disk, emissive meshes: :mod:`rtmesh.lights.area_lights`) satisfy
+:class:`AreaLight`: they are sampled several times per point (``light_samples``), each
+sample a point on the light with its normal, radiance and inverse pdf by area, and rays
+can meet them (``intersect``), so camera and mirror rays see them.  Their stage
+(:class:`rtmesh.lights.area_lights.AreaLighting`) turns the samples into directions,
+distances and shadow rays.  A delta light is the one-sample case of the same estimator
+(its "point" is fixed, its pdf a delta), which is why it gets the cheaper interface.
 
 A new light type is its module (its class, which satisfies this protocol, and its
 :class:`rtmesh.lights.light_types.LightType`), one entry in
@@ -52,3 +57,38 @@ class PointLikeLight(Protocol):
     @property
     def is_black(self):
         """True when the light emits nothing (the renderer drops it)."""
+
+
+@runtime_checkable
+class AreaLight(Protocol):
+    """A light with a surface: sampled by area, and seen by rays that meet it."""
+
+    two_sided: bool
+    visible: bool
+
+    def sample(self, u, p=None):
+        """Points on the light for sample points ``u`` ((k, 2) in [0, 1)^2).
+
+        Parameters
+        ----------
+        u : (k, 2) float64
+        p : (k, 3) float64, optional
+            The points being lit, for lights that sample the solid angle they subtend.
+
+        Returns
+        -------
+        points : (k, 3) float64
+        normals : (3,) or (k, 3) float64
+            Unit normals of the light at the points (its emitting side).
+        radiance : (3,) or (k, 3) float64
+            Emitted radiance, W / (sr m^2).
+        inverse_pdf : float or (k,) float64
+            ``1 / pdf`` with respect to area on the light (scene units^2).
+        """
+
+    def intersect(self, origins, directions):
+        """(n,) distance along each ray to the light's emitting side; ``inf`` where it misses."""
+
+    @property
+    def is_black(self):
+        """True when the light emits nothing."""
