@@ -10,6 +10,7 @@ from rtmesh.io.texture_images import Texture
 from rtmesh.lights.point_lights import DirectionalLight
 from rtmesh.materials.table import Material
 from rtmesh.rendering.surface_textures import SurfaceTextures
+from rtmesh.sampling.sampler import Sampler
 from rtmesh.scene.camera import Camera
 from rtmesh.scene.model import MeshPart, Scene
 
@@ -61,7 +62,8 @@ def cutout_accel(mode="mask", opacity=1.0):
                              [card, Material("floor")], lights=[])
     m = scene.materials
     return CutoutAccel(Accel(scene.vertices, scene.faces), scene.face_normals, scene.material_id,
-                       m.cutout, m.alpha_mode == 2, m.alpha_cutoff, SurfaceTextures(scene), 3.0, 0)
+                       m.cutout, m.alpha_mode == 2, m.alpha_cutoff, SurfaceTextures(scene), 3.0,
+                       Sampler("jittered", 0, 1))
 
 
 def test_shadow_rays_pass_exactly_through_the_holes():

@@ -18,14 +18,15 @@ which errs toward dark rather than light leaks.
 
 Random numbers
 --------------
-"blend" needs one uniform number per (ray, layer).  It is keyed by the ray itself -- the
+"blend" needs one uniform number per (ray, layer), from the render's sampler
+(:meth:`rtmesh.sampling.sampler.Sampler.alpha_coin`).  It is keyed by the ray itself -- the
 float32 bits of the origin Embree receives and of the direction -- hashed with the layer
 index in dimension :attr:`rtmesh.sampling.patterns.Dim.ALPHA` of the render's seed.  Rays are pure
 functions of (seed, pixel, sample), so the decision is too: the image does not depend on
 the thread count or chunk size, and no query needs to carry sample keys.
 
-Motion blur: cut-outs need the hit point in the world at the ray's time; the integrator
-renders them opaque with a warning when objects move (see :class:`Integrator`).
+Motion blur: a cut-out wraps a :class:`rtmesh.geometry.motion.MotionAccel` like a static
+one; the point past a cut-out is formed on the rest pose and moved to the ray's time.
 """
 
 import threading
@@ -35,7 +36,6 @@ import numpy as np
 from rtmesh.core.rays import take_rows
 from rtmesh.geometry.accel import barycentric_interpolate, offset_ray_origins
 from rtmesh.sampling.hashing import mix64
-from rtmesh.sampling.patterns import Dim, uniform
 
 # a ray crosses at most this many cut-out surfaces before it stops (foliage cards rarely
 # stack deeper; each layer is one more vectorised Embree query on the rays still passing)
@@ -84,7 +84,7 @@ class CutoutAccel:
     """
 
     def __init__(self, accel, face_normals, material_id, cutout, mode_blend, cutoff, textures,
-                 offset_scale, seed):
+                 offset_scale, sampler):
         self.accel = accel
         self.triangles = accel.triangles
         self.face_normals = face_normals
@@ -93,7 +93,7 @@ class CutoutAccel:
         self.blend, self.cutoff = np.asarray(mode_blend), np.asarray(cutoff, dtype=np.float64)
         self.textures = textures
         self.offset_scale = offset_scale
-        self.seed = seed
+        self.sampler = sampler
         self.layers_traced = 0
         self._lock = threading.Lock()
 
@@ -117,7 +117,7 @@ class CutoutAccel:
         through = ~blend & (alpha < self.cutoff[mat])
         if blend.any():
             b = np.flatnonzero(blend)
-            u = uniform(self.seed, keys[rows[b]], layer, Dim.ALPHA)
+            u = self.sampler.alpha_coin(keys[rows[b]], layer)
             through[b] = u >= alpha[b]
         return through
 

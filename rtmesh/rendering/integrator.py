@@ -148,7 +148,7 @@ class Integrator:
             # at each ray's time when objects move
             self.cutouts = CutoutAccel(self.accel, scene.face_normals, scene.material_id, m.cutout,
                                        m.alpha_mode == ALPHA_MODES.index("blend"), m.alpha_cutoff,
-                                       self.textures, self.offset_scale, settings.seed)
+                                       self.textures, self.offset_scale, self.sampler)
             self.accel = self.cutouts
         self.camera = _translated(scene.camera, self.shift)
         # formed once (and failing early on a degenerate camera), not for every chunk

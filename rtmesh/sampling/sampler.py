@@ -9,7 +9,7 @@ depth 2" instead of passing the kind, the seed, the spp and a dimension sum arou
 
 from dataclasses import dataclass
 
-from rtmesh.sampling.patterns import Dim, decorrelated_points, pixel_offsets, stratified_values
+from rtmesh.sampling.patterns import Dim, decorrelated_points, pixel_offsets, stratified_values, uniform
 
 
 @dataclass(frozen=True)
@@ -65,6 +65,24 @@ class Sampler:
         ``rays`` per hit at path ``depth`` (see :func:`light_dimension`)."""
         return decorrelated_points(self.kind, self.seed, pixel, sample, self.spp,
                                    light_dimension(depth, light_index, light_count), ray, rays)
+
+    def alpha_coin(self, ray_key, layer):
+        """Uniform numbers deciding whether rays pass a blended cut-out at crossing ``layer``.
+
+        Keyed by the ray itself (``ray_key``, :func:`rtmesh.geometry.cutouts.ray_keys`),
+        not by pixel and sample: cut-outs are resolved inside accel queries, which see rays
+        only.  Rays are pure functions of (seed, pixel, sample), so the numbers are too.
+
+        Parameters
+        ----------
+        ray_key : (k,) uint64
+        layer : int
+
+        Returns
+        -------
+        (k,) float64
+        """
+        return uniform(self.seed, ray_key, layer, Dim.ALPHA)
 
 
 def light_dimension(depth, light_index, light_count):
