@@ -72,6 +72,8 @@ def build_parser():
     p.add_argument("--fresnel", choices=FRESNEL_MODES, help="Fresnel model for dielectrics")
     p.add_argument("--exposure", type=float, help="exposure in stops for 8-bit output")
     p.add_argument("--tonemap", choices=TONEMAPS, help="tone-mapping operator for 8-bit output")
+    p.add_argument("--denoise", action="store_true", default=None,
+                   help="denoise with Intel Open Image Denoise (needs rtmesh[denoise])")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     _add_batch_parser(commands)
     return parser
@@ -196,6 +198,7 @@ def cmd_render(args):
         "light_samples": args.light_samples, "target_error": args.target_error,
         "time_limit": args.time_limit, "max_spp": args.max_spp,
         "fresnel": args.fresnel, "exposure": args.exposure, "tonemap": args.tonemap,
+        "denoise": args.denoise,
     }
     background = None if args.background is None else background_from_option(args.background)
     # the command owns its process: tune it for rendering (allocator, GIL, kept threads)

@@ -20,3 +20,7 @@ class MeshError(RtmeshError):
 
 class OutputError(RtmeshError):
     """An output image cannot be written."""
+
+
+class MissingExtraError(RtmeshError):
+    """An optional capability was asked for whose extra is not installed (names the pip command)."""

@@ -138,7 +138,7 @@ RENDER_KEYS = {
     "fresnel": _str, "ao_samples": _int, "ao_distance": _positive, "passes": _str_list,
     "light_samples": _int,
     "exposure": _float, "tonemap": _str,
-    "target_error": _positive, "time_limit": _positive, "max_spp": _int,
+    "target_error": _positive, "time_limit": _positive, "max_spp": _int, "denoise": _bool,
 }
 CAMERA_KEYS = {
     "position": _vec3, "look_at": _vec3, "up": _vec3, "fov": _positive,

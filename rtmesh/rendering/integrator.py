@@ -41,6 +41,7 @@ from rtmesh.geometry.accel import Accel
 from rtmesh.geometry.build_kernels import corner_rows, face_rows
 from rtmesh.geometry.cutouts import CutoutAccel
 from rtmesh.geometry.motion import MotionAccel, blurs, object_motions, scene_at_time, swept_bounds
+from rtmesh.io import denoising
 from rtmesh.io.passes import DERIVED_PASSES, PassRecorder, derived_pass
 from rtmesh.lights.area_lights import AreaLighting, emissive_mesh_light, is_area_light
 from rtmesh.materials.table import ALPHA_MODES
@@ -82,6 +83,9 @@ class RenderResult:
         The accumulation buffers (sums, sums of squares) for error estimates.
     alpha : (height, width, 1) float32 or None
         Coverage, when the background is transparent (``image`` is then premultiplied).
+    noisy : (height, width, 3) float32 or None
+        With ``denoise``, the image before denoising (``image`` is the denoised one; the
+        film's error estimate describes this one).
     """
 
     image: np.ndarray
@@ -89,6 +93,7 @@ class RenderResult:
     stats: RenderStats
     film: Film
     alpha: np.ndarray | None = None
+    noisy: np.ndarray | None = None
 
 
 def _translated(obj, shift):
@@ -176,8 +181,12 @@ class Integrator:
         ambient_on = bool((scene.ambient > 0).any() and (m.ambient > 0).any())
         self.background = as_background(scene.background)
         # only the passes asked for are computed; a transparent background needs coverage
-        self.passes = PassRecorder(scene, tuple(settings.passes) + ("alpha",) * self.background.transparent,
-                                   self.camera, self.shift)
+        if settings.denoise:
+            denoising.require()  # before any work: one line naming the extra when it is missing
+        # the denoiser's guides are computed even when they are not written
+        guides = ("albedo", "normal") if settings.denoise else ()
+        self.passes = PassRecorder(scene, tuple(settings.passes) + ("alpha",) * self.background.transparent
+                                   + guides, self.camera, self.shift)
         # the AO pass alone asks for 16 rays per camera hit unless ao_samples says otherwise
         self.ao_samples = settings.ao_samples or (16 if "ao" in settings.passes else 0)
         self.plan = RenderPlan(
@@ -307,7 +316,6 @@ class Integrator:
         """
         s = self.settings
         start = time.perf_counter()
-        # the first round renders every pixel (rtmesh.rendering.adaptive): the sums need no clearing;
         # without later rounds every pixel is added once, and its image value with it
         film = Film(s.width, s.height, self.passes.film_passes(), one_pass=not s.adaptive)
         stats = RenderStats(threads=s.thread_count, pixels=s.width * s.height)
@@ -326,7 +334,12 @@ class Integrator:
         passes.update({name: derived_pass(name, film) for name in s.passes if name in DERIVED_PASSES})
         passes = {name: passes[name] for name in s.passes if name in passes}  # order asked for
         alpha = film.pass_image("alpha") if self.background.transparent else None
-        return RenderResult(image, passes, stats, film, alpha)
+        noisy = None
+        if s.denoise:
+            noisy = image
+            image = denoising.denoise(image, film.pass_image("albedo"), film.pass_image("normal"))
+            stats.wall_seconds = time.perf_counter() - start
+        return RenderResult(image, passes, stats, film, alpha, noisy)
 
     def render_samples(self, film, pixels, first_sample, spp, stats, progress=None, pool=None):
         """Render samples of a set of pixels into ``film``, in chunks on the threads.

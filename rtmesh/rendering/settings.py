@@ -48,7 +48,7 @@ class RenderSettings:
         Extra output passes (see :data:`rtmesh.io.passes.REGISTRY`).
     exposure : float
         Stops, applied when writing 8-bit images.
-    tonemap : {"clamp", "reinhard", "aces"}
+    tonemap : {"clamp", "reinhard", "aces", "pbr-neutral", "agx"}
         Operator for 8-bit images.
     target_error : float or None
         Adaptive sampling (see :mod:`rtmesh.rendering.adaptive`): render in rounds until every pixel's
@@ -63,6 +63,9 @@ class RenderSettings:
     max_spp : int or None
         Most samples any pixel gets with adaptive sampling; None means
         ``DEFAULT_MAX_SPP`` (or ``spp``, if larger).
+    denoise : bool
+        Denoise the image with Intel Open Image Denoise, guided by the albedo and normal
+        passes (see :mod:`rtmesh.io.denoising`; needs the ``denoise`` extra).
     """
 
     width: int = 640
@@ -84,6 +87,7 @@ class RenderSettings:
     target_error: float | None = None
     time_limit: float | None = None
     max_spp: int | None = None
+    denoise: bool = False
 
     def validate(self):
         """Raise ValueError naming the first setting out of range."""
