@@ -9,7 +9,7 @@ import time
 from rtmesh import __version__
 from rtmesh.api import load_scene
 from rtmesh.core import runtime
-from rtmesh.core.errors import RtmeshError
+from rtmesh.core.errors import OutputError, RtmeshError
 from rtmesh.io.colour import TONEMAPS
 from rtmesh.io.images import check_output_path, write_display_image, write_image
 from rtmesh.io.passes import display_values
@@ -17,6 +17,7 @@ from rtmesh.rendering.integrator import Integrator
 from rtmesh.rendering.settings import FRESNEL_MODES, PASSES
 from rtmesh.sampling.patterns import SAMPLERS
 from rtmesh.scene.background import background_from_option
+from rtmesh.scene.camera_json import camera_record, write_camera_json
 
 EXIT_USER_ERROR = 2
 
@@ -72,6 +73,8 @@ def build_parser():
     p.add_argument("--fresnel", choices=FRESNEL_MODES, help="Fresnel model for dielectrics")
     p.add_argument("--exposure", type=float, help="exposure in stops for 8-bit output")
     p.add_argument("--tonemap", choices=TONEMAPS, help="tone-mapping operator for 8-bit output")
+    p.add_argument("--camera-json", metavar="PATH",
+                   help="also write the camera (intrinsics K, poses in OpenCV and OpenGL conventions) as JSON")
     p.add_argument("--denoise", action="store_true", default=None,
                    help="denoise with Intel Open Image Denoise (needs rtmesh[denoise])")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
@@ -188,6 +191,8 @@ def _pass_png_path(output, name):
 
 def cmd_render(args):
     check_output_path(args.output)
+    if args.camera_json and not os.path.isdir(os.path.dirname(os.path.abspath(args.camera_json))):
+        raise OutputError(f"{args.camera_json}: no such folder for the camera file")
     if args.pass_png:
         for name in args.passes or ():
             check_output_path(_pass_png_path(args.output, name))
@@ -213,6 +218,9 @@ def cmd_render(args):
         bar.close()
     write_image(args.output, result.image, result.passes, settings.exposure, settings.tonemap,
                 alpha=result.alpha)
+    if args.camera_json:
+        write_camera_json(args.camera_json, camera_record(scene.camera, settings.width, settings.height,
+                                                          scene.bounds))
     if args.pass_png:
         coverage = result.passes.get("alpha", result.alpha)
         coverage = None if coverage is None else coverage[:, :, 0]

@@ -1,0 +1,104 @@
+"""The camera of a render as data for other tools: intrinsics and poses in every convention.
+
+One JSON object per image (``rtmesh render --camera-json PATH``), with
+
+- ``width``, ``height``: image size in pixels;
+- ``K`` (3x3), ``fx``, ``fy``, ``cx``, ``cy``: pinhole intrinsics in pixels, with pixel
+  centres at half-integers (the centre of the top-left pixel is ``(0.5, 0.5)``), so a point
+  ``X`` (camera frame, OpenCV axes) lands at ``K X / X_z``; the principal point is the
+  image centre and pixels are square (``fx == fy``);
+- ``fov_y_degrees``: the vertical field of view;
+- ``camera_to_world_opencv`` (4x4; camera axes +x right, +y down, +z forward),
+  ``camera_to_world_opengl`` (4x4; +x right, +y up, -z forward: the Blender, nerfstudio
+  and instant-ngp convention) and ``world_to_camera_opencv`` (its inverse, the COLMAP
+  and OpenCV extrinsics ``[R | t]``);
+- ``projection``: ``"perspective"``;
+- ``near``, ``far``: the nearest and farthest distance along the view axis of the scene's
+  bounding box (``near`` at least 1e-6 of ``far``), for depth-buffer ranges;
+- ``aperture``, ``focus_distance``: the thin lens (aperture 0 for a pinhole);
+- ``asset_to_world`` (4x4): the transform applied to the asset file's coordinates before
+  rendering (identity when rtmesh moved nothing), so points of the original file can be
+  projected: ``K [R | t] asset_to_world X``.
+
+World coordinates are the scene's own (rtmesh re-centres scenes for tracing internally;
+that shift is not part of the exported pose).
+"""
+
+import json
+import os
+import tempfile
+
+import numpy as np
+
+from rtmesh.core.errors import OutputError
+
+
+def camera_record(camera, width, height, bounds, asset_to_world=None):
+    """The camera description of one image.
+
+    Parameters
+    ----------
+    camera : Camera
+    width, height : int
+        Image size in pixels.
+    bounds : (2, 3) float
+        The scene's bounding box (minimum and maximum corners), world units.
+    asset_to_world : (4, 4) float, optional
+        What was applied to the asset's coordinates (default identity).
+
+    Returns
+    -------
+    dict
+        JSON-ready (lists of floats); see the module notes for every key.
+    """
+    forward, right, up = camera.frame()
+    f = 0.5 * height / np.tan(np.radians(camera.fov) * 0.5)
+    cx, cy = 0.5 * width, 0.5 * height
+    opencv = np.eye(4)
+    opencv[:3, :3] = np.column_stack([right, -up, forward])
+    opencv[:3, 3] = camera.position
+    opengl = opencv.copy()
+    opengl[:3, :3] = np.column_stack([right, up, -forward])
+    world_to_camera = np.eye(4)
+    world_to_camera[:3, :3] = opencv[:3, :3].T
+    world_to_camera[:3, 3] = -opencv[:3, :3].T @ camera.position
+    corners = np.array([[x, y, z] for x in bounds[:, 0] for y in bounds[:, 1] for z in bounds[:, 2]])
+    depth = (corners - camera.position) @ forward
+    far = float(max(depth.max(), 0.0))
+    near = float(max(depth.min(), 1e-6 * far))
+    return {
+        "width": int(width), "height": int(height),
+        "K": [[f, 0.0, cx], [0.0, f, cy], [0.0, 0.0, 1.0]],
+        "fx": f, "fy": f, "cx": cx, "cy": cy,
+        "fov_y_degrees": float(camera.fov),
+        "camera_to_world_opencv": opencv.tolist(),
+        "camera_to_world_opengl": opengl.tolist(),
+        "world_to_camera_opencv": world_to_camera.tolist(),
+        "projection": "perspective",
+        "near": near, "far": far,
+        "aperture": float(camera.aperture), "focus_distance": float(camera.focus),
+        "asset_to_world": (np.eye(4) if asset_to_world is None else np.asarray(asset_to_world)).tolist(),
+    }
+
+
+def write_camera_json(path, record):
+    """Write ``record`` as JSON, atomically (a reader never sees a partial file).
+
+    Raises
+    ------
+    OutputError
+        The folder does not exist or cannot be written (one line naming the file).
+    """
+    folder = os.path.dirname(os.path.abspath(path))
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp", dir=folder)
+    except OSError as exc:
+        raise OutputError(f"{path}: cannot write the camera file ({exc.strerror})") from None
+    try:
+        with os.fdopen(fd, "w") as out:
+            json.dump(record, out, indent=2)
+            out.write("\n")
+        os.replace(tmp, path)
+    except BaseException:
+        os.unlink(tmp)
+        raise

@@ -1,0 +1,61 @@
+"""The camera JSON: intrinsics and poses that project the rendered surfaces onto their pixels."""
+
+import json
+
+import numpy as np
+from scenes import render, sphere_on_floor_scene
+
+from rtmesh.cli import main
+from rtmesh.scene.camera_json import camera_record
+
+WIDTH, HEIGHT = 40, 30
+
+
+def test_k_and_the_opencv_pose_project_every_hit_onto_its_pixel_centre():
+    """At one sample per pixel with the regular sampler each camera ray goes through its
+    pixel's centre; projecting the hit position (the position pass) with K [R | t] must give
+    that centre back."""
+    scene = sphere_on_floor_scene()
+    result = render(scene, width=WIDTH, height=HEIGHT, spp=1, sampler="regular", passes=("position", "alpha"))
+    record = camera_record(scene.camera, WIDTH, HEIGHT, scene.bounds)
+    hit = result.passes["alpha"][..., 0] > 0
+    rows, columns = np.nonzero(hit)
+    world = result.passes["position"][rows, columns].astype(np.float64)
+    w2c = np.array(record["world_to_camera_opencv"])
+    camera_points = world @ w2c[:3, :3].T + w2c[:3, 3]
+    assert (camera_points[:, 2] > 0).all()
+    projected = camera_points @ np.array(record["K"]).T
+    pixel = projected[:, :2] / projected[:, 2:]
+    # float32 positions: a few 1e-4 of a pixel
+    np.testing.assert_allclose(pixel, np.column_stack([columns + 0.5, rows + 0.5]), atol=2e-3)
+    assert record["near"] <= camera_points[:, 2].min() and camera_points[:, 2].max() <= record["far"]
+
+
+def test_the_conventions_agree_with_each_other():
+    scene = sphere_on_floor_scene()
+    record = camera_record(scene.camera, WIDTH, HEIGHT, scene.bounds)
+    opencv, opengl = np.array(record["camera_to_world_opencv"]), np.array(record["camera_to_world_opengl"])
+    # OpenGL is OpenCV with y and z flipped; both are rigid, and world_to_camera inverts OpenCV
+    np.testing.assert_allclose(opengl, opencv @ np.diag([1.0, -1.0, -1.0, 1.0]), atol=1e-12)
+    np.testing.assert_allclose(opencv[:3, :3].T @ opencv[:3, :3], np.eye(3), atol=1e-12)
+    assert np.linalg.det(opencv[:3, :3]) > 0
+    np.testing.assert_allclose(np.array(record["world_to_camera_opencv"]) @ opencv, np.eye(4), atol=1e-12)
+    # fy from the vertical field of view: a point at the top edge of the view projects to y = 0
+    k = np.array(record["K"])
+    half = np.tan(np.radians(record["fov_y_degrees"]) / 2)
+    assert abs((k @ [0.0, -half, 1.0])[1]) < 1e-9 and record["cx"] == WIDTH / 2 and record["cy"] == HEIGHT / 2
+
+
+def test_render_writes_the_camera_json_next_to_the_image(tmp_path, capsys):
+    out, cam = tmp_path / "show.png", tmp_path / "show.json"
+    assert main(["render", "assets/showcase.toml", "-o", str(out), "--width", "32", "--height", "24",
+                 "--spp", "1", "--camera-json", str(cam), "-q"]) == 0
+    record = json.loads(cam.read_text())
+    assert record["width"] == 32 and record["height"] == 24 and record["projection"] == "perspective"
+    assert np.array(record["K"]).shape == (3, 3) and np.array(record["asset_to_world"]).shape == (4, 4)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([out.name, cam.name])  # no temporary left
+    # a folder that does not exist: one line, exit 2, no image
+    code = main(["render", "assets/showcase.toml", "-o", str(tmp_path / "x.png"), "--width", "8", "--height", "8",
+                 "--camera-json", str(tmp_path / "missing" / "c.json"), "-q"])
+    assert code == 2 and not (tmp_path / "x.png").exists()
+    assert "no such folder" in capsys.readouterr().err
