@@ -59,3 +59,64 @@ def test_render_writes_the_camera_json_next_to_the_image(tmp_path, capsys):
                  "--camera-json", str(tmp_path / "missing" / "c.json"), "-q"])
     assert code == 2 and not (tmp_path / "x.png").exists()
     assert "no such folder" in capsys.readouterr().err
+
+
+def orthographic_spheres_scene():
+    """Two unit spheres, one 6 units farther from the camera than the other, seen
+    orthographically from +z with a 10-unit-high view."""
+    from scenes import icosphere, part
+
+    from rtmesh.lights.point_lights import DirectionalLight
+    from rtmesh.materials.table import Material
+    from rtmesh.scene.camera import Camera
+    from rtmesh.scene.model import Scene
+
+    near, far = icosphere(3, 1.0, (-2.5, 0.0, 0.0)), icosphere(3, 1.0, (2.5, 0.0, -6.0))
+    camera = Camera([0.0, 0.0, 10.0], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0], projection="orthographic",
+                    ortho_height=10.0)
+    return Scene.from_parts([part("near", near), part("far", far)], [Material("m", diffuse=0.7)],
+                            [DirectionalLight([0.0, 0.0, -1.0], 1.0)], camera)
+
+
+def test_orthographic_views_keep_sizes_and_project_hits_without_perspective():
+    scene = orthographic_spheres_scene()
+    width, height = 60, 30
+    result = render(scene, width=width, height=height, spp=1, sampler="regular", passes=("position", "alpha"))
+    covered = result.passes["alpha"][..., 0] > 0
+    # equal spheres at different depths cover the same number of pixels (no foreshortening):
+    # each is a disk of radius 1 at 3 pixels per unit, about pi * 9 = 28 pixels
+    left, right = covered[:, : width // 2].sum(), covered[:, width // 2:].sum()
+    assert left == right and 20 < left < 36
+    record = camera_record(scene.camera, width, height, scene.bounds)
+    assert record["projection"] == "orthographic" and record["fov_y_degrees"] is None
+    assert record["ortho_height"] == 10.0 and record["ortho_width"] == 20.0
+    rows, columns = np.nonzero(covered)
+    world = result.passes["position"][rows, columns].astype(np.float64)
+    w2c = np.array(record["world_to_camera_opencv"])
+    camera_points = world @ w2c[:3, :3].T + w2c[:3, 3]
+    k = np.array(record["K"])
+    pixel = camera_points[:, :2] @ k[:2, :2].T + k[:2, 2]  # no division by depth
+    np.testing.assert_allclose(pixel, np.column_stack([columns + 0.5, rows + 0.5]), atol=2e-3)
+
+
+def test_scene_files_and_gltf_files_give_orthographic_cameras(tmp_path):
+    import pytest
+
+    from rtmesh.core.errors import SceneError
+    from rtmesh.loaders.gltf_nodes import cameras_from_gltf
+    from rtmesh.loaders.scene_file import scene_from_dict
+
+    doc = {"camera": {"position": [0, 0, 5], "look_at": [0, 0, 0], "projection": "orthographic",
+                      "ortho_height": 3.0},
+           "objects": [{"primitive": "box"}]}
+    scene, _ = scene_from_dict(doc)
+    assert scene.camera.orthographic and scene.camera.ortho_height == 3.0
+    del doc["camera"]["ortho_height"]
+    with pytest.raises(SceneError, match="camera: an orthographic camera needs ortho_height > 0"):
+        scene_from_dict(doc)
+    gltf = {"cameras": [{"type": "orthographic", "orthographic": {"xmag": 2.0, "ymag": 1.5, "znear": 0.1,
+                                                                  "zfar": 100}}],
+            "nodes": [{"camera": 0, "translation": [0, 0, 4], "scale": [2, 2, 2]}],
+            "scenes": [{"nodes": [0]}], "scene": 0}
+    ((names, camera),) = cameras_from_gltf(gltf)
+    assert camera.orthographic and camera.ortho_height == pytest.approx(6.0)  # 2 ymag x node scale 2

@@ -128,7 +128,7 @@ def _frame(matrix):
 
 
 def cameras_from_gltf(doc, transform=None, source="gltf"):
-    """Perspective cameras of the file's camera nodes.
+    """Perspective and orthographic cameras of the file's camera nodes.
 
     Parameters
     ----------
@@ -153,13 +153,21 @@ def cameras_from_gltf(doc, transform=None, source="gltf"):
             continue
         spec = cameras[node["camera"]]
         names = tuple(n for n in (node.get("name"), spec.get("name")) if n)
-        if spec.get("type") != "perspective" or "perspective" not in spec:
-            log.warning("%s: camera %s is %s, not perspective; skipped", source,
-                        names[0] if names else node["camera"], spec.get("type"))
+        kind = spec.get("type")
+        if kind not in ("perspective", "orthographic") or kind not in spec:
+            log.warning("%s: camera %s is %s, neither perspective nor orthographic; skipped", source,
+                        names[0] if names else node["camera"], kind)
             continue
         position, forward, up = _frame(transform @ world)
-        camera = Camera(position, position + forward, up,
-                        fov=math.degrees(float(spec["perspective"]["yfov"])))
+        if kind == "perspective":
+            camera = Camera(position, position + forward, up,
+                            fov=math.degrees(float(spec["perspective"]["yfov"])))
+        else:
+            # ymag is half the view's height in the camera's node frame: scaled by the node
+            # transform's scale along its up axis
+            up_scale = float(np.linalg.norm((transform @ world)[:3, :3] @ [0.0, 1.0, 0.0]))
+            camera = Camera(position, position + forward, up, projection="orthographic",
+                            ortho_height=2.0 * float(spec["orthographic"]["ymag"]) * up_scale)
         out.append((names, camera))
     return out
 

@@ -310,7 +310,7 @@ def scene_from_trimesh(obj, name="mesh", **scene_options):
 def load_mesh_scene(path, **scene_options):
     """A renderable :class:`Scene` from a mesh file.
 
-    A glTF file's first perspective camera and its KHR_lights_punctual lights are used when
+    A glTF file's first camera (perspective or orthographic) and its KHR_lights_punctual lights are used when
     it has them (see :mod:`rtmesh.loaders.gltf_nodes`); otherwise an automatic camera frames the
     mesh and the default light rig lights it.
     """

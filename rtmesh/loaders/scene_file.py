@@ -143,7 +143,7 @@ RENDER_KEYS = {
 CAMERA_KEYS = {
     "position": _vec3, "look_at": _vec3, "up": _vec3, "fov": _positive,
     "aperture": _non_negative, "focus_distance": _positive, "from_file": _str,
-    "shutter": _shutter,
+    "shutter": _shutter, "projection": _one_of("perspective", "orthographic"), "ortho_height": _positive,
 }
 ENVIRONMENT_KEYS = {"ambient": _colour, "background": _colour}
 MATERIAL_KEYS = {
@@ -507,11 +507,13 @@ def _camera(r, values, file_cameras=()):
     for key in ("position", "look_at"):
         if key not in values:
             raise r.error(f"camera.{key}", "missing")
-    camera = Camera(values["position"], values["look_at"], values.get("up", np.array([0.0, 1.0, 0.0])),
-                    fov=values.get("fov", 45.0), aperture=values.get("aperture", 0.0),
-                    focus_distance=values.get("focus_distance"),
-                    shutter=tuple(values.get("shutter", (0.0, 0.0))))
     try:
+        camera = Camera(values["position"], values["look_at"], values.get("up", np.array([0.0, 1.0, 0.0])),
+                        fov=values.get("fov", 45.0), aperture=values.get("aperture", 0.0),
+                        focus_distance=values.get("focus_distance"),
+                        shutter=tuple(values.get("shutter", (0.0, 0.0))),
+                        projection=values.get("projection", "perspective"),
+                        ortho_height=values.get("ortho_height"))
         camera.frame()
     except ValueError as exc:
         raise r.error("camera", str(exc)) from None

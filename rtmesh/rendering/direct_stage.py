@@ -114,6 +114,8 @@ class DirectStage:
             return None
         if type(it.accel) is not Accel or not it.accel.packets or it.media is not None:
             return None
+        if it.camera.orthographic:  # the fused camera step forms pinhole rays
+            return None
         # lights without a compiled row are evaluated by the general path
         if st.lights and any(light.kernel_row() is None for light in it.lights):
             return None

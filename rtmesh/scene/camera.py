@@ -1,4 +1,4 @@
-"""Pinhole and thin-lens perspective cameras."""
+"""Cameras: pinhole and thin-lens perspective, and orthographic."""
 
 import math
 from dataclasses import dataclass
@@ -10,9 +10,12 @@ from rtmesh.sampling.warps import square_to_uniform_disk_concentric
 from rtmesh.scene import camera_rays
 
 
+PROJECTIONS = ("perspective", "orthographic")
+
+
 @dataclass
 class Camera:
-    """A perspective camera.
+    """A perspective (pinhole or thin-lens) or orthographic camera.
 
     Attributes
     ----------
@@ -31,6 +34,12 @@ class Camera:
     shutter : (2,) float
         Times the shutter opens and closes (the time unit of object motion, see
         :mod:`rtmesh.geometry.motion`); equal times take an instantaneous picture (no motion blur).
+    projection : {"perspective", "orthographic"}
+        Orthographic rays are parallel to the view direction and start on the plane through
+        ``position`` facing it (``fov`` does not apply; neither does a lens).
+    ortho_height : float or None
+        Height of the orthographic view, scene units (its width follows the image's
+        aspect ratio); required for an orthographic camera.
     """
 
     position: np.ndarray
@@ -40,12 +49,26 @@ class Camera:
     aperture: float = 0.0
     focus_distance: float | None = None
     shutter: tuple = (0.0, 0.0)
+    projection: str = "perspective"
+    ortho_height: float | None = None
 
     def __post_init__(self):
         self.position = np.asarray(self.position, dtype=np.float64)
         self.look_at = np.asarray(self.look_at, dtype=np.float64)
         self.up = np.asarray(self.up, dtype=np.float64)
         self.shutter = (float(self.shutter[0]), float(self.shutter[1]))
+        if self.projection not in PROJECTIONS:
+            raise ValueError(f"camera projection must be one of {', '.join(PROJECTIONS)}")
+        if self.orthographic:
+            if not (self.ortho_height is not None and 0.0 < self.ortho_height < math.inf):
+                raise ValueError("an orthographic camera needs ortho_height > 0")
+            if self.aperture > 0.0:
+                raise ValueError("an orthographic camera has no lens (aperture must be 0)")
+
+    @property
+    def orthographic(self):
+        """True for an orthographic camera."""
+        return self.projection == "orthographic"
 
     def frame(self):
         """Orthonormal camera frame.
@@ -94,9 +117,22 @@ class Camera:
             ``sx = x ax + bx``, ``sy = y ay + by`` on the plane, each an affine map of one
             film coordinate.
         """
-        tan_half = np.tan(np.radians(self.fov) * 0.5)
+        # orthographic: the same affine map onto the view plane, in scene units
+        tan_half = 0.5 * self.ortho_height if self.orthographic else np.tan(np.radians(self.fov) * 0.5)
         aspect = width / height
         return np.array([2.0 * tan_half * aspect / width, -tan_half * aspect, -2.0 * tan_half / height, tan_half])
+
+    def _orthographic_rays(self, film_xy, pixels, width, image_plane, forward, right, up):
+        """Parallel rays from the view plane (see :meth:`generate_rays`)."""
+        x, y = film_xy[:, 0], film_xy[:, 1]
+        if pixels is not None:
+            pixels = np.asarray(pixels, dtype=np.int64)
+            x, y = x + pixels % width, y + pixels // width
+        sx = x * image_plane[0] + image_plane[1]
+        sy = y * image_plane[2] + image_plane[3]
+        origins = self.position + sx[:, None] * right + sy[:, None] * up
+        # a real component-major array: later stages may gather or update direction rows
+        return origins, np.asfortranarray(np.broadcast_to(forward, origins.shape), dtype=np.float64)
 
     def generate_rays(self, film_xy, width, height, lens_uv=None, pixels=None, frame=None):
         """Primary rays through continuous film positions.
@@ -124,6 +160,9 @@ class Camera:
         """
         forward, right, up = self.frame() if frame is None else frame
         image_plane = self.image_plane(width, height)
+        if self.orthographic:
+            return self._orthographic_rays(np.asarray(film_xy, dtype=np.float64), pixels, width, image_plane,
+                                           forward, right, up)
         disk = np.zeros((0, 2))
         if self.aperture > 0.0 and lens_uv is not None:
             # thin lens: rays start on the aperture and meet on the plane of focus, so that

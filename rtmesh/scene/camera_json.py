@@ -12,7 +12,10 @@ One JSON object per image (``rtmesh render --camera-json PATH``), with
   ``camera_to_world_opengl`` (4x4; +x right, +y up, -z forward: the Blender, nerfstudio
   and instant-ngp convention) and ``world_to_camera_opencv`` (its inverse, the COLMAP
   and OpenCV extrinsics ``[R | t]``);
-- ``projection``: ``"perspective"``;
+- ``projection``: ``"perspective"`` or ``"orthographic"``; an orthographic camera has
+  ``ortho_height`` and ``ortho_width`` (scene units), no ``fov_y_degrees`` (null), and its
+  ``K`` maps camera-frame coordinates without the division by depth: ``u = fx x + cx``,
+  ``v = fy y + cy`` (``fx = height / ortho_height`` pixels per scene unit);
 - ``near``, ``far``: the nearest and farthest distance along the view axis of the scene's
   bounding box (``near`` at least 1e-6 of ``far``), for depth-buffer ranges;
 - ``aperture``, ``focus_distance``: the thin lens (aperture 0 for a pinhole);
@@ -52,8 +55,11 @@ def camera_record(camera, width, height, bounds, asset_to_world=None):
         JSON-ready (lists of floats); see the module notes for every key.
     """
     forward, right, up = camera.frame()
-    f = 0.5 * height / np.tan(np.radians(camera.fov) * 0.5)
     cx, cy = 0.5 * width, 0.5 * height
+    # perspective: pixels per unit of image-plane height at unit distance; orthographic:
+    # pixels per scene unit (u = f x + cx, with x the camera-frame coordinate itself)
+    f = (height / camera.ortho_height if camera.orthographic
+         else 0.5 * height / np.tan(np.radians(camera.fov) * 0.5))
     opencv = np.eye(4)
     opencv[:3, :3] = np.column_stack([right, -up, forward])
     opencv[:3, 3] = camera.position
@@ -66,19 +72,23 @@ def camera_record(camera, width, height, bounds, asset_to_world=None):
     depth = (corners - camera.position) @ forward
     far = float(max(depth.max(), 0.0))
     near = float(max(depth.min(), 1e-6 * far))
-    return {
+    record = {
         "width": int(width), "height": int(height),
         "K": [[f, 0.0, cx], [0.0, f, cy], [0.0, 0.0, 1.0]],
         "fx": f, "fy": f, "cx": cx, "cy": cy,
-        "fov_y_degrees": float(camera.fov),
+        "fov_y_degrees": None if camera.orthographic else float(camera.fov),
         "camera_to_world_opencv": opencv.tolist(),
         "camera_to_world_opengl": opengl.tolist(),
         "world_to_camera_opencv": world_to_camera.tolist(),
-        "projection": "perspective",
+        "projection": camera.projection,
         "near": near, "far": far,
         "aperture": float(camera.aperture), "focus_distance": float(camera.focus),
         "asset_to_world": (np.eye(4) if asset_to_world is None else np.asarray(asset_to_world)).tolist(),
     }
+    if camera.orthographic:
+        record["ortho_height"] = float(camera.ortho_height)
+        record["ortho_width"] = float(camera.ortho_height * width / height)
+    return record
 
 
 def write_camera_json(path, record):
