@@ -17,6 +17,9 @@ import numpy as np
 # Media a ray can be nested in at once (see rtmesh.rendering.media): glass in water in a tank is 3;
 # deeper nesting drops the outermost.  Scenes without transmissive materials carry none.
 STACK_DEPTH = 4
+# an empty (0, 3) array stands for "none" in the kernels' optional vector arguments
+NO_VECTORS = np.zeros((0, 3))
+NO_VECTORS.flags.writeable = False
 
 
 def component_major(components):

@@ -1,4 +1,5 @@
-"""What one chunk of pixel samples carries through the stages of the general path.
+"""What one chunk of pixel samples carries through the stages of the general path, and the
+base of those stages.
 
 :class:`ChunkState` is the chunk's state: its radiance and pass buffers, the keys of its
 samples (pixel and sample index, which key every random number), its statistics and stage
@@ -13,6 +14,19 @@ import numpy as np
 
 from rtmesh.core.rays import take_rows
 from rtmesh.rendering.film_sums import add_rows
+
+
+class Stage:
+    """A stage of the general path, for one integrator's scene.
+
+    Parameters
+    ----------
+    integrator : rtmesh.rendering.integrator.Integrator
+        After its tables are formed; the stage reads them (``self.it``).
+    """
+
+    def __init__(self, integrator):
+        self.it = integrator
 
 
 class ChunkState:

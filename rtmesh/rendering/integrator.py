@@ -63,8 +63,6 @@ from rtmesh.shading.direct_light import highlight_thresholds
 
 log = logging.getLogger(__name__)
 
-# an empty (0, 3) array stands for "none" in the kernels' optional vector arguments
-_NO_VECTORS = np.zeros((0, 3))
 _UNIT_THROUGHPUT = np.ones(3)
 
 

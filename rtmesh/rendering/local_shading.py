@@ -8,29 +8,17 @@ area lights (:mod:`rtmesh.lights.area_lights`).
 
 import numpy as np
 
-from rtmesh.core.rays import take_rows
+from rtmesh.core.rays import NO_VECTORS, take_rows
 from rtmesh.core.vecmath import orthonormal_basis
 from rtmesh.geometry.accel import offset_ray_origins
 from rtmesh.materials.blinn_phong import surface_reflectance
-from rtmesh.rendering.chunk_state import add_rows_or_all, rows_at
+from rtmesh.rendering.chunk_state import Stage, add_rows_or_all, rows_at
 from rtmesh.sampling.warps import square_to_cosine_hemisphere
 from rtmesh.shading.direct_light import SHADOW_SHORTEN, add_light, light_samples
 
-# an empty (0, 3) array stands for "none" in the kernels' optional vector arguments
-_NO_VECTORS = np.zeros((0, 3))
 
-
-class LocalShading:
-    """Local shading for one integrator's scene (its lights, material tables, sampler).
-
-    Parameters
-    ----------
-    integrator : rtmesh.rendering.integrator.Integrator
-        After its tables are formed; the stage reads them.
-    """
-
-    def __init__(self, integrator):
-        self.it = integrator
+class LocalShading(Stage):
+    """Local shading for one integrator's scene (its lights, material tables, sampler)."""
 
     def shade(self, srf, depth, chunk):
         """Emission, ambient (with AO) and direct light with shadows; (k, 3) or None."""
@@ -86,7 +74,7 @@ class LocalShading:
         if rows is not None and not len(rows):
             return None
         tints = srf.tints
-        tint_d, tint_s = (_NO_VECTORS if t is None else take_rows(t, rows)
+        tint_d, tint_s = (NO_VECTORS if t is None else take_rows(t, rows)
                           for t in ((None, None) if tints is None else (tints.diffuse, tints.specular)))
         materials = (take_rows(srf.mat, rows), it._diffuse, tint_d, it._specular, tint_s,
                      it._highlight_exponent)

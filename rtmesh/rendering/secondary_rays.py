@@ -12,19 +12,14 @@ import numpy as np
 from rtmesh.core.rays import RayBatch
 from rtmesh.geometry.accel import offset_ray_origins
 from rtmesh.materials.specular import SpecularScattering
+from rtmesh.rendering.chunk_state import Stage
 
 
-class SecondaryRays:
-    """Reflection and refraction rays for one integrator's scene.
-
-    Parameters
-    ----------
-    integrator : rtmesh.rendering.integrator.Integrator
-        After its tables are formed; the stage reads them.
-    """
+class SecondaryRays(Stage):
+    """Reflection and refraction rays for one integrator's scene."""
 
     def __init__(self, integrator):
-        self.it = integrator
+        super().__init__(integrator)
         self.scattering = SpecularScattering(integrator.scene.materials, integrator.settings.fresnel)
 
     def spawn(self, srf, rays, depth, chunk):

@@ -5,25 +5,13 @@ object hit and moved to the ray's time.
 
 import numpy as np
 
-from rtmesh.core.rays import take_rows
-from rtmesh.rendering.chunk_state import SurfaceRecords
+from rtmesh.core.rays import NO_VECTORS, take_rows
+from rtmesh.rendering.chunk_state import Stage, SurfaceRecords
 from rtmesh.shading.surfaces import face_viewer, surface_records
 
-# an empty (0, 3) array stands for "none" in the kernels' optional vector arguments
-_NO_VECTORS = np.zeros((0, 3))
 
-
-class SurfaceStage:
-    """Surface records for one integrator's scene (its face tables, textures, motion).
-
-    Parameters
-    ----------
-    integrator : rtmesh.rendering.integrator.Integrator
-        After its tables are formed; the stage reads them.
-    """
-
-    def __init__(self, integrator):
-        self.it = integrator
+class SurfaceStage(Stage):
+    """Surface records for one integrator's scene (its face tables, textures, motion)."""
 
     def records(self, rays, hits, rows, sample_time=None):
         """Hit points, normals facing the incoming ray, and material ids of the hit ``rows``
@@ -38,7 +26,7 @@ class SurfaceStage:
         srf.time = None if sample_time is None else sample_time[srf.sample]
         srf.d = take_rows(rays.directions, rows)
         srf.prim = take_rows(hits.prim, rows)
-        view = _NO_VECTORS
+        view = NO_VECTORS
         if srf.time is not None:
             view = it.motion.directions_to_rest(srf.prim.astype(np.intp), srf.time, srf.d)
         normal_maps = it.plan.normal_maps

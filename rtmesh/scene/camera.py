@@ -9,7 +9,6 @@ from rtmesh.core.rays import repeated_row
 from rtmesh.sampling.warps import square_to_uniform_disk_concentric
 from rtmesh.scene import camera_rays
 
-
 PROJECTIONS = ("perspective", "orthographic")
 
 
