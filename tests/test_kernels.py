@@ -183,8 +183,7 @@ def test_film_sums_and_means():
     radiance = rng.uniform(size=(4, 3, 3))
     pixels = np.array([7, 2, 5, 0])
     count = np.zeros(10, np.int64)
-    count[pixels[:2]] = 1  # these two add to what is there (a sample of 0), the others start from nothing
-    total[pixels[2:]] = total_sq[pixels[2:]] = np.nan
+    count[pixels[:2]] = 1  # these two had a sample of 0 already, the others none (sums start at 0)
     film_sums.accumulate_samples(total, total_sq, count, pixels, radiance, np.zeros((0, 3), np.float32))
     np.testing.assert_allclose(total[pixels], radiance.sum(axis=1), rtol=1e-15)
     np.testing.assert_allclose(total_sq[pixels], (radiance ** 2).sum(axis=1), rtol=1e-15)
