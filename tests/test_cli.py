@@ -152,3 +152,53 @@ def test_bundled_showcase_scene_renders(tmp_path):
     assert image.shape == (48, 64, 3)
     # lit objects in front of a sky-blue background: not a blank frame
     assert image.std() > 0.05
+
+
+def test_argparse_error_is_one_line_exit_2(tmp_path):
+    code, out, err = run_cli("render", tmp_path / "scene.toml", "--width", "0")
+    assert code == 2
+    assert err.startswith("rtmesh: error: ") and "--help" in err
+    assert len(err.strip().splitlines()) == 1 and "usage:" not in err
+
+
+def _failing_render(monkeypatch, exc):
+    import rtmesh.cli as cli
+
+    def render(self, progress=None):
+        raise exc
+
+    monkeypatch.setattr(cli.Integrator, "render", render)
+
+
+def test_internal_error_is_one_line_exit_70_without_traceback(scene_file, tmp_path, monkeypatch, capsys):
+    monkeypatch.delenv("RTMESH_DEBUG", raising=False)
+    _failing_render(monkeypatch, ValueError("a bug\nwith a second line"))
+    out = tmp_path / "x.png"
+    assert main(["render", str(scene_file), "-o", str(out), "-q"]) == 70
+    err = capsys.readouterr().err
+    assert err == ("rtmesh: internal error: ValueError: a bug (run with --debug or RTMESH_DEBUG=1 "
+                   "for the traceback)\n")
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("how", ["flag before", "flag after", "environment"])
+def test_debug_shows_the_traceback_of_an_internal_error(how, scene_file, tmp_path, monkeypatch, capsys):
+    monkeypatch.delenv("RTMESH_DEBUG", raising=False)
+    _failing_render(monkeypatch, ValueError("a bug"))
+    args = ["render", str(scene_file), "-o", str(tmp_path / "x.png"), "-q"]
+    if how == "flag before":
+        args = ["--debug"] + args
+    elif how == "flag after":
+        args = args + ["--debug"]
+    else:
+        monkeypatch.setenv("RTMESH_DEBUG", "1")
+    assert main(args) == 70
+    err = capsys.readouterr().err
+    assert "Traceback (most recent call last)" in err and "ValueError: a bug" in err
+
+
+def test_running_out_of_memory_is_a_user_error(scene_file, tmp_path, monkeypatch, capsys):
+    _failing_render(monkeypatch, MemoryError())
+    assert main(["render", str(scene_file), "-o", str(tmp_path / "x.png"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("rtmesh: error: out of memory") and len(err.splitlines()) == 1
