@@ -23,7 +23,8 @@ class Camera:
     up : (3,) float
         Approximate up direction; made orthogonal to the view direction.
     fov : float
-        Vertical field of view, degrees.
+        Vertical field of view, degrees: more than 0 and less than 180 (a pinhole maps
+        the image plane at unit distance; 180 degrees would be an infinite plane).
     aperture : float
         Lens diameter, scene units.  0 gives a pinhole camera (everything sharp).
     focus_distance : float or None
@@ -46,6 +47,8 @@ class Camera:
         self.look_at = np.asarray(self.look_at, dtype=np.float64)
         self.up = np.asarray(self.up, dtype=np.float64)
         self.shutter = (float(self.shutter[0]), float(self.shutter[1]))
+        if not 0.0 < self.fov < 180.0:  # NaN included
+            raise ValueError(f"camera fov must be more than 0 and less than 180 degrees (got {self.fov!r})")
 
     def frame(self):
         """Orthonormal camera frame.
@@ -156,7 +159,8 @@ def frame_bounds(bounds, fov=45.0, aspect=1.0, direction=(0.6, 0.45, 1.0), up=(0
     bounds : (2, 3) float
         Minimum and maximum corner, scene units.
     fov : float
-        Vertical field of view, degrees.
+        Vertical field of view, degrees: more than 0 and less than 180 (a pinhole maps
+        the image plane at unit distance; 180 degrees would be an infinite plane).
     aspect : float
         Width / height of the image.
     direction : (3,) float

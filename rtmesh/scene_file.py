@@ -49,6 +49,13 @@ def _positive(v):
     return v
 
 
+def _fov(v):
+    v = _float(v)
+    if not 0.0 < v < 180.0:
+        raise TypeError("expected degrees more than 0 and less than 180")
+    return v
+
+
 def _non_negative(v):
     v = _float(v)
     if v < 0:
@@ -141,7 +148,7 @@ RENDER_KEYS = {
     "target_error": _positive, "time_limit": _positive, "max_spp": _int,
 }
 CAMERA_KEYS = {
-    "position": _vec3, "look_at": _vec3, "up": _vec3, "fov": _positive,
+    "position": _vec3, "look_at": _vec3, "up": _vec3, "fov": _fov,
     "aperture": _non_negative, "focus_distance": _positive, "from_file": _str,
     "shutter": _shutter,
 }
