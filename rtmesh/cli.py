@@ -7,7 +7,7 @@ import sys
 import time
 import traceback
 
-from . import __version__, runtime
+from . import __version__, memory, runtime
 from .api import load_scene
 from .errors import RtmeshError
 from .colour import TONEMAPS
@@ -88,6 +88,9 @@ def build_parser():
     p.add_argument("--fresnel", choices=FRESNEL_MODES, help="Fresnel model for dielectrics")
     p.add_argument("--exposure", type=float, help="exposure in stops for 8-bit output")
     p.add_argument("--tonemap", choices=TONEMAPS, help="tone-mapping operator for 8-bit output")
+    p.add_argument("--memory-limit", type=_bytes, metavar="SIZE",
+                   help="refuse a render whose estimated memory exceeds SIZE, e.g. 4G; 0 = no check "
+                   "(default: the memory available)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     _add_debug_flag(p)
     _add_batch_parser(commands)
@@ -225,6 +228,7 @@ def cmd_render(args):
     # the command owns its process: tune it for rendering (allocator, GIL, kept threads)
     runtime.tune_process()
     scene, settings = load_scene(args.input, **overrides)
+    memory.check(settings, args.memory_limit)
     if background is not None:
         scene.background = background
     bar = ProgressBar(enabled=not args.quiet and sys.stderr.isatty())

@@ -202,3 +202,39 @@ def test_running_out_of_memory_is_a_user_error(scene_file, tmp_path, monkeypatch
     assert main(["render", str(scene_file), "-o", str(tmp_path / "x.png"), "-q"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("rtmesh: error: out of memory") and len(err.splitlines()) == 1
+
+
+@pytest.mark.parametrize("args", [["--width", "100000", "--height", "100000"],
+                                  ["--width", "64", "--height", "48", "--memory-limit", "1M"]])
+def test_a_render_too_large_for_memory_is_refused_in_one_line(args, tmp_path):
+    mesh = os.path.join(ASSETS, "meshes", "bunny.ply")
+    out = tmp_path / "x.png"
+    code, _, err = run_cli("render", mesh, "-o", out, *args)
+    assert code == 2 and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1
+    size = "x".join(args[1::2][:2])
+    assert err.startswith(f"rtmesh: error: a {size} render at 4 spp on ")
+    assert "needs about" in err and ("is available" in err or "--memory-limit is 1 MiB" in err)
+    assert "set --memory-limit (0 = no check)" in err
+    assert not out.exists()
+
+
+def test_scene_file_spp_too_large_for_memory_or_the_samplers_is_refused(scene_file, tmp_path, capsys):
+    out = tmp_path / "x.png"
+    scene_file.write_text(SMALL_SCENE.replace("spp = 2", "spp = 2147483648"))
+    assert main(["render", str(scene_file), "-o", str(out), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "render at 2147483648 spp" in err and "chunks" in err and len(err.splitlines()) == 1
+    # beyond the samplers' 32-bit sample index: refused by the settings, naming the value
+    scene_file.write_text(SMALL_SCENE.replace("spp = 2", "spp = 100000000000"))
+    assert main(["render", str(scene_file), "-o", str(out), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err == (f"rtmesh: error: {scene_file}: render: spp must be >= 1 and <= 4294967296 "
+                   "(got 100000000000)\n")
+    assert not out.exists()
+
+
+def test_memory_limit_zero_turns_the_check_off(scene_file, tmp_path):
+    out = tmp_path / "x.png"
+    assert main(["render", str(scene_file), "-o", str(out), "--memory-limit", "0", "-q"]) == 0
+    assert out.exists()
