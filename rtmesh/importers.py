@@ -1,5 +1,7 @@
 """trimesh -> rtmesh: meshes, scene graphs and their materials as :class:`MeshPart` lists."""
 
+import errno
+import io
 import logging
 import os
 
@@ -9,12 +11,13 @@ import trimesh
 from . import build_kernels
 from .errors import MeshError
 from .colour import srgb_to_linear
-from .gltf_scene import GLTF_EXTENSIONS, file_cameras_and_lights, read_gltf_json
+from .gltf_scene import GLTF_EXTENSIONS, check_external_files, file_cameras_and_lights, read_gltf_json
 from .material_files import gltf_json_materials, gltf_material, mtl_material, obj_materials
 from .materials import Material
+from .obj_polygons import triangulate_polygons
 from .scene import MeshPart, Scene
 from .smoothing import CREASE_ANGLE, smooth_vertex_normals
-from .textures import Texture
+from .textures import Texture, image_size_guard
 
 log = logging.getLogger(__name__)
 
@@ -38,21 +41,25 @@ def load_trimesh(path):
         Missing file, unknown format, or a file trimesh cannot parse.
     """
     path = os.fspath(path)
-    if not os.path.isfile(path):
-        raise MeshError(f"{path}: no such mesh file")
+    _check_file(path)
     ext = os.path.splitext(path)[1].lower()
     if ext not in MESH_EXTENSIONS:
         raise MeshError(f"{path}: unsupported mesh format {ext or '(none)'!r}; use "
                         + ", ".join(MESH_EXTENSIONS))
+    _check_content(path, ext)
+    if ext == ".gltf":
+        check_external_files(path, read_gltf_json(path))
     try:
-        if ext in GLTF_EXTENSIONS:
-            scene = trimesh.load(path, force="scene")  # trimesh leaves glTF meshes unprocessed
-        else:
-            # trimesh's processing, done by process() where it changes something
-            scene = trimesh.load(path, force="scene", process=False)
-            for geometry in scene.geometry.values():
-                if isinstance(geometry, trimesh.Trimesh) and not geometry.metadata.get("processed"):
-                    process(geometry)
+        with image_size_guard(path):  # textures trimesh decodes: too large is one message
+            scene = _load(path, ext)
+    except MeshError:
+        raise
+    except IndexError as exc:
+        raise MeshError(f"{path}: cannot read mesh: a face refers to a vertex the file does not "
+                        f"have ({exc})") from exc
+    except ImportError as exc:
+        # trimesh guesses the encoding of text that is not UTF-8 with an optional module
+        raise MeshError(f"{path}: not a valid {_format_name(ext)} file (text that is not UTF-8)") from exc
     except Exception as exc:  # trimesh raises many types for malformed files
         detail = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise MeshError(f"{path}: cannot read mesh: {detail}") from exc
@@ -61,38 +68,241 @@ def load_trimesh(path):
     return scene
 
 
-def process(mesh):
-    """What ``trimesh.load`` does to each mesh by default (``Trimesh.process``), faster.
+def _load(path, ext):
+    """trimesh's scene of a mesh file, processed (see :func:`process`)."""
+    if ext in GLTF_EXTENSIONS:
+        return trimesh.load(path, force="scene")  # trimesh leaves glTF meshes unprocessed
+    # trimesh's processing, done by process() where it changes something
+    scene = trimesh.load(**_obj_source(path, ext), force="scene", process=False)
+    for key, geometry in scene.geometry.items():
+        if isinstance(geometry, trimesh.Trimesh) and not geometry.metadata.get("processed"):
+            process(geometry, _geometry_source(path, scene, key))
+    return scene
+
+
+def _check_file(path):
+    """Raise MeshError unless ``path`` is a readable regular file, saying what it is instead."""
+    if os.path.isfile(path):
+        if not os.access(path, os.R_OK):
+            raise MeshError(f"{path}: cannot read the mesh file (permission denied)")
+        return
+    if os.path.isdir(path):
+        raise MeshError(f"{path}: is a directory, not a mesh file")
+    if os.path.islink(path):
+        try:
+            os.stat(path)
+        except OSError as exc:
+            if exc.errno == errno.ELOOP:
+                raise MeshError(f"{path}: symbolic link loop, not a mesh file") from None
+            raise MeshError(f"{path}: broken symbolic link (to {os.readlink(path)}), no such mesh file") from None
+    if os.path.exists(path):
+        raise MeshError(f"{path}: not a regular file")
+    raise MeshError(f"{path}: no such mesh file")
+
+
+def _format_name(ext):
+    return {".gltf": "glTF", ".glb": "GLB"}.get(ext, ext[1:].upper())
+
+
+# text formats: binary data in their first bytes means the file is something else
+_TEXT_FORMATS = (".obj", ".off", ".gltf")
+_SNIFF_BYTES = 4096
+
+
+def _check_content(path, ext):
+    """Raise MeshError for a file whose first bytes cannot start a file of its format (binary
+    data in a text format, a GLB without its magic, a PLY without its header, an STL that is
+    neither ASCII nor a binary STL of the file's size), instead of whatever trimesh makes of
+    it."""
+    size = os.path.getsize(path)
+    with open(path, "rb") as f:
+        head = f.read(_SNIFF_BYTES)
+    name = _format_name(ext)
+    problem = None
+    if ext in _TEXT_FORMATS:
+        control = sum(head.count(bytes([c])) for c in range(32) if c not in (9, 10, 11, 12, 13))
+        if control > 0.01 * len(head):
+            problem = "binary data, not text"
+    elif ext == ".glb" and head[:4] != b"glTF":
+        problem = "no glTF header"
+    elif ext == ".ply" and not head.startswith(b"ply"):
+        problem = "no 'ply' header"
+    elif ext == ".stl":
+        ascii_stl = head.lstrip()[:5].lower() == b"solid" and b"\0" not in head
+        if not ascii_stl:
+            count = int.from_bytes(head[80:84], "little") if len(head) >= 84 else None
+            if count is None:
+                problem = f"{size} bytes: too short for a binary STL and not ASCII"
+            elif size < 84 + 50 * count:
+                problem = (f"not ASCII, and its binary header announces {count} triangles "
+                           f"({84 + 50 * count} bytes) in a file of {size} bytes")
+    if problem:
+        raise MeshError(f"{path}: not a valid {name} file ({problem})")
+
+
+def _obj_source(path, ext):
+    """What trimesh reads: the file, or for an OBJ with polygons of five or more corners its
+    text with them ear-clipped (:mod:`rtmesh.obj_polygons`), materials resolved as beside
+    the file."""
+    if ext == ".obj":
+        with open(path, "rb") as f:
+            text = triangulate_polygons(f.read())
+        if text is not None:
+            return dict(file_obj=io.BytesIO(text), file_type="obj",
+                        resolver=trimesh.resolvers.FilePathResolver(path))
+    return dict(file_obj=path)
+
+
+def _geometry_source(path, scene, key):
+    """``file`` or ``file: object 'name'`` (for a file of several objects) in messages."""
+    name = os.path.basename(path)
+    return name if len(scene.geometry) == 1 else f"{name}: object '{key}'"
+
+
+def process(mesh, source="mesh"):
+    """What ``trimesh.load`` does to each mesh by default (``Trimesh.process``), faster and
+    without losing geometry silently or at extreme scales.
 
     trimesh's processing drops non-finite vertices and merges duplicate ones (equal after
-    rounding to ``trimesh.tol.merge``, with equal texture coordinates and normals); its
-    merge sorts the vertices, 0.4 s for a mesh of a million triangles.  Most files have no
-    duplicate vertices: one hash-table pass (:func:`rtmesh.build_kernels.rows_distinct`)
-    shows that the merge would keep every vertex where it is, and trimesh's own processing
-    runs only where it would not.  Either way the mesh's arrays come out the same.
+    rounding to ``trimesh.tol.merge``, with equal texture coordinates and normals).  Here:
+
+    - faces that use a vertex with a NaN or infinite coordinate are dropped with a warning
+      that counts them (trimesh drops them without a word);
+    - vertices merge as trimesh merges them (:func:`merge_vertices`), but at a precision
+      relative to the mesh's scale where ``tol.merge`` would be coarse for it (a model
+      measured in nanometres), and without trimesh's conversion to 64-bit integers, which
+      overflows for coordinates beyond about 1e10 and collapsed every vertex of such a
+      model;
+    - most files have no duplicate vertices: one hash-table pass
+      (:func:`rtmesh.build_kernels.rows_distinct`) shows that the merge would keep every
+      vertex where it is, and the merge (a sort, 0.4 s for a million triangles) runs only
+      where it would not.
 
     Parameters
     ----------
     mesh : trimesh.Trimesh
         Loaded with ``process=False``; processed in place.
+    source : str
+        Names the mesh in warnings.
     """
-    if not mesh.is_empty and _merge_keeps_everything(mesh):
-        mesh.metadata["processed"] = True
-    else:
-        mesh.process()
+    faces = mesh.faces.view(np.ndarray)
+    if mesh.is_empty or faces.ndim != 2 or not len(faces):
+        mesh.metadata["processed"] = True  # nothing to process (parts_from_trimesh skips it)
+        return
+    _drop_bad_index_faces(mesh, source)
+    _drop_non_finite_faces(mesh, source)
+    digits = merge_digits(mesh.vertices.view(np.ndarray), mesh.faces.view(np.ndarray))
+    if not _merge_keeps_everything(mesh, digits):
+        # as Trimesh.process: the cache lock keeps the file's normals across the merge
+        with mesh._cache:
+            merge_vertices(mesh, digits)
+            mesh._cache.clear(exclude={"face_normals", "vertex_normals"})
+    mesh.metadata["processed"] = True
 
 
-def _merge_keeps_everything(mesh):
-    """True when trimesh's processing would change nothing: every vertex finite and used by
-    a face, and no two vertices at the same position as trimesh rounds positions (distinct
-    positions make distinct rows whatever texture coordinates or normals it also compares).
+def _drop_bad_index_faces(mesh, source):
+    """Drop the faces that refer to vertices the file does not have, saying how many."""
+    faces = mesh.faces.view(np.ndarray)
+    bad = ((faces < 0) | (faces >= len(mesh.vertices))).any(axis=1)
+    if bad.any():
+        log.warning("%s: dropped %d of %d faces that refer to vertices the file does not have",
+                    source, int(bad.sum()), len(faces))
+        mesh.faces = faces[~bad]
+
+
+def _drop_non_finite_faces(mesh, source):
+    """Drop the faces that use a vertex with a NaN or infinite coordinate, saying how many."""
+    vertices, faces = mesh.vertices.view(np.ndarray), mesh.faces.view(np.ndarray)
+    if np.isfinite(vertices).all():
+        return
+    finite = np.isfinite(vertices).all(axis=1)
+    bad = ~finite[faces].all(axis=1)
+    log.warning("%s: dropped %d of %d faces that use vertices with NaN or infinite coordinates "
+                "(%d such vertices)", source, int(bad.sum()), len(faces), int((~finite).sum()))
+    mesh.remove_infinite_values()
+
+
+def merge_digits(vertices, faces):
+    """Decimal digits at which vertices merge: trimesh's (``tol.merge``), or finer for a
+    mesh whose typical edge is not long against it.
+
+    The tolerance is at most ``MERGE_FRACTION`` of the median edge length (of up to 4096
+    faces evenly spread), so merging never collapses the edges of a small model; for every
+    model with a typical edge longer than 1e-3 it is trimesh's.
+
+    Parameters
+    ----------
+    vertices : (v, 3) float
+        Finite.
+    faces : (f, 3) int
+
+    Returns
+    -------
+    int
+    """
+    digits = trimesh.util.decimal_to_digits(trimesh.tol.merge)
+    if not len(faces):
+        return digits
+    sample = faces[::max(1, len(faces) // 4096)]
+    corners = vertices[sample]
+    lengths = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2)
+    lengths = lengths[lengths > 0.0]
+    if not len(lengths):
+        return digits
+    tolerance = min(trimesh.tol.merge, MERGE_FRACTION * float(np.median(lengths)))
+    return max(digits, trimesh.util.decimal_to_digits(tolerance))
+
+
+# a merge tolerance at most this fraction of a mesh's median edge (see merge_digits)
+MERGE_FRACTION = 1e-5
+
+
+def _merge_keys(mesh, digits, with_attributes=True):
+    """The rows trimesh's merge compares (position, and texture coordinates and normals
+    unless ``with_attributes`` is False), rounded as it rounds them but kept as floats: equal
+    rounded values have equal bits (``+ 0.0`` turns -0.0 into 0.0), so the rows' int64 view
+    compares them exactly, with no conversion to overflow at any scale."""
+    stacked = [mesh.vertices.view(np.ndarray) * (10.0**digits)]
+    if with_attributes:
+        visual = mesh.visual
+        if (visual.defined and visual.kind == "texture" and visual.uv is not None
+                and len(visual.uv) == len(mesh.vertices)):
+            stacked.append(np.asarray(visual.uv, dtype=np.float64) * 1e4)  # trimesh: 4 digits
+        normals = mesh._cache["vertex_normals"]
+        if np.shape(normals) == mesh.vertices.shape:
+            stacked.append(np.asarray(normals, dtype=np.float64) * 1e2)  # trimesh: 2 digits
+    keys = np.column_stack(stacked).round() + 0.0
+    return np.ascontiguousarray(keys).view(np.int64)
+
+
+def merge_vertices(mesh, digits):
+    """``trimesh.grouping.merge_vertices`` at ``digits`` (same groups, same order), with the
+    rows compared by :func:`_merge_keys` instead of as int64 conversions.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+        Finite vertices; merged in place.
+    digits : int
+    """
+    referenced = np.zeros(len(mesh.vertices), dtype=bool)
+    referenced[mesh.faces] = True
+    keys = _merge_keys(mesh, digits)
+    unique, inverse_referenced = trimesh.grouping.unique_rows(keys[referenced], keep_order=True)
+    inverse = np.zeros(len(mesh.vertices), dtype=np.int64)
+    inverse[referenced] = inverse_referenced
+    mesh.update_vertices(mask=np.nonzero(referenced)[0][unique], inverse=inverse)
+
+
+def _merge_keeps_everything(mesh, digits):
+    """True when the merge would change nothing: every vertex finite and used by a face, and
+    no two vertices at the same position as the merge rounds positions (distinct positions
+    make distinct rows whatever texture coordinates or normals it also compares).
     """
     vertices, faces = mesh.vertices.view(np.ndarray), mesh.faces.view(np.ndarray)
     if not build_kernels.referenced_and_finite(vertices, faces):
         return False
-    # trimesh.grouping.merge_vertices: positions scaled to whole units of tol.merge, rounded
-    digits = trimesh.util.decimal_to_digits(trimesh.tol.merge)
-    return build_kernels.rows_distinct((vertices * (10**digits)).round().astype(np.int64))
+    return build_kernels.rows_distinct(_merge_keys(mesh, digits, with_attributes=False))
 
 
 def _file_has_vertex_normals(mesh):
@@ -175,10 +385,10 @@ class FileMaterials:
             return
         ext = os.path.splitext(path)[1].lower()
         if ext == ".obj":
-            self.obj, nan_vertices = obj_materials(path)
-            if nan_vertices:
-                log.warning("%s: %d vertices hold NaN values; the vertex colours are ignored",
-                            os.path.basename(path), nan_vertices)
+            self.obj, nan_colours = obj_materials(path)
+            if nan_colours:
+                log.warning("%s: %d vertex colours hold NaN values; the vertex colours are ignored",
+                            os.path.basename(path), nan_colours)
                 self.drop_vertex_colours = True
         elif ext in GLTF_EXTENSIONS:
             self.gltf = gltf_json_materials(read_gltf_json(path))
@@ -234,7 +444,12 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
     elif isinstance(obj, trimesh.Scene):
         nodes = []
         for node in obj.graph.nodes_geometry:
-            node_transform, geometry_name = obj.graph[node]
+            try:
+                node_transform, geometry_name = obj.graph[node]
+            except ValueError:  # trimesh: "Iteration limit exceeded!"
+                log.warning("%s: node '%s' has no transform from the scene's root (a cycle in the "
+                            "node graph, which glTF forbids); skipped", name, node)
+                continue
             nodes.append((str(node), node_transform, obj.geometry[geometry_name]))
     else:
         raise MeshError(f"{name}: expected a trimesh.Trimesh or trimesh.Scene, got {type(obj).__name__}")
@@ -265,6 +480,11 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
                 uv = None if uv is None else uv[original]
                 colours = None if colours is None else colours[original]
         matrix = transform @ node_transform
+        if not (np.isfinite(matrix).all() and np.linalg.det(matrix[:3, :3]) != 0.0):
+            # exporters hide parts with a zero scale: nothing of them would be seen
+            log.warning("%s: node '%s' has a zero scale (a singular transform), which hides "
+                        "it; its geometry is not rendered", name, node_name)
+            continue
         vertices = trimesh.transform_points(vertices, matrix)
         if np.linalg.det(matrix[:3, :3]) < 0:
             faces = faces[:, ::-1]  # a mirroring transform flips the winding
@@ -281,7 +501,10 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
             key = id(getattr(visual, "material", visual))
             if key not in material_ids:
                 material_ids[key] = len(materials)
-                materials.append(material_from_trimesh(visual, node_name, file_materials))
+                try:
+                    materials.append(material_from_trimesh(visual, node_name, file_materials))
+                except MeshError as exc:  # a texture of the file: name the file too
+                    raise MeshError(f"{name}: {exc}") from None
             mat = material_ids[key]
         else:
             mat = material
