@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import build_kernels
-from .camera import Camera, frame_bounds
+from .camera import Camera, frame_bounds, framing_bounds
 from .errors import MeshError
 from .lights import DirectionalLight
 from .materials import Material, MaterialTable
@@ -108,6 +108,13 @@ class Scene:
         used[self.faces.ravel()] = True
         points = self.vertices if used.all() else self.vertices[used]
         return np.stack([points.min(axis=0), points.max(axis=0)])
+
+    def _keep_faces(self, keep):
+        """Keep only the faces ``keep`` (indices) and their per-face data."""
+        self.faces, self.face_normals = self.faces[keep], self.face_normals[keep]
+        self.material_id, self.object_id = self.material_id[keep], self.object_id[keep]
+        if self.smooth is not None:
+            self.smooth = self.smooth[keep]
 
     @classmethod
     def from_parts(cls, parts, materials=None, lights=None, camera=None, ambient=None,
@@ -219,7 +226,17 @@ class Scene:
             vertex_colors=vertex_colors,
         )
         if camera is None:
-            scene.camera = frame_bounds(scene.bounds, aspect=aspect)
+            bounds, keep = framing_bounds(scene.vertices, scene.faces)
+            if keep is not None:
+                # the rest would be far below a pixel (and below float32's grid once the
+                # renderer centres the scene on its bounds): drop the far faces, saying so
+                whole = scene.bounds
+                log.warning("%s: dropped %d of %d faces that lie far from the rest (the scene "
+                            "spans %.3g, the rest %.3g)", source, len(scene.faces) - len(keep),
+                            len(scene.faces), float(np.max(whole[1] - whole[0])),
+                            float(np.max(bounds[1] - bounds[0])))
+                scene._keep_faces(keep)
+            scene.camera = frame_bounds(bounds, aspect=aspect)
         if lights is None:
             scene.lights = default_lights(scene.camera)
         return scene

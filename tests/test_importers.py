@@ -291,3 +291,35 @@ def test_a_texture_below_pils_limit_but_above_rtmeshs_is_refused_before_decoding
     path.write_bytes(hostile_files.png_bytes(70000, 1000))  # 70 M pixels
     with pytest.raises(MeshError, match=r"wide.png: texture of 70000x1000 pixels is larger than rtmesh reads"):
         load_texture(str(path))
+
+
+def test_faces_far_from_the_rest_are_dropped_with_a_warning_not_a_black_image(tmp_path, caplog):
+    path = _write(tmp_path, "far.obj", hostile_files.corpus()["far_outlier.obj"])
+    with caplog.at_level(logging.WARNING):
+        scene, settings = load_scene(path, width=24, height=18, spp=1, threads=1)
+    assert "dropped 12 of 24 faces that lie far from the rest (the scene spans 1.1e+30, the rest 2)" in caplog.text
+    assert len(scene.faces) == 12
+    unit, unit_settings = load_scene(_write(tmp_path, "unit.obj", hostile_files.cube_obj()),
+                                     width=24, height=18, spp=1, threads=1)
+    np.testing.assert_array_equal(Integrator(scene, settings).render().image,
+                                  Integrator(unit, unit_settings).render().image)
+
+
+def test_ordinary_scenes_are_framed_whole():
+    from rtmesh.camera import framing_bounds
+
+    cube_v, cube_f = hostile_files.CUBE_VERTICES, hostile_files.CUBE_FACES
+    dome = trimesh.creation.icosphere(subdivisions=2, radius=1e4)
+    scenes = {
+        "a row of cubes": [cube_v + [10.0 * i, 0, 0] for i in range(5)],
+        "a figure in a sky dome": [cube_v, dome.vertices],
+        "a model and a far one of its size": [cube_v, cube_v + [1e5, 0, 0]],
+    }
+    for name, pieces in scenes.items():
+        faces = [cube_f if len(p) == 8 else dome.faces for p in pieces]
+        offsets = np.cumsum([0] + [len(p) for p in pieces[:-1]])
+        vertices = np.vstack(pieces)
+        all_faces = np.vstack([f + o for f, o in zip(faces, offsets)])
+        bounds, keep = framing_bounds(vertices, all_faces)
+        assert keep is None, name
+        np.testing.assert_array_equal(bounds, [vertices.min(axis=0), vertices.max(axis=0)])
