@@ -196,8 +196,9 @@ def framing_bounds(vertices, faces):
     Faces split into clusters along an axis where no face's extent bridges the gap between
     them.  The cluster with the most faces (the one nearest the origin among equals) is
     the main one, and is split again, for as long as the part kept is more than
-    :data:`OUTLIER_RATIO` times smaller than what it was cut from along some axis.  Any
-    ordinary scene (objects side by side, a sky dome around a figure) keeps every face.
+    :data:`OUTLIER_RATIO` times smaller than what it was cut from (largest extent over the
+    three axes).  Any ordinary scene (objects side by side, a sky dome around a figure, a
+    card above a floor) keeps every face.
 
     Parameters
     ----------
@@ -230,8 +231,9 @@ def framing_bounds(vertices, faces):
             candidates = np.flatnonzero(sizes == sizes.max())
             main = candidates[np.argmin(centres[candidates])]
             members = order[starts[main]:stops[main]]
-            whole = high.max() - low.min()
-            part = high[members].max() - low[members].min()
+            # sizes over every axis (a flat part is not small)
+            whole = np.max(hi[keep].max(axis=0) - lo[keep].min(axis=0))
+            part = np.max(hi[keep[members]].max(axis=0) - lo[keep[members]].min(axis=0))
             if whole > OUTLIER_RATIO * part:
                 keep, changed = np.sort(keep[members]), True
                 break

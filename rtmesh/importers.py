@@ -294,14 +294,17 @@ def merge_vertices(mesh, digits):
     mesh.update_vertices(mask=np.nonzero(referenced)[0][unique], inverse=inverse)
 
 
-def _merge_keeps_everything(mesh, digits):
+def _merge_keeps_everything(mesh, digits=None):
     """True when the merge would change nothing: every vertex finite and used by a face, and
-    no two vertices at the same position as the merge rounds positions (distinct positions
-    make distinct rows whatever texture coordinates or normals it also compares).
+    no two vertices at the same position as the merge rounds positions (at ``digits``;
+    None: :func:`merge_digits`) (distinct positions make distinct rows whatever texture
+    coordinates or normals it also compares).
     """
     vertices, faces = mesh.vertices.view(np.ndarray), mesh.faces.view(np.ndarray)
     if not build_kernels.referenced_and_finite(vertices, faces):
         return False
+    if digits is None:
+        digits = merge_digits(vertices, faces)
     return build_kernels.rows_distinct(_merge_keys(mesh, digits, with_attributes=False))
 
 

@@ -314,6 +314,7 @@ def test_ordinary_scenes_are_framed_whole():
         "a row of cubes": [cube_v + [10.0 * i, 0, 0] for i in range(5)],
         "a figure in a sky dome": [cube_v, dome.vertices],
         "a model and a far one of its size": [cube_v, cube_v + [1e5, 0, 0]],
+        "a flat card above a flat floor": [cube_v * [3, 3, 0], cube_v * [1, 1, 0] + [0, 0, 1]],
     }
     for name, pieces in scenes.items():
         faces = [cube_f if len(p) == 8 else dome.faces for p in pieces]
