@@ -163,8 +163,9 @@ def map_statement(text):
     return rest.strip(), options
 
 
-def _map_texture(statements, keys, folder, cache, srgb, source, kind="colour"):
-    """The texture of the first of ``keys`` present, or None (missing file: warning)."""
+def _map_texture(statements, keys, folder, cache, srgb, source, kind="colour", problems=None):
+    """The texture of the first of ``keys`` present, or None (missing file: warning; a
+    malformed ``-bm`` is reported to ``problems`` and reads as 1)."""
     for key in keys:
         if key in statements:
             name, options = map_statement(statements[key])
@@ -177,7 +178,11 @@ def _map_texture(statements, keys, folder, cache, srgb, source, kind="colour"):
                             source, name, key)
                 return None
             if kind == "bump":
-                strength = float(options.get("-bm", ["1"])[0])
+                option = f"{key} -bm"
+                bm = {option: " ".join(options.get("-bm", ["1"])) or "?",
+                      LINES: {option: statements.get(LINES, {}).get(key)}}
+                strength = _floats(bm, option, 1, problems)
+                strength = 1.0 if strength is None else strength
                 return load_texture(path, srgb=False, wrap=wrap, cache=cache).height_to_normals(strength)
             return load_texture(path, srgb=srgb, wrap=wrap, cache=cache)
     return None
@@ -245,7 +250,7 @@ def mtl_material(statements, name, folder, cache=None, source="mtl", problems=No
             # "transparency" models: how much passes is the dissolve
             transmission = transmission * (1.0 - opacity)
     texture = lambda keys, srgb=True, kind="colour": _map_texture(  # noqa: E731
-        statements, keys, folder, cache, srgb, source, kind)
+        statements, keys, folder, cache, srgb, source, kind, problems)
     opacity_texture = texture(("map_d",), srgb=False)
     normal_texture = texture(("norm",), srgb=False)
     if normal_texture is None:

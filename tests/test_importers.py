@@ -324,3 +324,15 @@ def test_ordinary_scenes_are_framed_whole():
         bounds, keep = framing_bounds(vertices, all_faces)
         assert keep is None, name
         np.testing.assert_array_equal(bounds, [vertices.min(axis=0), vertices.max(axis=0)])
+
+
+def test_a_malformed_bump_strength_is_warned_and_reads_as_one(tmp_path, caplog):
+    shutil.copy(os.path.join(DATA, "fuze uv.jpg"), tmp_path / "h.jpg")
+    (tmp_path / "m.mtl").write_text("newmtl m\nbump -bm abc h.jpg\n")
+    (tmp_path / "t.obj").write_text(TRIANGLE_OBJ.replace("f 1 2 3", "vt 0 0\nvt 1 0\nvt 0 1\nf 1/1 2/2 3/3"))
+    with caplog.at_level(logging.WARNING):
+        _, materials = parts_from_trimesh(load_trimesh(tmp_path / "t.obj"))
+    assert "m.mtl: malformed values ignored, defaults used: line 2: bump -bm 'abc' (expected a number)" in caplog.text
+    (tmp_path / "m.mtl").write_text("newmtl m\nbump -bm 1 h.jpg\n")
+    _, same = parts_from_trimesh(load_trimesh(tmp_path / "t.obj"))
+    np.testing.assert_array_equal(materials[0].normal_texture.pixels, same[0].normal_texture.pixels)
