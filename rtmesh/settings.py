@@ -15,10 +15,12 @@ DEFAULT_MAX_SPP = 1024
 
 # The largest values a user may ask for (docs/LIMITS.md).  What fits in memory is usually
 # far less and is checked before rendering (rtmesh.memory); these bound what the code can
-# represent.  A pixel's sample index is a 32-bit number for the Sobol sampler (its points
-# would repeat beyond), so no pixel takes more than 2**32 samples.
+# represent.  A pixel's sample index is a 64-bit hash input, but a 32-bit number for the
+# Sobol sampler (its points would repeat beyond): 2**40 samples a pixel at most, 2**32 with
+# Sobol (the memory check refuses far fewer: a pixel's samples are rendered in one chunk).
 MAX_IMAGE_SIDE = 1 << 20
-MAX_SPP = 1 << 32
+MAX_SPP = 1 << 40
+MAX_SOBOL_SPP = 1 << 32
 # bounces are depth levels of Python orchestration; lights, AO and threads beyond these are
 # typing mistakes rather than wishes
 MAX_DEPTH = 1024
@@ -142,6 +144,9 @@ class RenderSettings:
         relations = [
             (self.max_spp is None or whole(self.max_spp, self.spp, MAX_SPP),
              f"max_spp must be >= spp and <= {MAX_SPP} (got {self.max_spp!r})"),
+            (self.sampler != "sobol" or self.sample_cap <= MAX_SOBOL_SPP,
+             f"spp and max_spp must be <= {MAX_SOBOL_SPP} with the sobol sampler (its sample index "
+             f"is 32-bit; got {self.sample_cap})"),
             (self.max_spp is None or self.adaptive,
              "max_spp needs target_error or time_limit (adaptive sampling)"),
             (self.spp >= 2 or not self.adaptive,

@@ -221,16 +221,18 @@ def test_a_render_too_large_for_memory_is_refused_in_one_line(args, tmp_path):
 
 def test_scene_file_spp_too_large_for_memory_or_the_samplers_is_refused(scene_file, tmp_path, capsys):
     out = tmp_path / "x.png"
-    scene_file.write_text(SMALL_SCENE.replace("spp = 2", "spp = 2147483648"))
+    for spp in (2147483648, 100000000000):
+        scene_file.write_text(SMALL_SCENE.replace("spp = 2", f"spp = {spp}"))
+        assert main(["render", str(scene_file), "-o", str(out), "-q"]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"rtmesh: error: a 48x32 render at {spp} spp on ")
+        assert "chunks" in err and len(err.splitlines()) == 1
+    # beyond the Sobol sampler's sample index: refused by the settings, naming the value
+    scene_file.write_text(SMALL_SCENE.replace("spp = 2", 'spp = 100000000000\nsampler = "sobol"'))
     assert main(["render", str(scene_file), "-o", str(out), "-q"]) == 2
     err = capsys.readouterr().err
-    assert "render at 2147483648 spp" in err and "chunks" in err and len(err.splitlines()) == 1
-    # beyond the samplers' 32-bit sample index: refused by the settings, naming the value
-    scene_file.write_text(SMALL_SCENE.replace("spp = 2", "spp = 100000000000"))
-    assert main(["render", str(scene_file), "-o", str(out), "-q"]) == 2
-    err = capsys.readouterr().err
-    assert err == (f"rtmesh: error: {scene_file}: render: spp must be >= 1 and <= 4294967296 "
-                   "(got 100000000000)\n")
+    assert err == (f"rtmesh: error: {scene_file}: render: spp and max_spp must be <= 4294967296 with the "
+                   "sobol sampler (its sample index is 32-bit; got 100000000000)\n")
     assert not out.exists()
 
 

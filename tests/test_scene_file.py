@@ -138,7 +138,8 @@ def test_a_registered_light_type_is_read_from_scene_files_without_touching_the_r
     [
         ({"width": 0}, "render: width must be >= 1 and <= 1048576 (got 0)"),
         ({"height": 2**21}, "render: height must be >= 1 and <= 1048576 (got 2097152)"),
-        ({"spp": 2**33}, "render: spp must be >= 1 and <= 4294967296 (got 8589934592)"),
+        ({"spp": 2**41}, "render: spp must be >= 1 and <= 1099511627776 (got 2199023255552)"),
+        ({"spp": 2**33, "sampler": "sobol"}, "render: spp and max_spp must be <= 4294967296 with the sobol sampler"),
         ({"max_depth": 10**6}, "render: max_depth must be >= 0 and <= 1024"),
         ({"seed": 2**64}, "render: seed must be"),
         ({"threads": 0}, "render: threads must be >= 1"),
@@ -148,7 +149,7 @@ def test_a_registered_light_type_is_read_from_scene_files_without_touching_the_r
         ({"exposure": 1000.0}, "render: exposure must be a number of stops from -64 to 64 (got 1000.0)"),
         ({"exposure": float("nan")}, "render.exposure: expected a finite number"),
         ({"target_error": float("inf")}, "render.target_error: expected a finite number"),
-        ({"max_spp": 2**40, "target_error": 0.1}, "render: max_spp must be >= spp and <= 4294967296"),
+        ({"max_spp": 2**41, "target_error": 0.1}, "render: max_spp must be >= spp and <= 1099511627776"),
     ],
 )
 def test_render_settings_out_of_range_name_the_key_and_value(render, message):
@@ -175,7 +176,8 @@ def test_api_settings_and_cameras_refuse_non_finite_and_out_of_range_values():
     for fov in (0.0, 180.0, 270.0, float("nan")):
         with pytest.raises(ValueError, match="fov must be more than 0 and less than 180"):
             Camera([0, 0, 0], [0, 0, 1], [0, 1, 0], fov=fov)
-    RenderSettings(exposure=-64.0, width=1 << 20, spp=1 << 32).validate()
+    RenderSettings(exposure=-64.0, width=1 << 20, spp=1 << 40).validate()
+    RenderSettings(sampler="sobol", spp=1 << 32).validate()
     Camera([0, 0, 0], [0, 0, 1], [0, 1, 0], fov=179.9)
 
 
