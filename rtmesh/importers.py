@@ -203,6 +203,8 @@ def process(mesh, source="mesh"):
 def _drop_bad_index_faces(mesh, source):
     """Drop the faces that refer to vertices the file does not have, saying how many."""
     faces = mesh.faces.view(np.ndarray)
+    if faces.min() >= 0 and faces.max() < len(mesh.vertices):
+        return
     bad = ((faces < 0) | (faces >= len(mesh.vertices))).any(axis=1)
     if bad.any():
         log.warning("%s: dropped %d of %d faces that refer to vertices the file does not have",
@@ -259,9 +261,10 @@ MERGE_FRACTION = 1e-5
 
 def _merge_keys(mesh, digits, with_attributes=True):
     """The rows trimesh's merge compares (position, and texture coordinates and normals
-    unless ``with_attributes`` is False), rounded as it rounds them but kept as floats: equal
-    rounded values have equal bits (``+ 0.0`` turns -0.0 into 0.0), so the rows' int64 view
-    compares them exactly, with no conversion to overflow at any scale."""
+    unless ``with_attributes`` is False), rounded as it rounds them, as int64: converted as
+    trimesh converts them where they fit, else the bits of the rounded floats (equal rounded
+    values have equal bits once ``+ 0.0`` turns -0.0 into 0.0), so that no conversion
+    overflows at any scale."""
     stacked = [mesh.vertices.view(np.ndarray) * (10.0**digits)]
     if with_attributes:
         visual = mesh.visual
@@ -271,8 +274,10 @@ def _merge_keys(mesh, digits, with_attributes=True):
         normals = mesh._cache["vertex_normals"]
         if np.shape(normals) == mesh.vertices.shape:
             stacked.append(np.asarray(normals, dtype=np.float64) * 1e2)  # trimesh: 2 digits
-    keys = np.column_stack(stacked).round() + 0.0
-    return np.ascontiguousarray(keys).view(np.int64)
+    keys = np.column_stack(stacked).round()
+    if -2.0**62 < keys.min() and keys.max() < 2.0**62:  # False for NaN (texture coordinates)
+        return keys.astype(np.int64)  # trimesh's keys exactly (and its fast hashing of them)
+    return np.ascontiguousarray(keys + 0.0).view(np.int64)
 
 
 def merge_vertices(mesh, digits):
