@@ -76,8 +76,28 @@ def _load(path, ext):
     scene = trimesh.load(**_obj_source(path, ext), force="scene", process=False)
     for key, geometry in scene.geometry.items():
         if isinstance(geometry, trimesh.Trimesh) and not geometry.metadata.get("processed"):
+            _warn_if_short(geometry, _geometry_source(path, scene, key))
             process(geometry, _geometry_source(path, scene, key))
     return scene
+
+
+def _warn_if_short(mesh, source):
+    """Warn when a PLY file holds fewer elements than its header announces (trimesh reads
+    what is there without a word): a truncated file, or a lying header."""
+    raw = mesh.metadata.get("_ply_raw")
+    if not isinstance(raw, dict):
+        return
+    short = []
+    for name, element in raw.items():
+        announced, data = element.get("length"), element.get("data")
+        if not isinstance(announced, int) or not isinstance(data, dict) or not data:
+            continue
+        held = min(np.shape(column)[0] if np.ndim(column) else 0 for column in data.values())
+        if held < announced:
+            short.append(f"{held} of {announced} {name} elements")
+    if short:
+        log.warning("%s: the file holds fewer elements than its header announces (%s): truncated?",
+                    source, ", ".join(short))
 
 
 def _check_file(path):

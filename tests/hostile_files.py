@@ -165,6 +165,10 @@ def corpus():
     files["lying_header.ply"] = ("ply\nformat ascii 1.0\nelement vertex 1000\nproperty float x\n"
                                  "property float y\nproperty float z\nelement face 1\n"
                                  "property list uchar int vertex_indices\nend_header\n0 0 0\n")
+    files["truncated_faces.ply"] = ("ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\n"
+                                    "property float y\nproperty float z\nelement face 3\n"
+                                    "property list uchar int vertex_indices\nend_header\n"
+                                    "0 0 0\n1 0 0\n0 1 0\n1 1 0\n3 0 1 2\n")
     files["index_out_of_range.ply"] = ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n"
                                        "property float y\nproperty float z\nelement face 2\n"
                                        "property list uchar int vertex_indices\nend_header\n"

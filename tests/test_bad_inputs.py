@@ -35,6 +35,7 @@ EXPECTED = {
     "lying_count.stl": (2, "its binary header announces 1000 triangles (50084 bytes) in a file of 584 bytes"),
     "truncated_ascii.stl": (2, "nothing to render (no triangles)"),
     "lying_header.ply": (2, "nothing to render (no triangles)"),
+    "truncated_faces.ply": (0, "the file holds fewer elements than its header announces (1 of 3 face elements)"),
     "index_out_of_range.ply": (0, "dropped 1 of 2 faces that refer to vertices the file does not have"),
     "garbage_mtl.obj": (0, "garbage.mtl: malformed values ignored, defaults used: line 2: kd 'abc 1 zz'"),
     "node_cycle.gltf": (0, "node 'b' has no transform from the scene's root (a cycle in the node graph"),
