@@ -227,8 +227,8 @@ def cmd_render(args):
     background = None if args.background is None else background_from_option(args.background)
     # the command owns its process: tune it for rendering (allocator, GIL, kept threads)
     runtime.tune_process()
-    scene, settings = load_scene(args.input, **overrides)
-    memory.check(settings, args.memory_limit)
+    # the memory check runs on the settings before any mesh is read
+    scene, settings = load_scene(args.input, lambda s: memory.check(s, args.memory_limit), **overrides)
     if background is not None:
         scene.background = background
     bar = ProgressBar(enabled=not args.quiet and sys.stderr.isatty())

@@ -223,7 +223,7 @@ class _Reader:
         return out
 
 
-def read_scene_file(path, overrides=None):
+def read_scene_file(path, overrides=None, check_settings=None):
     """Load a TOML scene file.
 
     Parameters
@@ -232,6 +232,9 @@ def read_scene_file(path, overrides=None):
     overrides : dict, optional
         Render settings that take precedence over the file's ``[render]`` table
         (e.g. from the command line).
+    check_settings : callable, optional
+        Called with the validated settings before any mesh is loaded (the command line's
+        memory check, :func:`rtmesh.memory.check`); it raises to refuse them.
 
     Returns
     -------
@@ -258,10 +261,10 @@ def read_scene_file(path, overrides=None):
     except UnicodeDecodeError:
         raise SceneError(f"{path}: not a UTF-8 text file") from None
     return scene_from_dict(doc, source=path, base_dir=os.path.dirname(os.path.abspath(path)),
-                           overrides=overrides)
+                           overrides=overrides, check_settings=check_settings)
 
 
-def scene_from_dict(doc, source="scene", base_dir=".", overrides=None):
+def scene_from_dict(doc, source="scene", base_dir=".", overrides=None, check_settings=None):
     """Build a scene and its render settings from a parsed scene description.
 
     Parameters
@@ -274,6 +277,8 @@ def scene_from_dict(doc, source="scene", base_dir=".", overrides=None):
         Folder that relative mesh paths are resolved against.
     overrides : dict, optional
         Render settings overriding ``doc["render"]``.
+    check_settings : callable, optional
+        See :func:`read_scene_file`.
 
     Returns
     -------
@@ -291,6 +296,8 @@ def scene_from_dict(doc, source="scene", base_dir=".", overrides=None):
         settings = RenderSettings(**render).validate()
     except ValueError as exc:
         raise r.error("render", str(exc)) from None
+    if check_settings is not None:
+        check_settings(settings)
 
     environment = r.fields(r.table(doc.get("environment", {}), "environment"), ENVIRONMENT_KEYS,
                            "environment")

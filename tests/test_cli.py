@@ -240,3 +240,20 @@ def test_memory_limit_zero_turns_the_check_off(scene_file, tmp_path):
     out = tmp_path / "x.png"
     assert main(["render", str(scene_file), "-o", str(out), "--memory-limit", "0", "-q"]) == 0
     assert out.exists()
+
+
+def test_the_memory_check_comes_before_any_mesh_is_read(tmp_path, monkeypatch, capsys):
+    import rtmesh.api
+    import rtmesh.scene_file
+
+    def no_mesh(*args, **kwargs):
+        raise AssertionError("a mesh was read before the memory check")
+
+    monkeypatch.setattr(rtmesh.api, "load_mesh_scene", no_mesh)
+    monkeypatch.setattr(rtmesh.scene_file, "load_trimesh", no_mesh)
+    mesh = os.path.join(ASSETS, "meshes", "bunny.ply")
+    scene = tmp_path / "s.toml"
+    scene.write_text(f'[render]\nwidth = 100000\nheight = 100000\n[[objects]]\nmesh = "{mesh}"\n')
+    for source, args in ((mesh, ["--width", "100000", "--height", "100000"]), (scene, [])):
+        assert main(["render", str(source), "-o", str(tmp_path / "x.png"), "-q", *args]) == 2
+        assert "a 100000x100000 render at 4 spp" in capsys.readouterr().err
