@@ -1,6 +1,5 @@
 """trimesh -> rtmesh: meshes, scene graphs and their materials as :class:`MeshPart` lists."""
 
-import errno
 import io
 import logging
 import os
@@ -14,6 +13,7 @@ from .colour import srgb_to_linear
 from .gltf_scene import GLTF_EXTENSIONS, check_external_files, file_cameras_and_lights, read_gltf_json
 from .material_files import gltf_json_materials, gltf_material, mtl_material, obj_materials
 from .materials import Material
+from .mesh_files import check_content, check_file, format_name
 from .obj_polygons import triangulate_polygons
 from .scene import MeshPart, Scene
 from .smoothing import CREASE_ANGLE, smooth_vertex_normals
@@ -41,12 +41,12 @@ def load_trimesh(path):
         Missing file, unknown format, or a file trimesh cannot parse.
     """
     path = os.fspath(path)
-    _check_file(path)
+    check_file(path)
     ext = os.path.splitext(path)[1].lower()
     if ext not in MESH_EXTENSIONS:
         raise MeshError(f"{path}: unsupported mesh format {ext or '(none)'!r}; use "
                         + ", ".join(MESH_EXTENSIONS))
-    _check_content(path, ext)
+    check_content(path, ext)
     if ext == ".gltf":
         check_external_files(path, read_gltf_json(path))
     try:
@@ -59,7 +59,7 @@ def load_trimesh(path):
                         f"have ({exc})") from exc
     except ImportError as exc:
         # trimesh guesses the encoding of text that is not UTF-8 with an optional module
-        raise MeshError(f"{path}: not a valid {_format_name(ext)} file (text that is not UTF-8)") from exc
+        raise MeshError(f"{path}: not a valid {format_name(ext)} file (text that is not UTF-8)") from exc
     except Exception as exc:  # trimesh raises many types for malformed files
         detail = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise MeshError(f"{path}: cannot read mesh: {detail}") from exc
@@ -98,66 +98,6 @@ def _warn_if_short(mesh, source):
     if short:
         log.warning("%s: the file holds fewer elements than its header announces (%s): truncated?",
                     source, ", ".join(short))
-
-
-def _check_file(path):
-    """Raise MeshError unless ``path`` is a readable regular file, saying what it is instead."""
-    if os.path.isfile(path):
-        if not os.access(path, os.R_OK):
-            raise MeshError(f"{path}: cannot read the mesh file (permission denied)")
-        return
-    if os.path.isdir(path):
-        raise MeshError(f"{path}: is a directory, not a mesh file")
-    if os.path.islink(path):
-        try:
-            os.stat(path)
-        except OSError as exc:
-            if exc.errno == errno.ELOOP:
-                raise MeshError(f"{path}: symbolic link loop, not a mesh file") from None
-            raise MeshError(f"{path}: broken symbolic link (to {os.readlink(path)}), no such mesh file") from None
-    if os.path.exists(path):
-        raise MeshError(f"{path}: not a regular file")
-    raise MeshError(f"{path}: no such mesh file")
-
-
-def _format_name(ext):
-    return {".gltf": "glTF", ".glb": "GLB"}.get(ext, ext[1:].upper())
-
-
-# text formats: binary data in their first bytes means the file is something else
-_TEXT_FORMATS = (".obj", ".off", ".gltf")
-_SNIFF_BYTES = 4096
-
-
-def _check_content(path, ext):
-    """Raise MeshError for a file whose first bytes cannot start a file of its format (binary
-    data in a text format, a GLB without its magic, a PLY without its header, an STL that is
-    neither ASCII nor a binary STL of the file's size), instead of whatever trimesh makes of
-    it."""
-    size = os.path.getsize(path)
-    with open(path, "rb") as f:
-        head = f.read(_SNIFF_BYTES)
-    name = _format_name(ext)
-    problem = None
-    if ext in _TEXT_FORMATS:
-        control = sum(head.count(bytes([c])) for c in range(32) if c not in (9, 10, 11, 12, 13))
-        if control > 0.01 * len(head):
-            problem = "binary data, not text"
-    elif ext == ".glb" and head[:4] != b"glTF":
-        problem = "no glTF header"
-    elif ext == ".ply" and not head.startswith(b"ply"):
-        problem = "no 'ply' header"
-    elif ext == ".stl":
-        ascii_stl = head.lstrip()[:5].lower() == b"solid" and b"\0" not in head
-        if not ascii_stl:
-            count = int.from_bytes(head[80:84], "little") if len(head) >= 84 else None
-            if count is None:
-                problem = f"{size} bytes: too short for a binary STL and not ASCII"
-            elif size < 84 + 50 * count:
-                problem = (f"not ASCII, and its binary header announces {count} triangles "
-                           f"({84 + 50 * count} bytes) in a file of {size} bytes")
-    if problem:
-        raise MeshError(f"{path}: not a valid {name} file ({problem})")
 
 
 def _obj_source(path, ext):
