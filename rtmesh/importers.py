@@ -146,6 +146,11 @@ def process(mesh, source="mesh"):
         Names the mesh in warnings.
     """
     faces = mesh.faces.view(np.ndarray)
+    if mesh.vertices.ndim != 2 or mesh.vertices.shape[1] != 3:
+        # trimesh reads every vertex with the column count of some line: one short line
+        # (a truncated file) makes all of them 2D
+        raise MeshError(f"{source}: vertices of {mesh.vertices.shape[-1]} coordinates, not 3 (a "
+                        "vertex statement with too few values: a truncated file?)")
     if mesh.is_empty or faces.ndim != 2 or not len(faces):
         mesh.metadata["processed"] = True  # nothing to process (parts_from_trimesh skips it)
         return

@@ -14,6 +14,9 @@ from .materials import Material, MaterialTable
 
 log = logging.getLogger(__name__)
 
+# the largest coordinate Embree's float32 vertices can hold
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+
 
 @dataclass
 class MeshPart:
@@ -166,6 +169,15 @@ class Scene:
                 log.warning("%s: object '%s': dropped %d faces with NaN/Inf vertices",
                             source, part.name, int((~keep).sum()))
                 f = f[keep]
+            # Embree holds float32: a coordinate beyond its range would become infinite
+            beyond = np.abs(v).max(axis=1, initial=0.0) > FLOAT32_MAX  # False for NaN
+            if beyond.any():
+                far = beyond[f].any(axis=1)
+                if far.any():
+                    log.warning("%s: object '%s': dropped %d faces with coordinates beyond float32's "
+                                "range (%.3g), which the ray tracer cannot hold", source, part.name,
+                                int(far.sum()), FLOAT32_MAX)
+                    f = f[~far]
             face_normals, area2 = build_kernels.face_crosses(v, f)
             nondegenerate = area2 > 0.0
             if not nondegenerate.all():
@@ -175,8 +187,9 @@ class Scene:
             if not len(f):
                 log.warning("%s: object '%s' has no renderable triangles; skipped", source, part.name)
                 continue
-            # non-finite vertices that no face uses are harmless but must not reach Embree
-            vertices.append(np.where(np.isfinite(v), v, 0.0))
+            # non-finite (or beyond float32) vertices that no face uses are harmless but must
+            # not reach Embree
+            vertices.append(np.where(np.isfinite(v) & (np.abs(v) <= FLOAT32_MAX), v, 0.0))
             faces.append(f + offset)
             normals.append(face_normals)
             vn, face_smooth = _unit_vertex_normals(part.vertex_normals, v, f)

@@ -336,3 +336,19 @@ def test_a_malformed_bump_strength_is_warned_and_reads_as_one(tmp_path, caplog):
     (tmp_path / "m.mtl").write_text("newmtl m\nbump -bm 1 h.jpg\n")
     _, same = parts_from_trimesh(load_trimesh(tmp_path / "t.obj"))
     np.testing.assert_array_equal(materials[0].normal_texture.pixels, same[0].normal_texture.pixels)
+
+
+def test_coordinates_beyond_float32_drop_their_faces_with_a_count(tmp_path, caplog):
+    text = hostile_files.cube_obj().replace("v -1.0 -1.0 -1.0", "v -1e50 -1.0 -1.0", 1)
+    with caplog.at_level(logging.WARNING):
+        scene, settings = load_scene(_write(tmp_path, "c.obj", text), width=16, height=12, spp=1)
+    dropped = int(np.isin(hostile_files.CUBE_FACES, [0]).any(axis=1).sum())
+    assert f"dropped {dropped} faces with coordinates beyond float32's range" in caplog.text
+    assert len(scene.faces) == 12 - dropped
+    assert np.isfinite(Integrator(scene, settings).render().image).all()
+
+
+def test_a_truncated_vertex_statement_is_one_clear_error(tmp_path):
+    text = hostile_files.cube_obj() + "v 0.5 0.25\n"
+    with pytest.raises(MeshError, match=r"vertices of 2 coordinates, not 3 \(a vertex statement with too few"):
+        load_mesh_scene(_write(tmp_path, "c.obj", text))
