@@ -120,7 +120,8 @@ def node_world_transforms(doc):
         if index in seen or not 0 <= index < len(nodes):
             continue  # a cycle or a bad index: glTF forbids both; do not loop forever
         seen.add(index)
-        world = parent @ _local_matrix(nodes[index])
+        with np.errstate(invalid="ignore", over="ignore"):  # non-finite nodes are skipped later
+            world = parent @ _local_matrix(nodes[index])
         out.append((index, world))
         stack.extend((c, world) for c in reversed(nodes[index].get("children", [])))
     return out

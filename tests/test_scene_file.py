@@ -1,5 +1,6 @@
 """Scene files: every kind of mistake is an error naming the file and the key."""
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -190,3 +191,17 @@ def test_cli_exposure_nan_is_a_one_line_error(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err == "rtmesh: error: render settings: exposure must be a number of stops from -64 to 64 (got nan)\n"
     assert not out.exists()
+
+
+@pytest.mark.parametrize("doc, where", [
+    (with_(camera={"position": [0, 0, 1e300], "look_at": [0, 0, 0]}), "camera.position"),
+    (with_(lights=[{"type": "point", "position": [0, 0, 5], "intensity": 1e19}]), "lights[0].intensity"),
+    (with_(objects=[{"primitive": "box", "translate": [1e30, 0, 0]}]), "objects[0].translate"),
+    (with_(objects=[{"primitive": "icosphere", "radius": 1e300}]), "objects[0].radius"),
+])
+def test_numbers_beyond_1e18_are_refused_naming_the_key(doc, where):
+    # squares and products of such numbers overflow (and coordinates leave float32)
+    with pytest.raises(SceneError, match=re.escape(f"s.toml: {where}: expected a ") + ".*magnitude at most 1e\\+18"):
+        scene_from_dict(doc, source="s.toml")
+    # up to the bound a scene reads
+    scene_from_dict(with_(objects=[{"primitive": "box", "translate": [1e18, 0, 0]}]), source="s.toml")
