@@ -15,7 +15,7 @@ from rtmesh.scene.model import Scene
 SCENE_EXTENSIONS = (".toml",)
 
 
-def load_scene(source, **settings):
+def load_scene(source, check_settings=None, **settings):
     """Load a scene from a scene file, a mesh file, or a trimesh object.
 
     Parameters
@@ -23,6 +23,9 @@ def load_scene(source, **settings):
     source : str, os.PathLike, trimesh.Trimesh or trimesh.Scene
         A ``.toml`` scene file, a mesh file (OBJ, glTF/GLB, PLY, STL, OFF), or an in-memory
         trimesh object.  Meshes get an automatic camera and the default light rig.
+    check_settings : callable, optional
+        Called with the validated settings before any mesh is read; raises to refuse them
+        (the command line's memory check, :func:`rtmesh.rendering.memory.check`).
     **settings
         Render settings (see :class:`RenderSettings`) overriding the scene file's.
 
@@ -34,12 +37,14 @@ def load_scene(source, **settings):
     overrides = {k: v for k, v in settings.items() if v is not None}
     if not isinstance(source, (trimesh.Trimesh, trimesh.Scene)) and \
             os.path.splitext(os.fspath(source))[1].lower() in SCENE_EXTENSIONS:
-        return read_scene_file(source, overrides)
+        return read_scene_file(source, overrides, check_settings)
     base = RenderSettings(**overrides)
     try:
         base.validate()
     except ValueError as exc:
         raise SceneError(f"render settings: {exc}") from None
+    if check_settings is not None:
+        check_settings(base)
     # the automatic camera frames the bounds for the image's aspect ratio
     aspect = base.width / base.height
     if isinstance(source, (trimesh.Trimesh, trimesh.Scene)):

@@ -5,6 +5,7 @@ import logging
 import os
 import sys
 import time
+import traceback
 
 from rtmesh import __version__
 from rtmesh.api import load_scene
@@ -13,13 +14,28 @@ from rtmesh.core.errors import OutputError, RtmeshError
 from rtmesh.io.colour import TONEMAPS
 from rtmesh.io.images import check_output_path, write_display_image, write_image
 from rtmesh.io.passes import display_values
+from rtmesh.rendering import memory
 from rtmesh.rendering.integrator import Integrator
 from rtmesh.rendering.settings import FRESNEL_MODES, PASSES
 from rtmesh.sampling.patterns import SAMPLERS
 from rtmesh.scene.background import background_from_option
 from rtmesh.scene.camera_json import camera_record, write_camera_json
 
+# exit statuses (docs/LIMITS.md): a user error (bad file, bad setting, not enough memory for
+# what was asked), an internal error (a bug: EX_SOFTWARE of sysexits.h), an interruption
 EXIT_USER_ERROR = 2
+EXIT_INTERNAL_ERROR = 70
+EXIT_INTERRUPTED = 130
+# set to 1 for the traceback of an internal error (as --debug does)
+DEBUG_VARIABLE = "RTMESH_DEBUG"
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with rtmesh's one-line errors: the message and where to find the usage,
+    instead of argparse's usage block (exit status 2 as argparse's)."""
+
+    def error(self, message):
+        self.exit(EXIT_USER_ERROR, f"rtmesh: error: {message} (see {self.prog} --help)\n")
 
 
 def _positive_int(text):
@@ -33,8 +49,10 @@ def _positive_int(text):
 
 
 def build_parser():
-    parser = argparse.ArgumentParser(prog="rtmesh", description="Ray trace triangle-mesh scenes.")
+    parser = _Parser(prog="rtmesh", description="Ray trace triangle-mesh scenes.")
     parser.add_argument("--version", action="version", version=f"rtmesh {__version__}")
+    parser.add_argument("--debug", action="store_true",
+                        help=f"show the traceback of an internal error (or set {DEBUG_VARIABLE}=1)")
     commands = parser.add_subparsers(dest="command", required=True)
 
     p = commands.add_parser("render", help="render a scene file or a mesh file to an image",
@@ -73,11 +91,15 @@ def build_parser():
     p.add_argument("--fresnel", choices=FRESNEL_MODES, help="Fresnel model for dielectrics")
     p.add_argument("--exposure", type=float, help="exposure in stops for 8-bit output")
     p.add_argument("--tonemap", choices=TONEMAPS, help="tone-mapping operator for 8-bit output")
+    p.add_argument("--memory-limit", type=_bytes, metavar="SIZE",
+                   help="refuse a render whose estimated memory exceeds SIZE, e.g. 4G; 0 = no check "
+                   "(default: the memory available)")
     p.add_argument("--camera-json", metavar="PATH",
                    help="also write the camera (intrinsics K, poses in OpenCV and OpenGL conventions) as JSON")
     p.add_argument("--denoise", action="store_true", default=None,
                    help="denoise with Intel Open Image Denoise (needs rtmesh[denoise])")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    _add_debug_flag(p)
     _add_batch_parser(commands)
     return parser
 
@@ -156,6 +178,13 @@ def _add_batch_parser(commands):
                    help="address space per local worker, e.g. 4G; 0 = off (default: RAM / workers)")
     p.add_argument("--force", action="store_true", help="redo every image, ignoring the ledger")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    _add_debug_flag(p)
+
+
+def _add_debug_flag(p):
+    """``--debug`` after a command as well as before it (``rtmesh render --debug ...``)."""
+    p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                   help=f"show the traceback of an internal error (or set {DEBUG_VARIABLE}=1)")
 
 
 class ProgressBar:
@@ -208,7 +237,8 @@ def cmd_render(args):
     background = None if args.background is None else background_from_option(args.background)
     # the command owns its process: tune it for rendering (allocator, GIL, kept threads)
     runtime.tune_process()
-    scene, settings = load_scene(args.input, **overrides)
+    # the memory check runs on the settings before any mesh is read
+    scene, settings = load_scene(args.input, lambda s: memory.check(s, args.memory_limit), **overrides)
     if background is not None:
         scene.background = background
     bar = ProgressBar(enabled=not args.quiet and sys.stderr.isatty())
@@ -266,7 +296,14 @@ def cmd_batch(args):
 
 
 def main(argv=None):
-    """Entry point of the ``rtmesh`` command; returns the exit status."""
+    """Entry point of the ``rtmesh`` command; returns the exit status.
+
+    Every failure ends in one line on stderr and an exit status (docs/LIMITS.md): a user
+    error (:class:`RtmeshError`, or memory running out for what was asked) 2, an
+    interruption 130, anything else is an internal error, 70, whose traceback
+    ``--debug`` or ``RTMESH_DEBUG=1`` shows.  Outputs are written atomically, so no
+    failure leaves a partial image.
+    """
     logging.basicConfig(format="rtmesh: warning: %(message)s", level=logging.WARNING)
     # trimesh reports recoverable oddities of files at warning level; ours are enough
     logging.getLogger("trimesh").setLevel(logging.ERROR)
@@ -277,7 +314,7 @@ def main(argv=None):
         if args.command == "batch":
             return cmd_batch(args)
     except RtmeshError as exc:
-        print(f"rtmesh: error: {exc}", file=sys.stderr)
+        print(f"rtmesh: error: {_one_line(exc)}", file=sys.stderr)
         return EXIT_USER_ERROR
     except KeyboardInterrupt:
         if args.command == "batch":
@@ -285,8 +322,25 @@ def main(argv=None):
                   file=sys.stderr)
         else:
             print("rtmesh: interrupted; no image written", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
+    except MemoryError:
+        # what the memory estimate (rtmesh.rendering.memory) did not foresee: still the size asked for
+        print("rtmesh: error: out of memory; no image written (ask for fewer pixels, samples "
+              "or passes, or a smaller chunk_samples)", file=sys.stderr)
+        return EXIT_USER_ERROR
+    except Exception as exc:  # a bug: one line unless asked for the traceback
+        if args.debug or os.environ.get(DEBUG_VARIABLE, "") not in ("", "0"):
+            traceback.print_exc()
+        print(f"rtmesh: internal error: {type(exc).__name__}: {_one_line(exc)} (run with --debug "
+              f"or {DEBUG_VARIABLE}=1 for the traceback)", file=sys.stderr)
+        return EXIT_INTERNAL_ERROR
     return 0
+
+
+def _one_line(exc):
+    """An exception's message on one line (first line, or its type when it has none)."""
+    lines = str(exc).strip().splitlines()
+    return lines[0] if lines else type(exc).__name__
 
 
 if __name__ == "__main__":

@@ -152,3 +152,108 @@ def test_bundled_showcase_scene_renders(tmp_path):
     assert image.shape == (48, 64, 3)
     # lit objects in front of a sky-blue background: not a blank frame
     assert image.std() > 0.05
+
+
+def test_argparse_error_is_one_line_exit_2(tmp_path):
+    code, out, err = run_cli("render", tmp_path / "scene.toml", "--width", "0")
+    assert code == 2
+    assert err.startswith("rtmesh: error: ") and "--help" in err
+    assert len(err.strip().splitlines()) == 1 and "usage:" not in err
+
+
+def _failing_render(monkeypatch, exc):
+    import rtmesh.cli as cli
+
+    def render(self, progress=None):
+        raise exc
+
+    monkeypatch.setattr(cli.Integrator, "render", render)
+
+
+def test_internal_error_is_one_line_exit_70_without_traceback(scene_file, tmp_path, monkeypatch, capsys):
+    monkeypatch.delenv("RTMESH_DEBUG", raising=False)
+    _failing_render(monkeypatch, ValueError("a bug\nwith a second line"))
+    out = tmp_path / "x.png"
+    assert main(["render", str(scene_file), "-o", str(out), "-q"]) == 70
+    err = capsys.readouterr().err
+    assert err == ("rtmesh: internal error: ValueError: a bug (run with --debug or RTMESH_DEBUG=1 "
+                   "for the traceback)\n")
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("how", ["flag before", "flag after", "environment"])
+def test_debug_shows_the_traceback_of_an_internal_error(how, scene_file, tmp_path, monkeypatch, capsys):
+    monkeypatch.delenv("RTMESH_DEBUG", raising=False)
+    _failing_render(monkeypatch, ValueError("a bug"))
+    args = ["render", str(scene_file), "-o", str(tmp_path / "x.png"), "-q"]
+    if how == "flag before":
+        args = ["--debug"] + args
+    elif how == "flag after":
+        args = args + ["--debug"]
+    else:
+        monkeypatch.setenv("RTMESH_DEBUG", "1")
+    assert main(args) == 70
+    err = capsys.readouterr().err
+    assert "Traceback (most recent call last)" in err and "ValueError: a bug" in err
+
+
+def test_running_out_of_memory_is_a_user_error(scene_file, tmp_path, monkeypatch, capsys):
+    _failing_render(monkeypatch, MemoryError())
+    assert main(["render", str(scene_file), "-o", str(tmp_path / "x.png"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("rtmesh: error: out of memory") and len(err.splitlines()) == 1
+
+
+@pytest.mark.parametrize("args", [["--width", "100000", "--height", "100000"],
+                                  ["--width", "64", "--height", "48", "--memory-limit", "1M"]])
+def test_a_render_too_large_for_memory_is_refused_in_one_line(args, tmp_path):
+    mesh = os.path.join(ASSETS, "meshes", "bunny.ply")
+    out = tmp_path / "x.png"
+    code, _, err = run_cli("render", mesh, "-o", out, *args)
+    assert code == 2 and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1
+    size = "x".join(args[1::2][:2])
+    assert err.startswith(f"rtmesh: error: a {size} render at 4 spp on ")
+    assert "needs about" in err and ("is available" in err or "--memory-limit is 1 MiB" in err)
+    assert "set --memory-limit (0 = no check)" in err
+    assert not out.exists()
+
+
+def test_scene_file_spp_too_large_for_memory_or_the_samplers_is_refused(scene_file, tmp_path, capsys):
+    out = tmp_path / "x.png"
+    for spp in (2147483648, 100000000000):
+        scene_file.write_text(SMALL_SCENE.replace("spp = 2", f"spp = {spp}"))
+        assert main(["render", str(scene_file), "-o", str(out), "-q"]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"rtmesh: error: a 48x32 render at {spp} spp on ")
+        assert "chunks" in err and len(err.splitlines()) == 1
+    # beyond the Sobol sampler's sample index: refused by the settings, naming the value
+    scene_file.write_text(SMALL_SCENE.replace("spp = 2", 'spp = 100000000000\nsampler = "sobol"'))
+    assert main(["render", str(scene_file), "-o", str(out), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err == (f"rtmesh: error: {scene_file}: render: spp and max_spp must be <= 4294967296 with the "
+                   "sobol sampler (its sample index is 32-bit; got 100000000000)\n")
+    assert not out.exists()
+
+
+def test_memory_limit_zero_turns_the_check_off(scene_file, tmp_path):
+    out = tmp_path / "x.png"
+    assert main(["render", str(scene_file), "-o", str(out), "--memory-limit", "0", "-q"]) == 0
+    assert out.exists()
+
+
+def test_the_memory_check_comes_before_any_mesh_is_read(tmp_path, monkeypatch, capsys):
+    import rtmesh.api
+    import rtmesh.loaders.scene_file
+
+    def no_mesh(*args, **kwargs):
+        raise AssertionError("a mesh was read before the memory check")
+
+    monkeypatch.setattr(rtmesh.api, "load_mesh_scene", no_mesh)
+    monkeypatch.setattr(rtmesh.loaders.scene_file, "load_trimesh", no_mesh)
+    mesh = os.path.join(ASSETS, "meshes", "bunny.ply")
+    scene = tmp_path / "s.toml"
+    scene.write_text(f'[render]\nwidth = 100000\nheight = 100000\n[[objects]]\nmesh = "{mesh}"\n')
+    for source, args in ((mesh, ["--width", "100000", "--height", "100000"]), (scene, [])):
+        assert main(["render", str(source), "-o", str(tmp_path / "x.png"), "-q", *args]) == 2
+        assert "a 100000x100000 render at 4 spp" in capsys.readouterr().err

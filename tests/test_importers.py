@@ -1,6 +1,7 @@
 """Importing meshes and materials with trimesh: MTL mapping, real files, transforms."""
 
 import os
+import re
 import shutil
 
 import numpy as np
@@ -117,3 +118,238 @@ def test_truncated_glb_is_a_one_line_error(tmp_path):
         f.truncate(2000)
     with pytest.raises(MeshError, match="broken.ply"):
         load_mesh_scene(broken)
+
+
+# ---------------------------------------------------------------- hostile and unusual files
+
+import logging  # noqa: E402
+
+import hostile_files  # noqa: E402
+
+from rtmesh.api import load_scene  # noqa: E402
+from rtmesh.rendering.integrator import Integrator
+
+
+def _write(tmp_path, name, content):
+    path = tmp_path / name
+    path.write_bytes(content if isinstance(content, bytes) else content.encode())
+    return path
+
+
+def test_nan_and_inf_vertices_drop_only_their_faces_and_say_how_many(tmp_path, caplog):
+    path = _write(tmp_path, "nan.obj", hostile_files.corpus()["nan_vertices.obj"])
+    with caplog.at_level(logging.WARNING):
+        parts, _ = parts_from_trimesh(load_trimesh(path))
+    # corners 0 (NaN) and 3 (inf) of the cube: the faces using either go, the rest stay
+    bad = np.isin(hostile_files.CUBE_FACES, [0, 3]).any(axis=1)
+    assert sum(len(p.faces) for p in parts) == 12 - bad.sum() == 4
+    assert f"dropped {bad.sum()} of 12 faces that use vertices with NaN or infinite coordinates (2 such vertices)" \
+        in caplog.text
+    assert "vertex colours" not in caplog.text
+
+
+def test_nan_vertex_colours_are_reported_as_colours(caplog):
+    with caplog.at_level(logging.WARNING):
+        parts, _ = parts_from_trimesh(load_trimesh(os.path.join(DATA, "nancolor.obj")))
+    assert "vertex colours hold NaN values" in caplog.text and "faces" not in caplog.text
+    assert parts[0].vertex_colors is None
+
+
+@pytest.mark.parametrize("scale, offset", [(1e11, 0.0), (1e-9, 0.0), (1e-9, 1e-3), (1.0, 1e7)])
+def test_a_cube_at_any_scale_keeps_its_triangles_and_renders(tmp_path, scale, offset):
+    path = _write(tmp_path, "cube.obj", hostile_files.cube_obj(scale, offset))
+    mesh = next(iter(load_trimesh(path).geometry.values()))
+    assert len(mesh.faces) == 12 and len(mesh.vertices) == 8
+    scene, settings = load_scene(path, width=24, height=18, spp=1, threads=1)
+    assert len(scene.faces) == 12
+    image = Integrator(scene, settings).render().image
+    # framed and lit like the unit cube: the same image whatever the scale
+    unit, unit_settings = load_scene(_write(tmp_path, "unit.obj", hostile_files.cube_obj()),
+                                     width=24, height=18, spp=1, threads=1)
+    np.testing.assert_allclose(image, Integrator(unit, unit_settings).render().image, atol=1e-3)
+
+
+@pytest.mark.parametrize("name", ["fuze.obj", "rabbit.obj", "fandisk.obj", "quadknot.obj", "textured_tetrahedron.obj"])
+def test_vertex_merge_equals_trimeshs_on_ordinary_files(name):
+    # rtmesh's merge (relative to scale, without trimesh's int64 conversion) keeps what
+    # trimesh keeps at ordinary scales: same vertices, same faces
+    ours = [g for g in load_trimesh(os.path.join(DATA, name)).geometry.values()]
+    theirs = [g for g in trimesh.load(os.path.join(DATA, name), force="scene").geometry.values()]
+    assert len(ours) == len(theirs)
+    for a, b in zip(ours, theirs):
+        np.testing.assert_array_equal(a.vertices, b.vertices)
+        np.testing.assert_array_equal(a.faces, b.faces)
+
+
+def test_a_concave_polygon_is_ear_clipped_not_fanned(tmp_path):
+    path = _write(tmp_path, "wall.obj", hostile_files.wall_with_door_obj())
+    parts, _ = parts_from_trimesh(load_trimesh(path), smooth=False)
+    v, f = parts[0].vertices, parts[0].faces
+    assert len(f) == len(hostile_files.WALL_CORNERS) - 2
+    cross = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    # the wall's area without the door (9 - 2), every triangle wound like the face (+z)
+    assert 0.5 * np.linalg.norm(cross, axis=1).sum() == pytest.approx(7.0)
+    assert (cross[:, 2] > 0).all()
+    # no triangle covers the middle of the door opening
+    p = np.array([1.5, 1.0])
+    a, b, c = (v[f[:, k], :2] for k in range(3))
+
+    def side(p0, p1):
+        return np.sign((p1[:, 0] - p0[:, 0]) * (p[1] - p0[:, 1]) - (p1[:, 1] - p0[:, 1]) * (p[0] - p0[:, 0]))
+    inside = (side(a, b) == side(b, c)) & (side(b, c) == side(c, a))
+    assert not inside.any()
+    # texture coordinates follow their corners
+    np.testing.assert_allclose(parts[0].uv, v[:, :2] / 3.0)
+
+
+def test_negative_polygon_indices_refer_back_from_the_statement(tmp_path):
+    text = "v 9 9 9\n" + "".join(f"v {x} {y} 0\n" for x, y in hostile_files.WALL_CORNERS)
+    text += "f " + " ".join(str(-8 + i) for i in range(8)) + "\n"
+    parts, _ = parts_from_trimesh(load_trimesh(_write(tmp_path, "w.obj", text)), smooth=False)
+    v, f = parts[0].vertices, parts[0].faces
+    assert len(f) == 6 and not (v[np.unique(f)] == 9).any()
+
+
+def test_gltf_node_cycle_and_zero_scale_render_the_rest_with_a_note(tmp_path, caplog):
+    corpus = hostile_files.corpus()
+    for name, node in (("node_cycle.gltf", "'b'"), ("zero_scale.gltf", "'hidden'")):
+        path = _write(tmp_path, name, corpus[name])
+        with caplog.at_level(logging.WARNING):
+            scene, settings = load_scene(path, width=16, height=12, spp=1)
+        assert f"node {node}" in caplog.text
+        assert len(scene.faces) == 12  # the other node's cube
+        assert Integrator(scene, settings).render().image.max() > 0
+
+
+@pytest.mark.parametrize("name, message", [
+    ("garbage.obj", "not a valid OBJ file (binary data, not text)"),
+    ("garbage.glb", "not a valid GLB file (no glTF header)"),
+    ("garbage.ply", "not a valid PLY file (no 'ply' header)"),
+    ("garbage.stl", "not a valid STL file (not ASCII, and its binary header announces"),
+    ("lying_count.stl", "announces 1000 triangles (50084 bytes) in a file of 584 bytes"),
+    ("missing_buffer.gltf", "buffer file gone.bin not found"),
+    ("index_out_of_range.obj", "a face refers to a vertex the file does not have"),
+    ("corrupt_texture.glb", "square baseColorTexture: corrupt or unreadable texture"),
+])
+def test_malformed_files_are_one_clear_error(tmp_path, name, message):
+    path = _write(tmp_path, name, hostile_files.corpus()[name])
+    with pytest.raises(MeshError, match=re.escape(message)):
+        load_mesh_scene(path)
+
+
+def test_directories_symlink_loops_and_broken_links_are_named_as_such(tmp_path):
+    (tmp_path / "folder.obj").mkdir()
+    os.symlink(tmp_path / "loop.obj", tmp_path / "loop.obj")
+    os.symlink(tmp_path / "gone.obj", tmp_path / "dangling.obj")
+    for name, message in (("folder.obj", "is a directory, not a mesh file"),
+                          ("loop.obj", "symbolic link loop"),
+                          ("dangling.obj", "broken symbolic link"),
+                          ("absent.obj", "no such mesh file")):
+        with pytest.raises(MeshError, match=message):
+            load_trimesh(tmp_path / name)
+
+
+def test_garbage_mtl_values_are_warned_once_per_file_with_key_and_line(tmp_path, caplog):
+    corpus = hostile_files.corpus()
+    _write(tmp_path, "garbage.mtl", corpus["garbage.mtl"])
+    path = _write(tmp_path, "m.obj", corpus["garbage_mtl.obj"])
+    with caplog.at_level(logging.WARNING):
+        _, materials = parts_from_trimesh(load_trimesh(path))
+    records = [r.getMessage() for r in caplog.records if "garbage.mtl" in r.getMessage()]
+    assert len(records) == 1
+    for fragment in ("line 2: kd 'abc 1 zz'", "line 3: ns '-inf'", "line 4: illum '99'", "line 5: ke 'nan 1 1'"):
+        assert fragment in records[0]
+    # the defaults: grey diffuse, Blinn-Phong, no emission
+    np.testing.assert_array_equal(materials[0].diffuse, np.full(3, 0.7))
+    assert not materials[0].emission.any() and not materials[0].unlit
+
+
+@pytest.fixture(scope="module")
+def big_png(tmp_path_factory):
+    path = tmp_path_factory.mktemp("big") / "big.png"
+    hostile_files.write_big_png(path)  # 20000 x 20000, a few hundred KB
+    return path
+
+
+def test_a_texture_too_large_is_one_line_naming_it(tmp_path, big_png):
+    import shutil as _shutil
+
+    _shutil.copy(big_png, tmp_path / "big.png")
+    (tmp_path / "m.mtl").write_text("newmtl m\nmap_Kd big.png\n")
+    (tmp_path / "t.obj").write_text(TRIANGLE_OBJ.replace("f 1 2 3", "vt 0 0\nvt 1 0\nvt 0 1\nf 1/1 2/2 3/3"))
+    with pytest.raises(MeshError, match=r"big.png: texture of 400000000 pixels is larger than rtmesh reads "
+                                        r"\(67108864 pixels, e.g. 8192x8192\): downsample it"):
+        load_mesh_scene(tmp_path / "t.obj")
+    glb = _write(tmp_path, "big.glb", hostile_files.textured_square_glb(big_png.read_bytes()))
+    with pytest.raises(MeshError, match="paint.png: corrupt or unreadable texture, or one of more than 89478485 pixels"):
+        load_mesh_scene(glb)
+
+
+def test_a_texture_below_pils_limit_but_above_rtmeshs_is_refused_before_decoding(tmp_path):
+    from rtmesh.io.texture_images import load_texture
+
+    path = tmp_path / "wide.png"
+    path.write_bytes(hostile_files.png_bytes(70000, 1000))  # 70 M pixels
+    with pytest.raises(MeshError, match=r"wide.png: texture of 70000x1000 pixels is larger than rtmesh reads"):
+        load_texture(str(path))
+
+
+def test_faces_far_from_the_rest_are_dropped_with_a_warning_not_a_black_image(tmp_path, caplog):
+    path = _write(tmp_path, "far.obj", hostile_files.corpus()["far_outlier.obj"])
+    with caplog.at_level(logging.WARNING):
+        scene, settings = load_scene(path, width=24, height=18, spp=1, threads=1)
+    assert "dropped 12 of 24 faces that lie far from the rest (the scene spans 1.1e+30, the rest 2)" in caplog.text
+    assert len(scene.faces) == 12
+    unit, unit_settings = load_scene(_write(tmp_path, "unit.obj", hostile_files.cube_obj()),
+                                     width=24, height=18, spp=1, threads=1)
+    np.testing.assert_array_equal(Integrator(scene, settings).render().image,
+                                  Integrator(unit, unit_settings).render().image)
+
+
+def test_ordinary_scenes_are_framed_whole():
+    from rtmesh.scene.camera import framing_bounds
+
+    cube_v, cube_f = hostile_files.CUBE_VERTICES, hostile_files.CUBE_FACES
+    dome = trimesh.creation.icosphere(subdivisions=2, radius=1e4)
+    scenes = {
+        "a row of cubes": [cube_v + [10.0 * i, 0, 0] for i in range(5)],
+        "a figure in a sky dome": [cube_v, dome.vertices],
+        "a model and a far one of its size": [cube_v, cube_v + [1e5, 0, 0]],
+        "a flat card above a flat floor": [cube_v * [3, 3, 0], cube_v * [1, 1, 0] + [0, 0, 1]],
+    }
+    for name, pieces in scenes.items():
+        faces = [cube_f if len(p) == 8 else dome.faces for p in pieces]
+        offsets = np.cumsum([0] + [len(p) for p in pieces[:-1]])
+        vertices = np.vstack(pieces)
+        all_faces = np.vstack([f + o for f, o in zip(faces, offsets)])
+        bounds, keep = framing_bounds(vertices, all_faces)
+        assert keep is None, name
+        np.testing.assert_array_equal(bounds, [vertices.min(axis=0), vertices.max(axis=0)])
+
+
+def test_a_malformed_bump_strength_is_warned_and_reads_as_one(tmp_path, caplog):
+    shutil.copy(os.path.join(DATA, "fuze uv.jpg"), tmp_path / "h.jpg")
+    (tmp_path / "m.mtl").write_text("newmtl m\nbump -bm abc h.jpg\n")
+    (tmp_path / "t.obj").write_text(TRIANGLE_OBJ.replace("f 1 2 3", "vt 0 0\nvt 1 0\nvt 0 1\nf 1/1 2/2 3/3"))
+    with caplog.at_level(logging.WARNING):
+        _, materials = parts_from_trimesh(load_trimesh(tmp_path / "t.obj"))
+    assert "m.mtl: malformed values ignored, defaults used: line 2: bump -bm 'abc' (expected a number)" in caplog.text
+    (tmp_path / "m.mtl").write_text("newmtl m\nbump -bm 1 h.jpg\n")
+    _, same = parts_from_trimesh(load_trimesh(tmp_path / "t.obj"))
+    np.testing.assert_array_equal(materials[0].normal_texture.pixels, same[0].normal_texture.pixels)
+
+
+def test_coordinates_beyond_float32_drop_their_faces_with_a_count(tmp_path, caplog):
+    text = hostile_files.cube_obj().replace("v -1.0 -1.0 -1.0", "v -1e50 -1.0 -1.0", 1)
+    with caplog.at_level(logging.WARNING):
+        scene, settings = load_scene(_write(tmp_path, "c.obj", text), width=16, height=12, spp=1)
+    dropped = int(np.isin(hostile_files.CUBE_FACES, [0]).any(axis=1).sum())
+    assert f"dropped {dropped} faces with coordinates beyond float32's range" in caplog.text
+    assert len(scene.faces) == 12 - dropped
+    assert np.isfinite(Integrator(scene, settings).render().image).all()
+
+
+def test_a_truncated_vertex_statement_is_one_clear_error(tmp_path):
+    text = hostile_files.cube_obj() + "v 0.5 0.25\n"
+    with pytest.raises(MeshError, match=r"vertices of 2 coordinates, not 3 \(a vertex statement with too few"):
+        load_mesh_scene(_write(tmp_path, "c.obj", text))

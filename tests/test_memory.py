@@ -92,3 +92,22 @@ def test_blocked_reductions_equal_whole_film_formulas(monkeypatch, block_pixels)
     np.testing.assert_allclose(film.relative_error(), expected_error, rtol=1e-12)
     np.testing.assert_array_equal(film.pass_image("depth").reshape(-1),
                                   radiance[:, :, 0].min(axis=1).astype(np.float32))
+
+
+def test_the_memory_estimate_covers_the_measured_film_and_chunks():
+    from rtmesh.io.passes import pass_width
+    from rtmesh.rendering.memory import estimate
+
+    # the film: its arrays (with passes) and the float32 image, with room for the output
+    passes = ("depth", "normal", "ao")
+    s = settings(width=96, height=64, spp=4, threads=THREADS, chunk_samples=CHUNK_SAMPLES, passes=passes)
+    film = Film(96, 64, {name: pass_width(name) for name in passes}, one_pass=True)
+    assert film.nbytes < estimate(s).film < 2 * film.nbytes
+    # the chunks: the measured chunk phase of renders below the estimate, whatever the spp
+    # (a chunk holds whole pixels: 4096 samples of one pixel make a chunk of their own)
+    for width, height, spp in ((128, 128, 4), (16, 16, 4096)):
+        measured = chunk_phase(width, height, spp)
+        expected = estimate(settings(width=width, height=height, spp=spp, threads=THREADS,
+                                     chunk_samples=CHUNK_SAMPLES)).chunks
+        # and not absurdly above (this scene: one light, many background samples)
+        assert measured < expected < 16 * measured, (width, height, spp, measured, expected)

@@ -1,5 +1,6 @@
 """Scene files: every kind of mistake is an error naming the file and the key."""
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -131,3 +132,76 @@ def test_a_registered_light_type_is_read_from_scene_files_without_touching_the_r
         scene_from_dict(with_(lights=[{"type": "lamp", "position": [1, 2, 3], "watts": "x"}]))
     with pytest.raises(SceneError, match=r"lights\[0\]\.intensity: does not apply to a lamp light"):
         scene_from_dict(with_(lights=[{"type": "lamp", "position": [1, 2, 3], "intensity": 1}]))
+
+
+@pytest.mark.parametrize(
+    "render, message",
+    [
+        ({"width": 0}, "render: width must be >= 1 and <= 1048576 (got 0)"),
+        ({"height": 2**21}, "render: height must be >= 1 and <= 1048576 (got 2097152)"),
+        ({"spp": 2**41}, "render: spp must be >= 1 and <= 1099511627776 (got 2199023255552)"),
+        ({"spp": 2**33, "sampler": "sobol"}, "render: spp and max_spp must be <= 4294967296 with the sobol sampler"),
+        ({"max_depth": 10**6}, "render: max_depth must be >= 0 and <= 1024"),
+        ({"seed": 2**64}, "render: seed must be"),
+        ({"threads": 0}, "render: threads must be >= 1"),
+        ({"chunk_samples": 2**40}, "render: chunk_samples must be >= 1 and <= 2**31 - 1"),
+        ({"ao_samples": 10**5}, "render: ao_samples must be >= 0 and <= 4096"),
+        ({"light_samples": 10**5}, "render: light_samples must be >= 1 and <= 4096"),
+        ({"exposure": 1000.0}, "render: exposure must be a number of stops from -64 to 64 (got 1000.0)"),
+        ({"exposure": float("nan")}, "render.exposure: expected a finite number"),
+        ({"target_error": float("inf")}, "render.target_error: expected a finite number"),
+        ({"max_spp": 2**41, "target_error": 0.1}, "render: max_spp must be >= spp and <= 1099511627776"),
+    ],
+)
+def test_render_settings_out_of_range_name_the_key_and_value(render, message):
+    with pytest.raises(SceneError) as info:
+        scene_from_dict(with_(render=render), source="s.toml")
+    assert f"s.toml: {message}" in str(info.value)
+
+
+@pytest.mark.parametrize("fov", [0, 180, 270, -10, float("inf")])
+def test_camera_fov_must_be_between_0_and_180_degrees(fov):
+    camera = {"position": [0, -5, 0], "look_at": [0, 0, 0], "fov": fov}
+    with pytest.raises(SceneError, match=r"s.toml: camera.fov: expected (a finite number|degrees more than 0 and less than 180)"):
+        scene_from_dict(with_(camera=camera), source="s.toml")
+
+
+def test_api_settings_and_cameras_refuse_non_finite_and_out_of_range_values():
+    from rtmesh.rendering.settings import RenderSettings
+    from rtmesh.scene.camera import Camera
+
+    for bad in (dict(exposure=float("nan")), dict(exposure=float("inf")), dict(cutoff=float("nan")),
+                dict(ao_distance=float("inf")), dict(time_limit=float("nan")), dict(width=True)):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            RenderSettings(**bad).validate()
+    for fov in (0.0, 180.0, 270.0, float("nan")):
+        with pytest.raises(ValueError, match="fov must be more than 0 and less than 180"):
+            Camera([0, 0, 0], [0, 0, 1], [0, 1, 0], fov=fov)
+    RenderSettings(exposure=-64.0, width=1 << 20, spp=1 << 40).validate()
+    RenderSettings(sampler="sobol", spp=1 << 32).validate()
+    Camera([0, 0, 0], [0, 0, 1], [0, 1, 0], fov=179.9)
+
+
+def test_cli_exposure_nan_is_a_one_line_error(tmp_path, capsys):
+    from rtmesh.cli import main
+
+    mesh = Path(__file__).parent / "data" / "quadknot.obj"
+    out = tmp_path / "x.png"
+    assert main(["render", str(mesh), "-o", str(out), "--exposure", "nan", "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err == "rtmesh: error: render settings: exposure must be a number of stops from -64 to 64 (got nan)\n"
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("doc, where", [
+    (with_(camera={"position": [0, 0, 1e300], "look_at": [0, 0, 0]}), "camera.position"),
+    (with_(lights=[{"type": "point", "position": [0, 0, 5], "intensity": 1e19}]), "lights[0].intensity"),
+    (with_(objects=[{"primitive": "box", "translate": [1e30, 0, 0]}]), "objects[0].translate"),
+    (with_(objects=[{"primitive": "icosphere", "radius": 1e300}]), "objects[0].radius"),
+])
+def test_numbers_beyond_1e18_are_refused_naming_the_key(doc, where):
+    # squares and products of such numbers overflow (and coordinates leave float32)
+    with pytest.raises(SceneError, match=re.escape(f"s.toml: {where}: expected a ") + ".*magnitude at most 1e\\+18"):
+        scene_from_dict(doc, source="s.toml")
+    # up to the bound a scene reads
+    scene_from_dict(with_(objects=[{"primitive": "box", "translate": [1e18, 0, 0]}]), source="s.toml")

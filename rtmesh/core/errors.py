@@ -2,7 +2,9 @@
 
 Everything a user can cause (a bad scene file, a broken mesh, an unwritable output path)
 raises :class:`RtmeshError` or a subclass.  The command line prints its message on one line
-and exits with status 2; anything else is a bug and keeps its traceback.
+and exits with status 2; anything else is a bug, reported on one line as an internal error
+(exit status 70) whose traceback ``--debug`` or ``RTMESH_DEBUG=1`` shows (see
+:func:`rtmesh.cli.main`).
 """
 
 
@@ -24,3 +26,7 @@ class OutputError(RtmeshError):
 
 class MissingExtraError(RtmeshError):
     """An optional capability was asked for whose extra is not installed (names the pip command)."""
+
+
+class ResourceError(RtmeshError):
+    """A render would need more memory than is available or allowed (see :mod:`rtmesh.rendering.memory`)."""

@@ -1,6 +1,9 @@
 """Image textures: decoding to linear float and bilinear lookup with wrap modes."""
 
+import contextlib
 import os
+import re
+import warnings
 
 import numpy as np
 
@@ -11,6 +14,42 @@ from rtmesh.io.colour import srgb_to_linear
 _LINEAR_FORMATS = (".exr", ".hdr")
 
 WRAP_MODES = ("repeat", "clamp", "mirror")
+
+# The largest texture rtmesh reads, in pixels (8192 x 8192): a texture is kept as float64
+# texels, 24-32 bytes a pixel (2 GiB at this size).  A larger one is refused with a message
+# naming the file (docs/LIMITS.md); PIL's own limit (its decompression-bomb guard) lies
+# above it and is reported the same way.
+MAX_TEXTURE_PIXELS = 1 << 26
+
+
+def _too_large(source, width=None, height=None, pixels=None):
+    size = f"{width}x{height} pixels" if width is not None else f"{pixels} pixels"
+    return MeshError(f"{source}: texture of {size} is larger than rtmesh reads ({MAX_TEXTURE_PIXELS} "
+                     "pixels, e.g. 8192x8192): downsample it")
+
+
+def check_texture_size(image, source):
+    """Raise MeshError for a PIL image above :data:`MAX_TEXTURE_PIXELS` (its header's size:
+    nothing is decoded)."""
+    width, height = image.size
+    if width * height > MAX_TEXTURE_PIXELS:
+        raise _too_large(source, width, height)
+
+
+@contextlib.contextmanager
+def image_size_guard(source):
+    """Decode images inside: PIL's decompression-bomb warning (an image above its limit)
+    and error (twice that) become one MeshError naming ``source`` and the size, instead of
+    a warning on stderr or an exception from inside trimesh."""
+    from PIL import Image
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", Image.DecompressionBombWarning)
+        try:
+            yield
+        except (Image.DecompressionBombWarning, Image.DecompressionBombError) as exc:
+            found = re.search(r"\((\d+) pixels\)", str(exc))
+            raise _too_large(source, pixels=found.group(1) if found else "too many") from None
 
 
 class Texture:
@@ -66,9 +105,21 @@ class Texture:
 
     @classmethod
     def from_pil(cls, image, srgb=True, **options):
-        """A texture from a PIL image (as trimesh decodes them), keeping alpha if present."""
+        """A texture from a PIL image (as trimesh decodes them), keeping alpha if present.
+
+        Raises
+        ------
+        MeshError
+            The image is larger than :data:`MAX_TEXTURE_PIXELS`, or cannot be decoded.
+        """
+        name = options.get("name", "texture")
+        check_texture_size(image, name)
         mode = "RGBA" if image.mode in ("RGBA", "LA", "PA") or "transparency" in image.info else "RGB"
-        return cls.from_8bit(np.asarray(image.convert(mode)), srgb=srgb, **options)
+        try:  # trimesh opens images lazily: a corrupt one fails here, where it is decoded
+            texels = np.asarray(image.convert(mode))
+        except (OSError, SyntaxError, ValueError) as exc:
+            raise MeshError(f"{name}: corrupt or unreadable texture ({exc})") from None
+        return cls.from_8bit(texels, srgb=srgb, **options)
 
     @property
     def channels(self):
@@ -142,7 +193,8 @@ def load_texture(path, srgb=True, wrap="repeat", cache=None):
     Raises
     ------
     MeshError
-        The file exists but cannot be decoded (one line naming it).
+        The file exists but cannot be decoded, or is larger than :data:`MAX_TEXTURE_PIXELS`
+        (one line naming it).
     """
     key = (os.path.abspath(path), srgb, wrap)
     if cache is not None and key in cache:
@@ -153,7 +205,8 @@ def load_texture(path, srgb=True, wrap="repeat", cache=None):
         from PIL import Image, UnidentifiedImageError
 
         try:
-            with Image.open(path) as image:
+            with image_size_guard(path), Image.open(path) as image:
+                check_texture_size(image, path)
                 image.load()
                 return _cached(cache, key, Texture.from_pil(image, srgb=srgb, wrap=wrap,
                                                             name=os.path.basename(path)))

@@ -29,6 +29,7 @@ import logging
 import math
 import os
 import struct
+import urllib.parse
 
 import numpy as np
 
@@ -69,6 +70,28 @@ def read_gltf_json(path):
         raise MeshError(f"{path}: cannot read glTF JSON: {exc}") from None
 
 
+def check_external_files(path, doc):
+    """Raise MeshError naming the first buffer or image file a ``.gltf`` file refers to that
+    does not exist (trimesh would report only the file name).
+
+    Parameters
+    ----------
+    path : str
+        The ``.gltf`` file; relative URIs are resolved against its folder.
+    doc : dict
+        Its JSON.
+    """
+    folder = os.path.dirname(os.path.abspath(path))
+    for kind in ("buffers", "images"):
+        for entry in doc.get(kind) or []:
+            uri = entry.get("uri") if isinstance(entry, dict) else None
+            if not isinstance(uri, str) or uri.startswith("data:"):
+                continue
+            target = os.path.join(folder, urllib.parse.unquote(uri))
+            if not os.path.isfile(target):
+                raise MeshError(f"{path}: {kind[:-1]} file {uri} not found (looked for {target})")
+
+
 def node_world_transforms(doc):
     """World transform of every node of the default scene.
 
@@ -97,7 +120,8 @@ def node_world_transforms(doc):
         if index in seen or not 0 <= index < len(nodes):
             continue  # a cycle or a bad index: glTF forbids both; do not loop forever
         seen.add(index)
-        world = parent @ _local_matrix(nodes[index])
+        with np.errstate(invalid="ignore", over="ignore"):  # non-finite nodes are skipped later
+            world = parent @ _local_matrix(nodes[index])
         out.append((index, world))
         stack.extend((c, world) for c in reversed(nodes[index].get("children", [])))
     return out
@@ -120,11 +144,20 @@ def _local_matrix(node):
 
 
 def _frame(matrix):
-    """Position, forward (-Z) and up (+Y) of a node's world matrix, unit directions."""
+    """Position, forward (-Z) and up (+Y) of a node's world matrix, unit directions; None
+    for a matrix that is not finite or scales an axis to zero (a hidden node)."""
     position = matrix[:3, 3].copy()
     forward = matrix[:3, :3] @ np.array([0.0, 0.0, -1.0])
     up = matrix[:3, :3] @ np.array([0.0, 1.0, 0.0])
-    return position, forward / np.linalg.norm(forward), up / np.linalg.norm(up)
+    lengths = np.array([np.linalg.norm(forward), np.linalg.norm(up)])
+    if not (np.isfinite(matrix).all() and (lengths > 0.0).all()):
+        return None
+    return position, forward / lengths[0], up / lengths[1]
+
+
+def _hidden(source, what, node):
+    log.warning("%s: %s node '%s' has a zero scale (or a non-finite transform); skipped",
+                source, what, node.get("name", "?"))
 
 
 def cameras_from_gltf(doc, transform=None, source="gltf"):
@@ -158,7 +191,11 @@ def cameras_from_gltf(doc, transform=None, source="gltf"):
             log.warning("%s: camera %s is %s, neither perspective nor orthographic; skipped", source,
                         names[0] if names else node["camera"], kind)
             continue
-        position, forward, up = _frame(transform @ world)
+        frame = _frame(transform @ world)
+        if frame is None:
+            _hidden(source, "camera", node)
+            continue
+        position, forward, up = frame
         if kind == "perspective":
             camera = Camera(position, position + forward, up,
                             fov=math.degrees(float(spec["perspective"]["yfov"])))
@@ -172,9 +209,10 @@ def cameras_from_gltf(doc, transform=None, source="gltf"):
     return out
 
 
-def lights_from_gltf(doc, transform=None):
+def lights_from_gltf(doc, transform=None, source="gltf"):
     """rtmesh lights of the file's KHR_lights_punctual light nodes (see the module docstring
-    for the unit conversion).
+    for the unit conversion).  ``source`` names the file in warnings (a light node with a
+    zero scale is skipped).
 
     Returns
     -------
@@ -188,7 +226,11 @@ def lights_from_gltf(doc, transform=None):
         if ref is None or not 0 <= ref.get("light", -1) < len(table):
             continue
         spec = table[ref["light"]]
-        position, direction, _ = _frame(transform @ world)
+        frame = _frame(transform @ world)
+        if frame is None:
+            _hidden(source, "light", doc["nodes"][index])
+            continue
+        position, direction, _ = frame
         # photometric value -> rtmesh units: viewers show cd / d^2 * kd / pi; rtmesh has no 1/pi
         power = np.asarray(spec.get("color", (1.0, 1.0, 1.0)), dtype=np.float64) * float(
             spec.get("intensity", 1.0)) / math.pi
@@ -223,7 +265,7 @@ def file_cameras_and_lights(path, transform=None):
         return [], []
     doc = read_gltf_json(path)
     try:
-        return cameras_from_gltf(doc, transform, source=path), lights_from_gltf(doc, transform)
+        return cameras_from_gltf(doc, transform, source=path), lights_from_gltf(doc, transform, source=path)
     except (KeyError, IndexError, TypeError, ValueError, AttributeError) as exc:
         # a camera or light entry that breaks the glTF schema (a bad index, a missing yfov)
         raise MeshError(f"{path}: malformed glTF camera or light: {type(exc).__name__}: {exc}") from None

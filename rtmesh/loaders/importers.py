@@ -1,5 +1,6 @@
 """trimesh -> rtmesh: meshes, scene graphs and their materials as :class:`MeshPart` lists."""
 
+import io
 import logging
 import os
 
@@ -10,9 +11,12 @@ from rtmesh.core.errors import MeshError
 from rtmesh.geometry import build_kernels
 from rtmesh.geometry.smoothing import CREASE_ANGLE, smooth_vertex_normals
 from rtmesh.io.colour import srgb_to_linear
-from rtmesh.io.texture_images import Texture
-from rtmesh.loaders.gltf_nodes import GLTF_EXTENSIONS, file_cameras_and_lights, read_gltf_json
+from rtmesh.io.texture_images import Texture, image_size_guard
+from rtmesh.loaders.gltf_nodes import (GLTF_EXTENSIONS, check_external_files, file_cameras_and_lights,
+                                       read_gltf_json)
 from rtmesh.loaders.material_files import gltf_json_materials, gltf_material, mtl_material, obj_materials
+from rtmesh.loaders.mesh_files import check_content, check_file, format_name
+from rtmesh.loaders.obj_polygons import triangulate_polygons
 from rtmesh.materials.table import Material
 from rtmesh.scene.model import MeshPart, Scene
 
@@ -38,21 +42,25 @@ def load_trimesh(path):
         Missing file, unknown format, or a file trimesh cannot parse.
     """
     path = os.fspath(path)
-    if not os.path.isfile(path):
-        raise MeshError(f"{path}: no such mesh file")
+    check_file(path)
     ext = os.path.splitext(path)[1].lower()
     if ext not in MESH_EXTENSIONS:
         raise MeshError(f"{path}: unsupported mesh format {ext or '(none)'!r}; use "
                         + ", ".join(MESH_EXTENSIONS))
+    check_content(path, ext)
+    if ext == ".gltf":
+        check_external_files(path, read_gltf_json(path))
     try:
-        if ext in GLTF_EXTENSIONS:
-            scene = trimesh.load(path, force="scene")  # trimesh leaves glTF meshes unprocessed
-        else:
-            # trimesh's processing, done by process() where it changes something
-            scene = trimesh.load(path, force="scene", process=False)
-            for geometry in scene.geometry.values():
-                if isinstance(geometry, trimesh.Trimesh) and not geometry.metadata.get("processed"):
-                    process(geometry)
+        with image_size_guard(path):  # textures trimesh decodes: too large is one message
+            scene = _load(path, ext)
+    except MeshError:
+        raise
+    except IndexError as exc:
+        raise MeshError(f"{path}: cannot read mesh: a face refers to a vertex the file does not "
+                        f"have ({exc})") from exc
+    except ImportError as exc:
+        # trimesh guesses the encoding of text that is not UTF-8 with an optional module
+        raise MeshError(f"{path}: not a valid {format_name(ext)} file (text that is not UTF-8)") from exc
     except Exception as exc:  # trimesh raises many types for malformed files
         detail = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise MeshError(f"{path}: cannot read mesh: {detail}") from exc
@@ -61,38 +69,214 @@ def load_trimesh(path):
     return scene
 
 
-def process(mesh):
-    """What ``trimesh.load`` does to each mesh by default (``Trimesh.process``), faster.
+def _load(path, ext):
+    """trimesh's scene of a mesh file, processed (see :func:`process`)."""
+    if ext in GLTF_EXTENSIONS:
+        return trimesh.load(path, force="scene")  # trimesh leaves glTF meshes unprocessed
+    # trimesh's processing, done by process() where it changes something
+    scene = trimesh.load(**_obj_source(path, ext), force="scene", process=False)
+    for key, geometry in scene.geometry.items():
+        if isinstance(geometry, trimesh.Trimesh) and not geometry.metadata.get("processed"):
+            _warn_if_short(geometry, _geometry_source(path, scene, key))
+            process(geometry, _geometry_source(path, scene, key))
+    return scene
+
+
+def _warn_if_short(mesh, source):
+    """Warn when a PLY file holds fewer elements than its header announces (trimesh reads
+    what is there without a word): a truncated file, or a lying header."""
+    raw = mesh.metadata.get("_ply_raw")
+    if not isinstance(raw, dict):
+        return
+    short = []
+    for name, element in raw.items():
+        announced, data = element.get("length"), element.get("data")
+        if not isinstance(announced, int) or not isinstance(data, dict) or not data:
+            continue
+        held = min(np.shape(column)[0] if np.ndim(column) else 0 for column in data.values())
+        if held < announced:
+            short.append(f"{held} of {announced} {name} elements")
+    if short:
+        log.warning("%s: the file holds fewer elements than its header announces (%s): truncated?",
+                    source, ", ".join(short))
+
+
+def _obj_source(path, ext):
+    """What trimesh reads: the file, or for an OBJ with polygons of five or more corners its
+    text with them ear-clipped (:mod:`rtmesh.loaders.obj_polygons`), materials resolved as beside
+    the file."""
+    if ext == ".obj":
+        with open(path, "rb") as f:
+            text = triangulate_polygons(f.read())
+        if text is not None:
+            return dict(file_obj=io.BytesIO(text), file_type="obj",
+                        resolver=trimesh.resolvers.FilePathResolver(path))
+    return dict(file_obj=path)
+
+
+def _geometry_source(path, scene, key):
+    """``file`` or ``file: object 'name'`` (for a file of several objects) in messages."""
+    name = os.path.basename(path)
+    return name if len(scene.geometry) == 1 else f"{name}: object '{key}'"
+
+
+def process(mesh, source="mesh"):
+    """What ``trimesh.load`` does to each mesh by default (``Trimesh.process``), faster and
+    without losing geometry silently or at extreme scales.
 
     trimesh's processing drops non-finite vertices and merges duplicate ones (equal after
-    rounding to ``trimesh.tol.merge``, with equal texture coordinates and normals); its
-    merge sorts the vertices, 0.4 s for a mesh of a million triangles.  Most files have no
-    duplicate vertices: one hash-table pass (:func:`rtmesh.geometry.build_kernels.rows_distinct`)
-    shows that the merge would keep every vertex where it is, and trimesh's own processing
-    runs only where it would not.  Either way the mesh's arrays come out the same.
+    rounding to ``trimesh.tol.merge``, with equal texture coordinates and normals).  Here:
+
+    - faces that use a vertex with a NaN or infinite coordinate are dropped with a warning
+      that counts them (trimesh drops them without a word);
+    - vertices merge as trimesh merges them (:func:`merge_vertices`), but at a precision
+      relative to the mesh's scale where ``tol.merge`` would be coarse for it (a model
+      measured in nanometres), and without trimesh's conversion to 64-bit integers, which
+      overflows for coordinates beyond about 1e10 and collapsed every vertex of such a
+      model;
+    - most files have no duplicate vertices: one hash-table pass
+      (:func:`rtmesh.geometry.build_kernels.rows_distinct`) shows that the merge would keep every
+      vertex where it is, and the merge (a sort, 0.4 s for a million triangles) runs only
+      where it would not.
 
     Parameters
     ----------
     mesh : trimesh.Trimesh
         Loaded with ``process=False``; processed in place.
+    source : str
+        Names the mesh in warnings.
     """
-    if not mesh.is_empty and _merge_keeps_everything(mesh):
-        mesh.metadata["processed"] = True
-    else:
-        mesh.process()
+    faces = mesh.faces.view(np.ndarray)
+    if mesh.vertices.ndim != 2 or mesh.vertices.shape[1] != 3:
+        # trimesh reads every vertex with the column count of some line: one short line
+        # (a truncated file) makes all of them 2D
+        raise MeshError(f"{source}: vertices of {mesh.vertices.shape[-1]} coordinates, not 3 (a "
+                        "vertex statement with too few values: a truncated file?)")
+    if mesh.is_empty or faces.ndim != 2 or not len(faces):
+        mesh.metadata["processed"] = True  # nothing to process (parts_from_trimesh skips it)
+        return
+    _drop_bad_index_faces(mesh, source)
+    _drop_non_finite_faces(mesh, source)
+    digits = merge_digits(mesh.vertices.view(np.ndarray), mesh.faces.view(np.ndarray))
+    if not _merge_keeps_everything(mesh, digits):
+        # as Trimesh.process: the cache lock keeps the file's normals across the merge
+        with mesh._cache:
+            merge_vertices(mesh, digits)
+            mesh._cache.clear(exclude={"face_normals", "vertex_normals"})
+    mesh.metadata["processed"] = True
 
 
-def _merge_keeps_everything(mesh):
-    """True when trimesh's processing would change nothing: every vertex finite and used by
-    a face, and no two vertices at the same position as trimesh rounds positions (distinct
-    positions make distinct rows whatever texture coordinates or normals it also compares).
+def _drop_bad_index_faces(mesh, source):
+    """Drop the faces that refer to vertices the file does not have, saying how many."""
+    faces = mesh.faces.view(np.ndarray)
+    if faces.min() >= 0 and faces.max() < len(mesh.vertices):
+        return
+    bad = ((faces < 0) | (faces >= len(mesh.vertices))).any(axis=1)
+    if bad.any():
+        log.warning("%s: dropped %d of %d faces that refer to vertices the file does not have",
+                    source, int(bad.sum()), len(faces))
+        mesh.faces = faces[~bad]
+
+
+def _drop_non_finite_faces(mesh, source):
+    """Drop the faces that use a vertex with a NaN or infinite coordinate, saying how many."""
+    vertices, faces = mesh.vertices.view(np.ndarray), mesh.faces.view(np.ndarray)
+    if np.isfinite(vertices).all():
+        return
+    finite = np.isfinite(vertices).all(axis=1)
+    bad = ~finite[faces].all(axis=1)
+    log.warning("%s: dropped %d of %d faces that use vertices with NaN or infinite coordinates "
+                "(%d such vertices)", source, int(bad.sum()), len(faces), int((~finite).sum()))
+    mesh.remove_infinite_values()
+
+
+def merge_digits(vertices, faces):
+    """Decimal digits at which vertices merge: trimesh's (``tol.merge``), or finer for a
+    mesh whose typical edge is not long against it.
+
+    The tolerance is at most ``MERGE_FRACTION`` of the median edge length (of up to 4096
+    faces evenly spread), so merging never collapses the edges of a small model; for every
+    model with a typical edge longer than 1e-3 it is trimesh's.
+
+    Parameters
+    ----------
+    vertices : (v, 3) float
+        Finite.
+    faces : (f, 3) int
+
+    Returns
+    -------
+    int
+    """
+    digits = trimesh.util.decimal_to_digits(trimesh.tol.merge)
+    if not len(faces):
+        return digits
+    sample = faces[::max(1, len(faces) // 4096)]
+    corners = vertices[sample]
+    lengths = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2)
+    lengths = lengths[lengths > 0.0]
+    if not len(lengths):
+        return digits
+    tolerance = min(trimesh.tol.merge, MERGE_FRACTION * float(np.median(lengths)))
+    return max(digits, trimesh.util.decimal_to_digits(tolerance))
+
+
+# a merge tolerance at most this fraction of a mesh's median edge (see merge_digits)
+MERGE_FRACTION = 1e-5
+
+
+def _merge_keys(mesh, digits, with_attributes=True):
+    """The rows trimesh's merge compares (position, and texture coordinates and normals
+    unless ``with_attributes`` is False), rounded as it rounds them, as int64: converted as
+    trimesh converts them where they fit, else the bits of the rounded floats (equal rounded
+    values have equal bits once ``+ 0.0`` turns -0.0 into 0.0), so that no conversion
+    overflows at any scale."""
+    stacked = [mesh.vertices.view(np.ndarray) * (10.0**digits)]
+    if with_attributes:
+        visual = mesh.visual
+        if (visual.defined and visual.kind == "texture" and visual.uv is not None
+                and len(visual.uv) == len(mesh.vertices)):
+            stacked.append(np.asarray(visual.uv, dtype=np.float64) * 1e4)  # trimesh: 4 digits
+        normals = mesh._cache["vertex_normals"]
+        if np.shape(normals) == mesh.vertices.shape:
+            stacked.append(np.asarray(normals, dtype=np.float64) * 1e2)  # trimesh: 2 digits
+    keys = np.column_stack(stacked).round()
+    if -2.0**62 < keys.min() and keys.max() < 2.0**62:  # False for NaN (texture coordinates)
+        return keys.astype(np.int64)  # trimesh's keys exactly (and its fast hashing of them)
+    return np.ascontiguousarray(keys + 0.0).view(np.int64)
+
+
+def merge_vertices(mesh, digits):
+    """``trimesh.grouping.merge_vertices`` at ``digits`` (same groups, same order), with the
+    rows compared by :func:`_merge_keys` instead of as int64 conversions.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+        Finite vertices; merged in place.
+    digits : int
+    """
+    referenced = np.zeros(len(mesh.vertices), dtype=bool)
+    referenced[mesh.faces] = True
+    keys = _merge_keys(mesh, digits)
+    unique, inverse_referenced = trimesh.grouping.unique_rows(keys[referenced], keep_order=True)
+    inverse = np.zeros(len(mesh.vertices), dtype=np.int64)
+    inverse[referenced] = inverse_referenced
+    mesh.update_vertices(mask=np.nonzero(referenced)[0][unique], inverse=inverse)
+
+
+def _merge_keeps_everything(mesh, digits=None):
+    """True when the merge would change nothing: every vertex finite and used by a face, and
+    no two vertices at the same position as the merge rounds positions (at ``digits``;
+    None: :func:`merge_digits`) (distinct positions make distinct rows whatever texture
+    coordinates or normals it also compares).
     """
     vertices, faces = mesh.vertices.view(np.ndarray), mesh.faces.view(np.ndarray)
     if not build_kernels.referenced_and_finite(vertices, faces):
         return False
-    # trimesh.grouping.merge_vertices: positions scaled to whole units of tol.merge, rounded
-    digits = trimesh.util.decimal_to_digits(trimesh.tol.merge)
-    return build_kernels.rows_distinct((vertices * (10**digits)).round().astype(np.int64))
+    if digits is None:
+        digits = merge_digits(vertices, faces)
+    return build_kernels.rows_distinct(_merge_keys(mesh, digits, with_attributes=False))
 
 
 def _file_has_vertex_normals(mesh):
@@ -175,10 +359,10 @@ class FileMaterials:
             return
         ext = os.path.splitext(path)[1].lower()
         if ext == ".obj":
-            self.obj, nan_vertices = obj_materials(path)
-            if nan_vertices:
-                log.warning("%s: %d vertices hold NaN values; the vertex colours are ignored",
-                            os.path.basename(path), nan_vertices)
+            self.obj, nan_colours = obj_materials(path)
+            if nan_colours:
+                log.warning("%s: %d vertex colours hold NaN values; the vertex colours are ignored",
+                            os.path.basename(path), nan_colours)
                 self.drop_vertex_colours = True
         elif ext in GLTF_EXTENSIONS:
             self.gltf = gltf_json_materials(read_gltf_json(path))
@@ -234,7 +418,12 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
     elif isinstance(obj, trimesh.Scene):
         nodes = []
         for node in obj.graph.nodes_geometry:
-            node_transform, geometry_name = obj.graph[node]
+            try:
+                node_transform, geometry_name = obj.graph[node]
+            except ValueError:  # trimesh: "Iteration limit exceeded!"
+                log.warning("%s: node '%s' has no transform from the scene's root (a cycle in the "
+                            "node graph, which glTF forbids); skipped", name, node)
+                continue
             nodes.append((str(node), node_transform, obj.geometry[geometry_name]))
     else:
         raise MeshError(f"{name}: expected a trimesh.Trimesh or trimesh.Scene, got {type(obj).__name__}")
@@ -265,6 +454,11 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
                 uv = None if uv is None else uv[original]
                 colours = None if colours is None else colours[original]
         matrix = transform @ node_transform
+        if not (np.isfinite(matrix).all() and np.linalg.det(matrix[:3, :3]) != 0.0):
+            # exporters hide parts with a zero scale: nothing of them would be seen
+            log.warning("%s: node '%s' has a zero scale (a singular transform), which hides "
+                        "it; its geometry is not rendered", name, node_name)
+            continue
         vertices = trimesh.transform_points(vertices, matrix)
         if np.linalg.det(matrix[:3, :3]) < 0:
             faces = faces[:, ::-1]  # a mirroring transform flips the winding
@@ -281,7 +475,10 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
             key = id(getattr(visual, "material", visual))
             if key not in material_ids:
                 material_ids[key] = len(materials)
-                materials.append(material_from_trimesh(visual, node_name, file_materials))
+                try:
+                    materials.append(material_from_trimesh(visual, node_name, file_materials))
+                except MeshError as exc:  # a texture of the file: name the file too
+                    raise MeshError(f"{name}: {exc}") from None
             mat = material_ids[key]
         else:
             mat = material

@@ -14,6 +14,7 @@ import re
 
 import numpy as np
 
+from rtmesh.core.errors import MeshError
 from rtmesh.io.texture_images import Texture, load_texture
 from rtmesh.materials.table import Material
 
@@ -41,7 +42,8 @@ _MAP_OPTIONS = {"-blendu": 1, "-blendv": 1, "-bm": 1, "-boost": 1, "-cc": 1, "-c
 _MTLLIB = re.compile(rb"^[ \t]*mtllib[ \t]+(.+?)[ \t]*$", re.M)
 # a face statement with fewer than three vertex references
 _SHORT_FACE = re.compile(rb"^[ \t]*f(?:[ \t]+\S+){0,2}[ \t]*$", re.M)
-_NAN_VERTEX = re.compile(rb"^[ \t]*v[ \t][^\n]*\bnan\b", re.M | re.I)
+# a vertex statement with NaN among its colour values (after x y z)
+_NAN_COLOUR = re.compile(rb"^[ \t]*v(?:[ \t]+\S+){3}[ \t]+[^\n]*\bnan\b", re.M | re.I)
 
 
 def scan_obj(path):
@@ -57,14 +59,16 @@ def scan_obj(path):
         The ``mtllib`` files, resolved against the OBJ's folder (missing ones included).
     short_faces : int
         Face statements with fewer than three vertices (trimesh drops them silently).
-    nan_vertices : int
-        Vertex statements holding NaN (trimesh turns a NaN colour into black).
+    nan_colours : int
+        Vertex statements with NaN among their colour values (trimesh turns a NaN colour
+        into black).  NaN coordinates are counted where their faces are dropped
+        (:func:`rtmesh.loaders.importers.process`).
     """
     with open(path, "rb") as f:
         text = f.read()
     folder = os.path.dirname(os.path.abspath(path))
     mtl_paths = [os.path.join(folder, m.decode("utf-8", "replace").strip()) for m in _MTLLIB.findall(text)]
-    return mtl_paths, len(_SHORT_FACE.findall(text)), len(_NAN_VERTEX.findall(text))
+    return mtl_paths, len(_SHORT_FACE.findall(text)), len(_NAN_COLOUR.findall(text))
 
 
 def parse_mtl(path):
@@ -78,11 +82,11 @@ def parse_mtl(path):
     -------
     dict of str to dict of str to str
         Material name -> lower-case keyword -> the rest of its line (the last statement of
-        a keyword wins).
+        a keyword wins); under :data:`LINES`, keyword -> its line number (for messages).
     """
     materials, current = {}, None
     with open(path, "r", encoding="utf-8", errors="replace") as f:
-        for line in f:
+        for number, line in enumerate(f, start=1):
             line = line.split("#", 1)[0].strip()
             if not line:
                 continue
@@ -92,19 +96,43 @@ def parse_mtl(path):
                 current = materials.setdefault(rest, {})
             elif current is not None:
                 current[key] = rest
+                current.setdefault(LINES, {})[key] = number
     return materials
 
 
-def _floats(statements, key, count):
-    """A float (count 1) or colour statement, or None if absent or malformed."""
+# where parse_mtl keeps the line number of each statement (no keyword holds a '#')
+LINES = "#lines"
+# what each numeric MTL statement must hold beyond finite numbers: (test, what it expects)
+_RANGES = {
+    "ni": (lambda v: v > 0.0, "a number > 0"),
+    "illum": (lambda v: v == int(v) and int(v) in ILLUM, "an illumination model from 0 to 10"),
+}
+
+
+def _floats(statements, key, count, problems=None):
+    """A float (count 1) or colour statement, or None if absent or malformed.
+
+    A malformed statement (not finite numbers, a colour below 0, a value out of
+    :data:`_RANGES`) is appended to ``problems`` as ``(line, keyword, text, expected)``.
+    """
     text = statements.get(key)
     if text is None:
         return None
+    expected = "numbers" if count > 1 else "a number"
     try:
         values = np.array([float(x) for x in text.split()[:count]], dtype=np.float64)
+        ok = len(values) > 0 and np.isfinite(values).all()
     except ValueError:
-        return None
-    if not len(values) or not np.isfinite(values).all():
+        ok = False
+    if ok and count > 1:
+        expected = "numbers >= 0"
+        ok = bool((values >= 0.0).all())
+    elif ok and key in _RANGES:
+        test, expected = _RANGES[key]
+        ok = test(values[0])
+    if not ok:
+        if problems is not None:
+            problems.append((statements.get(LINES, {}).get(key), key, text, expected))
         return None
     return float(values[0]) if count == 1 else np.resize(values, count)
 
@@ -135,8 +163,9 @@ def map_statement(text):
     return rest.strip(), options
 
 
-def _map_texture(statements, keys, folder, cache, srgb, source, kind="colour"):
-    """The texture of the first of ``keys`` present, or None (missing file: warning)."""
+def _map_texture(statements, keys, folder, cache, srgb, source, kind="colour", problems=None):
+    """The texture of the first of ``keys`` present, or None (missing file: warning; a
+    malformed ``-bm`` is reported to ``problems`` and reads as 1)."""
     for key in keys:
         if key in statements:
             name, options = map_statement(statements[key])
@@ -149,13 +178,17 @@ def _map_texture(statements, keys, folder, cache, srgb, source, kind="colour"):
                             source, name, key)
                 return None
             if kind == "bump":
-                strength = float(options.get("-bm", ["1"])[0])
+                option = f"{key} -bm"
+                bm = {option: " ".join(options.get("-bm", ["1"])) or "?",
+                      LINES: {option: statements.get(LINES, {}).get(key)}}
+                strength = _floats(bm, option, 1, problems)
+                strength = 1.0 if strength is None else strength
                 return load_texture(path, srgb=False, wrap=wrap, cache=cache).height_to_normals(strength)
             return load_texture(path, srgb=srgb, wrap=wrap, cache=cache)
     return None
 
 
-def mtl_material(statements, name, folder, cache=None, source="mtl"):
+def mtl_material(statements, name, folder, cache=None, source="mtl", problems=None):
     """Map one MTL material onto rtmesh's model (see docs/MATERIALS.md).
 
     Ka, Kd, Ks, Ke, Ns and Ni map to ambient, diffuse, specular, emission, shininess and
@@ -181,40 +214,43 @@ def mtl_material(statements, name, folder, cache=None, source="mtl"):
         file so that each image is read once.
     source : str
         For messages.
+    problems : list, optional
+        Collects the malformed statements, whose defaults are used instead (see
+        :func:`_floats`), for one warning per file (:func:`obj_materials`).
 
     Returns
     -------
     Material
     """
     cache = {} if cache is None else cache
-    diffuse = _floats(statements, "kd", 3)
+    diffuse = _floats(statements, "kd", 3, problems)
     diffuse = np.full(3, 0.7) if diffuse is None else diffuse
-    ambient = _floats(statements, "ka", 3)
-    specular = _floats(statements, "ks", 3)
+    ambient = _floats(statements, "ka", 3, problems)
+    specular = _floats(statements, "ks", 3, problems)
     specular = np.zeros(3) if specular is None else specular
-    emission = _floats(statements, "ke", 3)
-    shininess = _floats(statements, "ns", 1)
+    emission = _floats(statements, "ke", 3, problems)
+    shininess = _floats(statements, "ns", 1, problems)
     shininess = 32.0 if shininess is None else shininess
-    illum_value = _floats(statements, "illum", 1)
+    illum_value = _floats(statements, "illum", 1, problems)
     illum = 2 if illum_value is None else int(illum_value)
     lit, has_specular, has_mirror, transmissive = ILLUM.get(illum, ILLUM[2])
     if shininess < 1.0:
         has_specular = False
-    opacity = _floats(statements, "d", 1)
+    opacity = _floats(statements, "d", 1, problems)
     if opacity is None:
-        tr = _floats(statements, "tr", 1)
+        tr = _floats(statements, "tr", 1, problems)
         opacity = 1.0 if tr is None or tr >= 1.0 else 1.0 - tr
     opacity = float(np.clip(opacity, 0.0, 1.0))
     transmission = np.zeros(3)
     glass = illum in (4, 9)
     if transmissive:
-        tf = _floats(statements, "tf", 3)
+        tf = _floats(statements, "tf", 3, problems)
         transmission = tf if tf is not None else np.ones(3)
         if glass:
             # "transparency" models: how much passes is the dissolve
             transmission = transmission * (1.0 - opacity)
     texture = lambda keys, srgb=True, kind="colour": _map_texture(  # noqa: E731
-        statements, keys, folder, cache, srgb, source, kind)
+        statements, keys, folder, cache, srgb, source, kind, problems)
     opacity_texture = texture(("map_d",), srgb=False)
     normal_texture = texture(("norm",), srgb=False)
     if normal_texture is None:
@@ -232,7 +268,7 @@ def mtl_material(statements, name, folder, cache=None, source="mtl"):
         shininess=float(np.clip(shininess, 1.0, 10000.0)),
         mirror=specular if has_mirror else np.zeros(3),
         transmission=np.clip(transmission, 0.0, 1.0),
-        ior=_floats(statements, "ni", 1) or 1.5,
+        ior=_floats(statements, "ni", 1, problems) or 1.5,
         emission=np.zeros(3) if emission is None else np.maximum(emission, 0.0),
         unlit=not lit,
         opacity=opacity if blended else 1.0,
@@ -256,10 +292,10 @@ def obj_materials(path):
     Returns
     -------
     materials : dict of str to Material
-    nan_vertices : int
-        Vertex statements holding NaN (see :func:`scan_obj`).
+    nan_colours : int
+        Vertex statements with NaN colours (see :func:`scan_obj`).
     """
-    mtl_paths, short_faces, nan_vertices = scan_obj(path)
+    mtl_paths, short_faces, nan_colours = scan_obj(path)
     source = os.path.basename(path)
     if short_faces:
         log.warning("%s: %d faces with fewer than 3 vertices skipped", source, short_faces)
@@ -270,9 +306,20 @@ def obj_materials(path):
                         "default grey", source, os.path.basename(mtl_path))
             continue
         folder = os.path.dirname(mtl_path)
+        problems = []
         for name, statements in parse_mtl(mtl_path).items():
-            materials[name] = mtl_material(statements, name, folder, cache, source)
-    return materials, nan_vertices
+            materials[name] = mtl_material(statements, name, folder, cache, source, problems)
+        if problems:
+            log.warning("%s: %s", os.path.basename(mtl_path), malformed_statements(problems))
+    return materials, nan_colours
+
+
+def malformed_statements(problems, shown=4):
+    """One sentence for the malformed statements of an MTL file (see :func:`_floats`)."""
+    parts = [f"line {line}: {key} {text!r} (expected {expected})" for line, key, text, expected
+             in sorted(problems, key=lambda p: (p[0] is None, p[0] or 0))]
+    more = f"; and {len(parts) - shown} more" if len(parts) > shown else ""
+    return ("malformed values ignored, defaults used: " + "; ".join(parts[:shown]) + more)
 
 
 # ---------------------------------------------------------------- glTF
@@ -345,6 +392,7 @@ def gltf_material(pbr, json_material=None, name="gltf"):
     -------
     Material
     """
+    _check_decoded(pbr, json_material, pbr.name or name)
     f = _gltf_factors(pbr, json_material)
     ext = f["extensions"]
     base = f["base"]
@@ -411,6 +459,8 @@ def gltf_material(pbr, json_material=None, name="gltf"):
 _GLTF_WRAP = {33071: "clamp", 33648: "mirror", 10497: "repeat"}
 # where gltf_json_materials puts each texture's (u, v) wrap modes in a material object
 WRAP_KEY = "rtmesh:wrap"
+# ... and each texture's image (label, mime type), to tell images trimesh could not decode
+IMAGES_KEY = "rtmesh:images"
 
 
 def _texture_wrap(doc, texture_info):
@@ -423,12 +473,47 @@ def _texture_wrap(doc, texture_info):
     return tuple(_GLTF_WRAP.get(sampler.get(axis, 10497), "repeat") for axis in ("wrapS", "wrapT"))
 
 
+def _texture_image(doc, texture_info):
+    """(label, mime type) of the image a glTF textureInfo shows: its name, URI or index."""
+    try:
+        image = doc["images"][doc["textures"][texture_info["index"]]["source"]]
+        label = image.get("name") or image.get("uri", "")[:60] or f"image {texture_info['index']}"
+        return label, image.get("mimeType", "")
+    except (KeyError, IndexError, TypeError, AttributeError):
+        return "an image", ""
+
+
+# images above PIL's decompression-bomb limit (89478485 pixels) are dropped by trimesh
+# like corrupt ones; smaller ones above rtmesh.io.texture_images.MAX_TEXTURE_PIXELS are refused
+# by name when their texture is made
+PIL_LIMIT = 89478485
+
+
+def _check_decoded(pbr, json_material, name):
+    """Raise MeshError for a texture the file's JSON gives a material but trimesh could not
+    decode (it drops such an image without a word): a corrupt texture is an error, as for
+    MTL files (docs/MATERIALS.md).  KTX2 images, which trimesh does not decode, are a
+    warning."""
+    images = (json_material or {}).get(IMAGES_KEY, {})
+    for slot, (label, mime) in images.items():
+        if getattr(pbr, slot, None) is not None:
+            continue
+        if mime == "image/ktx2":
+            log.warning("%s: %s %s is a KTX2 image, which rtmesh cannot decode; not used",
+                        name, slot, label)
+            continue
+        raise MeshError(f"{label}: corrupt or unreadable texture, or one of more than {PIL_LIMIT} "
+                        f"pixels ({slot} of material '{name}')")
+
+
 def gltf_json_materials(doc):
     """``{material name: material object}`` of a glTF JSON document (unnamed ones skipped).
 
-    Each object is a copy with the wrap modes of its base-colour and normal textures under
-    :data:`WRAP_KEY` (``{"baseColorTexture": (u, v), ...}``), read from the samplers, which
-    trimesh does not keep.
+    Each object is a copy with the wrap modes of its base-colour, normal and emission
+    textures under :data:`WRAP_KEY` (``{"baseColorTexture": (u, v), ...}``), read from the
+    samplers, which trimesh does not keep, and the image of each texture (those and the
+    metallic-roughness one) under :data:`IMAGES_KEY` (``{"baseColorTexture": (label, mime
+    type), ...}``), to tell an image trimesh could not decode.
     """
     out = {}
     for material in doc.get("materials", []) or []:
@@ -437,5 +522,8 @@ def gltf_json_materials(doc):
                      "normalTexture": material.get("normalTexture"),
                      "emissiveTexture": material.get("emissiveTexture")}
             wraps = {slot: _texture_wrap(doc, info) for slot, info in infos.items() if isinstance(info, dict)}
-            out[material["name"]] = {**material, WRAP_KEY: wraps}
+            infos["metallicRoughnessTexture"] = (material.get("pbrMetallicRoughness") or {}).get(
+                "metallicRoughnessTexture")
+            images = {slot: _texture_image(doc, info) for slot, info in infos.items() if isinstance(info, dict)}
+            out[material["name"]] = {**material, WRAP_KEY: wraps, IMAGES_KEY: images}
     return out

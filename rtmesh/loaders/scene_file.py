@@ -32,13 +32,20 @@ from rtmesh.scene.model import MeshPart, Scene
 # ---------------------------------------------------------------- value types
 
 
+# Every number of a scene file is finite and at most this in magnitude: squares and
+# products of coordinates, distances and intensities then stay far inside float64, and a
+# coordinate inside the float32 Embree holds (docs/LIMITS.md).
+MAX_NUMBER = 1e18
+
+
 def _is_number(v):
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+    return (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+            and abs(v) <= MAX_NUMBER)
 
 
 def _float(v):
     if not _is_number(v):
-        raise TypeError("expected a finite number")
+        raise TypeError(f"expected a finite number (magnitude at most {MAX_NUMBER:g})")
     return float(v)
 
 
@@ -46,6 +53,13 @@ def _positive(v):
     v = _float(v)
     if v <= 0:
         raise TypeError("expected a number > 0")
+    return v
+
+
+def _fov(v):
+    v = _float(v)
+    if not 0.0 < v < 180.0:
+        raise TypeError("expected degrees more than 0 and less than 180")
     return v
 
 
@@ -77,7 +91,7 @@ def _str(v):
 def _vector(n):
     def convert(v):
         if not (isinstance(v, list) and len(v) == n and all(_is_number(x) for x in v)):
-            raise TypeError(f"expected a list of {n} numbers")
+            raise TypeError(f"expected a list of {n} numbers (finite, magnitude at most {MAX_NUMBER:g})")
         return np.array(v, dtype=np.float64)
     return convert
 
@@ -89,7 +103,7 @@ def _colour(v):
     """A number (grey) or [r, g, b], all >= 0."""
     c = np.full(3, _float(v)) if _is_number(v) else _vec3(v) if isinstance(v, list) else None
     if c is None:
-        raise TypeError("expected a number or a list of 3 numbers")
+        raise TypeError(f"expected a number or a list of 3 numbers (finite, magnitude at most {MAX_NUMBER:g})")
     if (c < 0).any():
         raise TypeError("colour components must be >= 0")
     return c
@@ -141,7 +155,7 @@ RENDER_KEYS = {
     "target_error": _positive, "time_limit": _positive, "max_spp": _int, "denoise": _bool,
 }
 CAMERA_KEYS = {
-    "position": _vec3, "look_at": _vec3, "up": _vec3, "fov": _positive,
+    "position": _vec3, "look_at": _vec3, "up": _vec3, "fov": _fov,
     "aperture": _non_negative, "focus_distance": _positive, "from_file": _str,
     "shutter": _shutter, "projection": _one_of("perspective", "orthographic"), "ortho_height": _positive,
 }
@@ -216,7 +230,7 @@ class _Reader:
         return out
 
 
-def read_scene_file(path, overrides=None):
+def read_scene_file(path, overrides=None, check_settings=None):
     """Load a TOML scene file.
 
     Parameters
@@ -225,6 +239,9 @@ def read_scene_file(path, overrides=None):
     overrides : dict, optional
         Render settings that take precedence over the file's ``[render]`` table
         (e.g. from the command line).
+    check_settings : callable, optional
+        Called with the validated settings before any mesh is loaded (the command line's
+        memory check, :func:`rtmesh.rendering.memory.check`); it raises to refuse them.
 
     Returns
     -------
@@ -251,10 +268,10 @@ def read_scene_file(path, overrides=None):
     except UnicodeDecodeError:
         raise SceneError(f"{path}: not a UTF-8 text file") from None
     return scene_from_dict(doc, source=path, base_dir=os.path.dirname(os.path.abspath(path)),
-                           overrides=overrides)
+                           overrides=overrides, check_settings=check_settings)
 
 
-def scene_from_dict(doc, source="scene", base_dir=".", overrides=None):
+def scene_from_dict(doc, source="scene", base_dir=".", overrides=None, check_settings=None):
     """Build a scene and its render settings from a parsed scene description.
 
     Parameters
@@ -267,6 +284,8 @@ def scene_from_dict(doc, source="scene", base_dir=".", overrides=None):
         Folder that relative mesh paths are resolved against.
     overrides : dict, optional
         Render settings overriding ``doc["render"]``.
+    check_settings : callable, optional
+        See :func:`read_scene_file`.
 
     Returns
     -------
@@ -284,6 +303,8 @@ def scene_from_dict(doc, source="scene", base_dir=".", overrides=None):
         settings = RenderSettings(**render).validate()
     except ValueError as exc:
         raise r.error("render", str(exc)) from None
+    if check_settings is not None:
+        check_settings(settings)
 
     environment = r.fields(r.table(doc.get("environment", {}), "environment"), ENVIRONMENT_KEYS,
                            "environment")

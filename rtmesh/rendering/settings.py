@@ -13,6 +13,22 @@ PASSES = PASS_NAMES
 # adaptive sampling's cap on samples per pixel when max_spp is not given
 DEFAULT_MAX_SPP = 1024
 
+# The largest values a user may ask for (docs/LIMITS.md).  What fits in memory is usually
+# far less and is checked before rendering (rtmesh.rendering.memory); these bound what the code can
+# represent.  A pixel's sample index is a 64-bit hash input, but a 32-bit number for the
+# Sobol sampler (its points would repeat beyond): 2**40 samples a pixel at most, 2**32 with
+# Sobol (the memory check refuses far fewer: a pixel's samples are rendered in one chunk).
+MAX_IMAGE_SIDE = 1 << 20
+MAX_SPP = 1 << 40
+MAX_SOBOL_SPP = 1 << 32
+# bounces are depth levels of Python orchestration; lights, AO and threads beyond these are
+# typing mistakes rather than wishes
+MAX_DEPTH = 1024
+MAX_RAYS_PER_HIT = 4096
+MAX_THREADS = 1024
+# 2 ** 64 overflows float32 tone mapping long before; 64 stops is already absurd
+MAX_EXPOSURE_STOPS = 64.0
+
 
 @dataclass
 class RenderSettings:
@@ -90,32 +106,57 @@ class RenderSettings:
     denoise: bool = False
 
     def validate(self):
-        """Raise ValueError naming the first setting out of range."""
+        """Raise ValueError naming the first setting out of range (and the value given)."""
+        def whole(value, low, high):
+            # an integer (bool excluded), low <= value <= high (the messages say "integer"
+            # only where the type is wrong: scene files and the command line check types)
+            return isinstance(value, int) and not isinstance(value, bool) and low <= value <= high
+
+        def real(value, low=-math.inf, high=math.inf):
+            # a finite number, low < value < high
+            return (isinstance(value, (int, float)) and not isinstance(value, bool)
+                    and math.isfinite(value) and low < value < high)
+
         checks = [
-            (self.width >= 1 and self.height >= 1, "width and height must be >= 1"),
-            (self.spp >= 1, "spp must be >= 1"),
-            (self.sampler in SAMPLERS, f"sampler must be one of {', '.join(SAMPLERS)}"),
-            (self.max_depth >= 0, "max_depth must be >= 0"),
-            (self.threads is None or self.threads >= 1, "threads must be >= 1"),
-            (self.chunk_samples >= 1, "chunk_samples must be >= 1"),
-            (self.cutoff >= 0, "cutoff must be >= 0"),
-            (self.fresnel in FRESNEL_MODES, f"fresnel must be one of {', '.join(FRESNEL_MODES)}"),
-            (self.ao_samples >= 0, "ao_samples must be >= 0"),
-            (self.ao_distance is None or self.ao_distance > 0, "ao_distance must be > 0"),
-            (self.light_samples >= 1, "light_samples must be >= 1"),
-            (all(p in PASSES for p in self.passes), f"passes must be among {', '.join(PASSES)}"),
-            (self.tonemap in TONEMAPS, f"tonemap must be one of {', '.join(TONEMAPS)}"),
-            (self.target_error is None or 0 < self.target_error < math.inf,
-             "target_error must be a number > 0"),
-            (self.time_limit is None or 0 < self.time_limit < math.inf,
-             "time_limit must be a number of seconds > 0"),
-            (self.max_spp is None or self.max_spp >= self.spp, "max_spp must be >= spp"),
+            ("width", whole(self.width, 1, MAX_IMAGE_SIDE), f">= 1 and <= {MAX_IMAGE_SIDE}"),
+            ("height", whole(self.height, 1, MAX_IMAGE_SIDE), f">= 1 and <= {MAX_IMAGE_SIDE}"),
+            ("spp", whole(self.spp, 1, MAX_SPP), f">= 1 and <= {MAX_SPP}"),
+            ("sampler", self.sampler in SAMPLERS, f"one of {', '.join(SAMPLERS)}"),
+            ("max_depth", whole(self.max_depth, 0, MAX_DEPTH), f">= 0 and <= {MAX_DEPTH}"),
+            ("seed", whole(self.seed, -2**63, 2**64 - 1), ">= -2**63 and <= 2**64 - 1"),
+            ("threads", self.threads is None or whole(self.threads, 1, MAX_THREADS),
+             f">= 1 and <= {MAX_THREADS}"),
+            ("chunk_samples", whole(self.chunk_samples, 1, 2**31 - 1), ">= 1 and <= 2**31 - 1"),
+            ("cutoff", real(self.cutoff) and self.cutoff >= 0, ">= 0 and finite"),
+            ("fresnel", self.fresnel in FRESNEL_MODES, f"one of {', '.join(FRESNEL_MODES)}"),
+            ("ao_samples", whole(self.ao_samples, 0, MAX_RAYS_PER_HIT),
+             f">= 0 and <= {MAX_RAYS_PER_HIT}"),
+            ("ao_distance", self.ao_distance is None or real(self.ao_distance, 0.0), "> 0 and finite"),
+            ("light_samples", whole(self.light_samples, 1, MAX_RAYS_PER_HIT),
+             f">= 1 and <= {MAX_RAYS_PER_HIT}"),
+            ("passes", all(p in PASSES for p in self.passes), f"among {', '.join(PASSES)}"),
+            ("exposure", real(self.exposure) and abs(self.exposure) <= MAX_EXPOSURE_STOPS,
+             f"a number of stops from {-MAX_EXPOSURE_STOPS:g} to {MAX_EXPOSURE_STOPS:g}"),
+            ("tonemap", self.tonemap in TONEMAPS, f"one of {', '.join(TONEMAPS)}"),
+            ("target_error", self.target_error is None or real(self.target_error, 0.0), "a number > 0 (finite)"),
+            ("time_limit", self.time_limit is None or real(self.time_limit, 0.0),
+             "a number of seconds > 0 (finite)"),
+        ]
+        for name, ok, expected in checks:
+            if not ok:
+                raise ValueError(f"{name} must be {expected} (got {getattr(self, name)!r})")
+        relations = [
+            (self.max_spp is None or whole(self.max_spp, self.spp, MAX_SPP),
+             f"max_spp must be >= spp and <= {MAX_SPP} (got {self.max_spp!r})"),
+            (self.sampler != "sobol" or self.sample_cap <= MAX_SOBOL_SPP,
+             f"spp and max_spp must be <= {MAX_SOBOL_SPP} with the sobol sampler (its sample index "
+             f"is 32-bit; got {self.sample_cap})"),
             (self.max_spp is None or self.adaptive,
              "max_spp needs target_error or time_limit (adaptive sampling)"),
             (self.spp >= 2 or not self.adaptive,
              "spp must be >= 2 with target_error or time_limit (one sample gives no error estimate)"),
         ]
-        for ok, message in checks:
+        for ok, message in relations:
             if not ok:
                 raise ValueError(message)
         return self

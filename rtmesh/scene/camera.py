@@ -25,7 +25,8 @@ class Camera:
     up : (3,) float
         Approximate up direction; made orthogonal to the view direction.
     fov : float
-        Vertical field of view, degrees.
+        Vertical field of view, degrees: more than 0 and less than 180 (a pinhole maps
+        the image plane at unit distance; 180 degrees would be an infinite plane).
     aperture : float
         Lens diameter, scene units.  0 gives a pinhole camera (everything sharp).
     focus_distance : float or None
@@ -56,6 +57,8 @@ class Camera:
         self.look_at = np.asarray(self.look_at, dtype=np.float64)
         self.up = np.asarray(self.up, dtype=np.float64)
         self.shutter = (float(self.shutter[0]), float(self.shutter[1]))
+        if not 0.0 < self.fov < 180.0:  # NaN included
+            raise ValueError(f"camera fov must be more than 0 and less than 180 degrees (got {self.fov!r})")
         if self.projection not in PROJECTIONS:
             raise ValueError(f"camera projection must be one of {', '.join(PROJECTIONS)}")
         if self.orthographic:
@@ -194,7 +197,8 @@ def frame_bounds(bounds, fov=45.0, aspect=1.0, direction=(0.6, 0.45, 1.0), up=(0
     bounds : (2, 3) float
         Minimum and maximum corner, scene units.
     fov : float
-        Vertical field of view, degrees.
+        Vertical field of view, degrees: more than 0 and less than 180 (a pinhole maps
+        the image plane at unit distance; 180 degrees would be an infinite plane).
     aspect : float
         Width / height of the image.
     direction : (3,) float
@@ -208,10 +212,69 @@ def frame_bounds(bounds, fov=45.0, aspect=1.0, direction=(0.6, 0.45, 1.0), up=(0
     """
     bounds = np.asarray(bounds, dtype=np.float64)
     centre = bounds.mean(axis=0)
-    radius = max(0.5 * float(np.linalg.norm(bounds[1] - bounds[0])), 1e-6)
+    radius = 0.5 * float(np.linalg.norm(bounds[1] - bounds[0]))
+    if not radius > 0.0:  # a single point: a size relative to where it is
+        radius = max(1e-6 * float(np.abs(centre).max()), 1e-6)
     half_v = np.radians(fov) * 0.5
     half_h = np.arctan(np.tan(half_v) * aspect)
     distance = 1.05 * radius / np.sin(min(half_v, half_h))
     d = np.asarray(direction, dtype=np.float64)
     d = d / np.linalg.norm(d)
     return Camera(position=centre + d * distance, look_at=centre, up=np.asarray(up, float), fov=fov)
+
+
+# a part of the scene this many times smaller than the whole would be far below a pixel
+OUTLIER_RATIO = 1e6
+
+
+def framing_bounds(vertices, faces):
+    """The faces an automatic camera frames: all of them, or their main cluster when faces
+    far away would shrink the rest below a pixel.
+
+    Faces split into clusters along an axis where no face's extent bridges the gap between
+    them.  The cluster with the most faces (the one nearest the origin among equals) is
+    the main one, and is split again, for as long as the part kept is more than
+    :data:`OUTLIER_RATIO` times smaller than what it was cut from (largest extent over the
+    three axes).  Any ordinary scene (objects side by side, a sky dome around a figure, a
+    card above a floor) keeps every face.
+
+    Parameters
+    ----------
+    vertices : (v, 3) float
+    faces : (f, 3) int
+
+    Returns
+    -------
+    bounds : (2, 3) float
+        Of the faces kept.
+    keep : (k,) int or None
+        The faces kept, ascending; None when they are all of them.
+    """
+    triangles = vertices[faces]
+    lo, hi = triangles.min(axis=1), triangles.max(axis=1)
+    keep = np.arange(len(faces))
+    changed = True
+    while changed and len(keep) > 1:
+        changed = False
+        for axis in range(3):
+            low, high = lo[keep, axis], hi[keep, axis]
+            order = np.argsort(low, kind="stable")
+            reach = np.maximum.accumulate(high[order])
+            cuts = np.flatnonzero(low[order][1:] > reach[:-1]) + 1
+            if not len(cuts):
+                continue
+            starts, stops = np.concatenate([[0], cuts]), np.concatenate([cuts, [len(order)]])
+            sizes = stops - starts
+            centres = np.abs(0.5 * (low[order[starts]] + reach[stops - 1]))
+            candidates = np.flatnonzero(sizes == sizes.max())
+            main = candidates[np.argmin(centres[candidates])]
+            members = order[starts[main]:stops[main]]
+            # sizes over every axis (a flat part is not small)
+            whole = np.max(hi[keep].max(axis=0) - lo[keep].min(axis=0))
+            part = np.max(hi[keep[members]].max(axis=0) - lo[keep[members]].min(axis=0))
+            if whole > OUTLIER_RATIO * part:
+                keep, changed = np.sort(keep[members]), True
+                break
+    kept = triangles[keep].reshape(-1, 3)
+    bounds = np.stack([kept.min(axis=0), kept.max(axis=0)])
+    return bounds, (None if len(keep) == len(faces) else keep)

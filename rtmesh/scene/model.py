@@ -10,9 +10,12 @@ from rtmesh.core.errors import MeshError
 from rtmesh.geometry import build_kernels
 from rtmesh.lights.point_lights import DirectionalLight
 from rtmesh.materials.table import Material, MaterialTable
-from rtmesh.scene.camera import Camera, frame_bounds
+from rtmesh.scene.camera import Camera, frame_bounds, framing_bounds
 
 log = logging.getLogger(__name__)
+
+# the largest coordinate Embree's float32 vertices can hold
+FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
 @dataclass
@@ -109,6 +112,13 @@ class Scene:
         points = self.vertices if used.all() else self.vertices[used]
         return np.stack([points.min(axis=0), points.max(axis=0)])
 
+    def _keep_faces(self, keep):
+        """Keep only the faces ``keep`` (indices) and their per-face data."""
+        self.faces, self.face_normals = self.faces[keep], self.face_normals[keep]
+        self.material_id, self.object_id = self.material_id[keep], self.object_id[keep]
+        if self.smooth is not None:
+            self.smooth = self.smooth[keep]
+
     @classmethod
     def from_parts(cls, parts, materials=None, lights=None, camera=None, ambient=None,
                    background=None, source="scene", aspect=1.0):
@@ -159,6 +169,15 @@ class Scene:
                 log.warning("%s: object '%s': dropped %d faces with NaN/Inf vertices",
                             source, part.name, int((~keep).sum()))
                 f = f[keep]
+            # Embree holds float32: a coordinate beyond its range would become infinite
+            beyond = np.abs(v).max(axis=1, initial=0.0) > FLOAT32_MAX  # False for NaN
+            if beyond.any():
+                far = beyond[f].any(axis=1)
+                if far.any():
+                    log.warning("%s: object '%s': dropped %d faces with coordinates beyond float32's "
+                                "range (%.3g), which the ray tracer cannot hold", source, part.name,
+                                int(far.sum()), FLOAT32_MAX)
+                    f = f[~far]
             face_normals, area2 = build_kernels.face_crosses(v, f)
             nondegenerate = area2 > 0.0
             if not nondegenerate.all():
@@ -168,8 +187,9 @@ class Scene:
             if not len(f):
                 log.warning("%s: object '%s' has no renderable triangles; skipped", source, part.name)
                 continue
-            # non-finite vertices that no face uses are harmless but must not reach Embree
-            vertices.append(np.where(np.isfinite(v), v, 0.0))
+            # non-finite (or beyond float32) vertices that no face uses are harmless but must
+            # not reach Embree
+            vertices.append(np.where(np.isfinite(v) & (np.abs(v) <= FLOAT32_MAX), v, 0.0))
             faces.append(f + offset)
             normals.append(face_normals)
             vn, face_smooth = _unit_vertex_normals(part.vertex_normals, v, f)
@@ -219,7 +239,17 @@ class Scene:
             vertex_colors=vertex_colors,
         )
         if camera is None:
-            scene.camera = frame_bounds(scene.bounds, aspect=aspect)
+            bounds, keep = framing_bounds(scene.vertices, scene.faces)
+            if keep is not None:
+                # the rest would be far below a pixel (and below float32's grid once the
+                # renderer centres the scene on its bounds): drop the far faces, saying so
+                whole = scene.bounds
+                log.warning("%s: dropped %d of %d faces that lie far from the rest (the scene "
+                            "spans %.3g, the rest %.3g)", source, len(scene.faces) - len(keep),
+                            len(scene.faces), float(np.max(whole[1] - whole[0])),
+                            float(np.max(bounds[1] - bounds[0])))
+                scene._keep_faces(keep)
+            scene.camera = frame_bounds(bounds, aspect=aspect)
         if lights is None:
             scene.lights = default_lights(scene.camera)
         return scene

@@ -1,0 +1,136 @@
+"""The corpus of bad inputs (tests/data/bad/, written by tests/hostile_files.py) through the
+command line: for each file the exit status, at most one error line and no traceback, no
+output file left behind, and the expected error or warning.
+
+Exit statuses (docs/LIMITS.md): 0 rendered (perhaps with warnings), 2 a user error.  No
+file of the corpus may end in an internal error (70) or a Python traceback.
+"""
+
+import logging
+import os
+
+import hostile_files
+import pytest
+
+from rtmesh.cli import main
+
+BAD = hostile_files.BAD
+
+# file -> (exit status, a fragment of the error line (status 2) or of a warning (status 0))
+EXPECTED = {
+    "nan_vertices.obj": (0, "dropped 8 of 12 faces that use vertices with NaN or infinite coordinates"),
+    "huge_cube.obj": (0, None),
+    "tiny_cube.obj": (0, None),
+    "offset_cube.obj": (0, None),
+    "far_outlier.obj": (0, "dropped 12 of 24 faces that lie far from the rest"),
+    "wall_with_door.obj": (0, None),
+    "index_out_of_range.obj": (2, "a face refers to a vertex the file does not have"),
+    "short_faces.obj": (0, "1 faces with fewer than 3 vertices skipped"),
+    "garbage.obj": (2, "not a valid OBJ file (binary data, not text)"),
+    "garbage.stl": (2, "not a valid STL file (not ASCII, and its binary header announces"),
+    "garbage.glb": (2, "not a valid GLB file (no glTF header)"),
+    "garbage.ply": (2, "not a valid PLY file (no 'ply' header)"),
+    "latin1_garbage.off": (2, "cannot read mesh"),
+    "only_comments.obj": (2, "nothing to render (no triangles)"),
+    "lying_count.stl": (2, "its binary header announces 1000 triangles (50084 bytes) in a file of 584 bytes"),
+    "truncated_ascii.stl": (2, "nothing to render (no triangles)"),
+    "lying_header.ply": (2, "nothing to render (no triangles)"),
+    "truncated_faces.ply": (0, "the file holds fewer elements than its header announces (1 of 3 face elements)"),
+    "index_out_of_range.ply": (0, "dropped 1 of 2 faces that refer to vertices the file does not have"),
+    "garbage_mtl.obj": (0, "garbage.mtl: malformed values ignored, defaults used: line 2: kd 'abc 1 zz'"),
+    "node_cycle.gltf": (0, "node 'b' has no transform from the scene's root (a cycle in the node graph"),
+    "zero_scale.gltf": (0, "node 'hidden' has a zero scale"),
+    "missing_buffer.gltf": (2, "buffer file gone.bin not found"),
+    "truncated.glb": (2, "cannot read mesh"),
+    "corrupt_texture.glb": (2, "square baseColorTexture: corrupt or unreadable texture"),
+    "bad_types.toml": (2, "bad_types.toml: render.width: expected an integer"),
+    "fov_270.toml": (2, "fov_270.toml: camera.fov: expected degrees more than 0 and less than 180"),
+    "huge_spp.toml": (2, "render at 100000000000 spp on "),
+    "not_utf8.toml": (2, "not_utf8.toml: not a UTF-8 text file"),
+}
+
+
+def test_the_corpus_is_what_hostile_files_writes_and_small():
+    # regenerate with: python tests/hostile_files.py
+    corpus = hostile_files.corpus()
+    on_disk = sorted(os.listdir(BAD))
+    assert on_disk == sorted(corpus)
+    for name, content in corpus.items():
+        with open(os.path.join(BAD, name), "rb") as f:
+            assert f.read() == (content if isinstance(content, bytes) else content.encode()), name
+    assert sum(os.path.getsize(os.path.join(BAD, n)) for n in on_disk) < 1_000_000
+    # every input file of the corpus has an expectation (the MTL is read through its OBJ)
+    assert sorted(EXPECTED) == sorted(n for n in on_disk if not n.endswith(".mtl"))
+
+
+def run(path, tmp_path, capsys, caplog, *extra):
+    """Run the command line in-process: (status, error lines, warnings, output path)."""
+    out = tmp_path / "out.png"
+    with caplog.at_level(logging.WARNING):
+        status = main(["render", str(path), "-o", str(out), "--width", "24", "--height", "18", "-q", *extra])
+    err = capsys.readouterr().err
+    warnings = [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING]
+    return status, err, warnings, out
+
+
+@pytest.mark.parametrize("name", sorted(EXPECTED))
+def test_bad_input(name, tmp_path, capsys, caplog):
+    status, message = EXPECTED[name]
+    code, err, warnings, out = run(os.path.join(BAD, name), tmp_path, capsys, caplog)
+    assert code == status, (err, warnings)
+    assert "Traceback" not in err and "internal error" not in err
+    errors = [line for line in err.splitlines() if line.startswith("rtmesh: error:")]
+    if status == 2:
+        assert len(errors) == 1 and len(err.strip().splitlines()) == 1, err
+        assert message in errors[0], errors[0]
+        assert not out.exists()
+    else:
+        assert not errors and out.exists()
+        if message is not None:
+            assert any(message in w for w in warnings), warnings
+        else:
+            assert not warnings, warnings
+    # no temporary of the atomic write is left either
+    assert [p.name for p in tmp_path.iterdir()] == (["out.png"] if status == 0 else [])
+
+
+def test_a_huge_texture_made_at_test_time_is_one_line(tmp_path, capsys, caplog):
+    hostile_files.write_big_png(tmp_path / "big.png")  # 20000 x 20000, a few hundred KB
+    (tmp_path / "big.mtl").write_text("newmtl m\nmap_Kd big.png\n")
+    obj = tmp_path / "big.obj"
+    obj.write_text("mtllib big.mtl\nusemtl m\n" + hostile_files.cube_obj())
+    code, err, _, out = run(obj, tmp_path, capsys, caplog)
+    assert code == 2 and not out.exists()
+    assert err == (f"rtmesh: error: {tmp_path / 'big.png'}: texture of 400000000 pixels is larger than "
+                   "rtmesh reads (67108864 pixels, e.g. 8192x8192): downsample it\n")
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--width", "100000", "--height", "100000"], "a 100000x100000 render at 4 spp on "),
+    (["--exposure", "nan"], "exposure must be a number of stops from -64 to 64 (got nan)"),
+    (["--exposure", "inf"], "exposure must be a number of stops from -64 to 64 (got inf)"),
+    (["--ao-distance", "nan"], "ao_distance must be > 0 and finite (got nan)"),
+    (["--max-depth", "100000"], "max_depth must be >= 0 and <= 1024"),
+])
+def test_bad_settings_on_the_command_line(args, message, tmp_path, capsys, caplog):
+    code, err, _, out = run(os.path.join(BAD, "offset_cube.obj"), tmp_path, capsys, caplog, *args)
+    assert code == 2 and not out.exists()
+    assert len(err.splitlines()) == 1 and message in err
+
+
+@pytest.mark.parametrize("name", ["corrupt_texture.glb", "nan_vertices.obj"])
+def test_as_a_separate_process(name, tmp_path):
+    # as a user runs it: stderr holds only rtmesh's own lines, no NumPy or Python warning
+    import subprocess
+    import sys
+
+    out = tmp_path / "out.png"
+    proc = subprocess.run([sys.executable, "-m", "rtmesh.cli", "render", os.path.join(BAD, name), "-o",
+                           str(out), "--width", "24", "--height", "18", "-q"],
+                          capture_output=True, text=True, timeout=300)
+    status, message = EXPECTED[name]
+    assert proc.returncode == status
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and message in lines[0]
+    assert lines[0].startswith("rtmesh: error: " if status else "rtmesh: warning: ")
+    assert out.exists() == (status == 0)
