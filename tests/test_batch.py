@@ -8,6 +8,7 @@ import json
 import os
 import shutil
 import signal
+import sqlite3
 import subprocess
 import sys
 import threading
@@ -18,7 +19,7 @@ import pytest
 import trimesh
 
 import rtmesh
-from rtmesh.batch import REPORT_NAME
+from rtmesh.batch import REPORT_NAME, SUMMARY_NAME
 from rtmesh.batch_inputs import InputError, discover
 from rtmesh.batch_ledger import LEDGER_NAME, Ledger
 from rtmesh.cli import main
@@ -52,9 +53,35 @@ def truncated_glb(path):
 
 
 def ledger_records(outdir):
-    """Every line of the ledger, parsed (duplicates kept)."""
-    with open(os.path.join(outdir, LEDGER_NAME)) as f:
-        return [json.loads(line) for line in f if line.strip()]
+    """Every row of the ledger (read-only, while a batch may be writing it)."""
+    path = os.path.join(outdir, LEDGER_NAME)
+    if not os.path.exists(path):
+        return []
+    db = sqlite3.connect(f"file:{path}?mode=ro", uri=True, timeout=10)
+    try:
+        db.row_factory = sqlite3.Row
+        rows = [dict(r) for r in db.execute("SELECT * FROM images")]
+    except sqlite3.OperationalError:  # not created yet
+        rows = []
+    finally:
+        db.close()
+    for r in rows:
+        r["files"] = [o[0] for o in json.loads(r["outputs"])]
+    return rows
+
+
+def counts(**given):
+    """A report's counts: the given ones, zero for the rest."""
+    keys = ("assets", "done", "skipped", "failed", "known_failed", "retried", "not_attempted", "images")
+    return {k: given.get(k, 0) for k in keys}
+
+
+def summary(outdir):
+    return json.loads((outdir / SUMMARY_NAME).read_text())
+
+
+def report_lines(outdir):
+    return [json.loads(line) for line in (outdir / REPORT_NAME).read_text().splitlines()]
 
 
 def temporary_files(folder):
@@ -78,7 +105,7 @@ def test_duplicate_file_names_in_different_folders_get_distinct_outputs(tmp_path
     make_mesh(src / "tables" / "model.ply")  # same stem, same folder, other format
     out = tmp_path / "out"
     report = rtmesh.batch_convert([src], out, workers=2, **TINY)
-    assert report.counts == {"assets": 3, "done": 3, "skipped": 0, "failed": 0, "images": 3}
+    assert report.counts == counts(assets=3, done=3, images=3)
     for name in ("chairs/model.obj.png", "tables/model.obj.png", "tables/model.ply.png"):
         image, _ = read_image(out / name)
         assert image.shape == (16, 24, 3)
@@ -88,13 +115,14 @@ def test_duplicate_file_names_in_different_folders_get_distinct_outputs(tmp_path
     assert not np.array_equal(a, b)
 
 
-def test_names_mirror_the_deepest_common_folder_of_the_inputs(tmp_path):
+def test_names_are_relative_to_the_input_they_were_found_under(tmp_path):
     first = make_mesh(tmp_path / "x" / "a" / "m.obj")
     second = make_mesh(tmp_path / "x" / "b" / "deep" / "m.obj")
     names = [a.name for a in discover([first, second, first])]  # a file named twice: once
-    assert names == ["a/m.obj", "b/deep/m.obj"]
-    # a folder input is the base of its own files, whatever they hold
+    assert names[0] == "m.obj" and names[1].startswith("m.obj-") and len(names) == 2
+    # a folder input is the base of its own files, whatever else is given
     assert [a.name for a in discover([tmp_path / "x" / "b"])] == ["deep/m.obj"]
+    assert [a.name for a in discover([tmp_path / "x" / "b", first])] == ["deep/m.obj", "m.obj"]
 
 
 def test_empty_input_is_a_one_line_error(tmp_path):
@@ -148,8 +176,7 @@ def test_corrupt_files_in_the_middle_of_a_batch_fail_alone(tmp_path):
     code = main(["batch", str(src), "-o", str(out), "--width", "16", "--height", "16",
                  "--spp", "1", "--workers", "2", "-q"])
     assert code == 1  # something failed
-    report = json.loads((out / REPORT_NAME).read_text())
-    status = {a["asset"]: a for a in report["assets"]}
+    status = {a["asset"]: a for a in report_lines(out)}
     assert status["a_good.obj"]["status"] == status["e_good.ply"]["status"] == "done"
     for bad in ("b_empty.obj", "d_truncated.glb"):
         assert status[bad]["status"] == "failed"
@@ -158,7 +185,7 @@ def test_corrupt_files_in_the_middle_of_a_batch_fail_alone(tmp_path):
         assert not (out / f"{bad}.png").exists()
     # whatever happens to a half-broken file, the batch finished and accounted for it
     assert status["c_notenoughindices.obj"]["status"] in ("done", "failed")
-    assert report["counts"]["assets"] == 5
+    assert summary(out)["counts"]["assets"] == 5 == len(status)
     assert temporary_files(out) == []
 
 
@@ -225,23 +252,152 @@ def test_rerun_skips_finished_images_and_redoes_changed_or_deleted_ones(tmp_path
     assert os.stat(out / "a.obj.png").st_ino == inode  # not rewritten
     os.unlink(out / "b.obj.png")
     again = rtmesh.batch_convert([tmp_path / "src"], out, workers=1, **TINY)
-    assert again.counts == {"assets": 2, "done": 1, "skipped": 1, "failed": 0, "images": 1}
+    assert again.counts == counts(assets=2, done=1, skipped=1, images=1)
     # other settings, other images: nothing is skipped
     again = rtmesh.batch_convert([tmp_path / "src"], out, workers=1, **{**TINY, "spp": 2})
     assert again.counts["done"] == 2
 
 
-def test_ledger_ignores_a_torn_last_line(tmp_path):
+def test_ledger_rows_commit_per_asset_and_refuse_old_or_foreign_formats(tmp_path):
     with Ledger(str(tmp_path)) as ledger:
-        ledger.record("a", "f1", "done", files=[])
-        ledger.record("b", "f2", "done", files=[])
-    with open(tmp_path / LEDGER_NAME, "a") as f:
-        f.write('{"key": "c", "fingerpri')  # a write cut short
+        ledger.record("a", "a.obj", "f1", "done", outputs=[["a.obj.png", 3, 1, "x"]])
+        ledger.record("b", "b.obj", "f2", "failed", stage="load", message="bad")
+        ledger.commit()
+        ledger.record("b", "b.obj", "f2", "failed", stage="load", message="bad again")
     with Ledger(str(tmp_path)) as ledger:
-        assert ledger.is_done("a", "f1") and ledger.is_done("b", "f2")
-        assert not ledger.is_done("b", "other inputs") and "c" not in ledger.records
-    # reopening compacted it back to whole lines
-    assert [r["key"] for r in ledger_records(tmp_path)] == ["a", "b"]
+        found = ledger.lookup(["a", "b", "c"])
+        assert sorted(found) == ["a", "b"] and found["a"].status == "done"
+        assert found["b"].attempts == 2 and found["b"].message == "bad again"  # same inputs
+        assert ledger.count() == 2
+        with pytest.raises(rtmesh.OutputError, match="another rtmesh batch"):
+            Ledger(str(tmp_path))
+    # rtmesh 0.1's JSON-lines ledger is refused in one line, never silently trusted
+    old = tmp_path / "old"
+    old.mkdir()
+    (old / "rtmesh-batch-ledger.jsonl").write_text('{"key": "a", "status": "done"}\n')
+    code, out, err = run_cli("batch", make_mesh(tmp_path / "m.obj"), "-o", old)
+    assert code == 2 and err.count("\n") == 1 and "rtmesh 0.1" in err and "delete it" in err
+    assert sorted(os.listdir(old)) == ["rtmesh-batch-ledger.jsonl"]
+
+
+def test_no_temporary_file_outlives_a_killed_run(tmp_path):
+    """The SQLite ledger is never copied (no compaction); what a killed run of any version
+    left behind (image, summary, probe and old compaction temporaries) is removed."""
+    out = tmp_path / "out"
+    out.mkdir()
+    stale = [".rtmesh-batch-ledger.k2j3h4.tmp", ".rtmesh-batch-summary.json.x1.tmp",
+             ".rtmesh-batch-probe-0123.tmp", ".m.obj.ab12.tmp.png"]
+    for name in stale:
+        (out / name).write_bytes(b"x" * 1000)
+    rtmesh.batch_convert([make_mesh(tmp_path / "src" / "m.obj")], out, workers=1, **TINY)
+    assert temporary_files(out) == []
+    # readable by the group and others, as the umask says (not 0600)
+    umask = os.umask(0)
+    os.umask(umask)
+    for name in (SUMMARY_NAME, REPORT_NAME, LEDGER_NAME):
+        assert os.stat(out / name).st_mode & 0o777 == 0o666 & ~umask, name
+
+
+# ------------------------------------------------------------------------- identity, changes
+
+def test_adding_an_input_or_reaching_the_library_through_a_link_renames_nothing(tmp_path):
+    make_mesh(tmp_path / "A" / "chairs" / "oak.obj")
+    make_mesh(tmp_path / "A" / "m.obj")
+    make_mesh(tmp_path / "B" / "m.obj", kind="box")  # same relative path as A's
+    out = tmp_path / "out"
+    first = rtmesh.batch_convert([tmp_path / "A"], out, workers=1, **TINY)
+    assert first.counts["done"] == 2
+    inode = os.stat(out / "chairs" / "oak.obj.png").st_ino
+    both = rtmesh.batch_convert([tmp_path / "A", tmp_path / "B"], out, workers=1, **TINY)
+    assert both.counts == counts(assets=3, done=1, skipped=2, images=1)
+    (new,) = [a["asset"] for a in both.assets]
+    assert new.startswith("m.obj-")  # B's clashing name gets a suffix, A's names stay
+    os.symlink(tmp_path / "A", tmp_path / "link")
+    linked = rtmesh.batch_convert([tmp_path / "link"], out, workers=1, **TINY)
+    assert linked.counts == counts(assets=2, skipped=2)
+    assert os.stat(out / "chairs" / "oak.obj.png").st_ino == inode
+    # manifests: one path per line; "#" starts a comment only at a line start or after a space
+    make_mesh(tmp_path / "A" / "part#2.obj")
+    (tmp_path / "A" / "list.txt").write_text("# parts\npart#2.obj   # the second\nm.obj\n")
+    assert [a.name for a in discover([tmp_path / "A" / "list.txt"])] == ["part#2.obj", "m.obj"]
+
+
+def test_symlinked_subfolders_are_searched_once(tmp_path):
+    make_mesh(tmp_path / "elsewhere" / "x.obj")
+    make_mesh(tmp_path / "lib" / "a.obj")
+    os.symlink(tmp_path / "elsewhere", tmp_path / "lib" / "linked")
+    os.symlink(tmp_path / "lib", tmp_path / "lib" / "loop")  # a cycle is not followed
+    assert [a.name for a in discover([tmp_path / "lib"])] == ["a.obj", "linked/x.obj"]
+
+
+def obj_with_material(folder, colour="1 0 0", texture=None):
+    folder.mkdir(parents=True, exist_ok=True)
+    make_mesh(folder / "m.obj")
+    text = (folder / "m.obj").read_text()
+    (folder / "m.obj").write_text("mtllib m.mtl\nusemtl paint\n" + text)
+    mtl = f"newmtl paint\nKd {colour}\n" + (f"map_Kd {texture}\n" if texture else "")
+    (folder / "m.mtl").write_text(mtl)
+    return folder / "m.obj"
+
+
+def test_editing_a_dependency_or_damaging_an_image_redoes_it(tmp_path):
+    from PIL import Image
+
+    src = tmp_path / "src"
+    obj_with_material(src / "paint")
+    Image.new("RGB", (4, 4), (0, 255, 0)).save(src / "tex.bmp")  # fixed size
+    obj_with_material(src / "textured", texture="../tex.bmp")
+    gltf = trimesh.creation.box().export(file_type="gltf")
+    (src / "buffers").mkdir()
+    for name, data in gltf.items():
+        (src / "buffers" / name).write_bytes(data)
+    out = tmp_path / "out"
+    run = lambda **kw: rtmesh.batch_convert([src], out, workers=1, **{**TINY, **kw})  # noqa: E731
+    assert run().counts["done"] == 3
+    rows = {r["key"]: json.loads(r["inputs"]) for r in ledger_records(out)}
+    assert [e[0] for e in rows["paint/m.obj"]] == ["", "m.mtl"]
+    assert [e[0] for e in rows["textured/m.obj"]] == ["", "m.mtl", "../tex.bmp"]
+    assert sorted(e[0] for e in rows["buffers/model.gltf"])[1:] == ["gltf_buffer_0.bin",
+                                                                    "gltf_buffer_1.bin"]
+    assert run().counts["skipped"] == 3
+
+    # each dependency edited, same size and time kept: content decides
+    def edit(path, data):
+        st = os.stat(path)
+        path.write_bytes(data)
+        os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns))
+
+    edit(src / "paint" / "m.mtl", (src / "paint" / "m.mtl").read_bytes().replace(b"1 0 0", b"0 0 1"))
+    Image.new("RGB", (4, 4), (255, 0, 255)).save(tmp_path / "t.bmp")
+    edit(src / "tex.bmp", (tmp_path / "t.bmp").read_bytes())
+    buffer = src / "buffers" / "gltf_buffer_1.bin"  # the box's 8 float32 positions
+    edit(buffer, (np.frombuffer(buffer.read_bytes(), np.float32) * 2).tobytes())
+    # with --trust-mtime, equal size and time are taken as unchanged...
+    assert run(trust_mtime=True).counts["skipped"] == 3
+    # ...by default the content is compared
+    again = run()
+    assert again.counts == counts(assets=3, done=3, images=3)
+    assert {a["asset"] for a in again.assets} == {"paint/m.obj", "textured/m.obj", "buffers/model.gltf"}
+
+    # damaged images: truncated, emptied, overwritten by another asset's image (same size)
+    png = out / "paint" / "m.obj.png"
+    png.write_bytes(png.read_bytes()[:50])
+    (out / "textured" / "m.obj.png").write_bytes(b"")
+    assert run(trust_mtime=True).counts == counts(assets=3, done=2, skipped=1, images=2)
+    shutil.copy(out / "paint" / "m.obj.png", out / "textured" / "m.obj.png")
+    data = bytearray(png.read_bytes())
+    data[-20] ^= 0xFF  # same size, other content
+    png.write_bytes(bytes(data))
+    assert run().counts == counts(assets=3, done=2, skipped=1, images=2)
+    # the rtmesh version is part of every image's fingerprint
+    from rtmesh import batch_identity
+
+    fp = batch_identity.image_fingerprint({"spp": 1}, {"name": "iso"}, ["*.png"], False)
+    batch_identity.__version__ = "99"
+    try:
+        assert batch_identity.image_fingerprint({"spp": 1}, {"name": "iso"}, ["*.png"], False) != fp
+    finally:
+        batch_identity.__version__ = rtmesh.__version__
 
 
 def test_resume_after_sigkill_writes_every_image_exactly_once(tmp_path):
@@ -256,7 +412,7 @@ def test_resume_after_sigkill_writes_every_image_exactly_once(tmp_path):
     ledger = out / LEDGER_NAME
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline and batch.poll() is None:
-        if ledger.exists() and len(ledger.read_text().splitlines()) >= 3:
+        if ledger.exists() and len(ledger_records(out)) >= 3:
             break
         time.sleep(0.02)
     assert batch.poll() is None, "the batch finished before it could be killed"
@@ -276,7 +432,7 @@ def test_resume_after_sigkill_writes_every_image_exactly_once(tmp_path):
 
     proc = subprocess.run(command, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
-    report = json.loads((out / REPORT_NAME).read_text())
+    report = summary(out)
     assert report["counts"]["skipped"] == len(finished)
     assert report["counts"]["done"] == 16 - len(finished)
     records = ledger_records(out)
@@ -333,7 +489,7 @@ def test_dask_cluster_with_a_worker_killed_mid_batch(tmp_path):
         ledger = out / LEDGER_NAME
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline and runner.is_alive():
-            if ledger.exists() and len(ledger.read_text().splitlines()) >= 2:
+            if ledger.exists() and len(ledger_records(out)) >= 2:
                 break
             time.sleep(0.01)
         assert runner.is_alive(), "the batch finished before a worker could be killed"
@@ -341,7 +497,7 @@ def test_dask_cluster_with_a_worker_killed_mid_batch(tmp_path):
         runner.join(timeout=120)
         assert not runner.is_alive()
     report = result["report"]
-    assert report.counts == {"assets": 14, "done": 14, "skipped": 0, "failed": 0, "images": 14}
+    assert report.counts == counts(assets=14, done=14, images=14)
     assert report.runner == "dask"
     records = ledger_records(out)
     assert len(records) == 14 == len({r["key"] for r in records})

@@ -1,0 +1,258 @@
+"""Dask batch runner: the jobs of a batch on a dask.distributed cluster.
+
+It takes the same :class:`~rtmesh.batch_worker.AssetJob` list as the local pool
+(:mod:`rtmesh.batch_pool`) and reports through the same callbacks, in the submitting
+process.  On a cluster the workers write the images into the output folder, which must be
+the same storage for them and for the submitting machine; and the cluster can outlive or
+lose the submitting process.  So:
+
+- **Storage probe**: before dispatching, every worker writes a probe file with a random
+  token into the output folder and checks that it can read an input; the submitter reads
+  each probe back.  A worker whose probe does not arrive is refused, with one warning line,
+  and gets no job while an accepted worker is alive.  No accepted worker: the batch stops
+  before any job, with one line.  (The submitter also checks every image a job reports,
+  size and checksum: see :class:`rtmesh.batch.Books`.)
+- **Run ids**: task keys carry the batch's run id, and each job carries the run file
+  (``OUTDIR/.rtmesh-batch-run``) that the submitter writes when it takes the folder.  A
+  task of an earlier run (its submitter killed) stops before its next write once a resumed
+  run has taken over; the resumed run waits until the earlier run's running tasks are gone
+  before dispatching, so no image has two writers.
+- **Cluster loss**: losing the scheduler raises :class:`ClusterLost`; the jobs not
+  finished are left for a resume, not recorded as failed.
+"""
+
+import logging
+import os
+import secrets
+import time
+from concurrent.futures import CancelledError
+
+from .batch_worker import current_run, image_result, run_job
+from .errors import RtmeshError
+from . import runtime
+
+log = logging.getLogger("rtmesh.batch")
+
+DASK_MISSING = "--scheduler needs dask.distributed: pip install rtmesh[distributed]"
+KEY_PREFIX = "rtmesh-batch-"
+
+
+class ClusterLost(RtmeshError):
+    """The connection to the Dask scheduler was lost in the middle of a batch."""
+
+
+def run_dask(jobs, scheduler, on_image, on_job, run="", outdir=None, time_limit=None,
+             retries=2, wait_for_earlier=60.0):
+    """Run jobs on a dask.distributed cluster; results come back to this process.
+
+    Parameters
+    ----------
+    jobs : sequence of AssetJob
+    scheduler : str or distributed.Client
+        Scheduler address (``tcp://host:8786``) or a connected client.
+    on_image, on_job : callable
+        Called here, in the client, as each job's result arrives.
+    run : str
+        The batch's run id (in the task keys).
+    outdir : str, optional
+        The output folder the workers must share with this machine (default: the jobs').
+    time_limit : float, optional
+        Seconds per job, enforced inside the task between render chunks (a Dask task cannot
+        be killed from outside without killing its worker).  Memory is guarded by the
+        cluster's own per-worker ``memory_limit``.
+    retries : int
+        Extra attempts for a task that raised (a task lost with a killed worker is re-run by
+        the scheduler without counting as a retry).
+    wait_for_earlier : float
+        Longest wait, in seconds, for running tasks of an earlier run to stop.
+
+    Raises
+    ------
+    RtmeshError
+        dask.distributed is not installed, the scheduler cannot be reached, or no worker
+        can write the output folder so that this machine sees it.
+    ClusterLost
+        The scheduler went away; jobs whose results had not arrived are not reported.
+    """
+    if not jobs:
+        return
+    try:
+        from distributed import Client, as_completed
+    except ImportError:
+        raise RtmeshError(DASK_MISSING) from None
+    outdir = outdir or jobs[0].outdir
+    own_client = not isinstance(scheduler, Client)
+    if own_client:
+        try:
+            client = Client(scheduler, timeout="20s")
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise RtmeshError(f"cannot reach the Dask scheduler at {scheduler}: "
+                              f"{' '.join(str(exc).split()) or type(exc).__name__}") from None
+    else:
+        client = scheduler
+    try:
+        try:
+            accepted = probe_workers(client, outdir, jobs[0].path)
+            _wait_for_earlier_runs(client, run, wait_for_earlier)
+        except (OSError, TimeoutError, CancelledError) as exc:
+            raise ClusterLost(f"cluster lost: {_one_line(exc)}") from None
+        # refused workers run nothing while an accepted one is alive ("loose" restriction:
+        # if every accepted worker is gone, a restarted one may run the job, and the
+        # submitter's check of the images still catches a private output folder)
+        futures = {client.submit(_dask_task, job, time_limit, key=f"{KEY_PREFIX}{run}-{i}",
+                                 pure=False, retries=retries, workers=accepted,
+                                 allow_other_workers=True): job
+                   for i, job in enumerate(jobs)}
+        try:
+            for future in as_completed(futures):
+                job = futures[future]
+                try:
+                    result = future.result()
+                except Exception as exc:
+                    if _lost(client, exc):
+                        raise ClusterLost("cluster lost") from None
+                    # the task itself failed: e.g. KilledWorker
+                    message = _one_line(exc)
+                    result = {"asset": job.asset, "seconds": 0.0, "images": [
+                        image_result(job, t, "failed", 0.0, stage="worker", message=message)
+                        for t in job.images]}
+                finally:
+                    future.release()
+                if result.get("superseded"):
+                    continue  # cannot happen for this run's own jobs; never recorded
+                for image in result["images"]:
+                    on_image(image)
+                on_job(result)
+        except ClusterLost:
+            raise
+        except (OSError, TimeoutError, CancelledError) as exc:
+            if _lost(client, exc):
+                raise ClusterLost("cluster lost") from None
+            raise
+    finally:
+        if own_client:
+            try:
+                client.close(timeout=5)
+            except Exception:  # noqa: BLE001 - closing a client of a dead scheduler
+                pass
+
+
+def _lost(client, exc):
+    """True when ``exc`` means the scheduler is gone, not that one task failed."""
+    try:
+        from distributed.comm.core import CommClosedError
+    except ImportError:  # pragma: no cover
+        CommClosedError = OSError
+    return (isinstance(exc, (CancelledError, CommClosedError, OSError, TimeoutError))
+            or client.status not in ("running", "connecting"))
+
+
+def probe_workers(client, outdir, sample_input):
+    """The workers that can read ``sample_input`` and write ``outdir`` visibly to this
+    machine; each refused worker gets one warning line.
+
+    Raises
+    ------
+    RtmeshError
+        No worker passes.
+    """
+    workers = list(client.scheduler_info(n_workers=-1)["workers"]) \
+        if _takes_n_workers(client) else list(client.scheduler_info()["workers"])
+    if not workers:
+        client.wait_for_workers(1, timeout=60)
+        workers = list(client.scheduler_info()["workers"])
+    tokens = {w: secrets.token_hex(8) for w in workers}
+    answers = client.run(_probe, outdir, sample_input, tokens, workers=workers, on_error="return")
+    accepted, reasons = [], {}
+    for worker in workers:
+        answer = answers.get(worker)
+        if isinstance(answer, BaseException) or answer is None:
+            reasons[worker] = f"probe failed: {_one_line(answer)}"
+            continue
+        name, problem = answer
+        path = os.path.join(outdir, name) if name else None
+        if problem:
+            reasons[worker] = problem
+        elif current_run(path) != tokens[worker]:
+            reasons[worker] = (f"its probe file {name} did not appear in {outdir} on this machine: "
+                               f"the worker's output folder is not this machine's (shared storage?)")
+        else:
+            accepted.append(worker)
+        if path:
+            try:
+                os.unlink(path)
+            except OSError:
+                pass
+    for worker, reason in reasons.items():
+        log.warning("Dask worker %s refused: %s", worker, reason)
+    if not accepted:
+        raise RtmeshError(f"no Dask worker can write {outdir} so that this machine sees the "
+                          f"images ({len(workers)} refused: {next(iter(reasons.values()))})")
+    return accepted
+
+
+def _takes_n_workers(client):
+    import inspect
+
+    return "n_workers" in inspect.signature(client.scheduler_info).parameters
+
+
+def _probe(outdir, sample_input, tokens, dask_worker=None):
+    """On a worker: read an input, write a probe file; returns (file name, problem)."""
+    token = tokens.get(dask_worker.address if dask_worker is not None else "", "")
+    try:
+        with open(sample_input, "rb") as f:
+            f.read(1)
+    except OSError as exc:
+        return "", f"cannot read the inputs ({sample_input}: {exc.strerror})"
+    name = f".rtmesh-batch-probe-{token}.tmp"
+    try:
+        with open(os.path.join(outdir, name), "w", encoding="utf-8") as f:
+            f.write(token + "\n")
+    except OSError as exc:
+        return "", f"cannot write {outdir}: {exc.strerror}"
+    return name, ""
+
+
+def _wait_for_earlier_runs(client, run, timeout):
+    """Wait until no task of an earlier batch run is running (they stop before their next
+    write once the run file names this run), cancelling those still queued."""
+    deadline = time.monotonic() + timeout
+    while True:
+        running, queued = client.run_on_scheduler(_earlier_tasks, KEY_PREFIX, run)
+        if queued:
+            from distributed import Future
+
+            client.cancel([Future(k, client, inform=False) for k in queued], force=True)
+        if not running:
+            return
+        if time.monotonic() > deadline:
+            log.warning("%d tasks of an earlier batch run are still running; they stop "
+                        "before writing any image", len(running))
+            return
+        time.sleep(0.25)
+
+
+def _earlier_tasks(prefix, run, dask_scheduler=None):
+    """On the scheduler: keys of other runs' batch tasks, (running, waiting)."""
+    running, queued = [], []
+    for key, ts in dask_scheduler.tasks.items():
+        if isinstance(key, str) and key.startswith(prefix) and not key.startswith(prefix + run):
+            if ts.state == "processing":
+                running.append(key)
+            elif ts.state in ("waiting", "queued", "no-worker", "released"):
+                queued.append(key)
+    return running, queued
+
+
+def _dask_task(job, time_limit):
+    """The function a Dask worker runs for one asset."""
+    # a worker of an rtmesh batch renders: tune its process for that (once; idempotent)
+    runtime.tune_process()
+    deadline = time.monotonic() + time_limit if time_limit else None
+    return run_job(job, deadline=deadline)
+
+
+def _one_line(exc):
+    text = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
