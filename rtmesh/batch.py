@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 from . import __version__
 from .batch_identity import image_fingerprint, inputs_unchanged, unchanged
 from .batch_inputs import InputError, discover
-from .batch_ledger import Ledger
+from .batch_ledger import Ledger, decode
 from .batch_worker import VIEWS, AssetJob, ImageTask, fixed_view, turntable_views
 from .errors import OutputError
 from .importers import MESH_EXTENSIONS
@@ -50,7 +50,7 @@ PROGRESS_MODES = ("bar", "jsonl", "none")
 EXIT_DONE, EXIT_FAILED, EXIT_USAGE, EXIT_CLUSTER_LOST = 0, 1, 2, 3
 # address space a local worker needs to start (imports, thread stacks, the BLAS buffers)
 MIN_MEMORY_LIMIT = 1 << 30
-_PLAN_CHUNK = 1000  # assets planned per ledger query
+_PLAN_CHUNK = 5000  # assets planned per ledger look-up
 
 
 @dataclass
@@ -372,7 +372,7 @@ def plan(assets, outdir, opts, ledger, book, run=""):
         found = {} if opts.force else ledger.lookup([t.key for _, _, tasks in chunk for t in tasks])
         for asset, fields, tasks in chunk:
             todo, skipped, known, retried = [], [], [], False
-            checked = {}  # inputs JSON -> unchanged? (shared by an asset's images)
+            checked = {}  # encoded inputs -> unchanged? (shared by an asset's images)
             for task in tasks:
                 entry = found.get(task.key)
                 if entry is None or entry.fingerprint != task.fingerprint:
@@ -381,12 +381,12 @@ def plan(assets, outdir, opts, ledger, book, run=""):
                 same = checked.get(entry.inputs)
                 if same is None:
                     same = checked[entry.inputs] = inputs_unchanged(
-                        json.loads(entry.inputs), asset.path, opts.trust_mtime)
+                        decode(entry.inputs), asset.path, opts.trust_mtime)
                 if not same:
                     todo.append(task)
                 elif entry.status == "done":
                     if all(unchanged(o, os.path.join(outdir, o[0]), opts.trust_mtime)
-                           for o in json.loads(entry.outputs)):
+                           for o in decode(entry.outputs)):
                         skipped.append(task)
                     else:
                         todo.append(task)

@@ -8,10 +8,13 @@ lose the submitting process.  So:
 
 - **Storage probe**: before dispatching, every worker writes a probe file with a random
   token into the output folder and checks that it can read an input; the submitter reads
-  each probe back.  A worker whose probe does not arrive is refused, with one warning line,
-  and gets no job while an accepted worker is alive.  No accepted worker: the batch stops
-  before any job, with one line.  (The submitter also checks every image a job reports,
-  size and checksum: see :class:`rtmesh.batch.Books`.)
+  each probe back.  An accepted worker is given a Dask resource named after the output
+  folder, which every job of the batch requires; a refused worker gets one warning line
+  and no job.  Workers that join later (a restarted worker) are probed the same way within
+  a few seconds.  No accepted worker: the batch stops before any job, with one line.  (The
+  submitter also checks every image a job reports, size and checksum, see
+  :class:`rtmesh.batch.Books`; a job that cannot see the batch's run file is failed the
+  same way.)
 - **Run ids**: task keys carry the batch's run id, and each job carries the run file
   (``OUTDIR/.rtmesh-batch-run``) that the submitter writes when it takes the folder.  A
   task of an earlier run (its submitter killed) stops before its next write once a resumed
@@ -21,9 +24,11 @@ lose the submitting process.  So:
   finished are left for a resume, not recorded as failed.
 """
 
+import hashlib
 import logging
 import os
 import secrets
+import threading
 import time
 from concurrent.futures import CancelledError
 
@@ -90,18 +95,17 @@ def run_dask(jobs, scheduler, on_image, on_job, run="", outdir=None, time_limit=
                               f"{' '.join(str(exc).split()) or type(exc).__name__}") from None
     else:
         client = scheduler
+    prober = None
     try:
+        resource = storage_resource(outdir)
         try:
-            accepted = probe_workers(client, outdir, jobs[0].path)
+            prober = Prober(client, outdir, jobs[0].path, resource)
             _wait_for_earlier_runs(client, run, wait_for_earlier)
         except (OSError, TimeoutError, CancelledError) as exc:
             raise ClusterLost(f"cluster lost: {_one_line(exc)}") from None
-        # refused workers run nothing while an accepted one is alive ("loose" restriction:
-        # if every accepted worker is gone, a restarted one may run the job, and the
-        # submitter's check of the images still catches a private output folder)
+        prober.start()
         futures = {client.submit(_dask_task, job, time_limit, key=f"{KEY_PREFIX}{run}-{i}",
-                                 pure=False, retries=retries, workers=accepted,
-                                 allow_other_workers=True): job
+                                 pure=False, retries=retries, resources={resource: 1}): job
                    for i, job in enumerate(jobs)}
         try:
             for future in as_completed(futures):
@@ -119,7 +123,13 @@ def run_dask(jobs, scheduler, on_image, on_job, run="", outdir=None, time_limit=
                 finally:
                     future.release()
                 if result.get("superseded"):
-                    continue  # cannot happen for this run's own jobs; never recorded
+                    # this run owns the folder: a job that reads another run id there does
+                    # not see the folder this machine sees
+                    result = {"asset": job.asset, "seconds": result["seconds"], "images": [
+                        image_result(job, t, "failed", 0.0, stage="storage",
+                                     message="output not visible to the submitting machine: the "
+                                     "worker does not see this batch's run file")
+                        for t in job.images]}
                 for image in result["images"]:
                     on_image(image)
                 on_job(result)
@@ -130,6 +140,8 @@ def run_dask(jobs, scheduler, on_image, on_job, run="", outdir=None, time_limit=
                 raise ClusterLost("cluster lost") from None
             raise
     finally:
+        if prober is not None:
+            prober.stop()
         if own_client:
             try:
                 client.close(timeout=5)
@@ -147,23 +159,96 @@ def _lost(client, exc):
             or client.status not in ("running", "connecting"))
 
 
-def probe_workers(client, outdir, sample_input):
-    """The workers that can read ``sample_input`` and write ``outdir`` visibly to this
-    machine; each refused worker gets one warning line.
+def storage_resource(outdir):
+    """Name of the Dask resource that marks workers proven to share ``outdir``."""
+    return "rtmesh-storage-" + hashlib.sha1(os.fspath(outdir).encode()).hexdigest()[:12]
+
+
+class Prober:
+    """Probes the cluster's workers (now, then every few seconds for new ones in a thread)
+    and gives those that pass the storage resource.
 
     Raises
     ------
     RtmeshError
-        No worker passes.
+        On creation, when no worker passes.
     """
-    workers = list(client.scheduler_info(n_workers=-1)["workers"]) \
-        if _takes_n_workers(client) else list(client.scheduler_info()["workers"])
-    if not workers:
-        client.wait_for_workers(1, timeout=60)
-        workers = list(client.scheduler_info()["workers"])
+
+    def __init__(self, client, outdir, sample_input, resource, every=2.0):
+        self.client, self.outdir, self.sample, self.resource = client, outdir, sample_input, resource
+        self.every, self.seen, self._stop = every, set(), threading.Event()
+        self._thread = None
+        accepted, reasons = self.probe()
+        if not accepted:
+            raise RtmeshError(f"no Dask worker can write {outdir} so that this machine sees "
+                              f"the images ({len(reasons)} refused: {next(iter(reasons.values()), 'no worker')})")
+
+    def probe(self):
+        """Probe the workers not seen yet; returns (accepted addresses, refusal reasons)."""
+        workers = [w for w in _workers(self.client) if w not in self.seen]
+        if not workers:
+            return [], {}
+        self.seen.update(workers)
+        accepted, reasons, probes = probe_workers(self.client, self.outdir, self.sample, workers)
+        grants = {w: 1 for w in accepted}
+        grants.update({w: 0 for w in reasons})  # a worker refused now loses an older grant
+        self.client.run(_grant, self.resource, grants, probes, workers=workers, on_error="return")
+        for worker, reason in reasons.items():
+            log.warning("Dask worker %s refused: %s", worker, reason)
+        return accepted, reasons
+
+    def start(self):
+        self._thread = threading.Thread(target=self._loop, name="rtmesh-dask-prober", daemon=True)
+        self._thread.start()
+
+    def _loop(self):
+        while not self._stop.wait(self.every):
+            try:
+                self.probe()
+            except Exception:  # noqa: BLE001 - a lost cluster is the main loop's to report
+                return
+
+    def stop(self):
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=10)
+
+
+def _workers(client):
+    import inspect
+
+    if "n_workers" in inspect.signature(client.scheduler_info).parameters:
+        return list(client.scheduler_info(n_workers=-1)["workers"])
+    return list(client.scheduler_info()["workers"])
+
+
+async def _grant(resource, grants, probes, dask_worker=None):
+    """On a worker: remove its probe file (from its own view of the folder), and hold
+    ``resource`` (as many as it has threads) if granted, else none."""
+    if probes.get(dask_worker.address):
+        try:
+            os.unlink(probes[dask_worker.address])
+        except OSError:
+            pass  # the submitter removed it: the folder is shared
+    if dask_worker.address in grants:
+        await dask_worker.set_resources(
+            **{resource: dask_worker.state.nthreads * grants[dask_worker.address]})
+
+
+def probe_workers(client, outdir, sample_input, workers):
+    """Which workers can read ``sample_input`` and write ``outdir`` visibly to this machine.
+
+    Returns
+    -------
+    accepted : list of str
+    reasons : dict of str to str
+        Why each other worker was refused (one line).
+    probes : dict of str to str
+        The probe file each worker wrote (for it to remove).
+    """
     tokens = {w: secrets.token_hex(8) for w in workers}
     answers = client.run(_probe, outdir, sample_input, tokens, workers=workers, on_error="return")
-    accepted, reasons = [], {}
+    accepted, reasons, probes = [], {}, {}
     for worker in workers:
         answer = answers.get(worker)
         if isinstance(answer, BaseException) or answer is None:
@@ -179,22 +264,12 @@ def probe_workers(client, outdir, sample_input):
         else:
             accepted.append(worker)
         if path:
+            probes[worker] = path
             try:
                 os.unlink(path)
             except OSError:
                 pass
-    for worker, reason in reasons.items():
-        log.warning("Dask worker %s refused: %s", worker, reason)
-    if not accepted:
-        raise RtmeshError(f"no Dask worker can write {outdir} so that this machine sees the "
-                          f"images ({len(workers)} refused: {next(iter(reasons.values()))})")
-    return accepted
-
-
-def _takes_n_workers(client):
-    import inspect
-
-    return "n_workers" in inspect.signature(client.scheduler_info).parameters
+    return accepted, reasons, probes
 
 
 def _probe(outdir, sample_input, tokens, dask_worker=None):

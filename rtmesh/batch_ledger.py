@@ -8,8 +8,8 @@ The ledger is an SQLite database (Python's standard :mod:`sqlite3`) in the outpu
 ``asset``      the asset's name (its path relative to its input root)
 ``fingerprint`` :func:`rtmesh.batch_identity.image_fingerprint`
 ``status``     ``done`` or ``failed``
-``inputs``     JSON list of input entries (mesh file, MTL, textures, buffers)
-``outputs``    JSON list of output entries (file, size, mtime_ns, checksum)
+``inputs``     input entries (mesh file, MTL, textures, buffers), see :func:`encode`
+``outputs``    output entries (file, size, mtime_ns, checksum), see :func:`encode`
 ``attempts``   failed attempts in a row with these inputs (0 once done)
 ``stage``, ``message``  why it failed
 ``seconds``, ``time``, ``run``  render time, when recorded, the run id
@@ -44,10 +44,34 @@ LEDGER_NAME = "rtmesh-batch-ledger.sqlite"
 OLD_LEDGER_NAME = "rtmesh-batch-ledger.jsonl"
 LOCK_NAME = ".rtmesh-batch.lock"
 FORMAT = "2"
-_LOOKUP_CHUNK = 500  # keys per query (SQLite allows 999 parameters in old builds)
+# keys per query: SQLite >= 3.32 takes 32766 parameters, older builds 999
+_LOOKUP_CHUNK = 10_000 if sqlite3.sqlite_version_info >= (3, 32) else 900
 
 Entry = namedtuple("Entry", "fingerprint status inputs outputs attempts stage message")
-Entry.__doc__ = """One image's ledger row (``inputs``/``outputs`` still JSON text)."""
+Entry.__doc__ = """One image's ledger row (``inputs``/``outputs`` still encoded: :func:`decode`)."""
+
+
+def encode(entries):
+    """File entries ``[name, size, mtime_ns, checksum]`` as text: one line per entry, fields
+    separated by tabs, empty for None (JSON, starting with ``[``, if a name holds a tab or
+    a line break).  Much quicker to read back than JSON, which matters at a million rows."""
+    if any("\t" in e[0] or "\n" in e[0] or e[0].startswith("[") for e in entries):
+        return json.dumps(entries, separators=(",", ":"))
+    return "\n".join("\t".join("" if v is None else str(v) for v in e) for e in entries)
+
+
+def decode(text):
+    """The entries :func:`encode` wrote."""
+    if not text:
+        return []
+    if text[0] == "[":
+        return json.loads(text)
+    entries = []
+    for line in text.split("\n"):
+        name, size, mtime, digest = line.split("\t")
+        entries.append([name, int(size) if size else None, int(mtime) if mtime else None,
+                        digest or None])
+    return entries
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (name TEXT PRIMARY KEY, value TEXT) WITHOUT ROWID;
@@ -103,6 +127,9 @@ class Ledger:
             # write-ahead log: commits append to OUTDIR/...-wal, crash-safe, no copy of the file
             self._db.execute("PRAGMA journal_mode=WAL")
             self._db.execute("PRAGMA synchronous=NORMAL")
+            # look-ups read the file through memory mapping, not a read call per page: a
+            # resume over a million rows asks for every page of the table
+            self._db.execute("PRAGMA mmap_size=4294967296")
             self._db.executescript(_SCHEMA)
             row = self._db.execute("SELECT value FROM meta WHERE name='format'").fetchone()
             if row is None:
@@ -148,8 +175,7 @@ class Ledger:
             attempts = (row[0] if row else 0) + 1
         self._db.execute("INSERT OR REPLACE INTO images VALUES (?,?,?,?,?,?,?,?,?,?,?,?)",
                          (key, asset, fingerprint, status,
-                          json.dumps(inputs, separators=(",", ":")),
-                          json.dumps(outputs, separators=(",", ":")), attempts, stage, message,
+                          encode(inputs), encode(outputs), attempts, stage, message,
                           round(seconds, 4), round(time.time(), 3), run))
 
     def commit(self):

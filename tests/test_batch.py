@@ -20,8 +20,8 @@ import trimesh
 
 import rtmesh
 from rtmesh.batch import REPORT_NAME, SUMMARY_NAME
-from rtmesh.batch_inputs import InputError, discover
-from rtmesh.batch_ledger import LEDGER_NAME, Ledger
+from rtmesh.batch_inputs import Asset, InputError, discover
+from rtmesh.batch_ledger import LEDGER_NAME, Ledger, decode, encode
 from rtmesh.cli import main
 from rtmesh.image_io import read_image
 
@@ -66,7 +66,7 @@ def ledger_records(outdir):
     finally:
         db.close()
     for r in rows:
-        r["files"] = [o[0] for o in json.loads(r["outputs"])]
+        r["files"] = [o[0] for o in decode(r["outputs"])]
     return rows
 
 
@@ -354,7 +354,7 @@ def test_editing_a_dependency_or_damaging_an_image_redoes_it(tmp_path):
     out = tmp_path / "out"
     run = lambda **kw: rtmesh.batch_convert([src], out, workers=1, **{**TINY, **kw})  # noqa: E731
     assert run().counts["done"] == 3
-    rows = {r["key"]: json.loads(r["inputs"]) for r in ledger_records(out)}
+    rows = {r["key"]: decode(r["inputs"]) for r in ledger_records(out)}
     assert [e[0] for e in rows["paint/m.obj"]] == ["", "m.mtl"]
     assert [e[0] for e in rows["textured/m.obj"]] == ["", "m.mtl", "../tex.bmp"]
     assert sorted(e[0] for e in rows["buffers/model.gltf"])[1:] == ["gltf_buffer_0.bin",
@@ -507,3 +507,98 @@ def test_dask_cluster_with_a_worker_killed_mid_batch(tmp_path):
     # run over this folder removes it
     visible = [n for n in os.listdir(out) if not n.startswith(".")]
     assert len([n for n in visible if n.endswith(".png")]) == 14
+
+
+# ------------------------------------------------------------------------- Dask: storage, runs, loss
+
+def start_process(*command, env=None, cwd=None):
+    return subprocess.Popen(list(map(str, command)), stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True, env=env, cwd=cwd)
+
+
+def dask_worker_command(address, *extra):
+    return [sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads", "1",
+            "--no-nanny", "--no-dashboard", *extra]
+
+
+def wait_for_workers(client, n, timeout=60):
+    client.wait_for_workers(n, timeout=timeout)
+    return list(client.scheduler_info(n_workers=-1)["workers"])
+
+
+def stop(*procs):
+    for proc in procs:
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait()
+
+
+def test_dask_worker_with_a_private_output_folder_is_refused(tmp_path):
+    """A real second worker process in its own mount namespace, where OUTDIR is another
+    folder (as on a node that mounts its own disk there): it is refused before any job."""
+    distributed = pytest.importorskip("distributed")
+    if shutil.which("unshare") is None or subprocess.run(
+            ["unshare", "-m", "true"], capture_output=True).returncode != 0:
+        pytest.skip("needs mount namespaces (unshare -m)")
+    src = tmp_path / "src"
+    for i in range(4):
+        make_mesh(src / f"m{i}.obj")
+    out, private = tmp_path / "out", tmp_path / "private"
+    out.mkdir()
+    private.mkdir()
+    with distributed.LocalCluster(n_workers=0, threads_per_worker=1, processes=True,
+                                  dashboard_address=None, silence_logs=50) as cluster, \
+            distributed.Client(cluster) as client:
+        script = (f"mount --bind {private} {out} && exec "
+                  + " ".join(dask_worker_command(cluster.scheduler_address)))
+        worker = start_process("unshare", "-m", "--propagation", "private", "sh", "-c", script)
+        try:
+            (bad,) = wait_for_workers(client, 1)
+            # only the private worker: nothing is dispatched, one line, exit 2
+            code, stdout, err = run_cli("batch", src, "-o", out, "--scheduler",
+                                        cluster.scheduler_address, "-q")
+            assert code == 2 and err.splitlines()[-1].startswith("rtmesh: error: no Dask worker")
+            assert "Traceback" not in err and os.listdir(private) == []
+            assert not [n for n in os.listdir(out) if n.endswith(".png")]
+            # with a worker that shares the folder, it does every job and the other none
+            cluster.scale(2)
+            wait_for_workers(client, 2)
+            code, stdout, err = run_cli("batch", src, "-o", out, "--scheduler",
+                                        cluster.scheduler_address, "--width", "16", "--height",
+                                        "16", "--spp", "1", "-q")
+            assert code == 0, err
+            refused = [line for line in err.splitlines() if "refused" in line]
+            assert len(refused) == 1 and bad in refused[0] and "shared storage" in refused[0]
+            assert "4 done" in stdout
+            assert os.listdir(private) == []  # the refused worker wrote nothing, not even a probe
+            assert sorted(n for n in os.listdir(out) if n.endswith(".png")) == [
+                f"m{i}.obj.png" for i in range(4)]
+        finally:
+            stop(worker)
+
+
+def test_images_a_job_reports_must_be_visible_here(tmp_path):
+    """After each job the submitter checks every reported file: missing, short or other
+    content fails the image as not visible (on Dask the content is compared too)."""
+    from rtmesh.batch import BatchOptions, Books
+    from rtmesh.batch_identity import describe
+
+    (tmp_path / "a.png").write_bytes(b"12345")
+    (tmp_path / "b.png").write_bytes(b"12345")
+    entry = describe(tmp_path / "a.png", "a.png")
+    with Ledger(str(tmp_path)) as ledger:
+        books = Books(ledger, str(tmp_path), BatchOptions(scheduler="tcp://x:1", quiet=True), 4)
+        cases = {"ok": ["a.png", entry], "gone": ["c.png", ["c.png", 5, 0, entry[3]]],
+                 "short": ["a.png", ["a.png", 9, 0, entry[3]]],
+                 "other": ["b.png", ["b.png", 5, 0, "0" * 32]]}
+        for key, (name, output) in cases.items():
+            books.planned(Asset(f"/src/{key}", key), [], [], False, True)
+            books.on_image({"asset": key, "key": key, "fingerprint": "f", "status": "done",
+                            "files": [name], "seconds": 0.1, "inputs": [], "outputs": [output]})
+            books.on_job({"asset": key, "seconds": 0.1})
+        books.close()
+        rows = ledger.lookup(list(cases))
+    assert rows["ok"].status == "done"
+    for key in ("gone", "short", "other"):
+        assert rows[key].status == "failed" and rows[key].stage == "storage"
+        assert rows[key].message.startswith("output not visible to the submitting machine")
