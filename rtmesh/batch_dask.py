@@ -82,9 +82,26 @@ def run_dask(jobs, scheduler, on_image, on_job, run="", outdir=None, time_limit=
     if not jobs:
         return
     try:
-        from distributed import Client, as_completed
+        from distributed import Client  # noqa: F401
     except ImportError:
         raise RtmeshError(DASK_MISSING) from None
+    # the client's own log (reconnection attempts, tracebacks of a lost connection) would
+    # bury the batch's one-line messages: it speaks only for critical errors meanwhile
+    names = ["distributed"] + [n for n in logging.root.manager.loggerDict
+                               if n.startswith("distributed.")]
+    levels = {n: logging.getLogger(n).level for n in names}
+    for name in names:
+        logging.getLogger(name).setLevel(logging.CRITICAL)
+    try:
+        _run(jobs, scheduler, on_image, on_job, run, outdir, time_limit, retries, wait_for_earlier)
+    finally:
+        for name, level in levels.items():
+            logging.getLogger(name).setLevel(level)
+
+
+def _run(jobs, scheduler, on_image, on_job, run, outdir, time_limit, retries, wait_for_earlier):
+    from distributed import Client, as_completed
+
     outdir = outdir or jobs[0].outdir
     own_client = not isinstance(scheduler, Client)
     if own_client:
@@ -325,7 +342,25 @@ def _dask_task(job, time_limit):
     # a worker of an rtmesh batch renders: tune its process for that (once; idempotent)
     runtime.tune_process()
     deadline = time.monotonic() + time_limit if time_limit else None
-    return run_job(job, deadline=deadline)
+    return run_job(job, deadline=deadline, abandoned=_abandoned_check())
+
+
+def _abandoned_check():
+    """A function telling whether this task was cancelled (its client gone, so the
+    scheduler forgot it: a result would reach nobody and its images nobody's ledger)."""
+    try:
+        from distributed import get_worker
+        from distributed.worker import thread_state
+
+        worker, key = get_worker(), thread_state.key
+    except (ImportError, ValueError, AttributeError):
+        return None
+
+    def abandoned():
+        ts = worker.state.tasks.get(key)
+        return ts is None or ts.state in ("cancelled", "released", "forgotten")
+
+    return abandoned
 
 
 def _one_line(exc):

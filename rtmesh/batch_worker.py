@@ -160,7 +160,7 @@ def current_run(run_file):
         return ""
 
 
-def run_job(job, on_image=None, deadline=None):
+def run_job(job, on_image=None, deadline=None, abandoned=None):
     """Convert one asset: load it once, then render and write each of its views.
 
     Parameters
@@ -172,6 +172,9 @@ def run_job(job, on_image=None, deadline=None):
     deadline : float, optional
         ``time.monotonic()`` value after which the job stops between render chunks (used
         where the job cannot be killed from outside, as on a Dask worker).
+    abandoned : callable, optional
+        ``abandoned()`` is True once nobody waits for the job's result any more (its Dask
+        client is gone): the job then stops like a superseded one, before its next write.
 
     Returns
     -------
@@ -191,6 +194,8 @@ def run_job(job, on_image=None, deadline=None):
     def check(done=None, total=None):
         _check_deadline(deadline)
         # the run file is read at most twice a second between render chunks
+        if abandoned is not None and abandoned():
+            raise Superseded()
         if job.run_file and time.monotonic() - last_check[0] > 0.5:
             last_check[0] = time.monotonic()
             if current_run(job.run_file) != job.run:

@@ -602,3 +602,129 @@ def test_images_a_job_reports_must_be_visible_here(tmp_path):
     for key in ("gone", "short", "other"):
         assert rows[key].status == "failed" and rows[key].stage == "storage"
         assert rows[key].message.startswith("output not visible to the submitting machine")
+
+
+def start_scheduler(tmp_path):
+    """A Dask scheduler in its own process (so that it can be killed); returns it and its
+    address."""
+    info = tmp_path / "scheduler.json"
+    scheduler = start_process(sys.executable, "-m", "distributed.cli.dask_scheduler", "--port", "0",
+                              "--no-dashboard", "--scheduler-file", info)
+    deadline = time.monotonic() + 60
+    while not info.exists() or not info.read_text().strip():
+        assert time.monotonic() < deadline and scheduler.poll() is None, scheduler.stderr.read()
+        time.sleep(0.1)
+    time.sleep(0.2)
+    return scheduler, json.loads(info.read_text())["address"]
+
+
+def wait_for_rows(out, n, proc, timeout=90):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and proc.poll() is None:
+        if (out / LEDGER_NAME).exists() and len(ledger_records(out)) >= n:
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"no {n} ledger rows (batch exit status {proc.poll()})")
+
+
+def test_a_lost_scheduler_ends_the_batch_with_its_own_exit_code_and_no_failures(tmp_path):
+    distributed = pytest.importorskip("distributed")  # noqa: F841
+    src = tmp_path / "src"
+    for i in range(12):
+        make_mesh(src / f"m{i:02d}.obj", subdivisions=3)
+    out = tmp_path / "out"
+    scheduler, address = start_scheduler(tmp_path)
+    worker = start_process(*dask_worker_command(address))
+    try:
+        batch = subprocess.Popen(
+            [sys.executable, "-m", "rtmesh.cli", "batch", str(src), "-o", str(out), "--scheduler",
+             address, "--width", "96", "--height", "96", "--spp", "16", "-q"],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        wait_for_rows(out, 2, batch)
+        scheduler.kill()
+        stdout, err = batch.communicate(timeout=120)
+    finally:
+        stop(scheduler, worker)
+    rows = ledger_records(out)
+    assert rows and all(r["status"] == "done" for r in rows)  # nothing marked failed
+    lost = 12 - len(rows)
+    assert batch.returncode == 3, err
+    assert err.strip().splitlines() == [
+        f"rtmesh: cluster lost: {lost} assets not attempted, resume to continue"]
+    assert summary(out)["counts"]["not_attempted"] == lost
+
+
+class RenameWatch:
+    """Every file renamed into a folder, in order (Linux inotify, IN_MOVED_TO): each image
+    and the run file are written as a temporary file renamed into place, so this counts
+    their writes exactly, without touching the writers."""
+
+    IN_MOVED_TO = 0x80
+
+    def __init__(self, folder):
+        import ctypes
+        import ctypes.util
+
+        self.libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+        self.fd = self.libc.inotify_init1(os.O_NONBLOCK)
+        if self.fd < 0 or self.libc.inotify_add_watch(self.fd, os.fsencode(folder), self.IN_MOVED_TO) < 0:
+            pytest.skip("inotify is not available")
+        self.names = []
+
+    def poll(self):
+        import struct
+
+        while True:
+            try:
+                data = os.read(self.fd, 65536)
+            except BlockingIOError:
+                return self.names
+            offset = 0
+            while offset < len(data):
+                _, mask, _, length = struct.unpack_from("iIII", data, offset)
+                name = data[offset + 16: offset + 16 + length].rstrip(b"\0").decode()
+                self.names.append(name)
+                offset += 16 + length
+
+    def close(self):
+        os.close(self.fd)
+
+
+def test_resume_right_after_killing_the_client_gives_each_image_one_writer(tmp_path):
+    """kill -9 of the submitting process: its Dask tasks stop before writing once the
+    scheduler drops them, and a resume started at once takes the folder over (run file):
+    no task of the killed run writes an image after that."""
+    distributed = pytest.importorskip("distributed")
+    src = tmp_path / "src"
+    for i in range(6):
+        make_mesh(src / f"m{i}.obj", subdivisions=4)
+    out = tmp_path / "out"
+    out.mkdir()
+    watch = RenameWatch(out)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None, silence_logs=50) as cluster:
+        command = [sys.executable, "-m", "rtmesh.cli", "batch", str(src), "-o", str(out),
+                   "--scheduler", cluster.scheduler_address, "--width", "192", "--height", "192",
+                   "--spp", "160", "-q"]
+        first = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        wait_for_rows(out, 1, first)
+        first.kill()  # its running tasks go on, on the cluster
+        first.wait()
+        proc = subprocess.run(command, capture_output=True, text=True, timeout=180)
+    names = watch.poll()
+    watch.close()
+    assert proc.returncode == 0, proc.stderr
+    takeovers = [i for i, n in enumerate(names) if n == ".rtmesh-batch-run"]
+    assert len(takeovers) == 2  # the killed run's, the resumed run's
+    after = [n for n in names[takeovers[1] + 1:] if n.endswith(".png")]
+    assert len(after) == len(set(after))  # after the take-over: one writer per image
+    # the killed run's tasks stop writing once the scheduler drops them: only an image
+    # finished between the killed run's last ledger commit and the kill is written again
+    from collections import Counter
+
+    twice = [n for n, k in Counter(n for n in names if n.endswith(".png")).items() if k > 1]
+    assert len(twice) <= 1, names
+    rows = ledger_records(out)
+    assert len(rows) == 6 and all(r["status"] == "done" for r in rows)
+    for r in rows:
+        assert read_image(out / r["files"][0])[0].shape == (192, 192, 3)
