@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 from . import __version__
 from .batch_identity import image_fingerprint, inputs_unchanged, unchanged
 from .batch_inputs import InputError, discover
-from .batch_ledger import Ledger, decode
+from .batch_ledger import FINGERPRINT, INPUTS, OUTPUTS, STATUS, Ledger, decode
 from .batch_worker import VIEWS, AssetJob, ImageTask, fixed_view, turntable_views
 from .errors import OutputError
 from .importers import MESH_EXTENSIONS
@@ -298,7 +298,8 @@ def batch_convert(inputs, outdir, **options):
         raise InputError(f"no mesh files ({', '.join(MESH_EXTENSIONS)}) found in "
                          f"{', '.join(map(os.fspath, inputs)) or '(no inputs)'}")
     for asset in assets:
-        _check_overrides(asset)
+        _check_overrides(asset, opts)
+    progress_stream = _open_progress_file(opts)
     outdir = os.path.abspath(os.fspath(outdir))
     _make_output_folder(outdir)
     if opts.scheduler is not None:
@@ -308,7 +309,7 @@ def batch_convert(inputs, outdir, **options):
         _remove_stale_temporaries(outdir)
         # the run that owns the folder now: tasks of an earlier run stop before writing
         _write_atomically(os.path.join(outdir, RUN_FILE), run + "\n")
-        book = Books(ledger, outdir, opts, len(assets))
+        book = Books(ledger, outdir, opts, len(assets), progress_stream)
         try:
             jobs = plan(assets, outdir, opts, ledger, book, run)
             book.start_progress()
@@ -339,14 +340,24 @@ def batch_convert(inputs, outdir, **options):
     return report
 
 
-def _check_overrides(asset):
+def _check_overrides(asset, opts):
     o = asset.overrides
     where = f"{asset.path}: "
     check_names(where + "views", o.get("views", ()), VIEWS)
     check_names(where + "formats", o.get("formats", ()), FORMATS)
     check_names(where + "passes", o.get("passes", ()), PASSES)
-    if "passes" in o or "formats" in o:
-        check_passes(o.get("passes", ()), o.get("formats", FORMATS), where)
+    check_passes(o.get("passes", opts.passes), o.get("formats", opts.formats), where)
+
+
+def _open_progress_file(opts):
+    """The file ``--progress jsonl`` appends to (None for stderr), opened before anything
+    is created so a bad path stops the batch at once."""
+    if opts.quiet or opts.progress != "jsonl" or not opts.progress_file:
+        return None
+    try:
+        return open(opts.progress_file, "a", encoding="utf-8")
+    except OSError as exc:
+        raise OutputError(f"{opts.progress_file}: cannot write progress: {exc.strerror}") from None
 
 
 def plan(assets, outdir, opts, ledger, book, run=""):
@@ -366,27 +377,27 @@ def plan(assets, outdir, opts, ledger, book, run=""):
     local_threads = opts.threads or max(1, _cores() // (opts.workers or _cores()))
     threads = opts.threads or (1 if opts.scheduler is not None else local_threads)
     run_file = os.path.join(outdir, RUN_FILE) if opts.scheduler is not None else ""
-    fingerprints = {}
+    shared = {}
     for first in range(0, len(assets), _PLAN_CHUNK):
-        chunk = [_image_tasks(asset, opts, fingerprints) for asset in assets[first:first + _PLAN_CHUNK]]
+        chunk = [_image_tasks(asset, opts, shared) for asset in assets[first:first + _PLAN_CHUNK]]
         found = {} if opts.force else ledger.lookup([t.key for _, _, tasks in chunk for t in tasks])
         for asset, fields, tasks in chunk:
             todo, skipped, known, retried = [], [], [], False
             checked = {}  # encoded inputs -> unchanged? (shared by an asset's images)
             for task in tasks:
                 entry = found.get(task.key)
-                if entry is None or entry.fingerprint != task.fingerprint:
+                if entry is None or entry[FINGERPRINT] != task.fingerprint:
                     todo.append(task)
                     continue
-                same = checked.get(entry.inputs)
+                same = checked.get(entry[INPUTS])
                 if same is None:
-                    same = checked[entry.inputs] = inputs_unchanged(
-                        decode(entry.inputs), asset.path, opts.trust_mtime)
+                    same = checked[entry[INPUTS]] = inputs_unchanged(
+                        decode(entry[INPUTS]), asset.path, opts.trust_mtime)
                 if not same:
                     todo.append(task)
-                elif entry.status == "done":
+                elif entry[STATUS] == "done":
                     if all(unchanged(o, os.path.join(outdir, o[0]), opts.trust_mtime)
-                           for o in decode(entry.outputs)):
+                           for o in decode(entry[OUTPUTS])):
                         skipped.append(task)
                     else:
                         todo.append(task)
@@ -394,7 +405,7 @@ def plan(assets, outdir, opts, ledger, book, run=""):
                     todo.append(task)
                     retried = True
                 else:
-                    known.append((task, entry))
+                    known.append(task)
             book.planned(asset, skipped, known, retried if todo else False, bool(todo))
             if todo:
                 jobs.append(AssetJob(asset.name, asset.path, outdir, {**fields, "threads": threads},
@@ -402,25 +413,30 @@ def plan(assets, outdir, opts, ledger, book, run=""):
     return jobs
 
 
-def _image_tasks(asset, opts, fingerprints):
-    """The asset, its render fields and one ImageTask per view."""
+def _image_tasks(asset, opts, shared):
+    """The asset, its render fields and one ImageTask per view.
+
+    ``shared`` caches what depends only on the settings (fields, views, fingerprints) by
+    the asset's overrides, so most assets of a batch (no overrides) pay only for names.
+    """
     o = asset.overrides
-    fields = opts.render_fields(o)
-    frames = o.get("turntable", opts.turntable)
-    views = turntable_views(frames) if frames else [fixed_view(v) for v in o.get("views", opts.views)]
-    formats = o.get("formats", opts.formats)
-    settings_key = json.dumps([fields, formats], sort_keys=True)
+    cache_key = json.dumps(o, sort_keys=True) if o else ""
+    settings = shared.get(cache_key)
+    if settings is None:
+        fields = opts.render_fields(o)
+        frames = o.get("turntable", opts.turntable)
+        views = turntable_views(frames) if frames else [fixed_view(v) for v in o.get("views", opts.views)]
+        formats = o.get("formats", opts.formats)
+        # the file names are the image's key (its identity) plus the formats
+        views = [(view, image_fingerprint(fields, dataclasses.asdict(view),
+                                          [f"*.{fmt}" for fmt in formats], opts.ground))
+                 for view in views]
+        settings = shared[cache_key] = (fields, views, formats)
+    fields, views, formats = settings
     tasks = []
-    for view in views:
+    for view, fingerprint in views:
         key = asset.name if len(views) == 1 else f"{asset.name}.{view.name}"
-        files = tuple(f"{key}.{fmt}" for fmt in formats)
-        # the file names are the key plus the formats: the key is hashed with the rest
-        cached = (settings_key, view.name)
-        if cached not in fingerprints:
-            fingerprints[cached] = image_fingerprint(fields, dataclasses.asdict(view),
-                                                     [f"*.{fmt}" for fmt in formats], opts.ground)
-        fingerprints_key = fingerprints[cached]
-        tasks.append(ImageTask(key, view, files, fingerprints_key))
+        tasks.append(ImageTask(key, view, tuple(f"{key}.{fmt}" for fmt in formats), fingerprint))
     return asset, fields, tasks
 
 
@@ -435,10 +451,13 @@ class Books:
     opts : BatchOptions
     total : int
         Assets in the batch.
+    progress_file : file, optional
+        Where ``jsonl`` progress goes (default stderr); closed with the books.
     """
 
-    def __init__(self, ledger, outdir, opts, total):
+    def __init__(self, ledger, outdir, opts, total, progress_file=None):
         self.ledger, self.outdir, self.opts, self.total = ledger, outdir, opts, total
+        self.progress_file = progress_file
         self.counts = {"assets": total, "done": 0, "skipped": 0, "failed": 0, "known_failed": 0,
                        "retried": 0, "not_attempted": 0, "images": 0}
         self.assets, self.pending, self.finished_jobs = [], {}, 0
@@ -453,10 +472,11 @@ class Books:
                   "retried": retried,
                   "images": [{"key": t.key, "status": "skipped", "files": list(t.files)}
                              for t in skipped]}
-        for task, entry in known:
+        for task in known:
+            attempts, stage, message = self.ledger.failure(task.key)
             record["images"].append({"key": task.key, "status": "known-failed",
-                                     "files": list(task.files), "stage": entry.stage,
-                                     "message": entry.message, "attempts": entry.attempts})
+                                     "files": list(task.files), "stage": stage,
+                                     "message": message, "attempts": attempts})
         self.counts["retried"] += bool(retried)
         if has_job:
             self.pending[asset.name] = record
@@ -469,7 +489,7 @@ class Books:
         done = self.counts["skipped"] + self.counts["known_failed"]
         mode = "none" if self.opts.quiet else self.opts.progress
         if mode == "jsonl":
-            self.progress = JsonProgress(self.total, done, self.opts.progress_file)
+            self.progress = JsonProgress(self.total, done, self.progress_file or sys.stderr)
         else:
             self.progress = BatchProgress(self.total, done, enabled=mode == "bar")
 
@@ -535,6 +555,8 @@ class Books:
     def close(self):
         if self.progress is not None:
             self.progress.close()
+        if self.progress_file is not None:
+            self.progress_file.close()
         self._report.close()
 
     def report(self, wall_seconds, runner, run):
@@ -674,17 +696,12 @@ class JsonProgress:
     """Machine-readable progress: one JSON line per finished asset (``--progress jsonl``).
 
     Each line: ``time`` (Unix seconds), ``asset``, ``status``, ``seconds``, ``images``
-    (written), ``errors``, ``finished`` and ``total`` assets.  Written to ``path``
-    (appended) or stderr, flushed line by line for cluster logs.
+    (written), ``errors``, ``finished`` and ``total`` assets.  Written to ``stream``,
+    flushed line by line for cluster logs.
     """
 
-    def __init__(self, total, finished, path=None):
-        self.total, self.finished = total, finished
-        self.own = path is not None
-        try:
-            self.stream = open(path, "a", encoding="utf-8") if path else sys.stderr
-        except OSError as exc:
-            raise OutputError(f"{path}: cannot write progress: {exc.strerror}") from None
+    def __init__(self, total, finished, stream):
+        self.total, self.finished, self.stream = total, finished, stream
 
     def update(self, record):
         self.finished += 1
@@ -696,8 +713,7 @@ class JsonProgress:
         self.stream.flush()
 
     def close(self):
-        if self.own:
-            self.stream.close()
+        pass
 
 
 def _duration(seconds):

@@ -85,31 +85,36 @@ def discover(inputs):
         A command-line input that does not exist, has an unknown extension, or a manifest
         that cannot be read or has a bad value.  Nothing has run yet when this is raised.
     """
-    found = []  # (absolute path, root folder the output name is relative to, overrides)
+    found = []  # (absolute path, root folder, name relative to the root, overrides)
     for item in inputs:
         path = os.path.abspath(os.fspath(item))
         ext = os.path.splitext(path)[1].lower()
         if os.path.isdir(path):
-            found.extend((p, path, {}) for p in _walk(path))
+            found.extend((p, path, name, {}) for p, name in _walk(path))
         elif not os.path.exists(path):
             raise InputError(f"{item}: no such file or folder")
         elif ext in MESH_EXTENSIONS:
-            found.append((path, os.path.dirname(path), {}))
+            found.append((path, os.path.dirname(path), None, {}))
         elif ext in CSV_MANIFEST_EXTENSIONS:
-            found.extend((p, _manifest_root(path, p), o) for p, o in read_csv_manifest(path))
+            found.extend((p, _manifest_root(path, p), None, o) for p, o in read_csv_manifest(path))
         elif ext in LINE_MANIFEST_EXTENSIONS:
-            found.extend((p, _manifest_root(path, p), {}) for p in read_line_manifest(path))
+            found.extend((p, _manifest_root(path, p), None, {}) for p in read_line_manifest(path))
         else:
             raise InputError(
                 f"{item}: not a mesh file ({', '.join(MESH_EXTENSIONS)}), a folder or a manifest "
                 f"({', '.join(LINE_MANIFEST_EXTENSIONS + CSV_MANIFEST_EXTENSIONS)})")
-    assets, seen, names = [], set(), set()
-    for path, root, overrides in found:
-        real = os.path.realpath(path)
-        if real in seen:
+    assets, seen, names, real_folders = [], set(), set(), {}
+    for path, root, name, overrides in found:
+        # a file reached twice (two inputs, a link) is the same real folder and file name
+        folder, base = os.path.split(path)
+        real = real_folders.get(folder)
+        if real is None:
+            real = real_folders[folder] = os.path.realpath(folder)
+        if (real, base) in seen:
             continue
-        seen.add(real)
-        name = os.path.relpath(path, root).replace(os.sep, "/")
+        seen.add((real, base))
+        if name is None:
+            name = os.path.relpath(path, root).replace(os.sep, "/")
         # names differing only by case would share a file on case-insensitive systems
         if name.lower() in names:
             tag = f"{os.path.basename(root)}/{name}".encode()
@@ -129,9 +134,16 @@ def _manifest_root(manifest, path):
 
 
 def _walk(folder):
-    """Mesh files under ``folder``, recursively, in a stable (sorted) order."""
+    """Mesh files under ``folder``, recursively, in a stable (sorted) order.
+
+    Returns
+    -------
+    list of (str, str)
+        Each file's path and its name relative to ``folder`` (``/``-separated).
+    """
     paths, visited = [], {os.path.realpath(folder)}
     for here, dirs, files in os.walk(folder, followlinks=True):
+        prefix = os.path.relpath(here, folder).replace(os.sep, "/") + "/" if here != folder else ""
         # hidden folders hold editor and VCS files, and our own temporary files start with ".";
         # a linked folder seen before (a loop, or a second link to it) is walked once
         kept = []
@@ -143,7 +155,7 @@ def _walk(folder):
             visited.add(real)
             kept.append(d)
         dirs[:] = kept
-        paths.extend(os.path.join(here, f) for f in sorted(files)
+        paths.extend((os.path.join(here, f), prefix + f) for f in sorted(files)
                      if not f.startswith(".") and os.path.splitext(f)[1].lower() in MESH_EXTENSIONS)
     return paths
 

@@ -36,7 +36,6 @@ import json
 import os
 import sqlite3
 import time
-from collections import namedtuple
 
 from .errors import OutputError
 
@@ -47,8 +46,10 @@ FORMAT = "2"
 # keys per query: SQLite >= 3.32 takes 32766 parameters, older builds 999
 _LOOKUP_CHUNK = 10_000 if sqlite3.sqlite_version_info >= (3, 32) else 900
 
-Entry = namedtuple("Entry", "fingerprint status inputs outputs attempts stage message")
-Entry.__doc__ = """One image's ledger row (``inputs``/``outputs`` still encoded: :func:`decode`)."""
+# What a resume needs of an image's row, as the plain tuple SQLite returns (a named tuple
+# would add a third to the time of a look-up): index it with these
+KEY, FINGERPRINT, STATUS, INPUTS, OUTPUTS = range(5)
+_ENTRY_COLUMNS = "key, fingerprint, status, inputs, outputs"
 
 
 def encode(entries):
@@ -147,19 +148,40 @@ class Ledger:
         Parameters
         ----------
         keys : sequence of str
+            Any order; a batch asks for a few thousand at a time, in the order it found its
+            assets, which for folders is mostly the ledger's own (sorted) order.
 
         Returns
         -------
-        dict of str to Entry
+        dict of str to tuple
+            ``(key, fingerprint, status, inputs, outputs)``, indexed with :data:`KEY`,
+            :data:`FINGERPRINT`, :data:`STATUS`, :data:`INPUTS`, :data:`OUTPUTS` (inputs and
+            outputs still encoded, see :func:`decode`).  Failure details (``attempts``,
+            ``stage``, ``message``) come from :meth:`failure`.
         """
         found = {}
         for start in range(0, len(keys), _LOOKUP_CHUNK):
-            chunk = keys[start:start + _LOOKUP_CHUNK]
-            query = ("SELECT key, fingerprint, status, inputs, outputs, attempts, stage, message "
-                     f"FROM images WHERE key IN ({','.join('?' * len(chunk))})")
-            for row in self._db.execute(query, chunk):
-                found[row[0]] = Entry(*row[1:])
+            chunk = sorted(keys[start:start + _LOOKUP_CHUNK])
+            if not chunk:
+                continue
+            want = set(chunk)
+            # one sequential read of the key range, when the range holds little else...
+            limit = 2 * len(chunk) + 100
+            rows = self._db.execute(f"SELECT {_ENTRY_COLUMNS} FROM images WHERE key BETWEEN ? "
+                                    "AND ? LIMIT ?", (chunk[0], chunk[-1], limit)).fetchall()
+            found.update((row[0], row) for row in rows if row[0] in want)
+            if len(rows) == limit:
+                # ...else an index look-up of each key not found yet
+                rest = [k for k in chunk if k not in found and k > rows[-1][0]]
+                query = (f"SELECT {_ENTRY_COLUMNS} FROM images WHERE key IN "
+                         f"({','.join('?' * len(rest))})")
+                found.update((row[0], row) for row in self._db.execute(query, rest))
         return found
+
+    def failure(self, key):
+        """``(attempts, stage, message)`` of a failed image's row (None if not failed)."""
+        return self._db.execute("SELECT attempts, stage, message FROM images WHERE key=? AND "
+                                "status='failed'", (key,)).fetchone()
 
     def record(self, key, asset, fingerprint, status, inputs=(), outputs=(), seconds=0.0,
                run="", stage=None, message=None):

@@ -21,7 +21,7 @@ import trimesh
 import rtmesh
 from rtmesh.batch import REPORT_NAME, SUMMARY_NAME
 from rtmesh.batch_inputs import Asset, InputError, discover
-from rtmesh.batch_ledger import LEDGER_NAME, Ledger, decode, encode
+from rtmesh.batch_ledger import LEDGER_NAME, STATUS, Ledger, decode
 from rtmesh.cli import main
 from rtmesh.image_io import read_image
 
@@ -266,9 +266,14 @@ def test_ledger_rows_commit_per_asset_and_refuse_old_or_foreign_formats(tmp_path
         ledger.record("b", "b.obj", "f2", "failed", stage="load", message="bad again")
     with Ledger(str(tmp_path)) as ledger:
         found = ledger.lookup(["a", "b", "c"])
-        assert sorted(found) == ["a", "b"] and found["a"].status == "done"
-        assert found["b"].attempts == 2 and found["b"].message == "bad again"  # same inputs
-        assert ledger.count() == 2
+        assert sorted(found) == ["a", "b"] and found["a"][STATUS] == "done"
+        assert ledger.failure("b") == (2, "load", "bad again")  # same fingerprint: counted
+        assert ledger.failure("a") is None
+        # a look-up of keys spread over more rows than it asks for takes the index
+        for i in range(300):
+            ledger.record(f"a{i:03d}", "x", "f", "done")
+        assert sorted(ledger.lookup(["b", "a", "a150", "zzz"])) == ["a", "a150", "b"]
+        assert ledger.count() == 302
         with pytest.raises(rtmesh.OutputError, match="another rtmesh batch"):
             Ledger(str(tmp_path))
     # rtmesh 0.1's JSON-lines ledger is refused in one line, never silently trusted
@@ -598,10 +603,12 @@ def test_images_a_job_reports_must_be_visible_here(tmp_path):
             books.on_job({"asset": key, "seconds": 0.1})
         books.close()
         rows = ledger.lookup(list(cases))
-    assert rows["ok"].status == "done"
+        failures = {key: ledger.failure(key) for key in cases}
+    assert rows["ok"][STATUS] == "done" and failures["ok"] is None
     for key in ("gone", "short", "other"):
-        assert rows[key].status == "failed" and rows[key].stage == "storage"
-        assert rows[key].message.startswith("output not visible to the submitting machine")
+        _, stage, message = failures[key]
+        assert rows[key][STATUS] == "failed" and stage == "storage"
+        assert message.startswith("output not visible to the submitting machine")
 
 
 def start_scheduler(tmp_path):
@@ -728,3 +735,154 @@ def test_resume_right_after_killing_the_client_gives_each_image_one_writer(tmp_p
     assert len(rows) == 6 and all(r["status"] == "done" for r in rows)
     for r in rows:
         assert read_image(out / r["files"][0])[0].shape == (192, 192, 3)
+
+
+# ------------------------------------------------------------------------- failure policy, exit codes
+
+def test_failures_are_retried_once_per_run_or_skipped_as_known(tmp_path):
+    src = tmp_path / "src"
+    make_mesh(src / "good.obj")
+    shutil.copy(os.path.join(DATA, "empty.obj"), src / "bad.obj")
+    out = tmp_path / "out"
+    args = ["batch", str(src), "-o", str(out), "--width", "16", "--height", "16", "--spp", "1",
+            "--workers", "1", "-q"]
+    assert main(args) == 1
+    # default: the known failure is tried again (once), and fails again: exit 1
+    assert main(args) == 1
+    assert summary(out)["counts"] == counts(assets=2, skipped=1, failed=1, retried=1)
+    with Ledger(str(out)) as ledger:
+        assert ledger.failure("bad.obj")[:2] == (2, "load")
+    # --skip-failed: left as a known failure, reported as such, and not an error any more
+    code, stdout, err = run_cli(*args, "--skip-failed")
+    assert code == 0, err
+    assert summary(out)["counts"] == counts(assets=2, skipped=1, known_failed=1)
+    assert "1 known failures not retried" in stdout
+    (line,) = report_lines(out)
+    assert line["status"] == "known-failed" and line["errors"][0]["stage"] == "load"
+    # a changed input is a new attempt, whatever the policy
+    make_mesh(src / "bad.obj")
+    assert main(args + ["--skip-failed"]) == 0
+    assert summary(out)["counts"] == counts(assets=2, done=1, skipped=1, images=1)
+
+
+def test_bad_invocations_are_one_line_exit_2_and_create_nothing(tmp_path):
+    src = make_mesh(tmp_path / "a.obj")
+    out = tmp_path / "out"
+    for extra, words in ((["--passes", "ao"], "only to EXR"),
+                         (["--memory-limit", "200M"], "memory limit"),
+                         (["--progress", "jsonl", "--progress-file", str(tmp_path / "no" / "p")],
+                          "cannot write progress")):
+        code, stdout, err = run_cli("batch", src, "-o", out, *extra)
+        assert code == 2 and err.count("\n") == 1 and words in err, err
+        assert "Traceback" not in err
+        if "progress" not in words:
+            assert not out.exists()
+    (tmp_path / "list.csv").write_text("path,passes\na.obj,ao\n")
+    code, stdout, err = run_cli("batch", tmp_path / "list.csv", "-o", out)
+    assert code == 2 and "only to EXR" in err
+
+
+# ------------------------------------------------------------------------- smaller defects
+
+def test_a_killed_worker_keeps_the_images_it_finished_and_is_not_called_out_of_memory(tmp_path):
+    psutil = pytest.importorskip("psutil")
+    make_mesh(tmp_path / "src" / "a.obj", subdivisions=3)
+    out = tmp_path / "out"
+    result = {}
+    runner = threading.Thread(target=lambda: result.update(report=rtmesh.batch_convert(
+        [tmp_path / "src"], out, workers=1, threads=1, turntable=12, width=96, height=96, spp=16,
+        quiet=True)))
+    runner.start()
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and len(list(out.glob("a.obj.turn*.png"))) < 2:
+        time.sleep(0.01)
+    (worker,) = [p for p in psutil.Process().children() if "spawn_main" in " ".join(p.cmdline())]
+    worker.kill()
+    runner.join(timeout=60)
+    report = result["report"]
+    written = len(list(out.glob("a.obj.turn*.png")))
+    assert 2 <= written < 12
+    assert report.counts["images"] == written  # the images finished before the kill count
+    (failed,) = report.failed
+    errors = failed["errors"]
+    assert len(errors) == 12 - written and errors[0]["stage"] == "crash"
+    assert "SIGKILL" in errors[0]["message"] and "out of memory?" not in errors[0]["message"]
+
+
+def test_nothing_to_do_starts_no_worker(tmp_path, monkeypatch):
+    make_mesh(tmp_path / "src" / "a.obj")
+    rtmesh.batch_convert([tmp_path / "src"], tmp_path / "out", workers=1, **TINY)
+    from rtmesh import batch_pool
+
+    def no_pool(*args, **kwargs):
+        raise AssertionError("a worker pool was started")
+
+    monkeypatch.setattr(batch_pool, "run_local", no_pool)
+    report = rtmesh.batch_convert([tmp_path / "src"], tmp_path / "out", workers=1, **TINY)
+    assert report.counts["skipped"] == 1 and report.runner == "nothing to do"
+
+
+def test_ground_under_a_view_from_below_does_not_hide_the_asset(tmp_path):
+    src = make_mesh(tmp_path / "a.obj", kind="box")
+    images = {}
+    for ground in (False, True):
+        out = tmp_path / f"out{ground}"
+        rtmesh.batch_convert([src], out, views=("bottom", "front"), ground=ground, width=32,
+                             height=32, spp=4, quiet=True)
+        images[ground] = {v: read_image(out / f"a.obj.{v}.png")[0] for v in ("bottom", "front")}
+    bottom = images[True]["bottom"].astype(float)
+    assert bottom.std() > 0.05 * bottom.mean()  # the box, not a blank plane
+    np.testing.assert_array_equal(images[True]["bottom"], images[False]["bottom"])
+    assert not np.array_equal(images[True]["front"], images[False]["front"])  # ground elsewhere
+
+
+def test_summary_to_a_closed_pipe_and_jsonl_progress(tmp_path):
+    make_mesh(tmp_path / "src" / "a.obj")
+    make_mesh(tmp_path / "src" / "b.obj", kind="box")
+    progress = tmp_path / "progress.jsonl"
+    command = [sys.executable, "-m", "rtmesh.cli", "batch", str(tmp_path / "src"), "-o",
+               str(tmp_path / "out"), "--width", "16", "--height", "16", "--spp", "1",
+               "--workers", "1", "--progress", "jsonl", "--progress-file", str(progress)]
+    proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc.stdout.close()  # like "| head" once it has read its lines
+    err = proc.stderr.read()
+    assert proc.wait(timeout=120) == 0 and err == ""
+    lines = [json.loads(line) for line in progress.read_text().splitlines()]
+    assert [(line["asset"], line["status"], line["images"]) for line in lines] == [
+        ("a.obj", "done", 1), ("b.obj", "done", 1)]
+    assert [line["finished"] for line in lines] == [1, 2] and lines[0]["total"] == 2
+    # to stderr by default, one line per finished asset and nothing else
+    code, stdout, err = run_cli("batch", tmp_path / "src", "-o", tmp_path / "out2", "--width",
+                                "16", "--height", "16", "--spp", "1", "--progress", "jsonl")
+    assert code == 0 and [json.loads(line)["asset"] for line in err.splitlines()] == ["a.obj", "b.obj"]
+
+
+# ------------------------------------------------------------------------- cost at scale
+
+def bench_batch():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("bench_batch", os.path.join(REPO, "tools", "bench_batch.py"))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_noop_resume_ledger_cost_and_bookkeeping_per_asset(tmp_path):
+    """A no-op resume over a 50,000-image ledger (open, fetch and decode every row, close)
+    and the bookkeeping of a finished asset; limits ten times what an idle 2-core machine
+    takes, to catch a cost that grows faster than the ledger (the 1M case is marked slow)."""
+    bench = bench_batch()
+    keys, _ = bench.synthetic_ledger(str(tmp_path), 50_000)
+    cost = bench.noop_resume_ledger_cost(str(tmp_path), keys)
+    assert cost["total"] < 2.5, cost
+    (tmp_path / "books").mkdir()
+    assert bench.bookkeeping_cost(str(tmp_path / "books"), 300) < 1.0  # ms per asset
+
+
+@pytest.mark.slow
+def test_noop_resume_over_a_million_ledger_rows_takes_at_most_5_s(tmp_path):
+    bench = bench_batch()
+    keys, _ = bench.synthetic_ledger(str(tmp_path), 1_000_000)
+    cost = bench.noop_resume_ledger_cost(str(tmp_path), keys)
+    assert cost["total"] <= 5.0, cost

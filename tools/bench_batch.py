@@ -116,7 +116,7 @@ def synthetic_ledger(folder, n):
 def noop_resume_ledger_cost(folder, keys):
     """Seconds a no-op resume spends in the ledger: open it, fetch and decode the row of
     every image (what :func:`rtmesh.batch.plan` does before checking files), close it."""
-    from rtmesh.batch_ledger import Ledger, decode
+    from rtmesh.batch_ledger import INPUTS, OUTPUTS, STATUS, Ledger, decode
 
     start = time.perf_counter()
     ledger = Ledger(folder)
@@ -125,9 +125,9 @@ def noop_resume_ledger_cost(folder, keys):
     for first in range(0, len(keys), 5000):  # as rtmesh.batch.plan asks
         found = ledger.lookup(keys[first:first + 5000])
         for entry in found.values():
-            decode(entry.inputs)
-            decode(entry.outputs)
-            done += entry.status == "done"
+            decode(entry[INPUTS])
+            decode(entry[OUTPUTS])
+            done += entry[STATUS] == "done"
     looked = time.perf_counter()
     ledger.close()
     end = time.perf_counter()
