@@ -167,13 +167,14 @@ def _run(jobs, scheduler, on_image, on_job, run, outdir, time_limit, retries, wa
 
 
 def _lost(client, exc):
-    """True when ``exc`` means the scheduler is gone, not that one task failed."""
+    """True when ``exc`` means the scheduler is gone, not that one task failed: the client
+    cancels every future when it loses the scheduler (a task's own error, such as a worker
+    killed too often, comes as that error)."""
     try:
         from distributed.comm.core import CommClosedError
     except ImportError:  # pragma: no cover
-        CommClosedError = OSError
-    return (isinstance(exc, (CancelledError, CommClosedError, OSError, TimeoutError))
-            or client.status not in ("running", "connecting"))
+        CommClosedError = ConnectionError
+    return isinstance(exc, (CancelledError, CommClosedError)) or client.status != "running"
 
 
 def storage_resource(outdir):
