@@ -140,7 +140,7 @@ def _bytes(text):
 
 
 def _add_batch_parser(commands):
-    from rtmesh.batch.runner import FORMATS, VIEWS
+    from rtmesh.batch.runner import FORMATS, PROGRESS_MODES, VIEWS
 
     p = commands.add_parser(
         "batch", help="render many mesh files (folders, manifests) to images, resumably",
@@ -148,8 +148,10 @@ def _add_batch_parser(commands):
         "tree. INPUTS are mesh files, folders (searched recursively) or manifests (.txt: one "
         "path per line; .csv: a 'path' column plus optional width, height, spp, views, "
         "turntable, formats, passes, seed). Re-running the same command skips finished images "
-        "(OUTDIR/rtmesh-batch-ledger.jsonl); OUTDIR/rtmesh-batch-report.json lists every asset. "
-        "Exit status: 0 all done, 1 some assets failed, 2 bad input.")
+        "whose inputs, settings and files are unchanged (OUTDIR/rtmesh-batch-ledger.sqlite); "
+        "OUTDIR/rtmesh-batch-summary.json and rtmesh-batch-report.jsonl say what the run did. "
+        "Exit status: 0 all done, 1 some assets failed, 2 bad invocation, 3 cluster lost "
+        "(resume to continue). See docs/BATCH.md.")
     p.add_argument("inputs", nargs="+", metavar="INPUT", help="mesh file, folder or manifest")
     p.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="output folder")
     p.add_argument("--width", type=_positive_int, default=256, help="image width (default 256)")
@@ -177,7 +179,20 @@ def _add_batch_parser(commands):
     p.add_argument("--memory-limit", type=_bytes, metavar="SIZE",
                    help="address space per local worker, e.g. 4G; 0 = off (default: RAM / workers)")
     p.add_argument("--force", action="store_true", help="redo every image, ignoring the ledger")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--trust-mtime", action="store_true",
+                   help="compare inputs and finished images by size and modification time, not "
+                   "content (faster resume)")
+    failed = p.add_mutually_exclusive_group()
+    failed.add_argument("--retry-failed", dest="retry_failed", action="store_true", default=True,
+                        help="try assets that failed in an earlier run once more (default)")
+    failed.add_argument("--skip-failed", dest="retry_failed", action="store_false",
+                        help="leave assets that failed in an earlier run with the same inputs "
+                        "(counted as known failures)")
+    p.add_argument("--progress", choices=PROGRESS_MODES, default="bar",
+                   help="bar (default), jsonl (one JSON line per finished asset) or none")
+    p.add_argument("--progress-file", metavar="FILE",
+                   help="append --progress jsonl lines to FILE instead of stderr")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress output")
     _add_debug_flag(p)
 
 
@@ -290,9 +305,19 @@ def cmd_batch(args):
         ground=args.ground, seed=args.seed, max_depth=args.max_depth, exposure=args.exposure,
         tonemap=args.tonemap, workers=args.workers, threads=args.threads,
         scheduler=args.scheduler, time_limit=args.time_limit, memory_limit=args.memory_limit,
-        force=args.force, quiet=args.quiet)
-    print(report.summary())
-    return 1 if report.counts["failed"] else 0
+        force=args.force, trust_mtime=args.trust_mtime, retry_failed=args.retry_failed,
+        progress=args.progress, progress_file=args.progress_file, quiet=args.quiet)
+    lost = report.counts["not_attempted"]
+    if lost:
+        print(f"rtmesh: cluster lost: {lost} assets not attempted, resume to continue",
+              file=sys.stderr)
+    try:
+        print(report.summary())
+        sys.stdout.flush()
+    except BrokenPipeError:
+        # the reader went away (| head): the batch itself is finished and recorded
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    return report.exit_code
 
 
 def main(argv=None):

@@ -8,6 +8,7 @@ import json
 import os
 import shutil
 import signal
+import sqlite3
 import subprocess
 import sys
 import threading
@@ -18,9 +19,9 @@ import pytest
 import trimesh
 
 import rtmesh
-from rtmesh.batch.inputs import InputError, discover
-from rtmesh.batch.ledger import LEDGER_NAME, Ledger
-from rtmesh.batch.runner import REPORT_NAME
+from rtmesh.batch.inputs import Asset, InputError, discover
+from rtmesh.batch.ledger import LEDGER_NAME, STATUS, Ledger, decode
+from rtmesh.batch.runner import REPORT_NAME, SUMMARY_NAME
 from rtmesh.cli import main
 from rtmesh.io.images import read_image
 
@@ -52,9 +53,35 @@ def truncated_glb(path):
 
 
 def ledger_records(outdir):
-    """Every line of the ledger, parsed (duplicates kept)."""
-    with open(os.path.join(outdir, LEDGER_NAME)) as f:
-        return [json.loads(line) for line in f if line.strip()]
+    """Every row of the ledger (read-only, while a batch may be writing it)."""
+    path = os.path.join(outdir, LEDGER_NAME)
+    if not os.path.exists(path):
+        return []
+    db = sqlite3.connect(f"file:{path}?mode=ro", uri=True, timeout=10)
+    try:
+        db.row_factory = sqlite3.Row
+        rows = [dict(r) for r in db.execute("SELECT * FROM images")]
+    except sqlite3.OperationalError:  # not created yet
+        rows = []
+    finally:
+        db.close()
+    for r in rows:
+        r["files"] = [o[0] for o in decode(r["outputs"])]
+    return rows
+
+
+def counts(**given):
+    """A report's counts: the given ones, zero for the rest."""
+    keys = ("assets", "done", "skipped", "failed", "known_failed", "retried", "not_attempted", "images")
+    return {k: given.get(k, 0) for k in keys}
+
+
+def summary(outdir):
+    return json.loads((outdir / SUMMARY_NAME).read_text())
+
+
+def report_lines(outdir):
+    return [json.loads(line) for line in (outdir / REPORT_NAME).read_text().splitlines()]
 
 
 def temporary_files(folder):
@@ -78,7 +105,7 @@ def test_duplicate_file_names_in_different_folders_get_distinct_outputs(tmp_path
     make_mesh(src / "tables" / "model.ply")  # same stem, same folder, other format
     out = tmp_path / "out"
     report = rtmesh.batch_convert([src], out, workers=2, **TINY)
-    assert report.counts == {"assets": 3, "done": 3, "skipped": 0, "failed": 0, "images": 3}
+    assert report.counts == counts(assets=3, done=3, images=3)
     for name in ("chairs/model.obj.png", "tables/model.obj.png", "tables/model.ply.png"):
         image, _ = read_image(out / name)
         assert image.shape == (16, 24, 3)
@@ -88,13 +115,14 @@ def test_duplicate_file_names_in_different_folders_get_distinct_outputs(tmp_path
     assert not np.array_equal(a, b)
 
 
-def test_names_mirror_the_deepest_common_folder_of_the_inputs(tmp_path):
+def test_names_are_relative_to_the_input_they_were_found_under(tmp_path):
     first = make_mesh(tmp_path / "x" / "a" / "m.obj")
     second = make_mesh(tmp_path / "x" / "b" / "deep" / "m.obj")
     names = [a.name for a in discover([first, second, first])]  # a file named twice: once
-    assert names == ["a/m.obj", "b/deep/m.obj"]
-    # a folder input is the base of its own files, whatever they hold
+    assert names[0] == "m.obj" and names[1].startswith("m.obj-") and len(names) == 2
+    # a folder input is the base of its own files, whatever else is given
     assert [a.name for a in discover([tmp_path / "x" / "b"])] == ["deep/m.obj"]
+    assert [a.name for a in discover([tmp_path / "x" / "b", first])] == ["deep/m.obj", "m.obj"]
 
 
 def test_empty_input_is_a_one_line_error(tmp_path):
@@ -148,8 +176,7 @@ def test_corrupt_files_in_the_middle_of_a_batch_fail_alone(tmp_path):
     code = main(["batch", str(src), "-o", str(out), "--width", "16", "--height", "16",
                  "--spp", "1", "--workers", "2", "-q"])
     assert code == 1  # something failed
-    report = json.loads((out / REPORT_NAME).read_text())
-    status = {a["asset"]: a for a in report["assets"]}
+    status = {a["asset"]: a for a in report_lines(out)}
     assert status["a_good.obj"]["status"] == status["e_good.ply"]["status"] == "done"
     for bad in ("b_empty.obj", "d_truncated.glb"):
         assert status[bad]["status"] == "failed"
@@ -158,7 +185,7 @@ def test_corrupt_files_in_the_middle_of_a_batch_fail_alone(tmp_path):
         assert not (out / f"{bad}.png").exists()
     # whatever happens to a half-broken file, the batch finished and accounted for it
     assert status["c_notenoughindices.obj"]["status"] in ("done", "failed")
-    assert report["counts"]["assets"] == 5
+    assert summary(out)["counts"]["assets"] == 5 == len(status)
     assert temporary_files(out) == []
 
 
@@ -225,23 +252,157 @@ def test_rerun_skips_finished_images_and_redoes_changed_or_deleted_ones(tmp_path
     assert os.stat(out / "a.obj.png").st_ino == inode  # not rewritten
     os.unlink(out / "b.obj.png")
     again = rtmesh.batch_convert([tmp_path / "src"], out, workers=1, **TINY)
-    assert again.counts == {"assets": 2, "done": 1, "skipped": 1, "failed": 0, "images": 1}
+    assert again.counts == counts(assets=2, done=1, skipped=1, images=1)
     # other settings, other images: nothing is skipped
     again = rtmesh.batch_convert([tmp_path / "src"], out, workers=1, **{**TINY, "spp": 2})
     assert again.counts["done"] == 2
 
 
-def test_ledger_ignores_a_torn_last_line(tmp_path):
+def test_ledger_rows_commit_per_asset_and_refuse_old_or_foreign_formats(tmp_path):
     with Ledger(str(tmp_path)) as ledger:
-        ledger.record("a", "f1", "done", files=[])
-        ledger.record("b", "f2", "done", files=[])
-    with open(tmp_path / LEDGER_NAME, "a") as f:
-        f.write('{"key": "c", "fingerpri')  # a write cut short
+        ledger.record("a", "a.obj", "f1", "done", outputs=[["a.obj.png", 3, 1, "x"]])
+        ledger.record("b", "b.obj", "f2", "failed", stage="load", message="bad")
+        ledger.commit()
+        ledger.record("b", "b.obj", "f2", "failed", stage="load", message="bad again")
     with Ledger(str(tmp_path)) as ledger:
-        assert ledger.is_done("a", "f1") and ledger.is_done("b", "f2")
-        assert not ledger.is_done("b", "other inputs") and "c" not in ledger.records
-    # reopening compacted it back to whole lines
-    assert [r["key"] for r in ledger_records(tmp_path)] == ["a", "b"]
+        found = ledger.lookup(["a", "b", "c"])
+        assert sorted(found) == ["a", "b"] and found["a"][STATUS] == "done"
+        assert ledger.failure("b") == (2, "load", "bad again")  # same fingerprint: counted
+        assert ledger.failure("a") is None
+        # a look-up of keys spread over more rows than it asks for takes the index
+        for i in range(300):
+            ledger.record(f"a{i:03d}", "x", "f", "done")
+        assert sorted(ledger.lookup(["b", "a", "a150", "zzz"])) == ["a", "a150", "b"]
+        assert ledger.count() == 302
+        with pytest.raises(rtmesh.OutputError, match="another rtmesh batch"):
+            Ledger(str(tmp_path))
+    # rtmesh 0.1's JSON-lines ledger is refused in one line, never silently trusted
+    old = tmp_path / "old"
+    old.mkdir()
+    (old / "rtmesh-batch-ledger.jsonl").write_text('{"key": "a", "status": "done"}\n')
+    code, out, err = run_cli("batch", make_mesh(tmp_path / "m.obj"), "-o", old)
+    assert code == 2 and err.count("\n") == 1 and "rtmesh 0.1" in err and "delete it" in err
+    assert sorted(os.listdir(old)) == ["rtmesh-batch-ledger.jsonl"]
+
+
+def test_no_temporary_file_outlives_a_killed_run(tmp_path):
+    """The SQLite ledger is never copied (no compaction); what a killed run of any version
+    left behind (image, summary, probe and old compaction temporaries) is removed."""
+    out = tmp_path / "out"
+    out.mkdir()
+    stale = [".rtmesh-batch-ledger.k2j3h4.tmp", ".rtmesh-batch-summary.json.x1.tmp",
+             ".rtmesh-batch-probe-0123.tmp", ".m.obj.ab12.tmp.png"]
+    for name in stale:
+        (out / name).write_bytes(b"x" * 1000)
+    rtmesh.batch_convert([make_mesh(tmp_path / "src" / "m.obj")], out, workers=1, **TINY)
+    assert temporary_files(out) == []
+    # readable by the group and others, as the umask says (not 0600)
+    umask = os.umask(0)
+    os.umask(umask)
+    for name in (SUMMARY_NAME, REPORT_NAME, LEDGER_NAME):
+        assert os.stat(out / name).st_mode & 0o777 == 0o666 & ~umask, name
+
+
+# ------------------------------------------------------------------------- identity, changes
+
+def test_adding_an_input_or_reaching_the_library_through_a_link_renames_nothing(tmp_path):
+    make_mesh(tmp_path / "A" / "chairs" / "oak.obj")
+    make_mesh(tmp_path / "A" / "m.obj")
+    make_mesh(tmp_path / "B" / "m.obj", kind="box")  # same relative path as A's
+    out = tmp_path / "out"
+    first = rtmesh.batch_convert([tmp_path / "A"], out, workers=1, **TINY)
+    assert first.counts["done"] == 2
+    inode = os.stat(out / "chairs" / "oak.obj.png").st_ino
+    both = rtmesh.batch_convert([tmp_path / "A", tmp_path / "B"], out, workers=1, **TINY)
+    assert both.counts == counts(assets=3, done=1, skipped=2, images=1)
+    (new,) = [a["asset"] for a in both.assets]
+    assert new.startswith("m.obj-")  # B's clashing name gets a suffix, A's names stay
+    os.symlink(tmp_path / "A", tmp_path / "link")
+    linked = rtmesh.batch_convert([tmp_path / "link"], out, workers=1, **TINY)
+    assert linked.counts == counts(assets=2, skipped=2)
+    assert os.stat(out / "chairs" / "oak.obj.png").st_ino == inode
+    # manifests: one path per line; "#" starts a comment only at a line start or after a space
+    make_mesh(tmp_path / "A" / "part#2.obj")
+    (tmp_path / "A" / "list.txt").write_text("# parts\npart#2.obj   # the second\nm.obj\n")
+    assert [a.name for a in discover([tmp_path / "A" / "list.txt"])] == ["part#2.obj", "m.obj"]
+
+
+def test_symlinked_subfolders_are_searched_once(tmp_path):
+    make_mesh(tmp_path / "elsewhere" / "x.obj")
+    make_mesh(tmp_path / "lib" / "a.obj")
+    os.symlink(tmp_path / "elsewhere", tmp_path / "lib" / "linked")
+    os.symlink(tmp_path / "lib", tmp_path / "lib" / "loop")  # a cycle is not followed
+    assert [a.name for a in discover([tmp_path / "lib"])] == ["a.obj", "linked/x.obj"]
+
+
+def obj_with_material(folder, colour="1 0 0", texture=None):
+    folder.mkdir(parents=True, exist_ok=True)
+    make_mesh(folder / "m.obj")
+    text = (folder / "m.obj").read_text()
+    (folder / "m.obj").write_text("mtllib m.mtl\nusemtl paint\n" + text)
+    mtl = f"newmtl paint\nKd {colour}\n" + (f"map_Kd {texture}\n" if texture else "")
+    (folder / "m.mtl").write_text(mtl)
+    return folder / "m.obj"
+
+
+def test_editing_a_dependency_or_damaging_an_image_redoes_it(tmp_path):
+    from PIL import Image
+
+    src = tmp_path / "src"
+    obj_with_material(src / "paint")
+    Image.new("RGB", (4, 4), (0, 255, 0)).save(src / "tex.bmp")  # fixed size
+    obj_with_material(src / "textured", texture="../tex.bmp")
+    gltf = trimesh.creation.box().export(file_type="gltf")
+    (src / "buffers").mkdir()
+    for name, data in gltf.items():
+        (src / "buffers" / name).write_bytes(data)
+    out = tmp_path / "out"
+    run = lambda **kw: rtmesh.batch_convert([src], out, workers=1, **{**TINY, **kw})  # noqa: E731
+    assert run().counts["done"] == 3
+    rows = {r["key"]: decode(r["inputs"]) for r in ledger_records(out)}
+    assert [e[0] for e in rows["paint/m.obj"]] == ["", "m.mtl"]
+    assert [e[0] for e in rows["textured/m.obj"]] == ["", "m.mtl", "../tex.bmp"]
+    assert sorted(e[0] for e in rows["buffers/model.gltf"])[1:] == ["gltf_buffer_0.bin",
+                                                                    "gltf_buffer_1.bin"]
+    assert run().counts["skipped"] == 3
+
+    # each dependency edited, same size and time kept: content decides
+    def edit(path, data):
+        st = os.stat(path)
+        path.write_bytes(data)
+        os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns))
+
+    edit(src / "paint" / "m.mtl", (src / "paint" / "m.mtl").read_bytes().replace(b"1 0 0", b"0 0 1"))
+    Image.new("RGB", (4, 4), (255, 0, 255)).save(tmp_path / "t.bmp")
+    edit(src / "tex.bmp", (tmp_path / "t.bmp").read_bytes())
+    buffer = src / "buffers" / "gltf_buffer_1.bin"  # the box's 8 float32 positions
+    edit(buffer, (np.frombuffer(buffer.read_bytes(), np.float32) * 2).tobytes())
+    # with --trust-mtime, equal size and time are taken as unchanged...
+    assert run(trust_mtime=True).counts["skipped"] == 3
+    # ...by default the content is compared
+    again = run()
+    assert again.counts == counts(assets=3, done=3, images=3)
+    assert {a["asset"] for a in again.assets} == {"paint/m.obj", "textured/m.obj", "buffers/model.gltf"}
+
+    # damaged images: truncated, emptied, overwritten by another asset's image (same size)
+    png = out / "paint" / "m.obj.png"
+    png.write_bytes(png.read_bytes()[:50])
+    (out / "textured" / "m.obj.png").write_bytes(b"")
+    assert run(trust_mtime=True).counts == counts(assets=3, done=2, skipped=1, images=2)
+    shutil.copy(out / "paint" / "m.obj.png", out / "textured" / "m.obj.png")
+    data = bytearray(png.read_bytes())
+    data[-20] ^= 0xFF  # same size, other content
+    png.write_bytes(bytes(data))
+    assert run().counts == counts(assets=3, done=2, skipped=1, images=2)
+    # the rtmesh version is part of every image's fingerprint
+    from rtmesh.batch import identity as batch_identity
+
+    fp = batch_identity.image_fingerprint({"spp": 1}, {"name": "iso"}, ["*.png"], False)
+    batch_identity.__version__ = "99"
+    try:
+        assert batch_identity.image_fingerprint({"spp": 1}, {"name": "iso"}, ["*.png"], False) != fp
+    finally:
+        batch_identity.__version__ = rtmesh.__version__
 
 
 def test_resume_after_sigkill_writes_every_image_exactly_once(tmp_path):
@@ -256,7 +417,7 @@ def test_resume_after_sigkill_writes_every_image_exactly_once(tmp_path):
     ledger = out / LEDGER_NAME
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline and batch.poll() is None:
-        if ledger.exists() and len(ledger.read_text().splitlines()) >= 3:
+        if ledger.exists() and len(ledger_records(out)) >= 3:
             break
         time.sleep(0.02)
     assert batch.poll() is None, "the batch finished before it could be killed"
@@ -276,7 +437,7 @@ def test_resume_after_sigkill_writes_every_image_exactly_once(tmp_path):
 
     proc = subprocess.run(command, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
-    report = json.loads((out / REPORT_NAME).read_text())
+    report = summary(out)
     assert report["counts"]["skipped"] == len(finished)
     assert report["counts"]["done"] == 16 - len(finished)
     records = ledger_records(out)
@@ -333,7 +494,7 @@ def test_dask_cluster_with_a_worker_killed_mid_batch(tmp_path):
         ledger = out / LEDGER_NAME
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline and runner.is_alive():
-            if ledger.exists() and len(ledger.read_text().splitlines()) >= 2:
+            if ledger.exists() and len(ledger_records(out)) >= 2:
                 break
             time.sleep(0.01)
         assert runner.is_alive(), "the batch finished before a worker could be killed"
@@ -341,7 +502,7 @@ def test_dask_cluster_with_a_worker_killed_mid_batch(tmp_path):
         runner.join(timeout=120)
         assert not runner.is_alive()
     report = result["report"]
-    assert report.counts == {"assets": 14, "done": 14, "skipped": 0, "failed": 0, "images": 14}
+    assert report.counts == counts(assets=14, done=14, images=14)
     assert report.runner == "dask"
     records = ledger_records(out)
     assert len(records) == 14 == len({r["key"] for r in records})
@@ -351,3 +512,377 @@ def test_dask_cluster_with_a_worker_killed_mid_batch(tmp_path):
     # run over this folder removes it
     visible = [n for n in os.listdir(out) if not n.startswith(".")]
     assert len([n for n in visible if n.endswith(".png")]) == 14
+
+
+# ------------------------------------------------------------------------- Dask: storage, runs, loss
+
+def start_process(*command, env=None, cwd=None):
+    return subprocess.Popen(list(map(str, command)), stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True, env=env, cwd=cwd)
+
+
+def dask_worker_command(address, *extra):
+    return [sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads", "1",
+            "--no-nanny", "--no-dashboard", *extra]
+
+
+def wait_for_workers(client, n, timeout=60):
+    client.wait_for_workers(n, timeout=timeout)
+    return list(client.scheduler_info(n_workers=-1)["workers"])
+
+
+def stop(*procs):
+    for proc in procs:
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait()
+
+
+def test_dask_worker_with_a_private_output_folder_is_refused(tmp_path):
+    """A real second worker process in its own mount namespace, where OUTDIR is another
+    folder (as on a node that mounts its own disk there): it is refused before any job."""
+    distributed = pytest.importorskip("distributed")
+    if shutil.which("unshare") is None or subprocess.run(
+            ["unshare", "-m", "true"], capture_output=True).returncode != 0:
+        pytest.skip("needs mount namespaces (unshare -m)")
+    src = tmp_path / "src"
+    for i in range(4):
+        make_mesh(src / f"m{i}.obj")
+    out, private = tmp_path / "out", tmp_path / "private"
+    out.mkdir()
+    private.mkdir()
+    with distributed.LocalCluster(n_workers=0, threads_per_worker=1, processes=True,
+                                  dashboard_address=None, silence_logs=50) as cluster, \
+            distributed.Client(cluster) as client:
+        script = (f"mount --bind {private} {out} && exec "
+                  + " ".join(dask_worker_command(cluster.scheduler_address)))
+        worker = start_process("unshare", "-m", "--propagation", "private", "sh", "-c", script)
+        try:
+            (bad,) = wait_for_workers(client, 1)
+            # only the private worker: nothing is dispatched, one line, exit 2
+            code, stdout, err = run_cli("batch", src, "-o", out, "--scheduler",
+                                        cluster.scheduler_address, "-q")
+            assert code == 2 and err.splitlines()[-1].startswith("rtmesh: error: no Dask worker")
+            assert "Traceback" not in err and os.listdir(private) == []
+            assert not [n for n in os.listdir(out) if n.endswith(".png")]
+            # with a worker that shares the folder, it does every job and the other none
+            cluster.scale(2)
+            wait_for_workers(client, 2)
+            code, stdout, err = run_cli("batch", src, "-o", out, "--scheduler",
+                                        cluster.scheduler_address, "--width", "16", "--height",
+                                        "16", "--spp", "1", "-q")
+            assert code == 0, err
+            refused = [line for line in err.splitlines() if "refused" in line]
+            assert len(refused) == 1 and bad in refused[0] and "shared storage" in refused[0]
+            assert "4 done" in stdout
+            assert os.listdir(private) == []  # the refused worker wrote nothing, not even a probe
+            assert sorted(n for n in os.listdir(out) if n.endswith(".png")) == [
+                f"m{i}.obj.png" for i in range(4)]
+        finally:
+            stop(worker)
+
+
+def test_images_a_job_reports_must_be_visible_here(tmp_path):
+    """After each job the submitter checks every reported file: missing, short or other
+    content fails the image as not visible (on Dask the content is compared too)."""
+    from rtmesh.batch.identity import describe
+    from rtmesh.batch.runner import BatchOptions, Books
+
+    (tmp_path / "a.png").write_bytes(b"12345")
+    (tmp_path / "b.png").write_bytes(b"12345")
+    entry = describe(tmp_path / "a.png", "a.png")
+    with Ledger(str(tmp_path)) as ledger:
+        books = Books(ledger, str(tmp_path), BatchOptions(scheduler="tcp://x:1", quiet=True), 4)
+        cases = {"ok": ["a.png", entry], "gone": ["c.png", ["c.png", 5, 0, entry[3]]],
+                 "short": ["a.png", ["a.png", 9, 0, entry[3]]],
+                 "other": ["b.png", ["b.png", 5, 0, "0" * 32]]}
+        for key, (name, output) in cases.items():
+            books.planned(Asset(f"/src/{key}", key), [], [], False, True)
+            books.on_image({"asset": key, "key": key, "fingerprint": "f", "status": "done",
+                            "files": [name], "seconds": 0.1, "inputs": [], "outputs": [output]})
+            books.on_job({"asset": key, "seconds": 0.1})
+        books.close()
+        rows = ledger.lookup(list(cases))
+        failures = {key: ledger.failure(key) for key in cases}
+    assert rows["ok"][STATUS] == "done" and failures["ok"] is None
+    for key in ("gone", "short", "other"):
+        _, stage, message = failures[key]
+        assert rows[key][STATUS] == "failed" and stage == "storage"
+        assert message.startswith("output not visible to the submitting machine")
+
+
+def start_scheduler(tmp_path):
+    """A Dask scheduler in its own process (so that it can be killed); returns it and its
+    address."""
+    info = tmp_path / "scheduler.json"
+    scheduler = start_process(sys.executable, "-m", "distributed.cli.dask_scheduler", "--port", "0",
+                              "--no-dashboard", "--scheduler-file", info)
+    deadline = time.monotonic() + 60
+    while not info.exists() or not info.read_text().strip():
+        assert time.monotonic() < deadline and scheduler.poll() is None, scheduler.stderr.read()
+        time.sleep(0.1)
+    time.sleep(0.2)
+    return scheduler, json.loads(info.read_text())["address"]
+
+
+def wait_for_rows(out, n, proc, timeout=90):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and proc.poll() is None:
+        if (out / LEDGER_NAME).exists() and len(ledger_records(out)) >= n:
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"no {n} ledger rows (batch exit status {proc.poll()})")
+
+
+def test_a_lost_scheduler_ends_the_batch_with_its_own_exit_code_and_no_failures(tmp_path):
+    distributed = pytest.importorskip("distributed")  # noqa: F841
+    src = tmp_path / "src"
+    for i in range(12):
+        make_mesh(src / f"m{i:02d}.obj", subdivisions=3)
+    out = tmp_path / "out"
+    scheduler, address = start_scheduler(tmp_path)
+    worker = start_process(*dask_worker_command(address))
+    try:
+        batch = subprocess.Popen(
+            [sys.executable, "-m", "rtmesh.cli", "batch", str(src), "-o", str(out), "--scheduler",
+             address, "--width", "96", "--height", "96", "--spp", "16", "-q"],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        wait_for_rows(out, 2, batch)
+        scheduler.kill()
+        stdout, err = batch.communicate(timeout=120)
+    finally:
+        stop(scheduler, worker)
+    rows = ledger_records(out)
+    assert rows and all(r["status"] == "done" for r in rows)  # nothing marked failed
+    lost = 12 - len(rows)
+    assert batch.returncode == 3, err
+    assert err.strip().splitlines() == [
+        f"rtmesh: cluster lost: {lost} assets not attempted, resume to continue"]
+    assert summary(out)["counts"]["not_attempted"] == lost
+
+
+class RenameWatch:
+    """Every file renamed into a folder, in order (Linux inotify, IN_MOVED_TO): each image
+    and the run file are written as a temporary file renamed into place, so this counts
+    their writes exactly, without touching the writers."""
+
+    IN_MOVED_TO = 0x80
+
+    def __init__(self, folder):
+        import ctypes
+        import ctypes.util
+
+        self.libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+        self.fd = self.libc.inotify_init1(os.O_NONBLOCK)
+        if self.fd < 0 or self.libc.inotify_add_watch(self.fd, os.fsencode(folder), self.IN_MOVED_TO) < 0:
+            pytest.skip("inotify is not available")
+        self.names = []
+
+    def poll(self):
+        import struct
+
+        while True:
+            try:
+                data = os.read(self.fd, 65536)
+            except BlockingIOError:
+                return self.names
+            offset = 0
+            while offset < len(data):
+                _, mask, _, length = struct.unpack_from("iIII", data, offset)
+                name = data[offset + 16: offset + 16 + length].rstrip(b"\0").decode()
+                self.names.append(name)
+                offset += 16 + length
+
+    def close(self):
+        os.close(self.fd)
+
+
+def test_resume_right_after_killing_the_client_gives_each_image_one_writer(tmp_path):
+    """kill -9 of the submitting process: its Dask tasks stop before writing once the
+    scheduler drops them, and a resume started at once takes the folder over (run file):
+    no task of the killed run writes an image after that."""
+    distributed = pytest.importorskip("distributed")
+    src = tmp_path / "src"
+    for i in range(6):
+        make_mesh(src / f"m{i}.obj", subdivisions=4)
+    out = tmp_path / "out"
+    out.mkdir()
+    watch = RenameWatch(out)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None, silence_logs=50) as cluster:
+        command = [sys.executable, "-m", "rtmesh.cli", "batch", str(src), "-o", str(out),
+                   "--scheduler", cluster.scheduler_address, "--width", "192", "--height", "192",
+                   "--spp", "160", "-q"]
+        first = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        wait_for_rows(out, 1, first)
+        first.kill()  # its running tasks go on, on the cluster
+        first.wait()
+        proc = subprocess.run(command, capture_output=True, text=True, timeout=180)
+    names = watch.poll()
+    watch.close()
+    assert proc.returncode == 0, proc.stderr
+    takeovers = [i for i, n in enumerate(names) if n == ".rtmesh-batch-run"]
+    assert len(takeovers) == 2  # the killed run's, the resumed run's
+    after = [n for n in names[takeovers[1] + 1:] if n.endswith(".png")]
+    assert len(after) == len(set(after))  # after the take-over: one writer per image
+    # the killed run's tasks stop writing once the scheduler drops them: only an image
+    # finished between the killed run's last ledger commit and the kill is written again
+    from collections import Counter
+
+    twice = [n for n, k in Counter(n for n in names if n.endswith(".png")).items() if k > 1]
+    assert len(twice) <= 1, names
+    rows = ledger_records(out)
+    assert len(rows) == 6 and all(r["status"] == "done" for r in rows)
+    for r in rows:
+        assert read_image(out / r["files"][0])[0].shape == (192, 192, 3)
+
+
+# ------------------------------------------------------------------------- failure policy, exit codes
+
+def test_failures_are_retried_once_per_run_or_skipped_as_known(tmp_path):
+    src = tmp_path / "src"
+    make_mesh(src / "good.obj")
+    shutil.copy(os.path.join(DATA, "empty.obj"), src / "bad.obj")
+    out = tmp_path / "out"
+    args = ["batch", str(src), "-o", str(out), "--width", "16", "--height", "16", "--spp", "1",
+            "--workers", "1", "-q"]
+    assert main(args) == 1
+    # default: the known failure is tried again (once), and fails again: exit 1
+    assert main(args) == 1
+    assert summary(out)["counts"] == counts(assets=2, skipped=1, failed=1, retried=1)
+    with Ledger(str(out)) as ledger:
+        assert ledger.failure("bad.obj")[:2] == (2, "load")
+    # --skip-failed: left as a known failure, reported as such, and not an error any more
+    code, stdout, err = run_cli(*args, "--skip-failed")
+    assert code == 0, err
+    assert summary(out)["counts"] == counts(assets=2, skipped=1, known_failed=1)
+    assert "1 known failures not retried" in stdout
+    (line,) = report_lines(out)
+    assert line["status"] == "known-failed" and line["errors"][0]["stage"] == "load"
+    # a changed input is a new attempt, whatever the policy
+    make_mesh(src / "bad.obj")
+    assert main(args + ["--skip-failed"]) == 0
+    assert summary(out)["counts"] == counts(assets=2, done=1, skipped=1, images=1)
+
+
+def test_bad_invocations_are_one_line_exit_2_and_create_nothing(tmp_path):
+    src = make_mesh(tmp_path / "a.obj")
+    out = tmp_path / "out"
+    for extra, words in ((["--passes", "ao"], "only to EXR"),
+                         (["--memory-limit", "200M"], "memory limit"),
+                         (["--progress", "jsonl", "--progress-file", str(tmp_path / "no" / "p")],
+                          "cannot write progress")):
+        code, stdout, err = run_cli("batch", src, "-o", out, *extra)
+        assert code == 2 and err.count("\n") == 1 and words in err, err
+        assert "Traceback" not in err
+        if "progress" not in words:
+            assert not out.exists()
+    (tmp_path / "list.csv").write_text("path,passes\na.obj,ao\n")
+    code, stdout, err = run_cli("batch", tmp_path / "list.csv", "-o", out)
+    assert code == 2 and "only to EXR" in err
+
+
+# ------------------------------------------------------------------------- smaller defects
+
+def test_a_killed_worker_keeps_the_images_it_finished_and_is_not_called_out_of_memory(tmp_path):
+    psutil = pytest.importorskip("psutil")
+    make_mesh(tmp_path / "src" / "a.obj", subdivisions=3)
+    out = tmp_path / "out"
+    result = {}
+    runner = threading.Thread(target=lambda: result.update(report=rtmesh.batch_convert(
+        [tmp_path / "src"], out, workers=1, threads=1, turntable=12, width=96, height=96, spp=16,
+        quiet=True)))
+    runner.start()
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and len(list(out.glob("a.obj.turn*.png"))) < 2:
+        time.sleep(0.01)
+    (worker,) = [p for p in psutil.Process().children() if "spawn_main" in " ".join(p.cmdline())]
+    worker.kill()
+    runner.join(timeout=60)
+    report = result["report"]
+    written = len(list(out.glob("a.obj.turn*.png")))
+    assert 2 <= written < 12
+    assert report.counts["images"] == written  # the images finished before the kill count
+    (failed,) = report.failed
+    errors = failed["errors"]
+    assert len(errors) == 12 - written and errors[0]["stage"] == "crash"
+    assert "SIGKILL" in errors[0]["message"] and "out of memory?" not in errors[0]["message"]
+
+
+def test_nothing_to_do_starts_no_worker(tmp_path, monkeypatch):
+    make_mesh(tmp_path / "src" / "a.obj")
+    rtmesh.batch_convert([tmp_path / "src"], tmp_path / "out", workers=1, **TINY)
+    from rtmesh.batch import pool as batch_pool
+
+    def no_pool(*args, **kwargs):
+        raise AssertionError("a worker pool was started")
+
+    monkeypatch.setattr(batch_pool, "run_local", no_pool)
+    report = rtmesh.batch_convert([tmp_path / "src"], tmp_path / "out", workers=1, **TINY)
+    assert report.counts["skipped"] == 1 and report.runner == "nothing to do"
+
+
+def test_ground_under_a_view_from_below_does_not_hide_the_asset(tmp_path):
+    src = make_mesh(tmp_path / "a.obj", kind="box")
+    images = {}
+    for ground in (False, True):
+        out = tmp_path / f"out{ground}"
+        rtmesh.batch_convert([src], out, views=("bottom", "front"), ground=ground, width=32,
+                             height=32, spp=4, quiet=True)
+        images[ground] = {v: read_image(out / f"a.obj.{v}.png")[0] for v in ("bottom", "front")}
+    bottom = images[True]["bottom"].astype(float)
+    assert bottom.std() > 0.05 * bottom.mean()  # the box, not a blank plane
+    np.testing.assert_array_equal(images[True]["bottom"], images[False]["bottom"])
+    assert not np.array_equal(images[True]["front"], images[False]["front"])  # ground elsewhere
+
+
+def test_summary_to_a_closed_pipe_and_jsonl_progress(tmp_path):
+    make_mesh(tmp_path / "src" / "a.obj")
+    make_mesh(tmp_path / "src" / "b.obj", kind="box")
+    progress = tmp_path / "progress.jsonl"
+    command = [sys.executable, "-m", "rtmesh.cli", "batch", str(tmp_path / "src"), "-o",
+               str(tmp_path / "out"), "--width", "16", "--height", "16", "--spp", "1",
+               "--workers", "1", "--progress", "jsonl", "--progress-file", str(progress)]
+    proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc.stdout.close()  # like "| head" once it has read its lines
+    err = proc.stderr.read()
+    assert proc.wait(timeout=120) == 0 and err == ""
+    lines = [json.loads(line) for line in progress.read_text().splitlines()]
+    assert [(line["asset"], line["status"], line["images"]) for line in lines] == [
+        ("a.obj", "done", 1), ("b.obj", "done", 1)]
+    assert [line["finished"] for line in lines] == [1, 2] and lines[0]["total"] == 2
+    # to stderr by default, one line per finished asset and nothing else
+    code, stdout, err = run_cli("batch", tmp_path / "src", "-o", tmp_path / "out2", "--width",
+                                "16", "--height", "16", "--spp", "1", "--progress", "jsonl")
+    assert code == 0 and [json.loads(line)["asset"] for line in err.splitlines()] == ["a.obj", "b.obj"]
+
+
+# ------------------------------------------------------------------------- cost at scale
+
+def bench_batch():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("bench_batch", os.path.join(REPO, "tools", "bench_batch.py"))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_noop_resume_ledger_cost_and_bookkeeping_per_asset(tmp_path):
+    """A no-op resume over a 50,000-image ledger (open, fetch and decode every row, close)
+    and the bookkeeping of a finished asset; limits ten times what an idle 2-core machine
+    takes, to catch a cost that grows faster than the ledger (the 1M case is marked slow)."""
+    bench = bench_batch()
+    keys, _ = bench.synthetic_ledger(str(tmp_path), 50_000)
+    cost = bench.noop_resume_ledger_cost(str(tmp_path), keys)
+    assert cost["total"] < 2.5, cost
+    (tmp_path / "books").mkdir()
+    assert bench.bookkeeping_cost(str(tmp_path / "books"), 300) < 1.0  # ms per asset
+
+
+@pytest.mark.slow
+def test_noop_resume_over_a_million_ledger_rows_takes_at_most_5_s(tmp_path):
+    bench = bench_batch()
+    keys, _ = bench.synthetic_ledger(str(tmp_path), 1_000_000)
+    cost = bench.noop_resume_ledger_cost(str(tmp_path), keys)
+    assert cost["total"] <= 5.0, cost

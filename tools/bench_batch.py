@@ -4,6 +4,8 @@ dask.distributed LocalCluster of N single-threaded worker processes.
 
     python tools/bench_batch.py                   # >= 50 generated meshes + the real assets
     python tools/bench_batch.py --count 80 --width 128 --height 128
+    python tools/bench_batch.py --ledger 1000000  # ledger cost of a no-op resume, 1M images
+    python tools/bench_batch.py --overhead 2000   # per-asset bookkeeping and resume checks
 
 The meshes are generated with trimesh.creation into a temporary folder (spheres, boxes,
 cylinders, capsules, tori, cones of varied tessellation, written as OBJ, PLY, STL and GLB),
@@ -15,12 +17,14 @@ Prints a Markdown table.
 """
 
 import argparse
+import json
 import os
 import platform
 import shutil
 import sys
 import tempfile
 import time
+from types import SimpleNamespace
 
 import numpy as np
 import trimesh
@@ -90,6 +94,91 @@ def cpu_name():
     return platform.processor() or "unknown CPU"
 
 
+def synthetic_ledger(folder, n):
+    """A ledger of ``n`` finished images (one per asset, as ``rtmesh batch`` writes them),
+    filled through :class:`rtmesh.batch.ledger.Ledger` itself; returns the keys and seconds."""
+    from rtmesh.batch.ledger import Ledger
+
+    # 1000 folders of n / 1000 files, in the order a folder walk finds them
+    keys = [f"library/group{i // max(1, n // 1000):03d}/asset{i:07d}.obj" for i in range(n)]
+    digest = "0123456789abcdef0123456789abcdef"
+    start = time.perf_counter()
+    with Ledger(folder) as ledger:
+        for i, key in enumerate(keys):
+            ledger.record(key, key, "f" * 40, "done", inputs=[["", 12345, 1_700_000_000_000_000_000, digest]],
+                          outputs=[[key + ".png", 23456, 1_700_000_000_000_000_000, digest]],
+                          seconds=0.05, run="bench")
+            if i % 10_000 == 9_999:
+                ledger.commit()
+    return keys, time.perf_counter() - start
+
+
+def noop_resume_ledger_cost(folder, keys):
+    """Seconds a no-op resume spends in the ledger: open it, fetch and decode the row of
+    every image (what :func:`rtmesh.batch.plan` does before checking files), close it."""
+    from rtmesh.batch.ledger import INPUTS, OUTPUTS, STATUS, Ledger, decode
+
+    start = time.perf_counter()
+    ledger = Ledger(folder)
+    opened = time.perf_counter()
+    done = 0
+    for first in range(0, len(keys), 5000):  # as rtmesh.batch.plan asks
+        found = ledger.lookup(keys[first:first + 5000])
+        for entry in found.values():
+            decode(entry[INPUTS])
+            decode(entry[OUTPUTS])
+            done += entry[STATUS] == "done"
+    looked = time.perf_counter()
+    ledger.close()
+    end = time.perf_counter()
+    assert done == len(keys)
+    return {"open": opened - start, "lookup": looked - opened, "close": end - looked,
+            "total": end - start}
+
+
+def bookkeeping_cost(folder, n):
+    """Milliseconds per asset the submitting process spends on a finished asset: checking
+    its image on disk, its ledger row and commit, its report line (:class:`rtmesh.batch.Books`)."""
+    from rtmesh.batch.identity import describe
+    from rtmesh.batch.ledger import Ledger
+    from rtmesh.batch.runner import BatchOptions, Books
+
+    images = []
+    for i in range(n):
+        name = f"a{i:05d}.obj.png"
+        with open(os.path.join(folder, name), "wb") as f:
+            f.write(os.urandom(20_000))
+        images.append({"asset": f"a{i:05d}.obj", "run": "bench", "key": f"a{i:05d}.obj",
+                       "fingerprint": "f" * 40, "status": "done", "files": [name], "seconds": 0.05,
+                       "inputs": [["", 1, 2, "x"], ["a.mtl", 1, 2, "y"]],
+                       "outputs": [describe(os.path.join(folder, name), name)]})
+    with Ledger(folder) as ledger:
+        books = Books(ledger, folder, BatchOptions(quiet=True), n)
+        for image in images:
+            books.planned(SimpleNamespace(name=image["asset"], path="/x/" + image["asset"]), [], [],
+                          False, True)
+        start = time.perf_counter()
+        for image in images:
+            books.on_image(image)
+            books.on_job({"asset": image["asset"], "seconds": 0.05, "images": [image]})
+        seconds = time.perf_counter() - start
+        books.close()
+    return 1000.0 * seconds / n
+
+
+def resume_check_cost(src, out, n):
+    """Milliseconds per asset of a no-op resume over ``n`` real assets (discovery, plan with
+    file checks, bookkeeping), by content and with --trust-mtime."""
+    result = {}
+    for trust in (False, True):
+        start = time.perf_counter()
+        report = rtmesh.batch_convert([src], out, width=16, height=16, spp=1, quiet=True,
+                                      trust_mtime=trust)
+        assert report.counts["skipped"] == n, report.counts
+        result[trust] = 1000.0 * (time.perf_counter() - start) / n
+    return result
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--count", type=int, default=56, help="generated meshes (default 56)")
@@ -99,7 +188,34 @@ def main(argv=None):
     parser.add_argument("--workers", type=int, default=len(os.sched_getaffinity(0)),
                         help="N for the pool and the cluster (default: cores)")
     parser.add_argument("--no-dask", action="store_true", help="skip the LocalCluster run")
+    parser.add_argument("--ledger", type=int, metavar="N",
+                        help="only measure the ledger cost of a no-op resume over N images")
+    parser.add_argument("--overhead", type=int, metavar="N",
+                        help="only measure per-asset bookkeeping and no-op resume checks, N assets")
     args = parser.parse_args(argv)
+    if args.ledger:
+        with tempfile.TemporaryDirectory(prefix="rtmesh-bench-ledger-") as tmp:
+            keys, fill = synthetic_ledger(tmp, args.ledger)
+            size = os.path.getsize(os.path.join(tmp, "rtmesh-batch-ledger.sqlite"))
+            cost = noop_resume_ledger_cost(tmp, keys)
+        print(f"ledger of {args.ledger} images ({size / 1e6:.0f} MB, filled in {fill:.1f} s): "
+              f"no-op resume {cost['total']:.2f} s (open {cost['open']:.3f}, look-up "
+              f"{cost['lookup']:.2f}, close {cost['close']:.3f})")
+        return 0
+    if args.overhead:
+        with tempfile.TemporaryDirectory(prefix="rtmesh-bench-overhead-") as tmp:
+            ms = bookkeeping_cost(tmp, args.overhead)
+            src, out = os.path.join(tmp, "src"), os.path.join(tmp, "out")
+            os.makedirs(src)
+            mesh = trimesh.creation.icosphere(subdivisions=1)
+            for i in range(args.overhead):
+                mesh.export(os.path.join(src, f"m{i:05d}.obj"))
+            rtmesh.batch_convert([src], out, width=16, height=16, spp=1, quiet=True)
+            resume = resume_check_cost(src, out, args.overhead)
+        print(f"bookkeeping per finished asset: {ms:.3f} ms; no-op resume per asset: "
+              f"{resume[False]:.3f} ms by content, {resume[True]:.3f} ms with --trust-mtime "
+              f"({args.overhead} assets)")
+        return 0
     settings = dict(width=args.width, height=args.height, spp=args.spp, quiet=True, force=True)
 
     with tempfile.TemporaryDirectory(prefix="rtmesh-bench-batch-") as tmp:

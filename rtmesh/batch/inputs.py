@@ -5,14 +5,21 @@ file whose header names a ``path`` column and optionally per-asset overrides
 (``width``, ``height``, ``spp``, ``views``, ``turntable``, ``formats``, ``passes``, ``seed``).
 Relative paths in a manifest are resolved against the manifest's folder.
 
-Every asset gets an output name that mirrors the input tree: its path relative to the
-deepest folder that holds every input (a folder input, a file's folder, a manifest's folder
-for the entries under it), with its extension kept (``chairs/oak.obj``), so two
-files that differ only by extension or by folder never share an output.
+An asset's identity, its output name, is its path relative to the input root it was
+found under (a folder input for the files in it, a file input's own folder, a manifest's
+folder for the entries under it), with its extension kept (``chairs/oak.obj``): adding
+other inputs to a batch never renames the assets already there, and a library reached
+through another path (a symlink, another mount point) keeps its names.  Two assets with
+the same relative path under two roots: the first keeps the name, the next gets a short
+suffix (``oak.obj-1a2b3c4d``) derived from its root's folder name and relative path.
+Symbolic links to folders are followed (each real folder once).
 """
 
 import csv
+import hashlib
+import logging
 import os
+import re
 from dataclasses import dataclass, field
 
 from rtmesh.core.errors import RtmeshError
@@ -26,6 +33,10 @@ CSV_MANIFEST_EXTENSIONS = (".csv",)
 _INT_COLUMNS = ("width", "height", "spp", "turntable", "seed")
 _LIST_COLUMNS = ("views", "formats", "passes")
 CSV_COLUMNS = ("path",) + _INT_COLUMNS + _LIST_COLUMNS
+# a comment: "#" at the start of a line or after white space ("a#b.obj" is a file name)
+_COMMENT = re.compile(r"(^|\s)#.*$")
+
+log = logging.getLogger(__name__)
 
 
 class InputError(RtmeshError):
@@ -42,8 +53,8 @@ class Asset:
         Absolute path of the mesh file (it may not exist: manifests can name missing files,
         which fail on their own without stopping the batch).
     name : str
-        Output name relative to the output folder, ``/``-separated, extension kept
-        (``"chairs/oak.obj"``).
+        The asset's identity and output name: its path relative to its input root,
+        ``/``-separated, extension kept (``"chairs/oak.obj"``).
     overrides : dict
         Per-asset settings from a CSV manifest (``width``, ``views``...).
     """
@@ -74,37 +85,43 @@ def discover(inputs):
         A command-line input that does not exist, has an unknown extension, or a manifest
         that cannot be read or has a bad value.  Nothing has run yet when this is raised.
     """
-    found = []  # (absolute path, root folder the output name is relative to, overrides)
+    found = []  # (absolute path, root folder, name relative to the root, overrides)
     for item in inputs:
         path = os.path.abspath(os.fspath(item))
         ext = os.path.splitext(path)[1].lower()
         if os.path.isdir(path):
-            found.extend((p, path, {}) for p in _walk(path))
+            found.extend((p, path, name, {}) for p, name in _walk(path))
         elif not os.path.exists(path):
             raise InputError(f"{item}: no such file or folder")
         elif ext in MESH_EXTENSIONS:
-            found.append((path, os.path.dirname(path), {}))
+            found.append((path, os.path.dirname(path), None, {}))
         elif ext in CSV_MANIFEST_EXTENSIONS:
-            found.extend((p, _manifest_root(path, p), o) for p, o in read_csv_manifest(path))
+            found.extend((p, _manifest_root(path, p), None, o) for p, o in read_csv_manifest(path))
         elif ext in LINE_MANIFEST_EXTENSIONS:
-            found.extend((p, _manifest_root(path, p), {}) for p in read_line_manifest(path))
+            found.extend((p, _manifest_root(path, p), None, {}) for p in read_line_manifest(path))
         else:
             raise InputError(
                 f"{item}: not a mesh file ({', '.join(MESH_EXTENSIONS)}), a folder or a manifest "
                 f"({', '.join(LINE_MANIFEST_EXTENSIONS + CSV_MANIFEST_EXTENSIONS)})")
-    unique, seen = [], set()
-    for path, root, overrides in found:
-        if path not in seen:
-            seen.add(path)
-            unique.append((path, root, overrides))
-    if not unique:
-        return []
-    # Names relative to the deepest folder above every root: distinct paths give distinct
-    # names, and for one folder input the base is the folder itself, so files added to it
-    # later never rename the ones already converted.
-    base = os.path.commonpath([root for _, root, _ in unique])
-    return [Asset(path, os.path.relpath(path, base).replace(os.sep, "/"), overrides)
-            for path, _, overrides in unique]
+    assets, seen, names, real_folders = [], set(), set(), {}
+    for path, root, name, overrides in found:
+        # a file reached twice (two inputs, a link) is the same real folder and file name
+        folder, base = os.path.split(path)
+        real = real_folders.get(folder)
+        if real is None:
+            real = real_folders[folder] = os.path.realpath(folder)
+        if (real, base) in seen:
+            continue
+        seen.add((real, base))
+        if name is None:
+            name = os.path.relpath(path, root).replace(os.sep, "/")
+        # names differing only by case would share a file on case-insensitive systems
+        if name.lower() in names:
+            tag = f"{os.path.basename(root)}/{name}".encode()
+            name = f"{name}-{hashlib.sha1(tag).hexdigest()[:8]}"
+        names.add(name.lower())
+        assets.append(Asset(path, name, overrides))
+    return assets
 
 
 def _manifest_root(manifest, path):
@@ -117,18 +134,37 @@ def _manifest_root(manifest, path):
 
 
 def _walk(folder):
-    """Mesh files under ``folder``, recursively, in a stable (sorted) order."""
-    paths = []
-    for here, dirs, files in os.walk(folder):
-        # hidden folders hold editor and VCS files, and our own temporary files start with "."
-        dirs[:] = sorted(d for d in dirs if not d.startswith("."))
-        paths.extend(os.path.join(here, f) for f in sorted(files)
+    """Mesh files under ``folder``, recursively, in a stable (sorted) order.
+
+    Returns
+    -------
+    list of (str, str)
+        Each file's path and its name relative to ``folder`` (``/``-separated).
+    """
+    paths, visited = [], {os.path.realpath(folder)}
+    for here, dirs, files in os.walk(folder, followlinks=True):
+        prefix = os.path.relpath(here, folder).replace(os.sep, "/") + "/" if here != folder else ""
+        # hidden folders hold editor and VCS files, and our own temporary files start with ".";
+        # a linked folder seen before (a loop, or a second link to it) is walked once
+        kept = []
+        for d in sorted(d for d in dirs if not d.startswith(".")):
+            real = os.path.realpath(os.path.join(here, d))
+            if real in visited:
+                log.warning("%s: links to a folder already searched; skipped", os.path.join(here, d))
+                continue
+            visited.add(real)
+            kept.append(d)
+        dirs[:] = kept
+        paths.extend((os.path.join(here, f), prefix + f) for f in sorted(files)
                      if not f.startswith(".") and os.path.splitext(f)[1].lower() in MESH_EXTENSIONS)
     return paths
 
 
 def read_line_manifest(path):
-    """Mesh paths listed one per line; blank lines and ``#`` comments are skipped.
+    """Mesh paths listed one per line; blank lines and comments are skipped.
+
+    A comment starts with ``#`` at the beginning of a line or after white space, so a file
+    name may hold ``#`` (``part#2.obj``).
 
     Returns
     -------
@@ -141,7 +177,7 @@ def read_line_manifest(path):
             lines = f.read().splitlines()
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{path}: cannot read manifest: {exc}") from None
-    entries = (line.split("#", 1)[0].strip() for line in lines)
+    entries = (_COMMENT.sub("", line).strip() for line in lines)
     return [os.path.abspath(os.path.join(folder, os.path.expanduser(e))) for e in entries if e]
 
 

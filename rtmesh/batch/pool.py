@@ -1,9 +1,9 @@
-"""Where batch jobs run: a local pool of worker processes, or a Dask cluster.
+"""Local batch runner: a pool of worker processes on this machine.
 
-Both runners take the same :class:`~rtmesh.batch.worker.AssetJob` list and report through
-the same two callbacks, ``on_image(image_result)`` and ``on_job(job_result)``, always called
-in the calling process: the caller alone writes the ledger, so a batch leaves the same
-ledger wherever it ran.
+It takes the same :class:`~rtmesh.batch.worker.AssetJob` list as the Dask runner
+(:mod:`rtmesh.batch.dask_pool`) and reports through the same two callbacks,
+``on_image(image_result)`` and ``on_job(job_result)``, always called in the calling process:
+the caller alone writes the ledger, so a batch leaves the same ledger wherever it ran.
 
 The local pool is not :class:`concurrent.futures.ProcessPoolExecutor` because that pool
 cannot stop one runaway job: it can only be shut down whole, and a worker that dies breaks
@@ -23,11 +23,9 @@ from collections import deque
 from multiprocessing.connection import wait
 
 from rtmesh.batch import worker as batch_worker
-from rtmesh.batch.worker import run_job
+from rtmesh.batch.worker import image_result, run_job
 from rtmesh.core import runtime
 from rtmesh.core.errors import RtmeshError
-
-DASK_MISSING = "--scheduler needs dask.distributed: pip install rtmesh[distributed]"
 
 
 def run_local(jobs, workers, on_image, on_job, time_limit=None, memory_limit=None):
@@ -45,6 +43,8 @@ def run_local(jobs, workers, on_image, on_job, time_limit=None, memory_limit=Non
         Bytes of address space per worker process (``RLIMIT_AS``); allocations beyond it
         fail inside the worker, which reports the asset as failed at the ``memory`` stage.
     """
+    if not jobs:
+        return  # no worker process for no job
     pending = deque(jobs)
     # spawn, not fork: a fork of a process that has run thread pools (Embree, NumPy) can
     # inherit locks held by threads that no longer exist
@@ -84,7 +84,7 @@ def run_local(jobs, workers, on_image, on_job, time_limit=None, memory_limit=Non
                     continue
                 if not worker.process.is_alive():
                     reason = _death_reason(worker.process.exitcode, memory_limit)
-                    worker.fail_rest("memory" if "memory" in reason else "crash", reason, on_image, on_job)
+                    worker.fail_rest("crash", reason, on_image, on_job)
                 elif worker.deadline is not None and time.monotonic() > worker.deadline:
                     worker.process.kill()
                     worker.process.join()
@@ -147,9 +147,7 @@ class _Worker:
         for task in self.job.images:
             if task.key in self.reported:
                 continue
-            images.append({"key": task.key, "fingerprint": task.fingerprint, "status": "failed",
-                           "files": list(task.files), "seconds": 0.0, "stage": stage,
-                           "message": message})
+            images.append(image_result(self.job, task, "failed", 0.0, stage=stage, message=message))
             on_image(images[-1])
         on_job({"asset": self.job.asset, "seconds": round(time.perf_counter() - self.start, 4),
                 "images": images})
@@ -221,7 +219,11 @@ def _exit_with_parent(parent_pid):
 
 
 def _death_reason(exitcode, memory_limit):
-    """One line on why a worker process ended in the middle of a job."""
+    """One line on why a worker process ended in the middle of a job.
+
+    A SIGKILL is named as such: the kernel's out-of-memory killer sends it, and so does a
+    person or a cluster manager, so it is not called a memory failure.
+    """
     if exitcode is not None and exitcode < 0:
         try:
             how = f"killed by {signal.Signals(-exitcode).name}"
@@ -229,77 +231,10 @@ def _death_reason(exitcode, memory_limit):
             how = f"killed by signal {-exitcode}"
     else:
         how = f"exited with status {exitcode}"
-    # the kernel's OOM killer sends SIGKILL, and allocators that hit RLIMIT_AS abort
-    if exitcode in (-signal.SIGKILL, -signal.SIGABRT, -signal.SIGSEGV):
-        limit = f" (limit {memory_limit / 2**30:.1f} GiB)" if memory_limit else ""
+    limit = f" (limit {memory_limit / 2**30:.1f} GiB)" if memory_limit else ""
+    if exitcode == -signal.SIGKILL:
+        return f"worker process {how} (by the out-of-memory killer or another process)"
+    # allocators that hit RLIMIT_AS abort or crash
+    if exitcode in (-signal.SIGABRT, -signal.SIGSEGV) and memory_limit:
         return f"worker process {how}; out of memory?{limit}"
     return f"worker process {how}"
-
-
-def run_dask(jobs, scheduler, on_image, on_job, time_limit=None, retries=2):
-    """Run jobs on a dask.distributed cluster; results come back to this process.
-
-    Parameters
-    ----------
-    jobs : sequence of AssetJob
-    scheduler : str or distributed.Client
-        Scheduler address (``tcp://host:8786``) or a connected client.
-    on_image, on_job : callable
-        Called here, in the client, as each job's result arrives.
-    time_limit : float, optional
-        Seconds per job, enforced inside the task between render chunks (a Dask task cannot
-        be killed from outside without killing its worker).  Memory is guarded by the
-        cluster's own per-worker ``memory_limit``: a worker past it is restarted by its
-        nanny and its task runs again elsewhere, up to the scheduler's allowed failures.
-    retries : int
-        Extra attempts for a task that raised (a task lost with a killed worker is always
-        re-run by the scheduler, without counting as a retry).
-
-    Raises
-    ------
-    RtmeshError
-        dask.distributed is not installed, or the scheduler cannot be reached.
-    """
-    try:
-        from distributed import Client, as_completed
-    except ImportError:
-        raise RtmeshError(DASK_MISSING) from None
-    own_client = not isinstance(scheduler, Client)
-    if own_client:
-        try:
-            client = Client(scheduler, timeout="20s")
-        except (OSError, TimeoutError, ValueError) as exc:
-            raise RtmeshError(f"cannot reach the Dask scheduler at {scheduler}: "
-                              f"{' '.join(str(exc).split()) or type(exc).__name__}") from None
-    else:
-        client = scheduler
-    try:
-        futures = {client.submit(_dask_task, job, time_limit, pure=False, retries=retries): job
-                   for job in jobs}
-        for future in as_completed(futures):
-            job = futures[future]
-            try:
-                result = future.result()
-            except Exception as exc:  # the task itself failed: e.g. KilledWorker
-                message = " ".join(str(exc).split())
-                message = f"{type(exc).__name__}: {message}" if message else type(exc).__name__
-                result = {"asset": job.asset, "seconds": 0.0, "images": [
-                    {"key": t.key, "fingerprint": t.fingerprint, "status": "failed",
-                     "files": list(t.files), "seconds": 0.0, "stage": "worker", "message": message}
-                    for t in job.images]}
-            finally:
-                future.release()
-            for image in result["images"]:
-                on_image(image)
-            on_job(result)
-    finally:
-        if own_client:
-            client.close()
-
-
-def _dask_task(job, time_limit):
-    """The function a Dask worker runs for one asset."""
-    # a worker of an rtmesh batch renders: tune its process for that (once; idempotent)
-    runtime.tune_process()
-    deadline = time.monotonic() + time_limit if time_limit else None
-    return run_job(job, deadline=deadline)

@@ -3,39 +3,54 @@
 >>> import rtmesh
 >>> report = rtmesh.batch_convert(["models/"], "thumbs/", width=128, height=128)  # doctest: +SKIP
 >>> report.counts  # doctest: +SKIP
-{'assets': 50, 'done': 49, 'skipped': 0, 'failed': 1, 'images': 50}
+{'assets': 50, 'done': 49, 'skipped': 0, 'failed': 1, 'known_failed': 0, 'retried': 0,
+ 'not_attempted': 0, 'images': 50}
 
 The pieces, one job each:
 
 - :mod:`rtmesh.batch.inputs` finds the assets (files, folders, manifests) and names them;
+- :mod:`rtmesh.batch.identity` says what an image depends on and whether it changed;
 - this module plans one job per asset (its views and output files, minus those the ledger
-  says are finished), runs them, and writes the report;
+  says are finished and unchanged), runs them, keeps the books and writes the report;
 - :mod:`rtmesh.batch.worker` converts one asset inside a worker;
-- :mod:`rtmesh.batch.pool` runs the jobs on local processes or a Dask cluster;
-- :mod:`rtmesh.batch.ledger` remembers finished images so a re-run resumes.
+- :mod:`rtmesh.batch.pool` runs the jobs on local processes, :mod:`rtmesh.batch.dask_pool` on a
+  Dask cluster;
+- :mod:`rtmesh.batch.ledger` remembers finished and failed images so a re-run resumes.
+
+Exit statuses of the ``rtmesh batch`` command (:attr:`BatchReport.exit_code`):
+:data:`EXIT_DONE` (0) every asset done, :data:`EXIT_FAILED` (1) some assets failed in this
+run, :data:`EXIT_USAGE` (2) bad invocation (nothing ran), :data:`EXIT_CLUSTER_LOST` (3)
+the Dask cluster was lost (resume to continue).
 """
 
 import dataclasses
-import hashlib
 import json
 import os
 import re
 import sys
 import tempfile
 import time
+import uuid
 from dataclasses import dataclass, field
 
 from rtmesh import __version__
+from rtmesh.batch.identity import image_fingerprint, inputs_unchanged, unchanged
 from rtmesh.batch.inputs import InputError, discover
-from rtmesh.batch.ledger import Ledger
-from rtmesh.batch.pool import run_dask, run_local
+from rtmesh.batch.ledger import FINGERPRINT, INPUTS, OUTPUTS, STATUS, Ledger, decode
 from rtmesh.batch.worker import VIEWS, AssetJob, ImageTask, fixed_view, turntable_views
 from rtmesh.core.errors import OutputError
 from rtmesh.loaders.importers import MESH_EXTENSIONS
 from rtmesh.rendering.settings import PASSES, RenderSettings
 
 FORMATS = ("png", "exr", "jpg")
-REPORT_NAME = "rtmesh-batch-report.json"
+REPORT_NAME = "rtmesh-batch-report.jsonl"
+SUMMARY_NAME = "rtmesh-batch-summary.json"
+RUN_FILE = ".rtmesh-batch-run"
+PROGRESS_MODES = ("bar", "jsonl", "none")
+EXIT_DONE, EXIT_FAILED, EXIT_USAGE, EXIT_CLUSTER_LOST = 0, 1, 2, 3
+# address space a local worker needs to start (imports, thread stacks, the BLAS buffers)
+MIN_MEMORY_LIMIT = 1 << 30
+_PLAN_CHUNK = 5000  # assets planned per ledger look-up
 
 
 @dataclass
@@ -54,11 +69,12 @@ class BatchOptions:
     formats : tuple of str
         ``png``, ``exr`` (linear float, with passes), ``jpg``; one render, written in each.
     passes : tuple of str
-        Extra EXR channels (``ao``).
+        Extra EXR channels (``ao``); they need ``exr`` among the formats.
     seed, max_depth, exposure, tonemap
         As for ``rtmesh render``.
     ground : bool
-        Put a grey ground plane under each asset, catching its shadow.
+        Put a grey ground plane under each asset, catching its shadow (left out of views
+        from below, where it would hide the asset).
     workers : int or None
         Local worker processes; None uses every core.  Ignored with ``scheduler``.
     threads : int or None
@@ -70,11 +86,23 @@ class BatchOptions:
         Seconds one asset may take (None: no limit).
     memory_limit : int or None
         Bytes of address space per local worker; None gives the machine's memory shared
-        out between the workers (at least 2 GiB each); 0 turns the guard off.
+        out between the workers (at least 2 GiB each); 0 turns the guard off.  A limit
+        below :data:`MIN_MEMORY_LIMIT` is refused.
     force : bool
         Redo every image, ignoring the ledger.
+    trust_mtime : bool
+        Compare input files and finished images by size and modification time instead of
+        by content (faster: reads no file to resume).
+    retry_failed : bool
+        True (default): assets that failed in an earlier run with the same inputs are tried
+        again, once per run.  False: they are left as known failures.
+    progress : str
+        ``bar`` (a progress bar or log line on stderr), ``jsonl`` (one JSON line per
+        finished asset) or ``none``.
+    progress_file : str or None
+        Where ``jsonl`` progress goes (default stderr).
     quiet : bool
-        No progress bar (the summary is :meth:`BatchReport.summary`, printed by the command).
+        Same as ``progress="none"`` (kept for the ``-q`` flag).
     """
 
     width: int = 256
@@ -95,6 +123,10 @@ class BatchOptions:
     time_limit: float | None = 600.0
     memory_limit: int | None = None
     force: bool = False
+    trust_mtime: bool = False
+    retry_failed: bool = True
+    progress: str = "bar"
+    progress_file: str | None = None
     quiet: bool = False
 
     def validate(self):
@@ -102,10 +134,12 @@ class BatchOptions:
         check_names("views", self.views, VIEWS)
         check_names("formats", self.formats, FORMATS)
         check_names("passes", self.passes, PASSES)
+        check_names("progress", (self.progress,), PROGRESS_MODES)
         if not self.views and not self.turntable:
             raise InputError("views: give at least one view (or a turntable)")
         if not self.formats:
             raise InputError("formats: give at least one output format")
+        check_passes(self.passes, self.formats)
         for name in ("workers", "threads"):
             value = getattr(self, name)
             if value is not None and value < 1:
@@ -114,6 +148,9 @@ class BatchOptions:
             raise InputError(f"turntable: must be >= 0, got {self.turntable}")
         if self.time_limit is not None and self.time_limit <= 0:
             raise InputError(f"time limit: must be > 0 seconds, got {self.time_limit}")
+        if self.memory_limit and self.memory_limit < MIN_MEMORY_LIMIT:
+            raise InputError(f"memory limit: {self.memory_limit / 2**20:.0f} MiB is below the "
+                             f"{MIN_MEMORY_LIMIT / 2**30:.0f} GiB a worker process needs to start")
         try:
             RenderSettings(**self.render_fields({})).validate()
         except ValueError as exc:
@@ -135,23 +172,38 @@ def check_names(what, names, allowed):
             raise InputError(f"{what}: unknown {name!r} (expected {', '.join(allowed)})")
 
 
+def check_passes(passes, formats, where=""):
+    """Raise InputError for passes asked without an EXR output (only EXR holds them)."""
+    if passes and "exr" not in formats:
+        raise InputError(f"{where}passes: {', '.join(passes)} are written only to EXR files: "
+                         f"add exr to the formats")
+
+
 @dataclass
 class BatchReport:
-    """What a batch did; also written as JSON to ``OUTDIR/rtmesh-batch-report.json``.
+    """What a batch did.
+
+    Also written to the output folder: ``rtmesh-batch-summary.json`` (this object without
+    the per-asset list) and ``rtmesh-batch-report.jsonl`` (one JSON line per asset this run
+    attempted or left as a known failure; assets finished by earlier runs are counted only).
 
     Attributes
     ----------
     counts : dict of str to int
-        ``assets``, ``done``, ``skipped`` (finished by an earlier run), ``failed``, and
-        ``images`` written by this run.
+        ``assets``; each one is ``done`` (by this run), ``skipped`` (finished by an earlier
+        run, unchanged), ``failed`` (in this run), ``known_failed`` (failed in an earlier run
+        with the same inputs and not retried: ``retry_failed=False``) or ``not_attempted``
+        (the cluster was lost first).  ``retried``: assets that had failed before and were
+        tried again by this run (whatever the outcome); ``images``: images written.
     assets : list of dict
-        Per asset: ``asset``, ``path``, ``status``, ``seconds``, ``images``, ``errors``
-        (``image``, ``stage``, ``message``).
+        Per attempted or known-failed asset: ``asset``, ``path``, ``status``, ``seconds``,
+        ``images``, ``errors`` (``image``, ``stage``, ``message``), ``retried``.
     wall_seconds : float
     assets_per_minute : float
         Assets converted by this run per minute of wall time.
+    runner : str
     path : str
-        Where the JSON report was written.
+        Where the summary JSON was written.
     """
 
     counts: dict
@@ -164,21 +216,32 @@ class BatchReport:
 
     @property
     def failed(self):
-        """Assets with at least one failed image."""
+        """Assets that failed in this run."""
         return [a for a in self.assets if a["status"] == "failed"]
 
+    @property
+    def exit_code(self):
+        """:data:`EXIT_CLUSTER_LOST`, :data:`EXIT_FAILED` or :data:`EXIT_DONE`."""
+        if self.counts["not_attempted"]:
+            return EXIT_CLUSTER_LOST
+        return EXIT_FAILED if self.counts["failed"] else EXIT_DONE
+
     def to_dict(self):
+        """The summary document (without the per-asset list)."""
         return {"rtmesh_version": __version__, "counts": self.counts,
                 "wall_seconds": round(self.wall_seconds, 3),
                 "assets_per_minute": round(self.assets_per_minute, 2), "runner": self.runner,
-                **self.extra, "assets": self.assets}
+                "exit_code": self.exit_code, **self.extra}
 
     def summary(self, max_lines=12):
         """A one-screen summary: counts, throughput, failures with reasons, slowest assets."""
         c = self.counts
+        known = f", {c['known_failed']} known failures not retried" if c["known_failed"] else ""
+        retried = f" ({c['retried']} retried)" if c["retried"] else ""
+        lost = f", {c['not_attempted']} not attempted" if c["not_attempted"] else ""
         lines = [f"rtmesh batch: {c['assets']} assets: {c['done']} done, {c['skipped']} skipped, "
-                 f"{c['failed']} failed; {c['images']} images in {self.wall_seconds:.1f} s "
-                 f"({self.assets_per_minute:.1f} assets/min, {self.runner})"]
+                 f"{c['failed']} failed{retried}{known}{lost}; {c['images']} images in "
+                 f"{self.wall_seconds:.1f} s ({self.assets_per_minute:.1f} assets/min, {self.runner})"]
         failed = self.failed
         if failed:
             lines.append("failed:")
@@ -207,21 +270,24 @@ def batch_convert(inputs, outdir, **options):
         line, or CSV with per-asset overrides): see :func:`rtmesh.batch.inputs.discover`.
     outdir : str or os.PathLike
         Output folder, created if needed.  Images mirror the input tree:
-        ``OUTDIR/<relative path>.<ext>`` for one view, ``OUTDIR/<relative path>.<view>.<ext>``
-        for several (``chairs/oak.obj.png``, ``chairs/oak.obj.turn007.png``).
+        ``OUTDIR/<name>.<ext>`` for one view, ``OUTDIR/<name>.<view>.<ext>`` for several
+        (``chairs/oak.obj.png``, ``chairs/oak.obj.turn007.png``), where the name is the
+        asset's path relative to its input root.
     **options
         Fields of :class:`BatchOptions`.
 
     Returns
     -------
     BatchReport
-        Failed assets are in the report; they do not raise.
+        Failed assets are in the report; they do not raise.  A lost Dask cluster does not
+        raise either: ``counts["not_attempted"]`` says how many assets are left for a resume.
 
     Raises
     ------
     RtmeshError
         Bad inputs or options, no asset found, an unwritable output folder, Dask missing or
-        unreachable: raised before any job runs.
+        unreachable, no Dask worker able to write the output folder: raised before any job
+        runs.
     """
     opts = BatchOptions(**options).validate()
     if isinstance(inputs, (str, os.PathLike)):
@@ -231,126 +297,275 @@ def batch_convert(inputs, outdir, **options):
     if not assets:
         raise InputError(f"no mesh files ({', '.join(MESH_EXTENSIONS)}) found in "
                          f"{', '.join(map(os.fspath, inputs)) or '(no inputs)'}")
+    for asset in assets:
+        _check_overrides(asset, opts)
+    progress_stream = _open_progress_file(opts)
     outdir = os.path.abspath(os.fspath(outdir))
     _make_output_folder(outdir)
     if opts.scheduler is not None:
         _check_dask()
+    run = uuid.uuid4().hex[:16]
     with Ledger(outdir) as ledger:
         _remove_stale_temporaries(outdir)
-        jobs, records = plan(assets, outdir, opts, ledger)
-        progress = BatchProgress(len(assets), len(assets) - len(jobs), enabled=not opts.quiet)
-
-        def on_image(image):
-            extra = {"stage": image["stage"], "message": image["message"]} if image["status"] == "failed" else {}
-            ledger.record(image["key"], image["fingerprint"], image["status"], files=image["files"],
-                          seconds=image["seconds"], **extra)
-
-        def on_job(result):
-            record = records[result["asset"]]
-            record["seconds"] = result["seconds"]
-            record["images"].extend(result["images"])
-            progress.update(failed=any(i["status"] == "failed" for i in result["images"]))
-
+        # the run that owns the folder now: tasks of an earlier run stop before writing
+        _write_atomically(os.path.join(outdir, RUN_FILE), run + "\n")
+        book = Books(ledger, outdir, opts, len(assets), progress_stream)
         try:
-            if opts.scheduler is not None:
+            jobs = plan(assets, outdir, opts, ledger, book, run)
+            book.start_progress()
+            if not jobs:
+                runner = "nothing to do"
+            elif opts.scheduler is not None:
+                from rtmesh.batch.dask_pool import ClusterLost, run_dask
+
                 runner = "dask"
-                run_dask(jobs, opts.scheduler, on_image, on_job, time_limit=opts.time_limit)
+                try:
+                    run_dask(jobs, opts.scheduler, book.on_image, book.on_job, run=run,
+                             outdir=outdir, time_limit=opts.time_limit)
+                except ClusterLost:
+                    book.counts["not_attempted"] = len(jobs) - book.finished_jobs
             else:
+                from rtmesh.batch.pool import run_local
+
                 workers = opts.workers or _cores()
-                used = min(workers, max(1, len(jobs)))
+                used = min(workers, len(jobs))
                 runner = f"{used} local worker{'s' if used > 1 else ''}"
-                run_local(jobs, workers, on_image, on_job, time_limit=opts.time_limit,
+                run_local(jobs, workers, book.on_image, book.on_job, time_limit=opts.time_limit,
                           memory_limit=_memory_limit(opts.memory_limit, workers))
         finally:
-            progress.close()
-    report = _report(records, time.perf_counter() - start, runner, outdir, opts)
-    report.path = os.path.join(outdir, REPORT_NAME)
-    _write_json_atomically(report.path, report.to_dict())
+            book.close()
+    report = book.report(time.perf_counter() - start, runner, run)
+    report.path = os.path.join(outdir, SUMMARY_NAME)
+    _write_atomically(report.path, json.dumps(report.to_dict(), indent=1) + "\n")
     return report
 
 
-def plan(assets, outdir, opts, ledger):
-    """One job per asset with the images the ledger does not have yet.
+def _check_overrides(asset, opts):
+    o = asset.overrides
+    where = f"{asset.path}: "
+    check_names(where + "views", o.get("views", ()), VIEWS)
+    check_names(where + "formats", o.get("formats", ()), FORMATS)
+    check_names(where + "passes", o.get("passes", ()), PASSES)
+    check_passes(o.get("passes", opts.passes), o.get("formats", opts.formats), where)
+
+
+def _open_progress_file(opts):
+    """The file ``--progress jsonl`` appends to (None for stderr), opened before anything
+    is created so a bad path stops the batch at once."""
+    if opts.quiet or opts.progress != "jsonl" or not opts.progress_file:
+        return None
+    try:
+        return open(opts.progress_file, "a", encoding="utf-8")
+    except OSError as exc:
+        raise OutputError(f"{opts.progress_file}: cannot write progress: {exc.strerror}") from None
+
+
+def plan(assets, outdir, opts, ledger, book, run=""):
+    """One job per asset with the images that are not finished and unchanged.
+
+    An image is skipped when the ledger has it ``done`` with the same fingerprint, its
+    inputs are unchanged and its files are there with the recorded size and checksum
+    (size and time with ``trust_mtime``).  An image that failed before with the same
+    fingerprint and inputs is a known failure: tried again with ``retry_failed``, else left.
 
     Returns
     -------
-    jobs : list of AssetJob
-    records : dict of str to dict
-        Per asset name, the report record to fill in (finished images already listed as
-        skipped).
+    list of AssetJob
+        Skipped assets and known failures are entered in ``book`` directly.
     """
-    jobs, records, used = [], {}, set()
+    jobs = []
     local_threads = opts.threads or max(1, _cores() // (opts.workers or _cores()))
-    for asset in assets:
-        o = asset.overrides
-        check_names("views", o.get("views", ()), VIEWS)
-        check_names("formats", o.get("formats", ()), FORMATS)
-        check_names("passes", o.get("passes", ()), PASSES)
+    threads = opts.threads or (1 if opts.scheduler is not None else local_threads)
+    run_file = os.path.join(outdir, RUN_FILE) if opts.scheduler is not None else ""
+    shared = {}
+    for first in range(0, len(assets), _PLAN_CHUNK):
+        chunk = [_image_tasks(asset, opts, shared) for asset in assets[first:first + _PLAN_CHUNK]]
+        found = {} if opts.force else ledger.lookup([t.key for _, _, tasks in chunk for t in tasks])
+        for asset, fields, tasks in chunk:
+            todo, skipped, known, retried = [], [], [], False
+            checked = {}  # encoded inputs -> unchanged? (shared by an asset's images)
+            for task in tasks:
+                entry = found.get(task.key)
+                if entry is None or entry[FINGERPRINT] != task.fingerprint:
+                    todo.append(task)
+                    continue
+                same = checked.get(entry[INPUTS])
+                if same is None:
+                    same = checked[entry[INPUTS]] = inputs_unchanged(
+                        decode(entry[INPUTS]), asset.path, opts.trust_mtime)
+                if not same:
+                    todo.append(task)
+                elif entry[STATUS] == "done":
+                    if all(unchanged(o, os.path.join(outdir, o[0]), opts.trust_mtime)
+                           for o in decode(entry[OUTPUTS])):
+                        skipped.append(task)
+                    else:
+                        todo.append(task)
+                elif opts.retry_failed:
+                    todo.append(task)
+                    retried = True
+                else:
+                    known.append(task)
+            book.planned(asset, skipped, known, retried if todo else False, bool(todo))
+            if todo:
+                jobs.append(AssetJob(asset.name, asset.path, outdir, {**fields, "threads": threads},
+                                     tuple(todo), opts.ground, run, run_file))
+    return jobs
+
+
+def _image_tasks(asset, opts, shared):
+    """The asset, its render fields and one ImageTask per view.
+
+    ``shared`` caches what depends only on the settings (fields, views, fingerprints) by
+    the asset's overrides, so most assets of a batch (no overrides) pay only for names.
+    """
+    o = asset.overrides
+    cache_key = json.dumps(o, sort_keys=True) if o else ""
+    settings = shared.get(cache_key)
+    if settings is None:
         fields = opts.render_fields(o)
-        fields["threads"] = opts.threads or (1 if opts.scheduler is not None else local_threads)
         frames = o.get("turntable", opts.turntable)
         views = turntable_views(frames) if frames else [fixed_view(v) for v in o.get("views", opts.views)]
         formats = o.get("formats", opts.formats)
-        stem = _unique_stem(asset, used)
-        source = _file_identity(asset.path)
-        tasks, skipped = [], []
-        for view in views:
-            key = stem if len(views) == 1 else f"{stem}.{view.name}"
-            files = tuple(f"{key}.{fmt}" for fmt in formats)
-            # threads never change the image, so they are not part of the fingerprint
-            identity = {"source": source, "settings": {**fields, "threads": None},
-                        "view": dataclasses.asdict(view), "files": files, "ground": opts.ground}
-            fingerprint = hashlib.sha1(json.dumps(identity, sort_keys=True).encode()).hexdigest()
-            task = ImageTask(key, view, files, fingerprint)
-            if not opts.force and ledger.is_done(key, fingerprint):
-                skipped.append({"key": key, "status": "skipped", "files": list(files), "seconds": 0.0})
-            else:
-                tasks.append(task)
-        records[asset.name] = {"asset": asset.name, "path": asset.path, "seconds": 0.0,
-                               "images": skipped}
-        if tasks:
-            jobs.append(AssetJob(asset.name, asset.path, outdir, fields, tuple(tasks), opts.ground))
-    return jobs, records
+        # the file names are the image's key (its identity) plus the formats
+        views = [(view, image_fingerprint(fields, dataclasses.asdict(view),
+                                          [f"*.{fmt}" for fmt in formats], opts.ground))
+                 for view in views]
+        settings = shared[cache_key] = (fields, views, formats)
+    fields, views, formats = settings
+    tasks = []
+    for view, fingerprint in views:
+        key = asset.name if len(views) == 1 else f"{asset.name}.{view.name}"
+        tasks.append(ImageTask(key, view, tuple(f"{key}.{fmt}" for fmt in formats), fingerprint))
+    return asset, fields, tasks
 
 
-def _unique_stem(asset, used):
-    """The asset's output stem; on a case-insensitive clash a short hash of its path keeps
-    names apart (distinct paths already give distinct names on case-sensitive systems)."""
-    stem = asset.name
-    if stem.lower() in used:
-        stem = f"{stem}-{hashlib.sha1(asset.path.encode()).hexdigest()[:8]}"
-    used.add(stem.lower())
-    return stem
+class Books:
+    """The batch's bookkeeping, in the submitting process: ledger rows, the JSON-lines
+    report, counts and progress, one asset at a time.
 
+    Parameters
+    ----------
+    ledger : Ledger
+    outdir : str
+    opts : BatchOptions
+    total : int
+        Assets in the batch.
+    progress_file : file, optional
+        Where ``jsonl`` progress goes (default stderr); closed with the books.
+    """
 
-def _file_identity(path):
-    """What identifies an input's content cheaply: its path, size and modification time."""
-    try:
-        st = os.stat(path)
-        return [path, st.st_size, st.st_mtime_ns]
-    except OSError:
-        return [path, None, None]
+    def __init__(self, ledger, outdir, opts, total, progress_file=None):
+        self.ledger, self.outdir, self.opts, self.total = ledger, outdir, opts, total
+        self.progress_file = progress_file
+        self.counts = {"assets": total, "done": 0, "skipped": 0, "failed": 0, "known_failed": 0,
+                       "retried": 0, "not_attempted": 0, "images": 0}
+        self.assets, self.pending, self.finished_jobs = [], {}, 0
+        self.check_content = opts.scheduler is not None
+        self._report = open(os.path.join(outdir, REPORT_NAME), "w", encoding="utf-8")
+        self.progress = None
 
-
-def _report(records, wall_seconds, runner, outdir, opts):
-    assets, counts = [], {"assets": len(records), "done": 0, "skipped": 0, "failed": 0, "images": 0}
-    for record in records.values():
-        images = record["images"]
-        errors = [{"image": i["key"], "stage": i["stage"], "message": i["message"]}
-                  for i in images if i["status"] == "failed"]
-        if errors:
-            status = "failed"
-        elif images and all(i["status"] == "skipped" for i in images):
-            status = "skipped"
+    def planned(self, asset, skipped, known, retried, has_job):
+        """Enter an asset as planned: its skipped images, known failures, and whether a job
+        will run for it."""
+        record = {"asset": asset.name, "path": asset.path, "status": None, "seconds": 0.0,
+                  "retried": retried,
+                  "images": [{"key": t.key, "status": "skipped", "files": list(t.files)}
+                             for t in skipped]}
+        for task in known:
+            attempts, stage, message = self.ledger.failure(task.key)
+            record["images"].append({"key": task.key, "status": "known-failed",
+                                     "files": list(task.files), "stage": stage,
+                                     "message": message, "attempts": attempts})
+        self.counts["retried"] += bool(retried)
+        if has_job:
+            self.pending[asset.name] = record
+        elif known:
+            self._finish(record, "known_failed")
         else:
-            status = "done"
-        counts[status] += 1
-        counts["images"] += sum(i["status"] == "done" for i in images)
-        assets.append({**record, "status": status, "errors": errors})
-    per_minute = 60.0 * counts["done"] / wall_seconds if wall_seconds > 0 else 0.0
-    extra = {"outdir": outdir, "started": time.strftime("%Y-%m-%dT%H:%M:%S%z",
-                                                        time.localtime(time.time() - wall_seconds))}
-    return BatchReport(counts, assets, wall_seconds, per_minute, runner, extra=extra)
+            self.counts["skipped"] += 1
+
+    def start_progress(self):
+        done = self.counts["skipped"] + self.counts["known_failed"]
+        mode = "none" if self.opts.quiet else self.opts.progress
+        if mode == "jsonl":
+            self.progress = JsonProgress(self.total, done, self.progress_file or sys.stderr)
+        else:
+            self.progress = BatchProgress(self.total, done, enabled=mode == "bar")
+
+    def on_image(self, image):
+        """Record one image's result (called as each image finishes or fails)."""
+        record = self.pending.get(image.get("asset")) if "asset" in image else None
+        if image["status"] == "done":
+            problem = self._not_visible(image)
+            if problem:
+                image = {**image, "status": "failed", "stage": "storage", "outputs": [],
+                         "message": f"output not visible to the submitting machine: {problem}"}
+        self.ledger.record(image["key"], image.get("asset", ""), image["fingerprint"],
+                           image["status"], inputs=image.get("inputs", ()),
+                           outputs=image.get("outputs", ()), seconds=image["seconds"],
+                           run=image.get("run", ""), stage=image.get("stage"),
+                           message=image.get("message"))
+        if record is not None:
+            record["images"].append({k: image[k] for k in ("key", "status", "files", "seconds",
+                                                          "stage", "message") if k in image})
+
+    def _not_visible(self, image):
+        """Why the image's files do not match what the worker reported, or ""."""
+        outputs = image.get("outputs") or []
+        for entry in outputs:
+            path = os.path.join(self.outdir, entry[0])
+            try:
+                size = os.stat(path).st_size
+            except OSError:
+                return f"{entry[0]} is missing"
+            if size != entry[1]:
+                return f"{entry[0]} has {size} bytes, the worker wrote {entry[1]}"
+            if self.check_content and not unchanged(entry, path):
+                return f"{entry[0]} differs from what the worker wrote"
+            # record this machine's view of the file (its time, for --trust-mtime resumes)
+            entry[2] = os.stat(path).st_mtime_ns
+        if len(outputs) != len(image["files"]):
+            return "the worker reported no file"
+        return ""
+
+    def on_job(self, result):
+        """Close one asset (after its images): count it, commit, report, show progress."""
+        record = self.pending.pop(result["asset"], None)
+        if record is None:
+            return
+        self.finished_jobs += 1
+        record["seconds"] = result["seconds"]
+        failed = any(i["status"] == "failed" for i in record["images"])
+        self.counts["images"] += sum(i["status"] == "done" for i in record["images"])
+        self._finish(record, "failed" if failed else "done")
+
+    def _finish(self, record, status):
+        record["status"] = status.replace("_", "-")
+        record["errors"] = [{"image": i["key"], "stage": i.get("stage"), "message": i.get("message")}
+                            for i in record["images"] if i["status"] in ("failed", "known-failed")]
+        self.counts[status] += 1
+        self.ledger.commit()
+        self.assets.append(record)
+        self._report.write(json.dumps(record, separators=(",", ":")) + "\n")
+        self._report.flush()
+        if self.progress is not None:
+            self.progress.update(record)
+
+    def close(self):
+        if self.progress is not None:
+            self.progress.close()
+        if self.progress_file is not None:
+            self.progress_file.close()
+        self._report.close()
+
+    def report(self, wall_seconds, runner, run):
+        per_minute = 60.0 * self.counts["done"] / wall_seconds if wall_seconds > 0 else 0.0
+        extra = {"outdir": self.outdir, "run": run, "report": os.path.join(self.outdir, REPORT_NAME),
+                 "started": time.strftime("%Y-%m-%dT%H:%M:%S%z",
+                                          time.localtime(time.time() - wall_seconds))}
+        return BatchReport(dict(self.counts), self.assets, wall_seconds, per_minute, runner,
+                           extra=extra)
 
 
 def _make_output_folder(outdir):
@@ -368,15 +583,20 @@ def _make_output_folder(outdir):
         raise OutputError(f"{outdir}: output folder is not writable: {exc.strerror}") from None
 
 
-def _remove_stale_temporaries(outdir):
-    """Delete half-written images a killed run left (hidden ``.NAME.XXXX.tmp.EXT`` files).
+# half-written images (".NAME.XXXX.tmp.EXT"), and the temporary files of the summary, the
+# run file, storage probes and rtmesh 0.1's ledger compaction
+_STALE = re.compile(r"^\.(.+\.tmp\.(png|exr|jpe?g)|rtmesh-batch-.+\.tmp)$", re.IGNORECASE)
 
-    Only called while this batch holds the folder's lock, so no live writer owns them.
+
+def _remove_stale_temporaries(outdir):
+    """Delete the temporary files a killed run left.
+
+    Only called while this batch holds the folder's lock, so no live writer of this
+    machine owns them (Dask tasks of a killed run stop before writing, see RUN_FILE).
     """
-    pattern = re.compile(r"^\..+\.tmp\.(png|exr|jpe?g)$", re.IGNORECASE)
     for here, dirs, files in os.walk(outdir):
         for name in files:
-            if pattern.match(name):
+            if _STALE.match(name):
                 try:
                     os.unlink(os.path.join(here, name))
                 except OSError:
@@ -387,18 +607,21 @@ def _check_dask():
     try:
         import distributed  # noqa: F401
     except ImportError:
-        from rtmesh.batch.pool import DASK_MISSING
+        from rtmesh.batch.dask_pool import DASK_MISSING
 
         raise InputError(DASK_MISSING) from None
 
 
-def _write_json_atomically(path, document):
-    folder = os.path.dirname(path)
-    fd, tmp = tempfile.mkstemp(prefix=".rtmesh-batch-report.", suffix=".tmp", dir=folder)
+def _write_atomically(path, text):
+    """Write a small text file whole or not at all, with the usual permissions (umask)."""
+    folder, name = os.path.split(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{name.lstrip('.')}.", suffix=".tmp", dir=folder)
     try:
+        umask = os.umask(0)
+        os.umask(umask)
+        os.fchmod(fd, 0o666 & ~umask)  # mkstemp makes 0600 files
         with os.fdopen(fd, "w", encoding="utf-8") as f:
-            json.dump(document, f, indent=1)
-            f.write("\n")
+            f.write(text)
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
@@ -439,9 +662,9 @@ class BatchProgress:
         self.log_every, self.last_log = log_every, self.start
         self.shown = False
 
-    def update(self, failed=False):
+    def update(self, record):
         self.done += 1
-        self.failed += failed
+        self.failed += record["status"] == "failed"
         if not self.enabled:
             return
         now = time.perf_counter()
@@ -467,6 +690,30 @@ class BatchProgress:
         if self.shown:
             self.stream.write("\n")
             self.stream.flush()
+
+
+class JsonProgress:
+    """Machine-readable progress: one JSON line per finished asset (``--progress jsonl``).
+
+    Each line: ``time`` (Unix seconds), ``asset``, ``status``, ``seconds``, ``images``
+    (written), ``errors``, ``finished`` and ``total`` assets.  Written to ``stream``,
+    flushed line by line for cluster logs.
+    """
+
+    def __init__(self, total, finished, stream):
+        self.total, self.finished, self.stream = total, finished, stream
+
+    def update(self, record):
+        self.finished += 1
+        line = {"time": round(time.time(), 3), "asset": record["asset"], "status": record["status"],
+                "seconds": record["seconds"],
+                "images": sum(i["status"] == "done" for i in record["images"]),
+                "errors": record["errors"], "finished": self.finished, "total": self.total}
+        self.stream.write(json.dumps(line, separators=(",", ":")) + "\n")
+        self.stream.flush()
+
+    def close(self):
+        pass
 
 
 def _duration(seconds):

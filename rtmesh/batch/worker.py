@@ -2,7 +2,10 @@
 
 This module runs inside a worker (a local worker process or a Dask worker).  It never
 raises for a bad asset: every failure comes back as a result with the stage it happened in
-(``load``, ``render``, ``write``, ``time``, ``memory``), so the batch goes on.
+(``load``, ``render``, ``write``, ``time``, ``memory``), so the batch goes on.  Each result
+also says what the asset was made from (``inputs``: the mesh file and every file its load
+read) and what was written (``outputs``: size and checksum of each file), see
+:mod:`rtmesh.batch.identity`.
 """
 
 import os
@@ -11,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rtmesh.batch.identity import OpenedFiles, describe
 from rtmesh.core.errors import RtmeshError
 from rtmesh.io.images import write_image
 from rtmesh.loaders.importers import load_trimesh, parts_from_trimesh
@@ -116,7 +120,13 @@ class AssetJob:
     images : tuple of ImageTask
         The views still to do.
     ground : bool
-        Put a grey ground plane under the asset (it catches the asset's shadow).
+        Put a grey ground plane under the asset (it catches the asset's shadow); views from
+        below leave it out (it would hide the asset).
+    run : str
+        Id of the batch run the job belongs to.
+    run_file : str
+        If set, the file naming the batch run that owns the output folder: the job stops,
+        writing nothing more, once it names another run (a resumed batch has taken over).
     """
 
     asset: str
@@ -125,6 +135,8 @@ class AssetJob:
     settings: dict
     images: tuple
     ground: bool = False
+    run: str = ""
+    run_file: str = ""
 
 
 # set by a worker process that runs under an address-space limit, for the failure message
@@ -135,7 +147,20 @@ class TimeLimitExceeded(Exception):
     """Raised inside a render when the job's deadline passes (cooperative time limit)."""
 
 
-def run_job(job, on_image=None, deadline=None):
+class Superseded(Exception):
+    """Raised inside a job whose batch run no longer owns the output folder."""
+
+
+def current_run(run_file):
+    """The run id written in ``run_file`` ("" if it cannot be read)."""
+    try:
+        with open(run_file, encoding="utf-8") as f:
+            return f.read().strip()
+    except OSError:
+        return ""
+
+
+def run_job(job, on_image=None, deadline=None, abandoned=None):
     """Convert one asset: load it once, then render and write each of its views.
 
     Parameters
@@ -147,20 +172,38 @@ def run_job(job, on_image=None, deadline=None):
     deadline : float, optional
         ``time.monotonic()`` value after which the job stops between render chunks (used
         where the job cannot be killed from outside, as on a Dask worker).
+    abandoned : callable, optional
+        ``abandoned()`` is True once nobody waits for the job's result any more (its Dask
+        client is gone): the job then stops like a superseded one, before its next write.
 
     Returns
     -------
     dict
-        ``asset``, ``seconds``, ``images``: one dict per image task with ``key``,
-        ``fingerprint``, ``status`` (``"done"`` or ``"failed"``), ``files``, ``seconds``, and
-        for failures ``stage`` and ``message`` (one line).
+        ``asset``, ``seconds``, ``superseded`` (True when the job stopped because a newer
+        run owns the output folder: its unfinished images are left out), ``images``: one
+        dict per image task with ``key``, ``fingerprint``, ``status`` (``"done"`` or
+        ``"failed"``), ``asset``, ``run``, ``files``, ``seconds``, ``inputs``, ``outputs``,
+        and for failures
+        ``stage`` and ``message`` (one line).
     """
     start = time.perf_counter()
     results = []
+    inputs = []
+    last_check = [0.0]
+
+    def check(done=None, total=None):
+        _check_deadline(deadline)
+        # the run file is read at most twice a second between render chunks
+        if abandoned is not None and abandoned():
+            raise Superseded()
+        if job.run_file and time.monotonic() - last_check[0] > 0.5:
+            last_check[0] = time.monotonic()
+            if current_run(job.run_file) != job.run:
+                raise Superseded()
 
     def fail_all(tasks, stage, message):
         for task in tasks:
-            results.append(_image_result(task, "failed", 0.0, stage=stage, message=message))
+            results.append(image_result(job, task, "failed", 0.0, inputs, stage=stage, message=message))
             if on_image:
                 on_image(results[-1])
 
@@ -169,37 +212,47 @@ def run_job(job, on_image=None, deadline=None):
     except (TypeError, ValueError) as exc:
         fail_all(job.images, "settings", str(exc))
         return _job_result(job, results, start)
+    opened = OpenedFiles()
     try:
-        parts, materials, bounds = _load(job)
+        with opened:
+            parts, materials, bounds = _load(job)
     except MemoryError:
         fail_all(job.images, "memory", f"out of memory while loading{MEMORY_LIMIT_NOTE}")
         return _job_result(job, results, start)
     except Exception as exc:  # any failure of one asset is that asset's, not the batch's
+        inputs.extend(opened.entries(job.path))
         fail_all(job.images, "load", _one_line(exc))
         return _job_result(job, results, start)
+    inputs.extend(opened.entries(job.path))
 
     for i, task in enumerate(job.images):
         image_start = time.perf_counter()
         stage = "render"
         try:
-            _check_deadline(deadline)
+            check()
             scene = _scene_for_view(parts, materials, bounds, task.view, settings, job.ground)
-            result = Integrator(scene, settings).render(
-                progress=lambda done, total: _check_deadline(deadline))
+            result = Integrator(scene, settings).render(progress=check)
             stage = "write"
+            last_check[0] = 0.0  # always ask just before writing
+            check()
+            outputs = []
             for name in task.files:
                 path = os.path.join(job.outdir, name)
                 os.makedirs(os.path.dirname(path), exist_ok=True)
                 write_image(path, result.image, result.passes, settings.exposure, settings.tonemap)
-            results.append(_image_result(task, "done", time.perf_counter() - image_start))
+                outputs.append(describe(path, name))
+            results.append(image_result(job, task, "done", time.perf_counter() - image_start, inputs,
+                                         outputs=outputs))
+        except Superseded:
+            return _job_result(job, results, start, superseded=True)
         except TimeLimitExceeded:
             fail_all(job.images[i:], "time", "time limit exceeded")
             break
         except MemoryError:
-            results.append(_image_result(task, "failed", time.perf_counter() - image_start,
+            results.append(image_result(job, task, "failed", time.perf_counter() - image_start, inputs,
                                          stage="memory", message=f"out of memory during {stage}{MEMORY_LIMIT_NOTE}"))
         except Exception as exc:
-            results.append(_image_result(task, "failed", time.perf_counter() - image_start,
+            results.append(image_result(job, task, "failed", time.perf_counter() - image_start, inputs,
                                          stage=stage, message=_one_line(exc)))
         if on_image:
             on_image(results[-1])
@@ -222,7 +275,8 @@ def _scene_for_view(parts, materials, bounds, view, settings, ground):
     rig_camera = frame_bounds(bounds, aspect=aspect, direction=view.light_direction or view.direction,
                               up=view.up)
     parts, materials = list(parts), list(materials) or [Material()]
-    if ground:
+    # seen from below, the plane would stand between the camera and the asset
+    if ground and view.direction[1] >= 0:
         parts.append(_ground_part(bounds, len(materials)))
         materials.append(Material(name="ground", diffuse=np.full(3, 0.8)))
     return Scene.from_parts(parts, materials, lights=default_lights(rig_camera), camera=camera,
@@ -254,10 +308,14 @@ def _one_line(exc):
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
-def _image_result(task, status, seconds, **fields):
-    return {"key": task.key, "fingerprint": task.fingerprint, "status": status,
-            "files": list(task.files), "seconds": round(seconds, 4), **fields}
+def image_result(job, task, status, seconds, inputs=(), outputs=(), **fields):
+    """One image's result, as :func:`run_job` reports it (also used by the runners for
+    images a lost worker never finished)."""
+    return {"asset": job.asset, "run": job.run, "key": task.key, "fingerprint": task.fingerprint, "status": status,
+            "files": list(task.files), "seconds": round(seconds, 4), "inputs": list(inputs),
+            "outputs": list(outputs), **fields}
 
 
-def _job_result(job, images, start):
-    return {"asset": job.asset, "seconds": round(time.perf_counter() - start, 4), "images": images}
+def _job_result(job, images, start, superseded=False):
+    return {"asset": job.asset, "seconds": round(time.perf_counter() - start, 4),
+            "superseded": superseded, "images": images}
