@@ -6,7 +6,7 @@ absorption, nested media, a camera inside glass (and inside glass inside water),
 and unlit materials, textures (base colour with alpha, specular, normal and emission maps,
 every wrap mode), vertex colours, alpha cut-outs (mask and blend, textured alpha), object
 motion (translation and rotation) under open, closed and off-zero shutters, point, spot, projector,
-directional, quad and disk lights, emissive objects, solid, gradient, environment and
+directional, quad and disk lights, emissive objects, solid, gradient, environment (lighting the scene or not) and
 transparent backgrounds, ambient light and AO, depth of field, every pass, adaptive
 sampling (``target_error``; ``time_limit`` is left out: its rounds depend on the clock, so
 its image may differ between thread counts by design) and every sampler.  rtmesh has no
@@ -162,10 +162,11 @@ lights = st.lists(st.one_of(
 
 backgrounds = st.one_of(
     st.fixed_dictionaries({"type": st.just("solid"), "colour": colours}),
-    st.fixed_dictionaries({"type": st.just("gradient"), "top": colours, "bottom": colours}),
+    st.fixed_dictionaries({"type": st.just("gradient"), "top": colours, "bottom": colours,
+                           "lighting": st.booleans()}),
     st.fixed_dictionaries({"type": st.just("environment"), "seed": st.integers(0, 2**16),
                            "rotation": st.sampled_from([0.0, 90.0]),
-                           "intensity": st.sampled_from([0.5, 2.0])}),
+                           "intensity": st.sampled_from([0.5, 2.0]), "lighting": st.booleans()}),
     st.fixed_dictionaries({"type": st.just("transparent")}),
 )
 
@@ -363,9 +364,11 @@ def build_scene(d):
         background = as_colour(b["colour"])
     elif b["type"] == "gradient":
         background = GradientBackground(as_colour(b["top"]), as_colour(b["bottom"]))
+        background.lighting = b["lighting"]
     elif b["type"] == "environment":
         pixels = np.random.default_rng(b["seed"]).uniform(0.0, 1.0, (4, 8, 3))
         background = EnvironmentBackground(pixels, b["rotation"], b["intensity"])
+        background.lighting = b["lighting"]
     else:
         background = TransparentBackground()
 

@@ -186,11 +186,11 @@ def light_keys():
 
 BACKGROUND_KEYS = {
     "type": _one_of(*BACKGROUND_TYPES), "colour": _colour, "top": _colour, "bottom": _colour,
-    "file": _str, "rotation": _float, "intensity": _non_negative,
+    "file": _str, "rotation": _float, "intensity": _non_negative, "lighting": _bool,
 }
 BACKGROUND_ALLOWED = {
-    "solid": ("colour",), "gradient": ("top", "bottom"),
-    "environment": ("file", "rotation", "intensity"), "transparent": (),
+    "solid": ("colour", "lighting"), "gradient": ("top", "bottom", "lighting"),
+    "environment": ("file", "rotation", "intensity", "lighting"), "transparent": (),
 }
 BACKGROUND_REQUIRED = {"solid": ("colour",), "gradient": ("top", "bottom"), "environment": ("file",),
                        "transparent": ()}
@@ -374,18 +374,21 @@ def _background(r, doc, environment, base_dir):
             raise r.error(f"background.{key}", f"missing (a {kind} background needs "
                           + " and ".join(BACKGROUND_REQUIRED[kind]) + ")")
     if kind == "solid":
-        return SolidBackground(values["colour"])
-    if kind == "gradient":
-        return GradientBackground(values["top"], values["bottom"])
-    if kind == "transparent":
+        background = SolidBackground(values["colour"])
+    elif kind == "gradient":
+        background = GradientBackground(values["top"], values["bottom"])
+    elif kind == "transparent":
         return TransparentBackground()
-    path = values["file"]
-    if not os.path.isabs(path):
-        path = os.path.join(base_dir, path)
-    try:
-        return read_environment(path, values.get("rotation", 0.0), values.get("intensity", 1.0))
-    except RtmeshError as exc:
-        raise r.error("background.file", str(exc)) from None
+    else:
+        path = values["file"]
+        if not os.path.isabs(path):
+            path = os.path.join(base_dir, path)
+        try:
+            background = read_environment(path, values.get("rotation", 0.0), values.get("intensity", 1.0))
+        except RtmeshError as exc:
+            raise r.error("background.file", str(exc)) from None
+    background.lighting = values.get("lighting", False)
+    return background
 
 
 def _object_parts(r, values, where, base_dir, materials, material_index):

@@ -44,6 +44,7 @@ from rtmesh.geometry.motion import MotionAccel, blurs, object_motions, scene_at_
 from rtmesh.io import denoising
 from rtmesh.io.passes import DERIVED_PASSES, PassRecorder, derived_pass
 from rtmesh.lights.area_lights import AreaLighting, emissive_mesh_light, is_area_light
+from rtmesh.lights.environment import EnvironmentLighting
 from rtmesh.materials.table import ALPHA_MODES
 from rtmesh.rendering.adaptive import render_rounds
 from rtmesh.rendering.chunk_state import ChunkState, Clock, scatter_add
@@ -173,11 +174,16 @@ class Integrator:
             area_lights += [emitters] if emitters is not None else []
         self.area_lighting = (AreaLighting(area_lights, self.accel, self.settings, self.offset_scale)
                               if area_lights else None)
+        self.background = as_background(scene.background)
+        # the background lights the scene only when asked (scene files: [background] lighting)
+        self.environment_lighting = None
+        if self.background.lighting and not self.background.is_black:
+            self.environment_lighting = EnvironmentLighting(self.background, self.accel, self.settings,
+                                                            self.offset_scale)
         lit = ~m.unlit[:, None]
         shaded_any = bool((((m.diffuse > 0) | (m.specular > 0)) & lit).any())
         self.ao_distance = settings.ao_distance or 0.2 * float(np.linalg.norm(np.ptp(scene_bounds, axis=0)))
         ambient_on = bool((scene.ambient > 0).any() and (m.ambient > 0).any())
-        self.background = as_background(scene.background)
         # only the passes asked for are computed; a transparent background needs coverage
         if settings.denoise:
             denoising.require()  # before any work: one line naming the extra when it is missing
@@ -193,6 +199,7 @@ class Integrator:
             lights=bool(self.lights) and shaded_any,
             area_lights=self.area_lighting is not None and shaded_any,
             area_light_visibility=self.area_lighting is not None and bool(self.area_lighting.visible),
+            environment_lighting=self.environment_lighting is not None and shaded_any,
             specular=m.any_specular,
             smooth_normals=scene.vertex_normals is not None,
             textures=bool(self.textures),

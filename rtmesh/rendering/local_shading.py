@@ -53,7 +53,7 @@ class LocalShading(Stage):
                 amb = amb * ao[:, None]
             local = amb if local is None else local + amb
 
-        if st.lights or st.area_lights:
+        if st.lights or st.area_lights or st.environment_lighting:
             direct = self.direct_light(srf, depth, chunk)
             if direct is not None:
                 local = direct if local is None else local + direct
@@ -97,7 +97,9 @@ class LocalShading(Stage):
                 total = np.zeros((len(srf.mat), 3), order="F")
             power = np.power(highlight, power_exponent, out=highlight)  # NumPy's pow is vectorised
             add_light(total, target, lit, occluded, cos_i, incident, highlight_rows, power, *materials[:5])
-        if it.plan.area_lights:
+        sampled = [lighting for lighting, on in ((it.area_lighting, it.plan.area_lights),
+                                                 (it.environment_lighting, it.plan.environment_lighting)) if on]
+        if sampled:
 
             def reflectance(wi, lit):
                 """Blinn-Phong factor toward unit directions ``wi``; highlights only where ``lit``."""
@@ -105,12 +107,13 @@ class LocalShading(Stage):
 
             pixel, sample_in_pixel = chunk.keys
             sample = take_rows(srf.sample, rows)
-            area = it.area_lighting.direct(p, ng, reflectance, pixel[sample], sample_in_pixel[sample], depth,
-                                             chunk.stats, chunk.clock, rows_at(srf.time, rows))
-            if area is not None:
-                if total is None:
-                    total = np.zeros((len(srf.mat), 3), order="F")
-                add_rows_or_all(total, rows, area)
+            for lighting in sampled:
+                light = lighting.direct(p, ng, reflectance, pixel[sample], sample_in_pixel[sample], depth,
+                                        chunk.stats, chunk.clock, rows_at(srf.time, rows))
+                if light is not None:
+                    if total is None:
+                        total = np.zeros((len(srf.mat), 3), order="F")
+                    add_rows_or_all(total, rows, light)
         return total
 
     def ambient_occlusion(self, srf, depth, chunk):

@@ -26,6 +26,9 @@ class RenderPlan:
         Area or emissive-mesh lights reach materials that reflect light.
     area_light_visibility : bool
         Area lights are seen by rays (they end rays that meet them first).
+    environment_lighting : bool
+        The background lights the scene (importance-sampled, with shadow rays) and reaches
+        materials that reflect light.
     specular : bool
         Some material has a Blinn-Phong highlight.
     smooth_normals : bool
@@ -60,6 +63,7 @@ class RenderPlan:
     lights: bool = False
     area_lights: bool = False
     area_light_visibility: bool = False
+    environment_lighting: bool = False
     specular: bool = False
     smooth_normals: bool = False
     textures: bool = False

@@ -4,7 +4,7 @@ from dataclasses import dataclass, field
 
 # "shadow": one per (hit, point/spot/directional light); "area_shadow": light_samples per
 # (hit, area light or emissive object); "cutout": rays traced again beyond a cut-out surface
-RAY_KINDS = ("camera", "shadow", "area_shadow", "reflection", "refraction", "ao", "cutout")
+RAY_KINDS = ("camera", "shadow", "area_shadow", "environment", "reflection", "refraction", "ao", "cutout")
 STAGES = ("camera", "intersect", "shade", "passes", "shadow", "ao", "spawn", "direct", "film")
 
 

@@ -37,6 +37,7 @@ class Dim(IntEnum):
     LIGHT = 1 << 24  # first of the area-light dimensions (see rtmesh.sampling.sampler.light_dimension)
     GLOSSY = 1 << 25  # glossy-reflection directions; the rays spawned at depth d use GLOSSY + 2*d
     ALPHA = 1 << 26  # stochastic transparency of cut-outs, keyed by the ray (see rtmesh.geometry.cutouts)
+    ENVIRONMENT = 1 << 27  # environment-light directions; the hits at depth d use ENVIRONMENT + 2*d
 
 
 def sequence_key(seed, pixel, dimension):

@@ -66,6 +66,12 @@ class Sampler:
         return decorrelated_points(self.kind, self.seed, pixel, sample, self.spp,
                                    light_dimension(depth, light_index, light_count), ray, rays)
 
+    def environment(self, pixel, sample, depth, ray, rays):
+        """Points for environment-light direction ``ray`` of ``rays`` per hit at path ``depth``
+        (see :class:`rtmesh.lights.environment.EnvironmentLighting`)."""
+        return decorrelated_points(self.kind, self.seed, pixel, sample, self.spp, Dim.ENVIRONMENT + 2 * depth, ray,
+                                   rays)
+
     def alpha_coin(self, ray_key, layer):
         """Uniform numbers deciding whether rays pass a blended cut-out at crossing ``layer``.
 

@@ -38,9 +38,16 @@ class SolidBackground:
     ----------
     colour : (3,) float
         Linear radiance.
+
+    Attributes
+    ----------
+    lighting : bool
+        Whether the background also lights the scene (see
+        :mod:`rtmesh.lights.environment`); every background has it, False unless set.
     """
 
     transparent = False
+    lighting = False
 
     def __init__(self, colour):
         self.colour = np.asarray(colour, dtype=np.float64).reshape(3)
@@ -80,6 +87,7 @@ class GradientBackground:
     """
 
     transparent = False
+    lighting = False  # see SolidBackground
 
     def __init__(self, top, bottom):
         self.top = np.asarray(top, dtype=np.float64).reshape(3)
@@ -111,6 +119,7 @@ class EnvironmentBackground:
     """
 
     transparent = False
+    lighting = False  # see SolidBackground
 
     def __init__(self, pixels, rotation=0.0, intensity=1.0, name="environment"):
         pixels = np.asarray(pixels, dtype=np.float64)

@@ -1,0 +1,231 @@
+"""Light from the background: an environment image (or a solid or gradient sky) lighting the
+scene, importance-sampled, with shadows.
+
+Sampling
+--------
+The background's radiance is tabulated on its latitude-longitude grid (an environment
+image's own texels; a 64 x 32 grid for a solid or gradient background) and directions are
+drawn from the piecewise-constant 2D density proportional to ``luminance x sin(theta)``,
+the luminance of a cell being the largest of its 3 x 3 neighbourhood (the bilinear lookup
+reaches that far)
+(pbrt's ``Distribution2D``): a row (elevation) from the marginal distribution with the first
+number, a column (azimuth) within the row with the second, so stratified points of the
+square stay stratified over the sphere.  The sin(theta) factor is the area of a row's
+texels on the sphere, so bright texels are drawn in proportion to the light they send.
+With ``p(u, v)`` the density over the image, the solid-angle density is
+
+    pdf(w) = p(u, v) / (2 pi^2 sin(theta))
+
+A small floor (1e-3 of the mean) keeps the density positive everywhere, so texels that the
+bilinear lookup lights from a bright neighbour are still reached: the estimator stays
+unbiased.
+
+Estimator
+---------
+Per hit, ``light_samples`` directions ``w_j``, each with a shadow ray that must escape::
+
+    (1 / N) sum_j V(p, w_j) f(w_j) L(w_j) / pdf(w_j)
+
+``f`` is the material's Blinn-Phong factor toward ``w_j`` (``kd cos`` + highlight, no 1/pi,
+as for every rtmesh light: a white diffuse surface under a uniform sky of radiance ``L``
+reflects ``pi L``).  The Whitted integrator samples no diffuse bounce, so there is no
+second strategy to weigh against (multiple importance sampling comes with a BSDF that is
+sampled, such as glTF's metallic-roughness model); mirrors and glass see the environment
+through their followed rays, as before.
+"""
+
+import math
+
+import numpy as np
+
+from rtmesh.core.rays import take_rows
+from rtmesh.core.vecmath import dot
+from rtmesh.geometry.accel import offset_ray_origins
+from rtmesh.sampling.sampler import Sampler
+
+# relative weight of the density's floor (see the module notes)
+_FLOOR = 1e-3
+# the tabulation of a background without an image of its own
+_GRID = (32, 64)
+
+
+class EnvironmentLighting:
+    """Importance-sampled light from a background.
+
+    Parameters
+    ----------
+    background : SolidBackground, GradientBackground or EnvironmentBackground
+        Any object with ``radiance(directions)``; an environment image is tabulated on its
+        own grid (``width``, its rotation through ``uv``).
+    accel : Accel
+        Traces the shadow rays.
+    settings : RenderSettings
+        ``light_samples`` and the sampler.
+    offset_scale : float
+        Scene size for :func:`rtmesh.geometry.accel.offset_ray_origins`.
+    """
+
+    def __init__(self, background, accel, settings, offset_scale):
+        self.background = background
+        self.accel = accel
+        self.samples = settings.light_samples
+        self.sampler = Sampler.for_settings(settings)
+        self.offset_scale = offset_scale
+        width = getattr(background, "width", None)
+        height, width = (_GRID if width is None else (max(width // 2, 1), width))
+        self.height, self.width = height, width
+        v = 1.0 - (np.arange(height) + 0.5) / height  # texture v: 1 at the top row
+        u = (np.arange(width) + 0.5) / width
+        directions = self.directions(np.stack(np.meshgrid(u, v), axis=2).reshape(-1, 2))
+        radiance = np.asarray(background.radiance(directions), dtype=np.float64).reshape(height, width, 3)
+        luminance = radiance @ np.array([0.2126, 0.7152, 0.0722])
+        # the bilinear lookup spreads a texel's radiance over its neighbours' cells: sample
+        # each cell by the brightest of the 3 x 3 texels around it, so the weight L / pdf
+        # stays bounded next to a small bright source (with the texel's own value, a sample
+        # at the edge of a dark cell beside the sun would weigh hundreds of times the rest)
+        luminance = _neighbourhood_max(luminance)
+        sin_theta = np.cos((v - 0.5) * math.pi)[:, None]
+        func = luminance * sin_theta
+        func = func + _FLOOR * max(float(func.mean()), 1e-300)
+        self._func = func
+        self._mean = float(func.mean())
+        rows = func.sum(axis=1)
+        self._marginal = np.concatenate([[0.0], np.cumsum(rows)]) / rows.sum()
+        conditional = np.concatenate([np.zeros((height, 1)), np.cumsum(func, axis=1)], axis=1) / rows[:, None]
+        self._conditional = conditional
+        # each row's cdf shifted by its row index: one ascending array for a vectorised search
+        self._shifted = (conditional + np.arange(height)[:, None]).ravel()
+
+    def directions(self, uv):
+        """Unit directions of image coordinates (the inverse of the background's ``uv``).
+
+        Parameters
+        ----------
+        uv : (k, 2) float
+            u in [0, 1] left to right, v in [0, 1] bottom to top.
+
+        Returns
+        -------
+        (k, 3) float64
+        """
+        azimuth = (uv[:, 0] - 0.5) * 2.0 * math.pi
+        elevation = (uv[:, 1] - 0.5) * math.pi
+        cos_el = np.cos(elevation)
+        xr, y, zr = cos_el * np.cos(azimuth), np.sin(elevation), cos_el * np.sin(azimuth)
+        angle = math.radians(getattr(self.background, "rotation", 0.0))
+        c, s = math.cos(angle), math.sin(angle)
+        # the background's uv() rotates by -rotation about +Y: undo it
+        return np.stack([c * xr + s * zr, y, -s * xr + c * zr], axis=1)
+
+    def sample(self, points):
+        """Directions drawn from the density, and their solid-angle pdf.
+
+        Parameters
+        ----------
+        points : (k, 2) float
+            Points of [0, 1)^2.
+
+        Returns
+        -------
+        wi : (k, 3) float64
+        pdf : (k,) float64
+            Solid-angle density of each direction; ``inf`` exactly at a pole (where
+            ``sin(theta)`` is 0 the sample carries no weight).
+        """
+        h, w = self.height, self.width
+        u1, u2 = points[:, 0], points[:, 1]
+        row = np.clip(np.searchsorted(self._marginal, u1, side="right") - 1, 0, h - 1)
+        low, high = self._marginal[row], self._marginal[row + 1]
+        dv = np.clip((u1 - low) / (high - low), 0.0, 1.0)
+        index = np.searchsorted(self._shifted, row + u2, side="right") - 1
+        column = np.clip(index - row * (w + 1), 0, w - 1)
+        low, high = self._conditional[row, column], self._conditional[row, column + 1]
+        du = np.clip((u2 - low) / (high - low), 0.0, 1.0)
+        uv = np.column_stack([(column + du) / w, 1.0 - (row + dv) / h])
+        density = self._func[row, column] / self._mean
+        sin_theta = np.cos((uv[:, 1] - 0.5) * math.pi)
+        with np.errstate(divide="ignore"):
+            pdf = np.where(sin_theta > 0.0, density / (2.0 * math.pi ** 2 * sin_theta), np.inf)
+        return self.directions(uv), pdf
+
+    def pdf(self, directions):
+        """Solid-angle density of :meth:`sample` at unit ``directions`` ((k, 3) -> (k,))."""
+        uv = self._uv(directions)
+        row = np.clip(((1.0 - uv[:, 1]) * self.height).astype(np.int64), 0, self.height - 1)
+        column = np.clip((uv[:, 0] * self.width).astype(np.int64), 0, self.width - 1)
+        sin_theta = np.sqrt(np.maximum(1.0 - directions[:, 1] ** 2, 0.0))
+        with np.errstate(divide="ignore"):
+            return np.where(sin_theta > 0.0, self._func[row, column] / self._mean
+                            / (2.0 * math.pi ** 2 * sin_theta), np.inf)
+
+    def _uv(self, directions):
+        angle = math.radians(getattr(self.background, "rotation", 0.0))
+        c, s = math.cos(angle), math.sin(angle)
+        x, y, z = directions[:, 0], directions[:, 1], directions[:, 2]
+        xr, zr = c * x - s * z, s * x + c * z
+        return np.column_stack([0.5 + np.arctan2(zr, xr) / (2.0 * math.pi),
+                                0.5 + np.arcsin(np.clip(y, -1.0, 1.0)) / math.pi])
+
+    def direct(self, p, ng, reflectance, pixel, sample, depth, stats, clock, time=None):
+        """Light from the background at every hit, ``light_samples`` shadow rays per hit.
+
+        Parameters
+        ----------
+        p : (k, 3) float
+            Shading points.
+        ng : (k, 3) float
+            Unit geometric normals on the side the incoming ray came from.
+        reflectance : callable
+            ``reflectance(wi, lit) -> (k, 3)``, the material's Blinn-Phong factor.
+        pixel, sample : (k,) int
+            The keys of each hit's random numbers.
+        depth : int
+            Path depth of the hits.
+        stats : RenderStats
+            Shadow rays are counted as ``environment``.
+        clock : object with ``lap(stage)``
+        time : (k,) float, optional
+            Time of each hit's ray (motion blur).
+
+        Returns
+        -------
+        (k, 3) float64 or None
+            None when no sample reached any hit.
+        """
+        n = self.samples
+        total = None
+        for j in range(n):
+            wi, pdf = self.sample(self.sampler.environment(pixel, sample, depth, j, n))
+            radiance = self.background.radiance(wi)
+            lit = (dot(wi, ng) > 0.0) & np.isfinite(pdf) & (radiance > 0.0).any(axis=1)
+            rows = np.flatnonzero(lit)
+            if not len(rows):
+                continue
+            wi_rows = take_rows(wi, rows)
+            origins = offset_ray_origins(take_rows(p, rows), take_rows(ng, rows), scale=self.offset_scale,
+                                         directions=wi_rows)
+            clock.lap("shade")
+            occluded = self.accel.occluded(origins, wi_rows, np.full(len(rows), np.inf),
+                                           time=None if time is None else take_rows(time, rows))
+            stats.rays["environment"] += len(rows)
+            clock.lap("shadow")
+            seen = rows[~occluded]
+            if not len(seen):
+                continue
+            visible = np.zeros(len(p), dtype=bool)
+            visible[seen] = True
+            weight = np.where(visible[:, None], radiance / np.where(visible, pdf, 1.0)[:, None], 0.0)
+            contribution = reflectance(wi, visible) * weight
+            total = contribution if total is None else total + contribution
+        if total is not None:
+            total *= 1.0 / n
+        return total
+
+
+def _neighbourhood_max(values):
+    """Largest value of each texel's 3 x 3 neighbourhood, (h, w) -> (h, w): columns wrap
+    around (azimuth), rows clamp at the poles."""
+    padded = np.concatenate([values[:, -1:], values, values[:, :1]], axis=1)
+    padded = np.concatenate([padded[:1], padded, padded[-1:]], axis=0)
+    h, w = values.shape
+    return np.max([padded[i:i + h, j:j + w] for i in range(3) for j in range(3)], axis=0)
