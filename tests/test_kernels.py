@@ -1,5 +1,5 @@
-"""The compiled kernels (rtmesh.shading.kernels) against small scalar references written from the
-formulas, row by row in plain Python."""
+"""The compiled kernels (surfaces, lights, Blinn-Phong, direct light, camera rays, film sums)
+against small scalar references written from the formulas, row by row in plain Python."""
 
 import math
 

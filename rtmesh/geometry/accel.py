@@ -45,7 +45,7 @@ _PACKET_FLAGS = embree_packets.RTC_RAY_QUERY_FLAG_COHERENT
 # any object even far from the origin (the former fixed 256-ulp offset was ~2 units at
 # |x| ~ 1e5, more than a unit object, which rays then tunnelled through).
 # The constants (ULPS = 4, EXTENT_EPSILONS = 16 eps32, DIRECTION_SHARE = 1/4) and the arithmetic
-# are in rtmesh.shading.kernels, which applies them one row at a time.
+# are in rtmesh.geometry.float32_rays, which applies them one row at a time.
 
 
 def offset_ray_origins(points, normals, dtype=np.float64, scale=1.0, directions=None):

@@ -9,8 +9,10 @@ moving those records through memory.  Here one kernel does a whole chunk, in blo
 surface records, and for each light the shadow rays of the lit samples through
 ``rtcOccluded16``; the rays and records of a block never leave the kernel's scratch arrays.
 
-The arithmetic is the general path's, row for row: the same row helpers of
-:mod:`rtmesh.shading.kernels` (camera, surface record, light, Blinn-Phong, origin offset) and of
+The arithmetic is the general path's, row for row: the same row helpers
+(:mod:`rtmesh.scene.camera_rays`, :mod:`rtmesh.shading.surfaces`,
+:mod:`rtmesh.lights.point_light_rows`, :mod:`rtmesh.materials.blinn_phong`,
+:mod:`rtmesh.geometry.float32_rays` for the origin offset) and those of
 :mod:`rtmesh.geometry.embree_packets` (lanes of a packet), in the same order, so the images are
 bit-identical to the general path's (tested).  The one operation the general path leaves
 to NumPy, raising highlight cosines to the shininess (NumPy's vectorised ``pow``, which can
@@ -34,9 +36,9 @@ from rtmesh.lights.point_light_rows import ROW, illuminate_row
 from rtmesh.materials.blinn_phong import highlight_cosine, shade_row
 from rtmesh.sampling.pixel_samples import PixelSampler, pixel_position
 from rtmesh.scene.background import SolidBackground
-from rtmesh.scene.camera_rays import image_plane_point, pinhole_direction
+from rtmesh.scene.camera_rays import image_plane_xy, pinhole_xyz
 from rtmesh.shading.direct_light import SHADOW_SHORTEN, light_reaches
-from rtmesh.shading.surfaces import surface_record
+from rtmesh.shading.surfaces import surface_from_rows_inlined
 
 _NO_TINT = np.zeros((0, 3))
 _NO_POSITIONS = np.zeros((0, 2))
@@ -183,9 +185,9 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     width : int
     image_plane : (4,) float64
     position, forward, right, up : (3,) float64
-        The camera (see :func:`rtmesh.shading.kernels.camera_rays`).
+        The camera (see :func:`rtmesh.scene.camera_rays.camera_rays`).
     faces, vertex_normals, smooth, material_id, fix_terminator
-        As for :func:`rtmesh.shading.kernels.surface_records`.
+        As for :func:`rtmesh.shading.surfaces.surface_records`.
     base : (M, 3) float64
         Emission plus ambient light per material.
     background : (3,) float64
@@ -216,10 +218,11 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     Notes
     -----
     Misses are computed on face 0 and ignored, so the steps of a block loop over its samples
-    without early exits.  Of those loops LLVM vectorises the light step
-    (:func:`_light_block`); the camera and surface steps stay scalar.  The packets of a
-    block lie side by side in one buffer (each 64-byte aligned), and sample ``b`` of the
-    block is lane ``b % 16`` of packet ``b // 16``.
+    without early exits.  LLVM vectorises the arithmetic of the camera directions, the
+    surface records and the light samples (:func:`_camera_block`, :func:`_surface_block`,
+    :func:`_light_block`); the pixel positions, the gathers and the packet lanes stay
+    scalar.  The packets of a block lie side by side in one buffer (each 64-byte aligned),
+    and sample ``b`` of the block is lane ``b % 16`` of packet ``b // 16``.
     """
     n = len(pixel)
     n_lights = len(lights)
@@ -228,8 +231,9 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     radiance = np.empty((n, 3))
     rays, words, valid, args = ep.packet_buffers(ep.RAYHIT_WORDS, PACKETS, flags)
     shadow, shadow_words, shadow_valid, _ = ep.packet_buffers(ep.RAY_WORDS, PACKETS, flags)
-    # per sample of the block: direction, surface record, material
-    srf = np.empty((9, BLOCK))
+    # per sample of the block: barycentrics and the rows of its face (_surface_block), material
+    face_rows = np.empty((23, BLOCK))
+    interpolate = np.empty(BLOCK, np.bool_)
     mat = np.empty(BLOCK, np.intp)
     hit = np.empty(BLOCK, np.bool_)
     # per light and sample: the light sample and its fate
@@ -248,11 +252,11 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     rec_raised = np.empty(capacity, np.bool_)
     records = 0
     shadow_rays = 0
+    camera = _camera_numbers(image_plane, forward, right, up)
     for start in range(0, n, BLOCK):
         count = min(BLOCK, n - start)
-        # camera rays (rtmesh.shading.kernels.camera_rays, pinhole); lanes past the end repeat sample 0
-        d = _camera_block(film_xy, sampler, keys, corners, size, spp, pixel, sample, start, count, width,
-                          image_plane, forward, right, up)
+        # camera rays (rtmesh.scene.camera_rays.camera_rays, pinhole); lanes past the end repeat sample 0
+        d = _camera_block(film_xy, sampler, keys, corners, size, spp, pixel, sample, start, count, width, camera)
         for b in range(BLOCK):
             valid[b] = -1 if b < count else 0
         for q in range(PACKETS):
@@ -265,17 +269,26 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
         for q in range((count + LANES - 1) // LANES):
             intersect16(valid.ctypes.data + 64 * q, scene, rays.ctypes.data + _PACKET_BYTES * q,
                         args.ctypes.data)
-        # surface records (rtmesh.shading.kernels.surface_records); misses use face 0
+        # surface records (rtmesh.shading.surfaces.surface_records): the rows of the faces hit (misses use
+        # face 0) are gathered first, then one loop does the arithmetic (_surface_block)
         for b in range(count):
             at = _hit_lane(b)
             hit[b] = words[ep.GEOM_ID * LANES + at] != -1
             f = np.intp(words[ep.PRIM_ID * LANES + at]) if hit[b] else np.intp(0)
             mat[b] = material_id[f]
-            interpolate = has_smooth & smooth[f]
-            (srf[0, b], srf[1, b], srf[2, b], srf[3, b], srf[4, b], srf[5, b], srf[6, b], srf[7, b], srf[8, b],
-             _) = surface_record(f, np.float64(rays[ep.U * LANES + at]), np.float64(rays[ep.V * LANES + at]),
-                                  d[0, b], d[1, b], d[2, b], faces, vertex_normals, interpolate, fix_terminator)
-        # each light: samples (rtmesh.shading.kernels.light_samples) and the shadow packets
+            interpolate[b] = has_smooth and smooth[f]
+            face_rows[0, b] = np.float64(rays[ep.U * LANES + at])
+            face_rows[1, b] = np.float64(rays[ep.V * LANES + at])
+            for j in range(12):
+                face_rows[2 + j, b] = faces[f, j]
+            if interpolate[b]:
+                for j in range(9):
+                    face_rows[14 + j, b] = vertex_normals[f, j]
+            else:
+                for j in range(9):
+                    face_rows[14 + j, b] = 0.0
+        srf = _surface_block(face_rows, interpolate, d, count, fix_terminator)
+        # each light: samples (rtmesh.shading.direct_light.light_samples) and the shadow packets
         for k in range(n_lights):
             light = lights[k]
             lit, values, shadow_ray = _light_block(light, srf, d, count, scale, shorten)
@@ -308,7 +321,7 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
                 shadow_rays += on
                 # Embree marks an occluded ray by setting its tfar to -inf
                 reaches[k, b] = on and shadow[ep.TFAR * LANES + _ray_lane(b)] != -np.inf
-        # add up (rtmesh.shading.kernels.add_light, then the general path's sums)
+        # add up (rtmesh.shading.direct_light.add_light, then the general path's sums)
         for b in range(count):
             i = start + b
             if not hit[b]:
@@ -344,29 +357,90 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
 
 
 @row
-def _camera_block(film_xy, sampler, keys, corners, size, spp, pixel, sample, start, count, width, image_plane,
-                  forward, right, up):
+def _camera_block(film_xy, sampler, keys, corners, size, spp, pixel, sample, start, count, width, camera):
     """Unit directions (3, BLOCK) of the camera rays of samples ``start .. start + count - 1``
-    (lanes past the end repeat sample ``start``), as :func:`rtmesh.shading.kernels.camera_rays`
+    (lanes past the end repeat sample ``start``), as :func:`rtmesh.scene.camera_rays.camera_rays`
     makes them for a pinhole; positions from ``film_xy``, or formed here when it is empty.
-    The output has the block's constant size, for LLVM (see :func:`_light_block`)."""
+
+    ``camera`` is the image-plane map and the camera frame as a tuple of 13 numbers
+    (:func:`_camera_numbers`): numba takes and releases a reference to every array argument
+    of a compiled call (atomic instructions, shared between the render threads), and this
+    helper is called once a block.  The positions (hashing, scalar) and the directions
+    (vectorised: the loop has no branch and its output the block's constant size, see
+    :func:`_light_block`) are separate loops.
+    """
+    ax, bx, ay, by, fx, fy, fz, rx, ry, rz, ux, uy, uz = camera
+    xy = np.empty((2, BLOCK))
+    if len(film_xy):
+        for b in range(count):
+            xy[0, b], xy[1, b] = film_xy[start + b, 0], film_xy[start + b, 1]
+    else:
+        for b in range(count):
+            xy[0, b], xy[1, b] = pixel_position(sampler, keys, corners, size, spp, pixel[start + b],
+                                                sample[start + b])
     d = np.empty((3, BLOCK))
     inverse_width = 1.0 / width
-    for b in range(BLOCK):
-        i = start + b if b < count else start
-        if len(film_xy):
-            x, y = film_xy[i, 0], film_xy[i, 1]
-        else:
-            x, y = pixel_position(sampler, keys, corners, size, spp, pixel[i], sample[i])
-        sx, sy = image_plane_point(x, y, pixel[i], width, inverse_width, image_plane)
-        d[0, b], d[1, b], d[2, b] = pinhole_direction(sx, sy, forward, right, up)
+    for b in range(count):
+        sx, sy = image_plane_xy(xy[0, b], xy[1, b], pixel[start + b], width, inverse_width, ax, bx, ay, by)
+        d[0, b], d[1, b], d[2, b] = pinhole_xyz(sx, sy, fx, fy, fz, rx, ry, rz, ux, uy, uz)
+    # inactive lanes of the last packet: a copy of the first ray keeps their words finite
+    for b in range(count, BLOCK):
+        d[0, b], d[1, b], d[2, b] = d[0, 0], d[1, 0], d[2, 0]
     return d
+
+
+@row
+def _camera_numbers(image_plane, forward, right, up):
+    """The image-plane map and the camera frame as one tuple of numbers, for :func:`_camera_block`."""
+    return (image_plane[0], image_plane[1], image_plane[2], image_plane[3], forward[0], forward[1], forward[2],
+            right[0], right[1], right[2], up[0], up[1], up[2])
+
+
+@row
+def _surface_block(face_rows, interpolate, d, count, fix_terminator):
+    """Surface records of the first ``count`` samples of a block from their gathered face
+    rows (the arithmetic of :func:`rtmesh.shading.surfaces.surface_records`).
+
+    Parameters
+    ----------
+    face_rows : (23, BLOCK) float64
+        Per sample: barycentrics ``u, v``, the face's ``faces`` row (12) and its
+        ``vertex_normals`` row (9; zeros where not interpolated).
+    interpolate : (BLOCK,) bool
+        Samples whose shading normal interpolates the vertex normals.
+    d : (3, BLOCK) float64
+        Unit ray directions.
+    count : int
+    fix_terminator : bool
+
+    Returns
+    -------
+    (9, BLOCK) float64
+        Hit point, geometric and shading normal (facing the ray's side).
+
+    Notes
+    -----
+    The loop reads no table and calls only number-to-number rows, and its output has the
+    block's constant size (see :func:`_light_block`): LLVM vectorises it.  With the tables
+    read inside (``_surface_record`` per sample) the loop stayed scalar, called the row out
+    of line and took and released a reference to the vertex normals per sample (two atomic
+    instructions, about a fifth of the stage's time).
+    """
+    srf = np.empty((9, BLOCK))
+    r = face_rows
+    for b in range(count):
+        (srf[0, b], srf[1, b], srf[2, b], srf[3, b], srf[4, b], srf[5, b], srf[6, b], srf[7, b], srf[8, b],
+         _) = surface_from_rows_inlined(r[0, b], r[1, b], d[0, b], d[1, b], d[2, b], r[2, b], r[3, b], r[4, b],
+                                         r[5, b], r[6, b], r[7, b], r[8, b], r[9, b], r[10, b], r[11, b], r[12, b],
+                                         r[13, b], interpolate[b], r[14, b], r[15, b], r[16, b], r[17, b], r[18, b],
+                                         r[19, b], r[20, b], r[21, b], r[22, b], fix_terminator)
+    return srf
 
 
 @row
 def _light_block(light, srf, d, count, scale, shorten):
     """One light at the first ``count`` surface records of a block (the arithmetic of
-    :func:`rtmesh.shading.kernels.light_samples`).
+    :func:`rtmesh.shading.direct_light.light_samples`).
 
     Returns
     -------
@@ -407,7 +481,7 @@ def _light_block(light, srf, d, count, scale, shorten):
 def _add_light(d0, d1, d2, m, cos_i, power, e0, e1, e2, diffuse, specular):
     """The direct light ``(d0, d1, d2)`` plus one light's Blinn-Phong term on material ``m``
     (``power``: the raised highlight cosine, 0 without one; ``e``: its incident term), as
-    :func:`rtmesh.shading.kernels.add_light` adds it."""
+    :func:`rtmesh.shading.direct_light.add_light` adds it."""
     f0, f1, f2 = shade_row(0, m, cos_i, power, diffuse, _NO_TINT, specular, _NO_TINT)
     return d0 + f0 * e0, d1 + f1 * e1, d2 + f2 * e2
 

@@ -15,7 +15,7 @@ class SurfaceStage(Stage):
 
     def records(self, rays, hits, rows, sample_time=None):
         """Hit points, normals facing the incoming ray, and material ids of the hit ``rows``
-        (see :func:`rtmesh.shading.kernels.surface_records`).
+        (see :func:`rtmesh.shading.surfaces.surface_records`).
 
         With motion blur, points and normals are formed on the rest pose of the object hit
         and moved to the ray's time at the end (see :mod:`rtmesh.geometry.motion`).
