@@ -116,6 +116,18 @@ def row(function):
     return numba.njit(nogil=True, error_model="numpy", no_cpython_wrapper=True)(function)
 
 
+def inline_row(function):
+    """Compile ``function`` as a :func:`row` that numba inlines into every caller itself
+    (``inline="always"``), before LLVM sees the code.
+
+    LLVM inlines only small rows; a loop that calls a larger one stays a scalar loop
+    with a call per iteration.  For rows of numbers only (no arrays: an inlined array
+    argument is counted like any array variable), called in loops that must vectorise.
+    Each caller compiles the row again, so keep it for such rows.
+    """
+    return numba.njit(nogil=True, error_model="numpy", no_cpython_wrapper=True, inline="always")(function)
+
+
 def cached(compiler):
     """Apply a numba decorator with ``cache=True``, or without it where no cache directory
     is writable (the ufunc builder's own cache, for :func:`numba.vectorize`: a ufunc calls

@@ -31,7 +31,7 @@ from .background import SolidBackground
 from .compiled import kernel, row
 from .pixel_samples import PixelSampler, pixel_position
 from .kernels import (SHADOW_SHORTEN, _dot, _highlight_cosine, _illuminate, _image_plane_point, _offset,
-                      _pinhole_direction, _reaches, _shade, _surface_record)
+                      _pinhole_direction, _reaches, _shade, _surface_from_rows)
 
 _F32_MAX = float(np.finfo(np.float32).max)
 _NO_TINT = np.zeros((0, 3))
@@ -205,8 +205,9 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     Notes
     -----
     Misses are computed on face 0 and ignored, so the steps of a block loop over its samples
-    without early exits.  Of those loops LLVM vectorises the light step
-    (:func:`_light_block`); the camera and surface steps stay scalar.  The packets of a
+    without early exits.  LLVM vectorises the arithmetic of the surface records and the
+    light samples (:func:`_surface_block`, :func:`_light_block`); the camera step, the
+    gathers and the packet lanes stay scalar.  The packets of a
     block lie side by side in one buffer (each 64-byte aligned), and sample ``b`` of the
     block is lane ``b % 16`` of packet ``b // 16``.
     """
@@ -217,8 +218,9 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     radiance = np.empty((n, 3))
     rays, words, valid, args = ep.packet_buffers(ep.RAYHIT_WORDS, PACKETS, flags)
     shadow, shadow_words, shadow_valid, _ = ep.packet_buffers(ep.RAY_WORDS, PACKETS, flags)
-    # per sample of the block: direction, surface record, material
-    srf = np.empty((9, BLOCK))
+    # per sample of the block: barycentrics and the rows of its face (_surface_block), material
+    face_rows = np.empty((23, BLOCK))
+    interpolate = np.empty(BLOCK, np.bool_)
     mat = np.empty(BLOCK, np.intp)
     hit = np.empty(BLOCK, np.bool_)
     # per light and sample: the light sample and its fate
@@ -254,16 +256,25 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
         for q in range((count + LANES - 1) // LANES):
             intersect16(valid.ctypes.data + 64 * q, scene, rays.ctypes.data + _PACKET_BYTES * q,
                         args.ctypes.data)
-        # surface records (rtmesh.kernels.surface_records); misses use face 0
+        # surface records (rtmesh.kernels.surface_records): the rows of the faces hit (misses use
+        # face 0) are gathered first, then one loop does the arithmetic (_surface_block)
         for b in range(count):
             at = _hit_lane(b)
             hit[b] = words[ep.GEOM_ID * LANES + at] != -1
             f = np.intp(words[ep.PRIM_ID * LANES + at]) if hit[b] else np.intp(0)
             mat[b] = material_id[f]
-            interpolate = has_smooth & smooth[f]
-            (srf[0, b], srf[1, b], srf[2, b], srf[3, b], srf[4, b], srf[5, b], srf[6, b], srf[7, b], srf[8, b],
-             _) = _surface_record(f, np.float64(rays[ep.U * LANES + at]), np.float64(rays[ep.V * LANES + at]),
-                                  d[0, b], d[1, b], d[2, b], faces, vertex_normals, interpolate, fix_terminator)
+            interpolate[b] = has_smooth and smooth[f]
+            face_rows[0, b] = np.float64(rays[ep.U * LANES + at])
+            face_rows[1, b] = np.float64(rays[ep.V * LANES + at])
+            for j in range(12):
+                face_rows[2 + j, b] = faces[f, j]
+            if interpolate[b]:
+                for j in range(9):
+                    face_rows[14 + j, b] = vertex_normals[f, j]
+            else:
+                for j in range(9):
+                    face_rows[14 + j, b] = 0.0
+        srf = _surface_block(face_rows, interpolate, d, count, fix_terminator)
         # each light: samples (rtmesh.kernels.light_samples) and the shadow packets
         for k in range(n_lights):
             light = lights[k]
@@ -350,6 +361,47 @@ def _camera_block(film_xy, sampler, keys, corners, size, spp, pixel, sample, sta
         sx, sy = _image_plane_point(x, y, pixel[i], width, inverse_width, image_plane)
         d[0, b], d[1, b], d[2, b] = _pinhole_direction(sx, sy, forward, right, up)
     return d
+
+
+@row
+def _surface_block(face_rows, interpolate, d, count, fix_terminator):
+    """Surface records of the first ``count`` samples of a block from their gathered face
+    rows (the arithmetic of :func:`rtmesh.kernels.surface_records`).
+
+    Parameters
+    ----------
+    face_rows : (23, BLOCK) float64
+        Per sample: barycentrics ``u, v``, the face's ``faces`` row (12) and its
+        ``vertex_normals`` row (9; zeros where not interpolated).
+    interpolate : (BLOCK,) bool
+        Samples whose shading normal interpolates the vertex normals.
+    d : (3, BLOCK) float64
+        Unit ray directions.
+    count : int
+    fix_terminator : bool
+
+    Returns
+    -------
+    (9, BLOCK) float64
+        Hit point, geometric and shading normal (facing the ray's side).
+
+    Notes
+    -----
+    The loop reads no table and calls only number-to-number rows, and its output has the
+    block's constant size (see :func:`_light_block`): LLVM vectorises it.  With the tables
+    read inside (``_surface_record`` per sample) the loop stayed scalar, called the row out
+    of line and took and released a reference to the vertex normals per sample (two atomic
+    instructions, about a fifth of the stage's time).
+    """
+    srf = np.empty((9, BLOCK))
+    r = face_rows
+    for b in range(count):
+        (srf[0, b], srf[1, b], srf[2, b], srf[3, b], srf[4, b], srf[5, b], srf[6, b], srf[7, b], srf[8, b],
+         _) = _surface_from_rows(r[0, b], r[1, b], d[0, b], d[1, b], d[2, b], r[2, b], r[3, b], r[4, b], r[5, b],
+                                 r[6, b], r[7, b], r[8, b], r[9, b], r[10, b], r[11, b], r[12, b], r[13, b],
+                                 interpolate[b], r[14, b], r[15, b], r[16, b], r[17, b], r[18, b], r[19, b],
+                                 r[20, b], r[21, b], r[22, b], fix_terminator)
+    return srf
 
 
 @row

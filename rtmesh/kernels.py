@@ -21,7 +21,7 @@ import numpy as np
 from numba import types
 from numba.extending import intrinsic
 
-from .compiled import cached, kernel, row
+from .compiled import cached, inline_row, kernel, row
 
 _row = row  # one-row helpers: compiled into the kernels that call them
 
@@ -295,21 +295,43 @@ def _surface_record(f, a, b, vx, vy, vz, faces, vertex_normals, smooth, fix_term
     """One hit's surface record (see :func:`surface_records`): face ``f`` at barycentrics
     ``(a, b)``, seen along ``(vx, vy, vz)``; ``smooth``: interpolate the vertex normals.
     Returns ``(px, py, pz, gx, gy, gz, sx, sy, sz, front)``."""
+    # vertex normals exist only where smooth shading was asked for: on flat faces the
+    # interpolation runs on zeros and is not used
+    n0x = n0y = n0z = m1x = m1y = m1z = m2x = m2y = m2z = 0.0
+    if smooth:
+        n0x, n0y, n0z = vertex_normals[f, 0], vertex_normals[f, 1], vertex_normals[f, 2]
+        m1x, m1y, m1z = vertex_normals[f, 3], vertex_normals[f, 4], vertex_normals[f, 5]
+        m2x, m2y, m2z = vertex_normals[f, 6], vertex_normals[f, 7], vertex_normals[f, 8]
+    return _surface_from_rows(a, b, vx, vy, vz, faces[f, 0], faces[f, 1], faces[f, 2], faces[f, 3], faces[f, 4],
+                              faces[f, 5], faces[f, 6], faces[f, 7], faces[f, 8], faces[f, 9], faces[f, 10],
+                              faces[f, 11], smooth, n0x, n0y, n0z, m1x, m1y, m1z, m2x, m2y, m2z, fix_terminator)
+
+
+@inline_row
+def _surface_from_rows(a, b, vx, vy, vz, v0x, v0y, v0z, e1x, e1y, e1z, e2x, e2y, e2z, gx, gy, gz, smooth, n0x, n0y,
+                       n0z, m1x, m1y, m1z, m2x, m2y, m2z, fix_terminator):
+    """The arithmetic of :func:`_surface_record` on a face's rows, given as numbers: ``v0``,
+    ``e1 = v1 - v0``, ``e2 = v2 - v0``, the unit normal ``g`` (a ``faces`` row) and the
+    vertex normals ``n0``, ``m1 = n1 - n0``, ``m2 = n2 - n0`` (a ``vertex_normals`` row;
+    read only where ``smooth``).
+
+    It takes no arrays, so a loop over gathered rows that calls it holds no array
+    references per row (numba counts them with atomic instructions); it is inlined by
+    numba (too large for LLVM's inliner) and has no branch LLVM cannot turn into selects,
+    so such a loop vectorises (the fused stage's surface step).
+    """
     # (u e1 + v0) + v e2: the order of rtmesh.accel.barycentric_interpolate
-    px = (faces[f, 3] * a + faces[f, 0]) + faces[f, 6] * b
-    py = (faces[f, 4] * a + faces[f, 1]) + faces[f, 7] * b
-    pz = (faces[f, 5] * a + faces[f, 2]) + faces[f, 8] * b
-    gx, gy, gz = faces[f, 9], faces[f, 10], faces[f, 11]
+    px = (e1x * a + v0x) + e2x * b
+    py = (e1y * a + v0y) + e2y * b
+    pz = (e1z * a + v0z) + e2z * b
     front = _dot(vx, vy, vz, gx, gy, gz) < 0.0
     flip = 1.0 if front else -1.0
     gx, gy, gz = gx * flip, gy * flip, gz * flip
-    sx, sy, sz = gx, gy, gz
-    if smooth:
-        sx, sy, sz = _normalized(
-            (vertex_normals[f, 3] * a + vertex_normals[f, 0]) + vertex_normals[f, 6] * b,
-            (vertex_normals[f, 4] * a + vertex_normals[f, 1]) + vertex_normals[f, 7] * b,
-            (vertex_normals[f, 5] * a + vertex_normals[f, 2]) + vertex_normals[f, 8] * b,
-            flip)
+    # formed on flat faces too and then not used: a select instead of a branch
+    ix, iy, iz = _normalized((m1x * a + n0x) + m2x * b, (m1y * a + n0y) + m2y * b, (m1z * a + n0z) + m2z * b, flip)
+    sx = ix if smooth else gx
+    sy = iy if smooth else gy
+    sz = iz if smooth else gz
     if fix_terminator:
         sx, sy, sz = _face_viewer(sx, sy, sz, gx, gy, gz, vx, vy, vz)
     return px, py, pz, gx, gy, gz, sx, sy, sz, front
