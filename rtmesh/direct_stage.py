@@ -205,11 +205,11 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     Notes
     -----
     Misses are computed on face 0 and ignored, so the steps of a block loop over its samples
-    without early exits.  LLVM vectorises the arithmetic of the surface records and the
-    light samples (:func:`_surface_block`, :func:`_light_block`); the camera step, the
-    gathers and the packet lanes stay scalar.  The packets of a
-    block lie side by side in one buffer (each 64-byte aligned), and sample ``b`` of the
-    block is lane ``b % 16`` of packet ``b // 16``.
+    without early exits.  LLVM vectorises the arithmetic of the camera directions, the
+    surface records and the light samples (:func:`_camera_block`, :func:`_surface_block`,
+    :func:`_light_block`); the pixel positions, the gathers and the packet lanes stay
+    scalar.  The packets of a block lie side by side in one buffer (each 64-byte aligned),
+    and sample ``b`` of the block is lane ``b % 16`` of packet ``b // 16``.
     """
     n = len(pixel)
     n_lights = len(lights)
@@ -349,17 +349,26 @@ def _camera_block(film_xy, sampler, keys, corners, size, spp, pixel, sample, sta
     """Unit directions (3, BLOCK) of the camera rays of samples ``start .. start + count - 1``
     (lanes past the end repeat sample ``start``), as :func:`rtmesh.kernels.camera_rays`
     makes them for a pinhole; positions from ``film_xy``, or formed here when it is empty.
-    The output has the block's constant size, for LLVM (see :func:`_light_block`)."""
+
+    The positions (hashing, scalar) and the directions (vectorised: the loop has no branch
+    and its output the block's constant size, see :func:`_light_block`) are separate loops.
+    """
+    xy = np.empty((2, BLOCK))
+    if len(film_xy):
+        for b in range(count):
+            xy[0, b], xy[1, b] = film_xy[start + b, 0], film_xy[start + b, 1]
+    else:
+        for b in range(count):
+            xy[0, b], xy[1, b] = pixel_position(sampler, keys, corners, size, spp, pixel[start + b],
+                                                sample[start + b])
     d = np.empty((3, BLOCK))
     inverse_width = 1.0 / width
-    for b in range(BLOCK):
-        i = start + b if b < count else start
-        if len(film_xy):
-            x, y = film_xy[i, 0], film_xy[i, 1]
-        else:
-            x, y = pixel_position(sampler, keys, corners, size, spp, pixel[i], sample[i])
-        sx, sy = _image_plane_point(x, y, pixel[i], width, inverse_width, image_plane)
+    for b in range(count):
+        sx, sy = _image_plane_point(xy[0, b], xy[1, b], pixel[start + b], width, inverse_width, image_plane)
         d[0, b], d[1, b], d[2, b] = _pinhole_direction(sx, sy, forward, right, up)
+    # inactive lanes of the last packet: a copy of the first ray keeps their words finite
+    for b in range(count, BLOCK):
+        d[0, b], d[1, b], d[2, b] = d[0, 0], d[1, 0], d[2, 0]
     return d
 
 
