@@ -120,10 +120,11 @@ def inline_row(function):
     """Compile ``function`` as a :func:`row` that numba inlines into every caller itself
     (``inline="always"``), before LLVM sees the code.
 
-    LLVM inlines only small rows; a loop that calls a larger one stays a scalar loop
-    with a call per iteration.  For rows of numbers only (no arrays: an inlined array
-    argument is counted like any array variable), called in loops that must vectorise.
-    Each caller compiles the row again, so keep it for such rows.
+    LLVM inlines only small rows; a loop that calls a larger one stays a scalar loop with
+    a call per iteration, which passes every argument through the stack and may take and
+    release a reference to each array argument (atomic instructions).  For rows called per
+    sample in the fused stage's loops (see :mod:`rtmesh.direct_stage`).  Each caller
+    compiles the row again, so keep it for such rows.
     """
     return numba.njit(nogil=True, error_model="numpy", no_cpython_wrapper=True, inline="always")(function)
 

@@ -31,7 +31,7 @@ from .background import SolidBackground
 from .compiled import kernel, row
 from .pixel_samples import PixelSampler, pixel_position
 from .kernels import (SHADOW_SHORTEN, _dot, _highlight_cosine, _illuminate, _image_plane_point, _offset,
-                      _pinhole_direction, _reaches, _shade, _surface_from_rows)
+                      _pinhole_direction, _reaches, _shade, _surface_from_rows_inlined)
 
 _F32_MAX = float(np.finfo(np.float32).max)
 _NO_TINT = np.zeros((0, 3))
@@ -406,10 +406,10 @@ def _surface_block(face_rows, interpolate, d, count, fix_terminator):
     r = face_rows
     for b in range(count):
         (srf[0, b], srf[1, b], srf[2, b], srf[3, b], srf[4, b], srf[5, b], srf[6, b], srf[7, b], srf[8, b],
-         _) = _surface_from_rows(r[0, b], r[1, b], d[0, b], d[1, b], d[2, b], r[2, b], r[3, b], r[4, b], r[5, b],
-                                 r[6, b], r[7, b], r[8, b], r[9, b], r[10, b], r[11, b], r[12, b], r[13, b],
-                                 interpolate[b], r[14, b], r[15, b], r[16, b], r[17, b], r[18, b], r[19, b],
-                                 r[20, b], r[21, b], r[22, b], fix_terminator)
+         _) = _surface_from_rows_inlined(r[0, b], r[1, b], d[0, b], d[1, b], d[2, b], r[2, b], r[3, b], r[4, b],
+                                         r[5, b], r[6, b], r[7, b], r[8, b], r[9, b], r[10, b], r[11, b], r[12, b],
+                                         r[13, b], interpolate[b], r[14, b], r[15, b], r[16, b], r[17, b], r[18, b],
+                                         r[19, b], r[20, b], r[21, b], r[22, b], fix_terminator)
     return srf
 
 

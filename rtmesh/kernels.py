@@ -307,7 +307,7 @@ def _surface_record(f, a, b, vx, vy, vz, faces, vertex_normals, smooth, fix_term
                               faces[f, 11], smooth, n0x, n0y, n0z, m1x, m1y, m1z, m2x, m2y, m2z, fix_terminator)
 
 
-@inline_row
+@_row
 def _surface_from_rows(a, b, vx, vy, vz, v0x, v0y, v0z, e1x, e1y, e1z, e2x, e2y, e2z, gx, gy, gz, smooth, n0x, n0y,
                        n0z, m1x, m1y, m1z, m2x, m2y, m2z, fix_terminator):
     """The arithmetic of :func:`_surface_record` on a face's rows, given as numbers: ``v0``,
@@ -316,9 +316,9 @@ def _surface_from_rows(a, b, vx, vy, vz, v0x, v0y, v0z, e1x, e1y, e1z, e2x, e2y,
     read only where ``smooth``).
 
     It takes no arrays, so a loop over gathered rows that calls it holds no array
-    references per row (numba counts them with atomic instructions); it is inlined by
-    numba (too large for LLVM's inliner) and has no branch LLVM cannot turn into selects,
-    so such a loop vectorises (the fused stage's surface step).
+    references per row (numba counts them with atomic instructions), and it has no branch
+    LLVM cannot turn into selects: inlined (:data:`_surface_from_rows_inlined`), such a
+    loop vectorises (the fused stage's surface step).
     """
     # (u e1 + v0) + v e2: the order of rtmesh.accel.barycentric_interpolate
     px = (e1x * a + v0x) + e2x * b
@@ -335,6 +335,12 @@ def _surface_from_rows(a, b, vx, vy, vz, v0x, v0y, v0z, e1x, e1y, e1z, e2x, e2y,
     if fix_terminator:
         sx, sy, sz = _face_viewer(sx, sy, sz, gx, gy, gz, vx, vy, vz)
     return px, py, pz, gx, gy, gz, sx, sy, sz, front
+
+
+# The same row, inlined by numba into its callers: too large for LLVM's inliner, it would
+# stay a call per row in the fused stage's loop.  The general path keeps the plain row, so
+# its kernels compile no longer than before (inlining costs each caller ~0.3 s CPU).
+_surface_from_rows_inlined = inline_row(_surface_from_rows.py_func)
 
 
 @kernel
