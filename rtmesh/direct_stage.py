@@ -30,8 +30,8 @@ from .accel import Accel
 from .background import SolidBackground
 from .compiled import kernel, row
 from .pixel_samples import PixelSampler, pixel_position
-from .kernels import (SHADOW_SHORTEN, _dot, _highlight_cosine, _illuminate, _image_plane_point, _offset,
-                      _pinhole_direction, _reaches, _shade, _surface_from_rows_inlined)
+from .kernels import (SHADOW_SHORTEN, _dot, _highlight_cosine, _illuminate, _image_plane_xy, _offset,
+                      _pinhole_xyz, _reaches, _shade, _surface_from_rows_inlined)
 
 _F32_MAX = float(np.finfo(np.float32).max)
 _NO_TINT = np.zeros((0, 3))
@@ -239,11 +239,11 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     rec_raised = np.empty(capacity, np.bool_)
     records = 0
     shadow_rays = 0
+    camera = _camera_numbers(image_plane, forward, right, up)
     for start in range(0, n, BLOCK):
         count = min(BLOCK, n - start)
         # camera rays (rtmesh.kernels.camera_rays, pinhole); lanes past the end repeat sample 0
-        d = _camera_block(film_xy, sampler, keys, corners, size, spp, pixel, sample, start, count, width,
-                          image_plane, forward, right, up)
+        d = _camera_block(film_xy, sampler, keys, corners, size, spp, pixel, sample, start, count, width, camera)
         for b in range(BLOCK):
             valid[b] = -1 if b < count else 0
         for q in range(PACKETS):
@@ -344,15 +344,19 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
 
 
 @row
-def _camera_block(film_xy, sampler, keys, corners, size, spp, pixel, sample, start, count, width, image_plane,
-                  forward, right, up):
+def _camera_block(film_xy, sampler, keys, corners, size, spp, pixel, sample, start, count, width, camera):
     """Unit directions (3, BLOCK) of the camera rays of samples ``start .. start + count - 1``
     (lanes past the end repeat sample ``start``), as :func:`rtmesh.kernels.camera_rays`
     makes them for a pinhole; positions from ``film_xy``, or formed here when it is empty.
 
-    The positions (hashing, scalar) and the directions (vectorised: the loop has no branch
-    and its output the block's constant size, see :func:`_light_block`) are separate loops.
+    ``camera`` is the image-plane map and the camera frame as a tuple of 13 numbers
+    (:func:`_camera_numbers`): numba takes and releases a reference to every array argument
+    of a compiled call (atomic instructions, shared between the render threads), and this
+    helper is called once a block.  The positions (hashing, scalar) and the directions
+    (vectorised: the loop has no branch and its output the block's constant size, see
+    :func:`_light_block`) are separate loops.
     """
+    ax, bx, ay, by, fx, fy, fz, rx, ry, rz, ux, uy, uz = camera
     xy = np.empty((2, BLOCK))
     if len(film_xy):
         for b in range(count):
@@ -364,12 +368,19 @@ def _camera_block(film_xy, sampler, keys, corners, size, spp, pixel, sample, sta
     d = np.empty((3, BLOCK))
     inverse_width = 1.0 / width
     for b in range(count):
-        sx, sy = _image_plane_point(xy[0, b], xy[1, b], pixel[start + b], width, inverse_width, image_plane)
-        d[0, b], d[1, b], d[2, b] = _pinhole_direction(sx, sy, forward, right, up)
+        sx, sy = _image_plane_xy(xy[0, b], xy[1, b], pixel[start + b], width, inverse_width, ax, bx, ay, by)
+        d[0, b], d[1, b], d[2, b] = _pinhole_xyz(sx, sy, fx, fy, fz, rx, ry, rz, ux, uy, uz)
     # inactive lanes of the last packet: a copy of the first ray keeps their words finite
     for b in range(count, BLOCK):
         d[0, b], d[1, b], d[2, b] = d[0, 0], d[1, 0], d[2, 0]
     return d
+
+
+@row
+def _camera_numbers(image_plane, forward, right, up):
+    """The image-plane map and the camera frame as one tuple of numbers, for :func:`_camera_block`."""
+    return (image_plane[0], image_plane[1], image_plane[2], image_plane[3], forward[0], forward[1], forward[2],
+            right[0], right[1], right[2], up[0], up[1], up[2])
 
 
 @row

@@ -216,6 +216,15 @@ def closest_hits(t_far, prim, u, v):
 def _image_plane_point(x, y, pixel, width, inverse_width, image_plane):
     """Image-plane coordinates ``(sx, sy)`` at unit distance along the camera's forward axis
     of film position ``(x, y)``, given in pixels, or inside pixel ``pixel`` (when >= 0)."""
+    return _image_plane_xy(x, y, pixel, width, inverse_width, image_plane[0], image_plane[1], image_plane[2],
+                           image_plane[3])
+
+
+@_row
+def _image_plane_xy(x, y, pixel, width, inverse_width, ax, bx, ay, by):
+    """:func:`_image_plane_point` with the image-plane map ``(ax, bx, ay, by)`` given as
+    numbers: a compiled function that takes them instead of the array holds no reference
+    to count (see :func:`rtmesh.direct_stage._camera_block`)."""
     if pixel >= 0:
         # the row by a float product and a one-step correction: an integer division a
         # ray would keep the loop from vectorising
@@ -223,18 +232,25 @@ def _image_plane_point(x, y, pixel, width, inverse_width, image_plane):
         row += (row + 1) * width <= pixel
         row -= row * width > pixel
         x, y = x + np.float64(pixel - row * width), y + np.float64(row)
-    return x * image_plane[0] + image_plane[1], y * image_plane[2] + image_plane[3]
+    return x * ax + bx, y * ay + by
 
 
 @_row
 def _pinhole_direction(sx, sy, forward, right, up):
     """Unit direction of the pinhole ray through image-plane point ``(sx, sy)``."""
+    return _pinhole_xyz(sx, sy, forward[0], forward[1], forward[2], right[0], right[1], right[2], up[0], up[1],
+                        up[2])
+
+
+@_row
+def _pinhole_xyz(sx, sy, fx, fy, fz, rx, ry, rz, ux, uy, uz):
+    """:func:`_pinhole_direction` with the camera frame (forward ``f``, right ``r``, up ``u``)
+    given as numbers (see :func:`_image_plane_xy`)."""
     # forward, right and up are orthonormal, so the squared length of
     # forward + sx right + sy up is 1 + sx^2 + sy^2
     inv = 1.0 / math.sqrt((sx * sx + sy * sy) + 1.0)
     sx, sy = sx * inv, sy * inv
-    return ((inv * forward[0] + sx * right[0]) + sy * up[0], (inv * forward[1] + sx * right[1]) + sy * up[1],
-            (inv * forward[2] + sx * right[2]) + sy * up[2])
+    return (inv * fx + sx * rx) + sy * ux, (inv * fy + sx * ry) + sy * uy, (inv * fz + sx * rz) + sy * uz
 
 
 @kernel
