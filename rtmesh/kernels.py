@@ -329,7 +329,7 @@ def _surface_from_rows(a, b, vx, vy, vz, v0x, v0y, v0z, e1x, e1y, e1z, e2x, e2y,
     """The arithmetic of :func:`_surface_record` on a face's rows, given as numbers: ``v0``,
     ``e1 = v1 - v0``, ``e2 = v2 - v0``, the unit normal ``g`` (a ``faces`` row) and the
     vertex normals ``n0``, ``m1 = n1 - n0``, ``m2 = n2 - n0`` (a ``vertex_normals`` row;
-    read only where ``smooth``).
+    any numbers where not ``smooth``: their interpolation is then formed but not used).
 
     It takes no arrays, so a loop over gathered rows that calls it holds no array
     references per row (numba counts them with atomic instructions), and it has no branch
