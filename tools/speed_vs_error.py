@@ -25,11 +25,18 @@ Errors:
   each pixel's standard error / (mean + 0.01).  For independent, normal errors the mean
   absolute error is sqrt(2/pi) = 0.80 of the standard error, so an exact estimate gives
   ``relative_error / estimated_error`` = 0.80.
+
+Denoised renders (method ``denoised``, the jittered sweep with ``denoise`` on; needs the
+``denoise`` extra): their ``rmse`` is that of the denoised image against the reference, and
+the summary gives the time a uniform render needs for the same RMSE.  Denoising is biased:
+its error does not fall to zero with more samples, and the render's own estimate (given in
+``estimated_error``) still describes the noisy image it started from, not the denoised one.
 """
 
 import argparse
 import csv
 import dataclasses
+import importlib.util
 import os
 import sys
 import time
@@ -69,7 +76,7 @@ def errors(image, reference):
     return rmse, relative
 
 
-def run_scene(name, threads, quick):
+def run_scene(name, threads, quick, denoise=False):
     path, width, height, ref_spp, top_spp = SCENES[name]
     if quick:
         width, height, ref_spp, top_spp = width // 2, height // 2, ref_spp // 4, top_spp // 4
@@ -86,10 +93,12 @@ def run_scene(name, threads, quick):
     runs = [("uniform", sampler, spp, None) for sampler in SAMPLERS
             for spp in 2 ** np.arange(int(np.log2(top_spp * (SOBOL_REACH if sampler == "sobol" else 1))) + 1)]
     runs += [("adaptive", sampler, BASE_SPP, target) for sampler in ADAPTIVE_SAMPLERS for target in TARGETS]
+    if denoise:
+        runs += [("denoised", "jittered", spp, None) for spp in 2 ** np.arange(int(np.log2(top_spp)) + 1)]
     rows = []
     for method, sampler, spp, target in runs:
         settings = dataclasses.replace(base, spp=int(spp), sampler=sampler, seed=0, target_error=target,
-                                       max_spp=MAX_SPP if target else None)
+                                       max_spp=MAX_SPP if target else None, denoise=method == "denoised")
         cpu = time.process_time()
         result = Integrator(scene, settings).render()
         cpu = time.process_time() - cpu
@@ -144,6 +153,13 @@ def summary(rows):
                           f"the time of uniform {top['spp']} spp")
                 lines.append(f"{scene} adaptive {sampler} target {r['target']}: RMSE {r['rmse']} "
                              f"in {r['cpu_seconds']} s CPU ({r['mean_spp']} spp mean); {saved}")
+        uniform = [r for r in mine if r["method"] == "uniform" and r["sampler"] == "jittered"]
+        for r in mine:
+            if r["method"] == "denoised":
+                t_uniform = cost_at_rmse(uniform, float(r["rmse"]))
+                equal = ("below every uniform render's RMSE" if t_uniform is None
+                         else f"uniform jittered needs {t_uniform:.2f} s: {t_uniform / float(r['cpu_seconds']):.2f}x")
+                lines.append(f"{scene} denoised {r['spp']} spp: RMSE {r['rmse']} in {r['cpu_seconds']} s CPU; {equal}")
         for sampler in SAMPLERS:
             ratios = [float(r["relative_error"]) / float(r["estimated_error"]) for r in mine
                       if r["sampler"] == sampler and r["method"] == "uniform" and r["estimated_error"]
@@ -172,6 +188,10 @@ def plot(rows, path):
             sel = [r for r in mine if r["method"] == "adaptive" and r["sampler"] == sampler]
             ax.loglog([r["cpu_seconds"] for r in sel], [float(r["rmse"]) for r in sel], style, lw=2, ms=4,
                       color="black" if sampler == "sobol" else "grey", label=f"adaptive {sampler}")
+        sel = [r for r in mine if r["method"] == "denoised"]
+        if sel:
+            ax.loglog([r["cpu_seconds"] for r in sel], [float(r["rmse"]) for r in sel], "v:", lw=2, ms=4,
+                      color="tab:purple", label="denoised jittered (biased)")
         ax.set_title(scene)
         ax.set_xlabel("render time [s, 1 thread, CPU]")
         ax.grid(True, which="both", alpha=0.3)
@@ -191,10 +211,13 @@ def main(argv=None):
     parser.add_argument("--quick", action="store_true", help="half size, fewer samples (a smoke test)")
     parser.add_argument("--out", default="speed_vs_error.csv")
     parser.add_argument("--plot", default=None, help="PNG of RMSE against time")
+    parser.add_argument("--no-denoise", action="store_true",
+                        help="leave out the denoised sweep (it runs when the denoise extra is installed)")
     args = parser.parse_args(argv)
+    denoise = not args.no_denoise and importlib.util.find_spec("pyoidn") is not None
     rows = []
     for name in args.scenes.split(","):
-        rows += run_scene(name, args.threads, args.quick)
+        rows += run_scene(name, args.threads, args.quick, denoise)
     with open(args.out, "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=FIELDS)
         writer.writeheader()
