@@ -316,7 +316,7 @@ def _wait_for_earlier_runs(client, run, timeout):
         if queued:
             from distributed import Future
 
-            client.cancel([Future(k, client, inform=False) for k in queued], force=True)
+            client.cancel([Future(k, client) for k in queued], force=True)
         if not running:
             return
         if time.monotonic() > deadline:

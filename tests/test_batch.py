@@ -887,3 +887,22 @@ def test_noop_resume_over_a_million_ledger_rows_takes_at_most_5_s(tmp_path):
     keys, _ = bench.synthetic_ledger(str(tmp_path), 1_000_000)
     cost = bench.noop_resume_ledger_cost(str(tmp_path), keys)
     assert cost["total"] <= 5.0, cost
+
+
+def test_a_resume_cancels_queued_tasks_of_an_earlier_run_and_waits_for_running_ones():
+    distributed = pytest.importorskip("distributed")
+    from rtmesh.batch_dask import KEY_PREFIX, _wait_for_earlier_runs
+
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                  dashboard_address=None, silence_logs=50) as cluster, \
+            distributed.Client(cluster) as client:
+        running = client.submit(time.sleep, 1.5, key=f"{KEY_PREFIX}old-0")
+        queued = client.submit(time.sleep, 0, key=f"{KEY_PREFIX}old-1", resources={"none": 1})
+        ours = client.submit(time.sleep, 0, key=f"{KEY_PREFIX}new-0", resources={"none": 1})
+        while not any(running.key in keys for keys in client.processing().values()):
+            time.sleep(0.01)
+        start = time.monotonic()
+        _wait_for_earlier_runs(client, "new", timeout=30)
+        assert 0.5 < time.monotonic() - start < 20  # waited for the running one, only
+        assert running.status == "finished" and queued.status == "cancelled"
+        assert ours.status == "pending"  # this run's own tasks are left alone
