@@ -906,3 +906,20 @@ def test_a_resume_cancels_queued_tasks_of_an_earlier_run_and_waits_for_running_o
         assert 0.5 < time.monotonic() - start < 20  # waited for the running one, only
         assert running.status == "finished" and queued.status == "cancelled"
         assert ours.status == "pending"  # this run's own tasks are left alone
+
+
+def test_warm_up_converts_a_tiny_asset_one_worker_per_host_first():
+    from rtmesh.batch_dask import warm_up_workers
+    from rtmesh.batch_worker import warm_up
+
+    (image,) = warm_up()["images"]
+    assert image["status"] == "done" and image["outputs"][0][1] > 0
+
+    class Client:
+        calls = []
+
+        def run(self, function, workers, on_error):
+            self.calls.append(workers)
+
+    warm_up_workers(Client(), ["tcp://a:1", "tcp://a:2", "tcp://b:1", "tcp://a:3"])
+    assert Client.calls == [["tcp://a:1", "tcp://b:1"], ["tcp://a:2", "tcp://a:3"]]
