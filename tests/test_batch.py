@@ -538,7 +538,7 @@ def stop(*procs):
         proc.wait()
 
 
-def test_dask_worker_with_a_private_output_folder_is_refused(tmp_path):
+def test_dask_worker_with_a_private_output_folder_is_refused(tmp_path, capsys, caplog):
     """A real second worker process in its own mount namespace, where OUTDIR is another
     folder (as on a node that mounts its own disk there): it is refused before any job."""
     distributed = pytest.importorskip("distributed")
@@ -560,21 +560,21 @@ def test_dask_worker_with_a_private_output_folder_is_refused(tmp_path):
         try:
             (bad,) = wait_for_workers(client, 1)
             # only the private worker: nothing is dispatched, one line, exit 2
-            code, stdout, err = run_cli("batch", src, "-o", out, "--scheduler",
-                                        cluster.scheduler_address, "-q")
-            assert code == 2 and err.splitlines()[-1].startswith("rtmesh: error: no Dask worker")
-            assert "Traceback" not in err and os.listdir(private) == []
+            code = main(["batch", str(src), "-o", str(out), "--scheduler",
+                         cluster.scheduler_address, "-q"])
+            err = capsys.readouterr().err
+            assert code == 2 and err.startswith("rtmesh: error: no Dask worker") and err.count("\n") == 1
+            assert os.listdir(private) == []
             assert not [n for n in os.listdir(out) if n.endswith(".png")]
             # with a worker that shares the folder, it does every job and the other none
             cluster.scale(2)
             wait_for_workers(client, 2)
-            code, stdout, err = run_cli("batch", src, "-o", out, "--scheduler",
-                                        cluster.scheduler_address, "--width", "16", "--height",
-                                        "16", "--spp", "1", "-q")
-            assert code == 0, err
-            refused = [line for line in err.splitlines() if "refused" in line]
-            assert len(refused) == 1 and bad in refused[0] and "shared storage" in refused[0]
-            assert "4 done" in stdout
+            caplog.set_level("WARNING", logger="rtmesh.batch.runner")
+            caplog.clear()  # the refusal of the run above
+            report = rtmesh.batch_convert([src], out, scheduler=cluster.scheduler_address, **TINY)
+            (refused,) = [r.getMessage() for r in caplog.records if "refused" in r.getMessage()]
+            assert bad in refused and "shared storage" in refused and "\n" not in refused
+            assert report.counts["done"] == 4
             assert os.listdir(private) == []  # the refused worker wrote nothing, not even a probe
             assert sorted(n for n in os.listdir(out) if n.endswith(".png")) == [
                 f"m{i}.obj.png" for i in range(4)]
@@ -765,21 +765,19 @@ def test_failures_are_retried_once_per_run_or_skipped_as_known(tmp_path):
     assert summary(out)["counts"] == counts(assets=2, done=1, skipped=1, images=1)
 
 
-def test_bad_invocations_are_one_line_exit_2_and_create_nothing(tmp_path):
+def test_bad_invocations_are_one_line_exit_2_and_create_nothing(tmp_path, capsys):
     src = make_mesh(tmp_path / "a.obj")
     out = tmp_path / "out"
-    for extra, words in ((["--passes", "ao"], "only to EXR"),
-                         (["--memory-limit", "200M"], "memory limit"),
-                         (["--progress", "jsonl", "--progress-file", str(tmp_path / "no" / "p")],
-                          "cannot write progress")):
-        code, stdout, err = run_cli("batch", src, "-o", out, *extra)
-        assert code == 2 and err.count("\n") == 1 and words in err, err
-        assert "Traceback" not in err
-        if "progress" not in words:
-            assert not out.exists()
     (tmp_path / "list.csv").write_text("path,passes\na.obj,ao\n")
-    code, stdout, err = run_cli("batch", tmp_path / "list.csv", "-o", out)
-    assert code == 2 and "only to EXR" in err
+    for args, words in (([src, "--passes", "ao"], "only to EXR"),
+                        ([tmp_path / "list.csv"], "only to EXR"),
+                        ([src, "--memory-limit", "200M"], "memory limit"),
+                        ([src, "--progress", "jsonl", "--progress-file", tmp_path / "no" / "p"],
+                         "cannot write progress")):
+        code = main(["batch", *map(str, args), "-o", str(out)])
+        err = capsys.readouterr().err
+        assert code == 2 and err.count("\n") == 1 and words in err, err
+        assert err.startswith("rtmesh: error:") and not out.exists()
 
 
 # ------------------------------------------------------------------------- smaller defects
@@ -839,22 +837,25 @@ def test_ground_under_a_view_from_below_does_not_hide_the_asset(tmp_path):
 def test_summary_to_a_closed_pipe_and_jsonl_progress(tmp_path):
     make_mesh(tmp_path / "src" / "a.obj")
     make_mesh(tmp_path / "src" / "b.obj", kind="box")
-    progress = tmp_path / "progress.jsonl"
     command = [sys.executable, "-m", "rtmesh.cli", "batch", str(tmp_path / "src"), "-o",
                str(tmp_path / "out"), "--width", "16", "--height", "16", "--spp", "1",
-               "--workers", "1", "--progress", "jsonl", "--progress-file", str(progress)]
+               "--workers", "1", "--progress", "jsonl"]
     proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     proc.stdout.close()  # like "| head" once it has read its lines
     err = proc.stderr.read()
-    assert proc.wait(timeout=120) == 0 and err == ""
-    lines = [json.loads(line) for line in progress.read_text().splitlines()]
+    assert proc.wait(timeout=120) == 0  # no BrokenPipeError
+    # stderr holds the progress, one JSON line per finished asset, and nothing else
+    lines = [json.loads(line) for line in err.splitlines()]
     assert [(line["asset"], line["status"], line["images"]) for line in lines] == [
         ("a.obj", "done", 1), ("b.obj", "done", 1)]
     assert [line["finished"] for line in lines] == [1, 2] and lines[0]["total"] == 2
-    # to stderr by default, one line per finished asset and nothing else
-    code, stdout, err = run_cli("batch", tmp_path / "src", "-o", tmp_path / "out2", "--width",
-                                "16", "--height", "16", "--spp", "1", "--progress", "jsonl")
-    assert code == 0 and [json.loads(line)["asset"] for line in err.splitlines()] == ["a.obj", "b.obj"]
+    # or appended to a file
+    progress = tmp_path / "progress.jsonl"
+    os.unlink(tmp_path / "out" / "b.obj.png")
+    rtmesh.batch_convert([tmp_path / "src"], tmp_path / "out", workers=1, width=16, height=16,
+                         spp=1, progress="jsonl", progress_file=str(progress))
+    (line,) = [json.loads(line) for line in progress.read_text().splitlines()]
+    assert line["asset"] == "b.obj" and line["finished"] == line["total"] == 2
 
 
 # ------------------------------------------------------------------------- cost at scale
@@ -886,3 +887,39 @@ def test_noop_resume_over_a_million_ledger_rows_takes_at_most_5_s(tmp_path):
     keys, _ = bench.synthetic_ledger(str(tmp_path), 1_000_000)
     cost = bench.noop_resume_ledger_cost(str(tmp_path), keys)
     assert cost["total"] <= 5.0, cost
+
+
+def test_a_resume_cancels_queued_tasks_of_an_earlier_run_and_waits_for_running_ones():
+    distributed = pytest.importorskip("distributed")
+    from rtmesh.batch.dask_pool import KEY_PREFIX, _wait_for_earlier_runs
+
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                  dashboard_address=None, silence_logs=50) as cluster, \
+            distributed.Client(cluster) as client:
+        running = client.submit(time.sleep, 1.5, key=f"{KEY_PREFIX}old-0")
+        queued = client.submit(time.sleep, 0, key=f"{KEY_PREFIX}old-1", resources={"none": 1})
+        ours = client.submit(time.sleep, 0, key=f"{KEY_PREFIX}new-0", resources={"none": 1})
+        while not any(running.key in keys for keys in client.processing().values()):
+            time.sleep(0.01)
+        start = time.monotonic()
+        _wait_for_earlier_runs(client, "new", timeout=30)
+        assert 0.5 < time.monotonic() - start < 20  # waited for the running one, only
+        assert running.status == "finished" and queued.status == "cancelled"
+        assert ours.status == "pending"  # this run's own tasks are left alone
+
+
+def test_warm_up_converts_a_tiny_asset_one_worker_per_host_first():
+    from rtmesh.batch.dask_pool import warm_up_workers
+    from rtmesh.batch.worker import warm_up
+
+    (image,) = warm_up()["images"]
+    assert image["status"] == "done" and image["outputs"][0][1] > 0
+
+    class Client:
+        calls = []
+
+        def run(self, function, workers, on_error):
+            self.calls.append(workers)
+
+    warm_up_workers(Client(), ["tcp://a:1", "tcp://a:2", "tcp://b:1", "tcp://a:3"])
+    assert Client.calls == [["tcp://a:1", "tcp://b:1"], ["tcp://a:2", "tcp://a:3"]]

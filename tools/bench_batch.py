@@ -17,7 +17,6 @@ Prints a Markdown table.
 """
 
 import argparse
-import json
 import os
 import platform
 import shutil

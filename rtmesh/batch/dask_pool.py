@@ -22,6 +22,10 @@ lose the submitting process.  So:
   before dispatching, so no image has two writers.
 - **Cluster loss**: losing the scheduler raises :class:`ClusterLost`; the jobs not
   finished are left for a resume, not recorded as failed.
+- **Warm workers**: accepted workers render a tiny scene before the first job
+  (:func:`rtmesh.batch.worker.warm_up`), first one worker per host, then the others: on a
+  fresh node the kernels are compiled once into numba's disk cache, which the node's other
+  workers then load, instead of every worker process compiling them at the same time.
 """
 
 import hashlib
@@ -32,7 +36,7 @@ import threading
 import time
 from concurrent.futures import CancelledError
 
-from rtmesh.batch.worker import current_run, image_result, run_job
+from rtmesh.batch.worker import current_run, image_result, run_job, warm_up
 from rtmesh.core import runtime
 from rtmesh.core.errors import RtmeshError
 
@@ -120,6 +124,7 @@ def _run(jobs, scheduler, on_image, on_job, run, outdir, time_limit, retries, wa
             _wait_for_earlier_runs(client, run, wait_for_earlier)
         except (OSError, TimeoutError, CancelledError) as exc:
             raise ClusterLost(f"cluster lost: {_one_line(exc)}") from None
+        warm_up_workers(client, prober.accepted)
         prober.start()
         futures = {client.submit(_dask_task, job, time_limit, key=f"{KEY_PREFIX}{run}-{i}",
                                  pure=False, retries=retries, resources={resource: 1}): job
@@ -197,6 +202,7 @@ class Prober:
         self.every, self.seen, self._stop = every, set(), threading.Event()
         self._thread = None
         accepted, reasons = self.probe()
+        self.accepted = accepted
         if not accepted:
             raise RtmeshError(f"no Dask worker can write {outdir} so that this machine sees "
                               f"the images ({len(reasons)} refused: {next(iter(reasons.values()), 'no worker')})")
@@ -213,6 +219,8 @@ class Prober:
         self.client.run(_grant, self.resource, grants, probes, workers=workers, on_error="return")
         for worker, reason in reasons.items():
             log.warning("Dask worker %s refused: %s", worker, reason)
+        if self._thread is not None and accepted:  # joined during the batch
+            warm_up_workers(self.client, accepted)
         return accepted, reasons
 
     def start(self):
@@ -230,6 +238,28 @@ class Prober:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=10)
+
+
+def warm_up_workers(client, workers):
+    """Warm up ``workers``: one per host first (it fills the host's kernel cache), then the
+    rest at once.  A worker that fails to warm up is left to fail its jobs on its own."""
+    first = {}
+    for worker in workers:
+        first.setdefault(_host(worker), worker)
+    for group in (list(first.values()), [w for w in workers if w not in first.values()]):
+        if group:
+            client.run(_warm_up_task, workers=group, on_error="return")
+
+
+def _host(address):
+    from urllib.parse import urlsplit
+
+    return urlsplit(address).hostname or address
+
+
+def _warm_up_task():
+    runtime.tune_process()
+    warm_up()
 
 
 def _workers(client):
@@ -316,7 +346,7 @@ def _wait_for_earlier_runs(client, run, timeout):
         if queued:
             from distributed import Future
 
-            client.cancel([Future(k, client, inform=False) for k in queued], force=True)
+            client.cancel([Future(k, client) for k in queued], force=True)
         if not running:
             return
         if time.monotonic() > deadline:

@@ -9,6 +9,7 @@ read) and what was written (``outputs``: size and checksum of each file), see
 """
 
 import os
+import tempfile
 import time
 from dataclasses import dataclass
 
@@ -257,6 +258,19 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
         if on_image:
             on_image(results[-1])
     return _job_result(job, results, start)
+
+
+def warm_up():
+    """Convert a tiny asset the way a job does (load, smooth, render, write a PNG, in a
+    temporary folder), so that the kernels are compiled, or loaded from numba's disk cache,
+    before a worker's first real asset, whose time limit then does not pay for them."""
+    with tempfile.TemporaryDirectory(prefix="rtmesh-warm-up-") as folder:
+        path = os.path.join(folder, "warm-up.obj")
+        with open(path, "w", encoding="utf-8") as f:
+            f.write("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n")
+        task = ImageTask("warm-up", fixed_view("iso"), ("warm-up.png",), "")
+        settings = {"width": 8, "height": 8, "spp": 1, "threads": 1}
+        return run_job(AssetJob("warm-up.obj", path, folder, settings, (task,), ground=True))
 
 
 def _load(job):
