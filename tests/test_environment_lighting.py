@@ -11,6 +11,7 @@ from rtmesh.lights.environment import EnvironmentLighting
 from rtmesh.loaders.scene_file import scene_from_dict
 from rtmesh.materials.table import Material
 from rtmesh.rendering.integrator import Integrator
+from rtmesh.sampling.warps import direction_to_latlong
 from rtmesh.scene.background import EnvironmentBackground, GradientBackground, SolidBackground, latlong_directions
 from rtmesh.scene.camera import Camera
 from rtmesh.scene.model import Scene
@@ -60,7 +61,7 @@ def test_sampling_density_is_a_density_and_pdf_matches_sample():
     np.testing.assert_allclose(lighting.pdf(wi[inside][:2000]), pdf[inside][:2000], rtol=1e-6)
     # texels are drawn in proportion to luminance x sin(theta): the sun's share of samples is
     # its share of that mass (about 2/3, from 0.3 % of the sphere)
-    uv = lighting._uv(wi)
+    uv = direction_to_latlong(wi, lighting.rotation)
     row = np.clip(((1.0 - uv[:, 1]) * lighting.height).astype(int), 0, lighting.height - 1)
     column = np.clip((uv[:, 0] * lighting.width).astype(int), 0, lighting.width - 1)
     sun = lighting._func > 10.0 * np.median(lighting._func)

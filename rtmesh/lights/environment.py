@@ -42,6 +42,7 @@ from rtmesh.core.rays import take_rows
 from rtmesh.core.vecmath import dot
 from rtmesh.geometry.accel import offset_ray_origins
 from rtmesh.sampling.sampler import Sampler
+from rtmesh.sampling.warps import direction_to_latlong, latlong_to_direction
 
 # relative weight of the density's floor (see the module notes)
 _FLOOR = 1e-3
@@ -71,6 +72,7 @@ class EnvironmentLighting:
         self.samples = settings.light_samples
         self.sampler = Sampler.for_settings(settings)
         self.offset_scale = offset_scale
+        self.rotation = getattr(background, "rotation", 0.0)
         width = getattr(background, "width", None)
         height, width = (_GRID if width is None else (max(width // 2, 1), width))
         self.height, self.width = height, width
@@ -97,25 +99,9 @@ class EnvironmentLighting:
         self._shifted = (conditional + np.arange(height)[:, None]).ravel()
 
     def directions(self, uv):
-        """Unit directions of image coordinates (the inverse of the background's ``uv``).
-
-        Parameters
-        ----------
-        uv : (k, 2) float
-            u in [0, 1] left to right, v in [0, 1] bottom to top.
-
-        Returns
-        -------
-        (k, 3) float64
-        """
-        azimuth = (uv[:, 0] - 0.5) * 2.0 * math.pi
-        elevation = (uv[:, 1] - 0.5) * math.pi
-        cos_el = np.cos(elevation)
-        xr, y, zr = cos_el * np.cos(azimuth), np.sin(elevation), cos_el * np.sin(azimuth)
-        angle = math.radians(getattr(self.background, "rotation", 0.0))
-        c, s = math.cos(angle), math.sin(angle)
-        # the background's uv() rotates by -rotation about +Y: undo it
-        return np.stack([c * xr + s * zr, y, -s * xr + c * zr], axis=1)
+        """Unit directions of image coordinates ((k, 2) -> (k, 3)), with the background's
+        rotation (see :func:`rtmesh.sampling.warps.latlong_to_direction`)."""
+        return latlong_to_direction(uv, self.rotation)
 
     def sample(self, points):
         """Directions drawn from the density, and their solid-angle pdf.
@@ -150,21 +136,13 @@ class EnvironmentLighting:
 
     def pdf(self, directions):
         """Solid-angle density of :meth:`sample` at unit ``directions`` ((k, 3) -> (k,))."""
-        uv = self._uv(directions)
+        uv = direction_to_latlong(directions, self.rotation)
         row = np.clip(((1.0 - uv[:, 1]) * self.height).astype(np.int64), 0, self.height - 1)
         column = np.clip((uv[:, 0] * self.width).astype(np.int64), 0, self.width - 1)
         sin_theta = np.sqrt(np.maximum(1.0 - directions[:, 1] ** 2, 0.0))
         with np.errstate(divide="ignore"):
             return np.where(sin_theta > 0.0, self._func[row, column] / self._mean
                             / (2.0 * math.pi ** 2 * sin_theta), np.inf)
-
-    def _uv(self, directions):
-        angle = math.radians(getattr(self.background, "rotation", 0.0))
-        c, s = math.cos(angle), math.sin(angle)
-        x, y, z = directions[:, 0], directions[:, 1], directions[:, 2]
-        xr, zr = c * x - s * z, s * x + c * z
-        return np.column_stack([0.5 + np.arctan2(zr, xr) / (2.0 * math.pi),
-                                0.5 + np.arcsin(np.clip(y, -1.0, 1.0)) / math.pi])
 
     def direct(self, p, ng, reflectance, pixel, sample, depth, stats, clock, time=None):
         """Light from the background at every hit, ``light_samples`` shadow rays per hit.

@@ -5,6 +5,8 @@ Each warp is area-preserving or has a closed-form density, so stratified points 
 square (:mod:`rtmesh.sampling.patterns`) stay stratified on the target domain.
 """
 
+import math
+
 import numpy as np
 
 from rtmesh.core.vecmath import dot, normalize
@@ -184,3 +186,51 @@ def uniform_triangle_to_square(b):
     with np.errstate(divide="ignore", invalid="ignore"):
         u1 = np.where(total > 0.0, b[:, 1] / total, 0.0)
     return np.stack([total * total, u1], axis=1)
+
+
+def direction_to_latlong(directions, rotation=0.0):
+    """Latitude-longitude image coordinates of unit directions (+Y up).
+
+    Parameters
+    ----------
+    directions : (k, 3) float
+    rotation : float
+        Degrees the map is turned about +Y (the direction is turned back by it first).
+
+    Returns
+    -------
+    (k, 2) float64
+        u in [0, 1] (azimuth ``atan2(z, x)`` from -pi at 0 to +pi at 1), v in [0, 1]
+        (straight down at 0, straight up at 1).
+    """
+    angle = math.radians(rotation)
+    c, s = math.cos(angle), math.sin(angle)
+    x, y, z = directions[:, 0], directions[:, 1], directions[:, 2]
+    xr = c * x - s * z
+    zr = s * x + c * z
+    u = 0.5 + np.arctan2(zr, xr) / (2.0 * math.pi)
+    v = 0.5 + np.arcsin(np.clip(y, -1.0, 1.0)) / math.pi
+    return np.stack([u, v], axis=1)
+
+
+def latlong_to_direction(uv, rotation=0.0):
+    """Unit directions of latitude-longitude image coordinates: the inverse of
+    :func:`direction_to_latlong`.
+
+    Parameters
+    ----------
+    uv : (k, 2) float
+    rotation : float
+        Degrees about +Y.
+
+    Returns
+    -------
+    (k, 3) float64
+    """
+    azimuth = (uv[:, 0] - 0.5) * 2.0 * math.pi
+    elevation = (uv[:, 1] - 0.5) * math.pi
+    cos_el = np.cos(elevation)
+    xr, y, zr = cos_el * np.cos(azimuth), np.sin(elevation), cos_el * np.sin(azimuth)
+    angle = math.radians(rotation)
+    c, s = math.cos(angle), math.sin(angle)
+    return np.stack([c * xr + s * zr, y, -s * xr + c * zr], axis=1)

@@ -25,6 +25,7 @@ import numpy as np
 from rtmesh.core.errors import SceneError
 from rtmesh.io.colour import srgb_to_linear
 from rtmesh.io.texture_images import Texture
+from rtmesh.sampling.warps import direction_to_latlong
 
 BACKGROUND_TYPES = ("solid", "gradient", "environment", "transparent")
 # files whose values are linear radiance; anything else is taken as 8-bit sRGB
@@ -139,8 +140,6 @@ class EnvironmentBackground:
         # not wrap from straight up to straight down)
         padded = np.concatenate([pixels[:, -1:], pixels, pixels[:, :1]], axis=1)
         self._texture = Texture(padded, wrap="clamp", name=name)
-        angle = math.radians(self.rotation)
-        self._cos, self._sin = math.cos(angle), math.sin(angle)
 
     @property
     def is_black(self):
@@ -159,13 +158,7 @@ class EnvironmentBackground:
             u in [0, 1] left to right (azimuth), v in [0, 1] bottom (-Y) to top (+Y), the
             texture convention of :class:`rtmesh.io.texture_images.Texture`.
         """
-        x, y, z = directions[:, 0], directions[:, 1], directions[:, 2]
-        # undo the environment's rotation about +Y: rotate the direction by -rotation
-        xr = self._cos * x - self._sin * z
-        zr = self._sin * x + self._cos * z
-        u = 0.5 + np.arctan2(zr, xr) / (2.0 * math.pi)
-        v = 0.5 + np.arcsin(np.clip(y, -1.0, 1.0)) / math.pi
-        return np.stack([u, v], axis=1)
+        return direction_to_latlong(directions, self.rotation)
 
     def radiance(self, directions):
         """(k, 3) float64 radiance seen along unit ``directions`` (k, 3)."""
