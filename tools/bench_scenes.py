@@ -34,13 +34,14 @@ SCENES = ["assets/showcase.toml", "assets/glass_edges.toml", "assets/passes.toml
 CHILD = r"""
 import dataclasses, json, sys
 import numpy as np
-try:
+try:  # the layered layout, or the flat one of revisions before it
     from rtmesh.core import runtime
-    runtime.tune_process()
+    from rtmesh.rendering.integrator import Integrator
 except ImportError:
-    pass
+    from rtmesh import runtime
+    from rtmesh.integrator import Integrator
+runtime.tune_process()
 from rtmesh.api import load_scene
-from rtmesh.rendering.integrator import Integrator
 path, threads, scale, image_path = sys.argv[1], int(sys.argv[2]), float(sys.argv[3]), sys.argv[4]
 scene, settings = load_scene(path)
 settings = dataclasses.replace(settings, threads=threads, width=max(1, round(settings.width * scale)),
