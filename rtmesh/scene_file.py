@@ -32,20 +32,22 @@ from .settings import RenderSettings
 # ---------------------------------------------------------------- value types
 
 
-# Every number of a scene file is finite and at most this in magnitude: squares and
-# products of coordinates, distances and intensities then stay far inside float64, and a
-# coordinate inside the float32 Embree holds (docs/LIMITS.md).
-MAX_NUMBER = 1e18
+# Every number of a scene file is finite and 0 or between these in magnitude: squares,
+# products and reciprocals of coordinates, distances, intensities, roughnesses and indices
+# of refraction then stay far inside float64, and a coordinate inside the float32 Embree
+# holds (docs/LIMITS.md).
+MIN_NUMBER, MAX_NUMBER = 1e-18, 1e18
+_RANGE = f"0, or magnitude {MIN_NUMBER:g} to {MAX_NUMBER:g}"
 
 
 def _is_number(v):
     return (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-            and abs(v) <= MAX_NUMBER)
+            and (v == 0 or MIN_NUMBER <= abs(v) <= MAX_NUMBER))
 
 
 def _float(v):
     if not _is_number(v):
-        raise TypeError(f"expected a finite number (magnitude at most {MAX_NUMBER:g})")
+        raise TypeError(f"expected a finite number ({_RANGE})")
     return float(v)
 
 
@@ -91,7 +93,7 @@ def _str(v):
 def _vector(n):
     def convert(v):
         if not (isinstance(v, list) and len(v) == n and all(_is_number(x) for x in v)):
-            raise TypeError(f"expected a list of {n} numbers (finite, magnitude at most {MAX_NUMBER:g})")
+            raise TypeError(f"expected a list of {n} numbers (finite; {_RANGE})")
         return np.array(v, dtype=np.float64)
     return convert
 
@@ -103,7 +105,7 @@ def _colour(v):
     """A number (grey) or [r, g, b], all >= 0."""
     c = np.full(3, _float(v)) if _is_number(v) else _vec3(v) if isinstance(v, list) else None
     if c is None:
-        raise TypeError(f"expected a number or a list of 3 numbers (finite, magnitude at most {MAX_NUMBER:g})")
+        raise TypeError(f"expected a number or a list of 3 numbers (finite; {_RANGE})")
     if (c < 0).any():
         raise TypeError("colour components must be >= 0")
     return c
