@@ -118,6 +118,9 @@ class Scene:
         self.material_id, self.object_id = self.material_id[keep], self.object_id[keep]
         if self.smooth is not None:
             self.smooth = self.smooth[keep]
+        # an object left without faces no longer moves (nothing of it is traced)
+        left = set(np.unique(self.object_id).tolist())
+        self.motions = {k: m for k, m in self.motions.items() if k in left}
 
     @classmethod
     def from_parts(cls, parts, materials=None, lights=None, camera=None, ambient=None,

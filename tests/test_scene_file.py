@@ -225,3 +225,16 @@ def test_an_object_far_from_what_the_camera_looks_at_is_dropped_with_a_warning(c
     assert "s.toml: dropped 1280 of 1360 faces that lie far from the rest" in caplog.text
     image = Integrator(scene, settings).render().image
     assert np.isfinite(image).all() and image.max() > 0
+
+
+def test_a_moving_object_dropped_for_lying_far_away_no_longer_moves():
+    from rtmesh.integrator import Integrator
+
+    doc = with_(camera={"position": [0, -5, 1], "look_at": [0, 0, 0], "up": [0, 0, 1], "shutter": [0, 1]},
+                objects=[{"primitive": "icosphere", "subdivisions": 1},
+                         {"primitive": "icosphere", "radius": 1e12, "translate": [0, 0, -1e17],
+                          "motion": {"translate": [1e12, 0, 0]}}],
+                render={"width": 16, "height": 12, "spp": 2})
+    scene, settings = scene_from_dict(doc, source="s.toml")
+    assert scene.motions == {}
+    assert np.isfinite(Integrator(scene, settings).render().image).all()
