@@ -111,6 +111,15 @@ def _colour(v):
     return c
 
 
+def _reflectance(v):
+    """A colour whose components are at most 1: a weight of the path through a bounce (more
+    would gain energy at every bounce, up to an infinite image)."""
+    c = _colour(v)
+    if (c > 1).any():
+        raise TypeError("colour components must be between 0 and 1 (a reflectance)")
+    return c
+
+
 def _scale(v):
     s = np.full(3, _float(v)) if _is_number(v) else _vec3(v)
     if (s == 0).any():
@@ -164,7 +173,7 @@ CAMERA_KEYS = {
 ENVIRONMENT_KEYS = {"ambient": _colour, "background": _colour}
 MATERIAL_KEYS = {
     "diffuse": _colour, "specular": _colour, "shininess": _non_negative, "ambient": _colour,
-    "mirror": _colour, "transmission": _colour, "ior": _positive, "absorption": _colour,
+    "mirror": _reflectance, "transmission": _reflectance, "ior": _positive, "absorption": _colour,
     "emission": _colour, "roughness": _non_negative,
 }
 OBJECT_KEYS = {

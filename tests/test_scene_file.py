@@ -238,3 +238,11 @@ def test_a_moving_object_dropped_for_lying_far_away_no_longer_moves():
     scene, settings = scene_from_dict(doc, source="s.toml")
     assert scene.motions == {}
     assert np.isfinite(Integrator(scene, settings).render().image).all()
+
+
+@pytest.mark.parametrize("key", ["mirror", "transmission"])
+def test_bounce_weights_above_one_are_refused(key):
+    # a weight above 1 gains energy at every bounce (1e9 made an infinite image)
+    with pytest.raises(SceneError, match=f"s.toml: materials.m.{key}: colour components must be between 0 and 1"):
+        scene_from_dict(with_(materials={"m": {key: [1e9, 0.5, 0.5]}}), source="s.toml")
+    scene_from_dict(with_(materials={"m": {key: 1}}), source="s.toml")
