@@ -451,7 +451,14 @@ def _object_parts(r, values, where, base_dir, materials, material_index):
         subdivisions = values.get("subdivisions", 3)
         if not 0 <= subdivisions <= 8:
             raise r.error(f"{where}.subdivisions", "expected an integer from 0 to 8")
-        mesh = trimesh.creation.icosphere(subdivisions=subdivisions, radius=values.get("radius", 1.0))
+        radius = values.get("radius", 1.0)
+        if radius >= 1e-12:
+            mesh = trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius)
+        else:
+            # trimesh moves the unit sphere's vertices by (radius - |v|) onto the radius,
+            # which cancels to nothing this small: scale the unit sphere instead
+            mesh = trimesh.creation.icosphere(subdivisions=subdivisions)
+            mesh = trimesh.Trimesh(mesh.vertices * radius, mesh.faces, process=False)
         default_smooth = True
     elif kind == "box":
         mesh = trimesh.creation.box(extents=values.get("extents", np.ones(3)))

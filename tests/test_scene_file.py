@@ -246,3 +246,10 @@ def test_bounce_weights_above_one_are_refused(key):
     with pytest.raises(SceneError, match=f"s.toml: materials.m.{key}: colour components must be between 0 and 1"):
         scene_from_dict(with_(materials={"m": {key: [1e9, 0.5, 0.5]}}), source="s.toml")
     scene_from_dict(with_(materials={"m": {key: 1}}), source="s.toml")
+
+
+def test_a_tiny_icosphere_is_a_sphere():
+    scene, _ = scene_from_dict(with_(objects=[{"primitive": "icosphere", "subdivisions": 2, "radius": 1e-18}]),
+                               source="s.toml")
+    np.testing.assert_allclose(np.linalg.norm(scene.vertices, axis=1), 1e-18, rtol=1e-12)
+    assert len(scene.faces) == 320
