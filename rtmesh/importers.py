@@ -71,7 +71,11 @@ def load_trimesh(path):
 def _load(path, ext):
     """trimesh's scene of a mesh file, processed (see :func:`process`)."""
     if ext in GLTF_EXTENSIONS:
-        return trimesh.load(path, force="scene")  # trimesh leaves glTF meshes unprocessed
+        scene = trimesh.load(path, force="scene")  # trimesh leaves glTF meshes unprocessed
+        for key, geometry in scene.geometry.items():
+            if isinstance(geometry, trimesh.Trimesh) and geometry.faces.ndim == 2 and len(geometry.faces):
+                _drop_bad_index_faces(geometry, _geometry_source(path, scene, key))
+        return scene
     # trimesh's processing, done by process() where it changes something
     scene = trimesh.load(**_obj_source(path, ext), force="scene", process=False)
     for key, geometry in scene.geometry.items():
