@@ -192,8 +192,9 @@ OUTLIER_RATIO = 1e6
 
 
 def framing_bounds(vertices, faces, focus=None):
-    """The faces an automatic camera frames: all of them, or their main cluster when faces
-    far away would shrink the rest below a pixel.
+    """The faces a render keeps: all of them, or their main cluster when faces far away would
+    shrink the rest below a pixel (and below the precision of the renderer's float32 frame,
+    centred on the scene's bounds); an automatic camera frames what is kept.
 
     Faces split into clusters along an axis where no face's extent bridges the gap between
     them.  The cluster with the most faces (the one nearest the origin among equals) is
