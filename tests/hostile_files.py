@@ -45,10 +45,11 @@ def wall_with_door_obj():
     return "\n".join(lines) + "\n"
 
 
-def gltf_cube(nodes, scene_nodes):
-    """A .gltf document (embedded buffer) of the cube, with the given nodes; mesh 0 is it."""
+def gltf_cube(nodes, scene_nodes, faces=CUBE_FACES):
+    """A .gltf document (embedded buffer) of the cube, with the given nodes; mesh 0 is it
+    (``faces``: its triangles, any indices)."""
     positions = CUBE_VERTICES.astype("<f4").tobytes()
-    indices = CUBE_FACES.astype("<u2").tobytes()
+    indices = np.asarray(faces).astype("<u2").tobytes()
     data = positions + indices
     uri = "data:application/octet-stream;base64," + __import__("base64").b64encode(data).decode()
     return {

@@ -134,3 +134,113 @@ def test_as_a_separate_process(name, tmp_path):
     assert len(lines) == 1 and message in lines[0]
     assert lines[0].startswith("rtmesh: error: " if status else "rtmesh: warning: ")
     assert out.exists() == (status == 0)
+
+
+# ---------------------------------------------------------------- mutated valid files
+
+ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), os.pardir)
+# numbers a mutation puts into a scene file: extremes of every kind
+EXTREMES = ["0", "-1", "1e308", "-1e308", "5e-324", "1e-30", "1e30", "-1e30", "1e18", "-1e18",
+            "1e-18", "1e39", "180", "1e9", "-0.0", "100000000000"]
+
+
+def _render_or_user_error(path, **settings):
+    """Load and render; a user error (RtmeshError) is fine, anything else fails the test,
+    and so does a non-finite image (and, by the pytest configuration, any RuntimeWarning)."""
+    import numpy as np
+
+    from rtmesh.api import load_scene
+    from rtmesh.core.errors import RtmeshError
+    from rtmesh.rendering.integrator import Integrator
+    from rtmesh.rendering.memory import check
+
+    try:
+        scene, loaded = load_scene(path, check_settings=check, **settings)
+        image = Integrator(scene, loaded).render().image
+    except RtmeshError:
+        return
+    assert np.isfinite(image).all()
+
+
+def _scene_file_mutations(count, seed):
+    import glob
+    import random
+    import re
+
+    rng = random.Random(seed)
+    scenes = sorted(glob.glob(os.path.join(ROOT, "assets", "**", "*.toml"), recursive=True))
+    number = re.compile(r"(?<![\w.])-?\d+(\.\d+)?(e-?\d+)?(?![\w.])")
+    for i in range(count):
+        path = scenes[i % len(scenes)]
+        with open(path) as f:
+            text = f.read()
+        spots = list(number.finditer(text))
+        for m in sorted(rng.sample(spots, rng.randint(1, 3)), key=lambda m: -m.start()):
+            text = text[:m.start()] + rng.choice(EXTREMES) + text[m.end():]
+        yield pytest.param(os.path.basename(path), text, id=f"{os.path.basename(path)}-{i}")
+
+
+def _check_scene_file_mutation(name, text, tmp_path):
+    for folder in ("meshes", "environments"):
+        os.symlink(os.path.join(ROOT, "assets", folder), tmp_path / folder)
+    path = tmp_path / name
+    path.write_text(text)
+    _render_or_user_error(path, width=8, height=6, spp=2, threads=1)
+
+
+@pytest.mark.parametrize("name, text", list(_scene_file_mutations(24, seed=1)))
+def test_scene_files_with_extreme_numbers_render_or_fail_as_user_errors(name, text, tmp_path):
+    _check_scene_file_mutation(name, text, tmp_path)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name, text", list(_scene_file_mutations(400, seed=2)))
+def test_many_scene_files_with_extreme_numbers(name, text, tmp_path):
+    _check_scene_file_mutation(name, text, tmp_path)
+
+
+MESHES = ["Duck.glb", "BoxTextured.glb", "fuze.obj", "quadknot.obj", "textured_tetrahedron.obj", "rabbit.obj"]
+COMPANIONS = ["fuze uv.jpg", "fuze.obj.mtl", "rabbit.mtl"]
+
+
+def _mesh_mutations(count, seed):
+    import random
+
+    rng = random.Random(seed)
+    data_dir = os.path.join(ROOT, "tests", "data")
+    for i in range(count):
+        name = MESHES[i % len(MESHES)]
+        with open(os.path.join(data_dir, name), "rb") as f:
+            data = bytearray(f.read())
+        kind = ("truncate", "bytes", "digits")[i // len(MESHES) % 3]
+        if kind == "truncate":
+            data = data[:rng.randrange(len(data))]
+        elif kind == "bytes":
+            for _ in range(rng.randint(1, 20)):
+                data[rng.randrange(len(data))] = rng.randrange(256)
+        else:  # digits changed into other digits, signs, exponents, 'n' (nan, inf)
+            digits = [k for k, b in enumerate(data) if 48 <= b <= 57]
+            for k in rng.sample(digits, min(len(digits), rng.randint(1, 20))):
+                data[k] = ord(rng.choice("0123456789-e.n"))
+        yield pytest.param(name, bytes(data), id=f"{name}-{kind}-{i}")
+
+
+def _check_mesh_mutation(name, data, tmp_path):
+    import shutil
+
+    for companion in COMPANIONS:
+        shutil.copy(os.path.join(ROOT, "tests", "data", companion), tmp_path / companion)
+    path = tmp_path / name
+    path.write_bytes(data)
+    _render_or_user_error(path, width=8, height=6, spp=1, threads=1)
+
+
+@pytest.mark.parametrize("name, data", list(_mesh_mutations(24, seed=1)))
+def test_mutated_mesh_files_render_or_fail_as_user_errors(name, data, tmp_path):
+    _check_mesh_mutation(name, data, tmp_path)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name, data", list(_mesh_mutations(400, seed=2)))
+def test_many_mutated_mesh_files(name, data, tmp_path):
+    _check_mesh_mutation(name, data, tmp_path)

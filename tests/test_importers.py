@@ -353,3 +353,17 @@ def test_a_truncated_vertex_statement_is_one_clear_error(tmp_path):
     text = hostile_files.cube_obj() + "v 0.5 0.25\n"
     with pytest.raises(MeshError, match=r"vertices of 2 coordinates, not 3 \(a vertex statement with too few"):
         load_mesh_scene(_write(tmp_path, "c.obj", text))
+
+
+def test_gltf_faces_with_indices_beyond_the_vertices_are_dropped_with_a_count(tmp_path, caplog):
+    import json
+
+    faces = hostile_files.CUBE_FACES.copy()
+    faces[0, 1] = 99
+    doc = hostile_files.gltf_cube([{"name": "cube", "mesh": 0}], [0], faces)
+    path = _write(tmp_path, "c.gltf", json.dumps(doc))
+    with caplog.at_level(logging.WARNING):
+        scene, settings = load_scene(path, width=16, height=12, spp=1)
+    assert "dropped 1 of 12 faces that refer to vertices the file does not have" in caplog.text
+    assert len(scene.faces) == 11
+    assert np.isfinite(Integrator(scene, settings).render().image).all()

@@ -198,10 +198,58 @@ def test_cli_exposure_nan_is_a_one_line_error(tmp_path, capsys):
     (with_(lights=[{"type": "point", "position": [0, 0, 5], "intensity": 1e19}]), "lights[0].intensity"),
     (with_(objects=[{"primitive": "box", "translate": [1e30, 0, 0]}]), "objects[0].translate"),
     (with_(objects=[{"primitive": "icosphere", "radius": 1e300}]), "objects[0].radius"),
+    (with_(materials={"m": {"roughness": 5e-324}}), "materials.m.roughness"),
+    (with_(materials={"m": {"ior": 1e-30}}), "materials.m.ior"),
 ])
-def test_numbers_beyond_1e18_are_refused_naming_the_key(doc, where):
-    # squares and products of such numbers overflow (and coordinates leave float32)
-    with pytest.raises(SceneError, match=re.escape(f"s.toml: {where}: expected a ") + ".*magnitude at most 1e\\+18"):
+def test_numbers_beyond_1e18_or_below_1e_18_are_refused_naming_the_key(doc, where):
+    # squares, products and reciprocals of such numbers overflow (and coordinates leave float32)
+    with pytest.raises(SceneError, match=re.escape(f"s.toml: {where}: expected a ") + r".*0, or magnitude 1e-18 to 1e\+18"):
         scene_from_dict(doc, source="s.toml")
-    # up to the bound a scene reads
-    scene_from_dict(with_(objects=[{"primitive": "box", "translate": [1e18, 0, 0]}]), source="s.toml")
+    # within the bounds a scene reads
+    scene_from_dict(with_(objects=[{"primitive": "box", "translate": [1e18, 1e-18, 0]}]), source="s.toml")
+
+
+def test_an_object_far_from_what_the_camera_looks_at_is_dropped_with_a_warning(caplog):
+    import logging
+
+    from rtmesh.rendering.integrator import Integrator
+
+    doc = with_(camera={"position": [0, -5, 1], "look_at": [0, 0, 0], "up": [0, 0, 1]},
+                objects=[{"primitive": "icosphere", "subdivisions": 1},
+                         {"primitive": "icosphere", "subdivisions": 3, "radius": 1e12,
+                          "translate": [0, 0, -1e17]}],
+                render={"width": 16, "height": 12, "spp": 1})
+    with caplog.at_level(logging.WARNING):
+        scene, settings = scene_from_dict(doc, source="s.toml")
+    # the far sphere has more faces, but the camera looks at the near one
+    assert "s.toml: dropped 1280 of 1360 faces that lie far from the rest" in caplog.text
+    image = Integrator(scene, settings).render().image
+    assert np.isfinite(image).all() and image.max() > 0
+
+
+def test_a_moving_object_dropped_for_lying_far_away_no_longer_moves():
+    from rtmesh.rendering.integrator import Integrator
+
+    doc = with_(camera={"position": [0, -5, 1], "look_at": [0, 0, 0], "up": [0, 0, 1], "shutter": [0, 1]},
+                objects=[{"primitive": "icosphere", "subdivisions": 1},
+                         {"primitive": "icosphere", "radius": 1e12, "translate": [0, 0, -1e17],
+                          "motion": {"translate": [1e12, 0, 0]}}],
+                render={"width": 16, "height": 12, "spp": 2})
+    scene, settings = scene_from_dict(doc, source="s.toml")
+    assert scene.motions == {}
+    assert np.isfinite(Integrator(scene, settings).render().image).all()
+
+
+@pytest.mark.parametrize("key", ["mirror", "transmission"])
+def test_bounce_weights_above_one_are_refused(key):
+    # a weight above 1 gains energy at every bounce (1e9 made an infinite image)
+    with pytest.raises(SceneError, match=f"s.toml: materials.m.{key}: colour components must be between 0 and 1"):
+        scene_from_dict(with_(materials={"m": {key: [1e9, 0.5, 0.5]}}), source="s.toml")
+    scene_from_dict(with_(materials={"m": {key: 1}}), source="s.toml")
+
+
+def test_a_tiny_icosphere_is_a_sphere():
+    scene, _ = scene_from_dict(with_(objects=[{"primitive": "icosphere", "subdivisions": 2, "radius": 1e-18}]),
+                               source="s.toml")
+    np.testing.assert_allclose(np.linalg.norm(scene.vertices, axis=1), 1e-18, rtol=1e-12)
+    assert len(scene.faces) == 320

@@ -16,6 +16,11 @@ class SceneError(RtmeshError):
     """A scene file or scene description is invalid (unknown key, wrong type, bad value)."""
 
 
+class CameraError(SceneError, ValueError):
+    """A camera that cannot form an image (position at look_at, up along the view, a field of
+    view outside (0, 180) degrees); a ValueError too, as it was before it was a user error."""
+
+
 class MeshError(RtmeshError):
     """A mesh file cannot be read or holds nothing renderable."""
 

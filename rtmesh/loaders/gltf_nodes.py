@@ -146,6 +146,8 @@ def _local_matrix(node):
 def _frame(matrix):
     """Position, forward (-Z) and up (+Y) of a node's world matrix, unit directions; None
     for a matrix that is not finite or scales an axis to zero (a hidden node)."""
+    if not np.isfinite(matrix).all():
+        return None
     position = matrix[:3, 3].copy()
     forward = matrix[:3, :3] @ np.array([0.0, 0.0, -1.0])
     up = matrix[:3, :3] @ np.array([0.0, 1.0, 0.0])
@@ -153,6 +155,13 @@ def _frame(matrix):
     if not (np.isfinite(matrix).all() and (lengths > 0.0).all()):
         return None
     return position, forward / lengths[0], up / lengths[1]
+
+
+def _placed(transform, world):
+    """``transform @ world``; a non-finite world matrix (a broken node) stays non-finite
+    without a NumPy warning, for :func:`_frame` to refuse."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        return transform @ world
 
 
 def _hidden(source, what, node):
@@ -191,7 +200,7 @@ def cameras_from_gltf(doc, transform=None, source="gltf"):
             log.warning("%s: camera %s is %s, neither perspective nor orthographic; skipped", source,
                         names[0] if names else node["camera"], kind)
             continue
-        frame = _frame(transform @ world)
+        frame = _frame(_placed(transform, world))
         if frame is None:
             _hidden(source, "camera", node)
             continue
@@ -226,7 +235,7 @@ def lights_from_gltf(doc, transform=None, source="gltf"):
         if ref is None or not 0 <= ref.get("light", -1) < len(table):
             continue
         spec = table[ref["light"]]
-        frame = _frame(transform @ world)
+        frame = _frame(_placed(transform, world))
         if frame is None:
             _hidden(source, "light", doc["nodes"][index])
             continue

@@ -72,7 +72,11 @@ def load_trimesh(path):
 def _load(path, ext):
     """trimesh's scene of a mesh file, processed (see :func:`process`)."""
     if ext in GLTF_EXTENSIONS:
-        return trimesh.load(path, force="scene")  # trimesh leaves glTF meshes unprocessed
+        scene = trimesh.load(path, force="scene")  # trimesh leaves glTF meshes unprocessed
+        for key, geometry in scene.geometry.items():
+            if isinstance(geometry, trimesh.Trimesh) and geometry.faces.ndim == 2 and len(geometry.faces):
+                _drop_bad_index_faces(geometry, _geometry_source(path, scene, key))
+        return scene
     # trimesh's processing, done by process() where it changes something
     scene = trimesh.load(**_obj_source(path, ext), force="scene", process=False)
     for key, geometry in scene.geometry.items():
@@ -419,7 +423,10 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
         nodes = []
         for node in obj.graph.nodes_geometry:
             try:
-                node_transform, geometry_name = obj.graph[node]
+                # a non-finite node matrix composes without a NumPy warning; such a node is
+                # skipped below with one of ours
+                with np.errstate(invalid="ignore", over="ignore"):
+                    node_transform, geometry_name = obj.graph[node]
             except ValueError:  # trimesh: "Iteration limit exceeded!"
                 log.warning("%s: node '%s' has no transform from the scene's root (a cycle in the "
                             "node graph, which glTF forbids); skipped", name, node)
@@ -453,11 +460,12 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
                     vertices, faces, CREASE_ANGLE if smooth is None else None)
                 uv = None if uv is None else uv[original]
                 colours = None if colours is None else colours[original]
-        matrix = transform @ node_transform
+        with np.errstate(invalid="ignore", over="ignore"):  # a non-finite node: skipped next
+            matrix = transform @ node_transform
         if not (np.isfinite(matrix).all() and np.linalg.det(matrix[:3, :3]) != 0.0):
             # exporters hide parts with a zero scale: nothing of them would be seen
-            log.warning("%s: node '%s' has a zero scale (a singular transform), which hides "
-                        "it; its geometry is not rendered", name, node_name)
+            log.warning("%s: node '%s' has a zero scale (a singular transform, which hides it) "
+                        "or a non-finite one; its geometry is not rendered", name, node_name)
             continue
         vertices = trimesh.transform_points(vertices, matrix)
         if np.linalg.det(matrix[:3, :3]) < 0:

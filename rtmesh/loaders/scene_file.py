@@ -32,20 +32,22 @@ from rtmesh.scene.model import MeshPart, Scene
 # ---------------------------------------------------------------- value types
 
 
-# Every number of a scene file is finite and at most this in magnitude: squares and
-# products of coordinates, distances and intensities then stay far inside float64, and a
-# coordinate inside the float32 Embree holds (docs/LIMITS.md).
-MAX_NUMBER = 1e18
+# Every number of a scene file is finite and 0 or between these in magnitude: squares,
+# products and reciprocals of coordinates, distances, intensities, roughnesses and indices
+# of refraction then stay far inside float64, and a coordinate inside the float32 Embree
+# holds (docs/LIMITS.md).
+MIN_NUMBER, MAX_NUMBER = 1e-18, 1e18
+_RANGE = f"0, or magnitude {MIN_NUMBER:g} to {MAX_NUMBER:g}"
 
 
 def _is_number(v):
     return (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-            and abs(v) <= MAX_NUMBER)
+            and (v == 0 or MIN_NUMBER <= abs(v) <= MAX_NUMBER))
 
 
 def _float(v):
     if not _is_number(v):
-        raise TypeError(f"expected a finite number (magnitude at most {MAX_NUMBER:g})")
+        raise TypeError(f"expected a finite number ({_RANGE})")
     return float(v)
 
 
@@ -91,7 +93,7 @@ def _str(v):
 def _vector(n):
     def convert(v):
         if not (isinstance(v, list) and len(v) == n and all(_is_number(x) for x in v)):
-            raise TypeError(f"expected a list of {n} numbers (finite, magnitude at most {MAX_NUMBER:g})")
+            raise TypeError(f"expected a list of {n} numbers (finite; {_RANGE})")
         return np.array(v, dtype=np.float64)
     return convert
 
@@ -103,9 +105,18 @@ def _colour(v):
     """A number (grey) or [r, g, b], all >= 0."""
     c = np.full(3, _float(v)) if _is_number(v) else _vec3(v) if isinstance(v, list) else None
     if c is None:
-        raise TypeError(f"expected a number or a list of 3 numbers (finite, magnitude at most {MAX_NUMBER:g})")
+        raise TypeError(f"expected a number or a list of 3 numbers (finite; {_RANGE})")
     if (c < 0).any():
         raise TypeError("colour components must be >= 0")
+    return c
+
+
+def _reflectance(v):
+    """A colour whose components are at most 1: a weight of the path through a bounce (more
+    would gain energy at every bounce, up to an infinite image)."""
+    c = _colour(v)
+    if (c > 1).any():
+        raise TypeError("colour components must be between 0 and 1 (a reflectance)")
     return c
 
 
@@ -162,7 +173,7 @@ CAMERA_KEYS = {
 ENVIRONMENT_KEYS = {"ambient": _colour, "background": _colour}
 MATERIAL_KEYS = {
     "diffuse": _colour, "specular": _colour, "shininess": _non_negative, "ambient": _colour,
-    "mirror": _colour, "transmission": _colour, "ior": _positive, "absorption": _colour,
+    "mirror": _reflectance, "transmission": _reflectance, "ior": _positive, "absorption": _colour,
     "emission": _colour, "roughness": _non_negative,
 }
 OBJECT_KEYS = {
@@ -443,7 +454,14 @@ def _object_parts(r, values, where, base_dir, materials, material_index):
         subdivisions = values.get("subdivisions", 3)
         if not 0 <= subdivisions <= 8:
             raise r.error(f"{where}.subdivisions", "expected an integer from 0 to 8")
-        mesh = trimesh.creation.icosphere(subdivisions=subdivisions, radius=values.get("radius", 1.0))
+        radius = values.get("radius", 1.0)
+        if radius >= 1e-12:
+            mesh = trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius)
+        else:
+            # trimesh moves the unit sphere's vertices by (radius - |v|) onto the radius,
+            # which cancels to nothing this small: scale the unit sphere instead
+            mesh = trimesh.creation.icosphere(subdivisions=subdivisions)
+            mesh = trimesh.Trimesh(mesh.vertices * radius, mesh.faces, process=False)
         default_smooth = True
     elif kind == "box":
         mesh = trimesh.creation.box(extents=values.get("extents", np.ones(3)))

@@ -5,6 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rtmesh.core.errors import CameraError
 from rtmesh.core.rays import repeated_row
 from rtmesh.sampling.warps import square_to_uniform_disk_concentric
 from rtmesh.scene import camera_rays
@@ -58,14 +59,14 @@ class Camera:
         self.up = np.asarray(self.up, dtype=np.float64)
         self.shutter = (float(self.shutter[0]), float(self.shutter[1]))
         if not 0.0 < self.fov < 180.0:  # NaN included
-            raise ValueError(f"camera fov must be more than 0 and less than 180 degrees (got {self.fov!r})")
+            raise CameraError(f"camera fov must be more than 0 and less than 180 degrees (got {self.fov!r})")
         if self.projection not in PROJECTIONS:
-            raise ValueError(f"camera projection must be one of {', '.join(PROJECTIONS)}")
+            raise CameraError(f"camera projection must be one of {', '.join(PROJECTIONS)}")
         if self.orthographic:
             if not (self.ortho_height is not None and 0.0 < self.ortho_height < math.inf):
-                raise ValueError("an orthographic camera needs ortho_height > 0")
+                raise CameraError("an orthographic camera needs ortho_height > 0")
             if self.aperture > 0.0:
-                raise ValueError("an orthographic camera has no lens (aperture must be 0)")
+                raise CameraError("an orthographic camera has no lens (aperture must be 0)")
 
     @property
     def orthographic(self):
@@ -82,18 +83,19 @@ class Camera:
 
         Raises
         ------
-        ValueError
-            If the camera looks at its own position or ``up`` is parallel to the view.
+        CameraError
+            If the camera looks at its own position or ``up`` is parallel to the view (also
+            where the renderer's re-centred frame makes them so); a user error.
         """
         forward = self.look_at - self.position
         length = np.linalg.norm(forward)
         if not length > 0.0:
-            raise ValueError("camera position and look_at coincide")
+            raise CameraError("camera position and look_at coincide")
         forward = forward / length
         right = _cross(forward, self.up)
         r = np.linalg.norm(right)
         if not r > 1e-9:
-            raise ValueError("camera up is parallel to the viewing direction")
+            raise CameraError("camera up is parallel to the viewing direction")
         right = right / r
         return forward, right, _cross(right, forward)
 
@@ -227,21 +229,27 @@ def frame_bounds(bounds, fov=45.0, aspect=1.0, direction=(0.6, 0.45, 1.0), up=(0
 OUTLIER_RATIO = 1e6
 
 
-def framing_bounds(vertices, faces):
-    """The faces an automatic camera frames: all of them, or their main cluster when faces
-    far away would shrink the rest below a pixel.
+def framing_bounds(vertices, faces, focus=None):
+    """The faces a render keeps: all of them, or their main cluster when faces far away would
+    shrink the rest below a pixel (and below the precision of the renderer's float32 frame,
+    centred on the scene's bounds); an automatic camera frames what is kept.
 
     Faces split into clusters along an axis where no face's extent bridges the gap between
     them.  The cluster with the most faces (the one nearest the origin among equals) is
     the main one, and is split again, for as long as the part kept is more than
     :data:`OUTLIER_RATIO` times smaller than what it was cut from (largest extent over the
     three axes).  Any ordinary scene (objects side by side, a sky dome around a figure, a
-    card above a floor) keeps every face.
+    card above a floor) keeps every face.  The faces are sorted only where the vertices leave
+    a gap of a 512th of the scene along some axis (:func:`_has_empty_bins`), so most large
+    meshes cost a few passes over their vertices.
 
     Parameters
     ----------
     vertices : (v, 3) float
     faces : (f, 3) int
+    focus : (3,) float, optional
+        A point the camera looks at (a scene's own camera): the main cluster is then the one
+        nearest it, not the one with the most faces.
 
     Returns
     -------
@@ -250,6 +258,13 @@ def framing_bounds(vertices, faces):
     keep : (k,) int or None
         The faces kept, ascending; None when they are all of them.
     """
+    used = np.zeros(len(vertices), dtype=bool)
+    used[faces.ravel()] = True
+    points = vertices[used]
+    if not _has_empty_bins(points):
+        # no gap of a 512th of the scene along any axis: nothing far from the rest (the
+        # common case, decided in a few passes over the vertices instead of sorting faces)
+        return np.stack([points.min(axis=0), points.max(axis=0)]), None
     triangles = vertices[faces]
     lo, hi = triangles.min(axis=1), triangles.max(axis=1)
     keep = np.arange(len(faces))
@@ -264,10 +279,15 @@ def framing_bounds(vertices, faces):
             if not len(cuts):
                 continue
             starts, stops = np.concatenate([[0], cuts]), np.concatenate([cuts, [len(order)]])
-            sizes = stops - starts
-            centres = np.abs(0.5 * (low[order[starts]] + reach[stops - 1]))
-            candidates = np.flatnonzero(sizes == sizes.max())
-            main = candidates[np.argmin(centres[candidates])]
+            if focus is None:
+                sizes = stops - starts
+                centres = np.abs(0.5 * (low[order[starts]] + reach[stops - 1]))
+                candidates = np.flatnonzero(sizes == sizes.max())
+                main = candidates[np.argmin(centres[candidates])]
+            else:  # the cluster whose span along the axis is nearest the focus
+                below = low[order[starts]] - focus[axis]
+                above = focus[axis] - reach[stops - 1]
+                main = int(np.argmin(np.maximum(np.maximum(below, above), 0.0)))
             members = order[starts[main]:stops[main]]
             # sizes over every axis (a flat part is not small)
             whole = np.max(hi[keep].max(axis=0) - lo[keep].min(axis=0))
@@ -278,3 +298,22 @@ def framing_bounds(vertices, faces):
     kept = triangles[keep].reshape(-1, 3)
     bounds = np.stack([kept.min(axis=0), kept.max(axis=0)])
     return bounds, (None if len(keep) == len(faces) else keep)
+
+
+def _has_empty_bins(points, bins=1024):
+    """Whether, along some axis, two neighbouring slices of ``bins`` equal slices of the
+    points' extent hold no point: a necessary condition for a gap between faces of two
+    slices (a face's extent along an axis lies between its corners, so a slice no face
+    covers holds no corner).  Single empty slices are common in regular meshes (an
+    icosphere's vertices leave one at its equator); the faces far from the rest that
+    :func:`framing_bounds` looks for leave almost every slice empty."""
+    low, high = points.min(axis=0), points.max(axis=0)
+    for axis in range(3):
+        extent = high[axis] - low[axis]
+        if not extent > 0.0:
+            continue
+        slot = np.minimum(((points[:, axis] - low[axis]) / extent * bins).astype(np.int64), bins - 1)
+        empty = np.bincount(slot, minlength=bins) == 0
+        if (empty[1:] & empty[:-1]).any():
+            return True
+    return False

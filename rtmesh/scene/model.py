@@ -118,6 +118,9 @@ class Scene:
         self.material_id, self.object_id = self.material_id[keep], self.object_id[keep]
         if self.smooth is not None:
             self.smooth = self.smooth[keep]
+        # an object left without faces no longer moves (nothing of it is traced)
+        left = set(np.unique(self.object_id).tolist())
+        self.motions = {k: m for k, m in self.motions.items() if k in left}
 
     @classmethod
     def from_parts(cls, parts, materials=None, lights=None, camera=None, ambient=None,
@@ -238,17 +241,19 @@ class Scene:
             uv=uv,
             vertex_colors=vertex_colors,
         )
+        bounds, keep = framing_bounds(scene.vertices, scene.faces,
+                                      None if camera is None else camera.look_at)
+        if keep is not None:
+            # the rest would be far below a pixel (and below float32's grid once the renderer
+            # centres the scene on its bounds): drop the far faces, saying so (with a camera
+            # of the scene's own, the rest is the part it looks at)
+            whole = scene.bounds
+            log.warning("%s: dropped %d of %d faces that lie far from the rest (the scene "
+                        "spans %.3g, the rest %.3g)", source, len(scene.faces) - len(keep),
+                        len(scene.faces), float(np.max(whole[1] - whole[0])),
+                        float(np.max(bounds[1] - bounds[0])))
+            scene._keep_faces(keep)
         if camera is None:
-            bounds, keep = framing_bounds(scene.vertices, scene.faces)
-            if keep is not None:
-                # the rest would be far below a pixel (and below float32's grid once the
-                # renderer centres the scene on its bounds): drop the far faces, saying so
-                whole = scene.bounds
-                log.warning("%s: dropped %d of %d faces that lie far from the rest (the scene "
-                            "spans %.3g, the rest %.3g)", source, len(scene.faces) - len(keep),
-                            len(scene.faces), float(np.max(whole[1] - whole[0])),
-                            float(np.max(bounds[1] - bounds[0])))
-                scene._keep_faces(keep)
             scene.camera = frame_bounds(bounds, aspect=aspect)
         if lights is None:
             scene.lights = default_lights(scene.camera)
