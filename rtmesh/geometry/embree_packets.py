@@ -393,7 +393,8 @@ class SharedScene:
         self.handle = library.new_scene(padded, self.faces32)
 
     def close(self):
-        if self.handle:
+        # getattr: __del__ runs on an object whose __init__ failed before setting it
+        if getattr(self, "handle", 0):
             self.library.release_scene(self.handle)
             self.handle = 0
 
