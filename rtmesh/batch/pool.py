@@ -49,10 +49,16 @@ def run_local(jobs, workers, on_image, on_job, time_limit=None, memory_limit=Non
     # spawn, not fork: a fork of a process that has run thread pools (Embree, NumPy) can
     # inherit locks held by threads that no longer exist
     context = multiprocessing.get_context("spawn")
-    pool = [_Worker(context, memory_limit) for _ in range(max(1, min(workers, len(pending))))]
+    size = max(1, min(workers, len(pending)))
+    # one worker first: it warms up (compiles the kernels into numba's disk cache on a fresh
+    # machine) before it says it is ready, and the others start after it, so they load the
+    # compiled kernels instead of each compiling them again (once per node, not per process)
+    pool = [_Worker(context, memory_limit)]
     failed_starts = 0
     try:
         while pending or any(w.job for w in pool):
+            if len(pool) < size and any(w.ready for w in pool):
+                pool += [_Worker(context, memory_limit) for _ in range(size - len(pool))]
             for i, worker in enumerate(pool):
                 if worker.process.is_alive() or worker.job is not None:
                     continue
@@ -181,6 +187,11 @@ def _worker_main(conn, memory_limit, parent_pid):
     logging.getLogger("trimesh").setLevel(logging.ERROR)
     # the process exists to render: tune it for that (allocator, GIL, kept threads)
     runtime.tune_process()
+    try:
+        # kernels compiled or loaded now, so the first job's time limit does not pay for them
+        batch_worker.warm_up()
+    except Exception:  # noqa: BLE001 - the jobs report what is wrong (e.g. too little memory)
+        pass
     conn.send(("ready", None))
     while True:
         try:
