@@ -923,3 +923,16 @@ def test_warm_up_converts_a_tiny_asset_one_worker_per_host_first():
 
     warm_up_workers(Client(), ["tcp://a:1", "tcp://a:2", "tcp://b:1", "tcp://a:3"])
     assert Client.calls == [["tcp://a:1", "tcp://b:1"], ["tcp://a:2", "tcp://a:3"]]
+
+
+def test_images_read_by_openimageio_are_recorded_as_inputs(tmp_path):
+    """OpenImageIO opens EXR/HDR files natively; read_image announces them, so a changed EXR
+    texture or environment changes the asset's fingerprint like a changed PNG does."""
+    from rtmesh.batch.identity import OpenedFiles
+    from rtmesh.io.images import write_image
+
+    exr = tmp_path / "env.exr"
+    write_image(str(exr), np.full((4, 8, 3), 0.5, dtype=np.float32))
+    with OpenedFiles() as opened:
+        read_image(str(exr))
+    assert os.fspath(exr) in opened.paths

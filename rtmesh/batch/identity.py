@@ -156,8 +156,9 @@ class OpenedFiles:
 
     Uses a process-wide audit hook (:func:`sys.addaudithook`, installed once and idle when
     nothing is being recorded), so it sees every ``open`` made from Python by trimesh,
-    PIL and rtmesh alike.  Files read by native libraries on their own (OpenImageIO
-    reading an EXR texture) are not seen.
+    PIL and rtmesh alike.  Files that native libraries open on their own are seen where
+    rtmesh announces them (:func:`rtmesh.io.images.read_image` raises the same ``open``
+    event for the images OpenImageIO reads: EXR and HDR textures and environments).
     """
 
     def __enter__(self):
