@@ -100,6 +100,20 @@ class Film:
                 self.pass_sums[name][px] += values[:, s]
         self.count[px] += spp
 
+    def kernel_arrays(self):
+        """The arrays a kernel that adds whole pixels itself updates
+        (:func:`rtmesh.rendering.film_sums.add_pixel`), for a film without passes.
+
+        Returns
+        -------
+        total, total_sq : (3, P) float64
+            :attr:`sum` and :attr:`sum_sq` transposed (row-major views of them).
+        count : (P,) int64
+        image : (P, 3) float32 or (0, 3)
+            The image a ``one_pass`` film fills as pixels are added; (0, 3) otherwise.
+        """
+        return self.sum.T, self.sum_sq.T, self.count, _NO_IMAGE if self._image is None else self._image
+
     def add_samples(self, pixels, counts, radiance, passes=None):
         """Add a different number of samples to each of a set of pixels.
 

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from rtmesh.core.compiled import kernel
+from rtmesh.core.compiled import inline_row, kernel
 
 
 # ------------------------------------------------------------------ film
@@ -43,6 +43,44 @@ def accumulate_samples(total, total_sq, count, pixels, radiance, image):
             inverse = 1.0 / np.float64(count[px] + radiance.shape[1])
             for c in range(3):
                 image[px, c] = np.float32(total[px, c] * inverse)
+
+
+@inline_row
+def add_pixel(total, total_sq, count, image, px, radiance, row, samples):
+    """Add one pixel's new samples to the film, as :func:`accumulate_samples` adds them
+    (each sum in sample order, from the value it had), write its mean where ``image`` has
+    rows, and raise its sample count (which :class:`rtmesh.rendering.film.Film` does after
+    :func:`accumulate_samples`).
+
+    For kernels that produce a pixel's samples themselves and add them while they are in
+    the cache (:mod:`rtmesh.rendering.direct_stage`); numba inlines it into them, so the
+    film's arrays are not passed through a call per pixel.
+
+    Parameters
+    ----------
+    total, total_sq : (3, P) float64
+        The film's sums, transposed (:attr:`Film.sum` is column-major (P, 3)).
+    count : (P,) int64
+        Updated in place: ``count[px] += samples``.
+    image : (P, 3) float32 or (0, 3)
+        Receives the pixel's mean; (0, 3): none.
+    px : int
+        The pixel.
+    radiance : (n, 3) float64
+        The samples are rows ``row .. row + samples - 1``, in sample order.
+    row, samples : int
+    """
+    for s in range(row, row + samples):
+        for c in range(3):
+            r = radiance[s, c]
+            total[c, px] += r
+            total_sq[c, px] += r * r
+    n = count[px] + samples
+    if image.shape[0] > 0:
+        inverse = 1.0 / np.float64(n)
+        for c in range(3):
+            image[px, c] = np.float32(total[c, px] * inverse)
+    count[px] = n
 
 
 @kernel
