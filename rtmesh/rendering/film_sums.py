@@ -14,7 +14,8 @@ from rtmesh.core.compiled import inline_row, kernel
 def accumulate_samples(total, total_sq, count, pixels, radiance, image):
     """Add samples and their squares to per-pixel sums, each pixel's samples in order.
 
-    The sums start at zero (:class:`rtmesh.rendering.film.Film` always clears them).  With
+    A pixel without samples yet (``count`` 0) starts from sums of 0 whatever they hold (a
+    ``one_pass`` :class:`rtmesh.rendering.film.Film` does not clear them).  With
     an ``image``, each pixel's mean is written too, while its sums are in registers (a film
     whose pixels are final once added, instead of a pass over the film at the end).
 
@@ -34,6 +35,10 @@ def accumulate_samples(total, total_sq, count, pixels, radiance, image):
     means = image.shape[0] > 0
     for i in range(len(pixels)):
         px = pixels[i]
+        if count[px] == 0:  # a one_pass film's sums start uncleared (Film)
+            for c in range(3):
+                total[px, c] = 0.0
+                total_sq[px, c] = 0.0
         for s in range(radiance.shape[1]):
             for c in range(3):
                 r = radiance[i, s, c]
@@ -52,6 +57,7 @@ def add_pixel(total, total_sq, count, image, px, radiance, row, samples):
     rows, and raise its sample count (which :class:`rtmesh.rendering.film.Film` does after
     :func:`accumulate_samples`).
 
+    A pixel without samples yet starts from sums of 0, as in :func:`accumulate_samples`.
     For kernels that produce a pixel's samples themselves and add them while they are in
     the cache (:mod:`rtmesh.rendering.direct_stage`); numba inlines it into them, so the
     film's arrays are not passed through a call per pixel.
@@ -70,6 +76,10 @@ def add_pixel(total, total_sq, count, image, px, radiance, row, samples):
         The samples are rows ``row .. row + samples - 1``, in sample order.
     row, samples : int
     """
+    if count[px] == 0:  # a one_pass film's sums start uncleared (Film)
+        for c in range(3):
+            total[c, px] = 0.0
+            total_sq[c, px] = 0.0
     for s in range(row, row + samples):
         for c in range(3):
             r = radiance[s, c]
