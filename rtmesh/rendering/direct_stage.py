@@ -329,6 +329,13 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     records = 0
     shadow_rays = 0
     camera = _camera_numbers(image_plane, forward, right, up)
+    # the lanes' fields no query changes, once for the chunk (the camera rays' origin too);
+    # the blocks write only directions, tfar, the shadow rays' origins and the hit ids
+    for q in range(PACKETS):
+        for lane in range(LANES):
+            ep.set_lane(rays, words, q * ep.RAYHIT_WORDS * LANES + lane, position[0], position[1], position[2],
+                        0.0, 0.0, 1.0, ep.DEFAULT_TFAR)
+            ep.set_lane(shadow, shadow_words, q * ep.RAY_WORDS * LANES + lane, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0)
     for start in range(0, n, BLOCK):
         count = min(BLOCK, n - start)
         for b in range(count):
@@ -349,8 +356,7 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
             for lane in range(LANES):
                 b = q * LANES + lane
                 at = q * ep.RAYHIT_WORDS * LANES + lane
-                ep.set_lane(rays, words, at, position[0], position[1], position[2], d[0, b], d[1, b], d[2, b],
-                            ep.DEFAULT_TFAR)
+                ep.set_lane_direction(rays, at, d[0, b], d[1, b], d[2, b], ep.DEFAULT_TFAR)
                 ep.clear_hit(words, at)
         for q in range((count + LANES - 1) // LANES):
             intersect16(valid.ctypes.data + 64 * q, scene, rays.ctypes.data + _PACKET_BYTES * q,
@@ -385,9 +391,9 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
             for q in range(PACKETS):
                 for lane in range(LANES):
                     b = q * LANES + lane
-                    ep.set_lane(shadow, shadow_words, q * ep.RAY_WORDS * LANES + lane, shadow_ray[0, b],
-                                shadow_ray[1, b], shadow_ray[2, b], shadow_ray[3, b], shadow_ray[4, b],
-                                shadow_ray[5, b], shadow_ray[6, b])
+                    ep.set_lane_ray(shadow, q * ep.RAY_WORDS * LANES + lane, shadow_ray[0, b], shadow_ray[1, b],
+                                    shadow_ray[2, b], shadow_ray[3, b], shadow_ray[4, b], shadow_ray[5, b],
+                                    shadow_ray[6, b])
             for b in range(BLOCK):
                 on = b < count and hit[b] and shaded[mat[b]] and lit[b]
                 shadow_valid[b] = -1 if on else 0
