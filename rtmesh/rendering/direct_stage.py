@@ -300,6 +300,7 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     interpolate = np.empty(BLOCK, np.bool_)
     mat = np.empty(BLOCK, np.intp)
     hit = np.empty(BLOCK, np.bool_)
+    xy = np.empty((2, BLOCK))  # positions in the pixels (_camera_block)
     # per sample of the block: its pixel, its sample index and its pixel's place in the chunk
     block_pixel = np.empty(BLOCK, np.int64)
     block_sample = np.empty(BLOCK, np.int64)
@@ -349,7 +350,7 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
             left -= 1
         # camera rays (rtmesh.scene.camera_rays.camera_rays, pinhole); lanes past the end repeat sample 0
         d = _camera_block(film_xy, sampler, keys, corners, size, spp, block_pixel, block_sample, start, count,
-                          width, camera)
+                          width, camera, xy)
         for b in range(BLOCK):
             valid[b] = -1 if b < count else 0
         for q in range(PACKETS):
@@ -461,7 +462,7 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
 
 
 @row
-def _camera_block(film_xy, sampler, keys, corners, size, spp, pixel, sample, start, count, width, camera):
+def _camera_block(film_xy, sampler, keys, corners, size, spp, pixel, sample, start, count, width, camera, xy):
     """Unit directions (3, BLOCK) of the camera rays of samples ``start .. start + count - 1``
     (lanes past the end repeat sample ``start``), as :func:`rtmesh.scene.camera_rays.camera_rays`
     makes them for a pinhole; positions from ``film_xy``, or formed here when it is empty.
@@ -472,10 +473,11 @@ def _camera_block(film_xy, sampler, keys, corners, size, spp, pixel, sample, sta
     of a compiled call (atomic instructions, shared between the render threads), and this
     helper is called once a block.  The positions (hashing, scalar) and the directions
     (vectorised: the loop has no branch and its output the block's constant size, see
-    :func:`_light_block`) are separate loops.
+    :func:`_light_block`) are separate loops.  ``xy`` (2, BLOCK) is scratch for the
+    positions, made once by the caller (the directions loop only reads it, so it still
+    vectorises).
     """
     ax, bx, ay, by, fx, fy, fz, rx, ry, rz, ux, uy, uz = camera
-    xy = np.empty((2, BLOCK))
     if len(film_xy):
         for b in range(count):
             xy[0, b], xy[1, b] = film_xy[start + b, 0], film_xy[start + b, 1]
