@@ -334,7 +334,9 @@ class Integrator:
             stats.rays["cutout"] += self.cutouts.layers_traced
         stats.wall_seconds = time.perf_counter() - start
         stats.samples = sum(r.samples for r in stats.rounds)
-        stats.relative_error = film.relative_error()
+        # a uniform render gives every pixel spp samples: below two there is no estimate,
+        # and the film need not be scanned for its smallest count to say so
+        stats.relative_error = (float("nan") if not s.adaptive and s.spp < 2 else film.relative_error())
         passes = {name: film.pass_image(name) for name in film.pass_sums if name in s.passes}
         passes.update({name: derived_pass(name, film) for name in s.passes if name in DERIVED_PASSES})
         passes = {name: passes[name] for name in s.passes if name in passes}  # order asked for
