@@ -333,11 +333,12 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     camera = _camera_numbers(image_plane, forward, right, up)
     # the lanes' fields no query changes, once for the chunk (the camera rays' origin too);
     # the blocks write only directions, tfar, the shadow rays' origins and the hit ids
-    for q in range(PACKETS):
-        for lane in range(LANES):
-            ep.set_lane(rays, words, q * ep.RAYHIT_WORDS * LANES + lane, position[0], position[1], position[2],
-                        0.0, 0.0, 1.0, ep.DEFAULT_TFAR)
-            ep.set_lane(shadow, shadow_words, q * ep.RAY_WORDS * LANES + lane, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0)
+    # (a loop over len(valid), not the constant BLOCK: LLVM would unroll it, which costs
+    # compile time and saves nothing in a loop run once per chunk)
+    for b in range(len(valid)):
+        ep.set_lane(rays, words, _hit_lane(b), position[0], position[1], position[2], 0.0, 0.0, 1.0,
+                    ep.DEFAULT_TFAR)
+        ep.set_lane(shadow, shadow_words, _ray_lane(b), 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0)
     for start in range(0, n, BLOCK):
         count = min(BLOCK, n - start)
         for b in range(count):
