@@ -152,11 +152,11 @@ def test_a_failing_chunk_on_threads_raises_and_stops_the_other_workers(monkeypat
     started = []
     render_chunk = Integrator.render_chunk
 
-    def failing(self, pixels, first_sample, spp):
+    def failing(self, pixels, first_sample, spp, film=None):
         started.append(len(pixels))
         if len(started) == 3:
             raise RuntimeError("chunk failed")
-        return render_chunk(self, pixels, first_sample, spp)
+        return render_chunk(self, pixels, first_sample, spp, film)
 
     monkeypatch.setattr(Integrator, "render_chunk", failing)
     with pytest.raises(RuntimeError, match="chunk failed"):
@@ -194,9 +194,9 @@ def test_chunks_are_the_same_for_every_thread_count(monkeypatch):
     seen = {}
     real = Integrator.render_chunk
 
-    def recording(self, pixels, first_sample, spp):
+    def recording(self, pixels, first_sample, spp, film=None):
         seen[self.settings.thread_count].append((int(pixels[0]), len(pixels)))
-        return real(self, pixels, first_sample, spp)
+        return real(self, pixels, first_sample, spp, film)
 
     monkeypatch.setattr(Integrator, "render_chunk", recording)
     for threads in (1, 2):

@@ -80,6 +80,28 @@ def test_thread_count_does_not_change_the_image():
     np.testing.assert_array_equal(one.image, two.image)
 
 
+def assert_same_film(a, b):
+    """The film's sums, squares and counts, not only the image: the fused stage adds its
+    samples to the film itself."""
+    for name in ("sum", "sum_sq", "count"):
+        np.testing.assert_array_equal(getattr(a.film, name), getattr(b.film, name))
+
+
+@pytest.mark.parametrize("highlights", [True, False])
+@pytest.mark.parametrize("overrides", [dict(spp=3, sampler="jittered"), dict(spp=1, sampler="sobol"),
+                                       dict(spp=2, target_error=0.02, max_spp=16),
+                                       dict(spp=5, threads=2, chunk_samples=70)])
+def test_the_film_the_fused_stage_adds_to_is_the_general_paths(highlights, overrides):
+    """With highlights every pixel of a chunk is added after finish_highlights; without,
+    as the kernel's blocks finish them (chunks of 70 samples at 5 spp: pixels straddle
+    blocks and chunks end inside blocks)."""
+    scene = lit_scene() if highlights else sphere_on_floor_scene(smooth=True)
+    a, b = render_both(scene, width=23, height=17, **overrides)
+    assert Integrator(scene, settings()).direct_stage._film_late == highlights
+    assert_same(a, b)
+    assert_same_film(a, b)
+
+
 def test_scenes_needing_more_take_the_general_path():
     scene = lit_scene()
     assert Integrator(scene, settings()).plan.fused_direct

@@ -237,6 +237,33 @@ def test_one_pass_film_writes_each_tiles_image_values_as_it_is_added():
     np.testing.assert_allclose(eager.image().reshape(-1, 3), radiance.mean(axis=1), rtol=1e-6)
 
 
+def test_a_one_pass_films_uncleared_sums_start_from_zero_at_each_pixels_first_sample():
+    from rtmesh.rendering import film_sums
+
+    rng = np.random.default_rng(4)
+    radiance = rng.random((6 * 5, 3, 3))
+    cleared = Film(6, 5)
+    cleared.add_tile(0, radiance)
+    ways = []
+    for way in ("add_tile", "add_pixel", "add_samples"):
+        film = Film(6, 5, one_pass=True)
+        film.sum[:] = np.nan  # what uncleared memory may hold
+        film.sum_sq[:] = -1.0
+        if way == "add_tile":
+            film.add_tile(0, radiance)
+        elif way == "add_pixel":
+            film_sums.add_pixel.py_func(*film.kernel_arrays(), 7, radiance[7], 0, 3)
+            rest = np.array([p for p in range(30) if p != 7])
+            film.add_tile(rest, radiance[rest])
+        else:
+            film.add_samples(np.arange(30), np.full(30, 3), radiance.reshape(-1, 3))
+        ways.append(film)
+    for film in ways:
+        np.testing.assert_array_equal(film.sum, cleared.sum)
+        np.testing.assert_array_equal(film.sum_sq, cleared.sum_sq)
+        np.testing.assert_array_equal(film.count, cleared.count)
+
+
 def test_film_first_keeps_sample_zero_across_rounds_and_min_keeps_the_smallest():
     film = Film(2, 1, {"id": (1, "first"), "z": (1, "min"), "m": 1})
     film.add_tile(slice(0, 2), np.zeros((2, 2, 3)),

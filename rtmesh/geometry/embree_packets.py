@@ -477,6 +477,30 @@ def set_lane(ray, words, lane, ox, oy, oz, dx, dy, dz, tfar):
 
 
 @row
+def set_lane_ray(ray, lane, ox, oy, oz, dx, dy, dz, tfar):
+    """:func:`set_lane` without the fields a query leaves as they are (tnear, time, mask, id,
+    flags): for a lane :func:`set_lane` filled before, which the same values keep filling.
+
+    Embree's queries write only ``tfar`` and the hit, so a kernel tracing many packets
+    through one buffer sets those fields once, not for every ray (fewer stores a lane).
+    """
+    ray[ORG * LANES + lane] = np.float32(ox)
+    ray[(ORG + 1) * LANES + lane] = np.float32(oy)
+    ray[(ORG + 2) * LANES + lane] = np.float32(oz)
+    set_lane_direction(ray, lane, dx, dy, dz, tfar)
+
+
+@row
+def set_lane_direction(ray, lane, dx, dy, dz, tfar):
+    """The direction and ``tfar`` of lane ``lane``, as :func:`set_lane` writes them: for a
+    lane whose other ray fields already hold the values wanted (see :func:`set_lane_ray`)."""
+    for c, value in ((0, dx), (1, dy), (2, dz)):
+        d = np.float32(value)
+        ray[(DIR + c) * LANES + lane] = _F32_ZERO if abs(d) < MIN_RCP_INPUT else d
+    ray[TFAR * LANES + lane] = np.float32(tfar)
+
+
+@row
 def clear_hit(words, lane):
     """Mark lane ``lane`` of a ``RTCRayHit16`` packet as not hitting anything yet."""
     words[GEOM_ID * LANES + lane] = _INVALID_ID

@@ -23,6 +23,12 @@ highlight are finished by a second kernel after NumPy has raised their cosines.
 handle (textures, passes, reflection and refraction, media, area lights, ambient
 occlusion, depth of field, motion blur, cut-outs, environment backgrounds, single-ray
 tracing) keeps the general path.
+
+A chunk is described by its pixels and their sample counts, not by per-sample index arrays:
+the kernel forms each block's pixel and sample indices itself, and with a film
+(:meth:`DirectStage.render`) adds the samples to it pixel by pixel
+(:func:`rtmesh.rendering.film_sums.add_pixel`: the sums :meth:`Film.add_tile` forms, in
+sample order) instead of returning them for a separate pass.
 """
 
 import numpy as np
@@ -34,6 +40,8 @@ from rtmesh.geometry.accel import Accel
 from rtmesh.geometry.float32_rays import F32_MAX, offset_origin
 from rtmesh.lights.point_light_rows import ROW, illuminate_row
 from rtmesh.materials.blinn_phong import highlight_cosine, shade_row
+from rtmesh.rendering.film_sums import add_pixel
+from rtmesh.rendering.scheduler import sample_indices
 from rtmesh.sampling.pixel_samples import PixelSampler, pixel_position
 from rtmesh.scene.background import SolidBackground
 from rtmesh.scene.camera_rays import image_plane_xy, pinhole_xyz
@@ -42,6 +50,12 @@ from rtmesh.shading.surfaces import surface_from_rows_inlined
 
 _NO_TINT = np.zeros((0, 3))
 _NO_POSITIONS = np.zeros((0, 2))
+# "no film": direct_samples returns the radiance without adding it anywhere
+_NO_SUMS = np.zeros((3, 0))
+_NO_COUNT = np.zeros(0, dtype=np.int64)
+_NO_IMAGE = np.zeros((0, 3), dtype=np.float32)
+# "the chunk's pixels are a run from first_pixel" for direct_samples
+_NO_PIXELS = np.zeros(0, dtype=np.int64)
 LANES = ep.LANES
 # samples per block: four packets, so the arithmetic of a block's samples runs in vector
 # loops long enough for AVX-512, while the block's records stay in L1
@@ -85,6 +99,13 @@ class DirectStage:
         self._lights = np.array(rows, dtype=np.float64).reshape(len(rows), ROW_WORDS)
         self._materials = (np.ascontiguousarray(it._shaded), np.ascontiguousarray(it._diffuse),
                            np.ascontiguousarray(it._specular), it._highlight_exponent, it._highlight_from)
+        # With highlights, some samples wait for NumPy's pow (finish_highlights), and then all
+        # of a chunk's pixels are added to the film after them in one ordered pass.  Adding
+        # the others as their blocks finish reads many lines of the film from memory twice
+        # (at 1 spp on bench_core's scene, thread CPU per frame 2.9 % above main's separate
+        # pass, against 1.9 % below it this way).  Without highlights, pixels are added as
+        # their blocks finish, while their samples are in the cache.
+        self._film_late = bool((it._shaded & (it._highlight_exponent >= 0.0)).any())
         background = it.background
         self._background = (np.ascontiguousarray(background.colour) if st.background else np.zeros(3))
         self._offset_scale = it._offset_scale32
@@ -126,48 +147,71 @@ class DirectStage:
             return None
         return cls(integrator)
 
-    def render(self, pixel, sample, stats):
-        """Radiance of camera samples.
+    def render(self, pixels, first_sample, spp, stats, film=None):
+        """Radiance of the samples of a chunk of pixels, or those samples added to a film.
 
         Parameters
         ----------
-        pixel : (n,) int64
-            Linear pixel index of each sample.
-        sample : (n,) int64
-            Index of each sample within its pixel (global across adaptive rounds).
+        pixels : range or (m,) int array
+            Linear pixel indices (a range of step 1: a run of consecutive pixels).
+        first_sample : int or (m,) int array
+            Index of each pixel's first sample (global across adaptive rounds).
+        spp : int or (m,) int array
+            Samples of each pixel (one for all, or per pixel).
         stats : RenderStats
             Camera and shadow ray counts are added to it.
+        film : Film, optional
+            Without passes.  The kernel adds each pixel's samples to it (sums in sample
+            order, count, and the image of a ``one_pass`` film) as it finishes the pixel,
+            while they are in the cache, instead of a pass over the chunk's radiance after
+            it (:meth:`Film.add_tile`, :meth:`Film.add_samples` form the same sums).
 
         Returns
         -------
-        (n, 3) float64
-            Row-major.
+        (n, 3) float64 or None
+            Radiance of every sample, pixel by pixel in sample order, row-major; None when
+            added to ``film``.
         """
+        if isinstance(pixels, range) and pixels.step == 1:
+            pixel_list, first_pixel, m = _NO_PIXELS, pixels.start, len(pixels)
+        else:
+            pixel_list = np.ascontiguousarray(pixels, dtype=np.int64)
+            first_pixel, m = 0, len(pixel_list)
+        # one number for all pixels travels as an array of one
+        first = np.ascontiguousarray(np.atleast_1d(first_sample), dtype=np.int64)
+        counts = np.ascontiguousarray(np.atleast_1d(spp), dtype=np.int64)
+        n = m * int(counts[0]) if len(counts) == 1 else int(counts.sum())
+        film_xy = _NO_POSITIONS
+        if self._pixel_sampler is None:  # Sobol: NumPy forms the positions
+            pixel, sample = sample_indices(pixels, first_sample, spp)
+            film_xy = np.ascontiguousarray(self._sampler.pixel(pixel, sample))
+        sums = (_NO_SUMS, _NO_SUMS, _NO_COUNT, _NO_IMAGE) if film is None else film.kernel_arrays()
         shaded, diffuse, specular, exponent, visible_from = self._materials
-        film_xy = (_NO_POSITIONS if self._pixel_sampler is not None else
-                   np.ascontiguousarray(self._sampler.pixel(pixel, sample)))
-        radiance, shadow_rays, records = direct_samples(
-            *self._queries, film_xy, *self._sampler_arrays, pixel, np.ascontiguousarray(sample, dtype=np.int64),
-            *self._camera,
-            *self._surfaces, self._base, self._background, self._lights, shaded, diffuse, specular, exponent,
-            visible_from, self._offset_scale, SHADOW_SHORTEN)
+        radiance, shadow_rays, records, waits = direct_samples(
+            *self._queries, film_xy, *self._sampler_arrays, pixel_list, first_pixel, m, first, counts, n, *sums,
+            self._film_late,
+            *self._camera, *self._surfaces, self._base, self._background, self._lights, shaded, diffuse, specular,
+            exponent, visible_from, self._offset_scale, SHADOW_SHORTEN)
         sample, mat, cos_i, incident, cosine, power_exponent, highlight = records
-        if len(sample):
+        if len(sample) or (film is not None and self._film_late):
             # NumPy raises the highlight cosines, as in the general path (its pow is vectorised)
             power = np.zeros(len(sample))
             power[highlight] = np.power(cosine[highlight], power_exponent[highlight])
-            finish_highlights(radiance, self._base, sample, mat, cos_i, incident, power, diffuse, specular)
-        stats.rays["camera"] += len(pixel)
+            finish_highlights(radiance, self._base, sample, mat, cos_i, incident, power, diffuse, specular, *sums,
+                              self._film_late, waits, pixel_list, first_pixel, counts)
+        stats.rays["camera"] += n
         stats.rays["shadow"] += shadow_rays
-        return radiance
+        return None if film is not None else radiance
 
 
 @kernel
-def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys, corners, size, spp, pixel,
-                   sample, width, image_plane, position, forward, right, up, faces, vertex_normals, smooth,
+def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys, corners, size, spp,
+                   pixel_list, first_pixel, m, first, counts, n, total, total_sq, film_count, image, film_late,
+                   width, image_plane, position, forward, right, up, faces, vertex_normals, smooth,
                    material_id, fix_terminator, base, background, lights, shaded, diffuse, specular, exponent,
                    visible_from, scale, shorten):
-    """Radiance of camera samples with direct light, in blocks of :data:`BLOCK` samples.
+    """Radiance of the camera samples of a chunk of pixels with direct light, in blocks of
+    :data:`BLOCK` samples, added to the film pixel by pixel where one is given.
 
     Parameters
     ----------
@@ -180,8 +224,25 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
         Positions inside the pixels, or empty: formed here by :func:`pixel_position`.
     sampler, keys, corners, size, spp
         The :class:`rtmesh.sampling.pixel_samples.PixelSampler` arrays.
-    pixel, sample : (n,) int64
-        Pixel and sample index of each sample.
+    pixel_list : (m,) int64 or (0,)
+        The chunk's pixels; empty: the ``m`` pixels from ``first_pixel`` on.
+    first_pixel, m : int
+        The first pixel of a run, and the number of pixels.
+    first, counts : (m,) int64 or (1,)
+        Index of each pixel's first sample and its number of samples (one entry: the same
+        for every pixel).  The samples are taken pixel by pixel in sample order, so each
+        pixel's samples are ``n`` consecutive rows; no per-sample pixel and sample index
+        arrays are made (the block's are formed here).
+    n : int
+        Samples in all.
+    total, total_sq, film_count, image
+        The film's arrays (:meth:`rtmesh.rendering.film.Film.kernel_arrays`), or empty
+        ((3, 0), (3, 0), (0,), (0, 3)): no film.  With a film, a pixel is added
+        (:func:`rtmesh.rendering.film_sums.add_pixel`) after the block that finishes it,
+        unless one of its samples waits for its highlight (see ``records``); those are
+        added by :func:`finish_highlights`.
+    film_late : bool
+        Add no pixel here: all go to ``deferred``, in order.
     width : int
     image_plane : (4,) float64
     position, forward, right, up : (3,) float64
@@ -214,6 +275,9 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
         For the samples with a highlight from a light that reaches them, one record per
         (sample, unshadowed light), in light order: sample, material, ``ns . wi``, incident
         term (r, 3), highlight cosine, shininess, and whether the highlight is raised.
+    waits : (m,) bool
+        The pixels with a sample in ``records``: with a film, not added here (nor any
+        pixel when ``film_late``), but by :func:`finish_highlights`.
 
     Notes
     -----
@@ -224,8 +288,8 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     scalar.  The packets of a block lie side by side in one buffer (each 64-byte aligned),
     and sample ``b`` of the block is lane ``b % 16`` of packet ``b // 16``.
     """
-    n = len(pixel)
     n_lights = len(lights)
+    adding = len(film_count) > 0 and not film_late
     has_smooth = len(vertex_normals) > 0
     # row-major, so that the integrator's (pixels, spp, 3) view of it is not a copy
     radiance = np.empty((n, 3))
@@ -236,6 +300,20 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     interpolate = np.empty(BLOCK, np.bool_)
     mat = np.empty(BLOCK, np.intp)
     hit = np.empty(BLOCK, np.bool_)
+    xy = np.empty((2, BLOCK))  # positions in the pixels (_camera_block)
+    d = np.empty((3, BLOCK))  # camera ray directions (_camera_block)
+    # per sample of the block: its pixel, its sample index and its pixel's place in the chunk
+    block_pixel = np.empty(BLOCK, np.int64)
+    block_sample = np.empty(BLOCK, np.int64)
+    owner = np.empty(BLOCK, np.int64)
+    # (per-pixel arrays are indexed here, not through a row helper: numba would take and
+    # release a reference to the array on every call, two atomic instructions per sample)
+    one_count, one_first, listed = len(counts) == 1, len(first) == 1, len(pixel_list) > 0
+    # the pixel being taken (its place in the chunk, index, next sample, samples left)
+    current, px, px_sample, left = -1, 0, 0, 0
+    # the first pixel not yet added to the film, and the row of its first sample
+    done, done_row = 0, 0
+    waits = np.zeros(m, np.bool_)  # pixels with a sample left for finish_highlights
     # per light and sample: the light sample and its fate
     cos_i = np.empty((n_lights, BLOCK))
     incident = np.empty((n_lights, 3, BLOCK))
@@ -253,18 +331,35 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     records = 0
     shadow_rays = 0
     camera = _camera_numbers(image_plane, forward, right, up)
+    # the lanes' fields no query changes, once for the chunk (the camera rays' origin too);
+    # the blocks write only directions, tfar, the shadow rays' origins and the hit ids
+    # (a loop over len(valid), not the constant BLOCK: LLVM would unroll it, which costs
+    # compile time and saves nothing in a loop run once per chunk)
+    for b in range(len(valid)):
+        ep.set_lane(rays, words, _hit_lane(b), position[0], position[1], position[2], 0.0, 0.0, 1.0,
+                    ep.DEFAULT_TFAR)
+        ep.set_lane(shadow, shadow_words, _ray_lane(b), 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0)
     for start in range(0, n, BLOCK):
         count = min(BLOCK, n - start)
+        for b in range(count):
+            while left == 0:  # the next pixel with samples
+                current += 1
+                left = counts[0] if one_count else counts[current]
+                px_sample = first[0] if one_first else first[current]
+                px = pixel_list[current] if listed else first_pixel + current
+            block_pixel[b], block_sample[b], owner[b] = px, px_sample, current
+            px_sample += 1
+            left -= 1
         # camera rays (rtmesh.scene.camera_rays.camera_rays, pinhole); lanes past the end repeat sample 0
-        d = _camera_block(film_xy, sampler, keys, corners, size, spp, pixel, sample, start, count, width, camera)
+        _camera_block(film_xy, sampler, keys, corners, size, spp, block_pixel, block_sample, start, count,
+                          width, camera, xy, d)
         for b in range(BLOCK):
             valid[b] = -1 if b < count else 0
         for q in range(PACKETS):
             for lane in range(LANES):
                 b = q * LANES + lane
                 at = q * ep.RAYHIT_WORDS * LANES + lane
-                ep.set_lane(rays, words, at, position[0], position[1], position[2], d[0, b], d[1, b], d[2, b],
-                            ep.DEFAULT_TFAR)
+                ep.set_lane_direction(rays, at, d[0, b], d[1, b], d[2, b], ep.DEFAULT_TFAR)
                 ep.clear_hit(words, at)
         for q in range((count + LANES - 1) // LANES):
             intersect16(valid.ctypes.data + 64 * q, scene, rays.ctypes.data + _PACKET_BYTES * q,
@@ -299,19 +394,19 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
             for q in range(PACKETS):
                 for lane in range(LANES):
                     b = q * LANES + lane
-                    ep.set_lane(shadow, shadow_words, q * ep.RAY_WORDS * LANES + lane, shadow_ray[0, b],
-                                shadow_ray[1, b], shadow_ray[2, b], shadow_ray[3, b], shadow_ray[4, b],
-                                shadow_ray[5, b], shadow_ray[6, b])
+                    ep.set_lane_ray(shadow, q * ep.RAY_WORDS * LANES + lane, shadow_ray[0, b], shadow_ray[1, b],
+                                    shadow_ray[2, b], shadow_ray[3, b], shadow_ray[4, b], shadow_ray[5, b],
+                                    shadow_ray[6, b])
             for b in range(BLOCK):
                 on = b < count and hit[b] and shaded[mat[b]] and lit[b]
                 shadow_valid[b] = -1 if on else 0
                 if on:
-                    m = mat[b]
-                    e = exponent[m]
+                    mat_b = mat[b]
+                    e = exponent[mat_b]
                     # a power of 0 is 1 whatever the cosine (0 ** 0 included)
                     c = 1.0 if e == 0.0 else cosine[k, b]
                     cosine[k, b] = c
-                    raised[k, b] = e >= 0.0 and c > 0.0 and c >= visible_from[m]
+                    raised[k, b] = e >= 0.0 and c > 0.0 and c >= visible_from[mat_b]
             for q in range((count + LANES - 1) // LANES):
                 if _any_valid(shadow_valid, q):
                     occluded16(shadow_valid.ctypes.data + 64 * q, scene, shadow.ctypes.data + _SHADOW_BYTES * q,
@@ -328,65 +423,79 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
                 for c in range(3):
                     radiance[i, c] = 0.0 + background[c]
                 continue
-            m = mat[b]
+            mat_b = mat[b]
             deferred = False
             for k in range(n_lights):
                 deferred = deferred or (reaches[k, b] and raised[k, b])
             if deferred:
+                waits[owner[b]] = True
                 for k in range(n_lights):
                     if reaches[k, b]:
-                        rec_sample[records], rec_mat[records] = i, m
+                        rec_sample[records], rec_mat[records] = i, mat_b
                         rec_cos[records] = cos_i[k, b]
                         for c in range(3):
                             rec_incident[records, c] = incident[k, c, b]
-                        rec_cosine[records], rec_exponent[records] = cosine[k, b], exponent[m]
+                        rec_cosine[records], rec_exponent[records] = cosine[k, b], exponent[mat_b]
                         rec_raised[records] = raised[k, b]
                         records += 1
                 for c in range(3):
-                    radiance[i, c] = base[m, c]
+                    radiance[i, c] = base[mat_b, c]
                 continue
             d0 = d1 = d2 = 0.0
             for k in range(n_lights):
                 if reaches[k, b]:
-                    d0, d1, d2 = _add_light(d0, d1, d2, m, cos_i[k, b], 0.0, incident[k, 0, b], incident[k, 1, b],
+                    d0, d1, d2 = _add_light(d0, d1, d2, mat_b, cos_i[k, b], 0.0, incident[k, 0, b], incident[k, 1, b],
                                             incident[k, 2, b], diffuse, specular)
-            _store(radiance, i, base, m, d0, d1, d2)
-    return radiance, shadow_rays, (rec_sample[:records], rec_mat[:records], rec_cos[:records],
-                                     rec_incident[:records], rec_cosine[:records], rec_exponent[:records],
-                                     rec_raised[:records])
+            _store(radiance, i, base, mat_b, d0, d1, d2)
+        # the film: the pixels this block finished, their samples still in the cache
+        while adding and done < m:
+            px_samples = counts[0] if one_count else counts[done]
+            if done_row + px_samples > start + count:
+                break
+            if not waits[done] and px_samples > 0:
+                added = pixel_list[done] if listed else first_pixel + done
+                add_pixel(total, total_sq, film_count, image, added, radiance, done_row, px_samples)
+            done_row += px_samples
+            done += 1
+    return (radiance, shadow_rays, (rec_sample[:records], rec_mat[:records], rec_cos[:records],
+                                      rec_incident[:records], rec_cosine[:records], rec_exponent[:records],
+                                      rec_raised[:records]),
+            waits)
 
 
 @row
-def _camera_block(film_xy, sampler, keys, corners, size, spp, pixel, sample, start, count, width, camera):
-    """Unit directions (3, BLOCK) of the camera rays of samples ``start .. start + count - 1``
-    (lanes past the end repeat sample ``start``), as :func:`rtmesh.scene.camera_rays.camera_rays`
-    makes them for a pinhole; positions from ``film_xy``, or formed here when it is empty.
+def _camera_block(film_xy, sampler, keys, corners, size, spp, pixel, sample, start, count, width, camera, xy, d):
+    """Writes into ``d`` (3, BLOCK) the unit directions of the camera rays of samples
+    ``start .. start + count - 1`` (lanes past the end repeat sample ``start``), as
+    :func:`rtmesh.scene.camera_rays.camera_rays` makes them for a pinhole; positions from
+    ``film_xy``, or formed here when it is empty.
+    ``pixel`` and ``sample`` (BLOCK,) are the block's own (sample ``start + b`` is entry ``b``).
 
     ``camera`` is the image-plane map and the camera frame as a tuple of 13 numbers
     (:func:`_camera_numbers`): numba takes and releases a reference to every array argument
     of a compiled call (atomic instructions, shared between the render threads), and this
     helper is called once a block.  The positions (hashing, scalar) and the directions
     (vectorised: the loop has no branch and its output the block's constant size, see
-    :func:`_light_block`) are separate loops.
+    :func:`_light_block`) are separate loops.  ``xy`` (2, BLOCK), scratch for the
+    positions, and ``d`` are made once by the caller: an allocation a block cost 2-4 % of a
+    frame each, and the directions loop, which reads only ``xy`` and numbers, still
+    vectorises with ``d`` passed in (measured; the light step's loop does not, see
+    :func:`_light_block`).
     """
     ax, bx, ay, by, fx, fy, fz, rx, ry, rz, ux, uy, uz = camera
-    xy = np.empty((2, BLOCK))
     if len(film_xy):
         for b in range(count):
             xy[0, b], xy[1, b] = film_xy[start + b, 0], film_xy[start + b, 1]
     else:
         for b in range(count):
-            xy[0, b], xy[1, b] = pixel_position(sampler, keys, corners, size, spp, pixel[start + b],
-                                                sample[start + b])
-    d = np.empty((3, BLOCK))
+            xy[0, b], xy[1, b] = pixel_position(sampler, keys, corners, size, spp, pixel[b], sample[b])
     inverse_width = 1.0 / width
     for b in range(count):
-        sx, sy = image_plane_xy(xy[0, b], xy[1, b], pixel[start + b], width, inverse_width, ax, bx, ay, by)
+        sx, sy = image_plane_xy(xy[0, b], xy[1, b], pixel[b], width, inverse_width, ax, bx, ay, by)
         d[0, b], d[1, b], d[2, b] = pinhole_xyz(sx, sy, fx, fy, fz, rx, ry, rz, ux, uy, uz)
     # inactive lanes of the last packet: a copy of the first ray keeps their words finite
     for b in range(count, BLOCK):
         d[0, b], d[1, b], d[2, b] = d[0, 0], d[1, 0], d[2, 0]
-    return d
 
 
 @row
@@ -517,8 +626,10 @@ def _any_valid(valid, q):
 
 
 @kernel
-def finish_highlights(radiance, base, sample, mat, cos_i, incident, power, diffuse, specular):
-    """Radiance of the samples :func:`direct_samples` left for their highlights.
+def finish_highlights(radiance, base, sample, mat, cos_i, incident, power, diffuse, specular, total, total_sq,
+                      film_count, image, film_late, waits, pixel_list, first_pixel, counts):
+    """Radiance of the samples :func:`direct_samples` left for their highlights, and the
+    pixels it did not add to the film because of them.
 
     Parameters
     ----------
@@ -533,6 +644,13 @@ def finish_highlights(radiance, base, sample, mat, cos_i, incident, power, diffu
     power : (r,) float64
         The raised highlight cosine (0 where there is no highlight).
     diffuse, specular : (M, 3) float64
+    total, total_sq, film_count, image, film_late
+        The film's arrays and whether :func:`direct_samples` left every pixel to this
+        function, as for it (empty arrays: no film).
+    waits : (m,) bool
+        The pixels :func:`direct_samples` did not add (its ``waits``).
+    pixel_list, first_pixel, counts
+        The chunk's pixels and their sample counts, as for :func:`direct_samples`.
     """
     j = 0
     r = len(sample)
@@ -544,3 +662,15 @@ def finish_highlights(radiance, base, sample, mat, cos_i, incident, power, diffu
                                     incident[j, 2], diffuse, specular)
             j += 1
         _store(radiance, i, base, m, d0, d1, d2)
+    # the film, pixel by pixel in order (here rather than in a kernel of its own: one
+    # compilation fewer on a first render)
+    if len(film_count) == 0:
+        return
+    one_count, listed = len(counts) == 1, len(pixel_list) > 0
+    row = 0
+    for j in range(len(waits)):
+        samples = counts[0] if one_count else counts[j]
+        if (film_late or waits[j]) and samples > 0:
+            add_pixel(total, total_sq, film_count, image, pixel_list[j] if listed else first_pixel + j, radiance,
+                      row, samples)
+        row += samples

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from rtmesh.core.compiled import kernel
+from rtmesh.core.compiled import inline_row, kernel
 
 
 # ------------------------------------------------------------------ film
@@ -14,7 +14,8 @@ from rtmesh.core.compiled import kernel
 def accumulate_samples(total, total_sq, count, pixels, radiance, image):
     """Add samples and their squares to per-pixel sums, each pixel's samples in order.
 
-    The sums start at zero (:class:`rtmesh.rendering.film.Film` always clears them).  With
+    A pixel without samples yet (``count`` 0) starts from sums of 0 whatever they hold (a
+    ``one_pass`` :class:`rtmesh.rendering.film.Film` does not clear them).  With
     an ``image``, each pixel's mean is written too, while its sums are in registers (a film
     whose pixels are final once added, instead of a pass over the film at the end).
 
@@ -34,6 +35,10 @@ def accumulate_samples(total, total_sq, count, pixels, radiance, image):
     means = image.shape[0] > 0
     for i in range(len(pixels)):
         px = pixels[i]
+        if count[px] == 0:  # a one_pass film's sums start uncleared (Film)
+            for c in range(3):
+                total[px, c] = 0.0
+                total_sq[px, c] = 0.0
         for s in range(radiance.shape[1]):
             for c in range(3):
                 r = radiance[i, s, c]
@@ -43,6 +48,49 @@ def accumulate_samples(total, total_sq, count, pixels, radiance, image):
             inverse = 1.0 / np.float64(count[px] + radiance.shape[1])
             for c in range(3):
                 image[px, c] = np.float32(total[px, c] * inverse)
+
+
+@inline_row
+def add_pixel(total, total_sq, count, image, px, radiance, row, samples):
+    """Add one pixel's new samples to the film, as :func:`accumulate_samples` adds them
+    (each sum in sample order, from the value it had), write its mean where ``image`` has
+    rows, and raise its sample count (which :class:`rtmesh.rendering.film.Film` does after
+    :func:`accumulate_samples`).
+
+    A pixel without samples yet starts from sums of 0, as in :func:`accumulate_samples`.
+    For kernels that produce a pixel's samples themselves and add them while they are in
+    the cache (:mod:`rtmesh.rendering.direct_stage`); numba inlines it into them, so the
+    film's arrays are not passed through a call per pixel.
+
+    Parameters
+    ----------
+    total, total_sq : (3, P) float64
+        The film's sums, transposed (:attr:`Film.sum` is column-major (P, 3)).
+    count : (P,) int64
+        Updated in place: ``count[px] += samples``.
+    image : (P, 3) float32 or (0, 3)
+        Receives the pixel's mean; (0, 3): none.
+    px : int
+        The pixel.
+    radiance : (n, 3) float64
+        The samples are rows ``row .. row + samples - 1``, in sample order.
+    row, samples : int
+    """
+    if count[px] == 0:  # a one_pass film's sums start uncleared (Film)
+        for c in range(3):
+            total[c, px] = 0.0
+            total_sq[c, px] = 0.0
+    for s in range(row, row + samples):
+        for c in range(3):
+            r = radiance[s, c]
+            total[c, px] += r
+            total_sq[c, px] += r * r
+    n = count[px] + samples
+    if image.shape[0] > 0:
+        inverse = 1.0 / np.float64(n)
+        for c in range(3):
+            image[px, c] = np.float32(total[c, px] * inverse)
+    count[px] = n
 
 
 @kernel

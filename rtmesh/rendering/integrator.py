@@ -53,7 +53,7 @@ from rtmesh.rendering.film import Film
 from rtmesh.rendering.local_shading import LocalShading
 from rtmesh.rendering.media import Media
 from rtmesh.rendering.render_plan import RenderPlan
-from rtmesh.rendering.scheduler import pixel_chunks, run_on_threads
+from rtmesh.rendering.scheduler import pixel_chunks, run_on_threads, sample_indices
 from rtmesh.rendering.secondary_rays import SecondaryRays
 from rtmesh.rendering.stats import RenderStats
 from rtmesh.rendering.surface_stage import SurfaceStage
@@ -334,7 +334,9 @@ class Integrator:
             stats.rays["cutout"] += self.cutouts.layers_traced
         stats.wall_seconds = time.perf_counter() - start
         stats.samples = sum(r.samples for r in stats.rounds)
-        stats.relative_error = film.relative_error()
+        # a uniform render gives every pixel spp samples: below two there is no estimate,
+        # and the film need not be scanned for its smallest count to say so
+        stats.relative_error = (float("nan") if not s.adaptive and s.spp < 2 else film.relative_error())
         passes = {name: film.pass_image(name) for name in film.pass_sums if name in s.passes}
         passes.update({name: derived_pass(name, film) for name in s.passes if name in DERIVED_PASSES})
         passes = {name: passes[name] for name in s.passes if name in passes}  # order asked for
@@ -393,7 +395,9 @@ class Integrator:
                 chunk = (pixels[a:b], first_sample, spp)
             else:
                 chunk = (pixels[a:b], first[a:b], counts[a:b])
-            radiance, passes, chunk_stats = self.render_chunk(*chunk)
+            radiance, passes, chunk_stats = self.render_chunk(*chunk, film=film)
+            if radiance is None:  # the fused stage added the samples itself
+                return chunk_stats
             t0 = time.perf_counter()
             if uniform:
                 # a run of consecutive pixels (every chunk of a whole image) is a slice:
@@ -416,7 +420,7 @@ class Integrator:
             run_on_threads(render_and_add, bounds, s.thread_count, workers, stats, progress)
 
     # ---------------------------------------------------------------- one chunk
-    def render_chunk(self, pixels, first_sample, spp):
+    def render_chunk(self, pixels, first_sample, spp, film=None):
         """Render the samples ``first_sample .. first_sample + spp - 1`` of some pixels.
 
         Sample indices are global to the pixel across adaptive rounds, so the samples a
@@ -433,12 +437,17 @@ class Integrator:
             Index of the first sample to take in each pixel (one for all, or per pixel).
         spp : int or (m,) int array
             Samples to take in each pixel (one for all, or per pixel).
+        film : Film, optional
+            The fused direct-lighting stage adds the samples to it itself, pixel by pixel
+            while they are in the cache, and returns no radiance; the general path ignores
+            it (the caller adds what it returns).
 
         Returns
         -------
-        radiance : (m, spp, 3) float64, or (sum(spp), 3) with per-pixel ``spp``
+        radiance : (m, spp, 3) float64, or (sum(spp), 3) with per-pixel ``spp``, or None
             Radiance of every sample, pixel by pixel in sample order (with per-pixel
-            counts the samples of pixel ``i`` are rows ``sum(spp[:i]) ..``).
+            counts the samples of pixel ``i`` are rows ``sum(spp[:i]) ..``); None when
+            the samples were added to ``film``.
         passes : dict of str to (m, spp, k) float64 (or (sum(spp), k)), or None
         stats : RenderStats
             Ray counts and stage times of this chunk.
@@ -446,33 +455,22 @@ class Integrator:
         s = self.settings
         stats = RenderStats()
         clock = Clock(stats.stage_seconds)
-        if isinstance(pixels, range):
-            pixels = np.arange(pixels.start, pixels.stop, pixels.step, dtype=np.int64)
-        pixels = np.asarray(pixels, dtype=np.int64)
         m = len(pixels)
         # (isinstance, not np.ndim: this runs per chunk with the GIL held)
         ragged = isinstance(spp, np.ndarray) or isinstance(first_sample, np.ndarray)
+        if self.direct_stage is not None:
+            # the stage forms the pixel and sample index of each sample and its position itself
+            # (see rtmesh.sampling.pixel_samples)
+            clock.lap("camera")
+            radiance = self.direct_stage.render(pixels, first_sample, spp, stats, film)
+            clock.lap("direct")
+            if radiance is None or ragged:
+                return radiance, None, stats
+            return radiance.reshape(m, spp, 3), None, stats
 
         # camera: one ray per pixel sample
-        if ragged:
-            counts = np.broadcast_to(np.asarray(spp, dtype=np.int64), pixels.shape)
-            first = np.broadcast_to(np.asarray(first_sample, dtype=np.int64), pixels.shape)
-            n = int(counts.sum())
-            pixel = np.repeat(pixels, counts)
-            # global index: the pixel's first sample plus the position in its run of rows
-            row_start = np.cumsum(counts) - counts
-            sample_in_pixel = np.repeat(first - row_start, counts) + np.arange(n, dtype=np.int64)
-        else:
-            n = m * spp
-            pixel = np.repeat(pixels, spp) if spp > 1 else pixels
-            sample_in_pixel = (np.full(m, first_sample, dtype=np.int64) if spp == 1 else
-                               np.tile(np.arange(first_sample, first_sample + spp, dtype=np.int64), m))
-        if self.direct_stage is not None:
-            # the stage forms the sample positions itself (see rtmesh.sampling.pixel_samples)
-            clock.lap("camera")
-            radiance = self.direct_stage.render(pixel, sample_in_pixel, stats)
-            clock.lap("direct")
-            return (radiance, None, stats) if ragged else (radiance.reshape(m, spp, 3), None, stats)
+        pixel, sample_in_pixel = sample_indices(pixels, first_sample, spp)
+        n = len(pixel)
         # every dimension is stratified in sets of the settings' spp, whatever the round
         in_pixel = self.sampler.pixel(pixel, sample_in_pixel)
         lens_uv = None

@@ -36,6 +36,40 @@ GUIDE = 2
 SCHEDULE_THREADS = 2
 
 
+def sample_indices(pixels, first_sample, spp):
+    """The pixel and the sample index of every sample of a chunk, pixel by pixel in sample
+    order.
+
+    Parameters
+    ----------
+    pixels : range or (m,) int array
+    first_sample : int or (m,) int array
+        Index of each pixel's first sample (one for all, or per pixel).
+    spp : int or (m,) int array
+        Samples of each pixel (one for all, or per pixel).
+
+    Returns
+    -------
+    pixel, sample : (n,) int64
+    """
+    if isinstance(pixels, range):
+        pixels = np.arange(pixels.start, pixels.stop, pixels.step, dtype=np.int64)
+    pixels = np.asarray(pixels, dtype=np.int64)
+    # (isinstance, not np.ndim: this runs per chunk with the GIL held)
+    if isinstance(spp, np.ndarray) or isinstance(first_sample, np.ndarray):
+        counts = np.broadcast_to(np.asarray(spp, dtype=np.int64), pixels.shape)
+        first = np.broadcast_to(np.asarray(first_sample, dtype=np.int64), pixels.shape)
+        n = int(counts.sum())
+        # global index: the pixel's first sample plus the position in its run of rows
+        row_start = np.cumsum(counts) - counts
+        return np.repeat(pixels, counts), np.repeat(first - row_start, counts) + np.arange(n, dtype=np.int64)
+    m = len(pixels)
+    pixel = np.repeat(pixels, spp) if spp > 1 else pixels
+    sample = (np.full(m, first_sample, dtype=np.int64) if spp == 1 else
+              np.tile(np.arange(first_sample, first_sample + spp, dtype=np.int64), m))
+    return pixel, sample
+
+
 def chunk_starts(total, chunk_samples):
     """Where the chunks of a batch of ``total`` pixel samples start, in samples.
 
