@@ -226,13 +226,14 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
         return _job_result(job, results, start)
     inputs.extend(opened.entries(job.path))
 
+    built = {}  # with a ground plane? -> the integrator built for the first such view
     for i, task in enumerate(job.images):
         image_start = time.perf_counter()
         stage = "render"
         try:
             check()
-            scene = _scene_for_view(parts, materials, bounds, task.view, settings, job.ground)
-            result = Integrator(scene, settings).render(progress=check)
+            result = _integrator_for_view(built, parts, materials, bounds, task.view, settings,
+                                          job.ground).render(progress=check)
             stage = "write"
             last_check[0] = 0.0  # always ask just before writing
             check()
@@ -282,18 +283,40 @@ def _load(job):
     return parts, materials, bounds
 
 
-def _scene_for_view(parts, materials, bounds, view, settings, ground):
-    """The asset's scene, framed from ``view`` and lit by the default rig."""
+def _integrator_for_view(built, parts, materials, bounds, view, settings, ground):
+    """The integrator rendering ``view``, sharing one built scene between views.
+
+    ``built`` maps "has a ground plane" to the integrator of the first view built with that
+    geometry (views from below leave the plane out, so an asset has at most two builds);
+    later views take it with their own camera and lights (:meth:`Integrator.with_view`).
+    """
+    with_ground = bool(ground and view.direction[1] >= 0)
+    integrator = built.get(with_ground)
+    if integrator is None:
+        scene = _scene_for_view(parts, materials, bounds, view, settings, ground)
+        integrator = built[with_ground] = Integrator(scene, settings)
+        return integrator
+    return integrator.with_view(*_camera_and_lights(bounds, view, settings))
+
+
+def _camera_and_lights(bounds, view, settings):
+    """The camera framing the asset from ``view`` and the default light rig of the view."""
     aspect = settings.width / settings.height
     camera = frame_bounds(bounds, aspect=aspect, direction=view.direction, up=view.up)
     rig_camera = frame_bounds(bounds, aspect=aspect, direction=view.light_direction or view.direction,
                               up=view.up)
+    return camera, default_lights(rig_camera)
+
+
+def _scene_for_view(parts, materials, bounds, view, settings, ground):
+    """The asset's scene, framed from ``view`` and lit by the default rig."""
+    camera, lights = _camera_and_lights(bounds, view, settings)
     parts, materials = list(parts), list(materials) or [Material()]
     # seen from below, the plane would stand between the camera and the asset
     if ground and view.direction[1] >= 0:
         parts.append(_ground_part(bounds, len(materials)))
         materials.append(Material(name="ground", diffuse=np.full(3, 0.8)))
-    return Scene.from_parts(parts, materials, lights=default_lights(rig_camera), camera=camera,
+    return Scene.from_parts(parts, materials, lights=lights, camera=camera,
                             ambient=np.full(3, 0.05), source=view.name)
 
 
