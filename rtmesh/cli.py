@@ -140,6 +140,7 @@ def _bytes(text):
 
 
 def _add_batch_parser(commands):
+    from rtmesh.batch.normalize import NORMALIZE_MODES
     from rtmesh.batch.runner import FORMATS, PROGRESS_MODES, VIEWS
 
     p = commands.add_parser(
@@ -165,6 +166,14 @@ def _add_batch_parser(commands):
                    help="comma-separated output formats: " + ", ".join(FORMATS) + " (default png)")
     p.add_argument("--passes", type=_names(PASSES), default=(), help="extra EXR passes: " + ", ".join(PASSES))
     p.add_argument("--ground", action="store_true", help="a ground plane under each asset (shadow)")
+    p.add_argument("--camera-json", action="store_true",
+                   help="write each image's camera (K, OpenCV/OpenGL poses, near/far, normalisation) "
+                   "next to it as IMAGE-KEY.camera.json (docs/CAMERAS.md)")
+    p.add_argument("--normalize", choices=NORMALIZE_MODES,
+                   help="centre each asset and scale it to a unit cube (longest side 1) or unit "
+                   "sphere (bounding radius 1) first")
+    p.add_argument("--ortho", action="store_true",
+                   help="orthographic cameras for the fixed views (front/top/side CAD views)")
     p.add_argument("--seed", type=int, default=0, help="random seed")
     p.add_argument("--max-depth", type=int, default=5, help="reflection/refraction bounces")
     p.add_argument("--exposure", type=float, default=0.0, help="exposure in stops for 8-bit output")
@@ -302,7 +311,8 @@ def cmd_batch(args):
     report = batch_convert(
         args.inputs, args.output, width=args.width, height=args.height, spp=args.spp,
         views=args.views, turntable=args.turntable or 0, formats=args.formats, passes=args.passes,
-        ground=args.ground, seed=args.seed, max_depth=args.max_depth, exposure=args.exposure,
+        ground=args.ground, camera_json=args.camera_json, normalize=args.normalize or "",
+        ortho=args.ortho, seed=args.seed, max_depth=args.max_depth, exposure=args.exposure,
         tonemap=args.tonemap, workers=args.workers, threads=args.threads,
         scheduler=args.scheduler, time_limit=args.time_limit, memory_limit=args.memory_limit,
         force=args.force, trust_mtime=args.trust_mtime, retry_failed=args.retry_failed,

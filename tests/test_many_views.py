@@ -73,7 +73,7 @@ def test_a_batch_job_loads_once_and_builds_once_per_ground_variant(tmp_path, mon
     # one load; one build with the ground plane (the turntable), one without (from below)
     assert len(loads) == 1 and len(builds) == 2
 
-    parts, materials, bounds = worker._load(worker.AssetJob("a.obj", str(mesh), str(tmp_path), fields, ()))
+    parts, materials, bounds, _ = worker._load(worker.AssetJob("a.obj", str(mesh), str(tmp_path), fields, ()))
     rs = worker.RenderSettings(**fields).validate()
     for view in (views[3], views[-1]):
         fresh = Integrator(worker._scene_for_view(parts, materials, bounds, view, rs, True), rs).render()

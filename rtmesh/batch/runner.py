@@ -37,7 +37,8 @@ from rtmesh import __version__
 from rtmesh.batch.identity import image_fingerprint, inputs_unchanged, unchanged
 from rtmesh.batch.inputs import InputError, discover
 from rtmesh.batch.ledger import FINGERPRINT, INPUTS, OUTPUTS, STATUS, Ledger, decode
-from rtmesh.batch.worker import VIEWS, AssetJob, ImageTask, fixed_view, turntable_views
+from rtmesh.batch.normalize import NORMALIZE_MODES
+from rtmesh.batch.worker import CAMERA_SUFFIX, VIEWS, AssetJob, ImageTask, fixed_view, turntable_views
 from rtmesh.core.errors import OutputError
 from rtmesh.loaders.importers import MESH_EXTENSIONS
 from rtmesh.rendering.settings import PASSES, RenderSettings
@@ -75,6 +76,16 @@ class BatchOptions:
     ground : bool
         Put a grey ground plane under each asset, catching its shadow (left out of views
         from below, where it would hide the asset).
+    camera_json : bool
+        Write each image's camera (intrinsics, poses in the OpenCV and OpenGL conventions,
+        near/far, the normalisation applied) next to it as ``<image key>.camera.json``
+        (:mod:`rtmesh.scene.camera_json`).
+    normalize : str
+        ``""`` (the asset as it is), ``unit-cube`` or ``unit-sphere``: centre and scale
+        each asset first (:mod:`rtmesh.batch.normalize`).
+    ortho : bool
+        Orthographic cameras for the fixed views (front, top, side CAD views) instead of
+        perspective ones.
     workers : int or None
         Local worker processes; None uses every core.  Ignored with ``scheduler``.
     threads : int or None
@@ -117,6 +128,9 @@ class BatchOptions:
     exposure: float = 0.0
     tonemap: str = "reinhard"
     ground: bool = False
+    camera_json: bool = False
+    normalize: str = ""
+    ortho: bool = False
     workers: int | None = None
     threads: int | None = None
     scheduler: object = None
@@ -135,6 +149,8 @@ class BatchOptions:
         check_names("formats", self.formats, FORMATS)
         check_names("passes", self.passes, PASSES)
         check_names("progress", (self.progress,), PROGRESS_MODES)
+        if self.normalize:
+            check_names("normalize", (self.normalize,), NORMALIZE_MODES)
         if not self.views and not self.turntable:
             raise InputError("views: give at least one view (or a turntable)")
         if not self.formats:
@@ -409,7 +425,7 @@ def plan(assets, outdir, opts, ledger, book, run=""):
             book.planned(asset, skipped, known, retried if todo else False, bool(todo))
             if todo:
                 jobs.append(AssetJob(asset.name, asset.path, outdir, {**fields, "threads": threads},
-                                     tuple(todo), opts.ground, run, run_file))
+                                     tuple(todo), opts.ground, run, run_file, opts.normalize))
     return jobs
 
 
@@ -426,17 +442,21 @@ def _image_tasks(asset, opts, shared):
         fields = opts.render_fields(o)
         frames = o.get("turntable", opts.turntable)
         views = turntable_views(frames) if frames else [fixed_view(v) for v in o.get("views", opts.views)]
-        formats = o.get("formats", opts.formats)
-        # the file names are the image's key (its identity) plus the formats
-        views = [(view, image_fingerprint(fields, dataclasses.asdict(view),
-                                          [f"*.{fmt}" for fmt in formats], opts.ground))
+        if opts.ortho and not frames:
+            views = [dataclasses.replace(view, orthographic=True) for view in views]
+        # the file names are the image's key (its identity) plus the formats (and the camera)
+        suffixes = [f".{fmt}" for fmt in o.get("formats", opts.formats)]
+        suffixes += [CAMERA_SUFFIX] * opts.camera_json
+        extra = {k: v for k, v in (("normalize", opts.normalize),) if v}
+        views = [(view, image_fingerprint(fields, view.identity(), [f"*{x}" for x in suffixes], opts.ground,
+                                          extra))
                  for view in views]
-        settings = shared[cache_key] = (fields, views, formats)
-    fields, views, formats = settings
+        settings = shared[cache_key] = (fields, views, suffixes)
+    fields, views, suffixes = settings
     tasks = []
     for view, fingerprint in views:
         key = asset.name if len(views) == 1 else f"{asset.name}.{view.name}"
-        tasks.append(ImageTask(key, view, tuple(f"{key}.{fmt}" for fmt in formats), fingerprint))
+        tasks.append(ImageTask(key, view, tuple(f"{key}{x}" for x in suffixes), fingerprint))
     return asset, fields, tasks
 
 
@@ -583,9 +603,11 @@ def _make_output_folder(outdir):
         raise OutputError(f"{outdir}: output folder is not writable: {exc.strerror}") from None
 
 
-# half-written images (".NAME.XXXX.tmp.EXT"), and the temporary files of the summary, the
-# run file, storage probes and rtmesh 0.1's ledger compaction
-_STALE = re.compile(r"^\.(.+\.tmp\.(png|exr|jpe?g)|rtmesh-batch-.+\.tmp)$", re.IGNORECASE)
+# half-written images (".NAME.XXXX.tmp.EXT") and camera files (".NAME.json.XXXX.tmp"), and
+# the temporary files of the summary, the run file, storage probes and rtmesh 0.1's ledger
+# compaction
+_STALE = re.compile(r"^\.(.+\.tmp\.(png|exr|jpe?g)|.+\.json\.[^.]+\.tmp|rtmesh-batch-.+\.tmp)$",
+                    re.IGNORECASE)
 
 
 def _remove_stale_temporaries(outdir):
