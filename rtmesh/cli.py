@@ -125,6 +125,41 @@ def _positive_float(text):
     return value
 
 
+def _non_negative_float(text):
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not 0 <= value < float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text}")
+    return value
+
+
+def _views_option(names):
+    """argparse type for ``--views``: fixed view names, or one view set (``fibonacci:N``...)
+    checked whole here, so a bad spec stops the command before anything is written."""
+    def parse(text):
+        from rtmesh.batch.view_sets import is_view_set, view_set
+
+        if not is_view_set(text.strip()):
+            return names(text)
+        try:
+            view_set(text.strip())
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc).removeprefix("views: ")) from None
+        return (text.strip(),)
+    return parse
+
+
+def _elevation(text):
+    from rtmesh.batch.view_sets import parse_elevation
+
+    try:
+        return parse_elevation(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix("elevation: ")) from None
+
+
 def _bytes(text):
     """A memory size: ``4G``, ``512M``, ``2.5GiB``, a plain number of bytes, or 0 (off)."""
     units = {"": 1, "K": 2**10, "M": 2**20, "G": 2**30, "T": 2**40}
@@ -158,8 +193,14 @@ def _add_batch_parser(commands):
     p.add_argument("--width", type=_positive_int, default=256, help="image width (default 256)")
     p.add_argument("--height", type=_positive_int, default=256, help="image height (default 256)")
     p.add_argument("--spp", type=_positive_int, default=4, help="samples per pixel (default 4)")
-    p.add_argument("--views", type=_names(tuple(VIEWS)), default=("iso",),
-                   help="comma-separated fixed views: " + ", ".join(VIEWS) + " (default iso)")
+    p.add_argument("--views", type=_views_option(_names(tuple(VIEWS))), default=("iso",),
+                   help="comma-separated fixed views: " + ", ".join(VIEWS) + " (default iso); or a view "
+                   "set: fibonacci:N (evenly spread), random:N (seeded, uniform), rings:E1,E2,...xK "
+                   "(K azimuths at each elevation, degrees)")
+    p.add_argument("--elevation", type=_elevation, default=(-90.0, 90.0), metavar="MIN,MAX",
+                   help="elevation band of random:N views, degrees (default -90,90)")
+    p.add_argument("--radius-jitter", type=_non_negative_float, default=0.0, metavar="J",
+                   help="view sets: camera distance times a seeded factor in [1, 1+J] (default 0)")
     p.add_argument("--turntable", type=_positive_int, metavar="N",
                    help="N frames orbiting each asset (instead of --views)")
     p.add_argument("--formats", type=_names(FORMATS), default=("png",),
@@ -310,7 +351,8 @@ def cmd_batch(args):
 
     report = batch_convert(
         args.inputs, args.output, width=args.width, height=args.height, spp=args.spp,
-        views=args.views, turntable=args.turntable or 0, formats=args.formats, passes=args.passes,
+        views=args.views, elevation=args.elevation, radius_jitter=args.radius_jitter,
+        turntable=args.turntable or 0, formats=args.formats, passes=args.passes,
         ground=args.ground, camera_json=args.camera_json, normalize=args.normalize or "",
         ortho=args.ortho, seed=args.seed, max_depth=args.max_depth, exposure=args.exposure,
         tonemap=args.tonemap, workers=args.workers, threads=args.threads,

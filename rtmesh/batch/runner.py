@@ -38,6 +38,7 @@ from rtmesh.batch.identity import image_fingerprint, inputs_unchanged, unchanged
 from rtmesh.batch.inputs import InputError, discover
 from rtmesh.batch.ledger import FINGERPRINT, INPUTS, OUTPUTS, STATUS, Ledger, decode
 from rtmesh.batch.normalize import NORMALIZE_MODES
+from rtmesh.batch.view_sets import is_view_set, parse_elevation, view_set
 from rtmesh.batch.worker import CAMERA_SUFFIX, VIEWS, AssetJob, ImageTask, fixed_view, turntable_views
 from rtmesh.core.errors import OutputError
 from rtmesh.loaders.importers import MESH_EXTENSIONS
@@ -64,7 +65,13 @@ class BatchOptions:
         Image size and samples per pixel (a quick thumbnail by default).
     views : tuple of str
         Fixed views (``iso``, ``front``, ``back``, ``left``, ``right``, ``top``,
-        ``bottom``), each auto-framed on the asset's bounding sphere.
+        ``bottom``), each auto-framed on the asset's bounding sphere; or one view set
+        (``("fibonacci:N",)``, ``random:N``, ``rings:E1,E2,...xK``, see
+        :mod:`rtmesh.batch.view_sets`).
+    elevation : (2,) float
+        Band of elevations, degrees, of ``random:N`` views.
+    radius_jitter : float
+        View sets: each camera's distance times a factor uniform in [1, 1 + J] (seeded).
     turntable : int
         If > 0, that many frames orbiting the asset instead of ``views``.
     formats : tuple of str
@@ -120,6 +127,8 @@ class BatchOptions:
     height: int = 256
     spp: int = 4
     views: tuple = ("iso",)
+    elevation: tuple = (-90.0, 90.0)
+    radius_jitter: float = 0.0
     turntable: int = 0
     formats: tuple = ("png",)
     passes: tuple = ()
@@ -145,7 +154,14 @@ class BatchOptions:
 
     def validate(self):
         """Raise InputError naming the first bad option."""
-        check_names("views", self.views, VIEWS)
+        if self.view_set:
+            try:
+                parse_elevation(",".join(map(str, self.elevation)))
+                view_set(self.view_set, 0, self.elevation, self.radius_jitter)
+            except ValueError as exc:
+                raise InputError(str(exc)) from None
+        else:
+            check_names("views", self.views, VIEWS)
         check_names("formats", self.formats, FORMATS)
         check_names("passes", self.passes, PASSES)
         check_names("progress", (self.progress,), PROGRESS_MODES)
@@ -172,6 +188,11 @@ class BatchOptions:
         except ValueError as exc:
             raise InputError(str(exc)) from None
         return self
+
+    @property
+    def view_set(self):
+        """The view set spec given in ``views`` (``""`` for fixed views)."""
+        return self.views[0] if len(self.views) == 1 and is_view_set(self.views[0]) else ""
 
     def render_fields(self, overrides):
         """RenderSettings fields for one asset (``overrides`` from its CSV row)."""
@@ -441,7 +462,12 @@ def _image_tasks(asset, opts, shared):
     if settings is None:
         fields = opts.render_fields(o)
         frames = o.get("turntable", opts.turntable)
-        views = turntable_views(frames) if frames else [fixed_view(v) for v in o.get("views", opts.views)]
+        if frames:
+            views = turntable_views(frames)
+        elif opts.view_set and "views" not in o:
+            views = view_set(opts.view_set, fields["seed"], opts.elevation, opts.radius_jitter)
+        else:
+            views = [fixed_view(v) for v in o.get("views", opts.views)]
         if opts.ortho and not frames:
             views = [dataclasses.replace(view, orthographic=True) for view in views]
         # the file names are the image's key (its identity) plus the formats (and the camera)
