@@ -37,6 +37,7 @@ from rtmesh import __version__
 from rtmesh.batch.identity import image_fingerprint, inputs_unchanged, unchanged
 from rtmesh.batch.inputs import InputError, discover
 from rtmesh.batch.ledger import FINGERPRINT, INPUTS, OUTPUTS, STATUS, Ledger, decode
+from rtmesh.batch.datasets import DATASETS, dataset_suffixes, write_dataset
 from rtmesh.batch.normalize import NORMALIZE_MODES
 from rtmesh.batch.view_sets import is_view_set, parse_elevation, view_set
 from rtmesh.batch.worker import CAMERA_SUFFIX, VIEWS, AssetJob, ImageTask, fixed_view, turntable_views
@@ -93,6 +94,10 @@ class BatchOptions:
     ortho : bool
         Orthographic cameras for the fixed views (front, top, side CAD views) instead of
         perspective ones.
+    dataset : str
+        ``""``, ``nerfstudio`` or ``colmap``: write each finished asset's dataset files
+        (:mod:`rtmesh.batch.datasets`); implies ``camera_json``.  With ``nerfstudio``, the
+        ``depth`` and ``alpha`` passes also give depth and mask PNGs per image.
     workers : int or None
         Local worker processes; None uses every core.  Ignored with ``scheduler``.
     threads : int or None
@@ -140,6 +145,7 @@ class BatchOptions:
     camera_json: bool = False
     normalize: str = ""
     ortho: bool = False
+    dataset: str = ""
     workers: int | None = None
     threads: int | None = None
     scheduler: object = None
@@ -167,6 +173,10 @@ class BatchOptions:
         check_names("progress", (self.progress,), PROGRESS_MODES)
         if self.normalize:
             check_names("normalize", (self.normalize,), NORMALIZE_MODES)
+        if self.dataset:
+            check_names("dataset", (self.dataset,), DATASETS)
+            if self.ortho:
+                raise InputError(f"dataset: {self.dataset} describes perspective cameras: leave out --ortho")
         if not self.views and not self.turntable:
             raise InputError("views: give at least one view (or a turntable)")
         if not self.formats:
@@ -472,7 +482,8 @@ def _image_tasks(asset, opts, shared):
             views = [dataclasses.replace(view, orthographic=True) for view in views]
         # the file names are the image's key (its identity) plus the formats (and the camera)
         suffixes = [f".{fmt}" for fmt in o.get("formats", opts.formats)]
-        suffixes += [CAMERA_SUFFIX] * opts.camera_json
+        extras = dataset_suffixes(opts.dataset, fields["passes"])
+        suffixes += [CAMERA_SUFFIX] * (opts.camera_json and not extras) + extras
         extra = {k: v for k, v in (("normalize", opts.normalize),) if v}
         views = [(view, image_fingerprint(fields, view.identity(), [f"*{x}" for x in suffixes], opts.ground,
                                           extra))
@@ -530,6 +541,7 @@ class Books:
             self._finish(record, "known_failed")
         else:
             self.counts["skipped"] += 1
+            self._write_dataset(record)
 
     def start_progress(self):
         done = self.counts["skipped"] + self.counts["known_failed"]
@@ -586,11 +598,20 @@ class Books:
         self.counts["images"] += sum(i["status"] == "done" for i in record["images"])
         self._finish(record, "failed" if failed else "done")
 
+    def _write_dataset(self, record):
+        """The asset's dataset files, once all its images are there (done or skipped)."""
+        images = record["images"]
+        if self.opts.dataset and images and all(i["status"] in ("done", "skipped") for i in images):
+            # by image key: the views of a set and the frames of a turntable in order
+            write_dataset(self.opts.dataset, self.outdir, record["asset"], sorted(images, key=lambda i: i["key"]))
+
     def _finish(self, record, status):
         record["status"] = status.replace("_", "-")
         record["errors"] = [{"image": i["key"], "stage": i.get("stage"), "message": i.get("message")}
                             for i in record["images"] if i["status"] in ("failed", "known-failed")]
         self.counts[status] += 1
+        if status == "done":
+            self._write_dataset(record)
         self.ledger.commit()
         self.assets.append(record)
         self._report.write(json.dumps(record, separators=(",", ":")) + "\n")
@@ -632,7 +653,7 @@ def _make_output_folder(outdir):
 # half-written images (".NAME.XXXX.tmp.EXT") and camera files (".NAME.json.XXXX.tmp"), and
 # the temporary files of the summary, the run file, storage probes and rtmesh 0.1's ledger
 # compaction
-_STALE = re.compile(r"^\.(.+\.tmp\.(png|exr|jpe?g)|.+\.json\.[^.]+\.tmp|rtmesh-batch-.+\.tmp)$",
+_STALE = re.compile(r"^\.(.+\.tmp\.(png|exr|jpe?g)|.+\.(json|txt)\.[^.]+\.tmp|rtmesh-batch-.+\.tmp)$",
                     re.IGNORECASE)
 
 

@@ -19,7 +19,7 @@ import numpy as np
 from rtmesh.batch.identity import OpenedFiles, describe
 from rtmesh.batch.normalize import asset_to_world, transform_points
 from rtmesh.core.errors import RtmeshError
-from rtmesh.io.images import write_image
+from rtmesh.io.images import write_depth_png, write_display_image, write_image
 from rtmesh.loaders.importers import load_trimesh, parts_from_trimesh
 from rtmesh.materials.table import Material
 from rtmesh.rendering.integrator import Integrator
@@ -40,8 +40,10 @@ VIEWS = {
     "top": ((0.0, 1.0, 0.0), (0.0, 0.0, -1.0)),
     "bottom": ((0.0, -1.0, 0.0), (0.0, 0.0, 1.0)),
 }
-# the file next to an image that describes its camera (``--camera-json``)
+# the file next to an image that describes its camera (``--camera-json``), and the depth
+# (16-bit PNG, millimetres) and mask (8-bit PNG) images of datasets (rtmesh.batch.datasets)
 CAMERA_SUFFIX = ".camera.json"
+DEPTH_PNG_SUFFIX, MASK_PNG_SUFFIX = ".depth.png", ".mask.png"
 
 
 @dataclass(frozen=True)
@@ -275,6 +277,10 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
                     scene = integrator.scene
                     write_camera_json(path, camera_record(scene.camera, settings.width, settings.height,
                                                           scene.bounds, to_world))
+                elif name.endswith(DEPTH_PNG_SUFFIX):
+                    write_depth_png(path, result.passes["depth"][:, :, 0])
+                elif name.endswith(MASK_PNG_SUFFIX):
+                    write_display_image(path, (result.passes["alpha"][:, :, :1] > 0.5).astype(np.float64))
                 else:
                     write_image(path, result.image, result.passes, settings.exposure, settings.tonemap)
                 outputs.append(describe(path, name))
