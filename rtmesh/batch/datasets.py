@@ -23,10 +23,10 @@ that reconstruction tools read beside the images, built from each image's camera
 
 import json
 import os
-import tempfile
 
 import numpy as np
 
+from rtmesh.batch.files import write_text
 from rtmesh.batch.worker import CAMERA_SUFFIX
 from rtmesh.batch.worker import DEPTH_PNG_SUFFIX as DEPTH_SUFFIX
 from rtmesh.batch.worker import MASK_PNG_SUFFIX as MASK_SUFFIX
@@ -78,7 +78,7 @@ def write_dataset(dataset, outdir, asset, images):
         return []
     if dataset == "nerfstudio":
         path = os.path.join(outdir, asset + ".transforms.json")
-        _write_text(path, json.dumps(nerfstudio_transforms(frames), indent=2) + "\n")
+        write_text(path, json.dumps(nerfstudio_transforms(frames), indent=2) + "\n")
         return [path]
     target = os.path.join(outdir, asset + ".colmap")
     os.makedirs(target, exist_ok=True)
@@ -87,7 +87,7 @@ def write_dataset(dataset, outdir, asset, images):
     for name, text in (("cameras.txt", cameras), ("images.txt", images_txt),
                        ("points3D.txt", "# 3D point list: none (rendered views, no reconstruction)\n")):
         written.append(os.path.join(target, name))
-        _write_text(written[-1], text)
+        write_text(written[-1], text)
     return written
 
 
@@ -156,24 +156,3 @@ def rotation_to_quaternion(rotation):
         q = [(r[1, 0] - r[0, 1]) / s, (r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s]
     q = np.array(q) / np.linalg.norm(q)
     return q if q[0] >= 0.0 else -q
-
-
-def _write_text(path, text):
-    """Write a text file whole or not at all."""
-    folder, name = os.path.split(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=folder)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-        os.chmod(tmp, 0o666 & ~_umask())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
-def _umask():
-    umask = os.umask(0)
-    os.umask(umask)
-    return umask

@@ -94,6 +94,9 @@ class BatchOptions:
     ortho : bool
         Orthographic cameras for the fixed views (front, top, side CAD views) instead of
         perspective ones.
+    asset_meta : bool
+        Write ``<asset>.meta.json`` per asset a job loads: counts, bounds, materials,
+        textures found and missing, load warnings (:mod:`rtmesh.batch.asset_meta`).
     dataset : str
         ``""``, ``nerfstudio`` or ``colmap``: write each finished asset's dataset files
         (:mod:`rtmesh.batch.datasets`); implies ``camera_json``.  With ``nerfstudio``, the
@@ -146,6 +149,7 @@ class BatchOptions:
     normalize: str = ""
     ortho: bool = False
     dataset: str = ""
+    asset_meta: bool = False
     workers: int | None = None
     threads: int | None = None
     scheduler: object = None
@@ -456,7 +460,8 @@ def plan(assets, outdir, opts, ledger, book, run=""):
             book.planned(asset, skipped, known, retried if todo else False, bool(todo))
             if todo:
                 jobs.append(AssetJob(asset.name, asset.path, outdir, {**fields, "threads": threads},
-                                     tuple(todo), opts.ground, run, run_file, opts.normalize))
+                                     tuple(todo), opts.ground, run, run_file, opts.normalize,
+                                     opts.asset_meta))
     return jobs
 
 
@@ -484,7 +489,8 @@ def _image_tasks(asset, opts, shared):
         suffixes = [f".{fmt}" for fmt in o.get("formats", opts.formats)]
         extras = dataset_suffixes(opts.dataset, fields["passes"])
         suffixes += [CAMERA_SUFFIX] * (opts.camera_json and not extras) + extras
-        extra = {k: v for k, v in (("normalize", opts.normalize),) if v}
+        # (a metadata file is written by the job that loads the asset: asking for it redoes them)
+        extra = {k: v for k, v in (("normalize", opts.normalize), ("asset_meta", opts.asset_meta)) if v}
         views = [(view, image_fingerprint(fields, view.identity(), [f"*{x}" for x in suffixes], opts.ground,
                                           extra))
                  for view in views]

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rtmesh.batch.asset_meta import WarningLog, asset_meta, write_meta
 from rtmesh.batch.identity import OpenedFiles, describe
 from rtmesh.batch.normalize import asset_to_world, transform_points
 from rtmesh.core.errors import RtmeshError
@@ -155,6 +156,8 @@ class AssetJob:
     normalize : str
         ``""``, ``unit-cube`` or ``unit-sphere``: move the asset first (see
         :mod:`rtmesh.batch.normalize`).
+    meta : bool
+        Write ``<asset>.meta.json`` once the asset is loaded (:mod:`rtmesh.batch.asset_meta`).
 
     Output files of an image ending in :data:`CAMERA_SUFFIX` get the camera JSON of the
     image (:func:`rtmesh.scene.camera_json.camera_record`), the others the image.
@@ -169,6 +172,7 @@ class AssetJob:
     run: str = ""
     run_file: str = ""
     normalize: str = ""
+    meta: bool = False
 
 
 # set by a worker process that runs under an address-space limit, for the failure message
@@ -246,7 +250,7 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
         return _job_result(job, results, start)
     opened = OpenedFiles()
     try:
-        with opened:
+        with opened, WarningLog() as warnings:
             parts, materials, bounds, to_world = _load(job)
     except MemoryError:
         fail_all(job.images, "memory", f"out of memory while loading{MEMORY_LIMIT_NOTE}")
@@ -256,6 +260,16 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
         fail_all(job.images, "load", _one_line(exc))
         return _job_result(job, results, start)
     inputs.extend(opened.entries(job.path))
+    if job.meta:
+        try:
+            check()
+            write_meta(job.outdir, job.asset, asset_meta(job.asset, job.path, parts, materials, bounds,
+                                                         to_world, inputs, warnings.lines))
+        except (Superseded, TimeLimitExceeded):
+            pass  # the images' loop below stops the same way
+        except Exception as exc:
+            fail_all(job.images, "write", _one_line(exc))
+            return _job_result(job, results, start)
 
     built = {}  # with a ground plane? -> the integrator built for the first such view
     for i, task in enumerate(job.images):
