@@ -38,6 +38,7 @@ from rtmesh.batch.identity import image_fingerprint, inputs_unchanged, unchanged
 from rtmesh.batch.inputs import InputError, discover
 from rtmesh.batch.ledger import FINGERPRINT, INPUTS, OUTPUTS, STATUS, Ledger, decode
 from rtmesh.batch.datasets import DATASETS, dataset_suffixes, write_dataset
+from rtmesh.batch.movies import MOVIE_FORMATS, movie_frames, write_movie
 from rtmesh.batch.normalize import NORMALIZE_MODES
 from rtmesh.batch.view_sets import is_view_set, parse_elevation, view_set
 from rtmesh.batch.worker import CAMERA_SUFFIX, VIEWS, AssetJob, ImageTask, fixed_view, turntable_views
@@ -94,6 +95,10 @@ class BatchOptions:
     ortho : bool
         Orthographic cameras for the fixed views (front, top, side CAD views) instead of
         perspective ones.
+    movie : str
+        ``""``, ``webp`` or ``gif``: with ``turntable``, assemble each asset's frames into
+        ``<asset>.turntable.webp|gif`` (:mod:`rtmesh.batch.movies`); needs png or jpg
+        among the formats.
     asset_meta : bool
         Write ``<asset>.meta.json`` per asset a job loads: counts, bounds, materials,
         textures found and missing, load warnings (:mod:`rtmesh.batch.asset_meta`).
@@ -150,6 +155,7 @@ class BatchOptions:
     ortho: bool = False
     dataset: str = ""
     asset_meta: bool = False
+    movie: str = ""
     workers: int | None = None
     threads: int | None = None
     scheduler: object = None
@@ -177,6 +183,12 @@ class BatchOptions:
         check_names("progress", (self.progress,), PROGRESS_MODES)
         if self.normalize:
             check_names("normalize", (self.normalize,), NORMALIZE_MODES)
+        if self.movie:
+            check_names("movie", (self.movie,), MOVIE_FORMATS)
+            if not self.turntable:
+                raise InputError("movie: a movie is made of turntable frames: add --turntable N")
+            if not {"png", "jpg"} & set(self.formats):
+                raise InputError("movie: the frames are read from PNG or JPEG images: add png to the formats")
         if self.dataset:
             check_names("dataset", (self.dataset,), DATASETS)
             if self.ortho:
@@ -547,7 +559,7 @@ class Books:
             self._finish(record, "known_failed")
         else:
             self.counts["skipped"] += 1
-            self._write_dataset(record)
+            self._write_asset_files(record)
 
     def start_progress(self):
         done = self.counts["skipped"] + self.counts["known_failed"]
@@ -604,12 +616,19 @@ class Books:
         self.counts["images"] += sum(i["status"] == "done" for i in record["images"])
         self._finish(record, "failed" if failed else "done")
 
-    def _write_dataset(self, record):
-        """The asset's dataset files, once all its images are there (done or skipped)."""
+    def _write_asset_files(self, record):
+        """The asset's dataset files and turntable movie, once all its images are there
+        (done or skipped)."""
         images = record["images"]
-        if self.opts.dataset and images and all(i["status"] in ("done", "skipped") for i in images):
+        if not images or any(i["status"] not in ("done", "skipped") for i in images):
+            return
+        if self.opts.dataset:
             # by image key: the views of a set and the frames of a turntable in order
             write_dataset(self.opts.dataset, self.outdir, record["asset"], sorted(images, key=lambda i: i["key"]))
+        frames = movie_frames(self.outdir, images)
+        if self.opts.movie and len(frames) > 1 and all(".turn" in i["key"] for i in images):
+            write_movie(os.path.join(self.outdir, f"{record['asset']}.turntable.{self.opts.movie}"), frames,
+                        self.opts.movie)
 
     def _finish(self, record, status):
         record["status"] = status.replace("_", "-")
@@ -617,7 +636,7 @@ class Books:
                             for i in record["images"] if i["status"] in ("failed", "known-failed")]
         self.counts[status] += 1
         if status == "done":
-            self._write_dataset(record)
+            self._write_asset_files(record)
         self.ledger.commit()
         self.assets.append(record)
         self._report.write(json.dumps(record, separators=(",", ":")) + "\n")
@@ -659,7 +678,7 @@ def _make_output_folder(outdir):
 # half-written images (".NAME.XXXX.tmp.EXT") and camera files (".NAME.json.XXXX.tmp"), and
 # the temporary files of the summary, the run file, storage probes and rtmesh 0.1's ledger
 # compaction
-_STALE = re.compile(r"^\.(.+\.tmp\.(png|exr|jpe?g)|.+\.(json|txt)\.[^.]+\.tmp|rtmesh-batch-.+\.tmp)$",
+_STALE = re.compile(r"^\.(.+\.tmp\.(png|exr|jpe?g)|.+\.(json|txt|webp|gif)\.[^.]+\.tmp|rtmesh-batch-.+\.tmp)$",
                     re.IGNORECASE)
 
 
