@@ -198,7 +198,8 @@ def _add_batch_parser(commands):
                    "set: fibonacci:N (evenly spread), random:N (seeded, uniform), rings:E1,E2,...xK "
                    "(K azimuths at each elevation, degrees)")
     p.add_argument("--elevation", type=_elevation, default=(-90.0, 90.0), metavar="MIN,MAX",
-                   help="elevation band of random:N views, degrees (default -90,90)")
+                   help="elevation band of random:N views, degrees (default -90,90; a negative MIN needs "
+                   "the = form: --elevation=-10,60)")
     p.add_argument("--radius-jitter", type=_non_negative_float, default=0.0, metavar="J",
                    help="view sets: camera distance times a seeded factor in [1, 1+J] (default 0)")
     p.add_argument("--turntable", type=_positive_int, metavar="N",
