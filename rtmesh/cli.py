@@ -220,6 +220,9 @@ def _add_batch_parser(commands):
                    "--camera-json (docs/BATCH.md)")
     p.add_argument("--movie", choices=("webp", "gif"),
                    help="with --turntable: each asset's frames as an animated ASSET.turntable.webp|gif")
+    p.add_argument("--contact-sheet", action="store_true",
+                   help="one grid image of all thumbnails with names per output folder "
+                   "(rtmesh-contact-sheet.png)")
     p.add_argument("--asset-meta", action="store_true",
                    help="write ASSET.meta.json per asset: triangle/vertex counts, bounds, materials, "
                    "textures found and missing, load warnings")
@@ -365,7 +368,7 @@ def cmd_batch(args):
         turntable=args.turntable or 0, formats=args.formats, passes=args.passes,
         ground=args.ground, camera_json=args.camera_json, normalize=args.normalize or "",
         ortho=args.ortho, dataset=args.dataset or "", asset_meta=args.asset_meta,
-        movie=args.movie or "", seed=args.seed, max_depth=args.max_depth, exposure=args.exposure,
+        movie=args.movie or "", contact_sheet=args.contact_sheet, seed=args.seed, max_depth=args.max_depth, exposure=args.exposure,
         tonemap=args.tonemap, workers=args.workers, threads=args.threads,
         scheduler=args.scheduler, time_limit=args.time_limit, memory_limit=args.memory_limit,
         force=args.force, trust_mtime=args.trust_mtime, retry_failed=args.retry_failed,

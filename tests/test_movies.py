@@ -1,5 +1,6 @@
 """Turntable movies: animated WebP and GIF read back with the right frame count and size."""
 
+import numpy as np
 import pytest
 import trimesh
 from PIL import Image
@@ -36,3 +37,27 @@ def test_a_movie_needs_a_turntable_and_8_bit_frames(tmp_path):
     with pytest.raises(rtmesh.RtmeshError, match="movie: .*png"):
         rtmesh.batch_convert([tmp_path], tmp_path / "out", movie="gif", turntable=3, formats=("exr",))
     assert not (tmp_path / "out").exists()
+
+
+def test_contact_sheet_has_a_named_thumbnail_per_image_per_folder(tmp_path):
+    src = tmp_path / "src"
+    for name in ("a.obj", "b.obj", "sub/c.obj"):
+        (src / name).parent.mkdir(parents=True, exist_ok=True)
+        trimesh.creation.box().export(src / name)
+    out = tmp_path / "out"
+    rtmesh.batch_convert([src], out, workers=1, width=20, height=10, spp=1, progress="none", contact_sheet=True)
+    # a resume that skips every image makes the sheets from the finished images too
+    (out / "rtmesh-contact-sheet.png").unlink()
+    report = rtmesh.batch_convert([src], out, workers=1, width=20, height=10, spp=1, progress="none",
+                                  contact_sheet=True)
+    assert report.counts["skipped"] == 3
+    with Image.open(out / "rtmesh-contact-sheet.png") as sheet:  # a, b: 2 columns, 1 row
+        assert sheet.size == (2 * 128, 128 + 14)
+        pixels = np.asarray(sheet.convert("L"))
+    # each thumbnail (20x10 scaled to 128x64) centred in its tile, its name written below
+    for column in range(2):
+        tile = pixels[:128, 128 * column:128 * (column + 1)]
+        assert (tile[32:96] != 255).any() and (tile[:30] == 255).all()
+        assert pixels[128:, 128 * column:128 * (column + 1)].min() < 128
+    with Image.open(out / "sub" / "rtmesh-contact-sheet.png") as sheet:
+        assert sheet.size == (128, 128 + 14)

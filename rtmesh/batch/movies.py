@@ -8,9 +8,10 @@ encoder that is not among rtmesh's dependencies).
 """
 
 import os
-import tempfile
 
 from PIL import Image
+
+from rtmesh.batch.files import replace_atomically
 
 MOVIE_FORMATS = ("webp", "gif")
 FPS = 12
@@ -43,20 +44,8 @@ def write_movie(path, frames, kind, fps=FPS):
     The file is written whole or not at all (a temporary file renamed into place).
     """
     images = [Image.open(f).convert("RGB") for f in frames]
-    folder, name = os.path.split(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=folder)
-    os.close(fd)
     options = {"save_all": True, "append_images": images[1:], "duration": int(round(1000.0 / fps)), "loop": 0}
     if kind == "webp":
         options.update(quality=90)
-    try:
-        images[0].save(tmp, format=kind.upper(), **options)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    replace_atomically(path, lambda tmp: images[0].save(tmp, format=kind.upper(), **options))
     return path

@@ -37,6 +37,7 @@ from rtmesh import __version__
 from rtmesh.batch.identity import image_fingerprint, inputs_unchanged, unchanged
 from rtmesh.batch.inputs import InputError, discover
 from rtmesh.batch.ledger import FINGERPRINT, INPUTS, OUTPUTS, STATUS, Ledger, decode
+from rtmesh.batch.contact_sheet import write_contact_sheets
 from rtmesh.batch.datasets import DATASETS, dataset_suffixes, write_dataset
 from rtmesh.batch.movies import MOVIE_FORMATS, movie_frames, write_movie
 from rtmesh.batch.normalize import NORMALIZE_MODES
@@ -95,6 +96,9 @@ class BatchOptions:
     ortho : bool
         Orthographic cameras for the fixed views (front, top, side CAD views) instead of
         perspective ones.
+    contact_sheet : bool
+        Write ``rtmesh-contact-sheet.png`` per output folder: every finished image's
+        thumbnail with its name (:mod:`rtmesh.batch.contact_sheet`).
     movie : str
         ``""``, ``webp`` or ``gif``: with ``turntable``, assemble each asset's frames into
         ``<asset>.turntable.webp|gif`` (:mod:`rtmesh.batch.movies`); needs png or jpg
@@ -156,6 +160,7 @@ class BatchOptions:
     dataset: str = ""
     asset_meta: bool = False
     movie: str = ""
+    contact_sheet: bool = False
     workers: int | None = None
     threads: int | None = None
     scheduler: object = None
@@ -397,6 +402,8 @@ def batch_convert(inputs, outdir, **options):
                           memory_limit=_memory_limit(opts.memory_limit, workers))
         finally:
             book.close()
+        if opts.contact_sheet:
+            write_contact_sheets(outdir, book.sheet)
     report = book.report(time.perf_counter() - start, runner, run)
     report.path = os.path.join(outdir, SUMMARY_NAME)
     _write_atomically(report.path, json.dumps(report.to_dict(), indent=1) + "\n")
@@ -536,6 +543,7 @@ class Books:
         self.counts = {"assets": total, "done": 0, "skipped": 0, "failed": 0, "known_failed": 0,
                        "retried": 0, "not_attempted": 0, "images": 0}
         self.assets, self.pending, self.finished_jobs = [], {}, 0
+        self.sheet = []  # (key, files) of every finished image, for --contact-sheet
         self.check_content = opts.scheduler is not None
         self._report = open(os.path.join(outdir, REPORT_NAME), "w", encoding="utf-8")
         self.progress = None
@@ -543,6 +551,8 @@ class Books:
     def planned(self, asset, skipped, known, retried, has_job):
         """Enter an asset as planned: its skipped images, known failures, and whether a job
         will run for it."""
+        if self.opts.contact_sheet:
+            self.sheet.extend((t.key, list(t.files)) for t in skipped)
         record = {"asset": asset.name, "path": asset.path, "status": None, "seconds": 0.0,
                   "retried": retried,
                   "images": [{"key": t.key, "status": "skipped", "files": list(t.files)}
@@ -582,6 +592,8 @@ class Books:
                            outputs=image.get("outputs", ()), seconds=image["seconds"],
                            run=image.get("run", ""), stage=image.get("stage"),
                            message=image.get("message"))
+        if self.opts.contact_sheet and image["status"] == "done":
+            self.sheet.append((image["key"], image["files"]))
         if record is not None:
             record["images"].append({k: image[k] for k in ("key", "status", "files", "seconds",
                                                           "stage", "message") if k in image})
@@ -678,7 +690,7 @@ def _make_output_folder(outdir):
 # half-written images (".NAME.XXXX.tmp.EXT") and camera files (".NAME.json.XXXX.tmp"), and
 # the temporary files of the summary, the run file, storage probes and rtmesh 0.1's ledger
 # compaction
-_STALE = re.compile(r"^\.(.+\.tmp\.(png|exr|jpe?g)|.+\.(json|txt|webp|gif)\.[^.]+\.tmp|rtmesh-batch-.+\.tmp)$",
+_STALE = re.compile(r"^\.(.+\.tmp\.(png|exr|jpe?g)|.+\.(json|txt|webp|gif|png)\.[^.]+\.tmp|rtmesh-batch-.+\.tmp)$",
                     re.IGNORECASE)
 
 
