@@ -125,6 +125,41 @@ def _positive_float(text):
     return value
 
 
+def _non_negative_float(text):
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not 0 <= value < float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text}")
+    return value
+
+
+def _views_option(names):
+    """argparse type for ``--views``: fixed view names, or one view set (``fibonacci:N``...)
+    checked whole here, so a bad spec stops the command before anything is written."""
+    def parse(text):
+        from rtmesh.batch.view_sets import is_view_set, view_set
+
+        if not is_view_set(text.strip()):
+            return names(text)
+        try:
+            view_set(text.strip())
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc).removeprefix("views: ")) from None
+        return (text.strip(),)
+    return parse
+
+
+def _elevation(text):
+    from rtmesh.batch.view_sets import parse_elevation
+
+    try:
+        return parse_elevation(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix("elevation: ")) from None
+
+
 def _bytes(text):
     """A memory size: ``4G``, ``512M``, ``2.5GiB``, a plain number of bytes, or 0 (off)."""
     units = {"": 1, "K": 2**10, "M": 2**20, "G": 2**30, "T": 2**40}
@@ -140,6 +175,7 @@ def _bytes(text):
 
 
 def _add_batch_parser(commands):
+    from rtmesh.batch.normalize import NORMALIZE_MODES
     from rtmesh.batch.runner import FORMATS, PROGRESS_MODES, VIEWS
 
     p = commands.add_parser(
@@ -157,14 +193,41 @@ def _add_batch_parser(commands):
     p.add_argument("--width", type=_positive_int, default=256, help="image width (default 256)")
     p.add_argument("--height", type=_positive_int, default=256, help="image height (default 256)")
     p.add_argument("--spp", type=_positive_int, default=4, help="samples per pixel (default 4)")
-    p.add_argument("--views", type=_names(tuple(VIEWS)), default=("iso",),
-                   help="comma-separated fixed views: " + ", ".join(VIEWS) + " (default iso)")
+    p.add_argument("--views", type=_views_option(_names(tuple(VIEWS))), default=("iso",),
+                   help="comma-separated fixed views: " + ", ".join(VIEWS) + " (default iso); or a view "
+                   "set: fibonacci:N (evenly spread), random:N (seeded, uniform), rings:E1,E2,...xK "
+                   "(K azimuths at each elevation, degrees)")
+    p.add_argument("--elevation", type=_elevation, default=(-90.0, 90.0), metavar="MIN,MAX",
+                   help="elevation band of random:N views, degrees (default -90,90; a negative MIN needs "
+                   "the = form: --elevation=-10,60)")
+    p.add_argument("--radius-jitter", type=_non_negative_float, default=0.0, metavar="J",
+                   help="view sets: camera distance times a seeded factor in [1, 1+J] (default 0)")
     p.add_argument("--turntable", type=_positive_int, metavar="N",
                    help="N frames orbiting each asset (instead of --views)")
     p.add_argument("--formats", type=_names(FORMATS), default=("png",),
                    help="comma-separated output formats: " + ", ".join(FORMATS) + " (default png)")
     p.add_argument("--passes", type=_names(PASSES), default=(), help="extra EXR passes: " + ", ".join(PASSES))
     p.add_argument("--ground", action="store_true", help="a ground plane under each asset (shadow)")
+    p.add_argument("--camera-json", action="store_true",
+                   help="write each image's camera (K, OpenCV/OpenGL poses, near/far, normalisation) "
+                   "next to it as IMAGE-KEY.camera.json (docs/CAMERAS.md)")
+    p.add_argument("--normalize", choices=NORMALIZE_MODES,
+                   help="centre each asset and scale it to a unit cube (longest side 1) or unit "
+                   "sphere (bounding radius 1) first")
+    p.add_argument("--dataset", choices=("nerfstudio", "colmap"),
+                   help="write each asset's dataset files: nerfstudio ASSET.transforms.json (with "
+                   "depth/mask PNGs for --passes depth,alpha) or COLMAP ASSET.colmap/*.txt; implies "
+                   "--camera-json (docs/BATCH.md)")
+    p.add_argument("--movie", choices=("webp", "gif"),
+                   help="with --turntable: each asset's frames as an animated ASSET.turntable.webp|gif")
+    p.add_argument("--contact-sheet", action="store_true",
+                   help="one grid image of all thumbnails with names per output folder "
+                   "(rtmesh-contact-sheet.png)")
+    p.add_argument("--asset-meta", action="store_true",
+                   help="write ASSET.meta.json per asset: triangle/vertex counts, bounds, materials, "
+                   "textures found and missing, load warnings")
+    p.add_argument("--ortho", action="store_true",
+                   help="orthographic cameras for the fixed views (front/top/side CAD views)")
     p.add_argument("--seed", type=int, default=0, help="random seed")
     p.add_argument("--max-depth", type=int, default=5, help="reflection/refraction bounces")
     p.add_argument("--exposure", type=float, default=0.0, help="exposure in stops for 8-bit output")
@@ -301,8 +364,12 @@ def cmd_batch(args):
 
     report = batch_convert(
         args.inputs, args.output, width=args.width, height=args.height, spp=args.spp,
-        views=args.views, turntable=args.turntable or 0, formats=args.formats, passes=args.passes,
-        ground=args.ground, seed=args.seed, max_depth=args.max_depth, exposure=args.exposure,
+        views=args.views, elevation=args.elevation, radius_jitter=args.radius_jitter,
+        turntable=args.turntable or 0, formats=args.formats, passes=args.passes,
+        ground=args.ground, camera_json=args.camera_json, normalize=args.normalize or "",
+        ortho=args.ortho, dataset=args.dataset or "", asset_meta=args.asset_meta,
+        movie=args.movie or "", contact_sheet=args.contact_sheet, seed=args.seed,
+        max_depth=args.max_depth, exposure=args.exposure,
         tonemap=args.tonemap, workers=args.workers, threads=args.threads,
         scheduler=args.scheduler, time_limit=args.time_limit, memory_limit=args.memory_limit,
         force=args.force, trust_mtime=args.trust_mtime, retry_failed=args.retry_failed,

@@ -95,7 +95,7 @@ def inputs_unchanged(entries, mesh_path, trust_mtime=False):
                for e in entries)
 
 
-def image_fingerprint(settings, view, files, ground):
+def image_fingerprint(settings, view, files, ground, extra=None):
     """Hash of everything that makes an image other than its input files.
 
     Parameters
@@ -107,10 +107,16 @@ def image_fingerprint(settings, view, files, ground):
     files : sequence of str
         Output file names (they carry the formats).
     ground : bool
+    extra : dict, optional
+        Options added after rtmesh 0.1 that change the image or its files (normalisation,
+        camera JSON...), only those not at their defaults: an image made without them
+        keeps its earlier fingerprint.
     """
     identity = {"format": FINGERPRINT_FORMAT, "rtmesh": __version__,
                 "settings": {**settings, "threads": None}, "view": view, "files": list(files),
                 "ground": bool(ground)}
+    if extra:
+        identity["extra"] = extra
     return hashlib.sha1(json.dumps(identity, sort_keys=True).encode()).hexdigest()
 
 

@@ -37,7 +37,12 @@ from rtmesh import __version__
 from rtmesh.batch.identity import image_fingerprint, inputs_unchanged, unchanged
 from rtmesh.batch.inputs import InputError, discover
 from rtmesh.batch.ledger import FINGERPRINT, INPUTS, OUTPUTS, STATUS, Ledger, decode
-from rtmesh.batch.worker import VIEWS, AssetJob, ImageTask, fixed_view, turntable_views
+from rtmesh.batch.contact_sheet import write_contact_sheets
+from rtmesh.batch.datasets import DATASETS, dataset_suffixes, write_dataset
+from rtmesh.batch.movies import MOVIE_FORMATS, movie_frames, write_movie
+from rtmesh.batch.normalize import NORMALIZE_MODES
+from rtmesh.batch.view_sets import is_view_set, parse_elevation, view_set
+from rtmesh.batch.worker import CAMERA_SUFFIX, VIEWS, AssetJob, ImageTask, fixed_view, turntable_views
 from rtmesh.core.errors import OutputError
 from rtmesh.loaders.importers import MESH_EXTENSIONS
 from rtmesh.rendering.settings import PASSES, RenderSettings
@@ -63,7 +68,13 @@ class BatchOptions:
         Image size and samples per pixel (a quick thumbnail by default).
     views : tuple of str
         Fixed views (``iso``, ``front``, ``back``, ``left``, ``right``, ``top``,
-        ``bottom``), each auto-framed on the asset's bounding sphere.
+        ``bottom``), each auto-framed on the asset's bounding sphere; or one view set
+        (``("fibonacci:N",)``, ``random:N``, ``rings:E1,E2,...xK``, see
+        :mod:`rtmesh.batch.view_sets`).
+    elevation : (2,) float
+        Band of elevations, degrees, of ``random:N`` views.
+    radius_jitter : float
+        View sets: each camera's distance times a factor uniform in [1, 1 + J] (seeded).
     turntable : int
         If > 0, that many frames orbiting the asset instead of ``views``.
     formats : tuple of str
@@ -75,6 +86,30 @@ class BatchOptions:
     ground : bool
         Put a grey ground plane under each asset, catching its shadow (left out of views
         from below, where it would hide the asset).
+    camera_json : bool
+        Write each image's camera (intrinsics, poses in the OpenCV and OpenGL conventions,
+        near/far, the normalisation applied) next to it as ``<image key>.camera.json``
+        (:mod:`rtmesh.scene.camera_json`).
+    normalize : str
+        ``""`` (the asset as it is), ``unit-cube`` or ``unit-sphere``: centre and scale
+        each asset first (:mod:`rtmesh.batch.normalize`).
+    ortho : bool
+        Orthographic cameras for the fixed views (front, top, side CAD views) instead of
+        perspective ones.
+    contact_sheet : bool
+        Write ``rtmesh-contact-sheet.png`` per output folder: every finished image's
+        thumbnail with its name (:mod:`rtmesh.batch.contact_sheet`).
+    movie : str
+        ``""``, ``webp`` or ``gif``: with ``turntable``, assemble each asset's frames into
+        ``<asset>.turntable.webp|gif`` (:mod:`rtmesh.batch.movies`); needs png or jpg
+        among the formats.
+    asset_meta : bool
+        Write ``<asset>.meta.json`` per asset a job loads: counts, bounds, materials,
+        textures found and missing, load warnings (:mod:`rtmesh.batch.asset_meta`).
+    dataset : str
+        ``""``, ``nerfstudio`` or ``colmap``: write each finished asset's dataset files
+        (:mod:`rtmesh.batch.datasets`); implies ``camera_json``.  With ``nerfstudio``, the
+        ``depth`` and ``alpha`` passes also give depth and mask PNGs per image.
     workers : int or None
         Local worker processes; None uses every core.  Ignored with ``scheduler``.
     threads : int or None
@@ -109,6 +144,8 @@ class BatchOptions:
     height: int = 256
     spp: int = 4
     views: tuple = ("iso",)
+    elevation: tuple = (-90.0, 90.0)
+    radius_jitter: float = 0.0
     turntable: int = 0
     formats: tuple = ("png",)
     passes: tuple = ()
@@ -117,6 +154,13 @@ class BatchOptions:
     exposure: float = 0.0
     tonemap: str = "reinhard"
     ground: bool = False
+    camera_json: bool = False
+    normalize: str = ""
+    ortho: bool = False
+    dataset: str = ""
+    asset_meta: bool = False
+    movie: str = ""
+    contact_sheet: bool = False
     workers: int | None = None
     threads: int | None = None
     scheduler: object = None
@@ -131,10 +175,29 @@ class BatchOptions:
 
     def validate(self):
         """Raise InputError naming the first bad option."""
-        check_names("views", self.views, VIEWS)
+        if self.view_set:
+            try:
+                parse_elevation(",".join(map(str, self.elevation)))
+                view_set(self.view_set, 0, self.elevation, self.radius_jitter)
+            except ValueError as exc:
+                raise InputError(str(exc)) from None
+        else:
+            check_names("views", self.views, VIEWS)
         check_names("formats", self.formats, FORMATS)
         check_names("passes", self.passes, PASSES)
         check_names("progress", (self.progress,), PROGRESS_MODES)
+        if self.normalize:
+            check_names("normalize", (self.normalize,), NORMALIZE_MODES)
+        if self.movie:
+            check_names("movie", (self.movie,), MOVIE_FORMATS)
+            if not self.turntable:
+                raise InputError("movie: a movie is made of turntable frames: add --turntable N")
+            if not {"png", "jpg"} & set(self.formats):
+                raise InputError("movie: the frames are read from PNG or JPEG images: add png to the formats")
+        if self.dataset:
+            check_names("dataset", (self.dataset,), DATASETS)
+            if self.ortho:
+                raise InputError(f"dataset: {self.dataset} describes perspective cameras: leave out --ortho")
         if not self.views and not self.turntable:
             raise InputError("views: give at least one view (or a turntable)")
         if not self.formats:
@@ -156,6 +219,11 @@ class BatchOptions:
         except ValueError as exc:
             raise InputError(str(exc)) from None
         return self
+
+    @property
+    def view_set(self):
+        """The view set spec given in ``views`` (``""`` for fixed views)."""
+        return self.views[0] if len(self.views) == 1 and is_view_set(self.views[0]) else ""
 
     def render_fields(self, overrides):
         """RenderSettings fields for one asset (``overrides`` from its CSV row)."""
@@ -334,6 +402,8 @@ def batch_convert(inputs, outdir, **options):
                           memory_limit=_memory_limit(opts.memory_limit, workers))
         finally:
             book.close()
+        if opts.contact_sheet:
+            write_contact_sheets(outdir, book.sheet)
     report = book.report(time.perf_counter() - start, runner, run)
     report.path = os.path.join(outdir, SUMMARY_NAME)
     _write_atomically(report.path, json.dumps(report.to_dict(), indent=1) + "\n")
@@ -409,7 +479,8 @@ def plan(assets, outdir, opts, ledger, book, run=""):
             book.planned(asset, skipped, known, retried if todo else False, bool(todo))
             if todo:
                 jobs.append(AssetJob(asset.name, asset.path, outdir, {**fields, "threads": threads},
-                                     tuple(todo), opts.ground, run, run_file))
+                                     tuple(todo), opts.ground, run, run_file, opts.normalize,
+                                     opts.asset_meta))
     return jobs
 
 
@@ -425,18 +496,29 @@ def _image_tasks(asset, opts, shared):
     if settings is None:
         fields = opts.render_fields(o)
         frames = o.get("turntable", opts.turntable)
-        views = turntable_views(frames) if frames else [fixed_view(v) for v in o.get("views", opts.views)]
-        formats = o.get("formats", opts.formats)
-        # the file names are the image's key (its identity) plus the formats
-        views = [(view, image_fingerprint(fields, dataclasses.asdict(view),
-                                          [f"*.{fmt}" for fmt in formats], opts.ground))
+        if frames:
+            views = turntable_views(frames)
+        elif opts.view_set and "views" not in o:
+            views = view_set(opts.view_set, fields["seed"], opts.elevation, opts.radius_jitter)
+        else:
+            views = [fixed_view(v) for v in o.get("views", opts.views)]
+        if opts.ortho and not frames:
+            views = [dataclasses.replace(view, orthographic=True) for view in views]
+        # the file names are the image's key (its identity) plus the formats (and the camera)
+        suffixes = [f".{fmt}" for fmt in o.get("formats", opts.formats)]
+        extras = dataset_suffixes(opts.dataset, fields["passes"])
+        suffixes += [CAMERA_SUFFIX] * (opts.camera_json and not extras) + extras
+        # (a metadata file is written by the job that loads the asset: asking for it redoes them)
+        extra = {k: v for k, v in (("normalize", opts.normalize), ("asset_meta", opts.asset_meta)) if v}
+        views = [(view, image_fingerprint(fields, view.identity(), [f"*{x}" for x in suffixes], opts.ground,
+                                          extra))
                  for view in views]
-        settings = shared[cache_key] = (fields, views, formats)
-    fields, views, formats = settings
+        settings = shared[cache_key] = (fields, views, suffixes)
+    fields, views, suffixes = settings
     tasks = []
     for view, fingerprint in views:
         key = asset.name if len(views) == 1 else f"{asset.name}.{view.name}"
-        tasks.append(ImageTask(key, view, tuple(f"{key}.{fmt}" for fmt in formats), fingerprint))
+        tasks.append(ImageTask(key, view, tuple(f"{key}{x}" for x in suffixes), fingerprint))
     return asset, fields, tasks
 
 
@@ -461,6 +543,7 @@ class Books:
         self.counts = {"assets": total, "done": 0, "skipped": 0, "failed": 0, "known_failed": 0,
                        "retried": 0, "not_attempted": 0, "images": 0}
         self.assets, self.pending, self.finished_jobs = [], {}, 0
+        self.sheet = []  # (key, files) of every finished image, for --contact-sheet
         self.check_content = opts.scheduler is not None
         self._report = open(os.path.join(outdir, REPORT_NAME), "w", encoding="utf-8")
         self.progress = None
@@ -468,6 +551,8 @@ class Books:
     def planned(self, asset, skipped, known, retried, has_job):
         """Enter an asset as planned: its skipped images, known failures, and whether a job
         will run for it."""
+        if self.opts.contact_sheet:
+            self.sheet.extend((t.key, list(t.files)) for t in skipped)
         record = {"asset": asset.name, "path": asset.path, "status": None, "seconds": 0.0,
                   "retried": retried,
                   "images": [{"key": t.key, "status": "skipped", "files": list(t.files)}
@@ -484,6 +569,7 @@ class Books:
             self._finish(record, "known_failed")
         else:
             self.counts["skipped"] += 1
+            self._write_asset_files(record)
 
     def start_progress(self):
         done = self.counts["skipped"] + self.counts["known_failed"]
@@ -506,6 +592,8 @@ class Books:
                            outputs=image.get("outputs", ()), seconds=image["seconds"],
                            run=image.get("run", ""), stage=image.get("stage"),
                            message=image.get("message"))
+        if self.opts.contact_sheet and image["status"] == "done":
+            self.sheet.append((image["key"], image["files"]))
         if record is not None:
             record["images"].append({k: image[k] for k in ("key", "status", "files", "seconds",
                                                           "stage", "message") if k in image})
@@ -540,11 +628,27 @@ class Books:
         self.counts["images"] += sum(i["status"] == "done" for i in record["images"])
         self._finish(record, "failed" if failed else "done")
 
+    def _write_asset_files(self, record):
+        """The asset's dataset files and turntable movie, once all its images are there
+        (done or skipped)."""
+        images = record["images"]
+        if not images or any(i["status"] not in ("done", "skipped") for i in images):
+            return
+        if self.opts.dataset:
+            # by image key: the views of a set and the frames of a turntable in order
+            write_dataset(self.opts.dataset, self.outdir, record["asset"], sorted(images, key=lambda i: i["key"]))
+        frames = movie_frames(self.outdir, images)
+        if self.opts.movie and len(frames) > 1 and all(".turn" in i["key"] for i in images):
+            write_movie(os.path.join(self.outdir, f"{record['asset']}.turntable.{self.opts.movie}"), frames,
+                        self.opts.movie)
+
     def _finish(self, record, status):
         record["status"] = status.replace("_", "-")
         record["errors"] = [{"image": i["key"], "stage": i.get("stage"), "message": i.get("message")}
                             for i in record["images"] if i["status"] in ("failed", "known-failed")]
         self.counts[status] += 1
+        if status == "done":
+            self._write_asset_files(record)
         self.ledger.commit()
         self.assets.append(record)
         self._report.write(json.dumps(record, separators=(",", ":")) + "\n")
@@ -583,9 +687,11 @@ def _make_output_folder(outdir):
         raise OutputError(f"{outdir}: output folder is not writable: {exc.strerror}") from None
 
 
-# half-written images (".NAME.XXXX.tmp.EXT"), and the temporary files of the summary, the
-# run file, storage probes and rtmesh 0.1's ledger compaction
-_STALE = re.compile(r"^\.(.+\.tmp\.(png|exr|jpe?g)|rtmesh-batch-.+\.tmp)$", re.IGNORECASE)
+# half-written images (".NAME.XXXX.tmp.EXT") and camera files (".NAME.json.XXXX.tmp"), and
+# the temporary files of the summary, the run file, storage probes and rtmesh 0.1's ledger
+# compaction
+_STALE = re.compile(r"^\.(.+\.tmp\.(png|exr|jpe?g)|.+\.(json|txt|webp|gif|png)\.[^.]+\.tmp|rtmesh-batch-.+\.tmp)$",
+                    re.IGNORECASE)
 
 
 def _remove_stale_temporaries(outdir):

@@ -8,6 +8,7 @@ read) and what was written (``outputs``: size and checksum of each file), see
 :mod:`rtmesh.batch.identity`.
 """
 
+import dataclasses
 import os
 import tempfile
 import time
@@ -15,14 +16,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rtmesh.batch.asset_meta import WarningLog, asset_meta, write_meta
 from rtmesh.batch.identity import OpenedFiles, describe
+from rtmesh.batch.normalize import asset_to_world, transform_points
 from rtmesh.core.errors import RtmeshError
-from rtmesh.io.images import write_image
+from rtmesh.io.images import write_depth_png, write_display_image, write_image
 from rtmesh.loaders.importers import load_trimesh, parts_from_trimesh
 from rtmesh.materials.table import Material
 from rtmesh.rendering.integrator import Integrator
 from rtmesh.rendering.settings import RenderSettings
 from rtmesh.scene.camera import frame_bounds
+from rtmesh.scene.camera_json import camera_record, write_camera_json
 from rtmesh.scene.model import MeshPart, Scene, default_lights
 
 # Directions from the subject towards the camera, and the camera's up vector.  "iso" is the
@@ -37,6 +41,10 @@ VIEWS = {
     "top": ((0.0, 1.0, 0.0), (0.0, 0.0, -1.0)),
     "bottom": ((0.0, -1.0, 0.0), (0.0, 0.0, 1.0)),
 }
+# the file next to an image that describes its camera (``--camera-json``), and the depth
+# (16-bit PNG, millimetres) and mask (8-bit PNG) images of datasets (rtmesh.batch.datasets)
+CAMERA_SUFFIX = ".camera.json"
+DEPTH_PNG_SUFFIX, MASK_PNG_SUFFIX = ".depth.png", ".mask.png"
 
 
 @dataclass(frozen=True)
@@ -54,12 +62,29 @@ class View:
         Camera direction the default light rig is placed for: the view's own for fixed views
         (each is well lit), frame 0's for a turntable (lights stay put while the camera
         orbits, so the shading moves across the object as it would on a real turntable).
+    orthographic : bool
+        An orthographic camera whose view height fits the asset's bounding sphere (CAD
+        views, ``--ortho``) instead of the perspective one.
+    distance_scale : float
+        The camera's distance from the centre, as a multiple of the auto-framed distance
+        (radius jitter of view sets; 1 frames the bounding sphere exactly).
     """
 
     name: str
     direction: tuple
     up: tuple = (0.0, 1.0, 0.0)
     light_direction: tuple | None = None
+    orthographic: bool = False
+    distance_scale: float = 1.0
+
+    def identity(self):
+        """The view's fields for its images' fingerprint; fields added after rtmesh 0.1 are
+        left out at their defaults, so the images of earlier batches keep their fingerprints."""
+        fields = dataclasses.asdict(self)
+        for name, default in (("orthographic", False), ("distance_scale", 1.0)):
+            if fields[name] == default:
+                del fields[name]
+        return fields
 
 
 def fixed_view(name):
@@ -128,6 +153,14 @@ class AssetJob:
     run_file : str
         If set, the file naming the batch run that owns the output folder: the job stops,
         writing nothing more, once it names another run (a resumed batch has taken over).
+    normalize : str
+        ``""``, ``unit-cube`` or ``unit-sphere``: move the asset first (see
+        :mod:`rtmesh.batch.normalize`).
+    meta : bool
+        Write ``<asset>.meta.json`` once the asset is loaded (:mod:`rtmesh.batch.asset_meta`).
+
+    Output files of an image ending in :data:`CAMERA_SUFFIX` get the camera JSON of the
+    image (:func:`rtmesh.scene.camera_json.camera_record`), the others the image.
     """
 
     asset: str
@@ -138,6 +171,8 @@ class AssetJob:
     ground: bool = False
     run: str = ""
     run_file: str = ""
+    normalize: str = ""
+    meta: bool = False
 
 
 # set by a worker process that runs under an address-space limit, for the failure message
@@ -215,8 +250,8 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
         return _job_result(job, results, start)
     opened = OpenedFiles()
     try:
-        with opened:
-            parts, materials, bounds = _load(job)
+        with opened, WarningLog() as warnings:
+            parts, materials, bounds, to_world = _load(job)
     except MemoryError:
         fail_all(job.images, "memory", f"out of memory while loading{MEMORY_LIMIT_NOTE}")
         return _job_result(job, results, start)
@@ -225,14 +260,26 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
         fail_all(job.images, "load", _one_line(exc))
         return _job_result(job, results, start)
     inputs.extend(opened.entries(job.path))
+    if job.meta:
+        try:
+            check()
+            write_meta(job.outdir, job.asset, asset_meta(job.asset, job.path, parts, materials, bounds,
+                                                         to_world, inputs, warnings.lines))
+        except (Superseded, TimeLimitExceeded):
+            pass  # the images' loop below stops the same way
+        except Exception as exc:
+            fail_all(job.images, "write", _one_line(exc))
+            return _job_result(job, results, start)
 
+    built = {}  # with a ground plane? -> the integrator built for the first such view
     for i, task in enumerate(job.images):
         image_start = time.perf_counter()
         stage = "render"
         try:
             check()
-            scene = _scene_for_view(parts, materials, bounds, task.view, settings, job.ground)
-            result = Integrator(scene, settings).render(progress=check)
+            integrator = _integrator_for_view(built, parts, materials, bounds, task.view, settings,
+                                              job.ground)
+            result = integrator.render(progress=check)
             stage = "write"
             last_check[0] = 0.0  # always ask just before writing
             check()
@@ -240,7 +287,16 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
             for name in task.files:
                 path = os.path.join(job.outdir, name)
                 os.makedirs(os.path.dirname(path), exist_ok=True)
-                write_image(path, result.image, result.passes, settings.exposure, settings.tonemap)
+                if name.endswith(CAMERA_SUFFIX):
+                    scene = integrator.scene
+                    write_camera_json(path, camera_record(scene.camera, settings.width, settings.height,
+                                                          scene.bounds, to_world))
+                elif name.endswith(DEPTH_PNG_SUFFIX):
+                    write_depth_png(path, result.passes["depth"][:, :, 0])
+                elif name.endswith(MASK_PNG_SUFFIX):
+                    write_display_image(path, (result.passes["alpha"][:, :, :1] > 0.5).astype(np.float64))
+                else:
+                    write_image(path, result.image, result.passes, settings.exposure, settings.tonemap)
                 outputs.append(describe(path, name))
             results.append(image_result(job, task, "done", time.perf_counter() - image_start, inputs,
                                          outputs=outputs))
@@ -274,26 +330,75 @@ def warm_up():
 
 
 def _load(job):
-    """Read the mesh once for all its views: parts, materials and the asset's bounds."""
+    """Read the mesh once for all its views.
+
+    Returns
+    -------
+    parts, materials
+        As :func:`rtmesh.loaders.importers.parts_from_trimesh`, normalised if asked.
+    bounds : (2, 3) float
+        The asset's bounds, after normalisation.
+    to_world : (4, 4) float
+        What normalisation applied to the file's coordinates (identity without).
+    """
     parts, materials = parts_from_trimesh(load_trimesh(job.path), name=job.path)
     # Scene.from_parts drops broken triangles and raises when nothing is left; build the
     # scene once here so an empty asset fails at the load stage, and frame its clean bounds
     bounds = Scene.from_parts(parts, materials, source=job.path).bounds
-    return parts, materials, bounds
+    to_world = asset_to_world(bounds, job.normalize)
+    if job.normalize:
+        # uniform scale and shift: normals, uv and colours stay as they are
+        parts = [dataclasses.replace(p, vertices=transform_points(to_world, p.vertices)) for p in parts]
+        bounds = transform_points(to_world, bounds)
+    return parts, materials, bounds, to_world
+
+
+def _integrator_for_view(built, parts, materials, bounds, view, settings, ground):
+    """The integrator rendering ``view``, sharing one built scene between views.
+
+    ``built`` maps "has a ground plane" to the integrator of the first view built with that
+    geometry (views from below leave the plane out, so an asset has at most two builds);
+    later views take it with their own camera and lights (:meth:`Integrator.with_view`).
+    """
+    with_ground = bool(ground and view.direction[1] >= 0)
+    integrator = built.get(with_ground)
+    if integrator is None:
+        scene = _scene_for_view(parts, materials, bounds, view, settings, ground)
+        integrator = built[with_ground] = Integrator(scene, settings)
+        return integrator
+    return integrator.with_view(*_camera_and_lights(bounds, view, settings))
+
+
+def _camera_and_lights(bounds, view, settings):
+    """The camera framing the asset from ``view`` and the default light rig of the view.
+
+    The perspective camera fits the bounding sphere in view (:func:`frame_bounds`), moved
+    along its axis by ``view.distance_scale``; the orthographic one stands in the same place
+    and its view fits the sphere (height ``2 r``, or ``2 r / aspect`` for a tall image).
+    """
+    aspect = settings.width / settings.height
+    camera = frame_bounds(bounds, aspect=aspect, direction=view.direction, up=view.up)
+    if view.distance_scale != 1.0:
+        camera = dataclasses.replace(
+            camera, position=camera.look_at + view.distance_scale * (camera.position - camera.look_at))
+    if view.orthographic:
+        radius = max(0.5 * float(np.linalg.norm(bounds[1] - bounds[0])), 1e-6)
+        camera = dataclasses.replace(camera, projection="orthographic",
+                                     ortho_height=2.0 * radius / min(aspect, 1.0))
+    rig_camera = frame_bounds(bounds, aspect=aspect, direction=view.light_direction or view.direction,
+                              up=view.up)
+    return camera, default_lights(rig_camera)
 
 
 def _scene_for_view(parts, materials, bounds, view, settings, ground):
     """The asset's scene, framed from ``view`` and lit by the default rig."""
-    aspect = settings.width / settings.height
-    camera = frame_bounds(bounds, aspect=aspect, direction=view.direction, up=view.up)
-    rig_camera = frame_bounds(bounds, aspect=aspect, direction=view.light_direction or view.direction,
-                              up=view.up)
+    camera, lights = _camera_and_lights(bounds, view, settings)
     parts, materials = list(parts), list(materials) or [Material()]
     # seen from below, the plane would stand between the camera and the asset
     if ground and view.direction[1] >= 0:
         parts.append(_ground_part(bounds, len(materials)))
         materials.append(Material(name="ground", diffuse=np.full(3, 0.8)))
-    return Scene.from_parts(parts, materials, lights=default_lights(rig_camera), camera=camera,
+    return Scene.from_parts(parts, materials, lights=lights, camera=camera,
                             ambient=np.full(3, 0.05), source=view.name)
 
 

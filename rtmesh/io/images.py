@@ -137,6 +137,27 @@ def write_display_image(path, display, srgb=False):
     _write_atomically(path, spec, pixels)
 
 
+def write_depth_png(path, depth, scale=1000.0):
+    """Write a depth map as a 16-bit grey PNG of ``round(depth * scale)`` (millimetres for
+    metre units at the default scale), 0 where nothing was hit (depth 0 or not finite),
+    clipped at 65535.
+
+    Parameters
+    ----------
+    path : str
+    depth : (h, w) float
+        Z-depth, scene units.
+    scale : float
+        Stored units per scene unit.
+    """
+    check_output_path(path)
+    depth = np.asarray(depth, dtype=np.float64)
+    stored = np.where(np.isfinite(depth) & (depth > 0.0), depth * scale, 0.0)
+    pixels = np.round(np.clip(stored, 0.0, 65535.0)).astype(np.uint16)
+    h, w = pixels.shape
+    _write_atomically(os.fspath(path), oiio.ImageSpec(w, h, 1, oiio.UINT16), np.ascontiguousarray(pixels[:, :, None]))
+
+
 def _8bit(display, ext):
     """Quantised pixels and the spec of an 8-bit image of display values in [0, 1]."""
     h, w, c = display.shape

@@ -28,6 +28,7 @@ interval, kept thread pools) is :mod:`rtmesh.core.runtime`'s, turned on by the p
 own their process.
 """
 
+import copy
 import dataclasses
 import logging
 import time
@@ -154,12 +155,7 @@ class Integrator:
                                        m.alpha_mode == ALPHA_MODES.index("blend"), m.alpha_cutoff,
                                        self.textures, self.offset_scale, self.sampler)
             self.accel = self.cutouts
-        self.camera = _translated(scene.camera, self.shift)
-        # formed once (and failing early on a degenerate camera), not for every chunk
-        self._camera_frame = self.camera.frame()
-        lights = [_translated(light, self.shift) for light in scene.lights if not light.is_black]
-        self.lights = [light for light in lights if not is_area_light(light)]
-        area_lights = [light for light in lights if is_area_light(light)]
+        self._emitters = None
         if m.any_emission:
             tint = mean_tint = None
             if self.textures.emission_textured:
@@ -169,11 +165,8 @@ class Integrator:
                     return self.textures.emission_tints(prim, u, v, material_id[prim])
 
                 mean_tint = self.textures.mean_emission_tints()[material_id]
-            emitters = emissive_mesh_light(self.accel.triangles, scene.face_normals,
-                                           m.emission[scene.material_id], tint, mean_tint)
-            area_lights += [emitters] if emitters is not None else []
-        self.area_lighting = (AreaLighting(area_lights, self.accel, self.settings, self.offset_scale)
-                              if area_lights else None)
+            self._emitters = emissive_mesh_light(self.accel.triangles, scene.face_normals,
+                                                 m.emission[scene.material_id], tint, mean_tint)
         self.background = as_background(scene.background)
         # the background lights the scene only when asked (scene files: [background] lighting)
         self.environment_lighting = None
@@ -181,45 +174,16 @@ class Integrator:
             self.environment_lighting = EnvironmentLighting(self.background, self.accel, self.settings,
                                                             self.offset_scale)
         lit = ~m.unlit[:, None]
-        shaded_any = bool((((m.diffuse > 0) | (m.specular > 0)) & lit).any())
+        self._shaded_any = bool((((m.diffuse > 0) | (m.specular > 0)) & lit).any())
         self.ao_distance = settings.ao_distance or 0.2 * float(np.linalg.norm(np.ptp(scene_bounds, axis=0)))
-        ambient_on = bool((scene.ambient > 0).any() and (m.ambient > 0).any())
-        # only the passes asked for are computed; a transparent background needs coverage
+        self._ambient_on = bool((scene.ambient > 0).any() and (m.ambient > 0).any())
         if settings.denoise:
             denoising.require()  # before any work: one line naming the extra when it is missing
-        # the denoiser's guides are computed even when they are not written
-        guides = ("albedo", "normal") if settings.denoise else ()
-        self.passes = PassRecorder(scene, tuple(settings.passes) + ("alpha",) * self.background.transparent
-                                   + guides, self.camera, self.shift)
         # the AO pass alone asks for 16 rays per camera hit unless ao_samples says otherwise
         self.ao_samples = settings.ao_samples or (16 if "ao" in settings.passes else 0)
-        self.plan = RenderPlan(
-            emission=m.any_emission,
-            ambient=ambient_on,
-            lights=bool(self.lights) and shaded_any,
-            area_lights=self.area_lighting is not None and shaded_any,
-            area_light_visibility=self.area_lighting is not None and bool(self.area_lighting.visible),
-            environment_lighting=self.environment_lighting is not None and shaded_any,
-            specular=m.any_specular,
-            smooth_normals=scene.vertex_normals is not None,
-            textures=bool(self.textures),
-            normal_maps=self.textures.tangents is not None,
-            cutouts=self.cutouts is not None,
-            unlit=m.any_unlit,
-            reflection=settings.max_depth > 0 and (m.any_mirror or m.any_transmission),
-            glossy=settings.max_depth > 0 and m.any_glossy,
-            refraction=settings.max_depth > 0 and m.any_transmission,
-            absorption=m.any_absorption,
-            background=not self.background.is_black,
-            passes=bool(self.passes),
-            ao=self.ao_samples > 0 and (ambient_on or "ao" in settings.passes),
-            lens=self.camera.aperture > 0.0,
-            motion=self.motion is not None,
-        )
         # per-material flags, looked up per hit
         self._shaded = ((m.diffuse > 0).any(axis=1) | (m.specular > 0).any(axis=1)) & ~m.unlit
         self._all_shaded = bool(self._shaded.all())  # then no per-hit lookup is needed
-        self._init_media(scene)
         self._has_specular = (m.specular > 0).any(axis=1)
         # per-material colours, component-major so that gathering them per hit keeps the
         # fast layout; the ambient term is the product of two constants, formed once
@@ -236,6 +200,84 @@ class Integrator:
                         else np.ascontiguousarray(scene.smooth, dtype=bool))
         # gathers with int32 indices are ~10x slower in NumPy than with intp ones
         self._material_id = scene.material_id.astype(np.intp)
+        self._set_view()
+
+    def with_view(self, camera, lights=None):
+        """The same built scene seen from another camera (and lit by other lights).
+
+        The Embree scene, textures, per-face tables and everything else that depends only
+        on the geometry and materials are shared with this integrator; only what depends on
+        the camera and the lights (rays, passes, light tables, the camera's media, the
+        stages) is formed again, so N views of one asset cost one build and N renders.  The
+        image is the one ``Integrator(scene with that camera and lights, settings)`` renders.
+
+        Parameters
+        ----------
+        camera : Camera
+            In the scene's own (world) frame.
+        lights : list, optional
+            Default: the scene's lights.
+
+        Returns
+        -------
+        Integrator
+
+        Raises
+        ------
+        ValueError
+            The scene has moving objects and ``camera``'s shutter differs from the built
+            one's (the built geometry depends on the shutter).
+        """
+        if object_motions(self.scene) and tuple(camera.shutter) != tuple(self.scene.camera.shutter):
+            raise ValueError("with_view: a scene with moving objects needs the built camera's shutter")
+        view = copy.copy(self)
+        view.scene = dataclasses.replace(self.scene, camera=camera,
+                                         lights=list(self.scene.lights if lights is None else lights))
+        view._set_view()
+        return view
+
+    def _set_view(self):
+        """Form what depends on the camera and the lights (after the geometry's tables)."""
+        scene, settings, m = self.scene, self.settings, self.scene.materials
+        self.camera = _translated(scene.camera, self.shift)
+        # formed once (and failing early on a degenerate camera), not for every chunk
+        self._camera_frame = self.camera.frame()
+        lights = [_translated(light, self.shift) for light in scene.lights if not light.is_black]
+        self.lights = [light for light in lights if not is_area_light(light)]
+        area_lights = [light for light in lights if is_area_light(light)]
+        area_lights += [self._emitters] if self._emitters is not None else []
+        self.area_lighting = (AreaLighting(area_lights, self.accel, self.settings, self.offset_scale)
+                              if area_lights else None)
+        shaded_any = self._shaded_any
+        # only the passes asked for are computed; a transparent background needs coverage;
+        # the denoiser's guides are computed even when they are not written
+        guides = ("albedo", "normal") if settings.denoise else ()
+        self.passes = PassRecorder(scene, tuple(settings.passes) + ("alpha",) * self.background.transparent
+                                   + guides, self.camera, self.shift)
+        self.plan = RenderPlan(
+            emission=m.any_emission,
+            ambient=self._ambient_on,
+            lights=bool(self.lights) and shaded_any,
+            area_lights=self.area_lighting is not None and shaded_any,
+            area_light_visibility=self.area_lighting is not None and bool(self.area_lighting.visible),
+            environment_lighting=self.environment_lighting is not None and shaded_any,
+            specular=m.any_specular,
+            smooth_normals=scene.vertex_normals is not None,
+            textures=bool(self.textures),
+            normal_maps=self.textures.tangents is not None,
+            cutouts=self.cutouts is not None,
+            unlit=m.any_unlit,
+            reflection=settings.max_depth > 0 and (m.any_mirror or m.any_transmission),
+            glossy=settings.max_depth > 0 and m.any_glossy,
+            refraction=settings.max_depth > 0 and m.any_transmission,
+            absorption=m.any_absorption,
+            background=not self.background.is_black,
+            passes=bool(self.passes),
+            ao=self.ao_samples > 0 and (self._ambient_on or "ao" in settings.passes),
+            lens=self.camera.aperture > 0.0,
+            motion=self.motion is not None,
+        )
+        self._init_media(scene)
         # the general path's stages, each reading the tables above
         self.surface_stage = SurfaceStage(self)
         self.local_shading = LocalShading(self)
@@ -294,7 +336,7 @@ class Integrator:
         # compiled passes writing the rows directly (filling the columns of a row-major
         # table from component-major ones took NumPy ~0.5 s on a million faces)
         faces = face_rows(self.accel.triangles, sc.face_normals)
-        if not self.plan.smooth_normals:
+        if sc.vertex_normals is None:  # no smooth shading (plan.smooth_normals)
             return faces, np.zeros((0, 9))
         return faces, corner_rows(sc.vertex_normals, sc.faces)
 

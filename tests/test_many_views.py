@@ -1,0 +1,81 @@
+"""Many views, one build: views of one asset share one loaded, built scene."""
+
+import dataclasses
+
+import numpy as np
+import OpenImageIO as oiio
+from scenes import settings, sphere_on_floor_scene
+
+from rtmesh.batch import worker
+from rtmesh.geometry import accel as accel_module
+from rtmesh.lights.point_lights import DirectionalLight
+from rtmesh.rendering.integrator import Integrator
+from rtmesh.scene.camera import Camera
+
+
+def _other_camera():
+    return Camera(np.array([5.0, 4.0, 3.0]), np.array([0.0, 0.0, 0.5]), [0.0, 0.0, 1.0], 40.0)
+
+
+def test_with_view_renders_what_a_fresh_build_renders():
+    """Bit for bit, with passes (camera-dependent depth) and with other lights."""
+    scene = sphere_on_floor_scene(smooth=True)
+    s = settings(width=24, height=18, spp=2, sampler="jittered", passes=("depth", "position", "normal"))
+    built = Integrator(scene, s)
+    camera = _other_camera()
+    lights = [DirectionalLight(np.array([0.3, -0.2, -1.0]), 2.0)]
+    fresh = Integrator(dataclasses.replace(scene, camera=camera, lights=lights), s).render()
+    shared = built.with_view(camera, lights)
+    assert shared.accel is built.accel
+    again = shared.render()
+    np.testing.assert_array_equal(again.image, fresh.image)
+    for name in ("depth", "position", "normal"):
+        np.testing.assert_array_equal(again.passes[name], fresh.passes[name])
+    # the original view is untouched by the new one
+    np.testing.assert_array_equal(built.render().image, Integrator(scene, s).render().image)
+
+
+def test_orthographic_and_fused_views_match_fresh_builds():
+    scene = sphere_on_floor_scene()
+    s = settings(width=20, height=20, spp=1)
+    built = Integrator(scene, s)
+    for camera in (_other_camera(),
+                   Camera(np.array([0.0, -6.0, 5.0]), np.zeros(3), [0.0, 0.0, 1.0],
+                          projection="orthographic", ortho_height=6.0)):
+        fresh = Integrator(dataclasses.replace(scene, camera=camera), s)
+        shared = built.with_view(camera)
+        assert (shared.direct_stage is None) == (fresh.direct_stage is None)
+        np.testing.assert_array_equal(shared.render().image, fresh.render().image)
+
+
+def test_a_batch_job_loads_once_and_builds_once_per_ground_variant(tmp_path, monkeypatch):
+    """Eight turntable frames: one load, one Embree build; images as from fresh builds."""
+    mesh = tmp_path / "a.obj"
+    mesh.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n")
+    builds, loads = [], []
+    real_accel, real_load = accel_module.Accel.__init__, worker.load_trimesh
+
+    def counting_accel(self, *args, **kwargs):
+        builds.append(1)
+        return real_accel(self, *args, **kwargs)
+
+    def counting_load(*args, **kwargs):
+        loads.append(1)
+        return real_load(*args, **kwargs)
+
+    monkeypatch.setattr(accel_module.Accel, "__init__", counting_accel)
+    monkeypatch.setattr(worker, "load_trimesh", counting_load)
+    views = worker.turntable_views(8) + [worker.fixed_view("bottom")]
+    tasks = tuple(worker.ImageTask(v.name, v, (f"{v.name}.exr",), "") for v in views)
+    fields = {"width": 16, "height": 12, "spp": 1, "threads": 1}
+    result = worker.run_job(worker.AssetJob("a.obj", str(mesh), str(tmp_path), fields, tasks, ground=True))
+    assert [i["status"] for i in result["images"]] == ["done"] * 9
+    # one load; one build with the ground plane (the turntable), one without (from below)
+    assert len(loads) == 1 and len(builds) == 2
+
+    parts, materials, bounds, _ = worker._load(worker.AssetJob("a.obj", str(mesh), str(tmp_path), fields, ()))
+    rs = worker.RenderSettings(**fields).validate()
+    for view in (views[3], views[-1]):
+        fresh = Integrator(worker._scene_for_view(parts, materials, bounds, view, rs, True), rs).render()
+        written = oiio.ImageInput.open(str(tmp_path / f"{view.name}.exr")).read_image("float")
+        np.testing.assert_array_equal(written[..., :3], fresh.image[..., :3])
