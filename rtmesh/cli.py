@@ -176,7 +176,8 @@ def _bytes(text):
 
 def _add_batch_parser(commands):
     from rtmesh.batch.normalize import NORMALIZE_MODES
-    from rtmesh.batch.runner import FORMATS, PROGRESS_MODES, VIEWS
+    from rtmesh.batch.options import FORMATS, PROGRESS_MODES
+    from rtmesh.batch.worker import VIEWS
 
     p = commands.add_parser(
         "batch", help="render many mesh files (folders, manifests) to images, resumably",

@@ -19,9 +19,9 @@ import pytest
 import trimesh
 
 import rtmesh
+from rtmesh.batch.books import REPORT_NAME, SUMMARY_NAME
 from rtmesh.batch.inputs import Asset, InputError, discover
 from rtmesh.batch.ledger import LEDGER_NAME, STATUS, Ledger, decode
-from rtmesh.batch.runner import REPORT_NAME, SUMMARY_NAME
 from rtmesh.cli import main
 from rtmesh.io.images import read_image
 
@@ -585,8 +585,9 @@ def test_dask_worker_with_a_private_output_folder_is_refused(tmp_path, capsys, c
 def test_images_a_job_reports_must_be_visible_here(tmp_path):
     """After each job the submitter checks every reported file: missing, short or other
     content fails the image as not visible (on Dask the content is compared too)."""
+    from rtmesh.batch.books import Books
     from rtmesh.batch.identity import describe
-    from rtmesh.batch.runner import BatchOptions, Books
+    from rtmesh.batch.options import BatchOptions
 
     (tmp_path / "a.png").write_bytes(b"12345")
     (tmp_path / "b.png").write_bytes(b"12345")

@@ -8,9 +8,9 @@ import trimesh
 from scipy import stats
 
 import rtmesh
-from rtmesh.cli import main
 from rtmesh.batch import worker
 from rtmesh.batch.view_sets import fibonacci_directions, view_set
+from rtmesh.cli import main
 from rtmesh.rendering.settings import RenderSettings
 
 

@@ -138,9 +138,10 @@ def noop_resume_ledger_cost(folder, keys):
 def bookkeeping_cost(folder, n):
     """Milliseconds per asset the submitting process spends on a finished asset: checking
     its image on disk, its ledger row and commit, its report line (:class:`rtmesh.batch.Books`)."""
+    from rtmesh.batch.books import Books
     from rtmesh.batch.identity import describe
     from rtmesh.batch.ledger import Ledger
-    from rtmesh.batch.runner import BatchOptions, Books
+    from rtmesh.batch.options import BatchOptions
 
     images = []
     for i in range(n):

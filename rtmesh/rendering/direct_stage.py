@@ -33,22 +33,19 @@ sample order) instead of returning them for a separate pass.
 
 import numpy as np
 
-from rtmesh.core.compiled import kernel, row
-from rtmesh.core.row_vectors import dot3
+from rtmesh.core.compiled import kernel
 from rtmesh.geometry import embree_packets as ep
 from rtmesh.geometry.accel import Accel
-from rtmesh.geometry.float32_rays import F32_MAX, offset_origin
-from rtmesh.lights.point_light_rows import ROW, illuminate_row
-from rtmesh.materials.blinn_phong import highlight_cosine, shade_row
+from rtmesh.lights.point_light_rows import ROW
+from rtmesh.rendering.direct_blocks import (BLOCK, LANES, PACKETS, add_light_row, any_valid, camera_block,
+                                            camera_numbers, hit_lane, light_block, ray_lane, store_radiance,
+                                            surface_block)
 from rtmesh.rendering.film_sums import add_pixel
 from rtmesh.rendering.scheduler import sample_indices
-from rtmesh.sampling.pixel_samples import PixelSampler, pixel_position
+from rtmesh.sampling.pixel_samples import PixelSampler
 from rtmesh.scene.background import SolidBackground
-from rtmesh.scene.camera_rays import image_plane_xy, pinhole_xyz
-from rtmesh.shading.direct_light import SHADOW_SHORTEN, light_reaches
-from rtmesh.shading.surfaces import surface_from_rows_inlined
+from rtmesh.shading.direct_light import SHADOW_SHORTEN
 
-_NO_TINT = np.zeros((0, 3))
 _NO_POSITIONS = np.zeros((0, 2))
 # "no film": direct_samples returns the radiance without adding it anywhere
 _NO_SUMS = np.zeros((3, 0))
@@ -56,11 +53,6 @@ _NO_COUNT = np.zeros(0, dtype=np.int64)
 _NO_IMAGE = np.zeros((0, 3), dtype=np.float32)
 # "the chunk's pixels are a run from first_pixel" for direct_samples
 _NO_PIXELS = np.zeros(0, dtype=np.int64)
-LANES = ep.LANES
-# samples per block: four packets, so the arithmetic of a block's samples runs in vector
-# loops long enough for AVX-512, while the block's records stay in L1
-PACKETS = 4
-BLOCK = PACKETS * LANES
 _PACKET_BYTES = 4 * ep.RAYHIT_WORDS * LANES  # 4-byte words
 _SHADOW_BYTES = 4 * ep.RAY_WORDS * LANES
 # float64 words of a light row
@@ -283,8 +275,8 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     -----
     Misses are computed on face 0 and ignored, so the steps of a block loop over its samples
     without early exits.  LLVM vectorises the arithmetic of the camera directions, the
-    surface records and the light samples (:func:`_camera_block`, :func:`_surface_block`,
-    :func:`_light_block`); the pixel positions, the gathers and the packet lanes stay
+    surface records and the light samples (:func:`camera_block`, :func:`surface_block`,
+    :func:`light_block`); the pixel positions, the gathers and the packet lanes stay
     scalar.  The packets of a block lie side by side in one buffer (each 64-byte aligned),
     and sample ``b`` of the block is lane ``b % 16`` of packet ``b // 16``.
     """
@@ -295,13 +287,13 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     radiance = np.empty((n, 3))
     rays, words, valid, args = ep.packet_buffers(ep.RAYHIT_WORDS, PACKETS, flags)
     shadow, shadow_words, shadow_valid, _ = ep.packet_buffers(ep.RAY_WORDS, PACKETS, flags)
-    # per sample of the block: barycentrics and the rows of its face (_surface_block), material
+    # per sample of the block: barycentrics and the rows of its face (surface_block), material
     face_rows = np.empty((23, BLOCK))
     interpolate = np.empty(BLOCK, np.bool_)
     mat = np.empty(BLOCK, np.intp)
     hit = np.empty(BLOCK, np.bool_)
-    xy = np.empty((2, BLOCK))  # positions in the pixels (_camera_block)
-    d = np.empty((3, BLOCK))  # camera ray directions (_camera_block)
+    xy = np.empty((2, BLOCK))  # positions in the pixels (camera_block)
+    d = np.empty((3, BLOCK))  # camera ray directions (camera_block)
     # per sample of the block: its pixel, its sample index and its pixel's place in the chunk
     block_pixel = np.empty(BLOCK, np.int64)
     block_sample = np.empty(BLOCK, np.int64)
@@ -330,15 +322,15 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     rec_raised = np.empty(capacity, np.bool_)
     records = 0
     shadow_rays = 0
-    camera = _camera_numbers(image_plane, forward, right, up)
+    camera = camera_numbers(image_plane, forward, right, up)
     # the lanes' fields no query changes, once for the chunk (the camera rays' origin too);
     # the blocks write only directions, tfar, the shadow rays' origins and the hit ids
     # (a loop over len(valid), not the constant BLOCK: LLVM would unroll it, which costs
     # compile time and saves nothing in a loop run once per chunk)
     for b in range(len(valid)):
-        ep.set_lane(rays, words, _hit_lane(b), position[0], position[1], position[2], 0.0, 0.0, 1.0,
+        ep.set_lane(rays, words, hit_lane(b), position[0], position[1], position[2], 0.0, 0.0, 1.0,
                     ep.DEFAULT_TFAR)
-        ep.set_lane(shadow, shadow_words, _ray_lane(b), 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0)
+        ep.set_lane(shadow, shadow_words, ray_lane(b), 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0)
     for start in range(0, n, BLOCK):
         count = min(BLOCK, n - start)
         for b in range(count):
@@ -351,7 +343,7 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
             px_sample += 1
             left -= 1
         # camera rays (rtmesh.scene.camera_rays.camera_rays, pinhole); lanes past the end repeat sample 0
-        _camera_block(film_xy, sampler, keys, corners, size, spp, block_pixel, block_sample, start, count,
+        camera_block(film_xy, sampler, keys, corners, size, spp, block_pixel, block_sample, start, count,
                           width, camera, xy, d)
         for b in range(BLOCK):
             valid[b] = -1 if b < count else 0
@@ -365,9 +357,9 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
             intersect16(valid.ctypes.data + 64 * q, scene, rays.ctypes.data + _PACKET_BYTES * q,
                         args.ctypes.data)
         # surface records (rtmesh.shading.surfaces.surface_records): the rows of the faces hit (misses use
-        # face 0) are gathered first, then one loop does the arithmetic (_surface_block)
+        # face 0) are gathered first, then one loop does the arithmetic (surface_block)
         for b in range(count):
-            at = _hit_lane(b)
+            at = hit_lane(b)
             hit[b] = words[ep.GEOM_ID * LANES + at] != -1
             f = np.intp(words[ep.PRIM_ID * LANES + at]) if hit[b] else np.intp(0)
             mat[b] = material_id[f]
@@ -382,11 +374,11 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
             else:
                 for j in range(9):
                     face_rows[14 + j, b] = 0.0
-        srf = _surface_block(face_rows, interpolate, d, count, fix_terminator)
+        srf = surface_block(face_rows, interpolate, d, count, fix_terminator)
         # each light: samples (rtmesh.shading.direct_light.light_samples) and the shadow packets
         for k in range(n_lights):
             light = lights[k]
-            lit, values, shadow_ray = _light_block(light, srf, d, count, scale, shorten)
+            lit, values, shadow_ray = light_block(light, srf, d, count, scale, shorten)
             for b in range(count):
                 cos_i[k, b] = values[0, b]
                 incident[k, 0, b], incident[k, 1, b], incident[k, 2, b] = values[1, b], values[2, b], values[3, b]
@@ -408,14 +400,14 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
                     cosine[k, b] = c
                     raised[k, b] = e >= 0.0 and c > 0.0 and c >= visible_from[mat_b]
             for q in range((count + LANES - 1) // LANES):
-                if _any_valid(shadow_valid, q):
+                if any_valid(shadow_valid, q):
                     occluded16(shadow_valid.ctypes.data + 64 * q, scene, shadow.ctypes.data + _SHADOW_BYTES * q,
                                args.ctypes.data)
             for b in range(count):
                 on = shadow_valid[b] != 0
                 shadow_rays += on
                 # Embree marks an occluded ray by setting its tfar to -inf
-                reaches[k, b] = on and shadow[ep.TFAR * LANES + _ray_lane(b)] != -np.inf
+                reaches[k, b] = on and shadow[ep.TFAR * LANES + ray_lane(b)] != -np.inf
         # add up (rtmesh.shading.direct_light.add_light, then the general path's sums)
         for b in range(count):
             i = start + b
@@ -444,9 +436,9 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
             d0 = d1 = d2 = 0.0
             for k in range(n_lights):
                 if reaches[k, b]:
-                    d0, d1, d2 = _add_light(d0, d1, d2, mat_b, cos_i[k, b], 0.0, incident[k, 0, b], incident[k, 1, b],
+                    d0, d1, d2 = add_light_row(d0, d1, d2, mat_b, cos_i[k, b], 0.0, incident[k, 0, b], incident[k, 1, b],
                                             incident[k, 2, b], diffuse, specular)
-            _store(radiance, i, base, mat_b, d0, d1, d2)
+            store_radiance(radiance, i, base, mat_b, d0, d1, d2)
         # the film: the pixels this block finished, their samples still in the cache
         while adding and done < m:
             px_samples = counts[0] if one_count else counts[done]
@@ -461,168 +453,6 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
                                       rec_incident[:records], rec_cosine[:records], rec_exponent[:records],
                                       rec_raised[:records]),
             waits)
-
-
-@row
-def _camera_block(film_xy, sampler, keys, corners, size, spp, pixel, sample, start, count, width, camera, xy, d):
-    """Writes into ``d`` (3, BLOCK) the unit directions of the camera rays of samples
-    ``start .. start + count - 1`` (lanes past the end repeat sample ``start``), as
-    :func:`rtmesh.scene.camera_rays.camera_rays` makes them for a pinhole; positions from
-    ``film_xy``, or formed here when it is empty.
-    ``pixel`` and ``sample`` (BLOCK,) are the block's own (sample ``start + b`` is entry ``b``).
-
-    ``camera`` is the image-plane map and the camera frame as a tuple of 13 numbers
-    (:func:`_camera_numbers`): numba takes and releases a reference to every array argument
-    of a compiled call (atomic instructions, shared between the render threads), and this
-    helper is called once a block.  The positions (hashing, scalar) and the directions
-    (vectorised: the loop has no branch and its output the block's constant size, see
-    :func:`_light_block`) are separate loops.  ``xy`` (2, BLOCK), scratch for the
-    positions, and ``d`` are made once by the caller: an allocation a block cost 2-4 % of a
-    frame each, and the directions loop, which reads only ``xy`` and numbers, still
-    vectorises with ``d`` passed in (measured; the light step's loop does not, see
-    :func:`_light_block`).
-    """
-    ax, bx, ay, by, fx, fy, fz, rx, ry, rz, ux, uy, uz = camera
-    if len(film_xy):
-        for b in range(count):
-            xy[0, b], xy[1, b] = film_xy[start + b, 0], film_xy[start + b, 1]
-    else:
-        for b in range(count):
-            xy[0, b], xy[1, b] = pixel_position(sampler, keys, corners, size, spp, pixel[b], sample[b])
-    inverse_width = 1.0 / width
-    for b in range(count):
-        sx, sy = image_plane_xy(xy[0, b], xy[1, b], pixel[b], width, inverse_width, ax, bx, ay, by)
-        d[0, b], d[1, b], d[2, b] = pinhole_xyz(sx, sy, fx, fy, fz, rx, ry, rz, ux, uy, uz)
-    # inactive lanes of the last packet: a copy of the first ray keeps their words finite
-    for b in range(count, BLOCK):
-        d[0, b], d[1, b], d[2, b] = d[0, 0], d[1, 0], d[2, 0]
-
-
-@row
-def _camera_numbers(image_plane, forward, right, up):
-    """The image-plane map and the camera frame as one tuple of numbers, for :func:`_camera_block`."""
-    return (image_plane[0], image_plane[1], image_plane[2], image_plane[3], forward[0], forward[1], forward[2],
-            right[0], right[1], right[2], up[0], up[1], up[2])
-
-
-@row
-def _surface_block(face_rows, interpolate, d, count, fix_terminator):
-    """Surface records of the first ``count`` samples of a block from their gathered face
-    rows (the arithmetic of :func:`rtmesh.shading.surfaces.surface_records`).
-
-    Parameters
-    ----------
-    face_rows : (23, BLOCK) float64
-        Per sample: barycentrics ``u, v``, the face's ``faces`` row (12) and its
-        ``vertex_normals`` row (9; zeros where not interpolated).
-    interpolate : (BLOCK,) bool
-        Samples whose shading normal interpolates the vertex normals.
-    d : (3, BLOCK) float64
-        Unit ray directions.
-    count : int
-    fix_terminator : bool
-
-    Returns
-    -------
-    (9, BLOCK) float64
-        Hit point, geometric and shading normal (facing the ray's side).
-
-    Notes
-    -----
-    The loop reads no table and calls only number-to-number rows, and its output has the
-    block's constant size (see :func:`_light_block`): LLVM vectorises it.  With the tables
-    read inside (``_surface_record`` per sample) the loop stayed scalar, called the row out
-    of line and took and released a reference to the vertex normals per sample (two atomic
-    instructions, about a fifth of the stage's time).
-    """
-    srf = np.empty((9, BLOCK))
-    r = face_rows
-    for b in range(count):
-        (srf[0, b], srf[1, b], srf[2, b], srf[3, b], srf[4, b], srf[5, b], srf[6, b], srf[7, b], srf[8, b],
-         _) = surface_from_rows_inlined(r[0, b], r[1, b], d[0, b], d[1, b], d[2, b], r[2, b], r[3, b], r[4, b],
-                                         r[5, b], r[6, b], r[7, b], r[8, b], r[9, b], r[10, b], r[11, b], r[12, b],
-                                         r[13, b], interpolate[b], r[14, b], r[15, b], r[16, b], r[17, b], r[18, b],
-                                         r[19, b], r[20, b], r[21, b], r[22, b], fix_terminator)
-    return srf
-
-
-@row
-def _light_block(light, srf, d, count, scale, shorten):
-    """One light at the first ``count`` surface records of a block (the arithmetic of
-    :func:`rtmesh.shading.direct_light.light_samples`).
-
-    Returns
-    -------
-    lit : (BLOCK,) bool
-        The light reaches the point (it is on the side the ray came from, its term is not 0).
-    values : (5, BLOCK) float64
-        ``ns . wi``, the incident term (3 rows) and the highlight cosine.
-    shadow_ray : (7, BLOCK) float32
-        Offset origin, float32 direction and length of the shadow ray.
-
-    Notes
-    -----
-    The loop has no branches, gathers or calls, and its outputs are made here with the
-    constant size of a block: only then does LLVM vectorise it (with output arrays passed
-    in, or sized at run time, it stays scalar, about twice as slow).
-    """
-    lit = np.empty(BLOCK, np.bool_)
-    values = np.empty((5, BLOCK))
-    shadow_ray = np.empty((7, BLOCK), np.float32)
-    for b in range(count):
-        px, py, pz = srf[0, b], srf[1, b], srf[2, b]
-        gx, gy, gz = srf[3, b], srf[4, b], srf[5, b]
-        nx, ny, nz = srf[6, b], srf[7, b], srf[8, b]
-        wx, wy, wz, distance, er, eg, eb = illuminate_row(light, px, py, pz)
-        lit[b] = light_reaches(wx, wy, wz, er, eg, eb, gx, gy, gz)
-        values[0, b] = dot3(nx, ny, nz, wx, wy, wz)
-        values[1, b], values[2, b], values[3, b] = er, eg, eb
-        values[4, b] = highlight_cosine(nx, ny, nz, -d[0, b], -d[1, b], -d[2, b], wx, wy, wz)
-        # the shadow ray's direction in float32, as Embree will see it, also sets the offset
-        dx, dy, dz = np.float32(wx), np.float32(wy), np.float32(wz)
-        shadow_ray[0, b], shadow_ray[1, b], shadow_ray[2, b] = offset_origin(px, py, pz, gx, gy, gz, dx, dy, dz, scale)
-        shadow_ray[3, b], shadow_ray[4, b], shadow_ray[5, b] = dx, dy, dz
-        shadow_ray[6, b] = np.float32(min(distance * shorten, F32_MAX))
-    return lit, values, shadow_ray
-
-
-@row
-def _add_light(d0, d1, d2, m, cos_i, power, e0, e1, e2, diffuse, specular):
-    """The direct light ``(d0, d1, d2)`` plus one light's Blinn-Phong term on material ``m``
-    (``power``: the raised highlight cosine, 0 without one; ``e``: its incident term), as
-    :func:`rtmesh.shading.direct_light.add_light` adds it."""
-    f0, f1, f2 = shade_row(0, m, cos_i, power, diffuse, _NO_TINT, specular, _NO_TINT)
-    return d0 + f0 * e0, d1 + f1 * e1, d2 + f2 * e2
-
-
-@row
-def _store(radiance, i, base, m, d0, d1, d2):
-    """Sample ``i``'s radiance: its material's emission and ambient light plus the direct
-    light, added to 0 as the general path adds a hit's local shading to its radiance."""
-    radiance[i, 0] = 0.0 + (base[m, 0] + d0)
-    radiance[i, 1] = 0.0 + (base[m, 1] + d1)
-    radiance[i, 2] = 0.0 + (base[m, 2] + d2)
-
-
-@row
-def _hit_lane(b):
-    """Word offset of sample ``b`` of a block in the ``RTCRayHit16`` packets (field 0)."""
-    return (b >> 4) * (ep.RAYHIT_WORDS * LANES) + (b & 15)
-
-
-@row
-def _ray_lane(b):
-    """Word offset of sample ``b`` of a block in the ``RTCRay16`` packets (field 0)."""
-    return (b >> 4) * (ep.RAY_WORDS * LANES) + (b & 15)
-
-
-@row
-def _any_valid(valid, q):
-    """Whether packet ``q`` of a block has an active lane."""
-    for lane in range(LANES * q, LANES * q + LANES):
-        if valid[lane]:
-            return True
-    return False
 
 
 @kernel
@@ -658,10 +488,10 @@ def finish_highlights(radiance, base, sample, mat, cos_i, incident, power, diffu
         i, m = sample[j], mat[j]
         d0 = d1 = d2 = 0.0
         while j < r and sample[j] == i:
-            d0, d1, d2 = _add_light(d0, d1, d2, m, cos_i[j], power[j], incident[j, 0], incident[j, 1],
+            d0, d1, d2 = add_light_row(d0, d1, d2, m, cos_i[j], power[j], incident[j, 0], incident[j, 1],
                                     incident[j, 2], diffuse, specular)
             j += 1
-        _store(radiance, i, base, m, d0, d1, d2)
+        store_radiance(radiance, i, base, m, d0, d1, d2)
     # the film, pixel by pixel in order (here rather than in a kernel of its own: one
     # compilation fewer on a first render)
     if len(film_count) == 0:

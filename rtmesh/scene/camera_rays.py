@@ -23,7 +23,7 @@ def image_plane_point(x, y, pixel, width, inverse_width, image_plane):
 def image_plane_xy(x, y, pixel, width, inverse_width, ax, bx, ay, by):
     """:func:`image_plane_point` with the image-plane map ``(ax, bx, ay, by)`` given as
     numbers: a compiled function that takes them instead of the array holds no reference
-    to count (see :func:`rtmesh.rendering.direct_stage._camera_block`)."""
+    to count (see :func:`rtmesh.rendering.direct_blocks.camera_block`)."""
     if pixel >= 0:
         # the row by a float product and a one-step correction: an integer division a
         # ray would keep the loop from vectorising

@@ -1,0 +1,212 @@
+"""The options of a batch: what ``rtmesh batch`` and :func:`rtmesh.batch_convert` accept, checked
+before anything runs (one line naming the option, exit 2).
+"""
+
+
+from dataclasses import dataclass
+
+from rtmesh.batch.datasets import DATASETS
+from rtmesh.batch.inputs import InputError
+from rtmesh.batch.movies import MOVIE_FORMATS
+from rtmesh.batch.normalize import NORMALIZE_MODES
+from rtmesh.batch.view_sets import is_view_set, parse_elevation, view_set
+from rtmesh.batch.worker import VIEWS
+from rtmesh.rendering.settings import PASSES, RenderSettings
+
+FORMATS = ("png", "exr", "jpg")
+
+
+PROGRESS_MODES = ("bar", "jsonl", "none")
+
+
+# address space a local worker needs to start (imports, thread stacks, the BLAS buffers)
+MIN_MEMORY_LIMIT = 1 << 30
+
+
+@dataclass
+class BatchOptions:
+    """How to convert a batch; per-asset CSV columns override the render fields.
+
+    Attributes
+    ----------
+    width, height, spp : int
+        Image size and samples per pixel (a quick thumbnail by default).
+    views : tuple of str
+        Fixed views (``iso``, ``front``, ``back``, ``left``, ``right``, ``top``,
+        ``bottom``), each auto-framed on the asset's bounding sphere; or one view set
+        (``("fibonacci:N",)``, ``random:N``, ``rings:E1,E2,...xK``, see
+        :mod:`rtmesh.batch.view_sets`).
+    elevation : (2,) float
+        Band of elevations, degrees, of ``random:N`` views.
+    radius_jitter : float
+        View sets: each camera's distance times a factor uniform in [1, 1 + J] (seeded).
+    turntable : int
+        If > 0, that many frames orbiting the asset instead of ``views``.
+    formats : tuple of str
+        ``png``, ``exr`` (linear float, with passes), ``jpg``; one render, written in each.
+    passes : tuple of str
+        Extra EXR channels (``ao``); they need ``exr`` among the formats.
+    seed, max_depth, exposure, tonemap
+        As for ``rtmesh render``.
+    ground : bool
+        Put a grey ground plane under each asset, catching its shadow (left out of views
+        from below, where it would hide the asset).
+    camera_json : bool
+        Write each image's camera (intrinsics, poses in the OpenCV and OpenGL conventions,
+        near/far, the normalisation applied) next to it as ``<image key>.camera.json``
+        (:mod:`rtmesh.scene.camera_json`).
+    normalize : str
+        ``""`` (the asset as it is), ``unit-cube`` or ``unit-sphere``: centre and scale
+        each asset first (:mod:`rtmesh.batch.normalize`).
+    ortho : bool
+        Orthographic cameras for the fixed views (front, top, side CAD views) instead of
+        perspective ones.
+    contact_sheet : bool
+        Write ``rtmesh-contact-sheet.png`` per output folder: every finished image's
+        thumbnail with its name (:mod:`rtmesh.batch.contact_sheet`).
+    movie : str
+        ``""``, ``webp`` or ``gif``: with ``turntable``, assemble each asset's frames into
+        ``<asset>.turntable.webp|gif`` (:mod:`rtmesh.batch.movies`); needs png or jpg
+        among the formats.
+    asset_meta : bool
+        Write ``<asset>.meta.json`` per asset a job loads: counts, bounds, materials,
+        textures found and missing, load warnings (:mod:`rtmesh.batch.asset_meta`).
+    dataset : str
+        ``""``, ``nerfstudio`` or ``colmap``: write each finished asset's dataset files
+        (:mod:`rtmesh.batch.datasets`); implies ``camera_json``.  With ``nerfstudio``, the
+        ``depth`` and ``alpha`` passes also give depth and mask PNGs per image.
+    workers : int or None
+        Local worker processes; None uses every core.  Ignored with ``scheduler``.
+    threads : int or None
+        Render threads per job; None gives cores / workers locally and 1 on Dask (whose
+        workers already run one task per thread).
+    scheduler : str, distributed.Client or None
+        A dask.distributed scheduler address (``tcp://host:8786``) or client.
+    time_limit : float or None
+        Seconds one asset may take (None: no limit).
+    memory_limit : int or None
+        Bytes of address space per local worker; None gives the machine's memory shared
+        out between the workers (at least 2 GiB each); 0 turns the guard off.  A limit
+        below :data:`MIN_MEMORY_LIMIT` is refused.
+    force : bool
+        Redo every image, ignoring the ledger.
+    trust_mtime : bool
+        Compare input files and finished images by size and modification time instead of
+        by content (faster: reads no file to resume).
+    retry_failed : bool
+        True (default): assets that failed in an earlier run with the same inputs are tried
+        again, once per run.  False: they are left as known failures.
+    progress : str
+        ``bar`` (a progress bar or log line on stderr), ``jsonl`` (one JSON line per
+        finished asset) or ``none``.
+    progress_file : str or None
+        Where ``jsonl`` progress goes (default stderr).
+    quiet : bool
+        Same as ``progress="none"`` (kept for the ``-q`` flag).
+    """
+
+    width: int = 256
+    height: int = 256
+    spp: int = 4
+    views: tuple = ("iso",)
+    elevation: tuple = (-90.0, 90.0)
+    radius_jitter: float = 0.0
+    turntable: int = 0
+    formats: tuple = ("png",)
+    passes: tuple = ()
+    seed: int = 0
+    max_depth: int = 5
+    exposure: float = 0.0
+    tonemap: str = "reinhard"
+    ground: bool = False
+    camera_json: bool = False
+    normalize: str = ""
+    ortho: bool = False
+    dataset: str = ""
+    asset_meta: bool = False
+    movie: str = ""
+    contact_sheet: bool = False
+    workers: int | None = None
+    threads: int | None = None
+    scheduler: object = None
+    time_limit: float | None = 600.0
+    memory_limit: int | None = None
+    force: bool = False
+    trust_mtime: bool = False
+    retry_failed: bool = True
+    progress: str = "bar"
+    progress_file: str | None = None
+    quiet: bool = False
+
+    def validate(self):
+        """Raise InputError naming the first bad option."""
+        if self.view_set:
+            try:
+                parse_elevation(",".join(map(str, self.elevation)))
+                view_set(self.view_set, 0, self.elevation, self.radius_jitter)
+            except ValueError as exc:
+                raise InputError(str(exc)) from None
+        else:
+            check_names("views", self.views, VIEWS)
+        check_names("formats", self.formats, FORMATS)
+        check_names("passes", self.passes, PASSES)
+        check_names("progress", (self.progress,), PROGRESS_MODES)
+        if self.normalize:
+            check_names("normalize", (self.normalize,), NORMALIZE_MODES)
+        if self.movie:
+            check_names("movie", (self.movie,), MOVIE_FORMATS)
+            if not self.turntable:
+                raise InputError("movie: a movie is made of turntable frames: add --turntable N")
+            if not {"png", "jpg"} & set(self.formats):
+                raise InputError("movie: the frames are read from PNG or JPEG images: add png to the formats")
+        if self.dataset:
+            check_names("dataset", (self.dataset,), DATASETS)
+            if self.ortho:
+                raise InputError(f"dataset: {self.dataset} describes perspective cameras: leave out --ortho")
+        if not self.views and not self.turntable:
+            raise InputError("views: give at least one view (or a turntable)")
+        if not self.formats:
+            raise InputError("formats: give at least one output format")
+        check_passes(self.passes, self.formats)
+        for name in ("workers", "threads"):
+            value = getattr(self, name)
+            if value is not None and value < 1:
+                raise InputError(f"{name}: must be >= 1, got {value}")
+        if self.turntable < 0:
+            raise InputError(f"turntable: must be >= 0, got {self.turntable}")
+        if self.time_limit is not None and self.time_limit <= 0:
+            raise InputError(f"time limit: must be > 0 seconds, got {self.time_limit}")
+        if self.memory_limit and self.memory_limit < MIN_MEMORY_LIMIT:
+            raise InputError(f"memory limit: {self.memory_limit / 2**20:.0f} MiB is below the "
+                             f"{MIN_MEMORY_LIMIT / 2**30:.0f} GiB a worker process needs to start")
+        try:
+            RenderSettings(**self.render_fields({})).validate()
+        except ValueError as exc:
+            raise InputError(str(exc)) from None
+        return self
+
+    @property
+    def view_set(self):
+        """The view set spec given in ``views`` (``""`` for fixed views)."""
+        return self.views[0] if len(self.views) == 1 and is_view_set(self.views[0]) else ""
+
+    def render_fields(self, overrides):
+        """RenderSettings fields for one asset (``overrides`` from its CSV row)."""
+        pick = {k: overrides.get(k, getattr(self, k)) for k in ("width", "height", "spp", "seed")}
+        return {**pick, "passes": tuple(overrides.get("passes", self.passes)),
+                "max_depth": self.max_depth, "exposure": self.exposure, "tonemap": self.tonemap,
+                "threads": self.threads}
+
+
+def check_names(what, names, allowed):
+    """Raise InputError if a name is not among ``allowed``."""
+    for name in names:
+        if name not in allowed:
+            raise InputError(f"{what}: unknown {name!r} (expected {', '.join(allowed)})")
+
+
+def check_passes(passes, formats, where=""):
+    """Raise InputError for passes asked without an EXR output (only EXR holds them)."""
+    if passes and "exr" not in formats:
+        raise InputError(f"{where}passes: {', '.join(passes)} are written only to EXR files: "
+                         f"add exr to the formats")

@@ -1,0 +1,193 @@
+"""The steps of one block of the fused direct-lighting stage, as compiled rows.
+
+A block is :data:`BLOCK` film samples, four 16-wide packets (sample ``b`` is lane
+``b % 16`` of packet ``b // 16``).  Each step works on the block's scratch arrays: the
+camera step (positions, then pinhole directions), the surface step (gathered face rows,
+then the arithmetic of :func:`rtmesh.shading.surfaces.surface_records`), the light step
+(the arithmetic of :func:`rtmesh.shading.direct_light.light_samples` for one light), and
+the Blinn-Phong sum of one light at one sample.  :func:`rtmesh.rendering.direct_stage.direct_samples`
+calls them in order; their loops have no branches, gathers or calls where LLVM is to
+vectorise them, and outputs of the block's constant size (see :func:`light_block`).
+"""
+
+import numpy as np
+
+from rtmesh.core.compiled import row
+from rtmesh.core.rays import NO_VECTORS
+from rtmesh.core.row_vectors import dot3
+from rtmesh.geometry import embree_packets as ep
+from rtmesh.geometry.float32_rays import F32_MAX, offset_origin
+from rtmesh.lights.point_light_rows import illuminate_row
+from rtmesh.materials.blinn_phong import highlight_cosine, shade_row
+from rtmesh.sampling.pixel_samples import pixel_position
+from rtmesh.scene.camera_rays import image_plane_xy, pinhole_xyz
+from rtmesh.shading.direct_light import light_reaches
+from rtmesh.shading.surfaces import surface_from_rows_inlined
+
+LANES = ep.LANES
+# samples per block: four packets, so the arithmetic of a block's samples runs in vector
+# loops long enough for AVX-512, while the block's records stay in L1
+PACKETS = 4
+BLOCK = PACKETS * LANES
+
+
+@row
+def camera_block(film_xy, sampler, keys, corners, size, spp, pixel, sample, start, count, width, camera, xy, d):
+    """Writes into ``d`` (3, BLOCK) the unit directions of the camera rays of samples
+    ``start .. start + count - 1`` (lanes past the end repeat sample ``start``), as
+    :func:`rtmesh.scene.camera_rays.camera_rays` makes them for a pinhole; positions from
+    ``film_xy``, or formed here when it is empty.
+    ``pixel`` and ``sample`` (BLOCK,) are the block's own (sample ``start + b`` is entry ``b``).
+
+    ``camera`` is the image-plane map and the camera frame as a tuple of 13 numbers
+    (:func:`camera_numbers`): numba takes and releases a reference to every array argument
+    of a compiled call (atomic instructions, shared between the render threads), and this
+    helper is called once a block.  The positions (hashing, scalar) and the directions
+    (vectorised: the loop has no branch and its output the block's constant size, see
+    :func:`light_block`) are separate loops.  ``xy`` (2, BLOCK), scratch for the
+    positions, and ``d`` are made once by the caller: an allocation a block cost 2-4 % of a
+    frame each, and the directions loop, which reads only ``xy`` and numbers, still
+    vectorises with ``d`` passed in (measured; the light step's loop does not, see
+    :func:`light_block`).
+    """
+    ax, bx, ay, by, fx, fy, fz, rx, ry, rz, ux, uy, uz = camera
+    if len(film_xy):
+        for b in range(count):
+            xy[0, b], xy[1, b] = film_xy[start + b, 0], film_xy[start + b, 1]
+    else:
+        for b in range(count):
+            xy[0, b], xy[1, b] = pixel_position(sampler, keys, corners, size, spp, pixel[b], sample[b])
+    inverse_width = 1.0 / width
+    for b in range(count):
+        sx, sy = image_plane_xy(xy[0, b], xy[1, b], pixel[b], width, inverse_width, ax, bx, ay, by)
+        d[0, b], d[1, b], d[2, b] = pinhole_xyz(sx, sy, fx, fy, fz, rx, ry, rz, ux, uy, uz)
+    # inactive lanes of the last packet: a copy of the first ray keeps their words finite
+    for b in range(count, BLOCK):
+        d[0, b], d[1, b], d[2, b] = d[0, 0], d[1, 0], d[2, 0]
+
+
+@row
+def camera_numbers(image_plane, forward, right, up):
+    """The image-plane map and the camera frame as one tuple of numbers, for :func:`camera_block`."""
+    return (image_plane[0], image_plane[1], image_plane[2], image_plane[3], forward[0], forward[1], forward[2],
+            right[0], right[1], right[2], up[0], up[1], up[2])
+
+
+@row
+def surface_block(face_rows, interpolate, d, count, fix_terminator):
+    """Surface records of the first ``count`` samples of a block from their gathered face
+    rows (the arithmetic of :func:`rtmesh.shading.surfaces.surface_records`).
+
+    Parameters
+    ----------
+    face_rows : (23, BLOCK) float64
+        Per sample: barycentrics ``u, v``, the face's ``faces`` row (12) and its
+        ``vertex_normals`` row (9; zeros where not interpolated).
+    interpolate : (BLOCK,) bool
+        Samples whose shading normal interpolates the vertex normals.
+    d : (3, BLOCK) float64
+        Unit ray directions.
+    count : int
+    fix_terminator : bool
+
+    Returns
+    -------
+    (9, BLOCK) float64
+        Hit point, geometric and shading normal (facing the ray's side).
+
+    Notes
+    -----
+    The loop reads no table and calls only number-to-number rows, and its output has the
+    block's constant size (see :func:`light_block`): LLVM vectorises it.  With the tables
+    read inside (``_surface_record`` per sample) the loop stayed scalar, called the row out
+    of line and took and released a reference to the vertex normals per sample (two atomic
+    instructions, about a fifth of the stage's time).
+    """
+    srf = np.empty((9, BLOCK))
+    r = face_rows
+    for b in range(count):
+        (srf[0, b], srf[1, b], srf[2, b], srf[3, b], srf[4, b], srf[5, b], srf[6, b], srf[7, b], srf[8, b],
+         _) = surface_from_rows_inlined(r[0, b], r[1, b], d[0, b], d[1, b], d[2, b], r[2, b], r[3, b], r[4, b],
+                                         r[5, b], r[6, b], r[7, b], r[8, b], r[9, b], r[10, b], r[11, b], r[12, b],
+                                         r[13, b], interpolate[b], r[14, b], r[15, b], r[16, b], r[17, b], r[18, b],
+                                         r[19, b], r[20, b], r[21, b], r[22, b], fix_terminator)
+    return srf
+
+
+@row
+def light_block(light, srf, d, count, scale, shorten):
+    """One light at the first ``count`` surface records of a block (the arithmetic of
+    :func:`rtmesh.shading.direct_light.light_samples`).
+
+    Returns
+    -------
+    lit : (BLOCK,) bool
+        The light reaches the point (it is on the side the ray came from, its term is not 0).
+    values : (5, BLOCK) float64
+        ``ns . wi``, the incident term (3 rows) and the highlight cosine.
+    shadow_ray : (7, BLOCK) float32
+        Offset origin, float32 direction and length of the shadow ray.
+
+    Notes
+    -----
+    The loop has no branches, gathers or calls, and its outputs are made here with the
+    constant size of a block: only then does LLVM vectorise it (with output arrays passed
+    in, or sized at run time, it stays scalar, about twice as slow).
+    """
+    lit = np.empty(BLOCK, np.bool_)
+    values = np.empty((5, BLOCK))
+    shadow_ray = np.empty((7, BLOCK), np.float32)
+    for b in range(count):
+        px, py, pz = srf[0, b], srf[1, b], srf[2, b]
+        gx, gy, gz = srf[3, b], srf[4, b], srf[5, b]
+        nx, ny, nz = srf[6, b], srf[7, b], srf[8, b]
+        wx, wy, wz, distance, er, eg, eb = illuminate_row(light, px, py, pz)
+        lit[b] = light_reaches(wx, wy, wz, er, eg, eb, gx, gy, gz)
+        values[0, b] = dot3(nx, ny, nz, wx, wy, wz)
+        values[1, b], values[2, b], values[3, b] = er, eg, eb
+        values[4, b] = highlight_cosine(nx, ny, nz, -d[0, b], -d[1, b], -d[2, b], wx, wy, wz)
+        # the shadow ray's direction in float32, as Embree will see it, also sets the offset
+        dx, dy, dz = np.float32(wx), np.float32(wy), np.float32(wz)
+        shadow_ray[0, b], shadow_ray[1, b], shadow_ray[2, b] = offset_origin(px, py, pz, gx, gy, gz, dx, dy, dz, scale)
+        shadow_ray[3, b], shadow_ray[4, b], shadow_ray[5, b] = dx, dy, dz
+        shadow_ray[6, b] = np.float32(min(distance * shorten, F32_MAX))
+    return lit, values, shadow_ray
+
+
+@row
+def add_light_row(d0, d1, d2, m, cos_i, power, e0, e1, e2, diffuse, specular):
+    """The direct light ``(d0, d1, d2)`` plus one light's Blinn-Phong term on material ``m``
+    (``power``: the raised highlight cosine, 0 without one; ``e``: its incident term), as
+    :func:`rtmesh.shading.direct_light.add_light` adds it."""
+    f0, f1, f2 = shade_row(0, m, cos_i, power, diffuse, NO_VECTORS, specular, NO_VECTORS)
+    return d0 + f0 * e0, d1 + f1 * e1, d2 + f2 * e2
+
+
+@row
+def store_radiance(radiance, i, base, m, d0, d1, d2):
+    """Sample ``i``'s radiance: its material's emission and ambient light plus the direct
+    light, added to 0 as the general path adds a hit's local shading to its radiance."""
+    radiance[i, 0] = 0.0 + (base[m, 0] + d0)
+    radiance[i, 1] = 0.0 + (base[m, 1] + d1)
+    radiance[i, 2] = 0.0 + (base[m, 2] + d2)
+
+
+@row
+def hit_lane(b):
+    """Word offset of sample ``b`` of a block in the ``RTCRayHit16`` packets (field 0)."""
+    return (b >> 4) * (ep.RAYHIT_WORDS * LANES) + (b & 15)
+
+
+@row
+def ray_lane(b):
+    """Word offset of sample ``b`` of a block in the ``RTCRay16`` packets (field 0)."""
+    return (b >> 4) * (ep.RAY_WORDS * LANES) + (b & 15)
+
+
+@row
+def any_valid(valid, q):
+    """Whether packet ``q`` of a block has an active lane."""
+    for lane in range(LANES * q, LANES * q + LANES):
+        if valid[lane]:
+            return True
+    return False
