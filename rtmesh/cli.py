@@ -219,8 +219,9 @@ def _add_batch_parser(commands):
                    help="write each asset's dataset files: nerfstudio ASSET.transforms.json (with "
                    "depth/mask PNGs for --passes depth,alpha) or COLMAP ASSET.colmap/*.txt; implies "
                    "--camera-json (docs/BATCH.md)")
-    p.add_argument("--movie", choices=("webp", "gif"),
-                   help="with --turntable: each asset's frames as an animated ASSET.turntable.webp|gif")
+    p.add_argument("--movie", choices=("webp", "gif", "mp4"),
+                   help="with --turntable: each asset's frames as ASSET.turntable.webp|gif|mp4 "
+                   "(mp4 needs rtmesh[movie])")
     p.add_argument("--contact-sheet", action="store_true",
                    help="one grid image of all thumbnails with names per output folder "
                    "(rtmesh-contact-sheet.png)")

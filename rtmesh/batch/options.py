@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 from rtmesh.batch.datasets import DATASETS
 from rtmesh.batch.inputs import InputError
-from rtmesh.batch.movies import MOVIE_FORMATS
+from rtmesh.batch.movies import MOVIE_FORMATS, require_mp4
 from rtmesh.batch.normalize import NORMALIZE_MODES
 from rtmesh.batch.view_sets import is_view_set, parse_elevation, view_set
 from rtmesh.batch.worker import VIEWS
@@ -159,6 +159,8 @@ class BatchOptions:
                 raise InputError("movie: a movie is made of turntable frames: add --turntable N")
             if not {"png", "jpg"} & set(self.formats):
                 raise InputError("movie: the frames are read from PNG or JPEG images: add png to the formats")
+            if self.movie == "mp4":
+                require_mp4()  # before any job: one line naming the extra
         if self.dataset:
             check_names("dataset", (self.dataset,), DATASETS)
             if self.ortho:
