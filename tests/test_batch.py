@@ -291,7 +291,7 @@ def test_no_temporary_file_outlives_a_killed_run(tmp_path):
     out = tmp_path / "out"
     out.mkdir()
     stale = [".rtmesh-batch-ledger.k2j3h4.tmp", ".rtmesh-batch-summary.json.x1.tmp",
-             ".rtmesh-batch-probe-0123.tmp", ".m.obj.ab12.tmp.png"]
+             ".rtmesh-batch-probe-0123.tmp", ".m.obj.ab12.tmp.png", ".m.obj.turntable.mp4.cd34.tmp"]
     for name in stale:
         (out / name).write_bytes(b"x" * 1000)
     rtmesh.batch_convert([make_mesh(tmp_path / "src" / "m.obj")], out, workers=1, **TINY)

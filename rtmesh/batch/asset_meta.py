@@ -23,8 +23,8 @@ import os
 
 import numpy as np
 
-from rtmesh.batch.files import write_text
 from rtmesh.batch.normalize import transform_points
+from rtmesh.io.atomic_files import write_text
 from rtmesh.materials.table import TEXTURE_FIELDS
 
 

@@ -8,7 +8,6 @@ bad invocation, 3 the Dask cluster was lost).
 import json
 import os
 import sys
-import tempfile
 import time
 from dataclasses import dataclass, field
 
@@ -256,20 +255,3 @@ class Books:
                                           time.localtime(time.time() - wall_seconds))}
         return BatchReport(dict(self.counts), self.assets, wall_seconds, per_minute, runner,
                            extra=extra)
-
-
-def write_atomically(path, text):
-    """Write a small text file whole or not at all, with the usual permissions (umask)."""
-    folder, name = os.path.split(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{name.lstrip('.')}.", suffix=".tmp", dir=folder)
-    try:
-        umask = os.umask(0)
-        os.umask(umask)
-        os.fchmod(fd, 0o666 & ~umask)  # mkstemp makes 0600 files
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise

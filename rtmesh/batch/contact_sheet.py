@@ -11,7 +11,7 @@ import os
 
 from PIL import Image, ImageDraw
 
-from rtmesh.batch.files import replace_atomically
+from rtmesh.io.atomic_files import replace_atomically
 
 SHEET_NAME = "rtmesh-contact-sheet.png"
 TILE = 128  # pixels, the largest side of a thumbnail

@@ -26,10 +26,10 @@ import os
 
 import numpy as np
 
-from rtmesh.batch.files import write_text
 from rtmesh.batch.worker import CAMERA_SUFFIX
 from rtmesh.batch.worker import DEPTH_PNG_SUFFIX as DEPTH_SUFFIX
 from rtmesh.batch.worker import MASK_PNG_SUFFIX as MASK_SUFFIX
+from rtmesh.io.atomic_files import write_text
 
 DATASETS = ("nerfstudio", "colmap")
 # image formats a dataset's frames point at, by preference

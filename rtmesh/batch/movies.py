@@ -13,8 +13,8 @@ import os
 import numpy as np
 from PIL import Image
 
-from rtmesh.batch.files import replace_atomically
 from rtmesh.core.errors import MissingExtraError
+from rtmesh.io.atomic_files import replace_atomically
 
 MOVIE_FORMATS = ("webp", "gif", "mp4")
 MP4_INSTALL = "pip install 'rtmesh[movie]'"

@@ -34,7 +34,7 @@ import tempfile
 import time
 import uuid
 
-from rtmesh.batch.books import SUMMARY_NAME, Books, write_atomically
+from rtmesh.batch.books import SUMMARY_NAME, Books
 from rtmesh.batch.contact_sheet import write_contact_sheets
 from rtmesh.batch.datasets import dataset_suffixes
 from rtmesh.batch.identity import image_fingerprint, inputs_unchanged, unchanged
@@ -44,6 +44,7 @@ from rtmesh.batch.options import FORMATS, BatchOptions, check_names, check_passe
 from rtmesh.batch.view_sets import view_set
 from rtmesh.batch.worker import CAMERA_SUFFIX, VIEWS, AssetJob, ImageTask, fixed_view, turntable_views
 from rtmesh.core.errors import OutputError
+from rtmesh.io.atomic_files import write_text
 from rtmesh.loaders.importers import MESH_EXTENSIONS
 from rtmesh.rendering.settings import PASSES
 
@@ -101,7 +102,7 @@ def batch_convert(inputs, outdir, **options):
     with Ledger(outdir) as ledger:
         _remove_stale_temporaries(outdir)
         # the run that owns the folder now: tasks of an earlier run stop before writing
-        write_atomically(os.path.join(outdir, RUN_FILE), run + "\n")
+        write_text(os.path.join(outdir, RUN_FILE), run + "\n")
         book = Books(ledger, outdir, opts, len(assets), progress_stream)
         try:
             jobs = plan(assets, outdir, opts, ledger, book, run)
@@ -131,7 +132,7 @@ def batch_convert(inputs, outdir, **options):
             write_contact_sheets(outdir, book.sheet)
     report = book.report(time.perf_counter() - start, runner, run)
     report.path = os.path.join(outdir, SUMMARY_NAME)
-    write_atomically(report.path, json.dumps(report.to_dict(), indent=1) + "\n")
+    write_text(report.path, json.dumps(report.to_dict(), indent=1) + "\n")
     return report
 
 
@@ -265,7 +266,7 @@ def _make_output_folder(outdir):
 # half-written images (".NAME.XXXX.tmp.EXT") and camera files (".NAME.json.XXXX.tmp"), and
 # the temporary files of the summary, the run file, storage probes and rtmesh 0.1's ledger
 # compaction
-_STALE = re.compile(r"^\.(.+\.tmp\.(png|exr|jpe?g)|.+\.(json|txt|webp|gif|png)\.[^.]+\.tmp|rtmesh-batch-.+\.tmp)$",
+_STALE = re.compile(r"^\.(.+\.tmp\.(png|exr|jpe?g)|.+\.(json|txt|webp|gif|mp4|png)\.[^.]+\.tmp|rtmesh-batch-.+\.tmp)$",
                     re.IGNORECASE)
 
 

@@ -7,12 +7,12 @@ leaves a partial image (and never destroys an existing one).
 
 import os
 import sys
-import tempfile
 
 import numpy as np
 import OpenImageIO as oiio
 
 from rtmesh.core.errors import OutputError
+from rtmesh.io.atomic_files import replace_atomically
 from rtmesh.io.colour import linear_to_srgb, tonemap
 from rtmesh.io.passes import exr_channel_names
 
@@ -191,16 +191,13 @@ def _exr_channels(image, passes):
 
 
 def _write_atomically(path, spec, pixels):
-    folder = os.path.dirname(os.path.abspath(path))
-    base, ext = os.path.splitext(os.path.basename(path))
-    # same extension so OpenImageIO picks the right writer; hidden name so nothing half
-    # written is mistaken for a result
-    fd, tmp = tempfile.mkstemp(prefix=f".{base}.", suffix=f".tmp{ext}", dir=folder)
-    os.close(fd)
-    try:
+    """Write ``pixels`` with OpenImageIO, whole or not at all (see
+    :func:`rtmesh.io.atomic_files.replace_atomically`; the temporary keeps the extension, by
+    which OpenImageIO picks its writer)."""
+    def write(tmp):
         out = oiio.ImageOutput.create(tmp)
         if out is None:
-            raise OutputError(f"{path}: no image writer for {ext}: {oiio.geterror()}")
+            raise OutputError(f"{path}: no image writer for {os.path.splitext(path)[1]}: {oiio.geterror()}")
         try:
             if not out.open(tmp, spec):
                 raise OutputError(f"{path}: cannot write: {out.geterror() or oiio.geterror()}")
@@ -208,15 +205,8 @@ def _write_atomically(path, spec, pixels):
                 raise OutputError(f"{path}: cannot write: {out.geterror() or oiio.geterror()}")
         finally:
             out.close()
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    # mkstemp creates 0600 files; give the image the permissions a normal file would get
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(path, 0o666 & ~umask)
+
+    replace_atomically(path, write, keep_extension=True)
 
 
 def read_image(path):

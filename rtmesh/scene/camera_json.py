@@ -28,12 +28,11 @@ that shift is not part of the exported pose).
 """
 
 import json
-import os
-import tempfile
 
 import numpy as np
 
 from rtmesh.core.errors import OutputError
+from rtmesh.io.atomic_files import write_text
 
 
 def camera_record(camera, width, height, bounds, asset_to_world=None):
@@ -92,23 +91,14 @@ def camera_record(camera, width, height, bounds, asset_to_world=None):
 
 
 def write_camera_json(path, record):
-    """Write ``record`` as JSON, atomically (a reader never sees a partial file).
+    """Write ``record`` as JSON, atomically (see :func:`rtmesh.io.atomic_files.write_text`).
 
     Raises
     ------
     OutputError
         The folder does not exist or cannot be written (one line naming the file).
     """
-    folder = os.path.dirname(os.path.abspath(path))
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp", dir=folder)
+        write_text(path, json.dumps(record, indent=2) + "\n")
     except OSError as exc:
         raise OutputError(f"{path}: cannot write the camera file ({exc.strerror})") from None
-    try:
-        with os.fdopen(fd, "w") as out:
-            json.dump(record, out, indent=2)
-            out.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        os.unlink(tmp)
-        raise
