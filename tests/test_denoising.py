@@ -1,6 +1,6 @@
 """--denoise: Intel Open Image Denoise on the beauty image, guided by albedo and normals."""
 
-import builtins
+import sys
 
 import numpy as np
 import pytest
@@ -38,14 +38,7 @@ def test_denoising_brings_a_noisy_render_closer_to_the_converged_image():
 
 
 def test_a_missing_denoiser_is_one_line_naming_the_extra(monkeypatch, tmp_path, capsys):
-    real_import = builtins.__import__
-
-    def no_pyoidn(name, *args, **kwargs):
-        if name == "pyoidn":
-            raise ImportError("No module named 'pyoidn'")
-        return real_import(name, *args, **kwargs)
-
-    monkeypatch.setattr(builtins, "__import__", no_pyoidn)
+    monkeypatch.setitem(sys.modules, "pyoidn", None)  # import pyoidn raises ImportError
     with pytest.raises(MissingExtraError, match=r"pip install 'rtmesh\[denoise\]'"):
         Integrator(sphere_on_floor_scene(), RenderSettings(width=8, height=8, denoise=True))
     out = tmp_path / "x.png"

@@ -85,16 +85,9 @@ def test_mp4_movies_read_back_with_every_frame_at_an_even_size(tmp_path):
 
 
 def test_mp4_without_the_movie_extra_is_one_line_naming_it(tmp_path, monkeypatch):
-    import builtins
+    import sys
 
-    real_import = builtins.__import__
-
-    def no_ffmpeg(name, *args, **kwargs):
-        if name == "imageio_ffmpeg":
-            raise ImportError("No module named 'imageio_ffmpeg'")
-        return real_import(name, *args, **kwargs)
-
-    monkeypatch.setattr(builtins, "__import__", no_ffmpeg)
+    monkeypatch.setitem(sys.modules, "imageio_ffmpeg", None)  # import imageio_ffmpeg raises ImportError
     trimesh.creation.box().export(tmp_path / "a.obj")
     with pytest.raises(rtmesh.RtmeshError, match=r"movie: MP4 needs ffmpeg: pip install 'rtmesh\[movie\]'"):
         rtmesh.batch_convert([tmp_path / "a.obj"], tmp_path / "out", movie="mp4", turntable=3)

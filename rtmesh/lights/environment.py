@@ -128,21 +128,20 @@ class EnvironmentLighting:
         low, high = self._conditional[row, column], self._conditional[row, column + 1]
         du = np.clip((u2 - low) / (high - low), 0.0, 1.0)
         uv = np.column_stack([(column + du) / w, 1.0 - (row + dv) / h])
-        density = self._func[row, column] / self._mean
-        sin_theta = np.cos((uv[:, 1] - 0.5) * math.pi)
-        with np.errstate(divide="ignore"):
-            pdf = np.where(sin_theta > 0.0, density / (2.0 * math.pi ** 2 * sin_theta), np.inf)
-        return self.directions(uv), pdf
+        return self.directions(uv), self._solid_angle_pdf(row, column, np.cos((uv[:, 1] - 0.5) * math.pi))
 
     def pdf(self, directions):
         """Solid-angle density of :meth:`sample` at unit ``directions`` ((k, 3) -> (k,))."""
         uv = direction_to_latlong(directions, self.rotation)
         row = np.clip(((1.0 - uv[:, 1]) * self.height).astype(np.int64), 0, self.height - 1)
         column = np.clip((uv[:, 0] * self.width).astype(np.int64), 0, self.width - 1)
-        sin_theta = np.sqrt(np.maximum(1.0 - directions[:, 1] ** 2, 0.0))
+        return self._solid_angle_pdf(row, column, np.sqrt(np.maximum(1.0 - directions[:, 1] ** 2, 0.0)))
+
+    def _solid_angle_pdf(self, row, column, sin_theta):
+        """``p(u, v) / (2 pi^2 sin(theta))`` of the cells ``(row, column)``; ``inf`` at the poles."""
         with np.errstate(divide="ignore"):
-            return np.where(sin_theta > 0.0, self._func[row, column] / self._mean
-                            / (2.0 * math.pi ** 2 * sin_theta), np.inf)
+            return np.where(sin_theta > 0.0, self._func[row, column] / self._mean / (2.0 * math.pi ** 2 * sin_theta),
+                            np.inf)
 
     def direct(self, p, ng, reflectance, pixel, sample, depth, stats, clock, time=None):
         """Light from the background at every hit, ``light_samples`` shadow rays per hit.
