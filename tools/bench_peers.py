@@ -240,11 +240,29 @@ def throughput_rows(spps, runs, pixels):
             for name, r in runs.items()]
 
 
+def mitsuba_environment(home):
+    """Environment variables for a Mitsuba worker process.
+
+    Parameters
+    ----------
+    home : str
+        Folder made (if missing) and set as ``HOME``, so Dr.Jit's kernel cache stays out of
+        the user's home.
+
+    Returns
+    -------
+    dict
+        ``os.environ`` with ``HOME`` and ``DRJIT_LIBLLVM_PATH`` (LLVM 19: the variant
+        ``llvm_ad_rgb`` aborts with the system's LLVM 15, see ``tools/peers_setup.sh``).
+    """
+    os.makedirs(home, exist_ok=True)
+    return dict(os.environ, HOME=home, DRJIT_LIBLLVM_PATH=LLVM)
+
+
 def mitsuba_sweep(python, spec_path, variant, spps, runs, reference_spp, folder):
     """Run the worker in the peers venv; images, median times and version (or None)."""
     out_path = os.path.join(folder, f"{variant}.npz")
-    env = dict(os.environ, HOME=os.path.join(folder, "home"), DRJIT_LIBLLVM_PATH=LLVM)
-    os.makedirs(env["HOME"], exist_ok=True)
+    env = mitsuba_environment(os.path.join(folder, "home"))
     command = [python, WORKER, spec_path, variant, out_path, "--spp", ",".join(map(str, spps)),
                "--runs", str(runs)]
     if reference_spp:

@@ -22,27 +22,51 @@ import mitsuba as mi
 import numpy as np
 
 
+def sensor_dict(camera, width, height, sampler):
+    """Mitsuba's pinhole camera matching rtmesh's :class:`rtmesh.scene.camera.Camera`.
+
+    Parameters
+    ----------
+    camera : dict
+        ``position``, ``look_at``, ``up`` (3 numbers each) and ``fov``: rtmesh's vertical
+        field of view in degrees (Mitsuba's ``fov`` with ``fov_axis = "y"``).
+    width, height : int
+        Image size in pixels.
+    sampler : dict
+        Mitsuba sampler plugin, e.g. ``{"type": "stratified", "sample_count": 4}``.
+
+    Returns
+    -------
+    dict
+        A ``perspective`` sensor with a box pixel filter (each sample counts in its own
+        pixel only, like rtmesh's film) and an RGB ``hdrfilm``; ``look_at`` builds the frame
+        as rtmesh does (``up`` made orthogonal to the view), image x to the right, row 0 at
+        the top.
+    """
+    return {
+        "type": "perspective",
+        "fov": camera["fov"],
+        "fov_axis": "y",
+        "to_world": mi.ScalarTransform4f().look_at(origin=camera["position"], target=camera["look_at"],
+                                                   up=camera["up"]),
+        "film": {"type": "hdrfilm", "width": width, "height": height,
+                 "rfilter": {"type": "box"}, "pixel_format": "rgb"},
+        "sampler": sampler,
+    }
+
+
 def scene_dict(spec):
     """The Mitsuba scene for the spec: the same meshes, camera, light and Lambert albedo.
 
     The point light's intensity is already scaled by pi in the spec (Mitsuba's diffuse
     BSDF is albedo / pi; rtmesh's Lambert term is kd cos / d^2 without it).
     """
-    camera = spec["camera"]
     bsdf = {"type": "diffuse", "reflectance": {"type": "rgb", "value": spec["albedo"]}}
     return {
         "type": "scene",
         "integrator": {"type": "direct", "emitter_samples": 1, "bsdf_samples": 0},
-        "sensor": {
-            "type": "perspective",
-            "fov": camera["fov"],
-            "fov_axis": "y",
-            "to_world": mi.ScalarTransform4f().look_at(origin=camera["position"], target=camera["look_at"],
-                                                       up=camera["up"]),
-            "film": {"type": "hdrfilm", "width": spec["width"], "height": spec["height"],
-                     "rfilter": {"type": "box"}, "pixel_format": "rgb"},
-            "sampler": {"type": "stratified", "sample_count": 4},
-        },
+        "sensor": sensor_dict(spec["camera"], spec["width"], spec["height"],
+                              {"type": "stratified", "sample_count": 4}),
         "light": {"type": "point", "position": spec["light_position"],
                   "intensity": {"type": "rgb", "value": spec["mitsuba_intensity"]}},
         **{name: {"type": "ply", "filename": path, "face_normals": False, "bsdf": bsdf}
