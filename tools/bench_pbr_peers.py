@@ -182,6 +182,32 @@ FIELDS = ["case", "geometry", "light", "material", "metallic", "roughness", "mit
           "peer_vs_gltf", "rtmesh_scale", "rtmesh_seconds", "mitsuba_seconds"]
 
 
+# how to read the table, for docs/BENCHMARKS.md (the module docstring has the details)
+NOTES = (
+    "How to read it:",
+    "",
+    "- `gltf` rows test rtmesh against the glTF 2.0 BRDF itself (Appendix B, as a Python BSDF in "
+    "Mitsuba, checked by `peers_mitsuba_pbr.py --self-test`: Mitsuba's chi-square test of its sampling, "
+    "weight = eval / pdf, and D and F against Mitsuba's `principled`): a correct rtmesh is at the noise "
+    "floor with a mean ratio of 1.",
+    "- `principled` and `roughplastic` rows say how far Mitsuba's own models are from glTF's (`peer vs "
+    "gltf`, Mitsuba against Mitsuba, same seeds): at metallic 1 `principled` differs only by Smith's "
+    "separable G (0.1 % or less at roughness 0.1 and 0.3, 1-2 % at 0.7, darker at grazing angles); at "
+    "metallic 0 `principled` is 4-12 % off (Disney's diffuse with retro-reflection, the exact "
+    "dielectric Fresnel, no `1 - F` on the diffuse) and `roughplastic` 8-16 % at roughness 0.1 and 0.3 "
+    "and 56-67 % at 0.7, where its diffuse base, seen through the single-scattering transmittance of "
+    "the rough interface, reflects about 0.55 of glTF's `(1 - F) base / pi`.",
+    "- The `check-*` rows test the set-up: `check-background` the environment's orientation and "
+    "lat-long mapping (+90 degrees about +Y for Mitsuba's `envmap`, and a 2H+1-row resampling of the "
+    "image: Mitsuba's rows are align-corners, rtmesh's texel-centred), `check-mirror` reflections "
+    "of it, `check-lambert-*` the light units (rtmesh's Blinn-Phong diffuse has no 1/pi: rtmesh / pi "
+    "is compared, so a point light of intensity I gives I / d^2 in both and a 1/pi-normalised BRDF "
+    "matches Mitsuba's `point` of the same intensity).",
+    "- Under the point light only direct light is compared (rtmesh `max_depth` 0, Mitsuba 2); at "
+    "roughness 0.1 the metal's highlight is smaller than a pixel, so its noise floor stays high.",
+)
+
+
 @dataclasses.dataclass
 class Case:
     """One matched scene.
@@ -251,7 +277,8 @@ def geometry_mesh(name, camera):
         return trimesh.Trimesh(vertices, sphere.faces, vertex_normals=normals, process=False)
     if name == "duck":
         loaded = trimesh.load(DUCK, force="scene")
-        mesh = loaded.dump(concatenate=True) if hasattr(loaded, "dump") else loaded
+        # the node transforms applied, one mesh (Duck.glb has one node and one primitive)
+        mesh = loaded.to_geometry() if hasattr(loaded, "to_geometry") else loaded.dump(concatenate=True)
         normals = np.asarray(mesh.vertex_normals)
         low, high = mesh.bounds
         vertices = (np.asarray(mesh.vertices) - 0.5 * (low + high)) / (0.5 * float(np.max(high - low)))
@@ -502,8 +529,8 @@ def compare(rt_halves, mi_halves, mask, scale):
 
 
 def display(image, exposure=0.0):
-    """8-bit sRGB of a linear image (AgX tone mapping)."""
-    return (linear_to_srgb(tonemap(image, exposure, "agx")) * 255.0 + 0.5).astype(np.uint8)
+    """8-bit sRGB of a linear image (Khronos PBR Neutral tone mapping: base colours stay true)."""
+    return (linear_to_srgb(tonemap(image, exposure, "pbr-neutral")) * 255.0 + 0.5).astype(np.uint8)
 
 
 def difference_panel(image, reference, mask):
@@ -519,16 +546,30 @@ def difference_panel(image, reference, mask):
 
 
 def write_side_by_side(path, case, rt_image, references, mask):
-    """A PNG: rtmesh | Mitsuba model... | difference to the first model."""
+    """A PNG, pixels doubled: rtmesh | Mitsuba model... | difference to the first model."""
     from PIL import Image
 
     panels = [display(rt_image)] + [display(r) for r in references.values()]
     panels.append(difference_panel(rt_image, next(iter(references.values())), mask))
     gap = np.full((rt_image.shape[0], 4, 3), 255, np.uint8)
     row = np.concatenate([p for panel in panels for p in (panel, gap)][:-1], axis=1)
-    Image.fromarray(row).save(path)
+    Image.fromarray(row).resize((2 * row.shape[1], 2 * row.shape[0]), Image.NEAREST).save(path)
     return f"{path}: rtmesh | " + " | ".join(f"Mitsuba {m}" for m in references) + \
         f" | (rtmesh - {next(iter(references))}) / mean, +-50 %"
+
+
+def rtmesh_version():
+    """The last commit of the rtmesh package being measured (in the checkout it is imported
+    from), with ``+changes`` when its files differ from it; ``?`` outside git."""
+    folder = os.path.dirname(os.path.abspath(rtmesh.__file__))
+    try:
+        commit = subprocess.run(["git", "-C", folder, "log", "-1", "--format=%h", "--", "."], capture_output=True,
+                                text=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "-C", folder, "status", "--porcelain", "--", "."], capture_output=True,
+                               text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "?"
+    return commit + ("+changes" if dirty else "")
 
 
 def markdown_table(rows):
@@ -674,7 +715,8 @@ def main(argv=None):
     text = "\n".join([
         f"## {SECTION}",
         "",
-        f"Command: `{' '.join(words)}` (Mitsuba {version} `{variant}` in its own venv, `sh tools/peers_setup.sh`); "
+        f"Command: `{' '.join(words)}`, rtmesh {rtmesh_version()} (Mitsuba {version} `{variant}` in its own venv, "
+        "`sh tools/peers_setup.sh`); "
         f"rows in `docs/pbr_peers.csv`; what is compared, the Mitsuba models and the metric are in the "
         f"tool's docstring.",
         "",
@@ -687,6 +729,8 @@ def main(argv=None):
         "renders' noise alone would give; peer vs gltf = Mitsuba's model against Mitsuba's exact glTF BRDF",
         "",
         table,
+        "",
+        *NOTES,
         "",
     ])
     publish(text, SECTION, write=True)
