@@ -110,9 +110,9 @@ from rtmesh.core.row_vectors import dot3, normalized3
 # (n.h)^2 (alpha^2 - 1) + 1 is about alpha^2 near the peak while (n.h)^2 carries an absolute
 # rounding error of ~1e-16, so D and the pdf of sampled directions lose relative precision
 # as 1e-16 / alpha^2 (and n.h of the sampled h, 1 - O(alpha^2), rounds to 1 below alpha
-# ~1e-8: every sample then gets the peak density).  At
-# 1e-3 (roughness ~0.032) that error is ~1e-10 and the peak 3.2e5; such a lobe is 2e-3 rad
-# wide, already a mirror at the resolution of images.
+# ~1e-8: every sample then gets the peak density).  At 1e-3 (roughness ~0.032) that error
+# is ~1e-10 and the peak 3.2e5; such a lobe is 2e-3 rad wide, already a mirror at the
+# resolution of images.
 MIN_ALPHA = 1e-3
 
 # Luminance of linear sRGB (Rec. 709 primaries, D65), to weigh the two lobes of an RGB BRDF
@@ -180,7 +180,8 @@ def smith_root(cos, a2):
 @row
 def smith_visibility(nl, nv, a2):
     """Height-correlated Smith visibility ``V = G2(wo, wi) / (4 NL NV)`` of GGX, for
-    ``nl, nv > 0`` (1 / sr-free: it carries the 1 / (4 NL NV) of the microfacet BRDF)."""
+    ``nl, nv > 0``: the masking-shadowing term with the ``1 / (4 NL NV)`` of the microfacet
+    BRDF folded in, so ``D V`` is the specular BRDF (per steradian) before Fresnel."""
     return 0.5 / (nl * smith_root(nv, a2) + nv * smith_root(nl, a2))
 
 
@@ -188,8 +189,8 @@ def smith_visibility(nl, nv, a2):
 def specular_probability(nv, b0, b1, b2, metallic):
     """Probability ``p_spec`` with which :func:`sample_row` draws from the GGX lobe.
 
-    The luminance of the Schlick Fresnel at ``n.wo`` (the mix of ``F_d`` and ``F_m``) against
-    the diffuse weight ``(1 - metallic) (1 - F_d) luminance(base)``, clamped to
+    ``S / (S + W)`` with ``S`` the luminance of the Schlick Fresnel at ``n.wo`` (the mix of
+    ``F_d`` and ``F_m``) and ``W`` the diffuse weight ``(1 - metallic) (1 - F_d) luminance(base)``, clamped to
     [:data:`P_SPEC_MIN`, :data:`P_SPEC_MAX`]; 1 where the diffuse weight is 0 (metals, black
     base colour), so that no sample is spent on a lobe that reflects nothing.  Fresnel at the
     viewing angle stands for the lobe's albedo, which has no closed form; any value in (0, 1]
