@@ -99,21 +99,31 @@ def pbr(**values):
     return PBRMaterial(name="m", **values)
 
 
-def test_gltf_metal_reflects_in_its_own_colour():
+def test_gltf_materials_keep_the_metallic_roughness_model():
     m = gltf_material(pbr(baseColorFactor=[0.8, 0.6, 0.2, 1.0], metallicFactor=1.0, roughnessFactor=0.5))
-    np.testing.assert_allclose(m.diffuse, 0.0)
-    np.testing.assert_allclose(m.specular, [0.8, 0.6, 0.2])
-    np.testing.assert_allclose(m.mirror, [0.8, 0.6, 0.2])
-    assert m.roughness == pytest.approx(0.25)  # the GGX alpha drives the glossy lobe
-    assert m.shininess == pytest.approx(2.0 / 0.5 ** 4 - 2.0)  # and the highlight
-    assert m.metallic == 1.0
+    assert m.model == "metallic_roughness"
+    np.testing.assert_allclose(m.base_color, [0.8, 0.6, 0.2], atol=1 / 255)  # trimesh keeps 8 bits
+    assert m.metallic == 1.0 and m.perceptual_roughness == pytest.approx(0.5)
+    # no Blinn-Phong terms: the BRDF reflects, nothing else does
+    assert not m.diffuse.any() and not m.specular.any() and not m.mirror.any()
+    d = gltf_material(pbr(baseColorFactor=[0.2, 0.4, 0.6, 1.0], metallicFactor=0.25, roughnessFactor=1.0))
+    np.testing.assert_allclose(d.diffuse, np.array([0.2, 0.4, 0.6]) * 0.75, atol=1 / 255)  # for the ambient term
 
 
-def test_gltf_dielectric_is_diffuse_with_a_four_percent_highlight():
-    m = gltf_material(pbr(baseColorFactor=[0.2, 0.4, 0.6, 1.0], metallicFactor=0.0, roughnessFactor=1.0))
-    np.testing.assert_allclose(m.diffuse, [0.2, 0.4, 0.6])
-    np.testing.assert_allclose(m.specular, 0.04)
-    assert not m.mirror.any() and m.shininess == 1.0
+def test_transmissive_and_unlit_gltf_materials_keep_the_blinn_phong_mapping():
+    glass = gltf_material(pbr(baseColorFactor=[0.8, 0.6, 0.2, 1.0], metallicFactor=0.0, roughnessFactor=0.5),
+                          {"extensions": {"KHR_materials_transmission": {"transmissionFactor": 1.0}}})
+    assert glass.model == "blinn_phong"
+    np.testing.assert_allclose(glass.transmission, [0.8, 0.6, 0.2], atol=1 / 255)
+    np.testing.assert_allclose(glass.specular, 0.04)
+    assert glass.roughness == pytest.approx(0.25)  # the GGX alpha drives the glossy lobe
+    assert glass.shininess == pytest.approx(2.0 / 0.5 ** 4 - 2.0)  # and the highlight
+    metal = gltf_material(pbr(baseColorFactor=[0.8, 0.6, 0.2, 1.0], metallicFactor=1.0, roughnessFactor=0.5),
+                          {"extensions": {"KHR_materials_transmission": {"transmissionFactor": 0.5}}})
+    np.testing.assert_allclose(metal.mirror, [0.8, 0.6, 0.2], atol=1 / 255)  # metals reflect in their colour
+    assert not metal.diffuse.any()
+    unlit = gltf_material(pbr(baseColorFactor=[0.2, 0.4, 0.6, 1.0]), {"extensions": {"KHR_materials_unlit": {}}})
+    assert unlit.model == "blinn_phong" and unlit.unlit
 
 
 def test_roughness_to_shininess_is_monotonic_and_clamped():

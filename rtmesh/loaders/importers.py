@@ -508,7 +508,10 @@ def scene_from_trimesh(obj, name="mesh", **scene_options):
     parts, materials = parts_from_trimesh(obj, name)
     if not parts:
         raise MeshError(f"{name}: nothing to render (no triangles)")
-    scene_options.setdefault("ambient", np.full(3, 0.05))
+    if not any(m.model == "metallic_roughness" and not m.unlit for m in materials):
+        # a little ambient light for the three-light rig; the studio environment of
+        # physically based assets lights them from every direction itself
+        scene_options.setdefault("ambient", np.full(3, 0.05))
     return Scene.from_parts(parts, materials, source=name, **scene_options)
 
 

@@ -367,17 +367,19 @@ def roughness_to_shininess(roughness):
 
 
 def gltf_material(pbr, json_material=None, name="gltf"):
-    """Map a glTF metallic-roughness material onto rtmesh's model (see docs/MATERIALS.md).
+    """A glTF metallic-roughness material as rtmesh's :class:`~rtmesh.materials.table.Material`
+    (see docs/MATERIALS.md).
 
-    ``diffuse = base * (1 - metallic)``; ``specular = 0.04 (1 - metallic) + base * metallic``
-    with the exponent of :func:`roughness_to_shininess`; metals reflect with
-    ``mirror = base * metallic``, blurred by a glossy lobe of ``roughness = r^2`` radians
-    (the GGX alpha).  A metallic-roughness texture contributes its mean (this model has
-    per-material metallic and roughness only).  Alpha mode, cutoff and base-colour alpha
-    give the opacity; KHR_materials_transmission / ior / volume make a refracting
-    dielectric (transmission tinted by the base colour, absorption
-    ``-ln(attenuationColor) / attenuationDistance``); KHR_materials_emissive_strength
-    scales the emission; KHR_materials_unlit shows the base colour without lighting.
+    Opaque, lit materials keep the model the format defines: ``model="metallic_roughness"``
+    with the base colour, metallic and roughness factors and the base-colour,
+    metallic-roughness, occlusion, normal and emissive textures, evaluated per texel
+    (:mod:`rtmesh.materials.metallic_roughness`).  Alpha mode, cutoff and base-colour
+    alpha give the opacity; KHR_materials_emissive_strength scales the emission.
+
+    Two kinds keep the Blinn-Phong mapping of :func:`blinn_phong_from_gltf`:
+    KHR_materials_unlit (the base colour shown without lighting) and
+    KHR_materials_transmission (a refracting dielectric; the metallic-roughness model of
+    rtmesh has no transmission lobe yet).
 
     Parameters
     ----------
@@ -395,8 +397,88 @@ def gltf_material(pbr, json_material=None, name="gltf"):
     _check_decoded(pbr, json_material, pbr.name or name)
     f = _gltf_factors(pbr, json_material)
     ext = f["extensions"]
-    base = f["base"]
-    base = np.append(base, 1.0) if len(base) == 3 else np.resize(base, 4)
+    transmits = float(ext.get("KHR_materials_transmission", {}).get("transmissionFactor", 0.0)) > 0.0
+    if transmits or "KHR_materials_unlit" in ext:
+        return blinn_phong_from_gltf(pbr, f, json_material, name)
+    base = _rgba(f["base"])
+    metallic, roughness = float(np.clip(f["metallic"], 0, 1)), float(np.clip(f["roughness"], 0, 1))
+
+    def texture(role, srgb):
+        return _gltf_texture(pbr, json_material, role, srgb, name)
+
+    emission = _emission(f)
+    occlusion = (json_material or {}).get("occlusionTexture") or {}
+    return Material(
+        name=pbr.name or name,
+        model="metallic_roughness",
+        base_color=base[:3],
+        metallic=metallic,
+        perceptual_roughness=roughness,
+        # kept for the ambient term and the albedo pass (see Material.model)
+        diffuse=base[:3] * (1.0 - metallic),
+        specular=np.zeros(3),
+        emission=emission,
+        opacity=float(base[3]),
+        alpha_mode=f["mode"] if f["mode"] in ("mask", "blend") else "opaque",
+        alpha_cutoff=f["cutoff"],
+        double_sided=f["double_sided"],
+        diffuse_texture=texture("baseColorTexture", True),
+        # glTF: roughness in green, metalness in blue, occlusion in red, all linear
+        metallic_roughness_texture=texture("metallicRoughnessTexture", False),
+        occlusion_texture=texture("occlusionTexture", False),
+        occlusion_strength=float(occlusion.get("strength", 1.0)),
+        normal_texture=texture("normalTexture", False),
+        emission_texture=texture("emissiveTexture", True) if (emission > 0).any() else None,  # factor x texture
+    )
+
+
+def _gltf_texture(pbr, json_material, role, srgb, name):
+    """The :class:`Texture` of one texture role (``"baseColorTexture"``, ...) of a glTF
+    material, with its sampler's wrap modes; None when the material has none."""
+    image = getattr(pbr, role)
+    if image is None:
+        return None
+    wraps = (json_material or {}).get(WRAP_KEY, {})
+    return Texture.from_pil(image, srgb=srgb, name=f"{name} {role}", wrap=wraps.get(role, "repeat"))
+
+
+def _rgba(base):
+    """A glTF base colour factor as RGBA (alpha 1 when the factor has three values)."""
+    return np.append(base, 1.0) if len(base) == 3 else np.resize(base, 4)
+
+
+def _emission(factors):
+    """Emitted radiance: ``emissiveFactor`` times KHR_materials_emissive_strength."""
+    strength = factors["extensions"].get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0)
+    return factors["emission"] * float(strength)
+
+
+def blinn_phong_from_gltf(pbr, f, json_material=None, name="gltf"):
+    """Map a glTF material onto rtmesh's Blinn-Phong model (unlit and transmissive ones).
+
+    ``diffuse = base * (1 - metallic)``; ``specular = 0.04 (1 - metallic) + base * metallic``
+    with the exponent of :func:`roughness_to_shininess`; metals reflect with
+    ``mirror = base * metallic``, blurred by a glossy lobe of ``roughness = r^2`` radians
+    (the GGX alpha).  A metallic-roughness texture contributes its mean (this model has
+    per-material metallic and roughness only).  KHR_materials_transmission / ior / volume
+    make a refracting dielectric (transmission tinted by the base colour, absorption
+    ``-ln(attenuationColor) / attenuationDistance``); KHR_materials_unlit shows the base
+    colour without lighting.
+
+    Parameters
+    ----------
+    pbr : trimesh.visual.material.PBRMaterial
+    f : dict
+        The material's factors (:func:`_gltf_factors`).
+    json_material : dict, optional
+    name : str
+
+    Returns
+    -------
+    Material
+    """
+    ext = f["extensions"]
+    base = _rgba(f["base"])
     metallic, roughness = f["metallic"], f["roughness"]
     if pbr.metallicRoughnessTexture is not None:
         # glTF: roughness in green, metalness in blue, both linear
@@ -406,7 +488,7 @@ def gltf_material(pbr, json_material=None, name="gltf"):
             roughness, metallic = roughness * mean[1], metallic * mean[2]
     metallic, roughness = float(np.clip(metallic, 0, 1)), float(np.clip(roughness, 0, 1))
     colour = base[:3]
-    emission = f["emission"] * float(ext.get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0))
+    emission = _emission(f)
     transmission, ior, absorption = np.zeros(3), 1.5, np.zeros(3)
     if "KHR_materials_ior" in ext:
         ior = float(ext["KHR_materials_ior"].get("ior", 1.5)) or 1.5
@@ -418,19 +500,6 @@ def gltf_material(pbr, json_material=None, name="gltf"):
         if np.isfinite(distance) and distance > 0:
             absorption = -np.log(tint) / distance
     mode = f["mode"]
-    texture = None
-    wraps = (json_material or {}).get(WRAP_KEY, {})
-    if pbr.baseColorTexture is not None:
-        texture = Texture.from_pil(pbr.baseColorTexture, srgb=True, name=f"{name} baseColorTexture",
-                                   wrap=wraps.get("baseColorTexture", "repeat"))
-    normal = None
-    if pbr.normalTexture is not None:
-        normal = Texture.from_pil(pbr.normalTexture, srgb=False, name=f"{name} normalTexture",
-                                  wrap=wraps.get("normalTexture", "repeat"))
-    glow = None
-    if pbr.emissiveTexture is not None and (emission > 0).any():  # glTF: factor x texture
-        glow = Texture.from_pil(pbr.emissiveTexture, srgb=True, name=f"{name} emissiveTexture",
-                                wrap=wraps.get("emissiveTexture", "repeat"))
     not_transmitted = 1.0 - transmission.max()
     return Material(
         name=pbr.name or name,
@@ -449,9 +518,11 @@ def gltf_material(pbr, json_material=None, name="gltf"):
         alpha_cutoff=f["cutoff"],
         double_sided=f["double_sided"],
         unlit="KHR_materials_unlit" in ext,
-        diffuse_texture=texture,
-        normal_texture=normal,
-        emission_texture=glow,
+        diffuse_texture=_gltf_texture(pbr, json_material, "baseColorTexture", True, name),
+        normal_texture=_gltf_texture(pbr, json_material, "normalTexture", False, name),
+        # glTF: emission is factor x texture
+        emission_texture=(_gltf_texture(pbr, json_material, "emissiveTexture", True, name)
+                          if (emission > 0).any() else None),
     )
 
 
@@ -509,21 +580,22 @@ def _check_decoded(pbr, json_material, name):
 def gltf_json_materials(doc):
     """``{material name: material object}`` of a glTF JSON document (unnamed ones skipped).
 
-    Each object is a copy with the wrap modes of its base-colour, normal and emission
-    textures under :data:`WRAP_KEY` (``{"baseColorTexture": (u, v), ...}``), read from the
-    samplers, which trimesh does not keep, and the image of each texture (those and the
-    metallic-roughness one) under :data:`IMAGES_KEY` (``{"baseColorTexture": (label, mime
-    type), ...}``), to tell an image trimesh could not decode.
+    Each object is a copy with the wrap modes of its textures (base colour,
+    metallic-roughness, occlusion, normal, emission) under :data:`WRAP_KEY`
+    (``{"baseColorTexture": (u, v), ...}``), read from the samplers, which trimesh does not
+    keep, and the image of each texture under :data:`IMAGES_KEY` (``{"baseColorTexture":
+    (label, mime type), ...}``), to tell an image trimesh could not decode.
     """
     out = {}
     for material in doc.get("materials", []) or []:
         if isinstance(material, dict) and isinstance(material.get("name"), str):
-            infos = {"baseColorTexture": (material.get("pbrMetallicRoughness") or {}).get("baseColorTexture"),
+            pbr = material.get("pbrMetallicRoughness") or {}
+            infos = {"baseColorTexture": pbr.get("baseColorTexture"),
+                     "metallicRoughnessTexture": pbr.get("metallicRoughnessTexture"),
+                     "occlusionTexture": material.get("occlusionTexture"),
                      "normalTexture": material.get("normalTexture"),
                      "emissiveTexture": material.get("emissiveTexture")}
             wraps = {slot: _texture_wrap(doc, info) for slot, info in infos.items() if isinstance(info, dict)}
-            infos["metallicRoughnessTexture"] = (material.get("pbrMetallicRoughness") or {}).get(
-                "metallicRoughnessTexture")
             images = {slot: _texture_image(doc, info) for slot, info in infos.items() if isinstance(info, dict)}
             out[material["name"]] = {**material, WRAP_KEY: wraps, IMAGES_KEY: images}
     return out

@@ -53,6 +53,7 @@ from rtmesh.rendering.direct_stage import DirectStage
 from rtmesh.rendering.film import Film
 from rtmesh.rendering.local_shading import LocalShading
 from rtmesh.rendering.media import Media
+from rtmesh.rendering.physical_shading import PhysicalShading, environment_weight
 from rtmesh.rendering.render_plan import RenderPlan
 from rtmesh.rendering.scheduler import pixel_chunks, run_on_threads, sample_indices
 from rtmesh.rendering.secondary_rays import SecondaryRays
@@ -170,11 +171,14 @@ class Integrator:
         self.background = as_background(scene.background)
         # the background lights the scene only when asked (scene files: [background] lighting)
         self.environment_lighting = None
-        if self.background.lighting and not self.background.is_black:
+        # unset (None), it lights scenes with physically based materials, which are made to
+        # be seen under their environment, and no others (whose images stay as they were)
+        lighting = m.any_physical if self.background.lighting is None else self.background.lighting
+        if lighting and not self.background.is_black:
             self.environment_lighting = EnvironmentLighting(self.background, self.accel, self.settings,
                                                             self.offset_scale)
         lit = ~m.unlit[:, None]
-        self._shaded_any = bool((((m.diffuse > 0) | (m.specular > 0)) & lit).any())
+        self._shaded_any = bool((((m.diffuse > 0) | (m.specular > 0)) & lit).any()) or m.any_physical
         self.ao_distance = settings.ao_distance or 0.2 * float(np.linalg.norm(np.ptp(scene_bounds, axis=0)))
         self._ambient_on = bool((scene.ambient > 0).any() and (m.ambient > 0).any())
         if settings.denoise:
@@ -182,7 +186,8 @@ class Integrator:
         # the AO pass alone asks for 16 rays per camera hit unless ao_samples says otherwise
         self.ao_samples = settings.ao_samples or (16 if "ao" in settings.passes else 0)
         # per-material flags, looked up per hit
-        self._shaded = ((m.diffuse > 0).any(axis=1) | (m.specular > 0).any(axis=1)) & ~m.unlit
+        # (Blinn-Phong materials; metallic-roughness ones are shaded by their own stage)
+        self._shaded = ((m.diffuse > 0).any(axis=1) | (m.specular > 0).any(axis=1)) & ~m.unlit & ~m.physical
         self._all_shaded = bool(self._shaded.all())  # then no per-hit lookup is needed
         self._has_specular = (m.specular > 0).any(axis=1)
         # per-material colours, component-major so that gathering them per hit keeps the
@@ -267,7 +272,8 @@ class Integrator:
             normal_maps=self.textures.tangents is not None,
             cutouts=self.cutouts is not None,
             unlit=m.any_unlit,
-            reflection=settings.max_depth > 0 and (m.any_mirror or m.any_transmission),
+            physical=m.any_physical,
+            reflection=settings.max_depth > 0 and (m.any_mirror or m.any_transmission or m.any_physical),
             glossy=settings.max_depth > 0 and m.any_glossy,
             refraction=settings.max_depth > 0 and m.any_transmission,
             absorption=m.any_absorption,
@@ -282,6 +288,7 @@ class Integrator:
         self.surface_stage = SurfaceStage(self)
         self.local_shading = LocalShading(self)
         self.secondary_rays = SecondaryRays(self)
+        self.physical_shading = PhysicalShading(self) if self.plan.physical else None
         # scenes that need only direct light take one compiled stage per chunk
         self.direct_stage = DirectStage.plan(self)
         self.plan = dataclasses.replace(self.plan, fused_direct=self.direct_stage is not None)
@@ -584,6 +591,9 @@ class Integrator:
 
         if on_light is not None and len(on_light[0]):
             ended, emitted = on_light
+            if rays.pdf is not None:
+                # BSDF-sampled rays leave area lights to light sampling (see physical_shading)
+                emitted = emitted * np.isinf(rays.pdf[ended])[:, None]
             scatter_add(radiance, rays.sample[ended], take_rows(rays.throughput, ended) * emitted,
                          unique=primary)
 
@@ -591,7 +601,10 @@ class Integrator:
         n_hit = int(np.count_nonzero(hit))
         if self.plan.background and n_hit < len(hit):
             miss = np.flatnonzero(hits.prim == -1)  # -2: ended on an area light
-            seen = self.background.radiance(take_rows(rays.directions, miss))
+            directions = take_rows(rays.directions, miss)
+            seen = self.background.radiance(directions)
+            if rays.pdf is not None:
+                seen = seen * self._background_weight(rays.pdf[miss], directions)[:, None]
             scatter_add(radiance, rays.sample[miss], take_rows(rays.throughput, miss) * seen,
                          unique=primary)
 
@@ -615,9 +628,22 @@ class Integrator:
 
         if depth >= self.settings.max_depth or not self.plan.reflection:
             return RayBatch.empty()
-        next_rays = self.secondary_rays.spawn(srf, rays.subset(rows), depth, chunk)
+        hit_rays = rays.subset(rows)
+        next_rays = self.secondary_rays.spawn(srf, hit_rays, depth, chunk)
+        if self.plan.physical:
+            next_rays = RayBatch.concatenate([next_rays, self.physical_shading.spawn(srf, hit_rays, depth, chunk)])
         chunk.clock.lap("spawn")
         return next_rays
+
+    def _background_weight(self, pdf, directions):
+        """Weight of the background seen by rays that left the scene, from the density of
+        their BSDF samples ((k,) -> (k,)): 1 for camera rays and delta lobes; the MIS
+        weight against environment light sampling where the background lights the scene,
+        else 0 (see :mod:`rtmesh.rendering.physical_shading`)."""
+        lighting = self.environment_lighting if self.plan.environment_lighting else None
+        if lighting is None:
+            return np.isinf(pdf).astype(np.float64)
+        return environment_weight(pdf, lighting.pdf(directions), lighting.samples)
 
 def render(scene, settings, progress=None):
     """Render ``scene`` with ``settings``; see :meth:`Integrator.render`."""

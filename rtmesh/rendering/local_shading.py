@@ -3,7 +3,8 @@
 Emission, unlit colours, ambient light (with ambient occlusion), and direct light: every
 point-like light through its :meth:`~rtmesh.lights.interface.PointLikeLight.illuminate`,
 one shadow ray per lit hit (:func:`rtmesh.shading.direct_light.light_samples`), and the
-area lights (:mod:`rtmesh.lights.area_lights`).
+area lights (:mod:`rtmesh.lights.area_lights`), for Blinn-Phong materials; metallic-roughness
+materials take their direct light from :mod:`rtmesh.rendering.physical_shading`.
 """
 
 import numpy as np
@@ -30,6 +31,10 @@ class LocalShading(Stage):
             local = take_rows(it._emission, srf.mat)
             if srf.tints is not None and srf.tints.emission is not None:
                 local = local * srf.tints.emission
+            if srf.pdf is not None:
+                # emissive triangles are area lights: BSDF-sampled rays leave their light to
+                # light sampling (weight 0, see rtmesh.rendering.physical_shading)
+                local = local * np.isinf(srf.pdf)[:, None]
         tint = None if srf.tints is None else srf.tints.diffuse
         if st.unlit:
             # unlit materials show their (textured) colour as is
@@ -51,12 +56,18 @@ class LocalShading(Stage):
                 amb = amb * tint
             if ao is not None:
                 amb = amb * ao[:, None]
+            if srf.tints is not None and srf.tints.metallic_roughness is not None:
+                amb = amb * srf.tints.metallic_roughness[:, 2:3]  # baked occlusion
             local = amb if local is None else local + amb
 
         if st.lights or st.area_lights or st.environment_lighting:
             direct = self.direct_light(srf, depth, chunk)
             if direct is not None:
                 local = direct if local is None else local + direct
+            if st.physical:
+                direct = it.physical_shading.direct(srf, depth, chunk)
+                if direct is not None:
+                    local = direct if local is None else local + direct
         return local
 
     def direct_light(self, srf, depth, chunk):
