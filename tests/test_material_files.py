@@ -234,7 +234,7 @@ def test_smoothing_by_angle_keeps_the_material_and_carries_uvs():
 
 def test_gltf_sampler_wrap_modes_reach_the_textures():
     # glTF keeps wrapS / wrapT in samplers, which trimesh drops: read from the JSON
-    from rtmesh.loaders.material_files import WRAP_KEY, gltf_json_materials
+    from rtmesh.loaders.material_files import OPTIONS_KEY, gltf_json_materials
 
     doc = {"samplers": [{"wrapS": 33071, "wrapT": 33648}, {}],
            "textures": [{"source": 0, "sampler": 0}, {"source": 0, "sampler": 1}, {"source": 0}],
@@ -243,10 +243,10 @@ def test_gltf_sampler_wrap_modes_reach_the_textures():
                          {"name": "b", "pbrMetallicRoughness": {"baseColorTexture": {"index": 2}}},
                          {"name": "c", "pbrMetallicRoughness": {"baseColorTexture": {"index": 9}}}]}
     materials = gltf_json_materials(doc)
-    assert materials["a"][WRAP_KEY] == {"baseColorTexture": ("clamp", "mirror"),
-                                        "normalTexture": ("repeat", "repeat")}
-    assert materials["b"][WRAP_KEY] == {"baseColorTexture": ("repeat", "repeat")}
-    assert materials["c"][WRAP_KEY] == {"baseColorTexture": ("repeat", "repeat")}  # bad index
+    assert {role: o["wrap"] for role, o in materials["a"][OPTIONS_KEY].items()} == {
+        "baseColorTexture": ("clamp", "mirror"), "normalTexture": ("repeat", "repeat")}
+    assert materials["b"][OPTIONS_KEY]["baseColorTexture"]["wrap"] == ("repeat", "repeat")
+    assert materials["c"][OPTIONS_KEY]["baseColorTexture"]["wrap"] == ("repeat", "repeat")  # bad index
     image = Image.new("RGB", (2, 2), (200, 100, 50))
     m = gltf_material(pbr(baseColorTexture=image, normalTexture=image), materials["a"])
     assert (m.diffuse_texture.wrap_u, m.diffuse_texture.wrap_v) == ("clamp", "mirror")
@@ -254,14 +254,14 @@ def test_gltf_sampler_wrap_modes_reach_the_textures():
 
 
 def test_gltf_emissive_texture_multiplies_the_factor():
-    from rtmesh.loaders.material_files import WRAP_KEY, gltf_json_materials
+    from rtmesh.loaders.material_files import OPTIONS_KEY, gltf_json_materials
 
     image = Image.new("RGB", (2, 1), (255, 0, 0))
     image.putpixel((1, 0), (0, 0, 0))
     doc = {"samplers": [{"wrapS": 33071, "wrapT": 33071}], "textures": [{"source": 0, "sampler": 0}],
            "materials": [{"name": "lamp", "emissiveFactor": [1.0, 0.5, 1.0], "emissiveTexture": {"index": 0}}]}
     json_material = gltf_json_materials(doc)["lamp"]
-    assert json_material[WRAP_KEY]["emissiveTexture"] == ("clamp", "clamp")
+    assert json_material[OPTIONS_KEY]["emissiveTexture"]["wrap"] == ("clamp", "clamp")
     m = gltf_material(pbr(emissiveTexture=image), json_material)
     np.testing.assert_allclose(m.emission, [1.0, 0.5, 1.0])
     np.testing.assert_allclose(m.emission_texture.pixels[0], [[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])  # sRGB decoded

@@ -369,7 +369,7 @@ class FileMaterials:
                             os.path.basename(path), nan_colours)
                 self.drop_vertex_colours = True
         elif ext in GLTF_EXTENSIONS:
-            self.gltf = gltf_json_materials(read_gltf_json(path))
+            self.gltf = gltf_json_materials(read_gltf_json(path), os.path.basename(path))
 
 
 def vertex_colours(mesh):

@@ -434,12 +434,12 @@ def gltf_material(pbr, json_material=None, name="gltf"):
 
 def _gltf_texture(pbr, json_material, role, srgb, name):
     """The :class:`Texture` of one texture role (``"baseColorTexture"``, ...) of a glTF
-    material, with its sampler's wrap modes; None when the material has none."""
+    material, with its sampler's wrap modes and its KHR_texture_transform; None when the
+    material has none."""
     image = getattr(pbr, role)
     if image is None:
         return None
-    wraps = (json_material or {}).get(WRAP_KEY, {})
-    return Texture.from_pil(image, srgb=srgb, name=f"{name} {role}", wrap=wraps.get(role, "repeat"))
+    return Texture.from_pil(image, srgb=srgb, name=f"{name} {role}", **texture_options(json_material, role))
 
 
 def _rgba(base):
@@ -528,10 +528,18 @@ def blinn_phong_from_gltf(pbr, f, json_material=None, name="gltf"):
 
 # glTF sampler wrap modes (the OpenGL enums) as Texture wrap modes; glTF's default is REPEAT
 _GLTF_WRAP = {33071: "clamp", 33648: "mirror", 10497: "repeat"}
-# where gltf_json_materials puts each texture's (u, v) wrap modes in a material object
-WRAP_KEY = "rtmesh:wrap"
+# the texture roles of a glTF material, each a textureInfo ("pbr." ones under pbrMetallicRoughness)
+TEXTURE_ROLES = ("baseColorTexture", "metallicRoughnessTexture", "normalTexture", "occlusionTexture",
+                 "emissiveTexture")
+_PBR_ROLES = ("baseColorTexture", "metallicRoughnessTexture")
+# where gltf_json_materials puts, per texture role of a material object, the keyword
+# arguments of Texture.from_pil that the file's JSON holds and trimesh drops: the sampler's
+# wrap modes and the KHR_texture_transform (see texture_options)
+OPTIONS_KEY = "rtmesh:texture options"
 # ... and each texture's image (label, mime type), to tell images trimesh could not decode
 IMAGES_KEY = "rtmesh:images"
+# the extension's name, in textureInfo.extensions and in the file's extensionsRequired
+TEXTURE_TRANSFORM = "KHR_texture_transform"
 
 
 def _texture_wrap(doc, texture_info):
@@ -542,6 +550,97 @@ def _texture_wrap(doc, texture_info):
     except (KeyError, IndexError, TypeError):
         return ("repeat", "repeat")
     return tuple(_GLTF_WRAP.get(sampler.get(axis, 10497), "repeat") for axis in ("wrapS", "wrapT"))
+
+
+def _numbers(value, count, what):
+    """``count`` finite floats from a JSON number (count 1) or array; ValueError naming
+    ``what`` otherwise."""
+    values = [value] if count == 1 else value
+    if (not isinstance(values, (list, tuple)) or len(values) != count
+            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in values)
+            or not np.isfinite(np.asarray(values, dtype=np.float64)).all()):
+        raise ValueError(f"{what} {value!r} (expected {'a number' if count == 1 else f'{count} numbers'})")
+    return np.asarray(values, dtype=np.float64)
+
+
+def khr_texture_transform(extension):
+    """The UV transform of a KHR_texture_transform object, in :class:`Texture`'s convention.
+
+    The extension maps glTF UVs (origin at the top left of the image, v down) by
+    ``T(offset) R(rotation) S(scale)`` with ``R = [[cos, sin], [-sin, cos]]`` acting on
+    column vectors: the spec's sample code read row by row (GLSL's ``mat3()`` fills columns,
+    which would give the transpose), and the direction its worked example needs ("the lower
+    left quadrant of the source image, rotated clockwise 90 degrees"); counter-clockwise as
+    the image is seen, since v points down.  trimesh flips v on import and :class:`Texture`
+    reads v upward, so the map ``M`` is conjugated by the flip ``F(u, v) = (u, 1 - v)``: the
+    lookup reads ``F(M(F(uv)))``, i.e. ``A' = D A D``, ``b' = D (A e + offset) + e`` with
+    ``A = R S``, ``D = diag(1, -1)``, ``e = (0, 1)``.
+
+    Parameters
+    ----------
+    extension : dict
+        ``offset`` (default [0, 0]), ``rotation`` (radians, default 0) and ``scale``
+        (default [1, 1]); ``texCoord`` is not read here (see :func:`gltf_json_materials`).
+
+    Returns
+    -------
+    (2, 3) float64 or None
+        ``[A' | b']`` for :class:`Texture`'s ``transform``; None for the identity.
+
+    Raises
+    ------
+    ValueError
+        A value is not a finite number or pair of numbers (the message names it).
+    """
+    if not isinstance(extension, dict):
+        raise ValueError(f"{extension!r} (expected an object)")
+    ox, oy = _numbers(extension.get("offset", [0.0, 0.0]), 2, "offset")
+    (angle,) = _numbers(extension.get("rotation", 0.0), 1, "rotation")
+    sx, sy = _numbers(extension.get("scale", [1.0, 1.0]), 2, "scale")
+    c, s = np.cos(angle), np.sin(angle)
+    a = np.array([[c * sx, s * sy], [-s * sx, c * sy]])  # R S, in glTF's UV space
+    matrix = np.array([[a[0, 0], -a[0, 1], ox + a[0, 1]],
+                       [-a[1, 0], a[1, 1], 1.0 - a[1, 1] - oy]])
+    return None if np.array_equal(matrix, [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]) else matrix
+
+
+def _texture_options(doc, info):
+    """:func:`texture_options` of one glTF textureInfo, its texture-coordinate set (the
+    extension's ``texCoord`` overrides the textureInfo's) and the malformed transform, if
+    any (then the transform is ignored)."""
+    options = {"wrap": _texture_wrap(doc, info), "transform": None}
+    extensions = info.get("extensions")
+    extension = extensions.get(TEXTURE_TRANSFORM) if isinstance(extensions, dict) else None
+    coord, problem = info.get("texCoord", 0), None
+    if extension is not None:
+        try:
+            options["transform"] = khr_texture_transform(extension)
+        except ValueError as exc:
+            problem = str(exc)
+        if isinstance(extension, dict):
+            coord = extension.get("texCoord", coord)
+    return options, coord, problem
+
+
+def texture_options(json_material, role):
+    """The keyword arguments of :meth:`Texture.from_pil` that a glTF material's JSON gives
+    one of its textures: ``wrap`` (the sampler's, default repeat) and ``transform``
+    (KHR_texture_transform, None for none).
+
+    Parameters
+    ----------
+    json_material : dict or None
+        A material object of :func:`gltf_json_materials` (None: no JSON known).
+    role : str
+        One of :data:`TEXTURE_ROLES`, e.g. ``"baseColorTexture"``.
+
+    Returns
+    -------
+    dict
+        A new dict, ``Texture.from_pil(image, ..., **texture_options(json_material, role))``.
+    """
+    options = (json_material or {}).get(OPTIONS_KEY, {}).get(role)
+    return dict(options) if options else {"wrap": "repeat", "transform": None}
 
 
 def _texture_image(doc, texture_info):
@@ -577,25 +676,60 @@ def _check_decoded(pbr, json_material, name):
                         f"pixels ({slot} of material '{name}')")
 
 
-def gltf_json_materials(doc):
+def gltf_json_materials(doc, source="glTF"):
     """``{material name: material object}`` of a glTF JSON document (unnamed ones skipped).
 
-    Each object is a copy with the wrap modes of its textures (base colour,
-    metallic-roughness, occlusion, normal, emission) under :data:`WRAP_KEY`
-    (``{"baseColorTexture": (u, v), ...}``), read from the samplers, which trimesh does not
-    keep, and the image of each texture under :data:`IMAGES_KEY` (``{"baseColorTexture":
-    (label, mime type), ...}``), to tell an image trimesh could not decode.
+    Each object is a copy with, under :data:`OPTIONS_KEY`, per texture role of
+    :data:`TEXTURE_ROLES` it has, the keyword arguments of :meth:`Texture.from_pil` that
+    trimesh drops: the sampler's wrap modes and the KHR_texture_transform
+    (``{"baseColorTexture": {"wrap": (u, v), "transform": (2, 3) array or None}, ...}``,
+    read with :func:`texture_options`); and the image of each of those textures under
+    :data:`IMAGES_KEY`
+    (``{"baseColorTexture": (label, mime type), ...}``), to tell an image trimesh could not
+    decode.
+
+    A texture that reads a texture-coordinate set other than 0 (``texCoord``, or the
+    extension's override) uses set 0: trimesh loads TEXCOORD_0 only.  That, and a malformed
+    KHR_texture_transform (ignored), is one warning for the file, naming the materials.
+    KHR_texture_transform may be in the file's ``extensionsRequired``: it is read.
+
+    Parameters
+    ----------
+    doc : dict
+        The file's JSON.
+    source : str
+        The file, for messages.
+
+    Returns
+    -------
+    dict of str to dict
     """
-    out = {}
+    out, other_sets, malformed = {}, [], []
     for material in doc.get("materials", []) or []:
         if isinstance(material, dict) and isinstance(material.get("name"), str):
             pbr = material.get("pbrMetallicRoughness") or {}
-            infos = {"baseColorTexture": pbr.get("baseColorTexture"),
-                     "metallicRoughnessTexture": pbr.get("metallicRoughnessTexture"),
-                     "occlusionTexture": material.get("occlusionTexture"),
-                     "normalTexture": material.get("normalTexture"),
-                     "emissiveTexture": material.get("emissiveTexture")}
-            wraps = {slot: _texture_wrap(doc, info) for slot, info in infos.items() if isinstance(info, dict)}
-            images = {slot: _texture_image(doc, info) for slot, info in infos.items() if isinstance(info, dict)}
-            out[material["name"]] = {**material, WRAP_KEY: wraps, IMAGES_KEY: images}
+            infos = {role: (pbr if role in _PBR_ROLES else material).get(role) for role in TEXTURE_ROLES}
+            infos = {role: info for role, info in infos.items() if isinstance(info, dict)}
+            options = {}
+            for role, info in infos.items():
+                options[role], coord, problem = _texture_options(doc, info)
+                where = f"material '{material['name']}' {role}"
+                if coord != 0:
+                    other_sets.append(f"{where} (set {coord!r})")
+                if problem:
+                    malformed.append(f"{where}: {problem}")
+            images = {role: _texture_image(doc, info) for role, info in infos.items()}
+            out[material["name"]] = {**material, OPTIONS_KEY: options, IMAGES_KEY: images}
+    if other_sets:
+        log.warning("%s: texture coordinate sets other than 0 are not read (trimesh loads "
+                    "TEXCOORD_0 only); set 0 used for %s", source, _listed(other_sets))
+    if malformed:
+        log.warning("%s: malformed %s ignored (texture shown untransformed): %s", source,
+                    TEXTURE_TRANSFORM, _listed(malformed))
     return out
+
+
+def _listed(items, shown=4):
+    """The first ``shown`` of ``items`` joined by "; ", then how many more."""
+    more = f"; and {len(items) - shown} more" if len(items) > shown else ""
+    return "; ".join(items[:shown]) + more

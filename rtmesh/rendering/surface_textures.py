@@ -83,6 +83,35 @@ def face_tangents(vertices, faces, uv):
     return np.concatenate([tangent, bitangent], axis=1)
 
 
+def transformed_tangents(tb, transform):
+    """Per-face ``[T, B]`` of :func:`face_tangents` for UVs mapped by a texture's transform.
+
+    A texture with ``transform = [A | b]`` reads ``uv' = A uv + b``, so its image axes lie
+    along ``dp/duv' = [T B] A^-1`` on the surface: a normal map rotated by
+    KHR_texture_transform bends normals in its rotated frame (the frame of the UVs the
+    lookup reads, since rtmesh derives tangents from UVs).  Faces with degenerate UVs (zero
+    bitangent) and a singular ``A`` keep their frame.
+
+    Parameters
+    ----------
+    tb : (k, 6) float
+    transform : (2, 3) float
+
+    Returns
+    -------
+    (k, 6) float64
+    """
+    linear = np.asarray(transform, dtype=np.float64)[:, :2]
+    if abs(np.linalg.det(linear)) < 1e-20:
+        return tb
+    inverse = np.linalg.inv(linear)
+    t, b = tb[:, :3], tb[:, 3:]
+    out = np.concatenate([t * inverse[0, 0] + b * inverse[1, 0], t * inverse[0, 1] + b * inverse[1, 1]], axis=1)
+    degenerate = ~b.any(axis=1)
+    out[degenerate] = tb[degenerate]
+    return out
+
+
 def _colour(texels):
     """(k, 3) colours of texels with any channel count (grey from one or two channels)."""
     return texels[:, :3] if texels.shape[1] >= 3 else np.repeat(texels[:, :1], 3, axis=1)
@@ -309,7 +338,8 @@ class SurfaceTextures:
 
         The map's texel ``t`` in [0, 1]^3 is the normal ``2 t - 1`` in the frame (T, B, N)
         with N the interpolated shading normal and T, B the face's UV derivatives made
-        orthogonal to N (Gram-Schmidt; B keeps the handedness of the UV mapping).  On the
+        orthogonal to N (Gram-Schmidt; B keeps the handedness of the UV mapping), taken
+        through the map's UV transform if it has one (:func:`transformed_tangents`).  On the
         back of a face (``flip`` -1) the frame is mirrored with the normal.
 
         Parameters
@@ -333,6 +363,8 @@ class SurfaceTextures:
             local = 2.0 * texel[:, :3] - 1.0
             n = np.ascontiguousarray(ns[rows])
             tb = self.tangents[prim[rows]]
+            if texture.transformed:
+                tb = transformed_tangents(tb, texture.transform)
             t = tb[:, :3] - n * dot(n, tb[:, :3])[:, None]
             t = normalize(t)
             b = np.cross(n, t)
