@@ -22,12 +22,13 @@ from rtmesh.batch.normalize import asset_to_world, transform_points
 from rtmesh.core.errors import RtmeshError
 from rtmesh.io.images import write_depth_png, write_display_image, write_image
 from rtmesh.loaders.importers import load_trimesh, parts_from_trimesh
-from rtmesh.materials.table import Material
+from rtmesh.materials.table import Material, MaterialTable
 from rtmesh.rendering.integrator import Integrator
 from rtmesh.rendering.settings import RenderSettings
 from rtmesh.scene.camera import frame_bounds
 from rtmesh.scene.camera_json import camera_record, write_camera_json
 from rtmesh.scene.model import MeshPart, Scene, default_lights
+from rtmesh.scene.studio import studio_background
 
 # Directions from the subject towards the camera, and the camera's up vector.  "iso" is the
 # automatic camera's direction (rtmesh.scene.camera.frame_bounds); top and bottom need another up
@@ -366,7 +367,11 @@ def _integrator_for_view(built, parts, materials, bounds, view, settings, ground
         scene = _scene_for_view(parts, materials, bounds, view, settings, ground)
         integrator = built[with_ground] = Integrator(scene, settings)
         return integrator
-    return integrator.with_view(*_camera_and_lights(bounds, view, settings))
+    camera, lights = _camera_and_lights(bounds, view, settings)
+    if integrator.plan.physical:
+        # the studio environment turned to this view's rig camera, as the three-light rig is
+        return integrator.with_view(camera, [], studio_background(_rig_camera(bounds, view, settings)))
+    return integrator.with_view(camera, lights)
 
 
 def _camera_and_lights(bounds, view, settings):
@@ -385,9 +390,14 @@ def _camera_and_lights(bounds, view, settings):
         radius = max(0.5 * float(np.linalg.norm(bounds[1] - bounds[0])), 1e-6)
         camera = dataclasses.replace(camera, projection="orthographic",
                                      ortho_height=2.0 * radius / min(aspect, 1.0))
-    rig_camera = frame_bounds(bounds, aspect=aspect, direction=view.light_direction or view.direction,
-                              up=view.up)
-    return camera, default_lights(rig_camera)
+    return camera, default_lights(_rig_camera(bounds, view, settings))
+
+
+def _rig_camera(bounds, view, settings):
+    """The camera the light rig of ``view`` is placed for: its ``light_direction`` (fixed
+    lighting for turntables), else the view's own direction."""
+    return frame_bounds(bounds, aspect=settings.width / settings.height,
+                        direction=view.light_direction or view.direction, up=view.up)
 
 
 def _scene_for_view(parts, materials, bounds, view, settings, ground):
@@ -398,6 +408,12 @@ def _scene_for_view(parts, materials, bounds, view, settings, ground):
     if ground and view.direction[1] >= 0:
         parts.append(_ground_part(bounds, len(materials)))
         materials.append(Material(name="ground", diffuse=np.full(3, 0.8)))
+    if MaterialTable(materials).any_physical:
+        # glTF metallic-roughness assets: the studio environment, turned to the view's rig
+        # camera, instead of the three-light rig (see rtmesh.scene.studio)
+        return Scene.from_parts(parts, materials, lights=[], camera=camera, ambient=np.zeros(3),
+                                background=studio_background(_rig_camera(bounds, view, settings)),
+                                source=view.name)
     return Scene.from_parts(parts, materials, lights=lights, camera=camera,
                             ambient=np.full(3, 0.05), source=view.name)
 

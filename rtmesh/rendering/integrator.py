@@ -168,15 +168,7 @@ class Integrator:
                 mean_tint = self.textures.mean_emission_tints()[material_id]
             self._emitters = emissive_mesh_light(self.accel.triangles, scene.face_normals,
                                                  m.emission[scene.material_id], tint, mean_tint)
-        self.background = as_background(scene.background)
-        # the background lights the scene only when asked (scene files: [background] lighting)
-        self.environment_lighting = None
-        # unset (None), it lights scenes with physically based materials, which are made to
-        # be seen under their environment, and no others (whose images stay as they were)
-        lighting = m.any_physical if self.background.lighting is None else self.background.lighting
-        if lighting and not self.background.is_black:
-            self.environment_lighting = EnvironmentLighting(self.background, self.accel, self.settings,
-                                                            self.offset_scale)
+        self._set_background(scene.background)
         lit = ~m.unlit[:, None]
         self._shaded_any = bool((((m.diffuse > 0) | (m.specular > 0)) & lit).any()) or m.any_physical
         self.ao_distance = settings.ao_distance or 0.2 * float(np.linalg.norm(np.ptp(scene_bounds, axis=0)))
@@ -207,7 +199,20 @@ class Integrator:
         self._material_id = scene.material_id.astype(np.intp)
         self._set_view()
 
-    def with_view(self, camera, lights=None):
+    def _set_background(self, background):
+        """The background rays see and, when it lights the scene, its light sampler."""
+        self.background = as_background(background)
+        m = self.scene.materials
+        self.environment_lighting = None
+        # it lights the scene when asked (scene files: [background] lighting); unset (None),
+        # it lights scenes with physically based materials, which are made to be seen under
+        # their environment, and no others (whose images stay as they were)
+        lighting = m.any_physical if self.background.lighting is None else self.background.lighting
+        if lighting and not self.background.is_black:
+            self.environment_lighting = EnvironmentLighting(self.background, self.accel, self.settings,
+                                                            self.offset_scale)
+
+    def with_view(self, camera, lights=None, background=None):
         """The same built scene seen from another camera (and lit by other lights).
 
         The Embree scene, textures, per-face tables and everything else that depends only
@@ -222,6 +227,8 @@ class Integrator:
             In the scene's own (world) frame.
         lights : list, optional
             Default: the scene's lights.
+        background : background object, optional
+            Default: the scene's background (and its light sampler) is kept.
 
         Returns
         -------
@@ -237,7 +244,10 @@ class Integrator:
             raise ValueError("with_view: a scene with moving objects needs the built camera's shutter")
         view = copy.copy(self)
         view.scene = dataclasses.replace(self.scene, camera=camera,
-                                         lights=list(self.scene.lights if lights is None else lights))
+                                         lights=list(self.scene.lights if lights is None else lights),
+                                         background=self.scene.background if background is None else background)
+        if background is not None:
+            view._set_background(background)
         view._set_view()
         return view
 
