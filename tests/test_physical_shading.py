@@ -194,3 +194,18 @@ def test_point_light_on_a_diffuse_physical_plane_is_lambert_with_one_over_pi():
     np.testing.assert_allclose(image.reshape(-1, 3).mean(axis=0), expected, rtol=1e-3)
     # the Lambert part dominates a roughness-1 dielectric: about (1 - 0.04) b / pi
     assert np.all(expected / (intensity / h ** 2) > 0.9 * np.array([0.5, 0.25, 0.125]) / math.pi)
+
+
+def test_a_gltf_primitive_without_material_gets_the_formats_default(tmp_path):
+    """glTF 2.0: "If material is undefined, then a default material MUST be used": white,
+    metallic 1, roughness 1; other formats keep rtmesh's grey Blinn-Phong default."""
+    box = trimesh.creation.box()
+    path = tmp_path / "bare.glb"
+    box.export(path)
+    scene, _ = load_scene(path)
+    m = scene.materials.materials[0]
+    assert m.model == "metallic_roughness" and m.metallic == 1.0 and m.perceptual_roughness == 1.0
+    np.testing.assert_allclose(m.base_color, 1.0)
+    box.export(tmp_path / "bare.ply")
+    ply, _ = load_scene(tmp_path / "bare.ply")
+    assert ply.materials.materials[0].model == "blinn_phong"

@@ -320,6 +320,11 @@ def material_from_trimesh(visual, name, file_materials=None):
     colours = getattr(visual, "main_color", None)
     if getattr(visual, "kind", None) == "face" and colours is not None:
         return Material(name=name, diffuse=srgb_to_linear(np.asarray(colours, dtype=np.float64)[:3] / 255.0))
+    if file_materials is not None and file_materials.gltf_file:
+        # a glTF primitive without a material has the format's default material: white,
+        # metallic 1, roughness 1 (glTF 2.0 specification, "Materials"), as three.js and the
+        # Khronos sample viewer show it
+        return gltf_material(trimesh.visual.material.PBRMaterial(name=f"{name} (glTF default)"), None, name)
     return Material(name=name)
 
 
@@ -355,13 +360,17 @@ class FileMaterials:
         A glTF file's material objects (JSON) by material name.
     drop_vertex_colours : bool
         The file's vertex colours are unusable (NaN in an OBJ: trimesh reads them as black).
+    gltf_file : bool
+        The file is glTF: a primitive without a material gets the format's default one.
     """
 
     def __init__(self, path=None):
         self.obj, self.gltf, self.drop_vertex_colours = None, {}, False
+        self.gltf_file = False
         if path is None:
             return
         ext = os.path.splitext(path)[1].lower()
+        self.gltf_file = ext in GLTF_EXTENSIONS
         if ext == ".obj":
             self.obj, nan_colours = obj_materials(path)
             if nan_colours:
