@@ -498,3 +498,15 @@ def test_white_dielectric_albedo_exceeds_one_at_grazing_views(roughness, theta_o
     assert quadrature == pytest.approx(ALBEDO_DIELECTRIC_BY_ANGLE[roughness, theta_o], abs=1e-4)
     mean, error = albedo_by_sampling(theta_o, alpha, 0.0)
     assert mean == pytest.approx(quadrature, abs=4.0 * error + 1e-4)
+
+
+def test_evaluate_and_pdf_is_evaluate_and_pdf_to_the_bit():
+    rng = np.random.default_rng(23)
+    k = 500
+    wo, wi = (v / np.linalg.norm(v, axis=1)[:, None] for v in (rng.normal(size=(k, 3)), rng.normal(size=(k, 3))))
+    ns = np.tile([0.0, 0.0, 1.0], (k, 1))
+    base, metallic = rng.uniform(size=(k, 3)), rng.uniform(size=k)
+    alpha = mr.alpha_from_roughness(rng.uniform(size=k))
+    value, density = mr.evaluate_and_pdf(wo, ns, wi, base, metallic, alpha)
+    np.testing.assert_array_equal(value, mr.evaluate(wo, ns, wi, base, metallic, alpha))
+    np.testing.assert_array_equal(density, mr.pdf(wo, ns, wi, base, metallic, alpha))

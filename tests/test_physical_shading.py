@@ -10,11 +10,12 @@ from scenes import part, render
 from trimesh.visual.material import PBRMaterial
 
 from rtmesh.api import load_scene
+from rtmesh.lights.area_lights import QuadLight
 from rtmesh.lights.point_lights import PointLight
 from rtmesh.materials import metallic_roughness as brdf
 from rtmesh.materials.table import Material
 from rtmesh.rendering.integrator import Integrator
-from rtmesh.rendering.physical_shading import environment_weight
+from rtmesh.rendering.physical_shading import bsdf_weight
 from rtmesh.scene.background import SolidBackground
 from rtmesh.scene.camera import Camera
 from rtmesh.scene.model import Scene
@@ -134,7 +135,7 @@ def _settings(**overrides):
 def test_mis_weights_sum_to_one_and_handle_the_edges():
     bsdf_pdf = np.array([0.5, 2.0, np.inf, 0.0, 3.0, 1e-300])
     env_pdf = np.array([1.0, 0.1, 1.0, 1.0, np.inf, 1e300])
-    w = environment_weight(bsdf_pdf, env_pdf, 4)
+    w = bsdf_weight(bsdf_pdf, env_pdf, 4)
     np.testing.assert_allclose(w[:2], [0.25 / (0.25 + 16.0), 4.0 / (4.0 + 0.16)])
     assert w[2] == 1.0 and w[3] == 0.0 and w[4] == 0.0 and w[5] < 1e-200
     assert np.all((w >= 0.0) & (w <= 1.0))
@@ -159,22 +160,28 @@ def test_mis_estimate_matches_bsdf_sampling_alone(monkeypatch):
     np.testing.assert_allclose(mis.mean(axis=(0, 1)), alone.mean(axis=(0, 1)), rtol=0.03)
 
 
-def test_bsdf_rays_leave_emitters_to_light_sampling():
-    """A diffuse physical floor under an emissive panel: path tracing one bounce deeper adds
-    nothing (the panel does not reflect), so max_depth 0 and 1 agree: the panel's light is
-    counted once, by light sampling, and not again by the rays that meet it."""
+@pytest.mark.parametrize("emitter", ["mesh", "quad"])
+def test_emitters_are_counted_once_by_both_strategies(emitter):
+    """A rough physical floor under an emissive panel (triangles, or a quad light): the
+    panel reflects nothing, so one bounce deeper adds nothing and max_depth 0 (light
+    sampling alone) and 1 (light sampling and BSDF rays meeting the panel, MIS-weighted)
+    agree; and the MIS weights actually split the light (BSDF rays do meet the panel)."""
     floor = tilted_quad(0.0, half=3.0)
     panel_vertices = np.array([[-0.5, -0.5, 1.0], [0.5, -0.5, 1.0], [0.5, 0.5, 1.0], [-0.5, 0.5, 1.0]])
-    panel = (panel_vertices, np.array([[0, 2, 1], [0, 3, 2]]))  # facing -Z, toward the floor
     camera = Camera([0.0, -2.5, 2.5], [0.0, 0.0, 0.0], [0.0, 0.0, 1.0], 40.0)
-    materials = [physical(base=0.8, metallic=0.0, roughness=0.6),
-                 Material("panel", diffuse=0.0, emission=4.0)]
-    scene = Scene.from_parts([part("floor", floor), part("panel", panel, material=1)], materials, [], camera,
-                             ambient=0.0)
+    materials = [physical(base=0.8, metallic=0.3, roughness=0.4)]
+    parts = [part("floor", floor)]
+    lights = []
+    if emitter == "mesh":
+        materials.append(Material("panel", diffuse=0.0, emission=4.0))
+        parts.append(part("panel", (panel_vertices, np.array([[0, 2, 1], [0, 3, 2]])), material=1))
+    else:
+        lights.append(QuadLight([0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0], 4.0))  # facing -Z
+    scene = Scene.from_parts(parts, materials, lights, camera, ambient=0.0)
     direct = render(scene, width=16, height=16, spp=64, light_samples=2, max_depth=0)
     traced = render(scene, width=16, height=16, spp=64, light_samples=2, max_depth=1)
     assert traced.stats.rays["bsdf"] > 0
-    np.testing.assert_allclose(traced.image.mean(), direct.image.mean(), rtol=0.03)
+    np.testing.assert_allclose(traced.image.mean(), direct.image.mean(), rtol=0.02)
 
 
 def test_point_light_on_a_diffuse_physical_plane_is_lambert_with_one_over_pi():
@@ -209,3 +216,37 @@ def test_a_gltf_primitive_without_material_gets_the_formats_default(tmp_path):
     box.export(tmp_path / "bare.ply")
     ply, _ = load_scene(tmp_path / "bare.ply")
     assert ply.materials.materials[0].model == "blinn_phong"
+
+
+def test_mis_tames_the_reflection_of_a_small_light_in_a_smooth_metal(monkeypatch):
+    """A smooth metal floor mirroring a small quad light: light sampling alone finds the
+    narrow lobe rarely (fireflies), BSDF sampling finds the light every time.  MIS keeps the
+    mean of BSDF sampling alone, and its noise (the RMS difference of two seeds) is a
+    fraction of light sampling's."""
+    from rtmesh.rendering import integrator as integrator_module
+    from rtmesh.rendering import local_shading, physical_shading
+
+    floor = tilted_quad(0.0, half=3.0)
+    camera = Camera([0.0, -2.0, 1.5], [0.0, 0.0, 0.0], [0.0, 0.0, 1.0], 50.0)
+    light = QuadLight([0.0, 1.5, 1.2], [0.0, 0.3, 0.0], [0.3, 0.0, 0.0], 40.0)
+    scene = Scene.from_parts([part("floor", floor)], [physical(base=0.9, metallic=1.0, roughness=0.08)], [light],
+                             camera, ambient=0.0)
+
+    def two_seeds(spp):
+        a, b = (render(scene, width=24, height=24, spp=spp, light_samples=1, max_depth=1, sampler="jittered",
+                       seed=seed).image for seed in (1, 2))
+        return 0.5 * (a.mean() + b.mean()), float(np.sqrt(np.mean((a - b) ** 2)))
+
+    mis_mean, mis_noise = two_seeds(64)
+
+    def strategy(weight):
+        for module in (integrator_module, local_shading, physical_shading):
+            monkeypatch.setattr(module, "bsdf_weight", lambda bsdf_pdf, light_pdf, samples: np.full(len(bsdf_pdf),
+                                                                                                   weight))
+
+    strategy(1.0)  # BSDF sampling alone: light samples weigh 0
+    bsdf_mean, _ = two_seeds(64)
+    strategy(0.0)  # light sampling alone
+    _, light_noise = two_seeds(64)
+    np.testing.assert_allclose(mis_mean, bsdf_mean, rtol=0.05)
+    assert mis_noise < 0.25 * light_noise

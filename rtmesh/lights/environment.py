@@ -153,7 +153,9 @@ class EnvironmentLighting:
         ng : (k, 3) float
             Unit geometric normals on the side the incoming ray came from.
         reflectance : callable
-            ``reflectance(wi, lit) -> (k, 3)``, the material's Blinn-Phong factor.
+            ``reflectance(wi, lit, pdf) -> (k, 3)``, the material's reflection factor
+            toward ``wi`` where ``lit``; ``pdf`` is each direction's solid-angle density
+            (for MIS weights).
         pixel, sample : (k,) int
             The keys of each hit's random numbers.
         depth : int
@@ -192,7 +194,7 @@ class EnvironmentLighting:
             visible = np.zeros(len(p), dtype=bool)
             visible[seen] = True
             weight = np.where(visible[:, None], radiance / np.where(visible, pdf, 1.0)[:, None], 0.0)
-            contribution = reflectance(wi, visible) * weight
+            contribution = reflectance(wi, visible, pdf) * weight
             total = contribution if total is None else total + contribution
         if total is not None:
             total *= 1.0 / n

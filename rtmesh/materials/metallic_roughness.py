@@ -459,6 +459,19 @@ def pdf_rows(wo, ns, wi, base, metallic, alpha):
 
 
 @kernel
+def brdf_cos_pdf_rows(wo, ns, wi, base, metallic, alpha):
+    """:func:`brdf_cos_pdf_row` of every row: ``((k, 3), (k,))`` (see :func:`evaluate_and_pdf`)."""
+    k = len(wo)
+    out = np.empty((3, k))
+    density = np.empty(k)
+    for i in range(k):
+        out[0, i], out[1, i], out[2, i], density[i] = brdf_cos_pdf_row(
+            wo[i, 0], wo[i, 1], wo[i, 2], ns[i, 0], ns[i, 1], ns[i, 2], wi[i, 0], wi[i, 1], wi[i, 2],
+            base[i, 0], base[i, 1], base[i, 2], metallic[i], alpha[i])
+    return out.T, density
+
+
+@kernel
 def sample_rows(wo, ns, u, base, metallic, alpha):
     """:func:`sample_row` of every row: ``(wi (k, 3), weight (k, 3), pdf (k,))`` (see :func:`sample`)."""
     k = len(wo)
@@ -478,8 +491,9 @@ _FIXING = threading.Lock()
 
 
 def _kernels():
-    """The three batch kernels, each compiled once for read-only float64 arrays of any
-    layout (C, Fortran, strided, broadcast), on first use rather than at import."""
+    """The batch kernels (evaluate, pdf, sample, evaluate-and-pdf), each compiled once for
+    read-only float64 arrays of any layout (C, Fortran, strided, broadcast), on first use
+    rather than at import."""
     with _FIXING:
         return _fixed_kernels()
 
@@ -489,9 +503,9 @@ def _fixed_kernels():
     vectors = types.Array(types.float64, 2, "A", readonly=True)
     values = types.Array(types.float64, 1, "A", readonly=True)
     signature = (vectors, vectors, vectors, vectors, values, values)
-    for dispatcher in (brdf_cos_rows, pdf_rows, sample_rows):
+    for dispatcher in (brdf_cos_rows, pdf_rows, sample_rows, brdf_cos_pdf_rows):
         fix_signatures(dispatcher, [signature])
-    return brdf_cos_rows, pdf_rows, sample_rows
+    return brdf_cos_rows, pdf_rows, sample_rows, brdf_cos_pdf_rows
 
 
 def _batch(wo, ns, third, base, metallic, alpha):
@@ -545,6 +559,18 @@ def pdf(wo, ns, wi, base, metallic, alpha):
         hemisphere is 1 minus the probability of a failed sample).
     """
     return _kernels()[1](*_batch(wo, ns, wi, base, metallic, alpha))
+
+
+def evaluate_and_pdf(wo, ns, wi, base, metallic, alpha):
+    """:func:`evaluate` and :func:`pdf` in one pass (one half vector per row): what a light
+    sample weighed against BSDF sampling needs.
+
+    Returns
+    -------
+    value : (k, 3) float64
+    pdf : (k,) float64
+    """
+    return _kernels()[3](*_batch(wo, ns, wi, base, metallic, alpha))
 
 
 def sample(wo, ns, u, base, metallic, alpha):

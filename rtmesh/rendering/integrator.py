@@ -53,7 +53,7 @@ from rtmesh.rendering.direct_stage import DirectStage
 from rtmesh.rendering.film import Film
 from rtmesh.rendering.local_shading import LocalShading
 from rtmesh.rendering.media import Media
-from rtmesh.rendering.physical_shading import PhysicalShading, environment_weight
+from rtmesh.rendering.physical_shading import PhysicalShading, bsdf_weight
 from rtmesh.rendering.render_plan import RenderPlan
 from rtmesh.rendering.scheduler import pixel_chunks, run_on_threads, sample_indices
 from rtmesh.rendering.secondary_rays import SecondaryRays
@@ -600,10 +600,12 @@ class Integrator:
                     rays.throughput[absorbing] *= np.where(sigma > 0, np.exp(-sigma * t), 1.0)
 
         if on_light is not None and len(on_light[0]):
-            ended, emitted = on_light
+            ended, emitted, lights = on_light
             if rays.pdf is not None:
-                # BSDF-sampled rays leave area lights to light sampling (see physical_shading)
-                emitted = emitted * np.isinf(rays.pdf[ended])[:, None]
+                # BSDF-sampled rays weigh the light against light sampling (see physical_shading)
+                light_pdf = self.area_lighting.pdf_of_visible(lights, take_rows(rays.origins, ended),
+                                                              take_rows(rays.directions, ended), hits.t[ended])
+                emitted = emitted * bsdf_weight(rays.pdf[ended], light_pdf, self.area_lighting.samples)[:, None]
             scatter_add(radiance, rays.sample[ended], take_rows(rays.throughput, ended) * emitted,
                          unique=primary)
 
@@ -653,7 +655,7 @@ class Integrator:
         lighting = self.environment_lighting if self.plan.environment_lighting else None
         if lighting is None:
             return np.isinf(pdf).astype(np.float64)
-        return environment_weight(pdf, lighting.pdf(directions), lighting.samples)
+        return bsdf_weight(pdf, lighting.pdf(directions), lighting.samples)
 
 def render(scene, settings, progress=None):
     """Render ``scene`` with ``settings``; see :meth:`Integrator.render`."""

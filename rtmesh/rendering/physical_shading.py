@@ -14,8 +14,8 @@ Hits whose material has the ``metallic_roughness`` model
   (hit, light), ``f cos E``.  Area lights (quads, disks, emissive meshes): the
   :class:`rtmesh.lights.area_lights.AreaLighting` estimator with ``f cos`` as its
   reflectance.  The environment (a background with ``lighting`` on): the
-  :class:`rtmesh.lights.environment.EnvironmentLighting` estimator, its samples weighted
-  for multiple importance sampling (below).
+  :class:`rtmesh.lights.environment.EnvironmentLighting` estimator.  Area-light and
+  environment samples are weighted for multiple importance sampling (below).
 - **BSDF sampling.** Each hit above the last depth sends one ray drawn from the BRDF
   (GGX visible normals for the specular lobe, cosine for the diffuse one); its throughput
   is multiplied by ``f cos / pdf`` and it carries ``pdf`` (:attr:`rtmesh.core.rays.RayBatch.pdf`),
@@ -26,24 +26,29 @@ Hits whose material has the ``metallic_roughness`` model
 
 Multiple importance sampling
 ----------------------------
-The environment is reached by two strategies: ``N = light_samples`` directions drawn from
-the environment's density ``p_e`` and one direction drawn from the BRDF's ``p_b``.  Each
-contribution is weighted by Veach's power heuristic (with the sample counts)::
+An area light or the environment is reached by two strategies: ``N = light_samples``
+directions drawn by the light (solid-angle density ``p_l``: the environment's, or an area
+light's area density turned to solid angle, ``d^2 / (|cos_l| A)``, or ``1 / omega`` for the
+emissive triangles sampled in solid angle) and one direction drawn from the BRDF (``p_b``).
+Each contribution is weighted by Veach's power heuristic (with the sample counts)::
 
-    w_e(w) = (N p_e)^2 / ((N p_e)^2 + p_b^2)       w_b(w) = p_b^2 / ((N p_e)^2 + p_b^2)
+    w_l(w) = (N p_l)^2 / ((N p_l)^2 + p_b^2)       w_b(w) = p_b^2 / ((N p_l)^2 + p_b^2)
 
-:func:`environment_weight` is ``w_b``; ``w_e = 1 - w_b``.  Together the weights sum to 1 for
-every direction, so the estimate is unbiased whatever the roughness, while glossy
-reflections of a bright sky come mostly from BSDF samples and diffuse light mostly from
-light samples.
+:func:`bsdf_weight` is ``w_b``; ``w_l = 1 - w_b`` (1 at the last depth, where no
+BSDF-sampled ray follows).  Light samples are weighted here (their
+reflectance callback receives ``p_l``); a BSDF-sampled ray is weighted where it meets the
+light: by the integrator where it leaves the scene (the environment) or ends on a quad or
+disk light (:meth:`rtmesh.lights.area_lights.AreaLighting.pdf_of_visible`), by the local
+shading stage where it hits an emissive triangle
+(:meth:`~rtmesh.lights.area_lights.AreaLighting.pdf_of_emitters`).  The weights sum to 1
+for every direction, so the estimate is unbiased whatever the roughness, while glossy
+reflections of small bright lights come mostly from BSDF samples and diffuse light mostly
+from light samples.  Rays of delta lobes (mirrors, smooth glass) carry an infinite density:
+weight 1, as no light sampling could have produced them.
 
-Area lights are reached by light sampling only: a BSDF-sampled ray that meets a quad or disk
-light or an emissive triangle adds none of its emission (weight 0), light sampling adds all
-of it (weight 1), which is unbiased too but noisier on smooth metals reflecting small
-lights (MIS for area lights needs each light's solid-angle density at the shading point;
-not built yet).  A background whose ``lighting`` is off lights no metallic-roughness
-surface: their BSDF-sampled rays that leave the scene see black (the background is then
-only seen: by camera rays and through the mirrors and glass of Blinn-Phong materials).
+A background whose ``lighting`` is off lights no metallic-roughness surface: their
+BSDF-sampled rays that leave the scene see black (the background is then only seen: by
+camera rays and through the mirrors and glass of Blinn-Phong materials).
 """
 
 import numpy as np
@@ -56,24 +61,25 @@ from rtmesh.rendering.chunk_state import Stage, add_rows_or_all, rows_at
 from rtmesh.shading.direct_light import SHADOW_SHORTEN
 
 
-def environment_weight(bsdf_pdf, environment_pdf, samples):
-    """Power-heuristic weight of BSDF-sampled directions against environment sampling.
+def bsdf_weight(bsdf_pdf, light_pdf, samples):
+    """Power-heuristic weight of BSDF-sampled directions against light sampling.
 
     Parameters
     ----------
     bsdf_pdf : (k,) float
         Solid-angle density of the BSDF sample; ``inf`` for a delta lobe (weight 1).
-    environment_pdf : (k,) float
-        The environment light's density of the same directions (``inf`` at a pole).
+    light_pdf : (k,) float
+        The light's solid-angle density of the same directions (``inf`` at an environment's
+        pole; 0 where light sampling cannot reach them: weight 1).
     samples : int
-        Environment samples per hit, ``N``.
+        Light samples per hit, ``N``.
 
     Returns
     -------
     (k,) float64
         ``p_b^2 / (p_b^2 + (N p_e)^2)``.
     """
-    light = samples * environment_pdf
+    light = samples * light_pdf
     # rows with a zero or infinite density on either side are settled by the wheres
     ordinary = np.isfinite(bsdf_pdf) & (bsdf_pdf > 0.0) & np.isfinite(light)
     with np.errstate(over="ignore"):  # a ratio beyond float64 is inf, and its weight 0
@@ -157,17 +163,21 @@ class PhysicalShading(Stage):
         pixel, sample_in_pixel = chunk.keys
         sample = srf.sample[rows]
         environment = it.environment_lighting if it.plan.environment_lighting else None
-        for lighting, weighted in ((it.area_lighting if it.plan.area_lights else None, False),
-                                   (environment, True)):
+        area = it.area_lighting if it.plan.area_lights else None
+        # at the last depth no BSDF-sampled ray follows: light sampling is the only strategy
+        # and takes the whole weight
+        bounces = depth < it.settings.max_depth
+        for lighting in (area, environment):
             if lighting is None:
                 continue
 
-            def reflectance(wi, lit, weighted=weighted, lighting=lighting):
-                """``f cos`` toward ``wi`` (times the environment's MIS weight), 0 off ``lit``."""
-                value = brdf.evaluate(wo, ns, wi, base, metallic, alpha)
-                if weighted:
-                    bsdf_pdf = brdf.pdf(wo, ns, wi, base, metallic, alpha)
-                    value *= (1.0 - environment_weight(bsdf_pdf, lighting.pdf(wi), lighting.samples))[:, None]
+            def reflectance(wi, lit, light_pdf, samples=lighting.samples):
+                """``f cos`` toward ``wi`` times the light sample's MIS weight; 0 off ``lit``."""
+                if not bounces:
+                    value = brdf.evaluate(wo, ns, wi, base, metallic, alpha)
+                else:
+                    value, bsdf_pdf = brdf.evaluate_and_pdf(wo, ns, wi, base, metallic, alpha)
+                    value *= (1.0 - bsdf_weight(bsdf_pdf, light_pdf, samples))[:, None]
                 value[~lit] = 0.0
                 return value
 
