@@ -175,8 +175,9 @@ class EnvironmentLighting:
         total = None
         for j in range(n):
             wi, pdf = self.sample(self.sampler.environment(pixel, sample, depth, j, n))
-            radiance = self.background.radiance(wi)
-            lit = (dot(wi, ng) > 0.0) & np.isfinite(pdf) & (radiance > 0.0).any(axis=1)
+            # the radiance is looked up only where the shadow ray escapes (below): about half
+            # the directions are below the surface, and some of the rest are blocked
+            lit = (dot(wi, ng) > 0.0) & np.isfinite(pdf)
             rows = np.flatnonzero(lit)
             if not len(rows):
                 continue
@@ -193,7 +194,8 @@ class EnvironmentLighting:
                 continue
             visible = np.zeros(len(p), dtype=bool)
             visible[seen] = True
-            weight = np.where(visible[:, None], radiance / np.where(visible, pdf, 1.0)[:, None], 0.0)
+            weight = np.zeros((len(p), 3))
+            weight[seen] = self.background.radiance(take_rows(wi, seen)) / pdf[seen, None]
             contribution = reflectance(wi, visible, pdf) * weight
             total = contribution if total is None else total + contribution
         if total is not None:
