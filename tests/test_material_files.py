@@ -9,7 +9,7 @@ from PIL import Image
 from trimesh.visual.material import PBRMaterial
 
 from rtmesh.loaders.importers import load_mesh_scene, parts_from_trimesh
-from rtmesh.loaders.material_files import gltf_material, map_statement, mtl_material, roughness_to_shininess
+from rtmesh.loaders.material_files import gltf_material, map_statement, mtl_material
 from rtmesh.loaders.scene_file import scene_from_dict
 
 # ---------------------------------------------------------------- MTL
@@ -110,26 +110,28 @@ def test_gltf_materials_keep_the_metallic_roughness_model():
     np.testing.assert_allclose(d.diffuse, np.array([0.2, 0.4, 0.6]) * 0.75, atol=1 / 255)  # for the ambient term
 
 
-def test_transmissive_and_unlit_gltf_materials_keep_the_blinn_phong_mapping():
+def test_transmissive_gltf_materials_refract_part_of_their_dielectric_diffuse_term():
     glass = gltf_material(pbr(baseColorFactor=[0.8, 0.6, 0.2, 1.0], metallicFactor=0.0, roughnessFactor=0.5),
-                          {"extensions": {"KHR_materials_transmission": {"transmissionFactor": 1.0}}})
-    assert glass.model == "blinn_phong"
-    np.testing.assert_allclose(glass.transmission, [0.8, 0.6, 0.2], atol=1 / 255)
-    np.testing.assert_allclose(glass.specular, 0.04)
-    assert glass.roughness == pytest.approx(0.25)  # the GGX alpha drives the glossy lobe
-    assert glass.shininess == pytest.approx(2.0 / 0.5 ** 4 - 2.0)  # and the highlight
-    metal = gltf_material(pbr(baseColorFactor=[0.8, 0.6, 0.2, 1.0], metallicFactor=1.0, roughnessFactor=0.5),
+                          {"extensions": {"KHR_materials_transmission": {"transmissionFactor": 0.75},
+                                          "KHR_materials_ior": {"ior": 1.4},
+                                          "KHR_materials_volume": {"attenuationColor": [0.5, 1.0, 1.0],
+                                                                   "attenuationDistance": 2.0}}})
+    assert glass.model == "metallic_roughness" and glass.transmission_factor == 0.75
+    np.testing.assert_allclose(glass.transmission, 0.75 * np.array([0.8, 0.6, 0.2]), atol=1 / 255)
+    np.testing.assert_allclose(glass.diffuse, 0.25 * np.array([0.8, 0.6, 0.2]), atol=1 / 255)
+    assert glass.ior == 1.4
+    np.testing.assert_allclose(glass.absorption, [np.log(2.0) / 2.0, 0.0, 0.0])
+    # a metal transmits nothing: transmission is part of the dielectric term only
+    metal = gltf_material(pbr(baseColorFactor=[0.8, 0.6, 0.2, 1.0], metallicFactor=1.0),
                           {"extensions": {"KHR_materials_transmission": {"transmissionFactor": 0.5}}})
-    np.testing.assert_allclose(metal.mirror, [0.8, 0.6, 0.2], atol=1 / 255)  # metals reflect in their colour
-    assert not metal.diffuse.any()
+    assert not metal.transmission.any()
+
+
+def test_unlit_gltf_materials_show_their_base_colour_whatever_their_metalness():
+    # glTF's metallicFactor defaults to 1: an unlit material must not turn black for it
     unlit = gltf_material(pbr(baseColorFactor=[0.2, 0.4, 0.6, 1.0]), {"extensions": {"KHR_materials_unlit": {}}})
     assert unlit.model == "blinn_phong" and unlit.unlit
-
-
-def test_roughness_to_shininess_is_monotonic_and_clamped():
-    values = [roughness_to_shininess(r) for r in (0.0, 0.05, 0.2, 0.5, 1.0)]
-    assert values[0] == values[1] and values == sorted(values, reverse=True)
-    assert values[-1] == 1.0
+    np.testing.assert_allclose(unlit.diffuse, [0.2, 0.4, 0.6], atol=1 / 255)
 
 
 def test_gltf_alpha_modes_emission_and_unlit():

@@ -9,8 +9,7 @@ Usage, from the repository root::
 each file, two renders with the file's own camera or the automatic framing:
 
 - **before**: every metallic-roughness material mapped onto Blinn-Phong as rtmesh did
-  before it had the glTF model (:func:`blinn_phong_mapping`, the mapping that
-  KHR_materials_transmission materials still get), lit by the three-light rig
+  before it had the glTF model (:func:`blinn_phong_mapping`), lit by the three-light rig
   (:func:`rtmesh.scene.model.default_lights`) with its ambient term;
 - **after**: the file as it loads, i.e. the glTF model, lit by the studio environment
   (:mod:`rtmesh.scene.studio`).
@@ -30,7 +29,6 @@ import numpy as np
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 from rtmesh.api import load_scene  # noqa: E402
 from rtmesh.io.images import write_image  # noqa: E402
-from rtmesh.loaders.material_files import roughness_to_shininess  # noqa: E402
 from rtmesh.materials.table import Material, MaterialTable  # noqa: E402
 from rtmesh.rendering.integrator import Integrator  # noqa: E402
 from rtmesh.scene.model import default_lights  # noqa: E402
@@ -40,9 +38,17 @@ REAL = os.path.join(ROOT, "..", "shared", "assets", "real")
 DEFAULT_FILES = ("Duck.glb", "BoxTextured.glb", "monkey.glb")
 
 
+def roughness_to_shininess(roughness):
+    """Blinn-Phong exponent with the highlight width of a GGX lobe of roughness ``r``:
+    ``2 / alpha^2 - 2`` with ``alpha = r^2`` (Walter et al. 2007's Beckmann-Phong
+    correspondence), clamped to [1, 10000]; ``r`` below 0.05 reads as 0.05."""
+    r4 = max(float(roughness), 0.05) ** 4
+    return float(np.clip(2.0 / r4 - 2.0, 1.0, 10000.0))
+
+
 def blinn_phong_mapping(material):
     """A metallic-roughness material as the Blinn-Phong material rtmesh used to map it to
-    (docs/MATERIALS.md, the transmission table): ``diffuse = b (1 - m)``, ``specular = 0.04
+    before it had the glTF model: ``diffuse = b (1 - m)``, ``specular = 0.04
     (1 - m) + b m`` with the GGX-equivalent exponent, ``mirror = b m`` blurred by ``r^2``
     radians, the metallic-roughness texture's mean in place of the texture."""
     if material.model != "metallic_roughness":

@@ -345,7 +345,7 @@ def _load(job):
     parts, materials = parts_from_trimesh(load_trimesh(job.path), name=job.path)
     # Scene.from_parts drops broken triangles and raises when nothing is left; build the
     # scene once here so an empty asset fails at the load stage, and frame its clean bounds
-    bounds = Scene.from_parts(parts, materials, source=job.path).bounds
+    bounds = Scene.from_parts(parts, materials, lights=[], source=job.path).bounds  # (no light rig needed)
     to_world = asset_to_world(bounds, job.normalize)
     if job.normalize:
         # uniform scale and shift: normals, uv and colours stay as they are

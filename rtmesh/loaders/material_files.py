@@ -356,30 +356,18 @@ def _gltf_factors(pbr, doc):
     )
 
 
-def roughness_to_shininess(roughness):
-    """Blinn-Phong exponent with the highlight width of a GGX lobe of roughness ``r``.
-
-    ``2 / alpha^2 - 2`` with ``alpha = r^2`` (Walter et al. 2007's Beckmann-Phong
-    correspondence), clamped to [1, 10000]; ``r`` below 0.05 reads as 0.05.
-    """
-    r4 = max(float(roughness), 0.05) ** 4
-    return float(np.clip(2.0 / r4 - 2.0, 1.0, 10000.0))
-
-
 def gltf_material(pbr, json_material=None, name="gltf"):
     """A glTF metallic-roughness material as rtmesh's :class:`~rtmesh.materials.table.Material`
     (see docs/MATERIALS.md).
 
-    Opaque, lit materials keep the model the format defines: ``model="metallic_roughness"``
-    with the base colour, metallic and roughness factors and the base-colour,
+    Lit materials keep the model the format defines: ``model="metallic_roughness"`` with
+    the base colour, metallic and roughness factors and the base-colour,
     metallic-roughness, occlusion, normal and emissive textures, evaluated per texel
     (:mod:`rtmesh.materials.metallic_roughness`).  Alpha mode, cutoff and base-colour
-    alpha give the opacity; KHR_materials_emissive_strength scales the emission.
-
-    Two kinds keep the Blinn-Phong mapping of :func:`blinn_phong_from_gltf`:
-    KHR_materials_unlit (the base colour shown without lighting) and
-    KHR_materials_transmission (a refracting dielectric; the metallic-roughness model of
-    rtmesh has no transmission lobe yet).
+    alpha give the opacity; KHR_materials_emissive_strength scales the emission;
+    KHR_materials_transmission / ior / volume make part of the dielectric's diffuse term a
+    smooth refraction into an absorbing interior (:func:`_transmission`).
+    KHR_materials_unlit shows the base colour without lighting.
 
     Parameters
     ----------
@@ -397,39 +385,74 @@ def gltf_material(pbr, json_material=None, name="gltf"):
     _check_decoded(pbr, json_material, pbr.name or name)
     f = _gltf_factors(pbr, json_material)
     ext = f["extensions"]
-    transmits = float(ext.get("KHR_materials_transmission", {}).get("transmissionFactor", 0.0)) > 0.0
-    if transmits or "KHR_materials_unlit" in ext:
-        return blinn_phong_from_gltf(pbr, f, json_material, name)
     base = _rgba(f["base"])
-    metallic, roughness = float(np.clip(f["metallic"], 0, 1)), float(np.clip(f["roughness"], 0, 1))
+    colour = base[:3]
 
     def texture(role, srgb):
         return _gltf_texture(pbr, json_material, role, srgb, name)
 
     emission = _emission(f)
-    occlusion = (json_material or {}).get("occlusionTexture") or {}
-    return Material(
+    common = dict(
         name=pbr.name or name,
-        model="metallic_roughness",
-        base_color=base[:3],
-        metallic=metallic,
-        perceptual_roughness=roughness,
-        # kept for the ambient term and the albedo pass (see Material.model)
-        diffuse=base[:3] * (1.0 - metallic),
-        specular=np.zeros(3),
         emission=emission,
         opacity=float(base[3]),
         alpha_mode=f["mode"] if f["mode"] in ("mask", "blend") else "opaque",
         alpha_cutoff=f["cutoff"],
         double_sided=f["double_sided"],
         diffuse_texture=texture("baseColorTexture", True),
+        emission_texture=texture("emissiveTexture", True) if (emission > 0).any() else None,  # factor x texture
+    )
+    if "KHR_materials_unlit" in ext:
+        # the base colour as is: metallic and roughness do not apply
+        return Material(diffuse=colour, unlit=True, **common)
+    metallic, roughness = float(np.clip(f["metallic"], 0, 1)), float(np.clip(f["roughness"], 0, 1))
+    factor, ior, absorption = _transmission(ext)
+    occlusion = (json_material or {}).get("occlusionTexture") or {}
+    return Material(
+        model="metallic_roughness",
+        base_color=colour,
+        metallic=metallic,
+        perceptual_roughness=roughness,
+        # kept for the ambient term and the albedo pass (see Material.model)
+        diffuse=colour * (1.0 - metallic) * (1.0 - factor),
+        specular=np.zeros(3),
+        transmission=factor * colour * (1.0 - metallic),
+        transmission_factor=factor,
+        ior=ior,
+        absorption=absorption,
         # glTF: roughness in green, metalness in blue, occlusion in red, all linear
         metallic_roughness_texture=texture("metallicRoughnessTexture", False),
         occlusion_texture=texture("occlusionTexture", False),
         occlusion_strength=float(occlusion.get("strength", 1.0)),
         normal_texture=texture("normalTexture", False),
-        emission_texture=texture("emissiveTexture", True) if (emission > 0).any() else None,  # factor x texture
+        **common,
     )
+
+
+def _transmission(ext):
+    """KHR_materials_transmission / ior / volume of a material's extensions.
+
+    Returns
+    -------
+    factor : float
+        ``transmissionFactor`` in [0, 1] (0 without the extension).
+    ior : float
+        ``KHR_materials_ior`` (1.5 by default, as the extension says).
+    absorption : (3,) float
+        ``-ln(attenuationColor) / attenuationDistance`` per scene unit (0 without a finite
+        distance).
+    """
+    factor = float(np.clip(float(ext.get("KHR_materials_transmission", {}).get("transmissionFactor", 0.0)), 0, 1))
+    ior = 1.5
+    if "KHR_materials_ior" in ext:
+        ior = float(ext["KHR_materials_ior"].get("ior", 1.5)) or 1.5
+    absorption = np.zeros(3)
+    volume = ext.get("KHR_materials_volume", {})
+    distance = float(volume.get("attenuationDistance", np.inf))
+    tint = np.clip(np.asarray(volume.get("attenuationColor", [1.0, 1.0, 1.0]), dtype=np.float64), 1e-6, 1.0)
+    if factor > 0 and np.isfinite(distance) and distance > 0:
+        absorption = -np.log(tint) / distance
+    return factor, ior, absorption
 
 
 def _gltf_texture(pbr, json_material, role, srgb, name):
@@ -451,79 +474,6 @@ def _emission(factors):
     """Emitted radiance: ``emissiveFactor`` times KHR_materials_emissive_strength."""
     strength = factors["extensions"].get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0)
     return factors["emission"] * float(strength)
-
-
-def blinn_phong_from_gltf(pbr, f, json_material=None, name="gltf"):
-    """Map a glTF material onto rtmesh's Blinn-Phong model (unlit and transmissive ones).
-
-    ``diffuse = base * (1 - metallic)``; ``specular = 0.04 (1 - metallic) + base * metallic``
-    with the exponent of :func:`roughness_to_shininess`; metals reflect with
-    ``mirror = base * metallic``, blurred by a glossy lobe of ``roughness = r^2`` radians
-    (the GGX alpha).  A metallic-roughness texture contributes its mean (this model has
-    per-material metallic and roughness only).  KHR_materials_transmission / ior / volume
-    make a refracting dielectric (transmission tinted by the base colour, absorption
-    ``-ln(attenuationColor) / attenuationDistance``); KHR_materials_unlit shows the base
-    colour without lighting.
-
-    Parameters
-    ----------
-    pbr : trimesh.visual.material.PBRMaterial
-    f : dict
-        The material's factors (:func:`_gltf_factors`).
-    json_material : dict, optional
-    name : str
-
-    Returns
-    -------
-    Material
-    """
-    ext = f["extensions"]
-    base = _rgba(f["base"])
-    metallic, roughness = f["metallic"], f["roughness"]
-    if pbr.metallicRoughnessTexture is not None:
-        # glTF: roughness in green, metalness in blue, both linear
-        texels = Texture.from_pil(pbr.metallicRoughnessTexture, srgb=False).pixels
-        mean = texels.reshape(-1, texels.shape[2]).mean(axis=0)
-        if len(mean) >= 3:
-            roughness, metallic = roughness * mean[1], metallic * mean[2]
-    metallic, roughness = float(np.clip(metallic, 0, 1)), float(np.clip(roughness, 0, 1))
-    colour = base[:3]
-    emission = _emission(f)
-    transmission, ior, absorption = np.zeros(3), 1.5, np.zeros(3)
-    if "KHR_materials_ior" in ext:
-        ior = float(ext["KHR_materials_ior"].get("ior", 1.5)) or 1.5
-    if "KHR_materials_transmission" in ext:
-        transmission = float(ext["KHR_materials_transmission"].get("transmissionFactor", 0.0)) * colour
-        volume = ext.get("KHR_materials_volume", {})
-        distance = float(volume.get("attenuationDistance", np.inf))
-        tint = np.clip(np.asarray(volume.get("attenuationColor", [1.0, 1.0, 1.0]), dtype=np.float64), 1e-6, 1.0)
-        if np.isfinite(distance) and distance > 0:
-            absorption = -np.log(tint) / distance
-    mode = f["mode"]
-    not_transmitted = 1.0 - transmission.max()
-    return Material(
-        name=pbr.name or name,
-        diffuse=colour * (1.0 - metallic) * not_transmitted,
-        specular=0.04 * (1.0 - metallic) + colour * metallic,
-        shininess=roughness_to_shininess(roughness),
-        mirror=colour * metallic,
-        roughness=roughness ** 2,
-        metallic=metallic,
-        transmission=transmission,
-        ior=ior,
-        absorption=absorption,
-        emission=emission,
-        opacity=float(base[3]),
-        alpha_mode=mode if mode in ("mask", "blend") else "opaque",
-        alpha_cutoff=f["cutoff"],
-        double_sided=f["double_sided"],
-        unlit="KHR_materials_unlit" in ext,
-        diffuse_texture=_gltf_texture(pbr, json_material, "baseColorTexture", True, name),
-        normal_texture=_gltf_texture(pbr, json_material, "normalTexture", False, name),
-        # glTF: emission is factor x texture
-        emission_texture=(_gltf_texture(pbr, json_material, "emissiveTexture", True, name)
-                          if (emission > 0).any() else None),
-    )
 
 
 # glTF sampler wrap modes (the OpenGL enums) as Texture wrap modes; glTF's default is REPEAT

@@ -186,11 +186,11 @@ def smith_visibility(nl, nv, a2):
 
 
 @row
-def specular_probability(nv, b0, b1, b2, metallic):
+def specular_probability(nv, b0, b1, b2, metallic, transmission):
     """Probability ``p_spec`` with which :func:`sample_row` draws from the GGX lobe.
 
     ``S / (S + W)`` with ``S`` the luminance of the Schlick Fresnel at ``n.wo`` (the mix of
-    ``F_d`` and ``F_m``) and ``W`` the diffuse weight ``(1 - metallic) (1 - F_d) luminance(base)``, clamped to
+    ``F_d`` and ``F_m``) and ``W`` the diffuse weight ``(1 - metallic) (1 - transmission) (1 - F_d) luminance(base)``, clamped to
     [:data:`P_SPEC_MIN`, :data:`P_SPEC_MAX`]; 1 where the diffuse weight is 0 (metals, black
     base colour), so that no sample is spent on a lobe that reflects nothing.  Fresnel at the
     viewing angle stands for the lobe's albedo, which has no closed form; any value in (0, 1]
@@ -204,6 +204,8 @@ def specular_probability(nv, b0, b1, b2, metallic):
         Linear base colour.
     metallic : float
         In [0, 1].
+    transmission : float
+        In [0, 1]: the part of the dielectric's diffuse term that is transmitted instead.
 
     Returns
     -------
@@ -214,7 +216,7 @@ def specular_probability(nv, b0, b1, b2, metallic):
     f_d = 0.04 + 0.96 * w
     lum = (_LUMA_R * b0 + _LUMA_G * b1) + _LUMA_B * b2
     specular = (1.0 - metallic) * f_d + metallic * (lum + (1.0 - lum) * w)
-    diffuse = (1.0 - metallic) * (1.0 - f_d) * lum
+    diffuse = (1.0 - metallic) * (1.0 - transmission) * (1.0 - f_d) * lum
     if not diffuse > 0.0:
         return 1.0
     return min(max(specular / (specular + diffuse), P_SPEC_MIN), P_SPEC_MAX)
@@ -231,7 +233,7 @@ def half_vector_cosines(ox, oy, oz, nx, ny, nz, wx, wy, wz):
 
 
 @row
-def brdf_cos_from_cosines(nv, nl, nh, vh, b0, b1, b2, metallic, alpha):
+def brdf_cos_from_cosines(nv, nl, nh, vh, b0, b1, b2, metallic, alpha, transmission):
     """``f max(0, NL)`` per channel from the cosines of :func:`half_vector_cosines`; 0 where
     ``nv <= 0`` or ``nl <= 0``."""
     if not ((nl > 0.0) & (nv > 0.0)):
@@ -243,7 +245,9 @@ def brdf_cos_from_cosines(nv, nl, nh, vh, b0, b1, b2, metallic, alpha):
     f_d = 0.04 + 0.96 * w
     # the channel-independent parts of (1 - m) dielectric + m metal
     dielectric = 1.0 - metallic
-    diffuse = dielectric * (1.0 - f_d) / math.pi
+    # KHR_materials_transmission: that part of the diffuse base is transmitted instead (a
+    # delta lobe of the secondary-ray stage, not part of this BRDF)
+    diffuse = dielectric * (1.0 - transmission) * (1.0 - f_d) / math.pi
     specular = dielectric * f_d * dv
     metal = metallic * dv
     return ((diffuse * b0 + specular + metal * (b0 + (1.0 - b0) * w)) * nl,
@@ -267,7 +271,7 @@ def pdf_from_cosines(nv, nl, nh, p_spec, alpha):
 
 # ------------------------------------------------------------------ one hit
 @row
-def brdf_cos_row(ox, oy, oz, nx, ny, nz, wx, wy, wz, b0, b1, b2, metallic, alpha):
+def brdf_cos_row(ox, oy, oz, nx, ny, nz, wx, wy, wz, b0, b1, b2, metallic, alpha, transmission):
     """``f(wo, wi) max(0, ns.wi)`` of one hit, three channels.
 
     Parameters
@@ -282,6 +286,9 @@ def brdf_cos_row(ox, oy, oz, nx, ny, nz, wx, wy, wz, b0, b1, b2, metallic, alpha
         Linear base colour.
     metallic, alpha : float
         Metalness in [0, 1]; ``roughness^2`` (values below :data:`MIN_ALPHA` count as it).
+    transmission : float
+        KHR_materials_transmission's factor in [0, 1]: the part of the dielectric's diffuse
+        term that is transmitted (0 for opaque materials).
 
     Returns
     -------
@@ -289,28 +296,28 @@ def brdf_cos_row(ox, oy, oz, nx, ny, nz, wx, wy, wz, b0, b1, b2, metallic, alpha
         Per steradian; 0 where ``ns.wo <= 0`` or ``ns.wi <= 0``.
     """
     nv, nl, nh, vh = half_vector_cosines(ox, oy, oz, nx, ny, nz, wx, wy, wz)
-    return brdf_cos_from_cosines(nv, nl, nh, vh, b0, b1, b2, metallic, alpha)
+    return brdf_cos_from_cosines(nv, nl, nh, vh, b0, b1, b2, metallic, alpha, transmission)
 
 
 @row
-def pdf_row(ox, oy, oz, nx, ny, nz, wx, wy, wz, b0, b1, b2, metallic, alpha):
+def pdf_row(ox, oy, oz, nx, ny, nz, wx, wy, wz, b0, b1, b2, metallic, alpha, transmission):
     """Solid-angle density with which :func:`sample_row` draws ``wi`` (arguments as
     :func:`brdf_cos_row`); 0 where ``ns.wo <= 0`` or ``ns.wi <= 0``."""
     nv, nl, nh, vh = half_vector_cosines(ox, oy, oz, nx, ny, nz, wx, wy, wz)
     if not ((nl > 0.0) & (nv > 0.0)):
         return 0.0
-    return pdf_from_cosines(nv, nl, nh, specular_probability(nv, b0, b1, b2, metallic), alpha)
+    return pdf_from_cosines(nv, nl, nh, specular_probability(nv, b0, b1, b2, metallic, transmission), alpha)
 
 
 @row
-def brdf_cos_pdf_row(ox, oy, oz, nx, ny, nz, wx, wy, wz, b0, b1, b2, metallic, alpha):
+def brdf_cos_pdf_row(ox, oy, oz, nx, ny, nz, wx, wy, wz, b0, b1, b2, metallic, alpha, transmission):
     """:func:`brdf_cos_row` and :func:`pdf_row` with one half vector (for multiple importance
     sampling of light samples): ``(f0, f1, f2, pdf)``."""
     nv, nl, nh, vh = half_vector_cosines(ox, oy, oz, nx, ny, nz, wx, wy, wz)
     if not ((nl > 0.0) & (nv > 0.0)):
         return 0.0, 0.0, 0.0, 0.0
-    f0, f1, f2 = brdf_cos_from_cosines(nv, nl, nh, vh, b0, b1, b2, metallic, alpha)
-    return f0, f1, f2, pdf_from_cosines(nv, nl, nh, specular_probability(nv, b0, b1, b2, metallic), alpha)
+    f0, f1, f2 = brdf_cos_from_cosines(nv, nl, nh, vh, b0, b1, b2, metallic, alpha, transmission)
+    return f0, f1, f2, pdf_from_cosines(nv, nl, nh, specular_probability(nv, b0, b1, b2, metallic, transmission), alpha)
 
 
 @row
@@ -385,7 +392,7 @@ def square_to_cosine_hemisphere_row(u1, u2):
 
 
 @row
-def sample_row(ox, oy, oz, nx, ny, nz, u0, u1, u2, b0, b1, b2, metallic, alpha):
+def sample_row(ox, oy, oz, nx, ny, nz, u0, u1, u2, b0, b1, b2, metallic, alpha, transmission):
     """Draw ``wi`` for one hit from the mixture of the GGX visible-normal lobe and the
     cosine lobe (see the module notes).
 
@@ -397,7 +404,7 @@ def sample_row(ox, oy, oz, nx, ny, nz, u0, u1, u2, b0, b1, b2, metallic, alpha):
         Unit shading normal on ``wo``'s side.
     u0, u1, u2 : float
         Uniform numbers in [0, 1): ``u0`` chooses the lobe, ``u1, u2`` the direction in it.
-    b0, b1, b2, metallic, alpha : float
+    b0, b1, b2, metallic, alpha, transmission : float
         As :func:`brdf_cos_row`.
 
     Returns
@@ -413,7 +420,7 @@ def sample_row(ox, oy, oz, nx, ny, nz, u0, u1, u2, b0, b1, b2, metallic, alpha):
         return (2.0 * nv * nx - ox, 2.0 * nv * ny - oy, 2.0 * nv * nz - oz, 0.0, 0.0, 0.0, 0.0)
     a = max(alpha, MIN_ALPHA)
     tx, ty, tz, sx, sy, sz = tangent_frame(nx, ny, nz)
-    p_spec = specular_probability(nv, b0, b1, b2, metallic)
+    p_spec = specular_probability(nv, b0, b1, b2, metallic, transmission)
     if u0 < p_spec:
         vx, vy = dot3(tx, ty, tz, ox, oy, oz), dot3(sx, sy, sz, ox, oy, oz)
         hx, hy, hz = sample_ggx_visible_normal(vx, vy, nv, a, u1, u2)
@@ -429,37 +436,37 @@ def sample_row(ox, oy, oz, nx, ny, nz, u0, u1, u2, b0, b1, b2, metallic, alpha):
     nv, nl, nh, vh = half_vector_cosines(ox, oy, oz, nx, ny, nz, wx, wy, wz)
     if not nl > 0.0:
         return wx, wy, wz, 0.0, 0.0, 0.0, 0.0
-    f0, f1, f2 = brdf_cos_from_cosines(nv, nl, nh, vh, b0, b1, b2, metallic, a)
+    f0, f1, f2 = brdf_cos_from_cosines(nv, nl, nh, vh, b0, b1, b2, metallic, a, transmission)
     density = pdf_from_cosines(nv, nl, nh, p_spec, a)
     return wx, wy, wz, f0 / density, f1 / density, f2 / density, density
 
 
 # ------------------------------------------------------------------ batches
 @kernel
-def brdf_cos_rows(wo, ns, wi, base, metallic, alpha):
+def brdf_cos_rows(wo, ns, wi, base, metallic, alpha, transmission):
     """:func:`brdf_cos_row` of every row, (k, 3) (see :func:`evaluate`)."""
     k = len(wo)
     out = np.empty((3, k))
     for i in range(k):
         out[0, i], out[1, i], out[2, i] = brdf_cos_row(
             wo[i, 0], wo[i, 1], wo[i, 2], ns[i, 0], ns[i, 1], ns[i, 2], wi[i, 0], wi[i, 1], wi[i, 2],
-            base[i, 0], base[i, 1], base[i, 2], metallic[i], alpha[i])
+            base[i, 0], base[i, 1], base[i, 2], metallic[i], alpha[i], transmission[i])
     return out.T
 
 
 @kernel
-def pdf_rows(wo, ns, wi, base, metallic, alpha):
+def pdf_rows(wo, ns, wi, base, metallic, alpha, transmission):
     """:func:`pdf_row` of every row, (k,) (see :func:`pdf`)."""
     k = len(wo)
     out = np.empty(k)
     for i in range(k):
         out[i] = pdf_row(wo[i, 0], wo[i, 1], wo[i, 2], ns[i, 0], ns[i, 1], ns[i, 2], wi[i, 0], wi[i, 1], wi[i, 2],
-                         base[i, 0], base[i, 1], base[i, 2], metallic[i], alpha[i])
+                         base[i, 0], base[i, 1], base[i, 2], metallic[i], alpha[i], transmission[i])
     return out
 
 
 @kernel
-def brdf_cos_pdf_rows(wo, ns, wi, base, metallic, alpha):
+def brdf_cos_pdf_rows(wo, ns, wi, base, metallic, alpha, transmission):
     """:func:`brdf_cos_pdf_row` of every row: ``((k, 3), (k,))`` (see :func:`evaluate_and_pdf`)."""
     k = len(wo)
     out = np.empty((3, k))
@@ -467,12 +474,12 @@ def brdf_cos_pdf_rows(wo, ns, wi, base, metallic, alpha):
     for i in range(k):
         out[0, i], out[1, i], out[2, i], density[i] = brdf_cos_pdf_row(
             wo[i, 0], wo[i, 1], wo[i, 2], ns[i, 0], ns[i, 1], ns[i, 2], wi[i, 0], wi[i, 1], wi[i, 2],
-            base[i, 0], base[i, 1], base[i, 2], metallic[i], alpha[i])
+            base[i, 0], base[i, 1], base[i, 2], metallic[i], alpha[i], transmission[i])
     return out.T, density
 
 
 @kernel
-def sample_rows(wo, ns, u, base, metallic, alpha):
+def sample_rows(wo, ns, u, base, metallic, alpha, transmission):
     """:func:`sample_row` of every row: ``(wi (k, 3), weight (k, 3), pdf (k,))`` (see :func:`sample`)."""
     k = len(wo)
     wi = np.empty((3, k))
@@ -481,7 +488,7 @@ def sample_rows(wo, ns, u, base, metallic, alpha):
     for i in range(k):
         (wi[0, i], wi[1, i], wi[2, i], weight[0, i], weight[1, i], weight[2, i], density[i]) = sample_row(
             wo[i, 0], wo[i, 1], wo[i, 2], ns[i, 0], ns[i, 1], ns[i, 2], u[i, 0], u[i, 1], u[i, 2],
-            base[i, 0], base[i, 1], base[i, 2], metallic[i], alpha[i])
+            base[i, 0], base[i, 1], base[i, 2], metallic[i], alpha[i], transmission[i])
     return wi.T, weight.T, density
 
 
@@ -502,22 +509,22 @@ def _kernels():
 def _fixed_kernels():
     vectors = types.Array(types.float64, 2, "A", readonly=True)
     values = types.Array(types.float64, 1, "A", readonly=True)
-    signature = (vectors, vectors, vectors, vectors, values, values)
+    signature = (vectors, vectors, vectors, vectors, values, values, values)
     for dispatcher in (brdf_cos_rows, pdf_rows, sample_rows, brdf_cos_pdf_rows):
         fix_signatures(dispatcher, [signature])
     return brdf_cos_rows, pdf_rows, sample_rows, brdf_cos_pdf_rows
 
 
-def _batch(wo, ns, third, base, metallic, alpha):
+def _batch(wo, ns, third, base, metallic, alpha, transmission):
     """The arguments as float64 arrays of the kernels' shapes (scalars and rows broadcast)."""
     wo = np.asarray(wo, dtype=np.float64)
     k = len(wo)
     vectors = tuple(np.broadcast_to(np.asarray(a, dtype=np.float64), (k, 3)) for a in (ns, third, base))
-    values = tuple(np.broadcast_to(np.asarray(a, dtype=np.float64), (k,)) for a in (metallic, alpha))
+    values = tuple(np.broadcast_to(np.asarray(a, dtype=np.float64), (k,)) for a in (metallic, alpha, transmission))
     return (wo,) + vectors + values
 
 
-def evaluate(wo, ns, wi, base, metallic, alpha):
+def evaluate(wo, ns, wi, base, metallic, alpha, transmission=0.0):
     """``f(wo, wi) max(0, ns.wi)`` of the metallic-roughness BRDF.
 
     Parameters
@@ -534,6 +541,9 @@ def evaluate(wo, ns, wi, base, metallic, alpha):
         Metalness in [0, 1].
     alpha : (k,) float
         GGX alpha, ``roughness^2`` (:func:`alpha_from_roughness`).
+    transmission : (k,) float, optional
+        KHR_materials_transmission's factor: the part of the dielectric diffuse term
+        transmitted instead of reflected (default 0).
 
     Returns
     -------
@@ -541,10 +551,10 @@ def evaluate(wo, ns, wi, base, metallic, alpha):
         Per steradian (times the incident radiance: reflected radiance); 0 where
         ``ns.wo <= 0`` or ``ns.wi <= 0``.
     """
-    return _kernels()[0](*_batch(wo, ns, wi, base, metallic, alpha))
+    return _kernels()[0](*_batch(wo, ns, wi, base, metallic, alpha, transmission))
 
 
-def pdf(wo, ns, wi, base, metallic, alpha):
+def pdf(wo, ns, wi, base, metallic, alpha, transmission=0.0):
     """Solid-angle density with which :func:`sample` draws ``wi``.
 
     Parameters
@@ -558,10 +568,10 @@ def pdf(wo, ns, wi, base, metallic, alpha):
         Per steradian; 0 where ``ns.wo <= 0`` or ``ns.wi <= 0`` (its integral over the
         hemisphere is 1 minus the probability of a failed sample).
     """
-    return _kernels()[1](*_batch(wo, ns, wi, base, metallic, alpha))
+    return _kernels()[1](*_batch(wo, ns, wi, base, metallic, alpha, transmission))
 
 
-def evaluate_and_pdf(wo, ns, wi, base, metallic, alpha):
+def evaluate_and_pdf(wo, ns, wi, base, metallic, alpha, transmission=0.0):
     """:func:`evaluate` and :func:`pdf` in one pass (one half vector per row): what a light
     sample weighed against BSDF sampling needs.
 
@@ -570,10 +580,10 @@ def evaluate_and_pdf(wo, ns, wi, base, metallic, alpha):
     value : (k, 3) float64
     pdf : (k,) float64
     """
-    return _kernels()[3](*_batch(wo, ns, wi, base, metallic, alpha))
+    return _kernels()[3](*_batch(wo, ns, wi, base, metallic, alpha, transmission))
 
 
-def sample(wo, ns, u, base, metallic, alpha):
+def sample(wo, ns, u, base, metallic, alpha, transmission=0.0):
     """Directions drawn from the mixture of the GGX visible-normal and cosine lobes.
 
     Parameters
@@ -592,4 +602,4 @@ def sample(wo, ns, u, base, metallic, alpha):
     pdf : (k,) float64
         Density per steradian, equal to :func:`pdf` of ``wi``; 0 for a failed sample.
     """
-    return _kernels()[2](*_batch(wo, ns, u, base, metallic, alpha))
+    return _kernels()[2](*_batch(wo, ns, u, base, metallic, alpha, transmission))

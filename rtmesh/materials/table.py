@@ -92,6 +92,10 @@ class Material:
     perceptual_roughness : float
         glTF ``roughnessFactor`` in [0, 1] of a ``metallic_roughness`` material (the GGX
         alpha is its square).
+    transmission_factor : float
+        KHR_materials_transmission's factor of a ``metallic_roughness`` material: that part
+        of its dielectric diffuse term is transmitted instead, through the smooth
+        refraction of ``transmission`` (= factor x base colour x (1 - metallic)) and ``ior``.
     occlusion_strength : float
         glTF ``occlusionTexture.strength``: the baked occlusion darkens the ambient term
         ``1 + strength (texel - 1)`` (traced light carries its own shadows).
@@ -132,6 +136,7 @@ class Material:
     emission_texture: object = None
     base_color: np.ndarray = field(default_factory=lambda: np.ones(3))
     perceptual_roughness: float = 1.0
+    transmission_factor: float = 0.0
     occlusion_strength: float = 1.0
     metallic_roughness_texture: object = None
     occlusion_texture: object = None
@@ -158,7 +163,7 @@ class MaterialTable:
     materials : list of Material
     diffuse, specular, ambient, mirror, transmission, absorption, emission : (m, 3) float
     base_color : (m, 3) float
-    shininess, ior, roughness, opacity, alpha_cutoff, metallic, perceptual_roughness : (m,) float
+    shininess, ior, roughness, opacity, alpha_cutoff, metallic, perceptual_roughness, transmission_factor : (m,) float
     alpha_mode : (m,) int
         Index into :data:`ALPHA_MODES`.
     unlit : (m,) bool
@@ -171,7 +176,7 @@ class MaterialTable:
         for name in COLOUR_FIELDS:
             setattr(self, name, np.array([getattr(m, name) for m in self.materials], dtype=np.float64).reshape(-1, 3))
         for name in ("shininess", "ior", "roughness", "opacity", "alpha_cutoff", "metallic",
-                     "perceptual_roughness", "occlusion_strength"):
+                     "perceptual_roughness", "transmission_factor", "occlusion_strength"):
             setattr(self, name, np.array([getattr(m, name) for m in self.materials], dtype=np.float64))
         self.alpha_mode = np.array([ALPHA_MODES.index(m.alpha_mode) for m in self.materials], dtype=np.intp)
         self.unlit = np.array([m.unlit for m in self.materials], dtype=bool)

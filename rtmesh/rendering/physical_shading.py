@@ -98,13 +98,15 @@ class PhysicalShading(Stage):
         self.base_color = m.base_color
         self.metallic = m.metallic
         self.roughness = m.perceptual_roughness
+        self.transmission = m.transmission_factor
 
     def rows(self, srf):
         """(j,) intp: the hits with a metallic-roughness material."""
         return np.flatnonzero(self.physical[srf.mat])
 
     def parameters(self, srf, rows):
-        """``(wo, ns, base, metallic, alpha)`` of the hits ``rows`` (see the module notes)."""
+        """``(wo, ns, base, metallic, alpha, transmission)`` of the hits ``rows`` (see the
+        module notes)."""
         mat = srf.mat[rows]
         base = self.base_color[mat]
         metallic = self.metallic[mat]
@@ -119,7 +121,8 @@ class PhysicalShading(Stage):
                 metallic = metallic * factors[:, 1]
         wo = -take_rows(srf.d, rows)
         ns = take_rows(srf.ns, rows)
-        return wo, ns, base, np.clip(metallic, 0.0, 1.0), brdf.alpha_from_roughness(np.clip(roughness, 0.0, 1.0))
+        return (wo, ns, base, np.clip(metallic, 0.0, 1.0), brdf.alpha_from_roughness(np.clip(roughness, 0.0, 1.0)),
+                self.transmission[mat])
 
     def direct(self, srf, depth, chunk):
         """Light reaching the metallic-roughness hits directly, toward the viewer.
@@ -134,7 +137,7 @@ class PhysicalShading(Stage):
         rows = self.rows(srf)
         if not len(rows):
             return None
-        wo, ns, base, metallic, alpha = self.parameters(srf, rows)
+        wo, ns, base, metallic, alpha, transmission = self.parameters(srf, rows)
         p, ng = take_rows(srf.p, rows), take_rows(srf.ng, rows)
         time = rows_at(srf.time, rows)
         total = None
@@ -155,7 +158,7 @@ class PhysicalShading(Stage):
             if not len(seen):
                 continue
             value = brdf.evaluate(take_rows(wo, seen), take_rows(ns, seen), take_rows(wi, seen), base[seen],
-                                  metallic[seen], alpha[seen]) * take_rows(incident, seen)
+                                  metallic[seen], alpha[seen], transmission[seen]) * take_rows(incident, seen)
             if total is None:
                 total = np.zeros((len(rows), 3))
             total[seen] += value
@@ -174,9 +177,9 @@ class PhysicalShading(Stage):
             def reflectance(wi, lit, light_pdf, samples=lighting.samples):
                 """``f cos`` toward ``wi`` times the light sample's MIS weight; 0 off ``lit``."""
                 if not bounces:
-                    value = brdf.evaluate(wo, ns, wi, base, metallic, alpha)
+                    value = brdf.evaluate(wo, ns, wi, base, metallic, alpha, transmission)
                 else:
-                    value, bsdf_pdf = brdf.evaluate_and_pdf(wo, ns, wi, base, metallic, alpha)
+                    value, bsdf_pdf = brdf.evaluate_and_pdf(wo, ns, wi, base, metallic, alpha, transmission)
                     value *= (1.0 - bsdf_weight(bsdf_pdf, light_pdf, samples))[:, None]
                 value[~lit] = 0.0
                 return value
@@ -210,11 +213,11 @@ class PhysicalShading(Stage):
         rows = self.rows(srf)
         if not len(rows):
             return RayBatch.empty()
-        wo, ns, base, metallic, alpha = self.parameters(srf, rows)
+        wo, ns, base, metallic, alpha, transmission = self.parameters(srf, rows)
         pixel, sample_in_pixel = chunk.keys
         sample = srf.sample[rows]
         u = it.sampler.bsdf(pixel[sample], sample_in_pixel[sample], depth)
-        wi, weight, pdf = brdf.sample(wo, ns, u, base, metallic, alpha)
+        wi, weight, pdf = brdf.sample(wo, ns, u, base, metallic, alpha, transmission)
         ng = take_rows(srf.ng, rows)
         # a direction above the shading normal but below the geometric one would enter the
         # surface: that sample is lost (the usual shading-normal energy loss)

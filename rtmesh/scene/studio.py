@@ -10,12 +10,14 @@ camera sees the key light from its upper left whatever direction it looks in, as
 three-light rig of :func:`rtmesh.scene.model.default_lights` is placed for Blinn-Phong assets.
 """
 
+import functools
 import math
 import os
 
 import numpy as np
 
-from rtmesh.scene.background import read_environment
+from rtmesh.io.images import read_image
+from rtmesh.scene.background import EnvironmentBackground
 
 STUDIO_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "studio.exr")
 
@@ -45,6 +47,16 @@ def studio_rotation(forward):
 def studio_background(camera):
     """The studio environment, lighting the scene, turned to ``camera``
     (:class:`rtmesh.scene.background.EnvironmentBackground` with ``lighting`` on)."""
-    background = read_environment(STUDIO_PATH, rotation=studio_rotation(np.asarray(camera.frame()[0])))
+    background = EnvironmentBackground(_studio_pixels(), rotation=studio_rotation(np.asarray(camera.frame()[0])),
+                                       name=STUDIO_PATH)
     background.lighting = True
     return background
+
+
+@functools.cache
+def _studio_pixels():
+    """The studio image (linear radiance, an EXR), read once per process: every view of a
+    batch turns it anew."""
+    pixels, _ = read_image(STUDIO_PATH)
+    pixels.flags.writeable = False  # shared by every background made from it
+    return pixels
