@@ -250,3 +250,22 @@ def test_mis_tames_the_reflection_of_a_small_light_in_a_smooth_metal(monkeypatch
     _, light_noise = two_seeds(64)
     np.testing.assert_allclose(mis_mean, bsdf_mean, rtol=0.05)
     assert mis_noise < 0.25 * light_noise
+
+
+def test_a_clear_physical_glass_ball_in_a_white_furnace_is_nearly_invisible():
+    """KHR_materials_transmission 1, white, no absorption, under a uniform white sky: what
+    the ball does not reflect (GGX lobe) it refracts through (smooth dielectric), so its
+    centre returns nearly the light it receives (less GGX's small loss at roughness 0.2,
+    and the paths cut at max_depth)."""
+    material = physical(base=1.0, metallic=0.0, roughness=0.2, transmission_factor=1.0,
+                        transmission=np.ones(3), ior=1.5)
+    sky = SolidBackground(np.ones(3))
+    sky.lighting = True
+    camera = Camera([0.0, 0.0, 6.0], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0], projection="orthographic",
+                    ortho_height=0.6)
+    ball = trimesh.creation.icosphere(subdivisions=4)
+    scene = Scene.from_parts([part("ball", ball, smooth=True)], [material], [], camera, ambient=0.0,
+                             background=sky)
+    result = render(scene, width=12, height=12, spp=32, light_samples=1, max_depth=8)
+    assert result.stats.rays["refraction"] > 0 and result.stats.rays["bsdf"] > 0
+    assert abs(float(result.image.mean()) - 1.0) < 0.03
