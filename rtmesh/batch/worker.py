@@ -333,9 +333,9 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
                         write_display_image(path, (result.passes["alpha"][:, :, :1] > 0.5).astype(np.float64))
                     else:
                         write_image(path, result.image, result.passes, settings.exposure, settings.tonemap)
-                # superseded while writing: the block's temporaries are removed, not reported
-                # (the run file is read again: a run that took the folder before this check
-                # removed only the temporaries written before it took the folder)
+                # superseded while writing: the block's temporaries are removed, not reported.
+                # The run file is read again: a run that took the folder removes the
+                # temporaries already there when it did; later ones are this task's to remove
                 last_check[0] = 0.0
                 stop_if_superseded()
             written = {path: tmp for tmp, path in pending}
