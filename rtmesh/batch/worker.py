@@ -5,9 +5,11 @@ raises for a bad asset: every failure comes back as a result with the stage it h
 (``load``, ``render``, ``write``, ``time``, ``memory``), so the batch goes on.  Each result
 also says what the asset was made from (``inputs``: the mesh file and every file its load
 read) and what was written (``outputs``: size and checksum of each file), see
-:mod:`rtmesh.batch.identity`.
+:mod:`rtmesh.batch.identity`.  A batch's jobs leave their files at temporary names for the
+submitting process to put in place (:mod:`rtmesh.batch.publish`).
 """
 
+import contextlib
 import dataclasses
 import os
 import tempfile
@@ -19,7 +21,9 @@ import numpy as np
 from rtmesh.batch.asset_meta import WarningLog, asset_meta, write_meta
 from rtmesh.batch.identity import OpenedFiles, describe
 from rtmesh.batch.normalize import asset_to_world, transform_points
+from rtmesh.batch.publish import discard
 from rtmesh.core.errors import RtmeshError
+from rtmesh.io.atomic_files import staged
 from rtmesh.io.images import write_depth_png, write_display_image, write_image
 from rtmesh.loaders.importers import load_trimesh, parts_from_trimesh
 from rtmesh.materials.table import Material, MaterialTable
@@ -159,6 +163,11 @@ class AssetJob:
         :mod:`rtmesh.batch.normalize`).
     meta : bool
         Write ``<asset>.meta.json`` once the asset is loaded (:mod:`rtmesh.batch.asset_meta`).
+    staged : bool
+        Leave every file at its hidden temporary name and report that name (``staged`` and
+        ``side_files`` in the results), for the submitting process to rename into place
+        once it has recorded the image (:mod:`rtmesh.batch.publish`); False writes the
+        files in place.
 
     Output files of an image ending in :data:`CAMERA_SUFFIX` get the camera JSON of the
     image (:func:`rtmesh.scene.camera_json.camera_record`), the others the image.
@@ -174,6 +183,7 @@ class AssetJob:
     run_file: str = ""
     normalize: str = ""
     meta: bool = False
+    staged: bool = False
 
 
 # set by a worker process that runs under an address-space limit, for the failure message
@@ -217,32 +227,56 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
     -------
     dict
         ``asset``, ``seconds``, ``superseded`` (True when the job stopped because a newer
-        run owns the output folder: its unfinished images are left out), ``images``: one
-        dict per image task with ``key``, ``fingerprint``, ``status`` (``"done"`` or
-        ``"failed"``), ``asset``, ``run``, ``files``, ``seconds``, ``inputs``, ``outputs``,
-        and for failures
-        ``stage`` and ``message`` (one line).
+        run owns the output folder or nobody waits for it: its unfinished images are left
+        out, and the staged files of images not yet handed to ``on_image`` are removed),
+        ``images``: one dict per image task with ``key``, ``fingerprint``, ``status``
+        (``"done"`` or ``"failed"``), ``asset``, ``run``, ``files``, ``seconds``,
+        ``inputs``, ``outputs``, for failures ``stage`` and ``message`` (one line), and
+        for a staged job's done images ``staged`` (the temporary name of each of
+        ``files``, relative to the output folder).  The first image result of a staged
+        job that wrote the asset's metadata file also has ``side_files``: ``[temporary,
+        name]`` pairs to put in place with it.
     """
     start = time.perf_counter()
     results = []
     inputs = []
     last_check = [0.0]
+    side = []  # the asset's staged metadata file: it goes with the job's first image result
+    handed = [0]  # results already given to on_image (their files are the caller's)
 
-    def check(done=None, total=None):
-        _check_deadline(deadline)
-        # the run file is read at most twice a second between render chunks
+    def stop_if_superseded():
         if abandoned is not None and abandoned():
             raise Superseded()
+        # the run file is read at most twice a second between render chunks
         if job.run_file and time.monotonic() - last_check[0] > 0.5:
             last_check[0] = time.monotonic()
             if current_run(job.run_file) != job.run:
                 raise Superseded()
 
+    def check(done=None, total=None):
+        _check_deadline(deadline)
+        stop_if_superseded()
+
+    def emit(result):
+        if side:
+            result["side_files"] = side[:]
+            side.clear()
+        results.append(result)
+        if on_image:
+            on_image(result)
+            handed[0] = len(results)
+
     def fail_all(tasks, stage, message):
         for task in tasks:
-            results.append(image_result(job, task, "failed", 0.0, inputs, stage=stage, message=message))
-            if on_image:
-                on_image(results[-1])
+            emit(image_result(job, task, "failed", 0.0, inputs, stage=stage, message=message))
+
+    def superseded():
+        # nobody will put these files in place: the next run would only remove them
+        for result in results[handed[0]:]:
+            discard(job.outdir, result.get("staged", ()))
+            discard(job.outdir, [t for t, _ in result.get("side_files", ())])
+        discard(job.outdir, [t for t, _ in side])
+        return _job_result(job, results, start, superseded=True)
 
     try:
         settings = RenderSettings(**job.settings).validate()
@@ -264,8 +298,10 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
     if job.meta:
         try:
             check()
-            write_meta(job.outdir, job.asset, asset_meta(job.asset, job.path, parts, materials, bounds,
-                                                         to_world, inputs, warnings.lines))
+            with _writing(job) as pending:
+                write_meta(job.outdir, job.asset, asset_meta(job.asset, job.path, parts, materials, bounds,
+                                                             to_world, inputs, warnings.lines))
+            side.extend(_relative(job, pending))
         except (Superseded, TimeLimitExceeded):
             pass  # the images' loop below stops the same way
         except Exception as exc:
@@ -284,37 +320,54 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
             stage = "write"
             last_check[0] = 0.0  # always ask just before writing
             check()
-            outputs = []
-            for name in task.files:
-                path = os.path.join(job.outdir, name)
-                os.makedirs(os.path.dirname(path), exist_ok=True)
-                if name.endswith(CAMERA_SUFFIX):
-                    scene = integrator.scene
-                    write_camera_json(path, camera_record(scene.camera, settings.width, settings.height,
-                                                          scene.bounds, to_world))
-                elif name.endswith(DEPTH_PNG_SUFFIX):
-                    write_depth_png(path, result.passes["depth"][:, :, 0])
-                elif name.endswith(MASK_PNG_SUFFIX):
-                    write_display_image(path, (result.passes["alpha"][:, :, :1] > 0.5).astype(np.float64))
-                else:
-                    write_image(path, result.image, result.passes, settings.exposure, settings.tonemap)
-                outputs.append(describe(path, name))
-            results.append(image_result(job, task, "done", time.perf_counter() - image_start, inputs,
-                                         outputs=outputs))
+            paths = [os.path.abspath(os.path.join(job.outdir, name)) for name in task.files]
+            with _writing(job) as pending:
+                for name, path in zip(task.files, paths):
+                    os.makedirs(os.path.dirname(path), exist_ok=True)
+                    if name.endswith(CAMERA_SUFFIX):
+                        scene = integrator.scene
+                        write_camera_json(path, camera_record(scene.camera, settings.width, settings.height,
+                                                              scene.bounds, to_world))
+                    elif name.endswith(DEPTH_PNG_SUFFIX):
+                        write_depth_png(path, result.passes["depth"][:, :, 0])
+                    elif name.endswith(MASK_PNG_SUFFIX):
+                        write_display_image(path, (result.passes["alpha"][:, :, :1] > 0.5).astype(np.float64))
+                    else:
+                        write_image(path, result.image, result.passes, settings.exposure, settings.tonemap)
+                # superseded while writing: the block's temporaries are removed, not reported.
+                # The run file is read again: a run that took the folder removes the
+                # temporaries already there when it did; later ones are this task's to remove
+                last_check[0] = 0.0
+                stop_if_superseded()
+            written = {path: tmp for tmp, path in pending}
+            outputs = [describe(written.get(path, path), name) for name, path in zip(task.files, paths)]
+            extra = {"staged": [t for t, _ in _relative(job, pending)]} if job.staged else {}
+            outcome = image_result(job, task, "done", time.perf_counter() - image_start, inputs,
+                                   outputs=outputs, **extra)
         except Superseded:
-            return _job_result(job, results, start, superseded=True)
+            return superseded()
         except TimeLimitExceeded:
             fail_all(job.images[i:], "time", "time limit exceeded")
             break
         except MemoryError:
-            results.append(image_result(job, task, "failed", time.perf_counter() - image_start, inputs,
-                                         stage="memory", message=f"out of memory during {stage}{MEMORY_LIMIT_NOTE}"))
+            outcome = image_result(job, task, "failed", time.perf_counter() - image_start, inputs,
+                                   stage="memory", message=f"out of memory during {stage}{MEMORY_LIMIT_NOTE}")
         except Exception as exc:
-            results.append(image_result(job, task, "failed", time.perf_counter() - image_start, inputs,
-                                         stage=stage, message=_one_line(exc)))
-        if on_image:
-            on_image(results[-1])
+            outcome = image_result(job, task, "failed", time.perf_counter() - image_start, inputs,
+                                   stage=stage, message=_one_line(exc))
+        emit(outcome)
     return _job_result(job, results, start)
+
+
+def _writing(job):
+    """Where the job's writes go: a :func:`rtmesh.io.atomic_files.staged` block (the files
+    stay at their temporary names) for a staged job, else straight into place."""
+    return staged() if job.staged else contextlib.nullcontext([])
+
+
+def _relative(job, pending):
+    """``(temporary, path)`` pairs of a staged block as names relative to the output folder."""
+    return [[os.path.relpath(tmp, job.outdir), os.path.relpath(path, job.outdir)] for tmp, path in pending]
 
 
 def warm_up():
