@@ -175,6 +175,8 @@ class Integrator:
         self._ambient_on = bool((scene.ambient > 0).any() and (m.ambient > 0).any())
         if settings.denoise:
             denoising.require()  # before any work: one line naming the extra when it is missing
+        # alpha-blend materials are let through at random: camera hits then vary per sample
+        self._stochastic_coverage = bool((m.alpha_mode == ALPHA_MODES.index("blend")).any())
         # the AO pass alone asks for 16 rays per camera hit unless ao_samples says otherwise
         self.ao_samples = settings.ao_samples or (16 if "ao" in settings.passes else 0)
         # per-material flags, looked up per hit
@@ -403,7 +405,9 @@ class Integrator:
         noisy = None
         if s.denoise:
             noisy = image
-            image = denoising.denoise(image, film.pass_image("albedo"), film.pass_image("normal"))
+            # the guides average each pixel's camera hits: noise-free unless those are random
+            clean = not (self.plan.lens or self.plan.motion or self._stochastic_coverage)
+            image = denoising.denoise(image, film.pass_image("albedo"), film.pass_image("normal"), clean)
             stats.wall_seconds = time.perf_counter() - start
         return RenderResult(image, passes, stats, film, alpha, noisy)
 
