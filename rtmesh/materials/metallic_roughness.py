@@ -398,14 +398,10 @@ def sample_row(ox, oy, oz, nx, ny, nz, u0, u1, u2, b0, b1, b2, metallic, alpha, 
 
     Parameters
     ----------
-    ox, oy, oz : float
-        Unit ``wo`` (toward the viewer).
-    nx, ny, nz : float
-        Unit shading normal on ``wo``'s side.
+    ox, oy, oz, nx, ny, nz, b0, b1, b2, metallic, alpha, transmission : float
+        As :func:`brdf_cos_row`.
     u0, u1, u2 : float
         Uniform numbers in [0, 1): ``u0`` chooses the lobe, ``u1, u2`` the direction in it.
-    b0, b1, b2, metallic, alpha, transmission : float
-        As :func:`brdf_cos_row`.
 
     Returns
     -------
