@@ -311,7 +311,7 @@ def material_from_trimesh(visual, name, file_materials=None):
     material = getattr(visual, "material", None)
     if isinstance(material, trimesh.visual.material.PBRMaterial):
         json_material = file_materials.gltf.get(material.name) if file_materials else None
-        return gltf_material(material, json_material, name)
+        return gltf_material(material, json_material, name, file_materials.source if file_materials else None)
     if isinstance(material, trimesh.visual.material.SimpleMaterial):
         if file_materials is not None and file_materials.obj is not None:
             found = file_materials.obj.get(material.name)
@@ -362,11 +362,14 @@ class FileMaterials:
         The file's vertex colours are unusable (NaN in an OBJ: trimesh reads them as black).
     gltf_file : bool
         The file is glTF: a primitive without a material gets the format's default one.
+    source : str or None
+        The file's name, for messages.
     """
 
     def __init__(self, path=None):
         self.obj, self.gltf, self.drop_vertex_colours = None, {}, False
         self.gltf_file = False
+        self.source = None if path is None else os.path.basename(path)
         if path is None:
             return
         ext = os.path.splitext(path)[1].lower()

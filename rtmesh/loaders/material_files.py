@@ -356,7 +356,7 @@ def _gltf_factors(pbr, doc):
     )
 
 
-def gltf_material(pbr, json_material=None, name="gltf"):
+def gltf_material(pbr, json_material=None, name="gltf", source=None):
     """A glTF metallic-roughness material as rtmesh's :class:`~rtmesh.materials.table.Material`
     (see docs/MATERIALS.md).
 
@@ -377,12 +377,15 @@ def gltf_material(pbr, json_material=None, name="gltf"):
         ``extensions``, which trimesh does not keep.
     name : str
         Used when the material has no name.
+    source : str, optional
+        The file, for warnings about unusable values.
 
     Returns
     -------
     Material
     """
     _check_decoded(pbr, json_material, pbr.name or name)
+    where = f"{source}: material '{pbr.name or name}'" if source else f"material '{pbr.name or name}'"
     f = _gltf_factors(pbr, json_material)
     ext = f["extensions"]
     base = _rgba(f["base"])
@@ -391,7 +394,7 @@ def gltf_material(pbr, json_material=None, name="gltf"):
     def texture(role, srgb):
         return _gltf_texture(pbr, json_material, role, srgb, name)
 
-    emission = _emission(f)
+    emission = _emission(f, where)
     common = dict(
         name=pbr.name or name,
         emission=emission,
@@ -406,7 +409,7 @@ def gltf_material(pbr, json_material=None, name="gltf"):
         # the base colour as is: metallic and roughness do not apply
         return Material(diffuse=colour, unlit=True, **common)
     metallic, roughness = float(np.clip(f["metallic"], 0, 1)), float(np.clip(f["roughness"], 0, 1))
-    factor, ior, absorption = _transmission(ext)
+    factor, ior, absorption = _transmission(ext, where)
     occlusion = (json_material or {}).get("occlusionTexture") or {}
     return Material(
         model="metallic_roughness",
@@ -429,30 +432,57 @@ def gltf_material(pbr, json_material=None, name="gltf"):
     )
 
 
-def _transmission(ext):
+def _transmission(ext, name):
     """KHR_materials_transmission / ior / volume of a material's extensions.
+
+    Parameters
+    ----------
+    ext : dict
+        The material's ``extensions``.
+    name : str
+        The file and material, for warnings.
 
     Returns
     -------
     factor : float
         ``transmissionFactor`` in [0, 1] (0 without the extension).
     ior : float
-        ``KHR_materials_ior`` (1.5 by default, as the extension says).
+        ``KHR_materials_ior`` (1.5 by default, as the extension says); at least 1.
     absorption : (3,) float
         ``-ln(attenuationColor) / attenuationDistance`` per scene unit (0 without a finite
-        distance).
+        positive distance).
     """
-    factor = float(np.clip(float(ext.get("KHR_materials_transmission", {}).get("transmissionFactor", 0.0)), 0, 1))
-    ior = 1.5
-    if "KHR_materials_ior" in ext:
-        ior = float(ext["KHR_materials_ior"].get("ior", 1.5)) or 1.5
+    factor = _extension_number(ext, "KHR_materials_transmission", "transmissionFactor", 0.0, name, 0.0, 1.0)
+    # an index below 1 (or 0, which the extension reserves for "infinite") is not a
+    # dielectric this model can refract through: 1.5, the extension's default
+    ior = _extension_number(ext, "KHR_materials_ior", "ior", 1.5, name, 1.0, np.inf, invalid_below=1.0)
     absorption = np.zeros(3)
-    volume = ext.get("KHR_materials_volume", {})
-    distance = float(volume.get("attenuationDistance", np.inf))
-    tint = np.clip(np.asarray(volume.get("attenuationColor", [1.0, 1.0, 1.0]), dtype=np.float64), 1e-6, 1.0)
+    distance = _extension_number(ext, "KHR_materials_volume", "attenuationDistance", np.inf, name, 0.0, np.inf)
     if factor > 0 and np.isfinite(distance) and distance > 0:
+        try:
+            tint = np.asarray(ext["KHR_materials_volume"].get("attenuationColor", [1.0, 1.0, 1.0]), dtype=np.float64)
+            tint = np.clip(np.nan_to_num(tint.reshape(3), nan=1.0), 1e-6, 1.0)
+        except (TypeError, ValueError):
+            log.warning("%s: KHR_materials_volume attenuationColor is not three numbers; not used", name)
+            tint = np.ones(3)
         absorption = -np.log(tint) / distance
     return factor, ior, absorption
+
+
+def _extension_number(ext, extension, key, default, name, low, high, invalid_below=None):
+    """``ext[extension][key]`` as a float clipped to [low, high]; ``default`` (with a warning
+    naming the material, extension and key) when it is not a finite number, or is below
+    ``invalid_below``."""
+    value = (ext.get(extension) or {}).get(key, default) if isinstance(ext.get(extension, {}), dict) else default
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        number = np.nan
+    if np.isnan(number) or (np.isinf(number) and number != default) or (
+            invalid_below is not None and number < invalid_below):
+        log.warning("%s: %s %s = %r is not usable; %s used", name, extension, key, value, default)
+        return float(default)
+    return float(np.clip(number, low, high))
 
 
 def _gltf_texture(pbr, json_material, role, srgb, name):
@@ -470,10 +500,12 @@ def _rgba(base):
     return np.append(base, 1.0) if len(base) == 3 else np.resize(base, 4)
 
 
-def _emission(factors):
-    """Emitted radiance: ``emissiveFactor`` times KHR_materials_emissive_strength."""
-    strength = factors["extensions"].get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0)
-    return factors["emission"] * float(strength)
+def _emission(factors, name):
+    """Emitted radiance: ``emissiveFactor`` (clipped to [0, 1], as the specification bounds
+    it) times KHR_materials_emissive_strength (finite, >= 0)."""
+    strength = _extension_number(factors["extensions"], "KHR_materials_emissive_strength", "emissiveStrength", 1.0,
+                                 name, 0.0, float(np.finfo(np.float32).max))
+    return np.clip(np.nan_to_num(factors["emission"], nan=0.0), 0.0, 1.0) * strength
 
 
 # glTF sampler wrap modes (the OpenGL enums) as Texture wrap modes; glTF's default is REPEAT
