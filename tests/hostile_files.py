@@ -185,6 +185,16 @@ def corpus():
     missing = copy.deepcopy(zero)
     missing["buffers"][0]["uri"] = "gone.bin"
     files["missing_buffer.gltf"] = json.dumps(missing)
+    # physically based materials with unusable extension values: a warning naming the file,
+    # material and key, the default used
+    bad_glass = gltf_cube([{"name": "glass", "mesh": 0}], [0])
+    bad_glass["meshes"][0]["primitives"][0]["material"] = 0
+    bad_glass["materials"] = [{"name": "glass", "emissiveFactor": [1, 1, 1], "extensions": {
+        "KHR_materials_transmission": {"transmissionFactor": "lots"},
+        "KHR_materials_ior": {"ior": -3},
+        "KHR_materials_emissive_strength": {"emissiveStrength": 1e308},
+        "KHR_materials_volume": {"attenuationDistance": -1, "attenuationColor": [2, -1, "x"]}}}]
+    files["bad_pbr_extensions.gltf"] = json.dumps(bad_glass)
     good = glb_bytes(zero)
     files["truncated.glb"] = good[: len(good) // 2]
     files["corrupt_texture.glb"] = textured_square_glb(corrupt_png())

@@ -93,7 +93,7 @@ def direct_light(lights, points, normal=(0.0, 0.0, 1.0), blockers=(), samples=64
     lighting = AreaLighting(lights, accel, settings(light_samples=samples, sampler=sampler, seed=seed), scale)
     diffuse = np.full((k, 3), kd)
 
-    def reflectance(wi, lit):
+    def reflectance(wi, lit, pdf):
         return blinn_phong(ng, ng, wi, diffuse, None, None)  # Lambert: no highlight
 
     stats = RenderStats()

@@ -41,6 +41,8 @@ EXPECTED = {
     "node_cycle.gltf": (0, "node 'b' has no transform from the scene's root (a cycle in the node graph"),
     "zero_scale.gltf": (0, "node 'hidden' has a zero scale"),
     "missing_buffer.gltf": (2, "buffer file gone.bin not found"),
+    "bad_pbr_extensions.gltf": (0, "bad_pbr_extensions.gltf: material 'glass': KHR_materials_transmission "
+                                   "transmissionFactor = 'lots' is not usable; 0.0 used"),
     "truncated.glb": (2, "cannot read mesh"),
     "corrupt_texture.glb": (2, "square baseColorTexture: corrupt or unreadable texture"),
     "bad_types.toml": (2, "bad_types.toml: render.width: expected an integer"),

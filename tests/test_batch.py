@@ -23,6 +23,7 @@ from rtmesh.batch.books import REPORT_NAME, SUMMARY_NAME
 from rtmesh.batch.inputs import Asset, InputError, discover
 from rtmesh.batch.ledger import LEDGER_NAME, STATUS, Ledger, decode
 from rtmesh.cli import main
+from rtmesh.io.atomic_files import target_of
 from rtmesh.io.images import read_image
 
 HERE = os.path.dirname(__file__)
@@ -285,6 +286,25 @@ def test_ledger_rows_commit_per_asset_and_refuse_old_or_foreign_formats(tmp_path
     assert sorted(os.listdir(old)) == ["rtmesh-batch-ledger.jsonl"]
 
 
+def test_an_output_folder_without_locks_runs_the_batch_with_one_warning(tmp_path, monkeypatch, caplog):
+    """flock fails on file systems without locks (NFS without its lock service): the batch
+    runs and says once that nothing keeps a second batch out."""
+    import errno
+
+    from rtmesh.batch import ledger as batch_ledger
+
+    def no_locks(file, operation):
+        raise OSError(errno.ENOLCK, os.strerror(errno.ENOLCK))
+
+    monkeypatch.setattr(batch_ledger.fcntl, "flock", no_locks)
+    caplog.set_level("WARNING", logger="rtmesh.batch.ledger")
+    report = rtmesh.batch_convert([make_mesh(tmp_path / "a.obj")], tmp_path / "out", workers=1, **TINY)
+    assert report.counts == counts(assets=1, done=1, images=1)
+    (line,) = [r.getMessage() for r in caplog.records]
+    assert line == (f"{tmp_path / 'out'}: cannot lock the output folder (No locks available): make sure "
+                    "no other batch writes to it at the same time")
+
+
 def test_no_temporary_file_outlives_a_killed_run(tmp_path):
     """The SQLite ledger is never copied (no compaction); what a killed run of any version
     left behind (image, summary, probe and old compaction temporaries) is removed."""
@@ -405,22 +425,139 @@ def test_editing_a_dependency_or_damaging_an_image_redoes_it(tmp_path):
         batch_identity.__version__ = rtmesh.__version__
 
 
+class RenameWatch:
+    """Every file renamed into some folders, in order (Linux inotify, IN_MOVED_TO), as paths
+    relative to the first folder: the batch puts each image and the run file in place by
+    renaming a temporary file, so this counts their writes exactly, without touching the
+    writers."""
+
+    IN_MOVED_TO = 0x80
+
+    def __init__(self, folder, *more):
+        import ctypes
+        import ctypes.util
+
+        self.libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+        self.fd = self.libc.inotify_init1(os.O_NONBLOCK)
+        if self.fd < 0:
+            pytest.skip("inotify is not available")
+        self.folders = {}
+        for path in (folder, *more):
+            wd = self.libc.inotify_add_watch(self.fd, os.fsencode(path), self.IN_MOVED_TO)
+            if wd < 0:
+                pytest.skip("inotify is not available")
+            self.folders[wd] = os.path.relpath(path, folder)
+        self.names = []
+
+    def poll(self):
+        import struct
+
+        while True:
+            try:
+                data = os.read(self.fd, 65536)
+            except BlockingIOError:
+                return self.names
+            offset = 0
+            while offset < len(data):
+                wd, mask, _, length = struct.unpack_from("iIII", data, offset)
+                name = data[offset + 16: offset + 16 + length].rstrip(b"\0").decode()
+                self.names.append(os.path.normpath(os.path.join(self.folders[wd], name)))
+                offset += 16 + length
+
+    def close(self):
+        os.close(self.fd)
+
+
+PNG_END = b"\x00\x00\x00\x00IEND\xaeB`\x82"  # the last chunk of every PNG
+
+
+def finished_unrecorded_image(out):
+    """A PNG image some worker has finished writing but the batch has not recorded: whole
+    under a temporary name (or in place without a ledger row, were workers to put images in
+    place themselves); None if there is none."""
+    recorded = {f for r in ledger_records(out) for f in r["files"]}
+    for here, _, names in os.walk(out):
+        for name in names:
+            target = target_of(name) if name.startswith(".") else name
+            image = os.path.relpath(os.path.join(here, target), out) if target else ""
+            if not image.endswith(".png") or image in recorded:
+                continue
+            try:
+                with open(os.path.join(here, name), "rb") as f:
+                    f.seek(-len(PNG_END), os.SEEK_END)
+                    if f.read() == PNG_END:
+                        return image
+            except OSError:
+                pass  # too short yet, or put in place meanwhile
+    return None
+
+
+def stop_at_an_unrecorded_image(batch, out, ready, timeout=120):
+    """Stop (SIGSTOP) the ``batch`` process at the worst moment for a kill: once
+    ``ready(rows)`` holds for the ledger rows it has committed and one of its workers has
+    finished an image it has not recorded (the workers go on while it is stopped).
+    Returns that image's name."""
+    deadline = time.monotonic() + timeout
+    while True:
+        assert time.monotonic() < deadline and batch.poll() is None, "the batch ended before it could be stopped"
+        if not ready(len(ledger_records(out))):
+            time.sleep(0.01)
+            continue
+        batch.send_signal(signal.SIGSTOP)
+        if ready(len(ledger_records(out))):  # what it committed before it stopped
+            break
+        batch.send_signal(signal.SIGCONT)
+    while time.monotonic() < deadline:
+        image = finished_unrecorded_image(out)
+        if image:
+            return image
+        time.sleep(0.02)
+    batch.send_signal(signal.SIGCONT)
+    raise AssertionError("no worker finished an image while the batch was stopped")
+
+
+def check_one_writer_per_image(names, at_kill, out, images, lost):
+    """The images put in place (renamed, from a :class:`RenameWatch`) by a batch killed when
+    ``at_kill`` names had been seen, and by its resume: each image once; none between the
+    kill and the resume's take-over (its run file); before the kill, exactly the images the
+    ledger says the killed run put in place, after the take-over those of the resumed run,
+    among them ``lost``, which a worker of the killed run had finished.
+    """
+    from collections import Counter
+
+    takeovers = [i for i, n in enumerate(names) if n == ".rtmesh-batch-run"]
+    assert len(takeovers) == 2 and takeovers[0] < at_kill <= takeovers[1]
+    placed = [(i, n) for i, n in enumerate(names) if n.endswith(".png")]
+    assert Counter(n for _, n in placed) == Counter(images), names  # every image, once
+    assert not [n for i, n in placed if at_kill <= i < takeovers[1]], names
+    resumed = summary(out)["run"]
+    run_of = {f: r["run"] for r in ledger_records(out) for f in r["files"]}
+    assert {n for i, n in placed if i < at_kill} == {f for f, run in run_of.items() if run != resumed}
+    assert {n for i, n in placed if i > takeovers[1]} == {f for f, run in run_of.items() if run == resumed}
+    assert lost in {n for i, n in placed if i > takeovers[1]}
+
+
 def test_resume_after_sigkill_writes_every_image_exactly_once(tmp_path):
+    """kill -9 of a local batch at the worst moment (its worker has finished an image the
+    batch has not recorded), then a resume: each image is put in place once, by one run;
+    images finished before the kill are kept, not written again."""
     psutil = pytest.importorskip("psutil")
     src = tmp_path / "src"
-    for i in range(16):
+    for i in range(8):
         make_mesh(src / f"group{i % 3}" / f"m{i:02d}.obj", subdivisions=3)
     out = tmp_path / "out"
-    command = [sys.executable, "-m", "rtmesh.cli", "batch", str(src), "-o", str(out), "--width",
-               "64", "--height", "64", "--spp", "4", "--workers", "1", "--threads", "1", "-q"]
+    folders = [out / f"group{g}" for g in range(3)]
+    for folder in folders:
+        folder.mkdir(parents=True)
+    watch = RenameWatch(out, *folders)
+    views = ("iso", "front", "back", "left")
+    command = [sys.executable, "-m", "rtmesh.cli", "batch", str(src), "-o", str(out), "--views",
+               ",".join(views), "--width", "64", "--height", "64", "--spp", "4", "--workers", "1",
+               "--threads", "1", "-q"]
     batch = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    ledger = out / LEDGER_NAME
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline and batch.poll() is None:
-        if ledger.exists() and len(ledger_records(out)) >= 3:
-            break
-        time.sleep(0.02)
-    assert batch.poll() is None, "the batch finished before it could be killed"
+    # in the middle of an asset (4 views), so the worker goes on with its next view
+    lost = stop_at_an_unrecorded_image(batch, out, lambda rows: rows >= 3 and rows % 4)
+    at_kill = len(watch.poll())
     workers = psutil.Process(batch.pid).children()
     batch.send_signal(signal.SIGKILL)
     batch.wait()
@@ -429,26 +566,79 @@ def test_resume_after_sigkill_writes_every_image_exactly_once(tmp_path):
     assert not alive
 
     finished = {r["key"]: r for r in ledger_records(out) if r["status"] == "done"}
-    assert 3 <= len(finished) < 16
-    before = {f: os.stat(out / f).st_ino for r in finished.values() for f in r["files"]}
+    assert 3 <= len(finished) < 32 and lost not in {f for r in finished.values() for f in r["files"]}
+    # (a file recorded but not yet renamed when the batch stopped is rolled forward later)
+    before = {f: os.stat(out / f).st_ino for r in finished.values() for f in r["files"]
+              if os.path.exists(out / f)}
     # a killed batch leaves its temporary files behind; none of them is taken for an image
     for name in os.listdir(out / "group0"):
-        assert name.endswith(".obj.png") or name.startswith(".")
+        assert name.startswith(".") or name.endswith(tuple(f".obj.{v}.png" for v in views)), name
 
     proc = subprocess.run(command, capture_output=True, text=True, timeout=120)
+    names = watch.poll()
+    watch.close()
     assert proc.returncode == 0, proc.stderr
     report = summary(out)
-    assert report["counts"]["skipped"] == len(finished)
-    assert report["counts"]["done"] == 16 - len(finished)
+    assert report["counts"]["images"] == 32 - len(finished)
     records = ledger_records(out)
-    assert sorted(r["key"] for r in records) == sorted({r["key"] for r in records})  # once each
-    assert len(records) == 16 and all(r["status"] == "done" for r in records)
+    assert len(records) == 32 and all(r["status"] == "done" for r in records)
+    check_one_writer_per_image(names, at_kill, out, [f for r in records for f in r["files"]], lost)
     for name, inode in before.items():  # finished before the kill: never written again
         assert os.stat(out / name).st_ino == inode
     for r in records:
         image, _ = read_image(out / r["files"][0])
         assert image.shape == (64, 64, 3) and image.max() > 0
     assert temporary_files(out) == []  # leftovers of the killed run are cleaned up
+
+
+def test_a_run_killed_between_recording_and_renaming_is_rolled_forward(tmp_path):
+    """A kill after an image's ledger row is committed but before all its files are renamed
+    into place leaves their temporaries: the next run puts them in place after checking
+    their content against the row, instead of rendering the image again; a temporary with
+    other content is removed and its image redone."""
+    src = tmp_path / "src"
+    make_mesh(src / "a.obj")
+    make_mesh(src / "b.obj", kind="box")
+    out = tmp_path / "out"
+    settings = dict(TINY, workers=1, formats=("png", "exr"))
+    rtmesh.batch_convert([src], out, **settings)
+    # as such a kill leaves them: a's EXR, and b's PNG (damaged here), at temporary names
+    os.rename(out / "a.obj.exr", out / ".a.obj.k2j4_x9q.tmp.exr")
+    inode = os.stat(out / ".a.obj.k2j4_x9q.tmp.exr").st_ino
+    data = bytearray((out / "b.obj.png").read_bytes())
+    data[-20] ^= 0xFF
+    (out / ".b.obj.p0q1r2s3.tmp.png").write_bytes(bytes(data))
+    os.unlink(out / "b.obj.png")
+    again = rtmesh.batch_convert([src], out, **settings)
+    assert again.counts == counts(assets=2, done=1, skipped=1, images=1)
+    assert [a["asset"] for a in again.assets] == ["b.obj"]
+    assert os.stat(out / "a.obj.exr").st_ino == inode  # renamed, not written again
+    # the run that put the files in place
+    assert {r["key"]: r["run"] for r in ledger_records(out)} == {"a.obj": again.extra["run"],
+                                                                  "b.obj": again.extra["run"]}
+    assert temporary_files(out) == []
+
+
+def test_a_superseded_task_removes_what_it_wrote_and_says_so(tmp_path):
+    from rtmesh.batch.worker import AssetJob, ImageTask, fixed_view, run_job
+
+    mesh = make_mesh(tmp_path / "a.obj")
+    out = tmp_path / "out"
+    out.mkdir()
+    tasks = tuple(ImageTask(f"a.obj.{v}", fixed_view(v), (f"a.obj.{v}.png",), "") for v in ("iso", "front"))
+    job = AssetJob("a.obj", mesh, str(out), {"width": 16, "height": 16, "spp": 1, "threads": 1}, tasks,
+                   meta=True, staged=True)
+    # a newer run takes the folder (or the cluster drops the task) while it writes its first image
+    result = run_job(job, abandoned=lambda: any(n.endswith(".tmp.png") for n in os.listdir(out)))
+    assert result["superseded"] and result["images"] == []  # not failed, not done
+    assert os.listdir(out) == []  # neither the image nor the asset's metadata file is left
+    # not superseded: every file stays at its temporary name, for the submitting process
+    iso, front = run_job(job)["images"]
+    (meta,) = iso["side_files"]
+    assert meta[1] == "a.obj.meta.json" and "side_files" not in front
+    assert [target_of(n) for n in iso["staged"] + front["staged"]] == ["a.obj.iso.png", "a.obj.front.png"]
+    assert sorted(os.listdir(out)) == sorted(iso["staged"] + front["staged"] + [meta[0]])
+    assert iso["outputs"][0][0] == "a.obj.iso.png" and iso["outputs"][0][1] > 0
 
 
 # ------------------------------------------------------------------------- entry points, Dask
@@ -612,6 +802,45 @@ def test_images_a_job_reports_must_be_visible_here(tmp_path):
         assert message.startswith("output not visible to the submitting machine")
 
 
+def test_an_image_is_recorded_before_its_files_are_put_in_place(tmp_path, monkeypatch):
+    """The submitting process commits a done image's row, then renames its staged files into
+    place; files it cannot accept are removed, not put in place."""
+    from rtmesh.batch import books as batch_books
+    from rtmesh.batch.books import Books
+    from rtmesh.batch.identity import describe
+    from rtmesh.batch.options import BatchOptions
+
+    committed = []
+
+    def publish(outdir, pairs):
+        pairs = list(pairs)
+        if pairs:
+            committed.append({r["key"]: r["status"] for r in ledger_records(outdir)})
+        real_publish(outdir, pairs)
+
+    real_publish = batch_books.publish
+    monkeypatch.setattr(batch_books, "publish", publish)
+    images = {}
+    for key in ("a", "b"):
+        temporary = f".{key}.obj.k2j4_x9q.tmp.png"
+        (tmp_path / temporary).write_bytes(b"12345")
+        entry = describe(tmp_path / temporary, f"{key}.obj.png")
+        images[key] = {"asset": key, "key": key, "fingerprint": "f", "status": "done", "seconds": 0.1,
+                       "files": [f"{key}.obj.png"], "staged": [temporary], "inputs": [], "outputs": [entry]}
+    images["b"]["outputs"][0][1] = 9  # the worker says it wrote 9 bytes
+    with Ledger(str(tmp_path)) as ledger:
+        books = Books(ledger, str(tmp_path), BatchOptions(quiet=True), 2)
+        for key, image in images.items():
+            books.planned(Asset(f"/src/{key}", key), [], [], False, True)
+            books.on_image(image)
+            books.on_job({"asset": key, "seconds": 0.1})
+        books.close()
+        assert ledger.failure("b")[1] == "storage"
+    assert committed == [{"a": "done"}]
+    assert sorted(os.listdir(tmp_path)) == [".rtmesh-batch.lock", "a.obj.png", LEDGER_NAME, REPORT_NAME]
+    assert (tmp_path / "a.obj.png").read_bytes() == b"12345"
+
+
 def start_scheduler(tmp_path):
     """A Dask scheduler in its own process (so that it can be killed); returns it and its
     address."""
@@ -662,46 +891,11 @@ def test_a_lost_scheduler_ends_the_batch_with_its_own_exit_code_and_no_failures(
     assert summary(out)["counts"]["not_attempted"] == lost
 
 
-class RenameWatch:
-    """Every file renamed into a folder, in order (Linux inotify, IN_MOVED_TO): each image
-    and the run file are written as a temporary file renamed into place, so this counts
-    their writes exactly, without touching the writers."""
-
-    IN_MOVED_TO = 0x80
-
-    def __init__(self, folder):
-        import ctypes
-        import ctypes.util
-
-        self.libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
-        self.fd = self.libc.inotify_init1(os.O_NONBLOCK)
-        if self.fd < 0 or self.libc.inotify_add_watch(self.fd, os.fsencode(folder), self.IN_MOVED_TO) < 0:
-            pytest.skip("inotify is not available")
-        self.names = []
-
-    def poll(self):
-        import struct
-
-        while True:
-            try:
-                data = os.read(self.fd, 65536)
-            except BlockingIOError:
-                return self.names
-            offset = 0
-            while offset < len(data):
-                _, mask, _, length = struct.unpack_from("iIII", data, offset)
-                name = data[offset + 16: offset + 16 + length].rstrip(b"\0").decode()
-                self.names.append(name)
-                offset += 16 + length
-
-    def close(self):
-        os.close(self.fd)
-
-
 def test_resume_right_after_killing_the_client_gives_each_image_one_writer(tmp_path):
-    """kill -9 of the submitting process: its Dask tasks stop before writing once the
-    scheduler drops them, and a resume started at once takes the folder over (run file):
-    no task of the killed run writes an image after that."""
+    """kill -9 of the submitting process at the worst moment (a Dask worker has finished an
+    image it has not recorded, others are rendering), and a resume at once: the killed
+    run's tasks put nothing in place (only a submitting process does, after recording), so
+    each image is put in place once, by one run, and nothing is left behind."""
     distributed = pytest.importorskip("distributed")
     src = tmp_path / "src"
     for i in range(6):
@@ -715,27 +909,20 @@ def test_resume_right_after_killing_the_client_gives_each_image_one_writer(tmp_p
                    "--scheduler", cluster.scheduler_address, "--width", "192", "--height", "192",
                    "--spp", "160", "-q"]
         first = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        wait_for_rows(out, 1, first)
-        first.kill()  # its running tasks go on, on the cluster
+        lost = stop_at_an_unrecorded_image(first, out, lambda rows: 1 <= rows < 5)
+        at_kill = len(watch.poll())
+        first.kill()  # its tasks go on, on the cluster, until they notice
         first.wait()
         proc = subprocess.run(command, capture_output=True, text=True, timeout=180)
     names = watch.poll()
     watch.close()
     assert proc.returncode == 0, proc.stderr
-    takeovers = [i for i, n in enumerate(names) if n == ".rtmesh-batch-run"]
-    assert len(takeovers) == 2  # the killed run's, the resumed run's
-    after = [n for n in names[takeovers[1] + 1:] if n.endswith(".png")]
-    assert len(after) == len(set(after))  # after the take-over: one writer per image
-    # the killed run's tasks stop writing once the scheduler drops them: only an image
-    # finished between the killed run's last ledger commit and the kill is written again
-    from collections import Counter
-
-    twice = [n for n, k in Counter(n for n in names if n.endswith(".png")).items() if k > 1]
-    assert len(twice) <= 1, names
     rows = ledger_records(out)
     assert len(rows) == 6 and all(r["status"] == "done" for r in rows)
+    check_one_writer_per_image(names, at_kill, out, [f"m{i}.obj.png" for i in range(6)], lost)
     for r in rows:
         assert read_image(out / r["files"][0])[0].shape == (192, 192, 3)
+    assert temporary_files(out) == []
 
 
 # ------------------------------------------------------------------------- failure policy, exit codes
@@ -890,23 +1077,33 @@ def test_noop_resume_over_a_million_ledger_rows_takes_at_most_5_s(tmp_path):
     assert cost["total"] <= 5.0, cost
 
 
-def test_a_resume_cancels_queued_tasks_of_an_earlier_run_and_waits_for_running_ones():
+def test_a_resume_cancels_the_earlier_runs_tasks_of_its_folder_without_waiting():
     distributed = pytest.importorskip("distributed")
-    from rtmesh.batch.dask_pool import KEY_PREFIX, _wait_for_earlier_runs
+    from rtmesh.batch.dask_pool import cancel_earlier_runs, task_prefix
 
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
                                   dashboard_address=None, silence_logs=50) as cluster, \
             distributed.Client(cluster) as client:
-        running = client.submit(time.sleep, 1.5, key=f"{KEY_PREFIX}old-0")
-        queued = client.submit(time.sleep, 0, key=f"{KEY_PREFIX}old-1", resources={"none": 1})
-        ours = client.submit(time.sleep, 0, key=f"{KEY_PREFIX}new-0", resources={"none": 1})
-        while not any(running.key in keys for keys in client.processing().values()):
+        old = task_prefix("/out", "old")
+        running = client.submit(time.sleep, 3, key=f"{old}0")
+        queued = client.submit(time.sleep, 0, key=f"{old}1", resources={"none": 1})
+        ours = client.submit(time.sleep, 0, key=f"{task_prefix('/out', 'new')}0", resources={"none": 1})
+        other = client.submit(time.sleep, 0, key=f"{task_prefix('/elsewhere', 'old')}0",
+                              resources={"none": 1})
+        keys = {f.key for f in (running, queued, ours, other)}
+        # the submissions reach the scheduler on another connection than run_on_scheduler
+        while not (keys <= set(client.run_on_scheduler(lambda dask_scheduler: list(dask_scheduler.tasks)))
+                   and any(running.key in k for k in client.processing().values())):
             time.sleep(0.01)
         start = time.monotonic()
-        _wait_for_earlier_runs(client, "new", timeout=30)
-        assert 0.5 < time.monotonic() - start < 20  # waited for the running one, only
-        assert running.status == "finished" and queued.status == "cancelled"
-        assert ours.status == "pending"  # this run's own tasks are left alone
+        assert cancel_earlier_runs(client, "/out", "new") == 2
+        assert time.monotonic() - start < 2.5  # did not wait for the running one
+        deadline = time.monotonic() + 10
+        while running.status != "cancelled" and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert running.status == "cancelled" and queued.status == "cancelled"
+        # this run's own tasks and another folder's batch are left alone
+        assert ours.status == "pending" and other.status == "pending"
 
 
 def test_warm_up_converts_a_tiny_asset_one_worker_per_host_first():

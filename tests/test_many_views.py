@@ -79,3 +79,34 @@ def test_a_batch_job_loads_once_and_builds_once_per_ground_variant(tmp_path, mon
         fresh = Integrator(worker._scene_for_view(parts, materials, bounds, view, rs, True), rs).render()
         written = oiio.ImageInput.open(str(tmp_path / f"{view.name}.exr")).read_image("float")
         np.testing.assert_array_equal(written[..., :3], fresh.image[..., :3])
+
+
+def test_physical_assets_get_the_studio_turned_to_each_view(tmp_path):
+    """A glTF metallic-roughness asset in a batch: no lights, the studio environment turned to
+    each fixed view's rig camera; the shared build renders what a fresh build renders."""
+    import trimesh
+    from trimesh.visual.material import PBRMaterial
+
+    from rtmesh.scene.studio import STUDIO_PATH
+
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    sphere.visual = trimesh.visual.TextureVisuals(
+        material=PBRMaterial(name="m", baseColorFactor=[0.9, 0.6, 0.3, 1.0], metallicFactor=1.0, roughnessFactor=0.4))
+    mesh = tmp_path / "ball.glb"
+    sphere.export(mesh)
+    views = [worker.fixed_view("iso"), worker.fixed_view("left")]
+    tasks = tuple(worker.ImageTask(v.name, v, (f"{v.name}.exr",), "") for v in views)
+    fields = {"width": 12, "height": 12, "spp": 2, "threads": 1}
+    result = worker.run_job(worker.AssetJob("ball.glb", str(mesh), str(tmp_path), fields, tasks))
+    assert [i["status"] for i in result["images"]] == ["done"] * 2
+    parts, materials, bounds, _ = worker._load(worker.AssetJob("ball.glb", str(mesh), str(tmp_path), fields, ()))
+    rs = worker.RenderSettings(**fields).validate()
+    rotations = []
+    for view in views:
+        scene = worker._scene_for_view(parts, materials, bounds, view, rs, False)
+        assert scene.lights == [] and scene.background.name == STUDIO_PATH and scene.background.lighting
+        rotations.append(scene.background.rotation)
+        fresh = Integrator(scene, rs).render()
+        written = oiio.ImageInput.open(str(tmp_path / f"{view.name}.exr")).read_image("float")
+        np.testing.assert_array_equal(written[..., :3], fresh.image[..., :3])
+    assert abs(rotations[0] - rotations[1]) > 1.0

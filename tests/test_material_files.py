@@ -9,7 +9,7 @@ from PIL import Image
 from trimesh.visual.material import PBRMaterial
 
 from rtmesh.loaders.importers import load_mesh_scene, parts_from_trimesh
-from rtmesh.loaders.material_files import gltf_material, map_statement, mtl_material, roughness_to_shininess
+from rtmesh.loaders.material_files import gltf_material, map_statement, mtl_material
 from rtmesh.loaders.scene_file import scene_from_dict
 
 # ---------------------------------------------------------------- MTL
@@ -99,27 +99,39 @@ def pbr(**values):
     return PBRMaterial(name="m", **values)
 
 
-def test_gltf_metal_reflects_in_its_own_colour():
+def test_gltf_materials_keep_the_metallic_roughness_model():
     m = gltf_material(pbr(baseColorFactor=[0.8, 0.6, 0.2, 1.0], metallicFactor=1.0, roughnessFactor=0.5))
-    np.testing.assert_allclose(m.diffuse, 0.0)
-    np.testing.assert_allclose(m.specular, [0.8, 0.6, 0.2])
-    np.testing.assert_allclose(m.mirror, [0.8, 0.6, 0.2])
-    assert m.roughness == pytest.approx(0.25)  # the GGX alpha drives the glossy lobe
-    assert m.shininess == pytest.approx(2.0 / 0.5 ** 4 - 2.0)  # and the highlight
-    assert m.metallic == 1.0
+    assert m.model == "metallic_roughness"
+    np.testing.assert_allclose(m.base_color, [0.8, 0.6, 0.2], atol=1 / 255)  # trimesh keeps 8 bits
+    assert m.metallic == 1.0 and m.perceptual_roughness == pytest.approx(0.5)
+    # no Blinn-Phong terms: the BRDF reflects, nothing else does
+    assert not m.diffuse.any() and not m.specular.any() and not m.mirror.any()
+    d = gltf_material(pbr(baseColorFactor=[0.2, 0.4, 0.6, 1.0], metallicFactor=0.25, roughnessFactor=1.0))
+    np.testing.assert_allclose(d.diffuse, np.array([0.2, 0.4, 0.6]) * 0.75, atol=1 / 255)  # for the ambient term
 
 
-def test_gltf_dielectric_is_diffuse_with_a_four_percent_highlight():
-    m = gltf_material(pbr(baseColorFactor=[0.2, 0.4, 0.6, 1.0], metallicFactor=0.0, roughnessFactor=1.0))
-    np.testing.assert_allclose(m.diffuse, [0.2, 0.4, 0.6])
-    np.testing.assert_allclose(m.specular, 0.04)
-    assert not m.mirror.any() and m.shininess == 1.0
+def test_transmissive_gltf_materials_refract_part_of_their_dielectric_diffuse_term():
+    glass = gltf_material(pbr(baseColorFactor=[0.8, 0.6, 0.2, 1.0], metallicFactor=0.0, roughnessFactor=0.5),
+                          {"extensions": {"KHR_materials_transmission": {"transmissionFactor": 0.75},
+                                          "KHR_materials_ior": {"ior": 1.4},
+                                          "KHR_materials_volume": {"attenuationColor": [0.5, 1.0, 1.0],
+                                                                   "attenuationDistance": 2.0}}})
+    assert glass.model == "metallic_roughness" and glass.transmission_factor == 0.75
+    np.testing.assert_allclose(glass.transmission, 0.75 * np.array([0.8, 0.6, 0.2]), atol=1 / 255)
+    np.testing.assert_allclose(glass.diffuse, 0.25 * np.array([0.8, 0.6, 0.2]), atol=1 / 255)
+    assert glass.ior == 1.4
+    np.testing.assert_allclose(glass.absorption, [np.log(2.0) / 2.0, 0.0, 0.0])
+    # a metal transmits nothing: transmission is part of the dielectric term only
+    metal = gltf_material(pbr(baseColorFactor=[0.8, 0.6, 0.2, 1.0], metallicFactor=1.0),
+                          {"extensions": {"KHR_materials_transmission": {"transmissionFactor": 0.5}}})
+    assert not metal.transmission.any()
 
 
-def test_roughness_to_shininess_is_monotonic_and_clamped():
-    values = [roughness_to_shininess(r) for r in (0.0, 0.05, 0.2, 0.5, 1.0)]
-    assert values[0] == values[1] and values == sorted(values, reverse=True)
-    assert values[-1] == 1.0
+def test_unlit_gltf_materials_show_their_base_colour_whatever_their_metalness():
+    # glTF's metallicFactor defaults to 1: an unlit material must not turn black for it
+    unlit = gltf_material(pbr(baseColorFactor=[0.2, 0.4, 0.6, 1.0]), {"extensions": {"KHR_materials_unlit": {}}})
+    assert unlit.model == "blinn_phong" and unlit.unlit
+    np.testing.assert_allclose(unlit.diffuse, [0.2, 0.4, 0.6], atol=1 / 255)
 
 
 def test_gltf_alpha_modes_emission_and_unlit():
@@ -224,7 +236,7 @@ def test_smoothing_by_angle_keeps_the_material_and_carries_uvs():
 
 def test_gltf_sampler_wrap_modes_reach_the_textures():
     # glTF keeps wrapS / wrapT in samplers, which trimesh drops: read from the JSON
-    from rtmesh.loaders.material_files import WRAP_KEY, gltf_json_materials
+    from rtmesh.loaders.material_files import OPTIONS_KEY, gltf_json_materials
 
     doc = {"samplers": [{"wrapS": 33071, "wrapT": 33648}, {}],
            "textures": [{"source": 0, "sampler": 0}, {"source": 0, "sampler": 1}, {"source": 0}],
@@ -233,10 +245,10 @@ def test_gltf_sampler_wrap_modes_reach_the_textures():
                          {"name": "b", "pbrMetallicRoughness": {"baseColorTexture": {"index": 2}}},
                          {"name": "c", "pbrMetallicRoughness": {"baseColorTexture": {"index": 9}}}]}
     materials = gltf_json_materials(doc)
-    assert materials["a"][WRAP_KEY] == {"baseColorTexture": ("clamp", "mirror"),
-                                        "normalTexture": ("repeat", "repeat")}
-    assert materials["b"][WRAP_KEY] == {"baseColorTexture": ("repeat", "repeat")}
-    assert materials["c"][WRAP_KEY] == {"baseColorTexture": ("repeat", "repeat")}  # bad index
+    assert {role: o["wrap"] for role, o in materials["a"][OPTIONS_KEY].items()} == {
+        "baseColorTexture": ("clamp", "mirror"), "normalTexture": ("repeat", "repeat")}
+    assert materials["b"][OPTIONS_KEY]["baseColorTexture"]["wrap"] == ("repeat", "repeat")
+    assert materials["c"][OPTIONS_KEY]["baseColorTexture"]["wrap"] == ("repeat", "repeat")  # bad index
     image = Image.new("RGB", (2, 2), (200, 100, 50))
     m = gltf_material(pbr(baseColorTexture=image, normalTexture=image), materials["a"])
     assert (m.diffuse_texture.wrap_u, m.diffuse_texture.wrap_v) == ("clamp", "mirror")
@@ -244,14 +256,14 @@ def test_gltf_sampler_wrap_modes_reach_the_textures():
 
 
 def test_gltf_emissive_texture_multiplies_the_factor():
-    from rtmesh.loaders.material_files import WRAP_KEY, gltf_json_materials
+    from rtmesh.loaders.material_files import OPTIONS_KEY, gltf_json_materials
 
     image = Image.new("RGB", (2, 1), (255, 0, 0))
     image.putpixel((1, 0), (0, 0, 0))
     doc = {"samplers": [{"wrapS": 33071, "wrapT": 33071}], "textures": [{"source": 0, "sampler": 0}],
            "materials": [{"name": "lamp", "emissiveFactor": [1.0, 0.5, 1.0], "emissiveTexture": {"index": 0}}]}
     json_material = gltf_json_materials(doc)["lamp"]
-    assert json_material[WRAP_KEY]["emissiveTexture"] == ("clamp", "clamp")
+    assert json_material[OPTIONS_KEY]["emissiveTexture"]["wrap"] == ("clamp", "clamp")
     m = gltf_material(pbr(emissiveTexture=image), json_material)
     np.testing.assert_allclose(m.emission, [1.0, 0.5, 1.0])
     np.testing.assert_allclose(m.emission_texture.pixels[0], [[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])  # sRGB decoded

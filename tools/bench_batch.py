@@ -137,7 +137,8 @@ def noop_resume_ledger_cost(folder, keys):
 
 def bookkeeping_cost(folder, n):
     """Milliseconds per asset the submitting process spends on a finished asset: checking
-    its image on disk, its ledger row and commit, its report line (:class:`rtmesh.batch.Books`)."""
+    its image (staged by the worker at a temporary name), its ledger row and commit,
+    renaming the image into place, its report line (:class:`rtmesh.batch.Books`)."""
     from rtmesh.batch.books import Books
     from rtmesh.batch.identity import describe
     from rtmesh.batch.ledger import Ledger
@@ -146,12 +147,13 @@ def bookkeeping_cost(folder, n):
     images = []
     for i in range(n):
         name = f"a{i:05d}.obj.png"
-        with open(os.path.join(folder, name), "wb") as f:
+        staged = f".a{i:05d}.obj.bench_00.tmp.png"  # as rtmesh.io.atomic_files names it
+        with open(os.path.join(folder, staged), "wb") as f:
             f.write(os.urandom(20_000))
         images.append({"asset": f"a{i:05d}.obj", "run": "bench", "key": f"a{i:05d}.obj",
                        "fingerprint": "f" * 40, "status": "done", "files": [name], "seconds": 0.05,
-                       "inputs": [["", 1, 2, "x"], ["a.mtl", 1, 2, "y"]],
-                       "outputs": [describe(os.path.join(folder, name), name)]})
+                       "inputs": [["", 1, 2, "x"], ["a.mtl", 1, 2, "y"]], "staged": [staged],
+                       "outputs": [describe(os.path.join(folder, staged), name)]})
     with Ledger(folder) as ledger:
         books = Books(ledger, folder, BatchOptions(quiet=True), n)
         for image in images:

@@ -1,15 +1,18 @@
-"""Write assets/environments/studio.exr: a neutral photo-studio environment for product shots
+"""Write rtmesh/scene/studio.exr: a neutral photo-studio environment for product shots
 (256 x 128, linear, half float), made from scratch (no third-party image).
 
 A soft grey cyclorama (darker below the horizon, like a floor), a large key softbox up and to
 the front-left, a smaller fill softbox to the right and a strip light behind, each a
 rectangle of constant radiance with softened edges, in the lat-long convention of
 rtmesh.scene.background (+Y up; the image centre looks along +X, a camera looking down -Z
-sees the key light from its upper left).  Use it as a lighting background:
+sees the key light from its upper left).  It is the default light rig of assets with
+physically based (glTF metallic-roughness) materials that bring no lights of their own
+(:mod:`rtmesh.scene.studio`, which turns it to the camera), and can be named in a scene
+file as any environment:
 
     [background]
     type = "environment"
-    file = "environments/studio.exr"
+    file = "/path/to/rtmesh/scene/studio.exr"
     lighting = true
 
 Run from the repository root: ``python tools/make_studio.py``.
@@ -59,7 +62,7 @@ def studio(width=WIDTH, height=HEIGHT):
     return radiance.astype(np.float32)
 
 
-def main(path=os.path.join(os.path.dirname(__file__), "..", "assets", "environments", "studio.exr")):
+def main(path=os.path.join(os.path.dirname(__file__), "..", "rtmesh", "scene", "studio.exr")):
     image = studio()
     spec = oiio.ImageSpec(WIDTH, HEIGHT, 3, oiio.HALF)
     spec.attribute("compression", "zip")

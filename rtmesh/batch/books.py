@@ -16,6 +16,7 @@ from rtmesh.batch.datasets import write_dataset
 from rtmesh.batch.identity import unchanged
 from rtmesh.batch.movies import movie_frames, write_movie
 from rtmesh.batch.progress import BatchProgress, JsonProgress
+from rtmesh.batch.publish import discard, publish
 
 REPORT_NAME = "rtmesh-batch-report.jsonl"
 
@@ -165,29 +166,56 @@ class Books:
             self.progress = BatchProgress(self.total, done, enabled=mode == "bar")
 
     def on_image(self, image):
-        """Record one image's result (called as each image finishes or fails)."""
+        """Record one image's result and put its files in place (called as each image
+        finishes or fails).
+
+        A done image's staged files (``staged``: temporary names, see
+        :mod:`rtmesh.batch.publish`) are checked, its ledger row is committed, and only
+        then are they renamed into place; those of an image not recorded as done are
+        removed.  ``side_files`` (the asset's metadata file) are put in place first, so
+        that an asset with a recorded image has them.
+        """
         record = self.pending.get(image.get("asset")) if "asset" in image else None
+        staged = image.get("staged") or []
+        try:
+            publish(self.outdir, image.get("side_files") or ())
+        except OSError as exc:
+            image = _failed(image, "write", f"cannot put {exc.filename} in place: {exc.strerror}")
         if image["status"] == "done":
-            problem = self._not_visible(image)
+            problem = self._not_visible(image, staged)
             if problem:
-                image = {**image, "status": "failed", "stage": "storage", "outputs": [],
-                         "message": f"output not visible to the submitting machine: {problem}"}
-        self.ledger.record(image["key"], image.get("asset", ""), image["fingerprint"],
-                           image["status"], inputs=image.get("inputs", ()),
-                           outputs=image.get("outputs", ()), seconds=image["seconds"],
-                           run=image.get("run", ""), stage=image.get("stage"),
-                           message=image.get("message"))
+                image = _failed(image, "storage", f"output not visible to the submitting machine: {problem}")
+        self._record(image)
+        if image["status"] == "done" and staged:
+            # the row is durable before the files appear: a kill in between leaves their
+            # temporaries, which the next run rolls forward, never an image without its row
+            self.ledger.commit()
+            try:
+                publish(self.outdir, zip(staged, image["files"]))
+            except OSError as exc:
+                image = _failed(image, "write", f"cannot put {exc.filename} in place: {exc.strerror}")
+                self._record(image)
+        if image["status"] != "done":
+            discard(self.outdir, staged)
         if self.opts.contact_sheet and image["status"] == "done":
             self.sheet.append((image["key"], image["files"]))
         if record is not None:
             record["images"].append({k: image[k] for k in ("key", "status", "files", "seconds",
                                                           "stage", "message") if k in image})
 
-    def _not_visible(self, image):
-        """Why the image's files do not match what the worker reported, or ""."""
+    def _record(self, image):
+        self.ledger.record(image["key"], image.get("asset", ""), image["fingerprint"],
+                           image["status"], inputs=image.get("inputs", ()),
+                           outputs=image.get("outputs", ()), seconds=image["seconds"],
+                           run=image.get("run", ""), stage=image.get("stage"),
+                           message=image.get("message"))
+
+    def _not_visible(self, image, staged):
+        """Why the image's files (at their ``staged`` names, if given) do not match what the
+        worker reported, or ""."""
         outputs = image.get("outputs") or []
-        for entry in outputs:
-            path = os.path.join(self.outdir, entry[0])
+        for i, entry in enumerate(outputs):
+            path = os.path.join(self.outdir, staged[i] if staged else entry[0])
             try:
                 size = os.stat(path).st_size
             except OSError:
@@ -196,9 +224,10 @@ class Books:
                 return f"{entry[0]} has {size} bytes, the worker wrote {entry[1]}"
             if self.check_content and not unchanged(entry, path):
                 return f"{entry[0]} differs from what the worker wrote"
-            # record this machine's view of the file (its time, for --trust-mtime resumes)
+            # record this machine's view of the file (its time, for --trust-mtime resumes;
+            # a rename keeps it)
             entry[2] = os.stat(path).st_mtime_ns
-        if len(outputs) != len(image["files"]):
+        if len(outputs) != len(image["files"]) or (staged and len(staged) != len(outputs)):
             return "the worker reported no file"
         return ""
 
@@ -255,3 +284,8 @@ class Books:
                                           time.localtime(time.time() - wall_seconds))}
         return BatchReport(dict(self.counts), self.assets, wall_seconds, per_minute, runner,
                            extra=extra)
+
+
+def _failed(image, stage, message):
+    """``image`` turned into a failure (its files are not recorded)."""
+    return {**image, "status": "failed", "stage": stage, "outputs": [], "message": message}

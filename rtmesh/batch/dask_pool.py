@@ -15,11 +15,15 @@ lose the submitting process.  So:
   submitter also checks every image a job reports, size and checksum, see
   :class:`rtmesh.batch.Books`; a job that cannot see the batch's run file is failed the
   same way.)
-- **Run ids**: task keys carry the batch's run id, and each job carries the run file
-  (``OUTDIR/.rtmesh-batch-run``) that the submitter writes when it takes the folder.  A
-  task of an earlier run (its submitter killed) stops before its next write once a resumed
-  run has taken over; the resumed run waits until the earlier run's running tasks are gone
-  before dispatching, so no image has two writers.
+- **Runs**: the workers never put an image in place: they leave its files at temporary
+  names, and the submitting process renames them once it has recorded the image
+  (:mod:`rtmesh.batch.publish`), so a task of an earlier run whose submitter was killed
+  cannot write an image, however long it goes on.  To free the cluster, task keys name the
+  output folder and the run (``rtmesh-batch-<folder>-<run>-<n>``): a resumed run cancels
+  the earlier runs' tasks of its folder, queued or running, without waiting for them, and
+  a task stops at its next check (between render chunks) once the scheduler has dropped
+  it or the run file (``OUTDIR/.rtmesh-batch-run``, written by the submitter when it takes
+  the folder) names another run.
 - **Cluster loss**: losing the scheduler raises :class:`ClusterLost`; the jobs not
   finished are left for a resume, not recorded as failed.
 - **Warm workers**: accepted workers render a tiny scene before the first job
@@ -51,7 +55,7 @@ class ClusterLost(RtmeshError):
 
 
 def run_dask(jobs, scheduler, on_image, on_job, run="", outdir=None, time_limit=None,
-             retries=2, wait_for_earlier=60.0):
+             retries=2):
     """Run jobs on a dask.distributed cluster; results come back to this process.
 
     Parameters
@@ -72,8 +76,6 @@ def run_dask(jobs, scheduler, on_image, on_job, run="", outdir=None, time_limit=
     retries : int
         Extra attempts for a task that raised (a task lost with a killed worker is re-run by
         the scheduler without counting as a retry).
-    wait_for_earlier : float
-        Longest wait, in seconds, for running tasks of an earlier run to stop.
 
     Raises
     ------
@@ -97,13 +99,13 @@ def run_dask(jobs, scheduler, on_image, on_job, run="", outdir=None, time_limit=
     for name in names:
         logging.getLogger(name).setLevel(logging.CRITICAL)
     try:
-        _run(jobs, scheduler, on_image, on_job, run, outdir, time_limit, retries, wait_for_earlier)
+        _run(jobs, scheduler, on_image, on_job, run, outdir, time_limit, retries)
     finally:
         for name, level in levels.items():
             logging.getLogger(name).setLevel(level)
 
 
-def _run(jobs, scheduler, on_image, on_job, run, outdir, time_limit, retries, wait_for_earlier):
+def _run(jobs, scheduler, on_image, on_job, run, outdir, time_limit, retries):
     from distributed import Client, as_completed
 
     outdir = outdir or jobs[0].outdir
@@ -121,12 +123,13 @@ def _run(jobs, scheduler, on_image, on_job, run, outdir, time_limit, retries, wa
         resource = storage_resource(outdir)
         try:
             prober = Prober(client, outdir, jobs[0].path, resource)
-            _wait_for_earlier_runs(client, run, wait_for_earlier)
+            cancel_earlier_runs(client, outdir, run)
         except (OSError, TimeoutError, CancelledError) as exc:
             raise ClusterLost(f"cluster lost: {_one_line(exc)}") from None
         warm_up_workers(client, prober.accepted)
         prober.start()
-        futures = {client.submit(_dask_task, job, time_limit, key=f"{KEY_PREFIX}{run}-{i}",
+        prefix = task_prefix(outdir, run)
+        futures = {client.submit(_dask_task, job, time_limit, key=f"{prefix}{i}",
                                  pure=False, retries=retries, resources={resource: 1}): job
                    for i, job in enumerate(jobs)}
         try:
@@ -184,7 +187,16 @@ def _lost(client, exc):
 
 def storage_resource(outdir):
     """Name of the Dask resource that marks workers proven to share ``outdir``."""
-    return "rtmesh-storage-" + hashlib.sha1(os.fspath(outdir).encode()).hexdigest()[:12]
+    return "rtmesh-storage-" + _folder_tag(outdir)
+
+
+def task_prefix(outdir, run=""):
+    """Key prefix of the batch tasks writing into ``outdir`` (of run ``run``, if given)."""
+    return f"{KEY_PREFIX}{_folder_tag(outdir)}-" + (f"{run}-" if run else "")
+
+
+def _folder_tag(outdir):
+    return hashlib.sha1(os.fspath(outdir).encode()).hexdigest()[:12]
 
 
 class Prober:
@@ -337,35 +349,25 @@ def _probe(outdir, sample_input, tokens, dask_worker=None):
     return name, ""
 
 
-def _wait_for_earlier_runs(client, run, timeout):
-    """Wait until no task of an earlier batch run is running (they stop before their next
-    write once the run file names this run), cancelling those still queued."""
-    deadline = time.monotonic() + timeout
-    while True:
-        running, queued = client.run_on_scheduler(_earlier_tasks, KEY_PREFIX, run)
-        if queued:
-            from distributed import Future
+def cancel_earlier_runs(client, outdir, run):
+    """Cancel the tasks of other runs into ``outdir``, queued or running; returns how many.
 
-            client.cancel([Future(k, client) for k in queued], force=True)
-        if not running:
-            return
-        if time.monotonic() > deadline:
-            log.warning("%d tasks of an earlier batch run are still running; they stop "
-                        "before writing any image", len(running))
-            return
-        time.sleep(0.25)
+    They could not put an image in place anyway (only their submitting process, now gone,
+    could have); cancelling frees their workers: a running one stops between render chunks
+    (:func:`_abandoned_check`).  Batches into other folders are left alone.
+    """
+    from distributed import Future
+
+    keys = client.run_on_scheduler(_other_runs_tasks, task_prefix(outdir), task_prefix(outdir, run))
+    if keys:
+        client.cancel([Future(k, client) for k in keys], force=True)
+    return len(keys)
 
 
-def _earlier_tasks(prefix, run, dask_scheduler=None):
-    """On the scheduler: keys of other runs' batch tasks, (running, waiting)."""
-    running, queued = [], []
-    for key, ts in dask_scheduler.tasks.items():
-        if isinstance(key, str) and key.startswith(prefix) and not key.startswith(prefix + run):
-            if ts.state == "processing":
-                running.append(key)
-            elif ts.state in ("waiting", "queued", "no-worker", "released"):
-                queued.append(key)
-    return running, queued
+def _other_runs_tasks(prefix, own, dask_scheduler=None):
+    """On the scheduler: keys starting with ``prefix`` and not with ``own``."""
+    return [key for key in dask_scheduler.tasks
+            if isinstance(key, str) and key.startswith(prefix) and not key.startswith(own)]
 
 
 def _dask_task(job, time_limit):

@@ -12,19 +12,21 @@ The ledger is an SQLite database (Python's standard :mod:`sqlite3`) in the outpu
 ``outputs``    output entries (file, size, mtime_ns, checksum), see :func:`encode`
 ``attempts``   failed attempts in a row with these inputs (0 once done)
 ``stage``, ``message``  why it failed
-``seconds``, ``time``, ``run``  render time, when recorded, the run id
+``seconds``, ``time``, ``run``  render time, when recorded, run id (done: the run that put the files in place)
 =============  ===================================================================
 
 and a ``meta`` table holding ``format`` (:data:`FORMAT`).  Entries are described in
 :mod:`rtmesh.batch.identity`.
 
 Safety against a kill at any moment: a ``done`` row is written only after every file of the
-image was written atomically (temporary file, then ``os.replace``) and checked from this
-process; rows are committed once per asset, in write-ahead-log mode, so a kill loses at
-most the uncommitted asset (redone next time) and never corrupts the database.  There is
+image was written whole (at a temporary name) and checked from this process, and committed
+before the files are renamed into place (:mod:`rtmesh.batch.publish`); other rows are
+committed once per asset, in write-ahead-log mode, so a kill loses at most the uncommitted
+asset (redone next time) and never corrupts the database.  There is
 no compaction and no temporary copy: one row per key is replaced in place.  Only the
 process that runs the batch writes the ledger, and a lock file stops two batches from
-sharing one output folder.
+sharing one output folder (``flock``; on a file system without locks the batch runs with a
+warning, and nothing keeps a second batch out).
 
 A ledger of rtmesh 0.1 (``rtmesh-batch-ledger.jsonl``) recorded only the mesh file's path,
 size and time, which cannot be checked against the rules above: a batch refuses such a
@@ -33,11 +35,14 @@ folder with one line rather than trusting or silently discarding it.
 
 import fcntl
 import json
+import logging
 import os
 import sqlite3
 import time
 
 from rtmesh.core.errors import OutputError
+
+log = logging.getLogger(__name__)
 
 LEDGER_NAME = "rtmesh-batch-ledger.sqlite"
 OLD_LEDGER_NAME = "rtmesh-batch-ledger.jsonl"
@@ -116,6 +121,13 @@ class Ledger:
         except BlockingIOError:
             self._lock.close()
             raise OutputError(f"{folder}: another rtmesh batch is writing to this folder") from None
+        except OSError as exc:
+            # no locks on this file system (NFS without its lock service, some FUSE
+            # mounts): refusing would make the folder unusable, and a killed batch needs no
+            # lock to be resumed safely (rtmesh.batch.publish); only two live batches in one
+            # folder are then not kept apart
+            log.warning("%s: cannot lock the output folder (%s): make sure no other batch "
+                        "writes to it at the same time", folder, exc.strerror)
         try:
             self._open()
         except BaseException:
@@ -200,8 +212,14 @@ class Ledger:
                           encode(inputs), encode(outputs), attempts, stage, message,
                           round(seconds, 4), round(time.time(), 3), run))
 
+    def set_run(self, key, run):
+        """Name ``run`` as the run that put ``key``'s files in place (a run that finishes
+        what a killed run recorded, see :class:`rtmesh.batch.publish.Leftovers`)."""
+        self._db.execute("UPDATE images SET run=? WHERE key=?", (run, key))
+
     def commit(self):
-        """Make the rows written so far durable (called once per finished asset)."""
+        """Make the rows written so far durable (called once per finished asset, and for each
+        done image before its files are put in place)."""
         self._db.execute("COMMIT")
         self._db.execute("BEGIN")
 

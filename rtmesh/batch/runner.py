@@ -15,6 +15,8 @@ The pieces, one job each:
   says are finished and unchanged) and runs them;
 - :mod:`rtmesh.batch.books` keeps the books (ledger entries, per-asset files, the report)
   and :mod:`rtmesh.batch.progress` shows the progress;
+- :mod:`rtmesh.batch.publish` puts the images in place, only from this process and only once
+  they are recorded, and deals with what a killed run left;
 - :mod:`rtmesh.batch.worker` converts one asset inside a worker;
 - :mod:`rtmesh.batch.pool` runs the jobs on local processes, :mod:`rtmesh.batch.dask_pool` on a
   Dask cluster;
@@ -29,7 +31,6 @@ the Dask cluster was lost (resume to continue).
 import dataclasses
 import json
 import os
-import re
 import tempfile
 import time
 import uuid
@@ -41,6 +42,7 @@ from rtmesh.batch.identity import image_fingerprint, inputs_unchanged, unchanged
 from rtmesh.batch.inputs import InputError, discover
 from rtmesh.batch.ledger import FINGERPRINT, INPUTS, OUTPUTS, STATUS, Ledger, decode
 from rtmesh.batch.options import FORMATS, BatchOptions, check_names, check_passes
+from rtmesh.batch.publish import Leftovers
 from rtmesh.batch.view_sets import view_set
 from rtmesh.batch.worker import CAMERA_SUFFIX, VIEWS, AssetJob, ImageTask, fixed_view, turntable_views
 from rtmesh.core.errors import OutputError
@@ -48,6 +50,8 @@ from rtmesh.io.atomic_files import write_text
 from rtmesh.loaders.importers import MESH_EXTENSIONS
 from rtmesh.rendering.settings import PASSES
 
+# names the run that holds the output folder, so that the tasks of an earlier run (its
+# submitting process killed) stop early instead of rendering what nobody will put in place
 RUN_FILE = ".rtmesh-batch-run"
 
 
@@ -100,12 +104,16 @@ def batch_convert(inputs, outdir, **options):
         _check_dask()
     run = uuid.uuid4().hex[:16]
     with Ledger(outdir) as ledger:
-        _remove_stale_temporaries(outdir)
-        # the run that owns the folder now: tasks of an earlier run stop before writing
         write_text(os.path.join(outdir, RUN_FILE), run + "\n")
+        # the temporaries a killed run left, found while this batch holds the folder (no
+        # other submitting process is putting files in place) and after the run file names
+        # this run (a task of an earlier run that writes later removes its files itself):
+        # the plan rolls forward those its ledger rows recorded, the rest are removed
+        leftovers = Leftovers(outdir)
         book = Books(ledger, outdir, opts, len(assets), progress_stream)
         try:
-            jobs = plan(assets, outdir, opts, ledger, book, run)
+            jobs = plan(assets, outdir, opts, ledger, book, run, leftovers)
+            leftovers.remove()
             book.start_progress()
             if not jobs:
                 runner = "nothing to do"
@@ -156,13 +164,16 @@ def _open_progress_file(opts):
         raise OutputError(f"{opts.progress_file}: cannot write progress: {exc.strerror}") from None
 
 
-def plan(assets, outdir, opts, ledger, book, run=""):
+def plan(assets, outdir, opts, ledger, book, run="", leftovers=None):
     """One job per asset with the images that are not finished and unchanged.
 
     An image is skipped when the ledger has it ``done`` with the same fingerprint, its
     inputs are unchanged and its files are there with the recorded size and checksum
-    (size and time with ``trust_mtime``).  An image that failed before with the same
-    fingerprint and inputs is a known failure: tried again with ``retry_failed``, else left.
+    (size and time with ``trust_mtime``), or are among ``leftovers`` with that content (a
+    run killed between recording the image and putting it in place: they are put in place
+    now, and the row names this run as the one that did).  An image that failed before
+    with the same fingerprint and inputs is a known failure: tried again with
+    ``retry_failed``, else left.
 
     Returns
     -------
@@ -192,11 +203,13 @@ def plan(assets, outdir, opts, ledger, book, run=""):
                 if not same:
                     todo.append(task)
                 elif entry[STATUS] == "done":
-                    if all(unchanged(o, os.path.join(outdir, o[0]), opts.trust_mtime)
-                           for o in decode(entry[OUTPUTS])):
-                        skipped.append(task)
-                    else:
+                    state = _files_in_place(decode(entry[OUTPUTS]), outdir, opts.trust_mtime, leftovers)
+                    if state is None:
                         todo.append(task)
+                    else:
+                        if state == "rolled forward":
+                            ledger.set_run(task.key, run)
+                        skipped.append(task)
                 elif opts.retry_failed:
                     todo.append(task)
                     retried = True
@@ -206,8 +219,23 @@ def plan(assets, outdir, opts, ledger, book, run=""):
             if todo:
                 jobs.append(AssetJob(asset.name, asset.path, outdir, {**fields, "threads": threads},
                                      tuple(todo), opts.ground, run, run_file, opts.normalize,
-                                     opts.asset_meta))
+                                     opts.asset_meta, staged=True))
     return jobs
+
+
+def _files_in_place(outputs, outdir, trust_mtime, leftovers):
+    """``"in place"`` when every recorded output file is there unchanged, ``"rolled
+    forward"`` when some were put there from ``leftovers`` (:class:`Leftovers`), None when
+    a file is missing or different."""
+    state = "in place"
+    for entry in outputs:
+        path = os.path.join(outdir, entry[0])
+        if unchanged(entry, path, trust_mtime):
+            continue
+        if leftovers is None or not leftovers.roll_forward(entry, path):
+            return None
+        state = "rolled forward"
+    return state
 
 
 def _image_tasks(asset, opts, shared):
@@ -261,28 +289,6 @@ def _make_output_folder(outdir):
             pass
     except OSError as exc:
         raise OutputError(f"{outdir}: output folder is not writable: {exc.strerror}") from None
-
-
-# half-written images (".NAME.XXXX.tmp.EXT") and camera files (".NAME.json.XXXX.tmp"), and
-# the temporary files of the summary, the run file, storage probes and rtmesh 0.1's ledger
-# compaction
-_STALE = re.compile(r"^\.(.+\.tmp\.(png|exr|jpe?g)|.+\.(json|txt|webp|gif|mp4|png)\.[^.]+\.tmp|rtmesh-batch-.+\.tmp)$",
-                    re.IGNORECASE)
-
-
-def _remove_stale_temporaries(outdir):
-    """Delete the temporary files a killed run left.
-
-    Only called while this batch holds the folder's lock, so no live writer of this
-    machine owns them (Dask tasks of a killed run stop before writing, see RUN_FILE).
-    """
-    for here, dirs, files in os.walk(outdir):
-        for name in files:
-            if _STALE.match(name):
-                try:
-                    os.unlink(os.path.join(here, name))
-                except OSError:
-                    pass  # harmless: it is hidden and never taken for an image
 
 
 def _check_dask():

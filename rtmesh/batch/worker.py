@@ -5,9 +5,11 @@ raises for a bad asset: every failure comes back as a result with the stage it h
 (``load``, ``render``, ``write``, ``time``, ``memory``), so the batch goes on.  Each result
 also says what the asset was made from (``inputs``: the mesh file and every file its load
 read) and what was written (``outputs``: size and checksum of each file), see
-:mod:`rtmesh.batch.identity`.
+:mod:`rtmesh.batch.identity`.  A batch's jobs leave their files at temporary names for the
+submitting process to put in place (:mod:`rtmesh.batch.publish`).
 """
 
+import contextlib
 import dataclasses
 import os
 import tempfile
@@ -19,15 +21,18 @@ import numpy as np
 from rtmesh.batch.asset_meta import WarningLog, asset_meta, write_meta
 from rtmesh.batch.identity import OpenedFiles, describe
 from rtmesh.batch.normalize import asset_to_world, transform_points
+from rtmesh.batch.publish import discard
 from rtmesh.core.errors import RtmeshError
+from rtmesh.io.atomic_files import staged
 from rtmesh.io.images import write_depth_png, write_display_image, write_image
 from rtmesh.loaders.importers import load_trimesh, parts_from_trimesh
-from rtmesh.materials.table import Material
+from rtmesh.materials.table import Material, MaterialTable
 from rtmesh.rendering.integrator import Integrator
 from rtmesh.rendering.settings import RenderSettings
 from rtmesh.scene.camera import frame_bounds
 from rtmesh.scene.camera_json import camera_record, write_camera_json
 from rtmesh.scene.model import MeshPart, Scene, default_lights
+from rtmesh.scene.studio import studio_background
 
 # Directions from the subject towards the camera, and the camera's up vector.  "iso" is the
 # automatic camera's direction (rtmesh.scene.camera.frame_bounds); top and bottom need another up
@@ -158,6 +163,11 @@ class AssetJob:
         :mod:`rtmesh.batch.normalize`).
     meta : bool
         Write ``<asset>.meta.json`` once the asset is loaded (:mod:`rtmesh.batch.asset_meta`).
+    staged : bool
+        Leave every file at its hidden temporary name and report that name (``staged`` and
+        ``side_files`` in the results), for the submitting process to rename into place
+        once it has recorded the image (:mod:`rtmesh.batch.publish`); False writes the
+        files in place.
 
     Output files of an image ending in :data:`CAMERA_SUFFIX` get the camera JSON of the
     image (:func:`rtmesh.scene.camera_json.camera_record`), the others the image.
@@ -173,6 +183,7 @@ class AssetJob:
     run_file: str = ""
     normalize: str = ""
     meta: bool = False
+    staged: bool = False
 
 
 # set by a worker process that runs under an address-space limit, for the failure message
@@ -216,32 +227,56 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
     -------
     dict
         ``asset``, ``seconds``, ``superseded`` (True when the job stopped because a newer
-        run owns the output folder: its unfinished images are left out), ``images``: one
-        dict per image task with ``key``, ``fingerprint``, ``status`` (``"done"`` or
-        ``"failed"``), ``asset``, ``run``, ``files``, ``seconds``, ``inputs``, ``outputs``,
-        and for failures
-        ``stage`` and ``message`` (one line).
+        run owns the output folder or nobody waits for it: its unfinished images are left
+        out, and the staged files of images not yet handed to ``on_image`` are removed),
+        ``images``: one dict per image task with ``key``, ``fingerprint``, ``status``
+        (``"done"`` or ``"failed"``), ``asset``, ``run``, ``files``, ``seconds``,
+        ``inputs``, ``outputs``, for failures ``stage`` and ``message`` (one line), and
+        for a staged job's done images ``staged`` (the temporary name of each of
+        ``files``, relative to the output folder).  The first image result of a staged
+        job that wrote the asset's metadata file also has ``side_files``: ``[temporary,
+        name]`` pairs to put in place with it.
     """
     start = time.perf_counter()
     results = []
     inputs = []
     last_check = [0.0]
+    side = []  # the asset's staged metadata file: it goes with the job's first image result
+    handed = [0]  # results already given to on_image (their files are the caller's)
 
-    def check(done=None, total=None):
-        _check_deadline(deadline)
-        # the run file is read at most twice a second between render chunks
+    def stop_if_superseded():
         if abandoned is not None and abandoned():
             raise Superseded()
+        # the run file is read at most twice a second between render chunks
         if job.run_file and time.monotonic() - last_check[0] > 0.5:
             last_check[0] = time.monotonic()
             if current_run(job.run_file) != job.run:
                 raise Superseded()
 
+    def check(done=None, total=None):
+        _check_deadline(deadline)
+        stop_if_superseded()
+
+    def emit(result):
+        if side:
+            result["side_files"] = side[:]
+            side.clear()
+        results.append(result)
+        if on_image:
+            on_image(result)
+            handed[0] = len(results)
+
     def fail_all(tasks, stage, message):
         for task in tasks:
-            results.append(image_result(job, task, "failed", 0.0, inputs, stage=stage, message=message))
-            if on_image:
-                on_image(results[-1])
+            emit(image_result(job, task, "failed", 0.0, inputs, stage=stage, message=message))
+
+    def superseded():
+        # nobody will put these files in place: the next run would only remove them
+        for result in results[handed[0]:]:
+            discard(job.outdir, result.get("staged", ()))
+            discard(job.outdir, [t for t, _ in result.get("side_files", ())])
+        discard(job.outdir, [t for t, _ in side])
+        return _job_result(job, results, start, superseded=True)
 
     try:
         settings = RenderSettings(**job.settings).validate()
@@ -263,8 +298,10 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
     if job.meta:
         try:
             check()
-            write_meta(job.outdir, job.asset, asset_meta(job.asset, job.path, parts, materials, bounds,
-                                                         to_world, inputs, warnings.lines))
+            with _writing(job) as pending:
+                write_meta(job.outdir, job.asset, asset_meta(job.asset, job.path, parts, materials, bounds,
+                                                             to_world, inputs, warnings.lines))
+            side.extend(_relative(job, pending))
         except (Superseded, TimeLimitExceeded):
             pass  # the images' loop below stops the same way
         except Exception as exc:
@@ -283,37 +320,54 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
             stage = "write"
             last_check[0] = 0.0  # always ask just before writing
             check()
-            outputs = []
-            for name in task.files:
-                path = os.path.join(job.outdir, name)
-                os.makedirs(os.path.dirname(path), exist_ok=True)
-                if name.endswith(CAMERA_SUFFIX):
-                    scene = integrator.scene
-                    write_camera_json(path, camera_record(scene.camera, settings.width, settings.height,
-                                                          scene.bounds, to_world))
-                elif name.endswith(DEPTH_PNG_SUFFIX):
-                    write_depth_png(path, result.passes["depth"][:, :, 0])
-                elif name.endswith(MASK_PNG_SUFFIX):
-                    write_display_image(path, (result.passes["alpha"][:, :, :1] > 0.5).astype(np.float64))
-                else:
-                    write_image(path, result.image, result.passes, settings.exposure, settings.tonemap)
-                outputs.append(describe(path, name))
-            results.append(image_result(job, task, "done", time.perf_counter() - image_start, inputs,
-                                         outputs=outputs))
+            paths = [os.path.abspath(os.path.join(job.outdir, name)) for name in task.files]
+            with _writing(job) as pending:
+                for name, path in zip(task.files, paths):
+                    os.makedirs(os.path.dirname(path), exist_ok=True)
+                    if name.endswith(CAMERA_SUFFIX):
+                        scene = integrator.scene
+                        write_camera_json(path, camera_record(scene.camera, settings.width, settings.height,
+                                                              scene.bounds, to_world))
+                    elif name.endswith(DEPTH_PNG_SUFFIX):
+                        write_depth_png(path, result.passes["depth"][:, :, 0])
+                    elif name.endswith(MASK_PNG_SUFFIX):
+                        write_display_image(path, (result.passes["alpha"][:, :, :1] > 0.5).astype(np.float64))
+                    else:
+                        write_image(path, result.image, result.passes, settings.exposure, settings.tonemap)
+                # superseded while writing: the block's temporaries are removed, not reported.
+                # The run file is read again: a run that took the folder removes the
+                # temporaries already there when it did; later ones are this task's to remove
+                last_check[0] = 0.0
+                stop_if_superseded()
+            written = {path: tmp for tmp, path in pending}
+            outputs = [describe(written.get(path, path), name) for name, path in zip(task.files, paths)]
+            extra = {"staged": [t for t, _ in _relative(job, pending)]} if job.staged else {}
+            outcome = image_result(job, task, "done", time.perf_counter() - image_start, inputs,
+                                   outputs=outputs, **extra)
         except Superseded:
-            return _job_result(job, results, start, superseded=True)
+            return superseded()
         except TimeLimitExceeded:
             fail_all(job.images[i:], "time", "time limit exceeded")
             break
         except MemoryError:
-            results.append(image_result(job, task, "failed", time.perf_counter() - image_start, inputs,
-                                         stage="memory", message=f"out of memory during {stage}{MEMORY_LIMIT_NOTE}"))
+            outcome = image_result(job, task, "failed", time.perf_counter() - image_start, inputs,
+                                   stage="memory", message=f"out of memory during {stage}{MEMORY_LIMIT_NOTE}")
         except Exception as exc:
-            results.append(image_result(job, task, "failed", time.perf_counter() - image_start, inputs,
-                                         stage=stage, message=_one_line(exc)))
-        if on_image:
-            on_image(results[-1])
+            outcome = image_result(job, task, "failed", time.perf_counter() - image_start, inputs,
+                                   stage=stage, message=_one_line(exc))
+        emit(outcome)
     return _job_result(job, results, start)
+
+
+def _writing(job):
+    """Where the job's writes go: a :func:`rtmesh.io.atomic_files.staged` block (the files
+    stay at their temporary names) for a staged job, else straight into place."""
+    return staged() if job.staged else contextlib.nullcontext([])
+
+
+def _relative(job, pending):
+    """``(temporary, path)`` pairs of a staged block as names relative to the output folder."""
+    return [[os.path.relpath(tmp, job.outdir), os.path.relpath(path, job.outdir)] for tmp, path in pending]
 
 
 def warm_up():
@@ -344,7 +398,7 @@ def _load(job):
     parts, materials = parts_from_trimesh(load_trimesh(job.path), name=job.path)
     # Scene.from_parts drops broken triangles and raises when nothing is left; build the
     # scene once here so an empty asset fails at the load stage, and frame its clean bounds
-    bounds = Scene.from_parts(parts, materials, source=job.path).bounds
+    bounds = Scene.from_parts(parts, materials, lights=[], source=job.path).bounds  # (no light rig needed)
     to_world = asset_to_world(bounds, job.normalize)
     if job.normalize:
         # uniform scale and shift: normals, uv and colours stay as they are
@@ -366,7 +420,11 @@ def _integrator_for_view(built, parts, materials, bounds, view, settings, ground
         scene = _scene_for_view(parts, materials, bounds, view, settings, ground)
         integrator = built[with_ground] = Integrator(scene, settings)
         return integrator
-    return integrator.with_view(*_camera_and_lights(bounds, view, settings))
+    camera, lights = _camera_and_lights(bounds, view, settings)
+    if integrator.plan.physical:
+        # the studio environment turned to this view's rig camera, as the three-light rig is
+        return integrator.with_view(camera, [], studio_background(_rig_camera(bounds, view, settings)))
+    return integrator.with_view(camera, lights)
 
 
 def _camera_and_lights(bounds, view, settings):
@@ -385,9 +443,14 @@ def _camera_and_lights(bounds, view, settings):
         radius = max(0.5 * float(np.linalg.norm(bounds[1] - bounds[0])), 1e-6)
         camera = dataclasses.replace(camera, projection="orthographic",
                                      ortho_height=2.0 * radius / min(aspect, 1.0))
-    rig_camera = frame_bounds(bounds, aspect=aspect, direction=view.light_direction or view.direction,
-                              up=view.up)
-    return camera, default_lights(rig_camera)
+    return camera, default_lights(_rig_camera(bounds, view, settings))
+
+
+def _rig_camera(bounds, view, settings):
+    """The camera the light rig of ``view`` is placed for: its ``light_direction`` (fixed
+    lighting for turntables), else the view's own direction."""
+    return frame_bounds(bounds, aspect=settings.width / settings.height,
+                        direction=view.light_direction or view.direction, up=view.up)
 
 
 def _scene_for_view(parts, materials, bounds, view, settings, ground):
@@ -398,6 +461,12 @@ def _scene_for_view(parts, materials, bounds, view, settings, ground):
     if ground and view.direction[1] >= 0:
         parts.append(_ground_part(bounds, len(materials)))
         materials.append(Material(name="ground", diffuse=np.full(3, 0.8)))
+    if MaterialTable(materials).any_physical:
+        # glTF metallic-roughness assets: the studio environment, turned to the view's rig
+        # camera, instead of the three-light rig (see rtmesh.scene.studio)
+        return Scene.from_parts(parts, materials, lights=[], camera=camera, ambient=np.zeros(3),
+                                background=studio_background(_rig_camera(bounds, view, settings)),
+                                source=view.name)
     return Scene.from_parts(parts, materials, lights=lights, camera=camera,
                             ambient=np.full(3, 0.05), source=view.name)
 

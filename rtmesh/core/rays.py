@@ -116,6 +116,11 @@ class RayBatch:
         column 0 is the transmissive material whose interior the ray travels through, -1
         outside every object; -1 pads unused entries.  ``k`` is :data:`STACK_DEPTH` in
         scenes with transmissive materials and 0 in the others.
+    pdf : (n,) float64 or None
+        Solid-angle density (1/sr) with which each ray's direction was drawn by BSDF
+        sampling, for the multiple-importance weights where it meets a light; ``inf`` for
+        camera rays and the rays of delta lobes (mirror, smooth glass), which no light
+        sampling could have produced.  None: ``inf`` for every ray.
     """
 
     origins: np.ndarray
@@ -123,6 +128,7 @@ class RayBatch:
     sample: np.ndarray
     throughput: np.ndarray
     medium: np.ndarray
+    pdf: np.ndarray | None = None
 
     def __len__(self):
         return len(self.sample)
@@ -131,7 +137,8 @@ class RayBatch:
         """The rays selected by a boolean mask or an index array."""
         if index is not None and np.asarray(index).dtype == bool:
             index = np.flatnonzero(index)
-        return RayBatch(*(take_rows(getattr(self, f.name), index) for f in fields(self)))
+        return RayBatch(*(None if getattr(self, f.name) is None else take_rows(getattr(self, f.name), index)
+                          for f in fields(self)))
 
     @staticmethod
     def concatenate(batches):
@@ -141,8 +148,11 @@ class RayBatch:
             return batches[0]
         if not batches:
             return RayBatch.empty()
+        pdf = None
+        if any(b.pdf is not None for b in batches):
+            pdf = np.concatenate([np.full(len(b), np.inf) if b.pdf is None else b.pdf for b in batches])
         return RayBatch(*(np.concatenate([getattr(b, f.name) for b in batches])
-                          for f in fields(RayBatch)))
+                          for f in fields(RayBatch) if f.name != "pdf"), pdf)
 
     @staticmethod
     def empty():

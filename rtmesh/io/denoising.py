@@ -27,7 +27,7 @@ def require():
     _pyoidn()
 
 
-def denoise(image, albedo, normal):
+def denoise(image, albedo, normal, clean_guides=False):
     """The denoised beauty image.
 
     Parameters
@@ -38,6 +38,11 @@ def denoise(image, albedo, normal):
         Diffuse reflectance in [0, 1] (coverage-weighted, as the ``albedo`` pass is).
     normal : (h, w, 3) float
         Unit world-space shading normals, components in [-1, 1].
+    clean_guides : bool
+        The guides are free of noise (OIDN's ``cleanAux``: it then trusts them instead of
+        filtering them first, and keeps more detail).  Averages of camera hits over a
+        pixel are, unless the hits themselves are random (depth of field, motion blur,
+        stochastic transparency).
 
     Returns
     -------
@@ -47,4 +52,4 @@ def denoise(image, albedo, normal):
     prepared = [np.ascontiguousarray(a, dtype=np.float32) for a in (image, albedo, normal)]
     prepared[1] = np.clip(prepared[1], 0.0, 1.0)
     prepared[2] = np.clip(prepared[2], -1.0, 1.0)
-    return np.maximum(pyoidn.denoise(*prepared, hdr=True), 0.0)
+    return np.maximum(pyoidn.denoise(*prepared, hdr=True, clean_aux=bool(clean_guides)), 0.0)

@@ -14,7 +14,8 @@ EXR naming (one OpenEXR layer per pass, ``layer.channel``)::
     ao           ao.Y                           mean       misses count as unoccluded (1)
     depth        depth.Z                        min        z-depth; 0 where no sample hits
     normal       normal.X normal.Y normal.Z     mean       world shading normal, camera side
-    albedo       albedo.R albedo.G albedo.B     mean       diffuse reflectance (tinted)
+    albedo       albedo.R albedo.G albedo.B     mean       diffuse reflectance (tinted; base colour of
+                                                           metallic-roughness materials)
     position     position.X position.Y position.Z  mean    world-space hit point
     uv           uv.U uv.V                      mean       texture coordinates
     object_id    object_id.id                   first      Scene.object_names index; -1 none
@@ -291,7 +292,11 @@ class PassRecorder:
         self.uv = getattr(scene, "uv", None)
         if "uv" in self.names and self.uv is None:
             log.warning("the uv pass is zero: the scene has no texture coordinates")
-        self.diffuse = scene.materials.diffuse
+        m = scene.materials
+        # a metallic-roughness material's albedo is its base colour: the diffuse albedo of a
+        # dielectric, the reflectance at normal incidence of a metal (what a denoiser's
+        # albedo guide expects for both)
+        self.diffuse = np.where(m.physical[:, None], m.base_color, m.diffuse) if len(m) else m.diffuse
         # exact float ids: every int32 index below 2^24 is a float32 integer
         self.object_id = scene.object_id.astype(np.float64)
         self.material_id = scene.material_id.astype(np.float64)

@@ -15,6 +15,9 @@ _LINEAR_FORMATS = (".exr", ".hdr")
 
 WRAP_MODES = ("repeat", "clamp", "mirror")
 
+# the 2 x 3 affine UV transform of a texture that has none: ``uv' = A uv + b`` as ``[A | b]``
+IDENTITY_UV_TRANSFORM = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+
 # The largest texture rtmesh reads, in pixels (8192 x 8192): a texture is kept as float64
 # texels, 24-32 bytes a pixel (2 GiB at this size).  A larger one is refused with a message
 # naming the file (docs/LIMITS.md); PIL's own limit (its decompression-bomb guard) lies
@@ -64,19 +67,35 @@ class Texture:
         (glTF samplers set ``wrapS`` and ``wrapT`` apart).
     name : str
         For messages.
+    transform : (2, 3) float, optional
+        An affine map ``[A | b]`` applied to every UV before the lookup, ``uv' = A uv + b``,
+        in this class's UV convention (below); glTF's KHR_texture_transform, converted by
+        :func:`rtmesh.loaders.material_files.khr_texture_transform`.  None or the identity
+        (the default) reads UVs as they are, with no arithmetic.
+
+    Attributes
+    ----------
+    transform : (2, 3) float64
+        The UV transform (the identity when none was given).
+    transformed : bool
+        Whether :attr:`transform` is not the identity.
 
     Notes
     -----
     UV (0, 0) is the bottom-left corner of the image and (1, 1) the top-right (the OBJ and
     OpenGL convention; trimesh converts glTF's top-left origin to it).  Texel centres sit at
-    half-integer positions, so a UV at a texel centre reads that texel exactly.
+    half-integer positions, so a UV at a texel centre reads that texel exactly.  Wrap modes
+    apply to the transformed UVs.
     """
 
-    def __init__(self, pixels, wrap="repeat", name="texture"):
+    def __init__(self, pixels, wrap="repeat", name="texture", transform=None):
         modes = (wrap, wrap) if isinstance(wrap, str) else tuple(wrap)
         if len(modes) != 2 or any(mode not in WRAP_MODES for mode in modes):
             raise ValueError(f"unknown wrap mode {wrap!r}; expected one of {', '.join(WRAP_MODES)}"
                              " or a pair of them")
+        matrix = IDENTITY_UV_TRANSFORM if transform is None else np.asarray(transform, dtype=np.float64)
+        if matrix.shape != (2, 3) or not np.isfinite(matrix).all():
+            raise ValueError(f"a UV transform is a finite 2 x 3 matrix [A | b], not {transform!r}")
         pixels = np.asarray(pixels, dtype=np.float64)
         if pixels.ndim == 2:
             pixels = pixels[:, :, None]
@@ -84,6 +103,9 @@ class Texture:
         self.wrap = wrap
         self.wrap_u, self.wrap_v = modes
         self.name = name
+        self.transform = matrix
+        # the identity (every MTL texture, most glTF ones) skips the multiply in sample()
+        self.transformed = not np.array_equal(matrix, IDENTITY_UV_TRANSFORM)
 
     @classmethod
     def from_8bit(cls, pixels, srgb=True, **options):
@@ -140,11 +162,14 @@ class Texture:
         Parameters
         ----------
         uv : (k, 2) float
+            Before :attr:`transform`, which is applied here.
 
         Returns
         -------
         (k, c) float64
         """
+        if self.transformed:
+            uv = uv @ self.transform[:, :2].T + self.transform[:, 2]
         h, w, _ = self.pixels.shape
         x = uv[:, 0] * w - 0.5
         y = (1.0 - uv[:, 1]) * h - 0.5  # v grows upward, rows grow downward
@@ -174,7 +199,8 @@ class Texture:
         dh_drow, dh_dx = np.gradient(height)
         n = np.stack([-dh_dx, dh_drow, np.ones_like(height)], axis=2)  # rows grow downward
         n /= np.linalg.norm(n, axis=2, keepdims=True)
-        return Texture(0.5 + 0.5 * n, wrap=self.wrap, name=f"{self.name} (normals)")
+        return Texture(0.5 + 0.5 * n, wrap=self.wrap, name=f"{self.name} (normals)",
+                       transform=self.transform)
 
 
 def load_texture(path, srgb=True, wrap="repeat", cache=None):

@@ -77,6 +77,14 @@ _FLUSH_MARGIN = 1.0 + 1e-5
 SOLID_ANGLE_SAMPLING_FROM = 1e-3
 
 
+def _area_pdf_to_solid_angle(area, normal, directions, t):
+    """Solid-angle density of points drawn uniformly by area on a flat light of ``area`` and
+    unit ``normal``, toward unit ``directions`` that meet it at distances ``t``, (k,):
+    ``t^2 / (|cos_l| area)``; ``inf`` for a direction in the light's plane."""
+    cos = np.abs(directions @ normal)
+    return np.divide(t * t, cos * area, out=np.full(len(cos), np.inf), where=cos > 0.0)
+
+
 def _vec3(value, name):
     v = np.asarray(value, dtype=np.float64).reshape(3)
     if not np.isfinite(v).all():
@@ -155,6 +163,11 @@ class QuadLight:
         points = component_major(self.corner[:, None] + self.edge1[:, None] * u[:, 0]
                                  + self.edge2[:, None] * u[:, 1])
         return points, self.normal, self.radiance, self.area
+
+    def pdf(self, origins, directions, t):
+        """Solid-angle density with which :meth:`sample` reaches the light along unit
+        ``directions`` from ``origins`` that meet it at distances ``t``, (k,)."""
+        return _area_pdf_to_solid_angle(self.area, self.normal, directions, t)
 
     def to_square(self, points):
         """Inverse of :meth:`sample`: points in the light's plane to ``u``, (k, 3) -> (k, 2).
@@ -238,6 +251,10 @@ class DiskLight:
         points = component_major(self.position[:, None] + self._tangents.T @ d.T)
         return points, self.normal, self.radiance, self.area
 
+    def pdf(self, origins, directions, t):
+        """See :meth:`QuadLight.pdf`."""
+        return _area_pdf_to_solid_angle(self.area, self.normal, directions, t)
+
     def intersect(self, origins, directions):
         """See :meth:`QuadLight.intersect`."""
         cos = directions @ self.normal
@@ -274,8 +291,10 @@ class MeshLight:
     two_sided = True
     visible = False  # seen as geometry through Embree, not by :meth:`AreaLighting.intersect`
 
-    def __init__(self, triangles, normals, emission, name="mesh", tint=None, mean_tint=None):
+    def __init__(self, triangles, normals, emission, name="mesh", tint=None, mean_tint=None, scene_faces=None):
         self.name = name
+        # the light's face of each scene triangle (-1: not emissive), for pdf() of rays that hit one
+        self.scene_faces = None if scene_faces is None else np.asarray(scene_faces, dtype=np.intp)
         self.triangles = component_major(np.asarray(triangles, dtype=np.float64).T)
         self.normals = component_major(np.asarray(normals, dtype=np.float64).T)
         self.emission = component_major(np.asarray(emission, dtype=np.float64).T)
@@ -346,6 +365,50 @@ class MeshLight:
             emission = emission * tint
         return points, take_rows(self.normals, face), emission, inverse_pdf
 
+    def pdf(self, origins, faces, points):
+        """Solid-angle density with which :meth:`sample` (from ``origins``) draws ``points``
+        on the light's ``faces``, (k,): the face's chance times ``1 / omega`` where the
+        face is sampled in solid angle from that origin, else times ``d^2 / (|cos_l| A)``.
+
+        Parameters
+        ----------
+        origins : (k, 3) float
+            The points being lit.
+        faces : (k,) int
+            Indices among the light's faces.
+        points : (k, 3) float
+            Points on those faces.
+        """
+        chance = self._power[faces] / self._total
+        triangles = take_rows(self.triangles, faces)
+        to_point = points - origins
+        d2 = dot(to_point, to_point)
+        cos = np.abs(dot(to_point, take_rows(self.normals, faces))) / np.sqrt(np.maximum(d2, 1e-300))
+        e1, e2 = triangles[:, 3:6], triangles[:, 6:9]
+        area = 0.5 * np.sqrt(dot(np.cross(e1, e2), np.cross(e1, e2)))
+        pdf = np.divide(chance * d2, cos * area, out=np.full(len(faces), np.inf), where=cos > 0.0)
+        omega = self._solid_angles(origins, faces, triangles)
+        wide = omega > SOLID_ANGLE_SAMPLING_FROM
+        pdf[wide] = chance[wide] / omega[wide]
+        return pdf
+
+    def _solid_angles(self, p, face, triangles):
+        """Solid angle of each face seen from ``p`` where it may exceed
+        :data:`SOLID_ANGLE_SAMPLING_FROM` (0 where the bounding sphere rules that out)."""
+        offset = take_rows(self._centroids, face) - p
+        distance = np.sqrt(dot(offset, offset))
+        radius = self._radii[face]
+        gap = np.maximum(distance - radius, 0.0)
+        cap = 2.0 * np.pi * (1.0 - gap / np.sqrt(gap * gap + radius * radius))  # >= the face's
+        omega = np.zeros(len(face))
+        near = np.flatnonzero(cap > SOLID_ANGLE_SAMPLING_FROM)
+        if len(near):
+            v0n, e1n, e2n = (take_rows(triangles[:, k:k + 3], near) for k in (0, 3, 6))
+            pn = take_rows(p, near)
+            unit = [normalize(c) for c in (v0n - pn, v0n + e1n - pn, v0n + e2n - pn)]
+            omega[near] = spherical_triangle_area(*unit)
+        return omega
+
     def _sample_solid_angle(self, p, square, triangles, face, points, b, inverse_pdf):
         """Move the samples of faces seen under a large solid angle from ``p`` to points
         uniform in that solid angle; updates ``points``, ``b`` and ``inverse_pdf`` in place.
@@ -356,25 +419,13 @@ class MeshLight:
         # which faces are seen under more than the threshold depends on p and the face
         # only (never on the sample, which would change the density): the bounding sphere
         # rules out the far ones cheaply, the exact solid angle decides for the rest
-        offset = take_rows(self._centroids, face) - p
-        distance = np.sqrt(dot(offset, offset))
-        radius = self._radii[face]
-        gap = np.maximum(distance - radius, 0.0)
-        cap = 2.0 * np.pi * (1.0 - gap / np.sqrt(gap * gap + radius * radius))  # >= the face's
-        near = np.flatnonzero(cap > SOLID_ANGLE_SAMPLING_FROM)
-        if not len(near):
+        omega = self._solid_angles(p, face, triangles)
+        rows = np.flatnonzero(omega > SOLID_ANGLE_SAMPLING_FROM)
+        if not len(rows):
             return
-        v0n, e1n, e2n = (take_rows(triangles[:, k:k + 3], near) for k in (0, 3, 6))
-        pn = take_rows(p, near)
-        corners = [v0n - pn, v0n + e1n - pn, v0n + e2n - pn]
-        unit = [normalize(c) for c in corners]
-        omega = spherical_triangle_area(*unit)
-        keep = np.flatnonzero(omega > SOLID_ANGLE_SAMPLING_FROM)
-        if not len(keep):
-            return
-        rows = near[keep]
         v0, e1, e2 = triangles[:, 0:3], triangles[:, 3:6], triangles[:, 6:9]
-        a, bb, c = (take_rows(x, keep) for x in unit)
+        pr, v0r_, e1r_, e2r_ = take_rows(p, rows), take_rows(v0, rows), take_rows(e1, rows), take_rows(e2, rows)
+        a, bb, c = (normalize(x) for x in (v0r_ - pr, v0r_ + e1r_ - pr, v0r_ + e2r_ - pr))
         w, omega = square_to_spherical_triangle(take_rows(square, rows), a, bb, c)
         n = take_rows(self.normals, face[rows])
         origin, e1r, e2r, v0r = take_rows(p, rows), take_rows(e1, rows), take_rows(e2, rows), take_rows(v0, rows)
@@ -448,8 +499,10 @@ def emissive_mesh_light(triangles, normals, emission, tint=None, mean_tint=None)
     if not len(faces):
         return None
     light_tint = None if tint is None else (lambda face, u, v: tint(faces[face], u, v))
+    scene_faces = np.full(len(emission), -1, dtype=np.intp)
+    scene_faces[faces] = np.arange(len(faces))
     return MeshLight(take_rows(triangles, faces), normals[faces], emission[faces], "emissive surfaces",
-                     light_tint, None if tint is None else mean_tint[faces])
+                     light_tint, None if tint is None else mean_tint[faces], scene_faces)
 
 
 class AreaLighting:
@@ -475,6 +528,9 @@ class AreaLighting:
         self.sampler = Sampler.for_settings(settings)
         self.offset_scale = offset_scale
         self.visible = [light for light in self.lights if light.visible]
+        # the scene's emissive triangles (one MeshLight, see emissive_mesh_light), if any
+        self.emitters = next((light for light in self.lights if getattr(light, "scene_faces", None) is not None),
+                             None)
 
     def direct(self, p, ng, reflectance, pixel, sample, depth, stats, clock, time=None):
         """Direct light from every area light, ``light_samples`` shadow rays per (hit, light).
@@ -487,8 +543,9 @@ class AreaLighting:
             Unit geometric normals on the side the incoming ray came from: lights behind
             the surface do not light it, and shadow rays leave on that side.
         reflectance : callable
-            ``reflectance(wi, lit) -> (k, 3)``: the material's Blinn-Phong factor for unit
-            directions ``wi`` toward the light, evaluated (at least) where ``lit``.
+            ``reflectance(wi, lit, pdf) -> (k, 3)``: the material's reflection factor for
+            unit directions ``wi`` toward the light, evaluated (at least) where ``lit``;
+            ``pdf`` is the solid-angle density of each sample (for MIS weights).
         pixel, sample : (k,) int
             Pixel and sample-in-pixel of each hit: the keys of its random numbers.
         depth : int
@@ -561,7 +618,10 @@ class AreaLighting:
         v = np.flatnonzero(visible)
         inv = inverse_pdf if np.ndim(inverse_pdf) == 0 else inverse_pdf[v]
         weight[v] = cos_light[v] * inv / distance2[v]
-        value = reflectance(wi, visible)
+        # the sample's solid-angle density, for reflectances that weigh it against BSDF sampling
+        pdf = np.full(len(lit), np.inf)
+        pdf[v] = 1.0 / weight[v]
+        value = reflectance(wi, visible, pdf)
         value *= radiance
         value *= weight[:, None]
         return value
@@ -583,6 +643,8 @@ class AreaLighting:
             Rays that ended on a light.
         emitted : (m, 3) float
             The radiance each of them sees.
+        lights : (m,) intp
+            Which light (index into :attr:`visible`) each met.
         """
         nearest = hits.t
         which = None
@@ -593,9 +655,30 @@ class AreaLighting:
                 nearest = np.where(closer, t, nearest)
                 which = np.where(closer, index, -1 if which is None else which)
         if which is None:
-            return np.zeros(0, dtype=np.intp), np.zeros((0, 3))
+            return np.zeros(0, dtype=np.intp), np.zeros((0, 3)), np.zeros(0, dtype=np.intp)
         rows = np.flatnonzero(which >= 0)
         hits.t = nearest
         hits.prim = np.where(which >= 0, -2, hits.prim).astype(hits.prim.dtype)
         radiance = np.stack([light.radiance for light in self.visible])
-        return rows, radiance[which[rows]]
+        return rows, radiance[which[rows]], which[rows]
+
+    def pdf_of_visible(self, lights, origins, directions, t):
+        """Solid-angle density of light sampling toward points on the visible lights that
+        rays met (:meth:`intersect`), (m,): each light's :meth:`QuadLight.pdf`."""
+        pdf = np.empty(len(lights))
+        for index in np.unique(lights):
+            rows = np.flatnonzero(lights == index)
+            pdf[rows] = self.visible[index].pdf(origins[rows], directions[rows], t[rows])
+        return pdf
+
+    def pdf_of_emitters(self, origins, prim, points):
+        """Solid-angle density of light sampling toward ``points`` on the emissive scene
+        triangles ``prim``, from ``origins``, (k,) (0 for triangles that are not emitters)."""
+        pdf = np.zeros(len(prim))
+        if self.emitters is None:
+            return pdf
+        faces = self.emitters.scene_faces[prim]
+        rows = np.flatnonzero(faces >= 0)
+        if len(rows):
+            pdf[rows] = self.emitters.pdf(take_rows(origins, rows), faces[rows], take_rows(points, rows))
+        return pdf

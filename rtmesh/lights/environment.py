@@ -38,11 +38,12 @@ import math
 
 import numpy as np
 
+from rtmesh.core.compiled import kernel
 from rtmesh.core.rays import take_rows
 from rtmesh.core.vecmath import dot
 from rtmesh.geometry.accel import offset_ray_origins
 from rtmesh.sampling.sampler import Sampler
-from rtmesh.sampling.warps import direction_to_latlong, latlong_to_direction
+from rtmesh.sampling.warps import direction_to_latlong, latlong_direction, latlong_to_direction
 
 # relative weight of the density's floor (see the module notes)
 _FLOOR = 1e-3
@@ -95,8 +96,6 @@ class EnvironmentLighting:
         self._marginal = np.concatenate([[0.0], np.cumsum(rows)]) / rows.sum()
         conditional = np.concatenate([np.zeros((height, 1)), np.cumsum(func, axis=1)], axis=1) / rows[:, None]
         self._conditional = conditional
-        # each row's cdf shifted by its row index: one ascending array for a vectorised search
-        self._shifted = (conditional + np.arange(height)[:, None]).ravel()
 
     def directions(self, uv):
         """Unit directions of image coordinates ((k, 2) -> (k, 3)), with the background's
@@ -118,17 +117,9 @@ class EnvironmentLighting:
             Solid-angle density of each direction; ``inf`` exactly at a pole (where
             ``sin(theta)`` is 0 the sample carries no weight).
         """
-        h, w = self.height, self.width
-        u1, u2 = points[:, 0], points[:, 1]
-        row = np.clip(np.searchsorted(self._marginal, u1, side="right") - 1, 0, h - 1)
-        low, high = self._marginal[row], self._marginal[row + 1]
-        dv = np.clip((u1 - low) / (high - low), 0.0, 1.0)
-        index = np.searchsorted(self._shifted, row + u2, side="right") - 1
-        column = np.clip(index - row * (w + 1), 0, w - 1)
-        low, high = self._conditional[row, column], self._conditional[row, column + 1]
-        du = np.clip((u2 - low) / (high - low), 0.0, 1.0)
-        uv = np.column_stack([(column + du) / w, 1.0 - (row + dv) / h])
-        return self.directions(uv), self._solid_angle_pdf(row, column, np.cos((uv[:, 1] - 0.5) * math.pi))
+        angle = math.radians(self.rotation)
+        return _sample_directions(np.ascontiguousarray(points, dtype=np.float64), self._marginal, self._conditional,
+                                  self._func, self._mean, math.cos(angle), math.sin(angle))
 
     def pdf(self, directions):
         """Solid-angle density of :meth:`sample` at unit ``directions`` ((k, 3) -> (k,))."""
@@ -153,7 +144,9 @@ class EnvironmentLighting:
         ng : (k, 3) float
             Unit geometric normals on the side the incoming ray came from.
         reflectance : callable
-            ``reflectance(wi, lit) -> (k, 3)``, the material's Blinn-Phong factor.
+            ``reflectance(wi, lit, pdf) -> (k, 3)``, the material's reflection factor
+            toward ``wi`` where ``lit``; ``pdf`` is each direction's solid-angle density
+            (for MIS weights).
         pixel, sample : (k,) int
             The keys of each hit's random numbers.
         depth : int
@@ -173,8 +166,9 @@ class EnvironmentLighting:
         total = None
         for j in range(n):
             wi, pdf = self.sample(self.sampler.environment(pixel, sample, depth, j, n))
-            radiance = self.background.radiance(wi)
-            lit = (dot(wi, ng) > 0.0) & np.isfinite(pdf) & (radiance > 0.0).any(axis=1)
+            # the radiance is looked up only where the shadow ray escapes (below): about half
+            # the directions are below the surface, and some of the rest are blocked
+            lit = (dot(wi, ng) > 0.0) & np.isfinite(pdf)
             rows = np.flatnonzero(lit)
             if not len(rows):
                 continue
@@ -191,12 +185,56 @@ class EnvironmentLighting:
                 continue
             visible = np.zeros(len(p), dtype=bool)
             visible[seen] = True
-            weight = np.where(visible[:, None], radiance / np.where(visible, pdf, 1.0)[:, None], 0.0)
-            contribution = reflectance(wi, visible) * weight
+            weight = np.zeros((len(p), 3))
+            weight[seen] = self.background.radiance(take_rows(wi, seen)) / pdf[seen, None]
+            contribution = reflectance(wi, visible, pdf) * weight
             total = contribution if total is None else total + contribution
         if total is not None:
             total *= 1.0 / n
         return total
+
+
+@kernel
+def _sample_directions(points, marginal, conditional, func, mean, cos_rotation, sin_rotation):
+    """:meth:`EnvironmentLighting.sample` in one compiled pass per point: a row from the
+    marginal cdf, a column from the row's conditional cdf (binary searches), the position
+    within the cell by inverting the cdf linearly, the direction of that image point
+    (:func:`rtmesh.sampling.warps.latlong_direction`, turned about +Y) and its
+    solid-angle density ``p(u, v) / (2 pi^2 sin(theta))`` (``inf`` exactly at a pole).
+
+    Parameters
+    ----------
+    points : (k, 2) float64
+    marginal : (h + 1,) float64
+        The rows' cdf, from 0 to 1.
+    conditional : (h, w + 1) float64
+        Each row's cdf over its columns, from 0 to 1.
+    func : (h, w) float64
+        The tabulated density (unnormalised); ``mean`` its mean.
+    cos_rotation, sin_rotation : float
+
+    Returns
+    -------
+    wi : (k, 3) float64
+    pdf : (k,) float64
+    """
+    k = points.shape[0]
+    h, w = func.shape
+    wi = np.empty((k, 3))
+    pdf = np.empty(k)
+    for i in range(k):
+        u1, u2 = points[i, 0], points[i, 1]
+        row = min(max(np.searchsorted(marginal, u1, side="right") - 1, 0), h - 1)
+        low, high = marginal[row], marginal[row + 1]
+        dv = min(max((u1 - low) / (high - low), 0.0), 1.0)
+        cdf = conditional[row]
+        column = min(max(np.searchsorted(cdf, u2, side="right") - 1, 0), w - 1)
+        low, high = cdf[column], cdf[column + 1]
+        du = min(max((u2 - low) / (high - low), 0.0), 1.0)
+        wi[i, 0], wi[i, 1], wi[i, 2], cos_el = latlong_direction((column + du) / w, 1.0 - (row + dv) / h,
+                                                                 cos_rotation, sin_rotation)
+        pdf[i] = func[row, column] / mean / (2.0 * math.pi ** 2 * cos_el) if cos_el > 0.0 else np.inf
+    return wi, pdf
 
 
 def _neighbourhood_max(values):

@@ -89,6 +89,13 @@ class AreaLight(Protocol):
     def intersect(self, origins, directions):
         """(n,) distance along each ray to the light's emitting side; ``inf`` where it misses."""
 
+    def pdf(self, origins, directions, t):
+        """(n,) solid-angle density with which :meth:`sample` (from ``origins``) reaches the
+        light along unit ``directions`` that meet it at distances ``t``: what a ray drawn by
+        a BSDF needs for its multiple-importance weight.  (The emissive triangles of a
+        scene, :class:`rtmesh.lights.area_lights.MeshLight`, are met as geometry and answer
+        for faces and points instead.)"""
+
     @property
     def is_black(self):
         """True when the light emits nothing."""

@@ -311,7 +311,7 @@ def material_from_trimesh(visual, name, file_materials=None):
     material = getattr(visual, "material", None)
     if isinstance(material, trimesh.visual.material.PBRMaterial):
         json_material = file_materials.gltf.get(material.name) if file_materials else None
-        return gltf_material(material, json_material, name)
+        return gltf_material(material, json_material, name, file_materials.source if file_materials else None)
     if isinstance(material, trimesh.visual.material.SimpleMaterial):
         if file_materials is not None and file_materials.obj is not None:
             found = file_materials.obj.get(material.name)
@@ -320,6 +320,11 @@ def material_from_trimesh(visual, name, file_materials=None):
     colours = getattr(visual, "main_color", None)
     if getattr(visual, "kind", None) == "face" and colours is not None:
         return Material(name=name, diffuse=srgb_to_linear(np.asarray(colours, dtype=np.float64)[:3] / 255.0))
+    if file_materials is not None and file_materials.gltf_file:
+        # a glTF primitive without a material has the format's default material: white,
+        # metallic 1, roughness 1 (glTF 2.0 specification, "Materials"), as three.js and the
+        # Khronos sample viewer show it
+        return gltf_material(trimesh.visual.material.PBRMaterial(name=f"{name} (glTF default)"), None, name)
     return Material(name=name)
 
 
@@ -355,13 +360,20 @@ class FileMaterials:
         A glTF file's material objects (JSON) by material name.
     drop_vertex_colours : bool
         The file's vertex colours are unusable (NaN in an OBJ: trimesh reads them as black).
+    gltf_file : bool
+        The file is glTF: a primitive without a material gets the format's default one.
+    source : str or None
+        The file's name, for messages.
     """
 
     def __init__(self, path=None):
         self.obj, self.gltf, self.drop_vertex_colours = None, {}, False
+        self.gltf_file = False
+        self.source = None if path is None else os.path.basename(path)
         if path is None:
             return
         ext = os.path.splitext(path)[1].lower()
+        self.gltf_file = ext in GLTF_EXTENSIONS
         if ext == ".obj":
             self.obj, nan_colours = obj_materials(path)
             if nan_colours:
@@ -369,7 +381,7 @@ class FileMaterials:
                             os.path.basename(path), nan_colours)
                 self.drop_vertex_colours = True
         elif ext in GLTF_EXTENSIONS:
-            self.gltf = gltf_json_materials(read_gltf_json(path))
+            self.gltf = gltf_json_materials(read_gltf_json(path), os.path.basename(path))
 
 
 def vertex_colours(mesh):
@@ -508,7 +520,10 @@ def scene_from_trimesh(obj, name="mesh", **scene_options):
     parts, materials = parts_from_trimesh(obj, name)
     if not parts:
         raise MeshError(f"{name}: nothing to render (no triangles)")
-    scene_options.setdefault("ambient", np.full(3, 0.05))
+    if not any(m.model == "metallic_roughness" and not m.unlit for m in materials):
+        # a little ambient light for the three-light rig; the studio environment of
+        # physically based assets lights them from every direction itself
+        scene_options.setdefault("ambient", np.full(3, 0.05))
     return Scene.from_parts(parts, materials, source=name, **scene_options)
 
 

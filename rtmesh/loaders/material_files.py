@@ -356,28 +356,18 @@ def _gltf_factors(pbr, doc):
     )
 
 
-def roughness_to_shininess(roughness):
-    """Blinn-Phong exponent with the highlight width of a GGX lobe of roughness ``r``.
+def gltf_material(pbr, json_material=None, name="gltf", source=None):
+    """A glTF metallic-roughness material as rtmesh's :class:`~rtmesh.materials.table.Material`
+    (see docs/MATERIALS.md).
 
-    ``2 / alpha^2 - 2`` with ``alpha = r^2`` (Walter et al. 2007's Beckmann-Phong
-    correspondence), clamped to [1, 10000]; ``r`` below 0.05 reads as 0.05.
-    """
-    r4 = max(float(roughness), 0.05) ** 4
-    return float(np.clip(2.0 / r4 - 2.0, 1.0, 10000.0))
-
-
-def gltf_material(pbr, json_material=None, name="gltf"):
-    """Map a glTF metallic-roughness material onto rtmesh's model (see docs/MATERIALS.md).
-
-    ``diffuse = base * (1 - metallic)``; ``specular = 0.04 (1 - metallic) + base * metallic``
-    with the exponent of :func:`roughness_to_shininess`; metals reflect with
-    ``mirror = base * metallic``, blurred by a glossy lobe of ``roughness = r^2`` radians
-    (the GGX alpha).  A metallic-roughness texture contributes its mean (this model has
-    per-material metallic and roughness only).  Alpha mode, cutoff and base-colour alpha
-    give the opacity; KHR_materials_transmission / ior / volume make a refracting
-    dielectric (transmission tinted by the base colour, absorption
-    ``-ln(attenuationColor) / attenuationDistance``); KHR_materials_emissive_strength
-    scales the emission; KHR_materials_unlit shows the base colour without lighting.
+    Lit materials keep the model the format defines: ``model="metallic_roughness"`` with
+    the base colour, metallic and roughness factors and the base-colour,
+    metallic-roughness, occlusion, normal and emissive textures, evaluated per texel
+    (:mod:`rtmesh.materials.metallic_roughness`).  Alpha mode, cutoff and base-colour
+    alpha give the opacity; KHR_materials_emissive_strength scales the emission;
+    KHR_materials_transmission / ior / volume make part of the dielectric's diffuse term a
+    smooth refraction into an absorbing interior (:func:`_transmission`).
+    KHR_materials_unlit shows the base colour without lighting.
 
     Parameters
     ----------
@@ -387,80 +377,151 @@ def gltf_material(pbr, json_material=None, name="gltf"):
         ``extensions``, which trimesh does not keep.
     name : str
         Used when the material has no name.
+    source : str, optional
+        The file, for warnings about unusable values.
 
     Returns
     -------
     Material
     """
     _check_decoded(pbr, json_material, pbr.name or name)
+    where = f"{source}: material '{pbr.name or name}'" if source else f"material '{pbr.name or name}'"
     f = _gltf_factors(pbr, json_material)
     ext = f["extensions"]
-    base = f["base"]
-    base = np.append(base, 1.0) if len(base) == 3 else np.resize(base, 4)
-    metallic, roughness = f["metallic"], f["roughness"]
-    if pbr.metallicRoughnessTexture is not None:
-        # glTF: roughness in green, metalness in blue, both linear
-        texels = Texture.from_pil(pbr.metallicRoughnessTexture, srgb=False).pixels
-        mean = texels.reshape(-1, texels.shape[2]).mean(axis=0)
-        if len(mean) >= 3:
-            roughness, metallic = roughness * mean[1], metallic * mean[2]
-    metallic, roughness = float(np.clip(metallic, 0, 1)), float(np.clip(roughness, 0, 1))
+    base = _rgba(f["base"])
     colour = base[:3]
-    emission = f["emission"] * float(ext.get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0))
-    transmission, ior, absorption = np.zeros(3), 1.5, np.zeros(3)
-    if "KHR_materials_ior" in ext:
-        ior = float(ext["KHR_materials_ior"].get("ior", 1.5)) or 1.5
-    if "KHR_materials_transmission" in ext:
-        transmission = float(ext["KHR_materials_transmission"].get("transmissionFactor", 0.0)) * colour
-        volume = ext.get("KHR_materials_volume", {})
-        distance = float(volume.get("attenuationDistance", np.inf))
-        tint = np.clip(np.asarray(volume.get("attenuationColor", [1.0, 1.0, 1.0]), dtype=np.float64), 1e-6, 1.0)
-        if np.isfinite(distance) and distance > 0:
-            absorption = -np.log(tint) / distance
-    mode = f["mode"]
-    texture = None
-    wraps = (json_material or {}).get(WRAP_KEY, {})
-    if pbr.baseColorTexture is not None:
-        texture = Texture.from_pil(pbr.baseColorTexture, srgb=True, name=f"{name} baseColorTexture",
-                                   wrap=wraps.get("baseColorTexture", "repeat"))
-    normal = None
-    if pbr.normalTexture is not None:
-        normal = Texture.from_pil(pbr.normalTexture, srgb=False, name=f"{name} normalTexture",
-                                  wrap=wraps.get("normalTexture", "repeat"))
-    glow = None
-    if pbr.emissiveTexture is not None and (emission > 0).any():  # glTF: factor x texture
-        glow = Texture.from_pil(pbr.emissiveTexture, srgb=True, name=f"{name} emissiveTexture",
-                                wrap=wraps.get("emissiveTexture", "repeat"))
-    not_transmitted = 1.0 - transmission.max()
-    return Material(
+
+    def texture(role, srgb):
+        return _gltf_texture(pbr, json_material, role, srgb, name)
+
+    emission = _emission(f, where)
+    common = dict(
         name=pbr.name or name,
-        diffuse=colour * (1.0 - metallic) * not_transmitted,
-        specular=0.04 * (1.0 - metallic) + colour * metallic,
-        shininess=roughness_to_shininess(roughness),
-        mirror=colour * metallic,
-        roughness=roughness ** 2,
-        metallic=metallic,
-        transmission=transmission,
-        ior=ior,
-        absorption=absorption,
         emission=emission,
         opacity=float(base[3]),
-        alpha_mode=mode if mode in ("mask", "blend") else "opaque",
+        alpha_mode=f["mode"] if f["mode"] in ("mask", "blend") else "opaque",
         alpha_cutoff=f["cutoff"],
         double_sided=f["double_sided"],
-        unlit="KHR_materials_unlit" in ext,
-        diffuse_texture=texture,
-        normal_texture=normal,
-        emission_texture=glow,
+        diffuse_texture=texture("baseColorTexture", True),
+        emission_texture=texture("emissiveTexture", True) if (emission > 0).any() else None,  # factor x texture
     )
+    if "KHR_materials_unlit" in ext:
+        # the base colour as is: metallic and roughness do not apply
+        return Material(diffuse=colour, unlit=True, **common)
+    metallic, roughness = float(np.clip(f["metallic"], 0, 1)), float(np.clip(f["roughness"], 0, 1))
+    factor, ior, absorption = _transmission(ext, where)
+    occlusion = (json_material or {}).get("occlusionTexture") or {}
+    return Material(
+        model="metallic_roughness",
+        base_color=colour,
+        metallic=metallic,
+        perceptual_roughness=roughness,
+        # kept for the ambient term and the albedo pass (see Material.model)
+        diffuse=colour * (1.0 - metallic) * (1.0 - factor),
+        specular=np.zeros(3),
+        transmission=factor * colour * (1.0 - metallic),
+        transmission_factor=factor,
+        ior=ior,
+        absorption=absorption,
+        # glTF: roughness in green, metalness in blue, occlusion in red, all linear
+        metallic_roughness_texture=texture("metallicRoughnessTexture", False),
+        occlusion_texture=texture("occlusionTexture", False),
+        occlusion_strength=float(occlusion.get("strength", 1.0)),
+        normal_texture=texture("normalTexture", False),
+        **common,
+    )
+
+
+def _transmission(ext, name):
+    """KHR_materials_transmission / ior / volume of a material's extensions.
+
+    Parameters
+    ----------
+    ext : dict
+        The material's ``extensions``.
+    name : str
+        The file and material, for warnings.
+
+    Returns
+    -------
+    factor : float
+        ``transmissionFactor`` in [0, 1] (0 without the extension).
+    ior : float
+        ``KHR_materials_ior`` (1.5 by default, as the extension says); at least 1.
+    absorption : (3,) float
+        ``-ln(attenuationColor) / attenuationDistance`` per scene unit (0 without a finite
+        positive distance).
+    """
+    factor = _extension_number(ext, "KHR_materials_transmission", "transmissionFactor", 0.0, name, 0.0, 1.0)
+    # an index below 1 (or 0, which the extension reserves for "infinite") is not a
+    # dielectric this model can refract through: 1.5, the extension's default
+    ior = _extension_number(ext, "KHR_materials_ior", "ior", 1.5, name, 1.0, np.inf, invalid_below=1.0)
+    absorption = np.zeros(3)
+    distance = _extension_number(ext, "KHR_materials_volume", "attenuationDistance", np.inf, name, 0.0, np.inf)
+    if factor > 0 and np.isfinite(distance) and distance > 0:
+        try:
+            tint = np.asarray(ext["KHR_materials_volume"].get("attenuationColor", [1.0, 1.0, 1.0]), dtype=np.float64)
+            tint = np.clip(np.nan_to_num(tint.reshape(3), nan=1.0), 1e-6, 1.0)
+        except (TypeError, ValueError):
+            log.warning("%s: KHR_materials_volume attenuationColor is not three numbers; not used", name)
+            tint = np.ones(3)
+        absorption = -np.log(tint) / distance
+    return factor, ior, absorption
+
+
+def _extension_number(ext, extension, key, default, name, low, high, invalid_below=None):
+    """``ext[extension][key]`` as a float clipped to [low, high]; ``default`` (with a warning
+    naming the material, extension and key) when it is not a finite number, or is below
+    ``invalid_below``."""
+    value = (ext.get(extension) or {}).get(key, default) if isinstance(ext.get(extension, {}), dict) else default
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        number = np.nan
+    if np.isnan(number) or (np.isinf(number) and number != default) or (
+            invalid_below is not None and number < invalid_below):
+        log.warning("%s: %s %s = %r is not usable; %s used", name, extension, key, value, default)
+        return float(default)
+    return float(np.clip(number, low, high))
+
+
+def _gltf_texture(pbr, json_material, role, srgb, name):
+    """The :class:`Texture` of one texture role (``"baseColorTexture"``, ...) of a glTF
+    material, with its sampler's wrap modes and its KHR_texture_transform; None when the
+    material has none."""
+    image = getattr(pbr, role)
+    if image is None:
+        return None
+    return Texture.from_pil(image, srgb=srgb, name=f"{name} {role}", **texture_options(json_material, role))
+
+
+def _rgba(base):
+    """A glTF base colour factor as RGBA (alpha 1 when the factor has three values)."""
+    return np.append(base, 1.0) if len(base) == 3 else np.resize(base, 4)
+
+
+def _emission(factors, name):
+    """Emitted radiance: ``emissiveFactor`` (clipped to [0, 1], as the specification bounds
+    it) times KHR_materials_emissive_strength (finite, >= 0)."""
+    strength = _extension_number(factors["extensions"], "KHR_materials_emissive_strength", "emissiveStrength", 1.0,
+                                 name, 0.0, float(np.finfo(np.float32).max))
+    return np.clip(np.nan_to_num(factors["emission"], nan=0.0), 0.0, 1.0) * strength
 
 
 # glTF sampler wrap modes (the OpenGL enums) as Texture wrap modes; glTF's default is REPEAT
 _GLTF_WRAP = {33071: "clamp", 33648: "mirror", 10497: "repeat"}
-# where gltf_json_materials puts each texture's (u, v) wrap modes in a material object
-WRAP_KEY = "rtmesh:wrap"
+# the texture roles of a glTF material, each a textureInfo ("pbr." ones under pbrMetallicRoughness)
+TEXTURE_ROLES = ("baseColorTexture", "metallicRoughnessTexture", "normalTexture", "occlusionTexture",
+                 "emissiveTexture")
+_PBR_ROLES = ("baseColorTexture", "metallicRoughnessTexture")
+# where gltf_json_materials puts, per texture role of a material object, the keyword
+# arguments of Texture.from_pil that the file's JSON holds and trimesh drops: the sampler's
+# wrap modes and the KHR_texture_transform (see texture_options)
+OPTIONS_KEY = "rtmesh:texture options"
 # ... and each texture's image (label, mime type), to tell images trimesh could not decode
 IMAGES_KEY = "rtmesh:images"
+# the extension's name, in textureInfo.extensions and in the file's extensionsRequired
+TEXTURE_TRANSFORM = "KHR_texture_transform"
 
 
 def _texture_wrap(doc, texture_info):
@@ -471,6 +532,97 @@ def _texture_wrap(doc, texture_info):
     except (KeyError, IndexError, TypeError):
         return ("repeat", "repeat")
     return tuple(_GLTF_WRAP.get(sampler.get(axis, 10497), "repeat") for axis in ("wrapS", "wrapT"))
+
+
+def _numbers(value, count, what):
+    """``count`` finite floats from a JSON number (count 1) or array; ValueError naming
+    ``what`` otherwise."""
+    values = [value] if count == 1 else value
+    if (not isinstance(values, (list, tuple)) or len(values) != count
+            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in values)
+            or not np.isfinite(np.asarray(values, dtype=np.float64)).all()):
+        raise ValueError(f"{what} {value!r} (expected {'a number' if count == 1 else f'{count} numbers'})")
+    return np.asarray(values, dtype=np.float64)
+
+
+def khr_texture_transform(extension):
+    """The UV transform of a KHR_texture_transform object, in :class:`Texture`'s convention.
+
+    The extension maps glTF UVs (origin at the top left of the image, v down) by
+    ``T(offset) R(rotation) S(scale)`` with ``R = [[cos, sin], [-sin, cos]]`` acting on
+    column vectors: the spec's sample code read row by row (GLSL's ``mat3()`` fills columns,
+    which would give the transpose), and the direction its worked example needs ("the lower
+    left quadrant of the source image, rotated clockwise 90 degrees"); counter-clockwise as
+    the image is seen, since v points down.  trimesh flips v on import and :class:`Texture`
+    reads v upward, so the map ``M`` is conjugated by the flip ``F(u, v) = (u, 1 - v)``: the
+    lookup reads ``F(M(F(uv)))``, i.e. ``A' = D A D``, ``b' = D (A e + offset) + e`` with
+    ``A = R S``, ``D = diag(1, -1)``, ``e = (0, 1)``.
+
+    Parameters
+    ----------
+    extension : dict
+        ``offset`` (default [0, 0]), ``rotation`` (radians, default 0) and ``scale``
+        (default [1, 1]); ``texCoord`` is not read here (see :func:`gltf_json_materials`).
+
+    Returns
+    -------
+    (2, 3) float64 or None
+        ``[A' | b']`` for :class:`Texture`'s ``transform``; None for the identity.
+
+    Raises
+    ------
+    ValueError
+        A value is not a finite number or pair of numbers (the message names it).
+    """
+    if not isinstance(extension, dict):
+        raise ValueError(f"{extension!r} (expected an object)")
+    ox, oy = _numbers(extension.get("offset", [0.0, 0.0]), 2, "offset")
+    (angle,) = _numbers(extension.get("rotation", 0.0), 1, "rotation")
+    sx, sy = _numbers(extension.get("scale", [1.0, 1.0]), 2, "scale")
+    c, s = np.cos(angle), np.sin(angle)
+    a = np.array([[c * sx, s * sy], [-s * sx, c * sy]])  # R S, in glTF's UV space
+    matrix = np.array([[a[0, 0], -a[0, 1], ox + a[0, 1]],
+                       [-a[1, 0], a[1, 1], 1.0 - a[1, 1] - oy]])
+    return None if np.array_equal(matrix, [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]) else matrix
+
+
+def _texture_options(doc, info):
+    """:func:`texture_options` of one glTF textureInfo, its texture-coordinate set (the
+    extension's ``texCoord`` overrides the textureInfo's) and the malformed transform, if
+    any (then the transform is ignored)."""
+    options = {"wrap": _texture_wrap(doc, info), "transform": None}
+    extensions = info.get("extensions")
+    extension = extensions.get(TEXTURE_TRANSFORM) if isinstance(extensions, dict) else None
+    coord, problem = info.get("texCoord", 0), None
+    if extension is not None:
+        try:
+            options["transform"] = khr_texture_transform(extension)
+        except ValueError as exc:
+            problem = str(exc)
+        if isinstance(extension, dict):
+            coord = extension.get("texCoord", coord)
+    return options, coord, problem
+
+
+def texture_options(json_material, role):
+    """The keyword arguments of :meth:`Texture.from_pil` that a glTF material's JSON gives
+    one of its textures: ``wrap`` (the sampler's, default repeat) and ``transform``
+    (KHR_texture_transform, None for none).
+
+    Parameters
+    ----------
+    json_material : dict or None
+        A material object of :func:`gltf_json_materials` (None: no JSON known).
+    role : str
+        One of :data:`TEXTURE_ROLES`, e.g. ``"baseColorTexture"``.
+
+    Returns
+    -------
+    dict
+        A new dict, ``Texture.from_pil(image, ..., **texture_options(json_material, role))``.
+    """
+    options = (json_material or {}).get(OPTIONS_KEY, {}).get(role)
+    return dict(options) if options else {"wrap": "repeat", "transform": None}
 
 
 def _texture_image(doc, texture_info):
@@ -506,24 +658,60 @@ def _check_decoded(pbr, json_material, name):
                         f"pixels ({slot} of material '{name}')")
 
 
-def gltf_json_materials(doc):
+def gltf_json_materials(doc, source="glTF"):
     """``{material name: material object}`` of a glTF JSON document (unnamed ones skipped).
 
-    Each object is a copy with the wrap modes of its base-colour, normal and emission
-    textures under :data:`WRAP_KEY` (``{"baseColorTexture": (u, v), ...}``), read from the
-    samplers, which trimesh does not keep, and the image of each texture (those and the
-    metallic-roughness one) under :data:`IMAGES_KEY` (``{"baseColorTexture": (label, mime
-    type), ...}``), to tell an image trimesh could not decode.
+    Each object is a copy with, under :data:`OPTIONS_KEY`, per texture role of
+    :data:`TEXTURE_ROLES` it has, the keyword arguments of :meth:`Texture.from_pil` that
+    trimesh drops: the sampler's wrap modes and the KHR_texture_transform
+    (``{"baseColorTexture": {"wrap": (u, v), "transform": (2, 3) array or None}, ...}``,
+    read with :func:`texture_options`); and the image of each of those textures under
+    :data:`IMAGES_KEY`
+    (``{"baseColorTexture": (label, mime type), ...}``), to tell an image trimesh could not
+    decode.
+
+    A texture that reads a texture-coordinate set other than 0 (``texCoord``, or the
+    extension's override) uses set 0: trimesh loads TEXCOORD_0 only.  That, and a malformed
+    KHR_texture_transform (ignored), is one warning for the file, naming the materials.
+    KHR_texture_transform may be in the file's ``extensionsRequired``: it is read.
+
+    Parameters
+    ----------
+    doc : dict
+        The file's JSON.
+    source : str
+        The file, for messages.
+
+    Returns
+    -------
+    dict of str to dict
     """
-    out = {}
+    out, other_sets, malformed = {}, [], []
     for material in doc.get("materials", []) or []:
         if isinstance(material, dict) and isinstance(material.get("name"), str):
-            infos = {"baseColorTexture": (material.get("pbrMetallicRoughness") or {}).get("baseColorTexture"),
-                     "normalTexture": material.get("normalTexture"),
-                     "emissiveTexture": material.get("emissiveTexture")}
-            wraps = {slot: _texture_wrap(doc, info) for slot, info in infos.items() if isinstance(info, dict)}
-            infos["metallicRoughnessTexture"] = (material.get("pbrMetallicRoughness") or {}).get(
-                "metallicRoughnessTexture")
-            images = {slot: _texture_image(doc, info) for slot, info in infos.items() if isinstance(info, dict)}
-            out[material["name"]] = {**material, WRAP_KEY: wraps, IMAGES_KEY: images}
+            pbr = material.get("pbrMetallicRoughness") or {}
+            infos = {role: (pbr if role in _PBR_ROLES else material).get(role) for role in TEXTURE_ROLES}
+            infos = {role: info for role, info in infos.items() if isinstance(info, dict)}
+            options = {}
+            for role, info in infos.items():
+                options[role], coord, problem = _texture_options(doc, info)
+                where = f"material '{material['name']}' {role}"
+                if coord != 0:
+                    other_sets.append(f"{where} (set {coord!r})")
+                if problem:
+                    malformed.append(f"{where}: {problem}")
+            images = {role: _texture_image(doc, info) for role, info in infos.items()}
+            out[material["name"]] = {**material, OPTIONS_KEY: options, IMAGES_KEY: images}
+    if other_sets:
+        log.warning("%s: texture coordinate sets other than 0 are not read (trimesh loads "
+                    "TEXCOORD_0 only); set 0 used for %s", source, _listed(other_sets))
+    if malformed:
+        log.warning("%s: malformed %s ignored (texture shown untransformed): %s", source,
+                    TEXTURE_TRANSFORM, _listed(malformed))
     return out
+
+
+def _listed(items, shown=4):
+    """The first ``shown`` of ``items`` joined by "; ", then how many more."""
+    more = f"; and {len(items) - shown} more" if len(items) > shown else ""
+    return "; ".join(items[:shown]) + more

@@ -398,7 +398,8 @@ def _background(r, doc, environment, base_dir):
             background = read_environment(path, values.get("rotation", 0.0), values.get("intensity", 1.0))
         except RtmeshError as exc:
             raise r.error("background.file", str(exc)) from None
-    background.lighting = values.get("lighting", False)
+    # unset: decided by the integrator (on for scenes with physically based materials)
+    background.lighting = values.get("lighting")
     return background
 
 

@@ -17,9 +17,11 @@ Two questions, asked by different stages:
 
 The Whitted integrator follows specular lobes only: Blinn-Phong's diffuse and highlight
 terms are evaluated toward the lights and not sampled, so Blinn-Phong offers no
-``sample``.  A physically based model (e.g. glTF's metallic-roughness BRDF) would offer
-all three for one lobe set, and the integrator would use its ``pdf`` for multiple
-importance sampling.
+``sample``.  The physically based model of glTF materials
+(:mod:`rtmesh.materials.metallic_roughness`) offers all three for one lobe set (per-hit
+parameters instead of a material table's rows), and its stage
+(:mod:`rtmesh.rendering.physical_shading`) uses its ``pdf`` for multiple importance
+sampling.
 """
 
 from typing import Protocol

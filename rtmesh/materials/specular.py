@@ -71,6 +71,9 @@ class SpecularScattering:
         self.roughness = materials.roughness
         self.reflective = (materials.mirror > 0).any(axis=1) | (materials.transmission > 0).any(axis=1)
         self.transmissive = (materials.transmission > 0).any(axis=1)
+        # metallic-roughness materials reflect through their BRDF's GGX lobe: their
+        # transmission spawns refracted rays (and totally reflected ones) only
+        self.brdf_reflects = materials.physical
         self.fresnel = fresnel_exact_or_schlick(fresnel)
 
     def sample(self, wo, ns, ng, mat, mirror_tint, refracting, follow, glossy_points=None):
@@ -116,7 +119,8 @@ class SpecularScattering:
             ok = ~tir & (dot(wt, ng[j]) < 0.0)
             transmission = self.transmission[mat[j]]
             reflect_weight = reflect_weight.copy()
-            reflect_weight[j] += np.where(tir, 1.0, fresnel)[:, None] * transmission
+            reflected = np.where(tir, 1.0, np.where(self.brdf_reflects[mat[j]], 0.0, fresnel))
+            reflect_weight[j] += reflected[:, None] * transmission
             w_t = (1.0 - fresnel)[:, None] * transmission
             keep = ok & follow(j, w_t)
             refraction = Lobe(j[keep], wt[keep], w_t[keep], keep)

@@ -27,9 +27,12 @@ def as_colour(value):
 
 
 ALPHA_MODES = ("opaque", "mask", "blend")
+# how a material reflects light toward the lights and which rays it sends (see Material.model)
+MODELS = ("blinn_phong", "metallic_roughness")
 COLOUR_FIELDS = ("diffuse", "specular", "ambient", "mirror", "transmission", "absorption",
-                 "emission")
-TEXTURE_FIELDS = ("diffuse_texture", "specular_texture", "opacity_texture", "normal_texture", "emission_texture")
+                 "emission", "base_color")
+TEXTURE_FIELDS = ("diffuse_texture", "specular_texture", "opacity_texture", "normal_texture", "emission_texture",
+                  "metallic_roughness_texture", "occlusion_texture")
 
 
 @dataclass
@@ -39,6 +42,15 @@ class Material:
     Attributes
     ----------
     name : str
+    model : {"blinn_phong", "metallic_roughness"}
+        ``blinn_phong`` (MTL and scene-file materials): the fields above the glTF ones,
+        lit by the Whitted integrator (specular lobes followed, no diffuse bounce).
+        ``metallic_roughness`` (glTF materials): the glTF 2.0 BRDF of
+        :mod:`rtmesh.materials.metallic_roughness` with ``base_color``, ``metallic`` and
+        ``perceptual_roughness`` (times the base-colour and metallic-roughness textures),
+        sampled and path traced (see :mod:`rtmesh.rendering.physical_shading`); its
+        ``diffuse`` is ``base_color (1 - metallic)``, kept for the albedo pass and the
+        ambient term, and its Blinn-Phong fields are otherwise unused.
     diffuse : (3,) float
         Lambert reflectance kd.
     specular : (3,) float
@@ -75,15 +87,32 @@ class Material:
         (metals reflect in their own colour); see :mod:`rtmesh.rendering.surface_textures`.
     double_sided : bool
         Kept from glTF for reference; both sides of every triangle are always shaded.
+    base_color : (3,) float
+        glTF ``baseColorFactor`` (linear RGB) of a ``metallic_roughness`` material.
+    perceptual_roughness : float
+        glTF ``roughnessFactor`` in [0, 1] of a ``metallic_roughness`` material (the GGX
+        alpha is its square).
+    transmission_factor : float
+        KHR_materials_transmission's factor of a ``metallic_roughness`` material: that part
+        of its dielectric diffuse term is transmitted instead, through the smooth
+        refraction of ``transmission`` (= factor x base colour x (1 - metallic)) and ``ior``.
+    occlusion_strength : float
+        glTF ``occlusionTexture.strength``: the baked occlusion darkens the ambient term
+        ``1 + strength (texel - 1)`` (traced light carries its own shadows).
     diffuse_texture, specular_texture, opacity_texture, normal_texture, emission_texture : Texture or None
         Image textures (:class:`rtmesh.io.texture_images.Texture`): base colour (multiplies
         ``diffuse`` and ``ambient``; its alpha multiplies ``opacity``), specular colour
         (multiplies ``specular``), opacity (first channel multiplies ``opacity``), a
         tangent-space normal map, and emitted colour (multiplies ``emission``, both where
         the surface is seen and where it lights others).
+    metallic_roughness_texture, occlusion_texture : Texture or None
+        glTF textures of a ``metallic_roughness`` material: roughness in the green channel
+        and metalness in the blue one (multiplying ``perceptual_roughness`` and
+        ``metallic``), and baked ambient occlusion in the red one.
     """
 
     name: str = "default"
+    model: str = "blinn_phong"
     diffuse: np.ndarray = field(default_factory=lambda: np.full(3, 0.7))
     specular: np.ndarray = field(default_factory=lambda: np.zeros(3))
     shininess: float = 32.0
@@ -105,8 +134,16 @@ class Material:
     opacity_texture: object = None
     normal_texture: object = None
     emission_texture: object = None
+    base_color: np.ndarray = field(default_factory=lambda: np.ones(3))
+    perceptual_roughness: float = 1.0
+    transmission_factor: float = 0.0
+    occlusion_strength: float = 1.0
+    metallic_roughness_texture: object = None
+    occlusion_texture: object = None
 
     def __post_init__(self):
+        if self.model not in MODELS:
+            raise ValueError(f"unknown material model {self.model!r}; expected one of " + ", ".join(MODELS))
         if self.alpha_mode not in ALPHA_MODES:
             raise ValueError(f"unknown alpha mode {self.alpha_mode!r}; expected one of "
                              + ", ".join(ALPHA_MODES))
@@ -125,23 +162,33 @@ class MaterialTable:
     ----------
     materials : list of Material
     diffuse, specular, ambient, mirror, transmission, absorption, emission : (m, 3) float
-    shininess, ior, roughness, opacity, alpha_cutoff, metallic : (m,) float
+    base_color : (m, 3) float
+    shininess, ior, roughness, opacity, alpha_cutoff, metallic, perceptual_roughness, transmission_factor : (m,) float
     alpha_mode : (m,) int
         Index into :data:`ALPHA_MODES`.
     unlit : (m,) bool
+    physical : (m,) bool
+        Materials of the ``metallic_roughness`` model (and not unlit).
     """
 
     def __init__(self, materials):
         self.materials = list(materials)
         for name in COLOUR_FIELDS:
             setattr(self, name, np.array([getattr(m, name) for m in self.materials], dtype=np.float64).reshape(-1, 3))
-        for name in ("shininess", "ior", "roughness", "opacity", "alpha_cutoff", "metallic"):
+        for name in ("shininess", "ior", "roughness", "opacity", "alpha_cutoff", "metallic",
+                     "perceptual_roughness", "transmission_factor", "occlusion_strength"):
             setattr(self, name, np.array([getattr(m, name) for m in self.materials], dtype=np.float64))
         self.alpha_mode = np.array([ALPHA_MODES.index(m.alpha_mode) for m in self.materials], dtype=np.intp)
         self.unlit = np.array([m.unlit for m in self.materials], dtype=bool)
+        self.physical = np.array([m.model == "metallic_roughness" for m in self.materials], dtype=bool) & ~self.unlit
 
     def __len__(self):
         return len(self.materials)
+
+    @property
+    def any_physical(self):
+        """True if any (lit) material has the glTF metallic-roughness model."""
+        return bool(self.physical.any())
 
     @property
     def any_specular(self):

@@ -72,10 +72,12 @@ class SurfaceRecords:
     the material, ``prim`` (int) the face hit, ``sample`` the pixel sample each hit
     contributes to, ``time`` (float, None without motion blur) the time of the ray (see
     :mod:`rtmesh.geometry.motion`).  ``tints`` (:class:`rtmesh.rendering.surface_textures.Tints` or None) holds the
-    texture and vertex-colour multipliers of the material colours.
+    texture and vertex-colour multipliers of the material colours.  ``pdf`` ((k,) float or
+    None) is the BSDF density of the incoming rays (see :attr:`rtmesh.core.rays.RayBatch.pdf`),
+    ``origin`` ((k, 3) or None, set with ``pdf``) where they started.
     """
 
-    __slots__ = ("p", "ng", "ns", "d", "front", "mat", "prim", "sample", "time", "tints")
+    __slots__ = ("p", "ng", "ns", "d", "front", "mat", "prim", "sample", "time", "tints", "pdf", "origin")
 
 
 def rows_at(time, *row_sets):

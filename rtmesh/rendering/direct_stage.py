@@ -123,7 +123,7 @@ class DirectStage:
         it = integrator
         st = it.plan
         needs_general = ("area_lights", "area_light_visibility", "environment_lighting", "textures", "normal_maps", "cutouts",
-                         "unlit", "reflection", "glossy", "refraction", "absorption", "passes", "ao", "lens",
+                         "unlit", "physical", "reflection", "glossy", "refraction", "absorption", "passes", "ao", "lens",
                          "motion")
         if any(getattr(st, name) for name in needs_general):
             return None

@@ -53,6 +53,7 @@ from rtmesh.rendering.direct_stage import DirectStage
 from rtmesh.rendering.film import Film
 from rtmesh.rendering.local_shading import LocalShading
 from rtmesh.rendering.media import Media
+from rtmesh.rendering.physical_shading import PhysicalShading, bsdf_weight
 from rtmesh.rendering.render_plan import RenderPlan
 from rtmesh.rendering.scheduler import pixel_chunks, run_on_threads, sample_indices
 from rtmesh.rendering.secondary_rays import SecondaryRays
@@ -167,22 +168,20 @@ class Integrator:
                 mean_tint = self.textures.mean_emission_tints()[material_id]
             self._emitters = emissive_mesh_light(self.accel.triangles, scene.face_normals,
                                                  m.emission[scene.material_id], tint, mean_tint)
-        self.background = as_background(scene.background)
-        # the background lights the scene only when asked (scene files: [background] lighting)
-        self.environment_lighting = None
-        if self.background.lighting and not self.background.is_black:
-            self.environment_lighting = EnvironmentLighting(self.background, self.accel, self.settings,
-                                                            self.offset_scale)
+        self._set_background(scene.background)
         lit = ~m.unlit[:, None]
-        self._shaded_any = bool((((m.diffuse > 0) | (m.specular > 0)) & lit).any())
+        self._shaded_any = bool((((m.diffuse > 0) | (m.specular > 0)) & lit).any()) or m.any_physical
         self.ao_distance = settings.ao_distance or 0.2 * float(np.linalg.norm(np.ptp(scene_bounds, axis=0)))
         self._ambient_on = bool((scene.ambient > 0).any() and (m.ambient > 0).any())
         if settings.denoise:
             denoising.require()  # before any work: one line naming the extra when it is missing
+        # alpha-blend materials are let through at random: camera hits then vary per sample
+        self._stochastic_coverage = bool((m.alpha_mode == ALPHA_MODES.index("blend")).any())
         # the AO pass alone asks for 16 rays per camera hit unless ao_samples says otherwise
         self.ao_samples = settings.ao_samples or (16 if "ao" in settings.passes else 0)
         # per-material flags, looked up per hit
-        self._shaded = ((m.diffuse > 0).any(axis=1) | (m.specular > 0).any(axis=1)) & ~m.unlit
+        # (Blinn-Phong materials; metallic-roughness ones are shaded by their own stage)
+        self._shaded = ((m.diffuse > 0).any(axis=1) | (m.specular > 0).any(axis=1)) & ~m.unlit & ~m.physical
         self._all_shaded = bool(self._shaded.all())  # then no per-hit lookup is needed
         self._has_specular = (m.specular > 0).any(axis=1)
         # per-material colours, component-major so that gathering them per hit keeps the
@@ -202,7 +201,20 @@ class Integrator:
         self._material_id = scene.material_id.astype(np.intp)
         self._set_view()
 
-    def with_view(self, camera, lights=None):
+    def _set_background(self, background):
+        """The background rays see and, when it lights the scene, its light sampler."""
+        self.background = as_background(background)
+        m = self.scene.materials
+        self.environment_lighting = None
+        # it lights the scene when asked (scene files: [background] lighting); unset (None),
+        # it lights scenes with physically based materials, which are made to be seen under
+        # their environment, and no others (whose images stay as they were)
+        lighting = m.any_physical if self.background.lighting is None else self.background.lighting
+        if lighting and not self.background.is_black:
+            self.environment_lighting = EnvironmentLighting(self.background, self.accel, self.settings,
+                                                            self.offset_scale)
+
+    def with_view(self, camera, lights=None, background=None):
         """The same built scene seen from another camera (and lit by other lights).
 
         The Embree scene, textures, per-face tables and everything else that depends only
@@ -217,6 +229,8 @@ class Integrator:
             In the scene's own (world) frame.
         lights : list, optional
             Default: the scene's lights.
+        background : background object, optional
+            Default: the scene's background (and its light sampler) is kept.
 
         Returns
         -------
@@ -232,7 +246,10 @@ class Integrator:
             raise ValueError("with_view: a scene with moving objects needs the built camera's shutter")
         view = copy.copy(self)
         view.scene = dataclasses.replace(self.scene, camera=camera,
-                                         lights=list(self.scene.lights if lights is None else lights))
+                                         lights=list(self.scene.lights if lights is None else lights),
+                                         background=self.scene.background if background is None else background)
+        if background is not None:
+            view._set_background(background)
         view._set_view()
         return view
 
@@ -267,7 +284,8 @@ class Integrator:
             normal_maps=self.textures.tangents is not None,
             cutouts=self.cutouts is not None,
             unlit=m.any_unlit,
-            reflection=settings.max_depth > 0 and (m.any_mirror or m.any_transmission),
+            physical=m.any_physical,
+            reflection=settings.max_depth > 0 and (m.any_mirror or m.any_transmission or m.any_physical),
             glossy=settings.max_depth > 0 and m.any_glossy,
             refraction=settings.max_depth > 0 and m.any_transmission,
             absorption=m.any_absorption,
@@ -282,6 +300,7 @@ class Integrator:
         self.surface_stage = SurfaceStage(self)
         self.local_shading = LocalShading(self)
         self.secondary_rays = SecondaryRays(self)
+        self.physical_shading = PhysicalShading(self) if self.plan.physical else None
         # scenes that need only direct light take one compiled stage per chunk
         self.direct_stage = DirectStage.plan(self)
         self.plan = dataclasses.replace(self.plan, fused_direct=self.direct_stage is not None)
@@ -386,7 +405,9 @@ class Integrator:
         noisy = None
         if s.denoise:
             noisy = image
-            image = denoising.denoise(image, film.pass_image("albedo"), film.pass_image("normal"))
+            # the guides average each pixel's camera hits: noise-free unless those are random
+            clean = not (self.plan.lens or self.plan.motion or self._stochastic_coverage)
+            image = denoising.denoise(image, film.pass_image("albedo"), film.pass_image("normal"), clean)
             stats.wall_seconds = time.perf_counter() - start
         return RenderResult(image, passes, stats, film, alpha, noisy)
 
@@ -583,7 +604,12 @@ class Integrator:
                     rays.throughput[absorbing] *= np.where(sigma > 0, np.exp(-sigma * t), 1.0)
 
         if on_light is not None and len(on_light[0]):
-            ended, emitted = on_light
+            ended, emitted, lights = on_light
+            if rays.pdf is not None:
+                # BSDF-sampled rays weigh the light against light sampling (see physical_shading)
+                light_pdf = self.area_lighting.pdf_of_visible(lights, take_rows(rays.origins, ended),
+                                                              take_rows(rays.directions, ended), hits.t[ended])
+                emitted = emitted * bsdf_weight(rays.pdf[ended], light_pdf, self.area_lighting.samples)[:, None]
             scatter_add(radiance, rays.sample[ended], take_rows(rays.throughput, ended) * emitted,
                          unique=primary)
 
@@ -591,7 +617,10 @@ class Integrator:
         n_hit = int(np.count_nonzero(hit))
         if self.plan.background and n_hit < len(hit):
             miss = np.flatnonzero(hits.prim == -1)  # -2: ended on an area light
-            seen = self.background.radiance(take_rows(rays.directions, miss))
+            directions = take_rows(rays.directions, miss)
+            seen = self.background.radiance(directions)
+            if rays.pdf is not None:
+                seen = seen * self._background_weight(rays.pdf[miss], directions)[:, None]
             scatter_add(radiance, rays.sample[miss], take_rows(rays.throughput, miss) * seen,
                          unique=primary)
 
@@ -615,9 +644,22 @@ class Integrator:
 
         if depth >= self.settings.max_depth or not self.plan.reflection:
             return RayBatch.empty()
-        next_rays = self.secondary_rays.spawn(srf, rays.subset(rows), depth, chunk)
+        hit_rays = rays.subset(rows)
+        next_rays = self.secondary_rays.spawn(srf, hit_rays, depth, chunk)
+        if self.plan.physical:
+            next_rays = RayBatch.concatenate([next_rays, self.physical_shading.spawn(srf, hit_rays, depth, chunk)])
         chunk.clock.lap("spawn")
         return next_rays
+
+    def _background_weight(self, pdf, directions):
+        """Weight of the background seen by rays that left the scene, from the density of
+        their BSDF samples ((k,) -> (k,)): 1 for camera rays and delta lobes; the MIS
+        weight against environment light sampling where the background lights the scene,
+        else 0 (see :mod:`rtmesh.rendering.physical_shading`)."""
+        lighting = self.environment_lighting if self.plan.environment_lighting else None
+        if lighting is None:
+            return np.isinf(pdf).astype(np.float64)
+        return bsdf_weight(pdf, lighting.pdf(directions), lighting.samples)
 
 def render(scene, settings, progress=None):
     """Render ``scene`` with ``settings``; see :meth:`Integrator.render`."""

@@ -3,7 +3,8 @@
 Emission, unlit colours, ambient light (with ambient occlusion), and direct light: every
 point-like light through its :meth:`~rtmesh.lights.interface.PointLikeLight.illuminate`,
 one shadow ray per lit hit (:func:`rtmesh.shading.direct_light.light_samples`), and the
-area lights (:mod:`rtmesh.lights.area_lights`).
+area lights (:mod:`rtmesh.lights.area_lights`), for Blinn-Phong materials; metallic-roughness
+materials take their direct light from :mod:`rtmesh.rendering.physical_shading`.
 """
 
 import numpy as np
@@ -13,6 +14,7 @@ from rtmesh.core.vecmath import orthonormal_basis
 from rtmesh.geometry.accel import offset_ray_origins
 from rtmesh.materials.blinn_phong import surface_reflectance
 from rtmesh.rendering.chunk_state import Stage, add_rows_or_all, rows_at
+from rtmesh.rendering.physical_shading import bsdf_weight
 from rtmesh.sampling.warps import square_to_cosine_hemisphere
 from rtmesh.shading.direct_light import SHADOW_SHORTEN, add_light, light_samples
 
@@ -30,6 +32,10 @@ class LocalShading(Stage):
             local = take_rows(it._emission, srf.mat)
             if srf.tints is not None and srf.tints.emission is not None:
                 local = local * srf.tints.emission
+            if srf.pdf is not None and it.area_lighting is not None:
+                # emissive triangles are area lights: what BSDF-sampled rays see of them is
+                # weighed against light sampling (see rtmesh.rendering.physical_shading)
+                local = local * self._emission_weight(srf)[:, None]
         tint = None if srf.tints is None else srf.tints.diffuse
         if st.unlit:
             # unlit materials show their (textured) colour as is
@@ -51,12 +57,18 @@ class LocalShading(Stage):
                 amb = amb * tint
             if ao is not None:
                 amb = amb * ao[:, None]
+            if srf.tints is not None and srf.tints.metallic_roughness is not None:
+                amb = amb * srf.tints.metallic_roughness[:, 2:3]  # baked occlusion
             local = amb if local is None else local + amb
 
         if st.lights or st.area_lights or st.environment_lighting:
             direct = self.direct_light(srf, depth, chunk)
             if direct is not None:
                 local = direct if local is None else local + direct
+            if st.physical:
+                direct = it.physical_shading.direct(srf, depth, chunk)
+                if direct is not None:
+                    local = direct if local is None else local + direct
         return local
 
     def direct_light(self, srf, depth, chunk):
@@ -101,8 +113,9 @@ class LocalShading(Stage):
                                                  (it.environment_lighting, it.plan.environment_lighting)) if on]
         if sampled:
 
-            def reflectance(wi, lit):
-                """Blinn-Phong factor toward unit directions ``wi``; highlights only where ``lit``."""
+            def reflectance(wi, lit, pdf=None):
+                """Blinn-Phong factor toward unit directions ``wi``; highlights only where ``lit``
+                (the samples' density does not matter: no MIS for Blinn-Phong)."""
                 return surface_reflectance(ns, d, wi, lit, *materials)
 
             pixel, sample_in_pixel = chunk.keys
@@ -115,6 +128,19 @@ class LocalShading(Stage):
                         total = np.zeros((len(srf.mat), 3), order="F")
                     add_rows_or_all(total, rows, light)
         return total
+
+    def _emission_weight(self, srf):
+        """(k,) MIS weight of the emission that the hits' incoming rays see: 1 for camera
+        rays and delta lobes, :func:`rtmesh.rendering.physical_shading.bsdf_weight` against
+        the emitters' light sampling for BSDF-sampled rays."""
+        lighting = self.it.area_lighting
+        weight = np.ones(len(srf.pdf))
+        sampled = np.flatnonzero(np.isfinite(srf.pdf))
+        if len(sampled):
+            light_pdf = lighting.pdf_of_emitters(take_rows(srf.origin, sampled), srf.prim[sampled],
+                                                 take_rows(srf.p, sampled))
+            weight[sampled] = bsdf_weight(srf.pdf[sampled], light_pdf, lighting.samples)
+        return weight
 
     def ambient_occlusion(self, srf, depth, chunk):
         """Fraction of cosine-weighted hemisphere rays that escape within ``ao_distance``."""

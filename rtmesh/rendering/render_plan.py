@@ -39,9 +39,12 @@ class RenderPlan:
         Rays pass through cut-out (alpha mask or blend) surfaces.
     unlit : bool
         Some material shows its colour unlit.
+    physical : bool
+        Some material has the glTF metallic-roughness model
+        (:mod:`rtmesh.rendering.physical_shading`).
     reflection, glossy, refraction : bool
-        Mirror or dielectric rays are spawned (``max_depth > 0``), glossy lobes sampled,
-        refraction rays traced.
+        Mirror, dielectric or BSDF-sampled rays are spawned (``max_depth > 0``), glossy
+        lobes sampled, refraction rays traced.
     absorption : bool
         Some medium absorbs light (Beer-Lambert).
     background : bool
@@ -70,6 +73,7 @@ class RenderPlan:
     normal_maps: bool = False
     cutouts: bool = False
     unlit: bool = False
+    physical: bool = False
     reflection: bool = False
     glossy: bool = False
     refraction: bool = False

@@ -26,6 +26,8 @@ class SurfaceStage(Stage):
         srf.time = None if sample_time is None else sample_time[srf.sample]
         srf.d = take_rows(rays.directions, rows)
         srf.prim = take_rows(hits.prim, rows)
+        srf.pdf = None if rays.pdf is None else take_rows(rays.pdf, rows)
+        srf.origin = None if rays.pdf is None else take_rows(rays.origins, rows)
         view = NO_VECTORS
         if srf.time is not None:
             view = it.motion.directions_to_rest(srf.prim.astype(np.intp), srf.time, srf.d)

@@ -83,6 +83,35 @@ def face_tangents(vertices, faces, uv):
     return np.concatenate([tangent, bitangent], axis=1)
 
 
+def transformed_tangents(tb, transform):
+    """Per-face ``[T, B]`` of :func:`face_tangents` for UVs mapped by a texture's transform.
+
+    A texture with ``transform = [A | b]`` reads ``uv' = A uv + b``, so its image axes lie
+    along ``dp/duv' = [T B] A^-1`` on the surface: a normal map rotated by
+    KHR_texture_transform bends normals in its rotated frame (the frame of the UVs the
+    lookup reads, since rtmesh derives tangents from UVs).  Faces with degenerate UVs (zero
+    bitangent) and a singular ``A`` keep their frame.
+
+    Parameters
+    ----------
+    tb : (k, 6) float
+    transform : (2, 3) float
+
+    Returns
+    -------
+    (k, 6) float64
+    """
+    linear = np.asarray(transform, dtype=np.float64)[:, :2]
+    if abs(np.linalg.det(linear)) < 1e-20:
+        return tb
+    inverse = np.linalg.inv(linear)
+    t, b = tb[:, :3], tb[:, 3:]
+    out = np.concatenate([t * inverse[0, 0] + b * inverse[1, 0], t * inverse[0, 1] + b * inverse[1, 1]], axis=1)
+    degenerate = ~b.any(axis=1)
+    out[degenerate] = tb[degenerate]
+    return out
+
+
 def _colour(texels):
     """(k, 3) colours of texels with any channel count (grey from one or two channels)."""
     return texels[:, :3] if texels.shape[1] >= 3 else np.repeat(texels[:, :1], 3, axis=1)
@@ -94,12 +123,17 @@ class Tints:
     Attributes
     ----------
     diffuse, specular, mirror, emission : (k, 3) float or None
+        ``diffuse`` also multiplies a metallic-roughness material's base colour.
+    metallic_roughness : (k, 3) float or None
+        Roughness, metallic and ambient-occlusion factors of metallic-roughness materials
+        (see :meth:`SurfaceTextures.metallic_roughness`).
     """
 
-    __slots__ = ("diffuse", "specular", "mirror", "emission")
+    __slots__ = ("diffuse", "specular", "mirror", "emission", "metallic_roughness")
 
-    def __init__(self, diffuse=None, specular=None, mirror=None, emission=None):
+    def __init__(self, diffuse=None, specular=None, mirror=None, emission=None, metallic_roughness=None):
         self.diffuse, self.specular, self.mirror, self.emission = diffuse, specular, mirror, emission
+        self.metallic_roughness = metallic_roughness
 
 
 class SurfaceTextures:
@@ -121,13 +155,18 @@ class SurfaceTextures:
 
     def __init__(self, scene):
         self.materials = scene.materials.materials
-        self.metallic = scene.materials.metallic
+        # the Blinn-Phong metal tint of specular and mirror (metallic-roughness materials
+        # use their metallic factor in their own BRDF, see metallic_roughness below)
+        self.metallic = np.where(scene.materials.physical, 0.0, scene.materials.metallic)
+        self.occlusion_strength = scene.materials.occlusion_strength
         self.opacity = scene.materials.opacity
         self.uv = None if scene.uv is None else corner_and_edges(scene.uv, scene.faces)
         self.colours = (None if scene.vertex_colors is None
                         else corner_and_edges(scene.vertex_colors, scene.faces))
         self.textured = np.array([any(getattr(m, f) is not None for f in TEXTURE_FIELDS)
                                   for m in self.materials], dtype=bool)
+        self.physical_textured = any(m.metallic_roughness_texture is not None or m.occlusion_texture is not None
+                                     for m in self.materials)
         self.normal_mapped_any = any(m.normal_texture is not None for m in self.materials)
         self.tangents = None
         if self.normal_mapped_any and scene.uv is not None:
@@ -190,7 +229,46 @@ class SurfaceTextures:
             uv = self.uv_at(prim, u, v) if uv is None else uv
             specular = np.ones((k, 3)) if specular is None else specular
             specular[rows] *= _colour(texture.sample(uv[rows]))
-        return Tints(diffuse, specular, mirror, self.emission_tints(prim, u, v, mat, uv))
+        return Tints(diffuse, specular, mirror, self.emission_tints(prim, u, v, mat, uv),
+                     self.metallic_roughness(prim, u, v, mat, uv) if self.physical_textured else None)
+
+    def metallic_roughness(self, prim, u, v, mat, uv=None):
+        """Per-hit multipliers of metallic-roughness materials' factors from their textures.
+
+        Parameters
+        ----------
+        prim : (k,) intp
+        u, v : (k,) float
+            Barycentrics of the hits.
+        mat : (k,) intp
+        uv : (k, 2) float, optional
+            The hits' texture coordinates, when already looked up.
+
+        Returns
+        -------
+        (k, 3) float64 or None
+            Columns: the roughness factor (the metallic-roughness texture's green channel),
+            the metallic factor (its blue channel) and the occlusion of the ambient term
+            (``1 + strength (red - 1)`` of the occlusion texture); None when no hit's
+            material has either texture (or the scene has no UVs).
+        """
+        if self.uv is None:
+            return None
+        factors = None
+        for field, columns in (("metallic_roughness_texture", (1, 2)), ("occlusion_texture", (0,))):
+            for texture, rows, i in self._groups(mat, field):
+                uv = self.uv_at(prim, u, v) if uv is None else uv
+                texels = texture.sample(uv[rows])
+                if factors is None:
+                    factors = np.ones((len(mat), 3))
+                if len(columns) == 2:
+                    # glTF: roughness in green, metalness in blue (grey images: every channel)
+                    green, blue = (texels[:, min(c, texels.shape[1] - 1)] for c in columns)
+                    factors[rows, 0] = green
+                    factors[rows, 1] = blue
+                else:
+                    factors[rows, 2] = 1.0 + self.occlusion_strength[i] * (texels[:, 0] - 1.0)
+        return factors
 
     @property
     def emission_textured(self):
@@ -260,7 +338,8 @@ class SurfaceTextures:
 
         The map's texel ``t`` in [0, 1]^3 is the normal ``2 t - 1`` in the frame (T, B, N)
         with N the interpolated shading normal and T, B the face's UV derivatives made
-        orthogonal to N (Gram-Schmidt; B keeps the handedness of the UV mapping).  On the
+        orthogonal to N (Gram-Schmidt; B keeps the handedness of the UV mapping), taken
+        through the map's UV transform if it has one (:func:`transformed_tangents`).  On the
         back of a face (``flip`` -1) the frame is mirrored with the normal.
 
         Parameters
@@ -284,6 +363,8 @@ class SurfaceTextures:
             local = 2.0 * texel[:, :3] - 1.0
             n = np.ascontiguousarray(ns[rows])
             tb = self.tangents[prim[rows]]
+            if texture.transformed:
+                tb = transformed_tangents(tb, texture.transform)
             t = tb[:, :3] - n * dot(n, tb[:, :3])[:, None]
             t = normalize(t)
             b = np.cross(n, t)

@@ -38,6 +38,7 @@ class Dim(IntEnum):
     GLOSSY = 1 << 25  # glossy-reflection directions; the rays spawned at depth d use GLOSSY + 2*d
     ALPHA = 1 << 26  # stochastic transparency of cut-outs, keyed by the ray (see rtmesh.geometry.cutouts)
     ENVIRONMENT = 1 << 27  # environment-light directions; the hits at depth d use ENVIRONMENT + 2*d
+    BSDF = 1 << 28  # sampled BSDF directions (pair BSDF + 4*d) and lobe choices (BSDF + 4*d + 2) at depth d
 
 
 def sequence_key(seed, pixel, dimension):

@@ -9,6 +9,8 @@ depth 2" instead of passing the kind, the seed, the spp and a dimension sum arou
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from rtmesh.sampling.patterns import Dim, decorrelated_points, pixel_offsets, stratified_values, uniform
 
 
@@ -59,6 +61,14 @@ class Sampler:
     def glossy(self, pixel, sample, depth):
         """Glossy-lobe directions of the rays spawned at path ``depth``."""
         return decorrelated_points(self.kind, self.seed, pixel, sample, self.spp, Dim.GLOSSY + 2 * depth)
+
+    def bsdf(self, pixel, sample, depth):
+        """(n, 3) numbers for the BSDF-sampled rays spawned at path ``depth``: column 0
+        chooses the lobe, columns 1-2 warp the direction (see
+        :func:`rtmesh.materials.metallic_roughness.sample`)."""
+        direction = decorrelated_points(self.kind, self.seed, pixel, sample, self.spp, Dim.BSDF + 4 * depth)
+        lobe = stratified_values(self.kind, self.seed, pixel, sample, self.spp, Dim.BSDF + 4 * depth + 2)
+        return np.column_stack([lobe, direction])
 
     def area_light(self, pixel, sample, depth, light_index, light_count, ray, rays):
         """Points on area light ``light_index`` of ``light_count`` for sample ``ray`` of

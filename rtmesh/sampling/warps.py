@@ -9,6 +9,8 @@ import math
 
 import numpy as np
 
+from rtmesh.core.compiled import kernel, row
+
 from rtmesh.core.vecmath import dot, normalize
 
 
@@ -227,10 +229,26 @@ def latlong_to_direction(uv, rotation=0.0):
     -------
     (k, 3) float64
     """
-    azimuth = (uv[:, 0] - 0.5) * 2.0 * math.pi
-    elevation = (uv[:, 1] - 0.5) * math.pi
-    cos_el = np.cos(elevation)
-    xr, y, zr = cos_el * np.cos(azimuth), np.sin(elevation), cos_el * np.sin(azimuth)
     angle = math.radians(rotation)
-    c, s = math.cos(angle), math.sin(angle)
-    return np.stack([c * xr + s * zr, y, -s * xr + c * zr], axis=1)
+    return _latlong_directions(np.ascontiguousarray(uv, dtype=np.float64), math.cos(angle), math.sin(angle))
+
+
+@row
+def latlong_direction(u, v, cos_rotation, sin_rotation):
+    """The unit direction ``(x, y, z)`` of one image point ``(u, v)`` of a lat-long image
+    turned about +Y (see :func:`latlong_to_direction`), and ``cos`` of its elevation
+    (``sin(theta)`` from the pole, the Jacobian's factor)."""
+    azimuth = (u - 0.5) * 2.0 * math.pi
+    elevation = (v - 0.5) * math.pi
+    cos_el = math.cos(elevation)
+    xr, zr = cos_el * math.cos(azimuth), cos_el * math.sin(azimuth)
+    return cos_rotation * xr + sin_rotation * zr, math.sin(elevation), -sin_rotation * xr + cos_rotation * zr, cos_el
+
+
+@kernel
+def _latlong_directions(uv, cos_rotation, sin_rotation):
+    """:func:`latlong_direction` of every row of ``uv``, (k, 3)."""
+    out = np.empty((uv.shape[0], 3))
+    for i in range(uv.shape[0]):
+        out[i, 0], out[i, 1], out[i, 2], _ = latlong_direction(uv[i, 0], uv[i, 1], cos_rotation, sin_rotation)
+    return out

@@ -42,13 +42,15 @@ class SolidBackground:
 
     Attributes
     ----------
-    lighting : bool
+    lighting : bool or None
         Whether the background also lights the scene (see
-        :mod:`rtmesh.lights.environment`); every background has it, False unless set.
+        :mod:`rtmesh.lights.environment`); every background has it.  None (unset): it
+        lights scenes with physically based (glTF metallic-roughness) materials and no
+        others.
     """
 
     transparent = False
-    lighting = False
+    lighting = None
 
     def __init__(self, colour):
         self.colour = np.asarray(colour, dtype=np.float64).reshape(3)
@@ -88,7 +90,7 @@ class GradientBackground:
     """
 
     transparent = False
-    lighting = False  # see SolidBackground
+    lighting = None  # see SolidBackground
 
     def __init__(self, top, bottom):
         self.top = np.asarray(top, dtype=np.float64).reshape(3)
@@ -120,7 +122,7 @@ class EnvironmentBackground:
     """
 
     transparent = False
-    lighting = False  # see SolidBackground
+    lighting = None  # see SolidBackground
 
     def __init__(self, pixels, rotation=0.0, intensity=1.0, name="environment"):
         pixels = np.asarray(pixels, dtype=np.float64)

@@ -11,6 +11,7 @@ from rtmesh.geometry import build_kernels
 from rtmesh.lights.point_lights import DirectionalLight
 from rtmesh.materials.table import Material, MaterialTable
 from rtmesh.scene.camera import Camera, frame_bounds, framing_bounds
+from rtmesh.scene.studio import studio_background
 
 log = logging.getLogger(__name__)
 
@@ -137,7 +138,9 @@ class Scene:
         materials : list of Material, optional
             Defaults to a single grey material.
         lights : list, optional
-            Defaults to :func:`default_lights` (a three-light rig).
+            Defaults to :func:`default_lights` (a three-light rig), or, for materials of
+            the metallic-roughness model with no ``background`` given, to no lights and the
+            studio environment (:func:`rtmesh.scene.studio.studio_background`).
         camera : Camera, optional
             Defaults to one framing the bounds (:func:`rtmesh.scene.camera.frame_bounds`).
         ambient : (3,) float, optional
@@ -256,7 +259,10 @@ class Scene:
         if camera is None:
             scene.camera = frame_bounds(bounds, aspect=aspect)
         if lights is None:
-            scene.lights = default_lights(scene.camera)
+            if scene.materials.any_physical and background is None:
+                scene.lights, scene.background = [], studio_background(scene.camera)
+            else:
+                scene.lights = default_lights(scene.camera)
         return scene
 
 
