@@ -276,8 +276,8 @@ def test_face_tables_are_the_corner_tables_row_by_row():
     expected = np.empty((len(scene.faces), 12))
     expected[:, :9] = integrator.accel.triangles
     expected[:, 9:] = scene.face_normals
-    assert_identical([integrator._faces], [expected])
-    assert integrator._faces.flags.c_contiguous
+    assert_identical([integrator.tables.faces], [expected])
+    assert integrator.tables.faces.flags.c_contiguous
     expected = np.ascontiguousarray(corner_table(scene.vertex_normals, scene.faces))
-    assert_identical([integrator._vertex_normals], [expected])
-    assert integrator._vertex_normals.flags.c_contiguous
+    assert_identical([integrator.tables.vertex_normals], [expected])
+    assert integrator.tables.vertex_normals.flags.c_contiguous

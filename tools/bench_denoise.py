@@ -6,9 +6,10 @@ points of a glTF asset under the studio environment.
 (default asset: Duck.glb of ../shared/assets/real).  Renders a reference (``--reference-spp``,
 its own seed, cached in /tmp by asset, size and spp), then, ``--runs`` times each and
 alternating, ``--denoised-spp`` samples with ``denoise`` on (Open Image Denoise through the
-``denoise`` extra, guided by the albedo and normal passes) and ``--plain-spp`` samples
-without, and prints the median wall time and the RMSE of each against the reference (linear
-radiance over every pixel and channel; also relative to the reference's RMS).
+``denoise`` extra, guided by the albedo and normal passes) and each of the ``--plain-spp``
+sample counts without, and prints the median wall time and the RMSE of each against the
+reference (linear radiance over every pixel and channel; also relative to the reference's
+RMS).
 
 Denoising is biased: its error does not go to zero with more samples, and the render's own
 error estimate describes the noisy image it started from; the RMSE against the reference is
@@ -55,7 +56,8 @@ def main(argv=None):
     parser.add_argument("--size", type=int, default=160)
     parser.add_argument("--reference-spp", type=int, default=4096)
     parser.add_argument("--denoised-spp", type=int, default=16)
-    parser.add_argument("--plain-spp", type=int, default=64)
+    parser.add_argument("--plain-spp", default="64",
+                        help="comma-separated sample counts of the renders without denoising (e.g. 16,32,64)")
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument("--threads", type=int, default=2)
     args = parser.parse_args(argv)
@@ -65,8 +67,9 @@ def main(argv=None):
     ref = reference(scene, dataclasses.replace(settings, spp=args.reference_spp),
                     f"/tmp/rtmesh-denoise-ref-{name}-{args.size}-{args.reference_spp}.npy")
     scale = float(np.sqrt(np.mean(ref.astype(np.float64) ** 2)))
-    cases = {"denoised": dataclasses.replace(settings, spp=args.denoised_spp, denoise=True),
-             "plain": dataclasses.replace(settings, spp=args.plain_spp)}
+    cases = {"denoised": dataclasses.replace(settings, spp=args.denoised_spp, denoise=True)}
+    for spp in (int(v) for v in args.plain_spp.split(",")):
+        cases[f"plain {spp}"] = dataclasses.replace(settings, spp=spp)
     times = {k: [] for k in cases}
     errors = {}
     render(scene, cases["denoised"])  # compile and load the denoiser before timing

@@ -73,34 +73,34 @@ class DirectStage:
         self._queries = (library.intersect16, library.occluded16, accel._shared.handle,
                          ep.RTC_RAY_QUERY_FLAG_COHERENT)
         camera, s = it.camera, it.settings
-        forward, right, up = it._camera_frame
+        forward, right, up = it.camera_frame
         self._camera = (s.width, camera.image_plane(s.width, s.height),
                         np.ascontiguousarray(camera.position, dtype=np.float64), forward, right, up)
         st = it.plan
-        self._surfaces = (it._faces, it._vertex_normals, it._smooth, it._material_id,
+        self._surfaces = (it.tables.faces, it.tables.vertex_normals, it.tables.smooth, it.tables.material_id,
                           st.smooth_normals and not st.normal_maps)
         # emission + ambient per material, as the general path adds them per hit
         base = np.zeros((len(m.diffuse), 3))
         if st.emission:
             base = np.ascontiguousarray(m.emission, dtype=np.float64)
         if st.ambient:
-            ambient = np.ascontiguousarray(it._ambient_light)
+            ambient = np.ascontiguousarray(it.tables.ambient_light)
             base = ambient if not st.emission else base + ambient
         self._base = np.ascontiguousarray(base)
         rows = [light.kernel_row() for light in it.lights] if st.lights else []
         self._lights = np.array(rows, dtype=np.float64).reshape(len(rows), ROW_WORDS)
-        self._materials = (np.ascontiguousarray(it._shaded), np.ascontiguousarray(it._diffuse),
-                           np.ascontiguousarray(it._specular), it._highlight_exponent, it._highlight_from)
+        self._materials = (np.ascontiguousarray(it.tables.shaded), np.ascontiguousarray(it.tables.diffuse),
+                           np.ascontiguousarray(it.tables.specular), it.tables.highlight_exponent, it.tables.highlight_from)
         # With highlights, some samples wait for NumPy's pow (finish_highlights), and then all
         # of a chunk's pixels are added to the film after them in one ordered pass.  Adding
         # the others as their blocks finish reads many lines of the film from memory twice
         # (at 1 spp on bench_core's scene, thread CPU per frame 2.9 % above main's separate
         # pass, against 1.9 % below it this way).  Without highlights, pixels are added as
         # their blocks finish, while their samples are in the cache.
-        self._film_late = bool((it._shaded & (it._highlight_exponent >= 0.0)).any())
+        self._film_late = bool((it.tables.shaded & (it.tables.highlight_exponent >= 0.0)).any())
         background = it.background
         self._background = (np.ascontiguousarray(background.colour) if st.background else np.zeros(3))
-        self._offset_scale = it._offset_scale32
+        self._offset_scale = it.tables.offset_scale32
         self._sampler = it.sampler
         # the sample positions are formed in the kernel, except for the Sobol sampler's
         self._pixel_sampler = PixelSampler.for_settings(s)

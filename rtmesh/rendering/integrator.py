@@ -37,9 +37,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from rtmesh.core import runtime
-from rtmesh.core.rays import RayBatch, component_major, repeated_row, take_rows
+from rtmesh.core.rays import RayBatch, repeated_row, take_rows
 from rtmesh.geometry.accel import Accel
-from rtmesh.geometry.build_kernels import corner_rows, face_rows
 from rtmesh.geometry.cutouts import CutoutAccel
 from rtmesh.geometry.motion import MotionAccel, blurs, object_motions, scene_at_time, swept_bounds
 from rtmesh.io import denoising
@@ -57,12 +56,12 @@ from rtmesh.rendering.physical_shading import PhysicalShading, bsdf_weight
 from rtmesh.rendering.render_plan import RenderPlan
 from rtmesh.rendering.scheduler import pixel_chunks, run_on_threads, sample_indices
 from rtmesh.rendering.secondary_rays import SecondaryRays
+from rtmesh.rendering.shading_tables import ShadingTables
 from rtmesh.rendering.stats import RenderStats
 from rtmesh.rendering.surface_stage import SurfaceStage
 from rtmesh.rendering.surface_textures import SurfaceTextures
 from rtmesh.sampling.sampler import Sampler
 from rtmesh.scene.background import as_background
-from rtmesh.shading.direct_light import highlight_thresholds
 
 log = logging.getLogger(__name__)
 
@@ -179,26 +178,8 @@ class Integrator:
         self._stochastic_coverage = bool((m.alpha_mode == ALPHA_MODES.index("blend")).any())
         # the AO pass alone asks for 16 rays per camera hit unless ao_samples says otherwise
         self.ao_samples = settings.ao_samples or (16 if "ao" in settings.passes else 0)
-        # per-material flags, looked up per hit
-        # (Blinn-Phong materials; metallic-roughness ones are shaded by their own stage)
-        self._shaded = ((m.diffuse > 0).any(axis=1) | (m.specular > 0).any(axis=1)) & ~m.unlit & ~m.physical
-        self._all_shaded = bool(self._shaded.all())  # then no per-hit lookup is needed
-        self._has_specular = (m.specular > 0).any(axis=1)
-        # per-material colours, component-major so that gathering them per hit keeps the
-        # fast layout; the ambient term is the product of two constants, formed once
-        self._diffuse = component_major(m.diffuse.T)
-        self._specular = component_major(m.specular.T)
-        self._emission = component_major(m.emission.T)
-        self._ambient_light = component_major((m.ambient * scene.ambient).T)
-        # the highlight's exponent per material; negative: no highlight
-        self._highlight_exponent = np.where(self._has_specular, m.shininess, -1.0)
-        self._highlight_from = highlight_thresholds(self._highlight_exponent)
-        self._offset_scale32 = np.float32(self.offset_scale)
-        self._faces, self._vertex_normals = self._face_tables()
-        self._smooth = (np.zeros(len(scene.faces), dtype=bool) if scene.smooth is None
-                        else np.ascontiguousarray(scene.smooth, dtype=bool))
-        # gathers with int32 indices are ~10x slower in NumPy than with intp ones
-        self._material_id = scene.material_id.astype(np.intp)
+        # what the stages read per hit (per-material colours and flags, per-face rows)
+        self.tables = ShadingTables.build(scene, self.accel.triangles, self.offset_scale)
         self._set_view()
 
     def _set_background(self, background):
@@ -258,7 +239,7 @@ class Integrator:
         scene, settings, m = self.scene, self.settings, self.scene.materials
         self.camera = _translated(scene.camera, self.shift)
         # formed once (and failing early on a degenerate camera), not for every chunk
-        self._camera_frame = self.camera.frame()
+        self.camera_frame = self.camera.frame()
         lights = [_translated(light, self.shift) for light in scene.lights if not light.is_black]
         self.lights = [light for light in lights if not is_area_light(light)]
         area_lights = [light for light in lights if is_area_light(light)]
@@ -337,27 +318,6 @@ class Integrator:
         self._camera_medium = self.media.camera_stack(trace, self.camera.position, self.offset_scale,
                                                       to_rest)
         self._camera_absorbs = bool((self.media.absorption[self._camera_medium[0]] > 0).any())
-
-    def _face_tables(self):
-        """What shading reads per hit triangle, packed so that one row holds it.
-
-        Returns
-        -------
-        faces : (F, 12) float64
-            Row-major (the surface kernel reads whole rows): the triangle
-            ``[v0, v1 - v0, v2 - v0]`` as Embree saw it (:attr:`Accel.triangles`) and the
-            unit geometric normal.
-        vertex_normals : (F, 9) float64
-            Row-major ``[n0, n1 - n0, n2 - n0]`` of each face's vertex normals; ``(0, 9)``
-            without smooth shading.
-        """
-        sc = self.scene
-        # compiled passes writing the rows directly (filling the columns of a row-major
-        # table from component-major ones took NumPy ~0.5 s on a million faces)
-        faces = face_rows(self.accel.triangles, sc.face_normals)
-        if sc.vertex_normals is None:  # no smooth shading (plan.smooth_normals)
-            return faces, np.zeros((0, 9))
-        return faces, corner_rows(sc.vertex_normals, sc.faces)
 
     # ---------------------------------------------------------------- whole image
     def render(self, progress=None, pool=None):
@@ -546,7 +506,7 @@ class Integrator:
             u = self.sampler.time(pixel, sample_in_pixel)
             sample_time = t_open + (t_close - t_open) * u
         origins, directions = self.camera.generate_rays(in_pixel, s.width, s.height, lens_uv, pixel,
-                                                        self._camera_frame)
+                                                        self.camera_frame)
         # camera rays have unit throughput: a read-only repeated row costs nothing; _shade
         # does not multiply by it at depth 0 and absorbs only on rows in an absorbing
         # medium (inside one, camera rays lose light on the way: then a real array)

@@ -29,7 +29,7 @@ class LocalShading(Stage):
         st = it.plan
         local = None
         if st.emission:
-            local = take_rows(it._emission, srf.mat)
+            local = take_rows(it.tables.emission, srf.mat)
             if srf.tints is not None and srf.tints.emission is not None:
                 local = local * srf.tints.emission
             if srf.pdf is not None and it.area_lighting is not None:
@@ -41,7 +41,7 @@ class LocalShading(Stage):
             # unlit materials show their (textured) colour as is
             unlit = it.scene.materials.unlit.take(srf.mat)
             if unlit.any():
-                shown = np.where(unlit[:, None], take_rows(it._diffuse, srf.mat), 0.0)
+                shown = np.where(unlit[:, None], take_rows(it.tables.diffuse, srf.mat), 0.0)
                 shown = shown if tint is None else shown * tint
                 local = shown if local is None else local + shown
 
@@ -52,7 +52,7 @@ class LocalShading(Stage):
                 chunk.passes.write("ao", srf.sample, ao)
             chunk.clock.lap("ao")
         if st.ambient:
-            amb = take_rows(it._ambient_light, srf.mat)
+            amb = take_rows(it.tables.ambient_light, srf.mat)
             if tint is not None:
                 amb = amb * tint
             if ao is not None:
@@ -82,21 +82,21 @@ class LocalShading(Stage):
             Component-major; None when no hit has a material that reflects light.
         """
         it = self.it
-        rows = None if it._all_shaded else np.flatnonzero(it._shaded[srf.mat])
+        rows = None if it.tables.all_shaded else np.flatnonzero(it.tables.shaded[srf.mat])
         if rows is not None and not len(rows):
             return None
         tints = srf.tints
         tint_d, tint_s = (NO_VECTORS if t is None else take_rows(t, rows)
                           for t in ((None, None) if tints is None else (tints.diffuse, tints.specular)))
-        materials = (take_rows(srf.mat, rows), it._diffuse, tint_d, it._specular, tint_s,
-                     it._highlight_exponent)
+        materials = (take_rows(srf.mat, rows), it.tables.diffuse, tint_d, it.tables.specular, tint_s,
+                     it.tables.highlight_exponent)
         p, ng, ns, d = (take_rows(a, rows) for a in (srf.p, srf.ng, srf.ns, srf.d))
         total = None
         for light in it.lights:
             wi, distance, incident = light.illuminate(p)
             (lit, origins, directions, t_max, cos_i, incident, highlight_rows, highlight,
              power_exponent) = light_samples(wi, distance, incident, p, ng, ns, d, materials[0],
-                                             it._highlight_exponent, it._highlight_from, it._offset_scale32,
+                                             it.tables.highlight_exponent, it.tables.highlight_from, it.tables.offset_scale32,
                                              SHADOW_SHORTEN)
             if not len(lit):
                 continue

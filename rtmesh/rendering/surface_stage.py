@@ -36,7 +36,7 @@ class SurfaceStage(Stage):
         # normal maps, applied below, change the normals after it
         srf.p, srf.ng, srf.ns, srf.front, srf.mat = surface_records(
             hits.prim, hits.u, hits.v, np.arange(len(hits)) if rows is None else rows, rays.directions,
-            view, it._faces, it._vertex_normals, it._smooth, it._material_id,
+            view, it.tables.faces, it.tables.vertex_normals, it.tables.smooth, it.tables.material_id,
             it.plan.smooth_normals and not normal_maps)
         srf.tints = None
         if it.plan.textures:
