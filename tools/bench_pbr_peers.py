@@ -148,14 +148,13 @@ import rtmesh  # noqa: E402
 from rtmesh.geometry.accel import Accel  # noqa: E402
 from rtmesh.io.colour import linear_to_srgb, tonemap  # noqa: E402
 from rtmesh.io.images import read_image  # noqa: E402
+from rtmesh.scene.studio import STUDIO_PATH  # noqa: E402
 
 SECTION = "glTF metallic-roughness against Mitsuba 3"
 TOOLS = Path(__file__).resolve().parent
 ROOT = TOOLS.parent
 WORKER = TOOLS / "peers_mitsuba_pbr.py"
-STUDIO = ROOT / "rtmesh" / "scene" / "studio.exr"
-if not STUDIO.exists():  # where it was before the metallic-roughness model made it the default rig
-    STUDIO = ROOT / "assets" / "environments" / "studio.exr"
+STUDIO = Path(STUDIO_PATH)
 DUCK = ROOT.parent / "shared" / "assets" / "real" / "Duck.glb"
 if not DUCK.exists():
     DUCK = Path("/work/shared/assets/real/Duck.glb")
