@@ -77,7 +77,7 @@ def bsdf_weight(bsdf_pdf, light_pdf, samples):
     Returns
     -------
     (k,) float64
-        ``p_b^2 / (p_b^2 + (N p_e)^2)``.
+        ``p_b^2 / (p_b^2 + (N p_l)^2)``.
     """
     light = samples * light_pdf
     # rows with a zero or infinite density on either side are settled by the wheres
