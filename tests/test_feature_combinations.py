@@ -73,7 +73,7 @@ textures = st.fixed_dictionaries({"seed": st.integers(0, 2**16), "size": st.samp
                                                     st.tuples(st.sampled_from(WRAPS),
                                                               st.sampled_from(WRAPS)))})
 MATERIAL_KINDS = ("diffuse", "specular", "mirror", "glossy", "glass", "absorbing_glass",
-                  "emissive", "unlit")
+                  "emissive", "unlit", "physical", "physical_glass")
 
 
 @st.composite
@@ -102,6 +102,18 @@ def materials(draw, kinds=MATERIAL_KINDS, cutouts=True):
             m["emission_texture"] = draw(textures)
     if kind == "unlit":
         m["unlit"] = True
+    if kind in ("physical", "physical_glass"):
+        # glTF's metallic-roughness model (path traced, MIS against the lights)
+        m["model"] = "metallic_roughness"
+        m["base_color"] = draw(colours)
+        m["metallic"] = draw(st.sampled_from([0.0, 0.5, 1.0]))
+        m["perceptual_roughness"] = draw(st.sampled_from([0.0, 0.3, 1.0]))
+        if draw(st.booleans()):
+            m["metallic_roughness_texture"] = draw(textures)
+    if kind == "physical_glass":
+        m["metallic"], m["diffuse"] = 0.0, 0.0
+        m["transmission_factor"], m["transmission"] = 1.0, 1.0
+        m["ior"] = draw(st.sampled_from([1.33, 1.5]))
     if draw(st.booleans()):
         m["diffuse_texture"] = draw(textures)
     if kind == "specular" and draw(st.booleans()):
@@ -248,9 +260,11 @@ def make_material(m, name):
     """A :class:`Material` from a :func:`materials` description."""
     options = {key: m[key] for key in ("diffuse", "specular", "shininess", "mirror", "metallic",
                                        "roughness", "transmission", "ior", "absorption",
-                                       "emission", "unlit", "alpha_mode", "opacity", "alpha_cutoff")
+                                       "emission", "unlit", "alpha_mode", "opacity", "alpha_cutoff",
+                                       "model", "base_color", "perceptual_roughness", "transmission_factor")
                if key in m}
-    for key in ("diffuse_texture", "specular_texture", "emission_texture", "opacity_texture"):
+    for key in ("diffuse_texture", "specular_texture", "emission_texture", "opacity_texture",
+                "metallic_roughness_texture"):
         if key in m:
             options[key] = make_texture(m[key], channels=4 if key == "diffuse_texture" else 3)
     if "normal_texture" in m:
