@@ -301,6 +301,7 @@ class MeshLight:
         self.tint = tint
         e1, e2 = self.triangles[:, 3:6], self.triangles[:, 6:9]
         face_area = 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
+        self._face_area = face_area
         self.area = float(face_area.sum())
         # a sphere around each face (centroid, farthest corner): its solid angle bounds the
         # face's, so faces far from a point are known to be small without the exact formula
@@ -380,14 +381,12 @@ class MeshLight:
             Points on those faces.
         """
         chance = self._power[faces] / self._total
-        triangles = take_rows(self.triangles, faces)
         to_point = points - origins
         d2 = dot(to_point, to_point)
         cos = np.abs(dot(to_point, take_rows(self.normals, faces))) / np.sqrt(np.maximum(d2, 1e-300))
-        e1, e2 = triangles[:, 3:6], triangles[:, 6:9]
-        area = 0.5 * np.sqrt(dot(np.cross(e1, e2), np.cross(e1, e2)))
-        pdf = np.divide(chance * d2, cos * area, out=np.full(len(faces), np.inf), where=cos > 0.0)
-        omega = self._solid_angles(origins, faces, triangles)
+        pdf = np.divide(chance * d2, cos * self._face_area[faces], out=np.full(len(faces), np.inf),
+                        where=cos > 0.0)
+        omega = self._solid_angles(origins, faces, take_rows(self.triangles, faces))
         wide = omega > SOLID_ANGLE_SAMPLING_FROM
         pdf[wide] = chance[wide] / omega[wide]
         return pdf
