@@ -74,10 +74,13 @@ class SurfaceRecords:
     :mod:`rtmesh.geometry.motion`).  ``tints`` (:class:`rtmesh.rendering.surface_textures.Tints` or None) holds the
     texture and vertex-colour multipliers of the material colours.  ``pdf`` ((k,) float or
     None) is the BSDF density of the incoming rays (see :attr:`rtmesh.core.rays.RayBatch.pdf`),
-    ``origin`` ((k, 3) or None, set with ``pdf``) where they started.
+    ``origin`` ((k, 3) or None, set with ``pdf``) where they started.  ``physical`` is the
+    metallic-roughness stage's rows and BRDF parameters of these hits, formed on first use
+    (:meth:`rtmesh.rendering.physical_shading.PhysicalShading.hits`; None until then).
     """
 
-    __slots__ = ("p", "ng", "ns", "d", "front", "mat", "prim", "sample", "time", "tints", "pdf", "origin")
+    __slots__ = ("p", "ng", "ns", "d", "front", "mat", "prim", "sample", "time", "tints", "pdf", "origin",
+                 "physical")
 
 
 def rows_at(time, *row_sets):

@@ -100,13 +100,18 @@ class PhysicalShading(Stage):
         self.roughness = m.perceptual_roughness
         self.transmission = m.transmission_factor
 
-    def rows(self, srf):
-        """(j,) intp: the hits with a metallic-roughness material."""
-        return np.flatnonzero(self.physical[srf.mat])
+    def hits(self, srf):
+        """``(rows, (wo, ns, base, metallic, alpha, transmission))`` of a depth level's
+        metallic-roughness hits (see the module notes); ``rows`` empty (and no parameters)
+        when there are none.  Formed once per depth level and kept on ``srf`` for the
+        bounce after the direct light."""
+        if srf.physical is None:
+            rows = np.flatnonzero(self.physical[srf.mat])
+            srf.physical = (rows, self._parameters(srf, rows) if len(rows) else None)
+        return srf.physical
 
-    def parameters(self, srf, rows):
-        """``(wo, ns, base, metallic, alpha, transmission)`` of the hits ``rows`` (see the
-        module notes)."""
+    def _parameters(self, srf, rows):
+        """The BRDF parameters of the hits ``rows``."""
         mat = srf.mat[rows]
         base = self.base_color[mat]
         metallic = self.metallic[mat]
@@ -134,10 +139,10 @@ class PhysicalShading(Stage):
             metallic-roughness hits or no light reached them.
         """
         it = self.it
-        rows = self.rows(srf)
+        rows, parameters = self.hits(srf)
         if not len(rows):
             return None
-        wo, ns, base, metallic, alpha, transmission = self.parameters(srf, rows)
+        wo, ns, base, metallic, alpha, transmission = parameters
         p, ng = take_rows(srf.p, rows), take_rows(srf.ng, rows)
         time = rows_at(srf.time, rows)
         total = None
@@ -210,10 +215,10 @@ class PhysicalShading(Stage):
             weight is 0 are dropped.
         """
         it = self.it
-        rows = self.rows(srf)
+        rows, parameters = self.hits(srf)
         if not len(rows):
             return RayBatch.empty()
-        wo, ns, base, metallic, alpha, transmission = self.parameters(srf, rows)
+        wo, ns, base, metallic, alpha, transmission = parameters
         pixel, sample_in_pixel = chunk.keys
         sample = srf.sample[rows]
         u = it.sampler.bsdf(pixel[sample], sample_in_pixel[sample], depth)

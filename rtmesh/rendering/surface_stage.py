@@ -28,6 +28,7 @@ class SurfaceStage(Stage):
         srf.prim = take_rows(hits.prim, rows)
         srf.pdf = None if rays.pdf is None else take_rows(rays.pdf, rows)
         srf.origin = None if rays.pdf is None else take_rows(rays.origins, rows)
+        srf.physical = None
         view = NO_VECTORS
         if srf.time is not None:
             view = it.motion.directions_to_rest(srf.prim.astype(np.intp), srf.time, srf.d)
