@@ -35,14 +35,21 @@ def sky(width=WIDTH, height=HEIGHT):
     return colour.astype(np.float32)
 
 
-def main(path=os.path.join(os.path.dirname(__file__), "..", "assets", "environments", "sky.exr")):
-    image = sky()
-    spec = oiio.ImageSpec(WIDTH, HEIGHT, 3, oiio.HALF)
+def write_environment(path, image):
+    """Write a linear (h, w, 3) environment image as a half-float, zip-compressed EXR (half's
+    11-bit mantissa is ample for light, and keeps the file small); exits with one line if the
+    file cannot be written."""
+    spec = oiio.ImageSpec(image.shape[1], image.shape[0], 3, oiio.HALF)
     spec.attribute("compression", "zip")
     out = oiio.ImageOutput.create(path)
     if out is None or not out.open(path, spec) or not out.write_image(image):
         raise SystemExit(f"cannot write {path}: {oiio.geterror()}")
     out.close()
+
+
+def main(path=os.path.join(os.path.dirname(__file__), "..", "assets", "environments", "sky.exr")):
+    image = sky()
+    write_environment(path, image)
     print(f"{path}: {WIDTH}x{HEIGHT}, max {image.max():.1f}")
 
 

@@ -22,9 +22,10 @@ import os
 import sys
 
 import numpy as np
-import OpenImageIO as oiio
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
+from make_sky import write_environment  # noqa: E402
+
 from rtmesh.scene.background import latlong_directions  # noqa: E402
 
 WIDTH, HEIGHT = 256, 128
@@ -64,13 +65,7 @@ def studio(width=WIDTH, height=HEIGHT):
 
 def main(path=os.path.join(os.path.dirname(__file__), "..", "rtmesh", "scene", "studio.exr")):
     image = studio()
-    spec = oiio.ImageSpec(WIDTH, HEIGHT, 3, oiio.HALF)
-    spec.attribute("compression", "zip")
-    out = oiio.ImageOutput.create(path)
-    if out is None or not out.open(path, spec):
-        raise SystemExit(f"cannot write {path}: {oiio.geterror()}")
-    out.write_image(image)
-    out.close()
+    write_environment(path, image)
     print(f"wrote {path}: {WIDTH}x{HEIGHT}, radiance {image.min():.2f} .. {image.max():.2f}")
 
 

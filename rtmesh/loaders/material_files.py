@@ -473,7 +473,8 @@ def _extension_number(ext, extension, key, default, name, low, high, invalid_bel
     """``ext[extension][key]`` as a float clipped to [low, high]; ``default`` (with a warning
     naming the material, extension and key) when it is not a finite number, or is below
     ``invalid_below``."""
-    value = (ext.get(extension) or {}).get(key, default) if isinstance(ext.get(extension, {}), dict) else default
+    table = ext.get(extension)
+    value = table.get(key, default) if isinstance(table, dict) else default
     try:
         number = float(value)
     except (TypeError, ValueError):
