@@ -19,8 +19,8 @@ from rtmesh.geometry import embree_packets as ep
 from rtmesh.geometry.float32_rays import F32_MAX, offset_origin
 from rtmesh.lights.point_light_rows import illuminate_row
 from rtmesh.materials.blinn_phong import highlight_cosine, shade_row
-from rtmesh.sampling.pixel_samples import pixel_position
-from rtmesh.scene.camera_rays import image_plane_xy, pinhole_xyz
+from rtmesh.sampling.pixel_samples import RANDOM, REGULAR, sequence_uniform
+from rtmesh.scene.camera_rays import pinhole_xyz
 from rtmesh.shading.direct_light import light_reaches
 from rtmesh.shading.surfaces import surface_from_rows_inlined
 
@@ -29,41 +29,80 @@ LANES = ep.LANES
 # loops long enough for AVX-512, while the block's records stay in L1
 PACKETS = 4
 BLOCK = PACKETS * LANES
+_F32_ZERO = np.float32(0.0)
 
 
 @row
-def camera_block(film_xy, sampler, keys, corners, size, spp, pixel, sample, start, count, width, camera, xy, d):
-    """Writes into ``d`` (3, BLOCK) the unit directions of the camera rays of samples
-    ``start .. start + count - 1`` (lanes past the end repeat sample ``start``), as
-    :func:`rtmesh.scene.camera_rays.camera_rays` makes them for a pinhole; positions from
-    ``film_xy``, or formed here when it is empty.
-    ``pixel`` and ``sample`` (BLOCK,) are the block's own (sample ``start + b`` is entry ``b``).
+def camera_block(film_xy, code, size, start, count, sequence, sample, corner, column, line, camera, xy, d, rays):
+    """Writes into ``d`` (3, BLOCK) and into the block's ``RTCRayHit16`` packets ``rays``
+    the unit directions of the camera rays of samples ``start .. start + count - 1``
+    (lanes past the end repeat sample ``start``), as
+    :func:`rtmesh.scene.camera_rays.camera_rays` makes them for a pinhole.
+
+    The positions in the pixels come from ``film_xy`` or, when it is empty, from the
+    sampler (``code``, :data:`rtmesh.sampling.pixel_samples.SAMPLER_CODES`), as
+    :func:`rtmesh.sampling.pixel_samples.pixel_position` forms them, from what the caller
+    formed once per pixel (per sample of the block, ``b`` for sample ``start + b``):
+
+    * ``sequence`` (2, BLOCK) uint64: the pixel's sequence keys of the two pixel dimensions
+      (:func:`rtmesh.sampling.pixel_samples.pixel_sequence`);
+    * ``sample`` (BLOCK,) uint64: the sample's index;
+    * ``corner`` (2, BLOCK): its stratum's row of the sampler's ``corners``;
+    * ``column``, ``line`` (BLOCK,): the pixel's column and row as floats.
 
     ``camera`` is the image-plane map and the camera frame as a tuple of 13 numbers
     (:func:`camera_numbers`): numba takes and releases a reference to every array argument
-    of a compiled call (atomic instructions, shared between the render threads), and this
-    helper is called once a block.  The positions (hashing, scalar) and the directions
-    (vectorised: the loop has no branch and its output the block's constant size, see
-    :func:`light_block`) are separate loops.  ``xy`` (2, BLOCK), scratch for the
-    positions, and ``d`` are made once by the caller: an allocation a block cost 2-4 % of a
-    frame each, and the directions loop, which reads only ``xy`` and numbers, still
-    vectorises with ``d`` passed in (measured; the light step's loop does not, see
-    :func:`light_block`).
+    of a compiled call (atomic instructions, shared between the render threads).  ``xy``
+    (2, BLOCK) is scratch.  Each loop is branch-free over the block's arrays, so LLVM
+    vectorises the hashing, the directions and the packet stores (with the pixel index
+    and the stratum formed per sample, and the packets' lanes written one by one, this
+    step took about 45 cycles a sample; now about 20).
     """
     ax, bx, ay, by, fx, fy, fz, rx, ry, rz, ux, uy, uz = camera
     if len(film_xy):
         for b in range(count):
             xy[0, b], xy[1, b] = film_xy[start + b, 0], film_xy[start + b, 1]
-    else:
+    elif code == RANDOM:
         for b in range(count):
-            xy[0, b], xy[1, b] = pixel_position(sampler, keys, corners, size, spp, pixel[b], sample[b])
-    inverse_width = 1.0 / width
-    for b in range(count):
-        sx, sy = image_plane_xy(xy[0, b], xy[1, b], pixel[b], width, inverse_width, ax, bx, ay, by)
-        d[0, b], d[1, b], d[2, b] = pinhole_xyz(sx, sy, fx, fy, fz, rx, ry, rz, ux, uy, uz)
+            xy[0, b] = sequence_uniform(sequence[0, b], sample[b])
+            xy[1, b] = sequence_uniform(sequence[1, b], sample[b])
+    elif code == REGULAR:  # the corners are the stratum centres
+        for b in range(count):
+            xy[0, b], xy[1, b] = corner[0, b], corner[1, b]
+    else:
+        s0, s1 = size[0], size[1]
+        for b in range(count):
+            xy[0, b] = (corner[0, b] + sequence_uniform(sequence[0, b], sample[b])) / s0
+            xy[1, b] = (corner[1, b] + sequence_uniform(sequence[1, b], sample[b])) / s1
     # inactive lanes of the last packet: a copy of the first ray keeps their words finite
     for b in range(count, BLOCK):
-        d[0, b], d[1, b], d[2, b] = d[0, 0], d[1, 0], d[2, 0]
+        xy[0, b], xy[1, b], column[b], line[b] = xy[0, 0], xy[1, 0], column[0], line[0]
+    # image_plane_xy with the pixel's column and row formed by the caller
+    for b in range(BLOCK):
+        sx = (xy[0, b] + column[b]) * ax + bx
+        sy = (xy[1, b] + line[b]) * ay + by
+        d[0, b], d[1, b], d[2, b] = pinhole_xyz(sx, sy, fx, fy, fz, rx, ry, rz, ux, uy, uz)
+    write_directions(d, rays, ep.RAYHIT_WORDS, ep.DEFAULT_TFAR)
+
+
+@row
+def write_directions(d, rays, words, tfar):
+    """Directions ``d`` (3, BLOCK) and a ``tfar`` (one for all) into the block's packets
+    ``rays`` (``words`` per lane), as :func:`rtmesh.geometry.embree_packets.set_lane_direction`
+    writes one lane; one branch-free loop of 16 lanes per packet and field, which LLVM
+    vectorises."""
+    tiny = ep.MIN_RCP_INPUT
+    far = np.float32(tfar)
+    for q in range(PACKETS):
+        base = q * words * LANES
+        for c in range(3):
+            at = base + (ep.DIR + c) * LANES
+            for lane in range(LANES):
+                f = np.float32(d[c, q * LANES + lane])
+                rays[at + lane] = _F32_ZERO if abs(f) < tiny else f
+        at = base + ep.TFAR * LANES
+        for lane in range(LANES):
+            rays[at + lane] = far
 
 
 @row

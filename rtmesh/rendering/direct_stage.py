@@ -42,7 +42,7 @@ from rtmesh.rendering.direct_blocks import (BLOCK, LANES, PACKETS, add_light_row
                                             surface_block)
 from rtmesh.rendering.film_sums import add_pixel
 from rtmesh.rendering.scheduler import sample_indices
-from rtmesh.sampling.pixel_samples import PixelSampler
+from rtmesh.sampling.pixel_samples import PixelSampler, pixel_sequence
 from rtmesh.scene.background import SolidBackground
 from rtmesh.shading.direct_light import SHADOW_SHORTEN
 
@@ -294,15 +294,20 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     hit = np.empty(BLOCK, np.bool_)
     xy = np.empty((2, BLOCK))  # positions in the pixels (camera_block)
     d = np.empty((3, BLOCK))  # camera ray directions (camera_block)
-    # per sample of the block: its pixel, its sample index and its pixel's place in the chunk
-    block_pixel = np.empty(BLOCK, np.int64)
-    block_sample = np.empty(BLOCK, np.int64)
+    # per sample of the block: its pixel's place in the chunk, and what camera_block needs
     owner = np.empty(BLOCK, np.int64)
+    sequence = np.empty((2, BLOCK), np.uint64)
+    sample = np.empty(BLOCK, np.uint64)
+    corner = np.empty((2, BLOCK))
+    column = np.empty(BLOCK)
+    line = np.empty(BLOCK)
     # (per-pixel arrays are indexed here, not through a row helper: numba would take and
     # release a reference to the array on every call, two atomic instructions per sample)
     one_count, one_first, listed = len(counts) == 1, len(first) == 1, len(pixel_list) > 0
     # the pixel being taken (its place in the chunk, index, next sample, samples left)
     current, px, px_sample, left = -1, 0, 0, 0
+    sequence0 = sequence1 = np.uint64(0)
+    stratum, px_column, px_line = 0, 0.0, 0.0
     # the first pixel not yet added to the film, and the row of its first sample
     done, done_row = 0, 0
     waits = np.zeros(m, np.bool_)  # pixels with a sample left for finish_highlights
@@ -333,26 +338,39 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
         ep.set_lane(shadow, shadow_words, ray_lane(b), 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0)
     for start in range(0, n, BLOCK):
         count = min(BLOCK, n - start)
-        for b in range(count):
-            while left == 0:  # the next pixel with samples
+        # the block's samples, pixel by pixel: what is the same for a pixel's samples is
+        # formed once per pixel
+        b = 0
+        while b < count:
+            if left == 0:  # the next pixel with samples
                 current += 1
                 left = counts[0] if one_count else counts[current]
                 px_sample = first[0] if one_first else first[current]
                 px = pixel_list[current] if listed else first_pixel + current
-            block_pixel[b], block_sample[b], owner[b] = px, px_sample, current
-            px_sample += 1
-            left -= 1
-        # camera rays (rtmesh.scene.camera_rays.camera_rays, pinhole); lanes past the end repeat sample 0
-        camera_block(film_xy, sampler, keys, corners, size, spp, block_pixel, block_sample, start, count,
-                          width, camera, xy, d)
+                sequence0, sequence1 = pixel_sequence(keys[0], px), pixel_sequence(keys[1], px)
+                stratum = px_sample % spp if spp > 1 else 0
+                px_row = px // width
+                px_column, px_line = np.float64(px - px_row * width), np.float64(px_row)
+                continue
+            run = min(left, count - b)
+            for j in range(b, b + run):
+                owner[j] = current
+                sequence[0, j], sequence[1, j], sample[j] = sequence0, sequence1, np.uint64(px_sample + (j - b))
+                column[j], line[j] = px_column, px_line
+            for j in range(b, b + run):  # the strata in turn (sample % spp)
+                corner[0, j], corner[1, j] = corners[stratum, 0], corners[stratum, 1]
+                stratum = stratum + 1 if stratum + 1 < spp else 0
+            px_sample += run
+            left -= run
+            b += run
+        # camera rays (rtmesh.scene.camera_rays.camera_rays, pinhole) into the packets; lanes past
+        # the end repeat sample 0
+        camera_block(film_xy, sampler, size, start, count, sequence, sample, corner, column, line, camera, xy, d,
+                     rays)
         for b in range(BLOCK):
             valid[b] = -1 if b < count else 0
-        for q in range(PACKETS):
-            for lane in range(LANES):
-                b = q * LANES + lane
-                at = q * ep.RAYHIT_WORDS * LANES + lane
-                ep.set_lane_direction(rays, at, d[0, b], d[1, b], d[2, b], ep.DEFAULT_TFAR)
-                ep.clear_hit(words, at)
+        for b in range(BLOCK):
+            ep.clear_hit(words, hit_lane(b))
         for q in range((count + LANES - 1) // LANES):
             intersect16(valid.ctypes.data + 64 * q, scene, rays.ctypes.data + _PACKET_BYTES * q,
                         args.ctypes.data)

@@ -76,20 +76,28 @@ def add_pixel(total, total_sq, count, image, px, radiance, row, samples):
         The samples are rows ``row .. row + samples - 1``, in sample order.
     row, samples : int
     """
-    if count[px] == 0:  # a one_pass film's sums start uncleared (Film)
-        for c in range(3):
-            total[c, px] = 0.0
-            total_sq[c, px] = 0.0
+    # the six sums stay in registers over the samples: added through the arrays, each add
+    # would wait for the store of the one before (numba cannot tell that ``radiance`` and
+    # the sums are different memory); the order of the additions is the same
+    fresh = count[px] == 0  # a one_pass film's sums start uncleared (Film)
+    t0 = 0.0 if fresh else total[0, px]
+    t1 = 0.0 if fresh else total[1, px]
+    t2 = 0.0 if fresh else total[2, px]
+    q0 = 0.0 if fresh else total_sq[0, px]
+    q1 = 0.0 if fresh else total_sq[1, px]
+    q2 = 0.0 if fresh else total_sq[2, px]
     for s in range(row, row + samples):
-        for c in range(3):
-            r = radiance[s, c]
-            total[c, px] += r
-            total_sq[c, px] += r * r
+        r0, r1, r2 = radiance[s, 0], radiance[s, 1], radiance[s, 2]
+        t0, t1, t2 = t0 + r0, t1 + r1, t2 + r2
+        q0, q1, q2 = q0 + r0 * r0, q1 + r1 * r1, q2 + r2 * r2
+    total[0, px], total[1, px], total[2, px] = t0, t1, t2
+    total_sq[0, px], total_sq[1, px], total_sq[2, px] = q0, q1, q2
     n = count[px] + samples
     if image.shape[0] > 0:
         inverse = 1.0 / np.float64(n)
-        for c in range(3):
-            image[px, c] = np.float32(total[c, px] * inverse)
+        image[px, 0] = np.float32(t0 * inverse)
+        image[px, 1] = np.float32(t1 * inverse)
+        image[px, 2] = np.float32(t2 * inverse)
     count[px] = n
 
 

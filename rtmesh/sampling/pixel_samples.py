@@ -66,11 +66,25 @@ class PixelSampler:
 
 
 @row
+def pixel_sequence(key, pixel):
+    """The key of one pixel's sequence in one dimension (``key``: the dimension's, from
+    :attr:`PixelSampler.keys`): the part of :func:`_uniform` that is the same for all of a
+    pixel's samples, for kernels that form it once per pixel."""
+    return mix64(key ^ (np.uint64(pixel) * GOLDEN))
+
+
+@row
+def sequence_uniform(sequence, sample):
+    """Sample ``sample`` (uint64) of a pixel's sequence (:func:`pixel_sequence`): a uniform
+    number in [0, 1) with 53 random bits.  Branch-free, so loops over samples vectorise."""
+    x = mix64(sequence ^ (sample * M1 + _ONE))
+    return np.float64(x >> np.uint64(11)) * _TO_UNIT
+
+
+@row
 def _uniform(key, pixel, sample):
     """:func:`rtmesh.sampling.patterns.uniform` for one (dimension key, pixel, sample)."""
-    sequence = mix64(key ^ (np.uint64(pixel) * GOLDEN))
-    x = mix64(sequence ^ (np.uint64(sample) * M1 + _ONE))
-    return np.float64(x >> np.uint64(11)) * _TO_UNIT
+    return sequence_uniform(pixel_sequence(key, pixel), np.uint64(sample))
 
 
 @row
