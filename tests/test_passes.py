@@ -245,14 +245,16 @@ def test_a_one_pass_films_uncleared_sums_start_from_zero_at_each_pixels_first_sa
     cleared = Film(6, 5)
     cleared.add_tile(0, radiance)
     ways = []
-    for way in ("add_tile", "add_pixel", "add_samples"):
+    for way in ("add_tile", "add_pixels", "add_samples"):
         film = Film(6, 5, one_pass=True)
         film.sum[:] = np.nan  # what uncleared memory may hold
         film.sum_sq[:] = -1.0
         if way == "add_tile":
             film.add_tile(0, radiance)
-        elif way == "add_pixel":
-            film_sums.add_pixel.py_func(*film.kernel_arrays(), 7, radiance[7], 0, 3)
+        elif way == "add_pixels":
+            done = film_sums.add_pixels.py_func(*film.kernel_arrays(), radiance[7], np.array([7]), 0, 1,
+                                                np.array([3]), 0, 0, 3)
+            assert done == (1, 3)
             rest = np.array([p for p in range(30) if p != 7])
             film.add_tile(rest, radiance[rest])
         else:

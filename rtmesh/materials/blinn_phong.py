@@ -12,8 +12,29 @@ from rtmesh.core.row_vectors import dot3
 # ------------------------------------------------------------------ Blinn-Phong
 # The factor is kd max(0, n.wi) + ks max(0, n.h)^shininess (the highlight only where
 # n.wi > 0 and the material has one).  The power is the one operation LLVM cannot vectorise
-# (a libm call, ~20 ns); on the hot path (light_samples) the cosines are formed first and
-# NumPy, which has SIMD pow, raises them, and everything else is vectorised by LLVM.
+# (a call of libm's pow); the kernels raise the cosines in loops of their own, over the
+# samples that have a highlight, so that everything else stays vectorised.  Every path
+# raises them with this pow (raise_highlight), so the paths agree to the bit.
+
+
+@row
+def raise_highlight(cosine, exponent):
+    """``cosine ** exponent`` with libm's pow, as every kernel raises a highlight cosine."""
+    return cosine ** exponent
+
+
+@kernel
+def raise_highlights(cosine, exponent):
+    """:func:`raise_highlight` of each element, in place (returns ``cosine``).
+
+    Parameters
+    ----------
+    cosine, exponent : (h,) float64
+        Highlight cosines and their materials' shininess.
+    """
+    for i in range(len(cosine)):
+        cosine[i] = raise_highlight(cosine[i], exponent[i])
+    return cosine
 
 
 @row
@@ -104,7 +125,8 @@ def surface_reflectance(ns, d, wi, lit, mat, diffuse, tint_d, specular, tint_s, 
         power = 0.0
         if lit[i] and exponent[m] >= 0.0:
             power = highlight_cosine(ns[i, 0], ns[i, 1], ns[i, 2], -d[i, 0], -d[i, 1], -d[i, 2],
-                                      wi[i, 0], wi[i, 1], wi[i, 2]) ** exponent[m]
+                                      wi[i, 0], wi[i, 1], wi[i, 2])
+            power = raise_highlight(power, exponent[m])
         out[0, i], out[1, i], out[2, i] = shade_row(
             i, m, dot3(ns[i, 0], ns[i, 1], ns[i, 2], wi[i, 0], wi[i, 1], wi[i, 2]), power,
             diffuse, tint_d, specular, tint_s)

@@ -13,12 +13,11 @@ vectorise them, and outputs of the block's constant size (see :func:`light_block
 import numpy as np
 
 from rtmesh.core.compiled import row
-from rtmesh.core.rays import NO_VECTORS
 from rtmesh.core.row_vectors import dot3
 from rtmesh.geometry import embree_packets as ep
 from rtmesh.geometry.float32_rays import F32_MAX, offset_origin
 from rtmesh.lights.point_light_rows import illuminate_row
-from rtmesh.materials.blinn_phong import highlight_cosine, shade_row
+from rtmesh.materials.blinn_phong import blinn_phong_row, highlight_cosine
 from rtmesh.sampling.pixel_samples import RANDOM, REGULAR, sequence_uniform
 from rtmesh.scene.camera_rays import pinhole_xyz
 from rtmesh.shading.direct_light import light_reaches
@@ -103,6 +102,28 @@ def write_directions(d, rays, words, tfar):
         at = base + ep.TFAR * LANES
         for lane in range(LANES):
             rays[at + lane] = far
+
+
+@row
+def write_rays(ray, rays):
+    """Shadow rays ``ray`` (7, BLOCK) float32 (origin, direction, length: see
+    :func:`light_block`) into the block's ``RTCRay16`` packets ``rays``, as
+    :func:`rtmesh.geometry.embree_packets.set_lane_ray` writes one lane, in branch-free
+    loops of 16 lanes that LLVM vectorises."""
+    tiny = ep.MIN_RCP_INPUT
+    for q in range(PACKETS):
+        base = q * ep.RAY_WORDS * LANES
+        for c in range(3):
+            at = base + (ep.ORG + c) * LANES
+            for lane in range(LANES):
+                rays[at + lane] = ray[c, q * LANES + lane]
+            at = base + (ep.DIR + c) * LANES
+            for lane in range(LANES):
+                f = ray[3 + c, q * LANES + lane]
+                rays[at + lane] = _F32_ZERO if abs(f) < tiny else f
+        at = base + ep.TFAR * LANES
+        for lane in range(LANES):
+            rays[at + lane] = ray[6, q * LANES + lane]
 
 
 @row
@@ -194,21 +215,14 @@ def light_block(light, srf, d, count, scale, shorten):
 
 
 @row
-def add_light_row(d0, d1, d2, m, cos_i, power, e0, e1, e2, diffuse, specular):
-    """The direct light ``(d0, d1, d2)`` plus one light's Blinn-Phong term on material ``m``
-    (``power``: the raised highlight cosine, 0 without one; ``e``: its incident term), as
-    :func:`rtmesh.shading.direct_light.add_light` adds it."""
-    f0, f1, f2 = shade_row(0, m, cos_i, power, diffuse, NO_VECTORS, specular, NO_VECTORS)
+def add_light_row(d0, d1, d2, kd0, kd1, kd2, ks0, ks1, ks2, cos_i, power, e0, e1, e2):
+    """The direct light ``(d0, d1, d2)`` plus one light's Blinn-Phong term for a material
+    with colours ``kd``, ``ks`` (``power``: the raised highlight cosine, 0 without one;
+    ``e``: its incident term), as :func:`rtmesh.shading.direct_light.add_light` adds it.
+    Numbers only: a row called per sample with array arguments takes and releases a
+    reference to each (atomic instructions)."""
+    f0, f1, f2 = blinn_phong_row(kd0, kd1, kd2, ks0, ks1, ks2, cos_i, power)
     return d0 + f0 * e0, d1 + f1 * e1, d2 + f2 * e2
-
-
-@row
-def store_radiance(radiance, i, base, m, d0, d1, d2):
-    """Sample ``i``'s radiance: its material's emission and ambient light plus the direct
-    light, added to 0 as the general path adds a hit's local shading to its radiance."""
-    radiance[i, 0] = 0.0 + (base[m, 0] + d0)
-    radiance[i, 1] = 0.0 + (base[m, 1] + d1)
-    radiance[i, 2] = 0.0 + (base[m, 2] + d2)
 
 
 @row

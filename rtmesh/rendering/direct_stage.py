@@ -14,10 +14,8 @@ The arithmetic is the general path's, row for row: the same row helpers
 :mod:`rtmesh.lights.point_light_rows`, :mod:`rtmesh.materials.blinn_phong`,
 :mod:`rtmesh.geometry.float32_rays` for the origin offset) and those of
 :mod:`rtmesh.geometry.embree_packets` (lanes of a packet), in the same order, so the images are
-bit-identical to the general path's (tested).  The one operation the general path leaves
-to NumPy, raising highlight cosines to the shininess (NumPy's vectorised ``pow``, which can
-round differently from the ``pow`` a compiled loop calls), stays with NumPy: samples with a
-highlight are finished by a second kernel after NumPy has raised their cosines.
+bit-identical to the general path's (tested).  Highlight cosines are raised with the one
+pow both paths call (:func:`rtmesh.materials.blinn_phong.raise_highlight`).
 
 :meth:`DirectStage.plan` decides whether a render can use the stage; everything it does not
 handle (textures, passes, reflection and refraction, media, area lights, ambient
@@ -27,7 +25,7 @@ tracing) keeps the general path.
 A chunk is described by its pixels and their sample counts, not by per-sample index arrays:
 the kernel forms each block's pixel and sample indices itself, and with a film
 (:meth:`DirectStage.render`) adds the samples to it pixel by pixel
-(:func:`rtmesh.rendering.film_sums.add_pixel`: the sums :meth:`Film.add_tile` forms, in
+(:func:`rtmesh.rendering.film_sums.add_pixels`: the sums :meth:`Film.add_tile` forms, in
 sample order) instead of returning them for a separate pass.
 """
 
@@ -38,9 +36,10 @@ from rtmesh.geometry import embree_packets as ep
 from rtmesh.geometry.accel import Accel
 from rtmesh.lights.point_light_rows import ROW
 from rtmesh.rendering.direct_blocks import (BLOCK, LANES, PACKETS, add_light_row, any_valid, camera_block,
-                                            camera_numbers, hit_lane, light_block, ray_lane, store_radiance,
-                                            surface_block)
-from rtmesh.rendering.film_sums import add_pixel
+                                            camera_numbers, hit_lane, light_block, ray_lane, surface_block,
+                                            write_rays)
+from rtmesh.materials.blinn_phong import raise_highlight
+from rtmesh.rendering.film_sums import add_pixels
 from rtmesh.rendering.scheduler import sample_indices
 from rtmesh.sampling.pixel_samples import PixelSampler, pixel_sequence
 from rtmesh.scene.background import SolidBackground
@@ -91,13 +90,6 @@ class DirectStage:
         self._lights = np.array(rows, dtype=np.float64).reshape(len(rows), ROW_WORDS)
         self._materials = (np.ascontiguousarray(it.tables.shaded), np.ascontiguousarray(it.tables.diffuse),
                            np.ascontiguousarray(it.tables.specular), it.tables.highlight_exponent, it.tables.highlight_from)
-        # With highlights, some samples wait for NumPy's pow (finish_highlights), and then all
-        # of a chunk's pixels are added to the film after them in one ordered pass.  Adding
-        # the others as their blocks finish reads many lines of the film from memory twice
-        # (at 1 spp on bench_core's scene, thread CPU per frame 2.9 % above main's separate
-        # pass, against 1.9 % below it this way).  Without highlights, pixels are added as
-        # their blocks finish, while their samples are in the cache.
-        self._film_late = bool((it.tables.shaded & (it.tables.highlight_exponent >= 0.0)).any())
         background = it.background
         self._background = (np.ascontiguousarray(background.colour) if st.background else np.zeros(3))
         self._offset_scale = it.tables.offset_scale32
@@ -178,19 +170,10 @@ class DirectStage:
             pixel, sample = sample_indices(pixels, first_sample, spp)
             film_xy = np.ascontiguousarray(self._sampler.pixel(pixel, sample))
         sums = (_NO_SUMS, _NO_SUMS, _NO_COUNT, _NO_IMAGE) if film is None else film.kernel_arrays()
-        shaded, diffuse, specular, exponent, visible_from = self._materials
-        radiance, shadow_rays, records, waits = direct_samples(
+        radiance, shadow_rays = direct_samples(
             *self._queries, film_xy, *self._sampler_arrays, pixel_list, first_pixel, m, first, counts, n, *sums,
-            self._film_late,
-            *self._camera, *self._surfaces, self._base, self._background, self._lights, shaded, diffuse, specular,
-            exponent, visible_from, self._offset_scale, SHADOW_SHORTEN)
-        sample, mat, cos_i, incident, cosine, power_exponent, highlight = records
-        if len(sample) or (film is not None and self._film_late):
-            # NumPy raises the highlight cosines, as in the general path (its pow is vectorised)
-            power = np.zeros(len(sample))
-            power[highlight] = np.power(cosine[highlight], power_exponent[highlight])
-            finish_highlights(radiance, self._base, sample, mat, cos_i, incident, power, diffuse, specular, *sums,
-                              self._film_late, waits, pixel_list, first_pixel, counts)
+            *self._camera, *self._surfaces, self._base, self._background, self._lights, *self._materials,
+            self._offset_scale, SHADOW_SHORTEN)
         stats.rays["camera"] += n
         stats.rays["shadow"] += shadow_rays
         return None if film is not None else radiance
@@ -198,7 +181,7 @@ class DirectStage:
 
 @kernel
 def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys, corners, size, spp,
-                   pixel_list, first_pixel, m, first, counts, n, total, total_sq, film_count, image, film_late,
+                   pixel_list, first_pixel, m, first, counts, n, total, total_sq, film_count, image,
                    width, image_plane, position, forward, right, up, faces, vertex_normals, smooth,
                    material_id, fix_terminator, base, background, lights, shaded, diffuse, specular, exponent,
                    visible_from, scale, shorten):
@@ -230,11 +213,7 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     total, total_sq, film_count, image
         The film's arrays (:meth:`rtmesh.rendering.film.Film.kernel_arrays`), or empty
         ((3, 0), (3, 0), (0,), (0, 3)): no film.  With a film, a pixel is added
-        (:func:`rtmesh.rendering.film_sums.add_pixel`) after the block that finishes it,
-        unless one of its samples waits for its highlight (see ``records``); those are
-        added by :func:`finish_highlights`.
-    film_late : bool
-        Add no pixel here: all go to ``deferred``, in order.
+        (:func:`rtmesh.rendering.film_sums.add_pixels`) after the block that finishes it.
     width : int
     image_plane : (4,) float64
     position, forward, right, up : (3,) float64
@@ -260,16 +239,8 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     Returns
     -------
     radiance : (n, 3) float64
-        Row-major; final except for the samples in ``records``, which hold
-        ``base`` of their material until :func:`finish_highlights` runs.
+        Row-major.
     shadow_rays : int
-    records : tuple of arrays
-        For the samples with a highlight from a light that reaches them, one record per
-        (sample, unshadowed light), in light order: sample, material, ``ns . wi``, incident
-        term (r, 3), highlight cosine, shininess, and whether the highlight is raised.
-    waits : (m,) bool
-        The pixels with a sample in ``records``: with a film, not added here (nor any
-        pixel when ``film_late``), but by :func:`finish_highlights`.
 
     Notes
     -----
@@ -281,7 +252,7 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     and sample ``b`` of the block is lane ``b % 16`` of packet ``b // 16``.
     """
     n_lights = len(lights)
-    adding = len(film_count) > 0 and not film_late
+    adding = len(film_count) > 0
     has_smooth = len(vertex_normals) > 0
     # row-major, so that the integrator's (pixels, spp, 3) view of it is not a copy
     radiance = np.empty((n, 3))
@@ -294,8 +265,7 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     hit = np.empty(BLOCK, np.bool_)
     xy = np.empty((2, BLOCK))  # positions in the pixels (camera_block)
     d = np.empty((3, BLOCK))  # camera ray directions (camera_block)
-    # per sample of the block: its pixel's place in the chunk, and what camera_block needs
-    owner = np.empty(BLOCK, np.int64)
+    # per sample of the block: what camera_block needs
     sequence = np.empty((2, BLOCK), np.uint64)
     sample = np.empty(BLOCK, np.uint64)
     corner = np.empty((2, BLOCK))
@@ -310,22 +280,19 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     stratum, px_column, px_line = 0, 0.0, 0.0
     # the first pixel not yet added to the film, and the row of its first sample
     done, done_row = 0, 0
-    waits = np.zeros(m, np.bool_)  # pixels with a sample left for finish_highlights
     # per light and sample: the light sample and its fate
     cos_i = np.empty((n_lights, BLOCK))
     incident = np.empty((n_lights, 3, BLOCK))
     cosine = np.empty((n_lights, BLOCK))
     raised = np.empty((n_lights, BLOCK), np.bool_)
+    power = np.empty((n_lights, BLOCK))  # the raised highlight cosine, 0 without a highlight
     reaches = np.zeros((n_lights, BLOCK), np.bool_)  # lit and not shadowed
-    capacity = n * n_lights
-    rec_sample = np.empty(capacity, np.int64)
-    rec_mat = np.empty(capacity, np.intp)
-    rec_cos = np.empty(capacity)
-    rec_incident = np.empty((capacity, 3))
-    rec_cosine = np.empty(capacity)
-    rec_exponent = np.empty(capacity)
-    rec_raised = np.empty(capacity, np.bool_)
-    records = 0
+    # per sample: lights count (a shaded surface), its material's shininess and smallest highlight cosine
+    receives = np.empty(BLOCK, np.bool_)
+    shininess = np.empty(BLOCK)
+    highlight_from = np.empty(BLOCK)
+    direct = np.empty((3, BLOCK))  # the sum of the lights' terms
+    colours = np.empty((6, BLOCK))  # the material's diffuse and specular colours
     shadow_rays = 0
     camera = camera_numbers(image_plane, forward, right, up)
     # the lanes' fields no query changes, once for the chunk (the camera rays' origin too);
@@ -354,7 +321,6 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
                 continue
             run = min(left, count - b)
             for j in range(b, b + run):
-                owner[j] = current
                 sequence[0, j], sequence[1, j], sample[j] = sequence0, sequence1, np.uint64(px_sample + (j - b))
                 column[j], line[j] = px_column, px_line
             for j in range(b, b + run):  # the strata in turn (sample % spp)
@@ -381,6 +347,10 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
             hit[b] = words[ep.GEOM_ID * LANES + at] != -1
             f = np.intp(words[ep.PRIM_ID * LANES + at]) if hit[b] else np.intp(0)
             mat[b] = material_id[f]
+            receives[b] = hit[b] and shaded[mat[b]]
+            shininess[b], highlight_from[b] = exponent[mat[b]], visible_from[mat[b]]
+            for c in range(3):
+                colours[c, b], colours[3 + c, b] = diffuse[mat[b], c], specular[mat[b], c]
             interpolate[b] = has_smooth and smooth[f]
             face_rows[0, b] = np.float64(rays[ep.U * LANES + at])
             face_rows[1, b] = np.float64(rays[ep.V * LANES + at])
@@ -395,130 +365,54 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
         srf = surface_block(face_rows, interpolate, d, count, fix_terminator)
         # each light: samples (rtmesh.shading.direct_light.light_samples) and the shadow packets
         for k in range(n_lights):
-            light = lights[k]
-            lit, values, shadow_ray = light_block(light, srf, d, count, scale, shorten)
-            for b in range(count):
-                cos_i[k, b] = values[0, b]
-                incident[k, 0, b], incident[k, 1, b], incident[k, 2, b] = values[1, b], values[2, b], values[3, b]
-                cosine[k, b] = values[4, b]
-            for q in range(PACKETS):
-                for lane in range(LANES):
-                    b = q * LANES + lane
-                    ep.set_lane_ray(shadow, q * ep.RAY_WORDS * LANES + lane, shadow_ray[0, b], shadow_ray[1, b],
-                                    shadow_ray[2, b], shadow_ray[3, b], shadow_ray[4, b], shadow_ray[5, b],
-                                    shadow_ray[6, b])
+            lit, values, shadow_ray = light_block(lights[k], srf, d, count, scale, shorten)
+            write_rays(shadow_ray, shadow)
+            # branch-free, so that LLVM vectorises it: what the light is not on for is
+            # written but never read (records take only the samples it reaches)
             for b in range(BLOCK):
-                on = b < count and hit[b] and shaded[mat[b]] and lit[b]
-                shadow_valid[b] = -1 if on else 0
-                if on:
-                    mat_b = mat[b]
-                    e = exponent[mat_b]
-                    # a power of 0 is 1 whatever the cosine (0 ** 0 included)
-                    c = 1.0 if e == 0.0 else cosine[k, b]
-                    cosine[k, b] = c
-                    raised[k, b] = e >= 0.0 and c > 0.0 and c >= visible_from[mat_b]
+                on = (b < count) & receives[b] & lit[b]
+                shadow_valid[b] = -np.int32(on)
+                e = shininess[b]
+                # a power of 0 is 1 whatever the cosine (0 ** 0 included)
+                c = 1.0 if e == 0.0 else values[4, b]
+                cos_i[k, b], cosine[k, b] = values[0, b], c
+                incident[k, 0, b], incident[k, 1, b], incident[k, 2, b] = values[1, b], values[2, b], values[3, b]
+                raised[k, b] = on & (e >= 0.0) & (c > 0.0) & (c >= highlight_from[b])
             for q in range((count + LANES - 1) // LANES):
                 if any_valid(shadow_valid, q):
                     occluded16(shadow_valid.ctypes.data + 64 * q, scene, shadow.ctypes.data + _SHADOW_BYTES * q,
                                args.ctypes.data)
+            for q in range(PACKETS):
+                at = q * ep.RAY_WORDS * LANES + ep.TFAR * LANES
+                for lane in range(LANES):
+                    b = q * LANES + lane
+                    on = shadow_valid[b] != 0
+                    shadow_rays += on
+                    # Embree marks an occluded ray by setting its tfar to -inf
+                    reaches[k, b] = on & (shadow[at + lane] != -np.inf)
+            # the highlights (pow is a call of libm's: a loop of its own, over the few samples
+            # that have one; the general path raises them with the same pow)
             for b in range(count):
-                on = shadow_valid[b] != 0
-                shadow_rays += on
-                # Embree marks an occluded ray by setting its tfar to -inf
-                reaches[k, b] = on and shadow[ep.TFAR * LANES + ray_lane(b)] != -np.inf
-        # add up (rtmesh.shading.direct_light.add_light, then the general path's sums)
-        for b in range(count):
-            i = start + b
-            if not hit[b]:
-                for c in range(3):
-                    radiance[i, c] = 0.0 + background[c]
-                continue
-            mat_b = mat[b]
-            deferred = False
-            for k in range(n_lights):
-                deferred = deferred or (reaches[k, b] and raised[k, b])
-            if deferred:
-                waits[owner[b]] = True
-                for k in range(n_lights):
-                    if reaches[k, b]:
-                        rec_sample[records], rec_mat[records] = i, mat_b
-                        rec_cos[records] = cos_i[k, b]
-                        for c in range(3):
-                            rec_incident[records, c] = incident[k, c, b]
-                        rec_cosine[records], rec_exponent[records] = cosine[k, b], exponent[mat_b]
-                        rec_raised[records] = raised[k, b]
-                        records += 1
-                for c in range(3):
-                    radiance[i, c] = base[mat_b, c]
-                continue
-            d0 = d1 = d2 = 0.0
-            for k in range(n_lights):
+                power[k, b] = raise_highlight(cosine[k, b], shininess[b]) if reaches[k, b] and raised[k, b] else 0.0
+        # add up (rtmesh.shading.direct_light.add_light, then the general path's sums), one
+        # branch-free loop per light
+        for b in range(BLOCK):
+            direct[0, b] = direct[1, b] = direct[2, b] = 0.0
+        for k in range(n_lights):
+            for b in range(count):
+                d0, d1, d2 = add_light_row(direct[0, b], direct[1, b], direct[2, b], colours[0, b], colours[1, b],
+                                           colours[2, b], colours[3, b], colours[4, b], colours[5, b], cos_i[k, b],
+                                           power[k, b], incident[k, 0, b], incident[k, 1, b], incident[k, 2, b])
                 if reaches[k, b]:
-                    d0, d1, d2 = add_light_row(d0, d1, d2, mat_b, cos_i[k, b], 0.0, incident[k, 0, b], incident[k, 1, b],
-                                            incident[k, 2, b], diffuse, specular)
-            store_radiance(radiance, i, base, mat_b, d0, d1, d2)
+                    direct[0, b], direct[1, b], direct[2, b] = d0, d1, d2
+        # emission and ambient light plus the direct light, added to 0 as the general path adds
+        # a hit's local shading to its radiance
+        for b in range(count):
+            i, mat_b = start + b, mat[b]
+            for c in range(3):
+                radiance[i, c] = 0.0 + (base[mat_b, c] + direct[c, b]) if hit[b] else 0.0 + background[c]
         # the film: the pixels this block finished, their samples still in the cache
-        while adding and done < m:
-            px_samples = counts[0] if one_count else counts[done]
-            if done_row + px_samples > start + count:
-                break
-            if not waits[done] and px_samples > 0:
-                added = pixel_list[done] if listed else first_pixel + done
-                add_pixel(total, total_sq, film_count, image, added, radiance, done_row, px_samples)
-            done_row += px_samples
-            done += 1
-    return (radiance, shadow_rays, (rec_sample[:records], rec_mat[:records], rec_cos[:records],
-                                      rec_incident[:records], rec_cosine[:records], rec_exponent[:records],
-                                      rec_raised[:records]),
-            waits)
-
-
-@kernel
-def finish_highlights(radiance, base, sample, mat, cos_i, incident, power, diffuse, specular, total, total_sq,
-                      film_count, image, film_late, waits, pixel_list, first_pixel, counts):
-    """Radiance of the samples :func:`direct_samples` left for their highlights, and the
-    pixels it did not add to the film because of them.
-
-    Parameters
-    ----------
-    radiance : (n, 3) float64
-        Updated in place at the rows in ``sample``.
-    base : (M, 3) float64
-    sample, mat : (r,) int
-        Each record's sample and material; a sample's records are consecutive, in light
-        order.
-    cos_i : (r,) float64
-    incident : (r, 3) float64
-    power : (r,) float64
-        The raised highlight cosine (0 where there is no highlight).
-    diffuse, specular : (M, 3) float64
-    total, total_sq, film_count, image, film_late
-        The film's arrays and whether :func:`direct_samples` left every pixel to this
-        function, as for it (empty arrays: no film).
-    waits : (m,) bool
-        The pixels :func:`direct_samples` did not add (its ``waits``).
-    pixel_list, first_pixel, counts
-        The chunk's pixels and their sample counts, as for :func:`direct_samples`.
-    """
-    j = 0
-    r = len(sample)
-    while j < r:
-        i, m = sample[j], mat[j]
-        d0 = d1 = d2 = 0.0
-        while j < r and sample[j] == i:
-            d0, d1, d2 = add_light_row(d0, d1, d2, m, cos_i[j], power[j], incident[j, 0], incident[j, 1],
-                                    incident[j, 2], diffuse, specular)
-            j += 1
-        store_radiance(radiance, i, base, m, d0, d1, d2)
-    # the film, pixel by pixel in order (here rather than in a kernel of its own: one
-    # compilation fewer on a first render)
-    if len(film_count) == 0:
-        return
-    one_count, listed = len(counts) == 1, len(pixel_list) > 0
-    row = 0
-    for j in range(len(waits)):
-        samples = counts[0] if one_count else counts[j]
-        if (film_late or waits[j]) and samples > 0:
-            add_pixel(total, total_sq, film_count, image, pixel_list[j] if listed else first_pixel + j, radiance,
-                      row, samples)
-        row += samples
+        if adding:
+            done, done_row = add_pixels(total, total_sq, film_count, image, radiance, pixel_list, first_pixel, m,
+                                        counts, done, done_row, start + count)
+    return radiance, shadow_rays

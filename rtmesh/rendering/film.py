@@ -108,7 +108,7 @@ class Film:
 
     def kernel_arrays(self):
         """The arrays a kernel that adds whole pixels itself updates
-        (:func:`rtmesh.rendering.film_sums.add_pixel`), for a film without passes.
+        (:func:`rtmesh.rendering.film_sums.add_pixels`), for a film without passes.
 
         Returns
         -------

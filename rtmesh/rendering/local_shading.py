@@ -12,7 +12,7 @@ import numpy as np
 from rtmesh.core.rays import NO_VECTORS, take_rows
 from rtmesh.core.vecmath import orthonormal_basis
 from rtmesh.geometry.accel import offset_ray_origins
-from rtmesh.materials.blinn_phong import surface_reflectance
+from rtmesh.materials.blinn_phong import raise_highlights, surface_reflectance
 from rtmesh.rendering.chunk_state import Stage, add_rows_or_all, rows_at
 from rtmesh.rendering.physical_shading import bsdf_weight
 from rtmesh.sampling.warps import square_to_cosine_hemisphere
@@ -107,7 +107,7 @@ class LocalShading(Stage):
             chunk.clock.lap("shadow")
             if total is None:
                 total = np.zeros((len(srf.mat), 3), order="F")
-            power = np.power(highlight, power_exponent, out=highlight)  # NumPy's pow is vectorised
+            power = raise_highlights(highlight, power_exponent)
             add_light(total, target, lit, occluded, cos_i, incident, highlight_rows, power, *materials[:5])
         sampled = [lighting for lighting, on in ((it.area_lighting, it.plan.area_lights),
                                                  (it.environment_lighting, it.plan.environment_lighting)) if on]
