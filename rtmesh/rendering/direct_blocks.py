@@ -19,7 +19,7 @@ from rtmesh.geometry.float32_rays import F32_MAX, offset_origin
 from rtmesh.lights.point_light_rows import illuminate_row
 from rtmesh.materials.blinn_phong import blinn_phong_row, highlight_cosine
 from rtmesh.sampling.pixel_samples import RANDOM, REGULAR, sequence_uniform
-from rtmesh.scene.camera_rays import pinhole_xyz
+from rtmesh.scene.camera_rays import pinhole_xyz, pixel_row
 from rtmesh.shading.direct_light import light_reaches
 from rtmesh.shading.surfaces import surface_from_rows_inlined
 
@@ -32,32 +32,32 @@ _F32_ZERO = np.float32(0.0)
 
 
 @row
-def camera_block(film_xy, code, size, start, count, sequence, sample, corner, column, line, camera, xy, d, rays):
+def camera_block(film_xy, code, corners, size, spp, start, count, sample, sequence, column, line, camera, xy, d, rays):
     """Writes into ``d`` (3, BLOCK) and into the block's ``RTCRayHit16`` packets ``rays``
     the unit directions of the camera rays of samples ``start .. start + count - 1``
     (lanes past the end repeat sample ``start``), as
     :func:`rtmesh.scene.camera_rays.camera_rays` makes them for a pinhole.
 
-    The positions in the pixels come from ``film_xy`` or, when it is empty, from the
-    sampler (``code``, :data:`rtmesh.sampling.pixel_samples.SAMPLER_CODES`), as
-    :func:`rtmesh.sampling.pixel_samples.pixel_position` forms them, from what the caller
-    formed once per pixel (per sample of the block, ``b`` for sample ``start + b``):
-
-    * ``sequence`` (2, BLOCK) uint64: the pixel's sequence keys of the two pixel dimensions
-      (:func:`rtmesh.sampling.pixel_samples.pixel_sequence`);
-    * ``sample`` (BLOCK,) uint64: the sample's index;
-    * ``corner`` (2, BLOCK): its stratum's row of the sampler's ``corners``;
-    * ``column``, ``line`` (BLOCK,): the pixel's column and row as floats.
+    ``sample`` (BLOCK,) uint64 holds each sample's index, and what the caller formed once
+    per pixel: ``sequence`` (2, BLOCK) uint64, the pixel's sequence keys of the two pixel
+    dimensions (:func:`rtmesh.sampling.pixel_samples.pixel_sequence`), and ``column``,
+    ``line`` (BLOCK,) float64, its column and row; ``b`` for sample ``start + b``.  The positions in the pixels
+    come from ``film_xy`` or, when it is empty, from the sampler (``code``, ``corners``,
+    ``size``, ``spp``: the :class:`rtmesh.sampling.pixel_samples.PixelSampler` arrays), as
+    :func:`rtmesh.sampling.pixel_samples.pixel_position` forms them.
 
     ``camera`` is the image-plane map and the camera frame as a tuple of 13 numbers
     (:func:`camera_numbers`): numba takes and releases a reference to every array argument
     of a compiled call (atomic instructions, shared between the render threads).  ``xy``
-    (2, BLOCK) is scratch.  Each loop is branch-free over the block's arrays, so LLVM
-    vectorises the hashing, the directions and the packet stores (with the pixel index
-    and the stratum formed per sample, and the packets' lanes written one by one, this
-    step took about 45 cycles a sample; now about 20).
+    (2, BLOCK) is scratch.  Each loop is branch-free over the block's arrays, and integer
+    divisions (the pixel's row, the stratum) are float products with a correction
+    (:func:`rtmesh.scene.camera_rays.pixel_row`), so LLVM vectorises the hashing, the
+    directions and the packet stores (with a call per sample and the packets' lanes
+    written one by one, this step took about 45 cycles a sample at 16 spp, and the
+    pixel's row and stratum as integer divisions cost about 25 more at 1 spp).
     """
     ax, bx, ay, by, fx, fy, fz, rx, ry, rz, ux, uy, uz = camera
+    inverse_spp = 1.0 / spp
     if len(film_xy):
         for b in range(count):
             xy[0, b], xy[1, b] = film_xy[start + b, 0], film_xy[start + b, 1]
@@ -65,23 +65,34 @@ def camera_block(film_xy, code, size, start, count, sequence, sample, corner, co
         for b in range(count):
             xy[0, b] = sequence_uniform(sequence[0, b], sample[b])
             xy[1, b] = sequence_uniform(sequence[1, b], sample[b])
-    elif code == REGULAR:  # the corners are the stratum centres
-        for b in range(count):
-            xy[0, b], xy[1, b] = corner[0, b], corner[1, b]
     else:
-        s0, s1 = size[0], size[1]
+        # the strata's corners (regular: their centres) first: a loop of its own, as its
+        # gathers would keep the hashing from vectorising
         for b in range(count):
-            xy[0, b] = (corner[0, b] + sequence_uniform(sequence[0, b], sample[b])) / s0
-            xy[1, b] = (corner[1, b] + sequence_uniform(sequence[1, b], sample[b])) / s1
+            stratum = stratum_of(sample[b], spp, inverse_spp)
+            xy[0, b], xy[1, b] = corners[stratum, 0], corners[stratum, 1]
+        if code != REGULAR:
+            s0, s1 = size[0], size[1]
+            for b in range(count):
+                xy[0, b] = (xy[0, b] + sequence_uniform(sequence[0, b], sample[b])) / s0
+                xy[1, b] = (xy[1, b] + sequence_uniform(sequence[1, b], sample[b])) / s1
     # inactive lanes of the last packet: a copy of the first ray keeps their words finite
     for b in range(count, BLOCK):
         xy[0, b], xy[1, b], column[b], line[b] = xy[0, 0], xy[1, 0], column[0], line[0]
-    # image_plane_xy with the pixel's column and row formed by the caller
+    # image_plane_xy
     for b in range(BLOCK):
         sx = (xy[0, b] + column[b]) * ax + bx
         sy = (xy[1, b] + line[b]) * ay + by
         d[0, b], d[1, b], d[2, b] = pinhole_xyz(sx, sy, fx, fy, fz, rx, ry, rz, ux, uy, uz)
     write_directions(d, rays, ep.RAYHIT_WORDS, ep.DEFAULT_TFAR)
+
+
+@row
+def stratum_of(sample, spp, inverse_spp):
+    """``sample % spp`` (the sample's stratum; 0 for one sample per pixel) without an
+    integer division, as :func:`rtmesh.scene.camera_rays.pixel_row` forms a quotient."""
+    i = np.int64(sample)
+    return i - pixel_row(i, spp, inverse_spp) * spp
 
 
 @row

@@ -43,6 +43,7 @@ from rtmesh.rendering.film_sums import add_pixels
 from rtmesh.rendering.scheduler import sample_indices
 from rtmesh.sampling.pixel_samples import PixelSampler, pixel_sequence
 from rtmesh.scene.background import SolidBackground
+from rtmesh.scene.camera_rays import pixel_row
 from rtmesh.shading.direct_light import SHADOW_SHORTEN
 
 _NO_POSITIONS = np.zeros((0, 2))
@@ -265,10 +266,9 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     hit = np.empty(BLOCK, np.bool_)
     xy = np.empty((2, BLOCK))  # positions in the pixels (camera_block)
     d = np.empty((3, BLOCK))  # camera ray directions (camera_block)
-    # per sample of the block: what camera_block needs
-    sequence = np.empty((2, BLOCK), np.uint64)
+    # per sample of the block: its index, its pixel's sequence keys, column and row (camera_block)
     sample = np.empty(BLOCK, np.uint64)
-    corner = np.empty((2, BLOCK))
+    sequence = np.empty((2, BLOCK), np.uint64)
     column = np.empty(BLOCK)
     line = np.empty(BLOCK)
     # (per-pixel arrays are indexed here, not through a row helper: numba would take and
@@ -277,7 +277,8 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     # the pixel being taken (its place in the chunk, index, next sample, samples left)
     current, px, px_sample, left = -1, 0, 0, 0
     sequence0 = sequence1 = np.uint64(0)
-    stratum, px_column, px_line = 0, 0.0, 0.0
+    px_column = px_line = 0.0
+    inverse_width = 1.0 / width
     # the first pixel not yet added to the film, and the row of its first sample
     done, done_row = 0, 0
     # per light and sample: the light sample and its fate
@@ -292,7 +293,6 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     shininess = np.empty(BLOCK)
     highlight_from = np.empty(BLOCK)
     direct = np.empty((3, BLOCK))  # the sum of the lights' terms
-    colours = np.empty((6, BLOCK))  # the material's diffuse and specular colours
     shadow_rays = 0
     camera = camera_numbers(image_plane, forward, right, up)
     # the lanes' fields no query changes, once for the chunk (the camera rays' origin too);
@@ -305,8 +305,7 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
         ep.set_lane(shadow, shadow_words, ray_lane(b), 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0)
     for start in range(0, n, BLOCK):
         count = min(BLOCK, n - start)
-        # the block's samples, pixel by pixel: what is the same for a pixel's samples is
-        # formed once per pixel
+        # the block's samples, pixel by pixel in sample order
         b = 0
         while b < count:
             if left == 0:  # the next pixel with samples
@@ -315,24 +314,21 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
                 px_sample = first[0] if one_first else first[current]
                 px = pixel_list[current] if listed else first_pixel + current
                 sequence0, sequence1 = pixel_sequence(keys[0], px), pixel_sequence(keys[1], px)
-                stratum = px_sample % spp if spp > 1 else 0
-                px_row = px // width
+                px_row = pixel_row(px, width, inverse_width)
                 px_column, px_line = np.float64(px - px_row * width), np.float64(px_row)
                 continue
             run = min(left, count - b)
-            for j in range(b, b + run):
-                sequence[0, j], sequence[1, j], sample[j] = sequence0, sequence1, np.uint64(px_sample + (j - b))
-                column[j], line[j] = px_column, px_line
-            for j in range(b, b + run):  # the strata in turn (sample % spp)
-                corner[0, j], corner[1, j] = corners[stratum, 0], corners[stratum, 1]
-                stratum = stratum + 1 if stratum + 1 < spp else 0
+            for j in range(run):
+                sample[b + j] = np.uint64(px_sample + j)
+                sequence[0, b + j], sequence[1, b + j] = sequence0, sequence1
+                column[b + j], line[b + j] = px_column, px_line
             px_sample += run
             left -= run
             b += run
         # camera rays (rtmesh.scene.camera_rays.camera_rays, pinhole) into the packets; lanes past
         # the end repeat sample 0
-        camera_block(film_xy, sampler, size, start, count, sequence, sample, corner, column, line, camera, xy, d,
-                     rays)
+        camera_block(film_xy, sampler, corners, size, spp, start, count, sample, sequence, column, line, camera, xy,
+                     d, rays)
         for b in range(BLOCK):
             valid[b] = -1 if b < count else 0
         for b in range(BLOCK):
@@ -349,8 +345,6 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
             mat[b] = material_id[f]
             receives[b] = hit[b] and shaded[mat[b]]
             shininess[b], highlight_from[b] = exponent[mat[b]], visible_from[mat[b]]
-            for c in range(3):
-                colours[c, b], colours[3 + c, b] = diffuse[mat[b], c], specular[mat[b], c]
             interpolate[b] = has_smooth and smooth[f]
             face_rows[0, b] = np.float64(rays[ep.U * LANES + at])
             face_rows[1, b] = np.float64(rays[ep.V * LANES + at])
@@ -400,9 +394,11 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
             direct[0, b] = direct[1, b] = direct[2, b] = 0.0
         for k in range(n_lights):
             for b in range(count):
-                d0, d1, d2 = add_light_row(direct[0, b], direct[1, b], direct[2, b], colours[0, b], colours[1, b],
-                                           colours[2, b], colours[3, b], colours[4, b], colours[5, b], cos_i[k, b],
-                                           power[k, b], incident[k, 0, b], incident[k, 1, b], incident[k, 2, b])
+                mat_b = mat[b]
+                d0, d1, d2 = add_light_row(direct[0, b], direct[1, b], direct[2, b], diffuse[mat_b, 0],
+                                           diffuse[mat_b, 1], diffuse[mat_b, 2], specular[mat_b, 0], specular[mat_b, 1],
+                                           specular[mat_b, 2], cos_i[k, b], power[k, b], incident[k, 0, b],
+                                           incident[k, 1, b], incident[k, 2, b])
                 if reaches[k, b]:
                     direct[0, b], direct[1, b], direct[2, b] = d0, d1, d2
         # emission and ambient light plus the direct light, added to 0 as the general path adds

@@ -25,13 +25,20 @@ def image_plane_xy(x, y, pixel, width, inverse_width, ax, bx, ay, by):
     numbers: a compiled function that takes them instead of the array holds no reference
     to count (see :func:`rtmesh.rendering.direct_blocks.camera_block`)."""
     if pixel >= 0:
-        # the row by a float product and a one-step correction: an integer division a
-        # ray would keep the loop from vectorising
-        row = np.int64(pixel * inverse_width)
-        row += (row + 1) * width <= pixel
-        row -= row * width > pixel
+        row = pixel_row(pixel, width, inverse_width)
         x, y = x + np.float64(pixel - row * width), y + np.float64(row)
     return x * ax + bx, y * ay + by
+
+
+@row
+def pixel_row(pixel, width, inverse_width):
+    """``pixel // width`` for ``pixel >= 0``, by a float product and a one-step correction:
+    an integer division (tens of cycles, and no vector form) would keep the loops that
+    call it from vectorising."""
+    row = np.int64(pixel * inverse_width)
+    row += (row + 1) * width <= pixel
+    row -= row * width > pixel
+    return row
 
 
 @row
