@@ -130,6 +130,13 @@ class RayBatch:
     medium: np.ndarray
     pdf: np.ndarray | None = None
 
+    def __post_init__(self):
+        # one layout for the vectors of every batch (camera rays are born component-major,
+        # secondary rays row-major from their kernels and np.concatenate): a kernel
+        # compiles once per layout it is called with, about a second each on a first run
+        self.origins, self.directions, self.throughput = (
+            np.asfortranarray(a) for a in (self.origins, self.directions, self.throughput))
+
     def __len__(self):
         return len(self.sample)
 
