@@ -8,9 +8,12 @@ import pytest
 
 from rtmesh.core.compiled import kernel
 from rtmesh.geometry.accel import offset_ray_origins
+from rtmesh.lights.point_light_rows import illuminate_row, point_row
 from rtmesh.lights.point_lights import DirectionalLight, PointLight, SpotLight
 from rtmesh.rendering import film_sums
+from rtmesh.rendering.direct_blocks import stratum_of
 from rtmesh.scene import camera_rays
+from rtmesh.scene.camera_rays import pixel_row
 from rtmesh.shading import direct_light, surfaces
 from rtmesh.shading.surfaces import face_viewer
 
@@ -215,6 +218,50 @@ def test_camera_rays_find_the_row_and_column_of_every_pixel_index(width):
                                np.array([1.0, 0.0, 1.0, 0.0]), 1.0)
     np.testing.assert_allclose(d[:, 0] / d[:, 2], pixels % width, rtol=1e-12, atol=1e-9)
     np.testing.assert_allclose(d[:, 1] / d[:, 2], pixels // width, rtol=1e-12, atol=1e-9)
+
+
+@kernel
+def _point_light_both_ways(light, points):
+    out = np.empty((2, len(points), 7))
+    for i in range(len(points)):
+        out[0, i] = illuminate_row(light, points[i, 0], points[i, 1], points[i, 2])
+        out[1, i] = point_row(light, points[i, 0], points[i, 1], points[i, 2])
+    return out
+
+
+def test_the_point_light_row_is_the_general_row_of_a_point_light_to_the_bit():
+    """The fused stage's point-light loop (point_row) forms what illuminate_row forms for
+    a point light, the point at the light itself included (direction and term 0)."""
+    light = PointLight([0.5, -1.0, 3.0], [5.0, 6.0, 7.0])
+    points = np.random.default_rng(3).uniform(-4, 4, size=(500, 3))
+    points[7] = light.position
+    general, point = _point_light_both_ways(light.kernel_row(), points)
+    np.testing.assert_array_equal(point, general)
+    assert (point[7, [0, 1, 2, 4, 5, 6]] == 0).all()
+
+
+@kernel
+def _quotients(values, divisor):
+    out = np.empty((2, len(values)), np.int64)
+    inverse = 1.0 / divisor
+    for i in range(len(values)):
+        out[0, i] = pixel_row(values[i], divisor, inverse)
+        out[1, i] = stratum_of(np.uint64(values[i]), divisor, inverse)
+    return out
+
+
+@pytest.mark.parametrize("divisor", [1, 3, 16, 17, 1000, 65535, 2 ** 20])
+def test_quotients_without_integer_division_are_exact(divisor):
+    """pixel_row (a pixel's row) and stratum_of (a sample's stratum) are ``//`` and ``%``
+    by a float product and a one-step correction: exact up to the largest indices rtmesh
+    allows (sides up to 2^20, so pixels and samples below 2^40)."""
+    rng = np.random.default_rng(divisor)
+    multiples = np.arange(0, 2 ** 40 // divisor, max(1, 2 ** 40 // divisor // 5000), dtype=np.int64) * divisor
+    values = np.unique(np.concatenate([multiples, multiples + divisor - 1, rng.integers(0, 2 ** 40, 5000)]))
+    values = values[values >= 0]
+    row, stratum = _quotients(values, divisor)
+    np.testing.assert_array_equal(row, values // divisor)
+    np.testing.assert_array_equal(stratum, values % divisor)
 
 
 def test_highlight_powers_below_float64_range_are_dropped_and_shininess_zero_is_one():

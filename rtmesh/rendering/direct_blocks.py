@@ -12,11 +12,11 @@ vectorise them, and outputs of the block's constant size (see :func:`light_block
 
 import numpy as np
 
-from rtmesh.core.compiled import row
+from rtmesh.core.compiled import inline_row, row
 from rtmesh.core.row_vectors import dot3
 from rtmesh.geometry import embree_packets as ep
 from rtmesh.geometry.float32_rays import F32_MAX, offset_origin
-from rtmesh.lights.point_light_rows import illuminate_row
+from rtmesh.lights.point_light_rows import KIND, POINT, illuminate_row, point_row
 from rtmesh.materials.blinn_phong import blinn_phong_row, highlight_cosine
 from rtmesh.sampling.pixel_samples import RANDOM, REGULAR, sequence_uniform
 from rtmesh.scene.camera_rays import pinhole_xyz, pixel_row
@@ -186,9 +186,12 @@ def surface_block(face_rows, interpolate, d, count, fix_terminator):
 
 
 @row
-def light_block(light, srf, d, count, scale, shorten):
+def light_block(light, srf, d, count, scale, shorten, highlights):
     """One light at the first ``count`` surface records of a block (the arithmetic of
     :func:`rtmesh.shading.direct_light.light_samples`).
+
+    ``highlights``: whether any material of the scene has a highlight; without, the
+    highlight cosines are not formed (0: they would be read by no one).
 
     Returns
     -------
@@ -201,28 +204,49 @@ def light_block(light, srf, d, count, scale, shorten):
 
     Notes
     -----
-    The loop has no branches, gathers or calls, and its outputs are made here with the
-    constant size of a block: only then does LLVM vectorise it (with output arrays passed
-    in, or sized at run time, it stays scalar, about twice as slow).
+    The loops have no branches, gathers or calls, and their outputs are made here with the
+    constant size of a block: only then does LLVM vectorise them (with output arrays passed
+    in, or sized at run time, they stay scalar, about twice as slow).  A point light has a
+    loop of its own (:func:`rtmesh.lights.point_light_rows.point_row`), without the
+    selects that form every kind of light.
     """
     lit = np.empty(BLOCK, np.bool_)
     values = np.empty((5, BLOCK))
     shadow_ray = np.empty((7, BLOCK), np.float32)
-    for b in range(count):
-        px, py, pz = srf[0, b], srf[1, b], srf[2, b]
-        gx, gy, gz = srf[3, b], srf[4, b], srf[5, b]
-        nx, ny, nz = srf[6, b], srf[7, b], srf[8, b]
-        wx, wy, wz, distance, er, eg, eb = illuminate_row(light, px, py, pz)
-        lit[b] = light_reaches(wx, wy, wz, er, eg, eb, gx, gy, gz)
-        values[0, b] = dot3(nx, ny, nz, wx, wy, wz)
-        values[1, b], values[2, b], values[3, b] = er, eg, eb
-        values[4, b] = highlight_cosine(nx, ny, nz, -d[0, b], -d[1, b], -d[2, b], wx, wy, wz)
-        # the shadow ray's direction in float32, as Embree will see it, also sets the offset
-        dx, dy, dz = np.float32(wx), np.float32(wy), np.float32(wz)
-        shadow_ray[0, b], shadow_ray[1, b], shadow_ray[2, b] = offset_origin(px, py, pz, gx, gy, gz, dx, dy, dz, scale)
-        shadow_ray[3, b], shadow_ray[4, b], shadow_ray[5, b] = dx, dy, dz
-        shadow_ray[6, b] = np.float32(min(distance * shorten, F32_MAX))
+    if light[KIND] == POINT:
+        for b in range(count):
+            wx, wy, wz, distance, er, eg, eb = point_row(light, srf[0, b], srf[1, b], srf[2, b])
+            (lit[b], values[0, b], values[1, b], values[2, b], values[3, b], values[4, b], shadow_ray[0, b],
+             shadow_ray[1, b], shadow_ray[2, b], shadow_ray[3, b], shadow_ray[4, b], shadow_ray[5, b],
+             shadow_ray[6, b]) = light_sample(srf[0, b], srf[1, b], srf[2, b], srf[3, b], srf[4, b], srf[5, b],
+                                              srf[6, b], srf[7, b], srf[8, b], d[0, b], d[1, b], d[2, b], wx, wy,
+                                              wz, distance, er, eg, eb, scale, shorten, highlights)
+    else:
+        for b in range(count):
+            wx, wy, wz, distance, er, eg, eb = illuminate_row(light, srf[0, b], srf[1, b], srf[2, b])
+            (lit[b], values[0, b], values[1, b], values[2, b], values[3, b], values[4, b], shadow_ray[0, b],
+             shadow_ray[1, b], shadow_ray[2, b], shadow_ray[3, b], shadow_ray[4, b], shadow_ray[5, b],
+             shadow_ray[6, b]) = light_sample(srf[0, b], srf[1, b], srf[2, b], srf[3, b], srf[4, b], srf[5, b],
+                                              srf[6, b], srf[7, b], srf[8, b], d[0, b], d[1, b], d[2, b], wx, wy,
+                                              wz, distance, er, eg, eb, scale, shorten, highlights)
     return lit, values, shadow_ray
+
+
+@inline_row
+def light_sample(px, py, pz, gx, gy, gz, nx, ny, nz, vx, vy, vz, wx, wy, wz, distance, er, eg, eb, scale, shorten,
+                 highlights):
+    """What :func:`light_block` keeps of one light at one surface record (point ``p``,
+    geometric and shading normals ``g``, ``n``, ray direction ``v``) from the light's
+    direction ``w``, distance and incident term ``e``: whether it lights the point, ``ns .
+    wi``, ``e``, the highlight cosine (0 without ``highlights``) and the shadow ray
+    (float32 offset origin, direction and length)."""
+    lit = light_reaches(wx, wy, wz, er, eg, eb, gx, gy, gz)
+    cosine = highlight_cosine(nx, ny, nz, -vx, -vy, -vz, wx, wy, wz) if highlights else 0.0
+    # the shadow ray's direction in float32, as Embree will see it, also sets the offset
+    dx, dy, dz = np.float32(wx), np.float32(wy), np.float32(wz)
+    ox, oy, oz = offset_origin(px, py, pz, gx, gy, gz, dx, dy, dz, scale)
+    return (lit, dot3(nx, ny, nz, wx, wy, wz), er, eg, eb, cosine, ox, oy, oz, dx, dy, dz,
+            np.float32(min(distance * shorten, F32_MAX)))
 
 
 @row

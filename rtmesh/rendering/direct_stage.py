@@ -91,6 +91,8 @@ class DirectStage:
         self._lights = np.array(rows, dtype=np.float64).reshape(len(rows), ROW_WORDS)
         self._materials = (np.ascontiguousarray(it.tables.shaded), np.ascontiguousarray(it.tables.diffuse),
                            np.ascontiguousarray(it.tables.specular), it.tables.highlight_exponent, it.tables.highlight_from)
+        # no material with a highlight: the light step forms no highlight cosines
+        self._highlights = bool((it.tables.shaded & (it.tables.highlight_exponent >= 0.0)).any())
         background = it.background
         self._background = (np.ascontiguousarray(background.colour) if st.background else np.zeros(3))
         self._offset_scale = it.tables.offset_scale32
@@ -174,7 +176,7 @@ class DirectStage:
         radiance, shadow_rays = direct_samples(
             *self._queries, film_xy, *self._sampler_arrays, pixel_list, first_pixel, m, first, counts, n, *sums,
             *self._camera, *self._surfaces, self._base, self._background, self._lights, *self._materials,
-            self._offset_scale, SHADOW_SHORTEN)
+            self._offset_scale, SHADOW_SHORTEN, self._highlights)
         stats.rays["camera"] += n
         stats.rays["shadow"] += shadow_rays
         return None if film is not None else radiance
@@ -185,7 +187,7 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
                    pixel_list, first_pixel, m, first, counts, n, total, total_sq, film_count, image,
                    width, image_plane, position, forward, right, up, faces, vertex_normals, smooth,
                    material_id, fix_terminator, base, background, lights, shaded, diffuse, specular, exponent,
-                   visible_from, scale, shorten):
+                   visible_from, scale, shorten, highlights):
     """Radiance of the camera samples of a chunk of pixels with direct light, in blocks of
     :data:`BLOCK` samples, added to the film pixel by pixel where one is given.
 
@@ -236,6 +238,9 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
         Scene size, for the origin offset.
     shorten : float
         Shadow rays end this fraction of the way to the light.
+    highlights : bool
+        Whether a material has a highlight (``shaded`` and ``exponent >= 0``); without,
+        no highlight cosine is formed.
 
     Returns
     -------
@@ -286,7 +291,7 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     incident = np.empty((n_lights, 3, BLOCK))
     cosine = np.empty((n_lights, BLOCK))
     raised = np.empty((n_lights, BLOCK), np.bool_)
-    power = np.empty((n_lights, BLOCK))  # the raised highlight cosine, 0 without a highlight
+    power = np.zeros((n_lights, BLOCK))  # the raised highlight cosine, 0 without a highlight
     reaches = np.zeros((n_lights, BLOCK), np.bool_)  # lit and not shadowed
     # per sample: lights count (a shaded surface), its material's shininess and smallest highlight cosine
     receives = np.empty(BLOCK, np.bool_)
@@ -359,7 +364,7 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
         srf = surface_block(face_rows, interpolate, d, count, fix_terminator)
         # each light: samples (rtmesh.shading.direct_light.light_samples) and the shadow packets
         for k in range(n_lights):
-            lit, values, shadow_ray = light_block(lights[k], srf, d, count, scale, shorten)
+            lit, values, shadow_ray = light_block(lights[k], srf, d, count, scale, shorten, highlights)
             write_rays(shadow_ray, shadow)
             # branch-free, so that LLVM vectorises it: what the light is not on for is
             # written but never read (records take only the samples it reaches)
@@ -386,8 +391,9 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
                     reaches[k, b] = on & (shadow[at + lane] != -np.inf)
             # the highlights (pow is a call of libm's: a loop of its own, over the few samples
             # that have one; the general path raises them with the same pow)
-            for b in range(count):
-                power[k, b] = raise_highlight(cosine[k, b], shininess[b]) if reaches[k, b] and raised[k, b] else 0.0
+            if highlights:
+                for b in range(count):
+                    power[k, b] = raise_highlight(cosine[k, b], shininess[b]) if reaches[k, b] and raised[k, b] else 0.0
         # add up (rtmesh.shading.direct_light.add_light, then the general path's sums), one
         # branch-free loop per light
         for b in range(BLOCK):
