@@ -145,15 +145,22 @@ def camera_numbers(image_plane, forward, right, up):
 
 
 @row
-def surface_block(face_rows, interpolate, d, count, fix_terminator):
-    """Surface records of the first ``count`` samples of a block from their gathered face
-    rows (the arithmetic of :func:`rtmesh.shading.surfaces.surface_records`).
+def surface_block(face_rows, face, normal_row, faces, normals, interpolate, d, count, fix_terminator):
+    """Surface records of the first ``count`` samples of a block (the arithmetic of
+    :func:`rtmesh.shading.surfaces.surface_records`).
 
     Parameters
     ----------
-    face_rows : (23, BLOCK) float64
-        Per sample: barycentrics ``u, v``, the face's ``faces`` row (12) and its
-        ``vertex_normals`` row (9; zeros where not interpolated).
+    face_rows : (2, BLOCK) float64
+        Per sample: barycentrics ``u, v``.
+    face, normal_row : (BLOCK,) intp
+        Per sample: the face hit (face 0 for a miss) and its row of ``normals``.
+    faces : (F, 12) float64
+        Per face ``[v0, v1 - v0, v2 - v0, unit normal]`` (``ShadingTables.faces``).
+    normals : (F, 9) or (1, 9) float64
+        Per face the vertex normals ``[n0, n1 - n0, n2 - n0]``; one row of zeros in a
+        scene without smooth faces (``normal_row`` is then 0).  A flat face's row is
+        read but not used.
     interpolate : (BLOCK,) bool
         Samples whose shading normal interpolates the vertex normals.
     d : (3, BLOCK) float64
@@ -168,20 +175,24 @@ def surface_block(face_rows, interpolate, d, count, fix_terminator):
 
     Notes
     -----
-    The loop reads no table and calls only number-to-number rows, and its output has the
-    block's constant size (see :func:`light_block`): LLVM vectorises it.  With the tables
-    read inside (``_surface_record`` per sample) the loop stayed scalar, called the row out
-    of line and took and released a reference to the vertex normals per sample (two atomic
-    instructions, about a fifth of the stage's time).
+    The loop reads the tables directly and calls only number-to-number rows (inlined), and
+    its output has the block's constant size (see :func:`light_block`): LLVM vectorises
+    it, the table reads as gathers.  Gathering the 21 numbers of each sample's rows into
+    block arrays first, in a scalar loop, cost about 10 cycles a sample more at 16 spp.
+    A row called per sample with the tables as arguments would take and release a
+    reference to each (atomic instructions, about a fifth of the stage's time once).
     """
     srf = np.empty((9, BLOCK))
     r = face_rows
     for b in range(count):
+        f, g = face[b], normal_row[b]
         (srf[0, b], srf[1, b], srf[2, b], srf[3, b], srf[4, b], srf[5, b], srf[6, b], srf[7, b], srf[8, b],
-         _) = surface_from_rows_inlined(r[0, b], r[1, b], d[0, b], d[1, b], d[2, b], r[2, b], r[3, b], r[4, b],
-                                         r[5, b], r[6, b], r[7, b], r[8, b], r[9, b], r[10, b], r[11, b], r[12, b],
-                                         r[13, b], interpolate[b], r[14, b], r[15, b], r[16, b], r[17, b], r[18, b],
-                                         r[19, b], r[20, b], r[21, b], r[22, b], fix_terminator)
+         _) = surface_from_rows_inlined(r[0, b], r[1, b], d[0, b], d[1, b], d[2, b], faces[f, 0], faces[f, 1],
+                                         faces[f, 2], faces[f, 3], faces[f, 4], faces[f, 5], faces[f, 6],
+                                         faces[f, 7], faces[f, 8], faces[f, 9], faces[f, 10], faces[f, 11],
+                                         interpolate[b], normals[g, 0], normals[g, 1], normals[g, 2],
+                                         normals[g, 3], normals[g, 4], normals[g, 5], normals[g, 6],
+                                         normals[g, 7], normals[g, 8], fix_terminator)
     return srf
 
 

@@ -265,7 +265,10 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     rays, words, valid, args = ep.packet_buffers(ep.RAYHIT_WORDS, PACKETS, flags)
     shadow, shadow_words, shadow_valid, _ = ep.packet_buffers(ep.RAY_WORDS, PACKETS, flags)
     # per sample of the block: barycentrics and the rows of its face (surface_block), material
-    face_rows = np.empty((23, BLOCK))
+    face_rows = np.empty((2, BLOCK))
+    face = np.empty(BLOCK, np.intp)
+    normal_row = np.empty(BLOCK, np.intp)
+    normals = vertex_normals if has_smooth else np.zeros((1, 9))
     interpolate = np.empty(BLOCK, np.bool_)
     mat = np.empty(BLOCK, np.intp)
     hit = np.empty(BLOCK, np.bool_)
@@ -353,15 +356,8 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
             interpolate[b] = has_smooth and smooth[f]
             face_rows[0, b] = np.float64(rays[ep.U * LANES + at])
             face_rows[1, b] = np.float64(rays[ep.V * LANES + at])
-            for j in range(12):
-                face_rows[2 + j, b] = faces[f, j]
-            if interpolate[b]:
-                for j in range(9):
-                    face_rows[14 + j, b] = vertex_normals[f, j]
-            else:
-                for j in range(9):
-                    face_rows[14 + j, b] = 0.0
-        srf = surface_block(face_rows, interpolate, d, count, fix_terminator)
+            face[b], normal_row[b] = f, f if has_smooth else 0
+        srf = surface_block(face_rows, face, normal_row, faces, normals, interpolate, d, count, fix_terminator)
         # each light: samples (rtmesh.shading.direct_light.light_samples) and the shadow packets
         for k in range(n_lights):
             lit, values, shadow_ray = light_block(lights[k], srf, d, count, scale, shorten, highlights)
