@@ -145,14 +145,14 @@ def camera_numbers(image_plane, forward, right, up):
 
 
 @row
-def surface_block(face_rows, face, normal_row, faces, normals, interpolate, d, count, fix_terminator):
+def surface_block(barycentrics, face, normal_row, faces, normals, interpolate, d, count, fix_terminator):
     """Surface records of the first ``count`` samples of a block (the arithmetic of
     :func:`rtmesh.shading.surfaces.surface_records`).
 
     Parameters
     ----------
-    face_rows : (2, BLOCK) float64
-        Per sample: barycentrics ``u, v``.
+    barycentrics : (2, BLOCK) float64
+        Per sample: ``u, v`` of the hit.
     face, normal_row : (BLOCK,) intp
         Per sample: the face hit (face 0 for a miss) and its row of ``normals``.
     faces : (F, 12) float64
@@ -183,7 +183,7 @@ def surface_block(face_rows, face, normal_row, faces, normals, interpolate, d, c
     reference to each (atomic instructions, about a fifth of the stage's time once).
     """
     srf = np.empty((9, BLOCK))
-    r = face_rows
+    r = barycentrics
     for b in range(count):
         f, g = face[b], normal_row[b]
         (srf[0, b], srf[1, b], srf[2, b], srf[3, b], srf[4, b], srf[5, b], srf[6, b], srf[7, b], srf[8, b],

@@ -265,7 +265,7 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     rays, words, valid, args = ep.packet_buffers(ep.RAYHIT_WORDS, PACKETS, flags)
     shadow, shadow_words, shadow_valid, _ = ep.packet_buffers(ep.RAY_WORDS, PACKETS, flags)
     # per sample of the block: barycentrics and the rows of its face (surface_block), material
-    face_rows = np.empty((2, BLOCK))
+    barycentrics = np.empty((2, BLOCK))
     face = np.empty(BLOCK, np.intp)
     normal_row = np.empty(BLOCK, np.intp)
     normals = vertex_normals if has_smooth else np.zeros((1, 9))
@@ -289,13 +289,12 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     inverse_width = 1.0 / width
     # the first pixel not yet added to the film, and the row of its first sample
     done, done_row = 0, 0
-    # per light and sample: the light sample and its fate
-    cos_i = np.empty((n_lights, BLOCK))
-    incident = np.empty((n_lights, 3, BLOCK))
-    cosine = np.empty((n_lights, BLOCK))
-    raised = np.empty((n_lights, BLOCK), np.bool_)
-    power = np.zeros((n_lights, BLOCK))  # the raised highlight cosine, 0 without a highlight
-    reaches = np.zeros((n_lights, BLOCK), np.bool_)  # lit and not shadowed
+    # per sample, for the light being added: its highlight cosine, whether it is raised, the
+    # raised cosine (0 without a highlight) and whether the light reaches the sample
+    cosine = np.empty(BLOCK)
+    raised = np.empty(BLOCK, np.bool_)
+    power = np.zeros(BLOCK)
+    reaches = np.zeros(BLOCK, np.bool_)
     # per sample: lights count (a shaded surface), its material's shininess and smallest highlight cosine
     receives = np.empty(BLOCK, np.bool_)
     shininess = np.empty(BLOCK)
@@ -354,25 +353,27 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
             receives[b] = hit[b] and shaded[mat[b]]
             shininess[b], highlight_from[b] = exponent[mat[b]], visible_from[mat[b]]
             interpolate[b] = has_smooth and smooth[f]
-            face_rows[0, b] = np.float64(rays[ep.U * LANES + at])
-            face_rows[1, b] = np.float64(rays[ep.V * LANES + at])
+            barycentrics[0, b] = np.float64(rays[ep.U * LANES + at])
+            barycentrics[1, b] = np.float64(rays[ep.V * LANES + at])
             face[b], normal_row[b] = f, f if has_smooth else 0
-        srf = surface_block(face_rows, face, normal_row, faces, normals, interpolate, d, count, fix_terminator)
-        # each light: samples (rtmesh.shading.direct_light.light_samples) and the shadow packets
+        srf = surface_block(barycentrics, face, normal_row, faces, normals, interpolate, d, count, fix_terminator)
+        # each light in turn: its samples (rtmesh.shading.direct_light.light_samples), the shadow
+        # packets, and its term added to the direct light (add_light's order: light by light)
+        for b in range(BLOCK):
+            direct[0, b] = direct[1, b] = direct[2, b] = 0.0
         for k in range(n_lights):
             lit, values, shadow_ray = light_block(lights[k], srf, d, count, scale, shorten, highlights)
             write_rays(shadow_ray, shadow)
             # branch-free, so that LLVM vectorises it: what the light is not on for is
-            # written but never read (records take only the samples it reaches)
+            # formed but never added
             for b in range(BLOCK):
                 on = (b < count) & receives[b] & lit[b]
                 shadow_valid[b] = -np.int32(on)
                 e = shininess[b]
                 # a power of 0 is 1 whatever the cosine (0 ** 0 included)
                 c = 1.0 if e == 0.0 else values[4, b]
-                cos_i[k, b], cosine[k, b] = values[0, b], c
-                incident[k, 0, b], incident[k, 1, b], incident[k, 2, b] = values[1, b], values[2, b], values[3, b]
-                raised[k, b] = on & (e >= 0.0) & (c > 0.0) & (c >= highlight_from[b])
+                cosine[b] = c
+                raised[b] = on & (e >= 0.0) & (c > 0.0) & (c >= highlight_from[b])
             for q in range((count + LANES - 1) // LANES):
                 if any_valid(shadow_valid, q):
                     occluded16(shadow_valid.ctypes.data + 64 * q, scene, shadow.ctypes.data + _SHADOW_BYTES * q,
@@ -384,24 +385,19 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
                     on = shadow_valid[b] != 0
                     shadow_rays += on
                     # Embree marks an occluded ray by setting its tfar to -inf
-                    reaches[k, b] = on & (shadow[at + lane] != -np.inf)
+                    reaches[b] = on & (shadow[at + lane] != -np.inf)
             # the highlights (pow is a call of libm's: a loop of its own, over the few samples
             # that have one; the general path raises them with the same pow)
             if highlights:
                 for b in range(count):
-                    power[k, b] = raise_highlight(cosine[k, b], shininess[b]) if reaches[k, b] and raised[k, b] else 0.0
-        # add up (rtmesh.shading.direct_light.add_light, then the general path's sums), one
-        # branch-free loop per light
-        for b in range(BLOCK):
-            direct[0, b] = direct[1, b] = direct[2, b] = 0.0
-        for k in range(n_lights):
+                    power[b] = raise_highlight(cosine[b], shininess[b]) if reaches[b] and raised[b] else 0.0
             for b in range(count):
                 mat_b = mat[b]
                 d0, d1, d2 = add_light_row(direct[0, b], direct[1, b], direct[2, b], diffuse[mat_b, 0],
                                            diffuse[mat_b, 1], diffuse[mat_b, 2], specular[mat_b, 0], specular[mat_b, 1],
-                                           specular[mat_b, 2], cos_i[k, b], power[k, b], incident[k, 0, b],
-                                           incident[k, 1, b], incident[k, 2, b])
-                if reaches[k, b]:
+                                           specular[mat_b, 2], values[0, b], power[b], values[1, b], values[2, b],
+                                           values[3, b])
+                if reaches[b]:
                     direct[0, b], direct[1, b], direct[2, b] = d0, d1, d2
         # emission and ambient light plus the direct light, added to 0 as the general path adds
         # a hit's local shading to its radiance
