@@ -219,28 +219,33 @@ def light_block(light, srf, d, count, scale, shorten, highlights):
     constant size of a block: only then does LLVM vectorise them (with output arrays passed
     in, or sized at run time, they stay scalar, about twice as slow).  A point light has a
     loop of its own (:func:`rtmesh.lights.point_light_rows.point_row`), without the
-    selects that form every kind of light.
+    selects that form every kind of light (:func:`_light_loop` makes both).
     """
-    lit = np.empty(BLOCK, np.bool_)
-    values = np.empty((5, BLOCK))
-    shadow_ray = np.empty((7, BLOCK), np.float32)
     if light[KIND] == POINT:
+        return _point_light_loop(light, srf, d, count, scale, shorten, highlights)
+    return _any_light_loop(light, srf, d, count, scale, shorten, highlights)
+
+
+def _light_loop(illuminate):
+    """:func:`light_block`'s loop for lights whose direction, distance and incident term
+    ``illuminate(light, px, py, pz)`` forms (one compiled loop per function, so that each
+    stays branch-free)."""
+
+    @row
+    def loop(light, srf, d, count, scale, shorten, highlights):
+        lit = np.empty(BLOCK, np.bool_)
+        values = np.empty((5, BLOCK))
+        shadow_ray = np.empty((7, BLOCK), np.float32)
         for b in range(count):
-            wx, wy, wz, distance, er, eg, eb = point_row(light, srf[0, b], srf[1, b], srf[2, b])
+            wx, wy, wz, distance, er, eg, eb = illuminate(light, srf[0, b], srf[1, b], srf[2, b])
             (lit[b], values[0, b], values[1, b], values[2, b], values[3, b], values[4, b], shadow_ray[0, b],
              shadow_ray[1, b], shadow_ray[2, b], shadow_ray[3, b], shadow_ray[4, b], shadow_ray[5, b],
              shadow_ray[6, b]) = light_sample(srf[0, b], srf[1, b], srf[2, b], srf[3, b], srf[4, b], srf[5, b],
                                               srf[6, b], srf[7, b], srf[8, b], d[0, b], d[1, b], d[2, b], wx, wy,
                                               wz, distance, er, eg, eb, scale, shorten, highlights)
-    else:
-        for b in range(count):
-            wx, wy, wz, distance, er, eg, eb = illuminate_row(light, srf[0, b], srf[1, b], srf[2, b])
-            (lit[b], values[0, b], values[1, b], values[2, b], values[3, b], values[4, b], shadow_ray[0, b],
-             shadow_ray[1, b], shadow_ray[2, b], shadow_ray[3, b], shadow_ray[4, b], shadow_ray[5, b],
-             shadow_ray[6, b]) = light_sample(srf[0, b], srf[1, b], srf[2, b], srf[3, b], srf[4, b], srf[5, b],
-                                              srf[6, b], srf[7, b], srf[8, b], d[0, b], d[1, b], d[2, b], wx, wy,
-                                              wz, distance, er, eg, eb, scale, shorten, highlights)
-    return lit, values, shadow_ray
+        return lit, values, shadow_ray
+
+    return loop
 
 
 @inline_row
@@ -258,6 +263,10 @@ def light_sample(px, py, pz, gx, gy, gz, nx, ny, nz, vx, vy, vz, wx, wy, wz, dis
     ox, oy, oz = offset_origin(px, py, pz, gx, gy, gz, dx, dy, dz, scale)
     return (lit, dot3(nx, ny, nz, wx, wy, wz), er, eg, eb, cosine, ox, oy, oz, dx, dy, dz,
             np.float32(min(distance * shorten, F32_MAX)))
+
+
+_point_light_loop = _light_loop(point_row)
+_any_light_loop = _light_loop(illuminate_row)
 
 
 @row
