@@ -450,6 +450,11 @@ def packet_buffers(fields, packets, flags):
         Lane masks, packet ``q``'s at ``q * LANES``.
     args : (8,) int32
         The query arguments (:func:`query_arguments`).
+
+    Notes
+    -----
+    Callers pass ``np.int64(...)``, not bare constants: numba compiles a row once for each
+    literal value it is called with (about half a second each on a first run).
     """
     rays = aligned_words(packets * fields * LANES, np.float32)
     return rays, rays.view(np.int32), aligned_words(packets * LANES, np.int32), query_arguments(flags)
@@ -563,7 +568,7 @@ def intersect_rays(intersect16, scene, origins, directions, flags):
     prim = np.empty(n, np.int32)
     u = np.empty(n)
     v = np.empty(n)
-    ray, words, valid, args = packet_buffers(RAYHIT_WORDS, 1, flags)
+    ray, words, valid, args = packet_buffers(np.int64(RAYHIT_WORDS), np.int64(1), flags)
     for start in range(0, n, LANES):
         count = min(LANES, n - start)
         _intersect_packet(intersect16, scene, ray, words, valid, args, origins, directions, start, count)
@@ -606,7 +611,7 @@ def occluded_rays(occluded16, scene, origins, directions, t_max, rows, flags):
     """
     n = len(rows) if len(rows) else origins.shape[0]
     blocked = np.empty(n, np.bool_)
-    ray, words, valid, args = packet_buffers(RAY_WORDS, 1, flags)
+    ray, words, valid, args = packet_buffers(np.int64(RAY_WORDS), np.int64(1), flags)
     for start in range(0, n, LANES):
         count = min(LANES, n - start)
         _load_rays(ray, words, valid, origins, directions, rows, start, count, t_max)

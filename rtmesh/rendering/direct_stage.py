@@ -262,8 +262,8 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     has_smooth = len(vertex_normals) > 0
     # row-major, so that the integrator's (pixels, spp, 3) view of it is not a copy
     radiance = np.empty((n, 3))
-    rays, words, valid, args = ep.packet_buffers(ep.RAYHIT_WORDS, PACKETS, flags)
-    shadow, shadow_words, shadow_valid, _ = ep.packet_buffers(ep.RAY_WORDS, PACKETS, flags)
+    rays, words, valid, args = ep.packet_buffers(np.int64(ep.RAYHIT_WORDS), np.int64(PACKETS), flags)
+    shadow, shadow_words, shadow_valid, _ = ep.packet_buffers(np.int64(ep.RAY_WORDS), np.int64(PACKETS), flags)
     # per sample of the block: barycentrics and the rows of its face (surface_block), material
     barycentrics = np.empty((2, BLOCK))
     face = np.empty(BLOCK, np.intp)
