@@ -120,3 +120,64 @@ def test_scenes_needing_more_take_the_general_path():
     assert Integrator(mirror, settings()).direct_stage is None
     # a mirror with no bounces left renders direct light only
     assert Integrator(mirror, settings(max_depth=0)).direct_stage is not None
+
+
+# ---------------------------------------------------------------- random scenes
+from hypothesis import HealthCheck, given  # noqa: E402
+from hypothesis import settings as hypothesis_settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+LIGHT_KINDS = {"point": lambda i: PointLight([2.0 - i, -1.0, 5.0], [30.0, 20.0, 10.0 + i]),
+               "directional": lambda i: DirectionalLight([-0.3, 0.4 + 0.1 * i, -1.0], 0.5),
+               "spot": lambda i: SpotLight([-2.0, -3.0, 4.0 + i], [0.4, 0.6, -0.7], 40.0, 10.0, 25.0 + i)}
+SHININESS = (-1.0, 0.0, 7.5, 40.0, 5000.0)  # -1: no highlight
+
+
+fused_cases = st.fixed_dictionaries({
+    "lights": st.lists(st.sampled_from(sorted(LIGHT_KINDS)), min_size=1, max_size=3),
+    "shininess": st.lists(st.sampled_from(SHININESS), min_size=3, max_size=3),
+    "smooth": st.booleans(),
+    "ambient": st.sampled_from([None, [0.05, 0.1, 0.02]]),
+    "background": st.sampled_from([None, [0.2, 0.3, 0.4]]),
+    "spp": st.integers(1, 20),
+    "sampler": st.sampled_from(["regular", "random", "jittered", "sobol"]),
+    "chunk_samples": st.integers(1, 300),
+    "threads": st.sampled_from([1, 2]),
+    "seed": st.integers(0, 3),
+    "adaptive": st.booleans(),
+})
+
+
+def check_fused_case(case):
+    """A scene the fused stage takes (point-like lights of the kinds drawn, materials with
+    and without highlights, ambient and a solid background or not) rendered with settings
+    that move block, pixel and chunk boundaries (spp, chunk size, threads, sampler, rounds)."""
+    materials = [Material(f"m{i}", diffuse=0.5, specular=0.0 if s < 0 else 0.4, shininess=max(s, 0.0))
+                 for i, s in enumerate(case["shininess"])]
+    parts = [part("ball", icosphere(2, 1.0, (0.0, 0.0, 1.0)), 0, smooth=case["smooth"]),
+             part("box", box((1.0, 1.0, 1.5), (1.8, 0.5, 0.75)), 1),
+             part("floor", floor_quad(6.0), 2)]
+    camera = Camera([0.5, -6.0, 4.0], [0.3, 0.0, 0.6], [0.0, 0.0, 1.0], 45.0)
+    scene = Scene.from_parts(parts, materials, [LIGHT_KINDS[k](i) for i, k in enumerate(case["lights"])],
+                             camera, ambient=case["ambient"], background=case["background"])
+    overrides = {name: case[name] for name in ("spp", "sampler", "chunk_samples", "threads", "seed")}
+    if case["adaptive"]:  # an error estimate needs two samples a pixel
+        overrides.update(spp=max(2, case["spp"]), target_error=0.05, max_spp=2 * case["spp"] + 8)
+    a, b = render_both(scene, width=19, height=13, **overrides)
+    assert_same(a, b)
+    assert_same_film(a, b)
+
+
+@hypothesis_settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(fused_cases)
+def test_random_scenes_render_alike_on_both_paths(case):
+    """Any scene and settings the fused stage takes give the general path's image, ray
+    counts and film sums to the bit."""
+    check_fused_case(case)
+
+
+@pytest.mark.slow
+@hypothesis_settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(fused_cases)
+def test_random_scenes_render_alike_on_both_paths_many(case):
+    check_fused_case(case)
