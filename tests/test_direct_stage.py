@@ -2,6 +2,9 @@
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given
+from hypothesis import settings as hypothesis_settings
+from hypothesis import strategies as st
 from scenes import assert_finite, box, floor_quad, icosphere, part, settings, sphere_on_floor_scene
 
 from rtmesh.geometry import embree_packets
@@ -123,10 +126,6 @@ def test_scenes_needing_more_take_the_general_path():
 
 
 # ---------------------------------------------------------------- random scenes
-from hypothesis import HealthCheck, given  # noqa: E402
-from hypothesis import settings as hypothesis_settings  # noqa: E402
-from hypothesis import strategies as st  # noqa: E402
-
 LIGHT_KINDS = {"point": lambda i: PointLight([2.0 - i, -1.0, 5.0], [30.0, 20.0, 10.0 + i]),
                "directional": lambda i: DirectionalLight([-0.3, 0.4 + 0.1 * i, -1.0], 0.5),
                "spot": lambda i: SpotLight([-2.0, -3.0, 4.0 + i], [0.4, 0.6, -0.7], 40.0, 10.0, 25.0 + i)}
