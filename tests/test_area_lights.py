@@ -19,7 +19,9 @@ from scenes import floor_quad, part, pixel_centre_rays, quad, render, settings
 
 from rtmesh.core.errors import SceneError
 from rtmesh.geometry.accel import Accel
-from rtmesh.lights.area_lights import AreaLighting, DiskLight, QuadLight, emissive_mesh_light
+from rtmesh.lights.area_lighting import AreaLighting
+from rtmesh.lights.area_lights import DiskLight, QuadLight
+from rtmesh.lights.mesh_lights import emissive_mesh_light
 from rtmesh.lights.point_lights import PointLight
 from rtmesh.loaders.scene_file import scene_from_dict
 from rtmesh.materials.blinn_phong import blinn_phong

@@ -1,7 +1,5 @@
 """The MTL and glTF mapping tables of docs/MATERIALS.md, scene-file overrides, scene graphs."""
 
-import os
-
 import numpy as np
 import pytest
 import trimesh
@@ -9,7 +7,8 @@ from PIL import Image
 from trimesh.visual.material import PBRMaterial
 
 from rtmesh.loaders.importers import load_mesh_scene, parts_from_trimesh
-from rtmesh.loaders.material_files import gltf_material, map_statement, mtl_material
+from rtmesh.loaders.gltf_materials import gltf_material
+from rtmesh.loaders.mtl_materials import map_statement, mtl_material
 from rtmesh.loaders.scene_file import scene_from_dict
 
 # ---------------------------------------------------------------- MTL
@@ -236,7 +235,7 @@ def test_smoothing_by_angle_keeps_the_material_and_carries_uvs():
 
 def test_gltf_sampler_wrap_modes_reach_the_textures():
     # glTF keeps wrapS / wrapT in samplers, which trimesh drops: read from the JSON
-    from rtmesh.loaders.material_files import OPTIONS_KEY, gltf_json_materials
+    from rtmesh.loaders.gltf_materials import OPTIONS_KEY, gltf_json_materials
 
     doc = {"samplers": [{"wrapS": 33071, "wrapT": 33648}, {}],
            "textures": [{"source": 0, "sampler": 0}, {"source": 0, "sampler": 1}, {"source": 0}],
@@ -256,7 +255,7 @@ def test_gltf_sampler_wrap_modes_reach_the_textures():
 
 
 def test_gltf_emissive_texture_multiplies_the_factor():
-    from rtmesh.loaders.material_files import OPTIONS_KEY, gltf_json_materials
+    from rtmesh.loaders.gltf_materials import OPTIONS_KEY, gltf_json_materials
 
     image = Image.new("RGB", (2, 1), (255, 0, 0))
     image.putpixel((1, 0), (0, 0, 0))

@@ -21,7 +21,7 @@ from trimesh.visual.material import PBRMaterial
 
 from rtmesh.io.texture_images import IDENTITY_UV_TRANSFORM, Texture
 from rtmesh.loaders.importers import load_mesh_scene
-from rtmesh.loaders.material_files import (OPTIONS_KEY, TEXTURE_TRANSFORM, gltf_json_materials,
+from rtmesh.loaders.gltf_materials import (OPTIONS_KEY, TEXTURE_TRANSFORM, gltf_json_materials,
                                            gltf_material, khr_texture_transform, texture_options)
 from rtmesh.rendering.surface_textures import face_tangents, transformed_tangents
 from rtmesh.scene.camera import Camera

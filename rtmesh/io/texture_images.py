@@ -70,7 +70,7 @@ class Texture:
     transform : (2, 3) float, optional
         An affine map ``[A | b]`` applied to every UV before the lookup, ``uv' = A uv + b``,
         in this class's UV convention (below); glTF's KHR_texture_transform, converted by
-        :func:`rtmesh.loaders.material_files.khr_texture_transform`.  None or the identity
+        :func:`rtmesh.loaders.gltf_materials.khr_texture_transform`.  None or the identity
         (the default) reads UVs as they are, with no arithmetic.
 
     Attributes

@@ -9,11 +9,12 @@ offer a compiled row (:meth:`PointLikeLight.kernel_row`): the fused direct-light
 (:mod:`rtmesh.rendering.direct_stage`) then evaluates it inside its kernel; a render with a
 light that has no row runs the general path instead, with the same result.
 
-Area lights (quad, disk, emissive meshes: :mod:`rtmesh.lights.area_lights`) satisfy
+Area lights (quad and disk: :mod:`rtmesh.lights.area_lights`; emissive meshes:
+:mod:`rtmesh.lights.mesh_lights`) satisfy
 :class:`AreaLight`: they are sampled several times per point (``light_samples``), each
 sample a point on the light with its normal, radiance and inverse pdf by area, and rays
 can meet them (``intersect``), so camera and mirror rays see them.  Their stage
-(:class:`rtmesh.lights.area_lights.AreaLighting`) turns the samples into directions,
+(:class:`rtmesh.lights.area_lighting.AreaLighting`) turns the samples into directions,
 distances and shadow rays.  A delta light is the one-sample case of the same estimator
 (its "point" is fixed, its pdf a delta), which is why it gets the cheaper interface.
 
@@ -93,7 +94,7 @@ class AreaLight(Protocol):
         """(n,) solid-angle density with which :meth:`sample` (from ``origins``) reaches the
         light along unit ``directions`` that meet it at distances ``t``: what a ray drawn by
         a BSDF needs for its multiple-importance weight.  (The emissive triangles of a
-        scene, :class:`rtmesh.lights.area_lights.MeshLight`, are met as geometry and answer
+        scene, :class:`rtmesh.lights.mesh_lights.MeshLight`, are met as geometry and answer
         for faces and points instead.)"""
 
     @property

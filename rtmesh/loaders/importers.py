@@ -14,7 +14,8 @@ from rtmesh.io.colour import srgb_to_linear
 from rtmesh.io.texture_images import Texture, image_size_guard
 from rtmesh.loaders.gltf_nodes import (GLTF_EXTENSIONS, check_external_files, file_cameras_and_lights,
                                        read_gltf_json)
-from rtmesh.loaders.material_files import gltf_json_materials, gltf_material, mtl_material, obj_materials
+from rtmesh.loaders.gltf_materials import gltf_json_materials, gltf_material
+from rtmesh.loaders.mtl_materials import mtl_material, obj_materials
 from rtmesh.loaders.mesh_files import check_content, check_file, format_name
 from rtmesh.loaders.obj_polygons import triangulate_polygons
 from rtmesh.materials.table import Material
@@ -292,9 +293,9 @@ def _file_has_vertex_normals(mesh):
 def material_from_trimesh(visual, name, file_materials=None):
     """Map a trimesh visual's material onto rtmesh's :class:`Material`.
 
-    glTF PBR materials go through :func:`rtmesh.loaders.material_files.gltf_material` (with the
+    glTF PBR materials go through :func:`rtmesh.loaders.gltf_materials.gltf_material` (with the
     file's material extensions when known); OBJ materials are taken from the file's own MTL
-    statements by name (:func:`rtmesh.loaders.material_files.obj_materials`) when the file is known,
+    statements by name (:func:`rtmesh.loaders.mtl_materials.obj_materials`) when the file is known,
     else from trimesh's parsed statements.  Face colours give their mean as the diffuse
     colour (vertex colours are carried per vertex, see :func:`vertex_colours`).
 

@@ -43,7 +43,9 @@ from rtmesh.geometry.cutouts import CutoutAccel
 from rtmesh.geometry.motion import MotionAccel, blurs, object_motions, scene_at_time, swept_bounds
 from rtmesh.io import denoising
 from rtmesh.io.passes import DERIVED_PASSES, PassRecorder, derived_pass
-from rtmesh.lights.area_lights import AreaLighting, emissive_mesh_light, is_area_light
+from rtmesh.lights.area_lighting import AreaLighting
+from rtmesh.lights.area_lights import is_area_light
+from rtmesh.lights.mesh_lights import emissive_mesh_light
 from rtmesh.lights.environment import EnvironmentLighting
 from rtmesh.materials.table import ALPHA_MODES
 from rtmesh.rendering.adaptive import render_rounds

@@ -3,7 +3,7 @@
 Emission, unlit colours, ambient light (with ambient occlusion), and direct light: every
 point-like light through its :meth:`~rtmesh.lights.interface.PointLikeLight.illuminate`,
 one shadow ray per lit hit (:func:`rtmesh.shading.direct_light.light_samples`), and the
-area lights (:mod:`rtmesh.lights.area_lights`), for Blinn-Phong materials; metallic-roughness
+area lights (:mod:`rtmesh.lights.area_lighting`), for Blinn-Phong materials; metallic-roughness
 materials take their direct light from :mod:`rtmesh.rendering.physical_shading`.
 """
 
@@ -74,7 +74,7 @@ class LocalShading(Stage):
     def direct_light(self, srf, depth, chunk):
         """Blinn-Phong light from every light: one shadow ray per lit (hit, point-like light)
         (see :mod:`rtmesh.lights.interface`, :func:`rtmesh.shading.direct_light.light_samples`), ``light_samples`` per (hit, area light)
-        (see :mod:`rtmesh.lights.area_lights`).
+        (see :mod:`rtmesh.lights.area_lighting`).
 
         Returns
         -------

@@ -12,7 +12,7 @@ Hits whose material has the ``metallic_roughness`` model
   stage.
 - **Light sampling** (next-event estimation). Point-like lights: one shadow ray per
   (hit, light), ``f cos E``.  Area lights (quads, disks, emissive meshes): the
-  :class:`rtmesh.lights.area_lights.AreaLighting` estimator with ``f cos`` as its
+  :class:`rtmesh.lights.area_lighting.AreaLighting` estimator with ``f cos`` as its
   reflectance.  The environment (a background with ``lighting`` on): the
   :class:`rtmesh.lights.environment.EnvironmentLighting` estimator.  Area-light and
   environment samples are weighted for multiple importance sampling (below).
@@ -38,9 +38,9 @@ Each contribution is weighted by Veach's power heuristic (with the sample counts
 BSDF-sampled ray follows).  Light samples are weighted here (their
 reflectance callback receives ``p_l``); a BSDF-sampled ray is weighted where it meets the
 light: by the integrator where it leaves the scene (the environment) or ends on a quad or
-disk light (:meth:`rtmesh.lights.area_lights.AreaLighting.pdf_of_visible`), by the local
+disk light (:meth:`rtmesh.lights.area_lighting.AreaLighting.pdf_of_visible`), by the local
 shading stage where it hits an emissive triangle
-(:meth:`~rtmesh.lights.area_lights.AreaLighting.pdf_of_emitters`).  The weights sum to 1
+(:meth:`~rtmesh.lights.area_lighting.AreaLighting.pdf_of_emitters`).  The weights sum to 1
 for every direction, so the estimate is unbiased whatever the roughness, while glossy
 reflections of small bright lights come mostly from BSDF samples and diffuse light mostly
 from light samples.  Rays of delta lobes (mirrors, smooth glass) carry an infinite density:

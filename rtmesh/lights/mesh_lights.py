@@ -1,0 +1,242 @@
+"""Emissive meshes as one area light: every triangle whose material has an ``emission``
+colour, sampled by area or, where a triangle is seen under a wide solid angle, uniformly in
+that angle (Arvo).  Emissive triangles are ordinary geometry too: rays see them, and they
+occlude and cast shadows like any surface.  See :mod:`rtmesh.lights.area_lights` for how area
+lights emit and :mod:`rtmesh.lights.area_lighting` for the estimator.
+"""
+
+import numpy as np
+
+from rtmesh.core.rays import component_major, take_rows
+from rtmesh.core.vecmath import dot, normalize
+from rtmesh.geometry.accel import barycentric_interpolate
+from rtmesh.sampling.warps import spherical_triangle_area, square_to_spherical_triangle, square_to_uniform_triangle
+
+# Emissive triangles seen under more than this solid angle (sr) are sampled uniformly in it
+# (see MeshLight.sample); smaller ones by area.  Arvo's angle sums keep ~10 digits at 1e-3 sr.
+SOLID_ANGLE_SAMPLING_FROM = 1e-3
+
+
+class MeshLight:
+    """Emissive triangles as one light emitting on both sides.
+
+    Parameters
+    ----------
+    triangles : (F, 9) float
+        Per face ``[v0, v1 - v0, v2 - v0]`` of the triangles exactly as Embree traces them
+        (rows of :attr:`rtmesh.geometry.accel.Accel.triangles`), so a sampled point lies on the
+        surface a shadow ray could hit.
+    normals : (F, 3) float
+        Unit face normals.
+    emission : (F, 3) float
+        Emitted radiance of each face; every face emits (some channel > 0).
+    name : str
+        What the triangles are, for messages.
+    tint : callable, optional
+        ``tint(faces, u, v)`` -> (k, 3) multipliers of the emission at points of the faces
+        given by their index among the triangles and barycentrics (emission textures), or
+        None where none of those faces has one; without it the faces emit uniformly.
+    mean_tint : (F, 3) float, optional
+        Each face's average of ``tint``, for choosing faces in proportion to their power.
+    """
+
+    two_sided = True
+    visible = False  # seen as geometry through Embree, not by :meth:`AreaLighting.intersect`
+
+    def __init__(self, triangles, normals, emission, name="mesh", tint=None, mean_tint=None, scene_faces=None):
+        self.name = name
+        # the light's face of each scene triangle (-1: not emissive), for pdf() of rays that hit one
+        self.scene_faces = None if scene_faces is None else np.asarray(scene_faces, dtype=np.intp)
+        self.triangles = component_major(np.asarray(triangles, dtype=np.float64).T)
+        self.normals = component_major(np.asarray(normals, dtype=np.float64).T)
+        self.emission = component_major(np.asarray(emission, dtype=np.float64).T)
+        self.tint = tint
+        e1, e2 = self.triangles[:, 3:6], self.triangles[:, 6:9]
+        face_area = 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
+        self._face_area = face_area
+        self.area = float(face_area.sum())
+        # a sphere around each face (centroid, farthest corner): its solid angle bounds the
+        # face's, so faces far from a point are known to be small without the exact formula
+        self._centroids = self.triangles[:, 0:3] + (e1 + e2) / 3.0
+        corners = np.stack([np.zeros_like(e1), e1, e2]) - (e1 + e2) / 3.0
+        self._radii = np.sqrt((corners ** 2).sum(axis=2).max(axis=0))
+        # faces are chosen in proportion to their power (area x mean emission): uniform by
+        # area for a uniform emitter, and no samples wasted on dim faces of a mixed one
+        self._mean_emission = (self.emission if mean_tint is None else self.emission * mean_tint).mean(axis=1)
+        power = face_area * self._mean_emission
+        self._cdf = np.cumsum(power)
+        self._power = power
+        self._total = float(self._cdf[-1])
+
+    @property
+    def is_black(self):
+        return not self._total > 0.0
+
+    def sample(self, u, p=None):
+        """Points on the emitter, each face in proportion to its power; on the face uniform
+        in the solid angle it subtends from ``p`` where that is large, else uniform by area.
+
+        The first coordinate picks the face and is then rescaled to [0, 1) within the face's
+        share of the CDF, so one pair of numbers does both and stratification carries over.
+
+        A point close to a face sees it under a large solid angle, and samples uniform by
+        area would weigh its near part with ``1 / d^2``: rare, very bright values (fireflies
+        beside a lamp).  Uniform in solid angle (Arvo's spherical-triangle sampling) the
+        geometric factor is bounded by the face's solid angle.  Faces seen under less than
+        :data:`SOLID_ANGLE_SAMPLING_FROM` keep area sampling, which is as good there and
+        where Arvo's angle sums lose their precision.
+
+        Parameters
+        ----------
+        u : (k, 2) float
+            Points in [0, 1)^2.
+        p : (k, 3) float, optional
+            The points being lit; without them every face is sampled by area.
+
+        Returns
+        -------
+        points, normals, radiance : (k, 3) float
+        inverse_pdf : (k,) float
+            ``1 / pdf`` with respect to area: ``total power / mean emission of the face``
+            (with a tint, the face's emission times its mean tint; the radiance is the
+            emission times the tint at the point).
+        """
+        x = u[:, 0] * self._total
+        face = np.minimum(np.searchsorted(self._cdf, x, side="right"), len(self._cdf) - 1)
+        start = self._cdf[face] - self._power[face]
+        remapped = np.clip((x - start) / self._power[face], 0.0, np.nextafter(1.0, 0.0))
+        square = np.stack([remapped, u[:, 1]], axis=1)
+        triangles = take_rows(self.triangles, face)
+        b = square_to_uniform_triangle(square)
+        points = barycentric_interpolate(triangles, b[:, 0], b[:, 1])
+        emission = take_rows(self.emission, face)
+        inverse_pdf = self._total / self._mean_emission[face]
+        if p is not None:
+            self._sample_solid_angle(p, square, triangles, face, points, b, inverse_pdf)
+        tint = None if self.tint is None else self.tint(face, b[:, 0], b[:, 1])
+        if tint is not None:  # None: none of these faces has an emission texture
+            emission = emission * tint
+        return points, take_rows(self.normals, face), emission, inverse_pdf
+
+    def pdf(self, origins, faces, points):
+        """Solid-angle density with which :meth:`sample` (from ``origins``) draws ``points``
+        on the light's ``faces``, (k,): the face's chance times ``1 / omega`` where the
+        face is sampled in solid angle from that origin, else times ``d^2 / (|cos_l| A)``.
+
+        Parameters
+        ----------
+        origins : (k, 3) float
+            The points being lit.
+        faces : (k,) int
+            Indices among the light's faces.
+        points : (k, 3) float
+            Points on those faces.
+        """
+        chance = self._power[faces] / self._total
+        to_point = points - origins
+        d2 = dot(to_point, to_point)
+        cos = np.abs(dot(to_point, take_rows(self.normals, faces))) / np.sqrt(np.maximum(d2, 1e-300))
+        pdf = np.divide(chance * d2, cos * self._face_area[faces], out=np.full(len(faces), np.inf),
+                        where=cos > 0.0)
+        omega = self._solid_angles(origins, faces, take_rows(self.triangles, faces))
+        wide = omega > SOLID_ANGLE_SAMPLING_FROM
+        pdf[wide] = chance[wide] / omega[wide]
+        return pdf
+
+    def _solid_angles(self, p, face, triangles):
+        """Solid angle of each face seen from ``p`` where it may exceed
+        :data:`SOLID_ANGLE_SAMPLING_FROM` (0 where the bounding sphere rules that out)."""
+        offset = take_rows(self._centroids, face) - p
+        distance = np.sqrt(dot(offset, offset))
+        radius = self._radii[face]
+        gap = np.maximum(distance - radius, 0.0)
+        cap = 2.0 * np.pi * (1.0 - gap / np.sqrt(gap * gap + radius * radius))  # >= the face's
+        omega = np.zeros(len(face))
+        near = np.flatnonzero(cap > SOLID_ANGLE_SAMPLING_FROM)
+        if len(near):
+            v0n, e1n, e2n = (take_rows(triangles[:, k:k + 3], near) for k in (0, 3, 6))
+            pn = take_rows(p, near)
+            unit = [normalize(c) for c in (v0n - pn, v0n + e1n - pn, v0n + e2n - pn)]
+            omega[near] = spherical_triangle_area(*unit)
+        return omega
+
+    def _sample_solid_angle(self, p, square, triangles, face, points, b, inverse_pdf):
+        """Move the samples of faces seen under a large solid angle from ``p`` to points
+        uniform in that solid angle; updates ``points``, ``b`` and ``inverse_pdf`` in place.
+
+        The area density of such a point is ``P(face) |cos_l| / (omega d^2)``, with
+        ``P(face) = area x mean emission / total`` the chance of choosing the face.
+        """
+        # which faces are seen under more than the threshold depends on p and the face
+        # only (never on the sample, which would change the density): the bounding sphere
+        # rules out the far ones cheaply, the exact solid angle decides for the rest
+        omega = self._solid_angles(p, face, triangles)
+        rows = np.flatnonzero(omega > SOLID_ANGLE_SAMPLING_FROM)
+        if not len(rows):
+            return
+        v0, e1, e2 = triangles[:, 0:3], triangles[:, 3:6], triangles[:, 6:9]
+        pr, v0r_, e1r_, e2r_ = take_rows(p, rows), take_rows(v0, rows), take_rows(e1, rows), take_rows(e2, rows)
+        a, bb, c = (normalize(x) for x in (v0r_ - pr, v0r_ + e1r_ - pr, v0r_ + e2r_ - pr))
+        w, omega = square_to_spherical_triangle(take_rows(square, rows), a, bb, c)
+        n = take_rows(self.normals, face[rows])
+        origin, e1r, e2r, v0r = take_rows(p, rows), take_rows(e1, rows), take_rows(e2, rows), take_rows(v0, rows)
+        cos = dot(w, n)
+        # where the direction meets the face's plane (inside the face up to rounding)
+        t = dot(v0r - origin, n) / np.where(cos != 0.0, cos, np.inf)
+        y = origin + t[:, None] * w
+        # barycentrics of y, for textured emission: least squares on the two edges
+        rel = y - v0r
+        d00, d01, d11 = dot(e1r, e1r), dot(e1r, e2r), dot(e2r, e2r)
+        d20, d21 = dot(rel, e1r), dot(rel, e2r)
+        det = d00 * d11 - d01 * d01
+        b1 = np.clip((d11 * d20 - d01 * d21) / det, 0.0, 1.0)
+        b2 = np.clip((d00 * d21 - d01 * d20) / det, 0.0, 1.0 - b1)
+        chance = self._power[face[rows]] / self._total
+        # a direction in the face's plane (cos 0: a point in that plane, e.g. on the face
+        # itself) gives no solid-angle sample: inf, not 0 / 0, and the area sample is kept
+        inverse = np.divide(omega * t * t, chance * np.abs(cos), out=np.full(len(cos), np.inf),
+                            where=cos != 0.0)
+        ok = np.isfinite(inverse) & (t > 0.0)  # else keep the area sample (a face seen edge-on)
+        rows, y, b1, b2, inverse = rows[ok], y[ok], b1[ok], b2[ok], inverse[ok]
+        points[rows] = y
+        b[rows, 0], b[rows, 1] = b1, b2
+        inverse_pdf[rows] = inverse
+
+
+def emissive_mesh_light(triangles, normals, emission, tint=None, mean_tint=None):
+    """All emissive triangles of a scene as one :class:`MeshLight`, or None if there are none.
+
+    One light, not one per object: each hit then sends ``light_samples`` shadow rays to
+    emissive geometry however many objects emit, and the power-proportional choice of
+    triangle shares them out between the emitters as a power-based light sampler would
+    (a lamp twice as bright gets twice the samples).  A scene with many dim emissive parts
+    costs no more than one with a single lamp.
+
+    Parameters
+    ----------
+    triangles : (F, 9) float
+        :attr:`rtmesh.geometry.accel.Accel.triangles`.
+    normals : (F, 3) float
+        Unit face normals.
+    emission : (F, 3) float
+        Emitted radiance of each face (its material's emission).
+    tint : callable, optional
+        ``tint(prim, u, v)`` -> (k, 3) multipliers of the emission at points of the scene's
+        faces ``prim`` (emission textures); see :class:`MeshLight`.
+    mean_tint : (F, 3) float, optional
+        Each face's average tint (required with ``tint``).
+
+    Returns
+    -------
+    MeshLight or None
+    """
+    faces = np.flatnonzero((emission > 0.0).any(axis=1))
+    if tint is not None:
+        faces = faces[(emission[faces] * mean_tint[faces] > 0.0).any(axis=1)]  # all-black maps emit nothing
+    if not len(faces):
+        return None
+    light_tint = None if tint is None else (lambda face, u, v: tint(faces[face], u, v))
+    scene_faces = np.full(len(emission), -1, dtype=np.intp)
+    scene_faces[faces] = np.arange(len(faces))
+    return MeshLight(take_rows(triangles, faces), normals[faces], emission[faces], "emissive surfaces",
+                     light_tint, None if tint is None else mean_tint[faces], scene_faces)
