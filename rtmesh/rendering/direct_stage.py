@@ -251,11 +251,13 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     Notes
     -----
     Misses are computed on face 0 and ignored, so the steps of a block loop over its samples
-    without early exits.  LLVM vectorises the arithmetic of the camera directions, the
-    surface records and the light samples (:func:`camera_block`, :func:`surface_block`,
-    :func:`light_block`); the pixel positions, the gathers and the packet lanes stay
-    scalar.  The packets of a block lie side by side in one buffer (each 64-byte aligned),
-    and sample ``b`` of the block is lane ``b % 16`` of packet ``b // 16``.
+    without early exits.  LLVM vectorises the hashing and arithmetic of the camera rays,
+    the surface records with their table reads, the light samples, the stores into the
+    packets and the Blinn-Phong sums (:func:`camera_block`, :func:`surface_block`,
+    :func:`light_block`, :func:`write_rays`); what is formed once per pixel, the hit ids
+    read back from the packets and the highlight powers (libm's pow) stay scalar.  The
+    packets of a block lie side by side in one buffer (each 64-byte aligned), and sample
+    ``b`` of the block is lane ``b % 16`` of packet ``b // 16``.
     """
     n_lights = len(lights)
     adding = len(film_count) > 0
@@ -264,7 +266,8 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     radiance = np.empty((n, 3))
     rays, words, valid, args = ep.packet_buffers(np.int64(ep.RAYHIT_WORDS), np.int64(PACKETS), flags)
     shadow, shadow_words, shadow_valid, _ = ep.packet_buffers(np.int64(ep.RAY_WORDS), np.int64(PACKETS), flags)
-    # per sample of the block: barycentrics and the rows of its face (surface_block), material
+    # per sample of the block: barycentrics, the face hit and its row of vertex normals
+    # (surface_block), material
     barycentrics = np.empty((2, BLOCK))
     face = np.empty(BLOCK, np.intp)
     normal_row = np.empty(BLOCK, np.intp)
