@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 
 from rtmesh.core.compiled import kernel
+from rtmesh.core.row_vectors import floor_quotient
 from rtmesh.geometry.accel import offset_ray_origins
 from rtmesh.lights.point_light_rows import illuminate_row, point_row
 from rtmesh.lights.point_lights import DirectionalLight, PointLight, SpotLight
 from rtmesh.rendering import film_sums
-from rtmesh.rendering.direct_blocks import stratum_of
+from rtmesh.sampling.pixel_samples import stratum_of
 from rtmesh.scene import camera_rays
-from rtmesh.scene.camera_rays import pixel_row
 from rtmesh.shading import direct_light, surfaces
 from rtmesh.shading.surfaces import face_viewer
 
@@ -245,14 +245,14 @@ def _quotients(values, divisor):
     out = np.empty((2, len(values)), np.int64)
     inverse = 1.0 / divisor
     for i in range(len(values)):
-        out[0, i] = pixel_row(values[i], divisor, inverse)
+        out[0, i] = floor_quotient(values[i], divisor, inverse)
         out[1, i] = stratum_of(np.uint64(values[i]), divisor, inverse)
     return out
 
 
 @pytest.mark.parametrize("divisor", [1, 3, 16, 17, 1000, 65535, 2 ** 20])
 def test_quotients_without_integer_division_are_exact(divisor):
-    """pixel_row (a pixel's row) and stratum_of (a sample's stratum) are ``//`` and ``%``
+    """floor_quotient (a pixel's row) and stratum_of (a sample's stratum) are ``//`` and ``%``
     by a float product and a one-step correction: exact up to the largest indices rtmesh
     allows (sides up to 2^20, so pixels and samples below 2^40)."""
     rng = np.random.default_rng(divisor)

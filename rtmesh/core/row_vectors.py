@@ -1,8 +1,11 @@
-"""One-row vector arithmetic for compiled kernels (dot products, normalising), in the
-summation order of :mod:`rtmesh.core.vecmath`, so compiled and NumPy results agree bit for bit.
+"""One-row arithmetic for compiled kernels: vectors (dot products, normalising), in the
+summation order of :mod:`rtmesh.core.vecmath`, so compiled and NumPy results agree bit for
+bit, and integer quotients without an integer division.
 """
 
 import math
+
+import numpy as np
 
 from rtmesh.core.compiled import row
 
@@ -24,3 +27,16 @@ def normalized3(x, y, z, scale):
 
 # Smallest cosine between a bent shading normal and the direction to the viewer: enough to
 # keep the Blinn-Phong half vector and the mirror direction well defined.
+
+
+# ------------------------------------------------------------------ integers
+@row
+def floor_quotient(value, divisor, inverse_divisor):
+    """``value // divisor`` for ``0 <= value < 2**52`` and ``divisor >= 1``, by a float
+    product and a one-step correction (``inverse_divisor`` is ``1.0 / divisor``): an integer
+    division takes tens of cycles and has no vector form, so it would keep the loops that
+    call it from vectorising."""
+    quotient = np.int64(value * inverse_divisor)
+    quotient += (quotient + 1) * divisor <= value
+    quotient -= quotient * divisor > value
+    return quotient

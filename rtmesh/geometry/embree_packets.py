@@ -464,15 +464,14 @@ def packet_buffers(fields, packets, flags):
 def set_lane(ray, words, lane, ox, oy, oz, dx, dy, dz, tfar):
     """Write one ray into lane ``lane`` of a packet (tnear 0, time 0, all masks).
 
-    The coordinates are rounded to float32 (to nearest, as NumPy's ``astype`` does), and
-    direction components below :data:`MIN_RCP_INPUT` become 0.
+    The coordinates are rounded to float32 (to nearest, as NumPy's ``astype`` does), the
+    direction's as :func:`packet_direction` forms them.
     """
     ray[ORG * LANES + lane] = np.float32(ox)
     ray[(ORG + 1) * LANES + lane] = np.float32(oy)
     ray[(ORG + 2) * LANES + lane] = np.float32(oz)
     for c, value in ((0, dx), (1, dy), (2, dz)):
-        d = np.float32(value)
-        ray[(DIR + c) * LANES + lane] = _F32_ZERO if abs(d) < MIN_RCP_INPUT else d
+        ray[(DIR + c) * LANES + lane] = packet_direction(value)
     ray[TFAR * LANES + lane] = np.float32(tfar)
     ray[TNEAR * LANES + lane] = _F32_ZERO
     ray[TIME * LANES + lane] = _F32_ZERO
@@ -482,27 +481,11 @@ def set_lane(ray, words, lane, ox, oy, oz, dx, dy, dz, tfar):
 
 
 @row
-def set_lane_ray(ray, lane, ox, oy, oz, dx, dy, dz, tfar):
-    """:func:`set_lane` without the fields a query leaves as they are (tnear, time, mask, id,
-    flags): for a lane :func:`set_lane` filled before, which the same values keep filling.
-
-    Embree's queries write only ``tfar`` and the hit, so a kernel tracing many packets
-    through one buffer sets those fields once, not for every ray (fewer stores a lane).
-    """
-    ray[ORG * LANES + lane] = np.float32(ox)
-    ray[(ORG + 1) * LANES + lane] = np.float32(oy)
-    ray[(ORG + 2) * LANES + lane] = np.float32(oz)
-    set_lane_direction(ray, lane, dx, dy, dz, tfar)
-
-
-@row
-def set_lane_direction(ray, lane, dx, dy, dz, tfar):
-    """The direction and ``tfar`` of lane ``lane``, as :func:`set_lane` writes them: for a
-    lane whose other ray fields already hold the values wanted (see :func:`set_lane_ray`)."""
-    for c, value in ((0, dx), (1, dy), (2, dz)):
-        d = np.float32(value)
-        ray[(DIR + c) * LANES + lane] = _F32_ZERO if abs(d) < MIN_RCP_INPUT else d
-    ray[TFAR * LANES + lane] = np.float32(tfar)
+def packet_direction(value):
+    """A direction component as a packet holds it: rounded to float32 (to nearest, as
+    NumPy's ``astype`` does), and 0 below :data:`MIN_RCP_INPUT`."""
+    d = np.float32(value)
+    return _F32_ZERO if abs(d) < MIN_RCP_INPUT else d
 
 
 @row

@@ -18,8 +18,8 @@ from rtmesh.geometry import embree_packets as ep
 from rtmesh.geometry.float32_rays import F32_MAX, offset_origin
 from rtmesh.lights.point_light_rows import KIND, POINT, illuminate_row, point_row
 from rtmesh.materials.blinn_phong import blinn_phong_row, highlight_cosine
-from rtmesh.sampling.pixel_samples import RANDOM, REGULAR, sequence_uniform
-from rtmesh.scene.camera_rays import pinhole_xyz, pixel_row
+from rtmesh.sampling.pixel_samples import sample_positions
+from rtmesh.scene.camera_rays import pinhole_xyz
 from rtmesh.shading.direct_light import light_reaches
 from rtmesh.shading.surfaces import surface_from_rows_inlined
 
@@ -28,7 +28,6 @@ LANES = ep.LANES
 # loops long enough for AVX-512, while the block's records stay in L1
 PACKETS = 4
 BLOCK = PACKETS * LANES
-_F32_ZERO = np.float32(0.0)
 
 
 @row
@@ -41,75 +40,50 @@ def camera_block(film_xy, code, corners, size, spp, start, count, sample, sequen
     ``sample`` (BLOCK,) uint64 holds each sample's index, and what the caller formed once
     per pixel: ``sequence`` (2, BLOCK) uint64, the pixel's sequence keys of the two pixel
     dimensions (:func:`rtmesh.sampling.pixel_samples.pixel_sequence`), and ``column``,
-    ``line`` (BLOCK,) float64, its column and row; ``b`` for sample ``start + b``.  The positions in the pixels
-    come from ``film_xy`` or, when it is empty, from the sampler (``code``, ``corners``,
-    ``size``, ``spp``: the :class:`rtmesh.sampling.pixel_samples.PixelSampler` arrays), as
-    :func:`rtmesh.sampling.pixel_samples.pixel_position` forms them.
+    ``line`` (BLOCK,) float64, its column and row; ``b`` for sample ``start + b``.  The
+    positions in the pixels come from ``film_xy`` or, when it is empty, from the sampler
+    (``code``, ``corners``, ``size``, ``spp``: the
+    :class:`rtmesh.sampling.pixel_samples.PixelSampler`'s), by
+    :func:`rtmesh.sampling.pixel_samples.sample_positions`.
 
     ``camera`` is the image-plane map and the camera frame as a tuple of 13 numbers
     (:func:`camera_numbers`): numba takes and releases a reference to every array argument
     of a compiled call (atomic instructions, shared between the render threads).  ``xy``
-    (2, BLOCK) is scratch.  Each loop is branch-free over the block's arrays, and integer
-    divisions (the pixel's row, the stratum) are float products with a correction
-    (:func:`rtmesh.scene.camera_rays.pixel_row`), so LLVM vectorises the hashing, the
-    directions and the packet stores (with a call per sample and the packets' lanes
-    written one by one, this step took about 45 cycles a sample at 16 spp, and the
-    pixel's row and stratum as integer divisions cost about 25 more at 1 spp).
+    (2, BLOCK) is scratch.  Each loop is branch-free over the block's arrays, so LLVM
+    vectorises the hashing, the directions and the packet stores (with a call per sample
+    and the packets' lanes written one by one, this step took about 45 cycles a sample at
+    16 spp; integer divisions for the pixel's row and the stratum cost about 25 more at
+    1 spp).
     """
     ax, bx, ay, by, fx, fy, fz, rx, ry, rz, ux, uy, uz = camera
-    inverse_spp = 1.0 / spp
     if len(film_xy):
         for b in range(count):
             xy[0, b], xy[1, b] = film_xy[start + b, 0], film_xy[start + b, 1]
-    elif code == RANDOM:
-        for b in range(count):
-            xy[0, b] = sequence_uniform(sequence[0, b], sample[b])
-            xy[1, b] = sequence_uniform(sequence[1, b], sample[b])
     else:
-        # the strata's corners (regular: their centres) first: a loop of its own, as its
-        # gathers would keep the hashing from vectorising
-        for b in range(count):
-            stratum = stratum_of(sample[b], spp, inverse_spp)
-            xy[0, b], xy[1, b] = corners[stratum, 0], corners[stratum, 1]
-        if code != REGULAR:
-            s0, s1 = size[0], size[1]
-            for b in range(count):
-                xy[0, b] = (xy[0, b] + sequence_uniform(sequence[0, b], sample[b])) / s0
-                xy[1, b] = (xy[1, b] + sequence_uniform(sequence[1, b], sample[b])) / s1
+        sample_positions(code, corners, size, spp, sample, sequence, count, xy)
     # inactive lanes of the last packet: a copy of the first ray keeps their words finite
     for b in range(count, BLOCK):
         xy[0, b], xy[1, b], column[b], line[b] = xy[0, 0], xy[1, 0], column[0], line[0]
-    # image_plane_xy
+    # image_plane_xy, with the pixel's column and row formed by the caller
     for b in range(BLOCK):
         sx = (xy[0, b] + column[b]) * ax + bx
         sy = (xy[1, b] + line[b]) * ay + by
         d[0, b], d[1, b], d[2, b] = pinhole_xyz(sx, sy, fx, fy, fz, rx, ry, rz, ux, uy, uz)
-    write_directions(d, rays, ep.RAYHIT_WORDS, ep.DEFAULT_TFAR)
+    write_directions(d, rays)
 
 
 @row
-def stratum_of(sample, spp, inverse_spp):
-    """``sample % spp`` (the sample's stratum; 0 for one sample per pixel) without an
-    integer division, as :func:`rtmesh.scene.camera_rays.pixel_row` forms a quotient."""
-    i = np.int64(sample)
-    return i - pixel_row(i, spp, inverse_spp) * spp
-
-
-@row
-def write_directions(d, rays, words, tfar):
-    """Directions ``d`` (3, BLOCK) and a ``tfar`` (one for all) into the block's packets
-    ``rays`` (``words`` per lane), as :func:`rtmesh.geometry.embree_packets.set_lane_direction`
-    writes one lane; one branch-free loop of 16 lanes per packet and field, which LLVM
-    vectorises."""
-    tiny = ep.MIN_RCP_INPUT
-    far = np.float32(tfar)
+def write_directions(d, rays):
+    """Camera ray directions ``d`` (3, BLOCK) and the default ``tfar`` into the block's
+    ``RTCRayHit16`` packets ``rays`` (:func:`rtmesh.geometry.embree_packets.packet_direction`);
+    one branch-free loop of 16 lanes per packet and field, which LLVM vectorises."""
+    far = np.float32(ep.DEFAULT_TFAR)
     for q in range(PACKETS):
-        base = q * words * LANES
+        base = q * ep.RAYHIT_WORDS * LANES
         for c in range(3):
             at = base + (ep.DIR + c) * LANES
             for lane in range(LANES):
-                f = np.float32(d[c, q * LANES + lane])
-                rays[at + lane] = _F32_ZERO if abs(f) < tiny else f
+                rays[at + lane] = ep.packet_direction(d[c, q * LANES + lane])
         at = base + ep.TFAR * LANES
         for lane in range(LANES):
             rays[at + lane] = far
@@ -119,9 +93,8 @@ def write_directions(d, rays, words, tfar):
 def write_rays(ray, rays):
     """Shadow rays ``ray`` (7, BLOCK) float32 (origin, direction, length: see
     :func:`light_block`) into the block's ``RTCRay16`` packets ``rays``, as
-    :func:`rtmesh.geometry.embree_packets.set_lane_ray` writes one lane, in branch-free
-    loops of 16 lanes that LLVM vectorises."""
-    tiny = ep.MIN_RCP_INPUT
+    :func:`rtmesh.geometry.embree_packets.set_lane` writes one lane, in branch-free loops of
+    16 lanes that LLVM vectorises."""
     for q in range(PACKETS):
         base = q * ep.RAY_WORDS * LANES
         for c in range(3):
@@ -130,8 +103,7 @@ def write_rays(ray, rays):
                 rays[at + lane] = ray[c, q * LANES + lane]
             at = base + (ep.DIR + c) * LANES
             for lane in range(LANES):
-                f = ray[3 + c, q * LANES + lane]
-                rays[at + lane] = _F32_ZERO if abs(f) < tiny else f
+                rays[at + lane] = ep.packet_direction(ray[3 + c, q * LANES + lane])
         at = base + ep.TFAR * LANES
         for lane in range(LANES):
             rays[at + lane] = ray[6, q * LANES + lane]

@@ -32,6 +32,7 @@ sample order) instead of returning them for a separate pass.
 import numpy as np
 
 from rtmesh.core.compiled import kernel
+from rtmesh.core.row_vectors import floor_quotient
 from rtmesh.geometry import embree_packets as ep
 from rtmesh.geometry.accel import Accel
 from rtmesh.lights.point_light_rows import ROW
@@ -43,7 +44,6 @@ from rtmesh.rendering.film_sums import add_pixels
 from rtmesh.rendering.scheduler import sample_indices
 from rtmesh.sampling.pixel_samples import PixelSampler, pixel_sequence
 from rtmesh.scene.background import SolidBackground
-from rtmesh.scene.camera_rays import pixel_row
 from rtmesh.shading.direct_light import SHADOW_SHORTEN
 
 _NO_POSITIONS = np.zeros((0, 2))
@@ -199,7 +199,7 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     flags : int
         Query flags (coherent).
     film_xy : (n, 2) float64 or (0, 2)
-        Positions inside the pixels, or empty: formed here by :func:`pixel_position`.
+        Positions inside the pixels, or empty: formed here (:func:`sample_positions`).
     sampler, keys, corners, size, spp
         The :class:`rtmesh.sampling.pixel_samples.PixelSampler` arrays.
     pixel_list : (m,) int64 or (0,)
@@ -324,7 +324,7 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
                 px_sample = first[0] if one_first else first[current]
                 px = pixel_list[current] if listed else first_pixel + current
                 sequence0, sequence1 = pixel_sequence(keys[0], px), pixel_sequence(keys[1], px)
-                px_row = pixel_row(px, width, inverse_width)
+                px_row = floor_quotient(px, width, inverse_width)
                 px_column, px_line = np.float64(px - px_row * width), np.float64(px_row)
                 continue
             run = min(left, count - b)

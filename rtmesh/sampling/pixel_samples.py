@@ -11,6 +11,7 @@ stays in NumPy: its scrambling tables are not worth a second implementation.
 import numpy as np
 
 from rtmesh.core.compiled import kernel, row
+from rtmesh.core.row_vectors import floor_quotient
 from rtmesh.sampling.hashing import GOLDEN, M1, mix64
 from rtmesh.sampling.patterns import Dim, _cell_grids
 
@@ -21,7 +22,7 @@ _TO_UNIT = 1.0 / 9007199254740992.0  # 2 ** -53: the top 53 bits as a double in 
 
 
 class PixelSampler:
-    """What :func:`pixel_position` needs for one render's sampler, formed once.
+    """What :func:`sample_positions` needs for one render's sampler, formed once.
 
     Parameters
     ----------
@@ -68,7 +69,7 @@ class PixelSampler:
 @row
 def pixel_sequence(key, pixel):
     """The key of one pixel's sequence in one dimension (``key``: the dimension's, from
-    :attr:`PixelSampler.keys`): the part of :func:`_uniform` that is the same for all of a
+    :attr:`PixelSampler.keys`): the part of a sample's hash that is the same for all of a
     pixel's samples, for kernels that form it once per pixel."""
     return mix64(key ^ (np.uint64(pixel) * GOLDEN))
 
@@ -82,29 +83,70 @@ def sequence_uniform(sequence, sample):
 
 
 @row
-def _uniform(key, pixel, sample):
-    """:func:`rtmesh.sampling.patterns.uniform` for one (dimension key, pixel, sample)."""
-    return sequence_uniform(pixel_sequence(key, pixel), np.uint64(sample))
+def stratum_of(sample, spp, inverse_spp):
+    """``sample % spp`` (uint64 ``sample``; ``inverse_spp`` is ``1.0 / spp``): the sample's
+    stratum, 0 for one sample per pixel, without an integer division."""
+    i = np.int64(sample)
+    return i - floor_quotient(i, spp, inverse_spp) * spp
 
 
 @row
-def pixel_position(code, keys, corners, size, spp, pixel, sample):
-    """Sample ``sample`` of pixel ``pixel``: its offset ``(x, y)`` in [0, 1)^2 from the
-    pixel's top-left corner, as :func:`rtmesh.sampling.patterns.pixel_offsets` gives it."""
+def sample_positions(code, corners, size, spp, sample, sequence, count, xy):
+    """Writes into ``xy`` (2, m) the positions of samples ``0 .. count - 1`` in their pixels:
+    offsets ``(x, y)`` in [0, 1)^2 from the pixel's top-left corner, as
+    :func:`rtmesh.sampling.patterns.pixel_offsets` gives them.
+
+    Parameters
+    ----------
+    code, corners, size, spp
+        The :class:`PixelSampler`'s.
+    sample : (m,) uint64
+        Each sample's index in its pixel.
+    sequence : (2, m) uint64
+        Its pixel's sequence keys of the two pixel dimensions (:func:`pixel_sequence`), which
+        a kernel forms once per pixel.
+    count : int
+    xy : (2, m) float64
+
+    Notes
+    -----
+    Each loop is branch-free and has no integer division, so LLVM vectorises the hashing;
+    the strata's corners (regular: their centres) are read in a loop of their own, as their
+    gathers would keep the hashing from vectorising.
+    """
     if code == RANDOM:
-        return _uniform(keys[0], pixel, sample), _uniform(keys[1], pixel, sample)
-    stratum = sample % spp if spp > 1 else 0
-    if code == REGULAR:
-        return corners[stratum, 0], corners[stratum, 1]
-    return ((corners[stratum, 0] + _uniform(keys[0], pixel, sample)) / size[0],
-            (corners[stratum, 1] + _uniform(keys[1], pixel, sample)) / size[1])
+        for b in range(count):
+            xy[0, b] = sequence_uniform(sequence[0, b], sample[b])
+            xy[1, b] = sequence_uniform(sequence[1, b], sample[b])
+        return
+    inverse_spp = 1.0 / spp
+    for b in range(count):
+        stratum = stratum_of(sample[b], spp, inverse_spp)
+        xy[0, b], xy[1, b] = corners[stratum, 0], corners[stratum, 1]
+    if code != REGULAR:
+        s0, s1 = size[0], size[1]
+        for b in range(count):
+            xy[0, b] = (xy[0, b] + sequence_uniform(sequence[0, b], sample[b])) / s0
+            xy[1, b] = (xy[1, b] + sequence_uniform(sequence[1, b], sample[b])) / s1
 
 
 @kernel
 def pixel_positions(code, keys, corners, size, spp, pixel, sample):
-    """:func:`pixel_position` of many samples, (n, 2) float64 (row-major)."""
+    """:func:`sample_positions` of samples given by pixel and index, (n, 2) float64.
+
+    Parameters
+    ----------
+    code, keys, corners, size, spp
+        The :class:`PixelSampler`'s.
+    pixel, sample : (n,) int
+        Each sample's pixel (linear index) and index in it.
+    """
     n = len(pixel)
-    out = np.empty((n, 2))
+    sequence = np.empty((2, n), np.uint64)
+    index = np.empty(n, np.uint64)
     for i in range(n):
-        out[i, 0], out[i, 1] = pixel_position(code, keys, corners, size, spp, pixel[i], sample[i])
-    return out
+        sequence[0, i], sequence[1, i] = pixel_sequence(keys[0], pixel[i]), pixel_sequence(keys[1], pixel[i])
+        index[i] = np.uint64(sample[i])
+    xy = np.empty((2, n))
+    sample_positions(code, corners, size, spp, index, sequence, n, xy)
+    return xy.T

@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from rtmesh.core.compiled import kernel, row
-from rtmesh.core.row_vectors import normalized3
+from rtmesh.core.row_vectors import floor_quotient, normalized3
 
 
 # ------------------------------------------------------------------ camera
@@ -25,20 +25,9 @@ def image_plane_xy(x, y, pixel, width, inverse_width, ax, bx, ay, by):
     numbers: a compiled function that takes them instead of the array holds no reference
     to count (see :func:`rtmesh.rendering.direct_blocks.camera_block`)."""
     if pixel >= 0:
-        row = pixel_row(pixel, width, inverse_width)
+        row = floor_quotient(pixel, width, inverse_width)
         x, y = x + np.float64(pixel - row * width), y + np.float64(row)
     return x * ax + bx, y * ay + by
-
-
-@row
-def pixel_row(pixel, width, inverse_width):
-    """``pixel // width`` for ``pixel >= 0``, by a float product and a one-step correction:
-    an integer division (tens of cycles, and no vector form) would keep the loops that
-    call it from vectorising."""
-    row = np.int64(pixel * inverse_width)
-    row += (row + 1) * width <= pixel
-    row -= row * width > pixel
-    return row
 
 
 @row
