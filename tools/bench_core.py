@@ -155,16 +155,15 @@ def packet_runner(accel, calls, threads):
     library = embree_packets.packet_library()
     flags = embree_packets.RTC_RAY_QUERY_FLAG_COHERENT
     handle = accel._shared.handle
+    intersect_rays, occluded_rays = embree_packets.query_kernels()
 
     def trace(share):
         for call in share:
             if call[0] == "intersect":
-                embree_packets.intersect_rays(library.intersect16, handle,
-                                              *embree_packets.closest_rays(call[1], call[2]), flags)
+                intersect_rays(library.intersect16, handle, *embree_packets.closest_rays(call[1], call[2]), flags)
             else:
-                embree_packets.occluded_rays(library.occluded16, handle,
-                                             *embree_packets.shadow_rays(call[1], call[2], call[3]),
-                                             call[4], flags)
+                occluded_rays(library.occluded16, handle, *embree_packets.shadow_rays(call[1], call[2], call[3]),
+                              call[4], flags)
 
     shares = [calls[i::threads] for i in range(threads)]
     if threads == 1:

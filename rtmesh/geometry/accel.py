@@ -219,9 +219,9 @@ class Accel:
             empty = np.zeros(0)
             return Hits(empty, np.zeros(0, np.int32), empty, empty)
         if self.packets:
-            t, prim, u, v = embree_packets.intersect_rays(self._intersect16, self._shared.handle,
-                                                          *embree_packets.closest_rays(origins, directions),
-                                                          _PACKET_FLAGS)
+            intersect_rays, _ = embree_packets.query_kernels()
+            t, prim, u, v = intersect_rays(self._intersect16, self._shared.handle,
+                                           *embree_packets.closest_rays(origins, directions), _PACKET_FLAGS)
             return Hits(t, prim, u, v)
         result = self._scene.run(_embree_rays(origins), _embree_rays(directions), output=1)
         prim = result["primID"]
@@ -250,7 +250,8 @@ class Accel:
         if self.packets:
             rows = _NO_ROWS if rows is None else np.asarray(rows, dtype=np.int64)
             o, d, t = embree_packets.shadow_rays(origins, directions, t_max)
-            return embree_packets.occluded_rays(self._occluded16, self._shared.handle, o, d, t, rows,
+            _, occluded_rays = embree_packets.query_kernels()
+            return occluded_rays(self._occluded16, self._shared.handle, o, d, t, rows,
                                                 _PACKET_FLAGS)
         if rows is not None:
             t_max = t_max[rows]

@@ -196,8 +196,6 @@ def packet_library():
             return _library
         _library_checked = True
         _library, reason = _open_verified()
-        if _library is not None:
-            _fix_query_signatures()
         if _library is None:
             log.info("tracing with embreex run(), one ray at a time: %s", reason)
         else:
@@ -206,9 +204,32 @@ def packet_library():
         return _library
 
 
+_queries_fixed = False
+
+
+def query_kernels():
+    """:func:`intersect_rays` and :func:`occluded_rays`, each compiled (or loaded from the
+    disk cache) for its one signature on the first call in the process (see
+    :func:`closest_rays` and :func:`shadow_rays` for the arguments they take).
+
+    Not at :func:`packet_library`: a render through the fused stage
+    (:mod:`rtmesh.rendering.direct_stage`) traces with packets of its own and never calls
+    them, and their compile took 2.4 s of its first run.
+
+    Returns
+    -------
+    intersect_rays, occluded_rays : numba dispatchers
+    """
+    global _queries_fixed
+    if not _queries_fixed:
+        with _library_lock:
+            if not _queries_fixed:
+                _fix_query_signatures()
+                _queries_fixed = True
+    return intersect_rays, occluded_rays
+
+
 def _fix_query_signatures():
-    """One compiled version of each query kernel (see :func:`closest_rays` and
-    :func:`shadow_rays` for the arguments they take)."""
     query = numba_typeof_query()
     # read-only views: writable arrays convert to them, and read-only ones (a camera's
     # repeated origin row) are accepted as they are
