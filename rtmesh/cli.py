@@ -9,7 +9,7 @@ import traceback
 
 from rtmesh import __version__
 from rtmesh.api import load_scene
-from rtmesh.core import runtime
+from rtmesh.core import compile_ahead, runtime
 from rtmesh.core.errors import OutputError, RtmeshError
 from rtmesh.io.colour import TONEMAPS
 from rtmesh.io.images import check_output_path, write_display_image, write_image
@@ -317,15 +317,17 @@ def cmd_render(args):
     background = None if args.background is None else background_from_option(args.background)
     # the command owns its process: tune it for rendering (allocator, GIL, kept threads)
     runtime.tune_process()
-    # the memory check runs on the settings before any mesh is read
-    scene, settings = load_scene(args.input, lambda s: memory.check(s, args.memory_limit), **overrides)
-    if background is not None:
-        scene.background = background
-    bar = ProgressBar(enabled=not args.quiet and sys.stderr.isatty())
-    try:
-        result = Integrator(scene, settings).render(progress=bar)
-    finally:
-        bar.close()
+    # on a first run, a second process compiles kernels alongside this one
+    with compile_ahead.helper():
+        # the memory check runs on the settings before any mesh is read
+        scene, settings = load_scene(args.input, lambda s: memory.check(s, args.memory_limit), **overrides)
+        if background is not None:
+            scene.background = background
+        bar = ProgressBar(enabled=not args.quiet and sys.stderr.isatty())
+        try:
+            result = Integrator(scene, settings).render(progress=bar)
+        finally:
+            bar.close()
     write_image(args.output, result.image, result.passes, settings.exposure, settings.tonemap,
                 alpha=result.alpha)
     if args.camera_json:

@@ -26,7 +26,9 @@ kernels do not check their indices: callers pass faces within range.
 import math
 
 import numpy as np
+from numba import types
 
+from rtmesh.core.compile_ahead import KernelGroup
 from rtmesh.core.compiled import kernel, row
 
 _row = row  # one-row helpers: compiled into the kernels that call them
@@ -510,3 +512,22 @@ def corner_rows(values, faces):
             out[f, 3 + c] = values[i1, c] - first
             out[f, 6 + c] = values[i2, c] - first
     return out
+
+
+_VECTORS = types.float64[:, ::1]
+_FACES = types.int64[:, ::1]
+# the passes as a scene build first calls them, for arrays as the loaders and Scene pass
+# them (see rtmesh.core.compile_ahead)
+BUILD_KERNELS = KernelGroup(__name__, "build", [
+    (referenced_and_finite, (_VECTORS, _FACES)),
+    (face_normals_and_dots, (_VECTORS, _FACES)),
+    (edge_pairs, (_FACES, types.int64)),
+    (corner_groups, (_FACES, _VECTORS, types.int64[::1], types.int64[::1], types.float64, types.boolean)),
+    (group_normals, (types.int64[::1], types.int64, _FACES, _VECTORS, _VECTORS)),
+    (finite_without_negative_zero, (_VECTORS,)),
+    (finite_faces, (_VECTORS, _FACES)),
+    (face_crosses, (_VECTORS, _FACES)),
+    (unit_rows, (_VECTORS, _FACES)),
+    (face_rows, (types.float64[::1, :], _VECTORS)),
+    (corner_rows, (_VECTORS, types.int32[:, ::1])),
+], every_render=True)

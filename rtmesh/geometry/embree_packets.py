@@ -32,6 +32,7 @@ import threading
 import numpy as np
 from numba import types
 
+from rtmesh.core.compile_ahead import KernelGroup
 from rtmesh.core.compiled import fix_signatures, kernel, row
 from rtmesh.geometry.float32_rays import F32_MAX
 
@@ -204,13 +205,11 @@ def packet_library():
         return _library
 
 
-_queries_fixed = False
-
-
 def query_kernels():
     """:func:`intersect_rays` and :func:`occluded_rays`, each compiled (or loaded from the
-    disk cache) for its one signature on the first call in the process (see
-    :func:`closest_rays` and :func:`shadow_rays` for the arguments they take).
+    disk cache) for its one signature (:data:`QUERY_KERNELS`) on the first call in the
+    process, and for no other (see :func:`closest_rays` and :func:`shadow_rays` for the
+    arguments they take).
 
     Not at :func:`packet_library`: a render through the fused stage
     (:mod:`rtmesh.rendering.direct_stage`) traces with packets of its own and never calls
@@ -224,21 +223,11 @@ def query_kernels():
     if not _queries_fixed:
         with _library_lock:
             if not _queries_fixed:
-                _fix_query_signatures()
+                QUERY_KERNELS.prepare()
+                for dispatcher, signature in QUERY_KERNELS.kernels:
+                    fix_signatures(dispatcher, [signature])
                 _queries_fixed = True
     return intersect_rays, occluded_rays
-
-
-def _fix_query_signatures():
-    query = numba_typeof_query()
-    # read-only views: writable arrays convert to them, and read-only ones (a camera's
-    # repeated origin row) are accepted as they are
-    rows = types.Array(types.int64, 1, "A", readonly=True)
-    vectors64 = types.Array(types.float64, 2, "A", readonly=True)
-    vectors32 = types.Array(types.float32, 2, "A", readonly=True)
-    lengths32 = types.Array(types.float32, 1, "A", readonly=True)
-    fix_signatures(intersect_rays, [(query, types.int64, vectors64, vectors64, types.int64)])
-    fix_signatures(occluded_rays, [(query, types.int64, vectors32, vectors32, lengths32, rows, types.int64)])
 
 
 def numba_typeof_query():
@@ -247,6 +236,9 @@ def numba_typeof_query():
     import numba
 
     return numba.typeof(_PACKET_QUERY(0))
+
+
+_queries_fixed = False  # set by query_kernels
 
 
 def closest_rays(origins, directions):
@@ -444,7 +436,7 @@ def aligned_words(n, dtype):
 def query_arguments(flags):
     """``RTCIntersectArguments`` / ``RTCOccludedArguments`` (32 bytes): query flags, all
     features, and NULL context, filter and callback."""
-    args = aligned_words(8, np.int32)
+    args = aligned_words(np.int64(8), np.int32)
     args[0] = flags
     args[1] = _RTC_FEATURE_FLAG_ALL
     return args
@@ -525,8 +517,11 @@ def _load_rays(ray, words, valid, origins, directions, rows, start, count, tfar)
     for lane in range(LANES):
         if lane < count:
             i = rows[start + lane] if len(rows) else start + lane
-            set_lane(ray, words, lane, origins[i, 0], origins[i, 1], origins[i, 2], directions[i, 0],
-                     directions[i, 1], directions[i, 2], tfar[i] if len(tfar) else DEFAULT_TFAR)
+            # float64 coordinates and a float32 length whatever the rays' dtype (exact
+            # conversions), so that set_lane compiles once for every caller
+            set_lane(ray, words, lane, np.float64(origins[i, 0]), np.float64(origins[i, 1]),
+                     np.float64(origins[i, 2]), np.float64(directions[i, 0]), np.float64(directions[i, 1]),
+                     np.float64(directions[i, 2]), np.float32(tfar[i]) if len(tfar) else DEFAULT_TFAR)
             valid[lane] = -1
         else:
             valid[lane] = 0
@@ -624,3 +619,20 @@ def occluded_rays(occluded16, scene, origins, directions, t_max, rows, flags):
             # Embree marks an occluded ray by setting its tfar to -inf
             blocked[start + lane] = ray[TFAR * LANES + lane] == -np.inf
     return blocked
+
+
+def _query_signatures():
+    """The one signature of each query kernel."""
+    query = numba_typeof_query()
+    # read-only views: writable arrays convert to them, and read-only ones (a camera's
+    # repeated origin row) are accepted as they are
+    rows = types.Array(types.int64, 1, "A", readonly=True)
+    vectors64 = types.Array(types.float64, 2, "A", readonly=True)
+    vectors32 = types.Array(types.float32, 2, "A", readonly=True)
+    lengths32 = types.Array(types.float32, 1, "A", readonly=True)
+    return [(intersect_rays, (query, types.int64, vectors64, vectors64, types.int64)),
+            (occluded_rays, (query, types.int64, vectors32, vectors32, lengths32, rows, types.int64))]
+
+
+# the packet queries of the general path (rtmesh.core.compile_ahead)
+QUERY_KERNELS = KernelGroup(__name__, "packet queries", _query_signatures())

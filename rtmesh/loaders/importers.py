@@ -151,6 +151,7 @@ def process(mesh, source="mesh"):
     source : str
         Names the mesh in warnings.
     """
+    build_kernels.BUILD_KERNELS.prepare()
     faces = mesh.faces.view(np.ndarray)
     if mesh.vertices.ndim != 2 or mesh.vertices.shape[1] != 3:
         # trimesh reads every vertex with the column count of some line: one short line

@@ -77,21 +77,22 @@ def blinn_phong_factors(n, wo, wi, diffuse, specular, shininess):
 
 
 @row
-def material_colour(table, m, tint, r, c):
-    """Channel ``c`` of material ``m``'s colour in ``table``, times row ``r``'s texture tint
+def material_colour(table, m, tint, r):
+    """Material ``m``'s colour in ``table`` (three numbers), times row ``r``'s texture tint
     where there is one (an empty ``tint``: none)."""
-    value = table[m, c]
-    return value * tint[r, c] if len(tint) else value
+    c0, c1, c2 = table[m, 0], table[m, 1], table[m, 2]
+    if len(tint):
+        return c0 * tint[r, 0], c1 * tint[r, 1], c2 * tint[r, 2]
+    return c0, c1, c2
 
 
 @row
 def shade_row(r, m, cos_i, power, diffuse, tint_d, specular, tint_s):
     """Blinn-Phong factor of hit row ``r`` with material ``m`` (and the row's tints) from
     ``n . wi`` and the raised highlight cosine (0 without a highlight)."""
-    return blinn_phong_row(material_colour(diffuse, m, tint_d, r, 0), material_colour(diffuse, m, tint_d, r, 1),
-                        material_colour(diffuse, m, tint_d, r, 2), material_colour(specular, m, tint_s, r, 0),
-                        material_colour(specular, m, tint_s, r, 1), material_colour(specular, m, tint_s, r, 2),
-                        cos_i, power)
+    d0, d1, d2 = material_colour(diffuse, m, tint_d, r)
+    s0, s1, s2 = material_colour(specular, m, tint_s, r)
+    return blinn_phong_row(d0, d1, d2, s0, s1, s2, cos_i, power)
 
 
 @kernel

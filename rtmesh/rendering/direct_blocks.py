@@ -12,7 +12,7 @@ vectorise them, and outputs of the block's constant size (see :func:`light_block
 
 import numpy as np
 
-from rtmesh.core.compiled import inline_row, row
+from rtmesh.core.compiled import inline_row, kernel, row
 from rtmesh.core.row_vectors import dot3
 from rtmesh.geometry import embree_packets as ep
 from rtmesh.geometry.float32_rays import F32_MAX, offset_origin
@@ -30,7 +30,7 @@ PACKETS = 4
 BLOCK = PACKETS * LANES
 
 
-@row
+@kernel
 def camera_block(film_xy, code, corners, size, spp, start, count, sample, sequence, column, line, camera, xy, d, rays):
     """Writes into ``d`` (3, BLOCK) and into the block's ``RTCRayHit16`` packets ``rays``
     the unit directions of the camera rays of samples ``start .. start + count - 1``
@@ -89,7 +89,7 @@ def write_directions(d, rays):
             rays[at + lane] = far
 
 
-@row
+@kernel
 def write_rays(ray, rays):
     """Shadow rays ``ray`` (7, BLOCK) float32 (origin, direction, length: see
     :func:`light_block`) into the block's ``RTCRay16`` packets ``rays``, as
@@ -116,7 +116,7 @@ def camera_numbers(image_plane, forward, right, up):
             right[0], right[1], right[2], up[0], up[1], up[2])
 
 
-@row
+@kernel
 def surface_block(barycentrics, face, normal_row, faces, normals, interpolate, d, count, fix_terminator):
     """Surface records of the first ``count`` samples of a block (the arithmetic of
     :func:`rtmesh.shading.surfaces.surface_records`).
@@ -168,7 +168,7 @@ def surface_block(barycentrics, face, normal_row, faces, normals, interpolate, d
     return srf
 
 
-@row
+@kernel
 def light_block(light, srf, d, count, scale, shorten, highlights):
     """One light at the first ``count`` surface records of a block (the arithmetic of
     :func:`rtmesh.shading.direct_light.light_samples`).

@@ -30,7 +30,9 @@ sample order) instead of returning them for a separate pass.
 """
 
 import numpy as np
+from numba import types
 
+from rtmesh.core.compile_ahead import KernelGroup
 from rtmesh.core.compiled import kernel
 from rtmesh.core.row_vectors import floor_quotient
 from rtmesh.geometry import embree_packets as ep
@@ -59,6 +61,22 @@ _SHADOW_BYTES = 4 * ep.RAY_WORDS * LANES
 ROW_WORDS = ROW.itemsize // 8
 
 
+_F64, _F64_2D, _I64 = types.float64[::1], types.float64[:, ::1], types.int64[::1]
+# the steps direct_samples calls, each a kernel of its own (cached apart from it, so that a
+# first run can compile them in two processes, see rtmesh.core.compile_ahead)
+FUSED_KERNELS = KernelGroup(__name__, "fused direct", [
+    (camera_block, (_F64_2D, types.int64, _F64_2D, _F64, types.int64, types.int64, types.int64, types.uint64[::1],
+                    types.uint64[:, ::1], _F64, _F64, types.UniTuple(types.float64, 13), _F64_2D, _F64_2D,
+                    types.float32[::1])),
+    (surface_block, (_F64_2D, _I64, _I64, _F64_2D, _F64_2D, types.boolean[::1], _F64_2D, types.int64,
+                     types.boolean)),
+    (light_block, (_F64, _F64_2D, _F64_2D, types.int64, types.float32, types.float64, types.boolean)),
+    (write_rays, (types.float32[:, ::1], types.float32[::1])),
+    (add_pixels, (_F64_2D, _F64_2D, _I64, types.float32[:, ::1], _F64_2D, _I64, types.int64, types.int64, _I64,
+                  types.int64, types.int64, types.int64)),
+])
+
+
 class DirectStage:
     """The tables the fused kernel reads, formed once per render.
 
@@ -66,6 +84,7 @@ class DirectStage:
     """
 
     def __init__(self, integrator):
+        FUSED_KERNELS.prepare()
         it = integrator
         accel = it.accel
         m = it.scene.materials
@@ -291,7 +310,9 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     px_column = px_line = 0.0
     inverse_width = 1.0 / width
     # the first pixel not yet added to the film, and the row of its first sample
-    done, done_row = 0, 0
+    # (int64 from the start: a literal 0 would have numba compile add_pixels a second time,
+    # for the loop's first typing pass)
+    done, done_row = np.int64(0), np.int64(0)
     # per sample, for the light being added: its highlight cosine, whether it is raised, the
     # raised cosine (0 without a highlight) and whether the light reaches the sample
     cosine = np.empty(BLOCK)
@@ -312,7 +333,7 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     for b in range(len(valid)):
         ep.set_lane(rays, words, hit_lane(b), position[0], position[1], position[2], 0.0, 0.0, 1.0,
                     ep.DEFAULT_TFAR)
-        ep.set_lane(shadow, shadow_words, ray_lane(b), 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0)
+        ep.set_lane(shadow, shadow_words, ray_lane(b), 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, np.float32(0.0))
     for start in range(0, n, BLOCK):
         count = min(BLOCK, n - start)
         # the block's samples, pixel by pixel in sample order

@@ -50,7 +50,7 @@ def accumulate_samples(total, total_sq, count, pixels, radiance, image):
                 image[px, c] = np.float32(total[px, c] * inverse)
 
 
-@row
+@kernel
 def add_pixels(total, total_sq, count, image, radiance, pixel_list, first_pixel, m, counts, done, row, end):
     """Add a chunk's pixels to the film, from its ``done``-th on, while their samples lie
     before row ``end`` of ``radiance``; as :func:`accumulate_samples` adds them (each sum

@@ -161,8 +161,10 @@ class Scene:
         uvs, colours = [], []
         motions = {}
         offset = 0
+        build_kernels.BUILD_KERNELS.prepare()
         for part in parts:
-            v = np.asarray(part.vertices, dtype=np.float64).reshape(-1, 3)
+            # row-major, as most loaders give it: the build passes are compiled for one layout
+            v = np.ascontiguousarray(part.vertices, dtype=np.float64).reshape(-1, 3)
             f = np.asarray(part.faces, dtype=np.int64).reshape(-1, 3)
             if len(f) and (f.min() < 0 or f.max() >= len(v)):
                 raise MeshError(f"{source}: object '{part.name}' has face indices out of range")

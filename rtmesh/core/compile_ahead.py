@@ -1,0 +1,233 @@
+"""A first run's kernels, compiled by two processes at once.
+
+The first render after an install (or after any kernel module changes, see
+:mod:`rtmesh.core.compiled`) compiles every kernel it calls, and numba compiles one
+function at a time per process: about 12 s on one core of a machine that has more.  A
+:class:`KernelGroup` declares kernels with the signatures renders call them with, in the
+order a render first calls them (the scene build's passes, the fused stage's steps, the
+packet queries).  When a program turns the helper on (:func:`helper`, as the ``rtmesh``
+command does while its cache is cold), a second Python process compiles each group that
+the render announces from its last kernel back, while the render compiles it from its
+first on (:meth:`KernelGroup.prepare`); a lock file per kernel keeps the two from
+compiling the same one, and numba's disk cache hands each kernel's machine code to the
+other process.  They meet in the middle of a group.
+
+Without a helper, :meth:`KernelGroup.prepare` does nothing and kernels compile on their
+first call as they always do.  The helper only compiles: it never changes what a render
+computes, and if it is killed half-way (numba writes its cache files whole, then renames
+them) the render compiles what is missing itself.
+"""
+
+import contextlib
+import importlib
+import logging
+import os
+import subprocess
+import sys
+import threading
+
+try:
+    import fcntl
+except ImportError:  # no advisory locks (Windows): the processes may compile a kernel twice
+    fcntl = None
+
+log = logging.getLogger(__name__)
+
+# every group, by name: the helper process finds a group the render announces here
+_GROUPS = {}
+# within helper(): whether groups may be compiled ahead, and the helper process once
+# started; the lock guards both and the helper's pipe
+_enabled = False
+_helper = None
+_helper_lock = threading.Lock()
+
+
+class KernelGroup:
+    """Kernels with the signatures a render calls them with, in the order it first calls
+    them.
+
+    Parameters
+    ----------
+    module : str
+        The module that declares the group (its ``__name__``): the helper process imports it.
+    name : str
+        Unique.
+    kernels : sequence of (dispatcher, tuple of numba types)
+        :func:`rtmesh.core.compiled.kernel` dispatchers (cached on disk) and one signature
+        each.  A call with other argument types still works; it compiles that version on
+        the spot, as any kernel call does.
+    every_render : bool
+        Every render prepares the group (the scene build's): while it is not cached, a
+        first run is under way, and :func:`helper` starts the helper process at once
+        rather than when a render first prepares a group the cache lacks.
+    """
+
+    def __init__(self, module, name, kernels, every_render=False):
+        if name in _GROUPS:
+            raise ValueError(f"kernel group {name!r} is declared twice")
+        self.module = module
+        self.name = name
+        self.kernels = tuple((dispatcher, tuple(signature)) for dispatcher, signature in kernels)
+        self.every_render = every_render
+        self._prepared = False
+        _GROUPS[name] = self
+
+    def prepare(self):
+        """Within :func:`helper`, if the disk cache lacks some of the group: compile the
+        group's kernels from the first on, while the helper process compiles them from the
+        last back (started now if it is not running).  Otherwise nothing: the kernels
+        compile (or load) on their first call, as they always do.
+
+        Call it just before the render first calls the group's kernels.
+        """
+        if not _enabled or self._prepared:
+            return
+        self._prepared = True
+        if self.cached() or not _announce(self):
+            return
+        for dispatcher, signature in self.kernels:
+            compile_locked(dispatcher, signature)
+
+    def compile_backwards(self):
+        """Compile the group from its last kernel back (what the helper process does)."""
+        for dispatcher, signature in reversed(self.kernels):
+            compile_locked(dispatcher, signature)
+
+    def cached(self):
+        """Whether the disk cache holds every kernel of the group for its signature."""
+        return all(_in_disk_cache(dispatcher, signature) for dispatcher, signature in self.kernels)
+
+
+def compile_locked(dispatcher, signature):
+    """Compile ``dispatcher`` for ``signature``, or load it from the disk cache, holding
+    the kernel's lock file: a process that finds the lock held waits, then loads what the
+    other one compiled.
+
+    Parameters
+    ----------
+    dispatcher : numba dispatcher with a disk cache
+    signature : tuple of numba types
+    """
+    if signature in dispatcher.overloads:
+        return
+    cache_path = getattr(dispatcher._cache, "_cache_path", None)
+    if fcntl is None or cache_path is None:
+        dispatcher.compile(signature)
+        return
+    os.makedirs(cache_path, exist_ok=True)
+    name = dispatcher.py_func.__module__ + "." + dispatcher.py_func.__qualname__
+    with open(os.path.join(cache_path, name + ".compiling"), "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            dispatcher.compile(signature)
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
+
+
+def _in_disk_cache(dispatcher, signature):
+    """Whether numba's disk cache holds ``dispatcher`` compiled for ``signature``, for this
+    machine (its index, read without loading the machine code)."""
+    cache = dispatcher._cache
+    if not hasattr(cache, "_cache_file"):  # no disk cache
+        return False
+    key = cache._index_key(signature, dispatcher.targetctx.codegen())
+    return key in cache._cache_file._load_index()
+
+
+@contextlib.contextmanager
+def helper(enabled=True):
+    """Within the block, a helper process compiles the kernel groups this process
+    prepares and the disk cache lacks (see the module docstring).
+
+    For programs that own their process (the ``rtmesh`` command): the helper is a second
+    process, busy on another core.  It starts at once when a group every render prepares
+    is not cached (a first run), else when a render first prepares a group that is not,
+    and it is stopped when the block ends.
+
+    Parameters
+    ----------
+    enabled : bool
+        False: no helper (the block runs as it would without this).
+    """
+    global _enabled, _helper
+    enabled = enabled and (os.cpu_count() or 1) > 1
+    with _helper_lock:
+        _enabled = enabled
+    if enabled and not all(group.cached() for group in _GROUPS.values() if group.every_render):
+        _announce(None)
+    try:
+        yield
+    finally:
+        with _helper_lock:
+            process, _helper, _enabled = _helper, None, False
+            for group in _GROUPS.values():
+                group._prepared = False
+        if process is not None:
+            _stop(process)
+
+
+def _announce(group):
+    """Start the helper process if it is not running, and tell it to compile ``group``
+    (None: none yet) from its end.
+
+    Returns
+    -------
+    bool
+        Whether a helper runs.
+    """
+    global _helper
+    with _helper_lock:
+        if not _enabled:
+            return False
+        if _helper is None:
+            _helper = _start()
+            if _helper is None:
+                return False
+        if group is not None:
+            try:
+                _helper.stdin.write(f"{group.module}\t{group.name}\n")
+                _helper.stdin.flush()
+            except OSError:  # the helper has gone: this process compiles alone
+                return False
+        return True
+
+
+def _start():
+    """The helper process, reading group names from its standard input; None if it cannot
+    be started."""
+    package_parent = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [package_parent, env.get("PYTHONPATH")]))
+    try:
+        return subprocess.Popen([sys.executable, "-m", __name__], stdin=subprocess.PIPE,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env, text=True)
+    except OSError as error:
+        log.debug("no compile helper: %s", error)
+        return None
+
+
+def _stop(process):
+    """End the helper: whatever it is compiling is no longer needed."""
+    try:
+        process.stdin.close()
+    except OSError:
+        pass
+    process.terminate()
+    process.wait()
+
+
+def _serve(lines):
+    """The helper process: compile each group named on a line (its module, a tab, its
+    name), from its end."""
+    for line in lines:
+        module, _, name = line.rstrip("\n").partition("\t")
+        importlib.import_module(module)  # declares the group
+        _GROUPS[name].compile_backwards()
+
+
+if __name__ == "__main__":
+    # run as a script, this file is the module __main__; the groups are declared in the
+    # module rtmesh.core.compile_ahead
+    from rtmesh.core.compile_ahead import _serve as serve
+
+    serve(sys.stdin)
