@@ -42,7 +42,7 @@ from rtmesh.rendering.direct_blocks import (BLOCK, LANES, PACKETS, add_light_row
                                             camera_numbers, hit_lane, light_block, ray_lane, surface_block,
                                             write_rays)
 from rtmesh.materials.blinn_phong import raise_highlight
-from rtmesh.rendering.film_sums import add_pixels
+from rtmesh.rendering.film_sums import add_pixels, pixel_errors
 from rtmesh.rendering.scheduler import sample_indices
 from rtmesh.sampling.pixel_samples import PixelSampler, pixel_sequence
 from rtmesh.scene.background import SolidBackground
@@ -74,6 +74,9 @@ FUSED_KERNELS = KernelGroup(__name__, "fused direct", [
     (write_rays, (types.float32[:, ::1], types.float32[::1])),
     (add_pixels, (_F64_2D, _F64_2D, _I64, types.float32[:, ::1], _F64_2D, _I64, types.int64, types.int64, _I64,
                   types.int64, types.int64, types.int64)),
+    # the per-pixel error of the film, after the chunks
+    (pixel_errors, (types.float64[::1, :], types.float64[::1, :], _I64, types.int64, types.int64, types.float64,
+                    types.boolean)),
 ])
 
 

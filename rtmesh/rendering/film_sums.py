@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from rtmesh.core.compiled import kernel, row
+from rtmesh.core.compiled import kernel
 
 
 # ------------------------------------------------------------------ film

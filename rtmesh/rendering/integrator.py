@@ -51,6 +51,7 @@ from rtmesh.materials.table import ALPHA_MODES
 from rtmesh.rendering.adaptive import render_rounds
 from rtmesh.rendering.chunk_state import ChunkState, Clock, scatter_add
 from rtmesh.rendering.direct_stage import DirectStage
+from rtmesh.rendering.general_kernels import GENERAL_KERNELS
 from rtmesh.rendering.film import Film
 from rtmesh.rendering.local_shading import LocalShading
 from rtmesh.rendering.media import Media
@@ -287,6 +288,8 @@ class Integrator:
         # scenes that need only direct light take one compiled stage per chunk
         self.direct_stage = DirectStage.plan(self)
         self.plan = dataclasses.replace(self.plan, fused_direct=self.direct_stage is not None)
+        if self.direct_stage is None:
+            GENERAL_KERNELS.prepare()
 
     def _init_media(self, scene):
         """Medium stacks (see :mod:`rtmesh.rendering.media`), only for scenes that refract.
