@@ -150,7 +150,9 @@ def helper(enabled=True):
         False: no helper (the block runs as it would without this).
     """
     global _enabled, _helper
-    enabled = enabled and (os.cpu_count() or 1) > 1
+    # without a second core, or a disk cache to hand kernels over, a helper cannot help
+    enabled = enabled and (os.cpu_count() or 1) > 1 and all(
+        hasattr(dispatcher._cache, "_cache_file") for group in _GROUPS.values() for dispatcher, _ in group.kernels)
     with _helper_lock:
         _enabled = enabled
     if enabled and not all(group.cached() for group in _GROUPS.values() if group.every_render):

@@ -1,4 +1,4 @@
-"""The steps of one block of the fused direct-lighting stage, as compiled rows.
+"""The steps of one block of the fused direct-lighting stage, compiled.
 
 A block is :data:`BLOCK` film samples, four 16-wide packets (sample ``b`` is lane
 ``b % 16`` of packet ``b // 16``).  Each step works on the block's scratch arrays: the
@@ -8,6 +8,13 @@ then the arithmetic of :func:`rtmesh.shading.surfaces.surface_records`), the lig
 the Blinn-Phong sum of one light at one sample.  :func:`rtmesh.rendering.direct_stage.direct_samples`
 calls them in order; their loops have no branches, gathers or calls where LLVM is to
 vectorise them, and outputs of the block's constant size (see :func:`light_block`).
+
+The larger steps (:func:`block_scratch`, :func:`camera_block`, :func:`surface_block`,
+:func:`light_block`, :func:`write_rays`) are kernels, each cached on disk apart from the
+stage, so that a first run compiles them in two processes
+(:data:`rtmesh.rendering.direct_stage.FUSED_KERNELS`); called once per block, like rows,
+they cost the stage nothing measurable (peer scene, 1 and 16 spp, 1 thread;
+:func:`block_scratch` runs once per chunk).
 """
 
 import numpy as np
@@ -28,6 +35,70 @@ LANES = ep.LANES
 # loops long enough for AVX-512, while the block's records stay in L1
 PACKETS = 4
 BLOCK = PACKETS * LANES
+
+
+@kernel
+def block_scratch(position, flags):
+    """The scratch arrays of :func:`rtmesh.rendering.direct_stage.direct_samples`, for one chunk.
+
+    A kernel of its own, cached apart from the fused stage, so that a first run compiles
+    its allocations in the other process (:mod:`rtmesh.core.compile_ahead`).
+
+    Parameters
+    ----------
+    position : (3,) float64
+        The camera's position: the camera rays' origin, written into the packets here with
+        every lane field that no query changes (the blocks write only directions, ``tfar``,
+        the shadow rays' origins and the hit ids).
+    flags : int
+        Query flags.
+
+    Returns
+    -------
+    rays, words, valid, args
+        The block's ``RTCRayHit16`` packets (:func:`rtmesh.geometry.embree_packets.packet_buffers`).
+    shadow, shadow_words, shadow_valid
+        Its ``RTCRay16`` packets.
+    barycentrics : (2, BLOCK) float64
+    face, normal_row : (BLOCK,) intp
+        The face hit and its row of vertex normals (:func:`surface_block`).
+    interpolate : (BLOCK,) bool
+    mat : (BLOCK,) intp
+        Material.
+    hit : (BLOCK,) bool
+    xy, d : (2, BLOCK), (3, BLOCK) float64
+        Positions in the pixels and camera ray directions (:func:`camera_block`).
+    sample : (BLOCK,) uint64
+    sequence : (2, BLOCK) uint64
+    column, line : (BLOCK,) float64
+        Each sample's index, and its pixel's sequence keys, column and row.
+    cosine : (BLOCK,) float64
+    raised : (BLOCK,) bool
+    power : (BLOCK,) float64, zeros
+    reaches : (BLOCK,) bool, False
+        For the light being added: the highlight cosine, whether it is raised, the raised
+        cosine (0 without a highlight), whether the light reaches the sample.
+    receives : (BLOCK,) bool
+    shininess, highlight_from : (BLOCK,) float64
+        Whether lights count (a shaded surface), the material's shininess and smallest
+        highlight cosine.
+    direct : (3, BLOCK) float64
+        The sum of the lights' terms.
+    """
+    rays, words, valid, args = ep.packet_buffers(np.int64(ep.RAYHIT_WORDS), np.int64(PACKETS), flags)
+    shadow, shadow_words, shadow_valid, _ = ep.packet_buffers(np.int64(ep.RAY_WORDS), np.int64(PACKETS), flags)
+    # (a loop over len(valid), not the constant BLOCK: LLVM would unroll it, which costs
+    # compile time and saves nothing in a loop run once per chunk)
+    for b in range(len(valid)):
+        ep.set_lane(rays, words, hit_lane(b), position[0], position[1], position[2], 0.0, 0.0, 1.0,
+                    ep.DEFAULT_TFAR)
+        ep.set_lane(shadow, shadow_words, ray_lane(b), 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, np.float32(0.0))
+    return (rays, words, valid, args, shadow, shadow_words, shadow_valid, np.empty((2, BLOCK)),
+            np.empty(BLOCK, np.intp), np.empty(BLOCK, np.intp), np.empty(BLOCK, np.bool_), np.empty(BLOCK, np.intp),
+            np.empty(BLOCK, np.bool_), np.empty((2, BLOCK)), np.empty((3, BLOCK)), np.empty(BLOCK, np.uint64),
+            np.empty((2, BLOCK), np.uint64), np.empty(BLOCK), np.empty(BLOCK), np.empty(BLOCK),
+            np.empty(BLOCK, np.bool_), np.zeros(BLOCK), np.zeros(BLOCK, np.bool_), np.empty(BLOCK, np.bool_),
+            np.empty(BLOCK), np.empty(BLOCK), np.empty((3, BLOCK)))
 
 
 @kernel

@@ -38,8 +38,8 @@ from rtmesh.core.row_vectors import floor_quotient
 from rtmesh.geometry import embree_packets as ep
 from rtmesh.geometry.accel import Accel
 from rtmesh.lights.point_light_rows import ROW
-from rtmesh.rendering.direct_blocks import (BLOCK, LANES, PACKETS, add_light_row, any_valid, camera_block,
-                                            camera_numbers, hit_lane, light_block, ray_lane, surface_block,
+from rtmesh.rendering.direct_blocks import (BLOCK, LANES, PACKETS, add_light_row, any_valid, block_scratch,
+                                            camera_block, camera_numbers, hit_lane, light_block, surface_block,
                                             write_rays)
 from rtmesh.materials.blinn_phong import raise_highlight
 from rtmesh.rendering.film_sums import add_pixels, pixel_errors
@@ -65,6 +65,7 @@ _F64, _F64_2D, _I64 = types.float64[::1], types.float64[:, ::1], types.int64[::1
 # the steps direct_samples calls, each a kernel of its own (cached apart from it, so that a
 # first run can compile them in two processes, see rtmesh.core.compile_ahead)
 FUSED_KERNELS = KernelGroup(__name__, "fused direct", [
+    (block_scratch, (types.float64[::1], types.int64)),
     (camera_block, (_F64_2D, types.int64, _F64_2D, _F64, types.int64, types.int64, types.int64, types.uint64[::1],
                     types.uint64[:, ::1], _F64, _F64, types.UniTuple(types.float64, 13), _F64_2D, _F64_2D,
                     types.float32[::1])),
@@ -286,24 +287,10 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     has_smooth = len(vertex_normals) > 0
     # row-major, so that the integrator's (pixels, spp, 3) view of it is not a copy
     radiance = np.empty((n, 3))
-    rays, words, valid, args = ep.packet_buffers(np.int64(ep.RAYHIT_WORDS), np.int64(PACKETS), flags)
-    shadow, shadow_words, shadow_valid, _ = ep.packet_buffers(np.int64(ep.RAY_WORDS), np.int64(PACKETS), flags)
-    # per sample of the block: barycentrics, the face hit and its row of vertex normals
-    # (surface_block), material
-    barycentrics = np.empty((2, BLOCK))
-    face = np.empty(BLOCK, np.intp)
-    normal_row = np.empty(BLOCK, np.intp)
+    (rays, words, valid, args, shadow, shadow_words, shadow_valid, barycentrics, face, normal_row, interpolate,
+     mat, hit, xy, d, sample, sequence, column, line, cosine, raised, power, reaches, receives, shininess,
+     highlight_from, direct) = block_scratch(position, flags)
     normals = vertex_normals if has_smooth else np.zeros((1, 9))
-    interpolate = np.empty(BLOCK, np.bool_)
-    mat = np.empty(BLOCK, np.intp)
-    hit = np.empty(BLOCK, np.bool_)
-    xy = np.empty((2, BLOCK))  # positions in the pixels (camera_block)
-    d = np.empty((3, BLOCK))  # camera ray directions (camera_block)
-    # per sample of the block: its index, its pixel's sequence keys, column and row (camera_block)
-    sample = np.empty(BLOCK, np.uint64)
-    sequence = np.empty((2, BLOCK), np.uint64)
-    column = np.empty(BLOCK)
-    line = np.empty(BLOCK)
     # (per-pixel arrays are indexed here, not through a row helper: numba would take and
     # release a reference to the array on every call, two atomic instructions per sample)
     one_count, one_first, listed = len(counts) == 1, len(first) == 1, len(pixel_list) > 0
@@ -316,27 +303,8 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     # (int64 from the start: a literal 0 would have numba compile add_pixels a second time,
     # for the loop's first typing pass)
     done, done_row = np.int64(0), np.int64(0)
-    # per sample, for the light being added: its highlight cosine, whether it is raised, the
-    # raised cosine (0 without a highlight) and whether the light reaches the sample
-    cosine = np.empty(BLOCK)
-    raised = np.empty(BLOCK, np.bool_)
-    power = np.zeros(BLOCK)
-    reaches = np.zeros(BLOCK, np.bool_)
-    # per sample: lights count (a shaded surface), its material's shininess and smallest highlight cosine
-    receives = np.empty(BLOCK, np.bool_)
-    shininess = np.empty(BLOCK)
-    highlight_from = np.empty(BLOCK)
-    direct = np.empty((3, BLOCK))  # the sum of the lights' terms
     shadow_rays = 0
     camera = camera_numbers(image_plane, forward, right, up)
-    # the lanes' fields no query changes, once for the chunk (the camera rays' origin too);
-    # the blocks write only directions, tfar, the shadow rays' origins and the hit ids
-    # (a loop over len(valid), not the constant BLOCK: LLVM would unroll it, which costs
-    # compile time and saves nothing in a loop run once per chunk)
-    for b in range(len(valid)):
-        ep.set_lane(rays, words, hit_lane(b), position[0], position[1], position[2], 0.0, 0.0, 1.0,
-                    ep.DEFAULT_TFAR)
-        ep.set_lane(shadow, shadow_words, ray_lane(b), 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, np.float32(0.0))
     for start in range(0, n, BLOCK):
         count = min(BLOCK, n - start)
         # the block's samples, pixel by pixel in sample order

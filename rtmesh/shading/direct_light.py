@@ -73,10 +73,9 @@ def light_samples(wi, distance, incident_all, p, ng, ns, d, mat, exponent, visib
         The lit rows (indices into the arrays above) with a highlight worth raising.
     highlight, power_exponent : (h,) float64
         ``highlight ** power_exponent`` is the highlight's power there (``max(0, ns . h)``
-        and the shininess); it is 0 on the other lit rows.  Left for NumPy to raise: its
-        pow is vectorised where a compiled loop calls libm once a row, but only for
-        ordinary operands: a zero base or an underflowing power takes a slow path (tens of
-        times slower), so those rows are not handed to it.
+        and the shininess); it is 0 on the other lit rows.  Raised afterwards by
+        :func:`rtmesh.materials.blinn_phong.raise_highlights` (libm's pow, as the fused
+        stage raises them), only on the rows that have a highlight worth raising.
 
     Notes
     -----

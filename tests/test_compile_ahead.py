@@ -1,0 +1,103 @@
+"""Kernel groups compiled ahead by a helper process on a first run (rtmesh.core.compile_ahead)."""
+
+import fcntl
+import os
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+import pytest
+from numba import types
+
+import rtmesh
+from rtmesh.core import compile_ahead
+from rtmesh.core.compiled import kernel
+from rtmesh.geometry import embree_packets
+from rtmesh.geometry.build_kernels import BUILD_KERNELS
+from rtmesh.rendering.direct_stage import FUSED_KERNELS
+from rtmesh.rendering.general_kernels import GENERAL_KERNELS
+
+ASSETS = os.path.join(os.path.dirname(__file__), "..", "assets")
+PACKAGE_PARENT = os.path.dirname(os.path.dirname(os.path.abspath(rtmesh.__file__)))
+
+
+@kernel
+def _twice(x):
+    return 2.0 * x
+
+
+def test_renders_call_the_declared_kernels_with_the_declared_types():
+    # a declared type that a render does not use would have the helper compile a version
+    # nobody calls, while the render compiles its own
+    groups = (BUILD_KERNELS, FUSED_KERNELS, GENERAL_KERNELS, embree_packets.QUERY_KERNELS)
+    for group in groups:
+        for dispatcher, signature in group.kernels:
+            compile_ahead.compile_locked(dispatcher, signature)
+    before = {id(d): len(d.signatures) for group in groups for d, _ in group.kernels}
+    for spp in (1, 3):
+        general = rtmesh.render(os.path.join(ASSETS, "showcase.toml"), width=40, height=30, spp=spp)
+        fused = rtmesh.render(os.path.join(ASSETS, "meshes", "bunny.ply"), width=40, height=30, spp=spp)
+    assert "fused_direct" not in general.stats.stages_enabled and "fused_direct" in fused.stats.stages_enabled
+    after = {id(d): len(d.signatures) for group in groups for d, _ in group.kernels}
+    grew = [d.py_func.__qualname__ for group in groups for d, _ in group.kernels if after[id(d)] != before[id(d)]]
+    assert grew == []
+    assert np.isfinite(general.image).all() and np.isfinite(fused.image).all()
+
+
+def test_groups_have_unique_names_and_every_render_starts_with_the_build():
+    assert BUILD_KERNELS.every_render
+    assert not FUSED_KERNELS.every_render and not GENERAL_KERNELS.every_render
+    with pytest.raises(ValueError, match="declared twice"):
+        compile_ahead.KernelGroup(__name__, BUILD_KERNELS.name, [])
+
+
+def _cached_in(cache_dir, module, group):
+    """Whether ``group`` of ``module`` is in the disk cache at ``cache_dir`` (asked of a
+    fresh process, which reads NUMBA_CACHE_DIR when numba is imported)."""
+    code = f"import {module} as m, sys; from rtmesh.core import compile_ahead as c; " \
+           f"sys.exit(0 if c._GROUPS[{group!r}].cached() else 3)"
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache_dir), PYTHONPATH=PACKAGE_PARENT)
+    return subprocess.run([sys.executable, "-c", code], env=env).returncode == 0
+
+
+def test_the_helper_compiles_an_announced_group_into_the_shared_disk_cache(tmp_path):
+    group = embree_packets.QUERY_KERNELS
+    assert not _cached_in(tmp_path, "rtmesh.geometry.embree_packets", group.name)
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path), PYTHONPATH=PACKAGE_PARENT)
+    # what the render writes when it prepares the group; end of input ends the helper
+    done = subprocess.run([sys.executable, "-m", "rtmesh.core.compile_ahead"], env=env, timeout=300,
+                          input=f"{group.module}\t{group.name}\n", text=True)
+    assert done.returncode == 0
+    assert _cached_in(tmp_path, "rtmesh.geometry.embree_packets", group.name)
+
+
+def test_a_kernel_being_compiled_by_the_other_process_is_waited_for():
+    signature = (types.float64,)
+    lock_path = os.path.join(_twice._cache._cache_path, f"{__name__}._twice.compiling")
+    os.makedirs(os.path.dirname(lock_path), exist_ok=True)
+    with open(lock_path, "a") as held:
+        fcntl.flock(held, fcntl.LOCK_EX)  # as the helper holds it while compiling
+        waiter = threading.Thread(target=compile_ahead.compile_locked, args=(_twice, signature))
+        waiter.start()
+        time.sleep(0.3)
+        assert waiter.is_alive() and signature not in _twice.overloads
+        fcntl.flock(held, fcntl.LOCK_UN)
+    waiter.join(timeout=120)
+    assert not waiter.is_alive() and signature in _twice.overloads
+    assert _twice(1.5) == 3.0
+
+
+def test_without_a_helper_prepare_compiles_nothing(monkeypatch):
+    started = []
+    monkeypatch.setattr(compile_ahead, "_start", lambda: started.append(1))
+    group = compile_ahead.KernelGroup(__name__, "test: never prepared ahead", [(_twice, (types.int64,))])
+    try:
+        group.prepare()  # outside helper(): kernels compile on their first call
+        assert (types.int64,) not in _twice.overloads and not started
+        with compile_ahead.helper(enabled=False):
+            group.prepare()
+        assert (types.int64,) not in _twice.overloads and not started
+    finally:
+        del compile_ahead._GROUPS[group.name]
