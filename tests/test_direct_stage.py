@@ -7,7 +7,7 @@ from hypothesis import settings as hypothesis_settings
 from hypothesis import strategies as st
 from scenes import assert_finite, box, floor_quad, icosphere, part, settings, sphere_on_floor_scene
 
-from rtmesh.geometry import embree_packets
+from rtmesh.geometry import embree_library
 from rtmesh.lights.point_lights import DirectionalLight, PointLight, SpotLight
 from rtmesh.materials.table import Material
 from rtmesh.rendering.integrator import Integrator
@@ -15,7 +15,7 @@ from rtmesh.scene.background import GradientBackground
 from rtmesh.scene.camera import Camera
 from rtmesh.scene.model import Scene
 
-pytestmark = pytest.mark.skipif(embree_packets.packet_library() is None,
+pytestmark = pytest.mark.skipif(embree_library.packet_library() is None,
                                 reason="the fused stage traces Embree packets")
 
 

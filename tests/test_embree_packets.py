@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 import trimesh
 
-from rtmesh.geometry import embree_packets
+from rtmesh.geometry import embree_library
 from rtmesh.geometry.accel import Accel
 
-pytestmark = pytest.mark.skipif(embree_packets.packet_library() is None,
+pytestmark = pytest.mark.skipif(embree_library.packet_library() is None,
                                 reason="Embree packets are verified only for Embree 4.4")
 
 
@@ -111,9 +111,9 @@ def test_shared_vertices_are_the_traced_float32_positions():
 
 
 def test_the_probe_accepts_this_library():
-    library = embree_packets.packet_library()
-    assert library.version[:2] in embree_packets.VERIFIED_VERSIONS
-    assert embree_packets._probe(library) is None
+    library = embree_library.packet_library()
+    assert library.version[:2] in embree_library.VERIFIED_VERSIONS
+    assert embree_library._probe(library) is None
 
 
 @pytest.mark.parametrize("path", ["packets", "run"])

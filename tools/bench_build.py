@@ -22,7 +22,7 @@ The stages inside a stage are timed in the same run by wrapping the functions na
 rtmesh's, Embree's own work is measured apart on the same arrays, as the Accel did it:
 
 * with packet queries (:mod:`rtmesh.geometry.embree_packets`): ``embree scene``, the
-  :class:`~rtmesh.geometry.embree_packets.SharedScene` (padded float32 and uint32 copies, Embree's
+  :class:`~rtmesh.geometry.embree_library.SharedScene` (padded float32 and uint32 copies, Embree's
   geometry over them, the commit that builds the BVH);
 * with embreex's ``run()``: ``embree upload`` (embreex ``TriangleMesh``, which copies the
   arrays into Embree's own buffers) and ``embree BVH`` (the commit on the first query);
@@ -56,7 +56,7 @@ from bench_core import machine, publish  # noqa: E402
 import rtmesh.loaders.importers  # noqa: E402
 import rtmesh.rendering.integrator  # noqa: E402
 from rtmesh.core import runtime
-from rtmesh.geometry import embree_packets  # noqa: E402
+from rtmesh.geometry import embree_library  # noqa: E402
 from rtmesh.loaders.importers import load_trimesh, parts_from_trimesh  # noqa: E402
 from rtmesh.rendering.integrator import Integrator  # noqa: E402
 from rtmesh.rendering.settings import RenderSettings  # noqa: E402
@@ -132,7 +132,7 @@ def build_once(path):
     del integrator, scene, parts, obj
     clock = time.perf_counter()
     if packets:
-        embree_packets.SharedScene(embree_packets.packet_library(), vertices, faces32).close()
+        embree_library.SharedScene(embree_library.packet_library(), vertices, faces32).close()
         lap("embree scene")
     else:
         vertices32 = np.ascontiguousarray(vertices, dtype=np.float32)
@@ -190,7 +190,7 @@ def main():
         size_mb = os.path.getsize(path) / 1e6
         build_once(path)  # warm-up: imports, compiled kernels, first-touch of the allocator
         runs = []
-        packets = embree_packets.packet_library() is not None
+        packets = embree_library.packet_library() is not None
         for _ in range(args.runs):
             times, n_faces = build_once(path)
             runs.append(times)

@@ -46,7 +46,7 @@ from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
 from rtmesh.core import runtime
-from rtmesh.geometry import embree_packets
+from rtmesh.geometry import embree_library, embree_packets
 from rtmesh.lights.point_lights import PointLight
 from rtmesh.materials.table import Material
 from rtmesh.rendering.integrator import Integrator
@@ -152,7 +152,7 @@ def packet_runner(accel, calls, threads):
     """A function that makes the recorded queries again, straight through the packet
     kernels on the render's own Embree scene (with several threads, the calls are dealt
     out in turn)."""
-    library = embree_packets.packet_library()
+    library = embree_library.packet_library()
     flags = embree_packets.RTC_RAY_QUERY_FLAG_COHERENT
     handle = accel._shared.handle
     intersect_rays, occluded_rays = embree_packets.query_kernels()

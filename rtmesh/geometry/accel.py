@@ -19,7 +19,7 @@ from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
 from rtmesh.core.rays import repeated_row, take_rows
-from rtmesh.geometry import embree_packets, float32_rays
+from rtmesh.geometry import embree_library, embree_packets, float32_rays
 from rtmesh.geometry.float32_rays import F32_MAX
 
 _NO_ROWS = np.zeros(0, dtype=np.int64)
@@ -150,7 +150,7 @@ class Accel:
     packets : bool, optional
         Trace with Embree's packet queries (True: raise RuntimeError where they cannot be
         used) or with embreex's ``run()`` (False).  Default: packets where
-        :func:`rtmesh.geometry.embree_packets.packet_library` verified them.  Both give the same
+        :func:`rtmesh.geometry.embree_library.packet_library` verified them.  Both give the same
         hits on scenes without coplanar overlapping triangles; where two triangles are hit
         at exactly the same distance, each path keeps the one its traversal meets first.
 
@@ -175,13 +175,13 @@ class Accel:
     """
 
     def __init__(self, vertices, faces, packets=None):
-        library = embree_packets.packet_library() if packets is None or packets else None
+        library = embree_library.packet_library() if packets is None or packets else None
         if packets and library is None:
             raise RuntimeError("Embree packet queries are not available here (see the log)")
         self.packets = library is not None
         self.faces = np.ascontiguousarray(faces, dtype=np.int32)
         if self.packets:
-            self._shared = embree_packets.SharedScene(library, vertices, self.faces)
+            self._shared = embree_library.SharedScene(library, vertices, self.faces)
             self.vertices32 = self._shared.vertices32
             self._intersect16, self._occluded16 = library.intersect16, library.occluded16
         else:

@@ -36,6 +36,7 @@ from rtmesh.core.compile_ahead import KernelGroup
 from rtmesh.core.compiled import kernel
 from rtmesh.core.row_vectors import floor_quotient
 from rtmesh.geometry import embree_packets as ep
+from rtmesh.geometry.embree_library import packet_library
 from rtmesh.geometry.accel import Accel
 from rtmesh.lights.point_light_rows import ROW
 from rtmesh.rendering.direct_blocks import (BLOCK, LANES, PACKETS, add_light_row, any_valid, block_scratch,
@@ -92,7 +93,7 @@ class DirectStage:
         it = integrator
         accel = it.accel
         m = it.scene.materials
-        library = ep.packet_library()
+        library = packet_library()
         self._queries = (library.intersect16, library.occluded16, accel._shared.handle,
                          ep.RTC_RAY_QUERY_FLAG_COHERENT)
         camera, s = it.camera, it.settings

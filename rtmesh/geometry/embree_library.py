@@ -1,0 +1,311 @@
+"""The Embree library embreex installs, opened with ctypes and verified before packets trace.
+
+``embreex`` installs the Embree 4 library; rtmesh opens that very library with ctypes
+(:class:`PacketLibrary`), builds its scenes itself over shared vertex and index arrays
+(:class:`SharedScene`), and traces them with the packet kernels of
+:mod:`rtmesh.geometry.embree_packets`.  The packet layout those kernels assume is a property
+of how the library was compiled, so :func:`packet_library` accepts only the versions it
+was verified on and then proves the layout once per process: it traces a probe scene with
+packets and single rays, checks that the hits agree and that Embree wrote nothing past the
+packet.  Any failure leaves rtmesh on embreex's ``run()`` (see
+:class:`rtmesh.geometry.accel.Accel`), with one log line saying which path runs.
+"""
+
+import ctypes
+import glob
+import logging
+import os
+import threading
+
+import numpy as np
+
+from rtmesh.geometry.embree_packets import (ALIGN_WORDS, DEFAULT_TFAR, DIR, GEOM_ID, INST_PRIM_ID, INVALID_ID, LANES,
+                                            MASK, ORG, PACKET_QUERY, PRIM_ID, RAYHIT_WORDS,
+                                            RTC_FEATURE_FLAG_ALL, RTC_RAY_QUERY_FLAG_COHERENT, TFAR, U, V)
+
+log = logging.getLogger(__name__)
+
+# Embree versions whose packet layout (21 words a lane, instPrimID present) was checked
+# against the library embreex ships; others use run().
+VERIFIED_VERSIONS = ((4, 4),)
+
+
+_RTC_SCENE_FLAG_ROBUST = 1 << 2
+_RTC_GEOMETRY_TYPE_TRIANGLE = 0
+_RTC_BUFFER_TYPE_INDEX, _RTC_BUFFER_TYPE_VERTEX = 0, 1
+_RTC_FORMAT_UINT3, _RTC_FORMAT_FLOAT3 = 0x5003, 0x9003
+_RTC_DEVICE_PROPERTY_VERSION_MAJOR, _RTC_DEVICE_PROPERTY_VERSION_MINOR = 1, 2
+_RTC_DEVICE_PROPERTY_VERSION_PATCH = 3
+
+def _library_path():
+    """The Embree library embreex loads (its wheel's ``embreex.libs``), or None."""
+    try:
+        import embreex
+    except ImportError:
+        return None
+    here = os.path.dirname(embreex.__file__)
+    for folder in (os.path.join(here, os.pardir, "embreex.libs"), here):
+        found = sorted(glob.glob(os.path.join(folder, "libembree4*.so*")))
+        if found:
+            return os.path.normpath(found[0])
+    return None
+
+
+class PacketLibrary:
+    """The Embree library embreex installed, opened with ctypes: one device per process.
+
+    Attributes
+    ----------
+    path : str
+    version : tuple of int
+        (major, minor, patch) as the device reports it.
+    intersect16, occluded16 : ctypes function objects
+        ``rtcIntersect16`` and ``rtcOccluded16``, typed for the kernels of :mod:`rtmesh.geometry.embree_packets`.
+    """
+
+    def __init__(self, path):
+        self.path = path
+        lib = ctypes.CDLL(path)
+        self._lib = lib
+        lib.rtcNewDevice.restype = ctypes.c_void_p
+        lib.rtcNewDevice.argtypes = [ctypes.c_char_p]
+        lib.rtcGetDeviceProperty.restype = ctypes.c_ssize_t
+        lib.rtcGetDeviceProperty.argtypes = [ctypes.c_void_p, ctypes.c_int]
+        lib.rtcGetDeviceError.restype = ctypes.c_int
+        lib.rtcGetDeviceError.argtypes = [ctypes.c_void_p]
+        lib.rtcNewScene.restype = ctypes.c_void_p
+        lib.rtcNewScene.argtypes = [ctypes.c_void_p]
+        lib.rtcSetSceneFlags.argtypes = [ctypes.c_void_p, ctypes.c_int]
+        lib.rtcNewGeometry.restype = ctypes.c_void_p
+        lib.rtcNewGeometry.argtypes = [ctypes.c_void_p, ctypes.c_int]
+        lib.rtcSetSharedGeometryBuffer.argtypes = [
+            ctypes.c_void_p, ctypes.c_int, ctypes.c_uint, ctypes.c_int, ctypes.c_void_p,
+            ctypes.c_size_t, ctypes.c_size_t, ctypes.c_size_t]
+        for name in ("rtcCommitGeometry", "rtcReleaseGeometry", "rtcCommitScene", "rtcReleaseScene",
+                     "rtcReleaseDevice"):
+            getattr(lib, name).argtypes = [ctypes.c_void_p]
+        lib.rtcAttachGeometry.restype = ctypes.c_uint
+        lib.rtcAttachGeometry.argtypes = [ctypes.c_void_p, ctypes.c_void_p]
+        self.device = lib.rtcNewDevice(None)
+        if not self.device:
+            raise OSError(f"{path}: rtcNewDevice failed (error {lib.rtcGetDeviceError(None)})")
+        self.version = tuple(int(lib.rtcGetDeviceProperty(self.device, p)) for p in (
+            _RTC_DEVICE_PROPERTY_VERSION_MAJOR, _RTC_DEVICE_PROPERTY_VERSION_MINOR,
+            _RTC_DEVICE_PROPERTY_VERSION_PATCH))
+        self.intersect16 = PACKET_QUERY(ctypes.cast(lib.rtcIntersect16, ctypes.c_void_p).value)
+        self.occluded16 = PACKET_QUERY(ctypes.cast(lib.rtcOccluded16, ctypes.c_void_p).value)
+
+    def new_scene(self, vertices32, faces32):
+        """Build and commit a robust triangle scene over shared (not copied) buffers.
+
+        Parameters
+        ----------
+        vertices32 : (V + 1, 3) float32, C-contiguous
+            Vertex positions and one row of padding: Embree reads 16 bytes per vertex, so
+            4 bytes past the last one must be readable.
+        faces32 : (F, 3) uint32 or int32, C-contiguous
+
+        Returns
+        -------
+        int
+            The committed ``RTCScene`` handle; release it with :meth:`release_scene` only
+            after the last query, and keep both arrays alive until then.
+        """
+        lib = self._lib
+        scene = lib.rtcNewScene(self.device)
+        # robust: the same traversal as embreex's scenes (rtmesh builds those robust), so
+        # rays through edges and vertices cannot slip between triangles
+        lib.rtcSetSceneFlags(scene, _RTC_SCENE_FLAG_ROBUST)
+        geometry = lib.rtcNewGeometry(self.device, _RTC_GEOMETRY_TYPE_TRIANGLE)
+        lib.rtcSetSharedGeometryBuffer(geometry, _RTC_BUFFER_TYPE_VERTEX, 0, _RTC_FORMAT_FLOAT3,
+                                       vertices32.ctypes.data, 0, 12, len(vertices32) - 1)
+        lib.rtcSetSharedGeometryBuffer(geometry, _RTC_BUFFER_TYPE_INDEX, 0, _RTC_FORMAT_UINT3,
+                                       faces32.ctypes.data, 0, 12, len(faces32))
+        lib.rtcCommitGeometry(geometry)
+        lib.rtcAttachGeometry(scene, geometry)
+        lib.rtcReleaseGeometry(geometry)  # the scene holds it now
+        lib.rtcCommitScene(scene)
+        error = lib.rtcGetDeviceError(self.device)
+        if error:
+            lib.rtcReleaseScene(scene)
+            raise RuntimeError(f"Embree could not build the scene (error {error})")
+        return scene
+
+    def release_scene(self, scene):
+        self._lib.rtcReleaseScene(scene)
+
+
+_library = None
+_library_checked = False
+_library_lock = threading.Lock()
+
+
+def packet_library():
+    """The process's :class:`PacketLibrary`, or None where packets cannot be used safely.
+
+    Opened and verified on the first call (version, then a probe trace, see the module
+    docstring); the outcome is logged once and kept.  Set ``RTMESH_EMBREE=run`` in the
+    environment to use embreex's ``run()`` regardless.
+
+    Returns
+    -------
+    PacketLibrary or None
+    """
+    global _library, _library_checked
+    with _library_lock:
+        if _library_checked:
+            return _library
+        _library_checked = True
+        _library, reason = _open_verified()
+        if _library is None:
+            log.info("tracing with embreex run(), one ray at a time: %s", reason)
+        else:
+            log.info("tracing with Embree %s 16-wide packets (%s)",
+                     ".".join(map(str, _library.version)), _library.path)
+        return _library
+
+
+
+def _open_verified():
+    """(PacketLibrary, None) when the packet path is safe here, else (None, reason)."""
+    if os.environ.get("RTMESH_EMBREE", "").strip().lower() == "run":
+        return None, "RTMESH_EMBREE=run"
+    path = _library_path()
+    if path is None:
+        return None, "embreex's Embree library was not found"
+    try:
+        library = PacketLibrary(path)
+    except (OSError, AttributeError) as error:
+        return None, f"cannot open {path}: {error}"
+    if library.version[:2] not in VERIFIED_VERSIONS:
+        return None, (f"Embree {'.'.join(map(str, library.version))} is not a version whose packet "
+                      f"layout rtmesh was checked against")
+    problem = _probe(library)
+    if problem:
+        return None, problem
+    return library, None
+
+
+def _probe(library):
+    """Trace a small scene both ways; a description of the first disagreement, or None."""
+    from embreex import rtcore_scene
+    from embreex.mesh_construction import TriangleMesh
+
+    rng = np.random.default_rng(1)
+    vertices = rng.uniform(-1.0, 1.0, (60, 3)).astype(np.float32)
+    faces = rng.integers(0, 60, (40, 3)).astype(np.int32)
+    origins = rng.uniform(-3.0, 3.0, (37, 3)).astype(np.float32)
+    directions = rng.normal(size=(37, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    origins[:20] = 0.0  # rays from inside the cloud of triangles, hitting most of them
+    reference = rtcore_scene.EmbreeScene(robust=True)
+    TriangleMesh(reference, vertices, faces)
+    expected = reference.run(origins, directions.astype(np.float32), output=1)
+    with SharedScene(library, vertices, faces) as scene:
+        t, prim, u, v, guard_intact = _probe_packets(library, scene.handle, origins,
+                                                     directions.astype(np.float32))
+    if not guard_intact:
+        return "Embree wrote past the 16-wide packet: its layout differs from the one rtmesh expects"
+    hit = expected["primID"] >= 0
+    if not hit.any():
+        return "the probe scene was missed by every ray"
+    if not (np.array_equal(prim, expected["primID"]) and np.array_equal(t[hit], expected["tfar"][hit])
+            and np.array_equal(u[hit], expected["u"][hit]) and np.array_equal(v[hit], expected["v"][hit])):
+        return "packet and single-ray hits differ on the probe scene"
+    return None
+
+
+def _probe_packets(library, scene, origins, directions):
+    """Trace float32 rays 16 at a time through ctypes calls (no compiled code: the probe
+    runs before the kernels are trusted), each packet followed by 64 guard words.
+
+    Returns
+    -------
+    t, u, v : (n,) float32
+    prim : (n,) int32
+        -1 for misses.
+    guard_intact : bool
+        Embree left every guard word alone.
+    """
+    n = len(origins)
+    t, u, v = (np.empty(n, np.float32) for _ in range(3))
+    prim = np.empty(n, np.int32)
+    words = RAYHIT_WORDS * LANES
+    guard = np.int32(0x5EED5EED)
+
+    def aligned(count, dtype):
+        """:func:`aligned_words` for NumPy (that one is compiled-only)."""
+        raw = np.zeros(count + ALIGN_WORDS, dtype)
+        skip = ((-raw.ctypes.data) % 64) // 4
+        return raw[skip:skip + count]
+
+    buffer = aligned(words + 64, np.float32)
+    ints = buffer.view(np.int32)
+    packet = buffer[:words].reshape(RAYHIT_WORDS, LANES)
+    fields = packet.view(np.int32)
+    valid = aligned(LANES, np.int32)
+    args = aligned(8, np.int32)
+    args[0], args[1] = RTC_RAY_QUERY_FLAG_COHERENT, RTC_FEATURE_FLAG_ALL
+    intact = True
+    for start in range(0, n, LANES):
+        count = min(LANES, n - start)
+        rows = slice(start, start + count)
+        ints[words:] = guard
+        packet[:] = 0.0
+        packet[ORG:ORG + 3, :count] = origins[rows].T
+        packet[DIR:DIR + 3, :count] = directions[rows].T
+        packet[TFAR, :count] = DEFAULT_TFAR
+        fields[MASK] = -1
+        fields[GEOM_ID:INST_PRIM_ID + 1] = INVALID_ID
+        valid[:] = 0
+        valid[:count] = -1
+        library.intersect16(valid.ctypes.data, scene, buffer.ctypes.data, args.ctypes.data)
+        intact = intact and bool((ints[words:] == guard).all())
+        hit = fields[GEOM_ID, :count] != INVALID_ID
+        prim[rows] = np.where(hit, fields[PRIM_ID, :count], -1)
+        t[rows], u[rows], v[rows] = packet[TFAR, :count], packet[U, :count], packet[V, :count]
+    return t, prim, u, v, intact
+
+
+class SharedScene:
+    """A committed Embree scene over float32 vertices and uint32 faces it shares.
+
+    Parameters
+    ----------
+    library : PacketLibrary
+    vertices : (V, 3) float
+    faces : (F, 3) int
+
+    Attributes
+    ----------
+    handle : int
+        The ``RTCScene``, for the query kernels.
+    vertices32 : (V, 3) float32
+        The positions Embree traces (a view of the padded buffer it shares).
+    faces32 : (F, 3) uint32
+    """
+
+    def __init__(self, library, vertices, faces):
+        self.library = library
+        padded = np.empty((len(vertices) + 1, 3), dtype=np.float32)
+        padded[:-1] = vertices
+        padded[-1] = 0.0
+        self._padded = padded
+        self.vertices32 = padded[:-1]
+        self.faces32 = np.ascontiguousarray(faces, dtype=np.uint32)
+        self.handle = library.new_scene(padded, self.faces32)
+
+    def close(self):
+        # getattr: __del__ runs on an object whose __init__ failed before setting it
+        if getattr(self, "handle", 0):
+            self.library.release_scene(self.handle)
+            self.handle = 0
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def __del__(self):
+        self.close()
