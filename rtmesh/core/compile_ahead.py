@@ -80,9 +80,10 @@ class KernelGroup:
 
         Call it just before the render first calls the group's kernels.
         """
-        if not _enabled or self._prepared:
-            return
-        self._prepared = True
+        with _helper_lock:
+            if not _enabled or self._prepared:
+                return
+            self._prepared = True
         if self.cached() or not _announce(self):
             return
         for dispatcher, signature in self.kernels:

@@ -234,7 +234,8 @@ def _probe_packets(library, scene, origins, directions):
     guard = np.int32(0x5EED5EED)
 
     def aligned(count, dtype):
-        """:func:`aligned_words` for NumPy (that one is compiled-only)."""
+        """:func:`rtmesh.geometry.embree_packets.aligned_words` for NumPy (that one is
+        compiled-only)."""
         raw = np.zeros(count + ALIGN_WORDS, dtype)
         skip = ((-raw.ctypes.data) % 64) // 4
         return raw[skip:skip + count]

@@ -32,7 +32,6 @@ import copy
 import dataclasses
 import logging
 import time
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -51,12 +50,13 @@ from rtmesh.materials.table import ALPHA_MODES
 from rtmesh.rendering.adaptive import render_rounds
 from rtmesh.rendering.chunk_state import ChunkState, Clock, scatter_add
 from rtmesh.rendering.direct_stage import DirectStage
-from rtmesh.rendering.general_kernels import GENERAL_KERNELS
 from rtmesh.rendering.film import Film
+from rtmesh.rendering.general_kernels import GENERAL_KERNELS
 from rtmesh.rendering.local_shading import LocalShading
 from rtmesh.rendering.media import Media
 from rtmesh.rendering.physical_shading import PhysicalShading, bsdf_weight
 from rtmesh.rendering.render_plan import RenderPlan
+from rtmesh.rendering.render_result import RenderResult
 from rtmesh.rendering.scheduler import pixel_chunks, run_on_threads, sample_indices
 from rtmesh.rendering.secondary_rays import SecondaryRays
 from rtmesh.rendering.shading_tables import ShadingTables
@@ -69,34 +69,6 @@ from rtmesh.scene.background import as_background
 log = logging.getLogger(__name__)
 
 _UNIT_THROUGHPUT = np.ones(3)
-
-
-@dataclass
-class RenderResult:
-    """Output of :func:`render`.
-
-    Attributes
-    ----------
-    image : (height, width, 3) float32
-        Linear radiance, row 0 at the top.
-    passes : dict of str to (height, width, k) float32
-        Requested extra passes (see :mod:`rtmesh.io.passes`).
-    stats : RenderStats
-    film : Film
-        The accumulation buffers (sums, sums of squares) for error estimates.
-    alpha : (height, width, 1) float32 or None
-        Coverage, when the background is transparent (``image`` is then premultiplied).
-    noisy : (height, width, 3) float32 or None
-        With ``denoise``, the image before denoising (``image`` is the denoised one; the
-        film's error estimate describes this one).
-    """
-
-    image: np.ndarray
-    passes: dict
-    stats: RenderStats
-    film: Film
-    alpha: np.ndarray | None = None
-    noisy: np.ndarray | None = None
 
 
 def _translated(obj, shift):
