@@ -46,6 +46,7 @@ from rtmesh.batch.publish import Leftovers
 from rtmesh.batch.view_sets import view_set
 from rtmesh.batch.worker import CAMERA_SUFFIX, VIEWS, AssetJob, ImageTask, fixed_view, turntable_views
 from rtmesh.core.errors import OutputError
+from rtmesh.core.runtime import usable_cores
 from rtmesh.io.atomic_files import write_text
 from rtmesh.loaders.importers import MESH_EXTENSIONS
 from rtmesh.rendering.settings import PASSES
@@ -129,7 +130,7 @@ def batch_convert(inputs, outdir, **options):
             else:
                 from rtmesh.batch.pool import run_local
 
-                workers = opts.workers or _cores()
+                workers = opts.workers or usable_cores()
                 used = min(workers, len(jobs))
                 runner = f"{used} local worker{'s' if used > 1 else ''}"
                 run_local(jobs, workers, book.on_image, book.on_job, time_limit=opts.time_limit,
@@ -181,7 +182,7 @@ def plan(assets, outdir, opts, ledger, book, run="", leftovers=None):
         Skipped assets and known failures are entered in ``book`` directly.
     """
     jobs = []
-    local_threads = opts.threads or max(1, _cores() // (opts.workers or _cores()))
+    local_threads = opts.threads or max(1, usable_cores() // (opts.workers or usable_cores()))
     threads = opts.threads or (1 if opts.scheduler is not None else local_threads)
     run_file = os.path.join(outdir, RUN_FILE) if opts.scheduler is not None else ""
     shared = {}
@@ -298,13 +299,6 @@ def _check_dask():
         from rtmesh.batch.dask_pool import DASK_MISSING
 
         raise InputError(DASK_MISSING) from None
-
-
-def _cores():
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        return os.cpu_count() or 1
 
 
 def _memory_limit(requested, workers):

@@ -31,6 +31,8 @@ try:
 except ImportError:  # no advisory locks (Windows): the processes may compile a kernel twice
     fcntl = None
 
+from rtmesh.core.runtime import usable_cores
+
 log = logging.getLogger(__name__)
 
 # every group, by name: the helper process finds a group the render announces here
@@ -151,8 +153,9 @@ def helper(enabled=True):
         False: no helper (the block runs as it would without this).
     """
     global _enabled, _helper
-    # without a second core, or a disk cache to hand kernels over, a helper cannot help
-    enabled = enabled and (os.cpu_count() or 1) > 1 and all(
+    # without a second core, or a disk cache to hand kernels over, a helper cannot help;
+    # a frozen application's executable is not a Python that could run one
+    enabled = enabled and not getattr(sys, "frozen", False) and usable_cores() > 1 and all(
         hasattr(dispatcher._cache, "_cache_file") for group in _GROUPS.values() for dispatcher, _ in group.kernels)
     with _helper_lock:
         _enabled = enabled

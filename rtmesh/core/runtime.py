@@ -27,6 +27,15 @@ from concurrent.futures import ThreadPoolExecutor
 _tuned = False  # set by tune_process
 
 
+def usable_cores():
+    """The cores this process may run on (its CPU affinity where the system tells it, as
+    under a cluster's CPU set), else the machine's."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
 def tune_process():
     """Tune this process for rendering (idempotent; there is no undo).
 

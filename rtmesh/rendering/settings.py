@@ -1,9 +1,9 @@
 """Render settings: what a render is asked to do, validated."""
 
 import math
-import os
 from dataclasses import dataclass
 
+from rtmesh.core.runtime import usable_cores
 from rtmesh.io.colour import TONEMAPS
 from rtmesh.io.passes import PASS_NAMES
 from rtmesh.sampling.patterns import SAMPLERS
@@ -174,9 +174,4 @@ class RenderSettings:
     @property
     def thread_count(self):
         """Threads to use: ``threads`` or the machine's usable cores."""
-        if self.threads:
-            return self.threads
-        try:
-            return len(os.sched_getaffinity(0))
-        except AttributeError:  # not on Linux
-            return os.cpu_count() or 1
+        return self.threads or usable_cores()
