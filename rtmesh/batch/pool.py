@@ -24,7 +24,7 @@ from multiprocessing.connection import wait
 
 from rtmesh.batch import worker as batch_worker
 from rtmesh.batch.worker import image_result, run_job
-from rtmesh.core import runtime
+from rtmesh.core import compile_ahead, runtime
 from rtmesh.core.errors import RtmeshError
 
 
@@ -188,8 +188,11 @@ def _worker_main(conn, memory_limit, parent_pid):
     # the process exists to render: tune it for that (allocator, GIL, kept threads)
     runtime.tune_process()
     try:
-        # kernels compiled or loaded now, so the first job's time limit does not pay for them
-        batch_worker.warm_up()
+        # kernels compiled or loaded now, so the first job's time limit does not pay for them;
+        # on a first run (the first worker, while the others wait for it) with a helper
+        # process compiling half of them
+        with compile_ahead.helper():
+            batch_worker.warm_up()
     except Exception:  # noqa: BLE001 - the jobs report what is wrong (e.g. too little memory)
         pass
     conn.send(("ready", None))
