@@ -16,6 +16,7 @@ from rtmesh.core import compile_ahead
 from rtmesh.core.compiled import kernel
 from rtmesh.geometry import embree_packets
 from rtmesh.geometry.build_kernels import BUILD_KERNELS
+from rtmesh.io.images import read_image
 from rtmesh.rendering.direct_stage import FUSED_KERNELS
 from rtmesh.rendering.general_kernels import GENERAL_KERNELS
 
@@ -101,3 +102,21 @@ def test_without_a_helper_prepare_compiles_nothing(monkeypatch):
         assert (types.int64,) not in _twice.overloads and not started
     finally:
         del compile_ahead._GROUPS[group.name]
+
+
+def test_a_first_run_with_the_helper_renders_what_a_later_run_renders(tmp_path):
+    # the command line from an empty cache: the helper compiles half of the build and
+    # fused-stage groups, and the image is the one a run with everything cached gives
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"), PYTHONPATH=PACKAGE_PARENT)
+    code = "import sys; from rtmesh.cli import main; sys.exit(main())"
+    images = []
+    for name in ("first.exr", "later.exr"):
+        out = tmp_path / name
+        subprocess.run([sys.executable, "-c", code, "render", os.path.join(ASSETS, "meshes", "bunny.ply"),
+                        "-o", str(out), "--width", "32", "--height", "24", "--spp", "2", "-q"],
+                       env=env, check=True, timeout=300, stdout=subprocess.DEVNULL)
+        images.append(read_image(str(out))[0])
+        if name == "first.exr":
+            # the render took each kernel's lock file while it compiled its half
+            assert any(path.suffix == ".compiling" for path in (tmp_path / "cache").rglob("*"))
+    assert np.array_equal(images[0], images[1])
