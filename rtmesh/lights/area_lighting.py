@@ -64,36 +64,10 @@ class AreaLighting:
                              None)
 
     def direct(self, p, ng, reflectance, pixel, sample, depth, stats, clock, time=None):
-        """Direct light from every area light, ``light_samples`` shadow rays per (hit, light).
-
-        Parameters
-        ----------
-        p : (k, 3) float
-            Shading points.
-        ng : (k, 3) float
-            Unit geometric normals on the side the incoming ray came from: lights behind
-            the surface do not light it, and shadow rays leave on that side.
-        reflectance : callable
-            ``reflectance(wi, lit, pdf) -> (k, 3)``: the material's reflection factor for
-            unit directions ``wi`` toward the light, evaluated (at least) where ``lit``;
-            ``pdf`` is the solid-angle density of each sample (for MIS weights).
-        pixel, sample : (k,) int
-            Pixel and sample-in-pixel of each hit: the keys of its random numbers.
-        depth : int
-            Path depth of the hits (its own sample dimensions).
-        stats : RenderStats
-            Shadow rays are counted as ``area_shadow``.
-        clock : object with ``lap(stage)``
-            Times the work as ``shade`` and ``shadow``.
-        time : (k,) float, optional
-            Time of each hit's ray, with motion blur: the shadow rays see the moving objects
-            at that time (``accel`` is then a :class:`rtmesh.geometry.motion.MotionAccel`).
-
-        Returns
-        -------
-        (k, 3) float64 or None
-            None when no sample reached any hit.
-        """
+        """Direct light from every area light, ``light_samples`` shadow rays per (hit, light):
+        :meth:`rtmesh.lights.interface.SampledLighting.direct`, with shadow rays counted as
+        ``area_shadow`` (``accel`` is a :class:`rtmesh.geometry.motion.MotionAccel` when the
+        hits have times)."""
         n = self.samples
         total = None
         for light_index, light in enumerate(self.lights):

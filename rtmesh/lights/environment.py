@@ -135,33 +135,9 @@ class EnvironmentLighting:
                             np.inf)
 
     def direct(self, p, ng, reflectance, pixel, sample, depth, stats, clock, time=None):
-        """Light from the background at every hit, ``light_samples`` shadow rays per hit.
-
-        Parameters
-        ----------
-        p : (k, 3) float
-            Shading points.
-        ng : (k, 3) float
-            Unit geometric normals on the side the incoming ray came from.
-        reflectance : callable
-            ``reflectance(wi, lit, pdf) -> (k, 3)``, the material's reflection factor
-            toward ``wi`` where ``lit``; ``pdf`` is each direction's solid-angle density
-            (for MIS weights).
-        pixel, sample : (k,) int
-            The keys of each hit's random numbers.
-        depth : int
-            Path depth of the hits.
-        stats : RenderStats
-            Shadow rays are counted as ``environment``.
-        clock : object with ``lap(stage)``
-        time : (k,) float, optional
-            Time of each hit's ray (motion blur).
-
-        Returns
-        -------
-        (k, 3) float64 or None
-            None when no sample reached any hit.
-        """
+        """Light from the background at every hit, ``light_samples`` shadow rays per hit:
+        :meth:`rtmesh.lights.interface.SampledLighting.direct`, with shadow rays counted as
+        ``environment``."""
         n = self.samples
         total = None
         for j in range(n):

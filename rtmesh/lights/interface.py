@@ -17,6 +17,8 @@ can meet them (``intersect``), so camera and mirror rays see them.  Their stage
 (:class:`rtmesh.lights.area_lighting.AreaLighting`) turns the samples into directions,
 distances and shadow rays.  A delta light is the one-sample case of the same estimator
 (its "point" is fixed, its pdf a delta), which is why it gets the cheaper interface.
+That stage and the environment's (:class:`rtmesh.lights.environment.EnvironmentLighting`)
+both answer :meth:`SampledLighting.direct`, as the shading stages call them.
 
 A new light type is its module (its class, which satisfies this protocol, and its
 :class:`rtmesh.lights.light_types.LightType`), one entry in
@@ -100,3 +102,42 @@ class AreaLight(Protocol):
     @property
     def is_black(self):
         """True when the light emits nothing."""
+
+
+class SampledLighting(Protocol):
+    """Light that a hit gathers by sampling directions and tracing shadow rays: the area
+    lights of a scene (:class:`rtmesh.lights.area_lighting.AreaLighting`) and the background
+    lighting it (:class:`rtmesh.lights.environment.EnvironmentLighting`).  The shading
+    stages call both the same way."""
+
+    def direct(self, p, ng, reflectance, pixel, sample, depth, stats, clock, time=None):
+        """Direct light at every hit, ``light_samples`` shadow rays per hit (and light).
+
+        Parameters
+        ----------
+        p : (k, 3) float
+            Shading points.
+        ng : (k, 3) float
+            Unit geometric normals on the side the incoming ray came from: light from
+            behind the surface does not light it, and shadow rays leave on that side.
+        reflectance : callable
+            ``reflectance(wi, lit, pdf) -> (k, 3)``: the material's reflection factor for
+            unit directions ``wi`` toward the light, evaluated (at least) where ``lit``;
+            ``pdf`` is the solid-angle density of each sample (for MIS weights).
+        pixel, sample : (k,) int
+            Pixel and sample-in-pixel of each hit: the keys of its random numbers.
+        depth : int
+            Path depth of the hits (its own sample dimensions).
+        stats : RenderStats
+            Shadow rays are counted (each implementation names its counter).
+        clock : object with ``lap(stage)``
+            Times the work as ``shade`` and ``shadow``.
+        time : (k,) float, optional
+            Time of each hit's ray, with motion blur: the shadow rays see the moving objects
+            at that time.
+
+        Returns
+        -------
+        (k, 3) float64 or None
+            None when no sample reached any hit.
+        """
