@@ -68,7 +68,7 @@ def test_the_helper_compiles_an_announced_group_into_the_shared_disk_cache(tmp_p
     assert not _cached_in(tmp_path, "rtmesh.geometry.embree_packets", group.name)
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path), PYTHONPATH=PACKAGE_PARENT)
     # what the render writes when it prepares the group; end of input ends the helper
-    done = subprocess.run([sys.executable, "-m", "rtmesh.core.compile_ahead"], env=env, timeout=300,
+    done = subprocess.run(compile_ahead.HELPER_COMMAND, env=env, timeout=300,
                           input=f"{group.module}\t{group.name}\n", text=True)
     assert done.returncode == 0
     assert _cached_in(tmp_path, "rtmesh.geometry.embree_packets", group.name)

@@ -6,11 +6,11 @@ function at a time per process: about 12 s on one core of a machine that has mor
 :class:`KernelGroup` declares kernels with the signatures renders call them with, in the
 order a render first calls them (the scene build's passes, the fused stage's steps, the
 packet queries).  When a program turns the helper on (:func:`helper`, as the ``rtmesh``
-command does while its cache is cold), a second Python process compiles each group that
-the render announces from its last kernel back, while the render compiles it from its
-first on (:meth:`KernelGroup.prepare`); a lock file per kernel keeps the two from
-compiling the same one, and numba's disk cache hands each kernel's machine code to the
-other process.  They meet in the middle of a group.
+command does while its cache is cold), a second Python process (:data:`HELPER_COMMAND`)
+compiles each group that the render announces from its last kernel back, while the render
+compiles it from its first on (:meth:`KernelGroup.prepare`); a lock file per kernel keeps
+the two from compiling the same one, and numba's disk cache hands each kernel's machine
+code to the other process.  They meet in the middle of a group.
 
 Without a helper, :meth:`KernelGroup.prepare` does nothing and kernels compile on their
 first call as they always do.  The helper only compiles: it never changes what a render
@@ -205,7 +205,7 @@ def _start():
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [package_parent, env.get("PYTHONPATH")]))
     try:
-        return subprocess.Popen([sys.executable, "-m", __name__], stdin=subprocess.PIPE,
+        return subprocess.Popen(HELPER_COMMAND, stdin=subprocess.PIPE,
                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env, text=True)
     except OSError as error:
         log.debug("no compile helper: %s", error)
@@ -231,9 +231,8 @@ def _serve(lines):
         _GROUPS[name].compile_backwards()
 
 
-if __name__ == "__main__":
-    # run as a script, this file is the module __main__; the groups are declared in the
-    # module rtmesh.core.compile_ahead
-    from rtmesh.core.compile_ahead import _serve as serve
 
-    serve(sys.stdin)
+# the helper process: it reads group lines from its standard input until it closes (not
+# ``python -m`` this module, which would run a second copy of it beside the one
+# rtmesh.core imports)
+HELPER_COMMAND = [sys.executable, "-c", "import sys; from rtmesh.core import compile_ahead; compile_ahead._serve(sys.stdin)"]
