@@ -42,6 +42,10 @@ _GROUPS = {}
 _enabled = False
 _helper = None
 _helper_lock = threading.Lock()
+# the helper process: it reads group lines from its standard input until it closes (not
+# ``python -m`` this module, which would run a second copy of it beside the one
+# rtmesh.core imports)
+HELPER_COMMAND = [sys.executable, "-c", "import sys; from rtmesh.core import compile_ahead; compile_ahead._serve(sys.stdin)"]
 
 
 class KernelGroup:
@@ -153,6 +157,11 @@ def helper(enabled=True):
         False: no helper (the block runs as it would without this).
     """
     global _enabled, _helper
+    with _helper_lock:
+        nested = _enabled
+    if nested:  # an enclosing block runs the helper
+        yield
+        return
     # without a second core, or a disk cache to hand kernels over, a helper cannot help;
     # a frozen application's executable is not a Python that could run one
     enabled = enabled and not getattr(sys, "frozen", False) and usable_cores() > 1 and all(
@@ -229,10 +238,3 @@ def _serve(lines):
         module, _, name = line.rstrip("\n").partition("\t")
         importlib.import_module(module)  # declares the group
         _GROUPS[name].compile_backwards()
-
-
-
-# the helper process: it reads group lines from its standard input until it closes (not
-# ``python -m`` this module, which would run a second copy of it beside the one
-# rtmesh.core imports)
-HELPER_COMMAND = [sys.executable, "-c", "import sys; from rtmesh.core import compile_ahead; compile_ahead._serve(sys.stdin)"]
