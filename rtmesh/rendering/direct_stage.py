@@ -66,7 +66,7 @@ _F64, _F64_2D, _I64 = types.float64[::1], types.float64[:, ::1], types.int64[::1
 # the steps direct_samples calls, each a kernel of its own (cached apart from it, so that a
 # first run can compile them in two processes, see rtmesh.core.compile_ahead)
 FUSED_KERNELS = KernelGroup(__name__, "fused direct", [
-    (block_scratch, (types.float64[::1], types.int64)),
+    (block_scratch, (_F64, types.int64)),
     (camera_block, (_F64_2D, types.int64, _F64_2D, _F64, types.int64, types.int64, types.int64, types.uint64[::1],
                     types.uint64[:, ::1], _F64, _F64, types.UniTuple(types.float64, 13), _F64_2D, _F64_2D,
                     types.float32[::1])),
@@ -288,6 +288,7 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     has_smooth = len(vertex_normals) > 0
     # row-major, so that the integrator's (pixels, spp, 3) view of it is not a copy
     radiance = np.empty((n, 3))
+    # the packets (their constant lanes written) and the per-sample scratch of a block
     (rays, words, valid, args, shadow, shadow_words, shadow_valid, barycentrics, face, normal_row, interpolate,
      mat, hit, xy, d, sample, sequence, column, line, cosine, raised, power, reaches, receives, shininess,
      highlight_from, direct) = block_scratch(position, flags)
