@@ -117,18 +117,33 @@ def compile_locked(dispatcher, signature):
     """
     if signature in dispatcher.overloads:
         return
-    cache_path = getattr(dispatcher._cache, "_cache_path", None)
-    if fcntl is None or cache_path is None:
+    with _kernel_lock(dispatcher):
         dispatcher.compile(signature)
-        return
-    os.makedirs(cache_path, exist_ok=True)
+
+
+@contextlib.contextmanager
+def _kernel_lock(dispatcher):
+    """Hold the lock file of ``dispatcher`` (in its cache folder) within the block; where
+    there is no such lock (no ``fcntl``, no cache folder, a file system that refuses it),
+    the block runs without one, and two processes may then compile the kernel twice."""
+    cache_path = getattr(dispatcher._cache, "_cache_path", None)
     name = dispatcher.py_func.__module__ + "." + dispatcher.py_func.__qualname__
-    with open(os.path.join(cache_path, name + ".compiling"), "a") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
+    lock = None
+    if fcntl is not None and cache_path is not None:
         try:
-            dispatcher.compile(signature)
-        finally:
+            os.makedirs(cache_path, exist_ok=True)
+            lock = open(os.path.join(cache_path, name + ".compiling"), "a")
+            fcntl.flock(lock, fcntl.LOCK_EX)
+        except OSError:
+            if lock is not None:
+                lock.close()
+            lock = None
+    try:
+        yield
+    finally:
+        if lock is not None:
             fcntl.flock(lock, fcntl.LOCK_UN)
+            lock.close()
 
 
 def _in_disk_cache(dispatcher, signature):
