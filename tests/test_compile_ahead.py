@@ -65,13 +65,19 @@ def _cached_in(cache_dir, module, group):
 
 def test_the_helper_compiles_an_announced_group_into_the_shared_disk_cache(tmp_path):
     group = embree_packets.QUERY_KERNELS
-    assert not _cached_in(tmp_path, "rtmesh.geometry.embree_packets", group.name)
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path), PYTHONPATH=PACKAGE_PARENT)
+    cache = tmp_path / "cache"
+    assert not _cached_in(cache, "rtmesh.geometry.embree_packets", group.name)
+    # started in a folder with another rtmesh (as `rtmesh render` run in the source tree
+    # that `pip install .` installed from), the helper still imports this one
+    (tmp_path / "rtmesh").mkdir()
+    (tmp_path / "rtmesh" / "__init__.py").write_text("raise ImportError('the helper imported the wrong rtmesh')\n")
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
+    env.pop("PYTHONPATH", None)
     # what the render writes when it prepares the group; end of input ends the helper
-    done = subprocess.run(compile_ahead.HELPER_COMMAND, env=env, timeout=300,
+    done = subprocess.run(compile_ahead.helper_command(), env=env, cwd=tmp_path, timeout=300,
                           input=f"{group.module}\t{group.name}\n", text=True)
     assert done.returncode == 0
-    assert _cached_in(tmp_path, "rtmesh.geometry.embree_packets", group.name)
+    assert _cached_in(cache, "rtmesh.geometry.embree_packets", group.name)
 
 
 def test_a_kernel_being_compiled_by_the_other_process_is_waited_for():

@@ -6,7 +6,7 @@ function at a time per process: about 12 s on one core of a machine that has mor
 :class:`KernelGroup` declares kernels with the signatures renders call them with, in the
 order a render first calls them (the scene build's passes, the fused stage's steps, the
 packet queries).  When a program turns the helper on (:func:`helper`, as the ``rtmesh``
-command does while its cache is cold), a second Python process (:data:`HELPER_COMMAND`)
+command does while its cache is cold), a second Python process (:func:`helper_command`)
 compiles each group that the render announces from its last kernel back, while the render
 compiles it from its first on (:meth:`KernelGroup.prepare`); a lock file per kernel keeps
 the two from compiling the same one, and numba's disk cache hands each kernel's machine
@@ -42,10 +42,6 @@ _GROUPS = {}
 _enabled = False
 _helper = None
 _helper_lock = threading.Lock()
-# the helper process: it reads group lines from its standard input until it closes (not
-# ``python -m`` this module, which would run a second copy of it beside the one
-# rtmesh.core imports)
-HELPER_COMMAND = [sys.executable, "-c", "import sys; from rtmesh.core import compile_ahead; compile_ahead._serve(sys.stdin)"]
 
 
 class KernelGroup:
@@ -222,15 +218,31 @@ def _announce(group):
         return True
 
 
-def _start():
-    """The helper process, reading group names from its standard input; None if it cannot
-    be started."""
+def helper_command():
+    """The command line of the helper process: it reads group lines from its standard input
+    until it closes.
+
+    It imports this very copy of rtmesh, first on its path: with ``python -c`` the working
+    folder comes first otherwise, and a folder holding another copy (the source tree that
+    ``pip install .`` installed from) would give the helper other kernels and another cache.
+    (Not ``python -m`` this module either, which would run a second copy of it beside the
+    one :mod:`rtmesh.core` imports.)
+
+    Returns
+    -------
+    list of str
+    """
     package_parent = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(filter(None, [package_parent, env.get("PYTHONPATH")]))
+    code = (f"import sys; sys.path.insert(0, {package_parent!r}); "
+            "from rtmesh.core import compile_ahead; compile_ahead._serve(sys.stdin)")
+    return [sys.executable, "-c", code]
+
+
+def _start():
+    """The helper process (:func:`helper_command`); None if it cannot be started."""
     try:
-        return subprocess.Popen(HELPER_COMMAND, stdin=subprocess.PIPE,
-                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env, text=True)
+        return subprocess.Popen(helper_command(), stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL, text=True)
     except OSError as error:
         log.debug("no compile helper: %s", error)
         return None
