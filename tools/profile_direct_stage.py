@@ -99,6 +99,10 @@ def instrumented_source():
     source = inspect.getsource(direct_stage)
     body = source[source.index("@kernel\ndef direct_samples"):]
     head = source[:source.index("@kernel\ndef direct_samples")]
+    # the copy uses the stage's kernel group rather than declaring it a second time
+    group = head.index("FUSED_KERNELS = KernelGroup(")
+    head = (head[:group] + "from rtmesh.rendering.direct_stage import FUSED_KERNELS  # noqa: E402\n"
+            + head[head.index("\n])\n", group) + 4:])
     names = step_names()
     for text, name in STEPS:
         if body.count(text) != 1:
