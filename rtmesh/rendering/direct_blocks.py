@@ -19,15 +19,13 @@ they cost the stage nothing measurable (peer scene, 1 and 16 spp, 1 thread;
 
 import numpy as np
 
-from rtmesh.core.compiled import inline_row, kernel, row
-from rtmesh.core.row_vectors import dot3
+from rtmesh.core.compiled import kernel, row
 from rtmesh.geometry import embree_packets as ep
-from rtmesh.geometry.float32_rays import F32_MAX, offset_origin
 from rtmesh.lights.point_light_rows import KIND, POINT, illuminate_row, point_row
-from rtmesh.materials.blinn_phong import blinn_phong_row, highlight_cosine
+from rtmesh.materials.blinn_phong import blinn_phong_row
 from rtmesh.sampling.pixel_samples import sample_positions
 from rtmesh.scene.camera_rays import pinhole_xyz
-from rtmesh.shading.direct_light import light_reaches
+from rtmesh.shading.direct_light import light_sample
 from rtmesh.shading.surfaces import surface_from_rows_inlined
 
 LANES = ep.LANES
@@ -289,23 +287,6 @@ def _light_loop(illuminate):
         return lit, values, shadow_ray
 
     return loop
-
-
-@inline_row
-def light_sample(px, py, pz, gx, gy, gz, nx, ny, nz, vx, vy, vz, wx, wy, wz, distance, er, eg, eb, scale, shorten,
-                 highlights):
-    """What :func:`light_block` keeps of one light at one surface record (point ``p``,
-    geometric and shading normals ``g``, ``n``, ray direction ``v``) from the light's
-    direction ``w``, distance and incident term ``e``: whether it lights the point, ``ns .
-    wi``, ``e``, the highlight cosine (0 without ``highlights``) and the shadow ray
-    (float32 offset origin, direction and length)."""
-    lit = light_reaches(wx, wy, wz, er, eg, eb, gx, gy, gz)
-    cosine = highlight_cosine(nx, ny, nz, -vx, -vy, -vz, wx, wy, wz) if highlights else 0.0
-    # the shadow ray's direction in float32, as Embree will see it, also sets the offset
-    dx, dy, dz = np.float32(wx), np.float32(wy), np.float32(wz)
-    ox, oy, oz = offset_origin(px, py, pz, gx, gy, gz, dx, dy, dz, scale)
-    return (lit, dot3(nx, ny, nz, wx, wy, wz), er, eg, eb, cosine, ox, oy, oz, dx, dy, dz,
-            np.float32(min(distance * shorten, F32_MAX)))
 
 
 _point_light_loop = _light_loop(point_row)

@@ -47,7 +47,7 @@ from rtmesh.rendering.film_sums import add_pixels, pixel_errors
 from rtmesh.rendering.scheduler import sample_indices
 from rtmesh.sampling.pixel_samples import PixelSampler, pixel_sequence
 from rtmesh.scene.background import SolidBackground
-from rtmesh.shading.direct_light import SHADOW_SHORTEN
+from rtmesh.shading.direct_light import SHADOW_SHORTEN, highlight_to_raise
 
 _NO_POSITIONS = np.zeros((0, 2))
 # "no film": direct_samples returns the radiance without adding it anywhere
@@ -366,11 +366,8 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
             for b in range(BLOCK):
                 on = (b < count) & receives[b] & lit[b]
                 shadow_valid[b] = -np.int32(on)
-                e = shininess[b]
-                # a power of 0 is 1 whatever the cosine (0 ** 0 included)
-                c = 1.0 if e == 0.0 else values[4, b]
-                cosine[b] = c
-                raised[b] = on & (e >= 0.0) & (c > 0.0) & (c >= highlight_from[b])
+                cosine[b], raise_it = highlight_to_raise(shininess[b], values[4, b], highlight_from[b])
+                raised[b] = on & raise_it
             for q in range((count + LANES - 1) // LANES):
                 if any_valid(shadow_valid, q):
                     occluded16(shadow_valid.ctypes.data + 64 * q, scene, shadow.ctypes.data + _SHADOW_BYTES * q,

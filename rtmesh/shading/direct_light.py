@@ -6,7 +6,7 @@ terms (:func:`add_light`).
 
 import numpy as np
 
-from rtmesh.core.compiled import kernel, row
+from rtmesh.core.compiled import inline_row, kernel, row
 from rtmesh.core.row_vectors import dot3
 from rtmesh.geometry.float32_rays import F32_MAX, offset_origin
 from rtmesh.materials.blinn_phong import highlight_cosine, shade_row
@@ -21,6 +21,35 @@ def light_reaches(wx, wy, wz, er, eg, eb, gx, gy, gz):
     (``wi . ng > 0``: no leaks through the surface) and its term is not zero."""
     # bitwise operators: short-circuits are branches, which stop vectorisation
     return (dot3(wx, wy, wz, gx, gy, gz) > 0.0) & ((er > 0.0) | (eg > 0.0) | (eb > 0.0))
+
+
+@inline_row
+def light_sample(px, py, pz, gx, gy, gz, nx, ny, nz, vx, vy, vz, wx, wy, wz, distance, er, eg, eb, scale, shorten,
+                 highlights):
+    """What :func:`light_samples` and the fused stage's light step
+    (:func:`rtmesh.rendering.direct_blocks.light_block`) keep of one light at one surface
+    record (point ``p``, geometric and shading normals ``g``, ``n``, ray direction ``v``)
+    from the light's direction ``w``, distance and incident term ``e``: whether it lights
+    the point, ``ns . wi``, ``e``, the highlight cosine (0 without ``highlights``) and the
+    shadow ray (float32 offset origin, direction and length).  Numbers only, and inlined:
+    the loops that call it vectorise."""
+    lit = light_reaches(wx, wy, wz, er, eg, eb, gx, gy, gz)
+    cosine = highlight_cosine(nx, ny, nz, -vx, -vy, -vz, wx, wy, wz) if highlights else 0.0
+    # the shadow ray's direction in float32, as Embree will see it, also sets the offset
+    dx, dy, dz = np.float32(wx), np.float32(wy), np.float32(wz)
+    ox, oy, oz = offset_origin(px, py, pz, gx, gy, gz, dx, dy, dz, scale)
+    return (lit, dot3(nx, ny, nz, wx, wy, wz), er, eg, eb, cosine, ox, oy, oz, dx, dy, dz,
+            np.float32(min(distance * shorten, F32_MAX)))
+
+
+@row
+def highlight_to_raise(exponent, cosine, visible_from):
+    """The cosine a highlight raises to ``exponent`` (a power of 0 is 1 whatever the
+    cosine, 0 ** 0 included), and whether it is raised at all: the material has a
+    highlight (``exponent >= 0``) and the cosine is positive and at least ``visible_from``
+    (:func:`highlight_thresholds`).  Branch-free, for vectorised loops."""
+    c = 1.0 if exponent == 0.0 else cosine
+    return c, (exponent >= 0.0) & (c > 0.0) & (c >= visible_from)
 
 
 # Shadow rays to point and spot lights stop this fraction short of the light, so a light
@@ -96,19 +125,12 @@ def light_samples(wi, distance, incident_all, p, ng, ns, d, mat, exponent, visib
         n = min(_BLOCK, k - start)
         for b in range(n):
             i = start + b
-            wx, wy, wz = wi[i, 0], wi[i, 1], wi[i, 2]
-            er, eg, eb = incident_all[i, 0], incident_all[i, 1], incident_all[i, 2]
-            block_lit[b] = light_reaches(wx, wy, wz, er, eg, eb, ng[i, 0], ng[i, 1], ng[i, 2])
-            block_incident[0, b], block_incident[1, b], block_incident[2, b] = er, eg, eb
-            block_cos[0, b] = dot3(ns[i, 0], ns[i, 1], ns[i, 2], wx, wy, wz)
-            block_cos[1, b] = highlight_cosine(ns[i, 0], ns[i, 1], ns[i, 2], -d[i, 0], -d[i, 1], -d[i, 2],
-                                                wx, wy, wz)
-            # the shadow ray's direction in float32, as Embree will see it, also sets the offset
-            dx, dy, dz = np.float32(wx), np.float32(wy), np.float32(wz)
-            block_ray[0, b], block_ray[1, b], block_ray[2, b] = offset_origin(
-                p[i, 0], p[i, 1], p[i, 2], ng[i, 0], ng[i, 1], ng[i, 2], dx, dy, dz, scale)
-            block_ray[3, b], block_ray[4, b], block_ray[5, b] = dx, dy, dz
-            block_length[b] = np.float32(min(distance[i] * shorten, F32_MAX))
+            (block_lit[b], block_cos[0, b], block_incident[0, b], block_incident[1, b], block_incident[2, b],
+             block_cos[1, b], block_ray[0, b], block_ray[1, b], block_ray[2, b], block_ray[3, b], block_ray[4, b],
+             block_ray[5, b], block_length[b]) = light_sample(
+                p[i, 0], p[i, 1], p[i, 2], ng[i, 0], ng[i, 1], ng[i, 2], ns[i, 0], ns[i, 1], ns[i, 2], d[i, 0],
+                d[i, 1], d[i, 2], wi[i, 0], wi[i, 1], wi[i, 2], distance[i], incident_all[i, 0],
+                incident_all[i, 1], incident_all[i, 2], scale, shorten, True)
         for b in range(n):
             if not block_lit[b]:
                 continue
@@ -120,11 +142,9 @@ def light_samples(wi, distance, incident_all, p, ng, ns, d, mat, exponent, visib
             t_max[j] = block_length[b]
             cos_i[j] = block_cos[0, b]
             m = mat[i]
-            e = exponent[m]
-            # a power of 0 is 1 whatever the cosine (0 ** 0 included)
-            c = 1.0 if e == 0.0 else block_cos[1, b]
-            if e >= 0.0 and c > 0.0 and c >= visible_from[m]:
-                highlight_rows[h], highlight[h], power_exponent[h] = j, c, e
+            c, raised = highlight_to_raise(exponent[m], block_cos[1, b], visible_from[m])
+            if raised:
+                highlight_rows[h], highlight[h], power_exponent[h] = j, c, exponent[m]
                 h += 1
             lit[j] = i
             j += 1
