@@ -67,8 +67,8 @@ def blinn_phong_factors(n, wo, wi, diffuse, specular, shininess):
     for i in range(k):
         power, ks0, ks1, ks2 = 0.0, 0.0, 0.0, 0.0
         if highlight:
-            power = highlight_cosine(n[i, 0], n[i, 1], n[i, 2], wo[i, 0], wo[i, 1], wo[i, 2],
-                                      wi[i, 0], wi[i, 1], wi[i, 2]) ** shininess[i]
+            power = raise_highlight(highlight_cosine(n[i, 0], n[i, 1], n[i, 2], wo[i, 0], wo[i, 1], wo[i, 2],
+                                                     wi[i, 0], wi[i, 1], wi[i, 2]), shininess[i])
             ks0, ks1, ks2 = specular[i, 0], specular[i, 1], specular[i, 2]
         out[0, i], out[1, i], out[2, i] = blinn_phong_row(
             diffuse[i, 0], diffuse[i, 1], diffuse[i, 2], ks0, ks1, ks2,
