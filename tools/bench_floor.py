@@ -1,0 +1,260 @@
+"""How fast a fused direct-lighting kernel can be here: a minimal one beside rtmesh's.
+
+Issue 13 asks rtmesh to reach Mitsuba 3's equal-error time on the peer scene of
+``tools/bench_peers.py``.  Whether that is reachable depends on what Embree's packet
+queries and numba-compiled code cost on the machine, whatever rtmesh's own design.  This
+tool measures that floor: the smallest kernel that renders the peer image, with nothing a
+renderer would add (no materials table, no film sums for error estimates, no highlights,
+no emission, no origin offsets: the shadow rays start on the surface with ``tnear``).
+
+Per 16-wide packet of one pixel's samples (the packets of rtmesh's fused stage at 16 spp)
+it hashes the sample positions, forms pinhole rays, traces them with ``rtcIntersect16``
+(coherent), interpolates the vertex normals, forms Lambert + one point light, traces the
+shadow packet with ``rtcOccluded16`` (coherent) and adds the samples to the pixel.  It
+runs on rtmesh's own Embree scene, camera and normal tables (taken from an
+:class:`~rtmesh.rendering.integrator.Integrator`), in two compiled variants: float32
+arithmetic throughout, and float64 (packets float32, as Embree needs).
+
+Reported, 1 thread, medians of ``--runs`` interleaved runs: ns per sample of each floor
+variant and of rtmesh's render of the same scene and samples, and the ns per sample spent
+inside the two Embree calls (read from the CPU's cycle counter around each call).  The
+floor image must match rtmesh's within its noise (relative RMSE printed; the tool stops
+above 2 %), so the floor renders the same picture.
+
+Usage::
+
+    python tools/bench_floor.py [--spp 16] [--runs 7] [--size 512] [--no-write]
+"""
+
+import argparse
+import os
+import sys
+import time
+
+import numba
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from bench_core import machine, publish  # noqa: E402
+from bench_peers import ALBEDO, peer_meshes, peer_scene, relative_rmse  # noqa: E402
+from profile_direct_stage import counter_rate, cycle_counter  # noqa: E402
+
+from rtmesh.core import runtime  # noqa: E402
+from rtmesh.geometry import embree_packets as ep  # noqa: E402
+from rtmesh.geometry.embree_library import packet_library  # noqa: E402
+from rtmesh.rendering.integrator import Integrator  # noqa: E402
+from rtmesh.rendering.settings import RenderSettings  # noqa: E402
+
+SECTION = "The floor: a minimal fused kernel beside rtmesh's"
+LANES = ep.LANES
+
+
+def make_floor(real):
+    """The floor kernel with its arithmetic in ``real`` (np.float32 or np.float64).
+
+    The constants are of that type (numba freezes the closure's values with their types),
+    so the float32 variant computes in float32 throughout.
+    """
+    zero, one, two = real(0.0), real(1.0), real(2.0)
+    to_unit = real(1.0 / 4294967296.0)  # a 32-bit hash to [0, 1)
+    tnear = np.float32(1e-4)  # the shadow rays' start, past the surface they leave
+    shorten = real(1.0 - 1e-5)
+
+    @numba.njit(nogil=True)
+    def hash32(x):
+        # a 32-bit integer hash (lowbias32); numba widens uint32 products, so mask them
+        mask = np.uint64(0xFFFFFFFF)
+        x = np.uint64(x) & mask
+        x ^= x >> np.uint64(16)
+        x = (x * np.uint64(0x7FEB352D)) & mask
+        x ^= x >> np.uint64(15)
+        x = (x * np.uint64(0x846CA68B)) & mask
+        x ^= x >> np.uint64(16)
+        return x
+
+    @numba.njit(nogil=True, error_model="numpy")
+    def render(intersect16, occluded16, scene, width, height, spp, camera, light, power, faces, smooth,
+               normals, image, ticks):
+        """Adds the mean of ``spp`` samples of each pixel to ``image`` (height, width);
+        ``ticks[0]``, ``ticks[1]`` gather the counter ticks inside the two queries."""
+        hit_buffer = np.zeros(ep.RAYHIT_WORDS * LANES + 16, np.float32)
+        at = ((-hit_buffer.ctypes.data) % 64) // 4
+        rays = hit_buffer[at:at + ep.RAYHIT_WORDS * LANES]
+        words = rays.view(np.int32)
+        shadow_buffer = np.zeros(ep.RAY_WORDS * LANES + 16, np.float32)
+        at = ((-shadow_buffer.ctypes.data) % 64) // 4
+        shadow = shadow_buffer[at:at + ep.RAY_WORDS * LANES]
+        shadow_words = shadow.view(np.int32)
+        masks = np.zeros(3 * LANES, np.int32)
+        at = ((-masks.ctypes.data) % 64) // 4
+        valid, shadow_valid = masks[at:at + LANES], masks[at + LANES:at + 2 * LANES]
+        arguments = np.zeros(32, np.int32)
+        at = ((-arguments.ctypes.data) % 64) // 4
+        args = arguments[at:at + 8]
+        args[0], args[1] = ep.RTC_RAY_QUERY_FLAG_COHERENT, ep.RTC_FEATURE_FLAG_ALL
+        for lane in range(LANES):
+            valid[lane] = -1
+            for c in range(3):
+                rays[(ep.ORG + c) * LANES + lane] = np.float32(camera[c])
+            rays[ep.TNEAR * LANES + lane] = 0.0
+            rays[ep.TIME * LANES + lane] = 0.0
+            words[ep.MASK * LANES + lane] = -1
+            words[ep.RAY_ID * LANES + lane] = 0
+            words[ep.FLAGS * LANES + lane] = 0
+            shadow[ep.TNEAR * LANES + lane] = tnear
+            shadow[ep.TIME * LANES + lane] = 0.0
+            shadow_words[ep.MASK * LANES + lane] = -1
+            shadow_words[ep.RAY_ID * LANES + lane] = 0
+            shadow_words[ep.FLAGS * LANES + lane] = 0
+        term = np.empty(LANES, real)
+        ox, oy, oz = real(camera[0]), real(camera[1]), real(camera[2])
+        ax, bx, ay, by = real(camera[3]), real(camera[4]), real(camera[5]), real(camera[6])
+        fx, fy, fz = real(camera[7]), real(camera[8]), real(camera[9])
+        rx, ry, rz = real(camera[10]), real(camera[11]), real(camera[12])
+        ux, uy, uz = real(camera[13]), real(camera[14]), real(camera[15])
+        lx, ly, lz = real(light[0]), real(light[1]), real(light[2])
+        weight = one / real(spp)
+        power = real(power)
+        for pixel in range(width * height):
+            line, column = pixel // width, pixel % width
+            total = zero
+            for first in range(0, spp, LANES):
+                for lane in range(LANES):
+                    key = np.uint64(pixel) * np.uint64(spp) + np.uint64(first + lane)
+                    h1 = hash32(key * np.uint64(2))
+                    h2 = hash32(h1 ^ np.uint64(0x9E3779B9))
+                    sx = (real(column) + real(h1) * to_unit) * ax + bx
+                    sy = (real(line) + real(h2) * to_unit) * ay + by
+                    inv = one / np.sqrt(sx * sx + sy * sy + one)
+                    rays[ep.DIR * LANES + lane] = np.float32((fx + sx * rx + sy * ux) * inv)
+                    rays[(ep.DIR + 1) * LANES + lane] = np.float32((fy + sx * ry + sy * uy) * inv)
+                    rays[(ep.DIR + 2) * LANES + lane] = np.float32((fz + sx * rz + sy * uz) * inv)
+                    rays[ep.TFAR * LANES + lane] = ep.DEFAULT_TFAR
+                    words[ep.GEOM_ID * LANES + lane] = ep.INVALID_ID
+                    words[ep.PRIM_ID * LANES + lane] = ep.INVALID_ID
+                    words[ep.INST_ID * LANES + lane] = ep.INVALID_ID
+                    words[ep.INST_PRIM_ID * LANES + lane] = ep.INVALID_ID
+                start = cycle_counter()
+                intersect16(valid.ctypes.data, scene, rays.ctypes.data, args.ctypes.data)
+                ticks[0] += cycle_counter() - start
+                for lane in range(LANES):
+                    term[lane] = zero
+                    shadow_valid[lane] = 0
+                    if words[ep.GEOM_ID * LANES + lane] == ep.INVALID_ID:
+                        continue
+                    f = words[ep.PRIM_ID * LANES + lane]
+                    t = real(rays[ep.TFAR * LANES + lane])
+                    u, v = real(rays[ep.U * LANES + lane]), real(rays[ep.V * LANES + lane])
+                    if smooth[f]:  # per face [n0, n1 - n0, n2 - n0]
+                        nx = real(normals[f, 0]) + u * real(normals[f, 3]) + v * real(normals[f, 6])
+                        ny = real(normals[f, 1]) + u * real(normals[f, 4]) + v * real(normals[f, 7])
+                        nz = real(normals[f, 2]) + u * real(normals[f, 5]) + v * real(normals[f, 8])
+                    else:  # the face's unit normal
+                        nx, ny, nz = real(faces[f, 9]), real(faces[f, 10]), real(faces[f, 11])
+                    px = ox + t * real(rays[ep.DIR * LANES + lane])
+                    py = oy + t * real(rays[(ep.DIR + 1) * LANES + lane])
+                    pz = oz + t * real(rays[(ep.DIR + 2) * LANES + lane])
+                    wx, wy, wz = lx - px, ly - py, lz - pz
+                    squared = wx * wx + wy * wy + wz * wz
+                    distance = np.sqrt(squared)
+                    cosine = (nx * wx + ny * wy + nz * wz) / (distance * np.sqrt(nx * nx + ny * ny + nz * nz))
+                    if cosine <= zero:
+                        continue
+                    shadow_valid[lane] = -1
+                    shadow[ep.ORG * LANES + lane] = np.float32(px)
+                    shadow[(ep.ORG + 1) * LANES + lane] = np.float32(py)
+                    shadow[(ep.ORG + 2) * LANES + lane] = np.float32(pz)
+                    shadow[ep.DIR * LANES + lane] = np.float32(wx / distance)
+                    shadow[(ep.DIR + 1) * LANES + lane] = np.float32(wy / distance)
+                    shadow[(ep.DIR + 2) * LANES + lane] = np.float32(wz / distance)
+                    shadow[ep.TFAR * LANES + lane] = np.float32(distance * shorten)
+                    term[lane] = power * cosine / squared
+                start = cycle_counter()
+                occluded16(shadow_valid.ctypes.data, scene, shadow.ctypes.data, args.ctypes.data)
+                ticks[1] += cycle_counter() - start
+                for lane in range(LANES):
+                    # Embree marks an occluded ray by setting its tfar to -inf
+                    if shadow_valid[lane] != 0 and shadow[ep.TFAR * LANES + lane] != -np.inf:
+                        total += term[lane]
+            image[line, column] += total * weight
+
+    return render
+
+
+def floor_inputs(integrator):
+    """What the floor kernel reads, from an Integrator of the peer scene (its Embree scene,
+    camera, light and per-face vertex normals, in the Integrator's shifted coordinates)."""
+    it = integrator
+    s = it.settings
+    forward, right, up = it.camera_frame
+    camera = np.concatenate([it.camera.position, it.camera.image_plane(s.width, s.height), forward, right, up])
+    light = it.lights[0]
+    # the peer scene's albedo times the light's (grey) intensity
+    power = ALBEDO * float(np.asarray(light.intensity).reshape(-1)[0])
+    library = packet_library()
+    return (library.intersect16, library.occluded16, it.accel._shared.handle, s.width, s.height, s.spp,
+            camera, np.asarray(light.position, dtype=np.float64), power, it.tables.faces, it.tables.smooth,
+            np.ascontiguousarray(it.tables.vertex_normals))
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--spp", type=int, default=16, help="a multiple of 16")
+    parser.add_argument("--runs", type=int, default=7)
+    parser.add_argument("--size", type=int, default=512)
+    parser.add_argument("--no-write", action="store_true")
+    args = parser.parse_args()
+    if args.spp % LANES:
+        parser.error("--spp must be a multiple of 16 (one pixel's samples fill whole packets)")
+    runtime.tune_process()
+    it = Integrator(peer_scene(peer_meshes()), RenderSettings(width=args.size, height=args.size, spp=args.spp,
+                                                              sampler="jittered", threads=1, seed=0))
+    inputs = floor_inputs(it)
+    variants = {"float32": make_floor(np.float32), "float64": make_floor(np.float64)}
+    samples = args.size * args.size * args.spp
+    rates = counter_rate()
+    times = {name: [] for name in (*variants, "rtmesh")}
+    ticks = {name: np.zeros(2, np.int64) for name in variants}
+    images = {}
+    reference = it.render().image  # warm-up
+    for run in range(args.runs + 1):
+        for name, render in variants.items():
+            image = np.zeros((args.size, args.size), np.float64 if name == "float64" else np.float32)
+            counts = np.zeros(2, np.int64)
+            start = time.perf_counter()
+            render(*inputs, image, counts)
+            elapsed = time.perf_counter() - start
+            if run:  # the first run compiles
+                times[name].append(elapsed)
+                ticks[name] += counts
+            images[name] = image
+        start = time.perf_counter()
+        reference = it.render().image
+        if run:
+            times["rtmesh"].append(time.perf_counter() - start)
+    grey = reference[..., 0]
+    errors = {name: relative_rmse(image.astype(np.float64), grey) for name, image in images.items()}
+    for name, error in errors.items():
+        if not error < 0.02:
+            raise SystemExit(f"bench_floor: the {name} floor image differs from rtmesh's by {error:.2%} "
+                             "relative RMSE: not the same picture")
+    per_sample = {name: float(np.median(t)) / samples * 1e9 for name, t in times.items()}
+    lines = [f"Peer scene ({args.size}x{args.size}, {args.spp} spp, jittered), 1 thread, medians of {args.runs} "
+             f"interleaved runs; {machine()}; the cycle counter ticks {rates:.2f} times a ns.", "",
+             "| kernel | ns a sample | x float32 floor | inside rtcIntersect16 | inside rtcOccluded16 | "
+             "rest | image vs rtmesh (rel. RMSE) |", "|---|---:|---:|---:|---:|---:|---:|"]
+    floor = per_sample["float32"]
+    for name in (*variants, "rtmesh"):
+        if name in ticks:
+            inside = ticks[name] / (args.runs * samples * rates)
+            cells = f"{inside[0]:.1f} | {inside[1]:.1f} | {per_sample[name] - inside.sum():.1f} | {errors[name]:.2%}"
+        else:
+            cells = "see tools/profile_direct_stage.py | | | (reference)"
+        label = f"floor, {name} arithmetic" if name in variants else "rtmesh (fused stage)"
+        lines.append(f"| {label} | {per_sample[name]:.1f} | {per_sample[name] / floor:.2f} | {cells} |")
+    text = "\n".join(lines)
+    publish(text, SECTION, write=not args.no_write)
+
+
+if __name__ == "__main__":
+    main()
