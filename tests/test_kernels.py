@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from rtmesh.core.compiled import kernel
+from rtmesh.core.compiled import by_component, kernel
 from rtmesh.core.row_vectors import floor_quotient
 from rtmesh.geometry.accel import offset_ray_origins
 from rtmesh.lights.point_light_rows import illuminate_row, point_row
@@ -21,6 +21,13 @@ from rtmesh.shading.surfaces import face_viewer
 def unit_rows(rng, n):
     v = rng.normal(size=(n, 3))
     return v / np.linalg.norm(v, axis=1)[:, None]
+
+
+def light_sample_inputs(illuminated, *records):
+    """The first seven arguments of light_samples: a light's ``illuminate()`` result and the
+    surface records (points, normals, directions), vectors by component."""
+    wi, distance, incident = illuminated
+    return (by_component(wi), distance, by_component(incident), *(by_component(r) for r in records))
 
 
 def scalar_light(light, p):
@@ -69,14 +76,14 @@ def test_light_samples_match_the_scalar_formulas(light):
     exponent = np.array([50.0, -1.0, 7.5])  # the middle material has no highlight
     tint = rng.uniform(0.2, 1.0, size=(n, 3))
     (lit, origins, directions, t_max, cos_i, incident, highlight_rows, highlight,
-     power_exponent) = direct_light.light_samples(*light.illuminate(p), p, ng, ns, d, mat, exponent,
+     power_exponent) = direct_light.light_samples(*light_sample_inputs(light.illuminate(p), p, ng, ns, d), mat, exponent,
                                                   direct_light.highlight_thresholds(exponent), np.float32(2.0),
                                                   1.0 - 1e-5)
     # the Blinn-Phong term goes to the rows whose shadow rays are clear
     occluded = np.zeros(len(lit), dtype=bool)
     occluded[::5] = True
     total = np.zeros((n, 3))
-    direct_light.add_light(total, lit, lit, occluded, cos_i, incident, highlight_rows,
+    direct_light.add_light(by_component(total), lit, lit, occluded, cos_i, incident, highlight_rows,
                            np.power(highlight, power_exponent), mat, diffuse, tint, specular, np.zeros((0, 3)))
     expected_lit = []
     expected_total = np.zeros((n, 3))
@@ -130,7 +137,7 @@ def test_surface_records_match_the_formulas():
     directions = np.asfortranarray(unit_rows(rng, 2 * n))
     rows = np.flatnonzero(prim >= 0)
     for fix in (False, True):
-        p, ng, ns, front, mat = surfaces.surface_records(prim, u, v, rows, directions, np.zeros((0, 3)), faces,
+        p, ng, ns, front, mat = surfaces.surface_records(prim, u, v, rows, by_component(directions), np.zeros((0, 3)), faces,
                                                         vertex_normals, smooth, material_id, fix)
         f, a, b, dr = prim[rows], u[rows], v[rows], directions[rows]
         np.testing.assert_allclose(p, v0[f] + a[:, None] * e1[f] + b[:, None] * e2[f], rtol=1e-12, atol=1e-12)
@@ -279,7 +286,7 @@ def test_highlight_powers_below_float64_range_are_dropped_and_shininess_zero_is_
     for m in range(3):
         mat = np.full(n, m, dtype=np.intp)
         lit, *_, cos_i, incident, rows, highlight, power_exponent = direct_light.light_samples(
-            *light, p, up, up, d, mat, exponent, threshold, np.float32(1.0), 1.0)
+            *light_sample_inputs(light, p, up, up, d), mat, exponent, threshold, np.float32(1.0), 1.0)
         assert len(lit) == n
         if m == 0:
             assert (highlight ** 5000.0 >= 2.0 ** -1000).all() and 0 < len(rows) < n

@@ -97,14 +97,15 @@ def illuminate_row(light, px, py, pz):
 
 
 @kernel
-def illuminate(light, points):
+def illuminate(light, points_t):
     """Direction toward a light, distance and incident term at each point.
 
     Parameters
     ----------
     light : (12,) float64
         The light's row (:func:`pack_row`).
-    points : (k, 3) float
+    points_t : (3, k) float
+        The points by component (:func:`rtmesh.core.compiled.by_component`).
 
     Returns
     -------
@@ -112,6 +113,7 @@ def illuminate(light, points):
     distance : (k,) float64
     incident : (k, 3) float64
     """
+    points = points_t.T
     k = len(points)
     wi, distance, incident = np.empty((3, k)), np.empty(k), np.empty((3, k))
     for i in range(k):

@@ -23,6 +23,7 @@ from rtmesh.shading.surfaces import surface_records
 
 _ROWS = types.float64[:, ::1]  # row-major (n, 3)
 _VECTORS = types.float64[::1, :]  # component-major (n, 3), as RayBatch keeps them
+_COMPONENTS = types.float64[:, ::1]  # their (3, n) transpose (rtmesh.core.compiled.by_component)
 _NUMBERS = types.float64[::1]
 _INDICES = types.int64[::1]
 _NO_ROWS = types.Array(types.float64, 2, "C", readonly=True)  # the shared empty (0, 3)
@@ -35,13 +36,13 @@ GENERAL_KERNELS = KernelGroup(__name__, "general direct", [
     # the (pixels, spp, 3) view of the radiance: strided, or column-major at 1 spp
     (accumulate_samples, (_VECTORS, _VECTORS, _INDICES, _INDICES, types.float64[:, :, :], types.float32[:, ::1])),
     (accumulate_samples, (_VECTORS, _VECTORS, _INDICES, _INDICES, types.float64[::1, :, :], types.float32[:, ::1])),
-    (surface_records, (types.int32[::1], _NUMBERS, _NUMBERS, _INDICES, _VECTORS, _NO_ROWS, _ROWS, _ROWS,
+    (surface_records, (types.int32[::1], _NUMBERS, _NUMBERS, _INDICES, _COMPONENTS, _NO_ROWS, _ROWS, _ROWS,
                        types.boolean[::1], _INDICES, types.boolean)),
-    (illuminate, (_NUMBERS, _VECTORS)),
-    (light_samples, (_VECTORS, _NUMBERS, _VECTORS, _VECTORS, _VECTORS, _VECTORS, _VECTORS, _INDICES, _NUMBERS,
-                     _NUMBERS, types.float32, types.float64)),
+    (illuminate, (_NUMBERS, _COMPONENTS)),
+    (light_samples, (_COMPONENTS, _NUMBERS, _COMPONENTS, _COMPONENTS, _COMPONENTS, _COMPONENTS, _COMPONENTS, _INDICES,
+                     _NUMBERS, _NUMBERS, types.float32, types.float64)),
     (raise_highlights, (_NUMBERS, _NUMBERS)),
-    (add_light, (_VECTORS, _INDICES, _INDICES, types.boolean[::1], _NUMBERS, _ROWS, _INDICES, _NUMBERS, _INDICES,
+    (add_light, (_COMPONENTS, _INDICES, _INDICES, types.boolean[::1], _NUMBERS, _ROWS, _INDICES, _NUMBERS, _INDICES,
                  _VECTORS, _NO_ROWS, _VECTORS, _NO_ROWS)),
     (pixel_errors, (_VECTORS, _VECTORS, _INDICES, types.int64, types.int64, types.float64, types.boolean)),
 ])

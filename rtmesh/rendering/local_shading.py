@@ -9,6 +9,7 @@ materials take their direct light from :mod:`rtmesh.rendering.physical_shading`.
 
 import numpy as np
 
+from rtmesh.core.compiled import by_component
 from rtmesh.core.rays import NO_VECTORS, take_rows
 from rtmesh.core.vecmath import orthonormal_basis
 from rtmesh.geometry.accel import offset_ray_origins
@@ -91,11 +92,12 @@ class LocalShading(Stage):
         materials = (take_rows(srf.mat, rows), it.tables.diffuse, tint_d, it.tables.specular, tint_s,
                      it.tables.highlight_exponent)
         p, ng, ns, d = (take_rows(a, rows) for a in (srf.p, srf.ng, srf.ns, srf.d))
+        records = [by_component(a) for a in (p, ng, ns, d)]
         total = None
         for light in it.lights:
             wi, distance, incident = light.illuminate(p)
             (lit, origins, directions, t_max, cos_i, incident, highlight_rows, highlight,
-             power_exponent) = light_samples(wi, distance, incident, p, ng, ns, d, materials[0],
+             power_exponent) = light_samples(by_component(wi), distance, by_component(incident), *records, materials[0],
                                              it.tables.highlight_exponent, it.tables.highlight_from, it.tables.offset_scale32,
                                              SHADOW_SHORTEN)
             if not len(lit):
@@ -108,7 +110,8 @@ class LocalShading(Stage):
             if total is None:
                 total = np.zeros((len(srf.mat), 3), order="F")
             power = raise_highlights(highlight, power_exponent)
-            add_light(total, target, lit, occluded, cos_i, incident, highlight_rows, power, *materials[:5])
+            add_light(by_component(total), target, lit, occluded, cos_i, incident, highlight_rows, power,
+                      *materials[:5])
         sampled = [lighting for lighting, on in ((it.area_lighting, it.plan.area_lights),
                                                  (it.environment_lighting, it.plan.environment_lighting)) if on]
         if sampled:

@@ -5,6 +5,7 @@ object hit and moved to the ray's time.
 
 import numpy as np
 
+from rtmesh.core.compiled import by_component
 from rtmesh.core.rays import NO_VECTORS, take_rows
 from rtmesh.rendering.chunk_state import Stage, SurfaceRecords
 from rtmesh.shading.surfaces import face_viewer, surface_records
@@ -36,7 +37,7 @@ class SurfaceStage(Stage):
         # the shading-normal terminator fix (see face_viewer) runs in the kernel unless
         # normal maps, applied below, change the normals after it
         srf.p, srf.ng, srf.ns, srf.front, srf.mat = surface_records(
-            hits.prim, hits.u, hits.v, np.arange(len(hits)) if rows is None else rows, rays.directions,
+            hits.prim, hits.u, hits.v, np.arange(len(hits)) if rows is None else rows, by_component(rays.directions),
             view, it.tables.faces, it.tables.vertex_normals, it.tables.smooth, it.tables.material_id,
             it.plan.smooth_normals and not normal_maps)
         srf.tints = None

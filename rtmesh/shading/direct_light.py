@@ -60,20 +60,22 @@ _BLOCK = 256
 
 
 @kernel
-def light_samples(wi, distance, incident_all, p, ng, ns, d, mat, exponent, visible_from, scale, shorten):
+def light_samples(wi_t, distance, incident_t, p_t, ng_t, ns_t, d_t, mat, exponent, visible_from, scale, shorten):
     """One point-like light at every hit: the lit hits, their shadow rays, and what shading
     them needs once the shadow rays are traced (see :func:`add_light`).
 
+    The vectors come by component, (3, k) (:func:`rtmesh.core.compiled.by_component`).
+
     Parameters
     ----------
-    wi : (k, 3) float64
+    wi_t : (3, k) float64
         Unit directions toward the light (see
         :meth:`rtmesh.lights.interface.PointLikeLight.illuminate`).
     distance : (k,) float64
         Distances to the light.
-    incident_all : (k, 3) float64
+    incident_t : (3, k) float64
         The light's incident term at each hit.
-    p, ng, ns, d : (k, 3) float64
+    p_t, ng_t, ns_t, d_t : (3, k) float64
         Surface records: points, geometric and shading normals, incoming directions.
     mat : (k,) intp
     exponent : (M,) float64
@@ -111,6 +113,7 @@ def light_samples(wi, distance, incident_all, p, ng, ns, d, mat, exponent, visib
     A block of rows is formed by a loop without branches, gathers or calls, which LLVM
     vectorises; a second loop over the block keeps the lit rows.
     """
+    wi, incident_all, p, ng, ns, d = wi_t.T, incident_t.T, p_t.T, ng_t.T, ns_t.T, d_t.T
     k = len(p)
     lit = np.empty(k, np.intp)
     origins, directions = np.empty((k, 3), np.float32), np.empty((k, 3), np.float32)
@@ -175,14 +178,15 @@ def highlight_thresholds(exponent):
 
 
 @kernel
-def add_light(total, target, lit, occluded, cos_i, incident, highlight_rows, power, mat, diffuse, tint_d,
+def add_light(total_t, target, lit, occluded, cos_i, incident, highlight_rows, power, mat, diffuse, tint_d,
               specular, tint_s):
     """Add one light's Blinn-Phong term to the lit rows whose shadow rays are clear.
 
     Parameters
     ----------
-    total : (K, 3) float64
-        Accumulated direct light (updated in place).
+    total_t : (3, K) float64
+        Accumulated direct light by component (:func:`rtmesh.core.compiled.by_component`;
+        updated in place).
     target : (j,) intp
         Row of ``total`` for each lit row.
     lit : (j,) intp
@@ -202,6 +206,7 @@ def add_light(total, target, lit, occluded, cos_i, incident, highlight_rows, pow
     tint_d, tint_s : (k, 3) float or (0, 3)
         Texture tints of the colours, or empty.
     """
+    total = total_t.T
     q = 0  # next highlight row: both lists are ascending
     for j in range(len(lit)):
         highlight = 0.0

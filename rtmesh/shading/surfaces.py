@@ -134,7 +134,7 @@ surface_from_rows_inlined = inline_row(surface_from_rows.py_func)
 
 
 @kernel
-def surface_records(prim_all, u_all, v_all, rows, directions, view, faces, vertex_normals,
+def surface_records(prim_all, u_all, v_all, rows, directions_t, view, faces, vertex_normals,
                     smooth, material_id, fix_terminator):
     """Hit points, facing normals and materials of the hit rows of a ray batch.
 
@@ -146,8 +146,9 @@ def surface_records(prim_all, u_all, v_all, rows, directions, view, faces, verte
         Barycentric weights of vertices 1 and 2.
     rows : (k,) intp
         The rows of the batch that hit a triangle.
-    directions : (n, 3) float
-        Unit ray directions of the batch.
+    directions_t : (3, n) float
+        Unit ray directions of the batch, by component
+        (:func:`rtmesh.core.compiled.by_component`).
     view : (k, 3) float or (0, 3)
         Directions of the hit rows in the frame of the triangles (motion blur), or empty
         when that is ``directions``.
@@ -181,6 +182,7 @@ def surface_records(prim_all, u_all, v_all, rows, directions, view, faces, verte
     take by itself (the directions, primitives and barycentrics of the rows) is not
     copied here.
     """
+    directions = directions_t.T
     k = len(rows)
     p, ng, ns = np.empty((3, k)), np.empty((3, k)), np.empty((3, k))
     front = np.empty(k, np.bool_)
