@@ -194,7 +194,7 @@ def test_film_sums_and_means():
     pixels = np.array([7, 2, 5, 0])
     count = np.zeros(10, np.int64)
     count[pixels[:2]] = 1  # these two had a sample of 0 already, the others none (sums start at 0)
-    film_sums.accumulate_samples(total, total_sq, count, pixels, radiance, np.zeros((0, 3), np.float32))
+    film_sums.accumulate_samples(total.T, total_sq.T, count, pixels, radiance, np.zeros((0, 3), np.float32))
     np.testing.assert_allclose(total[pixels], radiance.sum(axis=1), rtol=1e-15)
     np.testing.assert_allclose(total_sq[pixels], (radiance ** 2).sum(axis=1), rtol=1e-15)
     count[pixels] += 3
@@ -206,8 +206,7 @@ def test_film_sums_and_means():
     # the means written with the sums are mean_image's, bit for bit; other pixels untouched
     count[pixels] -= 3
     again = np.full((10, 3), -1.0, dtype=np.float32)
-    film_sums.accumulate_samples(np.zeros((10, 3), order="F"), np.zeros((10, 3), order="F"), count, pixels,
-                               radiance, again)
+    film_sums.accumulate_samples(np.zeros((3, 10)), np.zeros((3, 10)), count, pixels, radiance, again)
     np.testing.assert_array_equal(again[pixels], means[pixels])
     assert (np.delete(again, pixels, axis=0) == -1).all()
 

@@ -1,6 +1,7 @@
 """Output passes against known geometry: depth, normals, positions, ids, coverage, UVs, and
 the film reductions, EXR channel names and PNG mappings behind them."""
 
+import numba
 import numpy as np
 import pytest
 from scenes import box, part, pixel_centre_rays, quad, render, settings
@@ -9,6 +10,7 @@ from rtmesh.cli import main
 from rtmesh.io.images import read_image
 from rtmesh.io.passes import PASS_NAMES, display_values, exr_channel_names, id_colours, pass_width
 from rtmesh.materials.table import Material
+from rtmesh.rendering import film_sums
 from rtmesh.rendering.film import Film
 from rtmesh.rendering.integrator import Integrator
 from rtmesh.sampling.patterns import pixel_offsets
@@ -237,24 +239,32 @@ def test_one_pass_film_writes_each_tiles_image_values_as_it_is_added():
     np.testing.assert_allclose(eager.image().reshape(-1, 3), radiance.mean(axis=1), rtol=1e-6)
 
 
-def test_a_one_pass_films_uncleared_sums_start_from_zero_at_each_pixels_first_sample():
-    from rtmesh.rendering import film_sums
+@numba.njit
+def add_pixel(total, total_sq, count, image, px, radiance):
+    """Add one pixel's samples to a film's kernel arrays as the fused stage adds them."""
+    t0, t1, t2, q0, q1, q2 = film_sums.pixel_sums(total, total_sq, count, px)
+    for s in range(len(radiance)):
+        r0, r1, r2 = radiance[s, 0], radiance[s, 1], radiance[s, 2]
+        t0, t1, t2 = t0 + r0, t1 + r1, t2 + r2
+        q0, q1, q2 = q0 + r0 * r0, q1 + r1 * r1, q2 + r2 * r2
+    count[px] += len(radiance)
+    film_sums.store_pixel(total, total_sq, image, px, count[px], t0, t1, t2, q0, q1, q2)
 
+
+def test_a_one_pass_films_uncleared_sums_start_from_zero_at_each_pixels_first_sample():
     rng = np.random.default_rng(4)
     radiance = rng.random((6 * 5, 3, 3))
     cleared = Film(6, 5)
     cleared.add_tile(0, radiance)
     ways = []
-    for way in ("add_tile", "add_pixels", "add_samples"):
+    for way in ("add_tile", "pixel_sums", "add_samples"):
         film = Film(6, 5, one_pass=True)
         film.sum[:] = np.nan  # what uncleared memory may hold
         film.sum_sq[:] = -1.0
         if way == "add_tile":
             film.add_tile(0, radiance)
-        elif way == "add_pixels":
-            done = film_sums.add_pixels.py_func(*film.kernel_arrays(), radiance[7], np.array([7]), 0, 1,
-                                                np.array([3]), 0, 0, 3)
-            assert done == (1, 3)
+        elif way == "pixel_sums":  # as the fused stage adds a pixel
+            add_pixel(*film.kernel_arrays(), 7, radiance[7])
             rest = np.array([p for p in range(30) if p != 7])
             film.add_tile(rest, radiance[rest])
         else:

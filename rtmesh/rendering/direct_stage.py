@@ -24,16 +24,17 @@ tracing) keeps the general path.
 
 A chunk is described by its pixels and their sample counts, not by per-sample index arrays:
 the kernel forms each block's pixel and sample indices itself, and with a film
-(:meth:`DirectStage.render`) adds the samples to it pixel by pixel
-(:func:`rtmesh.rendering.film_sums.add_pixels`: the sums :meth:`Film.add_tile` forms, in
-sample order) instead of returning them for a separate pass.
+(:meth:`DirectStage.render`) adds each sample to its pixel's sums as it is formed
+(:func:`rtmesh.rendering.film_sums.pixel_sums` and :func:`~rtmesh.rendering.film_sums.store_pixel`:
+the sums :meth:`Film.add_tile` forms, in sample order) instead of returning the samples for
+a separate pass.
 """
 
 import numpy as np
 from numba import types
 
 from rtmesh.core.compile_ahead import KernelGroup
-from rtmesh.core.compiled import kernel
+from rtmesh.core.compiled import inline_row, kernel
 from rtmesh.core.row_vectors import floor_quotient
 from rtmesh.geometry import embree_packets as ep
 from rtmesh.geometry.embree_library import packet_library
@@ -43,7 +44,7 @@ from rtmesh.rendering.direct_blocks import (BLOCK, LANES, PACKETS, add_light_row
                                             camera_block, camera_numbers, hit_lane, light_block, surface_block,
                                             write_rays)
 from rtmesh.materials.blinn_phong import raise_highlight
-from rtmesh.rendering.film_sums import add_pixels, pixel_errors
+from rtmesh.rendering.film_sums import pixel_errors, pixel_sums, store_pixel
 from rtmesh.rendering.scheduler import sample_indices
 from rtmesh.sampling.pixel_samples import PixelSampler, pixel_sequence
 from rtmesh.scene.background import SolidBackground
@@ -74,8 +75,6 @@ FUSED_KERNELS = KernelGroup(__name__, "fused direct", [
                      types.boolean)),
     (light_block, (_F64, _F64_2D, _F64_2D, types.int64, types.float32, types.float64, types.boolean)),
     (write_rays, (types.float32[:, ::1], types.float32[::1])),
-    (add_pixels, (_F64_2D, _F64_2D, _I64, types.float32[:, ::1], _F64_2D, _I64, types.int64, types.int64, _I64,
-                  types.int64, types.int64, types.int64)),
     # the per-pixel error of the film, after the chunks
     (pixel_errors, (types.float64[::1, :], types.float64[::1, :], _I64, types.int64, types.int64, types.float64,
                     types.boolean)),
@@ -239,8 +238,9 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
         Samples in all.
     total, total_sq, film_count, image
         The film's arrays (:meth:`rtmesh.rendering.film.Film.kernel_arrays`), or empty
-        ((3, 0), (3, 0), (0,), (0, 3)): no film.  With a film, a pixel is added
-        (:func:`rtmesh.rendering.film_sums.add_pixels`) after the block that finishes it.
+        ((3, 0), (3, 0), (0,), (0, 3)): no film.  With a film, each sample is added to
+        its pixel's sums (:func:`rtmesh.rendering.film_sums.pixel_sums`), which are stored
+        (:func:`rtmesh.rendering.film_sums.store_pixel`) when the pixel's last sample is in.
     width : int
     image_plane : (4,) float64
     position, forward, right, up : (3,) float64
@@ -268,7 +268,7 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
 
     Returns
     -------
-    radiance : (n, 3) float64
+    radiance : (n, 3) or, with a film, (0, 3) float64
         Row-major.
     shadow_rays : int
 
@@ -287,7 +287,8 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     adding = len(film_count) > 0
     has_smooth = len(vertex_normals) > 0
     # row-major, so that the integrator's (pixels, spp, 3) view of it is not a copy
-    radiance = np.empty((n, 3))
+    # (no rows when the samples go to the film)
+    radiance = np.empty((0 if adding else n, 3))
     # the packets (their constant lanes written) and the per-sample scratch of a block
     (rays, words, valid, args, shadow, shadow_words, shadow_valid, barycentrics, face, normal_row, interpolate,
      mat, hit, xy, d, sample, sequence, column, line, cosine, raised, power, reaches, receives, shininess,
@@ -301,10 +302,11 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     sequence0 = sequence1 = np.uint64(0)
     px_column = px_line = 0.0
     inverse_width = 1.0 / width
-    # the first pixel not yet added to the film, and the row of its first sample
-    # (int64 from the start: a literal 0 would have numba compile add_pixels a second time,
-    # for the loop's first typing pass)
-    done, done_row = np.int64(0), np.int64(0)
+    # each sample's pixel (its place in the chunk); the pixel whose samples are being added
+    # to the film, its index, and its sums (film_sums.pixel_sums)
+    owner = np.empty(BLOCK, np.int64)
+    adding_to, adding_px = -1, 0
+    t0 = t1 = t2 = q0 = q1 = q2 = 0.0
     shadow_rays = 0
     camera = camera_numbers(image_plane, forward, right, up)
     for start in range(0, n, BLOCK):
@@ -323,6 +325,7 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
                 continue
             run = min(left, count - b)
             for j in range(run):
+                owner[b + j] = current
                 sample[b + j] = np.uint64(px_sample + j)
                 sequence[0, b + j], sequence[1, b + j] = sequence0, sequence1
                 column[b + j], line[b + j] = px_column, px_line
@@ -394,13 +397,36 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
                 if reaches[b]:
                     direct[0, b], direct[1, b], direct[2, b] = d0, d1, d2
         # emission and ambient light plus the direct light, added to 0 as the general path adds
-        # a hit's local shading to its radiance
+        # a hit's local shading to its radiance; with a film, added to the sums of its pixel in
+        # sample order (as Film.add_tile adds them), each pixel stored when its last sample is in
         for b in range(count):
-            i, mat_b = start + b, mat[b]
-            for c in range(3):
-                radiance[i, c] = 0.0 + (base[mat_b, c] + direct[c, b]) if hit[b] else 0.0 + background[c]
-        # the film: the pixels this block finished, their samples still in the cache
-        if adding:
-            done, done_row = add_pixels(total, total_sq, film_count, image, radiance, pixel_list, first_pixel, m,
-                                        counts, done, done_row, start + count)
+            mat_b = mat[b]
+            r0 = 0.0 + (base[mat_b, 0] + direct[0, b]) if hit[b] else 0.0 + background[0]
+            r1 = 0.0 + (base[mat_b, 1] + direct[1, b]) if hit[b] else 0.0 + background[1]
+            r2 = 0.0 + (base[mat_b, 2] + direct[2, b]) if hit[b] else 0.0 + background[2]
+            if not adding:
+                radiance[start + b, 0], radiance[start + b, 1], radiance[start + b, 2] = r0, r1, r2
+                continue
+            if owner[b] != adding_to:  # the first sample of the next pixel
+                if adding_to >= 0:
+                    film_count[adding_px] = _store_pixel(total, total_sq, film_count, image, adding_px,
+                                                         counts[0] if one_count else counts[adding_to],
+                                                         t0, t1, t2, q0, q1, q2)
+                adding_to = owner[b]
+                adding_px = pixel_list[adding_to] if listed else first_pixel + adding_to
+                t0, t1, t2, q0, q1, q2 = pixel_sums(total, total_sq, film_count, adding_px)
+            t0, t1, t2 = t0 + r0, t1 + r1, t2 + r2
+            q0, q1, q2 = q0 + r0 * r0, q1 + r1 * r1, q2 + r2 * r2
+    if adding_to >= 0:
+        film_count[adding_px] = _store_pixel(total, total_sq, film_count, image, adding_px,
+                                             counts[0] if one_count else counts[adding_to], t0, t1, t2, q0, q1, q2)
     return radiance, shadow_rays
+
+
+@inline_row
+def _store_pixel(total, total_sq, film_count, image, px, samples, t0, t1, t2, q0, q1, q2):
+    """:func:`rtmesh.rendering.film_sums.store_pixel` for a pixel that had ``film_count[px]``
+    samples and now ``samples`` more; the new count."""
+    n = film_count[px] + samples
+    store_pixel(total, total_sq, image, px, n, t0, t1, t2, q0, q1, q2)
+    return n

@@ -2,6 +2,7 @@
 
 import numpy as np
 
+from rtmesh.core.compiled import by_component
 from rtmesh.core.rays import rows_as_float32
 from rtmesh.rendering import film_sums
 
@@ -99,7 +100,7 @@ class Film:
         index = px if isinstance(px, np.ndarray) else np.arange(px.start, px.stop)
         # a one_pass film's pixels are final: their image values are written with the sums,
         # on this thread, instead of in a serial pass after the render
-        film_sums.accumulate_samples(self.sum, self.sum_sq, self.count, index, radiance,
+        film_sums.accumulate_samples(by_component(self.sum), by_component(self.sum_sq), self.count, index, radiance,
                                    _NO_IMAGE if self._image is None else self._image)
         for s in range(spp):
             for name, values in mean_passes.items():
@@ -107,8 +108,9 @@ class Film:
         self.count[px] += spp
 
     def kernel_arrays(self):
-        """The arrays a kernel that adds whole pixels itself updates
-        (:func:`rtmesh.rendering.film_sums.add_pixels`), for a film without passes.
+        """The arrays a kernel that adds samples to the film itself updates
+        (:func:`rtmesh.rendering.film_sums.pixel_sums`, :func:`~rtmesh.rendering.film_sums.store_pixel`;
+        the fused stage), for a film without passes.
 
         Returns
         -------
@@ -118,7 +120,8 @@ class Film:
         image : (P, 3) float32 or (0, 3)
             The image a ``one_pass`` film fills as pixels are added; (0, 3) otherwise.
         """
-        return self.sum.T, self.sum_sq.T, self.count, _NO_IMAGE if self._image is None else self._image
+        return (by_component(self.sum), by_component(self.sum_sq), self.count,
+                _NO_IMAGE if self._image is None else self._image)
 
     def add_samples(self, pixels, counts, radiance, passes=None):
         """Add a different number of samples to each of a set of pixels.

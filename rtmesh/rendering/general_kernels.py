@@ -34,8 +34,9 @@ GENERAL_KERNELS = KernelGroup(__name__, "general direct", [
                    types.float64)),
     (add_rows, (_VECTORS, _INDICES, _VECTORS)),
     # the (pixels, spp, 3) view of the radiance: strided, or column-major at 1 spp
-    (accumulate_samples, (_VECTORS, _VECTORS, _INDICES, _INDICES, types.float64[:, :, :], types.float32[:, ::1])),
-    (accumulate_samples, (_VECTORS, _VECTORS, _INDICES, _INDICES, types.float64[::1, :, :], types.float32[:, ::1])),
+    (accumulate_samples, (_COMPONENTS, _COMPONENTS, _INDICES, _INDICES, types.float64[:, :, :], types.float32[:, ::1])),
+    (accumulate_samples, (_COMPONENTS, _COMPONENTS, _INDICES, _INDICES, types.float64[::1, :, :],
+                          types.float32[:, ::1])),
     (surface_records, (types.int32[::1], _NUMBERS, _NUMBERS, _INDICES, _COMPONENTS, _NO_ROWS, _ROWS, _ROWS,
                        types.boolean[::1], _INDICES, types.boolean)),
     (illuminate, (_NUMBERS, _COMPONENTS)),
