@@ -62,9 +62,9 @@ STEPS = [
     ("            # the highlights (pow is", "occlusion results"),
     ("            for b in range(count):\n                mat_b = mat[b]\n                d0, d1, d2", "highlight powers"),
     ("        # emission and ambient light plus", "Blinn-Phong sums"),
-    ("        # the film: the pixels this block finished", "radiance"),
 ]
-FILM_END = "                                        counts, done, done_row, start + count)\n"
+# the last line of the block loop: the radiance of each sample, added to its pixel's sums
+FILM_END = "            square_r, square_g, square_b = square_r + r0 * r0, square_g + r1 * r1, square_b + r2 * r2\n"
 SIGNATURE_END = "visible_from, scale, shorten, highlights):"
 
 
@@ -90,7 +90,7 @@ def step_names():
     for _, name in STEPS:
         if name not in names:
             names.append(name)
-    return names + ["film"]
+    return names + ["radiance and film"]
 
 
 def instrumented_source():
@@ -113,7 +113,7 @@ def instrumented_source():
     for text in (FILM_END, SIGNATURE_END, "    for start in range(0, n, BLOCK):"):
         if body.count(text) != 1:
             raise SystemExit(f"profile_direct_stage: the kernel no longer has this line once:\n{text}")
-    body = body.replace(FILM_END, FILM_END + f"        t1 = cycle_counter(); cycles[{names.index('film')}] += t1 - t0; "
+    body = body.replace(FILM_END, FILM_END + f"        t1 = cycle_counter(); cycles[{names.index('radiance and film')}] += t1 - t0; "
                         "t0 = t1\n")
     body = body.replace(SIGNATURE_END, SIGNATURE_END.replace("):", ", cycles):"))
     body = body.replace("    for start in range(0, n, BLOCK):", "    t0 = cycle_counter()\n    for start in range(0, n, BLOCK):")

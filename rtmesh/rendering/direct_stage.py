@@ -306,7 +306,7 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     # to the film, its index, and its sums (film_sums.pixel_sums)
     owner = np.empty(BLOCK, np.int64)
     adding_to, adding_px = -1, 0
-    t0 = t1 = t2 = q0 = q1 = q2 = 0.0
+    sum_r = sum_g = sum_b = square_r = square_g = square_b = 0.0
     shadow_rays = 0
     camera = camera_numbers(image_plane, forward, right, up)
     for start in range(0, n, BLOCK):
@@ -411,15 +411,17 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
                 if adding_to >= 0:
                     film_count[adding_px] = _store_pixel(total, total_sq, film_count, image, adding_px,
                                                          counts[0] if one_count else counts[adding_to],
-                                                         t0, t1, t2, q0, q1, q2)
+                                                         sum_r, sum_g, sum_b, square_r, square_g, square_b)
                 adding_to = owner[b]
                 adding_px = pixel_list[adding_to] if listed else first_pixel + adding_to
-                t0, t1, t2, q0, q1, q2 = pixel_sums(total, total_sq, film_count, adding_px)
-            t0, t1, t2 = t0 + r0, t1 + r1, t2 + r2
-            q0, q1, q2 = q0 + r0 * r0, q1 + r1 * r1, q2 + r2 * r2
+                sum_r, sum_g, sum_b, square_r, square_g, square_b = pixel_sums(total, total_sq, film_count,
+                                                                               adding_px)
+            sum_r, sum_g, sum_b = sum_r + r0, sum_g + r1, sum_b + r2
+            square_r, square_g, square_b = square_r + r0 * r0, square_g + r1 * r1, square_b + r2 * r2
     if adding_to >= 0:
         film_count[adding_px] = _store_pixel(total, total_sq, film_count, image, adding_px,
-                                             counts[0] if one_count else counts[adding_to], t0, t1, t2, q0, q1, q2)
+                                             counts[0] if one_count else counts[adding_to],
+                                             sum_r, sum_g, sum_b, square_r, square_g, square_b)
     return radiance, shadow_rays
 
 
