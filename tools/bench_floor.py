@@ -239,7 +239,8 @@ def main():
             raise SystemExit(f"bench_floor: the {name} floor image differs from rtmesh's by {error:.2%} "
                              "relative RMSE: not the same picture")
     per_sample = {name: float(np.median(t)) / samples * 1e9 for name, t in times.items()}
-    lines = [f"Peer scene ({args.size}x{args.size}, {args.spp} spp, jittered), 1 thread, medians of {args.runs} "
+    lines = [f"## {SECTION}", "", f"`python tools/bench_floor.py --spp {args.spp} --runs {args.runs}`", "",
+             f"Peer scene ({args.size}x{args.size}, {args.spp} spp, jittered), 1 thread, medians of {args.runs} "
              f"interleaved runs; {machine()}; the cycle counter ticks {rates:.2f} times a ns.", "",
              "| kernel | ns a sample | x float32 floor | inside rtcIntersect16 | inside rtcOccluded16 | "
              "rest | image vs rtmesh (rel. RMSE) |", "|---|---:|---:|---:|---:|---:|---:|"]
