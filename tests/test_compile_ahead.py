@@ -126,3 +126,27 @@ def test_a_first_run_with_the_helper_renders_what_a_later_run_renders(tmp_path):
             # the render took each kernel's lock file while it compiled its half
             assert any(path.suffix == ".compiling" for path in (tmp_path / "cache").rglob("*"))
     assert np.array_equal(images[0], images[1])
+
+
+
+def test_a_dask_workers_warm_up_runs_inside_a_helper_block(monkeypatch):
+    """The first worker's warm-up on a host (its first compile) is where a helper process
+    saves the most: the task runs it inside compile_ahead.helper()."""
+    import contextlib
+
+    from rtmesh.batch import dask_pool
+    from rtmesh.core import runtime
+
+    events = []
+
+    @contextlib.contextmanager
+    def recording_helper(enabled=True):
+        events.append("helper on")
+        yield
+        events.append("helper off")
+
+    monkeypatch.setattr(compile_ahead, "helper", recording_helper)
+    monkeypatch.setattr(runtime, "tune_process", lambda: None)
+    monkeypatch.setattr(dask_pool, "warm_up", lambda: events.append("warm up"))
+    dask_pool._warm_up_task()
+    assert events == ["helper on", "warm up", "helper off"]
