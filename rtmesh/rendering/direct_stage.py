@@ -409,9 +409,9 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
                 continue
             if owner[b] != adding_to:  # the first sample of the next pixel
                 if adding_to >= 0:
-                    film_count[adding_px] = _store_pixel(total, total_sq, film_count, image, adding_px,
-                                                         counts[0] if one_count else counts[adding_to],
-                                                         sum_r, sum_g, sum_b, square_r, square_g, square_b)
+                    _finish_pixel(total, total_sq, film_count, image, adding_px,
+                                  counts[0] if one_count else counts[adding_to],
+                                  sum_r, sum_g, sum_b, square_r, square_g, square_b)
                 adding_to = owner[b]
                 adding_px = pixel_list[adding_to] if listed else first_pixel + adding_to
                 sum_r, sum_g, sum_b, square_r, square_g, square_b = pixel_sums(total, total_sq, film_count,
@@ -419,16 +419,15 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
             sum_r, sum_g, sum_b = sum_r + r0, sum_g + r1, sum_b + r2
             square_r, square_g, square_b = square_r + r0 * r0, square_g + r1 * r1, square_b + r2 * r2
     if adding_to >= 0:
-        film_count[adding_px] = _store_pixel(total, total_sq, film_count, image, adding_px,
-                                             counts[0] if one_count else counts[adding_to],
-                                             sum_r, sum_g, sum_b, square_r, square_g, square_b)
+        _finish_pixel(total, total_sq, film_count, image, adding_px, counts[0] if one_count else counts[adding_to],
+                      sum_r, sum_g, sum_b, square_r, square_g, square_b)
     return radiance, shadow_rays
 
 
 @inline_row
-def _store_pixel(total, total_sq, film_count, image, px, samples, t0, t1, t2, q0, q1, q2):
-    """:func:`rtmesh.rendering.film_sums.store_pixel` for a pixel that had ``film_count[px]``
-    samples and now ``samples`` more; the new count."""
+def _finish_pixel(total, total_sq, film_count, image, px, samples, t0, t1, t2, q0, q1, q2):
+    """Store a pixel's sums with ``samples`` more samples than ``film_count[px]``
+    (:func:`rtmesh.rendering.film_sums.store_pixel`) and raise its count."""
     n = film_count[px] + samples
     store_pixel(total, total_sq, image, px, n, t0, t1, t2, q0, q1, q2)
-    return n
+    film_count[px] = n

@@ -100,8 +100,8 @@ class Film:
         index = px if isinstance(px, np.ndarray) else np.arange(px.start, px.stop)
         # a one_pass film's pixels are final: their image values are written with the sums,
         # on this thread, instead of in a serial pass after the render
-        film_sums.accumulate_samples(by_component(self.sum), by_component(self.sum_sq), self.count, index, radiance,
-                                   _NO_IMAGE if self._image is None else self._image)
+        film_sums.accumulate_samples(by_component(self.sum), by_component(self.sum_sq), self.count, index,
+                                     radiance, _NO_IMAGE if self._image is None else self._image)
         for s in range(spp):
             for name, values in mean_passes.items():
                 self.pass_sums[name][px] += values[:, s]
