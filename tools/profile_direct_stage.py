@@ -64,7 +64,7 @@ STEPS = [
     ("        # emission and ambient light plus", "Blinn-Phong sums"),
 ]
 # the last line of the block loop: the radiance of each sample, added to its pixel's sums
-FILM_END = "            square_r, square_g, square_b = square_r + r0 * r0, square_g + r1 * r1, square_b + r2 * r2\n"
+FILM_END = "                       first_pixel, counts, total, total_sq, film_count, image, sums, state)\n"
 SIGNATURE_END = "visible_from, scale, shorten, highlights):"
 
 

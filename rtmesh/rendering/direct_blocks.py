@@ -23,6 +23,7 @@ from rtmesh.core.compiled import kernel, row
 from rtmesh.geometry import embree_packets as ep
 from rtmesh.lights.point_light_rows import KIND, POINT, illuminate_row, point_row
 from rtmesh.materials.blinn_phong import blinn_phong_row
+from rtmesh.rendering.film_sums import pixel_sums, store_pixel
 from rtmesh.sampling.pixel_samples import sample_positions
 from rtmesh.scene.camera_rays import pinhole_xyz
 from rtmesh.shading.direct_light import light_sample
@@ -291,6 +292,70 @@ def _light_loop(illuminate):
 
 _point_light_loop = _light_loop(point_row)
 _any_light_loop = _light_loop(illuminate_row)
+
+
+@kernel
+def radiance_block(radiance, start, count, base, background, mat, hit, direct, owner, last, pixel_list, first_pixel,
+                   counts, total, total_sq, film_count, image, sums, state):
+    """The radiance of the first ``count`` samples of a block: emission and ambient light
+    plus the direct light, added to 0 as the general path adds a hit's local shading to its
+    radiance; written to rows ``start ..`` of ``radiance`` or, with a film, added to the
+    sums of the sample's pixel in sample order (as ``Film.add_tile`` adds them), each pixel
+    stored when its last sample is in.
+
+    Parameters
+    ----------
+    radiance : (n, 3) float64
+        The chunk's samples, row-major; (0, 3) with a film.
+    start, count : int
+    base : (M, 3) float64
+        Emission plus ambient light per material.
+    background : (3,) float64
+    mat : (BLOCK,) intp
+    hit : (BLOCK,) bool
+    direct : (3, BLOCK) float64
+    owner : (BLOCK,) int64
+        Each sample's pixel (its place in the chunk).
+    last : (BLOCK,) bool
+        Whether the sample is its pixel's last (a chunk holds every sample of its pixels).
+    pixel_list, first_pixel, counts
+        The chunk's pixels and their sample counts (see
+        :func:`rtmesh.rendering.direct_stage.direct_samples`).
+    total, total_sq, film_count, image
+        The film's arrays, or empty: no film.
+    sums : (6,) float64
+    state : (2,) int64
+        The pixel being added across blocks: its sums (:func:`film_sums.pixel_sums`), its
+        place in the chunk (-1 before the first) and its index.
+
+    Notes
+    -----
+    A kernel of its own, like the other steps, so that a first run compiles it in the other
+    process (:mod:`rtmesh.core.compile_ahead`).
+    """
+    adding, one_count, listed = len(film_count) > 0, len(counts) == 1, len(pixel_list) > 0
+    adding_to, adding_px = state[0], state[1]
+    sum_r, sum_g, sum_b, square_r, square_g, square_b = sums[0], sums[1], sums[2], sums[3], sums[4], sums[5]
+    for b in range(count):
+        mat_b = mat[b]
+        r0 = 0.0 + (base[mat_b, 0] + direct[0, b]) if hit[b] else 0.0 + background[0]
+        r1 = 0.0 + (base[mat_b, 1] + direct[1, b]) if hit[b] else 0.0 + background[1]
+        r2 = 0.0 + (base[mat_b, 2] + direct[2, b]) if hit[b] else 0.0 + background[2]
+        if not adding:
+            radiance[start + b, 0], radiance[start + b, 1], radiance[start + b, 2] = r0, r1, r2
+            continue
+        if owner[b] != adding_to:  # the first sample of the next pixel
+            adding_to = owner[b]
+            adding_px = pixel_list[adding_to] if listed else first_pixel + adding_to
+            sum_r, sum_g, sum_b, square_r, square_g, square_b = pixel_sums(total, total_sq, film_count, adding_px)
+        sum_r, sum_g, sum_b = sum_r + r0, sum_g + r1, sum_b + r2
+        square_r, square_g, square_b = square_r + r0 * r0, square_g + r1 * r1, square_b + r2 * r2
+        if last[b]:
+            n = film_count[adding_px] + (counts[0] if one_count else counts[adding_to])
+            store_pixel(total, total_sq, image, adding_px, n, sum_r, sum_g, sum_b, square_r, square_g, square_b)
+            film_count[adding_px] = n
+    state[0], state[1] = adding_to, adding_px
+    sums[0], sums[1], sums[2], sums[3], sums[4], sums[5] = sum_r, sum_g, sum_b, square_r, square_g, square_b
 
 
 @row

@@ -34,17 +34,17 @@ import numpy as np
 from numba import types
 
 from rtmesh.core.compile_ahead import KernelGroup
-from rtmesh.core.compiled import inline_row, kernel
+from rtmesh.core.compiled import kernel
 from rtmesh.core.row_vectors import floor_quotient
 from rtmesh.geometry import embree_packets as ep
 from rtmesh.geometry.embree_library import packet_library
 from rtmesh.geometry.accel import Accel
 from rtmesh.lights.point_light_rows import ROW
 from rtmesh.rendering.direct_blocks import (BLOCK, LANES, PACKETS, add_light_row, any_valid, block_scratch,
-                                            camera_block, camera_numbers, hit_lane, light_block, surface_block,
-                                            write_rays)
+                                            camera_block, camera_numbers, hit_lane, light_block, radiance_block,
+                                            surface_block, write_rays)
 from rtmesh.materials.blinn_phong import raise_highlight
-from rtmesh.rendering.film_sums import pixel_errors, pixel_sums, store_pixel
+from rtmesh.rendering.film_sums import pixel_errors
 from rtmesh.rendering.scheduler import sample_indices
 from rtmesh.sampling.pixel_samples import PixelSampler, pixel_sequence
 from rtmesh.scene.background import SolidBackground
@@ -75,6 +75,9 @@ FUSED_KERNELS = KernelGroup(__name__, "fused direct", [
                      types.boolean)),
     (light_block, (_F64, _F64_2D, _F64_2D, types.int64, types.float32, types.float64, types.boolean)),
     (write_rays, (types.float32[:, ::1], types.float32[::1])),
+    (radiance_block, (_F64_2D, types.int64, types.int64, _F64_2D, _F64, _I64, types.boolean[::1], _F64_2D, _I64,
+                      types.boolean[::1], _I64, types.int64, _I64, _F64_2D, _F64_2D, _I64, types.float32[:, ::1],
+                      _F64, _I64)),
     # the per-pixel error of the film, after the chunks
     (pixel_errors, (types.float64[::1, :], types.float64[::1, :], _I64, types.int64, types.int64, types.float64,
                     types.boolean)),
@@ -302,11 +305,10 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     sequence0 = sequence1 = np.uint64(0)
     px_column = px_line = 0.0
     inverse_width = 1.0 / width
-    # each sample's pixel (its place in the chunk); the pixel whose samples are being added
-    # to the film, its index, and its sums (film_sums.pixel_sums)
-    owner = np.empty(BLOCK, np.int64)
-    adding_to, adding_px = -1, 0
-    sum_r = sum_g = sum_b = square_r = square_g = square_b = 0.0
+    # each sample's pixel (its place in the chunk) and whether it is the pixel's last; the
+    # pixel being added to the film across blocks (radiance_block)
+    owner, last = np.empty(BLOCK, np.int64), np.empty(BLOCK, np.bool_)
+    sums, state = np.zeros(6), np.full(2, -1, np.int64)
     shadow_rays = 0
     camera = camera_numbers(image_plane, forward, right, up)
     for start in range(0, n, BLOCK):
@@ -325,7 +327,7 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
                 continue
             run = min(left, count - b)
             for j in range(run):
-                owner[b + j] = current
+                owner[b + j], last[b + j] = current, j == left - 1
                 sample[b + j] = np.uint64(px_sample + j)
                 sequence[0, b + j], sequence[1, b + j] = sequence0, sequence1
                 column[b + j], line[b + j] = px_column, px_line
@@ -396,38 +398,8 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
                                            values[3, b])
                 if reaches[b]:
                     direct[0, b], direct[1, b], direct[2, b] = d0, d1, d2
-        # emission and ambient light plus the direct light, added to 0 as the general path adds
-        # a hit's local shading to its radiance; with a film, added to the sums of its pixel in
-        # sample order (as Film.add_tile adds them), each pixel stored when its last sample is in
-        for b in range(count):
-            mat_b = mat[b]
-            r0 = 0.0 + (base[mat_b, 0] + direct[0, b]) if hit[b] else 0.0 + background[0]
-            r1 = 0.0 + (base[mat_b, 1] + direct[1, b]) if hit[b] else 0.0 + background[1]
-            r2 = 0.0 + (base[mat_b, 2] + direct[2, b]) if hit[b] else 0.0 + background[2]
-            if not adding:
-                radiance[start + b, 0], radiance[start + b, 1], radiance[start + b, 2] = r0, r1, r2
-                continue
-            if owner[b] != adding_to:  # the first sample of the next pixel
-                if adding_to >= 0:
-                    _finish_pixel(total, total_sq, film_count, image, adding_px,
-                                  counts[0] if one_count else counts[adding_to],
-                                  sum_r, sum_g, sum_b, square_r, square_g, square_b)
-                adding_to = owner[b]
-                adding_px = pixel_list[adding_to] if listed else first_pixel + adding_to
-                sum_r, sum_g, sum_b, square_r, square_g, square_b = pixel_sums(total, total_sq, film_count,
-                                                                               adding_px)
-            sum_r, sum_g, sum_b = sum_r + r0, sum_g + r1, sum_b + r2
-            square_r, square_g, square_b = square_r + r0 * r0, square_g + r1 * r1, square_b + r2 * r2
-    if adding_to >= 0:
-        _finish_pixel(total, total_sq, film_count, image, adding_px, counts[0] if one_count else counts[adding_to],
-                      sum_r, sum_g, sum_b, square_r, square_g, square_b)
+        # emission and ambient light plus the direct light, into the radiance rows or the film
+        radiance_block(radiance, start, count, base, background, mat, hit, direct, owner, last, pixel_list,
+                       first_pixel, counts, total, total_sq, film_count, image, sums, state)
     return radiance, shadow_rays
 
-
-@inline_row
-def _finish_pixel(total, total_sq, film_count, image, px, samples, t0, t1, t2, q0, q1, q2):
-    """Store a pixel's sums with ``samples`` more samples than ``film_count[px]``
-    (:func:`rtmesh.rendering.film_sums.store_pixel`) and raise its count."""
-    n = film_count[px] + samples
-    store_pixel(total, total_sq, image, px, n, t0, t1, t2, q0, q1, q2)
-    film_count[px] = n
