@@ -4,13 +4,14 @@ A block is :data:`BLOCK` film samples, four 16-wide packets (sample ``b`` is lan
 ``b % 16`` of packet ``b // 16``).  Each step works on the block's scratch arrays: the
 camera step (positions, then pinhole directions), the surface step (gathered face rows,
 then the arithmetic of :func:`rtmesh.shading.surfaces.surface_records`), the light step
-(the arithmetic of :func:`rtmesh.shading.direct_light.light_samples` for one light), and
-the Blinn-Phong sum of one light at one sample.  :func:`rtmesh.rendering.direct_stage.direct_samples`
+(the arithmetic of :func:`rtmesh.shading.direct_light.light_samples` for one light), the
+Blinn-Phong sum of one light at one sample, and the radiance step (each sample's radiance,
+into the chunk's rows or its pixel's film sums).  :func:`rtmesh.rendering.direct_stage.direct_samples`
 calls them in order; their loops have no branches, gathers or calls where LLVM is to
 vectorise them, and outputs of the block's constant size (see :func:`light_block`).
 
 The larger steps (:func:`block_scratch`, :func:`camera_block`, :func:`surface_block`,
-:func:`light_block`, :func:`write_rays`) are kernels, each cached on disk apart from the
+:func:`light_block`, :func:`write_rays`, :func:`radiance_block`) are kernels, each cached on disk apart from the
 stage, so that a first run compiles them in two processes
 (:data:`rtmesh.rendering.direct_stage.FUSED_KERNELS`); called once per block, like rows,
 they cost the stage nothing measurable (peer scene, 1 and 16 spp, 1 thread;
