@@ -338,7 +338,7 @@ def test_add_rows_adds_into_the_given_rows_only():
     rows, values = np.array([8, 0, 4]), rng.uniform(size=(3, 3))
     expected = target.copy()
     expected[rows] += values
-    film_sums.add_rows(target, rows, np.asfortranarray(values))
+    film_sums.add_rows(by_component(target), rows, by_component(np.asfortranarray(values)))
     np.testing.assert_array_equal(target, expected)
 
 

@@ -18,11 +18,13 @@ import numpy as np
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
+from rtmesh.core.compiled import by_component
 from rtmesh.core.rays import repeated_row, take_rows
 from rtmesh.geometry import embree_library, embree_packets, float32_rays
 from rtmesh.geometry.float32_rays import F32_MAX
 
 _NO_ROWS = np.zeros(0, dtype=np.int64)
+_NO_DIRECTIONS = np.zeros((0, 3))  # a normal-only origin offset
 # Every query asks for Embree's coherent packet traversal.  Camera rays and shadow rays
 # toward one point light gain most (3-4x the rays per second of run(), see
 # shared/EMBREE_PACKETS.md); for the secondary rays of the effects scenes it was still as
@@ -85,9 +87,11 @@ def offset_ray_origins(points, normals, dtype=np.float64, scale=1.0, directions=
         Offset origins, component-major; every value is exactly representable in
         float32, so handing them to Embree does not round them back onto the surface.
     """
-    no_directions = np.zeros((0, 3), dtype=np.float32)
-    origins = float32_rays.offset_origins(points, normals, no_directions if directions is None else directions,
-                                     np.float32(scale))
+    # every caller's arrays as one layout and dtype (exact conversions; a copy for row-major
+    # ones), so that the kernel compiles once
+    vectors = (points, normals, _NO_DIRECTIONS if directions is None else directions)
+    origins = float32_rays.offset_origins(*(by_component(np.asfortranarray(v, dtype=np.float64)) for v in vectors),
+                                          np.float32(scale))
     return origins.astype(dtype, copy=False)
 
 

@@ -93,13 +93,15 @@ def offset_origin(px, py, pz, nx, ny, nz, dx, dy, dz, scale):
 
 
 @kernel
-def offset_origins(points, normals, directions, scale):
+def offset_origins(points_t, normals_t, directions_t, scale):
     """Ray origins moved off a surface; see :func:`rtmesh.geometry.accel.offset_ray_origins`.
+
+    The vectors come by component (:func:`rtmesh.core.compiled.by_component`).
 
     Parameters
     ----------
-    points, normals : (n, 3) float
-    directions : (n, 3) float or (0, 3)
+    points_t, normals_t : (3, n) float
+    directions_t : (3, n) float or (3, 0)
         Directions of the rays, or an empty array for a normal-only offset.
     scale : float32
         Scene size.
@@ -109,6 +111,7 @@ def offset_origins(points, normals, directions, scale):
     (n, 3) float32
         Component-major.
     """
+    points, normals, directions = points_t.T, normals_t.T, directions_t.T
     n = len(points)
     out = np.empty((3, n), np.float32)
     along = len(directions) > 0

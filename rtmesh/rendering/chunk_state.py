@@ -12,6 +12,7 @@ import time
 
 import numpy as np
 
+from rtmesh.core.compiled import by_component
 from rtmesh.core.rays import take_rows
 from rtmesh.rendering.film_sums import add_rows
 
@@ -124,7 +125,9 @@ def add_rows_or_all(target, rows, values):
     else:
         # one pass without temporaries (a NumPy fancy-index add gathers, adds and
         # scatters each column)
-        add_rows(target, rows, values)
+        # by component, component-major values as they are and others copied: one layout for
+        # every caller and row count, so that the kernel compiles once
+        add_rows(by_component(target), rows, by_component(np.asfortranarray(values)))
     return target
 
 

@@ -77,17 +77,19 @@ def accumulate_samples(total, total_sq, count, pixels, radiance, image):
 
 
 @kernel
-def add_rows(target, rows, values):
-    """``target[rows] += values`` for distinct ``rows``.
+def add_rows(target_t, rows, values_t):
+    """``target[rows] += values`` for distinct ``rows``, the arrays given by component
+    (:func:`rtmesh.core.compiled.by_component`).
 
     Parameters
     ----------
-    target : (n, k) float64
+    target_t : (k, n) float64
         Updated in place.
     rows : (m,) int
         Distinct row indices.
-    values : (m, k) float
+    values_t : (k, m) float
     """
+    target, values = target_t.T, values_t.T
     for c in range(target.shape[1]):
         for i in range(len(rows)):
             target[rows[i], c] += values[i, c]

@@ -29,10 +29,10 @@ _INDICES = types.int64[::1]
 _NO_ROWS = types.Array(types.float64, 2, "C", readonly=True)  # the shared empty (0, 3)
 
 GENERAL_KERNELS = KernelGroup(__name__, "general direct", [
-    (offset_origins, (_ROWS, _ROWS, _ROWS, types.float32)),
+    (offset_origins, (_COMPONENTS, _COMPONENTS, _COMPONENTS, types.float32)),
     (camera_rays, (_VECTORS, _INDICES, types.int64, _ROWS, _NUMBERS, _NUMBERS, _NUMBERS, _NUMBERS, _NUMBERS,
                    types.float64)),
-    (add_rows, (_VECTORS, _INDICES, _VECTORS)),
+    (add_rows, (_COMPONENTS, _INDICES, _COMPONENTS)),
     # the (pixels, spp, 3) view of the radiance: strided, or column-major at 1 spp
     (accumulate_samples, (_COMPONENTS, _COMPONENTS, _INDICES, _INDICES, types.float64[:, :, :], types.float32[:, ::1])),
     (accumulate_samples, (_COMPONENTS, _COMPONENTS, _INDICES, _INDICES, types.float64[::1, :, :],
