@@ -326,7 +326,8 @@ def radiance_block(radiance, start, count, base, background, mat, hit, direct, o
         The film's arrays, or empty: no film.
     sums : (6,) float64
     state : (2,) int64
-        The pixel being added across blocks: its sums (:func:`film_sums.pixel_sums`), its
+        The pixel being added across blocks: its sums
+        (:func:`rtmesh.rendering.film_sums.pixel_sums`), its
         place in the chunk (-1 before the first) and its index.
 
     Notes
