@@ -95,9 +95,9 @@ def assert_same_film(a, b):
                                        dict(spp=2, target_error=0.02, max_spp=16),
                                        dict(spp=5, threads=2, chunk_samples=70)])
 def test_the_film_the_fused_stage_adds_to_is_the_general_paths(highlights, overrides):
-    """The kernel adds pixels to the film as its blocks finish them, with highlights (raised
-    in the kernel) or without (chunks of 70 samples at 5 spp: pixels straddle blocks and
-    chunks end inside blocks)."""
+    """The kernel adds each sample to its pixel's film sums as it forms it, with highlights
+    (raised in the kernel) or without; chunks of 70 samples at 5 spp: pixels straddle blocks
+    (their sums carried from one block to the next) and chunks end inside blocks."""
     scene = lit_scene() if highlights else sphere_on_floor_scene(smooth=True)
     a, b = render_both(scene, width=23, height=17, **overrides)
     assert_same(a, b)
