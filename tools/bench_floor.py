@@ -17,18 +17,23 @@ arithmetic throughout, and float64 (packets float32, as Embree needs).
 
 Reported, 1 thread, medians of ``--runs`` interleaved runs: ns per sample of each floor
 variant and of rtmesh's render of the same scene and samples, and the ns per sample spent
-inside the two Embree calls (read from the CPU's cycle counter around each call).  The
+inside the two Embree calls (read from the CPU's cycle counter around each call).  Where
+the peers venv of ``tools/bench_peers.py`` exists, Mitsuba 3 ``llvm_ad_rgb`` renders the
+same scene and samples too (its ``direct`` integrator, on every core), reported as ns per
+sample and thread: at equal spp the renderers have equal error, so this is what the
+equal-error target of issue 13 compares.  The
 floor image must match rtmesh's within its noise (relative RMSE printed; the tool stops
 above 2 %), so the floor renders the same picture.
 
 Usage::
 
-    python tools/bench_floor.py [--spp 16] [--runs 7] [--size 512] [--no-write]
+    python tools/bench_floor.py [--spp 16] [--runs 7] [--size 512] [--venv /tmp/peers-venv] [--no-write]
 """
 
 import argparse
 import os
 import sys
+import tempfile
 import time
 
 import numba
@@ -36,7 +41,8 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from bench_core import machine, publish  # noqa: E402
-from bench_peers import ALBEDO, peer_meshes, peer_scene, relative_rmse  # noqa: E402
+from bench_peers import (ALBEDO, mitsuba_sweep, peer_meshes, peer_scene, relative_rmse,  # noqa: E402
+                         write_mitsuba_scene)
 from profile_direct_stage import counter_rate, cycle_counter  # noqa: E402
 
 from rtmesh.core import runtime  # noqa: E402
@@ -197,11 +203,28 @@ def floor_inputs(integrator):
             np.ascontiguousarray(it.tables.vertex_normals))
 
 
+def mitsuba_per_sample(size, spp, runs, venv):
+    """Mitsuba llvm_ad_rgb's median render time of the peer scene, as ns per sample and
+    thread, and its thread count; None without the peers venv or when it fails."""
+    python = os.path.join(venv, "bin", "python")
+    if not os.path.exists(python):
+        return None
+    with tempfile.TemporaryDirectory(prefix="rtmesh-floor-") as folder:
+        spec_path = write_mitsuba_scene(peer_meshes(), size, size, folder)
+        result = mitsuba_sweep(python, spec_path, "llvm_ad_rgb", [spp], runs, 0, folder)
+    if result is None:
+        return None
+    threads = runtime.usable_cores()  # Dr.Jit's pool takes every core it may use
+    seconds = result["sweep"][spp][1]
+    return seconds * threads / (size * size * spp) * 1e9, threads
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--spp", type=int, default=16, help="a multiple of 16")
     parser.add_argument("--runs", type=int, default=7)
     parser.add_argument("--size", type=int, default=512)
+    parser.add_argument("--venv", default="/tmp/peers-venv", help="Mitsuba's venv (tools/peers_setup.sh)")
     parser.add_argument("--no-write", action="store_true")
     args = parser.parse_args()
     if args.spp % LANES:
@@ -253,6 +276,13 @@ def main():
             cells = "see tools/profile_direct_stage.py | | | (reference)"
         label = f"floor, {name} arithmetic" if name in variants else "rtmesh (fused stage)"
         lines.append(f"| {label} | {per_sample[name]:.1f} | {per_sample[name] / floor:.2f} | {cells} |")
+    mitsuba = mitsuba_per_sample(args.size, args.spp, args.runs, args.venv)
+    if mitsuba is None:
+        lines += ["", f"Mitsuba skipped: no venv at {args.venv} (run `sh tools/peers_setup.sh`), or it failed."]
+    else:
+        ns, threads = mitsuba
+        lines.append(f"| Mitsuba 3 llvm_ad_rgb, {threads} threads, per sample and thread | {ns:.1f} | "
+                     f"{ns / floor:.2f} | | | | (its own samples) |")
     text = "\n".join(lines)
     publish(text, SECTION, write=not args.no_write)
 

@@ -278,9 +278,10 @@ def mitsuba_sweep(python, spec_path, variant, spps, runs, reference_spp, folder)
             "reference": data["reference"] if "reference" in data else None}
 
 
-def equal_error(meshes, scene, args, folder):
-    """The equal-error study; returns the markdown lines and a dict of key numbers."""
-    spec = {"width": args.width, "height": args.height, "albedo": ALBEDO, "camera": CAMERA,
+def write_mitsuba_scene(meshes, width, height, folder):
+    """The scene description the Mitsuba worker reads (JSON beside one PLY per mesh);
+    returns its path."""
+    spec = {"width": width, "height": height, "albedo": ALBEDO, "camera": CAMERA,
             "light_position": LIGHT_POSITION, "mitsuba_intensity": np.pi * LIGHT_INTENSITY,
             "meshes": {}}
     for name, (v, f, n) in meshes.items():
@@ -290,6 +291,12 @@ def equal_error(meshes, scene, args, folder):
     spec_path = os.path.join(folder, "scene.json")
     with open(spec_path, "w") as fh:
         json.dump(spec, fh)
+    return spec_path
+
+
+def equal_error(meshes, scene, args, folder):
+    """The equal-error study; returns the markdown lines and a dict of key numbers."""
+    spec_path = write_mitsuba_scene(meshes, args.width, args.height, folder)
     python = os.path.join(args.venv, "bin", "python")
     if not os.path.exists(python):
         return [f"Mitsuba skipped: no venv at {args.venv} (run `sh tools/peers_setup.sh`)."], {}
