@@ -200,7 +200,7 @@ class DirectStage:
             film_xy = np.ascontiguousarray(self._sampler.pixel(pixel, sample))
         sums = (_NO_SUMS, _NO_SUMS, _NO_COUNT, _NO_IMAGE) if film is None else film.kernel_arrays()
         radiance, shadow_rays = direct_samples(
-            *self._queries, film_xy, *self._sampler_arrays, pixel_list, first_pixel, m, first, counts, n, *sums,
+            *self._queries, film_xy, *self._sampler_arrays, pixel_list, first_pixel, first, counts, n, *sums,
             *self._camera, *self._surfaces, self._base, self._background, self._lights, *self._materials,
             self._offset_scale, SHADOW_SHORTEN, self._highlights)
         stats.rays["camera"] += n
@@ -210,7 +210,7 @@ class DirectStage:
 
 @kernel
 def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys, corners, size, spp,
-                   pixel_list, first_pixel, m, first, counts, n, total, total_sq, film_count, image,
+                   pixel_list, first_pixel, first, counts, n, total, total_sq, film_count, image,
                    width, image_plane, position, forward, right, up, faces, vertex_normals, smooth,
                    material_id, fix_terminator, base, background, lights, shaded, diffuse, specular, exponent,
                    visible_from, scale, shorten, highlights):
@@ -229,9 +229,10 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
     sampler, keys, corners, size, spp
         The :class:`rtmesh.sampling.pixel_samples.PixelSampler` arrays.
     pixel_list : (m,) int64 or (0,)
-        The chunk's pixels; empty: the ``m`` pixels from ``first_pixel`` on.
-    first_pixel, m : int
-        The first pixel of a run, and the number of pixels.
+        The chunk's ``m`` pixels; empty: a run of pixels from ``first_pixel`` on (as many as
+        ``counts`` and ``n`` take).
+    first_pixel : int
+        The first pixel of a run.
     first, counts : (m,) int64 or (1,)
         Index of each pixel's first sample and its number of samples (one entry: the same
         for every pixel).  The samples are taken pixel by pixel in sample order, so each
