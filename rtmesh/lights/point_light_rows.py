@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from rtmesh.core.compiled import kernel, row
+from rtmesh.core.compiled import by_component, kernel, row
 from rtmesh.core.row_vectors import dot3
 
 POINT, DIRECTIONAL, SPOT = 0, 1, 2
@@ -94,6 +94,18 @@ def illuminate_row(light, px, py, pz):
     eb = pb if directional else (pb * falloff if spot else pb / square)
     return (-light[DIRECTION] if directional else wx, -light[DIRECTION + 1] if directional else wy,
             -light[DIRECTION + 2] if directional else wz, np.inf if directional else distance, er, eg, eb)
+
+
+def illuminate_points(light, points):
+    """:func:`illuminate` at points of any layout and float dtype: what the point-like
+    lights' ``illuminate(points)`` returns.
+
+    Parameters
+    ----------
+    light : (12,) float64
+    points : (k, 3) float
+    """
+    return illuminate(light, by_component(np.asarray(points, dtype=np.float64)))
 
 
 @kernel

@@ -11,7 +11,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rtmesh.core.compiled import by_component
 from rtmesh.lights import point_light_rows
 from rtmesh.lights.light_types import LightType, aim
 from rtmesh.materials.table import as_colour
@@ -50,7 +49,7 @@ class PointLight:
         incident : (k, 3) float
             ``intensity / distance^2`` (inverse-square falloff).
         """
-        return point_light_rows.illuminate(self.kernel_row(), by_component(np.asarray(points, dtype=np.float64)))
+        return point_light_rows.illuminate_points(self.kernel_row(), points)
 
     def kernel_row(self):
         """The light's row for the kernels (:func:`rtmesh.lights.point_light_rows.pack_row`)."""
@@ -86,7 +85,7 @@ class DirectionalLight:
 
     def illuminate(self, points):
         """See :meth:`PointLight.illuminate`; the distance is ``inf``."""
-        return point_light_rows.illuminate(self.kernel_row(), by_component(np.asarray(points, dtype=np.float64)))
+        return point_light_rows.illuminate_points(self.kernel_row(), points)
 
     def kernel_row(self):
         """See :meth:`PointLight.kernel_row`."""
@@ -134,7 +133,7 @@ class SpotLight:
     def illuminate(self, points):
         """See :meth:`PointLight.illuminate`; the incident term includes the cone falloff,
         a smoothstep in cos(angle) from the axis between the outer and the inner angle."""
-        return point_light_rows.illuminate(self.kernel_row(), by_component(np.asarray(points, dtype=np.float64)))
+        return point_light_rows.illuminate_points(self.kernel_row(), points)
 
     def kernel_row(self):
         """See :meth:`PointLight.kernel_row`."""
