@@ -83,35 +83,16 @@ def make_floor(real):
                normals, image, ticks):
         """Adds the mean of ``spp`` samples of each pixel to ``image`` (height, width);
         ``ticks[0]``, ``ticks[1]`` gather the counter ticks inside the two queries."""
-        hit_buffer = np.zeros(ep.RAYHIT_WORDS * LANES + 16, np.float32)
-        at = ((-hit_buffer.ctypes.data) % 64) // 4
-        rays = hit_buffer[at:at + ep.RAYHIT_WORDS * LANES]
-        words = rays.view(np.int32)
-        shadow_buffer = np.zeros(ep.RAY_WORDS * LANES + 16, np.float32)
-        at = ((-shadow_buffer.ctypes.data) % 64) // 4
-        shadow = shadow_buffer[at:at + ep.RAY_WORDS * LANES]
-        shadow_words = shadow.view(np.int32)
-        masks = np.zeros(3 * LANES, np.int32)
-        at = ((-masks.ctypes.data) % 64) // 4
-        valid, shadow_valid = masks[at:at + LANES], masks[at + LANES:at + 2 * LANES]
-        arguments = np.zeros(32, np.int32)
-        at = ((-arguments.ctypes.data) % 64) // 4
-        args = arguments[at:at + 8]
-        args[0], args[1] = ep.RTC_RAY_QUERY_FLAG_COHERENT, ep.RTC_FEATURE_FLAG_ALL
+        # one packet of each kind, with rtmesh's packet helpers (64-byte aligned buffers, the
+        # lane fields no query changes)
+        flags = np.int64(ep.RTC_RAY_QUERY_FLAG_COHERENT)
+        rays, words, valid, args = ep.packet_buffers(np.int64(ep.RAYHIT_WORDS), np.int64(1), flags)
+        shadow, shadow_words, shadow_valid, _ = ep.packet_buffers(np.int64(ep.RAY_WORDS), np.int64(1), flags)
         for lane in range(LANES):
             valid[lane] = -1
-            for c in range(3):
-                rays[(ep.ORG + c) * LANES + lane] = np.float32(camera[c])
-            rays[ep.TNEAR * LANES + lane] = 0.0
-            rays[ep.TIME * LANES + lane] = 0.0
-            words[ep.MASK * LANES + lane] = -1
-            words[ep.RAY_ID * LANES + lane] = 0
-            words[ep.FLAGS * LANES + lane] = 0
+            ep.set_lane(rays, words, lane, camera[0], camera[1], camera[2], 0.0, 0.0, 1.0, ep.DEFAULT_TFAR)
+            ep.set_lane(shadow, shadow_words, lane, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, np.float32(0.0))
             shadow[ep.TNEAR * LANES + lane] = tnear
-            shadow[ep.TIME * LANES + lane] = 0.0
-            shadow_words[ep.MASK * LANES + lane] = -1
-            shadow_words[ep.RAY_ID * LANES + lane] = 0
-            shadow_words[ep.FLAGS * LANES + lane] = 0
         term = np.empty(LANES, real)
         ox, oy, oz = real(camera[0]), real(camera[1]), real(camera[2])
         ax, bx, ay, by = real(camera[3]), real(camera[4]), real(camera[5]), real(camera[6])
@@ -136,10 +117,7 @@ def make_floor(real):
                     rays[(ep.DIR + 1) * LANES + lane] = np.float32((fy + sx * ry + sy * uy) * inv)
                     rays[(ep.DIR + 2) * LANES + lane] = np.float32((fz + sx * rz + sy * uz) * inv)
                     rays[ep.TFAR * LANES + lane] = ep.DEFAULT_TFAR
-                    words[ep.GEOM_ID * LANES + lane] = ep.INVALID_ID
-                    words[ep.PRIM_ID * LANES + lane] = ep.INVALID_ID
-                    words[ep.INST_ID * LANES + lane] = ep.INVALID_ID
-                    words[ep.INST_PRIM_ID * LANES + lane] = ep.INVALID_ID
+                    ep.clear_hit(words, lane)
                 start = cycle_counter()
                 intersect16(valid.ctypes.data, scene, rays.ctypes.data, args.ctypes.data)
                 ticks[0] += cycle_counter() - start
