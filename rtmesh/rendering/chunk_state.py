@@ -125,9 +125,9 @@ def add_rows_or_all(target, rows, values):
     else:
         # one pass without temporaries (a NumPy fancy-index add gathers, adds and
         # scatters each column)
-        # by component, component-major values as they are and others copied: one layout for
-        # every caller and row count, so that the kernel compiles once
-        add_rows(by_component(target), rows, by_component(np.asfortranarray(values)))
+        # by component, so that a one-row target or batch of values compiles no variant of
+        # its own (values of either layout are taken as they are: no copy on this path)
+        add_rows(by_component(target), rows, by_component(values))
     return target
 
 
