@@ -255,8 +255,7 @@ class Accel:
             rows = _NO_ROWS if rows is None else np.asarray(rows, dtype=np.int64)
             o, d, t = embree_packets.shadow_rays(origins, directions, t_max)
             _, occluded_rays = embree_packets.query_kernels()
-            return occluded_rays(self._occluded16, self._shared.handle, o, d, t, rows,
-                                                _PACKET_FLAGS)
+            return occluded_rays(self._occluded16, self._shared.handle, o, d, t, rows, _PACKET_FLAGS)
         if rows is not None:
             t_max = t_max[rows]
         if len(t_max) == 0:
