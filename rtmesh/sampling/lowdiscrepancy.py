@@ -11,59 +11,57 @@ with the hash-based permutation of Burley, "Practical Hash-based Owen Scrambling
 
 import numpy as np
 
+from rtmesh.core.compiled import kernel, row
 from rtmesh.sampling.hashing import GOLDEN, mix64
 
 _BITS = 32
 
-# generator matrices as 32 column vectors (most significant bit first):
-# dimension 0 is van der Corput (bit reversal), dimension 1 is Sobol's second dimension,
-# whose direction numbers follow from the primitive polynomial x + 1: v_k = v_{k-1} ^ (v_{k-1} >> 1)
-_VDC = np.array([1 << (31 - k) for k in range(_BITS)], dtype=np.uint32)
+# generator matrices as 32 column vectors (most significant bit first): dimension 0 is
+# van der Corput (bit reversal, column k is 1 << (31 - k)), dimension 1 is Sobol's second
+# dimension, whose direction numbers follow from the primitive polynomial x + 1:
+# v_k = v_{k-1} ^ (v_{k-1} >> 1)
 _SOBOL1 = np.zeros(_BITS, dtype=np.uint32)
 _SOBOL1[0] = 1 << 31
 for _k in range(1, _BITS):
     _SOBOL1[_k] = _SOBOL1[_k - 1] ^ (_SOBOL1[_k - 1] >> 1)
 
+# uint32 arithmetic in uint64 words: numba widens 32-bit integers to 64 bits, so every
+# product and sum is cut back to its low 32 bits, which is what wrapping uint32 gives
+_LOW32 = np.uint64(0xFFFFFFFF)
+_TO_UNIT = 1.0 / 4294967296.0  # 2 ** -32: a 0.32 fixed-point value as a double in [0, 1)
+
+
+@row
 def reverse_bits(x):
-    """Reverse the 32 bits of each value, (n,) uint32 -> (n,) uint32.
+    """Reverse the 32 bits of ``x`` (a uint64 holding a uint32).
 
-    Swaps neighbouring bits, pairs and nibbles (reversing each byte), then the byte order of
-    each value: eight whole-array operations and a byteswap, several times faster than a
-    byte look-up table (which needs a strided copy to reorder the bytes).
+    Swaps neighbouring bits, pairs and nibbles (reversing each byte), then the bytes:
+    branch-free, so loops over points vectorise.
     """
-    x = np.asarray(x, dtype=np.uint32)
-    for shift, mask in ((1, 0x55555555), (2, 0x33333333), (4, 0x0F0F0F0F)):
-        shift, mask = np.uint32(shift), np.uint32(mask)
-        x = ((x >> shift) & mask) | ((x & mask) << shift)
-    return x.byteswap()  # the value's byte order, whatever the machine's
+    one, two, four = np.uint64(1), np.uint64(2), np.uint64(4)
+    x = ((x >> one) & np.uint64(0x55555555)) | ((x & np.uint64(0x55555555)) << one)
+    x = ((x >> two) & np.uint64(0x33333333)) | ((x & np.uint64(0x33333333)) << two)
+    x = ((x >> four) & np.uint64(0x0F0F0F0F)) | ((x & np.uint64(0x0F0F0F0F)) << four)
+    return (((x >> np.uint64(24)) & np.uint64(0xFF)) | ((x >> np.uint64(8)) & np.uint64(0xFF00))
+            | ((x << np.uint64(8)) & np.uint64(0xFF0000)) | ((x << np.uint64(24)) & np.uint64(0xFF000000)))
 
 
-def _laine_karras_permutation(x, seed):
-    """Burley's improved Laine-Karras hash: a permutation that only lets each bit depend on
-    the bits below it, which is exactly nested uniform scrambling once bits are reversed."""
-    with np.errstate(over="ignore"):
-        x = x ^ (x * np.uint32(0x3D20ADEA))
-        x = x + seed
-        x = x * ((seed >> np.uint32(16)) | np.uint32(1))
-        x = x ^ (x * np.uint32(0x05526C56))
-        x = x ^ (x * np.uint32(0x53A22864))
-    return x
+@row
+def laine_karras_permutation(x, seed):
+    """Burley's improved Laine-Karras hash of ``x`` with ``seed`` (uint32 values in uint64
+    words): a permutation that only lets each bit depend on the bits below it, which is
+    exactly nested uniform scrambling once bits are reversed."""
+    x = x ^ ((x * np.uint64(0x3D20ADEA)) & _LOW32)
+    x = (x + seed) & _LOW32
+    x = (x * ((seed >> np.uint64(16)) | np.uint64(1))) & _LOW32
+    x = x ^ ((x * np.uint64(0x05526C56)) & _LOW32)
+    return x ^ ((x * np.uint64(0x53A22864)) & _LOW32)
 
 
+@row
 def nested_uniform_scramble(x, seed):
-    """Owen-scramble 32-bit fixed-point values with a per-element seed.
-
-    Parameters
-    ----------
-    x : (n,) uint32
-        Values in 0.32 fixed point.
-    seed : (n,) uint32
-
-    Returns
-    -------
-    (n,) uint32
-    """
-    return reverse_bits(_laine_karras_permutation(reverse_bits(x), np.asarray(seed, dtype=np.uint32)))
+    """Owen-scramble a 32-bit fixed-point value (uint64 word) with ``seed``."""
+    return reverse_bits(laine_karras_permutation(reverse_bits(x), seed))
 
 
 def _byte_tables(matrix):
@@ -75,57 +73,65 @@ def _byte_tables(matrix):
 
     Returns
     -------
-    (4, 256) uint32
+    (4, 256) uint64
         ``tables[b, v]``: the XOR of the columns ``matrix[8 b + k]`` for the bits ``k`` set
         in ``v``.
     """
     bits = (np.arange(256)[:, None] >> np.arange(8)) & 1  # (256, 8): bit k of each byte
     return np.stack([np.bitwise_xor.reduce(bits * matrix[8 * b:8 * b + 8].astype(np.int64), axis=1)
-                     for b in range(4)]).astype(np.uint32)
+                     for b in range(4)]).astype(np.uint64)
 
 
-_VDC_TABLES = _byte_tables(_VDC)
-_SOBOL1_TABLES = _byte_tables(_SOBOL1)
+SOBOL1_TABLES = _byte_tables(_SOBOL1)
 
 
-def _sobol_bits(index, tables):
-    """Multiply the bits of ``index`` ((n,) uint32) by a generator matrix over GF(2), given
-    as its :func:`_byte_tables`; (n,) uint32."""
-    out = tables[0].take(index & np.uint32(0xFF))
-    for b in range(1, 4):
-        out ^= tables[b].take((index >> np.uint32(8 * b)) & np.uint32(0xFF))
-    return out
+@row
+def sobol_bits(index, tables):
+    """Multiply the bits of ``index`` (a uint32 in a uint64 word) by a generator matrix over
+    GF(2), given as its :func:`_byte_tables`."""
+    byte = np.uint64(0xFF)
+    return (tables[0, index & byte] ^ tables[1, (index >> np.uint64(8)) & byte]
+            ^ tables[2, (index >> np.uint64(16)) & byte] ^ tables[3, (index >> np.uint64(24)) & byte])
 
 
-def _hash_seeds(keys, count):
-    """``count`` independent 32-bit seeds per key, (n,) uint64 -> (count, n) uint32."""
-    with np.errstate(over="ignore"):
-        seeds = [mix64(keys + GOLDEN * np.uint64(i + 1)) for i in range(count)]
-    return [(s >> np.uint64(32)).astype(np.uint32) for s in seeds]
-
-
-def sobol_02(sample, keys):
-    """Owen-scrambled (0,2)-sequence points, one independent scramble per key.
+@kernel
+def sobol_points(index, dimension_key, pixel, dims, tables):
+    """Owen-scrambled (0,2)-sequence points, scrambled per pixel.
 
     Parameters
     ----------
-    sample : (n,) int
-        Index of the point in its sequence (the sample index within the pixel).
-    keys : (n,) uint64
-        One key per sequence (e.g. a hash of seed, pixel and dimension): points with the same
-        key belong to the same scrambled sequence.
+    index : (n,) int64
+        Index of each point in its sequence (below 2**32).
+    dimension_key : uint64
+        The dimension's key (:func:`rtmesh.sampling.patterns.dimension_key`): with the
+        pixel it keys the sequence (:func:`rtmesh.sampling.patterns.sequence_key`).
+    pixel : (n,) int64
+        Each point's pixel.
+    dims : int
+        1: the first coordinate only, a (0,1)-sequence; 2: both.
+    tables : (4, 256) uint64
+        :data:`SOBOL1_TABLES`.
 
     Returns
     -------
-    (n, 2) float64
-        Points in [0, 1)^2.
+    (dims, n) float64
+        Points in [0, 1)^2, component-major; values in 0.32 fixed point, so exact doubles.
     """
-    sample = np.asarray(sample, dtype=np.uint32)
-    keys = np.asarray(keys, dtype=np.uint64)
-    shuffle_seed, seed_x, seed_y = _hash_seeds(keys, 3)
-    # scrambling the index permutes points only inside aligned power-of-two blocks, so every
-    # power-of-two prefix is still a whole (0,m,2)-net; it decorrelates pixels from each other
-    index = nested_uniform_scramble(sample, shuffle_seed)
-    x = nested_uniform_scramble(_sobol_bits(index, _VDC_TABLES), seed_x)
-    y = nested_uniform_scramble(_sobol_bits(index, _SOBOL1_TABLES), seed_y)
-    return np.stack([x, y], axis=1).astype(np.float64) * (1.0 / 4294967296.0)
+    n = len(index)
+    points = np.empty((dims, n))
+    for i in range(n):
+        key = mix64(dimension_key ^ (np.uint64(pixel[i]) * GOLDEN))
+        # three independent 32-bit seeds per sequence: the index shuffle, x and y
+        shuffle_seed = mix64(key + GOLDEN) >> np.uint64(32)
+        # scrambling the index permutes points only inside aligned power-of-two blocks, so
+        # every power-of-two prefix is still a whole (0,m,2)-net; it decorrelates pixels
+        shuffled = nested_uniform_scramble(np.uint64(index[i]) & _LOW32, shuffle_seed)
+        # the first dimension's generator is the bit reversal, which the scramble's own
+        # reversal undoes
+        seed_x = mix64(key + GOLDEN * np.uint64(2)) >> np.uint64(32)
+        points[0, i] = np.float64(reverse_bits(laine_karras_permutation(shuffled, seed_x))) * _TO_UNIT
+        if dims == 2:
+            seed_y = mix64(key + GOLDEN * np.uint64(3)) >> np.uint64(32)
+            y = nested_uniform_scramble(sobol_bits(shuffled, tables), seed_y)
+            points[1, i] = np.float64(y) * _TO_UNIT
+    return points

@@ -22,7 +22,7 @@ import numpy as np
 
 from rtmesh.core.rays import component_major, take_rows
 from rtmesh.sampling.hashing import GOLDEN, M1, mix64
-from rtmesh.sampling.lowdiscrepancy import sobol_02
+from rtmesh.sampling.lowdiscrepancy import SOBOL1_TABLES, sobol_points
 
 SAMPLERS = ("regular", "random", "jittered", "sobol")
 
@@ -41,16 +41,23 @@ class Dim(IntEnum):
     BSDF = 1 << 28  # sampled BSDF directions (pair BSDF + 4*d) and lobe choices (BSDF + 4*d + 2) at depth d
 
 
+def dimension_key(seed, dimension):
+    """64-bit key of one dimension of a render's samples (uint64): the part of
+    :func:`sequence_key` that is the same for every pixel."""
+    with np.errstate(over="ignore"):  # the multiplication is meant to wrap modulo 2**64
+        return mix64(np.uint64(seed & 0xFFFFFFFFFFFFFFFF) * GOLDEN + np.uint64(dimension))
+
+
 def sequence_key(seed, pixel, dimension):
     """64-bit key of the sample sequence of one pixel and dimension, (n,) -> (n,) uint64.
 
     Every sample of a pixel in a given dimension shares it; :func:`uniform` hashes the
-    sample index into it, the Sobol sampler uses it as the scrambling seed.
+    sample index into it, the Sobol sampler (:func:`rtmesh.sampling.lowdiscrepancy.sobol_points`,
+    which forms it itself) derives its scrambling seeds from it.
     """
     pixel = np.asarray(pixel, dtype=np.uint64)
-    with np.errstate(over="ignore"):  # the multiplications are meant to wrap modulo 2**64
-        key = mix64(np.uint64(seed & 0xFFFFFFFFFFFFFFFF) * GOLDEN + np.uint64(dimension))
-        return mix64(key ^ (pixel * GOLDEN))
+    with np.errstate(over="ignore"):  # the multiplication is meant to wrap modulo 2**64
+        return mix64(dimension_key(seed, dimension) ^ (pixel * GOLDEN))
 
 
 def uniform(seed, pixel, sample, dimension):
@@ -313,8 +320,9 @@ def _stratified(sampler, seed, pixel, sample, spp, dimension, ray, rays, dims):
             return uniform(seed, pixel, index, dimension)
         return uniform2(seed, pixel, index, dimension)
     if sampler == "sobol":
-        points = sobol_02(index, sequence_key(seed, pixel, dimension))
-        return points[:, 0] if dims == 1 else component_major(points.T)
+        points = sobol_points(np.ascontiguousarray(index, dtype=np.int64), dimension_key(seed, dimension),
+                              np.ascontiguousarray(pixel, dtype=np.int64), dims, SOBOL1_TABLES)
+        return points[0] if dims == 1 else points.T
     (cx, cy), (sx, sy), table = _cell_grids(rays, spp, dims)
     if dimension == Dim.PIXEL:
         stratum = sample % spp if spp > 1 else np.zeros_like(sample)
