@@ -935,3 +935,53 @@ def test_a_point_on_an_emissive_triangle_does_not_sample_its_own_plane_by_zero_o
         warnings.simplefilter("error")
         result = render(scene, width=8, height=8)
     assert result.image.max() == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("one_normal, two_sided", [(True, False), (False, True), (False, False)])
+def test_shadow_segments_kernel_equals_the_numpy_formulation(one_normal, two_sided):
+    # the kernel forms in one pass what the estimator formed with NumPy: every number must
+    # be the same (dot products summed (x + y) + z, quotients divided, both ends offset as
+    # offset_ray_origins offsets them)
+    from rtmesh.core.compiled import by_component
+    from rtmesh.core.vecmath import dot
+    from rtmesh.geometry.accel import offset_ray_origins
+    from rtmesh.lights.area_lighting import shadow_segments
+
+    rng = np.random.default_rng(7)
+    n = 4000
+    p = np.asfortranarray(rng.uniform(-5, 5, (n, 3)))
+    ng = np.asfortranarray(rng.normal(size=(n, 3)))
+    ng /= np.sqrt(dot(ng, ng))[:, None]
+    y = np.asfortranarray(rng.uniform(-5, 5, (n, 3)))
+    y[:5] = p[:5]  # samples at the hit: zero distance
+    n_light = rng.normal(size=3) if one_normal else np.asfortranarray(rng.normal(size=(n, 3)))
+    n_light = n_light / np.linalg.norm(n_light, axis=-1, keepdims=True)
+    scale = np.float32(7.5)
+    normals_t = n_light.reshape(3, 1).copy() if one_normal else by_component(n_light)
+    wi_t, distance2, cos_light, rows, start_t, direction_t, length = shadow_segments(
+        by_component(p), by_component(ng), by_component(y), normals_t, two_sided, scale)
+
+    to_light = y - p
+    d2 = dot(to_light, to_light)
+    distance = np.sqrt(d2)
+    wi = to_light / np.where(distance > 0.0, distance, np.inf)[:, None]
+    n_rows_all = np.broadcast_to(n_light, (n, 3))
+    facing = -dot(wi, np.asfortranarray(n_rows_all))
+    cos = np.abs(facing) if two_sided else facing
+    expected_rows = np.flatnonzero((cos > 0.0) & (dot(wi, ng) > 0.0))
+    start = offset_ray_origins(p[expected_rows], ng[expected_rows], scale=scale, directions=wi[expected_rows])
+    toward = np.where(facing > 0.0, 1.0, -1.0)[expected_rows, None]
+    target = offset_ray_origins(y[expected_rows], n_rows_all[expected_rows] * toward, scale=scale,
+                                directions=-wi[expected_rows])
+    segment = target - start
+    seg_length = np.sqrt(dot(segment, segment))
+    direction = segment / np.where(seg_length > 0.0, seg_length, np.inf)[:, None]
+
+    assert 0 < len(rows) < n
+    np.testing.assert_array_equal(wi_t.T, wi)
+    np.testing.assert_array_equal(distance2, d2)
+    np.testing.assert_array_equal(cos_light, cos)
+    np.testing.assert_array_equal(rows, expected_rows)
+    np.testing.assert_array_equal(start_t.T, start)
+    np.testing.assert_array_equal(direction_t.T, direction)
+    np.testing.assert_array_equal(length, seg_length)

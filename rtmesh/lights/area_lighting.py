@@ -23,11 +23,13 @@ the ``spp * N`` points a pixel's samples send to one light are one stratified se
 ``N`` of each hit are stratified among themselves.
 """
 
+import math
+
 import numpy as np
 
+from rtmesh.core.compiled import by_component, kernel
 from rtmesh.core.rays import take_rows
-from rtmesh.core.vecmath import dot
-from rtmesh.geometry.accel import offset_ray_origins
+from rtmesh.geometry.float32_rays import offset_origin
 from rtmesh.sampling.sampler import Sampler
 
 # Rays meeting a visible light and a surface at the same distance (a light placed flush on a
@@ -83,50 +85,33 @@ class AreaLighting:
     def _one_sample(self, p, ng, reflectance, light, u, stats, clock, time=None):
         """One light sample per hit: ``V f L cos_l / (d^2 pdf_A)``, (k, 3) or None."""
         y, n_light, radiance, inverse_pdf = light.sample(u, p)
-        to_light = y - p
-        distance2 = dot(to_light, to_light)
-        distance = np.sqrt(distance2)
-        wi = to_light / np.where(distance > 0.0, distance, np.inf)[:, None]
-        facing = -(wi @ n_light) if n_light.ndim == 1 else -dot(wi, n_light)
-        cos_light = np.abs(facing) if light.two_sided else facing
-        lit = (cos_light > 0.0) & (dot(wi, ng) > 0.0)
-        rows = np.flatnonzero(lit)
+        # one normal for the whole light (a quad, a disk) travels as a single column
+        normals_t = (np.ascontiguousarray(np.reshape(n_light, (3, 1)), dtype=np.float64) if n_light.ndim == 1
+                     else by_component(np.asfortranarray(n_light, dtype=np.float64)))
+        wi_t, distance2, cos_light, rows, start_t, direction_t, length = shadow_segments(
+            *(by_component(np.asfortranarray(v, dtype=np.float64)) for v in (p, ng, y)), normals_t,
+            light.two_sided, np.float32(self.offset_scale))
         if not len(rows):
             return None
-        # The shadow ray leaves the hit like every spawned ray, and ends just short of the
-        # sampled point: the point is moved off the light toward the hit by the same float32
-        # ulp offset (the ray run backwards), so an emissive triangle, which is in Embree,
-        # cannot occlude its own sample, and a light flush with a ceiling is not hidden by
-        # it, even at grazing angles.
-        wi_rows = take_rows(wi, rows)
-        start = offset_ray_origins(take_rows(p, rows), take_rows(ng, rows), scale=self.offset_scale,
-                                   directions=wi_rows)
-        toward = np.where(facing > 0.0, 1.0, -1.0)
-        n_rows = (n_light[None, :] if n_light.ndim == 1 else take_rows(n_light, rows)) * toward[rows, None]
-        target = offset_ray_origins(take_rows(y, rows), n_rows, scale=self.offset_scale,
-                                    directions=-wi_rows)
-        segment = target - start
-        length = np.sqrt(dot(segment, segment))
-        direction = segment / np.where(length > 0.0, length, np.inf)[:, None]
         clock.lap("shade")
         if time is None:
-            occluded = self.accel.occluded(start, direction, length)
+            occluded = self.accel.occluded(start_t.T, direction_t.T, length)
         else:
-            occluded = self.accel.occluded(start, direction, length, time=time[rows])
+            occluded = self.accel.occluded(start_t.T, direction_t.T, length, time=time[rows])
         stats.rays["area_shadow"] += len(rows)
         clock.lap("shadow")
-        visible = np.zeros(len(lit), dtype=bool)
+        visible = np.zeros(len(distance2), dtype=bool)
         visible[rows[~occluded]] = True
         if not visible.any():
             return None
-        weight = np.zeros(len(lit))
+        weight = np.zeros(len(distance2))
         v = np.flatnonzero(visible)
         inv = inverse_pdf if np.ndim(inverse_pdf) == 0 else inverse_pdf[v]
         weight[v] = cos_light[v] * inv / distance2[v]
         # the sample's solid-angle density, for reflectances that weigh it against BSDF sampling
-        pdf = np.full(len(lit), np.inf)
+        pdf = np.full(len(distance2), np.inf)
         pdf[v] = 1.0 / weight[v]
-        value = reflectance(wi, visible, pdf)
+        value = reflectance(wi_t.T, visible, pdf)
         value *= radiance
         value *= weight[:, None]
         return value
@@ -187,3 +172,93 @@ class AreaLighting:
         if len(rows):
             pdf[rows] = self.emitters.pdf(take_rows(origins, rows), faces[rows], take_rows(points, rows))
         return pdf
+
+
+@kernel
+def shadow_segments(points_t, normals_t, samples_t, light_normals_t, two_sided, scale):
+    """The directions toward one light sample per hit, and the shadow segments of the hits
+    it lights.
+
+    The shadow ray leaves the hit like every spawned ray, and ends just short of the sampled
+    point: the point is moved off the light toward the hit by the same float32 ulp offset
+    (:func:`rtmesh.geometry.float32_rays.offset_origin`, the ray run backwards), so an
+    emissive triangle, which is in Embree, cannot occlude its own sample, and a light flush
+    with a ceiling is not hidden by it, even at grazing angles.
+
+    Parameters
+    ----------
+    points_t, normals_t : (3, n) float64
+        The hits and their geometric normals (facing the side the light is sampled from),
+        by component (:func:`rtmesh.core.compiled.by_component`).
+    samples_t : (3, n) float64
+        The sampled points on the light.
+    light_normals_t : (3, n) or (3, 1) float64
+        The light's unit normal at each sample, or one for all.
+    two_sided : bool
+        The light emits from both faces.
+    scale : float32
+        Scene size, for the offsets.
+
+    Returns
+    -------
+    wi_t : (3, n) float64
+        Unit directions toward the samples (0 for a sample at the hit).
+    distance2 : (n,) float64
+        Squared distances to the samples.
+    cos_light : (n,) float64
+        Cosine at the light (its absolute value for a two-sided light).
+    rows : (k,) int64
+        The hits the sample lights: the light faces them and they face the light.
+    start_t, direction_t : (3, k) float64
+        Shadow-ray origins (float32 values) and unit directions.
+    length : (k,) float64
+        Shadow-ray lengths, in scene units.
+
+    Notes
+    -----
+    Each dot product sums ``(x + y) + z`` and each quotient divides, as
+    :func:`rtmesh.core.vecmath.dot` and NumPy's division do.
+    """
+    n = points_t.shape[1]
+    one_normal = light_normals_t.shape[1] == 1
+    wi_t = np.empty((3, n))
+    distance2, cos_light, facing_light = np.empty(n), np.empty(n), np.empty(n, np.bool_)
+    lit = np.empty(n, np.bool_)
+    count = 0
+    for i in range(n):
+        tx, ty, tz = samples_t[0, i] - points_t[0, i], samples_t[1, i] - points_t[1, i], samples_t[2, i] - points_t[2, i]
+        d2 = (tx * tx + ty * ty) + tz * tz
+        distance = math.sqrt(d2)
+        divisor = distance if distance > 0.0 else np.inf
+        wx, wy, wz = tx / divisor, ty / divisor, tz / divisor
+        j = 0 if one_normal else i
+        facing = -((wx * light_normals_t[0, j] + wy * light_normals_t[1, j]) + wz * light_normals_t[2, j])
+        cosine = abs(facing) if two_sided else facing
+        wi_t[0, i], wi_t[1, i], wi_t[2, i] = wx, wy, wz
+        distance2[i], cos_light[i], facing_light[i] = d2, cosine, facing > 0.0
+        lit[i] = cosine > 0.0 and ((wx * normals_t[0, i] + wy * normals_t[1, i]) + wz * normals_t[2, i]) > 0.0
+        count += lit[i]
+    rows = np.empty(count, np.int64)
+    start_t, direction_t, length = np.empty((3, count)), np.empty((3, count)), np.empty(count)
+    k = 0
+    for i in range(n):
+        if not lit[i]:
+            continue
+        wx, wy, wz = wi_t[0, i], wi_t[1, i], wi_t[2, i]
+        sx, sy, sz = offset_origin(points_t[0, i], points_t[1, i], points_t[2, i], normals_t[0, i], normals_t[1, i],
+                                   normals_t[2, i], wx, wy, wz, scale)
+        # the light's normal turned toward the hit
+        toward = 1.0 if facing_light[i] else -1.0
+        j = 0 if one_normal else i
+        ex, ey, ez = offset_origin(samples_t[0, i], samples_t[1, i], samples_t[2, i], light_normals_t[0, j] * toward,
+                                   light_normals_t[1, j] * toward, light_normals_t[2, j] * toward, -wx, -wy, -wz,
+                                   scale)
+        gx, gy, gz = np.float64(ex) - np.float64(sx), np.float64(ey) - np.float64(sy), np.float64(ez) - np.float64(sz)
+        segment = math.sqrt((gx * gx + gy * gy) + gz * gz)
+        divisor = segment if segment > 0.0 else np.inf
+        rows[k] = i
+        start_t[0, k], start_t[1, k], start_t[2, k] = sx, sy, sz
+        direction_t[0, k], direction_t[1, k], direction_t[2, k] = gx / divisor, gy / divisor, gz / divisor
+        length[k] = segment
+        k += 1
+    return wi_t, distance2, cos_light, rows, start_t, direction_t, length
