@@ -985,3 +985,40 @@ def test_shadow_segments_kernel_equals_the_numpy_formulation(one_normal, two_sid
     np.testing.assert_array_equal(start_t.T, start)
     np.testing.assert_array_equal(direction_t.T, direction)
     np.testing.assert_array_equal(length, seg_length)
+
+
+@pytest.mark.parametrize("powers", ["uniform", "zeros", "skewed", "tiny_tail", "one"])
+def test_area_sample_kernel_chooses_the_faces_numpy_searchsorted_chooses(powers):
+    # the guided, galloping search must give np.searchsorted's face for every value, and
+    # the point on it the NumPy formulation's, for any spread of powers
+    from rtmesh.geometry.accel import barycentric_interpolate
+    from rtmesh.lights.mesh_lights import choose_area_samples
+
+    rng = np.random.default_rng(3)
+    faces = 1 if powers == "one" else 500
+    power = rng.uniform(0.5, 1.5, faces)
+    if powers == "zeros":
+        power[rng.random(faces) < 0.3] = 0.0
+        power[-5:] = 0.0
+    elif powers == "skewed":
+        power[17] = 1e6
+    elif powers == "tiny_tail":
+        power[:-1] = 1e-9  # almost every face crowds into the first cell
+    cdf = np.cumsum(power)
+    total = float(cdf[-1])
+    guide = np.searchsorted(cdf, total * (np.arange(faces) / faces), side="right")
+    triangles = rng.normal(size=(faces, 9))
+    u = rng.random((20000, 2))
+    u[:4, 0] = [0.0, np.nextafter(1.0, 0.0), 0.5, cdf[0] / total]  # ends and a CDF step
+    face, square_t, b_t, points_t = choose_area_samples(u[:, 0].copy(), u[:, 1].copy(), total, cdf, power, guide,
+                                                        np.ascontiguousarray(triangles.T))
+
+    x = u[:, 0] * total
+    expected = np.minimum(np.searchsorted(cdf, x, side="right"), faces - 1)
+    np.testing.assert_array_equal(face, expected)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        remapped = np.clip((x - (cdf[expected] - power[expected])) / power[expected], 0.0, np.nextafter(1.0, 0.0))
+    np.testing.assert_array_equal(square_t[0], remapped)
+    b = square_to_uniform_triangle(np.stack([remapped, u[:, 1]], axis=1))
+    np.testing.assert_array_equal(b_t.T, b)
+    np.testing.assert_array_equal(points_t.T, barycentric_interpolate(triangles[expected], b[:, 0], b[:, 1]))

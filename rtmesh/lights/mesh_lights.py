@@ -7,10 +7,10 @@ lights emit and :mod:`rtmesh.lights.area_lighting` for the estimator.
 
 import numpy as np
 
+from rtmesh.core.compiled import kernel
 from rtmesh.core.rays import component_major, take_rows
 from rtmesh.core.vecmath import dot, normalize
-from rtmesh.geometry.accel import barycentric_interpolate
-from rtmesh.sampling.warps import spherical_triangle_area, square_to_spherical_triangle, square_to_uniform_triangle
+from rtmesh.sampling.warps import spherical_triangle_area, square_to_spherical_triangle, uniform_triangle_weights
 
 # Emissive triangles seen under more than this solid angle (sr) are sampled uniformly in it
 # (see MeshLight.sample); smaller ones by area.  Arvo's angle sums keep ~10 digits at 1e-3 sr.
@@ -67,6 +67,10 @@ class MeshLight:
         self._cdf = np.cumsum(power)
         self._power = power
         self._total = float(self._cdf[-1])
+        # a guide to the CDF (one cell per face): where the search for a value in each
+        # equal part of [0, total) starts (see choose_area_samples)
+        cells = len(self._cdf)
+        self._guide = np.searchsorted(self._cdf, self._total * (np.arange(cells) / cells), side="right")
 
     @property
     def is_black(self):
@@ -101,14 +105,11 @@ class MeshLight:
             (with a tint, the face's emission times its mean tint; the radiance is the
             emission times the tint at the point).
         """
-        x = u[:, 0] * self._total
-        face = np.minimum(np.searchsorted(self._cdf, x, side="right"), len(self._cdf) - 1)
-        start = self._cdf[face] - self._power[face]
-        remapped = np.clip((x - start) / self._power[face], 0.0, np.nextafter(1.0, 0.0))
-        square = np.stack([remapped, u[:, 1]], axis=1)
+        face, square_t, b_t, points_t = choose_area_samples(np.ascontiguousarray(u[:, 0]), np.ascontiguousarray(u[:, 1]),
+                                                            self._total, self._cdf, self._power, self._guide,
+                                                            self.triangles.T)
+        square, b, points = square_t.T, b_t.T, points_t.T
         triangles = take_rows(self.triangles, face)
-        b = square_to_uniform_triangle(square)
-        points = barycentric_interpolate(triangles, b[:, 0], b[:, 1])
         emission = take_rows(self.emission, face)
         inverse_pdf = self._total / self._mean_emission[face]
         if p is not None:
@@ -240,3 +241,84 @@ def emissive_mesh_light(triangles, normals, emission, tint=None, mean_tint=None)
     scene_faces[faces] = np.arange(len(faces))
     return MeshLight(take_rows(triangles, faces), normals[faces], emission[faces], "emissive surfaces",
                      light_tint, None if tint is None else mean_tint[faces], scene_faces)
+
+
+@kernel
+def choose_area_samples(u0, u1, total, cdf, power, guide, triangles_t):
+    """Points on an emissive mesh's faces, each face chosen in proportion to its power, on
+    the face uniform by area.
+
+    The first number picks the face and is rescaled to [0, 1) within the face's share of
+    the CDF, so one pair of numbers does both and stratification carries over.
+
+    Parameters
+    ----------
+    u0, u1 : (k,) float64
+        Points in [0, 1)^2.
+    total : float
+        The last entry of ``cdf``.
+    cdf, power : (F,) float64
+        Cumulative and per-face power.
+    guide : (F,) int64
+        For each of F equal parts of [0, total), the index ``np.searchsorted(cdf, left
+        end, side="right")``: where the search for a value in that part may start.
+    triangles_t : (9, F) float64
+        The faces ``[v0, v1 - v0, v2 - v0]`` by component.
+
+    Returns
+    -------
+    face : (k,) int64
+        ``min(np.searchsorted(cdf, u0 * total, side="right"), F - 1)``.
+    square_t : (2, k) float64
+        The rescaled first number and ``u1``.
+    b_t : (2, k) float64
+        Barycentric weights of vertices 1 and 2
+        (:func:`rtmesh.sampling.warps.square_to_uniform_triangle`).
+    points_t : (3, k) float64
+        The points (:func:`rtmesh.geometry.accel.barycentric_interpolate`: ``(e1 b1 + v0) + e2 b2``).
+
+    Notes
+    -----
+    The search starts from the guide's entry and gallops forward, then halves the
+    interval: about one step for faces of similar power (NumPy's binary search over every
+    face took half of an emissive mesh's sampling time), never more than twice a binary
+    search's for any spread of powers.
+    """
+    k, faces = len(u0), len(cdf)
+    below_one = np.nextafter(1.0, 0.0)
+    cells_per_power = faces / total
+    face = np.empty(k, np.int64)
+    square_t, b_t, points_t = np.empty((2, k)), np.empty((2, k)), np.empty((3, k))
+    for i in range(k):
+        x = u0[i] * total
+        # one cell before the one x falls in, so that rounding of the cell index cannot
+        # start past the answer; the check after it makes that certain
+        cell = min(max(int(x * cells_per_power), 1), faces) - 1
+        lo = guide[cell]
+        if lo > 0 and cdf[lo - 1] > x:
+            lo = 0
+        # every entry before lo is <= x; gallop until an entry is > x, then halve
+        hi, step = lo, 1
+        while hi < faces and cdf[hi] <= x:
+            lo = hi + 1
+            hi += step
+            step *= 2
+        hi = min(hi, faces)
+        while lo < hi:
+            middle = (lo + hi) >> 1
+            if cdf[middle] <= x:
+                lo = middle + 1
+            else:
+                hi = middle
+        f = min(lo, faces - 1)
+        remapped = (x - (cdf[f] - power[f])) / power[f]
+        # as np.clip: NaN stays NaN
+        remapped = 0.0 if remapped < 0.0 else remapped
+        remapped = below_one if remapped > below_one else remapped
+        b1, b2 = uniform_triangle_weights(remapped, u1[i])
+        face[i] = f
+        square_t[0, i], square_t[1, i] = remapped, u1[i]
+        b_t[0, i], b_t[1, i] = b1, b2
+        for c in range(3):
+            points_t[c, i] = (triangles_t[3 + c, f] * b1 + triangles_t[c, f]) + triangles_t[6 + c, f] * b2
+    return face, square_t, b_t, points_t

@@ -8,9 +8,9 @@ square (:mod:`rtmesh.sampling.patterns`) stay stratified on the target domain.
 import math
 
 import numpy as np
+from numba.extending import register_jitable
 
 from rtmesh.core.compiled import kernel, row
-
 from rtmesh.core.vecmath import dot, normalize
 
 
@@ -112,8 +112,15 @@ def square_to_uniform_triangle(u):
         (see :func:`rtmesh.geometry.accel.barycentric_interpolate`); density ``1 / area`` with respect
         to area on any triangle.
     """
-    s = np.sqrt(u[:, 0])
-    return np.stack([s * (1.0 - u[:, 1]), s * u[:, 1]], axis=1)
+    return np.stack(uniform_triangle_weights(u[:, 0], u[:, 1]), axis=1)
+
+
+@register_jitable
+def uniform_triangle_weights(u0, u1):
+    """:func:`square_to_uniform_triangle` of ``(u0, u1)``, as the pair ``(b1, b2)``: for
+    arrays, and for numbers in compiled code (:func:`rtmesh.lights.mesh_lights.choose_area_samples`)."""
+    s = np.sqrt(u0)
+    return s * (1.0 - u1), s * u1
 
 
 def spherical_triangle_area(a, b, c):
