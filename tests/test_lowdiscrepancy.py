@@ -16,8 +16,7 @@ GOLDEN = 0x9E3779B97F4A7C15
 def sobol_02(index, keys):
     """Points of the sequences keyed ``keys`` (the tests' keys stand for a key per pixel:
     ``keys`` are used as pixels under one dimension key), (n, 2)."""
-    return sobol_points(np.asarray(index, dtype=np.int64), np.uint64(0), np.asarray(keys).astype(np.int64), 2,
-                        SOBOL1_TABLES).T
+    return sobol_points(np.asarray(index, dtype=np.int64), np.uint64(0), np.asarray(keys).astype(np.int64), 2).T
 
 
 @numba.njit
@@ -94,8 +93,8 @@ def test_kernel_matches_a_scalar_reference_in_python_integers():
     pixel = rng.integers(0, 10 ** 7, 200).astype(np.int64)
     for seed, dimension in ((0, 0), (2 ** 64 - 1, 1 << 24), (12345, (1 << 28) + 6)):
         key = dimension_key(seed, dimension)
-        points = sobol_points(index, key, pixel, 2, SOBOL1_TABLES)
-        first = sobol_points(index, key, pixel, 1, SOBOL1_TABLES)
+        points = sobol_points(index, key, pixel, 2)
+        first = sobol_points(index, key, pixel, 1)
         expected = np.array([_reference_point(int(i), int(key), int(p)) for i, p in zip(index, pixel)])
         np.testing.assert_array_equal(points.T, expected)
         np.testing.assert_array_equal(first[0], expected[:, 0])

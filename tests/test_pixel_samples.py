@@ -7,7 +7,7 @@ from rtmesh.sampling.patterns import pixel_offsets
 from rtmesh.sampling.pixel_samples import PixelSampler, pixel_positions
 
 
-@pytest.mark.parametrize("sampler", ["regular", "jittered", "random"])
+@pytest.mark.parametrize("sampler", ["regular", "jittered", "random", "sobol"])
 @pytest.mark.parametrize("spp", [1, 2, 3, 4, 6, 16])
 @pytest.mark.parametrize("seed", [0, 7, -3, 2 ** 63 + 5])
 def test_compiled_pixel_positions_equal_numpy(sampler, spp, seed):
@@ -20,7 +20,8 @@ def test_compiled_pixel_positions_equal_numpy(sampler, spp, seed):
     np.testing.assert_array_equal(got, expected)
 
 
-def test_sobol_has_no_compiled_twin():
+def test_every_sampler_has_a_compiled_twin():
     from rtmesh.rendering.settings import RenderSettings
-    assert PixelSampler.for_settings(RenderSettings(sampler="sobol")) is None
-    assert PixelSampler.for_settings(RenderSettings(sampler="jittered", spp=4)).spp == 4
+    from rtmesh.sampling.patterns import SAMPLERS
+    for name in SAMPLERS:
+        assert PixelSampler.for_settings(RenderSettings(sampler=name, spp=4)).spp == 4

@@ -102,7 +102,7 @@ def block_scratch(position, flags):
 
 
 @kernel
-def camera_block(film_xy, code, corners, size, spp, start, count, sample, sequence, column, line, camera, xy, d, rays):
+def camera_block(code, corners, size, spp, start, count, sample, sequence, column, line, camera, xy, d, rays):
     """Writes into ``d`` (3, BLOCK) and into the block's ``RTCRayHit16`` packets ``rays``
     the unit directions of the camera rays of samples ``start .. start + count - 1``
     (lanes past the end repeat sample ``start``), as
@@ -112,9 +112,8 @@ def camera_block(film_xy, code, corners, size, spp, start, count, sample, sequen
     per pixel: ``sequence`` (2, BLOCK) uint64, the pixel's sequence keys of the two pixel
     dimensions (:func:`rtmesh.sampling.pixel_samples.pixel_sequence`), and ``column``,
     ``line`` (BLOCK,) float64, its column and row; ``b`` for sample ``start + b``.  The
-    positions in the pixels come from ``film_xy`` or, when it is empty, from the sampler
-    (``code``, ``corners``, ``size``, ``spp``: the
-    :class:`rtmesh.sampling.pixel_samples.PixelSampler`'s), by
+    positions in the pixels come from the sampler (``code``, ``corners``, ``size``,
+    ``spp``: the :class:`rtmesh.sampling.pixel_samples.PixelSampler`'s), by
     :func:`rtmesh.sampling.pixel_samples.sample_positions`.
 
     ``camera`` is the image-plane map and the camera frame as a tuple of 13 numbers
@@ -127,11 +126,7 @@ def camera_block(film_xy, code, corners, size, spp, start, count, sample, sequen
     1 spp).
     """
     ax, bx, ay, by, fx, fy, fz, rx, ry, rz, ux, uy, uz = camera
-    if len(film_xy):
-        for b in range(count):
-            xy[0, b], xy[1, b] = film_xy[start + b, 0], film_xy[start + b, 1]
-    else:
-        sample_positions(code, corners, size, spp, sample, sequence, count, xy)
+    sample_positions(code, corners, size, spp, sample, sequence, count, xy)
     # inactive lanes of the last packet: a copy of the first ray keeps their words finite
     for b in range(count, BLOCK):
         xy[0, b], xy[1, b], column[b], line[b] = xy[0, 0], xy[1, 0], column[0], line[0]

@@ -45,12 +45,10 @@ from rtmesh.rendering.direct_blocks import (BLOCK, LANES, PACKETS, add_light_row
                                             surface_block, write_rays)
 from rtmesh.materials.blinn_phong import raise_highlight
 from rtmesh.rendering.film_sums import pixel_errors
-from rtmesh.rendering.scheduler import sample_indices
 from rtmesh.sampling.pixel_samples import PixelSampler, pixel_sequence
 from rtmesh.scene.background import SolidBackground
 from rtmesh.shading.direct_light import SHADOW_SHORTEN, highlight_to_raise
 
-_NO_POSITIONS = np.zeros((0, 2))
 # "no film": direct_samples returns the radiance without adding it anywhere
 _NO_SUMS = np.zeros((3, 0))
 _NO_COUNT = np.zeros(0, dtype=np.int64)
@@ -68,7 +66,7 @@ _F64, _F64_2D, _I64 = types.float64[::1], types.float64[:, ::1], types.int64[::1
 # first run can compile them in two processes, see rtmesh.core.compile_ahead)
 FUSED_KERNELS = KernelGroup(__name__, "fused direct", [
     (block_scratch, (_F64, types.int64)),
-    (camera_block, (_F64_2D, types.int64, _F64_2D, _F64, types.int64, types.int64, types.int64, types.uint64[::1],
+    (camera_block, (types.int64, _F64_2D, _F64, types.int64, types.int64, types.int64, types.uint64[::1],
                     types.uint64[:, ::1], _F64, _F64, types.UniTuple(types.float64, 13), _F64_2D, _F64_2D,
                     types.float32[::1])),
     (surface_block, (_F64_2D, _I64, _I64, _F64_2D, _F64_2D, types.boolean[::1], _F64_2D, types.int64,
@@ -122,10 +120,8 @@ class DirectStage:
         background = it.background
         self._background = (np.ascontiguousarray(background.colour) if st.background else np.zeros(3))
         self._offset_scale = it.tables.offset_scale32
-        self._sampler = it.sampler
-        # the sample positions are formed in the kernel, except for the Sobol sampler's
-        self._pixel_sampler = PixelSampler.for_settings(s)
-        sampler = self._pixel_sampler or PixelSampler("regular", 0, 1)
+        # the sample positions are formed in the kernel
+        sampler = PixelSampler.for_settings(s)
         self._sampler_arrays = (sampler.code, sampler.keys, sampler.corners, sampler.size, sampler.spp)
 
     @classmethod
@@ -194,13 +190,9 @@ class DirectStage:
         first = np.ascontiguousarray(np.atleast_1d(first_sample), dtype=np.int64)
         counts = np.ascontiguousarray(np.atleast_1d(spp), dtype=np.int64)
         n = m * int(counts[0]) if len(counts) == 1 else int(counts.sum())
-        film_xy = _NO_POSITIONS
-        if self._pixel_sampler is None:  # Sobol: NumPy forms the positions
-            pixel, sample = sample_indices(pixels, first_sample, spp)
-            film_xy = np.ascontiguousarray(self._sampler.pixel(pixel, sample))
         sums = (_NO_SUMS, _NO_SUMS, _NO_COUNT, _NO_IMAGE) if film is None else film.kernel_arrays()
         radiance, shadow_rays = direct_samples(
-            *self._queries, film_xy, *self._sampler_arrays, pixel_list, first_pixel, first, counts, n, *sums,
+            *self._queries, *self._sampler_arrays, pixel_list, first_pixel, first, counts, n, *sums,
             *self._camera, *self._surfaces, self._base, self._background, self._lights, *self._materials,
             self._offset_scale, SHADOW_SHORTEN, self._highlights)
         stats.rays["camera"] += n
@@ -209,7 +201,7 @@ class DirectStage:
 
 
 @kernel
-def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys, corners, size, spp,
+def direct_samples(intersect16, occluded16, scene, flags, sampler, keys, corners, size, spp,
                    pixel_list, first_pixel, first, counts, n, total, total_sq, film_count, image,
                    width, image_plane, position, forward, right, up, faces, vertex_normals, smooth,
                    material_id, fix_terminator, base, background, lights, shaded, diffuse, specular, exponent,
@@ -224,8 +216,6 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
         The committed ``RTCScene``.
     flags : int
         Query flags (coherent).
-    film_xy : (n, 2) float64 or (0, 2)
-        Positions inside the pixels, or empty: formed here (:func:`sample_positions`).
     sampler, keys, corners, size, spp
         The :class:`rtmesh.sampling.pixel_samples.PixelSampler` arrays.
     pixel_list : (m,) int64 or (0,)
@@ -337,7 +327,7 @@ def direct_samples(intersect16, occluded16, scene, flags, film_xy, sampler, keys
             b += run
         # camera rays (rtmesh.scene.camera_rays.camera_rays, pinhole) into the packets; lanes past
         # the end repeat sample 0
-        camera_block(film_xy, sampler, corners, size, spp, start, count, sample, sequence, column, line, camera, xy,
+        camera_block(sampler, corners, size, spp, start, count, sample, sequence, column, line, camera, xy,
                      d, rays)
         for b in range(BLOCK):
             valid[b] = -1 if b < count else 0

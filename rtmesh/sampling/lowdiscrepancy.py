@@ -94,9 +94,28 @@ def sobol_bits(index, tables):
             ^ tables[2, (index >> np.uint64(16)) & byte] ^ tables[3, (index >> np.uint64(24)) & byte])
 
 
+@row
+def sobol_pair(key, index):
+    """Point ``index`` (below 2**32) of the Owen-scrambled (0,2)-sequence keyed ``key`` (a
+    pixel's sequence key, :func:`rtmesh.sampling.patterns.sequence_key`), ``(x, y)`` in
+    [0, 1)^2: values in 0.32 fixed point, so exact doubles."""
+    # three independent 32-bit seeds per sequence: the index shuffle, x and y
+    shuffle_seed = mix64(key + GOLDEN) >> np.uint64(32)
+    seed_x = mix64(key + GOLDEN * np.uint64(2)) >> np.uint64(32)
+    seed_y = mix64(key + GOLDEN * np.uint64(3)) >> np.uint64(32)
+    # scrambling the index permutes points only inside aligned power-of-two blocks, so
+    # every power-of-two prefix is still a whole (0,m,2)-net; it decorrelates pixels
+    shuffled = nested_uniform_scramble(np.uint64(index) & _LOW32, shuffle_seed)
+    # the first dimension's generator is the bit reversal, which the scramble's own
+    # reversal undoes
+    x = reverse_bits(laine_karras_permutation(shuffled, seed_x))
+    y = nested_uniform_scramble(sobol_bits(shuffled, SOBOL1_TABLES), seed_y)
+    return np.float64(x) * _TO_UNIT, np.float64(y) * _TO_UNIT
+
+
 @kernel
-def sobol_points(index, dimension_key, pixel, dims, tables):
-    """Owen-scrambled (0,2)-sequence points, scrambled per pixel.
+def sobol_points(index, dimension_key, pixel, dims):
+    """Owen-scrambled (0,2)-sequence points, scrambled per pixel (:func:`sobol_pair`).
 
     Parameters
     ----------
@@ -109,29 +128,17 @@ def sobol_points(index, dimension_key, pixel, dims, tables):
         Each point's pixel.
     dims : int
         1: the first coordinate only, a (0,1)-sequence; 2: both.
-    tables : (4, 256) uint64
-        :data:`SOBOL1_TABLES`.
 
     Returns
     -------
     (dims, n) float64
-        Points in [0, 1)^2, component-major; values in 0.32 fixed point, so exact doubles.
+        Points in [0, 1)^2, component-major.
     """
     n = len(index)
     points = np.empty((dims, n))
     for i in range(n):
-        key = mix64(dimension_key ^ (np.uint64(pixel[i]) * GOLDEN))
-        # three independent 32-bit seeds per sequence: the index shuffle, x and y
-        shuffle_seed = mix64(key + GOLDEN) >> np.uint64(32)
-        # scrambling the index permutes points only inside aligned power-of-two blocks, so
-        # every power-of-two prefix is still a whole (0,m,2)-net; it decorrelates pixels
-        shuffled = nested_uniform_scramble(np.uint64(index[i]) & _LOW32, shuffle_seed)
-        # the first dimension's generator is the bit reversal, which the scramble's own
-        # reversal undoes
-        seed_x = mix64(key + GOLDEN * np.uint64(2)) >> np.uint64(32)
-        points[0, i] = np.float64(reverse_bits(laine_karras_permutation(shuffled, seed_x))) * _TO_UNIT
+        x, y = sobol_pair(mix64(dimension_key ^ (np.uint64(pixel[i]) * GOLDEN)), index[i])
+        points[0, i] = x
         if dims == 2:
-            seed_y = mix64(key + GOLDEN * np.uint64(3)) >> np.uint64(32)
-            y = nested_uniform_scramble(sobol_bits(shuffled, tables), seed_y)
-            points[1, i] = np.float64(y) * _TO_UNIT
+            points[1, i] = y
     return points

@@ -22,7 +22,7 @@ import numpy as np
 
 from rtmesh.core.rays import component_major, take_rows
 from rtmesh.sampling.hashing import GOLDEN, M1, mix64
-from rtmesh.sampling.lowdiscrepancy import SOBOL1_TABLES, sobol_points
+from rtmesh.sampling.lowdiscrepancy import sobol_points
 
 SAMPLERS = ("regular", "random", "jittered", "sobol")
 
@@ -321,7 +321,7 @@ def _stratified(sampler, seed, pixel, sample, spp, dimension, ray, rays, dims):
         return uniform2(seed, pixel, index, dimension)
     if sampler == "sobol":
         points = sobol_points(np.ascontiguousarray(index, dtype=np.int64), dimension_key(seed, dimension),
-                              np.ascontiguousarray(pixel, dtype=np.int64), dims, SOBOL1_TABLES)
+                              np.ascontiguousarray(pixel, dtype=np.int64), dims)
         return points[0] if dims == 1 else points.T
     (cx, cy), (sx, sy), table = _cell_grids(rays, spp, dims)
     if dimension == Dim.PIXEL:

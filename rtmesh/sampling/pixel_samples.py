@@ -1,11 +1,11 @@
 """Pixel sample positions in compiled code: the twin of :func:`rtmesh.sampling.patterns.pixel_offsets`
-for the regular, jittered and random samplers, for kernels that make camera rays.
+for kernels that make camera rays.
 
 The arithmetic is that of :mod:`rtmesh.sampling.patterns` and :mod:`rtmesh.sampling.hashing`, operation for
 operation (64-bit integer hashing wraps in both; the float conversions and divisions are
 the same), so a kernel that forms its positions here renders bit for bit what it would
-render from positions formed by NumPy (tests/test_pixel_samples.py).  The Sobol sampler
-stays in NumPy: its scrambling tables are not worth a second implementation.
+render from positions formed by NumPy (tests/test_pixel_samples.py).  The Sobol sampler's
+points come from the row its NumPy path calls too (:func:`rtmesh.sampling.lowdiscrepancy.sobol_pair`).
 """
 
 import numpy as np
@@ -13,10 +13,11 @@ import numpy as np
 from rtmesh.core.compiled import kernel, row
 from rtmesh.core.row_vectors import floor_quotient
 from rtmesh.sampling.hashing import GOLDEN, M1, mix64
-from rtmesh.sampling.patterns import Dim, _cell_grids
+from rtmesh.sampling.lowdiscrepancy import sobol_pair
+from rtmesh.sampling.patterns import Dim, _cell_grids, dimension_key
 
-REGULAR, JITTERED, RANDOM = 0, 1, 2
-SAMPLER_CODES = {"regular": REGULAR, "jittered": JITTERED, "random": RANDOM}
+REGULAR, JITTERED, RANDOM, SOBOL = 0, 1, 2, 3
+SAMPLER_CODES = {"regular": REGULAR, "jittered": JITTERED, "random": RANDOM, "sobol": SOBOL}
 _ONE = np.uint64(1)
 _TO_UNIT = 1.0 / 9007199254740992.0  # 2 ** -53: the top 53 bits as a double in [0, 1)
 
@@ -26,7 +27,7 @@ class PixelSampler:
 
     Parameters
     ----------
-    sampler : {"regular", "jittered", "random"}
+    sampler : {"regular", "jittered", "random", "sobol"}
     seed : int
     spp : int
         Samples per stratified set (the render's samples per pixel).
@@ -34,11 +35,12 @@ class PixelSampler:
     Attributes
     ----------
     code : int
-        :data:`REGULAR`, :data:`JITTERED` or :data:`RANDOM`.
+        :data:`REGULAR`, :data:`JITTERED`, :data:`RANDOM` or :data:`SOBOL`.
     spp : int
     keys : (2,) uint64
         The seed's key of the two pixel dimensions (``Dim.PIXEL`` and the next), before
-        the pixel is mixed in (see :func:`rtmesh.sampling.patterns.sequence_key`).
+        the pixel is mixed in (see :func:`rtmesh.sampling.patterns.sequence_key`); Sobol
+        takes both coordinates from the first.
     corners : (spp, 2) float64
         Column and row of each stratum (jittered), or the stratum centres already divided
         by the grid size (regular).
@@ -49,9 +51,7 @@ class PixelSampler:
     def __init__(self, sampler, seed, spp):
         self.code = SAMPLER_CODES[sampler]
         self.spp = int(spp)
-        with np.errstate(over="ignore"):  # the products wrap modulo 2**64 by design
-            self.keys = np.array([mix64(np.uint64(seed & 0xFFFFFFFFFFFFFFFF) * GOLDEN + np.uint64(d))
-                                  for d in (Dim.PIXEL, Dim.PIXEL + 1)], dtype=np.uint64)
+        self.keys = np.array([dimension_key(seed, d) for d in (Dim.PIXEL, Dim.PIXEL + 1)], dtype=np.uint64)
         (cx, cy), (sx, sy), table = _cell_grids(1, self.spp, 2)
         self.size = np.array([cx * sx, cy * sy], dtype=np.float64)
         table = np.ascontiguousarray(table)
@@ -60,9 +60,7 @@ class PixelSampler:
 
     @classmethod
     def for_settings(cls, settings):
-        """The sampler of ``settings``, or None where it has no compiled twin (Sobol)."""
-        if settings.sampler not in SAMPLER_CODES:
-            return None
+        """The sampler of ``settings``."""
         return cls(settings.sampler, settings.seed, settings.spp)
 
 
@@ -118,6 +116,10 @@ def sample_positions(code, corners, size, spp, sample, sequence, count, xy):
         for b in range(count):
             xy[0, b] = sequence_uniform(sequence[0, b], sample[b])
             xy[1, b] = sequence_uniform(sequence[1, b], sample[b])
+        return
+    if code == SOBOL:  # the pixel's points of its (0,2)-sequence (rays = 1: index = sample)
+        for b in range(count):
+            xy[0, b], xy[1, b] = sobol_pair(sequence[0, b], sample[b])
         return
     inverse_spp = 1.0 / spp
     for b in range(count):
