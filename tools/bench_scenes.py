@@ -38,9 +38,13 @@ try:  # the layered layout, or the flat one of revisions before it
     from rtmesh.core import runtime
     from rtmesh.rendering.integrator import Integrator
 except ImportError:
-    from rtmesh import runtime
     from rtmesh.integrator import Integrator
-runtime.tune_process()
+    try:
+        from rtmesh import runtime
+    except ImportError:  # before the runtime module: building a renderer tuned the process
+        runtime = None
+if runtime is not None:
+    runtime.tune_process()
 from rtmesh.api import load_scene
 path, threads, scale, image_path = sys.argv[1], int(sys.argv[2]), float(sys.argv[3]), sys.argv[4]
 scene, settings = load_scene(path)
