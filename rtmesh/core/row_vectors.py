@@ -25,6 +25,17 @@ def normalized3(x, y, z, scale):
     return x * inv, y * inv, z * inv
 
 
+@row
+def tangent_frame(nx, ny, nz):
+    """Unit tangents ``t, b`` with ``t x b = n`` of a unit normal, as six numbers: the
+    branchless construction of Duff et al. (2017), as :func:`rtmesh.core.vecmath.orthonormal_basis`
+    (``sign * nx * nx`` is ``sign * nx ** 2`` exactly: ``sign`` is +-1)."""
+    sign = 1.0 if nz >= 0.0 else -1.0
+    a = -1.0 / (sign + nz)
+    c = nx * ny * a
+    return 1.0 + sign * nx * nx * a, sign * c, -sign * nx, c, sign + ny * ny * a, -ny
+
+
 # Smallest cosine between a bent shading normal and the direction to the viewer: enough to
 # keep the Blinn-Phong half vector and the mirror direction well defined.
 

@@ -32,8 +32,10 @@ lobe below the horizon (up to one half), which the mirror model (r = 0) never do
 """
 
 import numpy as np
+from numba.extending import register_jitable
 
-from rtmesh.core.vecmath import dot, orthonormal_basis
+from rtmesh.core.compiled import by_component, kernel
+from rtmesh.core.row_vectors import dot3, tangent_frame
 
 
 def roughness_exponent(roughness):
@@ -71,12 +73,27 @@ def square_to_phong_lobe(u, exponent):
     (k, 3) float
         Unit directions with z > 0.
     """
-    log_cos = np.log1p(-u[:, 0]) / (np.asarray(exponent) + 1.0)
-    one_minus_cos = -np.expm1(log_cos)
+    return np.stack(lobe_direction(_one_minus_cos(u[:, 0], exponent), u[:, 1]), axis=1)
+
+
+def _one_minus_cos(u0, exponent):
+    """``1 - cos(theta)`` of :func:`square_to_phong_lobe` from its first number, (k,).
+
+    NumPy's SIMD ``log1p`` and ``expm1``, which round differently from libm's: kept out of
+    the kernels so that every path draws the same directions."""
+    log_cos = np.log1p(-u0) / (np.asarray(exponent) + 1.0)
+    return -np.expm1(log_cos)
+
+
+@register_jitable
+def lobe_direction(one_minus_cos, u1):
+    """The lobe direction around +z of :func:`square_to_phong_lobe` from ``1 - cos(theta)``
+    and its second number, ``(x, y, z)``: for arrays, and for numbers in compiled code
+    (:func:`lobe_directions`)."""
     cos_theta = 1.0 - one_minus_cos
     sin_theta = np.sqrt(np.maximum(one_minus_cos * (1.0 + cos_theta), 0.0))
-    phi = 2.0 * np.pi * u[:, 1]
-    return np.stack([sin_theta * np.cos(phi), sin_theta * np.sin(phi), cos_theta], axis=1)
+    phi = 2.0 * np.pi * u1
+    return sin_theta * np.cos(phi), sin_theta * np.sin(phi), cos_theta
 
 
 def phong_lobe_to_square(w, exponent):
@@ -114,9 +131,39 @@ def sample_glossy_directions(mirror, ng, roughness, u):
         Unit directions with ``wi . ng >= 0`` (directions drawn under the surface are
         folded back above it, see the module notes); each carries the weight ``kr``.
     """
-    local = square_to_phong_lobe(u, roughness_exponent(roughness))
-    t, b = orthonormal_basis(mirror)
-    wi = t * local[:, :1] + b * local[:, 1:2] + mirror * local[:, 2:3]
-    below = dot(wi, ng)
-    fold = np.minimum(below, 0.0)
-    return wi - (2.0 * fold)[:, None] * ng
+    one_minus_cos = np.ascontiguousarray(_one_minus_cos(u[:, 0], roughness_exponent(roughness)), dtype=np.float64)
+    return lobe_directions(*(by_component(np.asfortranarray(v, dtype=np.float64)) for v in (mirror, ng)),
+                           one_minus_cos, np.ascontiguousarray(u[:, 1], dtype=np.float64)).T
+
+
+@kernel
+def lobe_directions(mirror_t, ng_t, one_minus_cos, u1):
+    """:func:`sample_glossy_directions` once the lobe's ``1 - cos(theta)`` is formed.
+
+    Parameters
+    ----------
+    mirror_t, ng_t : (3, k) float64
+        Mirror directions and geometric normals by component
+        (:func:`rtmesh.core.compiled.by_component`).
+    one_minus_cos, u1 : (k,) float64
+        ``1 - cos(theta)`` (:func:`_one_minus_cos`) and the second sample number.
+
+    Returns
+    -------
+    (3, k) float64
+        Directions ``(t x + b y) + wr z`` in the mirror direction's frame
+        (:func:`rtmesh.core.row_vectors.tangent_frame`), folded above the surface:
+        ``wi - (2 min(wi . ng, 0)) ng``, each rounding as the NumPy formulation does.
+    """
+    k = len(one_minus_cos)
+    out = np.empty((3, k))
+    for i in range(k):
+        lx, ly, lz = lobe_direction(one_minus_cos[i], u1[i])
+        mx, my, mz = mirror_t[0, i], mirror_t[1, i], mirror_t[2, i]
+        tx, ty, tz, bx, by, bz = tangent_frame(mx, my, mz)
+        wx, wy, wz = (tx * lx + bx * ly) + mx * lz, (ty * lx + by * ly) + my * lz, (tz * lx + bz * ly) + mz * lz
+        gx, gy, gz = ng_t[0, i], ng_t[1, i], ng_t[2, i]
+        below = dot3(wx, wy, wz, gx, gy, gz)
+        fold = 0.0 if below > 0.0 else below  # np.minimum(below, 0.0): NaN stays NaN
+        out[0, i], out[1, i], out[2, i] = wx - (2.0 * fold) * gx, wy - (2.0 * fold) * gy, wz - (2.0 * fold) * gz
+    return out

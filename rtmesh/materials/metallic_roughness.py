@@ -103,7 +103,7 @@ import numpy as np
 from numba import types
 
 from rtmesh.core.compiled import fix_signatures, kernel, row
-from rtmesh.core.row_vectors import dot3, normalized3
+from rtmesh.core.row_vectors import dot3, normalized3, tangent_frame
 
 # Smallest alpha (= roughness^2) the model is evaluated with.  As alpha -> 0 GGX becomes a
 # delta: the peak D = 1 / (pi alpha^2) grows without bound, and D's denominator
@@ -318,16 +318,6 @@ def brdf_cos_pdf_row(ox, oy, oz, nx, ny, nz, wx, wy, wz, b0, b1, b2, metallic, a
         return 0.0, 0.0, 0.0, 0.0
     f0, f1, f2 = brdf_cos_from_cosines(nv, nl, nh, vh, b0, b1, b2, metallic, alpha, transmission)
     return f0, f1, f2, pdf_from_cosines(nv, nl, nh, specular_probability(nv, b0, b1, b2, metallic, transmission), alpha)
-
-
-@row
-def tangent_frame(nx, ny, nz):
-    """Unit tangents ``t, b`` with ``t x b = n`` of a unit normal, as six numbers: the
-    branchless construction of Duff et al. (2017), as :func:`rtmesh.core.vecmath.orthonormal_basis`."""
-    sign = 1.0 if nz >= 0.0 else -1.0
-    a = -1.0 / (sign + nz)
-    c = nx * ny * a
-    return 1.0 + sign * nx * nx * a, sign * c, -sign * nx, c, sign + ny * ny * a, -ny
 
 
 @row
