@@ -343,3 +343,31 @@ def test_a_smooth_ball_spinning_about_its_centre_looks_still():
     assert "motion" in spinning.stats.stages_enabled
     assert np.abs(spinning.image - still).mean() < 2e-3
     assert np.abs(spinning.image - still).max() < 0.05
+
+
+def test_sphere_test_kernel_keeps_the_rows_the_numpy_formulation_keeps():
+    # the bounding-sphere test of a moving object: the same rows as the NumPy expressions
+    # it replaced, for rays from inside, outside, behind and tangent to the sphere
+    from rtmesh.core.compiled import by_component
+    from rtmesh.core.vecmath import dot
+    from rtmesh.geometry.motion import rays_near_sphere
+
+    rng = np.random.default_rng(4)
+    n = 20000
+    centre, radius2 = np.array([0.5, -1.0, 2.0]), 1.7 ** 2
+    origins = np.asfortranarray(rng.uniform(-6, 6, (n, 3)))
+    directions = rng.normal(size=(n, 3))
+    directions = np.asfortranarray(directions / np.sqrt(dot(directions, directions))[:, None])
+    origins[:2] = centre + [1.7, 0.0, 0.0]  # on the sphere, grazing and leaving
+    directions[:2] = [[0.0, 1.0, 0.0], [1.0, 0.0, 0.0]]
+    t_max = rng.uniform(0.0, 12.0, n)
+    t_max[::7] = np.inf
+
+    oc = origins - centre
+    b = dot(oc, directions)
+    disc = b * b - (dot(oc, oc) - radius2)
+    root = np.sqrt(np.maximum(disc, 0.0))
+    expected = np.flatnonzero((disc >= 0.0) & (root - b >= 0.0) & (-b - root <= t_max))
+    rows = rays_near_sphere(by_component(origins), by_component(directions), t_max, centre, radius2)
+    assert 0 < len(rows) < n
+    np.testing.assert_array_equal(rows, expected)

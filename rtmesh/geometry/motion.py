@@ -47,12 +47,14 @@ some object moves during a shutter of non-zero length.
 """
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from rtmesh.core.compiled import by_component, kernel
 from rtmesh.core.rays import component_major, take_rows
-from rtmesh.core.vecmath import dot
+from rtmesh.core.row_vectors import dot3
 from rtmesh.geometry.accel import Accel, Hits
 
 
@@ -284,12 +286,9 @@ class _Mover:
 
     def candidates(self, origins, directions, t_max):
         """Rows of the rays that can meet the object before ``t_max`` (unit directions)."""
-        oc = origins - self.centre
-        b = dot(oc, directions)
-        c = dot(oc, oc) - self.radius2
-        disc = b * b - c
-        root = np.sqrt(np.maximum(disc, 0.0))
-        return np.flatnonzero((disc >= 0.0) & (root - b >= 0.0) & (-b - root <= t_max))
+        return rays_near_sphere(*(by_component(np.asfortranarray(v, dtype=np.float64)) for v in (origins, directions)),
+                                np.ascontiguousarray(np.broadcast_to(t_max, len(origins)), dtype=np.float64),
+                                self.centre, self.radius2)
 
 
 class MotionAccel:
@@ -472,3 +471,43 @@ class MotionAccel:
             if rotating_only and not self.movers[i].motion.rotates:
                 continue
             yield int(i), np.flatnonzero(mover == i)
+
+
+@kernel
+def rays_near_sphere(origins_t, directions_t, t_max, centre, radius2):
+    """Rows of the rays whose segment ``[0, t_max]`` can meet a sphere.
+
+    Parameters
+    ----------
+    origins_t, directions_t : (3, n) float64
+        Origins and unit directions, by component (:func:`rtmesh.core.compiled.by_component`).
+    t_max : (n,) float64
+    centre : (3,) float64
+    radius2 : float
+        The squared radius.
+
+    Returns
+    -------
+    (k,) int64
+        In increasing order: ``b = oc . d``, ``disc = b^2 - (oc . oc - r^2)``, kept where
+        ``disc >= 0``, ``sqrt(disc) - b >= 0`` and ``-b - sqrt(disc) <= t_max`` (``oc``
+        the origin minus the centre; dot products summed ``(x + y) + z``).
+    """
+    n = len(t_max)
+    near = np.empty(n, np.bool_)
+    count = 0
+    for i in range(n):
+        ox, oy, oz = origins_t[0, i] - centre[0], origins_t[1, i] - centre[1], origins_t[2, i] - centre[2]
+        b = dot3(ox, oy, oz, directions_t[0, i], directions_t[1, i], directions_t[2, i])
+        c = dot3(ox, oy, oz, ox, oy, oz) - radius2
+        disc = b * b - c
+        root = math.sqrt(disc if disc > 0.0 else 0.0)
+        near[i] = (disc >= 0.0) & (root - b >= 0.0) & (-b - root <= t_max[i])
+        count += near[i]
+    rows = np.empty(count, np.int64)
+    k = 0
+    for i in range(n):
+        if near[i]:
+            rows[k] = i
+            k += 1
+    return rows
