@@ -29,16 +29,25 @@ def square_to_uniform_disk_concentric(u):
     (n, 2) float
         Points in the unit disk; density 1/pi with respect to area.
     """
-    a = 2.0 * u[:, 0] - 1.0
-    b = 2.0 * u[:, 1] - 1.0
-    use_a = np.abs(a) > np.abs(b)
-    r = np.where(use_a, a, b)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        phi = np.where(
-            use_a, (np.pi / 4.0) * (b / a), (np.pi / 2.0) - (np.pi / 4.0) * (a / b)
-        )
-    phi = np.nan_to_num(phi)  # a == b == 0 maps to the centre whatever phi is
-    return np.stack([r * np.cos(phi), r * np.sin(phi)], axis=1)
+    return concentric_disk(*(np.ascontiguousarray(u[:, k], dtype=np.float64) for k in (0, 1)))
+
+
+@kernel
+def concentric_disk(u0, u1):
+    """:func:`square_to_uniform_disk_concentric` of the points ``(u0, u1)`` ((n,) each), (n, 2)."""
+    n = len(u0)
+    out = np.empty((n, 2))
+    for i in range(n):
+        a = 2.0 * u0[i] - 1.0
+        b = 2.0 * u1[i] - 1.0
+        if abs(a) > abs(b):
+            r, phi = a, (np.pi / 4.0) * (b / a)
+        else:
+            r, phi = b, (np.pi / 2.0) - (np.pi / 4.0) * (a / b)
+        if phi != phi:  # a == b == 0 (0 / 0) maps to the centre whatever phi is
+            phi = 0.0
+        out[i, 0], out[i, 1] = r * math.cos(phi), r * math.sin(phi)
+    return out
 
 
 def uniform_disk_concentric_to_square(d):
