@@ -15,7 +15,7 @@ its first ray, in a process tuned as that command tunes its own
   face normals, auto camera);
 * ``integrator``: :class:`rtmesh.rendering.integrator.Integrator`, of which ``accel`` is the
   :class:`rtmesh.geometry.accel.Accel` the integrator builds (float32 copies, Embree scene and BVH,
-  the float64 triangle table) and ``face tables`` the per-face rows shading reads.
+  the float64 triangle table) and ``shading tables`` the per-face rows shading reads (:meth:`ShadingTables.build`).
 
 The stages inside a stage are timed in the same run by wrapping the functions named above
 (a sub-stage whose function is missing is left out).  To read Embree's share apart from
@@ -60,6 +60,7 @@ from rtmesh.geometry import embree_library  # noqa: E402
 from rtmesh.loaders.importers import load_trimesh, parts_from_trimesh  # noqa: E402
 from rtmesh.rendering.integrator import Integrator  # noqa: E402
 from rtmesh.rendering.settings import RenderSettings  # noqa: E402
+from rtmesh.rendering.shading_tables import ShadingTables  # noqa: E402
 from rtmesh.scene.model import Scene  # noqa: E402
 
 SECTION = "Scene build time, 1M+ triangles"
@@ -68,7 +69,7 @@ SUB_STAGES = (
     ("load", "trimesh.load", trimesh, "load"),
     ("parts", "smooth normals", rtmesh.loaders.importers, "smooth_vertex_normals"),
     ("integrator", "accel", rtmesh.rendering.integrator, "Accel"),
-    ("integrator", "face tables", Integrator, "_face_tables"),
+    ("integrator", "shading tables", ShadingTables, "build"),
 )
 STAGES = ("load", "parts", "scene", "integrator")
 # Embree's part, measured apart: the shared-buffer scene (packet path) or embreex's (run())
