@@ -110,7 +110,7 @@ def camera_block(code, corners, size, spp, start, count, sample, sequence, colum
 
     ``sample`` (BLOCK,) uint64 holds each sample's index, and what the caller formed once
     per pixel: ``sequence`` (2, BLOCK) uint64, the pixel's sequence keys of the two pixel
-    dimensions (:func:`rtmesh.sampling.pixel_samples.pixel_sequence`), and ``column``,
+    dimensions (:func:`rtmesh.sampling.hashing.pixel_sequence`), and ``column``,
     ``line`` (BLOCK,) float64, its column and row; ``b`` for sample ``start + b``.  The
     positions in the pixels come from the sampler (``code``, ``corners``, ``size``,
     ``spp``: the :class:`rtmesh.sampling.pixel_samples.PixelSampler`'s), by

@@ -45,7 +45,8 @@ from rtmesh.rendering.direct_blocks import (BLOCK, LANES, PACKETS, add_light_row
                                             surface_block, write_rays)
 from rtmesh.materials.blinn_phong import raise_highlight
 from rtmesh.rendering.film_sums import pixel_errors
-from rtmesh.sampling.pixel_samples import PixelSampler, pixel_sequence
+from rtmesh.sampling.hashing import pixel_sequence
+from rtmesh.sampling.pixel_samples import PixelSampler
 from rtmesh.scene.background import SolidBackground
 from rtmesh.shading.direct_light import SHADOW_SHORTEN, highlight_to_raise
 
@@ -393,4 +394,3 @@ def direct_samples(intersect16, occluded16, scene, flags, sampler, keys, corners
         radiance_block(radiance, start, count, base, background, mat, hit, direct, owner, last, pixel_list,
                        first_pixel, counts, total, total_sq, film_count, image, sums, state)
     return radiance, shadow_rays
-

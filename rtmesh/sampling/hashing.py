@@ -30,3 +30,16 @@ def mix64(x):
     x = x ^ (x >> np.uint64(27))
     x = x * M2
     return x ^ (x >> np.uint64(31))
+
+
+@register_jitable
+def pixel_sequence(key, pixel):
+    """The key of one pixel's sample sequence in one dimension: the dimension's ``key``
+    (:func:`rtmesh.sampling.patterns.dimension_key`) mixed with the pixel index, the part of
+    a sample's hash that is the same for all of a pixel's samples.
+
+    Plain NumPy for (n,) uint64 pixels (the product wraps modulo 2**64; callers silence
+    NumPy's overflow warning for scalars); compiled code calls the same function for one
+    pixel, so kernels can form it once per pixel.
+    """
+    return mix64(key ^ (np.uint64(pixel) * GOLDEN))

@@ -12,7 +12,7 @@ with the hash-based permutation of Burley, "Practical Hash-based Owen Scrambling
 import numpy as np
 
 from rtmesh.core.compiled import kernel, row
-from rtmesh.sampling.hashing import GOLDEN, mix64
+from rtmesh.sampling.hashing import GOLDEN, mix64, pixel_sequence
 
 _BITS = 32
 
@@ -137,7 +137,7 @@ def sobol_points(index, dimension_key, pixel, dims):
     n = len(index)
     points = np.empty((dims, n))
     for i in range(n):
-        x, y = sobol_pair(mix64(dimension_key ^ (np.uint64(pixel[i]) * GOLDEN)), index[i])
+        x, y = sobol_pair(pixel_sequence(dimension_key, pixel[i]), index[i])
         points[0, i] = x
         if dims == 2:
             points[1, i] = y

@@ -21,7 +21,7 @@ from enum import IntEnum
 import numpy as np
 
 from rtmesh.core.rays import component_major, take_rows
-from rtmesh.sampling.hashing import GOLDEN, M1, mix64
+from rtmesh.sampling.hashing import GOLDEN, M1, mix64, pixel_sequence
 from rtmesh.sampling.lowdiscrepancy import sobol_points
 
 SAMPLERS = ("regular", "random", "jittered", "sobol")
@@ -55,9 +55,8 @@ def sequence_key(seed, pixel, dimension):
     sample index into it, the Sobol sampler (:func:`rtmesh.sampling.lowdiscrepancy.sobol_points`,
     which forms it itself) derives its scrambling seeds from it.
     """
-    pixel = np.asarray(pixel, dtype=np.uint64)
     with np.errstate(over="ignore"):  # the multiplication is meant to wrap modulo 2**64
-        return mix64(dimension_key(seed, dimension) ^ (pixel * GOLDEN))
+        return pixel_sequence(dimension_key(seed, dimension), np.asarray(pixel, dtype=np.uint64))
 
 
 def uniform(seed, pixel, sample, dimension):

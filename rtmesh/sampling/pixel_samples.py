@@ -12,7 +12,7 @@ import numpy as np
 
 from rtmesh.core.compiled import kernel, row
 from rtmesh.core.row_vectors import floor_quotient
-from rtmesh.sampling.hashing import GOLDEN, M1, mix64
+from rtmesh.sampling.hashing import M1, mix64, pixel_sequence
 from rtmesh.sampling.lowdiscrepancy import sobol_pair
 from rtmesh.sampling.patterns import Dim, _cell_grids, dimension_key
 
@@ -65,16 +65,8 @@ class PixelSampler:
 
 
 @row
-def pixel_sequence(key, pixel):
-    """The key of one pixel's sequence in one dimension (``key``: the dimension's, from
-    :attr:`PixelSampler.keys`): the part of a sample's hash that is the same for all of a
-    pixel's samples, for kernels that form it once per pixel."""
-    return mix64(key ^ (np.uint64(pixel) * GOLDEN))
-
-
-@row
 def sequence_uniform(sequence, sample):
-    """Sample ``sample`` (uint64) of a pixel's sequence (:func:`pixel_sequence`): a uniform
+    """Sample ``sample`` (uint64) of a pixel's sequence (:func:`rtmesh.sampling.hashing.pixel_sequence`): a uniform
     number in [0, 1) with 53 random bits.  Branch-free, so loops over samples vectorise."""
     x = mix64(sequence ^ (sample * M1 + _ONE))
     return np.float64(x >> np.uint64(11)) * _TO_UNIT
@@ -101,7 +93,7 @@ def sample_positions(code, corners, size, spp, sample, sequence, count, xy):
     sample : (m,) uint64
         Each sample's index in its pixel.
     sequence : (2, m) uint64
-        Its pixel's sequence keys of the two pixel dimensions (:func:`pixel_sequence`), which
+        Its pixel's sequence keys of the two pixel dimensions (:func:`rtmesh.sampling.hashing.pixel_sequence`), which
         a kernel forms once per pixel.
     count : int
     xy : (2, m) float64
