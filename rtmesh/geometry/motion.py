@@ -495,7 +495,6 @@ def rays_near_sphere(origins_t, directions_t, t_max, centre, radius2):
     """
     n = len(t_max)
     near = np.empty(n, np.bool_)
-    count = 0
     for i in range(n):
         ox, oy, oz = origins_t[0, i] - centre[0], origins_t[1, i] - centre[1], origins_t[2, i] - centre[2]
         b = dot3(ox, oy, oz, directions_t[0, i], directions_t[1, i], directions_t[2, i])
@@ -503,11 +502,4 @@ def rays_near_sphere(origins_t, directions_t, t_max, centre, radius2):
         disc = b * b - c
         root = math.sqrt(disc if disc > 0.0 else 0.0)
         near[i] = (disc >= 0.0) & (root - b >= 0.0) & (-b - root <= t_max[i])
-        count += near[i]
-    rows = np.empty(count, np.int64)
-    k = 0
-    for i in range(n):
-        if near[i]:
-            rows[k] = i
-            k += 1
-    return rows
+    return np.flatnonzero(near)

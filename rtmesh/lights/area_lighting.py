@@ -29,6 +29,7 @@ import numpy as np
 
 from rtmesh.core.compiled import by_component, kernel
 from rtmesh.core.rays import take_rows
+from rtmesh.core.row_vectors import dot3
 from rtmesh.geometry.float32_rays import offset_origin
 from rtmesh.sampling.sampler import Sampler
 
@@ -216,34 +217,31 @@ def shadow_segments(points_t, normals_t, samples_t, light_normals_t, two_sided, 
 
     Notes
     -----
-    Each dot product sums ``(x + y) + z`` and each quotient divides, as
-    :func:`rtmesh.core.vecmath.dot` and NumPy's division do.
+    Each dot product sums ``(x + y) + z`` (:func:`rtmesh.core.row_vectors.dot3`) and each
+    quotient divides, as :func:`rtmesh.core.vecmath.dot` and NumPy's division do.
     """
     n = points_t.shape[1]
     one_normal = light_normals_t.shape[1] == 1
     wi_t = np.empty((3, n))
     distance2, cos_light, facing_light = np.empty(n), np.empty(n), np.empty(n, np.bool_)
     lit = np.empty(n, np.bool_)
-    count = 0
     for i in range(n):
         tx, ty, tz = samples_t[0, i] - points_t[0, i], samples_t[1, i] - points_t[1, i], samples_t[2, i] - points_t[2, i]
-        d2 = (tx * tx + ty * ty) + tz * tz
+        d2 = dot3(tx, ty, tz, tx, ty, tz)
         distance = math.sqrt(d2)
         divisor = distance if distance > 0.0 else np.inf
         wx, wy, wz = tx / divisor, ty / divisor, tz / divisor
         j = 0 if one_normal else i
-        facing = -((wx * light_normals_t[0, j] + wy * light_normals_t[1, j]) + wz * light_normals_t[2, j])
+        facing = -dot3(wx, wy, wz, light_normals_t[0, j], light_normals_t[1, j], light_normals_t[2, j])
         cosine = abs(facing) if two_sided else facing
         wi_t[0, i], wi_t[1, i], wi_t[2, i] = wx, wy, wz
         distance2[i], cos_light[i], facing_light[i] = d2, cosine, facing > 0.0
-        lit[i] = cosine > 0.0 and ((wx * normals_t[0, i] + wy * normals_t[1, i]) + wz * normals_t[2, i]) > 0.0
-        count += lit[i]
-    rows = np.empty(count, np.int64)
-    start_t, direction_t, length = np.empty((3, count)), np.empty((3, count)), np.empty(count)
-    k = 0
-    for i in range(n):
-        if not lit[i]:
-            continue
+        lit[i] = cosine > 0.0 and dot3(wx, wy, wz, normals_t[0, i], normals_t[1, i], normals_t[2, i]) > 0.0
+    rows = np.flatnonzero(lit)
+    k = len(rows)
+    start_t, direction_t, length = np.empty((3, k)), np.empty((3, k)), np.empty(k)
+    for r in range(k):
+        i = rows[r]
         wx, wy, wz = wi_t[0, i], wi_t[1, i], wi_t[2, i]
         sx, sy, sz = offset_origin(points_t[0, i], points_t[1, i], points_t[2, i], normals_t[0, i], normals_t[1, i],
                                    normals_t[2, i], wx, wy, wz, scale)
@@ -254,11 +252,9 @@ def shadow_segments(points_t, normals_t, samples_t, light_normals_t, two_sided, 
                                    light_normals_t[1, j] * toward, light_normals_t[2, j] * toward, -wx, -wy, -wz,
                                    scale)
         gx, gy, gz = np.float64(ex) - np.float64(sx), np.float64(ey) - np.float64(sy), np.float64(ez) - np.float64(sz)
-        segment = math.sqrt((gx * gx + gy * gy) + gz * gz)
+        segment = math.sqrt(dot3(gx, gy, gz, gx, gy, gz))
         divisor = segment if segment > 0.0 else np.inf
-        rows[k] = i
-        start_t[0, k], start_t[1, k], start_t[2, k] = sx, sy, sz
-        direction_t[0, k], direction_t[1, k], direction_t[2, k] = gx / divisor, gy / divisor, gz / divisor
-        length[k] = segment
-        k += 1
+        start_t[0, r], start_t[1, r], start_t[2, r] = sx, sy, sz
+        direction_t[0, r], direction_t[1, r], direction_t[2, r] = gx / divisor, gy / divisor, gz / divisor
+        length[r] = segment
     return wi_t, distance2, cos_light, rows, start_t, direction_t, length
