@@ -109,11 +109,10 @@ class MeshLight:
                                                             self._total, self._cdf, self._power, self._guide,
                                                             self.triangles.T)
         square, b, points = square_t.T, b_t.T, points_t.T
-        triangles = take_rows(self.triangles, face)
         emission = take_rows(self.emission, face)
         inverse_pdf = self._total / self._mean_emission[face]
         if p is not None:
-            self._sample_solid_angle(p, square, triangles, face, points, b, inverse_pdf)
+            self._sample_solid_angle(p, square, face, points, b, inverse_pdf)
         tint = None if self.tint is None else self.tint(face, b[:, 0], b[:, 1])
         if tint is not None:  # None: none of these faces has an emission texture
             emission = emission * tint
@@ -139,12 +138,16 @@ class MeshLight:
         cos = np.abs(dot(to_point, take_rows(self.normals, faces))) / np.sqrt(np.maximum(d2, 1e-300))
         pdf = np.divide(chance * d2, cos * self._face_area[faces], out=np.full(len(faces), np.inf),
                         where=cos > 0.0)
-        omega = self._solid_angles(origins, faces, take_rows(self.triangles, faces))
+        omega = self._solid_angles(origins, faces)
         wide = omega > SOLID_ANGLE_SAMPLING_FROM
         pdf[wide] = chance[wide] / omega[wide]
         return pdf
 
-    def _solid_angles(self, p, face, triangles):
+    def _corner_and_edges(self, faces):
+        """``v0``, ``v1 - v0`` and ``v2 - v0`` of the given faces, three (k, 3) arrays."""
+        return tuple(take_rows(self.triangles[:, k:k + 3], faces) for k in (0, 3, 6))
+
+    def _solid_angles(self, p, face):
         """Solid angle of each face seen from ``p`` where it may exceed
         :data:`SOLID_ANGLE_SAMPLING_FROM` (0 where the bounding sphere rules that out)."""
         offset = take_rows(self._centroids, face) - p
@@ -155,13 +158,13 @@ class MeshLight:
         omega = np.zeros(len(face))
         near = np.flatnonzero(cap > SOLID_ANGLE_SAMPLING_FROM)
         if len(near):
-            v0n, e1n, e2n = (take_rows(triangles[:, k:k + 3], near) for k in (0, 3, 6))
+            v0n, e1n, e2n = self._corner_and_edges(face[near])
             pn = take_rows(p, near)
             unit = [normalize(c) for c in (v0n - pn, v0n + e1n - pn, v0n + e2n - pn)]
             omega[near] = spherical_triangle_area(*unit)
         return omega
 
-    def _sample_solid_angle(self, p, square, triangles, face, points, b, inverse_pdf):
+    def _sample_solid_angle(self, p, square, face, points, b, inverse_pdf):
         """Move the samples of faces seen under a large solid angle from ``p`` to points
         uniform in that solid angle; updates ``points``, ``b`` and ``inverse_pdf`` in place.
 
@@ -171,16 +174,15 @@ class MeshLight:
         # which faces are seen under more than the threshold depends on p and the face
         # only (never on the sample, which would change the density): the bounding sphere
         # rules out the far ones cheaply, the exact solid angle decides for the rest
-        omega = self._solid_angles(p, face, triangles)
+        omega = self._solid_angles(p, face)
         rows = np.flatnonzero(omega > SOLID_ANGLE_SAMPLING_FROM)
         if not len(rows):
             return
-        v0, e1, e2 = triangles[:, 0:3], triangles[:, 3:6], triangles[:, 6:9]
-        pr, v0r_, e1r_, e2r_ = take_rows(p, rows), take_rows(v0, rows), take_rows(e1, rows), take_rows(e2, rows)
-        a, bb, c = (normalize(x) for x in (v0r_ - pr, v0r_ + e1r_ - pr, v0r_ + e2r_ - pr))
+        v0r, e1r, e2r = self._corner_and_edges(face[rows])
+        origin = take_rows(p, rows)
+        a, bb, c = (normalize(x) for x in (v0r - origin, v0r + e1r - origin, v0r + e2r - origin))
         w, omega = square_to_spherical_triangle(take_rows(square, rows), a, bb, c)
         n = take_rows(self.normals, face[rows])
-        origin, e1r, e2r, v0r = take_rows(p, rows), take_rows(e1, rows), take_rows(e2, rows), take_rows(v0, rows)
         cos = dot(w, n)
         # where the direction meets the face's plane (inside the face up to rounding)
         t = dot(v0r - origin, n) / np.where(cos != 0.0, cos, np.inf)
