@@ -61,7 +61,7 @@ def make_floor(real):
     The constants are of that type (numba freezes the closure's values with their types),
     so the float32 variant computes in float32 throughout.
     """
-    zero, one, two = real(0.0), real(1.0), real(2.0)
+    zero, one = real(0.0), real(1.0)
     to_unit = real(1.0 / 4294967296.0)  # a 32-bit hash to [0, 1)
     tnear = np.float32(1e-4)  # the shadow rays' start, past the surface they leave
     shorten = real(1.0 - 1e-5)
