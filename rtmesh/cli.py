@@ -16,7 +16,7 @@ from rtmesh.io.images import check_output_path, write_display_image, write_image
 from rtmesh.io.passes import display_values
 from rtmesh.rendering import memory
 from rtmesh.rendering.integrator import Integrator
-from rtmesh.rendering.settings import FRESNEL_MODES, PASSES
+from rtmesh.rendering.settings import FRESNEL_MODES, INTEGRATORS, PASSES
 from rtmesh.sampling.patterns import SAMPLERS
 from rtmesh.scene.background import background_from_option
 from rtmesh.scene.camera_json import camera_record, write_camera_json
@@ -73,7 +73,14 @@ def build_parser():
                    help="adaptive sampling: start no round that would end after this many seconds")
     p.add_argument("--max-spp", type=_positive_int, metavar="N",
                    help="adaptive sampling: at most N samples in any pixel (default 1024)")
-    p.add_argument("--max-depth", type=int, help="reflection/refraction bounces")
+    p.add_argument("--integrator", choices=INTEGRATORS,
+                   help="light transport: whitted (Blinn-Phong, lights, mirrors and glass; the default) or "
+                   "path (physically based path tracing with global illumination)")
+    p.add_argument("--max-depth", type=int,
+                   help="whitted: reflection/refraction bounces (default 5); path: segments after the "
+                   "camera ray, 1 = direct light only, -1 = unlimited (the default)")
+    p.add_argument("--clamp", type=float, metavar="L",
+                   help="path: largest value a contribution after the first bounce may add (0 = off)")
     p.add_argument("--seed", type=int, help="random seed (same seed, same image)")
     p.add_argument("--threads", type=_positive_int, help="worker threads (default: all cores)")
     p.add_argument("--ao-samples", type=int, help="ambient-occlusion rays per hit (0 = off)")
@@ -231,7 +238,11 @@ def _add_batch_parser(commands):
     p.add_argument("--ortho", action="store_true",
                    help="orthographic cameras for the fixed views (front/top/side CAD views)")
     p.add_argument("--seed", type=int, default=0, help="random seed")
-    p.add_argument("--max-depth", type=int, default=5, help="reflection/refraction bounces")
+    p.add_argument("--integrator", choices=INTEGRATORS, default="whitted",
+                   help="light transport: whitted (default) or path (path tracing)")
+    p.add_argument("--max-depth", type=int,
+                   help="whitted: reflection/refraction bounces (default 5); path: segments after the "
+                   "camera ray (default -1, unlimited)")
     p.add_argument("--exposure", type=float, default=0.0, help="exposure in stops for 8-bit output")
     p.add_argument("--tonemap", choices=TONEMAPS, default="reinhard", help="tone mapping for 8-bit output")
     p.add_argument("--workers", type=_positive_int, help="local worker processes (default: all cores)")
@@ -312,7 +323,7 @@ def cmd_render(args):
         "light_samples": args.light_samples, "target_error": args.target_error,
         "time_limit": args.time_limit, "max_spp": args.max_spp,
         "fresnel": args.fresnel, "exposure": args.exposure, "tonemap": args.tonemap,
-        "denoise": args.denoise,
+        "denoise": args.denoise, "integrator": args.integrator, "clamp": args.clamp,
     }
     background = None if args.background is None else background_from_option(args.background)
     # the command owns its process: tune it for rendering (allocator, GIL, kept threads)
@@ -373,7 +384,7 @@ def cmd_batch(args):
         ground=args.ground, camera_json=args.camera_json, normalize=args.normalize or "",
         ortho=args.ortho, dataset=args.dataset or "", asset_meta=args.asset_meta,
         movie=args.movie or "", contact_sheet=args.contact_sheet, seed=args.seed,
-        max_depth=args.max_depth, exposure=args.exposure,
+        max_depth=args.max_depth, integrator=args.integrator, exposure=args.exposure,
         tonemap=args.tonemap, workers=args.workers, threads=args.threads,
         scheduler=args.scheduler, time_limit=args.time_limit, memory_limit=args.memory_limit,
         force=args.force, trust_mtime=args.trust_mtime, retry_failed=args.retry_failed,

@@ -46,7 +46,7 @@ class BatchOptions:
         ``png``, ``exr`` (linear float, with passes), ``jpg``; one render, written in each.
     passes : tuple of str
         Extra EXR channels (``ao``); they need ``exr`` among the formats.
-    seed, max_depth, exposure, tonemap
+    seed, max_depth, integrator, exposure, tonemap
         As for ``rtmesh render``.
     ground : bool
         Put a grey ground plane under each asset, catching its shadow (left out of views
@@ -115,7 +115,8 @@ class BatchOptions:
     formats: tuple = ("png",)
     passes: tuple = ()
     seed: int = 0
-    max_depth: int = 5
+    max_depth: int | None = None
+    integrator: str = "whitted"
     exposure: float = 0.0
     tonemap: str = "reinhard"
     ground: bool = False
@@ -196,7 +197,8 @@ class BatchOptions:
         """RenderSettings fields for one asset (``overrides`` from its CSV row)."""
         pick = {k: overrides.get(k, getattr(self, k)) for k in ("width", "height", "spp", "seed")}
         return {**pick, "passes": tuple(overrides.get("passes", self.passes)),
-                "max_depth": self.max_depth, "exposure": self.exposure, "tonemap": self.tonemap,
+                "max_depth": self.max_depth, "integrator": self.integrator, "exposure": self.exposure,
+                "tonemap": self.tonemap,
                 "threads": self.threads}
 
 

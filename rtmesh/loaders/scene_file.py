@@ -27,6 +27,8 @@ from rtmesh.rendering.settings import RenderSettings
 from rtmesh.scene.background import (BACKGROUND_TYPES, GradientBackground, SolidBackground, TransparentBackground,
                                      read_environment)
 from rtmesh.scene.camera import Camera
+from rtmesh.materials.models import MODEL_NAMES
+from rtmesh.rendering.settings import INTEGRATORS
 from rtmesh.scene.model import MeshPart, Scene
 
 # ---------------------------------------------------------------- value types
@@ -164,6 +166,7 @@ RENDER_KEYS = {
     "light_samples": _int,
     "exposure": _float, "tonemap": _str,
     "target_error": _positive, "time_limit": _positive, "max_spp": _int, "denoise": _bool,
+    "integrator": _one_of(*INTEGRATORS), "clamp": _non_negative,
 }
 CAMERA_KEYS = {
     "position": _vec3, "look_at": _vec3, "up": _vec3, "fov": _fov,
@@ -174,7 +177,7 @@ ENVIRONMENT_KEYS = {"ambient": _colour, "background": _colour}
 MATERIAL_KEYS = {
     "diffuse": _colour, "specular": _colour, "shininess": _non_negative, "ambient": _colour,
     "mirror": _reflectance, "transmission": _reflectance, "ior": _positive, "absorption": _colour,
-    "emission": _colour, "roughness": _non_negative,
+    "emission": _colour, "roughness": _non_negative, "model": _one_of(*MODEL_NAMES),
 }
 OBJECT_KEYS = {
     "name": _str, "mesh": _str,

@@ -19,6 +19,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from rtmesh.materials.models import MODEL_NAMES
+
 
 def as_colour(value):
     """A colour from a number (grey) or three numbers, as a (3,) float64 array."""
@@ -27,8 +29,9 @@ def as_colour(value):
 
 
 ALPHA_MODES = ("opaque", "mask", "blend")
-# how a material reflects light toward the lights and which rays it sends (see Material.model)
-MODELS = ("blinn_phong", "metallic_roughness")
+# how a material reflects light toward the lights and which rays it sends (see Material.model);
+# the path integrator's registry (rtmesh.materials.models) names them
+MODELS = MODEL_NAMES
 COLOUR_FIELDS = ("diffuse", "specular", "ambient", "mirror", "transmission", "absorption",
                  "emission", "base_color")
 TEXTURE_FIELDS = ("diffuse_texture", "specular_texture", "opacity_texture", "normal_texture", "emission_texture",

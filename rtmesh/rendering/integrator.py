@@ -54,6 +54,7 @@ from rtmesh.rendering.film import Film
 from rtmesh.rendering.general_kernels import GENERAL_KERNELS
 from rtmesh.rendering.local_shading import LocalShading
 from rtmesh.rendering.media import Media
+from rtmesh.rendering.path_stage import PathStage
 from rtmesh.rendering.physical_shading import PhysicalShading, bsdf_weight
 from rtmesh.rendering.render_plan import RenderPlan
 from rtmesh.rendering.render_result import RenderResult
@@ -216,6 +217,7 @@ class Integrator:
         # formed once (and failing early on a degenerate camera), not for every chunk
         self.camera_frame = self.camera.frame()
         lights = [_translated(light, self.shift) for light in scene.lights if not light.is_black]
+        self.view_lights = lights
         self.lights = [light for light in lights if not is_area_light(light)]
         area_lights = [light for light in lights if is_area_light(light)]
         area_lights += [self._emitters] if self._emitters is not None else []
@@ -257,10 +259,12 @@ class Integrator:
         self.local_shading = LocalShading(self)
         self.secondary_rays = SecondaryRays(self)
         self.physical_shading = PhysicalShading(self) if self.plan.physical else None
+        # the path integrator: one compiled kernel per chunk (rtmesh.rendering.path_stage)
+        self.path_stage = PathStage(self) if settings.integrator == "path" else None
         # scenes that need only direct light take one compiled stage per chunk
-        self.direct_stage = DirectStage.plan(self)
+        self.direct_stage = DirectStage.plan(self) if self.path_stage is None else None
         self.plan = dataclasses.replace(self.plan, fused_direct=self.direct_stage is not None)
-        if self.direct_stage is None:
+        if self.direct_stage is None and self.path_stage is None:
             GENERAL_KERNELS.prepare()
 
     def _init_media(self, scene):
@@ -470,6 +474,8 @@ class Integrator:
 
         # camera: one ray per pixel sample
         pixel, sample_in_pixel = sample_indices(pixels, first_sample, spp)
+        if self.path_stage is not None:
+            return self._render_paths(pixel, sample_in_pixel, m, spp, ragged, stats, clock)
         n = len(pixel)
         # every dimension is stratified in sets of the settings' spp, whatever the round
         in_pixel = self.sampler.pixel(pixel, sample_in_pixel)
@@ -508,6 +514,39 @@ class Integrator:
             return chunk.radiance, self.passes.per_sample(chunk.passes, n) or None, stats
         passes = self.passes.per_pixel(chunk.passes, m, spp) or None
         return chunk.radiance.reshape(m, spp, 3), passes, stats
+
+    def _camera_rays(self, pixel, sample_in_pixel):
+        """Camera rays of the samples ``(pixel, sample_in_pixel)`` ((n,) each), re-centred frame."""
+        s = self.settings
+        in_pixel = self.sampler.pixel(pixel, sample_in_pixel)
+        lens_uv = self.sampler.lens(pixel, sample_in_pixel) if self.plan.lens else None
+        return self.camera.generate_rays(in_pixel, s.width, s.height, lens_uv, pixel, self.camera_frame)
+
+    def _render_paths(self, pixel, sample_in_pixel, m, spp, ragged, stats, clock):
+        """:meth:`render_chunk` under the path integrator: camera rays, then the path kernel;
+        the passes come from the camera rays' first hits, as on the Whitted path."""
+        origins, directions = self._camera_rays(pixel, sample_in_pixel)
+        n = len(pixel)
+        clock.lap("camera")
+        radiance = self.path_stage.render(origins, directions, pixel, sample_in_pixel, stats)
+        clock.lap("direct")
+        buffers = None
+        if self.plan.passes:
+            chunk = ChunkState(radiance, self.passes.buffers(n), pixel, sample_in_pixel, stats, clock, None)
+            rays = RayBatch(origins, directions, np.arange(n, dtype=np.int64), repeated_row(_UNIT_THROUGHPUT, n),
+                            repeated_row(self._camera_medium, n))
+            hits = self.accel.intersect(origins, directions)
+            hit = hits.prim >= 0
+            rows = None if hit.all() else np.flatnonzero(hit)
+            if len(hit) and hit.any():
+                srf = self.surface_stage.records(rays, hits, rows, None)
+                self.passes.record(chunk.passes, srf, hits, rows)
+            buffers = chunk.passes
+            clock.lap("passes")
+        if ragged:
+            return radiance, (self.passes.per_sample(buffers, n) or None) if buffers is not None else None, stats
+        passes = (self.passes.per_pixel(buffers, m, spp) or None) if buffers is not None else None
+        return radiance.reshape(m, spp, 3), passes, stats
 
     # ---------------------------------------------------------------- stages
     def _shade(self, rays, hits, depth, chunk):

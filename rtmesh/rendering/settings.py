@@ -9,6 +9,11 @@ from rtmesh.io.passes import PASS_NAMES
 from rtmesh.sampling.patterns import SAMPLERS
 
 FRESNEL_MODES = ("schlick", "exact")
+# "whitted": Blinn-Phong, lights and followed specular lobes (the values of scene files written
+# for it); "path": physically based path tracing (rtmesh.rendering.path_stage)
+INTEGRATORS = ("whitted", "path")
+# max_depth when it is not given: Whitted's bounces; the path integrator's "unlimited"
+DEFAULT_MAX_DEPTH = {"whitted": 5, "path": -1}
 PASSES = PASS_NAMES
 # adaptive sampling's cap on samples per pixel when max_spp is not given
 DEFAULT_MAX_SPP = 1024
@@ -42,8 +47,13 @@ class RenderSettings:
         Samples per pixel.
     sampler : {"regular", "random", "jittered"}
         Pixel sample pattern (box filter).
-    max_depth : int
-        Number of reflection/refraction bounces after the camera ray.
+    integrator : {"whitted", "path"}
+        The light transport (see :data:`INTEGRATORS`).
+    max_depth : int or None
+        Under ``whitted``, reflection/refraction bounces after the camera ray (default 5);
+        under ``path``, segments after the camera ray (1: direct light only, 2: one indirect
+        bounce; Mitsuba's ``max_depth`` is this + 1), -1 unlimited (the default: Russian
+        roulette ends paths).  None takes the integrator's default when validated.
     seed : int
         Seed of every random number (same seed, same image).
     threads : int or None
@@ -79,6 +89,9 @@ class RenderSettings:
     max_spp : int or None
         Most samples any pixel gets with adaptive sampling; None means
         ``DEFAULT_MAX_SPP`` (or ``spp``, if larger).
+    clamp : float
+        Path integrator: the largest channel any contribution after the first bounce may
+        add to a sample (fireflies from rare bright paths; biased), 0 for none.
     denoise : bool
         Denoise the image with Intel Open Image Denoise, guided by the albedo and normal
         passes (see :mod:`rtmesh.io.denoising`; needs the ``denoise`` extra).
@@ -88,7 +101,7 @@ class RenderSettings:
     height: int = 480
     spp: int = 4
     sampler: str = "jittered"
-    max_depth: int = 5
+    max_depth: int | None = None
     seed: int = 0
     threads: int | None = None
     chunk_samples: int = 32768
@@ -104,6 +117,8 @@ class RenderSettings:
     time_limit: float | None = None
     max_spp: int | None = None
     denoise: bool = False
+    integrator: str = "whitted"
+    clamp: float = 0.0
 
     def validate(self):
         """Raise ValueError naming the first setting out of range (and the value given)."""
@@ -117,12 +132,18 @@ class RenderSettings:
             return (isinstance(value, (int, float)) and not isinstance(value, bool)
                     and math.isfinite(value) and low < value < high)
 
+        if self.max_depth is None and self.integrator in INTEGRATORS:
+            self.max_depth = DEFAULT_MAX_DEPTH[self.integrator]
+        lowest_depth = -1 if self.integrator == "path" else 0
         checks = [
+            ("integrator", self.integrator in INTEGRATORS, f"one of {', '.join(INTEGRATORS)}"),
             ("width", whole(self.width, 1, MAX_IMAGE_SIDE), f">= 1 and <= {MAX_IMAGE_SIDE}"),
             ("height", whole(self.height, 1, MAX_IMAGE_SIDE), f">= 1 and <= {MAX_IMAGE_SIDE}"),
             ("spp", whole(self.spp, 1, MAX_SPP), f">= 1 and <= {MAX_SPP}"),
             ("sampler", self.sampler in SAMPLERS, f"one of {', '.join(SAMPLERS)}"),
-            ("max_depth", whole(self.max_depth, 0, MAX_DEPTH), f">= 0 and <= {MAX_DEPTH}"),
+            ("max_depth", whole(self.max_depth, lowest_depth, MAX_DEPTH),
+             f">= {lowest_depth} and <= {MAX_DEPTH}"),
+            ("clamp", real(self.clamp) and self.clamp >= 0, ">= 0 and finite (0: no clamp)"),
             ("seed", whole(self.seed, -2**63, 2**64 - 1), ">= -2**63 and <= 2**64 - 1"),
             ("threads", self.threads is None or whole(self.threads, 1, MAX_THREADS),
              f">= 1 and <= {MAX_THREADS}"),

@@ -5,7 +5,9 @@ from dataclasses import dataclass, field
 # "shadow": one per (hit, point/spot/directional light); "area_shadow": light_samples per
 # (hit, area light or emissive object); "cutout": rays traced again beyond a cut-out surface;
 # "bsdf": rays drawn from a metallic-roughness BRDF (see rtmesh.rendering.physical_shading)
-RAY_KINDS = ("camera", "shadow", "area_shadow", "environment", "reflection", "refraction", "bsdf", "ao", "cutout")
+# "bounce": the path integrator's BSDF-sampled segments (its shadow rays count as "shadow")
+RAY_KINDS = ("camera", "shadow", "area_shadow", "environment", "reflection", "refraction", "bsdf", "ao", "cutout",
+             "bounce")
 STAGES = ("camera", "intersect", "shade", "passes", "shadow", "ao", "spawn", "direct", "film")
 
 

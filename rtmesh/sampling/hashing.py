@@ -43,3 +43,17 @@ def pixel_sequence(key, pixel):
     pixel, so kernels can form it once per pixel.
     """
     return mix64(key ^ (np.uint64(pixel) * GOLDEN))
+
+
+@register_jitable
+def path_key(key, pixel, sample):
+    """The key of one pixel sample's random numbers in the path integrator: the seed's
+    ``key`` mixed with the pixel and the sample index (a pure function of the three, so
+    images do not depend on chunks or threads)."""
+    return mix64(pixel_sequence(key, pixel) ^ (np.uint64(sample) * M2))
+
+
+@register_jitable
+def uniform(key, dimension):
+    """A uniform number in [0, 1) (53 bits) of one sample's ``dimension``."""
+    return np.float64(mix64(key ^ (np.uint64(dimension) * GOLDEN)) >> np.uint64(11)) * (1.0 / 9007199254740992.0)

@@ -38,16 +38,22 @@ def concentric_disk(u0, u1):
     n = len(u0)
     out = np.empty((n, 2))
     for i in range(n):
-        a = 2.0 * u0[i] - 1.0
-        b = 2.0 * u1[i] - 1.0
-        if abs(a) > abs(b):
-            r, phi = a, (np.pi / 4.0) * (b / a)
-        else:
-            r, phi = b, (np.pi / 2.0) - (np.pi / 4.0) * (a / b)
-        if phi != phi:  # a == b == 0 (0 / 0) maps to the centre whatever phi is
-            phi = 0.0
-        out[i, 0], out[i, 1] = r * math.cos(phi), r * math.sin(phi)
+        out[i, 0], out[i, 1] = concentric_disk_row(u0[i], u1[i])
     return out
+
+
+@row
+def concentric_disk_row(u0, u1):
+    """Shirley-Chiu's concentric map of one point of the square to the unit disk, ``(x, y)``."""
+    a = 2.0 * u0 - 1.0
+    b = 2.0 * u1 - 1.0
+    if abs(a) > abs(b):
+        r, phi = a, (np.pi / 4.0) * (b / a)
+    else:
+        r, phi = b, (np.pi / 2.0) - (np.pi / 4.0) * (a / b)
+    if phi != phi:  # a == b == 0 (0 / 0) maps to the centre whatever phi is
+        phi = 0.0
+    return r * math.cos(phi), r * math.sin(phi)
 
 
 def uniform_disk_concentric_to_square(d):

@@ -1,0 +1,308 @@
+"""Every light of a scene as one table of rows for the path integrator: one light interface
+(``sample_li``, ``pdf_li``, ``power``) over every light type, and the choice of a light by
+power through an alias table, so that many lights (emissive meshes hold one light per
+triangle) cost one table lookup per vertex, not a loop.
+
+Rows
+----
+A row is :data:`WIDTH` float64 words.  Point, spot and directional lights keep the row of
+:mod:`rtmesh.lights.point_light_rows` (kinds 0-2, their incident term ``E`` from
+``illuminate_row``: ``I / d^2`` in W/sr, irradiance in W/m^2); area lights add:
+
+=============  ==================================================================
+QUAD (3)       corner (1-3), normal (4-6), radiance (7-9), edge1 (10-12), edge2 (13-15)
+DISK (4)       centre (1-3), normal (4-6), radiance (7-9), radius x tangents (10-15)
+TRIANGLE (5)   corner v0 (1-3), normal (4-6), radiance (7-9), e1 (10-12), e2 (13-15)
+ENVIRONMENT (6) the background (its tables are :class:`EnvironmentTables`)
+=============  ==================================================================
+
+with the area (:data:`AREA`), whether it emits on both sides (:data:`TWO_SIDED`) and whether
+rays see it (:data:`VISIBLE`; emissive triangles are seen as geometry).  ``sample_li``
+returns the direction toward the light, the distance, the incident radiance (for delta
+lights the incident term) and the solid-angle density (1 for delta lights, flagged).
+"""
+
+import math
+
+import numpy as np
+
+from rtmesh.core.compiled import kernel, row
+from rtmesh.lights import point_light_rows
+from rtmesh.lights.area_lights import DiskLight, QuadLight
+from rtmesh.sampling.warps import concentric_disk_row, latlong_direction, uniform_triangle_weights
+
+QUAD, DISK, TRIANGLE, ENVIRONMENT = 3, 4, 5, 6
+WIDTH = 24
+RADIANCE = 7
+AREA, TWO_SIDED, VISIBLE, FACE = 16, 17, 18, 19
+_LUMA = np.array([0.2126, 0.7152, 0.0722])
+
+
+def _luminance(colour):
+    return float(np.dot(_LUMA, np.asarray(colour, dtype=np.float64)))
+
+
+def _row(kind, point, normal, radiance, a, b, area, two_sided, visible, face=-1.0):
+    r = np.zeros(WIDTH)
+    r[0] = kind
+    r[1:4], r[4:7], r[7:10], r[10:13], r[13:16] = point, normal, radiance, a, b
+    r[AREA], r[TWO_SIDED], r[VISIBLE], r[FACE] = area, two_sided, visible, face
+    return r
+
+
+class LightTable:
+    """The lights of one view, as rows, with the alias table that chooses among them.
+
+    Parameters
+    ----------
+    lights : list
+        Point, spot, directional, quad and disk lights (in the re-centred frame).
+    triangles : (F, 9) float64
+        ``[v0, e1, e2]`` of every triangle as Embree traces them.
+    face_normals : (F, 3) float64
+    face_emission : (F, 3) float64
+        Emitted radiance of each face (zero for most).
+    environment : EnvironmentTables or None
+        The background, when it lights the scene.
+    scene_radius : float
+        Bounds the power of lights at infinity (directional, environment): what falls on
+        the scene.
+
+    Attributes
+    ----------
+    rows : (L, WIDTH) float64
+    probability, alias : (L,) float64, (L,) int64
+        The alias table (:mod:`rtmesh.sampling.alias`).
+    pmf : (L,) float64
+        Each light's choice probability.
+    face_light : (F,) int64
+        The light of each emissive face, -1 elsewhere.
+    environment : int
+        The environment's row, or -1.
+    analytic : (k,) int64
+        The rows of the quad and disk lights that rays see (tested along every ray).
+    """
+
+    def __init__(self, lights, triangles, face_normals, face_emission, environment, scene_radius):
+        from rtmesh.sampling.alias import alias_table
+
+        rows, power = [], []
+        for light in lights:
+            if isinstance(light, QuadLight):
+                rows.append(_row(QUAD, light.corner, light.normal, light.radiance, light.edge1, light.edge2,
+                                 light.area, 0.0, float(light.visible)))
+                power.append(math.pi * light.area * _luminance(light.radiance))
+            elif isinstance(light, DiskLight):
+                rows.append(_row(DISK, light.position, light.normal, light.radiance, light._tangents[0],
+                                 light._tangents[1], light.area, 0.0, float(light.visible)))
+                power.append(math.pi * light.area * _luminance(light.radiance))
+            else:
+                packed = light.kernel_row() if hasattr(light, "kernel_row") else None
+                if packed is None:
+                    raise ValueError(f"the path integrator cannot sample a {type(light).__name__} yet")
+                r = np.zeros(WIDTH)
+                r[:len(packed)] = packed
+                rows.append(r)
+                power.append(_delta_power(packed, scene_radius))
+        emissive = np.flatnonzero((face_emission > 0).any(axis=1))
+        self.face_light = np.full(len(triangles), -1, dtype=np.int64)
+        if len(emissive):
+            e1, e2 = triangles[emissive, 3:6], triangles[emissive, 6:9]
+            area = 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
+            keep = area > 0.0
+            emissive, area = emissive[keep], area[keep]
+            block = np.zeros((len(emissive), WIDTH))
+            block[:, 0] = TRIANGLE
+            block[:, 1:4], block[:, 10:13], block[:, 13:16] = (triangles[emissive, 0:3], triangles[emissive, 3:6],
+                                                               triangles[emissive, 6:9])
+            block[:, 4:7], block[:, 7:10] = face_normals[emissive], face_emission[emissive]
+            block[:, AREA], block[:, TWO_SIDED], block[:, VISIBLE], block[:, FACE] = area, 1.0, 1.0, emissive
+            self.face_light[emissive] = len(rows) + np.arange(len(emissive))
+            rows.extend(block)
+            power.extend(2.0 * math.pi * area * (face_emission[emissive] @ _LUMA))
+        self.environment = -1
+        if environment is not None:
+            self.environment = len(rows)
+            rows.append(_row(ENVIRONMENT, np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3),
+                             0.0, 0.0, 1.0))
+            power.append(environment.power(scene_radius))
+        self.rows = np.array(rows, dtype=np.float64).reshape(-1, WIDTH)
+        power = np.maximum(np.asarray(power, dtype=np.float64), 0.0)
+        if len(power) and not power.sum() > 0.0:
+            power = np.ones_like(power)
+        self.probability, self.alias, self.pmf = alias_table(power)
+        kinds = self.rows[:, 0] if len(self.rows) else np.zeros(0)
+        self.analytic = np.flatnonzero(((kinds == QUAD) | (kinds == DISK)) & (self.rows[:, VISIBLE] > 0)
+                                       if len(self.rows) else np.zeros(0, bool)).astype(np.int64)
+
+    def __len__(self):
+        return len(self.rows)
+
+
+def _delta_power(packed, scene_radius):
+    """Power of a point, spot or directional light (for choosing among lights)."""
+    kind = packed[point_light_rows.KIND]
+    colour = packed[point_light_rows.POWER:point_light_rows.POWER + 3]
+    if kind == point_light_rows.DIRECTIONAL:
+        return math.pi * scene_radius * scene_radius * _luminance(colour)
+    if kind == point_light_rows.SPOT:
+        cos_inner, cos_outer = packed[point_light_rows.COS_INNER], packed[point_light_rows.COS_OUTER]
+        return 2.0 * math.pi * (1.0 - 0.5 * (cos_inner + cos_outer)) * _luminance(colour)
+    return 4.0 * math.pi * _luminance(colour)
+
+
+class EnvironmentTables:
+    """The background as compiled code reads it: its radiance on a latitude-longitude grid
+    (bilinear, as :class:`rtmesh.scene.background.EnvironmentBackground` looks it up) and
+    the sampling tables of :class:`rtmesh.lights.environment.EnvironmentLighting`.
+
+    Parameters
+    ----------
+    lighting : EnvironmentLighting
+        Its tables (marginal and conditional cdfs, the tabulated density).
+    background : background object
+
+    Attributes
+    ----------
+    pixels : (h, w + 2, 3) float64
+        Radiance, one wrapped column on each side (the azimuth's seam).
+    marginal, conditional, func, mean, cos_rotation, sin_rotation
+        As :func:`rtmesh.lights.environment._sample_directions` takes them.
+    """
+
+    def __init__(self, lighting, background):
+        image = getattr(background, "_texture", None)
+        if image is not None:
+            self.pixels = np.ascontiguousarray(image.pixels[:, :, :3], dtype=np.float64)
+        else:
+            h, w = 64, 128
+            v = 1.0 - (np.arange(h) + 0.5) / h
+            u = (np.arange(w) + 0.5) / w
+            uv = np.stack(np.meshgrid(u, v), axis=2).reshape(-1, 2)
+            grid = np.asarray(background.radiance(lighting.directions(uv)), dtype=np.float64).reshape(h, w, 3)
+            self.pixels = np.ascontiguousarray(np.concatenate([grid[:, -1:], grid, grid[:, :1]], axis=1))
+        angle = math.radians(getattr(background, "rotation", 0.0))
+        self.cos_rotation, self.sin_rotation = math.cos(angle), math.sin(angle)
+        self.marginal, self.conditional = lighting._marginal, lighting._conditional
+        self.func, self.mean = lighting._func, lighting._mean
+        self.mean_luminance = float((self.pixels[:, 1:-1] @ _LUMA).mean())
+
+    def power(self, scene_radius):
+        """What the environment sends onto the scene's bounding disk (for choosing lights)."""
+        return math.pi * scene_radius * scene_radius * 4.0 * math.pi * self.mean_luminance
+
+
+# ------------------------------------------------------------------ compiled rows
+@row
+def environment_radiance(pixels, cos_rotation, sin_rotation, dx, dy, dz):
+    """Background radiance along a unit direction: :func:`rtmesh.sampling.warps.direction_to_latlong`
+    and the clamped bilinear lookup of the padded image (r, g, b)."""
+    xr = cos_rotation * dx - sin_rotation * dz
+    zr = sin_rotation * dx + cos_rotation * dz
+    u = 0.5 + math.atan2(zr, xr) / (2.0 * math.pi)
+    v = 0.5 + math.asin(min(max(dy, -1.0), 1.0)) / math.pi
+    h, w2 = pixels.shape[0], pixels.shape[1]
+    w = w2 - 2
+    x = (u * w + 1.0) / (w + 2.0) * w2 - 0.5
+    y = (1.0 - v) * h - 0.5
+    x0, y0 = math.floor(x), math.floor(y)
+    fx, fy = x - x0, y - y0
+    xa, xb = min(max(int(x0), 0), w2 - 1), min(max(int(x0) + 1, 0), w2 - 1)
+    ya, yb = min(max(int(y0), 0), h - 1), min(max(int(y0) + 1, 0), h - 1)
+    out0 = (pixels[ya, xa, 0] * (1.0 - fx) + pixels[ya, xb, 0] * fx) * (1.0 - fy) + (
+        pixels[yb, xa, 0] * (1.0 - fx) + pixels[yb, xb, 0] * fx) * fy
+    out1 = (pixels[ya, xa, 1] * (1.0 - fx) + pixels[ya, xb, 1] * fx) * (1.0 - fy) + (
+        pixels[yb, xa, 1] * (1.0 - fx) + pixels[yb, xb, 1] * fx) * fy
+    out2 = (pixels[ya, xa, 2] * (1.0 - fx) + pixels[ya, xb, 2] * fx) * (1.0 - fy) + (
+        pixels[yb, xa, 2] * (1.0 - fx) + pixels[yb, xb, 2] * fx) * fy
+    return out0, out1, out2
+
+
+@row
+def environment_pdf(marginal, conditional, func, mean, cos_rotation, sin_rotation, dx, dy, dz):
+    """Solid-angle density of :func:`environment_sample` at a unit direction (as
+    :meth:`rtmesh.lights.environment.EnvironmentLighting.pdf`)."""
+    h, w = func.shape
+    xr = cos_rotation * dx - sin_rotation * dz
+    zr = sin_rotation * dx + cos_rotation * dz
+    u = 0.5 + math.atan2(zr, xr) / (2.0 * math.pi)
+    v = 0.5 + math.asin(min(max(dy, -1.0), 1.0)) / math.pi
+    r = min(max(int((1.0 - v) * h), 0), h - 1)
+    c = min(max(int(u * w), 0), w - 1)
+    sin_theta = math.sqrt(max(1.0 - dy * dy, 0.0))
+    if not sin_theta > 0.0:
+        return math.inf
+    return func[r, c] / mean / (2.0 * math.pi * math.pi * sin_theta)
+
+
+@row
+def environment_sample(marginal, conditional, func, mean, cos_rotation, sin_rotation, u1, u2):
+    """A direction drawn from the environment's density and its solid-angle density (the
+    row of :func:`rtmesh.lights.environment._sample_directions`)."""
+    h, w = func.shape
+    row_index = min(max(np.searchsorted(marginal, u1, side="right") - 1, 0), h - 1)
+    low, high = marginal[row_index], marginal[row_index + 1]
+    dv = min(max((u1 - low) / (high - low), 0.0), 1.0)
+    cdf = conditional[row_index]
+    column = min(max(np.searchsorted(cdf, u2, side="right") - 1, 0), w - 1)
+    low, high = cdf[column], cdf[column + 1]
+    du = min(max((u2 - low) / (high - low), 0.0), 1.0)
+    dx, dy, dz, cos_el = latlong_direction((column + du) / w, 1.0 - (row_index + dv) / h, cos_rotation,
+                                           sin_rotation)
+    pdf = func[row_index, column] / mean / (2.0 * math.pi * math.pi * cos_el) if cos_el > 0.0 else math.inf
+    return dx, dy, dz, pdf
+
+
+@row
+def area_pdf(light, px, py, pz, dx, dy, dz, distance):
+    """Solid-angle density of ``sample_li`` reaching a point of an area light from ``p``
+    along unit ``d`` at ``distance``; 0 from behind a one-sided light."""
+    cos_l = -((light[4] * dx + light[5] * dy) + light[6] * dz)
+    if light[TWO_SIDED] > 0.0:
+        cos_l = abs(cos_l)
+    if not cos_l > 0.0:
+        return 0.0
+    return distance * distance / (light[AREA] * cos_l)
+
+
+@row
+def sample_area_point(light, u1, u2):
+    """A uniform point on a quad, disk or triangle light."""
+    kind = light[0]
+    if kind == QUAD:
+        return (light[1] + u1 * light[10] + u2 * light[13], light[2] + u1 * light[11] + u2 * light[14],
+                light[3] + u1 * light[12] + u2 * light[15])
+    if kind == DISK:
+        a, b = concentric_disk_row(u1, u2)
+        return (light[1] + a * light[10] + b * light[13], light[2] + a * light[11] + b * light[14],
+                light[3] + a * light[12] + b * light[15])
+    b1, b2 = uniform_triangle_weights(u1, u2)
+    return (light[1] + b1 * light[10] + b2 * light[13], light[2] + b1 * light[11] + b2 * light[14],
+            light[3] + b1 * light[12] + b2 * light[15])
+
+
+@row
+def hit_analytic(light, ox, oy, oz, dx, dy, dz, t_max):
+    """Distance at which a ray meets a quad or disk light (from its emitting side for a
+    one-sided light), or inf."""
+    nx, ny, nz = light[4], light[5], light[6]
+    denom = (nx * dx + ny * dy) + nz * dz
+    if not denom < 0.0:
+        return math.inf
+    t = ((nx * (light[1] - ox) + ny * (light[2] - oy)) + nz * (light[3] - oz)) / denom
+    if not (t > 0.0 and t < t_max):
+        return math.inf
+    qx, qy, qz = ox + t * dx - light[1], oy + t * dy - light[2], oz + t * dz - light[3]
+    if light[0] == QUAD:
+        # coordinates along the edges through the dual basis (edge . edge Gram matrix)
+        e11 = (light[10] * light[10] + light[11] * light[11]) + light[12] * light[12]
+        e22 = (light[13] * light[13] + light[14] * light[14]) + light[15] * light[15]
+        e12 = (light[10] * light[13] + light[11] * light[14]) + light[12] * light[15]
+        q1 = (qx * light[10] + qy * light[11]) + qz * light[12]
+        q2 = (qx * light[13] + qy * light[14]) + qz * light[15]
+        det = e11 * e22 - e12 * e12
+        a = (q1 * e22 - q2 * e12) / det
+        b = (q2 * e11 - q1 * e12) / det
+        return t if (a >= 0.0) & (a <= 1.0) & (b >= 0.0) & (b <= 1.0) else math.inf
+    r2 = (light[10] * light[10] + light[11] * light[11]) + light[12] * light[12]
+    return t if (qx * qx + qy * qy) + qz * qz <= r2 else math.inf

@@ -1,0 +1,381 @@
+"""The path integrator's compiled kernel: unidirectional path tracing with next-event
+estimation and multiple importance sampling, over Embree packets.
+
+Each block of 16 camera samples is one 16-wide packet: the camera rays are traced with the
+coherent flag, every later segment of the 16 paths as one incoherent packet of the lanes
+still alive, and each vertex's shadow rays as one occlusion packet.  Per lane and vertex:
+
+1. the ray meets a visible quad or disk light, a surface or nothing (the background);
+   emission found there is weighted against light sampling by the power heuristic
+   (weight 1 after a camera ray or a delta lobe);
+2. at a surface: a light chosen by power (alias table, :mod:`rtmesh.sampling.alias`), a point
+   or direction on it (``sample_li``), the BSDF toward it (:func:`rtmesh.materials.models.evaluate`),
+   weighted against BSDF sampling (delta lights: weight 1), its shadow ray into the packet;
+3. a BSDF sample continues the path (:func:`rtmesh.materials.models.sample`); after
+   ``rr_depth`` vertices Russian roulette on the throughput's largest channel ends it.
+
+``max_depth`` counts segments after the camera ray (1: direct light only; -1: unlimited,
+Russian roulette ends paths).  Every random number is :func:`rtmesh.sampling.hashing.uniform`
+of the sample's key and a dimension (:data:`DIMENSIONS_PER_VERTEX` per vertex), so the image
+does not depend on chunks or threads.
+"""
+
+import math
+
+import numpy as np
+
+from rtmesh.core.compiled import kernel, row
+from rtmesh.geometry.embree_packets import (DEFAULT_TFAR, GEOM_ID, INVALID_ID, LANES, PRIM_ID, RAY_WORDS, RAYHIT_WORDS,
+                                            RTC_RAY_QUERY_FLAG_COHERENT, RTC_RAY_QUERY_FLAG_INCOHERENT, TFAR, U, V,
+                                            clear_hit, packet_buffers, query_arguments, set_lane)
+from rtmesh.geometry.float32_rays import F32_MAX, offset_origin
+from rtmesh.lights import light_table as lt
+from rtmesh.lights.point_light_rows import illuminate_row
+from rtmesh.materials import lobes, models
+from rtmesh.sampling.alias import alias_sample
+from rtmesh.sampling.hashing import uniform
+from rtmesh.sampling.mis import power_heuristic
+
+DIMENSIONS_PER_VERTEX = 8
+# dimensions of a vertex, after DIMENSIONS_PER_VERTEX * depth
+_LIGHT_CHOICE, _LIGHT_U1, _LIGHT_U2, _LOBE, _BSDF_U1, _BSDF_U2, _ROULETTE = range(7)
+# shadow rays toward a point stop this fraction short of it, so they do not meet the
+# light's own surface (an emissive triangle) in float32
+_SHADOW_SHORTEN = 1.0 - 1e-4
+# ray counters
+CAMERA, BOUNCE, SHADOW = 0, 1, 2
+
+
+@row
+def _clamped(r, g, b, limit):
+    """``(r, g, b)`` scaled down so that its largest channel is at most ``limit`` (> 0)."""
+    peak = max(r, max(g, b))
+    if limit > 0.0 and peak > limit:
+        s = limit / peak
+        return r * s, g * s, b * s
+    return r, g, b
+
+
+@row
+def sample_li(light, env, px, py, pz, u1, u2):
+    """One light's ``sample_li`` at a point: ``(wx, wy, wz, distance, Lr, Lg, Lb, pdf, delta)``
+    with the incident radiance (delta lights: their incident term) and the solid-angle density
+    (delta lights: 1); ``pdf`` 0 for a failed sample."""
+    kind = light[0]
+    if kind < lt.QUAD:
+        wx, wy, wz, distance, er, eg, eb = illuminate_row(light, px, py, pz)
+        return wx, wy, wz, distance, er, eg, eb, 1.0, True
+    if kind == lt.ENVIRONMENT:
+        (pixels, marginal, conditional, func, mean, cos_r, sin_r) = env
+        dx, dy, dz, pdf = lt.environment_sample(marginal, conditional, func, mean, cos_r, sin_r, u1, u2)
+        if not (pdf > 0.0 and pdf < math.inf):
+            return dx, dy, dz, math.inf, 0.0, 0.0, 0.0, 0.0, False
+        lr, lg, lb = lt.environment_radiance(pixels, cos_r, sin_r, dx, dy, dz)
+        return dx, dy, dz, math.inf, lr, lg, lb, pdf, False
+    qx, qy, qz = lt.sample_area_point(light, u1, u2)
+    dx, dy, dz = qx - px, qy - py, qz - pz
+    distance = math.sqrt((dx * dx + dy * dy) + dz * dz)
+    if not distance > 0.0:
+        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, False
+    dx, dy, dz = dx / distance, dy / distance, dz / distance
+    pdf = lt.area_pdf(light, px, py, pz, dx, dy, dz, distance)
+    if not pdf > 0.0:
+        return dx, dy, dz, distance, 0.0, 0.0, 0.0, 0.0, False
+    return dx, dy, dz, distance, light[lt.RADIANCE], light[lt.RADIANCE + 1], light[lt.RADIANCE + 2], pdf, False
+
+
+@kernel
+def trace_paths(intersect16, occluded16, scene, origins, directions, keys, coherent,
+                triangles, face_normals, vertex_normals, faces, smooth, material_id,
+                tags, params, transmissive, emission, absorption, unlit, albedo_table,
+                light_rows, light_probability, light_alias, light_pmf, face_light, analytic, env_light,
+                env_pixels, env_marginal, env_conditional, env_func, env_mean, env_cos, env_sin, background_seen,
+                max_depth, rr_depth, clamp, offset_scale, radiance, counts):
+    """Trace one path per camera ray and write its radiance.
+
+    Parameters
+    ----------
+    intersect16, occluded16 : ctypes function objects
+        Embree's packet queries (:class:`rtmesh.geometry.embree_library.PacketLibrary`).
+    scene : int
+        The committed ``RTCScene``.
+    origins, directions : (n, 3) float64
+        Camera rays in the re-centred frame (unit directions).
+    keys : (n,) uint64
+        Each sample's random key (:func:`rtmesh.sampling.hashing.path_key`).
+    coherent : bool
+        Trace camera rays with the coherent flag (neighbouring samples of a tile).
+    triangles : (F, 9) float64
+        ``[v0, e1, e2]`` as Embree traces them; ``face_normals`` (F, 3) unit.
+    vertex_normals : (V, 3) float64, or (0, 3)
+    faces : (F, 3) int32
+    smooth : (F,) bool, or (0,)
+    material_id : (F,) int32
+    tags, params, transmissive : the material tables (:func:`rtmesh.materials.models.material_rows`)
+    emission, absorption : (M, 3) float64
+        Emitted radiance; Beer-Lambert coefficient of a transmissive material's interior.
+    unlit : (M, 4) float64
+        Column 0: 1 for materials shown without lighting, their colour in 1-3.
+    albedo_table : the GGX albedo table (:mod:`rtmesh.materials.ggx_albedo`)
+    light_rows, light_probability, light_alias, light_pmf, face_light, analytic, env_light :
+        :class:`rtmesh.lights.light_table.LightTable`'s arrays.
+    env_pixels, env_marginal, env_conditional, env_func, env_mean, env_cos, env_sin :
+        :class:`rtmesh.lights.light_table.EnvironmentTables` (``env_pixels`` all zero for a
+        black background).
+    background_seen : bool
+        Camera rays that miss see the background (False for a transparent one).
+    max_depth, rr_depth : int
+        Segments after the camera ray (-1: unlimited); vertices before Russian roulette.
+    clamp : float
+        Largest channel of any contribution after the first bounce (0: no clamp).
+    offset_scale : float32
+        Scene size for the origin offsets.
+    radiance : (n, 3) float64
+        Output.
+    counts : (3,) int64
+        Camera, bounce and shadow rays traced (active lanes only), added to.
+    """
+    n = origins.shape[0]
+    env = (env_pixels, env_marginal, env_conditional, env_func, env_mean, env_cos, env_sin)
+    has_lights = len(light_rows) > 0
+    ray, words, valid, args_coherent = packet_buffers(np.int64(RAYHIT_WORDS), np.int64(1),
+                                                      np.int64(RTC_RAY_QUERY_FLAG_COHERENT))
+    args_incoherent = query_arguments(np.int64(RTC_RAY_QUERY_FLAG_INCOHERENT))
+    shadow, shadow_words, shadow_valid, _ = packet_buffers(np.int64(RAY_WORDS), np.int64(1),
+                                                           np.int64(RTC_RAY_QUERY_FLAG_INCOHERENT))
+    px = np.zeros(LANES)
+    py = np.zeros(LANES)
+    pz = np.zeros(LANES)
+    dx = np.zeros(LANES)
+    dy = np.zeros(LANES)
+    dz = np.zeros(LANES)
+    beta = np.zeros((LANES, 3))
+    total = np.zeros((LANES, 3))
+    pending = np.zeros((LANES, 3))
+    sigma = np.zeros((LANES, 3))
+    alive = np.zeros(LANES, np.bool_)
+    prev_pdf = np.zeros(LANES)
+    prev_delta = np.zeros(LANES, np.bool_)
+    for start in range(0, n, LANES):
+        count = min(LANES, n - start)
+        for lane in range(LANES):
+            alive[lane] = lane < count
+            if lane < count:
+                i = start + lane
+                px[lane], py[lane], pz[lane] = origins[i, 0], origins[i, 1], origins[i, 2]
+                dx[lane], dy[lane], dz[lane] = directions[i, 0], directions[i, 1], directions[i, 2]
+                beta[lane, 0] = beta[lane, 1] = beta[lane, 2] = 1.0
+                total[lane, 0] = total[lane, 1] = total[lane, 2] = 0.0
+                sigma[lane, 0] = sigma[lane, 1] = sigma[lane, 2] = 0.0
+                prev_pdf[lane] = 0.0
+                prev_delta[lane] = True
+        depth = 0
+        while True:
+            active = 0
+            for lane in range(LANES):
+                if alive[lane]:
+                    set_lane(ray, words, lane, px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane],
+                             DEFAULT_TFAR)
+                    clear_hit(words, lane)
+                    valid[lane] = -1
+                    active += 1
+                else:
+                    valid[lane] = 0
+            if active == 0:
+                break
+            counts[CAMERA if depth == 0 else BOUNCE] += active
+            args = args_coherent if (depth == 0) & coherent else args_incoherent
+            intersect16(valid.ctypes.data, scene, ray.ctypes.data, args.ctypes.data)
+            shadows = 0
+            for lane in range(LANES):
+                shadow_valid[lane] = 0
+                if not alive[lane]:
+                    continue
+                key = keys[start + lane]
+                base = DIMENSIONS_PER_VERTEX * depth
+                hit = words[GEOM_ID * LANES + lane] != INVALID_ID
+                t = np.float64(ray[TFAR * LANES + lane]) if hit else math.inf
+                # a visible quad or disk light before the surface ends the path there
+                seen = -1
+                for a in analytic:
+                    ta = lt.hit_analytic(light_rows[a], px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], t)
+                    if ta < t:
+                        t, seen = ta, a
+                if sigma[lane, 0] + sigma[lane, 1] + sigma[lane, 2] > 0.0 and t < math.inf:
+                    for c in range(3):
+                        beta[lane, c] *= math.exp(-sigma[lane, c] * t)
+                if seen >= 0:
+                    light = light_rows[seen]
+                    w = 1.0
+                    if not prev_delta[lane]:
+                        w = power_heuristic(prev_pdf[lane], light_pmf[seen] * lt.area_pdf(
+                            light, px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], t))
+                    er, eg, eb = _clamped(beta[lane, 0] * light[lt.RADIANCE] * w, beta[lane, 1] * light[lt.RADIANCE + 1] * w,
+                                          beta[lane, 2] * light[lt.RADIANCE + 2] * w, clamp if depth > 1 else 0.0)
+                    total[lane, 0] += er
+                    total[lane, 1] += eg
+                    total[lane, 2] += eb
+                    alive[lane] = False
+                    continue
+                if not hit:
+                    if (env_light >= 0) | ((depth == 0) & background_seen):
+                        lr, lg, lb = lt.environment_radiance(env_pixels, env_cos, env_sin, dx[lane], dy[lane], dz[lane])
+                        w = 1.0
+                        if not prev_delta[lane]:
+                            w = power_heuristic(prev_pdf[lane], light_pmf[env_light] * lt.environment_pdf(
+                                env_marginal, env_conditional, env_func, env_mean, env_cos, env_sin,
+                                dx[lane], dy[lane], dz[lane]))
+                        er, eg, eb = _clamped(beta[lane, 0] * lr * w, beta[lane, 1] * lg * w, beta[lane, 2] * lb * w,
+                                              clamp if depth > 1 else 0.0)
+                        total[lane, 0] += er
+                        total[lane, 1] += eg
+                        total[lane, 2] += eb
+                    alive[lane] = False
+                    continue
+                # the surface point, on the float32 triangle Embree saw
+                prim = words[PRIM_ID * LANES + lane]
+                bu = np.float64(ray[U * LANES + lane])
+                bv = np.float64(ray[V * LANES + lane])
+                tri = triangles[prim]
+                hx = tri[0] + bu * tri[3] + bv * tri[6]
+                hy = tri[1] + bu * tri[4] + bv * tri[7]
+                hz = tri[2] + bu * tri[5] + bv * tri[8]
+                gx, gy, gz = face_normals[prim, 0], face_normals[prim, 1], face_normals[prim, 2]
+                nx, ny, nz = gx, gy, gz
+                if len(smooth) and smooth[prim]:
+                    f0, f1, f2 = faces[prim, 0], faces[prim, 1], faces[prim, 2]
+                    w0 = 1.0 - bu - bv
+                    nx = w0 * vertex_normals[f0, 0] + bu * vertex_normals[f1, 0] + bv * vertex_normals[f2, 0]
+                    ny = w0 * vertex_normals[f0, 1] + bu * vertex_normals[f1, 1] + bv * vertex_normals[f2, 1]
+                    nz = w0 * vertex_normals[f0, 2] + bu * vertex_normals[f1, 2] + bv * vertex_normals[f2, 2]
+                    length = math.sqrt(nx * nx + ny * ny + nz * nz)
+                    if length > 0.0:
+                        nx, ny, nz = nx / length, ny / length, nz / length
+                    else:
+                        nx, ny, nz = gx, gy, gz
+                mat = material_id[prim]
+                # emission (triangles emit on both sides)
+                if emission[mat, 0] + emission[mat, 1] + emission[mat, 2] > 0.0:
+                    w = 1.0
+                    if not prev_delta[lane]:
+                        light = face_light[prim]
+                        if light >= 0:
+                            w = power_heuristic(prev_pdf[lane], light_pmf[light] * lt.area_pdf(
+                                light_rows[light], px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], t))
+                    er, eg, eb = _clamped(beta[lane, 0] * emission[mat, 0] * w, beta[lane, 1] * emission[mat, 1] * w,
+                                          beta[lane, 2] * emission[mat, 2] * w, clamp if depth > 1 else 0.0)
+                    total[lane, 0] += er
+                    total[lane, 1] += eg
+                    total[lane, 2] += eb
+                if unlit[mat, 0] > 0.0:
+                    total[lane, 0] += beta[lane, 0] * unlit[mat, 1]
+                    total[lane, 1] += beta[lane, 1] * unlit[mat, 2]
+                    total[lane, 2] += beta[lane, 2] * unlit[mat, 3]
+                    alive[lane] = False
+                    continue
+                # the shading frame: reflection-only models turn it to the viewer's side;
+                # transmissive ones keep the outward side (inside: wo.z < 0)
+                ox, oy, oz = -dx[lane], -dy[lane], -dz[lane]
+                if (nx * gx + ny * gy) + nz * gz < 0.0:
+                    nx, ny, nz = -nx, -ny, -nz
+                if not transmissive[mat]:
+                    if (gx * ox + gy * oy) + gz * oz < 0.0:
+                        gx, gy, gz, nx, ny, nz = -gx, -gy, -gz, -nx, -ny, -nz
+                    if not (nx * ox + ny * oy) + nz * oz > 0.0:
+                        # a bent shading normal facing away from the viewer: shade flat
+                        nx, ny, nz = gx, gy, gz
+                sign = 1.0 if nz >= 0.0 else -1.0
+                fa = -1.0 / (sign + nz)
+                fb = nx * ny * fa
+                tx, ty, tz = 1.0 + sign * nx * nx * fa, sign * fb, -sign * nx
+                sx, sy, sz = fb, sign + ny * ny * fa, -ny
+                lox = (tx * ox + ty * oy) + tz * oz
+                loy = (sx * ox + sy * oy) + sz * oz
+                loz = (nx * ox + ny * oy) + nz * oz
+                tag = tags[mat]
+                follow = (max_depth < 0) | (depth + 1 <= max_depth)
+                # next-event estimation
+                if follow and has_lights:
+                    chosen = alias_sample(light_probability, light_alias, uniform(key, base + _LIGHT_CHOICE))
+                    light = light_rows[chosen]
+                    wx, wy, wz, distance, lr, lg, lb, pdf_li, delta = sample_li(
+                        light, env, hx, hy, hz, uniform(key, base + _LIGHT_U1), uniform(key, base + _LIGHT_U2))
+                    if (pdf_li > 0.0) & ((lr > 0.0) | (lg > 0.0) | (lb > 0.0)):
+                        lix = (tx * wx + ty * wy) + tz * wz
+                        liy = (sx * wx + sy * wy) + sz * wz
+                        liz = (nx * wx + ny * wy) + nz * wz
+                        # light must arrive on a side the geometry lets it reach from
+                        side = (gx * wx + gy * wy) + gz * wz
+                        if transmissive[mat] or side > 0.0:
+                            fr, fg, fbb, pdf_bsdf = models.evaluate(tag, params, mat, albedo_table, lox, loy, loz,
+                                                                    lix, liy, liz)
+                            if (fr > 0.0) | (fg > 0.0) | (fbb > 0.0):
+                                p_light = light_pmf[chosen] * pdf_li
+                                w = 1.0 if delta else power_heuristic(p_light, pdf_bsdf)
+                                scale = w / p_light
+                                cr, cg, cb = _clamped(beta[lane, 0] * fr * lr * scale, beta[lane, 1] * fg * lg * scale,
+                                                      beta[lane, 2] * fbb * lb * scale, clamp if depth > 0 else 0.0)
+                                pending[lane, 0], pending[lane, 1], pending[lane, 2] = cr, cg, cb
+                                sgx, sgy, sgz = (gx, gy, gz) if side > 0.0 else (-gx, -gy, -gz)
+                                qx, qy, qz = offset_origin(hx, hy, hz, sgx, sgy, sgz, wx, wy, wz, offset_scale)
+                                reach = F32_MAX if math.isinf(distance) else distance * _SHADOW_SHORTEN
+                                set_lane(shadow, shadow_words, lane, np.float64(qx), np.float64(qy), np.float64(qz),
+                                         wx, wy, wz, np.float32(reach))
+                                shadow_valid[lane] = -1
+                                shadows += 1
+                if not follow:
+                    alive[lane] = False
+                    continue
+                # continue the path by sampling the BSDF
+                wx, wy, wz, gr, gg, gb, pdf, flags = models.sample(
+                    tag, params, mat, albedo_table, lox, loy, loz, uniform(key, base + _LOBE),
+                    uniform(key, base + _BSDF_U1), uniform(key, base + _BSDF_U2))
+                if (flags == lobes.FAILED) | (not ((gr > 0.0) | (gg > 0.0) | (gb > 0.0))):
+                    alive[lane] = False
+                    continue
+                ndx = (wx * tx + wy * sx) + wz * nx
+                ndy = (wx * ty + wy * sy) + wz * ny
+                ndz = (wx * tz + wy * sz) + wz * nz
+                length = math.sqrt((ndx * ndx + ndy * ndy) + ndz * ndz)
+                ndx, ndy, ndz = ndx / length, ndy / length, ndz / length
+                side = (gx * ndx + gy * ndy) + gz * ndz
+                if (not transmissive[mat]) and not side > 0.0:
+                    # a shading-normal sample below the geometric surface
+                    alive[lane] = False
+                    continue
+                beta[lane, 0] *= gr
+                beta[lane, 1] *= gg
+                beta[lane, 2] *= gb
+                prev_pdf[lane] = pdf
+                prev_delta[lane] = (flags & lobes.DELTA) != 0
+                if transmissive[mat] and side < 0.0 and (flags & lobes.TRANSMISSION):
+                    # into the interior (the outward normal faces away from the new ray)
+                    sigma[lane, 0], sigma[lane, 1], sigma[lane, 2] = absorption[mat, 0], absorption[mat, 1], absorption[mat, 2]
+                elif transmissive[mat] and (flags & lobes.TRANSMISSION):
+                    sigma[lane, 0] = sigma[lane, 1] = sigma[lane, 2] = 0.0
+                if depth + 1 >= rr_depth:
+                    q = max(beta[lane, 0], max(beta[lane, 1], beta[lane, 2]))
+                    if q < 1.0:
+                        if uniform(key, base + _ROULETTE) >= q:
+                            alive[lane] = False
+                            continue
+                        beta[lane, 0] /= q
+                        beta[lane, 1] /= q
+                        beta[lane, 2] /= q
+                sgx, sgy, sgz = (gx, gy, gz) if side > 0.0 else (-gx, -gy, -gz)
+                qx, qy, qz = offset_origin(hx, hy, hz, sgx, sgy, sgz, ndx, ndy, ndz, offset_scale)
+                px[lane], py[lane], pz[lane] = np.float64(qx), np.float64(qy), np.float64(qz)
+                dx[lane], dy[lane], dz[lane] = ndx, ndy, ndz
+            if shadows:
+                counts[SHADOW] += shadows
+                occluded16(shadow_valid.ctypes.data, scene, shadow.ctypes.data, args_incoherent.ctypes.data)
+                for lane in range(LANES):
+                    if shadow_valid[lane] and not shadow[TFAR * LANES + lane] == -np.inf:
+                        total[lane, 0] += pending[lane, 0]
+                        total[lane, 1] += pending[lane, 1]
+                        total[lane, 2] += pending[lane, 2]
+            depth += 1
+        for lane in range(count):
+            radiance[start + lane, 0] = total[lane, 0]
+            radiance[start + lane, 1] = total[lane, 1]
+            radiance[start + lane, 2] = total[lane, 2]

@@ -1,0 +1,166 @@
+"""Every registered material model of the path integrator against the seam's contract
+(rtmesh.materials.models): reciprocity, its pdf against its samples (integral, agreement,
+chi-square, as pbrt's bsdfs_test and Mitsuba's chi2 tests), weights equal to f cos / pdf,
+and white-furnace energy bounds."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from rtmesh.materials import ggx_albedo, lobes, models
+from rtmesh.materials.table import Material
+
+TABLE = ggx_albedo.table()
+
+# one or more parameter sets of every registered model (non-delta unless marked)
+CASES = {
+    "lambert": [Material(model="lambert", diffuse=(0.8, 0.5, 0.2))],
+    "oren-nayar": [Material(model="oren-nayar", diffuse=(0.9, 0.6, 0.3), roughness=r) for r in (0.3, 1.0)],
+    "conductor": [Material(model="conductor", mirror=(0.95, 0.64, 0.54), roughness=r) for r in (0.2, 0.6, 1.0)],
+    "dielectric": [Material(model="dielectric", ior=1.5, roughness=r) for r in (0.3, 0.7)],
+    "metallic_roughness": [Material(model="metallic_roughness", base_color=(0.7, 0.4, 0.2), metallic=m,
+                                    perceptual_roughness=r) for m, r in ((0.0, 0.5), (1.0, 0.4), (0.5, 0.8))],
+    "blinn_phong": [Material(diffuse=0.5, specular=0.3, shininess=20.0),
+                    Material(diffuse=0.2, mirror=0.5, roughness=0.2)],
+}
+PARAMS = [(name, i) for name, cases in CASES.items() for i in range(len(cases))]
+
+
+def test_every_registered_model_has_cases():
+    assert set(CASES) == set(models.REGISTRY)
+
+
+def _rows(material):
+    tags, params, transmissive = models.material_rows([material])
+    return int(tags[0]), params, bool(transmissive[0])
+
+
+def _directions(n, rng, hemisphere):
+    """Uniform unit directions on the sphere (or the upper hemisphere)."""
+    v = rng.normal(size=(n, 3))
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    if hemisphere:
+        v[:, 2] = np.abs(v[:, 2])
+    return v
+
+
+@pytest.mark.parametrize("name,i", PARAMS)
+def test_reflection_is_reciprocal(name, i):
+    tag, params, _ = _rows(CASES[name][i])
+    rng = np.random.default_rng(3)
+    wo, wi = _directions(2000, rng, True), _directions(2000, rng, True)
+    f_oi, _ = models.evaluate_many(tag, params, 0, TABLE, wo, wi)
+    f_io, _ = models.evaluate_many(tag, params, 0, TABLE, wi, wo)
+    # evaluate returns f |cos wi|
+    a = f_oi / wi[:, 2:3]
+    b = f_io / wo[:, 2:3]
+    assert np.abs(a).max() > 0
+    np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("name,i", PARAMS)
+def test_samples_agree_with_evaluate(name, i):
+    """The density and weight sample() returns are evaluate()'s at the sampled direction."""
+    tag, params, transmissive = _rows(CASES[name][i])
+    rng = np.random.default_rng(5)
+    for mu in (0.2, 0.7, -0.6) if transmissive else (0.2, 0.7):
+        n = 4000
+        wo = np.tile([math.sqrt(1 - mu * mu), 0.0, mu], (n, 1))
+        wi, weight, pdf, flags = models.sample_many(tag, params, 0, TABLE, wo, rng.random((n, 3)))
+        ok = (flags != lobes.FAILED) & ((flags & lobes.DELTA) == 0)
+        assert ok.sum() > n // 2
+        f, p = models.evaluate_many(tag, params, 0, TABLE, wo[ok], wi[ok])
+        np.testing.assert_allclose(p, pdf[ok], rtol=1e-9)
+        np.testing.assert_allclose(weight[ok], f / p[:, None], rtol=1e-9)
+
+
+@pytest.mark.parametrize("name,i", PARAMS)
+def test_pdf_integrates_to_at_most_one(name, i):
+    tag, params, transmissive = _rows(CASES[name][i])
+    rng = np.random.default_rng(7)
+    n = 400000
+    for mu in (0.3, 0.9):
+        wo = np.tile([math.sqrt(1 - mu * mu), 0.0, mu], (n, 1))
+        wi = _directions(n, rng, False)
+        _, pdf = models.evaluate_many(tag, params, 0, TABLE, wo, wi)
+        integral = 4.0 * math.pi * pdf.mean()
+        error = 4.0 * math.pi * pdf.std() / math.sqrt(n)
+        assert integral <= 1.0 + 4 * error + 1e-3
+        # and the failed samples account for the rest
+        wi_s, _, _, flags = models.sample_many(tag, params, 0, TABLE, wo[:20000], rng.random((20000, 3)))
+        drawn = float(np.mean(flags != lobes.FAILED))
+        assert abs(integral - drawn) < 4 * error + 0.01
+
+
+def _chi2_pvalue(tag, params, wo, rng, n=200000, theta_bins=10, phi_bins=20):
+    """pbrt's chi-square test: sampled directions binned over (cos theta, phi) against the
+    pdf integrated over each bin, bins with expected counts below 5 pooled."""
+    wi, _, _, flags = models.sample_many(tag, params, 0, TABLE, np.tile(wo, (n, 1)), rng.random((n, 3)))
+    wi = wi[flags != lobes.FAILED]
+    cos_edges = np.linspace(-1, 1, theta_bins + 1)
+    phi_edges = np.linspace(-math.pi, math.pi, phi_bins + 1)
+    observed, _, _ = np.histogram2d(wi[:, 2], np.arctan2(wi[:, 1], wi[:, 0]), [cos_edges, phi_edges])
+    # the pdf over each bin by a 24 x 24 midpoint rule (uniform in cos theta and phi: dw = dcos dphi)
+    k = 24
+    c = cos_edges[:-1, None] + (np.arange(k) + 0.5)[None, :] * (2.0 / theta_bins / k)
+    p = phi_edges[:-1, None] + (np.arange(k) + 0.5)[None, :] * (2 * math.pi / phi_bins / k)
+    cc, pp = np.meshgrid(c.ravel(), p.ravel(), indexing="ij")
+    s = np.sqrt(np.maximum(1 - cc ** 2, 0))
+    dirs = np.stack([s * np.cos(pp), s * np.sin(pp), cc], axis=-1).reshape(-1, 3)
+    _, pdf = models.evaluate_many(tag, params, 0, TABLE, np.tile(wo, (len(dirs), 1)), dirs)
+    cell = (2.0 / theta_bins / k) * (2 * math.pi / phi_bins / k)
+    expected = (pdf.reshape(theta_bins, k, phi_bins, k).sum(axis=(1, 3)) * cell) * n
+    o, e = observed.ravel(), expected.ravel()
+    order = np.argsort(e)
+    o, e = o[order], e[order]
+    small = np.cumsum(e) < 5
+    pooled_o, pooled_e = o[small].sum(), e[small].sum()
+    o, e = o[~small], e[~small]
+    if pooled_e > 0:
+        o, e = np.append(o, pooled_o), np.append(e, pooled_e)
+    # the failed samples' share makes the totals differ slightly; compare shapes
+    e = e * (o.sum() / e.sum())
+    chi2 = float(((o - e) ** 2 / e).sum())
+    return stats.chi2.sf(chi2, len(o) - 1)
+
+
+@pytest.mark.parametrize("name,i", PARAMS)
+def test_sampling_passes_chi_square(name, i):
+    tag, params, transmissive = _rows(CASES[name][i])
+    rng = np.random.default_rng(11)
+    for mu in ((0.5, -0.8) if transmissive else (0.5, 0.95)):
+        wo = np.array([math.sqrt(1 - mu * mu), 0.0, mu])
+        assert _chi2_pvalue(tag, params, wo, rng) > 1e-3
+
+
+@pytest.mark.parametrize("roughness", [0.05, 0.2, 0.5, 0.8, 1.0])
+def test_white_rough_conductor_reflects_everything(roughness):
+    """Kulla-Conty compensation: a white rough metal's albedo is >= 0.99 at every angle."""
+    tag, params, _ = _rows(Material(model="conductor", mirror=1.0, roughness=roughness))
+    rng = np.random.default_rng(13)
+    for mu in (0.1, 0.5, 1.0):
+        n = 100000
+        wo = np.tile([math.sqrt(1 - mu * mu), 0.0, mu], (n, 1))
+        _, weight, _, _ = models.sample_many(tag, params, 0, TABLE, wo, rng.random((n, 3)))
+        assert 0.99 <= weight[:, 0].mean() <= 1.01
+
+
+@pytest.mark.parametrize("model,extra", [("lambert", {}), ("oren-nayar", {"roughness": 0.5}),
+                                         ("oren-nayar", {"roughness": 1.0})])
+def test_white_diffuse_models_reflect_everything(model, extra):
+    tag, params, _ = _rows(Material(model=model, diffuse=1.0, **extra))
+    rng = np.random.default_rng(17)
+    for mu in (0.1, 0.5, 1.0):
+        n = 100000
+        wo = np.tile([math.sqrt(1 - mu * mu), 0.0, mu], (n, 1))
+        _, weight, _, _ = models.sample_many(tag, params, 0, TABLE, wo, rng.random((n, 3)))
+        assert abs(weight[:, 0].mean() - 1.0) < 0.005
+
+
+def test_shipped_ggx_albedo_table_is_what_tabulate_computes():
+    fresh = ggx_albedo.tabulate(ggx_albedo.MU_CELLS, ggx_albedo.ROUGHNESS_CELLS, ggx_albedo.STRATA)
+    np.testing.assert_allclose(fresh, TABLE, rtol=1e-12)
+    # roughness 1 at normal incidence: 1 - ln 2 in closed form
+    assert abs(TABLE[-1, ggx_albedo.MU_CELLS - 1] - (1 - math.log(2))) < 1e-3
