@@ -19,9 +19,10 @@ def sphere():
 
 
 def _inside(sphere, material):
-    """Camera at the centre of a closed sphere."""
+    """Camera at the centre of a closed sphere whose faces look inward (under path, emission
+    leaves the front side only)."""
     camera = Camera(np.zeros(3), np.array([0.0, 0.0, -1.0]), np.array([0.0, 1.0, 0.0]), fov=90.0)
-    return Scene.from_parts([MeshPart("s", sphere.vertices, sphere.faces, 0)], materials=[material], lights=[],
+    return Scene.from_parts([MeshPart("s", sphere.vertices, sphere.faces[:, ::-1], 0)], materials=[material], lights=[],
                             camera=camera, background=0.0)
 
 
@@ -100,6 +101,17 @@ def test_path_refuses_what_it_cannot_render_yet(sphere):
     scene = _outside(sphere, material)
     with pytest.raises(SceneError, match="integrator 'path' does not render image textures"):
         Integrator(scene, RenderSettings(width=8, height=8, spp=1, integrator="path"))
+
+
+def test_emission_leaves_the_front_side_only(sphere):
+    """Faces looking outward: the camera inside sees their back sides, which do not emit."""
+    camera = Camera(np.zeros(3), np.array([0.0, 0.0, -1.0]), np.array([0.0, 1.0, 0.0]), fov=90.0)
+    scene = Scene.from_parts([MeshPart("s", sphere.vertices, sphere.faces, 0)],
+                             materials=[Material("wall", model="lambert", diffuse=0.5, emission=1.0)], lights=[],
+                             camera=camera, background=0.0)
+    # (light samples on the shading point's own plane meet it at a cosine of rounding size,
+    # ~1e-14 of the emission: nothing else may arrive)
+    assert _mean(scene, spp=4, integrator="path").max() < 1e-9
 
 
 def test_max_depth_defaults_follow_the_integrator():

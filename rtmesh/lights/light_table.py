@@ -116,10 +116,11 @@ class LightTable:
             block[:, 1:4], block[:, 10:13], block[:, 13:16] = (triangles[emissive, 0:3], triangles[emissive, 3:6],
                                                                triangles[emissive, 6:9])
             block[:, 4:7], block[:, 7:10] = face_normals[emissive], face_emission[emissive]
-            block[:, AREA], block[:, TWO_SIDED], block[:, VISIBLE], block[:, FACE] = area, 1.0, 1.0, emissive
+            # one-sided, toward the winding's normal (as pbrt's and Mitsuba's area lights)
+            block[:, AREA], block[:, TWO_SIDED], block[:, VISIBLE], block[:, FACE] = area, 0.0, 1.0, emissive
             self.face_light[emissive] = len(rows) + np.arange(len(emissive))
             rows.extend(block)
-            power.extend(2.0 * math.pi * area * (face_emission[emissive] @ _LUMA))
+            power.extend(math.pi * area * (face_emission[emissive] @ _LUMA))
         self.environment = -1
         if environment is not None:
             self.environment = len(rows)

@@ -254,8 +254,10 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, coher
                     else:
                         nx, ny, nz = gx, gy, gz
                 mat = material_id[prim]
-                # emission (triangles emit on both sides)
-                if emission[mat, 0] + emission[mat, 1] + emission[mat, 2] > 0.0:
+                # emission, from the front side (the winding's normal), as pbrt's and Mitsuba's
+                # area lights
+                front = (gx * dx[lane] + gy * dy[lane]) + gz * dz[lane] < 0.0
+                if front and emission[mat, 0] + emission[mat, 1] + emission[mat, 2] > 0.0:
                     w = 1.0
                     if not prev_delta[lane]:
                         light = face_light[prim]
