@@ -95,12 +95,61 @@ def test_images_do_not_depend_on_the_thread_count(sphere):
 
 
 def test_path_refuses_what_it_cannot_render_yet(sphere):
+    from rtmesh.geometry.motion import Motion
+
+    scene = Scene.from_parts([MeshPart("s", sphere.vertices, sphere.faces, 0,
+                                       motion=Motion(translate=(0.1, 0.0, 0.0)))],
+                             materials=[Material("m", model="lambert")], lights=[],
+                             camera=Camera(np.array([0.0, 0.0, 3.2]), np.zeros(3), np.array([0.0, 1.0, 0.0]),
+                                           shutter=(0.0, 1.0)), background=1.0)
+    with pytest.raises(SceneError, match="integrator 'path' does not render motion blur"):
+        Integrator(scene, RenderSettings(width=8, height=8, spp=1, integrator="path"))
+
+
+def _textured_sphere(sphere, **material):
+    """The sphere with UVs (from its positions) and a material holding textures."""
+    uv = 0.5 + 0.5 * sphere.vertices[:, :2]
+    camera = Camera(np.array([0.0, 0.0, 3.2]), np.zeros(3), np.array([0.0, 1.0, 0.0]), fov=30.0)
+    part = MeshPart("s", sphere.vertices, sphere.faces, 0, vertex_normals=sphere.vertex_normals, uv=uv)
+    return Scene.from_parts([part], materials=[Material("m", **material)], lights=[], camera=camera,
+                            background=1.0)
+
+
+def test_a_uniform_texture_renders_as_its_colour(sphere):
     from rtmesh.io.texture_images import Texture
 
-    material = Material("t", diffuse_texture=Texture(np.ones((2, 2, 3))))
-    scene = _outside(sphere, material)
-    with pytest.raises(SceneError, match="integrator 'path' does not render image textures"):
-        Integrator(scene, RenderSettings(width=8, height=8, spp=1, integrator="path"))
+    colour = np.array([0.8, 0.4, 0.2])
+    textured = _textured_sphere(sphere, model="lambert", diffuse=1.0,
+                                diffuse_texture=Texture(np.tile(colour, (4, 4, 1))))
+    plain = _textured_sphere(sphere, model="lambert", diffuse=colour)
+    a, b = _mean(textured, spp=4, integrator="path"), _mean(plain, spp=4, integrator="path")
+    np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-6)
+
+
+def test_a_flat_normal_map_changes_nothing(sphere):
+    from rtmesh.io.texture_images import Texture
+
+    flat = Texture(np.tile([0.5, 0.5, 1.0], (4, 4, 1)))
+    a = _mean(_textured_sphere(sphere, model="conductor", mirror=0.9, roughness=0.3, normal_texture=flat), spp=4,
+              integrator="path")
+    b = _mean(_textured_sphere(sphere, model="conductor", mirror=0.9, roughness=0.3), spp=4, integrator="path")
+    np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-6)
+
+
+@pytest.mark.parametrize("mode", ["mask", "blend"])
+def test_a_fully_cut_out_object_is_invisible(sphere, mode):
+    scene = _textured_sphere(sphere, model="lambert", diffuse=0.2, opacity=0.0, alpha_mode=mode)
+    image = _mean(scene, spp=4, integrator="path")
+    assert np.abs(image - 1.0).max() < 1e-6
+
+
+def test_half_opaque_blend_lets_half_the_light_through(sphere):
+    """A black sphere of opacity 0.5 before a white background: each surface crossed keeps
+    half, two crossings through the middle leave a quarter of the background."""
+    scene = _textured_sphere(sphere, model="lambert", diffuse=0.0, opacity=0.5, alpha_mode="blend")
+    image = _mean(scene, spp=256, size=16, integrator="path")
+    centre = image[6:10, 6:10].mean()
+    assert abs(centre - 0.25) < 0.02
 
 
 def test_emission_leaves_the_front_side_only(sphere):

@@ -26,6 +26,7 @@ from rtmesh.materials.metallic_roughness import square_to_cosine_hemisphere_row
 from rtmesh.materials.microfacet import SMOOTH_ALPHA, distribution, masking, masking_shadowing, sample_visible_normal
 
 NAME = "conductor"
+SLOTS = {"colour": 0}
 
 
 def parameters(material):

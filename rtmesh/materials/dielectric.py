@@ -29,6 +29,7 @@ from rtmesh.materials.microfacet import (SMOOTH_ALPHA, distribution, masking_sha
                                          visible_normal_pdf)
 
 NAME = "dielectric"
+SLOTS = {"colour": 2}
 
 
 def parameters(material):

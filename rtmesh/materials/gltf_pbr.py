@@ -18,6 +18,7 @@ from rtmesh.materials import dielectric, lobes
 from rtmesh.materials.metallic_roughness import alpha_from_roughness, brdf_cos_pdf_row, sample_row
 
 NAME = "metallic_roughness"
+SLOTS = {"colour": 0, "metallic": 3, "alpha": 4, "roughness": 5}
 
 
 def parameters(material):

@@ -11,6 +11,8 @@ from rtmesh.materials import lobes
 from rtmesh.materials.metallic_roughness import square_to_cosine_hemisphere_row
 
 NAME = "lambert"
+# parameters that textures scale (rtmesh.materials.models.SLOTS)
+SLOTS = {"colour": 0}
 
 
 def parameters(material):

@@ -9,6 +9,9 @@ A model module (:mod:`~rtmesh.materials.lambert`, :mod:`~rtmesh.materials.oren_n
 - ``parameters(material)``: its float row (at most :data:`~rtmesh.materials.lobes.PARAMETER_WIDTH`)
   from a :class:`~rtmesh.materials.table.Material`;
 - optionally ``transmissive(material)``: whether light passes through it (default: no);
+- ``SLOTS``: which parameters image textures scale per hit (:data:`SLOT_NAMES`: the colour
+  the base-colour texture and vertex colours multiply, the specular and mirror colours,
+  glTF's metallic, roughness and the alpha formed from it);
 - compiled rows (``@row``) taking the parameter table, the material's row index, the GGX
   albedo table (:mod:`~rtmesh.materials.ggx_albedo`) and local-frame directions:
   ``evaluate(params, m, table, wo..., wi...) -> f|cos| r, g, b, pdf``,
@@ -51,6 +54,12 @@ class MaterialModel:
         test = getattr(self.module, "transmissive", None)
         return bool(test(material)) if test is not None else self.module is dielectric
 
+
+# the parameters a hit's textures scale, by model tag: column k holds the index of the first
+# parameter of SLOT_NAMES[k] in the model's row, or -1 (rtmesh.rendering.path_kernel)
+SLOT_NAMES = ("colour", "specular", "mirror", "metallic", "roughness", "alpha")
+SLOTS = np.array([[module.SLOTS.get(name, -1) for name in SLOT_NAMES] for module in MODULES], dtype=np.int64)
+COLOUR_SLOT, SPECULAR_SLOT, MIRROR_SLOT, METALLIC_SLOT, ROUGHNESS_SLOT, ALPHA_SLOT = range(len(SLOT_NAMES))
 
 REGISTRY = {module.NAME: MaterialModel(module.NAME, tag, module) for tag, module in enumerate(MODULES)}
 MODEL_NAMES = tuple(REGISTRY)

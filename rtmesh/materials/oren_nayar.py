@@ -30,6 +30,7 @@ from rtmesh.materials import lobes
 from rtmesh.materials.metallic_roughness import square_to_cosine_hemisphere_row
 
 NAME = "oren-nayar"
+SLOTS = {"colour": 0}
 _C1 = 0.5 - 2.0 / (3.0 * math.pi)
 _C2 = 2.0 / 3.0 - 28.0 / (15.0 * math.pi)
 # keeps the multiple-scattering lobe's divisions finite where FON's albedo reaches 1

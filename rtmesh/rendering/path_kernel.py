@@ -3,13 +3,15 @@ estimation and multiple importance sampling, over Embree packets.
 
 Each block of 16 camera samples is one 16-wide packet: the camera rays are traced with the
 coherent flag, every later segment of the 16 paths as one incoherent packet of the lanes
-still alive, and each vertex's shadow rays as one occlusion packet.  Per lane and vertex:
+still alive, and each round's shadow rays as one occlusion packet.  Per lane and vertex:
 
 1. the ray meets a visible quad or disk light, a surface or nothing (the background);
    emission found there is weighted against light sampling by the power heuristic
-   (weight 1 after a camera ray or a delta lobe);
-2. at a surface: a light chosen by power (alias table, :mod:`rtmesh.sampling.alias`), a point
-   or direction on it (``sample_li``), the BSDF toward it (:func:`rtmesh.materials.models.evaluate`),
+   (weight 1 after a camera ray or a delta lobe); a cut-out surface the ray passes
+   (alpha mask or blend) continues it from there, with the same depth;
+2. at a surface: textures and normal maps (:mod:`rtmesh.rendering.path_surfaces`), then a
+   light chosen by power (alias table, :mod:`rtmesh.sampling.alias`), a point or direction on
+   it (:func:`sample_li`), the BSDF toward it (:func:`rtmesh.materials.models.evaluate`),
    weighted against BSDF sampling (delta lights: weight 1), its shadow ray into the packet;
 3. a BSDF sample continues the path (:func:`rtmesh.materials.models.sample`); after
    ``rr_depth`` vertices Russian roulette on the throughput's largest channel ends it.
@@ -18,6 +20,13 @@ still alive, and each vertex's shadow rays as one occlusion packet.  Per lane an
 Russian roulette ends paths).  Every random number is :func:`rtmesh.sampling.hashing.uniform`
 of the sample's key and a dimension (:data:`DIMENSIONS_PER_VERTEX` per vertex), so the image
 does not depend on chunks or threads.
+
+Records (tuples of arrays, built once by :class:`rtmesh.rendering.path_stage.PathStage`):
+``geometry`` and ``surface`` as :mod:`rtmesh.rendering.path_surfaces` describes them;
+``lights = (rows, probability, alias, pmf, face_light, analytic, environment)``
+(:class:`rtmesh.lights.light_table.LightTable`); ``env = (pixels, marginal, conditional,
+func, mean, cos_rotation, sin_rotation)`` (:class:`rtmesh.lights.light_table.EnvironmentTables`);
+``options = (max_depth, rr_depth, clamp, offset_scale, background_seen, cutouts)``.
 """
 
 import math
@@ -32,16 +41,20 @@ from rtmesh.geometry.float32_rays import F32_MAX, offset_origin
 from rtmesh.lights import light_table as lt
 from rtmesh.lights.point_light_rows import illuminate_row
 from rtmesh.materials import lobes, models
+from rtmesh.rendering.path_surfaces import emission_at, is_transparent, normal_mapped, surface_point, textured_row
 from rtmesh.sampling.alias import alias_sample
-from rtmesh.sampling.hashing import uniform
+from rtmesh.sampling.hashing import mix64, uniform
 from rtmesh.sampling.mis import power_heuristic
+from rtmesh.sampling.warps import uniform_triangle_weights
 
 DIMENSIONS_PER_VERTEX = 8
 # dimensions of a vertex, after DIMENSIONS_PER_VERTEX * depth
-_LIGHT_CHOICE, _LIGHT_U1, _LIGHT_U2, _LOBE, _BSDF_U1, _BSDF_U2, _ROULETTE = range(7)
+_LIGHT_CHOICE, _LIGHT_U1, _LIGHT_U2, _LOBE, _BSDF_U1, _BSDF_U2, _ROULETTE, _COVERAGE = range(8)
 # shadow rays toward a point stop this fraction short of it, so they do not meet the
 # light's own surface (an emissive triangle) in float32
 _SHADOW_SHORTEN = 1.0 - 1e-4
+# cut-out layers a ray passes before the next surface counts as opaque
+MAX_LAYERS = 64
 # ray counters
 CAMERA, BOUNCE, SHADOW = 0, 1, 2
 
@@ -54,6 +67,12 @@ def _clamped(r, g, b, limit):
         s = limit / peak
         return r * s, g * s, b * s
     return r, g, b
+
+
+@row
+def _layer_coin(key, depth, layer, dimension):
+    """The coin of an alpha-blend layer: one number per (vertex, layer)."""
+    return uniform(mix64(key ^ np.uint64(layer + 1)), DIMENSIONS_PER_VERTEX * depth + dimension)
 
 
 @row
@@ -84,13 +103,64 @@ def sample_li(light, env, px, py, pz, u1, u2):
     return dx, dy, dz, distance, light[lt.RADIANCE], light[lt.RADIANCE + 1], light[lt.RADIANCE + 2], pdf, False
 
 
+@row
+def _add(total, lane, r, g, b):
+    total[lane, 0] += r
+    total[lane, 1] += g
+    total[lane, 2] += b
+
+
+@row
+def _shadows_through_cutouts(intersect16, scene, args, shadow, shadow_words, shadow_valid, geometry, surface,
+                             offset_scale, keys, start, lane_depth, reach, counts):
+    """Trace the shadow packet's rays with closest hits, passing cut-out layers, until each
+    is blocked (its ``shadow_valid`` lane cleared) or free; a free ray keeps its lane set."""
+    material_id = geometry[5]
+    for layer in range(MAX_LAYERS):
+        active = 0
+        for lane in range(LANES):
+            if shadow_valid[lane]:
+                clear_hit(shadow_words, lane)
+                active += 1
+        if active == 0:
+            return
+        if layer > 0:
+            counts[SHADOW] += active
+        intersect16(shadow_valid.ctypes.data, scene, shadow.ctypes.data, args.ctypes.data)
+        more = False
+        for lane in range(LANES):
+            if not shadow_valid[lane] or shadow_words[GEOM_ID * LANES + lane] == INVALID_ID:
+                continue
+            prim = shadow_words[PRIM_ID * LANES + lane]
+            bu = np.float64(shadow[U * LANES + lane])
+            bv = np.float64(shadow[V * LANES + lane])
+            mat = material_id[prim]
+            coin = _layer_coin(keys[start + lane], lane_depth[lane], layer + MAX_LAYERS, _COVERAGE)
+            if layer + 1 < MAX_LAYERS and is_transparent(surface, geometry, mat, prim, bu, bv, coin):
+                # on past the layer: the rest of the segment from just beyond it
+                t = np.float64(shadow[TFAR * LANES + lane])
+                hx, hy, hz, gx, gy, gz, _, _, _ = surface_point(geometry, prim, bu, bv)
+                dx = np.float64(shadow[4 * LANES + lane])
+                dy = np.float64(shadow[5 * LANES + lane])
+                dz = np.float64(shadow[6 * LANES + lane])
+                if (gx * dx + gy * dy) + gz * dz < 0.0:
+                    gx, gy, gz = -gx, -gy, -gz
+                qx, qy, qz = offset_origin(hx, hy, hz, gx, gy, gz, dx, dy, dz, offset_scale)
+                reach[lane] = reach[lane] - t
+                if not reach[lane] > 0.0:
+                    continue  # the layer was the end of the segment: free
+                set_lane(shadow, shadow_words, lane, np.float64(qx), np.float64(qy), np.float64(qz), dx, dy, dz,
+                         np.float32(reach[lane]))
+                more = True
+            else:
+                shadow_valid[lane] = 0
+        if not more:
+            return
+
+
 @kernel
-def trace_paths(intersect16, occluded16, scene, origins, directions, keys, coherent,
-                triangles, face_normals, vertex_normals, faces, smooth, material_id,
-                tags, params, transmissive, emission, absorption, unlit, albedo_table,
-                light_rows, light_probability, light_alias, light_pmf, face_light, analytic, env_light,
-                env_pixels, env_marginal, env_conditional, env_func, env_mean, env_cos, env_sin, background_seen,
-                max_depth, rr_depth, clamp, offset_scale, radiance, counts):
+def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geometry, surface, lights, env, options,
+                radiance, counts):
     """Trace one path per camera ray and write its radiance.
 
     Parameters
@@ -103,46 +173,26 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, coher
         Camera rays in the re-centred frame (unit directions).
     keys : (n,) uint64
         Each sample's random key (:func:`rtmesh.sampling.hashing.path_key`).
-    coherent : bool
-        Trace camera rays with the coherent flag (neighbouring samples of a tile).
-    triangles : (F, 9) float64
-        ``[v0, e1, e2]`` as Embree traces them; ``face_normals`` (F, 3) unit.
-    vertex_normals : (V, 3) float64, or (0, 3)
-    faces : (F, 3) int32
-    smooth : (F,) bool, or (0,)
-    material_id : (F,) int32
-    tags, params, transmissive : the material tables (:func:`rtmesh.materials.models.material_rows`)
-    emission, absorption : (M, 3) float64
-        Emitted radiance; Beer-Lambert coefficient of a transmissive material's interior.
-    unlit : (M, 4) float64
-        Column 0: 1 for materials shown without lighting, their colour in 1-3.
-    albedo_table : the GGX albedo table (:mod:`rtmesh.materials.ggx_albedo`)
-    light_rows, light_probability, light_alias, light_pmf, face_light, analytic, env_light :
-        :class:`rtmesh.lights.light_table.LightTable`'s arrays.
-    env_pixels, env_marginal, env_conditional, env_func, env_mean, env_cos, env_sin :
-        :class:`rtmesh.lights.light_table.EnvironmentTables` (``env_pixels`` all zero for a
-        black background).
-    background_seen : bool
-        Camera rays that miss see the background (False for a transparent one).
-    max_depth, rr_depth : int
-        Segments after the camera ray (-1: unlimited); vertices before Russian roulette.
-    clamp : float
-        Largest channel of any contribution after the first bounce (0: no clamp).
-    offset_scale : float32
-        Scene size for the origin offsets.
+    geometry, surface, lights, env, options : tuples
+        The records described in the module notes.
     radiance : (n, 3) float64
         Output.
     counts : (3,) int64
         Camera, bounce and shadow rays traced (active lanes only), added to.
     """
     n = origins.shape[0]
-    env = (env_pixels, env_marginal, env_conditional, env_func, env_mean, env_cos, env_sin)
+    material_id = geometry[5]
+    tags, transmissive, absorption, unlit, albedo_table = surface[0], surface[2], surface[4], surface[5], surface[6]
+    light_rows, light_probability, light_alias, light_pmf, face_light, analytic, env_light = lights
+    max_depth, rr_depth, clamp, offset_scale, background_seen, cutouts = options
+    env_pixels, env_marginal, env_conditional, env_func, env_mean, env_cos, env_sin = env
     has_lights = len(light_rows) > 0
     ray, words, valid, args_coherent = packet_buffers(np.int64(RAYHIT_WORDS), np.int64(1),
                                                       np.int64(RTC_RAY_QUERY_FLAG_COHERENT))
     args_incoherent = query_arguments(np.int64(RTC_RAY_QUERY_FLAG_INCOHERENT))
-    shadow, shadow_words, shadow_valid, _ = packet_buffers(np.int64(RAY_WORDS), np.int64(1),
+    shadow, shadow_words, shadow_valid, _ = packet_buffers(np.int64(RAYHIT_WORDS), np.int64(1),
                                                            np.int64(RTC_RAY_QUERY_FLAG_INCOHERENT))
+    scratch = np.zeros((LANES, lobes.PARAMETER_WIDTH))
     px = np.zeros(LANES)
     py = np.zeros(LANES)
     pz = np.zeros(LANES)
@@ -153,9 +203,12 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, coher
     total = np.zeros((LANES, 3))
     pending = np.zeros((LANES, 3))
     sigma = np.zeros((LANES, 3))
+    reach = np.zeros(LANES)
     alive = np.zeros(LANES, np.bool_)
     prev_pdf = np.zeros(LANES)
     prev_delta = np.zeros(LANES, np.bool_)
+    lane_depth = np.zeros(LANES, np.int64)
+    layers = np.zeros(LANES, np.int64)
     for start in range(0, n, LANES):
         count = min(LANES, n - start)
         for lane in range(LANES):
@@ -169,7 +222,9 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, coher
                 sigma[lane, 0] = sigma[lane, 1] = sigma[lane, 2] = 0.0
                 prev_pdf[lane] = 0.0
                 prev_delta[lane] = True
-        depth = 0
+                lane_depth[lane] = 0
+                layers[lane] = 0
+        first = True
         while True:
             active = 0
             for lane in range(LANES):
@@ -179,12 +234,13 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, coher
                     clear_hit(words, lane)
                     valid[lane] = -1
                     active += 1
+                    counts[CAMERA if lane_depth[lane] == 0 else BOUNCE] += 1
                 else:
                     valid[lane] = 0
             if active == 0:
                 break
-            counts[CAMERA if depth == 0 else BOUNCE] += active
-            args = args_coherent if (depth == 0) & coherent else args_incoherent
+            args = args_coherent if first else args_incoherent
+            first = False
             intersect16(valid.ctypes.data, scene, ray.ctypes.data, args.ctypes.data)
             shadows = 0
             for lane in range(LANES):
@@ -192,7 +248,9 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, coher
                 if not alive[lane]:
                     continue
                 key = keys[start + lane]
+                depth = lane_depth[lane]
                 base = DIMENSIONS_PER_VERTEX * depth
+                limit = clamp if depth > 1 else 0.0
                 hit = words[GEOM_ID * LANES + lane] != INVALID_ID
                 t = np.float64(ray[TFAR * LANES + lane]) if hit else math.inf
                 # a visible quad or disk light before the surface ends the path there
@@ -210,11 +268,9 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, coher
                     if not prev_delta[lane]:
                         w = power_heuristic(prev_pdf[lane], light_pmf[seen] * lt.area_pdf(
                             light, px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], t))
-                    er, eg, eb = _clamped(beta[lane, 0] * light[lt.RADIANCE] * w, beta[lane, 1] * light[lt.RADIANCE + 1] * w,
-                                          beta[lane, 2] * light[lt.RADIANCE + 2] * w, clamp if depth > 1 else 0.0)
-                    total[lane, 0] += er
-                    total[lane, 1] += eg
-                    total[lane, 2] += eb
+                    r, g, b = _clamped(beta[lane, 0] * light[lt.RADIANCE] * w, beta[lane, 1] * light[lt.RADIANCE + 1] * w,
+                                       beta[lane, 2] * light[lt.RADIANCE + 2] * w, limit)
+                    _add(total, lane, r, g, b)
                     alive[lane] = False
                     continue
                 if not hit:
@@ -225,61 +281,51 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, coher
                             w = power_heuristic(prev_pdf[lane], light_pmf[env_light] * lt.environment_pdf(
                                 env_marginal, env_conditional, env_func, env_mean, env_cos, env_sin,
                                 dx[lane], dy[lane], dz[lane]))
-                        er, eg, eb = _clamped(beta[lane, 0] * lr * w, beta[lane, 1] * lg * w, beta[lane, 2] * lb * w,
-                                              clamp if depth > 1 else 0.0)
-                        total[lane, 0] += er
-                        total[lane, 1] += eg
-                        total[lane, 2] += eb
+                        r, g, b = _clamped(beta[lane, 0] * lr * w, beta[lane, 1] * lg * w, beta[lane, 2] * lb * w,
+                                           limit)
+                        _add(total, lane, r, g, b)
                     alive[lane] = False
                     continue
-                # the surface point, on the float32 triangle Embree saw
                 prim = words[PRIM_ID * LANES + lane]
                 bu = np.float64(ray[U * LANES + lane])
                 bv = np.float64(ray[V * LANES + lane])
-                tri = triangles[prim]
-                hx = tri[0] + bu * tri[3] + bv * tri[6]
-                hy = tri[1] + bu * tri[4] + bv * tri[7]
-                hz = tri[2] + bu * tri[5] + bv * tri[8]
-                gx, gy, gz = face_normals[prim, 0], face_normals[prim, 1], face_normals[prim, 2]
-                nx, ny, nz = gx, gy, gz
-                if len(smooth) and smooth[prim]:
-                    f0, f1, f2 = faces[prim, 0], faces[prim, 1], faces[prim, 2]
-                    w0 = 1.0 - bu - bv
-                    nx = w0 * vertex_normals[f0, 0] + bu * vertex_normals[f1, 0] + bv * vertex_normals[f2, 0]
-                    ny = w0 * vertex_normals[f0, 1] + bu * vertex_normals[f1, 1] + bv * vertex_normals[f2, 1]
-                    nz = w0 * vertex_normals[f0, 2] + bu * vertex_normals[f1, 2] + bv * vertex_normals[f2, 2]
-                    length = math.sqrt(nx * nx + ny * ny + nz * nz)
-                    if length > 0.0:
-                        nx, ny, nz = nx / length, ny / length, nz / length
-                    else:
-                        nx, ny, nz = gx, gy, gz
                 mat = material_id[prim]
+                hx, hy, hz, gx, gy, gz, nx, ny, nz = surface_point(geometry, prim, bu, bv)
+                if cutouts and layers[lane] + 1 < MAX_LAYERS and is_transparent(
+                        surface, geometry, mat, prim, bu, bv, _layer_coin(key, depth, layers[lane], _COVERAGE)):
+                    # the ray passes this layer: on from just beyond it, same depth
+                    layers[lane] += 1
+                    sgx, sgy, sgz = (gx, gy, gz) if (gx * dx[lane] + gy * dy[lane]) + gz * dz[lane] > 0.0 \
+                        else (-gx, -gy, -gz)
+                    qx, qy, qz = offset_origin(hx, hy, hz, sgx, sgy, sgz, dx[lane], dy[lane], dz[lane], offset_scale)
+                    px[lane], py[lane], pz[lane] = np.float64(qx), np.float64(qy), np.float64(qz)
+                    continue
+                layers[lane] = 0
+                er, eg, eb = textured_row(surface, geometry, mat, prim, bu, bv, scratch, lane)
                 # emission, from the front side (the winding's normal), as pbrt's and Mitsuba's
                 # area lights
                 front = (gx * dx[lane] + gy * dy[lane]) + gz * dz[lane] < 0.0
-                if front and emission[mat, 0] + emission[mat, 1] + emission[mat, 2] > 0.0:
+                if front and er + eg + eb > 0.0:
                     w = 1.0
                     if not prev_delta[lane]:
                         light = face_light[prim]
                         if light >= 0:
                             w = power_heuristic(prev_pdf[lane], light_pmf[light] * lt.area_pdf(
                                 light_rows[light], px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], t))
-                    er, eg, eb = _clamped(beta[lane, 0] * emission[mat, 0] * w, beta[lane, 1] * emission[mat, 1] * w,
-                                          beta[lane, 2] * emission[mat, 2] * w, clamp if depth > 1 else 0.0)
-                    total[lane, 0] += er
-                    total[lane, 1] += eg
-                    total[lane, 2] += eb
+                    r, g, b = _clamped(beta[lane, 0] * er * w, beta[lane, 1] * eg * w, beta[lane, 2] * eb * w, limit)
+                    _add(total, lane, r, g, b)
                 if unlit[mat, 0] > 0.0:
-                    total[lane, 0] += beta[lane, 0] * unlit[mat, 1]
-                    total[lane, 1] += beta[lane, 1] * unlit[mat, 2]
-                    total[lane, 2] += beta[lane, 2] * unlit[mat, 3]
+                    _add(total, lane, beta[lane, 0] * unlit[mat, 1], beta[lane, 1] * unlit[mat, 2],
+                         beta[lane, 2] * unlit[mat, 3])
                     alive[lane] = False
                     continue
-                # the shading frame: reflection-only models turn it to the viewer's side;
-                # transmissive ones keep the outward side (inside: wo.z < 0)
+                # the shading frame: normal maps bend the front side's normal; reflection-only
+                # models turn the frame to the viewer's side, transmissive ones keep the
+                # outward side (inside: wo.z < 0)
                 ox, oy, oz = -dx[lane], -dy[lane], -dz[lane]
                 if (nx * gx + ny * gy) + nz * gz < 0.0:
                     nx, ny, nz = -nx, -ny, -nz
+                nx, ny, nz = normal_mapped(surface, geometry, mat, prim, bu, bv, nx, ny, nz)
                 if not transmissive[mat]:
                     if (gx * ox + gy * oy) + gz * oz < 0.0:
                         gx, gy, gz, nx, ny, nz = -gx, -gy, -gz, -nx, -ny, -nz
@@ -302,27 +348,29 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, coher
                     light = light_rows[chosen]
                     wx, wy, wz, distance, lr, lg, lb, pdf_li, delta = sample_li(
                         light, env, hx, hy, hz, uniform(key, base + _LIGHT_U1), uniform(key, base + _LIGHT_U2))
+                    if light[0] == lt.TRIANGLE:
+                        # the emitter's own (textured) radiance at the sampled point
+                        face = np.int64(light[lt.FACE])
+                        b1, b2 = uniform_triangle_weights(uniform(key, base + _LIGHT_U1), uniform(key, base + _LIGHT_U2))
+                        lr, lg, lb = emission_at(surface, geometry, material_id[face], face, b1, b2)
                     if (pdf_li > 0.0) & ((lr > 0.0) | (lg > 0.0) | (lb > 0.0)):
-                        lix = (tx * wx + ty * wy) + tz * wz
-                        liy = (sx * wx + sy * wy) + sz * wz
-                        liz = (nx * wx + ny * wy) + nz * wz
-                        # light must arrive on a side the geometry lets it reach from
                         side = (gx * wx + gy * wy) + gz * wz
                         if transmissive[mat] or side > 0.0:
-                            fr, fg, fbb, pdf_bsdf = models.evaluate(tag, params, mat, albedo_table, lox, loy, loz,
-                                                                    lix, liy, liz)
+                            fr, fg, fbb, pdf_bsdf = models.evaluate(
+                                tag, scratch, lane, albedo_table, lox, loy, loz, (tx * wx + ty * wy) + tz * wz,
+                                (sx * wx + sy * wy) + sz * wz, (nx * wx + ny * wy) + nz * wz)
                             if (fr > 0.0) | (fg > 0.0) | (fbb > 0.0):
                                 p_light = light_pmf[chosen] * pdf_li
                                 w = 1.0 if delta else power_heuristic(p_light, pdf_bsdf)
                                 scale = w / p_light
-                                cr, cg, cb = _clamped(beta[lane, 0] * fr * lr * scale, beta[lane, 1] * fg * lg * scale,
-                                                      beta[lane, 2] * fbb * lb * scale, clamp if depth > 0 else 0.0)
-                                pending[lane, 0], pending[lane, 1], pending[lane, 2] = cr, cg, cb
+                                pending[lane, 0], pending[lane, 1], pending[lane, 2] = _clamped(
+                                    beta[lane, 0] * fr * lr * scale, beta[lane, 1] * fg * lg * scale,
+                                    beta[lane, 2] * fbb * lb * scale, clamp if depth > 0 else 0.0)
                                 sgx, sgy, sgz = (gx, gy, gz) if side > 0.0 else (-gx, -gy, -gz)
                                 qx, qy, qz = offset_origin(hx, hy, hz, sgx, sgy, sgz, wx, wy, wz, offset_scale)
-                                reach = F32_MAX if math.isinf(distance) else distance * _SHADOW_SHORTEN
+                                reach[lane] = F32_MAX if math.isinf(distance) else distance * _SHADOW_SHORTEN
                                 set_lane(shadow, shadow_words, lane, np.float64(qx), np.float64(qy), np.float64(qz),
-                                         wx, wy, wz, np.float32(reach))
+                                         wx, wy, wz, np.float32(reach[lane]))
                                 shadow_valid[lane] = -1
                                 shadows += 1
                 if not follow:
@@ -330,7 +378,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, coher
                     continue
                 # continue the path by sampling the BSDF
                 wx, wy, wz, gr, gg, gb, pdf, flags = models.sample(
-                    tag, params, mat, albedo_table, lox, loy, loz, uniform(key, base + _LOBE),
+                    tag, scratch, lane, albedo_table, lox, loy, loz, uniform(key, base + _LOBE),
                     uniform(key, base + _BSDF_U1), uniform(key, base + _BSDF_U2))
                 if (flags == lobes.FAILED) | (not ((gr > 0.0) | (gg > 0.0) | (gb > 0.0))):
                     alive[lane] = False
@@ -350,11 +398,12 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, coher
                 beta[lane, 2] *= gb
                 prev_pdf[lane] = pdf
                 prev_delta[lane] = (flags & lobes.DELTA) != 0
-                if transmissive[mat] and side < 0.0 and (flags & lobes.TRANSMISSION):
-                    # into the interior (the outward normal faces away from the new ray)
-                    sigma[lane, 0], sigma[lane, 1], sigma[lane, 2] = absorption[mat, 0], absorption[mat, 1], absorption[mat, 2]
-                elif transmissive[mat] and (flags & lobes.TRANSMISSION):
-                    sigma[lane, 0] = sigma[lane, 1] = sigma[lane, 2] = 0.0
+                if transmissive[mat] and (flags & lobes.TRANSMISSION):
+                    if side < 0.0:  # into the interior (the outward normal faces away from the new ray)
+                        sigma[lane, 0], sigma[lane, 1], sigma[lane, 2] = (absorption[mat, 0], absorption[mat, 1],
+                                                                          absorption[mat, 2])
+                    else:
+                        sigma[lane, 0] = sigma[lane, 1] = sigma[lane, 2] = 0.0
                 if depth + 1 >= rr_depth:
                     q = max(beta[lane, 0], max(beta[lane, 1], beta[lane, 2]))
                     if q < 1.0:
@@ -368,15 +417,20 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, coher
                 qx, qy, qz = offset_origin(hx, hy, hz, sgx, sgy, sgz, ndx, ndy, ndz, offset_scale)
                 px[lane], py[lane], pz[lane] = np.float64(qx), np.float64(qy), np.float64(qz)
                 dx[lane], dy[lane], dz[lane] = ndx, ndy, ndz
+                lane_depth[lane] = depth + 1
             if shadows:
                 counts[SHADOW] += shadows
-                occluded16(shadow_valid.ctypes.data, scene, shadow.ctypes.data, args_incoherent.ctypes.data)
-                for lane in range(LANES):
-                    if shadow_valid[lane] and not shadow[TFAR * LANES + lane] == -np.inf:
-                        total[lane, 0] += pending[lane, 0]
-                        total[lane, 1] += pending[lane, 1]
-                        total[lane, 2] += pending[lane, 2]
-            depth += 1
+                if cutouts:
+                    _shadows_through_cutouts(intersect16, scene, args_incoherent, shadow, shadow_words, shadow_valid,
+                                             geometry, surface, offset_scale, keys, start, lane_depth, reach, counts)
+                    for lane in range(LANES):
+                        if shadow_valid[lane]:
+                            _add(total, lane, pending[lane, 0], pending[lane, 1], pending[lane, 2])
+                else:
+                    occluded16(shadow_valid.ctypes.data, scene, shadow.ctypes.data, args_incoherent.ctypes.data)
+                    for lane in range(LANES):
+                        if shadow_valid[lane] and not shadow[TFAR * LANES + lane] == -np.inf:
+                            _add(total, lane, pending[lane, 0], pending[lane, 1], pending[lane, 2])
         for lane in range(count):
             radiance[start + lane, 0] = total[lane, 0]
             radiance[start + lane, 1] = total[lane, 1]

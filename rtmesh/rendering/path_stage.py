@@ -1,26 +1,30 @@
 """The path integrator's stage: what a scene builds once for the compiled path kernel
 (:mod:`rtmesh.rendering.path_kernel`) and what each chunk hands it.
 
-The scene's part (material tables, emission, geometry rows) is formed once per
-:class:`~rtmesh.rendering.integrator.Integrator`; the view's part (the light table, with
-the lights and the background of the view) once per view.  Per chunk, the camera rays come
-from the camera (every sampler, depth of field, orthographic), then one kernel call traces
-every path of the chunk.
+The scene's part (material, texture and geometry tables: the kernel's ``geometry`` and
+``surface`` records) is formed once per :class:`~rtmesh.rendering.integrator.Integrator`;
+the view's part (the light table, with the lights and the background of the view) once per
+view.  Per chunk, the camera rays come from the camera (every sampler, depth of field,
+orthographic), then one kernel call traces every path of the chunk.
 
 What the path integrator does not render yet gives one clear error when the render is set
-up (a :class:`~rtmesh.core.errors.SceneError`), never a wrong image: motion blur, alpha
-cut-outs, image textures and normal maps, projector lights.
+up (a :class:`~rtmesh.core.errors.SceneError`), never a wrong image: motion blur and
+projector lights.
 """
 
 import numpy as np
 
 from rtmesh.core.errors import SceneError
+from rtmesh.geometry.cutouts import CutoutAccel
+from rtmesh.io.texture_atlas import TextureAtlas
 from rtmesh.lights.environment import EnvironmentLighting
 from rtmesh.lights.light_table import EnvironmentTables, LightTable
 from rtmesh.lights.mesh_lights import MeshLight
 from rtmesh.materials import ggx_albedo
-from rtmesh.materials.models import material_rows
+from rtmesh.materials.models import SLOTS, material_rows
 from rtmesh.rendering.path_kernel import BOUNCE, CAMERA, SHADOW, trace_paths
+from rtmesh.rendering.path_surfaces import TEXTURE_COLUMNS
+from rtmesh.rendering.surface_textures import corner_and_edges, face_tangents
 from rtmesh.sampling.hashing import mix64, path_key
 
 # vertices a path takes before Russian roulette may end it (pbrt-v4 starts at its second)
@@ -30,20 +34,68 @@ RR_DEPTH = 3
 def unsupported(it):
     """What of the scene and settings the path integrator cannot render yet (a list of
     phrases, empty when it can render everything)."""
-    m = it.scene.materials
     missing = []
     if it.motion is not None:
         missing.append("motion blur")
-    if it.cutouts is not None:
-        missing.append("alpha cut-outs")
-    if m.any_texture or bool(it.textures):
-        missing.append("image textures and vertex colours")
-    if not it.accel.packets:
+    elif not _packet_accel(it.accel).packets:
         missing.append("the single-ray Embree path (RTMESH_EMBREE=run)")
     if any(not isinstance(light, MeshLight) and not hasattr(light, "corner") and not hasattr(light, "radius")
            and light.kernel_row() is None for light in it.view_lights):
         missing.append("projector lights")
     return missing
+
+
+def _packet_accel(accel):
+    """The Embree scene under a cut-out wrapper (the kernel handles cut-outs itself)."""
+    return accel.accel if isinstance(accel, CutoutAccel) else accel
+
+
+def _scene_tables(scene, triangles, faces):
+    """The kernel's ``geometry`` and ``surface`` records of a scene (see
+    :mod:`rtmesh.rendering.path_surfaces`), and the per-face emission for the light table."""
+    m = scene.materials
+    tags, params, transmissive = material_rows(m.materials)
+    unlit = np.zeros((len(m), 4))
+    unlit[:, 0] = m.unlit
+    unlit[:, 1:] = m.diffuse
+    textures = []
+    for material in m.materials:
+        for name in TEXTURE_COLUMNS:
+            texture = getattr(material, name)
+            if texture is not None and not any(texture is known for known in textures):
+                textures.append(texture)
+    atlas = TextureAtlas(textures)
+    material_textures = np.array([[atlas.index(getattr(material, name)) for name in TEXTURE_COLUMNS]
+                                  for material in m.materials], dtype=np.int64).reshape(len(m), len(TEXTURE_COLUMNS))
+    if scene.uv is None:
+        material_textures[:] = -1  # no coordinates to read them with
+    # the Whitted metal tint of specular and mirror colours (glTF materials use metallic in their BRDF)
+    metal_tint = np.where(m.physical, 0.0, m.metallic)
+    if scene.vertex_normals is not None:
+        vertex_normals = np.ascontiguousarray(scene.vertex_normals, dtype=np.float64)
+        smooth = (np.ones(len(faces), bool) if scene.smooth is None else np.ascontiguousarray(scene.smooth, dtype=bool))
+    else:
+        vertex_normals, smooth = np.zeros((0, 3)), np.zeros(0, bool)
+    face_uv = np.zeros((0, 6)) if scene.uv is None else np.ascontiguousarray(corner_and_edges(scene.uv, scene.faces))
+    face_colours = (np.zeros((0, 12)) if scene.vertex_colors is None
+                    else np.ascontiguousarray(corner_and_edges(scene.vertex_colors, scene.faces)))
+    normal_mapped = scene.uv is not None and (material_textures[:, TEXTURE_COLUMNS.index("normal_texture")] >= 0).any()
+    tangents = (np.ascontiguousarray(face_tangents(scene.vertices, scene.faces, scene.uv)) if normal_mapped
+                else np.zeros((0, 6)))
+    material_id = np.ascontiguousarray(scene.material_id, dtype=np.int32)
+    geometry = (np.ascontiguousarray(triangles), np.ascontiguousarray(scene.face_normals, dtype=np.float64),
+                vertex_normals, np.ascontiguousarray(faces), smooth, material_id, face_uv, face_colours, tangents)
+    surface = (tags, params, transmissive, np.ascontiguousarray(m.emission), np.ascontiguousarray(m.absorption),
+               unlit, ggx_albedo.table(), SLOTS, material_textures, np.ascontiguousarray(metal_tint, dtype=np.float64),
+               np.ascontiguousarray(m.alpha_mode, dtype=np.int64), np.ascontiguousarray(m.alpha_cutoff),
+               np.ascontiguousarray(m.opacity), atlas.texels, atlas.descriptors)
+    # what each face emits on average (emission textures by their mean), for choosing lights by power
+    mean_tint = np.array([np.ones(3) if material.emission_texture is None or scene.uv is None else
+                          np.asarray(material.emission_texture.pixels, dtype=np.float64).reshape(
+                              -1, material.emission_texture.channels)[:, :3].mean(axis=0)
+                          for material in m.materials]).reshape(-1, 3)
+    face_emission = (m.emission * mean_tint)[material_id]
+    return geometry, surface, face_emission
 
 
 class PathStage:
@@ -67,35 +119,17 @@ class PathStage:
                              + " yet; use integrator = 'whitted'")
         self.it = it
         scene, settings = it.scene, it.settings
-        m = scene.materials
-        self.tags, self.params, self.transmissive = material_rows(m.materials)
-        self.emission = np.ascontiguousarray(m.emission)
-        self.absorption = np.ascontiguousarray(m.absorption)
-        self.unlit = np.zeros((len(m), 4))
-        self.unlit[:, 0] = m.unlit
-        self.unlit[:, 1:] = m.diffuse
-        accel = it.accel
-        self.triangles = np.ascontiguousarray(accel.triangles)
-        self.face_normals = np.ascontiguousarray(scene.face_normals, dtype=np.float64)
-        self.faces = np.ascontiguousarray(accel.faces)
-        self.material_id = np.ascontiguousarray(scene.material_id, dtype=np.int32)
-        if scene.vertex_normals is not None:
-            self.vertex_normals = np.ascontiguousarray(scene.vertex_normals, dtype=np.float64)
-            self.smooth = (np.ones(len(self.faces), bool) if scene.smooth is None
-                           else np.ascontiguousarray(scene.smooth, dtype=bool))
-        else:
-            self.vertex_normals = np.zeros((0, 3))
-            self.smooth = np.zeros(0, bool)
-        self.albedo_table = ggx_albedo.table()
+        accel = _packet_accel(it.accel)
+        self.geometry, self.surface, face_emission = _scene_tables(scene, accel.triangles, accel.faces)
+        self.cutouts = it.cutouts is not None
         background = it.background
         lights_scene = background.lighting is not False and not background.is_black
         environment = None
         if not background.is_black:
             environment = EnvironmentTables(EnvironmentLighting(background, accel, settings, it.offset_scale),
                                             background)
-        self.environment = environment
         self.lights = LightTable([light for light in it.view_lights if not isinstance(light, MeshLight)],
-                                 self.triangles, self.face_normals, self.emission[self.material_id],
+                                 self.geometry[0], self.geometry[1], face_emission,
                                  environment if lights_scene else None, it.offset_scale)
         if environment is None:
             self._env = (np.zeros((1, 3, 3)), np.zeros(2), np.zeros((1, 2)), np.ones((1, 1)), 1.0, 1.0, 0.0)
@@ -131,13 +165,13 @@ class PathStage:
         counts = np.zeros(3, np.int64)
         lights = self.lights
         intersect16, occluded16, handle = self._queries
+        light_record = (lights.rows, lights.probability, lights.alias, lights.pmf, lights.face_light,
+                        lights.analytic, lights.environment)
+        options = (s.max_depth, RR_DEPTH, float(s.clamp), np.float32(it.offset_scale),
+                   not it.background.transparent, self.cutouts)
         trace_paths(intersect16, occluded16, handle, np.ascontiguousarray(origins, dtype=np.float64),
-                    np.ascontiguousarray(directions, dtype=np.float64), keys, True,
-                    self.triangles, self.face_normals, self.vertex_normals, self.faces, self.smooth, self.material_id,
-                    self.tags, self.params, self.transmissive, self.emission, self.absorption, self.unlit,
-                    self.albedo_table, lights.rows, lights.probability, lights.alias, lights.pmf, lights.face_light,
-                    lights.analytic, lights.environment, *self._env, not it.background.transparent,
-                    s.max_depth, RR_DEPTH, float(s.clamp), np.float32(it.offset_scale), radiance, counts)
+                    np.ascontiguousarray(directions, dtype=np.float64), keys, self.geometry, self.surface,
+                    light_record, self._env, options, radiance, counts)
         stats.rays["camera"] += int(counts[CAMERA])
         stats.rays["bounce"] += int(counts[BOUNCE])
         stats.rays["shadow"] += int(counts[SHADOW])

@@ -1,0 +1,209 @@
+"""What the path kernel reads at a surface hit, as compiled rows: the point and its normals,
+texture coordinates, the material's parameters scaled by its textures and vertex colours,
+normal maps, emission and opacity (alpha cut-outs).
+
+The rows take two records (tuples of arrays) that :class:`rtmesh.rendering.path_stage.PathStage`
+builds once per scene:
+
+``geometry``: ``(triangles (F, 9), face_normals (F, 3), vertex_normals (V, 3) or (0, 3),
+faces (F, 3), smooth (F,) or (0,), material_id (F,), face_uv (F, 6) or (0, 6),
+face_colours (F, 12) or (0, 12), face_tangents (F, 6) or (0, 6))`` — corners and edges
+(:func:`rtmesh.rendering.surface_textures.corner_and_edges`) of the UVs and vertex colours.
+
+``surface``: ``(tags, params, transmissive, emission, absorption, unlit, albedo_table,
+slots, textures (M, 6), metal_tint (M,), alpha_mode (M,), alpha_cutoff (M,), opacity (M,),
+texels, texture_descriptors)``: the material tables of :mod:`rtmesh.materials.models`, each
+material's texture indices in the atlas (:data:`TEXTURE_COLUMNS`; -1 none) and its
+Whitted metal tint, and the atlas (:mod:`rtmesh.io.texture_atlas`).
+
+Texturing follows :mod:`rtmesh.rendering.surface_textures` (docs/MATERIALS.md): the base
+colour texture and vertex colours scale the model's colour, its alpha and the opacity
+texture the opacity, glTF's metallic-roughness texture the roughness (green) and metalness
+(blue), the emission texture the emission; a Whitted material's ``metallic`` tints its
+specular and mirror colours by the base texture.
+"""
+
+import math
+
+from rtmesh.core.compiled import row
+from rtmesh.io.texture_atlas import texel
+from rtmesh.materials import models
+from rtmesh.materials.metallic_roughness import alpha_from_roughness_row
+from rtmesh.materials.table import ALPHA_MODES
+
+TEXTURE_COLUMNS = ("diffuse_texture", "metallic_roughness_texture", "normal_texture", "emission_texture",
+                   "specular_texture", "opacity_texture")
+BASE_TEXTURE, MR_TEXTURE, NORMAL_TEXTURE, EMISSION_TEXTURE, SPECULAR_TEXTURE, OPACITY_TEXTURE = range(6)
+OPAQUE, MASK, BLEND = (ALPHA_MODES.index(name) for name in ("opaque", "mask", "blend"))
+
+
+@row
+def surface_point(geometry, prim, bu, bv):
+    """The hit point on the float32 triangle, its unit geometric normal (winding) and its
+    unit shading normal (interpolated where the face is smooth)."""
+    triangles, face_normals, vertex_normals, faces, smooth = geometry[0], geometry[1], geometry[2], geometry[3], geometry[4]
+    tri = triangles[prim]
+    hx = tri[0] + bu * tri[3] + bv * tri[6]
+    hy = tri[1] + bu * tri[4] + bv * tri[7]
+    hz = tri[2] + bu * tri[5] + bv * tri[8]
+    gx, gy, gz = face_normals[prim, 0], face_normals[prim, 1], face_normals[prim, 2]
+    nx, ny, nz = gx, gy, gz
+    if len(smooth) and smooth[prim]:
+        f0, f1, f2 = faces[prim, 0], faces[prim, 1], faces[prim, 2]
+        w0 = 1.0 - bu - bv
+        sx = w0 * vertex_normals[f0, 0] + bu * vertex_normals[f1, 0] + bv * vertex_normals[f2, 0]
+        sy = w0 * vertex_normals[f0, 1] + bu * vertex_normals[f1, 1] + bv * vertex_normals[f2, 1]
+        sz = w0 * vertex_normals[f0, 2] + bu * vertex_normals[f1, 2] + bv * vertex_normals[f2, 2]
+        length = math.sqrt((sx * sx + sy * sy) + sz * sz)
+        if length > 0.0:
+            nx, ny, nz = sx / length, sy / length, sz / length
+    return hx, hy, hz, gx, gy, gz, nx, ny, nz
+
+
+@row
+def hit_uv(geometry, prim, bu, bv):
+    """Texture coordinates of a hit ((0, 0) without UVs)."""
+    face_uv = geometry[6]
+    if not len(face_uv):
+        return 0.0, 0.0
+    r = face_uv[prim]
+    return r[0] + bu * r[2] + bv * r[4], r[1] + bu * r[3] + bv * r[5]
+
+
+@row
+def vertex_colour(geometry, prim, bu, bv):
+    """Linear RGBA vertex colour of a hit (ones without vertex colours)."""
+    colours = geometry[7]
+    if not len(colours):
+        return 1.0, 1.0, 1.0, 1.0
+    r = colours[prim]
+    return (r[0] + bu * r[4] + bv * r[8], r[1] + bu * r[5] + bv * r[9], r[2] + bu * r[6] + bv * r[10],
+            r[3] + bu * r[7] + bv * r[11])
+
+
+@row
+def is_transparent(surface, geometry, mat, prim, bu, bv, coin):
+    """Whether a ray passes this hit of a cut-out material (mask: opacity below the cutoff;
+    blend: with probability 1 - opacity, decided by ``coin`` in [0, 1))."""
+    mode = surface[10][mat]
+    if mode == OPAQUE:
+        return False
+    alpha = surface[12][mat] * vertex_colour(geometry, prim, bu, bv)[3]
+    textures = surface[8]
+    base, opacity = textures[mat, BASE_TEXTURE], textures[mat, OPACITY_TEXTURE]
+    if (base >= 0) | (opacity >= 0):
+        u, v = hit_uv(geometry, prim, bu, bv)
+        texels, descriptors = surface[13], surface[14]
+        if base >= 0 and (descriptors[base, 3] == 2.0 or descriptors[base, 3] == 4.0):
+            alpha *= texel(texels, descriptors, base, u, v)[3]
+        if opacity >= 0:
+            alpha *= texel(texels, descriptors, opacity, u, v)[0]
+    alpha = min(max(alpha, 0.0), 1.0)
+    if mode == MASK:
+        return alpha < surface[11][mat]
+    return coin >= alpha
+
+
+@row
+def textured_row(surface, geometry, mat, prim, bu, bv, scratch, lane):
+    """Copy the material's parameter row into ``scratch[lane]`` with its textures and vertex
+    colours applied; returns the emission (r, g, b) at the hit."""
+    tags, params, emission, slots, textures = surface[0], surface[1], surface[3], surface[7], surface[8]
+    for k in range(params.shape[1]):
+        scratch[lane, k] = params[mat, k]
+    er, eg, eb = emission[mat, 0], emission[mat, 1], emission[mat, 2]
+    slot = slots[tags[mat]]
+    cr, cg, cb, _ = vertex_colour(geometry, prim, bu, bv)
+    if len(geometry[6]):
+        texels, descriptors = surface[13], surface[14]
+        u, v = hit_uv(geometry, prim, bu, bv)
+        t = textures[mat, BASE_TEXTURE]
+        if t >= 0:
+            br, bg, bb, _ = texel(texels, descriptors, t, u, v)
+            cr, cg, cb = cr * br, cg * bg, cb * bb
+            m = surface[9][mat]
+            if m > 0.0:
+                for s in (slot[models.SPECULAR_SLOT], slot[models.MIRROR_SLOT]):
+                    if s >= 0:
+                        scratch[lane, s] *= (1.0 - m) + m * br
+                        scratch[lane, s + 1] *= (1.0 - m) + m * bg
+                        scratch[lane, s + 2] *= (1.0 - m) + m * bb
+        t = textures[mat, SPECULAR_TEXTURE]
+        s = slot[models.SPECULAR_SLOT]
+        if t >= 0 and s >= 0:
+            sr, sg, sb, _ = texel(texels, descriptors, t, u, v)
+            scratch[lane, s] *= sr
+            scratch[lane, s + 1] *= sg
+            scratch[lane, s + 2] *= sb
+        t = textures[mat, MR_TEXTURE]
+        if t >= 0:
+            _, green, blue, _ = texel(texels, descriptors, t, u, v)
+            if slot[models.METALLIC_SLOT] >= 0:
+                scratch[lane, slot[models.METALLIC_SLOT]] *= blue
+            s = slot[models.ROUGHNESS_SLOT]
+            if s >= 0:
+                scratch[lane, s] *= green
+                if slot[models.ALPHA_SLOT] >= 0:
+                    scratch[lane, slot[models.ALPHA_SLOT]] = alpha_from_roughness_row(scratch[lane, s])
+        er, eg, eb = emission_at(surface, geometry, mat, prim, bu, bv)
+    s = slot[models.COLOUR_SLOT]
+    if s >= 0:
+        scratch[lane, s] *= cr
+        scratch[lane, s + 1] *= cg
+        scratch[lane, s + 2] *= cb
+    return er, eg, eb
+
+
+@row
+def emission_at(surface, geometry, mat, prim, bu, bv):
+    """Emitted radiance (r, g, b) at a point of a face: the material's, times its emission
+    texture."""
+    emission = surface[3]
+    er, eg, eb = emission[mat, 0], emission[mat, 1], emission[mat, 2]
+    t = surface[8][mat, EMISSION_TEXTURE]
+    if t >= 0 and len(geometry[6]):
+        u, v = hit_uv(geometry, prim, bu, bv)
+        tr, tg, tb, _ = texel(surface[13], surface[14], t, u, v)
+        er, eg, eb = er * tr, eg * tg, eb * tb
+    return er, eg, eb
+
+
+@row
+def normal_mapped(surface, geometry, mat, prim, bu, bv, nx, ny, nz):
+    """The shading normal (on the front side of the face) bent by the material's tangent-space
+    normal map, as :meth:`rtmesh.rendering.surface_textures.SurfaceTextures.normal_mapped`."""
+    t = surface[8][mat, NORMAL_TEXTURE]
+    tangents = geometry[8]
+    if t < 0 or not len(tangents):
+        return nx, ny, nz
+    texels, descriptors = surface[13], surface[14]
+    u, v = hit_uv(geometry, prim, bu, bv)
+    lr, lg, lb, _ = texel(texels, descriptors, t, u, v)
+    lx, ly, lz = 2.0 * lr - 1.0, 2.0 * lg - 1.0, 2.0 * lb - 1.0
+    tb = tangents[prim]
+    tx, ty, tz, bx, by, bz = tb[0], tb[1], tb[2], tb[3], tb[4], tb[5]
+    d = descriptors[t]
+    a00, a01, a10, a11 = d[6], d[7], d[9], d[10]
+    det = a00 * a11 - a01 * a10
+    if (a00 != 1.0 or a01 != 0.0 or a10 != 0.0 or a11 != 1.0) and abs(det) >= 1e-20 \
+            and (bx != 0.0 or by != 0.0 or bz != 0.0):
+        # the image axes through the texture's UV transform (transformed_tangents)
+        i00, i01, i10, i11 = a11 / det, -a01 / det, -a10 / det, a00 / det
+        tx, ty, tz, bx, by, bz = (tx * i00 + bx * i10, ty * i00 + by * i10, tz * i00 + bz * i10,
+                                  tx * i01 + bx * i11, ty * i01 + by * i11, tz * i01 + bz * i11)
+    dn = (nx * tx + ny * ty) + nz * tz
+    tx, ty, tz = tx - nx * dn, ty - ny * dn, tz - nz * dn
+    length = math.sqrt((tx * tx + ty * ty) + tz * tz)
+    if not length > 0.0:
+        return nx, ny, nz
+    tx, ty, tz = tx / length, ty / length, tz / length
+    cx, cy, cz = ny * tz - nz * ty, nz * tx - nx * tz, nx * ty - ny * tx
+    handed = -1.0 if (cx * bx + cy * by) + cz * bz < 0.0 else 1.0
+    mx = lx * tx + handed * ly * cx + lz * nx
+    my = lx * ty + handed * ly * cy + lz * ny
+    mz = lx * tz + handed * ly * cz + lz * nz
+    length2 = (mx * mx + my * my) + mz * mz
+    if not length2 > 0.0:  # an unusable texel (zero vector) keeps the interpolated normal
+        return nx, ny, nz
+    inv = 1.0 / math.sqrt(length2)
+    return mx * inv, my * inv, mz * inv
