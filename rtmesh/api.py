@@ -6,7 +6,7 @@ import os
 import trimesh
 
 from rtmesh.core.errors import SceneError
-from rtmesh.loaders.importers import load_mesh_scene, scene_from_trimesh
+from rtmesh.loaders.importers import default_integrator, load_mesh_scene, scene_from_trimesh
 from rtmesh.loaders.scene_file import read_scene_file
 from rtmesh.rendering.integrator import Integrator
 from rtmesh.rendering.settings import RenderSettings
@@ -35,9 +35,12 @@ def load_scene(source, check_settings=None, **settings):
     settings : RenderSettings
     """
     overrides = {k: v for k, v in settings.items() if v is not None}
-    if not isinstance(source, (trimesh.Trimesh, trimesh.Scene)) and \
-            os.path.splitext(os.fspath(source))[1].lower() in SCENE_EXTENSIONS:
+    in_memory = isinstance(source, (trimesh.Trimesh, trimesh.Scene))
+    if not in_memory and os.path.splitext(os.fspath(source))[1].lower() in SCENE_EXTENSIONS:
         return read_scene_file(source, overrides, check_settings)
+    if not in_memory:
+        # glTF renders path traced unless asked otherwise; other mesh files with Whitted
+        overrides.setdefault("integrator", default_integrator(source))
     base = RenderSettings(**overrides)
     try:
         base.validate()
@@ -47,10 +50,11 @@ def load_scene(source, check_settings=None, **settings):
         check_settings(base)
     # the automatic camera frames the bounds for the image's aspect ratio
     aspect = base.width / base.height
-    if isinstance(source, (trimesh.Trimesh, trimesh.Scene)):
-        scene = scene_from_trimesh(source, aspect=aspect)
+    physical = base.integrator == "path"
+    if in_memory:
+        scene = scene_from_trimesh(source, aspect=aspect, physical=physical)
     else:
-        scene = load_mesh_scene(source, aspect=aspect)
+        scene = load_mesh_scene(source, aspect=aspect, physical=physical)
     return scene, base
 
 

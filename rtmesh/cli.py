@@ -74,8 +74,9 @@ def build_parser():
     p.add_argument("--max-spp", type=_positive_int, metavar="N",
                    help="adaptive sampling: at most N samples in any pixel (default 1024)")
     p.add_argument("--integrator", choices=INTEGRATORS,
-                   help="light transport: whitted (Blinn-Phong, lights, mirrors and glass; the default) or "
-                   "path (physically based path tracing with global illumination)")
+                   help="light transport: whitted (Blinn-Phong, lights, mirrors and glass) or path (physically "
+                   "based path tracing with global illumination); default: path for glTF/GLB files, the scene "
+                   "file's [render] integrator (whitted when silent), whitted for other mesh files")
     p.add_argument("--max-depth", type=int,
                    help="whitted: reflection/refraction bounces (default 5); path: segments after the "
                    "camera ray, 1 = direct light only, -1 = unlimited (the default)")
@@ -238,8 +239,9 @@ def _add_batch_parser(commands):
     p.add_argument("--ortho", action="store_true",
                    help="orthographic cameras for the fixed views (front/top/side CAD views)")
     p.add_argument("--seed", type=int, default=0, help="random seed")
-    p.add_argument("--integrator", choices=INTEGRATORS, default="whitted",
-                   help="light transport: whitted (default) or path (path tracing)")
+    p.add_argument("--integrator", choices=INTEGRATORS,
+                   help="light transport: whitted or path (path tracing); default: path for glTF/GLB, "
+                   "whitted for other files")
     p.add_argument("--max-depth", type=int,
                    help="whitted: reflection/refraction bounces (default 5); path: segments after the "
                    "camera ray (default -1, unlimited)")
@@ -340,7 +342,7 @@ def cmd_render(args):
         finally:
             bar.close()
     write_image(args.output, result.image, result.passes, settings.exposure, settings.tonemap,
-                alpha=result.alpha)
+                alpha=result.alpha, header=settings.header())
     if args.camera_json:
         write_camera_json(args.camera_json, camera_record(scene.camera, settings.width, settings.height,
                                                           scene.bounds))

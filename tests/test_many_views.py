@@ -100,7 +100,8 @@ def test_physical_assets_get_the_studio_turned_to_each_view(tmp_path):
     result = worker.run_job(worker.AssetJob("ball.glb", str(mesh), str(tmp_path), fields, tasks))
     assert [i["status"] for i in result["images"]] == ["done"] * 2
     parts, materials, bounds, _ = worker._load(worker.AssetJob("ball.glb", str(mesh), str(tmp_path), fields, ()))
-    rs = worker.RenderSettings(**fields).validate()
+    # a glTF asset in a batch renders with the path integrator unless the batch says otherwise
+    rs = worker.RenderSettings(**fields, integrator="path").validate()
     rotations = []
     for view in views:
         scene = worker._scene_for_view(parts, materials, bounds, view, rs, False)

@@ -170,3 +170,18 @@ def test_max_depth_defaults_follow_the_integrator():
         RenderSettings(max_depth=-1).validate()
     with pytest.raises(ValueError, match="integrator"):
         RenderSettings(integrator="bidirectional").validate()
+
+
+def test_the_exr_header_records_the_render_settings(tmp_path, sphere):
+    import OpenImageIO as oiio
+
+    from rtmesh.io.images import write_image
+
+    settings = RenderSettings(width=4, height=4, spp=3, seed=11, integrator="path").validate()
+    path = tmp_path / "out.exr"
+    write_image(path, np.zeros((4, 4, 3)), header=settings.header())
+    spec = oiio.ImageInput.open(str(path)).spec()
+    assert spec.getattribute("rtmesh:integrator") == "path"
+    assert spec.getattribute("rtmesh:spp") == 3
+    assert spec.getattribute("rtmesh:seed") == "11"
+    assert spec.getattribute("rtmesh:max_depth") == -1

@@ -116,7 +116,7 @@ class BatchOptions:
     passes: tuple = ()
     seed: int = 0
     max_depth: int | None = None
-    integrator: str = "whitted"
+    integrator: str | None = None
     exposure: float = 0.0
     tonemap: str = "reinhard"
     ground: bool = False
@@ -196,10 +196,13 @@ class BatchOptions:
     def render_fields(self, overrides):
         """RenderSettings fields for one asset (``overrides`` from its CSV row)."""
         pick = {k: overrides.get(k, getattr(self, k)) for k in ("width", "height", "spp", "seed")}
-        return {**pick, "passes": tuple(overrides.get("passes", self.passes)),
-                "max_depth": self.max_depth, "integrator": self.integrator, "exposure": self.exposure,
-                "tonemap": self.tonemap,
-                "threads": self.threads}
+        fields = {**pick, "passes": tuple(overrides.get("passes", self.passes)),
+                  "max_depth": self.max_depth, "exposure": self.exposure, "tonemap": self.tonemap,
+                  "threads": self.threads}
+        if self.integrator is not None:
+            # unset, each asset takes its file's default (rtmesh.loaders.importers.default_integrator)
+            fields["integrator"] = self.integrator
+        return fields
 
 
 def check_names(what, names, allowed):

@@ -25,7 +25,7 @@ from rtmesh.batch.publish import discard
 from rtmesh.core.errors import RtmeshError
 from rtmesh.io.atomic_files import staged
 from rtmesh.io.images import write_depth_png, write_display_image, write_image
-from rtmesh.loaders.importers import load_trimesh, parts_from_trimesh
+from rtmesh.loaders.importers import default_integrator, load_trimesh, parts_from_trimesh
 from rtmesh.materials.table import Material, MaterialTable
 from rtmesh.rendering.integrator import Integrator
 from rtmesh.rendering.settings import RenderSettings
@@ -279,7 +279,11 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
         return _job_result(job, results, start, superseded=True)
 
     try:
-        settings = RenderSettings(**job.settings).validate()
+        fields = dict(job.settings)
+        if fields.get("integrator") is None:
+            # glTF path traced, other files with Whitted, unless the batch asks for one
+            fields["integrator"] = default_integrator(job.path)
+        settings = RenderSettings(**fields).validate()
     except (TypeError, ValueError) as exc:
         fail_all(job.images, "settings", str(exc))
         return _job_result(job, results, start)
@@ -333,7 +337,8 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
                     elif name.endswith(MASK_PNG_SUFFIX):
                         write_display_image(path, (result.passes["alpha"][:, :, :1] > 0.5).astype(np.float64))
                     else:
-                        write_image(path, result.image, result.passes, settings.exposure, settings.tonemap)
+                        write_image(path, result.image, result.passes, settings.exposure, settings.tonemap,
+                                    header=settings.header())
                 # superseded while writing: the block's temporaries are removed, not reported.
                 # The run file is read again: a run that took the folder removes the
                 # temporaries already there when it did; later ones are this task's to remove
@@ -424,6 +429,8 @@ def _integrator_for_view(built, parts, materials, bounds, view, settings, ground
     if integrator.plan.physical:
         # the studio environment turned to this view's rig camera, as the three-light rig is
         return integrator.with_view(camera, [], studio_background(_rig_camera(bounds, view, settings)))
+    if settings.integrator == "path":
+        return integrator.with_view(camera, lights, studio_background(_rig_camera(bounds, view, settings)))
     return integrator.with_view(camera, lights)
 
 
@@ -443,7 +450,7 @@ def _camera_and_lights(bounds, view, settings):
         radius = max(0.5 * float(np.linalg.norm(bounds[1] - bounds[0])), 1e-6)
         camera = dataclasses.replace(camera, projection="orthographic",
                                      ortho_height=2.0 * radius / min(aspect, 1.0))
-    return camera, default_lights(_rig_camera(bounds, view, settings))
+    return camera, default_lights(_rig_camera(bounds, view, settings), physical=settings.integrator == "path")
 
 
 def _rig_camera(bounds, view, settings):
@@ -465,6 +472,11 @@ def _scene_for_view(parts, materials, bounds, view, settings, ground):
         # glTF metallic-roughness assets: the studio environment, turned to the view's rig
         # camera, instead of the three-light rig (see rtmesh.scene.studio)
         return Scene.from_parts(parts, materials, lights=[], camera=camera, ambient=np.zeros(3),
+                                background=studio_background(_rig_camera(bounds, view, settings)),
+                                source=view.name)
+    if settings.integrator == "path":
+        # the rig in the path integrator's units, with the studio environment instead of ambient light
+        return Scene.from_parts(parts, materials, lights=lights, camera=camera, ambient=np.zeros(3),
                                 background=studio_background(_rig_camera(bounds, view, settings)),
                                 source=view.name)
     return Scene.from_parts(parts, materials, lights=lights, camera=camera,

@@ -48,7 +48,7 @@ def check_output_path(path):
         raise OutputError(f"{path}: is a folder, not a file name")
 
 
-def write_image(path, image, passes=None, exposure=0.0, operator="reinhard", alpha=None):
+def write_image(path, image, passes=None, exposure=0.0, operator="reinhard", alpha=None, header=None):
     """Write a rendered image; the format follows the file extension.
 
     Parameters
@@ -72,6 +72,9 @@ def write_image(path, image, passes=None, exposure=0.0, operator="reinhard", alp
         EXR stores it as channel ``A`` (premultiplied RGBA, the OpenEXR convention); PNG as
         straight (unassociated) alpha: the colour is divided by alpha before tone mapping.
         JPEG has no alpha: the image is written over black.
+    header : dict of str to str, int or float, optional
+        Attributes written into an EXR's header (the render settings,
+        :meth:`rtmesh.rendering.settings.RenderSettings.header`); 8-bit formats leave them out.
 
     Raises
     ------
@@ -95,6 +98,8 @@ def write_image(path, image, passes=None, exposure=0.0, operator="reinhard", alp
         if "A" in names:
             spec.alpha_channel = names.index("A")
         spec.attribute("compression", "zip")
+        for name, value in (header or {}).items():
+            spec.attribute(name, value)
         pixels = channels
     else:
         straight_alpha = alpha is not None and ext == ".png"

@@ -18,7 +18,9 @@ Conventions (glTF 2.0)
   Filament, Babylon) display them: a white Lambertian surface 1 m from a 1 cd light, or
   under 1 lx, has radiance 1/pi.  rtmesh's diffuse term has no 1/pi (see
   :mod:`rtmesh.materials.table`), so ``intensity = color * candela / pi`` and
-  ``irradiance = color * lux / pi``.  Spot cone angles (radians) become rtmesh's inner
+  ``irradiance = color * lux / pi`` under the Whitted integrator; the path integrator's
+  Lambert term has the 1/pi, so there (``physical``) candela and lux map 1:1 to W/sr and
+  W/m^2.  Spot cone angles (radians) become rtmesh's inner
   and outer half-angles (degrees; rtmesh blends between them with a smoothstep in the
   cosine where glTF suggests a squared linear ramp).  ``range`` is not used (rtmesh
   lights fall off as 1/d^2 without a cut-off).
@@ -218,10 +220,10 @@ def cameras_from_gltf(doc, transform=None, source="gltf"):
     return out
 
 
-def lights_from_gltf(doc, transform=None, source="gltf"):
+def lights_from_gltf(doc, transform=None, source="gltf", physical=False):
     """rtmesh lights of the file's KHR_lights_punctual light nodes (see the module docstring
-    for the unit conversion).  ``source`` names the file in warnings (a light node with a
-    zero scale is skipped).
+    for the unit conversion; ``physical``: the path integrator's units).  ``source`` names
+    the file in warnings (a light node with a zero scale is skipped).
 
     Returns
     -------
@@ -240,9 +242,9 @@ def lights_from_gltf(doc, transform=None, source="gltf"):
             _hidden(source, "light", doc["nodes"][index])
             continue
         position, direction, _ = frame
-        # photometric value -> rtmesh units: viewers show cd / d^2 * kd / pi; rtmesh has no 1/pi
+        # photometric value -> rtmesh units: viewers show cd / d^2 * kd / pi; Whitted has no 1/pi
         power = np.asarray(spec.get("color", (1.0, 1.0, 1.0)), dtype=np.float64) * float(
-            spec.get("intensity", 1.0)) / math.pi
+            spec.get("intensity", 1.0)) / (1.0 if physical else math.pi)
         kind = spec.get("type")
         if kind == "point":
             out.append(PointLight(position, power))
@@ -256,8 +258,9 @@ def lights_from_gltf(doc, transform=None, source="gltf"):
     return out
 
 
-def file_cameras_and_lights(path, transform=None):
-    """Cameras and lights of a mesh file: empty lists unless it is glTF.
+def file_cameras_and_lights(path, transform=None, physical=False):
+    """Cameras and lights of a mesh file: empty lists unless it is glTF (lights in the path
+    integrator's units when ``physical``).
 
     Returns
     -------
@@ -274,7 +277,8 @@ def file_cameras_and_lights(path, transform=None):
         return [], []
     doc = read_gltf_json(path)
     try:
-        return cameras_from_gltf(doc, transform, source=path), lights_from_gltf(doc, transform, source=path)
+        return (cameras_from_gltf(doc, transform, source=path),
+                lights_from_gltf(doc, transform, source=path, physical=physical))
     except (KeyError, IndexError, TypeError, ValueError, AttributeError) as exc:
         # a camera or light entry that breaks the glTF schema (a bad index, a missing yfov)
         raise MeshError(f"{path}: malformed glTF camera or light: {type(exc).__name__}: {exc}") from None

@@ -522,22 +522,31 @@ def scene_from_trimesh(obj, name="mesh", **scene_options):
     parts, materials = parts_from_trimesh(obj, name)
     if not parts:
         raise MeshError(f"{name}: nothing to render (no triangles)")
-    if not any(m.model == "metallic_roughness" and not m.unlit for m in materials):
+    if not scene_options.get("physical") and not any(m.model == "metallic_roughness" and not m.unlit
+                                                      for m in materials):
         # a little ambient light for the three-light rig; the studio environment of
         # physically based assets lights them from every direction itself
         scene_options.setdefault("ambient", np.full(3, 0.05))
     return Scene.from_parts(parts, materials, source=name, **scene_options)
 
 
-def load_mesh_scene(path, **scene_options):
+def default_integrator(path):
+    """The integrator a mesh file renders with when none is asked for: ``"path"`` for glTF
+    (its format defines physically based materials and lights), ``"whitted"`` otherwise."""
+    return "path" if os.path.splitext(os.fspath(path))[1].lower() in GLTF_EXTENSIONS else "whitted"
+
+
+def load_mesh_scene(path, physical=False, **scene_options):
     """A renderable :class:`Scene` from a mesh file.
 
     A glTF file's first camera (perspective or orthographic) and its KHR_lights_punctual lights are used when
     it has them (see :mod:`rtmesh.loaders.gltf_nodes`); otherwise an automatic camera frames the
-    mesh and the default light rig lights it.
+    mesh and the default light rig lights it.  ``physical``: the scene is for the path
+    integrator (light units and the default rig, :meth:`Scene.from_parts`).
     """
     obj = load_trimesh(path)
-    cameras, lights = file_cameras_and_lights(path)
+    cameras, lights = file_cameras_and_lights(path, physical=physical)
+    scene_options["physical"] = physical
     if cameras:
         scene_options.setdefault("camera", cameras[0][1])
     if lights:

@@ -339,7 +339,8 @@ def scene_from_dict(doc, source="scene", base_dir=".", overrides=None, check_set
         parts.extend(_object_parts(r, values, where, base_dir, materials, material_index))
         if "mesh" in values:
             try:
-                cameras, lights = file_cameras_and_lights(_mesh_path(values, base_dir), _transform(values))
+                cameras, lights = file_cameras_and_lights(_mesh_path(values, base_dir), _transform(values),
+                                                          physical=settings.integrator == "path")
             except RtmeshError as exc:
                 raise r.error(f"{where}.mesh", str(exc)) from None
             file_cameras.extend(cameras)
@@ -366,7 +367,7 @@ def scene_from_dict(doc, source="scene", base_dir=".", overrides=None, check_set
         parts, materials, lights=lights, camera=camera,
         ambient=environment.get("ambient", np.zeros(3) if lights is not None else np.full(3, 0.05)),
         background=_background(r, doc, environment, base_dir),
-        source=source, aspect=settings.width / settings.height,
+        source=source, aspect=settings.width / settings.height, physical=settings.integrator == "path",
     )
     return scene, settings
 

@@ -156,6 +156,8 @@ class Integrator:
         self.ao_samples = settings.ao_samples or (16 if "ao" in settings.passes else 0)
         # what the stages read per hit (per-material colours and flags, per-face rows)
         self.tables = ShadingTables.build(scene, self.accel.triangles, self.offset_scale)
+        # the path kernel's scene records, formed by the first PathStage and shared by every view
+        self.path_tables = None
         self._set_view()
 
     def _set_background(self, background):

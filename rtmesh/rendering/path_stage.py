@@ -50,9 +50,23 @@ def _packet_accel(accel):
     return accel.accel if isinstance(accel, CutoutAccel) else accel
 
 
-def _scene_tables(scene, triangles, faces):
-    """The kernel's ``geometry`` and ``surface`` records of a scene (see
-    :mod:`rtmesh.rendering.path_surfaces`), and the per-face emission for the light table."""
+def scene_tables(scene, accel):
+    """What the path kernel reads of a scene, formed once and shared by every view: its
+    ``geometry`` and ``surface`` records (see :mod:`rtmesh.rendering.path_surfaces`) and the
+    per-face emission the light table chooses by.
+
+    Parameters
+    ----------
+    scene : Scene
+    accel : Accel or CutoutAccel
+        The built Embree scene (its float32 triangles).
+
+    Returns
+    -------
+    geometry, surface : tuples
+    face_emission : (F, 3) float64
+    """
+    triangles, faces = _packet_accel(accel).triangles, _packet_accel(accel).faces
     m = scene.materials
     tags, params, transmissive = material_rows(m.materials)
     unlit = np.zeros((len(m), 4))
@@ -120,7 +134,10 @@ class PathStage:
         self.it = it
         scene, settings = it.scene, it.settings
         accel = _packet_accel(it.accel)
-        self.geometry, self.surface, face_emission = _scene_tables(scene, accel.triangles, accel.faces)
+        if it.path_tables is None:
+            # formed with the integrator's first view; views made by with_view share them
+            it.path_tables = scene_tables(scene, it.accel)
+        self.geometry, self.surface, face_emission = it.path_tables
         self.cutouts = it.cutouts is not None
         background = it.background
         lights_scene = background.lighting is not False and not background.is_black

@@ -182,6 +182,19 @@ class RenderSettings:
                 raise ValueError(message)
         return self
 
+    def header(self):
+        """What an EXR's header records of the render: integrator, samples, seed, depth,
+        sampler and the rtmesh version (``rtmesh:`` attributes)."""
+        from importlib import metadata
+
+        try:
+            version = metadata.version("rtmesh")
+        except metadata.PackageNotFoundError:  # running from a source tree
+            version = "unknown"
+        return {"rtmesh:version": version, "rtmesh:integrator": self.integrator, "rtmesh:spp": int(self.spp),
+                "rtmesh:seed": str(self.seed), "rtmesh:max_depth": int(self.max_depth),
+                "rtmesh:sampler": self.sampler}
+
     @property
     def adaptive(self):
         """True when the render refines noisy pixels in rounds (see :mod:`rtmesh.rendering.adaptive`)."""

@@ -125,7 +125,7 @@ class Scene:
 
     @classmethod
     def from_parts(cls, parts, materials=None, lights=None, camera=None, ambient=None,
-                   background=None, source="scene", aspect=1.0):
+                   background=None, source="scene", aspect=1.0, physical=False):
         """Flatten mesh parts into one scene, dropping faces that cannot render.
 
         Faces that touch a non-finite vertex or have zero area are removed with a warning
@@ -150,6 +150,11 @@ class Scene:
             Where the parts came from, for error messages.
         aspect : float
             Image width / height the automatic camera frames the bounds for.
+        physical : bool
+            The scene is rendered by the path integrator: the default rig's irradiances
+            are multiplied by pi (its Lambert term has the 1/pi the Whitted one lacks, so a
+            white surface under the key light looks the same) and, without a ``background``,
+            the studio environment lights the scene as well (no ambient term).
 
         Raises
         ------
@@ -263,6 +268,10 @@ class Scene:
         if lights is None:
             if scene.materials.any_physical and background is None:
                 scene.lights, scene.background = [], studio_background(scene.camera)
+            elif physical:
+                scene.lights = default_lights(scene.camera, physical=True)
+                if background is None:
+                    scene.background = studio_background(scene.camera)
             else:
                 scene.lights = default_lights(scene.camera)
         return scene
@@ -317,7 +326,7 @@ def _unit_vertex_normals(vertex_normals, vertices, faces):
     return build_kernels.unit_rows(vn, faces)
 
 
-def default_lights(camera):
+def default_lights(camera, physical=False):
     """A three-light rig (key, fill, rim) of directional lights placed relative to the camera.
 
     Directional lights make the rig independent of the scene's scale.
@@ -325,6 +334,9 @@ def default_lights(camera):
     Parameters
     ----------
     camera : Camera
+    physical : bool
+        For the path integrator: irradiances times pi (its Lambert term has the 1/pi the
+        Whitted one lacks, so a white surface under the key light looks the same).
 
     Returns
     -------
@@ -334,8 +346,9 @@ def default_lights(camera):
     key = forward - 0.8 * right - 0.9 * up  # from upper left, in front of the subject
     fill = forward + 0.9 * right - 0.2 * up  # from the right, weaker
     rim = -forward - 0.3 * right - 0.8 * up  # from behind, separates the silhouette
+    scale = np.pi if physical else 1.0
     return [
-        DirectionalLight(key, irradiance=np.full(3, 1.0)),
-        DirectionalLight(fill, irradiance=np.full(3, 0.35)),
-        DirectionalLight(rim, irradiance=np.full(3, 0.5)),
+        DirectionalLight(key, irradiance=np.full(3, 1.0 * scale)),
+        DirectionalLight(fill, irradiance=np.full(3, 0.35 * scale)),
+        DirectionalLight(rim, irradiance=np.full(3, 0.5 * scale)),
     ]
