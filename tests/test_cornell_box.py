@@ -66,3 +66,44 @@ def test_cornell_box_camera_is_the_published_one(cornell):
     np.testing.assert_array_equal(camera.up, [0, 1, 0])
     assert camera.fov == 39.3 and camera.aperture == 0 and camera.projection == "perspective"
     assert settings.width == settings.height
+
+
+DATA = Path(__file__).resolve().parent / "data"
+
+
+@pytest.fixture(scope="module")
+def references():
+    from rtmesh.io.images import read_image
+
+    images = {}
+    for name in ("cornell_mitsuba_128", "cornell_mitsuba_128_direct"):
+        image, channels = read_image(DATA / f"{name}.exr")
+        assert channels == ["R", "G", "B"] and image.shape == (128, 128, 3)
+        images[name] = image.astype(np.float64)
+    return images
+
+
+def test_cornell_references_are_linear_radiance_with_row_0_at_the_top(references):
+    full, direct = references["cornell_mitsuba_128"], references["cornell_mitsuba_128_direct"]
+    for image in (full, direct):
+        assert np.isfinite(image).all() and image.min() >= 0
+    # seen directly, the light shows its radiance: exactly (17, 12, 4) with direct light only
+    # (nothing lights the light's own surface), a little more with its reflection of the box
+    bright = direct[..., 0] > 16
+    assert 40 < bright.sum() < 150
+    # pixels whose eight neighbours see the light too lie wholly on it
+    lit = bright.copy()
+    lit[1:-1, 1:-1] &= np.all([np.roll(bright, (dy, dx), axis=(0, 1))[1:-1, 1:-1]
+                               for dy in (-1, 0, 1) for dx in (-1, 0, 1)], axis=0)
+    assert lit.sum() > 10
+    np.testing.assert_allclose(direct[lit], np.tile([17, 12, 4], (lit.sum(), 1)), rtol=1e-5)
+    assert (full[lit] > direct[lit]).all()
+    # the light is in the top rows, centred; the red wall on the left, the green one on the right
+    rows, cols = np.nonzero(bright)
+    assert 12 < rows.min() and rows.max() < 24 and abs(cols.mean() - 63.5) < 2
+    middle = full[40:90]
+    assert (middle[:, 2:10, 0] > 3 * middle[:, 2:10, 1]).all()
+    assert (middle[:, -10:-2, 1] > 1.5 * middle[:, -10:-2, 0]).all()  # a warm light on green
+    # indirect light adds about a third to the direct image
+    ratio = full.mean(axis=(0, 1)) / direct.mean(axis=(0, 1))
+    assert ((ratio > 1.1) & (ratio < 1.6)).all()

@@ -1,5 +1,6 @@
 #!/bin/sh
-# Install the peer renderers for tools/bench_peers.py in a venv of their own.
+# Install the peer renderers for tools/bench_peers.py, tools/bench_pbr_peers.py and
+# tools/peers_mitsuba_cornell.py in a venv of their own.
 #
 # Mitsuba 3 is a benchmark peer, never a dependency of rtmesh: it goes into a separate
 # virtual environment (default /tmp/peers-venv; pass another path as the first argument).
