@@ -28,52 +28,24 @@ render threads, a short GIL switch interval while they run, glibc keeping freed 
 
 Usage::
 
-    python tools/bench_core.py [--width 512] [--height 512] [--runs 7] [--no-write]
+    python -m benchmarks.bench_core [--width 512] [--height 512] [--runs 7] [--no-write]
 """
 
 import argparse
 import datetime
-import os
-import platform
-import re
-import time
 from concurrent.futures import ThreadPoolExecutor
-from pathlib import Path
 
 import numpy as np
-import trimesh
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
+from benchmarks._lib import machine, publish, seconds, sphere_scene
 from rtmesh.core import runtime
 from rtmesh.geometry import embree_library, embree_packets
-from rtmesh.lights.point_lights import PointLight
-from rtmesh.materials.table import Material
 from rtmesh.rendering.integrator import Integrator
 from rtmesh.rendering.settings import RenderSettings
-from rtmesh.scene.camera import Camera
-from rtmesh.scene.model import MeshPart, Scene
 
 SECTION = "Core renderer vs raw Embree"
-DOC = Path(__file__).resolve().parent.parent / "docs" / "BENCHMARKS.md"
-
-
-def benchmark_scene():
-    """The benchmark scene: icosphere (5 subdivisions, radius 1, centre (0, 0, 1), smooth
-    normals) on a 20 x 20 ground quad at z = 0, a point light at (3, -3, 6), a 45 degree
-    camera at (0, -4, 2.5) looking at (0, 0, 0.8); diffuse albedo 0.7."""
-    sphere = trimesh.creation.icosphere(subdivisions=5)
-    sphere.apply_translation([0, 0, 1])
-    ground_v = np.array([[-10, -10, 0], [10, -10, 0], [10, 10, 0], [-10, 10, 0]], dtype=float)
-    parts = [
-        MeshPart("sphere", sphere.vertices, sphere.faces, 0, sphere.vertex_normals),
-        MeshPart("ground", ground_v, np.array([[0, 1, 2], [0, 2, 3]]), 1),
-    ]
-    materials = [Material("sphere", diffuse=0.7, specular=0.3, shininess=50),
-                 Material("ground", diffuse=0.7)]
-    camera = Camera([0, -4, 2.5], [0, 0, 0.8], [0, 0, 1], 45)
-    return Scene.from_parts(parts, materials, [PointLight([3, -3, 6], 40)], camera,
-                            ambient=[0.05] * 3)
 
 
 class RayRecorder:
@@ -172,58 +144,13 @@ def packet_runner(accel, calls, threads):
     return lambda: list(pool.map(trace, shares))
 
 
-def seconds(fn):
-    start = time.perf_counter()
-    fn()
-    return time.perf_counter() - start
-
-
-def machine():
-    model = "unknown CPU"
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    model = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    # the 1-minute load average says how busy the (shared) machine was at the start
-    return (f"{os.cpu_count()} CPUs (nproc), {model}, Python {platform.python_version()}, "
-            f"NumPy {np.__version__}, load average {os.getloadavg()[0]:.1f} at the start")
-
-
 def command(args):
     """The command line that reproduces this run (non-default options only)."""
-    words = ["python tools/bench_core.py"]
+    words = ["python -m benchmarks.bench_core"]
     for name, default in (("width", 512), ("height", 512), ("runs", 7)):
         if getattr(args, name) != default:
             words.append(f"--{name} {getattr(args, name)}")
     return " ".join(words)
-
-
-def write_section(text, section=SECTION):
-    """Replace (or append) the section ``## <section>`` of docs/BENCHMARKS.md with ``text``.
-
-    Every benchmark tool writes its own section through this; the others are kept.
-    """
-    DOC.parent.mkdir(exist_ok=True)
-    old = DOC.read_text() if DOC.exists() else "# Benchmarks\n"
-    pattern = re.compile(rf"^## {re.escape(section)}\n.*?(?=^## |\Z)", re.S | re.M)
-    if pattern.search(old):
-        # the pattern takes the blank line before the next section with it: put it back
-        new = pattern.sub(lambda _: text.rstrip("\n") + "\n\n", old)
-    else:
-        new = old.rstrip("\n") + "\n\n" + text
-    DOC.write_text(new.rstrip("\n") + "\n")
-
-
-def publish(text, section=SECTION, write=True):
-    """Print a benchmark's section and, if ``write``, put it into docs/BENCHMARKS.md."""
-    print(text)
-    if write:
-        write_section(text, section)
-        print(f"written to {DOC}")
 
 
 def main():
@@ -236,7 +163,7 @@ def main():
     # measure rtmesh as the rtmesh command runs it: in a process tuned for rendering
     runtime.tune_process()
 
-    scene = benchmark_scene()
+    scene = sphere_scene(peer=False)
     integrators = {
         threads: Integrator(scene, RenderSettings(width=args.width, height=args.height, spp=1,
                                                   sampler="regular", threads=threads))
@@ -345,7 +272,7 @@ def main():
         f"- rtmesh 1-thread stage times, ms: {stage_text}",
         "",
     ])
-    publish(text, write=not args.no_write)
+    publish(text, SECTION, write=not args.no_write)
 
 
 if __name__ == "__main__":

@@ -2,33 +2,32 @@
 
 For a lit (Blinn-Phong) sphere and an absorbing glass sphere, renders the icosphere at
 rising subdivision with rtmesh and compares each image with the exact analytic sphere
-(tools/analytic_sphere.py), next to the render time: the trade-off a user picks from.
+(benchmarks/analytic_sphere.py), next to the render time: the trade-off a user picks from.
 
-    python tools/sphere_study.py --out docs/sphere_study.csv --plot docs/images/sphere_study.png
-    python tools/sphere_study.py --from-csv docs/sphere_study.csv --plot docs/images/sphere_study.png
+    python -m benchmarks.sphere_study --out docs/sphere_study.csv --plot docs/images/sphere_study.png
+    python -m benchmarks.sphere_study --from-csv docs/sphere_study.csv --plot docs/images/sphere_study.png
 
-Writes a CSV (case, subdivisions, triangles, seconds, rmse, relative_error) and, if matplotlib
-is installed, a log-log plot of error against time.
+Writes a CSV (case, subdivisions, triangles, seconds, rmse, relative_error: the RMSE over the
+reference's mean, :func:`benchmarks._lib.relative_rmse`) and, if matplotlib is installed, a
+log-log plot of error against time.
 """
 
 import argparse
 import csv
-import os
 import sys
 import time
 
 import numpy as np
 import trimesh
 
-sys.path.insert(0, os.path.dirname(__file__))
-from analytic_sphere import AnalyticSphere, render_analytic_image  # noqa: E402
-
-from rtmesh.lights.point_lights import PointLight  # noqa: E402
-from rtmesh.materials.table import Material  # noqa: E402
-from rtmesh.rendering.integrator import Integrator  # noqa: E402
-from rtmesh.rendering.settings import RenderSettings  # noqa: E402
-from rtmesh.scene.camera import Camera  # noqa: E402
-from rtmesh.scene.model import MeshPart, Scene  # noqa: E402
+from benchmarks._lib import relative_rmse
+from benchmarks.analytic_sphere import AnalyticSphere, render_analytic_image
+from rtmesh.lights.point_lights import PointLight
+from rtmesh.materials.table import Material
+from rtmesh.rendering.integrator import Integrator
+from rtmesh.rendering.settings import RenderSettings
+from rtmesh.scene.camera import Camera
+from rtmesh.scene.model import MeshPart, Scene
 
 CASES = {
     "lit": Material("lit", diffuse=[0.7, 0.5, 0.3], specular=0.4, shininess=60),
@@ -78,7 +77,6 @@ def main(argv=None):
         reference = render_analytic_image(
             AnalyticSphere(np.zeros(3), 1.0, material, LIGHTS, AMBIENT, BACKGROUND),
             CAMERA, args.size, args.size, max_depth=5)
-        scale = float(np.sqrt(np.mean(reference.astype(np.float64) ** 2)))
         for subdivisions in range(args.max_subdivisions + 1):
             scene = icosphere_scene(material, subdivisions)
             settings = RenderSettings(width=args.size, height=args.size, spp=1, sampler="regular",
@@ -87,11 +85,12 @@ def main(argv=None):
             integrator.render()  # warm-up
             seconds, result = median_time(integrator.render, args.runs)
             rmse = float(np.sqrt(np.mean((result.image.astype(np.float64) - reference) ** 2)))
+            relative = relative_rmse(result.image, reference)
             rows.append({"case": case, "subdivisions": subdivisions, "triangles": len(scene.faces),
                          "seconds": round(seconds, 4), "rmse": f"{rmse:.5g}",
-                         "relative_error": f"{rmse / scale:.5g}"})
+                         "relative_error": f"{relative:.5g}"})
             print(f"{case:6s} subdiv {subdivisions}  {len(scene.faces):7d} tris  "
-                  f"{seconds:7.3f} s  RMSE {rmse:.4g}  rel {rmse / scale:.4g}", flush=True)
+                  f"{seconds:7.3f} s  RMSE {rmse:.4g}  rel {relative:.4g}", flush=True)
 
     with open(args.out, "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=list(rows[0]))

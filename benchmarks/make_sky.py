@@ -2,17 +2,15 @@
 
 A blue zenith fading to a pale horizon, a darker ground, and a sun disk (half-angle 2.5
 degrees, radiance 60) with a soft glow, in the lat-long convention of rtmesh.scene.background
-(+Y up).  Run from the repository root: ``python tools/make_sky.py``.
+(+Y up).  Run from the repository root: ``python -m benchmarks.make_sky``.
 """
 
 import os
-import sys
 
 import numpy as np
 import OpenImageIO as oiio
 
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
-from rtmesh.scene.background import latlong_directions  # noqa: E402
+from rtmesh.scene.background import latlong_directions
 
 WIDTH, HEIGHT = 256, 128
 SUN = np.array([0.45, 0.55, -0.70])  # toward the sun: up and behind a camera looking down -Z

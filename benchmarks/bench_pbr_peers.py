@@ -14,7 +14,7 @@ rendered by rtmesh and by Mitsuba 3 (``path`` integrator) from the same camera:
   a user's file (trimesh stores the base colour in 8 bits: the factors rtmesh reads, e.g.
   0.949 for 0.95, are read back from the file and given to Mitsuba);
 - light: ``point`` (intensity 25 W/sr at (2.5, 3, 3), black background) or ``env``
-  (``rtmesh/scene/studio.exr``, made by tools/make_studio.py, as background with
+  (``rtmesh/scene/studio.exr``, made by benchmarks/make_studio.py, as background with
   ``lighting = true``, unturned: the key softbox up and to the front-left of the camera; Mitsuba
   ``envmap``).
 
@@ -29,7 +29,7 @@ before they reach the point light are caustics neither renderer samples well).
 Three Mitsuba models stand for the material:
 
 - ``gltf``: the BRDF of the glTF 2.0 specification's Appendix B written as a Mitsuba BSDF in
-  Python (tools/peers_mitsuba_pbr.py, ``GltfBSDF``): GGX with alpha = roughness^2,
+  Python (benchmarks/peers_mitsuba_pbr.py, ``GltfBSDF``): GGX with alpha = roughness^2,
   height-correlated Smith visibility, Schlick Fresnel (F0 = base colour for metals, 0.04 for
   the dielectric layer, which takes ``1 - F`` from the Lambert ``base / pi`` below it).  This
   is the model rtmesh implements; the rtmesh-vs-``gltf`` error of a correct implementation
@@ -99,9 +99,9 @@ jointly, so its estimate is a little above the noise of one full-spp render.
 
 Running
 -------
-Mitsuba runs in its own venv (``sh tools/peers_setup.sh``, default ``/tmp/peers-venv``)
-through tools/peers_mitsuba_pbr.py, launched as tools/bench_peers.py launches its worker
-(``bench_peers.mitsuba_environment``: HOME in a temporary folder, ``DRJIT_LIBLLVM_PATH``);
+Mitsuba runs in its own venv (``sh benchmarks/peers_setup.sh``; ``--venv``, default
+``$RTMESH_PEERS_VENV`` or ``/tmp/peers-venv``) through benchmarks/peers_mitsuba_pbr.py, launched
+by :func:`benchmarks._lib.run_peer` (HOME in a temporary folder, ``DRJIT_LIBLLVM_PATH``);
 variant ``llvm_ad_rgb`` (``scalar_rgb`` when asked: far slower with the Python BSDF).
 Mitsuba's images are cached in ``--cache`` (default ``/tmp/rtmesh-pbr-peers``) under a hash
 of everything they depend on (job, mesh and environment bytes, the worker's source), so a
@@ -110,13 +110,13 @@ models, signed difference) go to ``--png-dir``.
 
 Usage::
 
-    python tools/bench_pbr_peers.py [--cases 'sphere-*,check-*'] [--list] [--size 128]
+    python -m benchmarks.bench_pbr_peers [--cases 'sphere-*,check-*'] [--list] [--size 128]
                                     [--spp 256] [--point-spp 8192]
                                     [--mitsuba-spp 2048] [--mitsuba-point-spp 8192]
                                     [--models gltf,principled,roughplastic] [--variant llvm_ad_rgb]
                                     [--cache /tmp/rtmesh-pbr-peers] [--png-dir DIR] [--png-cases GLOBS]
                                     [--out docs/pbr_peers.csv] [--no-write]
-    /tmp/peers-venv/bin/python tools/peers_mitsuba_pbr.py --self-test   # checks the glTF BSDF
+    /tmp/peers-venv/bin/python -m benchmarks.peers_mitsuba_pbr --self-test   # checks the glTF BSDF
 """
 
 import argparse
@@ -140,20 +140,16 @@ import trimesh
 from trimesh.visual import TextureVisuals
 from trimesh.visual.material import PBRMaterial
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from bench_core import machine, publish  # noqa: E402
-from bench_peers import mitsuba_environment, write_ply  # noqa: E402
-
-import rtmesh  # noqa: E402
-from rtmesh.geometry.accel import Accel  # noqa: E402
-from rtmesh.io.colour import linear_to_srgb, tonemap  # noqa: E402
-from rtmesh.io.images import read_image  # noqa: E402
-from rtmesh.scene.studio import STUDIO_PATH  # noqa: E402
+import rtmesh
+from benchmarks._lib import PEERS_VENV, ROOT, machine, peer_python, publish, relative_rmse, run_peer, write_ply
+from rtmesh.geometry.accel import Accel
+from rtmesh.io.colour import linear_to_srgb, tonemap
+from rtmesh.io.images import read_image
+from rtmesh.scene.studio import STUDIO_PATH
 
 SECTION = "glTF metallic-roughness against Mitsuba 3"
-TOOLS = Path(__file__).resolve().parent
-ROOT = TOOLS.parent
-WORKER = TOOLS / "peers_mitsuba_pbr.py"
+HERE = Path(__file__).resolve().parent
+WORKER = HERE / "peers_mitsuba_pbr.py"
 STUDIO = Path(STUDIO_PATH)
 DUCK = ROOT.parent / "shared" / "assets" / "real" / "Duck.glb"
 if not DUCK.exists():
@@ -505,7 +501,7 @@ def mitsuba_job(case, model, prepared, args):
            "mesh": str(prepared["ply"]) if prepared["ply"] else None}
     identity = dict(job, name=None, mesh=file_hash(job["mesh"]) if job["mesh"] else None,
                     light=dict(light, image=file_hash(light["image"])) if "image" in light else light,
-                    variant=args.variant, worker=file_hash(WORKER), shared=file_hash(TOOLS / "peers_mitsuba.py"))
+                    variant=args.variant, worker=file_hash(WORKER), shared=file_hash(HERE / "peers_mitsuba.py"))
     key = hashlib.sha256(json.dumps(identity, sort_keys=True).encode()).hexdigest()[:20]
     job["out"] = str(Path(args.cache) / f"{key}.npz")
     return job
@@ -517,9 +513,8 @@ def run_mitsuba(jobs, args, folder):
     print(f"Mitsuba: {len(jobs) - len(todo)} of {len(jobs)} images cached in {args.cache}", flush=True)
     if not todo:
         return True
-    python = os.path.join(args.venv, "bin", "python")
-    if not os.path.exists(python):
-        print(f"bench_pbr_peers: no Mitsuba venv at {args.venv} (run `sh tools/peers_setup.sh`)")
+    if peer_python(args.venv) is None:
+        print(f"bench_pbr_peers: no Mitsuba venv at {args.venv} (run `sh benchmarks/peers_setup.sh`)")
         return False
     spec = Path(folder) / "mitsuba_jobs.json"
     spec.write_text(json.dumps(todo))
@@ -528,8 +523,8 @@ def run_mitsuba(jobs, args, folder):
     for job in todo:
         job["out"] = job["out"][:-4] + ".partial.npz"
     spec.write_text(json.dumps(todo))
-    done = subprocess.run([python, str(WORKER), str(spec), args.variant],
-                          env=mitsuba_environment(os.path.join(folder, "home")), text=True)
+    done = run_peer("peers_mitsuba_pbr", [spec, args.variant], os.path.join(folder, "home"), args.venv,
+                    capture=False)
     for job in todo:
         if os.path.exists(job["out"]):
             os.replace(job["out"], final[job["name"]])
@@ -557,7 +552,7 @@ def compare(rt_halves, mi_halves, mask, scale):
     mean = float(reference[pick].mean())
 
     def rel(a, b, factor=1.0):
-        return float(np.sqrt(np.mean((a[pick] - b[pick]) ** 2)) * factor / mean)
+        return relative_rmse(a, b, mask=mask, mean=mean) * factor
 
     rt_noise, mi_noise = rel(rt[0], rt[1], 0.5), rel(mi_halves[0], mi_halves[1], 0.5)
     return {"rel_rmse": rel(image, reference), "rtmesh_noise": rt_noise, "mitsuba_noise": mi_noise,
@@ -635,7 +630,7 @@ def main(argv=None):
                         help="Mitsuba samples per pixel under the point light: twice a square")
     parser.add_argument("--models", default=",".join(MODELS), help="Mitsuba models for the glTF cases")
     parser.add_argument("--variant", default="llvm_ad_rgb", help="Mitsuba variant (llvm_ad_rgb or scalar_rgb)")
-    parser.add_argument("--venv", default="/tmp/peers-venv")
+    parser.add_argument("--venv", default=PEERS_VENV, help="the peers' venv (benchmarks/peers_setup.sh)")
     parser.add_argument("--cache", default="/tmp/rtmesh-pbr-peers", help="folder of cached Mitsuba images")
     parser.add_argument("--png-dir", default="/tmp/rtmesh-pbr-peers/png", help="side-by-side PNGs")
     parser.add_argument("--png-cases", default="check-*,*-r0.3",
@@ -744,7 +739,7 @@ def main(argv=None):
         for r in rows:
             writer.writerow({k: (f"{v:.5g}" if isinstance(v, float) else v) for k, v in r.items()})
     print(f"written to {args.out}")
-    words = ["python tools/bench_pbr_peers.py"]
+    words = ["python -m benchmarks.bench_pbr_peers"]
     for name, default in (("cases", "*"), ("size", 128), ("spp", 256), ("point_spp", 8192), ("mitsuba_spp", 2048),
                           ("mitsuba_point_spp", 8192),
                           ("models", ",".join(MODELS)), ("variant", "llvm_ad_rgb")):
@@ -754,7 +749,7 @@ def main(argv=None):
         f"## {SECTION}",
         "",
         f"Command: `{' '.join(words)}`, rtmesh {rtmesh_version()} (Mitsuba {version} `{variant}` in its own venv, "
-        "`sh tools/peers_setup.sh`); "
+        "`sh benchmarks/peers_setup.sh`); "
         f"rows in `docs/pbr_peers.csv`; what is compared, the Mitsuba models and the metric are in the "
         f"tool's docstring.",
         "",

@@ -1,6 +1,7 @@
 """Mitsuba 3 path-traced reference of a scene file of diffuse and emissive meshes (the Cornell box).
 
-Runs inside the peers venv (``sh tools/peers_setup.sh``), never imports rtmesh. It reads the
+Runs inside the peers venv (``sh benchmarks/peers_setup.sh``), from the repository root as a
+module; never imports rtmesh. It reads the
 rtmesh scene file itself (``assets/cornell_box.toml``), so the reference sees the same
 triangles (the same OBJ files, loaded by Mitsuba's ``obj`` plugin with flat normals), the
 same camera (position, look-at, up, vertical field of view) and the same values:
@@ -12,8 +13,9 @@ same camera (position, look-at, up, vertical field of view) and the same values:
   faces the floor);
 - the integrator is Mitsuba's ``path`` (``max_depth`` -1: unbounded, Russian roulette from
   depth 5, Mitsuba's default; ``max_depth`` 2 is direct light only);
-- the film is an RGB ``hdrfilm`` with a box pixel filter (each sample counts in its own
-  pixel only, as rtmesh's film), the sampler ``independent``.
+- the camera is :func:`benchmarks.peers_mitsuba.sensor_dict`'s (a ``perspective`` sensor,
+  ``fov_axis = "y"``; an RGB ``hdrfilm`` with a box pixel filter: each sample counts in its
+  own pixel only, as in rtmesh's film), the sampler ``independent``.
 
 The samples are rendered in passes of ``--pass-spp`` with seeds ``--seed``, ``--seed`` + 1,
 ... and averaged (one render of thousands of samples a pixel would hold every sample's state
@@ -25,7 +27,7 @@ background, depth of field) is refused: the reference would no longer be the sam
 
 Usage::
 
-    /work/peers-venv/bin/python tools/peers_mitsuba_cornell.py assets/cornell_box.toml \\
+    /work/peers-venv/bin/python -m benchmarks.peers_mitsuba_cornell assets/cornell_box.toml \\
         tests/data/cornell_mitsuba_128.exr --width 128 --height 128 --spp 4096 --max-depth -1
 """
 
@@ -48,6 +50,9 @@ os.makedirs(os.environ["HOME"], exist_ok=True)
 import drjit as dr  # noqa: E402
 import mitsuba as mi  # noqa: E402
 import numpy as np  # noqa: E402
+
+from benchmarks._lib import relative_rmse  # noqa: E402
+from benchmarks.peers_mitsuba import sensor_dict  # noqa: E402
 
 CAMERA_KEYS = {"position", "look_at", "up", "fov"}
 MATERIAL_KEYS = {"diffuse", "emission"}
@@ -129,20 +134,10 @@ def scene_dict(scene, width, height, max_depth):
     dict
         For :func:`mitsuba.load_dict`.
     """
-    camera = scene["camera"]
     result = {
         "type": "scene",
         "integrator": {"type": "path", "max_depth": max_depth},
-        "sensor": {
-            "type": "perspective",
-            "fov": camera["fov"],
-            "fov_axis": "y",
-            "to_world": mi.ScalarTransform4f().look_at(origin=camera["position"], target=camera["look_at"],
-                                                       up=camera["up"]),
-            "film": {"type": "hdrfilm", "width": width, "height": height,
-                     "rfilter": {"type": "box"}, "pixel_format": "rgb", "component_format": "float32"},
-            "sampler": {"type": "independent", "sample_count": 1},
-        },
+        "sensor": sensor_dict(scene["camera"], width, height, {"type": "independent", "sample_count": 1}),
     }
     for obj in scene["objects"]:
         material = scene["materials"][obj["material"]]
@@ -179,29 +174,21 @@ def render(scene, spp, pass_spp, seed):
     return image, halves
 
 
-def block_means(image, block=8):
-    """Means of ``block`` x ``block`` pixel blocks (the image size a multiple of ``block``)."""
-    h, w, c = image.shape
-    return image.reshape(h // block, block, w // block, block, c).mean(axis=(1, 3))
-
-
 def noise(halves, block=8):
-    """Estimated relative RMSE of the full render's pixels and 8x8 block means.
+    """Estimated relative RMSE of the full render's pixels and ``block`` x ``block`` block means.
 
     The difference of two independent half renders has twice the variance of either, four
     times that of their mean: its RMSE / 2, over the image mean, estimates the full render's
-    error (RMSE over the mean, as the benchmarks measure error).
+    error (:func:`benchmarks._lib.relative_rmse`, as the benchmarks measure error).
 
     Returns
     -------
     (float, float)
-        Per pixel and per ``block`` x ``block`` block mean.
+        Per pixel and per block mean.
     """
     a, b = halves
     mean = 0.5 * (a + b).mean()
-    pixel = np.sqrt(np.mean((a - b) ** 2)) / 2 / mean
-    blocks = np.sqrt(np.mean((block_means(a, block) - block_means(b, block)) ** 2)) / 2 / mean
-    return float(pixel), float(blocks)
+    return (0.5 * relative_rmse(a, b, mean=mean), 0.5 * relative_rmse(a, b, block=block, mean=mean))
 
 
 def main():

@@ -27,24 +27,22 @@ rtmesh runs in a process tuned as the ``rtmesh`` command tunes its own
 (:func:`rtmesh.core.runtime.tune_process`), and traces with Embree's packet queries unless
 ``RTMESH_EMBREE=run`` is set (embreex ``run()``, one ray at a time); the report says which.
 
-Mitsuba runs in its own venv (``sh tools/peers_setup.sh``, default ``/tmp/peers-venv``),
-through ``tools/peers_mitsuba.py``; it is never a dependency of rtmesh.  Without the venv the
-Mitsuba rows are skipped.  Times are medians of ``--runs`` runs, the ratios come from this
+Mitsuba runs in its own venv (``sh benchmarks/peers_setup.sh``; ``--venv``, default
+``$RTMESH_PEERS_VENV`` or ``/tmp/peers-venv``), through ``benchmarks/peers_mitsuba.py``; it is
+never a dependency of rtmesh.  Without the venv the Mitsuba rows are skipped.  Times are medians of ``--runs`` runs, the ratios come from this
 one run.
 
 Usage::
 
-    python tools/bench_peers.py [--runs 5] [--spp 1,4,16,64] [--reference-spp 1024]
-                                [--adaptive-targets 0.2,0.1,0.05,0.03,0.02] [--adaptive-spp 4]
-                                [--venv /tmp/peers-venv] [--no-write]
+    python -m benchmarks.bench_peers [--runs 5] [--spp 1,4,16,64] [--reference-spp 1024]
+                                     [--adaptive-targets 0.2,0.1,0.05,0.03,0.02] [--adaptive-spp 4]
+                                     [--venv /tmp/peers-venv] [--no-write]
 """
 
 import argparse
 import datetime
 import json
 import os
-import subprocess
-import sys
 import tempfile
 import time
 
@@ -53,68 +51,17 @@ import trimesh
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from bench_core import machine, publish, seconds  # noqa: E402
-
-from rtmesh.core import runtime  # noqa: E402
-from rtmesh.geometry.accel import Accel  # noqa: E402
-from rtmesh.lights.point_lights import PointLight  # noqa: E402
-from rtmesh.materials.table import Material  # noqa: E402
-from rtmesh.rendering.integrator import Integrator  # noqa: E402
-from rtmesh.rendering.settings import DEFAULT_MAX_SPP, RenderSettings  # noqa: E402
-from rtmesh.scene.camera import Camera  # noqa: E402
-from rtmesh.scene.model import MeshPart, Scene  # noqa: E402
+from benchmarks._lib import (ALBEDO, CAMERA, LIGHT_INTENSITY, LIGHT_POSITION, PEERS_VENV, machine, publish,
+                             relative_rmse, run_peer, seconds, sphere_meshes, sphere_scene, write_ply)
+from rtmesh.core import runtime
+from rtmesh.geometry.accel import Accel
+from rtmesh.rendering.integrator import Integrator
+from rtmesh.rendering.settings import DEFAULT_MAX_SPP, RenderSettings
 
 SECTION = "Against peers: trimesh, raw Embree, Mitsuba 3"
-WORKER = os.path.join(os.path.dirname(os.path.abspath(__file__)), "peers_mitsuba.py")
-LLVM = "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1"
-ALBEDO = 0.7
-LIGHT_POSITION = [3.0, -3.0, 6.0]
-LIGHT_INTENSITY = 40.0  # W/sr in rtmesh's Lambert model (kd I cos / d^2)
-CAMERA = dict(position=[0.0, -4.0, 2.5], look_at=[0.0, 0.0, 0.8], up=[0.0, 0.0, 1.0], fov=45.0)
 TARGETS = (0.02, 0.01, 0.005, 0.0025, 0.001)  # relative RMSE at which times are compared
 ADAPTIVE_TARGETS = (0.2, 0.1, 0.05, 0.03, 0.02)  # rtmesh target_error values of the adaptive sweep
 VARIANTS = ("llvm_ad_rgb", "scalar_rgb")
-
-
-def peer_meshes():
-    """Sphere and ground as (vertices float32-exact, faces, vertex normals or None)."""
-    sphere = trimesh.creation.icosphere(subdivisions=5)
-    sphere.apply_translation([0.0, 0.0, 1.0])
-    # both renderers trace float32 positions: give both exactly the same ones
-    sphere_v = sphere.vertices.astype(np.float32).astype(np.float64)
-    normals = np.asarray(sphere.vertex_normals).astype(np.float32).astype(np.float64)
-    ground_v = np.array([[-10, -10, 0], [10, -10, 0], [10, 10, 0], [-10, 10, 0]], dtype=np.float64)
-    return {"sphere": (sphere_v, np.asarray(sphere.faces), normals),
-            "ground": (ground_v, np.array([[0, 1, 2], [0, 2, 3]]), None)}
-
-
-def peer_scene(meshes):
-    """The rtmesh scene of the meshes: Lambert albedo 0.7, one point light, no ambient."""
-    parts = [MeshPart(name, v, f, 0, n) for name, (v, f, n) in meshes.items()]
-    return Scene.from_parts(parts, [Material("lambert", diffuse=ALBEDO)],
-                            [PointLight(LIGHT_POSITION, LIGHT_INTENSITY)], Camera(**CAMERA))
-
-
-def write_ply(path, vertices, faces, normals=None):
-    """A binary little-endian PLY with float32 positions, optional normals and int faces."""
-    columns = [vertices] if normals is None else [vertices, normals]
-    props = "xyz" if normals is None else ["x", "y", "z", "nx", "ny", "nz"]
-    header = ["ply", "format binary_little_endian 1.0", f"element vertex {len(vertices)}",
-              *[f"property float {p}" for p in props], f"element face {len(faces)}",
-              "property list uchar int vertex_indices", "end_header"]
-    face_records = np.zeros(len(faces), dtype=[("n", "u1"), ("v", "<i4", 3)])
-    face_records["n"], face_records["v"] = 3, faces
-    with open(path, "wb") as f:
-        f.write(("\n".join(header) + "\n").encode("ascii"))
-        f.write(np.ascontiguousarray(np.hstack(columns), dtype="<f4").tobytes())
-        f.write(face_records.tobytes())
-
-
-def relative_rmse(image, reference):
-    """RMSE over pixels and channels divided by the reference's mean."""
-    diff = np.asarray(image, np.float64) - reference
-    return float(np.sqrt(np.mean(diff * diff)) / np.mean(reference))
 
 
 def time_to_error(spps, times, errors, target):
@@ -240,34 +187,16 @@ def throughput_rows(spps, runs, pixels):
             for name, r in runs.items()]
 
 
-def mitsuba_environment(home):
-    """Environment variables for a Mitsuba worker process.
-
-    Parameters
-    ----------
-    home : str
-        Folder made (if missing) and set as ``HOME``, so Dr.Jit's kernel cache stays out of
-        the user's home.
-
-    Returns
-    -------
-    dict
-        ``os.environ`` with ``HOME`` and ``DRJIT_LIBLLVM_PATH`` (LLVM 19: the variant
-        ``llvm_ad_rgb`` aborts with the system's LLVM 15, see ``tools/peers_setup.sh``).
-    """
-    os.makedirs(home, exist_ok=True)
-    return dict(os.environ, HOME=home, DRJIT_LIBLLVM_PATH=LLVM)
-
-
-def mitsuba_sweep(python, spec_path, variant, spps, runs, reference_spp, folder):
-    """Run the worker in the peers venv; images, median times and version (or None)."""
+def mitsuba_sweep(venv, spec_path, variant, spps, runs, reference_spp, folder):
+    """Run the worker (``benchmarks/peers_mitsuba.py``) in the peers venv; images, median
+    times and version (or None: no venv, or the worker failed)."""
     out_path = os.path.join(folder, f"{variant}.npz")
-    env = mitsuba_environment(os.path.join(folder, "home"))
-    command = [python, WORKER, spec_path, variant, out_path, "--spp", ",".join(map(str, spps)),
-               "--runs", str(runs)]
+    args = [spec_path, variant, out_path, "--spp", ",".join(map(str, spps)), "--runs", runs]
     if reference_spp:
-        command += ["--reference-spp", str(reference_spp)]
-    done = subprocess.run(command, env=env, capture_output=True, text=True)
+        args += ["--reference-spp", reference_spp]
+    done = run_peer("peers_mitsuba", args, os.path.join(folder, "home"), venv)
+    if done is None:
+        return None
     if done.returncode != 0:
         print(f"bench_peers: Mitsuba {variant} failed: {done.stderr.strip().splitlines()[-1:]}")
         return None
@@ -297,12 +226,11 @@ def write_mitsuba_scene(meshes, width, height, folder):
 def equal_error(meshes, scene, args, folder):
     """The equal-error study; returns the markdown lines and a dict of key numbers."""
     spec_path = write_mitsuba_scene(meshes, args.width, args.height, folder)
-    python = os.path.join(args.venv, "bin", "python")
-    if not os.path.exists(python):
-        return [f"Mitsuba skipped: no venv at {args.venv} (run `sh tools/peers_setup.sh`)."], {}
+    if not os.path.exists(os.path.join(args.venv, "bin", "python")):
+        return [f"Mitsuba skipped: no venv at {args.venv} (run `sh benchmarks/peers_setup.sh`)."], {}
 
     # references first: the two renderers must agree before anything is timed
-    llvm = mitsuba_sweep(python, spec_path, "llvm_ad_rgb", args.spp, args.runs, args.reference_spp, folder)
+    llvm = mitsuba_sweep(args.venv, spec_path, "llvm_ad_rgb", args.spp, args.runs, args.reference_spp, folder)
     if llvm is None or llvm["reference"] is None:
         return ["Mitsuba llvm_ad_rgb failed to run; see the tool's output."], {}
     rt_reference = Integrator(scene, RenderSettings(width=args.width, height=args.height,
@@ -317,7 +245,7 @@ def equal_error(meshes, scene, args, folder):
 
     runs = {"rtmesh (2 threads)": rtmesh_sweep(scene, args.width, args.height, args.spp, args.runs),
             "Mitsuba llvm_ad_rgb": llvm["sweep"]}
-    scalar = mitsuba_sweep(python, spec_path, "scalar_rgb", args.spp, args.runs, 0, folder)
+    scalar = mitsuba_sweep(args.venv, spec_path, "scalar_rgb", args.spp, args.runs, 0, folder)
     if scalar is not None:
         runs["Mitsuba scalar_rgb"] = scalar["sweep"]
     errors = {name: [relative_rmse(r[spp][0], reference) for spp in args.spp] for name, r in runs.items()}
@@ -410,7 +338,7 @@ def main():
     parser.add_argument("--adaptive-targets", default=",".join(map(str, ADAPTIVE_TARGETS)),
                         help="target_error values of rtmesh's adaptive renders, decreasing")
     parser.add_argument("--adaptive-spp", type=int, default=4, help="first-round spp of the adaptive renders")
-    parser.add_argument("--venv", default="/tmp/peers-venv")
+    parser.add_argument("--venv", default=PEERS_VENV, help="the peers' venv (benchmarks/peers_setup.sh)")
     parser.add_argument("--no-write", action="store_true", help="print only; leave docs/BENCHMARKS.md alone")
     args = parser.parse_args()
     args.spp = [int(s) for s in args.spp.split(",")]
@@ -419,8 +347,8 @@ def main():
     runtime.tune_process()
     machine_at_start = machine()  # its load average is the one before the measurements
 
-    meshes = peer_meshes()
-    scene = peer_scene(meshes)
+    meshes = sphere_meshes()
+    scene = sphere_scene(meshes)
     hits, n_rays, agree, intersector, packets = intersection(scene, args.width, args.height, args.runs)
     print(hits, flush=True)
     with tempfile.TemporaryDirectory() as folder:
@@ -430,9 +358,9 @@ def main():
     rtmesh_rate = n_rays / hits["rtmesh Accel.intersect"]
     rows = [f"| {name} | {1e3 * t:.1f} | {n_rays / t / 1e6:.2f} | {rtmesh_rate / (n_rays / t):.2f} |"
             for name, t in hits.items()]
-    words = ["python tools/bench_peers.py"]
+    words = ["python -m benchmarks.bench_peers"]
     defaults = {"width": 512, "height": 512, "runs": 5, "reference_spp": 1024, "thread_spp": 16,
-                "adaptive_spp": 4, "venv": "/tmp/peers-venv"}
+                "adaptive_spp": 4, "venv": PEERS_VENV}
     for name, default in defaults.items():
         if getattr(args, name) != default:
             words.append(f"--{name.replace('_', '-')} {getattr(args, name)}")
@@ -446,7 +374,7 @@ def main():
     text = "\n".join([
         f"## {SECTION}",
         "",
-        "Commands: `sh tools/peers_setup.sh` (once: Mitsuba in its own venv, LLVM 19 from apt), "
+        "Commands: `sh benchmarks/peers_setup.sh` (once: Mitsuba in its own venv, LLVM 19 from apt), "
         f"then `{' '.join(words)}`",
         "",
         f"- Machine: {machine_at_start}, {os.getloadavg()[0]:.1f} at the end; shared with other "

@@ -1,16 +1,17 @@
 #!/bin/sh
-# Install the peer renderers for tools/bench_peers.py, tools/bench_pbr_peers.py and
-# tools/peers_mitsuba_cornell.py in a venv of their own.
+# Install the peer renderers for benchmarks/bench_peers.py, benchmarks/bench_pbr_peers.py and
+# benchmarks/peers_mitsuba_cornell.py in a venv of their own.
 #
 # Mitsuba 3 is a benchmark peer, never a dependency of rtmesh: it goes into a separate
-# virtual environment (default /tmp/peers-venv; pass another path as the first argument).
+# virtual environment: the first argument, else $RTMESH_PEERS_VENV, else /tmp/peers-venv (the
+# benchmarks look for it in the same places: benchmarks/_lib.py).
 # Its llvm_ad_rgb variant aborts with the system's LLVM 15 ("Cannot select ... fminimum"),
-# so LLVM 19 is installed from apt when it is missing; bench_peers.py points Dr.Jit at it
-# through DRJIT_LIBLLVM_PATH.
+# so LLVM 19 is installed from apt when it is missing; the benchmarks point Dr.Jit at it
+# through DRJIT_LIBLLVM_PATH (benchmarks/_lib.py run_peer).
 #
-# Usage: sh tools/peers_setup.sh [VENV]
+# Usage: sh benchmarks/peers_setup.sh [VENV]
 set -eu
-VENV="${1:-/tmp/peers-venv}"
+VENV="${1:-${RTMESH_PEERS_VENV:-/tmp/peers-venv}}"
 LLVM=/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1
 
 if [ ! -e "$LLVM" ]; then

@@ -15,18 +15,15 @@ file as any environment:
     file = "/path/to/rtmesh/scene/studio.exr"
     lighting = true
 
-Run from the repository root: ``python tools/make_studio.py``.
+Run from the repository root: ``python -m benchmarks.make_studio``.
 """
 
 import os
-import sys
 
 import numpy as np
 
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
-from make_sky import write_environment  # noqa: E402
-
-from rtmesh.scene.background import latlong_directions  # noqa: E402
+from benchmarks.make_sky import write_environment
+from rtmesh.scene.background import latlong_directions
 
 WIDTH, HEIGHT = 256, 128
 # softboxes: (unit direction of the centre, half-width and half-height in radians, radiance)

@@ -1,4 +1,4 @@
-"""Mitsuba 3 side of tools/bench_pbr_peers.py; runs inside the peers venv, never imports rtmesh.
+"""Mitsuba 3 side of benchmarks/bench_pbr_peers.py; runs inside the peers venv, never imports rtmesh.
 
 Reads a JSON list of render jobs that bench_pbr_peers.py wrote, renders each with Mitsuba's
 ``path`` integrator in one variant, and writes, per job, an ``.npz`` file holding the two
@@ -18,12 +18,13 @@ its BSDF, its light and its camera:
 - ``light.type``: ``point`` (intensity in W/sr, Mitsuba's ``point``) or ``envmap`` (a
   ``.npy`` latitude-longitude image in Mitsuba's layout and a rotation about +Y that turns
   Mitsuba's map into rtmesh's; see bench_pbr_peers.py);
-- the camera goes through :func:`peers_mitsuba.sensor_dict`, shared with tools/bench_peers.py.
+- the camera goes through :func:`benchmarks.peers_mitsuba.sensor_dict`, shared with benchmarks/bench_peers.py.
 
-Usage (from bench_pbr_peers.py; ``--self-test`` checks the glTF BSDF, see :func:`self_test`)::
+Usage, from the repository root (bench_pbr_peers.py runs it; ``--self-test`` checks the glTF
+BSDF, see :func:`self_test`)::
 
-    /tmp/peers-venv/bin/python tools/peers_mitsuba_pbr.py JOBS.json VARIANT
-    /tmp/peers-venv/bin/python tools/peers_mitsuba_pbr.py --self-test
+    /tmp/peers-venv/bin/python -m benchmarks.peers_mitsuba_pbr JOBS.json VARIANT
+    /tmp/peers-venv/bin/python -m benchmarks.peers_mitsuba_pbr --self-test
 """
 
 import argparse
@@ -35,7 +36,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from peers_mitsuba import sensor_dict
+from benchmarks.peers_mitsuba import sensor_dict
 
 # Mitsuba's own plugins for the peer models, from a job's base colour, metallic and roughness
 PEER_MODELS = ("principled", "roughplastic")

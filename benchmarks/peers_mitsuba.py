@@ -1,4 +1,4 @@
-"""Mitsuba 3 side of tools/bench_peers.py; runs inside the peers venv, never imports rtmesh.
+"""Mitsuba 3 side of benchmarks/bench_peers.py; runs inside the peers venv, never imports rtmesh.
 
 Reads the scene description bench_peers.py wrote (JSON next to two PLY meshes with vertex
 normals), renders it with Mitsuba's ``direct`` integrator in one variant at each requested
@@ -8,9 +8,9 @@ Each sample count is rendered once untimed first (the LLVM variant compiles its 
 then), then ``--runs`` times with the clock running; every run uses seed 0, so the runs do
 the same work and the image of the last one is kept.
 
-Usage (from bench_peers.py)::
+Usage, from the repository root (bench_peers.py runs it through :func:`benchmarks._lib.run_peer`)::
 
-    /tmp/peers-venv/bin/python tools/peers_mitsuba.py SCENE.json VARIANT OUT.npz \
+    /tmp/peers-venv/bin/python -m benchmarks.peers_mitsuba SCENE.json VARIANT OUT.npz \
         --spp 1,4,16 --runs 5 [--reference-spp 1024]
 """
 

@@ -1,7 +1,7 @@
 """How fast a fused direct-lighting kernel can be here: a minimal one beside rtmesh's.
 
 Issue 13 asks rtmesh to reach Mitsuba 3's equal-error time on the peer scene of
-``tools/bench_peers.py``.  Whether that is reachable depends on what Embree's packet
+``benchmarks/bench_peers.py``.  Whether that is reachable depends on what Embree's packet
 queries and numba-compiled code cost on the machine, whatever rtmesh's own design.  This
 tool measures that floor: the smallest kernel that renders the peer image, with nothing a
 renderer would add (no materials table, no film sums for error estimates, no highlights,
@@ -18,7 +18,7 @@ arithmetic throughout, and float64 (packets float32, as Embree needs).
 Reported, 1 thread, medians of ``--runs`` interleaved runs: ns per sample of each floor
 variant and of rtmesh's render of the same scene and samples, and the ns per sample spent
 inside the two Embree calls (read from the CPU's cycle counter around each call).  Where
-the peers venv of ``tools/bench_peers.py`` exists, Mitsuba 3 ``llvm_ad_rgb`` renders the
+the peers venv of ``benchmarks/bench_peers.py`` exists, Mitsuba 3 ``llvm_ad_rgb`` renders the
 same scene and samples too (its ``direct`` integrator, on every core), reported as ns per
 sample and thread: at equal spp the renderers have equal error, so this is what the
 equal-error target of issue 13 compares.  The
@@ -27,29 +27,25 @@ above 2 %), so the floor renders the same picture.
 
 Usage::
 
-    python tools/bench_floor.py [--spp 16] [--runs 7] [--size 512] [--venv /tmp/peers-venv] [--no-write]
+    python -m benchmarks.bench_floor [--spp 16] [--runs 7] [--size 512] [--venv /tmp/peers-venv] [--no-write]
 """
 
 import argparse
-import os
-import sys
 import tempfile
 import time
 
 import numba
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from bench_core import machine, publish  # noqa: E402
-from bench_peers import (ALBEDO, mitsuba_sweep, peer_meshes, peer_scene, relative_rmse,  # noqa: E402
-                         write_mitsuba_scene)
-from profile_direct_stage import counter_rate, cycle_counter  # noqa: E402
-
-from rtmesh.core import runtime  # noqa: E402
-from rtmesh.geometry import embree_packets as ep  # noqa: E402
-from rtmesh.geometry.embree_library import packet_library  # noqa: E402
-from rtmesh.rendering.integrator import Integrator  # noqa: E402
-from rtmesh.rendering.settings import RenderSettings  # noqa: E402
+from benchmarks._lib import (ALBEDO, PEERS_VENV, machine, peer_python, publish, relative_rmse, sphere_meshes,
+                             sphere_scene)
+from benchmarks.bench_peers import mitsuba_sweep, write_mitsuba_scene
+from benchmarks.profile_direct_stage import counter_rate, cycle_counter
+from rtmesh.core import runtime
+from rtmesh.geometry import embree_packets as ep
+from rtmesh.geometry.embree_library import packet_library
+from rtmesh.rendering.integrator import Integrator
+from rtmesh.rendering.settings import RenderSettings
 
 SECTION = "The floor: a minimal fused kernel beside rtmesh's"
 LANES = ep.LANES
@@ -184,12 +180,11 @@ def floor_inputs(integrator):
 def mitsuba_per_sample(size, spp, runs, venv):
     """Mitsuba llvm_ad_rgb's median render time of the peer scene, as ns per sample and
     thread, and its thread count; None without the peers venv or when it fails."""
-    python = os.path.join(venv, "bin", "python")
-    if not os.path.exists(python):
+    if peer_python(venv) is None:
         return None
     with tempfile.TemporaryDirectory(prefix="rtmesh-floor-") as folder:
-        spec_path = write_mitsuba_scene(peer_meshes(), size, size, folder)
-        result = mitsuba_sweep(python, spec_path, "llvm_ad_rgb", [spp], runs, 0, folder)
+        spec_path = write_mitsuba_scene(sphere_meshes(), size, size, folder)
+        result = mitsuba_sweep(venv, spec_path, "llvm_ad_rgb", [spp], runs, 0, folder)
     if result is None:
         return None
     threads = runtime.usable_cores()  # Dr.Jit's pool takes every core it may use
@@ -202,13 +197,13 @@ def main():
     parser.add_argument("--spp", type=int, default=16, help="a multiple of 16")
     parser.add_argument("--runs", type=int, default=7)
     parser.add_argument("--size", type=int, default=512)
-    parser.add_argument("--venv", default="/tmp/peers-venv", help="Mitsuba's venv (tools/peers_setup.sh)")
+    parser.add_argument("--venv", default=PEERS_VENV, help="Mitsuba's venv (benchmarks/peers_setup.sh)")
     parser.add_argument("--no-write", action="store_true")
     args = parser.parse_args()
     if args.spp % LANES:
         parser.error("--spp must be a multiple of 16 (one pixel's samples fill whole packets)")
     runtime.tune_process()
-    it = Integrator(peer_scene(peer_meshes()), RenderSettings(width=args.size, height=args.size, spp=args.spp,
+    it = Integrator(sphere_scene(), RenderSettings(width=args.size, height=args.size, spp=args.spp,
                                                               sampler="jittered", threads=1, seed=0))
     inputs = floor_inputs(it)
     variants = {"float32": make_floor(np.float32), "float64": make_floor(np.float64)}
@@ -240,7 +235,7 @@ def main():
             raise SystemExit(f"bench_floor: the {name} floor image differs from rtmesh's by {error:.2%} "
                              "relative RMSE: not the same picture")
     per_sample = {name: float(np.median(t)) / samples * 1e9 for name, t in times.items()}
-    lines = [f"## {SECTION}", "", f"`python tools/bench_floor.py --spp {args.spp} --runs {args.runs}`", "",
+    lines = [f"## {SECTION}", "", f"`python -m benchmarks.bench_floor --spp {args.spp} --runs {args.runs}`", "",
              f"Peer scene ({args.size}x{args.size}, {args.spp} spp, jittered), 1 thread, medians of {args.runs} "
              f"interleaved runs; {machine()}; the cycle counter ticks {rates:.2f} times a ns.", "",
              "| kernel | ns a sample | x float32 floor | inside rtcIntersect16 | inside rtcOccluded16 | "
@@ -251,12 +246,12 @@ def main():
             inside = ticks[name] / (args.runs * samples * rates)
             cells = f"{inside[0]:.1f} | {inside[1]:.1f} | {per_sample[name] - inside.sum():.1f} | {errors[name]:.2%}"
         else:
-            cells = "see tools/profile_direct_stage.py | | | (reference)"
+            cells = "see benchmarks/profile_direct_stage.py | | | (reference)"
         label = f"floor, {name} arithmetic" if name in variants else "rtmesh (fused stage)"
         lines.append(f"| {label} | {per_sample[name]:.1f} | {per_sample[name] / floor:.2f} | {cells} |")
     mitsuba = mitsuba_per_sample(args.size, args.spp, args.runs, args.venv)
     if mitsuba is None:
-        lines += ["", f"Mitsuba skipped: no venv at {args.venv} (run `sh tools/peers_setup.sh`), or it failed."]
+        lines += ["", f"Mitsuba skipped: no venv at {args.venv} (run `sh benchmarks/peers_setup.sh`), or it failed."]
     else:
         ns, threads = mitsuba
         lines.append(f"| Mitsuba 3 llvm_ad_rgb, {threads} threads, per sample and thread | {ns:.1f} | "

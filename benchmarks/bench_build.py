@@ -34,14 +34,13 @@ Medians over ``--runs`` runs in one process, after a warm-up run.
 
 Usage::
 
-    python tools/bench_build.py [--subdivisions 8] [--runs 5] [--no-write]
+    python -m benchmarks.bench_build [--subdivisions 8] [--runs 5] [--no-write]
 """
 
 import argparse
 import contextlib
 import datetime
 import os
-import sys
 import tempfile
 import time
 
@@ -50,18 +49,16 @@ import trimesh
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from bench_core import machine, publish  # noqa: E402
-
-import rtmesh.loaders.importers  # noqa: E402
-import rtmesh.rendering.integrator  # noqa: E402
+import rtmesh.loaders.importers
+import rtmesh.rendering.integrator
+from benchmarks._lib import machine, publish
 from rtmesh.core import runtime
-from rtmesh.geometry import embree_library  # noqa: E402
-from rtmesh.loaders.importers import load_trimesh, parts_from_trimesh  # noqa: E402
-from rtmesh.rendering.integrator import Integrator  # noqa: E402
-from rtmesh.rendering.settings import RenderSettings  # noqa: E402
-from rtmesh.rendering.shading_tables import ShadingTables  # noqa: E402
-from rtmesh.scene.model import Scene  # noqa: E402
+from rtmesh.geometry import embree_library
+from rtmesh.loaders.importers import load_trimesh, parts_from_trimesh
+from rtmesh.rendering.integrator import Integrator
+from rtmesh.rendering.settings import RenderSettings
+from rtmesh.rendering.shading_tables import ShadingTables
+from rtmesh.scene.model import Scene
 
 SECTION = "Scene build time, 1M+ triangles"
 # (stage, sub-stage, where the sub-stage's function is looked up, its name there)
@@ -197,7 +194,7 @@ def main():
             runs.append(times)
             print(", ".join(f"{k} {v:.2f}" for k, v in times.items()), flush=True)
     median = {k: float(np.median([r[k] for r in runs])) for k in runs[0]}
-    command = "python tools/bench_build.py"
+    command = "python -m benchmarks.bench_build"
     if args.subdivisions != 8 or args.runs != 5:
         command += f" --subdivisions {args.subdivisions} --runs {args.runs}"
     text = "\n".join([

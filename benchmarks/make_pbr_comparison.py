@@ -3,7 +3,7 @@ metallic-roughness model under the studio environment.
 
 Usage, from the repository root::
 
-    python tools/make_pbr_comparison.py [--spp N] [--size S] [--denoise] [FILE ...]
+    python -m benchmarks.make_pbr_comparison [--spp N] [--size S] [--denoise] [FILE ...]
 
 (default files: Duck.glb, BoxTextured.glb and monkey.glb of ../shared/assets/real).  For
 each file, two renders with the file's own camera or the automatic framing:
@@ -21,17 +21,15 @@ on the left) and the render times are printed.
 import argparse
 import dataclasses
 import os
-import sys
 import time
 
 import numpy as np
 
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
-from rtmesh.api import load_scene  # noqa: E402
-from rtmesh.io.images import write_image  # noqa: E402
-from rtmesh.materials.table import Material, MaterialTable  # noqa: E402
-from rtmesh.rendering.integrator import Integrator  # noqa: E402
-from rtmesh.scene.model import default_lights  # noqa: E402
+from rtmesh.api import load_scene
+from rtmesh.io.images import write_image
+from rtmesh.materials.table import MaterialTable
+from rtmesh.rendering.integrator import Integrator
+from rtmesh.scene.model import default_lights
 
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 REAL = os.path.join(ROOT, "..", "shared", "assets", "real")

@@ -1,7 +1,7 @@
 """Denoised low-sample renders against more samples: error and time at the two operating
 points of a glTF asset under the studio environment.
 
-    python tools/bench_denoise.py [ASSET] [--size 160] [--reference-spp 4096] [--runs 3]
+    python -m benchmarks.bench_denoise [ASSET] [--size 160] [--reference-spp 4096] [--runs 3]
 
 (default asset: Duck.glb of ../shared/assets/real).  Renders a reference (``--reference-spp``,
 its own seed, cached in /tmp by asset, size and spp), then, ``--runs`` times each and
@@ -9,7 +9,7 @@ alternating, ``--denoised-spp`` samples with ``denoise`` on (Open Image Denoise 
 ``denoise`` extra, guided by the albedo and normal passes) and each of the ``--plain-spp``
 sample counts without, and prints the median wall time and the RMSE of each against the
 reference (linear radiance over every pixel and channel; also relative to the reference's
-RMS).
+mean, :func:`benchmarks._lib.relative_rmse`).
 
 Denoising is biased: its error does not go to zero with more samples, and the render's own
 error estimate describes the noisy image it started from; the RMSE against the reference is
@@ -20,14 +20,13 @@ import argparse
 import dataclasses
 import os
 import statistics
-import sys
 import time
 
 import numpy as np
 
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
-from rtmesh.api import load_scene  # noqa: E402
-from rtmesh.rendering.integrator import Integrator  # noqa: E402
+from benchmarks._lib import relative_rmse
+from rtmesh.api import load_scene
+from rtmesh.rendering.integrator import Integrator
 
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 DEFAULT_ASSET = os.path.join(ROOT, "..", "shared", "assets", "real", "Duck.glb")
@@ -66,7 +65,6 @@ def main(argv=None):
     name = os.path.splitext(os.path.basename(args.asset))[0]
     ref = reference(scene, dataclasses.replace(settings, spp=args.reference_spp),
                     f"/tmp/rtmesh-denoise-ref-{name}-{args.size}-{args.reference_spp}.npy")
-    scale = float(np.sqrt(np.mean(ref.astype(np.float64) ** 2)))
     cases = {"denoised": dataclasses.replace(settings, spp=args.denoised_spp, denoise=True)}
     for spp in (int(v) for v in args.plain_spp.split(",")):
         cases[f"plain {spp}"] = dataclasses.replace(settings, spp=spp)
@@ -77,14 +75,15 @@ def main(argv=None):
         for key, case in cases.items():
             image, seconds = render(scene, case)
             times[key].append(seconds)
-            errors[key] = float(np.sqrt(np.mean((image.astype(np.float64) - ref) ** 2)))
+            errors[key] = (float(np.sqrt(np.mean((image.astype(np.float64) - ref) ** 2))),
+                           relative_rmse(image, ref))
     print(f"{name} {args.size}x{args.size}, {args.threads} threads, reference {args.reference_spp} spp")
-    print("| render | spp | median s (runs) | RMSE | RMSE / RMS(reference) |")
+    print("| render | spp | median s (runs) | RMSE | rel. RMSE |")
     print("|---|---|---|---|---|")
     for key, case in cases.items():
         runs = ", ".join(f"{t:.2f}" for t in times[key])
-        print(f"| {key} | {case.spp} | {statistics.median(times[key]):.2f} ({runs}) | {errors[key]:.5f} | "
-              f"{errors[key] / scale:.4f} |")
+        print(f"| {key} | {case.spp} | {statistics.median(times[key]):.2f} ({runs}) | {errors[key][0]:.5f} | "
+              f"{errors[key][1]:.4f} |")
 
 
 if __name__ == "__main__":

@@ -4,7 +4,7 @@ For scenes shipped in assets/, renders a high-sample reference (Sobol, its own s
 sweeps samples per pixel for every sampler and adaptive targets, and measures each image's
 error against the reference next to its wall time:
 
-    python tools/speed_vs_error.py --out docs/speed_vs_error.csv --plot docs/images/speed_vs_error.png
+    python -m benchmarks.speed_vs_error --out docs/speed_vs_error.csv --plot docs/images/speed_vs_error.png
 
 Writes a CSV (scene, method, sampler, spp, target, seconds, cpu_seconds, mean_spp, rays, rmse,
 relative_error, estimated_error), a log-log plot of RMSE against time (needs matplotlib: the

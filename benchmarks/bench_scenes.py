@@ -8,12 +8,13 @@ compiles the kernels.  Each process is tuned as the ``rtmesh`` command tunes its
 (:func:`rtmesh.core.runtime.tune_process` where the revision has it; older revisions tuned
 every process as they built a renderer).  Only the render is timed
 (``stats.wall_seconds``: no start-up, no scene loading, no image writing).  Prints a table
-of median times and speed-ups, and how far apart the two images are (relative RMSE; 0 for
-bit-identical images).
+of median times and speed-ups, and how far apart the two images are: relative RMSE
+(:func:`benchmarks._lib.relative_rmse`, RMSE over the other revision's mean; 0 for
+bit-identical images) of the pixels and of 8 x 8 block means.
 
 Usage::
 
-    python tools/bench_scenes.py [--against REV] [--runs 3] [--threads 2] [--scale 1.0]
+    python -m benchmarks.bench_scenes [--against REV] [--runs 3] [--threads 2] [--scale 1.0]
 """
 
 import argparse
@@ -26,7 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
+from benchmarks._lib import ROOT, relative_rmse
+
 SCENES = ["assets/showcase.toml", "assets/glass_edges.toml", "assets/passes.toml",
           *sorted(str(p.relative_to(ROOT)) for p in (ROOT / "assets" / "effects").glob("*.toml"))]
 
@@ -65,12 +67,6 @@ def render_once(source, scene, threads, scale, image_path):
     return json.loads(done.stdout.strip().splitlines()[-1])["seconds"]
 
 
-def relative_rmse(a, b):
-    """RMSE of ``a - b`` relative to the RMS of ``b`` (0 for identical images)."""
-    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
-    return float(np.sqrt(np.mean((a - b) ** 2)) / max(np.sqrt(np.mean(b ** 2)), 1e-30))
-
-
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--against", default="4c3801c", help="git revision to compare with")
@@ -89,21 +85,23 @@ def main():
                 images = {key: Path(folder) / f"{key}.npy" for key in times}
                 for source, key in ((ROOT, "this"), (other, "other")):  # warm-up: compile, cache
                     render_once(source, scene, args.threads, args.scale, images[key])
-                difference = relative_rmse(np.load(images["this"]), np.load(images["other"]))
+                this_image, other_image = np.load(images["this"]), np.load(images["other"])
+                difference = (relative_rmse(this_image, other_image),
+                              relative_rmse(this_image, other_image, block=8))
                 for _ in range(args.runs):
                     for source, key in ((ROOT, "this"), (other, "other")):
                         times[key].append(render_once(source, scene, args.threads, args.scale, images[key]))
                 this, then = float(np.median(times["this"])), float(np.median(times["other"]))
                 rows.append(f"| {scene} | {1e3 * then:.0f} | {1e3 * this:.0f} | {then / this:.2f} | "
-                            f"{difference:.2g} |")
+                            f"{difference[0]:.2g} | {difference[1]:.2g} |")
                 print(rows[-1], flush=True)
         finally:
             subprocess.run(["git", "worktree", "remove", "--force", str(other)], cwd=ROOT, check=False)
     print()
     print(f"Render times, ms (medians of {args.runs}, {args.threads} threads, scale {args.scale}); "
           f"{args.against} against this checkout:")
-    print(f"| scene | {args.against} | this | speed-up | image difference (rel. RMSE) |")
-    print("|---|---:|---:|---:|---|")
+    print(f"| scene | {args.against} | this | speed-up | image difference (rel. RMSE) | of 8x8 block means |")
+    print("|---|---:|---:|---:|---:|---:|")
     print("\n".join(rows))
 
 

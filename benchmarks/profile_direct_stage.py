@@ -6,8 +6,8 @@ whole.  This tool makes an instrumented copy of
 the CPU's cycle counter (``llvm.readcyclecounter``, through a numba intrinsic) at each step
 boundary, the cycles between two reads added to that step's total.  The copy is compiled
 in a temporary folder, put in the stage's place, and renders the scene of
-``tools/bench_peers.py`` (``--scene peer``: Lambert, one point light, jittered samples) or of
-``tools/bench_core.py`` (``--scene core``: a highlight on the sphere, ambient light,
+``benchmarks/bench_peers.py`` (``--scene peer``: Lambert, one point light, jittered samples) or of
+``benchmarks/bench_core.py`` (``--scene core``: a highlight on the sphere, ambient light,
 regular samples) on 1 thread.  It prints the cycles per sample of each step and checks
 that the instrumented copy renders the image the stage renders.
 
@@ -18,14 +18,13 @@ samples); the counter ticks at a constant rate (printed), not at the core's cloc
 
 Usage::
 
-    python tools/profile_direct_stage.py [--scene peer|core] [--spp 16] [--runs 5] [--size 512]
+    python -m benchmarks.profile_direct_stage [--scene peer|core] [--spp 16] [--runs 5] [--size 512]
 """
 
 import argparse
 import importlib.util
 import inspect
 import os
-import sys
 import tempfile
 import time
 
@@ -35,14 +34,11 @@ from llvmlite import ir
 from numba.core import types
 from numba.extending import intrinsic
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from bench_core import benchmark_scene  # noqa: E402
-from bench_peers import peer_meshes, peer_scene  # noqa: E402
-
-from rtmesh.core import runtime  # noqa: E402
-from rtmesh.rendering import direct_stage  # noqa: E402
-from rtmesh.rendering.integrator import Integrator  # noqa: E402
-from rtmesh.rendering.settings import RenderSettings  # noqa: E402
+from benchmarks._lib import sphere_scene
+from rtmesh.core import runtime
+from rtmesh.rendering import direct_stage
+from rtmesh.rendering.integrator import Integrator
+from rtmesh.rendering.settings import RenderSettings
 
 # (a line of direct_samples, the step that ends where it begins), in source order; a step
 # may end at several lines (the light loop's steps run once per light)
@@ -117,7 +113,7 @@ def instrumented_source():
                         "t0 = t1\n")
     body = body.replace(SIGNATURE_END, SIGNATURE_END.replace("):", ", cycles):"))
     body = body.replace("    for start in range(0, n, BLOCK):", "    t0 = cycle_counter()\n    for start in range(0, n, BLOCK):")
-    return head + "from profile_direct_stage import cycle_counter\n\n" + body
+    return head + "from benchmarks.profile_direct_stage import cycle_counter\n\n" + body
 
 
 def load_instrumented(folder):
@@ -148,7 +144,7 @@ def main():
     parser.add_argument("--size", type=int, default=512)
     args = parser.parse_args()
     runtime.tune_process()
-    scene = peer_scene(peer_meshes()) if args.scene == "peer" else benchmark_scene()
+    scene = sphere_scene(peer=args.scene == "peer")
     settings = RenderSettings(width=args.size, height=args.size, spp=args.spp, threads=1, seed=0,
                               sampler="jittered" if args.scene == "peer" else "regular")
     integrator = Integrator(scene, settings)

@@ -2,7 +2,7 @@
 
 Usage, from the repository root::
 
-    python tools/make_real_images.py [FOLDER]    # default: ../shared/assets/real
+    python -m benchmarks.make_real_images [FOLDER]    # default: ../shared/assets/real
 
 Each file is rendered at 320x320, 16 samples per pixel, with its own materials and
 textures, its glTF camera and lights where it has them, and otherwise the automatic framing

@@ -2,10 +2,10 @@
 """Batch conversion throughput: assets per minute with 1 worker, N local workers, and a
 dask.distributed LocalCluster of N single-threaded worker processes.
 
-    python tools/bench_batch.py                   # >= 50 generated meshes + the real assets
-    python tools/bench_batch.py --count 80 --width 128 --height 128
-    python tools/bench_batch.py --ledger 1000000  # ledger cost of a no-op resume, 1M images
-    python tools/bench_batch.py --overhead 2000   # per-asset bookkeeping and resume checks
+    python -m benchmarks.bench_batch                   # >= 50 generated meshes + the real assets
+    python -m benchmarks.bench_batch --count 80 --width 128 --height 128
+    python -m benchmarks.bench_batch --ledger 1000000  # ledger cost of a no-op resume, 1M images
+    python -m benchmarks.bench_batch --overhead 2000   # per-asset bookkeeping and resume checks
 
 The meshes are generated with trimesh.creation into a temporary folder (spheres, boxes,
 cylinders, capsules, tori, cones of varied tessellation, written as OBJ, PLY, STL and GLB),
@@ -28,9 +28,8 @@ from types import SimpleNamespace
 import numpy as np
 import trimesh
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
-import rtmesh  # noqa: E402
+import rtmesh
 
 REAL_ASSETS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "shared",
                            "assets", "real")

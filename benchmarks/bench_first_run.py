@@ -5,9 +5,9 @@ twice with the command line (a new process each time) and reports the wall time 
 and their difference, the time spent compiling.  With several source trees (worktrees of
 other commits) the trees alternate run by run, so that they share the machine's state.
 
-    python tools/bench_first_run.py --runs 3
-    python tools/bench_first_run.py --runs 3 --tree /path/to/old/worktree --tree .
-    python tools/bench_first_run.py --api      # rtmesh.render(): no compile helper
+    python -m benchmarks.bench_first_run --runs 3
+    python -m benchmarks.bench_first_run --runs 3 --tree /path/to/old/worktree --tree .
+    python -m benchmarks.bench_first_run --api      # rtmesh.render(): no compile helper
 
 Prints one line per run and the medians; the README reports the figures.
 """

@@ -1,6 +1,6 @@
 """Render assets/passes.toml with every output pass and write docs/images/passes_*.png.
 
-Run from the repository root: ``python tools/make_pass_images.py`` (about a second).
+Run from the repository root: ``python -m benchmarks.make_pass_images`` (about a second).
 """
 
 import os

@@ -3,8 +3,9 @@
 A render holds the film (per-pixel sums: 56 bytes per pixel, plus the 12-byte float32
 image for a render without adaptive rounds, which fills it as chunks are added: the only
 part that has to grow with the resolution) and, while chunks are rendered, the temporaries
-of one chunk per thread.  This tool renders the benchmark scene of ``tools/bench_core.py`` at
-rising resolution x spp, each point in a fresh process, and reports
+of one chunk per thread.  This tool renders the benchmark scene of ``benchmarks/bench_core.py``
+(:func:`benchmarks._lib.sphere_scene`) at rising resolution x spp, each point in a fresh
+process, and reports
 
 * ``film``: bytes of the film's arrays;
 * ``chunk phase``: tracemalloc's peak (NumPy reports its buffers to tracemalloc) from the
@@ -18,7 +19,7 @@ rising resolution x spp, each point in a fresh process, and reports
 
 Usage::
 
-    python tools/bench_memory.py [--points 512x512x1,3840x2160x64] [--threads 2] [--no-write]
+    python -m benchmarks.bench_memory [--points 512x512x1,3840x2160x64] [--threads 2] [--no-write]
 
 The default grid ends with 3840 x 2160 at 64 spp (530 M samples: minutes on two cores).
 """
@@ -33,11 +34,9 @@ import sys
 import time
 import tracemalloc
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from bench_core import benchmark_scene, machine, publish  # noqa: E402
-
-from rtmesh.rendering.integrator import Integrator  # noqa: E402
-from rtmesh.rendering.settings import RenderSettings  # noqa: E402
+from benchmarks._lib import ROOT, machine, publish, sphere_scene
+from rtmesh.rendering.integrator import Integrator
+from rtmesh.rendering.settings import RenderSettings
 
 SECTION = "Peak memory against resolution x spp"
 DEFAULT_POINTS = "512x512x1,512x512x16,1920x1080x4,3840x2160x1,3840x2160x4,3840x2160x16,3840x2160x64"
@@ -96,7 +95,7 @@ def current_rss():
 
 def measure_point(width, height, spp, threads, chunk_samples):
     """One grid point, in this process (meant to be a fresh one); a dict of numbers."""
-    integrator = Integrator(benchmark_scene(), RenderSettings(
+    integrator = Integrator(sphere_scene(peer=False), RenderSettings(
         width=width, height=height, spp=spp, sampler="jittered", threads=threads,
         chunk_samples=chunk_samples))
     rss_before = current_rss()
@@ -138,9 +137,10 @@ def main():
     mb = 1e-6
     rows = []
     for w, h, spp in points:
-        child = subprocess.run([sys.executable, __file__, "--one", "--points", f"{w}x{h}x{spp}",
-                                "--threads", str(args.threads), "--chunk-samples", str(args.chunk_samples)],
-                               capture_output=True, text=True, check=True)
+        child = subprocess.run([sys.executable, "-m", "benchmarks.bench_memory", "--one",
+                                "--points", f"{w}x{h}x{spp}", "--threads", str(args.threads),
+                                "--chunk-samples", str(args.chunk_samples)],
+                               capture_output=True, text=True, check=True, cwd=ROOT)
         r = json.loads(child.stdout.strip().splitlines()[-1])
         row = (f"| {w}x{h} | {spp} | {w * h * spp / 1e6:.1f} | {r['seconds']:.1f} | {r['film'] * mb:.0f} "
                f"| {r['film'] / (w * h):.0f} | {r['chunk_phase'] * mb:.1f} | {r['finish_phase'] * mb:.1f} "
@@ -148,7 +148,7 @@ def main():
         print(row, flush=True)
         rows.append(row)
 
-    command = "python tools/bench_memory.py"
+    command = "python -m benchmarks.bench_memory"
     if args.points != DEFAULT_POINTS:
         command += f" --points {args.points}"
     if args.threads != 2:
