@@ -133,3 +133,34 @@ def test_cornell_box_direct_light_matches_the_mitsuba_reference(cornell, referen
     for c in range(3):  # each channel on its own: blue is a small part of the whole
         assert scaled[away, c].mean() == pytest.approx(reference[away, c].mean(), rel=0.005)  # measured <= 0.1 %
         assert relative_rmse(scaled[..., c], reference[..., c], block=2) < 0.01  # 8 x 8 blocks at 128; 0.2-0.3 %
+
+
+def _render_path(scene, settings, size, spp, max_depth):
+    import dataclasses
+
+    from rtmesh.rendering.integrator import Integrator
+
+    settings = dataclasses.replace(settings, width=size, height=size, spp=spp, integrator="path",
+                                   max_depth=max_depth, threads=2)
+    return Integrator(scene, settings).render().image[..., :3].astype(np.float64)
+
+
+@pytest.mark.parametrize("name, max_depth", [("cornell_mitsuba_128", -1), ("cornell_mitsuba_128_direct", 1)])
+def test_path_integrator_has_the_mitsuba_references_means(cornell, references, name, max_depth):
+    """Under path, the image mean of every channel is Mitsuba's (max_depth -1, and 1 = its 2);
+    32 x 32 at 64 spp is about 0.1 s and its mean within 0.2 % here (a 32 x 32 pixel is the
+    mean of 4 x 4 of the reference's: box filters)."""
+    image = _render_path(*cornell, size=32, spp=64, max_depth=max_depth)
+    np.testing.assert_allclose(image.mean(axis=(0, 1)), references[name].mean(axis=(0, 1)), rtol=0.01)
+
+
+@pytest.mark.slow
+def test_path_integrator_matches_the_mitsuba_reference_in_8x8_blocks(cornell, references):
+    """The issue's Cornell box criterion: at 128 x 128, image mean within 1 %, 8 x 8 block
+    means within 2 % relative RMSE (256 spp: 0.02 % and 0.53 % measured)."""
+    from benchmarks._lib import relative_rmse
+
+    image = _render_path(*cornell, size=128, spp=256, max_depth=-1)
+    reference = references["cornell_mitsuba_128"]
+    assert image.mean() == pytest.approx(reference.mean(), rel=0.01)
+    assert relative_rmse(image, reference, block=8) < 0.02
