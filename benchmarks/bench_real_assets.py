@@ -53,6 +53,18 @@ def has_option(tree, option):
     return done.returncode == 0 and re.search(rf"(^|\s){re.escape(option)}\b", done.stdout) is not None
 
 
+def tree_commit(tree):
+    """The last commit of the tree's rtmesh package, ``+changes`` when its files differ; ``?`` outside git."""
+    try:
+        commit = subprocess.run(["git", "-C", str(tree), "log", "-1", "--format=%h", "--", "rtmesh"],
+                                capture_output=True, text=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "-C", str(tree), "status", "--porcelain", "--", "rtmesh"],
+                               capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "?"
+    return (commit or "?") + ("+changes" if dirty else "")
+
+
 def render_command(asset, output, args, integrator):
     """The ``rtmesh render`` arguments of one render (``integrator`` None: not passed)."""
     command = [sys.executable, "-m", "rtmesh.cli", "render", str(asset), "-o", str(output),
@@ -140,6 +152,7 @@ def main(argv=None):
     if missing:
         parser.error("missing assets: " + ", ".join(missing))
     trees = {"this": ROOT, **{str(t): Path(t).resolve() for t in args.tree}}
+    trees = {f"{name} ({tree_commit(tree)})": tree for name, tree in trees.items()}
     integrators, notes = {}, []
     for name, tree in trees.items():
         supported = args.integrator is not None and has_option(tree, "--integrator")
@@ -180,7 +193,7 @@ def main(argv=None):
         "- M rays/s as the render's summary line counts them; samples/s = pixels x spp / render seconds; "
         "render s from the summary line (no start-up, loading or writing); process s: the whole command",
         "",
-        "| asset | tree | M rays/s | M samples/s | rays a sample | render s | process s |",
+        "| asset | tree (rtmesh/ at) | M rays/s | M samples/s | rays a sample | render s | process s |",
         "|---|---|---:|---:|---:|---:|---:|",
         *rows,
         "",
