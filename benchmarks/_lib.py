@@ -8,7 +8,8 @@
 - :func:`run_peer` runs a worker script of this folder in the peers' own venv (Mitsuba 3,
   never a dependency of rtmesh; ``sh benchmarks/peers_setup.sh``), with Dr.Jit pointed at LLVM
   19 and its kernel cache in a folder of the caller's.
-- :func:`publish` prints a benchmark's section of docs/BENCHMARKS.md and writes it there.
+- :func:`publish` prints a benchmark's section of docs/BENCHMARKS.md and writes it there;
+  :func:`write_side_by_side` shows an image beside its references.
 
 Benchmarks run from the repository root as modules, e.g. ``python -m benchmarks.bench_peers``,
 and import this module as ``from benchmarks import _lib``.
@@ -80,6 +81,19 @@ def publish(text, section, write=True, doc=DOC):
         print(f"written to {doc}")
 
 
+def rtmesh_commit(folder):
+    """The last commit that changed ``folder`` (an rtmesh package), ``+changes`` when its files
+    differ from it; ``?`` outside git."""
+    try:
+        commit = subprocess.run(["git", "-C", str(folder), "log", "-1", "--format=%h", "--", "."],
+                                capture_output=True, text=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "-C", str(folder), "status", "--porcelain", "--", "."],
+                               capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "?"
+    return (commit or "?") + ("+changes" if dirty else "")
+
+
 # ---------------------------------------------------------------- error
 
 
@@ -128,6 +142,59 @@ def relative_rmse(image, reference, block=1, mask=None, mean=None):
         image, reference = block_means(image, block), block_means(reference, block)
     denominator = float(np.mean(reference)) if mean is None else float(mean)
     return float(np.sqrt(np.mean((image - reference) ** 2)) / max(denominator, 1e-30))
+
+
+def display(image, exposure=0.0, operator="pbr-neutral"):
+    """8-bit sRGB of a linear image (by default Khronos PBR Neutral tone mapping: base colours stay true)."""
+    from rtmesh.io.colour import linear_to_srgb, tonemap
+
+    return (linear_to_srgb(tonemap(image, exposure, operator)) * 255.0 + 0.5).astype(np.uint8)
+
+
+def difference_panel(image, reference, mask=None):
+    """Signed difference ``(image - reference) / mean(reference)``: red where the image is
+    brighter, blue where darker, full colour at +-50 %, grey outside ``mask``."""
+    from rtmesh.io.colour import linear_to_srgb
+
+    mask = np.ones(image.shape[:2], bool) if mask is None else mask
+    mean = float(reference[mask].mean()) if mask.any() else 1.0
+    d = np.clip((image - reference).mean(axis=2) / mean / 0.5, -1.0, 1.0)
+    out = np.zeros(image.shape, np.float64)
+    out[..., 0] = np.clip(d, 0, 1)
+    out[..., 2] = np.clip(-d, 0, 1)
+    out[~mask] = 0.15
+    return (linear_to_srgb(out.astype(np.float32)) * 255.0 + 0.5).astype(np.uint8)
+
+
+def write_side_by_side(path, image, references, mask=None, exposure=0.0):
+    """A PNG, pixels doubled: rtmesh | each reference | difference to the first reference.
+
+    Parameters
+    ----------
+    path : str or Path
+    image : (h, w, 3) float
+        rtmesh's linear image.
+    references : dict of str to (h, w, 3) float
+        Linear references by name, in panel order.
+    mask : (h, w) bool, optional
+        Pixels the difference panel shows (the others grey).
+    exposure : float, optional
+        Stops, for the tone-mapped panels.
+
+    Returns
+    -------
+    str
+        The file and what its panels are.
+    """
+    from PIL import Image
+
+    panels = [display(image, exposure)] + [display(r, exposure) for r in references.values()]
+    panels.append(difference_panel(image, next(iter(references.values())), mask))
+    gap = np.full((image.shape[0], 4, 3), 255, np.uint8)
+    row = np.concatenate([p for panel in panels for p in (panel, gap)][:-1], axis=1)
+    Image.fromarray(row).resize((2 * row.shape[1], 2 * row.shape[0]), Image.NEAREST).save(path)
+    return f"{path}: rtmesh | " + " | ".join(f"Mitsuba {m}" for m in references) + \
+        f" | (rtmesh - {next(iter(references))}) / mean, +-50 %"
 
 
 # ---------------------------------------------------------------- the benchmark scene

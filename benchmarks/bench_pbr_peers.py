@@ -129,7 +129,6 @@ import json
 import math
 import os
 import struct
-import subprocess
 import sys
 import tempfile
 import time
@@ -141,9 +140,9 @@ from trimesh.visual import TextureVisuals
 from trimesh.visual.material import PBRMaterial
 
 import rtmesh
-from benchmarks._lib import PEERS_VENV, ROOT, machine, peer_python, publish, relative_rmse, run_peer, write_ply
+from benchmarks._lib import (PEERS_VENV, ROOT, machine, peer_python, publish, relative_rmse, rtmesh_commit,
+                             run_peer, write_ply, write_side_by_side)
 from rtmesh.geometry.accel import Accel
-from rtmesh.io.colour import linear_to_srgb, tonemap
 from rtmesh.io.images import read_image
 from rtmesh.scene.studio import STUDIO_PATH
 
@@ -560,48 +559,10 @@ def compare(rt_halves, mi_halves, mask, scale):
             "image": image, "reference": reference}
 
 
-def display(image, exposure=0.0):
-    """8-bit sRGB of a linear image (Khronos PBR Neutral tone mapping: base colours stay true)."""
-    return (linear_to_srgb(tonemap(image, exposure, "pbr-neutral")) * 255.0 + 0.5).astype(np.uint8)
-
-
-def difference_panel(image, reference, mask):
-    """Signed difference ``(image - reference) / mean(reference)``: red where rtmesh is
-    brighter, blue where darker, full colour at +-50 %, grey outside the object."""
-    mean = float(reference[mask].mean()) if mask.any() else 1.0
-    d = np.clip((image - reference).mean(axis=2) / mean / 0.5, -1.0, 1.0)
-    out = np.zeros(image.shape, np.float64)
-    out[..., 0] = np.clip(d, 0, 1)
-    out[..., 2] = np.clip(-d, 0, 1)
-    out[~mask] = 0.15
-    return (linear_to_srgb(out.astype(np.float32)) * 255.0 + 0.5).astype(np.uint8)
-
-
-def write_side_by_side(path, case, rt_image, references, mask):
-    """A PNG, pixels doubled: rtmesh | Mitsuba model... | difference to the first model."""
-    from PIL import Image
-
-    panels = [display(rt_image)] + [display(r) for r in references.values()]
-    panels.append(difference_panel(rt_image, next(iter(references.values())), mask))
-    gap = np.full((rt_image.shape[0], 4, 3), 255, np.uint8)
-    row = np.concatenate([p for panel in panels for p in (panel, gap)][:-1], axis=1)
-    Image.fromarray(row).resize((2 * row.shape[1], 2 * row.shape[0]), Image.NEAREST).save(path)
-    return f"{path}: rtmesh | " + " | ".join(f"Mitsuba {m}" for m in references) + \
-        f" | (rtmesh - {next(iter(references))}) / mean, +-50 %"
-
-
 def rtmesh_version():
     """The last commit of the rtmesh package being measured (in the checkout it is imported
     from), with ``+changes`` when its files differ from it; ``?`` outside git."""
-    folder = os.path.dirname(os.path.abspath(rtmesh.__file__))
-    try:
-        commit = subprocess.run(["git", "-C", folder, "log", "-1", "--format=%h", "--", "."], capture_output=True,
-                                text=True, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "-C", folder, "status", "--porcelain", "--", "."], capture_output=True,
-                               text=True, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "?"
-    return commit + ("+changes" if dirty else "")
+    return rtmesh_commit(os.path.dirname(os.path.abspath(rtmesh.__file__)))
 
 
 def markdown_table(rows):
@@ -718,7 +679,7 @@ def main(argv=None):
                       f"rtmesh {rt_seconds:.1f} s", flush=True)
             if any(fnmatch.fnmatch(case.name, pat.strip()) for pat in args.png_cases.split(",") if pat.strip()):
                 rt_image = 0.5 * (rt_halves[0] + rt_halves[1]) * case.rtmesh_scale
-                notes.append(write_side_by_side(Path(args.png_dir) / f"{case.name}.png", case, rt_image,
+                notes.append(write_side_by_side(Path(args.png_dir) / f"{case.name}.png", rt_image,
                                                 images, p["mask"]))
     total = time.perf_counter() - started
     if not rows:

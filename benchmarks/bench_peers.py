@@ -29,8 +29,8 @@ rtmesh runs in a process tuned as the ``rtmesh`` command tunes its own
 
 Mitsuba runs in its own venv (``sh benchmarks/peers_setup.sh``; ``--venv``, default
 ``$RTMESH_PEERS_VENV`` or ``/tmp/peers-venv``), through ``benchmarks/peers_mitsuba.py``; it is
-never a dependency of rtmesh.  Without the venv the Mitsuba rows are skipped.  Times are medians of ``--runs`` runs, the ratios come from this
-one run.
+never a dependency of rtmesh.  Without the venv the Mitsuba rows are skipped.  Times are
+medians of ``--runs`` runs, the ratios come from this one run.
 
 Usage::
 

@@ -34,7 +34,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchmarks._lib import ROOT, machine, publish
+from benchmarks._lib import ROOT, machine, publish, rtmesh_commit
 
 SECTION = "Real assets: rays/s and samples/s"
 ASSETS = ("Duck.glb", "CesiumMilkTruck.glb", "monkey.glb", "AlphaBlendModeTest.glb")
@@ -51,18 +51,6 @@ def has_option(tree, option):
     done = subprocess.run([sys.executable, "-m", "rtmesh.cli", "render", "--help"], cwd=tree,
                           env=dict(os.environ, PYTHONPATH=str(tree)), capture_output=True, text=True)
     return done.returncode == 0 and re.search(rf"(^|\s){re.escape(option)}\b", done.stdout) is not None
-
-
-def tree_commit(tree):
-    """The last commit of the tree's rtmesh package, ``+changes`` when its files differ; ``?`` outside git."""
-    try:
-        commit = subprocess.run(["git", "-C", str(tree), "log", "-1", "--format=%h", "--", "rtmesh"],
-                                capture_output=True, text=True, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "-C", str(tree), "status", "--porcelain", "--", "rtmesh"],
-                               capture_output=True, text=True, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "?"
-    return (commit or "?") + ("+changes" if dirty else "")
 
 
 def render_command(asset, output, args, integrator):
@@ -152,7 +140,7 @@ def main(argv=None):
     if missing:
         parser.error("missing assets: " + ", ".join(missing))
     trees = {"this": ROOT, **{str(t): Path(t).resolve() for t in args.tree}}
-    trees = {f"{name} ({tree_commit(tree)})": tree for name, tree in trees.items()}
+    trees = {f"{name} ({rtmesh_commit(tree / 'rtmesh')})": tree for name, tree in trees.items()}
     integrators, notes = {}, []
     for name, tree in trees.items():
         supported = args.integrator is not None and has_option(tree, "--integrator")
