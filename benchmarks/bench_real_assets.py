@@ -25,6 +25,7 @@ Usage, from the repository root::
 
 import argparse
 import datetime
+import functools
 import os
 import re
 import statistics
@@ -46,11 +47,17 @@ SUMMARY = re.compile(r"(?P<spp>\d+) spp, (?P<rays>[\d.]+) M rays \((?P<rate>[\d.
                      r"(?P<seconds>[\d.]+) s, (?P<threads>\d+) threads")
 
 
-def has_option(tree, option):
-    """Whether ``rtmesh render`` of the source tree ``tree`` takes ``option``."""
+@functools.lru_cache(maxsize=None)
+def render_help(tree):
+    """The help text of ``rtmesh render`` of the source tree ``tree`` ('' if it fails)."""
     done = subprocess.run([sys.executable, "-m", "rtmesh.cli", "render", "--help"], cwd=tree,
                           env=dict(os.environ, PYTHONPATH=str(tree)), capture_output=True, text=True)
-    return done.returncode == 0 and re.search(rf"(^|\s){re.escape(option)}\b", done.stdout) is not None
+    return done.stdout if done.returncode == 0 else ""
+
+
+def has_option(tree, option):
+    """Whether ``rtmesh render`` of the source tree ``tree`` takes ``option``."""
+    return re.search(rf"(^|\s){re.escape(option)}\b", render_help(Path(tree))) is not None
 
 
 def render_command(asset, output, args, integrator):
