@@ -645,10 +645,10 @@ def test_a_superseded_task_removes_what_it_wrote_and_says_so(tmp_path):
 
 def test_tool_script_runs_the_batch_command(tmp_path):
     src = make_mesh(tmp_path / "a.obj")
-    proc = subprocess.run([sys.executable, os.path.join(REPO, "tools", "batch_convert.py"), src,
+    proc = subprocess.run([sys.executable, "-m", "benchmarks.batch_convert", src,
                            "-o", str(tmp_path / "out"), "--width", "16", "--height", "16",
                            "--spp", "1", "--formats", "png,exr", "-q"],
-                          capture_output=True, text=True, timeout=120)
+                          capture_output=True, text=True, timeout=120, cwd=REPO)
     assert proc.returncode == 0, proc.stderr
     assert "1 done" in proc.stdout
     images = sorted(n for n in os.listdir(tmp_path / "out") if n.startswith("a."))
@@ -1049,11 +1049,8 @@ def test_summary_to_a_closed_pipe_and_jsonl_progress(tmp_path):
 # ------------------------------------------------------------------------- cost at scale
 
 def bench_batch():
-    import importlib.util
+    from benchmarks import bench_batch as module
 
-    spec = importlib.util.spec_from_file_location("bench_batch", os.path.join(REPO, "tools", "bench_batch.py"))
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
     return module
 
 

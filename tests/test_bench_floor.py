@@ -1,26 +1,21 @@
-"""tools/bench_floor.py's floor kernel renders the peer scene's picture (the tool's numbers
+"""benchmarks/bench_floor.py's floor kernel renders the peer scene's picture (the tool's numbers
 mean something only if it does) and times its two Embree calls."""
-
-import os
-import sys
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tools"))
-from bench_floor import floor_inputs, make_floor  # noqa: E402
-from bench_peers import peer_meshes, peer_scene, relative_rmse  # noqa: E402
-
-from rtmesh.geometry.embree_library import packet_library  # noqa: E402
-from rtmesh.rendering.integrator import Integrator  # noqa: E402
-from rtmesh.rendering.settings import RenderSettings  # noqa: E402
+from benchmarks._lib import relative_rmse, sphere_scene
+from benchmarks.bench_floor import floor_inputs, make_floor
+from rtmesh.geometry.embree_library import packet_library
+from rtmesh.rendering.integrator import Integrator
+from rtmesh.rendering.settings import RenderSettings
 
 
 @pytest.mark.skipif(packet_library() is None, reason="the floor traces with Embree's packet queries")
 def test_the_floor_kernel_renders_rtmeshs_picture():
     size, spp = 48, 32
-    it = Integrator(peer_scene(peer_meshes()), RenderSettings(width=size, height=size, spp=spp,
-                                                              sampler="jittered", threads=1, seed=0))
+    it = Integrator(sphere_scene(), RenderSettings(width=size, height=size, spp=spp,
+                                                   sampler="jittered", threads=1, seed=0))
     reference = it.render().image[..., 0].astype(np.float64)
     inputs = floor_inputs(it)
     for real in (np.float32, np.float64):

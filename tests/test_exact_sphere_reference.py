@@ -1,4 +1,4 @@
-"""Whole renders of icospheres against the exact analytic sphere (tools/analytic_sphere.py).
+"""Whole renders of icospheres against the exact analytic sphere (benchmarks/analytic_sphere.py).
 
 The reference intersects the true sphere in closed form and uses its exact normal, so the
 difference is the tessellation error alone: it must fall steadily as subdivision rises, for
@@ -6,18 +6,13 @@ a lit Blinn-Phong sphere and for an absorbing glass sphere (refraction, Fresnel,
 internal reflection and Beer absorption all take part).
 """
 
-import os
-import sys
-
 import numpy as np
 import pytest
 
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tools"))
-from analytic_sphere import AnalyticSphere, intersect_sphere, render_analytic_image  # noqa: E402
-from sphere_study import AMBIENT, BACKGROUND, CAMERA, CASES, LIGHTS, icosphere_scene  # noqa: E402
-
-from rtmesh.rendering.integrator import Integrator  # noqa: E402
-from rtmesh.rendering.settings import RenderSettings  # noqa: E402
+from benchmarks.analytic_sphere import AnalyticSphere, intersect_sphere, render_analytic_image
+from benchmarks.sphere_study import AMBIENT, BACKGROUND, CAMERA, CASES, LIGHTS, icosphere_scene
+from rtmesh.rendering.integrator import Integrator
+from rtmesh.rendering.settings import RenderSettings
 
 SIZE = 64
 

@@ -7,20 +7,16 @@ results to the film is slow; and the whole-film reductions (image, error estimat
 work in blocks instead of making temporaries of the film's size.
 """
 
-import os
-import sys
 import tracemalloc
 
 import numpy as np
 import pytest
+from scenes import settings, sphere_on_floor_scene
 
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tools"))
-from bench_memory import traced_render  # noqa: E402
-from scenes import settings, sphere_on_floor_scene  # noqa: E402
-
-import rtmesh.rendering.film as film_module  # noqa: E402
-from rtmesh.rendering.film import Film  # noqa: E402
-from rtmesh.rendering.integrator import Integrator  # noqa: E402
+import rtmesh.rendering.film as film_module
+from benchmarks.bench_memory import traced_render
+from rtmesh.rendering.film import Film
+from rtmesh.rendering.integrator import Integrator
 
 CHUNK_SAMPLES = 2048
 THREADS = 2
