@@ -2,7 +2,7 @@
 does not fit.
 
 A render holds its film for the whole render and, while chunks are rendered, the
-temporaries of one chunk per thread (``tools/bench_memory.py``, docs/BENCHMARKS.md): the
+temporaries of one chunk per thread (``benchmarks/bench_memory.py``, docs/BENCHMARKS.md): the
 film grows with the image, the chunks with ``chunk_samples`` and with the samples of one
 pixel (a chunk never splits a pixel, so a chunk holds up to ``chunk_samples + spp - 1``
 samples).  :func:`estimate` adds these up from the settings alone, with a margin over

@@ -1,7 +1,7 @@
 """The default light rig of physically based assets: a neutral photo studio.
 
 An asset whose materials follow the glTF metallic-roughness model and that brings no lights
-of its own is lit by ``studio.exr`` (made from scratch by ``tools/make_studio.py``: a grey
+of its own is lit by ``studio.exr`` (made from scratch by ``python -m benchmarks.make_studio``: a grey
 cyclorama with a key softbox up and to the front-left, a fill to the right and a strip light
 behind) as an environment that lights the scene, the way product renderers (f3d, OSPRay
 Studio, Blender's look-dev mode) light glTF assets: metals then reflect something, and
