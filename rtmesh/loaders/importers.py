@@ -7,11 +7,12 @@ import os
 import numpy as np
 import trimesh
 
-from rtmesh.core.errors import MeshError
+from rtmesh.core.errors import MeshError, RtmeshError
 from rtmesh.geometry import build_kernels
 from rtmesh.geometry.smoothing import CREASE_ANGLE, smooth_vertex_normals
 from rtmesh.io.colour import srgb_to_linear
 from rtmesh.io.texture_images import Texture, image_size_guard
+from rtmesh.loaders import gltf_compression
 from rtmesh.loaders.gltf_nodes import (GLTF_EXTENSIONS, check_external_files, file_cameras_and_lights,
                                        read_gltf_json)
 from rtmesh.loaders.gltf_materials import gltf_json_materials, gltf_material
@@ -54,7 +55,7 @@ def load_trimesh(path):
     try:
         with image_size_guard(path):  # textures trimesh decodes: too large is one message
             scene = _load(path, ext)
-    except MeshError:
+    except RtmeshError:  # ours, one line already (a missing codec is a MissingExtraError)
         raise
     except IndexError as exc:
         raise MeshError(f"{path}: cannot read mesh: a face refers to a vertex the file does not "
@@ -73,7 +74,8 @@ def load_trimesh(path):
 def _load(path, ext):
     """trimesh's scene of a mesh file, processed (see :func:`process`)."""
     if ext in GLTF_EXTENSIONS:
-        scene = trimesh.load(path, force="scene")  # trimesh leaves glTF meshes unprocessed
+        # trimesh leaves glTF meshes unprocessed
+        scene = trimesh.load(**_gltf_source(path, ext), force="scene")
         for key, geometry in scene.geometry.items():
             if isinstance(geometry, trimesh.Trimesh) and geometry.faces.ndim == 2 and len(geometry.faces):
                 _drop_bad_index_faces(geometry, _geometry_source(path, scene, key))
@@ -85,6 +87,17 @@ def _load(path, ext):
             _warn_if_short(geometry, _geometry_source(path, scene, key))
             process(geometry, _geometry_source(path, scene, key))
     return scene
+
+
+def _gltf_source(path, ext):
+    """What trimesh reads of a glTF file: the file, or for one with compressed or quantised
+    geometry a plain GLB of it (:mod:`rtmesh.loaders.gltf_compression`), its external
+    images resolved as beside the file."""
+    doc = read_gltf_json(path)
+    if not gltf_compression.uses_decoded_extensions(doc):
+        return dict(file_obj=path)
+    return dict(file_obj=io.BytesIO(gltf_compression.plain_glb(path, doc)), file_type="glb",
+                resolver=trimesh.resolvers.FilePathResolver(path))
 
 
 def _warn_if_short(mesh, source):
