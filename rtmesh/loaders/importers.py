@@ -13,8 +13,8 @@ from rtmesh.geometry.smoothing import CREASE_ANGLE, smooth_vertex_normals
 from rtmesh.io.colour import srgb_to_linear
 from rtmesh.io.texture_images import Texture, image_size_guard
 from rtmesh.loaders import gltf_compression
-from rtmesh.loaders.gltf_nodes import (GLTF_EXTENSIONS, check_external_files, file_cameras_and_lights,
-                                       read_gltf_json)
+from rtmesh.loaders.gltf_nodes import (GLTF_EXTENSIONS, check_external_files, check_node_graph,
+                                       file_cameras_and_lights, read_gltf_json)
 from rtmesh.loaders.gltf_materials import gltf_json_materials, gltf_material
 from rtmesh.loaders.mtl_materials import mtl_material, obj_materials
 from rtmesh.loaders.mesh_files import check_content, check_file, format_name
@@ -94,6 +94,7 @@ def _gltf_source(path, ext):
     geometry a plain GLB of it (:mod:`rtmesh.loaders.gltf_compression`), its external
     images resolved as beside the file."""
     doc = read_gltf_json(path)
+    check_node_graph(path, doc)
     if not gltf_compression.uses_decoded_extensions(doc):
         return dict(file_obj=path)
     return dict(file_obj=io.BytesIO(gltf_compression.plain_glb(path, doc)), file_type="glb",
@@ -444,6 +445,7 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
         Imported materials, indexed by the parts' ``material`` (empty if ``material`` given).
     """
     transform = np.eye(4) if transform is None else np.asarray(transform, dtype=np.float64)
+    skipped = {kind: [] for kind in _SKIPPED}  # node names by why they are not rendered
     if isinstance(obj, trimesh.Trimesh):
         nodes = [(name, np.eye(4), obj)]
     elif isinstance(obj, trimesh.Scene):
@@ -455,8 +457,7 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
                 with np.errstate(invalid="ignore", over="ignore"):
                     node_transform, geometry_name = obj.graph[node]
             except ValueError:  # trimesh: "Iteration limit exceeded!"
-                log.warning("%s: node '%s' has no transform from the scene's root (a cycle in the "
-                            "node graph, which glTF forbids); skipped", name, node)
+                skipped["unplaced"].append(str(node))
                 continue
             nodes.append((str(node), node_transform, obj.geometry[geometry_name]))
     else:
@@ -466,8 +467,7 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
     parts, materials, material_ids = [], [], {}
     for node_name, node_transform, mesh in nodes:
         if not isinstance(mesh, trimesh.Trimesh):
-            log.warning("%s: node '%s' is a %s, not a triangle mesh; skipped",
-                        name, node_name, type(mesh).__name__)
+            skipped["not_a_mesh"].append(f"{node_name} ({type(mesh).__name__})")
             continue
         if len(mesh.faces) == 0:
             continue
@@ -491,8 +491,7 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
             matrix = transform @ node_transform
         if not (np.isfinite(matrix).all() and np.linalg.det(matrix[:3, :3]) != 0.0):
             # exporters hide parts with a zero scale: nothing of them would be seen
-            log.warning("%s: node '%s' has a zero scale (a singular transform, which hides it) "
-                        "or a non-finite one; its geometry is not rendered", name, node_name)
+            skipped["hidden"].append(node_name)
             continue
         vertices = trimesh.transform_points(vertices, matrix)
         if np.linalg.det(matrix[:3, :3]) < 0:
@@ -518,7 +517,31 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
         else:
             mat = material
         parts.append(MeshPart(node_name, vertices, faces, mat, normals, uv=uv, vertex_colors=colours))
+    for kind, names in skipped.items():
+        if names:
+            log.warning("%s: %s", name, _SKIPPED[kind](names))
     return parts, materials
+
+
+def _listed(names, most=5):
+    """``'a', 'b', 'c'`` or ``'a', ..., 'e' and 7 more``: node names in a warning, sorted."""
+    names = sorted(names)
+    shown = ", ".join(f"'{n}'" for n in names[:most])
+    return shown if len(names) <= most else f"{shown} and {len(names) - most} more"
+
+
+def _nodes(names):
+    return f"node {_listed(names)} has" if len(names) == 1 else f"{len(names)} nodes ({_listed(names)}) have"
+
+
+# the nodes parts_from_trimesh skips, one warning a kind and file
+_SKIPPED = {
+    "unplaced": lambda names: (f"{_nodes(names)} no transform from the scene's root (a cycle in the node "
+                               "graph, which glTF forbids); skipped"),
+    "not_a_mesh": lambda names: (f"{_nodes(names)} no triangle mesh (a path or point cloud); skipped"),
+    "hidden": lambda names: (f"{_nodes(names)} a zero scale (a singular transform, which hides it) or a "
+                             "non-finite one; not rendered"),
+}
 
 
 def scene_from_trimesh(obj, name="mesh", **scene_options):
