@@ -332,8 +332,10 @@ def cmd_render(args):
     runtime.tune_process()
     # on a first run, a second process compiles kernels alongside this one
     with compile_ahead.helper():
-        # the memory check runs on the settings before any mesh is read
-        scene, settings = load_scene(args.input, lambda s: memory.check(s, args.memory_limit), **overrides)
+        # the memory check runs on the settings before any mesh is read, and the loaders
+        # check what a file would take before they take it
+        with memory.loading_limit(args.memory_limit):
+            scene, settings = load_scene(args.input, lambda s: memory.check(s, args.memory_limit), **overrides)
         if background is not None:
             scene.background = background
         bar = ProgressBar(enabled=not args.quiet and sys.stderr.isatty())

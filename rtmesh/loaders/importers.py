@@ -19,12 +19,16 @@ from rtmesh.loaders.gltf_materials import gltf_json_materials, gltf_material
 from rtmesh.loaders.mtl_materials import mtl_material, obj_materials
 from rtmesh.loaders.mesh_files import check_content, check_file, format_name
 from rtmesh.loaders.obj_polygons import triangulate_polygons
+from rtmesh.loaders.usd_files import USD_EXTENSIONS, load_usd_scene, read_usd
 from rtmesh.materials.table import Material
 from rtmesh.scene.model import MeshPart, Scene
 
 log = logging.getLogger(__name__)
 
-MESH_EXTENSIONS = (".obj", ".ply", ".stl", ".glb", ".gltf", ".off")
+# files trimesh reads
+TRIMESH_EXTENSIONS = (".obj", ".ply", ".stl", ".glb", ".gltf", ".off")
+# every mesh file rtmesh renders: trimesh's and USD (rtmesh.loaders.usd_files)
+MESH_EXTENSIONS = TRIMESH_EXTENSIONS + USD_EXTENSIONS
 
 
 def load_trimesh(path):
@@ -46,7 +50,10 @@ def load_trimesh(path):
     path = os.fspath(path)
     check_file(path)
     ext = os.path.splitext(path)[1].lower()
-    if ext not in MESH_EXTENSIONS:
+    if ext in USD_EXTENSIONS:
+        raise MeshError(f"{path}: USD files are rendered as they are (rtmesh render, rtmesh batch), not "
+                        "read as a trimesh scene (a scene file's objects cannot name them yet)")
+    if ext not in TRIMESH_EXTENSIONS:
         raise MeshError(f"{path}: unsupported mesh format {ext or '(none)'!r}; use "
                         + ", ".join(MESH_EXTENSIONS))
     check_content(path, ext)
@@ -568,8 +575,25 @@ def scene_from_trimesh(obj, name="mesh", **scene_options):
 
 def default_integrator(path):
     """The integrator a mesh file renders with when none is asked for: ``"path"`` for glTF
-    (its format defines physically based materials and lights), ``"whitted"`` otherwise."""
-    return "path" if os.path.splitext(os.fspath(path))[1].lower() in GLTF_EXTENSIONS else "whitted"
+    and USD (their formats define physically based materials and lights), ``"whitted"``
+    otherwise."""
+    ext = os.path.splitext(os.fspath(path))[1].lower()
+    return "path" if ext in GLTF_EXTENSIONS or ext in USD_EXTENSIONS else "whitted"
+
+
+def mesh_file_parts(path):
+    """The parts and materials of any mesh file rtmesh renders (trimesh's formats and USD),
+    without camera or lights (the batch renders assets this way).
+
+    Returns
+    -------
+    parts : list of MeshPart
+    materials : list of Material
+    """
+    if os.path.splitext(os.fspath(path))[1].lower() in USD_EXTENSIONS:
+        content = read_usd(path)
+        return content.parts, content.materials
+    return parts_from_trimesh(load_trimesh(path), name=os.fspath(path))
 
 
 def load_mesh_scene(path, physical=False, **scene_options):
@@ -579,7 +603,11 @@ def load_mesh_scene(path, physical=False, **scene_options):
     it has them (see :mod:`rtmesh.loaders.gltf_nodes`); otherwise an automatic camera frames the
     mesh and the default light rig lights it.  ``physical``: the scene is for the path
     integrator (light units and the default rig, :meth:`Scene.from_parts`).
+    USD files go through :func:`rtmesh.loaders.usd_files.load_usd_scene` (their cameras
+    and lights likewise).
     """
+    if os.path.splitext(os.fspath(path))[1].lower() in USD_EXTENSIONS:
+        return load_usd_scene(path, physical=physical, **scene_options)
     obj = load_trimesh(path)
     cameras, lights = file_cameras_and_lights(path, physical=physical)
     scene_options["physical"] = physical
