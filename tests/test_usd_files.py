@@ -356,3 +356,32 @@ def test_a_folder_of_usd_files_renders_in_batch(usd_file, tmp_path, capsys):
                  "--workers", "1", "-q"])
     assert code == 0, capsys.readouterr().err
     assert (out / "scene.usda.png").exists()
+
+
+def test_instanceable_prims_are_placed_as_their_references(tmp_path):
+    stage = _stage(tmp_path / "instanced.usda")
+    UsdGeom.Xform.Define(stage, "/Library")
+    stage.GetPrimAtPath("/Library").SetSpecifier(Sdf.SpecifierClass)
+    tri = UsdGeom.Mesh.Define(stage, "/Library/Tri")
+    tri.CreatePointsAttr([(0, 0, 0), (1, 0, 0), (0, 1, 0)])
+    tri.CreateFaceVertexCountsAttr([3])
+    tri.CreateFaceVertexIndicesAttr([0, 1, 2])
+    for i in range(3):
+        holder = UsdGeom.Xform.Define(stage, f"/Copy{i}")
+        holder.AddTranslateOp().Set(Gf.Vec3d(10.0 * i, 0, 0))
+        holder.GetPrim().GetReferences().AddInternalReference("/Library")
+        holder.GetPrim().SetInstanceable(True)
+    stage.GetRootLayer().Save()
+    parts = read_usd(tmp_path / "instanced.usda").parts
+    assert len(parts) == 3
+    assert sorted(float(p.vertices[:, 0].min()) for p in parts) == [0.0, 10.0, 20.0]
+
+
+def test_a_usdz_package_reads_its_textures_from_the_package(usd_file, tmp_path):
+    from pxr import UsdUtils
+
+    package = tmp_path / "scene.usdz"
+    assert UsdUtils.CreateNewUsdzPackage(Sdf.AssetPath(str(usd_file)), str(package))
+    content = read_usd(package)
+    assert {m.name: m for m in content.materials}["Checker"].diffuse_texture is not None
+    assert len(content.parts) == 3

@@ -644,7 +644,8 @@ class _Reader:
         try:
             if resolved.endswith("]") and "[" in resolved:
                 package, inner = resolved[:-1].split("[", 1)
-                data = self.Usd.ZipFile.Open(package).GetFile(inner)
+                zip_file = getattr(self.Sdf, "ZipFile", None) or self.Usd.ZipFile  # Usd's before 24.11
+                data = zip_file.Open(package).GetFile(inner)
                 if data is None:
                     raise OSError("not in the package")
                 data = bytes(data)
