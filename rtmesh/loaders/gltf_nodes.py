@@ -179,6 +179,55 @@ def node_world_transforms(doc):
     return out
 
 
+def flattened_size(doc):
+    """What the file's meshes come to once every node that places one has its own copy (as
+    trimesh and rtmesh flatten them): counted from accessor counts, before reading a byte
+    of geometry.
+
+    Parameters
+    ----------
+    doc : dict
+        glTF JSON.
+
+    Returns
+    -------
+    copies : int
+        Mesh nodes of the default scene.
+    vertices, triangles : int
+        Over all copies.
+    """
+    accessors = doc.get("accessors") or []
+    meshes = doc.get("meshes") or []
+
+    def count(index):
+        if isinstance(index, int) and 0 <= index < len(accessors) and isinstance(accessors[index], dict):
+            value = accessors[index].get("count", 0)
+            return value if isinstance(value, int) and value > 0 else 0
+        return 0
+
+    sizes = []
+    for mesh in meshes:
+        vertices = triangles = 0
+        for primitive in (mesh.get("primitives") or []) if isinstance(mesh, dict) else []:
+            if not isinstance(primitive, dict):
+                continue
+            corners = count((primitive.get("attributes") or {}).get("POSITION"))
+            vertices += corners
+            if "indices" in primitive:
+                corners = count(primitive["indices"])
+            triangles += corners // 3
+        sizes.append((vertices, triangles))
+    copies = vertices = triangles = 0
+    nodes = doc.get("nodes") or []
+    for index, _ in node_world_transforms(doc):
+        mesh = nodes[index].get("mesh") if isinstance(nodes[index], dict) else None
+        if isinstance(mesh, int) and 0 <= mesh < len(sizes):
+            copies += 1
+            vertices += sizes[mesh][0]
+            triangles += sizes[mesh][1]
+    return copies, vertices, triangles
+
+
 def _local_matrix(node):
     """A node's local transform: ``matrix`` (column-major) or T @ R @ S."""
     if "matrix" in node:

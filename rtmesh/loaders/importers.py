@@ -14,13 +14,14 @@ from rtmesh.io.colour import srgb_to_linear
 from rtmesh.io.texture_images import Texture, image_size_guard
 from rtmesh.loaders import gltf_compression
 from rtmesh.loaders.gltf_nodes import (GLTF_EXTENSIONS, check_external_files, check_node_graph,
-                                       file_cameras_and_lights, read_gltf_json)
+                                       file_cameras_and_lights, flattened_size, read_gltf_json)
 from rtmesh.loaders.gltf_materials import gltf_json_materials, gltf_material
 from rtmesh.loaders.mtl_materials import mtl_material, obj_materials
 from rtmesh.loaders.mesh_files import check_content, check_file, format_name
 from rtmesh.loaders.obj_polygons import triangulate_polygons
 from rtmesh.loaders.usd_files import USD_EXTENSIONS, load_usd_scene, read_usd
 from rtmesh.materials.table import Material
+from rtmesh.rendering import memory
 from rtmesh.scene.model import MeshPart, Scene
 
 log = logging.getLogger(__name__)
@@ -102,6 +103,9 @@ def _gltf_source(path, ext):
     images resolved as beside the file."""
     doc = read_gltf_json(path)
     check_node_graph(path, doc)
+    copies, vertices, triangles = flattened_size(doc)
+    memory.check_load(path, f"{copies} mesh nodes of {triangles} triangles in all, each its own copy",
+                      memory.load_estimate(vertices, triangles))
     if not gltf_compression.uses_decoded_extensions(doc):
         return dict(file_obj=path)
     return dict(file_obj=io.BytesIO(gltf_compression.plain_glb(path, doc)), file_type="glb",

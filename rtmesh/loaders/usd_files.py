@@ -59,9 +59,6 @@ log = logging.getLogger(__name__)
 
 USD_EXTENSIONS = (".usd", ".usda", ".usdc", ".usdz")
 EXTRA = "rtmesh[usd]"
-# memory a flattened copy takes while the scene is built (MeshPart, Scene arrays, Embree,
-# shading tables): bytes a vertex and a triangle, a generous round figure
-BYTES_PER_VERTEX, BYTES_PER_TRIANGLE = 200, 300
 _WRAP = {"repeat": "repeat", "mirror": "mirror", "clamp": "clamp", "black": "clamp", "useMetadata": "repeat"}
 
 
@@ -337,7 +334,7 @@ class _Reader:
 
     def _check_memory(self, prim, copies, vertices, faces):
         """Refuse, before flattening, copies whose memory exceeds the loading limit."""
-        self.estimated += copies * (BYTES_PER_VERTEX * vertices + BYTES_PER_TRIANGLE * faces)
+        self.estimated += memory.load_estimate(copies * vertices, copies * faces)
         memory.check_load(self.path, f"{prim.GetPath()} and the prims before it, flattened "
                                      f"({copies} copies of {faces} triangles here)", self.estimated)
 

@@ -151,6 +151,19 @@ def check(settings, limit=None, option="--memory-limit"):
     return needed
 
 
+# What a vertex and a triangle of a loaded scene take until the render starts: the loader's
+# arrays, the parts, the scene's flattened arrays, Embree's build and the shading tables.
+# Measured: a GLB of 200 nodes placing one 5120-triangle sphere (2562 vertices) peaks
+# 3.08 MB a copy above one copy's render (32x24, 1 spp, 1 thread).
+LOAD_BYTES_PER_VERTEX = 300
+LOAD_BYTES_PER_TRIANGLE = 450
+
+
+def load_estimate(vertices, triangles):
+    """Bytes a scene of ``vertices`` and ``triangles`` (all copies counted) takes loaded."""
+    return LOAD_BYTES_PER_VERTEX * int(vertices) + LOAD_BYTES_PER_TRIANGLE * int(triangles)
+
+
 # the limit loaders check against (loading_limit): (bytes or None, option name), or None
 _LOAD_LIMIT = contextvars.ContextVar("rtmesh_load_limit", default=None)
 
