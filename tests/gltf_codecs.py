@@ -183,3 +183,17 @@ def quantised_glb(plain):
         nodes[0]["matrix"] = (local @ dequantise).T.ravel().tolist()
     _used(doc, "KHR_mesh_quantization")
     return out.glb()
+
+
+def gpu_instanced_glb(plain, node, translations, rotations, scales):
+    """The plain GLB with node ``node`` drawing its mesh once per instance
+    (EXT_mesh_gpu_instancing): translations and scales as floats, rotations (x, y, z, w)
+    as normalised int16."""
+    doc, binary = split_glb(plain)
+    out = _Builder(doc, binary)
+    doc["nodes"][node].setdefault("extensions", {})["EXT_mesh_gpu_instancing"] = {"attributes": {
+        "TRANSLATION": out.accessor(np.asarray(translations, "<f4"), 5126),
+        "ROTATION": out.accessor(np.round(np.asarray(rotations) * 32767).astype("<i2"), 5122, normalized=True),
+        "SCALE": out.accessor(np.asarray(scales, "<f4"), 5126)}}
+    doc.setdefault("extensionsUsed", []).append("EXT_mesh_gpu_instancing")
+    return out.glb()

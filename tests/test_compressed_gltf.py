@@ -163,3 +163,28 @@ def test_plain_files_are_read_by_trimesh_as_they_are(files, monkeypatch):
     monkeypatch.setattr(gltf_compression, "plain_glb", refuse)
     assert parts_from_trimesh(load_trimesh(files["plain"]), "plain")[0]
     assert json.loads(json.dumps(gltf_codecs.split_glb(files["plain"].read_bytes())[0])).get("extensionsUsed") is None
+
+
+def test_gpu_instances_are_flattened_into_a_copy_each(files, tmp_path):
+    from rtmesh.loaders.gltf_nodes import flattened_size, read_gltf_json
+
+    rng = np.random.default_rng(3)
+    translations = rng.uniform(-2, 2, (5, 3))
+    rotations = rng.normal(size=(5, 4))
+    rotations /= np.linalg.norm(rotations, axis=1, keepdims=True)
+    scales = rng.uniform(0.5, 1.5, (5, 3))
+    path = tmp_path / "instanced.glb"
+    path.write_bytes(gltf_codecs.gpu_instanced_glb(files["plain"].read_bytes(), 0, translations, rotations, scales))
+    assert flattened_size(read_gltf_json(path))[0] == 5 + 1  # five balls and the floor
+    plain, _ = parts_from_trimesh(load_trimesh(files["plain"]), "plain")
+    ball = next(p for p in plain if p.name == "ball")
+    node = trimesh.transformations.rotation_matrix(0.3, [0, 1, 0])
+    local = trimesh.transform_points(ball.vertices, np.linalg.inv(node))
+    parts, _ = parts_from_trimesh(load_trimesh(path), "instanced")
+    placed = {p.name: p for p in parts}
+    assert sorted(placed) == ["ball[0]", "ball[1]", "ball[2]", "ball[3]", "ball[4]", "floor"]
+    for k in range(5):
+        x, y, z, w = np.round(rotations[k] * 32767) / 32767
+        matrix = (node @ trimesh.transformations.translation_matrix(translations[k])
+                  @ trimesh.transformations.quaternion_matrix([w, x, y, z]) @ np.diag([*scales[k], 1.0]))
+        assert np.allclose(placed[f"ball[{k}]"].vertices, trimesh.transform_points(local, matrix), atol=1e-5)

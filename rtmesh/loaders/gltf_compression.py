@@ -12,7 +12,10 @@ converted to float32 as the glTF specification defines (``c / (2^(b-1) - 1)`` cl
 -1 for signed normalised types, ``c / (2^b - 1)`` for unsigned ones, the integer itself
 when not normalised).  Node transforms are left as they are: the dequantising transforms
 a quantiser writes on the nodes then place the float attributes as they placed the
-integers.  Files that use none of the three extensions are read by trimesh as before.
+integers.  ``EXT_mesh_gpu_instancing`` nodes become a child node per instance (its
+translation, rotation and scale), which trimesh then flattens into copies as it does any
+node tree (Embree instancing is future work).  Files that use none of these extensions are
+read by trimesh as before.
 
 Draco needs ``DracoPy`` and meshopt the ``meshopt`` package (meshoptimizer's codecs), both
 in the ``rtmesh[compressed]`` extra; a file that needs a missing one is refused in one
@@ -34,8 +37,9 @@ from rtmesh.core.errors import MeshError, MissingExtraError
 DRACO = "KHR_draco_mesh_compression"
 MESHOPT = "EXT_meshopt_compression"
 QUANTIZATION = "KHR_mesh_quantization"
+GPU_INSTANCING = "EXT_mesh_gpu_instancing"
 # the extensions this module decodes; a file that uses one is rewritten
-DECODED = (DRACO, MESHOPT, QUANTIZATION)
+DECODED = (DRACO, MESHOPT, QUANTIZATION, GPU_INSTANCING)
 # the meshopt extension under its vendor-neutral name (gltfpack writes either)
 _MESHOPT_NAMES = (MESHOPT, "KHR_meshopt_compression")
 
@@ -102,6 +106,11 @@ def plain_glb(path, doc):
             for name, index in list((primitive.get("attributes") or {}).items()):
                 if name.startswith(_QUANTISABLE):
                     primitive["attributes"][name] = writer.float_accessor(doc, index, f"{where}.attributes.{name}")
+    nodes = doc.get("nodes") or []
+    for i in range(len(nodes)):
+        spec = (nodes[i].get("extensions") or {}).pop(GPU_INSTANCING, None) if isinstance(nodes[i], dict) else None
+        if spec is not None:
+            writer.instance_nodes(doc, i, spec, f"nodes[{i}].extensions.{GPU_INSTANCING}")
     for key in ("extensionsUsed", "extensionsRequired"):
         if key in doc:
             doc[key] = [e for e in doc[key] if e not in DECODED + _MESHOPT_NAMES]
@@ -264,6 +273,32 @@ class _Writer:
         primitive.pop("mode", None)  # Draco meshes are triangles
         if primitive.get("extensions") == {}:
             del primitive["extensions"]
+
+    def instance_nodes(self, doc, index, spec, where):
+        """An EXT_mesh_gpu_instancing node's instances as its children, its mesh on each."""
+        node = doc["nodes"][index]
+        attributes = spec.get("attributes") or {}
+        values, count = {}, None
+        for name, width in (("TRANSLATION", 3), ("ROTATION", 4), ("SCALE", 3)):
+            if name not in attributes:
+                continue
+            accessor = _accessor(doc, attributes[name], self, f"{where}.attributes.{name}")
+            read = _dequantised(_read_accessor(doc, accessor, self, f"{where}.attributes.{name}"),
+                                accessor.get("normalized", False))
+            if read.shape[1] != width or (count is not None and len(read) != count):
+                raise self.error(f"{where}.attributes.{name}", f"{len(read)} values of {read.shape[1]} "
+                                 f"components; expected {count if count is not None else 'n'} of {width}")
+            if not np.isfinite(read).all():
+                raise self.error(f"{where}.attributes.{name}", "values that are not finite")
+            values[name.lower()], count = read, len(read)
+        if count is None or "mesh" not in node:
+            return
+        mesh, name = node.pop("mesh"), node.get("name", f"node {index}")
+        first = len(doc["nodes"])
+        columns = {key: array.tolist() for key, array in values.items()}
+        doc["nodes"].extend({"name": f"{name}[{k}]", "mesh": mesh, **{key: rows[k] for key, rows in columns.items()}}
+                            for k in range(count))
+        node["children"] = list(node.get("children") or []) + list(range(first, first + count))
 
     def new_accessor(self, doc, values, component=_FLOAT):
         """Index of a new accessor of ``values``, (n, k) float32 or (n, 1) uint32."""

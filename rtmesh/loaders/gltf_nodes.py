@@ -192,7 +192,7 @@ def flattened_size(doc):
     Returns
     -------
     copies : int
-        Mesh nodes of the default scene.
+        Mesh nodes of the default scene (each EXT_mesh_gpu_instancing instance a node).
     vertices, triangles : int
         Over all copies.
     """
@@ -222,9 +222,13 @@ def flattened_size(doc):
     for index, _ in node_world_transforms(doc):
         mesh = nodes[index].get("mesh") if isinstance(nodes[index], dict) else None
         if isinstance(mesh, int) and 0 <= mesh < len(sizes):
-            copies += 1
-            vertices += sizes[mesh][0]
-            triangles += sizes[mesh][1]
+            # EXT_mesh_gpu_instancing: a copy for each instance
+            instancing = (nodes[index].get("extensions") or {}).get("EXT_mesh_gpu_instancing") or {}
+            attributes = list((instancing.get("attributes") or {}).values())
+            placed = count(attributes[0]) if attributes else 1
+            copies += placed
+            vertices += placed * sizes[mesh][0]
+            triangles += placed * sizes[mesh][1]
     return copies, vertices, triangles
 
 
