@@ -188,3 +188,14 @@ def test_gpu_instances_are_flattened_into_a_copy_each(files, tmp_path):
         matrix = (node @ trimesh.transformations.translation_matrix(translations[k])
                   @ trimesh.transformations.quaternion_matrix([w, x, y, z]) @ np.diag([*scales[k], 1.0]))
         assert np.allclose(placed[f"ball[{k}]"].vertices, trimesh.transform_points(local, matrix), atol=1e-5)
+
+
+def test_a_compressed_glb_without_its_binary_chunk_is_one_line(files, tmp_path, capsys, caplog):
+    doc, _ = gltf_codecs.split_glb(files["draco"].read_bytes())
+    text = json.dumps(doc).encode()
+    text += b" " * (-len(text) % 4)
+    cut = tmp_path / "cut.glb"
+    cut.write_bytes(files["draco"].read_bytes()[:20 + len(text)])
+    status, err, out = _cli(cut, tmp_path, capsys, caplog)
+    assert status == 2 and not out.exists()
+    assert err == f"rtmesh: error: {cut}: buffers[0]: cannot read (no URI, and no GLB binary chunk holds it)\n"

@@ -385,3 +385,18 @@ def test_a_usdz_package_reads_its_textures_from_the_package(usd_file, tmp_path):
     content = read_usd(package)
     assert {m.name: m for m in content.materials}["Checker"].diffuse_texture is not None
     assert len(content.parts) == 3
+
+
+def test_usds_own_diagnostics_stay_off_the_terminal(tmp_path):
+    # USD prints composition warnings from C++ on file descriptor 2; a user sees one line
+    import subprocess
+    import sys
+
+    (tmp_path / "a.usda").write_text('#usda 1.0\ndef Xform "A" (prepend references = @b.usda@</B>) {}\n')
+    (tmp_path / "b.usda").write_text('#usda 1.0\ndef Xform "B" (prepend references = @a.usda@</A>) {}\n')
+    proc = subprocess.run([sys.executable, "-m", "rtmesh.cli", "render", str(tmp_path / "a.usda"), "-o",
+                           str(tmp_path / "out.png"), "--width", "24", "--height", "18", "-q"],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2 and not (tmp_path / "out.png").exists()
+    assert proc.stderr.splitlines() == [f"rtmesh: error: {tmp_path / 'a.usda'}: a cycle of references: "
+                                        "a.usda</A> -> b.usda</B> -> a.usda</A> (USD cannot compose it)"]

@@ -132,6 +132,8 @@ def _file_buffers(path, doc):
             if uri is None:
                 fallback = any((buffer.get("extensions") or {}).get(n, {}).get("fallback")
                                for n in _MESHOPT_NAMES)
+                if not fallback and glb_bin is None:
+                    raise ValueError("no URI, and no GLB binary chunk holds it")
                 out.append(None if fallback else glb_bin)
             elif uri.startswith("data:"):
                 out.append(base64.b64decode(uri.split(",", 1)[1]))

@@ -194,13 +194,12 @@ def read_usd(path, physical=True):
     """
     path = os.fspath(path)
     stage = open_stage(path)
-    with _quiet_stderr():
-        try:
-            return _Reader(path, stage, physical).read()
-        except RtmeshError:
-            raise
-        except Exception as exc:  # pxr raises Tf.ErrorException, RuntimeError, ValueError...
-            raise MeshError(f"{path}: cannot read USD: {_tf_message(exc)}") from None
+    try:
+        return _Reader(path, stage, physical).read()
+    except RtmeshError:
+        raise
+    except Exception as exc:  # pxr raises Tf.ErrorException, RuntimeError, ValueError...
+        raise MeshError(f"{path}: cannot read USD: {_tf_message(exc)}") from None
 
 
 class _Reader:
