@@ -400,3 +400,14 @@ def test_usds_own_diagnostics_stay_off_the_terminal(tmp_path):
     assert proc.returncode == 2 and not (tmp_path / "out.png").exists()
     assert proc.stderr.splitlines() == [f"rtmesh: error: {tmp_path / 'a.usda'}: a cycle of references: "
                                         "a.usda</A> -> b.usda</B> -> a.usda</A> (USD cannot compose it)"]
+
+
+def test_a_scene_file_object_places_a_usd_file_with_its_materials(usd_file, tmp_path):
+    scene_file = tmp_path / "with_usd.toml"
+    scene_file.write_text(f'[[objects]]\nmesh = "{usd_file}"\ntranslate = [0, 5, 0]\nscale = 2\n'
+                          '[[lights]]\ntype = "directional"\ndirection = [0, -1, 0]\nirradiance = 1\n')
+    scene, _ = load_scene(str(scene_file), width=16, height=12, spp=1)
+    direct = read_usd(usd_file)
+    points = np.concatenate([p.vertices for p in direct.parts])
+    assert np.allclose(scene.vertices.min(axis=0), 2 * points.min(axis=0) + [0, 5, 0], atol=1e-6)
+    assert {"Red", "Checker", "Blue"} <= {m.name for m in scene.materials.materials}

@@ -52,8 +52,8 @@ def load_trimesh(path):
     check_file(path)
     ext = os.path.splitext(path)[1].lower()
     if ext in USD_EXTENSIONS:
-        raise MeshError(f"{path}: USD files are rendered as they are (rtmesh render, rtmesh batch), not "
-                        "read as a trimesh scene (a scene file's objects cannot name them yet)")
+        raise MeshError(f"{path}: a USD file is not a trimesh scene (read it with mesh_file_parts or "
+                        "load_mesh_scene)")
     if ext not in TRIMESH_EXTENSIONS:
         raise MeshError(f"{path}: unsupported mesh format {ext or '(none)'!r}; use "
                         + ", ".join(MESH_EXTENSIONS))
@@ -585,19 +585,49 @@ def default_integrator(path):
     return "path" if ext in GLTF_EXTENSIONS or ext in USD_EXTENSIONS else "whitted"
 
 
-def mesh_file_parts(path):
+def mesh_file_parts(path, name=None, transform=None, material=None, smooth=None):
     """The parts and materials of any mesh file rtmesh renders (trimesh's formats and USD),
-    without camera or lights (the batch renders assets this way).
+    without camera or lights (the batch and scene files' objects read files this way).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+    name : str, optional
+        As :func:`parts_from_trimesh`'s (default: the path); USD parts keep their prim paths.
+    transform : (4, 4) float, optional
+        Applied after the file's own transforms.
+    material : int, optional
+        Material index for every part; None imports the file's materials.
+    smooth : bool, optional
+        As :func:`parts_from_trimesh`'s; for USD, False drops the normals and True or None
+        keeps them (meshes without normals are smoothed by angle).
 
     Returns
     -------
     parts : list of MeshPart
     materials : list of Material
+        Imported materials, indexed by the parts' ``material`` (empty if ``material`` given).
     """
-    if os.path.splitext(os.fspath(path))[1].lower() in USD_EXTENSIONS:
-        content = read_usd(path)
-        return content.parts, content.materials
-    return parts_from_trimesh(load_trimesh(path), name=os.fspath(path))
+    path = os.fspath(path)
+    if os.path.splitext(path)[1].lower() not in USD_EXTENSIONS:
+        return parts_from_trimesh(load_trimesh(path), name or path, transform, material, smooth)
+    content = read_usd(path)
+    parts, materials = content.parts, content.materials
+    if transform is not None:
+        matrix = np.asarray(transform, dtype=np.float64)
+        normal_matrix = np.linalg.inv(matrix[:3, :3]).T
+        mirrored = np.linalg.det(matrix[:3, :3]) < 0
+        for part in parts:
+            part.vertices = trimesh.transform_points(part.vertices, matrix)
+            part.faces = part.faces[:, ::-1] if mirrored else part.faces
+            if part.vertex_normals is not None:
+                part.vertex_normals = part.vertex_normals @ normal_matrix.T
+    for part in parts:
+        if smooth is False:
+            part.vertex_normals = None
+        if material is not None:
+            part.material = material
+    return parts, [] if material is not None else materials
 
 
 def load_mesh_scene(path, physical=False, **scene_options):
