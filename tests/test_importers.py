@@ -392,3 +392,18 @@ def test_gltf_faces_with_indices_beyond_the_vertices_are_dropped_with_a_count(tm
     assert "dropped 1 of 12 faces that refer to vertices the file does not have" in caplog.text
     assert len(scene.faces) == 11
     assert np.isfinite(Integrator(scene, settings).render().image).all()
+
+
+def test_faces_dropped_in_many_objects_are_one_warning_a_kind(caplog):
+    from rtmesh.scene.model import MeshPart, Scene
+
+    square = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    degenerate = np.array([[0, 1, 2], [0, 2, 3], [0, 0, 1]])  # one zero-area face
+    parts = [MeshPart(f"o{i}", square + [2 * i, 0, 0], degenerate) for i in range(7)]
+    parts.append(MeshPart("flat", np.zeros((3, 3)), np.array([[0, 1, 2]])))
+    with caplog.at_level(logging.WARNING):
+        Scene.from_parts(parts, source="many.glb")
+    assert [r.getMessage() for r in caplog.records] == [
+        "many.glb: dropped 8 zero-area faces in 8 objects: 'o0' (1), 'o1' (1), 'o2' (1), 'o3' (1), 'o4' (1) "
+        "and 3 more",
+        "many.glb: object 'flat' has no renderable triangles; skipped"]
