@@ -57,7 +57,8 @@ def build_parser():
 
     p = commands.add_parser("render", help="render a scene file or a mesh file to an image",
                             description="Render a .toml scene file or a mesh file (OBJ, glTF/GLB, "
-                            "PLY, STL, OFF; framed automatically and lit by a default light rig).")
+                            "PLY, STL, OFF, USD; framed automatically and lit by a default light rig "
+                            "unless the file has its own camera and lights).")
     p.add_argument("input", help="scene file (.toml) or mesh file")
     p.add_argument("-o", "--output", required=True,
                    help="output image: .exr (linear float, with passes) or .png/.jpg (8-bit sRGB)")
