@@ -257,6 +257,8 @@ def test_primvars_of_every_interpolation_reach_each_corner(tmp_path):
     local_x = corners[..., 0] - np.where(left, 0.0, 1.0)[:, None]
     assert np.allclose(uv[..., 0], local_x) and np.allclose(uv[..., 1], corners[..., 1])
     assert np.allclose(part.vertex_normals, [0, 0, 1])
+    (material,) = read_usd(tmp_path / "primvars.usda").materials
+    assert np.allclose(material.base_color, 1.0)  # the colours are the vertices'
 
 
 def test_z_up_centimetre_stages_are_turned_to_y_up_metres(tmp_path):

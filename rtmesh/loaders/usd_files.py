@@ -524,10 +524,12 @@ class _Reader:
     def _material_index(self, material, prim):
         UsdGeom = self.UsdGeom
         if material is None:
-            colour = self._primvar(UsdGeom.PrimvarsAPI(prim).GetPrimvar("displayColor"),
-                                   dict(point=np.zeros((1, 3), int), faces=1, points=1, corners=1,
-                                        face=np.zeros(1, int), corner=np.zeros((1, 3), int)), 3, "colour")
+            primvar = UsdGeom.PrimvarsAPI(prim).GetPrimvar("displayColor")
+            colour = self._primvar(primvar, dict(point=np.zeros((1, 3), int), faces=1, points=1, corners=1,
+                                                 face=np.zeros(1, int), corner=np.zeros((1, 3), int)), 3, "colour")
             base = (0.18, 0.18, 0.18) if colour is None else tuple(float(c) for c in colour[0, 0])
+            if colour is not None and primvar.GetInterpolation() != UsdGeom.Tokens.constant:
+                base = (1.0, 1.0, 1.0)  # the vertex colours carry it (glTF's COLOR_0 times the base)
             key = ("displayColor", base)
             if key not in self.material_ids:
                 pbr = trimesh.visual.material.PBRMaterial(
