@@ -21,7 +21,7 @@ def load_scene(source, check_settings=None, **settings):
     Parameters
     ----------
     source : str, os.PathLike, trimesh.Trimesh or trimesh.Scene
-        A ``.toml`` scene file, a mesh file (OBJ, glTF/GLB, PLY, STL, OFF), or an in-memory
+        A ``.toml`` scene file, a mesh file (OBJ, glTF/GLB, PLY, STL, OFF, USD), or an in-memory
         trimesh object.  Meshes get an automatic camera and the default light rig.
     check_settings : callable, optional
         Called with the validated settings before any mesh is read; raises to refuse them

@@ -57,7 +57,8 @@ def build_parser():
 
     p = commands.add_parser("render", help="render a scene file or a mesh file to an image",
                             description="Render a .toml scene file or a mesh file (OBJ, glTF/GLB, "
-                            "PLY, STL, OFF; framed automatically and lit by a default light rig).")
+                            "PLY, STL, OFF, USD; framed automatically and lit by a default light rig "
+                            "unless the file has its own camera and lights).")
     p.add_argument("input", help="scene file (.toml) or mesh file")
     p.add_argument("-o", "--output", required=True,
                    help="output image: .exr (linear float, with passes) or .png/.jpg (8-bit sRGB)")
@@ -332,8 +333,10 @@ def cmd_render(args):
     runtime.tune_process()
     # on a first run, a second process compiles kernels alongside this one
     with compile_ahead.helper():
-        # the memory check runs on the settings before any mesh is read
-        scene, settings = load_scene(args.input, lambda s: memory.check(s, args.memory_limit), **overrides)
+        # the memory check runs on the settings before any mesh is read, and the loaders
+        # check what a file would take before they take it
+        with memory.loading_limit(args.memory_limit):
+            scene, settings = load_scene(args.input, lambda s: memory.check(s, args.memory_limit), **overrides)
         if background is not None:
             scene.background = background
         bar = ProgressBar(enabled=not args.quiet and sys.stderr.isatty())

@@ -122,6 +122,7 @@ def test_truncated_glb_is_a_one_line_error(tmp_path):
 
 # ---------------------------------------------------------------- hostile and unusual files
 
+import json  # noqa: E402
 import logging  # noqa: E402
 
 import hostile_files  # noqa: E402
@@ -210,15 +211,39 @@ def test_negative_polygon_indices_refer_back_from_the_statement(tmp_path):
     assert len(f) == 6 and not (v[np.unique(f)] == 9).any()
 
 
-def test_gltf_node_cycle_and_zero_scale_render_the_rest_with_a_note(tmp_path, caplog):
-    corpus = hostile_files.corpus()
-    for name, node in (("node_cycle.gltf", "'b'"), ("zero_scale.gltf", "'hidden'")):
-        path = _write(tmp_path, name, corpus[name])
-        with caplog.at_level(logging.WARNING):
-            scene, settings = load_scene(path, width=16, height=12, spp=1)
-        assert f"node {node}" in caplog.text
-        assert len(scene.faces) == 12  # the other node's cube
-        assert Integrator(scene, settings).render().image.max() > 0
+def test_a_gltf_node_cycle_is_one_error_naming_the_nodes(tmp_path, caplog):
+    path = _write(tmp_path, "node_cycle.gltf", hostile_files.corpus()["node_cycle.gltf"])
+    with caplog.at_level(logging.WARNING), pytest.raises(MeshError) as caught:
+        load_scene(path, width=16, height=12, spp=1)
+    assert str(caught.value) == (f"{path}: 2 nodes form a cycle: 'a' -> 'b' -> 'a' (glTF forbids cycles in "
+                                 "the node graph)")
+    assert not caplog.records
+    # a longer cycle below a root, and nodes without names
+    nodes = [{"name": "root", "children": [1]}, {"mesh": 0, "children": [2]}, {"name": "c", "children": [3]},
+             {"name": "d", "children": [1]}]
+    path = _write(tmp_path, "long_cycle.gltf", json.dumps(hostile_files.gltf_cube(nodes, [0])))
+    with pytest.raises(MeshError, match=re.escape("3 nodes form a cycle: nodes[1] -> 'c' -> 'd' -> nodes[1]")):
+        load_mesh_scene(path)
+
+
+def test_hidden_nodes_are_one_warning_for_the_file_and_the_rest_renders(tmp_path, caplog):
+    path = _write(tmp_path, "zero_scale.gltf", hostile_files.corpus()["zero_scale.gltf"])
+    with caplog.at_level(logging.WARNING):
+        scene, settings = load_scene(path, width=16, height=12, spp=1)
+    assert [r.getMessage() for r in caplog.records] == [
+        f"{path}: node 'hidden' has a zero scale (a singular transform, which hides it) or a non-finite one; "
+        "not rendered"]
+    assert len(scene.faces) == 12  # the other node's cube
+    assert Integrator(scene, settings).render().image.max() > 0
+    caplog.clear()
+    nodes = [{"name": f"n{i}", "mesh": 0, "scale": [0, 0, 0]} for i in range(9)] + [{"name": "shown", "mesh": 0}]
+    path = _write(tmp_path, "nine_hidden.gltf", json.dumps(hostile_files.gltf_cube(nodes, list(range(10)))))
+    with caplog.at_level(logging.WARNING):
+        scene, _ = load_scene(path, width=16, height=12, spp=1)
+    assert [r.getMessage() for r in caplog.records] == [
+        f"{path}: 9 nodes ('n0', 'n1', 'n2', 'n3', 'n4' and 4 more) have a zero scale (a singular transform, "
+        "which hides it) or a non-finite one; not rendered"]
+    assert len(scene.faces) == 12
 
 
 @pytest.mark.parametrize("name, message", [
@@ -367,3 +392,18 @@ def test_gltf_faces_with_indices_beyond_the_vertices_are_dropped_with_a_count(tm
     assert "dropped 1 of 12 faces that refer to vertices the file does not have" in caplog.text
     assert len(scene.faces) == 11
     assert np.isfinite(Integrator(scene, settings).render().image).all()
+
+
+def test_faces_dropped_in_many_objects_are_one_warning_a_kind(caplog):
+    from rtmesh.scene.model import MeshPart, Scene
+
+    square = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    degenerate = np.array([[0, 1, 2], [0, 2, 3], [0, 0, 1]])  # one zero-area face
+    parts = [MeshPart(f"o{i}", square + [2 * i, 0, 0], degenerate) for i in range(7)]
+    parts.append(MeshPart("flat", np.zeros((3, 3)), np.array([[0, 1, 2]])))
+    with caplog.at_level(logging.WARNING):
+        Scene.from_parts(parts, source="many.glb")
+    assert [r.getMessage() for r in caplog.records] == [
+        "many.glb: dropped 8 zero-area faces in 8 objects: 'o0' (1), 'o1' (1), 'o2' (1), 'o3' (1), 'o4' (1) "
+        "and 3 more",
+        "many.glb: object 'flat' has no renderable triangles; skipped"]

@@ -53,7 +53,7 @@ def test_a_batch_job_loads_once_and_builds_once_per_ground_variant(tmp_path, mon
     mesh = tmp_path / "a.obj"
     mesh.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n")
     builds, loads = [], []
-    real_accel, real_load = accel_module.Accel.__init__, worker.load_trimesh
+    real_accel, real_load = accel_module.Accel.__init__, worker.mesh_file_parts
 
     def counting_accel(self, *args, **kwargs):
         builds.append(1)
@@ -64,7 +64,7 @@ def test_a_batch_job_loads_once_and_builds_once_per_ground_variant(tmp_path, mon
         return real_load(*args, **kwargs)
 
     monkeypatch.setattr(accel_module.Accel, "__init__", counting_accel)
-    monkeypatch.setattr(worker, "load_trimesh", counting_load)
+    monkeypatch.setattr(worker, "mesh_file_parts", counting_load)
     views = worker.turntable_views(8) + [worker.fixed_view("bottom")]
     tasks = tuple(worker.ImageTask(v.name, v, (f"{v.name}.exr",), "") for v in views)
     fields = {"width": 16, "height": 12, "spp": 1, "threads": 1}

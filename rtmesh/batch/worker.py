@@ -25,7 +25,7 @@ from rtmesh.batch.publish import discard
 from rtmesh.core.errors import RtmeshError
 from rtmesh.io.atomic_files import staged
 from rtmesh.io.images import write_depth_png, write_display_image, write_image
-from rtmesh.loaders.importers import default_integrator, load_trimesh, parts_from_trimesh
+from rtmesh.loaders.importers import default_integrator, mesh_file_parts
 from rtmesh.materials.table import Material, MaterialTable
 from rtmesh.rendering.integrator import Integrator
 from rtmesh.rendering.settings import RenderSettings
@@ -400,7 +400,7 @@ def _load(job):
     to_world : (4, 4) float
         What normalisation applied to the file's coordinates (identity without).
     """
-    parts, materials = parts_from_trimesh(load_trimesh(job.path), name=job.path)
+    parts, materials = mesh_file_parts(job.path)  # trimesh's formats and USD
     # Scene.from_parts drops broken triangles and raises when nothing is left; build the
     # scene once here so an empty asset fails at the load stage, and frame its clean bounds
     bounds = Scene.from_parts(parts, materials, lights=[], source=job.path).bounds  # (no light rig needed)

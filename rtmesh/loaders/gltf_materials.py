@@ -78,7 +78,7 @@ def gltf_material(pbr, json_material=None, name="gltf", source=None):
     -------
     Material
     """
-    _check_decoded(pbr, json_material, pbr.name or name)
+    _check_decoded(pbr, json_material, pbr.name or name, source)
     where = f"{source}: material '{pbr.name or name}'" if source else f"material '{pbr.name or name}'"
     f = _gltf_factors(pbr, json_material)
     ext = f["extensions"]
@@ -323,11 +323,22 @@ def texture_options(json_material, role):
 def _texture_image(doc, texture_info):
     """(label, mime type) of the image a glTF textureInfo shows: its name, URI or index."""
     try:
-        image = doc["images"][doc["textures"][texture_info["index"]]["source"]]
-        label = image.get("name") or image.get("uri", "")[:60] or f"image {texture_info['index']}"
-        return label, image.get("mimeType", "")
+        texture = doc["textures"][texture_info["index"]]
+        # KHR_texture_basisu: the KTX2 image in the extension, a PNG or JPEG fallback (which
+        # trimesh reads) in "source" where the file has one
+        basisu = (texture.get("extensions") or {}).get(BASISU) or {}
+        source = texture.get("source", basisu.get("source"))
+        image = doc["images"][source]
+        label = image.get("name") or image.get("uri", "")[:60] or f"image {source}"
+        mime = image.get("mimeType", "")
+        if "source" in basisu and source == basisu["source"] or str(image.get("uri", "")).lower().endswith(".ktx2"):
+            mime = "image/ktx2"
+        return label, mime
     except (KeyError, IndexError, TypeError, AttributeError):
         return "an image", ""
+
+
+BASISU = "KHR_texture_basisu"
 
 
 # images above PIL's decompression-bomb limit (89478485 pixels) are dropped by trimesh
@@ -336,21 +347,27 @@ def _texture_image(doc, texture_info):
 PIL_LIMIT = 89478485
 
 
-def _check_decoded(pbr, json_material, name):
+def _check_decoded(pbr, json_material, name, source=None):
     """Raise MeshError for a texture the file's JSON gives a material but trimesh could not
     decode (it drops such an image without a word): a corrupt texture is an error, as for
-    MTL files (docs/MATERIALS.md).  KTX2 images, which trimesh does not decode, are a
-    warning."""
+    MTL files (docs/MATERIALS.md).  KTX2 images (KHR_texture_basisu) without a fallback
+    image are one warning a material naming them: rtmesh does not decode them (libktx's
+    Python interface, pyktx, has no wheel to install), and the material's factors are used
+    without them (docs/ASSETS.md)."""
     images = (json_material or {}).get(IMAGES_KEY, {})
+    ktx2 = []
     for slot, (label, mime) in images.items():
         if getattr(pbr, slot, None) is not None:
             continue
         if mime == "image/ktx2":
-            log.warning("%s: %s %s is a KTX2 image, which rtmesh cannot decode; not used",
-                        name, slot, label)
+            ktx2.append(f"{slot} '{label}'")
             continue
         raise MeshError(f"{label}: corrupt or unreadable texture, or one of more than {PIL_LIMIT} "
                         f"pixels ({slot} of material '{name}')")
+    if ktx2:
+        log.warning("%smaterial '%s': %s %s a KTX2 image (%s), which rtmesh does not decode; the "
+                    "material's factors are used without %s", f"{source}: " if source else "", name,
+                    ", ".join(ktx2), "is" if len(ktx2) == 1 else "are", BASISU, "it" if len(ktx2) == 1 else "them")
 
 
 def gltf_json_materials(doc, source="glTF"):

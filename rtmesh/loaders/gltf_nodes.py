@@ -94,6 +94,56 @@ def check_external_files(path, doc):
                 raise MeshError(f"{path}: {kind[:-1]} file {uri} not found (looked for {target})")
 
 
+def check_node_graph(path, doc):
+    """Raise MeshError for a glTF node graph with a cycle, which glTF forbids, naming the
+    nodes that form it (trimesh would otherwise warn once for every node it cannot place).
+
+    Parameters
+    ----------
+    path : str
+        For the message.
+    doc : dict
+        glTF JSON.
+
+    Raises
+    ------
+    MeshError
+        ``file: 2 nodes form a cycle: 'a' -> 'b' -> 'a' (glTF forbids cycles in the node graph)``.
+    """
+    nodes = doc.get("nodes") or []
+    children = [[c for c in (n.get("children") or []) if isinstance(c, int) and 0 <= c < len(nodes)]
+                if isinstance(n, dict) else [] for n in nodes]
+    state = [0] * len(nodes)  # 0 unseen, 1 on the current path, 2 done
+    for start in range(len(nodes)):
+        if state[start]:
+            continue
+        path_nodes, stack = [], [(start, iter(children[start]))]
+        state[start] = 1
+        path_nodes.append(start)
+        while stack:
+            node, pending = stack[-1]
+            child = next(pending, None)
+            if child is None:
+                state[node] = 2
+                stack.pop()
+                path_nodes.pop()
+            elif state[child] == 1:
+                cycle = path_nodes[path_nodes.index(child):] + [child]
+                names = " -> ".join(_node_name(nodes, i) for i in cycle)
+                raise MeshError(f"{path}: {len(cycle) - 1} nodes form a cycle: {names} (glTF forbids "
+                                "cycles in the node graph)")
+            elif state[child] == 0:
+                state[child] = 1
+                path_nodes.append(child)
+                stack.append((child, iter(children[child])))
+
+
+def _node_name(nodes, index):
+    """A node's name in messages: ``'name'``, or ``nodes[3]`` for one without a name."""
+    name = nodes[index].get("name") if isinstance(nodes[index], dict) else None
+    return repr(name) if isinstance(name, str) and name else f"nodes[{index}]"
+
+
 def node_world_transforms(doc):
     """World transform of every node of the default scene.
 
@@ -127,6 +177,59 @@ def node_world_transforms(doc):
         out.append((index, world))
         stack.extend((c, world) for c in reversed(nodes[index].get("children", [])))
     return out
+
+
+def flattened_size(doc):
+    """What the file's meshes come to once every node that places one has its own copy (as
+    trimesh and rtmesh flatten them): counted from accessor counts, before reading a byte
+    of geometry.
+
+    Parameters
+    ----------
+    doc : dict
+        glTF JSON.
+
+    Returns
+    -------
+    copies : int
+        Mesh nodes of the default scene (each EXT_mesh_gpu_instancing instance a node).
+    vertices, triangles : int
+        Over all copies.
+    """
+    accessors = doc.get("accessors") or []
+    meshes = doc.get("meshes") or []
+
+    def count(index):
+        if isinstance(index, int) and 0 <= index < len(accessors) and isinstance(accessors[index], dict):
+            value = accessors[index].get("count", 0)
+            return value if isinstance(value, int) and value > 0 else 0
+        return 0
+
+    sizes = []
+    for mesh in meshes:
+        vertices = triangles = 0
+        for primitive in (mesh.get("primitives") or []) if isinstance(mesh, dict) else []:
+            if not isinstance(primitive, dict):
+                continue
+            corners = count((primitive.get("attributes") or {}).get("POSITION"))
+            vertices += corners
+            if "indices" in primitive:
+                corners = count(primitive["indices"])
+            triangles += corners // 3
+        sizes.append((vertices, triangles))
+    copies = vertices = triangles = 0
+    nodes = doc.get("nodes") or []
+    for index, _ in node_world_transforms(doc):
+        mesh = nodes[index].get("mesh") if isinstance(nodes[index], dict) else None
+        if isinstance(mesh, int) and 0 <= mesh < len(sizes):
+            # EXT_mesh_gpu_instancing: a copy for each instance
+            instancing = (nodes[index].get("extensions") or {}).get("EXT_mesh_gpu_instancing") or {}
+            attributes = list((instancing.get("attributes") or {}).values())
+            placed = count(attributes[0]) if attributes else 1
+            copies += placed
+            vertices += placed * sizes[mesh][0]
+            triangles += placed * sizes[mesh][1]
+    return copies, vertices, triangles
 
 
 def _local_matrix(node):

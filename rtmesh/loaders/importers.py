@@ -7,23 +7,29 @@ import os
 import numpy as np
 import trimesh
 
-from rtmesh.core.errors import MeshError
+from rtmesh.core.errors import MeshError, RtmeshError
 from rtmesh.geometry import build_kernels
 from rtmesh.geometry.smoothing import CREASE_ANGLE, smooth_vertex_normals
 from rtmesh.io.colour import srgb_to_linear
 from rtmesh.io.texture_images import Texture, image_size_guard
-from rtmesh.loaders.gltf_nodes import (GLTF_EXTENSIONS, check_external_files, file_cameras_and_lights,
-                                       read_gltf_json)
+from rtmesh.loaders import gltf_compression
+from rtmesh.loaders.gltf_nodes import (GLTF_EXTENSIONS, check_external_files, check_node_graph,
+                                       file_cameras_and_lights, flattened_size, read_gltf_json)
 from rtmesh.loaders.gltf_materials import gltf_json_materials, gltf_material
 from rtmesh.loaders.mtl_materials import mtl_material, obj_materials
 from rtmesh.loaders.mesh_files import check_content, check_file, format_name
 from rtmesh.loaders.obj_polygons import triangulate_polygons
+from rtmesh.loaders.usd_files import USD_EXTENSIONS, load_usd_scene, read_usd
 from rtmesh.materials.table import Material
+from rtmesh.rendering import memory
 from rtmesh.scene.model import MeshPart, Scene
 
 log = logging.getLogger(__name__)
 
-MESH_EXTENSIONS = (".obj", ".ply", ".stl", ".glb", ".gltf", ".off")
+# files trimesh reads
+TRIMESH_EXTENSIONS = (".obj", ".ply", ".stl", ".glb", ".gltf", ".off")
+# every mesh file rtmesh renders: trimesh's and USD (rtmesh.loaders.usd_files)
+MESH_EXTENSIONS = TRIMESH_EXTENSIONS + USD_EXTENSIONS
 
 
 def load_trimesh(path):
@@ -45,7 +51,10 @@ def load_trimesh(path):
     path = os.fspath(path)
     check_file(path)
     ext = os.path.splitext(path)[1].lower()
-    if ext not in MESH_EXTENSIONS:
+    if ext in USD_EXTENSIONS:
+        raise MeshError(f"{path}: a USD file is not a trimesh scene (read it with mesh_file_parts or "
+                        "load_mesh_scene)")
+    if ext not in TRIMESH_EXTENSIONS:
         raise MeshError(f"{path}: unsupported mesh format {ext or '(none)'!r}; use "
                         + ", ".join(MESH_EXTENSIONS))
     check_content(path, ext)
@@ -54,7 +63,7 @@ def load_trimesh(path):
     try:
         with image_size_guard(path):  # textures trimesh decodes: too large is one message
             scene = _load(path, ext)
-    except MeshError:
+    except RtmeshError:  # ours, one line already (a missing codec is a MissingExtraError)
         raise
     except IndexError as exc:
         raise MeshError(f"{path}: cannot read mesh: a face refers to a vertex the file does not "
@@ -73,7 +82,8 @@ def load_trimesh(path):
 def _load(path, ext):
     """trimesh's scene of a mesh file, processed (see :func:`process`)."""
     if ext in GLTF_EXTENSIONS:
-        scene = trimesh.load(path, force="scene")  # trimesh leaves glTF meshes unprocessed
+        # trimesh leaves glTF meshes unprocessed
+        scene = trimesh.load(**_gltf_source(path, ext), force="scene")
         for key, geometry in scene.geometry.items():
             if isinstance(geometry, trimesh.Trimesh) and geometry.faces.ndim == 2 and len(geometry.faces):
                 _drop_bad_index_faces(geometry, _geometry_source(path, scene, key))
@@ -85,6 +95,21 @@ def _load(path, ext):
             _warn_if_short(geometry, _geometry_source(path, scene, key))
             process(geometry, _geometry_source(path, scene, key))
     return scene
+
+
+def _gltf_source(path, ext):
+    """What trimesh reads of a glTF file: the file, or for one with compressed or quantised
+    geometry a plain GLB of it (:mod:`rtmesh.loaders.gltf_compression`), its external
+    images resolved as beside the file."""
+    doc = read_gltf_json(path)
+    check_node_graph(path, doc)
+    copies, vertices, triangles = flattened_size(doc)
+    memory.check_load(path, f"{copies} mesh nodes of {triangles} triangles in all, each its own copy",
+                      memory.load_estimate(vertices, triangles))
+    if not gltf_compression.uses_decoded_extensions(doc):
+        return dict(file_obj=path)
+    return dict(file_obj=io.BytesIO(gltf_compression.plain_glb(path, doc)), file_type="glb",
+                resolver=trimesh.resolvers.FilePathResolver(path))
 
 
 def _warn_if_short(mesh, source):
@@ -431,6 +456,7 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
         Imported materials, indexed by the parts' ``material`` (empty if ``material`` given).
     """
     transform = np.eye(4) if transform is None else np.asarray(transform, dtype=np.float64)
+    skipped = {kind: [] for kind in _SKIPPED}  # node names by why they are not rendered
     if isinstance(obj, trimesh.Trimesh):
         nodes = [(name, np.eye(4), obj)]
     elif isinstance(obj, trimesh.Scene):
@@ -442,8 +468,7 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
                 with np.errstate(invalid="ignore", over="ignore"):
                     node_transform, geometry_name = obj.graph[node]
             except ValueError:  # trimesh: "Iteration limit exceeded!"
-                log.warning("%s: node '%s' has no transform from the scene's root (a cycle in the "
-                            "node graph, which glTF forbids); skipped", name, node)
+                skipped["unplaced"].append(str(node))
                 continue
             nodes.append((str(node), node_transform, obj.geometry[geometry_name]))
     else:
@@ -453,8 +478,7 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
     parts, materials, material_ids = [], [], {}
     for node_name, node_transform, mesh in nodes:
         if not isinstance(mesh, trimesh.Trimesh):
-            log.warning("%s: node '%s' is a %s, not a triangle mesh; skipped",
-                        name, node_name, type(mesh).__name__)
+            skipped["not_a_mesh"].append(f"{node_name} ({type(mesh).__name__})")
             continue
         if len(mesh.faces) == 0:
             continue
@@ -478,8 +502,7 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
             matrix = transform @ node_transform
         if not (np.isfinite(matrix).all() and np.linalg.det(matrix[:3, :3]) != 0.0):
             # exporters hide parts with a zero scale: nothing of them would be seen
-            log.warning("%s: node '%s' has a zero scale (a singular transform, which hides it) "
-                        "or a non-finite one; its geometry is not rendered", name, node_name)
+            skipped["hidden"].append(node_name)
             continue
         vertices = trimesh.transform_points(vertices, matrix)
         if np.linalg.det(matrix[:3, :3]) < 0:
@@ -505,7 +528,31 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
         else:
             mat = material
         parts.append(MeshPart(node_name, vertices, faces, mat, normals, uv=uv, vertex_colors=colours))
+    for kind, names in skipped.items():
+        if names:
+            log.warning("%s: %s", name, _SKIPPED[kind](names))
     return parts, materials
+
+
+def _listed(names, most=5):
+    """``'a', 'b', 'c'`` or ``'a', ..., 'e' and 7 more``: node names in a warning, sorted."""
+    names = sorted(names)
+    shown = ", ".join(f"'{n}'" for n in names[:most])
+    return shown if len(names) <= most else f"{shown} and {len(names) - most} more"
+
+
+def _nodes(names):
+    return f"node {_listed(names)} has" if len(names) == 1 else f"{len(names)} nodes ({_listed(names)}) have"
+
+
+# the nodes parts_from_trimesh skips, one warning a kind and file
+_SKIPPED = {
+    "unplaced": lambda names: (f"{_nodes(names)} no transform from the scene's root (a cycle in the node "
+                               "graph, which glTF forbids); skipped"),
+    "not_a_mesh": lambda names: (f"{_nodes(names)} no triangle mesh (a path or point cloud); skipped"),
+    "hidden": lambda names: (f"{_nodes(names)} a zero scale (a singular transform, which hides it) or a "
+                             "non-finite one; not rendered"),
+}
 
 
 def scene_from_trimesh(obj, name="mesh", **scene_options):
@@ -532,8 +579,55 @@ def scene_from_trimesh(obj, name="mesh", **scene_options):
 
 def default_integrator(path):
     """The integrator a mesh file renders with when none is asked for: ``"path"`` for glTF
-    (its format defines physically based materials and lights), ``"whitted"`` otherwise."""
-    return "path" if os.path.splitext(os.fspath(path))[1].lower() in GLTF_EXTENSIONS else "whitted"
+    and USD (their formats define physically based materials and lights), ``"whitted"``
+    otherwise."""
+    ext = os.path.splitext(os.fspath(path))[1].lower()
+    return "path" if ext in GLTF_EXTENSIONS or ext in USD_EXTENSIONS else "whitted"
+
+
+def mesh_file_parts(path, name=None, transform=None, material=None, smooth=None):
+    """The parts and materials of any mesh file rtmesh renders (trimesh's formats and USD),
+    without camera or lights (the batch and scene files' objects read files this way).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+    name : str, optional
+        As :func:`parts_from_trimesh`'s (default: the path); USD parts keep their prim paths.
+    transform : (4, 4) float, optional
+        Applied after the file's own transforms.
+    material : int, optional
+        Material index for every part; None imports the file's materials.
+    smooth : bool, optional
+        As :func:`parts_from_trimesh`'s; for USD, False drops the normals and True or None
+        keeps them (meshes without normals are smoothed by angle).
+
+    Returns
+    -------
+    parts : list of MeshPart
+    materials : list of Material
+        Imported materials, indexed by the parts' ``material`` (empty if ``material`` given).
+    """
+    path = os.fspath(path)
+    if os.path.splitext(path)[1].lower() not in USD_EXTENSIONS:
+        return parts_from_trimesh(load_trimesh(path), name or path, transform, material, smooth)
+    content = read_usd(path)
+    parts, materials = content.parts, content.materials
+    if transform is not None:
+        matrix = np.asarray(transform, dtype=np.float64)
+        normal_matrix = np.linalg.inv(matrix[:3, :3]).T
+        mirrored = np.linalg.det(matrix[:3, :3]) < 0
+        for part in parts:
+            part.vertices = trimesh.transform_points(part.vertices, matrix)
+            part.faces = part.faces[:, ::-1] if mirrored else part.faces
+            if part.vertex_normals is not None:
+                part.vertex_normals = part.vertex_normals @ normal_matrix.T
+    for part in parts:
+        if smooth is False:
+            part.vertex_normals = None
+        if material is not None:
+            part.material = material
+    return parts, [] if material is not None else materials
 
 
 def load_mesh_scene(path, physical=False, **scene_options):
@@ -543,7 +637,11 @@ def load_mesh_scene(path, physical=False, **scene_options):
     it has them (see :mod:`rtmesh.loaders.gltf_nodes`); otherwise an automatic camera frames the
     mesh and the default light rig lights it.  ``physical``: the scene is for the path
     integrator (light units and the default rig, :meth:`Scene.from_parts`).
+    USD files go through :func:`rtmesh.loaders.usd_files.load_usd_scene` (their cameras
+    and lights likewise).
     """
+    if os.path.splitext(os.fspath(path))[1].lower() in USD_EXTENSIONS:
+        return load_usd_scene(path, physical=physical, **scene_options)
     obj = load_trimesh(path)
     cameras, lights = file_cameras_and_lights(path, physical=physical)
     scene_options["physical"] = physical

@@ -20,7 +20,7 @@ except ModuleNotFoundError:  # Python 3.10
 from rtmesh.core.errors import RtmeshError, SceneError
 from rtmesh.geometry.motion import Motion
 from rtmesh.loaders.gltf_nodes import file_cameras_and_lights
-from rtmesh.loaders.importers import load_trimesh, parts_from_trimesh
+from rtmesh.loaders.importers import mesh_file_parts
 from rtmesh.loaders.light_registry import LIGHT_TYPES
 from rtmesh.materials.table import Material
 from rtmesh.rendering.settings import RenderSettings
@@ -430,11 +430,11 @@ def _object_parts(r, values, where, base_dir, materials, material_index):
     if has_mesh:
         mesh_path = _mesh_path(values, base_dir)
         try:
-            obj = load_trimesh(mesh_path)
+            # trimesh's formats and USD (its meshes and materials; not its lights or cameras)
+            parts, imported = mesh_file_parts(mesh_path, name or os.path.basename(mesh_path), transform,
+                                              material, smooth)
         except RtmeshError as exc:
             raise r.error(f"{where}.mesh", str(exc)) from None
-        parts, imported = parts_from_trimesh(obj, name or os.path.basename(mesh_path), transform,
-                                             material, smooth)
         # imported materials are appended after the scene file's own; one whose name a
         # [materials.NAME] table defines is replaced by that table
         if material is None:

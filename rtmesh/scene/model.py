@@ -1,5 +1,6 @@
 """The flattened scene: one triangle soup with per-face material and object ids."""
 
+import collections
 import dataclasses
 import logging
 from dataclasses import dataclass, field
@@ -167,6 +168,9 @@ class Scene:
         motions = {}
         offset = 0
         build_kernels.BUILD_KERNELS.prepare()
+        # faces dropped by kind: (object, count); one warning a kind, after the loop
+        dropped = collections.defaultdict(list)
+        empty = []
         for part in parts:
             # row-major, as most loaders give it: the build passes are compiled for one layout
             v = np.ascontiguousarray(part.vertices, dtype=np.float64).reshape(-1, 3)
@@ -179,26 +183,23 @@ class Scene:
             # cross(v1 - v0, v2 - v0) over its length, rounded as NumPy rounds them
             keep = build_kernels.finite_faces(v, f)
             if not keep.all():
-                log.warning("%s: object '%s': dropped %d faces with NaN/Inf vertices",
-                            source, part.name, int((~keep).sum()))
+                dropped["faces with NaN/Inf vertices"].append((part.name, int((~keep).sum())))
                 f = f[keep]
             # Embree holds float32: a coordinate beyond its range would become infinite
             beyond = np.abs(v).max(axis=1, initial=0.0) > FLOAT32_MAX  # False for NaN
             if beyond.any():
                 far = beyond[f].any(axis=1)
                 if far.any():
-                    log.warning("%s: object '%s': dropped %d faces with coordinates beyond float32's "
-                                "range (%.3g), which the ray tracer cannot hold", source, part.name,
-                                int(far.sum()), FLOAT32_MAX)
+                    dropped[f"faces with coordinates beyond float32's range ({FLOAT32_MAX:.3g}), which the "
+                            "ray tracer cannot hold"].append((part.name, int(far.sum())))
                     f = f[~far]
             face_normals, area2 = build_kernels.face_crosses(v, f)
             nondegenerate = area2 > 0.0
             if not nondegenerate.all():
-                log.warning("%s: object '%s': dropped %d zero-area faces",
-                            source, part.name, int((~nondegenerate).sum()))
+                dropped["zero-area faces"].append((part.name, int((~nondegenerate).sum())))
                 f, face_normals = f[nondegenerate], face_normals[nondegenerate]
             if not len(f):
-                log.warning("%s: object '%s' has no renderable triangles; skipped", source, part.name)
+                empty.append(part.name)
                 continue
             # non-finite (or beyond float32) vertices that no face uses are harmless but must
             # not reach Embree
@@ -218,6 +219,7 @@ class Scene:
                 motions[len(names)] = _with_centre(part.motion, v[np.unique(f)])
             names.append(part.name)
             offset += len(v)
+        _warn_dropped(source, dropped, empty)
         if not faces:
             raise MeshError(f"{source}: nothing to render (no non-degenerate triangles with finite vertices)")
         smooth_faces = np.concatenate(smooth)
@@ -352,3 +354,32 @@ def default_lights(camera, physical=False):
         DirectionalLight(fill, irradiance=np.full(3, 0.35 * scale)),
         DirectionalLight(rim, irradiance=np.full(3, 0.5 * scale)),
     ]
+
+
+def _warn_dropped(source, dropped, empty, most=5):
+    """One warning a kind of dropped face, and one for the objects left empty, naming up to
+    ``most`` objects: ``scene.glb: object 'a': dropped 2 zero-area faces`` or
+    ``scene.glb: dropped 7 zero-area faces in 3 objects: 'a' (3), 'b' (2), 'c' (2)``.
+
+    Parameters
+    ----------
+    source : str
+    dropped : dict of str to list of (str, int)
+        Kind of face -> (object name, faces dropped).
+    empty : list of str
+        Objects with no renderable triangle left.
+    """
+    for kind, objects in dropped.items():
+        if len(objects) == 1:
+            log.warning("%s: object '%s': dropped %d %s", source, objects[0][0], objects[0][1], kind)
+            continue
+        listed = ", ".join(f"'{name}' ({count})" for name, count in objects[:most])
+        more = f" and {len(objects) - most} more" if len(objects) > most else ""
+        log.warning("%s: dropped %d %s in %d objects: %s%s", source, sum(c for _, c in objects), kind,
+                    len(objects), listed, more)
+    if len(empty) == 1:
+        log.warning("%s: object '%s' has no renderable triangles; skipped", source, empty[0])
+    elif empty:
+        more = f" and {len(empty) - most} more" if len(empty) > most else ""
+        log.warning("%s: %d objects have no renderable triangles (%s%s); skipped", source, len(empty),
+                    ", ".join(f"'{n}'" for n in empty[:most]), more)

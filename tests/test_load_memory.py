@@ -1,0 +1,78 @@
+"""--memory-limit while loading: a glTF whose nodes would flatten into more copies than the
+limit allows stops with one line naming the file and the estimate, before reading its
+geometry (the USD case is in tests/test_usd_files.py)."""
+
+import base64
+import json
+import resource
+import time
+
+import numpy as np
+import pytest
+import trimesh
+
+from rtmesh.cli import main
+from rtmesh.core.errors import ResourceError
+from rtmesh.loaders.gltf_nodes import flattened_size, read_gltf_json
+from rtmesh.loaders.importers import load_trimesh
+from rtmesh.rendering import memory
+
+
+def write_forest(path, nodes):
+    """A glTF of ``nodes`` nodes placing one 5120-triangle sphere (2562 vertices)."""
+    ball = trimesh.creation.icosphere(subdivisions=4)
+    positions = ball.vertices.astype("<f4").tobytes()
+    indices = ball.faces.astype("<u4").tobytes()
+    data = positions + indices
+    doc = {
+        "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": list(range(nodes))}],
+        "nodes": [{"mesh": 0, "translation": [3.0 * (i % 100), 3.0 * (i // 100), 0.0]} for i in range(nodes)],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+        "buffers": [{"byteLength": len(data),
+                     "uri": "data:application/octet-stream;base64," + base64.b64encode(data).decode()}],
+        "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": len(positions)},
+                        {"buffer": 0, "byteOffset": len(positions), "byteLength": len(indices)}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": len(ball.vertices), "type": "VEC3",
+                       "min": [-1, -1, -1], "max": [1, 1, 1]},
+                      {"bufferView": 1, "componentType": 5125, "count": 3 * len(ball.faces), "type": "SCALAR"}],
+    }
+    path.write_text(json.dumps(doc))
+    return path
+
+
+@pytest.fixture(scope="module")
+def forest(tmp_path_factory):
+    return write_forest(tmp_path_factory.mktemp("forest") / "forest.gltf", 10_000)
+
+
+def test_flattened_size_counts_every_node_that_places_a_mesh(forest):
+    assert flattened_size(read_gltf_json(forest)) == (10_000, 10_000 * 2562, 10_000 * 5120)
+
+
+def test_ten_thousand_copies_beyond_the_limit_stop_before_the_memory_is_taken(forest, tmp_path, capsys):
+    out = tmp_path / "out.png"
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    start = time.perf_counter()
+    status = main(["render", str(forest), "-o", str(out), "--width", "32", "--height", "24", "-q",
+                   "--memory-limit", "4G"])
+    elapsed = time.perf_counter() - start
+    err = capsys.readouterr().err
+    assert status == 2 and not out.exists()
+    assert err == (f"rtmesh: error: {forest}: 10000 mesh nodes of 51200000 triangles in all, each its own copy "
+                   "would need about 28.6 GiB of memory to load but --memory-limit is 4 GiB: stopped before "
+                   "taking it (set --memory-limit, 0 = no check)\n")
+    # refused from the JSON: no geometry read, no copy made
+    assert elapsed < 5.0
+    assert resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before < 200_000  # KB
+
+
+def test_files_within_the_limit_load_and_no_limit_is_checked_outside_the_command(tmp_path):
+    small = write_forest(tmp_path / "small.gltf", 3)
+    with memory.loading_limit(10_000_000):
+        assert len(load_trimesh(small).graph.nodes_geometry) == 3
+    with memory.loading_limit(1_000_000), pytest.raises(ResourceError, match="3 mesh nodes of 15360 triangles"):
+        load_trimesh(small)
+    with memory.loading_limit(0):
+        load_trimesh(small)
+    load_trimesh(small)  # the Python API: no limit
+    assert np.isfinite(memory.load_estimate(2562, 5120))
