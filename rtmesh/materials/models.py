@@ -88,7 +88,10 @@ def material_rows(materials):
     return tags, params, transmissive
 
 
-@row
+# evaluate and sample are kernels of their own (cached on disk), not rows inlined into every
+# caller: a first run's helper process compiles them while the render compiles the path
+# kernel that calls them (rtmesh.rendering.path_kernel.PATH_KERNELS)
+@kernel
 def evaluate(tag, params, m, table, ox, oy, oz, wx, wy, wz):
     """``f(wo, wi) |wi.z|`` (r, g, b) and the density with which :func:`sample` draws ``wi``."""
     if tag == BLINN_PHONG:
@@ -104,7 +107,7 @@ def evaluate(tag, params, m, table, ox, oy, oz, wx, wy, wz):
     return dielectric.evaluate(params, m, table, ox, oy, oz, wx, wy, wz)
 
 
-@row
+@kernel
 def sample(tag, params, m, table, ox, oy, oz, u0, u1, u2):
     """Draw ``wi``: ``(wx, wy, wz, weight r, g, b, pdf, flags)``."""
     if tag == BLINN_PHONG:

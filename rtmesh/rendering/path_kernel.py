@@ -33,6 +33,7 @@ import math
 
 import numpy as np
 
+from rtmesh.core.compile_ahead import KernelGroup
 from rtmesh.core.compiled import kernel, row
 from rtmesh.geometry.embree_packets import (DEFAULT_TFAR, GEOM_ID, INVALID_ID, LANES, PRIM_ID, RAY_WORDS, RAYHIT_WORDS,
                                             RTC_RAY_QUERY_FLAG_COHERENT, RTC_RAY_QUERY_FLAG_INCOHERENT, TFAR, U, V,
@@ -435,3 +436,38 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geome
             radiance[start + lane, 0] = total[lane, 0]
             radiance[start + lane, 1] = total[lane, 1]
             radiance[start + lane, 2] = total[lane, 2]
+
+
+def _path_signatures():
+    """The one signature of the path kernel and of the BSDF dispatch it calls, from the
+    types of small records of the shapes :class:`rtmesh.rendering.path_stage.PathStage` builds."""
+    import numba
+    from numba import types
+
+    from rtmesh.geometry.embree_packets import numba_typeof_query
+
+    f64 = types.float64
+    rows = types.Array(f64, 2, "C")
+    bsdf_args = (types.int64, rows, types.int64, rows)
+    evaluate = bsdf_args + (f64,) * 6
+    sample = bsdf_args + (f64,) * 6
+    z = np.zeros
+    geometry = (z((1, 9)), z((1, 3)), z((0, 3)), z((1, 3), np.int32), z(0, bool), z(1, np.int32), z((0, 6)),
+                z((0, 12)), z((0, 6)))
+    surface = (z(1, np.int64), z((1, lobes.PARAMETER_WIDTH)), z(1, bool), z((1, 3)), z((1, 3)), z((1, 4)),
+               z((2, 3)), z((1, 6), np.int64), z((1, 6), np.int64), z(1), z(1, np.int64), z(1), z(1),
+               z(1, np.float32), z((1, 12)))
+    lights = (z((1, lt.WIDTH)), z(1), z(1, np.int64), z(1), z(1, np.int64), z(0, np.int64), -1)
+    env = (z((1, 3, 3)), z(2), z((1, 2)), z((1, 1)), 1.0, 1.0, 0.0)
+    options = (-1, 3, 0.0, np.float32(1.0), True, False)
+    query = numba_typeof_query()
+    trace = (query, query, types.int64, rows, rows, types.Array(types.uint64, 1, "C")) + tuple(
+        numba.typeof(record) for record in (geometry, surface, lights, env, options)) + (rows,
+                                                                                        types.Array(types.int64, 1, "C"))
+    return [(models.evaluate, evaluate), (trace_paths, trace), (models.sample, sample)]
+
+
+# the path integrator's kernels, in the order a first run best compiles them in two processes:
+# the render the BSDF evaluation, then the path kernel (loading the sampling row the helper
+# compiled meanwhile from the disk cache); the helper the sampling row first
+PATH_KERNELS = KernelGroup(__name__, "path", _path_signatures())

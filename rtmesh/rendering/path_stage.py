@@ -22,7 +22,7 @@ from rtmesh.lights.light_table import EnvironmentTables, LightTable
 from rtmesh.lights.mesh_lights import MeshLight
 from rtmesh.materials import ggx_albedo
 from rtmesh.materials.models import SLOTS, material_rows
-from rtmesh.rendering.path_kernel import BOUNCE, CAMERA, SHADOW, trace_paths
+from rtmesh.rendering.path_kernel import BOUNCE, CAMERA, PATH_KERNELS, SHADOW, trace_paths
 from rtmesh.rendering.path_surfaces import TEXTURE_COLUMNS
 from rtmesh.rendering.surface_textures import corner_and_edges, face_tangents
 from rtmesh.sampling.hashing import mix64, path_key
@@ -157,6 +157,7 @@ class PathStage:
             self._seed_key = mix64(np.uint64(settings.seed % (1 << 64)) ^ np.uint64(0x5A17_7ACE_D00D_F00D))
         library = accel._shared.library
         self._queries = (library.intersect16, library.occluded16, accel._shared.handle)
+        PATH_KERNELS.prepare()
 
     def render(self, origins, directions, pixel, sample, stats):
         """Radiance of the camera rays of one chunk.
