@@ -164,3 +164,25 @@ def test_shipped_ggx_albedo_table_is_what_tabulate_computes():
     np.testing.assert_allclose(fresh, TABLE, rtol=1e-12)
     # roughness 1 at normal incidence: 1 - ln 2 in closed form
     assert abs(TABLE[-1, ggx_albedo.MU_CELLS - 1] - (1 - math.log(2))) < 1e-3
+
+
+@pytest.mark.parametrize("name,i", PARAMS)
+def test_diffuse_and_transmitted_parts_lie_within_the_whole(name, i):
+    """parts() splits evaluate() for the light-path passes: each part >= 0, together <= f;
+    Lambertian models are all diffuse, metals all glossy, light through glass transmission."""
+    tag, params, transmissive = _rows(CASES[name][i])
+    rng = np.random.default_rng(19)
+    wo = _directions(3000, rng, not transmissive)
+    wi = _directions(3000, rng, False)
+    f, _ = models.evaluate_many(tag, params, 0, TABLE, wo, wi)
+    diffuse, transmitted = models.parts_many(tag, params, 0, TABLE, wo, wi)
+    assert (diffuse >= 0).all() and (transmitted >= 0).all()
+    assert (diffuse + transmitted <= f * (1 + 1e-12) + 1e-15).all()
+    if name in ("lambert", "oren-nayar"):
+        np.testing.assert_allclose(diffuse, f, rtol=1e-12)
+    if name == "conductor":
+        assert not diffuse.any() and not transmitted.any()
+    if name == "dielectric":
+        through = wo[:, 2] * wi[:, 2] < 0
+        np.testing.assert_allclose(transmitted[through], f[through], rtol=1e-12)
+        assert not transmitted[~through].any()

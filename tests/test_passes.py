@@ -8,7 +8,7 @@ from scenes import box, part, pixel_centre_rays, quad, render, settings
 
 from rtmesh.cli import main
 from rtmesh.io.images import read_image
-from rtmesh.io.passes import PASS_NAMES, display_values, exr_channel_names, id_colours, pass_width
+from rtmesh.io.passes import LIGHT_PATH_PASSES, PASS_NAMES, display_values, exr_channel_names, id_colours, pass_width
 from rtmesh.materials.table import Material
 from rtmesh.rendering import film_sums
 from rtmesh.rendering.film import Film
@@ -215,12 +215,14 @@ def test_only_requested_passes_are_computed_and_stored():
     np.testing.assert_array_equal(asked.image, plain.image)
 
 
-def test_passes_are_bit_identical_across_threads_and_chunk_sizes():
+@pytest.mark.parametrize("integrator", ["whitted", "path"])
+def test_passes_are_bit_identical_across_threads_and_chunk_sizes(integrator):
     scene = box_scene()
-    names = tuple(n for n in PASS_NAMES if n != "ao")
-    a = render(scene, width=20, height=14, spp=4, sampler="jittered", passes=names, threads=1)
+    # the light-path passes exist under the path integrator only
+    names = tuple(n for n in PASS_NAMES if n != "ao" and (integrator == "path" or n not in LIGHT_PATH_PASSES))
+    a = render(scene, width=20, height=14, spp=4, sampler="jittered", passes=names, threads=1, integrator=integrator)
     b = render(scene, width=20, height=14, spp=4, sampler="jittered", passes=names, threads=2,
-               chunk_samples=28)
+               chunk_samples=28, integrator=integrator)
     for name in names:
         np.testing.assert_array_equal(a.passes[name], b.passes[name], err_msg=name)
 
@@ -295,7 +297,7 @@ def test_film_first_keeps_sample_zero_across_rounds_and_min_keeps_the_smallest()
 def test_exr_holds_every_pass_under_its_layer_names_and_pngs_map_them(tmp_path):
     scene_file = tmp_path / "box.toml"
     scene_file.write_text(
-        '[render]\nwidth = 20\nheight = 16\nspp = 1\nsampler = "regular"\nthreads = 1\n'
+        '[render]\nwidth = 20\nheight = 16\nspp = 1\nsampler = "regular"\nthreads = 1\nintegrator = "path"\n'
         '[camera]\nposition = [3.0, 2.5, 4.0]\nlook_at = [0.0, 0.0, 0.0]\nfov = 30\n'
         '[[objects]]\nprimitive = "box"\n')
     out = tmp_path / "out.exr"

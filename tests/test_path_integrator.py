@@ -185,3 +185,35 @@ def test_the_exr_header_records_the_render_settings(tmp_path, sphere):
     assert spec.getattribute("rtmesh:spp") == 3
     assert spec.getattribute("rtmesh:seed") == "11"
     assert spec.getattribute("rtmesh:max_depth") == -1
+
+
+LIGHT_PATHS = ("emission", "direct_diffuse", "direct_glossy", "direct_transmission", "indirect_diffuse",
+               "indirect_glossy", "indirect_transmission")
+
+
+def test_light_path_passes_sum_to_the_image(sphere):
+    """A Blinn-Phong sphere (diffuse, highlight, mirror) on a diffuse floor under a point
+    light and a sky: the seven passes add up to the image sample by sample."""
+    from rtmesh.lights.point_lights import PointLight
+
+    floor = trimesh.creation.box(extents=(6.0, 0.1, 6.0))
+    floor.apply_translation((0.0, -1.05, 0.0))
+    parts = [MeshPart("s", sphere.vertices, sphere.faces, 0, vertex_normals=sphere.vertex_normals),
+             MeshPart("floor", floor.vertices, floor.faces, 1)]
+    materials = [Material("s", diffuse=0.4, specular=0.2, shininess=30.0, mirror=0.3),
+                 Material("g", model="lambert", diffuse=0.6)]
+    camera = Camera(np.array([0.0, 1.0, 4.0]), np.zeros(3), np.array([0.0, 1.0, 0.0]), fov=50.0)
+    scene = Scene.from_parts(parts, materials=materials, lights=[PointLight((2.0, 3.0, 2.0), 20.0)],
+                             camera=camera, background=0.3)
+    result = Integrator(scene, RenderSettings(width=20, height=16, spp=8, integrator="path", threads=2,
+                                              passes=LIGHT_PATHS)).render()
+    total = sum(result.passes[name] for name in LIGHT_PATHS)
+    np.testing.assert_allclose(total, result.image, rtol=1e-5, atol=1e-6)
+    for name in ("emission", "direct_diffuse", "direct_glossy", "indirect_diffuse", "indirect_glossy"):
+        assert result.passes[name].max() > 0, name
+    assert not result.passes["direct_transmission"].any()
+
+
+def test_light_path_passes_need_the_path_integrator():
+    with pytest.raises(ValueError, match="need integrator 'path'"):
+        RenderSettings(passes=("direct_diffuse",)).validate()

@@ -182,8 +182,20 @@ REGISTRY = {
                  "object index (Scene.object_names), -1 for none"),
         PassSpec("material_id", ("id",), "first", -1.0, _material_id, "material index, -1 for none"),
         PassSpec("alpha", ("A",), "mean", 0.0, _covered, "coverage of camera rays by geometry"),
-    )
+    ) + tuple(PassSpec(name, ("R", "G", "B"), "mean", 0.0, None, doc) for name, doc in (
+        ("emission", "path: light seen straight from the camera (emitters, lights, the background)"),
+        ("direct_diffuse", "path: light from a light after one diffuse reflection"),
+        ("direct_glossy", "path: light from a light after one glossy or mirror reflection"),
+        ("direct_transmission", "path: light from a light after one transmission"),
+        ("indirect_diffuse", "path: light after more bounces, the first diffuse"),
+        ("indirect_glossy", "path: light after more bounces, the first glossy or mirror"),
+        ("indirect_transmission", "path: light after more bounces, the first a transmission"),
+    ))
 }
+# the path integrator's light-path passes (they sum to the image), in the order of its kernel's
+# categories (rtmesh.rendering.path_kernel)
+LIGHT_PATH_PASSES = ("emission", "direct_diffuse", "direct_glossy", "direct_transmission", "indirect_diffuse",
+                     "indirect_glossy", "indirect_transmission")
 
 
 @dataclass(frozen=True)

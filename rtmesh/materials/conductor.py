@@ -109,6 +109,13 @@ def sample(params, m, table, ox, oy, oz, u0, u1, u2):
 
 
 @row
+def parts(params, m, table, ox, oy, oz, wx, wy, wz):
+    """The diffuse and transmitted parts of ``f |cos|`` (light-path passes): none, a metal
+    is all glossy."""
+    return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+
+
+@row
 def albedo(params, m):
     """``F0``, for the denoiser's guide."""
     return params[m, 0], params[m, 1], params[m, 2]

@@ -127,6 +127,16 @@ def sample(params, m, table, ox, oy, oz, u0, u1, u2):
 
 
 @row
+def parts(params, m, table, ox, oy, oz, wx, wy, wz):
+    """The diffuse and transmitted parts of ``f |cos|`` (light-path passes): light through
+    the interface is transmission, its reflection glossy."""
+    if oz * wz < 0.0:
+        fr, fg, fb, _ = evaluate(params, m, table, ox, oy, oz, wx, wy, wz)
+        return 0.0, 0.0, 0.0, fr, fg, fb
+    return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+
+
+@row
 def albedo(params, m):
     """The tint, for the denoiser's guide (what shows through the interface)."""
     return params[m, 2], params[m, 3], params[m, 4]

@@ -13,9 +13,12 @@ Parameters: ``base`` r, g, b, ``metallic``, ``alpha`` (roughness squared), ``rou
 ``transmission``, ``ior``.
 """
 
+import math
+
 from rtmesh.core.compiled import row
 from rtmesh.materials import dielectric, lobes
-from rtmesh.materials.metallic_roughness import alpha_from_roughness, brdf_cos_pdf_row, sample_row
+from rtmesh.materials.metallic_roughness import (alpha_from_roughness, brdf_cos_pdf_row, half_vector_cosines,
+                                                 sample_row, schlick_weight)
 
 NAME = "metallic_roughness"
 SLOTS = {"colour": 0, "metallic": 3, "alpha": 4, "roughness": 5}
@@ -84,6 +87,22 @@ def sample(params, m, table, ox, oy, oz, u0, u1, u2):
     if oz * wz < 0.0:
         flags |= lobes.TRANSMISSION
     return wx, wy, wz, fr / pdf, fg / pdf, fb / pdf, pdf, flags
+
+
+@row
+def parts(params, m, table, ox, oy, oz, wx, wy, wz):
+    """The diffuse and transmitted parts of ``f |cos|`` (light-path passes): the BRDF's
+    Lambert term, and what the KHR transmission interface lets through."""
+    dr = dg = db = tr = tg = tb = 0.0
+    if (oz > 0.0) & (wz > 0.0):
+        nv, nl, nh, vh = half_vector_cosines(ox, oy, oz, 0.0, 0.0, 1.0, wx, wy, wz)
+        d = (1.0 - params[m, 3]) * (1.0 - params[m, 6]) * (1.0 - (0.04 + 0.96 * schlick_weight(vh))) / math.pi * nl
+        dr, dg, db = d * params[m, 0], d * params[m, 1], d * params[m, 2]
+    t = params[m, 6] * (1.0 - params[m, 3])
+    if t > 0.0 and oz * wz < 0.0 and params[m, 5] * params[m, 5] >= dielectric.SMOOTH_ALPHA:
+        value, _, _ = dielectric.rough_interface(ox, oy, oz, wx, wy, wz, params[m, 7], params[m, 5] * params[m, 5])
+        tr, tg, tb = t * value * params[m, 0], t * value * params[m, 1], t * value * params[m, 2]
+    return dr, dg, db, tr, tg, tb
 
 
 @row

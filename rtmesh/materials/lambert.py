@@ -42,6 +42,14 @@ def sample(params, m, table, ox, oy, oz, u0, u1, u2):
 
 
 @row
+def parts(params, m, table, ox, oy, oz, wx, wy, wz):
+    """The diffuse and transmitted parts (r, g, b each) of :func:`evaluate`'s ``f |cos|``
+    (the light-path passes; the glossy part is the rest): all diffuse."""
+    fr, fg, fb, _ = evaluate(params, m, table, ox, oy, oz, wx, wy, wz)
+    return fr, fg, fb, 0.0, 0.0, 0.0
+
+
+@row
 def albedo(params, m):
     """Directional albedo (r, g, b), for the denoiser's guide."""
     return params[m, 0], params[m, 1], params[m, 2]

@@ -16,9 +16,12 @@ A model module (:mod:`~rtmesh.materials.lambert`, :mod:`~rtmesh.materials.oren_n
   albedo table (:mod:`~rtmesh.materials.ggx_albedo`) and local-frame directions:
   ``evaluate(params, m, table, wo..., wi...) -> f|cos| r, g, b, pdf``,
   ``sample(params, m, table, wo..., u0, u1, u2) -> wi..., weight r, g, b, pdf, flags``,
+  ``parts(params, m, table, wo..., wi...) -> diffuse r, g, b, transmission r, g, b``, the
+  diffuse and transmitted parts of ``evaluate``'s ``f |cos|`` (the rest is glossy; for the
+  light-path passes),
   ``albedo(params, m) -> r, g, b`` (conventions in :mod:`~rtmesh.materials.lobes`).
 
-Adding a model: its module, one line in :data:`MODULES` and one branch in each of the three
+Adding a model: its module, one line in :data:`MODULES` and one branch in each of the four
 dispatch rows below (numba has no virtual calls; the branches are the tag switch).
 """
 
@@ -121,6 +124,34 @@ def sample(tag, params, m, table, ox, oy, oz, u0, u1, u2):
     if tag == CONDUCTOR:
         return conductor.sample(params, m, table, ox, oy, oz, u0, u1, u2)
     return dielectric.sample(params, m, table, ox, oy, oz, u0, u1, u2)
+
+
+@kernel
+def parts(tag, params, m, table, ox, oy, oz, wx, wy, wz):
+    """The diffuse and transmitted parts (r, g, b each) of :func:`evaluate`'s ``f |cos|``."""
+    if tag == BLINN_PHONG:
+        return phong.parts(params, m, table, ox, oy, oz, wx, wy, wz)
+    if tag == METALLIC_ROUGHNESS:
+        return gltf_pbr.parts(params, m, table, ox, oy, oz, wx, wy, wz)
+    if tag == LAMBERT:
+        return lambert.parts(params, m, table, ox, oy, oz, wx, wy, wz)
+    if tag == OREN_NAYAR:
+        return oren_nayar.parts(params, m, table, ox, oy, oz, wx, wy, wz)
+    if tag == CONDUCTOR:
+        return conductor.parts(params, m, table, ox, oy, oz, wx, wy, wz)
+    return dielectric.parts(params, m, table, ox, oy, oz, wx, wy, wz)
+
+
+@kernel
+def parts_many(tag, params, m, table, wo, wi):
+    """:func:`parts` of rows of local directions ((k, 3) each) -> (k, 3) diffuse, (k, 3) transmitted."""
+    k = wo.shape[0]
+    diffuse = np.zeros((k, 3))
+    transmitted = np.zeros((k, 3))
+    for i in range(k):
+        (diffuse[i, 0], diffuse[i, 1], diffuse[i, 2], transmitted[i, 0], transmitted[i, 1],
+         transmitted[i, 2]) = parts(tag, params, m, table, wo[i, 0], wo[i, 1], wo[i, 2], wi[i, 0], wi[i, 1], wi[i, 2])
+    return diffuse, transmitted
 
 
 @row

@@ -89,6 +89,13 @@ def sample(params, m, table, ox, oy, oz, u0, u1, u2):
 
 
 @row
+def parts(params, m, table, ox, oy, oz, wx, wy, wz):
+    """The diffuse and transmitted parts of ``f |cos|`` (light-path passes): all diffuse."""
+    fr, fg, fb, _ = evaluate(params, m, table, ox, oy, oz, wx, wy, wz)
+    return fr, fg, fb, 0.0, 0.0, 0.0
+
+
+@row
 def albedo(params, m):
     """``rho`` (the model's hemispherical albedo tends to it), for the denoiser's guide."""
     return params[m, 0], params[m, 1], params[m, 2]

@@ -144,6 +144,22 @@ def sample(params, m, table, ox, oy, oz, u0, u1, u2):
 
 
 @row
+def parts(params, m, table, ox, oy, oz, wx, wy, wz):
+    """The diffuse and transmitted parts of ``f |cos|`` (light-path passes): the Lambert
+    lobe, and the rough interface's transmission."""
+    pd, ps, pr, pt = _weights(params, m)
+    dr = dg = db = tr = tg = tb = 0.0
+    if (oz > 0.0) & (wz > 0.0):
+        c = wz / math.pi
+        dr, dg, db = params[m, 0] * c, params[m, 1] * c, params[m, 2] * c
+    rough = _glossy_roughness(params, m)
+    if pt > 0.0 and oz * wz < 0.0 and rough * rough >= dielectric.SMOOTH_ALPHA:
+        value, _, _ = dielectric.rough_interface(ox, oy, oz, wx, wy, wz, params[m, 13], rough * rough)
+        tr, tg, tb = params[m, 10] * value, params[m, 11] * value, params[m, 12] * value
+    return dr, dg, db, tr, tg, tb
+
+
+@row
 def albedo(params, m):
     """The diffuse colour plus the specular, mirror and transmission colours, for the guide."""
     return (params[m, 0] + params[m, 3] + params[m, 7] + params[m, 10],

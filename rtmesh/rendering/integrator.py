@@ -530,11 +530,12 @@ class Integrator:
         origins, directions = self._camera_rays(pixel, sample_in_pixel)
         n = len(pixel)
         clock.lap("camera")
-        radiance = self.path_stage.render(origins, directions, pixel, sample_in_pixel, stats)
+        buffers = self.passes.buffers(n) if self.plan.passes else None
+        radiance = self.path_stage.render(origins, directions, pixel, sample_in_pixel, stats, buffers)
         clock.lap("direct")
-        buffers = None
-        if self.plan.passes:
-            chunk = ChunkState(radiance, self.passes.buffers(n), pixel, sample_in_pixel, stats, clock, None)
+        if self.plan.passes and any(spec.producer is not None for spec in self.passes.specs):
+            # the camera-hit passes (the kernel writes the light-path passes itself)
+            chunk = ChunkState(radiance, buffers, pixel, sample_in_pixel, stats, clock, None)
             rays = RayBatch(origins, directions, np.arange(n, dtype=np.int64), repeated_row(_UNIT_THROUGHPUT, n),
                             repeated_row(self._camera_medium, n))
             hits = self.accel.intersect(origins, directions)
@@ -543,7 +544,6 @@ class Integrator:
             if len(hit) and hit.any():
                 srf = self.surface_stage.records(rays, hits, rows, None)
                 self.passes.record(chunk.passes, srf, hits, rows)
-            buffers = chunk.passes
             clock.lap("passes")
         if ragged:
             return radiance, (self.passes.per_sample(buffers, n) or None) if buffers is not None else None, stats

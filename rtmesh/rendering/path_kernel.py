@@ -26,7 +26,15 @@ Records (tuples of arrays, built once by :class:`rtmesh.rendering.path_stage.Pat
 ``lights = (rows, probability, alias, pmf, face_light, analytic, environment)``
 (:class:`rtmesh.lights.light_table.LightTable`); ``env = (pixels, marginal, conditional,
 func, mean, cos_rotation, sin_rotation)`` (:class:`rtmesh.lights.light_table.EnvironmentTables`);
-``options = (max_depth, rr_depth, clamp, offset_scale, background_seen, cutouts)``.
+``options = (max_depth, rr_depth, clamp, offset_scale, background_seen, cutouts, split)``.
+
+With ``split``, every contribution is also added to one of the light-path passes
+(:data:`rtmesh.io.passes.LIGHT_PATH_PASSES`, which sum to the image): what the camera ray
+meets itself (``emission``); light from a light after the first vertex, by the part of the
+BSDF it came through (``direct_*``: next-event estimation at the first vertex is split by
+:func:`rtmesh.materials.models.parts`, emission met by the first BSDF sample goes with that
+sample's lobe); everything after more vertices by the first vertex's sampled lobe
+(``indirect_*``).
 """
 
 import math
@@ -58,6 +66,27 @@ _SHADOW_SHORTEN = 1.0 - 1e-4
 MAX_LAYERS = 64
 # ray counters
 CAMERA, BOUNCE, SHADOW = 0, 1, 2
+# light-path passes (rtmesh.io.passes.LIGHT_PATH_PASSES) and the first vertex's lobe categories
+EMISSION, DIRECT, INDIRECT = 0, 1, 4
+DIFFUSE_PATH, GLOSSY_PATH, TRANSMISSION_PATH = 0, 1, 2
+LIGHT_PATHS = 7
+
+
+@row
+def _bucket(depth, category):
+    """The light-path pass of emission met at vertex ``depth`` of a path whose first lobe was
+    ``category``."""
+    if depth == 0:
+        return EMISSION
+    return (DIRECT if depth == 1 else INDIRECT) + category
+
+
+@row
+def _category(flags):
+    """The light-path category of a sampled lobe."""
+    if flags & lobes.TRANSMISSION:
+        return TRANSMISSION_PATH
+    return DIFFUSE_PATH if flags & lobes.DIFFUSE else GLOSSY_PATH
 
 
 @row
@@ -112,6 +141,14 @@ def _add(total, lane, r, g, b):
 
 
 @row
+def _add_path(paths, split, lane, bucket, r, g, b):
+    if split:
+        paths[lane, bucket, 0] += r
+        paths[lane, bucket, 1] += g
+        paths[lane, bucket, 2] += b
+
+
+@row
 def _shadows_through_cutouts(intersect16, scene, args, shadow, shadow_words, shadow_valid, geometry, surface,
                              offset_scale, keys, start, lane_depth, reach, counts):
     """Trace the shadow packet's rays with closest hits, passing cut-out layers, until each
@@ -161,7 +198,7 @@ def _shadows_through_cutouts(intersect16, scene, args, shadow, shadow_words, sha
 
 @kernel
 def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geometry, surface, lights, env, options,
-                radiance, counts):
+                radiance, light_paths, counts):
     """Trace one path per camera ray and write its radiance.
 
     Parameters
@@ -178,6 +215,8 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geome
         The records described in the module notes.
     radiance : (n, 3) float64
         Output.
+    light_paths : (n, LIGHT_PATHS, 3) float64, or (0, LIGHT_PATHS, 3)
+        Output of the light-path passes, with ``split``.
     counts : (3,) int64
         Camera, bounce and shadow rays traced (active lanes only), added to.
     """
@@ -185,7 +224,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geome
     material_id = geometry[5]
     tags, transmissive, absorption, unlit, albedo_table = surface[0], surface[2], surface[4], surface[5], surface[6]
     light_rows, light_probability, light_alias, light_pmf, face_light, analytic, env_light = lights
-    max_depth, rr_depth, clamp, offset_scale, background_seen, cutouts = options
+    max_depth, rr_depth, clamp, offset_scale, background_seen, cutouts, split = options
     env_pixels, env_marginal, env_conditional, env_func, env_mean, env_cos, env_sin = env
     has_lights = len(light_rows) > 0
     ray, words, valid, args_coherent = packet_buffers(np.int64(RAYHIT_WORDS), np.int64(1),
@@ -203,6 +242,9 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geome
     beta = np.zeros((LANES, 3))
     total = np.zeros((LANES, 3))
     pending = np.zeros((LANES, 3))
+    paths = np.zeros((LANES, LIGHT_PATHS, 3))
+    pending_paths = np.zeros((LANES, LIGHT_PATHS, 3))
+    category = np.zeros(LANES, np.int64)
     sigma = np.zeros((LANES, 3))
     reach = np.zeros(LANES)
     alive = np.zeros(LANES, np.bool_)
@@ -220,6 +262,8 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geome
                 dx[lane], dy[lane], dz[lane] = directions[i, 0], directions[i, 1], directions[i, 2]
                 beta[lane, 0] = beta[lane, 1] = beta[lane, 2] = 1.0
                 total[lane, 0] = total[lane, 1] = total[lane, 2] = 0.0
+                paths[lane, :, :] = 0.0
+                category[lane] = GLOSSY_PATH
                 sigma[lane, 0] = sigma[lane, 1] = sigma[lane, 2] = 0.0
                 prev_pdf[lane] = 0.0
                 prev_delta[lane] = True
@@ -272,6 +316,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geome
                     r, g, b = _clamped(beta[lane, 0] * light[lt.RADIANCE] * w, beta[lane, 1] * light[lt.RADIANCE + 1] * w,
                                        beta[lane, 2] * light[lt.RADIANCE + 2] * w, limit)
                     _add(total, lane, r, g, b)
+                    _add_path(paths, split, lane, _bucket(depth, category[lane]), r, g, b)
                     alive[lane] = False
                     continue
                 if not hit:
@@ -285,6 +330,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geome
                         r, g, b = _clamped(beta[lane, 0] * lr * w, beta[lane, 1] * lg * w, beta[lane, 2] * lb * w,
                                            limit)
                         _add(total, lane, r, g, b)
+                        _add_path(paths, split, lane, _bucket(depth, category[lane]), r, g, b)
                     alive[lane] = False
                     continue
                 prim = words[PRIM_ID * LANES + lane]
@@ -315,9 +361,12 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geome
                                 light_rows[light], px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], t))
                     r, g, b = _clamped(beta[lane, 0] * er * w, beta[lane, 1] * eg * w, beta[lane, 2] * eb * w, limit)
                     _add(total, lane, r, g, b)
+                    _add_path(paths, split, lane, _bucket(depth, category[lane]), r, g, b)
                 if unlit[mat, 0] > 0.0:
                     _add(total, lane, beta[lane, 0] * unlit[mat, 1], beta[lane, 1] * unlit[mat, 2],
                          beta[lane, 2] * unlit[mat, 3])
+                    _add_path(paths, split, lane, _bucket(depth, category[lane]), beta[lane, 0] * unlit[mat, 1],
+                              beta[lane, 1] * unlit[mat, 2], beta[lane, 2] * unlit[mat, 3])
                     alive[lane] = False
                     continue
                 # the shading frame: normal maps bend the front side's normal; reflection-only
@@ -357,9 +406,11 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geome
                     if (pdf_li > 0.0) & ((lr > 0.0) | (lg > 0.0) | (lb > 0.0)):
                         side = (gx * wx + gy * wy) + gz * wz
                         if transmissive[mat] or side > 0.0:
-                            fr, fg, fbb, pdf_bsdf = models.evaluate(
-                                tag, scratch, lane, albedo_table, lox, loy, loz, (tx * wx + ty * wy) + tz * wz,
-                                (sx * wx + sy * wy) + sz * wz, (nx * wx + ny * wy) + nz * wz)
+                            lix = (tx * wx + ty * wy) + tz * wz
+                            liy = (sx * wx + sy * wy) + sz * wz
+                            liz = (nx * wx + ny * wy) + nz * wz
+                            fr, fg, fbb, pdf_bsdf = models.evaluate(tag, scratch, lane, albedo_table, lox, loy, loz,
+                                                                    lix, liy, liz)
                             if (fr > 0.0) | (fg > 0.0) | (fbb > 0.0):
                                 p_light = light_pmf[chosen] * pdf_li
                                 w = 1.0 if delta else power_heuristic(p_light, pdf_bsdf)
@@ -367,6 +418,24 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geome
                                 pending[lane, 0], pending[lane, 1], pending[lane, 2] = _clamped(
                                     beta[lane, 0] * fr * lr * scale, beta[lane, 1] * fg * lg * scale,
                                     beta[lane, 2] * fbb * lb * scale, clamp if depth > 0 else 0.0)
+                                if split:
+                                    pending_paths[lane, :, :] = 0.0
+                                    if depth == 0:
+                                        # split by the part of the BSDF the light comes through
+                                        dr, dg, db, ur, ug, ub = models.parts(tag, scratch, lane, albedo_table,
+                                                                              lox, loy, loz, lix, liy, liz)
+                                        cr, cg, cb = (beta[lane, 0] * lr * scale, beta[lane, 1] * lg * scale,
+                                                      beta[lane, 2] * lb * scale)
+                                        _add_path(pending_paths, split, lane, DIRECT + DIFFUSE_PATH,
+                                                  dr * cr, dg * cg, db * cb)
+                                        _add_path(pending_paths, split, lane, DIRECT + TRANSMISSION_PATH,
+                                                  ur * cr, ug * cg, ub * cb)
+                                        _add_path(pending_paths, split, lane, DIRECT + GLOSSY_PATH,
+                                                  pending[lane, 0] - (dr + ur) * cr, pending[lane, 1] - (dg + ug) * cg,
+                                                  pending[lane, 2] - (db + ub) * cb)
+                                    else:
+                                        _add_path(pending_paths, split, lane, INDIRECT + category[lane],
+                                                  pending[lane, 0], pending[lane, 1], pending[lane, 2])
                                 sgx, sgy, sgz = (gx, gy, gz) if side > 0.0 else (-gx, -gy, -gz)
                                 qx, qy, qz = offset_origin(hx, hy, hz, sgx, sgy, sgz, wx, wy, wz, offset_scale)
                                 reach[lane] = F32_MAX if math.isinf(distance) else distance * _SHADOW_SHORTEN
@@ -399,6 +468,8 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geome
                 beta[lane, 2] *= gb
                 prev_pdf[lane] = pdf
                 prev_delta[lane] = (flags & lobes.DELTA) != 0
+                if depth == 0:
+                    category[lane] = _category(flags)
                 if transmissive[mat] and (flags & lobes.TRANSMISSION):
                     if side < 0.0:  # into the interior (the outward normal faces away from the new ray)
                         sigma[lane, 0], sigma[lane, 1], sigma[lane, 2] = (absorption[mat, 0], absorption[mat, 1],
@@ -427,15 +498,21 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geome
                     for lane in range(LANES):
                         if shadow_valid[lane]:
                             _add(total, lane, pending[lane, 0], pending[lane, 1], pending[lane, 2])
+                            if split:
+                                paths[lane] += pending_paths[lane]
                 else:
                     occluded16(shadow_valid.ctypes.data, scene, shadow.ctypes.data, args_incoherent.ctypes.data)
                     for lane in range(LANES):
                         if shadow_valid[lane] and not shadow[TFAR * LANES + lane] == -np.inf:
                             _add(total, lane, pending[lane, 0], pending[lane, 1], pending[lane, 2])
+                            if split:
+                                paths[lane] += pending_paths[lane]
         for lane in range(count):
             radiance[start + lane, 0] = total[lane, 0]
             radiance[start + lane, 1] = total[lane, 1]
             radiance[start + lane, 2] = total[lane, 2]
+            if split:
+                light_paths[start + lane] = paths[lane]
 
 
 def _path_signatures():
@@ -459,15 +536,15 @@ def _path_signatures():
                z(1, np.float32), z((1, 12)))
     lights = (z((1, lt.WIDTH)), z(1), z(1, np.int64), z(1), z(1, np.int64), z(0, np.int64), -1)
     env = (z((1, 3, 3)), z(2), z((1, 2)), z((1, 1)), 1.0, 1.0, 0.0)
-    options = (-1, 3, 0.0, np.float32(1.0), True, False)
+    options = (-1, 3, 0.0, np.float32(1.0), True, False, False)
     query = numba_typeof_query()
     trace = (query, query, types.int64, rows, rows, types.Array(types.uint64, 1, "C")) + tuple(
-        numba.typeof(record) for record in (geometry, surface, lights, env, options)) + (rows,
-                                                                                        types.Array(types.int64, 1, "C"))
-    return [(models.evaluate, evaluate), (trace_paths, trace), (models.sample, sample)]
+        numba.typeof(record) for record in (geometry, surface, lights, env, options)) + (
+        rows, types.Array(f64, 3, "C"), types.Array(types.int64, 1, "C"))
+    return [(models.evaluate, evaluate), (trace_paths, trace), (models.sample, sample), (models.parts, evaluate)]
 
 
 # the path integrator's kernels, in the order a first run best compiles them in two processes:
-# the render the BSDF evaluation, then the path kernel (loading the sampling row the helper
-# compiled meanwhile from the disk cache); the helper the sampling row first
+# the render the BSDF evaluation, then the path kernel (loading the sampling and parts rows the
+# helper compiled meanwhile from the disk cache); the helper those two first
 PATH_KERNELS = KernelGroup(__name__, "path", _path_signatures())

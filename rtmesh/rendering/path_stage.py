@@ -22,7 +22,8 @@ from rtmesh.lights.light_table import EnvironmentTables, LightTable
 from rtmesh.lights.mesh_lights import MeshLight
 from rtmesh.materials import ggx_albedo
 from rtmesh.materials.models import SLOTS, material_rows
-from rtmesh.rendering.path_kernel import BOUNCE, CAMERA, PATH_KERNELS, SHADOW, trace_paths
+from rtmesh.io.passes import LIGHT_PATH_PASSES
+from rtmesh.rendering.path_kernel import BOUNCE, CAMERA, LIGHT_PATHS, PATH_KERNELS, SHADOW, trace_paths
 from rtmesh.rendering.path_surfaces import TEXTURE_COLUMNS
 from rtmesh.rendering.surface_textures import corner_and_edges, face_tangents
 from rtmesh.sampling.hashing import mix64, path_key
@@ -159,7 +160,7 @@ class PathStage:
         self._queries = (library.intersect16, library.occluded16, accel._shared.handle)
         PATH_KERNELS.prepare()
 
-    def render(self, origins, directions, pixel, sample, stats):
+    def render(self, origins, directions, pixel, sample, stats, passes=None):
         """Radiance of the camera rays of one chunk.
 
         Parameters
@@ -170,6 +171,8 @@ class PathStage:
             Each ray's pixel and global sample index.
         stats : RenderStats
             Ray counts are added to it.
+        passes : PassSink, optional
+            The chunk's pass buffers: the light-path passes it wants are written to it.
 
         Returns
         -------
@@ -185,11 +188,17 @@ class PathStage:
         intersect16, occluded16, handle = self._queries
         light_record = (lights.rows, lights.probability, lights.alias, lights.pmf, lights.face_light,
                         lights.analytic, lights.environment)
+        split = passes is not None and any(passes.wants(name) for name in LIGHT_PATH_PASSES)
         options = (s.max_depth, RR_DEPTH, float(s.clamp), np.float32(it.offset_scale),
-                   not it.background.transparent, self.cutouts)
+                   not it.background.transparent, self.cutouts, split)
+        light_paths = np.zeros((n if split else 0, LIGHT_PATHS, 3))
         trace_paths(intersect16, occluded16, handle, np.ascontiguousarray(origins, dtype=np.float64),
                     np.ascontiguousarray(directions, dtype=np.float64), keys, self.geometry, self.surface,
-                    light_record, self._env, options, radiance, counts)
+                    light_record, self._env, options, radiance, light_paths, counts)
+        if split:
+            for k, name in enumerate(LIGHT_PATH_PASSES):
+                if passes.wants(name):
+                    passes.write(name, slice(None), light_paths[:, k])
         stats.rays["camera"] += int(counts[CAMERA])
         stats.rays["bounce"] += int(counts[BOUNCE])
         stats.rays["shadow"] += int(counts[SHADOW])

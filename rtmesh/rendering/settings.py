@@ -5,7 +5,7 @@ from dataclasses import dataclass
 
 from rtmesh.core.runtime import usable_cores
 from rtmesh.io.colour import TONEMAPS
-from rtmesh.io.passes import PASS_NAMES
+from rtmesh.io.passes import LIGHT_PATH_PASSES, PASS_NAMES
 from rtmesh.sampling.patterns import SAMPLERS
 
 FRESNEL_MODES = ("schlick", "exact")
@@ -174,6 +174,8 @@ class RenderSettings:
              f"is 32-bit; got {self.sample_cap})"),
             (self.max_spp is None or self.adaptive,
              "max_spp needs target_error or time_limit (adaptive sampling)"),
+            (self.integrator == "path" or not set(self.passes) & set(LIGHT_PATH_PASSES),
+             f"passes {', '.join(p for p in self.passes if p in LIGHT_PATH_PASSES)} need integrator 'path'"),
             (self.spp >= 2 or not self.adaptive,
              "spp must be >= 2 with target_error or time_limit (one sample gives no error estimate)"),
         ]
