@@ -42,7 +42,7 @@ import math
 import numpy as np
 
 from rtmesh.core.compile_ahead import KernelGroup
-from rtmesh.core.compiled import kernel, row
+from rtmesh.core.compiled import inline_row, kernel, row
 from rtmesh.geometry.embree_packets import (DEFAULT_TFAR, GEOM_ID, INVALID_ID, LANES, PRIM_ID, RAY_WORDS, RAYHIT_WORDS,
                                             RTC_RAY_QUERY_FLAG_COHERENT, RTC_RAY_QUERY_FLAG_INCOHERENT, TFAR, U, V,
                                             clear_hit, packet_buffers, query_arguments, set_lane)
@@ -105,7 +105,7 @@ def _layer_coin(key, depth, layer, dimension):
     return uniform(mix64(key ^ np.uint64(layer + 1)), DIMENSIONS_PER_VERTEX * depth + dimension)
 
 
-@row
+@inline_row
 def sample_li(light, env, px, py, pz, u1, u2):
     """One light's ``sample_li`` at a point: ``(wx, wy, wz, distance, Lr, Lg, Lb, pdf, delta)``
     with the incident radiance (delta lights: their incident term) and the solid-angle density
@@ -148,7 +148,7 @@ def _add_path(paths, split, lane, bucket, r, g, b):
         paths[lane, bucket, 2] += b
 
 
-@row
+@inline_row
 def _shadows_through_cutouts(intersect16, scene, args, shadow, shadow_words, shadow_valid, geometry, surface,
                              offset_scale, keys, start, lane_depth, reach, counts):
     """Trace the shadow packet's rays with closest hits, passing cut-out layers, until each
@@ -262,7 +262,8 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geome
                 dx[lane], dy[lane], dz[lane] = directions[i, 0], directions[i, 1], directions[i, 2]
                 beta[lane, 0] = beta[lane, 1] = beta[lane, 2] = 1.0
                 total[lane, 0] = total[lane, 1] = total[lane, 2] = 0.0
-                paths[lane, :, :] = 0.0
+                if split:
+                    paths[lane, :, :] = 0.0
                 category[lane] = GLOSSY_PATH
                 sigma[lane, 0] = sigma[lane, 1] = sigma[lane, 2] = 0.0
                 prev_pdf[lane] = 0.0
@@ -300,7 +301,8 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geome
                 t = np.float64(ray[TFAR * LANES + lane]) if hit else math.inf
                 # a visible quad or disk light before the surface ends the path there
                 seen = -1
-                for a in analytic:
+                for k in range(len(analytic)):
+                    a = analytic[k]
                     ta = lt.hit_analytic(light_rows[a], px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], t)
                     if ta < t:
                         t, seen = ta, a

@@ -2,6 +2,10 @@
 texture coordinates, the material's parameters scaled by its textures and vertex colours,
 normal maps, emission and opacity (alpha cut-outs).
 
+The rows are inlined into the kernel (``inline_row``): a call of a compiled row takes and
+releases a reference to every array of its record arguments (atomic instructions, some
+fifteen arrays a record), which made them the kernel's largest cost.
+
 The rows take two records (tuples of arrays) that :class:`rtmesh.rendering.path_stage.PathStage`
 builds once per scene:
 
@@ -25,7 +29,7 @@ specular and mirror colours by the base texture.
 
 import math
 
-from rtmesh.core.compiled import row
+from rtmesh.core.compiled import inline_row
 from rtmesh.io.texture_atlas import texel
 from rtmesh.materials import models
 from rtmesh.materials.metallic_roughness import alpha_from_roughness_row
@@ -37,7 +41,7 @@ BASE_TEXTURE, MR_TEXTURE, NORMAL_TEXTURE, EMISSION_TEXTURE, SPECULAR_TEXTURE, OP
 OPAQUE, MASK, BLEND = (ALPHA_MODES.index(name) for name in ("opaque", "mask", "blend"))
 
 
-@row
+@inline_row
 def surface_point(geometry, prim, bu, bv):
     """The hit point on the float32 triangle, its unit geometric normal (winding) and its
     unit shading normal (interpolated where the face is smooth)."""
@@ -60,7 +64,7 @@ def surface_point(geometry, prim, bu, bv):
     return hx, hy, hz, gx, gy, gz, nx, ny, nz
 
 
-@row
+@inline_row
 def hit_uv(geometry, prim, bu, bv):
     """Texture coordinates of a hit ((0, 0) without UVs)."""
     face_uv = geometry[6]
@@ -70,7 +74,7 @@ def hit_uv(geometry, prim, bu, bv):
     return r[0] + bu * r[2] + bv * r[4], r[1] + bu * r[3] + bv * r[5]
 
 
-@row
+@inline_row
 def vertex_colour(geometry, prim, bu, bv):
     """Linear RGBA vertex colour of a hit (ones without vertex colours)."""
     colours = geometry[7]
@@ -81,7 +85,7 @@ def vertex_colour(geometry, prim, bu, bv):
             r[3] + bu * r[7] + bv * r[11])
 
 
-@row
+@inline_row
 def is_transparent(surface, geometry, mat, prim, bu, bv, coin):
     """Whether a ray passes this hit of a cut-out material (mask: opacity below the cutoff;
     blend: with probability 1 - opacity, decided by ``coin`` in [0, 1))."""
@@ -104,7 +108,7 @@ def is_transparent(surface, geometry, mat, prim, bu, bv, coin):
     return coin >= alpha
 
 
-@row
+@inline_row
 def textured_row(surface, geometry, mat, prim, bu, bv, scratch, lane):
     """Copy the material's parameter row into ``scratch[lane]`` with its textures and vertex
     colours applied; returns the emission (r, g, b) at the hit."""
@@ -154,7 +158,7 @@ def textured_row(surface, geometry, mat, prim, bu, bv, scratch, lane):
     return er, eg, eb
 
 
-@row
+@inline_row
 def emission_at(surface, geometry, mat, prim, bu, bv):
     """Emitted radiance (r, g, b) at a point of a face: the material's, times its emission
     texture."""
@@ -168,7 +172,7 @@ def emission_at(surface, geometry, mat, prim, bu, bv):
     return er, eg, eb
 
 
-@row
+@inline_row
 def normal_mapped(surface, geometry, mat, prim, bu, bv, nx, ny, nz):
     """The shading normal (on the front side of the face) bent by the material's tangent-space
     normal map, as :meth:`rtmesh.rendering.surface_textures.SurfaceTextures.normal_mapped`."""
