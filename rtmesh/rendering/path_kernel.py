@@ -50,11 +50,27 @@ from rtmesh.geometry.float32_rays import F32_MAX, offset_origin
 from rtmesh.lights import light_table as lt
 from rtmesh.lights.point_light_rows import illuminate_row
 from rtmesh.materials import lobes, models
-from rtmesh.rendering.path_surfaces import emission_at, is_transparent, normal_mapped, surface_point, textured_row
+from rtmesh.rendering.path_surfaces import (NORMAL_TEXTURE, emission_at, is_transparent, normal_mapped, surface_point,
+                                            textured_row)
 from rtmesh.sampling.alias import alias_sample
 from rtmesh.sampling.hashing import mix64, uniform
 from rtmesh.sampling.mis import power_heuristic
 from rtmesh.sampling.warps import uniform_triangle_weights
+
+# The rows taking arrays that the kernel calls per lane, inlined by numba: a compiled call that
+# passes arrays takes and releases a reference to each (atomic instructions), and LLVM stops
+# inlining small rows into a function this large (those calls doubled the kernel's time);
+# rows of numbers only stay calls (inlining them too cost compile time, no speed)
+set_lane = inline_row(set_lane.py_func)
+clear_hit = inline_row(clear_hit.py_func)
+alias_sample = inline_row(alias_sample.py_func)
+_area_pdf = inline_row(lt.area_pdf.py_func)
+_hit_analytic = inline_row(lt.hit_analytic.py_func)
+_environment_radiance = inline_row(lt.environment_radiance.py_func)
+_environment_pdf = inline_row(lt.environment_pdf.py_func)
+_environment_sample = inline_row(lt.environment_sample.py_func)
+_sample_area_point = inline_row(lt.sample_area_point.py_func)
+_illuminate_row = inline_row(illuminate_row.py_func)
 
 DIMENSIONS_PER_VERTEX = 8
 # dimensions of a vertex, after DIMENSIONS_PER_VERTEX * depth
@@ -112,35 +128,35 @@ def sample_li(light, env, px, py, pz, u1, u2):
     (delta lights: 1); ``pdf`` 0 for a failed sample."""
     kind = light[0]
     if kind < lt.QUAD:
-        wx, wy, wz, distance, er, eg, eb = illuminate_row(light, px, py, pz)
+        wx, wy, wz, distance, er, eg, eb = _illuminate_row(light, px, py, pz)
         return wx, wy, wz, distance, er, eg, eb, 1.0, True
     if kind == lt.ENVIRONMENT:
         (pixels, marginal, conditional, func, mean, cos_r, sin_r) = env
-        dx, dy, dz, pdf = lt.environment_sample(marginal, conditional, func, mean, cos_r, sin_r, u1, u2)
+        dx, dy, dz, pdf = _environment_sample(marginal, conditional, func, mean, cos_r, sin_r, u1, u2)
         if not (pdf > 0.0 and pdf < math.inf):
             return dx, dy, dz, math.inf, 0.0, 0.0, 0.0, 0.0, False
-        lr, lg, lb = lt.environment_radiance(pixels, cos_r, sin_r, dx, dy, dz)
+        lr, lg, lb = _environment_radiance(pixels, cos_r, sin_r, dx, dy, dz)
         return dx, dy, dz, math.inf, lr, lg, lb, pdf, False
-    qx, qy, qz = lt.sample_area_point(light, u1, u2)
+    qx, qy, qz = _sample_area_point(light, u1, u2)
     dx, dy, dz = qx - px, qy - py, qz - pz
     distance = math.sqrt((dx * dx + dy * dy) + dz * dz)
     if not distance > 0.0:
         return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, False
     dx, dy, dz = dx / distance, dy / distance, dz / distance
-    pdf = lt.area_pdf(light, px, py, pz, dx, dy, dz, distance)
+    pdf = _area_pdf(light, px, py, pz, dx, dy, dz, distance)
     if not pdf > 0.0:
         return dx, dy, dz, distance, 0.0, 0.0, 0.0, 0.0, False
     return dx, dy, dz, distance, light[lt.RADIANCE], light[lt.RADIANCE + 1], light[lt.RADIANCE + 2], pdf, False
 
 
-@row
+@inline_row
 def _add(total, lane, r, g, b):
     total[lane, 0] += r
     total[lane, 1] += g
     total[lane, 2] += b
 
 
-@row
+@inline_row
 def _add_path(paths, split, lane, bucket, r, g, b):
     if split:
         paths[lane, bucket, 0] += r
@@ -222,7 +238,13 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geome
     """
     n = origins.shape[0]
     material_id = geometry[5]
-    tags, transmissive, absorption, unlit, albedo_table = surface[0], surface[2], surface[4], surface[5], surface[6]
+    tags, params, transmissive, emission = surface[0], surface[1], surface[2], surface[3]
+    absorption, unlit, albedo_table, material_textures = surface[4], surface[5], surface[6], surface[8]
+    # materials whose parameters vary over the surface (textures, vertex colours): only their
+    # hits copy and scale a parameter row (the records' rows cost reference counting per call)
+    textured = np.zeros(len(tags), np.bool_)
+    for mat in range(len(tags)):
+        textured[mat] = len(geometry[7]) > 0 or (len(geometry[6]) > 0 and (material_textures[mat] >= 0).any())
     light_rows, light_probability, light_alias, light_pmf, face_light, analytic, env_light = lights
     max_depth, rr_depth, clamp, offset_scale, background_seen, cutouts, split = options
     env_pixels, env_marginal, env_conditional, env_func, env_mean, env_cos, env_sin = env
@@ -303,7 +325,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geome
                 seen = -1
                 for k in range(len(analytic)):
                     a = analytic[k]
-                    ta = lt.hit_analytic(light_rows[a], px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], t)
+                    ta = _hit_analytic(light_rows[a], px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], t)
                     if ta < t:
                         t, seen = ta, a
                 if sigma[lane, 0] + sigma[lane, 1] + sigma[lane, 2] > 0.0 and t < math.inf:
@@ -313,7 +335,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geome
                     light = light_rows[seen]
                     w = 1.0
                     if not prev_delta[lane]:
-                        w = power_heuristic(prev_pdf[lane], light_pmf[seen] * lt.area_pdf(
+                        w = power_heuristic(prev_pdf[lane], light_pmf[seen] * _area_pdf(
                             light, px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], t))
                     r, g, b = _clamped(beta[lane, 0] * light[lt.RADIANCE] * w, beta[lane, 1] * light[lt.RADIANCE + 1] * w,
                                        beta[lane, 2] * light[lt.RADIANCE + 2] * w, limit)
@@ -323,10 +345,10 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geome
                     continue
                 if not hit:
                     if (env_light >= 0) | ((depth == 0) & background_seen):
-                        lr, lg, lb = lt.environment_radiance(env_pixels, env_cos, env_sin, dx[lane], dy[lane], dz[lane])
+                        lr, lg, lb = _environment_radiance(env_pixels, env_cos, env_sin, dx[lane], dy[lane], dz[lane])
                         w = 1.0
                         if not prev_delta[lane]:
-                            w = power_heuristic(prev_pdf[lane], light_pmf[env_light] * lt.environment_pdf(
+                            w = power_heuristic(prev_pdf[lane], light_pmf[env_light] * _environment_pdf(
                                 env_marginal, env_conditional, env_func, env_mean, env_cos, env_sin,
                                 dx[lane], dy[lane], dz[lane]))
                         r, g, b = _clamped(beta[lane, 0] * lr * w, beta[lane, 1] * lg * w, beta[lane, 2] * lb * w,
@@ -350,7 +372,12 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geome
                     px[lane], py[lane], pz[lane] = np.float64(qx), np.float64(qy), np.float64(qz)
                     continue
                 layers[lane] = 0
-                er, eg, eb = textured_row(surface, geometry, mat, prim, bu, bv, scratch, lane)
+                if textured[mat]:
+                    er, eg, eb = textured_row(surface, geometry, mat, prim, bu, bv, scratch, lane)
+                    bsdf_params, bsdf_row = scratch, lane
+                else:
+                    er, eg, eb = emission[mat, 0], emission[mat, 1], emission[mat, 2]
+                    bsdf_params, bsdf_row = params, mat
                 # emission, from the front side (the winding's normal), as pbrt's and Mitsuba's
                 # area lights
                 front = (gx * dx[lane] + gy * dy[lane]) + gz * dz[lane] < 0.0
@@ -359,7 +386,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geome
                     if not prev_delta[lane]:
                         light = face_light[prim]
                         if light >= 0:
-                            w = power_heuristic(prev_pdf[lane], light_pmf[light] * lt.area_pdf(
+                            w = power_heuristic(prev_pdf[lane], light_pmf[light] * _area_pdf(
                                 light_rows[light], px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], t))
                     r, g, b = _clamped(beta[lane, 0] * er * w, beta[lane, 1] * eg * w, beta[lane, 2] * eb * w, limit)
                     _add(total, lane, r, g, b)
@@ -377,7 +404,8 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geome
                 ox, oy, oz = -dx[lane], -dy[lane], -dz[lane]
                 if (nx * gx + ny * gy) + nz * gz < 0.0:
                     nx, ny, nz = -nx, -ny, -nz
-                nx, ny, nz = normal_mapped(surface, geometry, mat, prim, bu, bv, nx, ny, nz)
+                if material_textures[mat, NORMAL_TEXTURE] >= 0:
+                    nx, ny, nz = normal_mapped(surface, geometry, mat, prim, bu, bv, nx, ny, nz)
                 if not transmissive[mat]:
                     if (gx * ox + gy * oy) + gz * oz < 0.0:
                         gx, gy, gz, nx, ny, nz = -gx, -gy, -gz, -nx, -ny, -nz
@@ -411,7 +439,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geome
                             lix = (tx * wx + ty * wy) + tz * wz
                             liy = (sx * wx + sy * wy) + sz * wz
                             liz = (nx * wx + ny * wy) + nz * wz
-                            fr, fg, fbb, pdf_bsdf = models.evaluate(tag, scratch, lane, albedo_table, lox, loy, loz,
+                            fr, fg, fbb, pdf_bsdf = models.evaluate(tag, bsdf_params, bsdf_row, albedo_table, lox, loy, loz,
                                                                     lix, liy, liz)
                             if (fr > 0.0) | (fg > 0.0) | (fbb > 0.0):
                                 p_light = light_pmf[chosen] * pdf_li
@@ -424,7 +452,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geome
                                     pending_paths[lane, :, :] = 0.0
                                     if depth == 0:
                                         # split by the part of the BSDF the light comes through
-                                        dr, dg, db, ur, ug, ub = models.parts(tag, scratch, lane, albedo_table,
+                                        dr, dg, db, ur, ug, ub = models.parts(tag, bsdf_params, bsdf_row, albedo_table,
                                                                               lox, loy, loz, lix, liy, liz)
                                         cr, cg, cb = (beta[lane, 0] * lr * scale, beta[lane, 1] * lg * scale,
                                                       beta[lane, 2] * lb * scale)
@@ -450,7 +478,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geome
                     continue
                 # continue the path by sampling the BSDF
                 wx, wy, wz, gr, gg, gb, pdf, flags = models.sample(
-                    tag, scratch, lane, albedo_table, lox, loy, loz, uniform(key, base + _LOBE),
+                    tag, bsdf_params, bsdf_row, albedo_table, lox, loy, loz, uniform(key, base + _LOBE),
                     uniform(key, base + _BSDF_U1), uniform(key, base + _BSDF_U2))
                 if (flags == lobes.FAILED) | (not ((gr > 0.0) | (gg > 0.0) | (gb > 0.0))):
                     alive[lane] = False
