@@ -44,7 +44,7 @@ from hypothesis import strategies as st
 from scenes import assert_finite, box, icosphere, settings
 
 from rtmesh.geometry.motion import Motion
-from rtmesh.io.passes import PASS_NAMES
+from rtmesh.io.passes import LIGHT_PATH_PASSES, PASS_NAMES
 from rtmesh.io.texture_images import Texture
 from rtmesh.lights.area_lights import DiskLight, QuadLight
 from rtmesh.lights.point_lights import DirectionalLight, PointLight, SpotLight
@@ -222,8 +222,10 @@ def render_settings(draw):
 
 @st.composite
 def scene_descriptions(draw):
-    """Everything one example renders: scene, camera, lights, background and settings."""
-    return {
+    """Everything one example renders: scene, camera, lights, background and settings, under
+    either integrator (under path without motion blur and projector lights, which it does not
+    render yet)."""
+    d = {
         "objects": draw(objects()),
         "floor": draw(st.one_of(st.none(), materials(("diffuse", "specular", "mirror", "glossy")))),
         # the block's bottom in the floor's plane (coplanar overlapping triangles), or 0.01 above
@@ -236,6 +238,19 @@ def scene_descriptions(draw):
         "shutter": draw(st.sampled_from([(0.0, 0.0), (0.0, 1.0), (0.4, 0.4), (-0.5, 0.5)])),
         "settings": draw(render_settings()),
     }
+    integrator = draw(st.sampled_from(["whitted", "path"]))
+    d["settings"]["integrator"] = integrator
+    if integrator == "path":
+        # what the path integrator does not render yet: motion blur and projector lights
+        for o in d["objects"]:
+            o["motion"] = None
+        if d["camera_media"] is not None:
+            d["camera_media"]["motion"] = None
+        d["lights"] = [light for light in d["lights"] if light["type"] != "projector"]
+    if integrator == "whitted":
+        # the light-path passes exist under the path integrator only
+        d["settings"]["passes"] = tuple(p for p in d["settings"]["passes"] if p not in LIGHT_PATH_PASSES)
+    return d
 
 
 # ---------------------------------------------------------------- building the scene
@@ -460,6 +475,7 @@ def test_random_feature_combinations_render_finite_quiet_and_thread_independent(
     for stage in result.stats.stages_enabled:
         event(f"stage {stage}")
     event(f"sampler {d['settings']['sampler']}")
+    event(f"integrator {d['settings']['integrator']}")
     event("adaptive" if "target_error" in d["settings"] else "uniform")
     if d["camera_media"]:
         event("camera in glass" + (" in water" if d["camera_media"]["water"] else ""))
