@@ -6,8 +6,10 @@ that reconstruction tools read beside the images, built from each image's camera
 
 - ``nerfstudio``: ``<asset>.transforms.json`` in the asset's image folder (the nerfstudio /
   instant-ngp layout): ``camera_model`` ``"OPENCV"`` (no distortion: ``k1 k2 p1 p2`` 0),
-  ``fl_x``, ``fl_y``, ``cx``, ``cy`` (pixels, pixel centres at +0.5), ``w``, ``h`` and
-  ``frames``: ``file_path`` (relative to the JSON file) and ``transform_matrix``, the
+  or ``"ORTHOPHOTO"`` for orthographic views (``--ortho``), ``fl_x``, ``fl_y``, ``cx``,
+  ``cy`` (pixels, pixel centres at +0.5), ``w``, ``h`` (at the top level when every frame
+  shares them, else in each frame only: nerfstudio ignores per-frame intrinsics when
+  top-level ones exist) and ``frames``: ``file_path`` (relative to the JSON file) and ``transform_matrix``, the
   camera-to-world matrix in the OpenGL convention (+x right, +y up, -z forward); with
   ``--passes depth`` each frame has ``depth_file_path`` (16-bit PNG, millimetres: depth in
   scene units times 1000, nerfstudio's default ``depth_unit_scale_factor`` 1e-3), with
@@ -29,6 +31,7 @@ import numpy as np
 from rtmesh.batch.worker import CAMERA_SUFFIX
 from rtmesh.batch.worker import DEPTH_PNG_SUFFIX as DEPTH_SUFFIX
 from rtmesh.batch.worker import MASK_PNG_SUFFIX as MASK_SUFFIX
+from rtmesh.core.errors import OutputError
 from rtmesh.io.atomic_files import write_text
 
 DATASETS = ("nerfstudio", "colmap")
@@ -78,7 +81,7 @@ def write_dataset(dataset, outdir, asset, images):
         return []
     if dataset == "nerfstudio":
         path = os.path.join(outdir, asset + ".transforms.json")
-        write_text(path, json.dumps(nerfstudio_transforms(frames), indent=2) + "\n")
+        write_text(path, json.dumps(nerfstudio_transforms(frames, path), indent=2) + "\n")
         return [path]
     target = os.path.join(outdir, asset + ".colmap")
     os.makedirs(target, exist_ok=True)
@@ -91,18 +94,41 @@ def write_dataset(dataset, outdir, asset, images):
     return written
 
 
-def nerfstudio_transforms(frames):
-    """The ``transforms.json`` document of ``frames`` ((record, image, files) tuples)."""
-    first = frames[0][0]
-    document = {"camera_model": "OPENCV", "fl_x": first["fx"], "fl_y": first["fy"], "cx": first["cx"],
-                "cy": first["cy"], "w": first["width"], "h": first["height"],
-                "k1": 0.0, "k2": 0.0, "p1": 0.0, "p2": 0.0, "frames": []}
-    for record, picture, files in frames:
+_INTRINSICS = (("fl_x", "fx"), ("fl_y", "fy"), ("cx", "cx"), ("cy", "cy"), ("w", "width"), ("h", "height"))
+
+
+def nerfstudio_transforms(frames, where="transforms.json"):
+    """The ``transforms.json`` document of ``frames`` ((record, image, files) tuples).
+
+    Intrinsics go to the top level when every frame shares them, else into each frame
+    only: nerfstudio reads the top-level keys whenever they exist (``fx_fixed = "fl_x" in
+    meta``) and then ignores per-frame ones.  Perspective views are ``"OPENCV"`` (zero
+    distortion), orthographic ones ``"ORTHOPHOTO"`` (``fl_x`` in pixels per scene unit).
+
+    Raises
+    ------
+    OutputError
+        The frames mix orthographic and perspective views (one ``camera_model`` per file);
+        the message names ``where``.
+    """
+    projections = {record["projection"] for record, _, _ in frames}
+    if len(projections) > 1:
+        raise OutputError(f"{where}: camera_model: nerfstudio has one camera model per file, and these "
+                          f"views mix orthographic and perspective cameras")
+    model = "ORTHOPHOTO" if projections == {"orthographic"} else "OPENCV"
+    document = {"camera_model": model}
+    intrinsics = [{key: record[field] for key, field in _INTRINSICS} for record, _, _ in frames]
+    shared = all(i == intrinsics[0] for i in intrinsics)
+    if shared:
+        document.update(intrinsics[0])
+    if model == "OPENCV":
+        document.update(k1=0.0, k2=0.0, p1=0.0, p2=0.0)
+    document["frames"] = []
+    for (record, picture, files), own in zip(frames, intrinsics):
         frame = {"file_path": os.path.basename(picture),
                  "transform_matrix": record["camera_to_world_opengl"]}
-        if any(record[k] != first[k] for k in ("fx", "fy", "cx", "cy", "width", "height")):
-            frame.update(fl_x=record["fx"], fl_y=record["fy"], cx=record["cx"], cy=record["cy"],
-                         w=record["width"], h=record["height"])
+        if not shared:
+            frame.update(own)
         for suffix, field in ((DEPTH_SUFFIX, "depth_file_path"), (MASK_SUFFIX, "mask_path")):
             extra = [f for f in files if f.endswith(suffix)]
             if extra:

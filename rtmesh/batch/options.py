@@ -73,7 +73,8 @@ class BatchOptions:
         textures found and missing, load warnings (:mod:`rtmesh.batch.asset_meta`).
     dataset : str
         ``""``, ``nerfstudio`` or ``colmap``: write each finished asset's dataset files
-        (:mod:`rtmesh.batch.datasets`); implies ``camera_json``.  With ``nerfstudio``, the
+        (:mod:`rtmesh.batch.datasets`); implies ``camera_json``.  ``nerfstudio`` takes
+        ``ortho`` (``ORTHOPHOTO``), ``colmap`` does not.  With ``nerfstudio``, the
         ``depth`` and ``alpha`` passes also give depth and mask PNGs per image.
     workers : int or None
         Local worker processes; None uses every core.  Ignored with ``scheduler``.
@@ -164,8 +165,8 @@ class BatchOptions:
                 require_mp4()  # before any job: one line naming the extra
         if self.dataset:
             check_names("dataset", (self.dataset,), DATASETS)
-            if self.ortho:
-                raise InputError(f"dataset: {self.dataset} describes perspective cameras: leave out --ortho")
+            if self.ortho and self.dataset == "colmap":
+                raise InputError("dataset: colmap describes perspective cameras: leave out --ortho")
         if not self.views and not self.turntable:
             raise InputError("views: give at least one view (or a turntable)")
         if not self.formats:
