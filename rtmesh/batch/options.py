@@ -68,6 +68,10 @@ class BatchOptions:
         ``""``, ``webp`` or ``gif``: with ``turntable``, assemble each asset's frames into
         ``<asset>.turntable.webp|gif`` (:mod:`rtmesh.batch.movies`); needs png or jpg
         among the formats.
+    annotations : bool
+        Write COCO instance annotations: a fragment ``<image key>.coco.json`` per image
+        and, at the end of each run, ``annotations.coco.json`` per output folder merging
+        every finished image's (:mod:`rtmesh.batch.coco`).
     asset_meta : bool
         Write ``<asset>.meta.json`` per asset a job loads: counts, bounds, materials,
         textures found and missing, load warnings (:mod:`rtmesh.batch.asset_meta`).
@@ -126,6 +130,7 @@ class BatchOptions:
     ortho: bool = False
     dataset: str = ""
     asset_meta: bool = False
+    annotations: bool = False
     movie: str = ""
     contact_sheet: bool = False
     workers: int | None = None

@@ -36,6 +36,7 @@ import time
 import uuid
 
 from rtmesh.batch.books import SUMMARY_NAME, Books
+from rtmesh.batch.coco import COCO_SUFFIX, write_batch_annotations
 from rtmesh.batch.contact_sheet import write_contact_sheets
 from rtmesh.batch.datasets import dataset_suffixes
 from rtmesh.batch.identity import image_fingerprint, inputs_unchanged, unchanged
@@ -139,6 +140,8 @@ def batch_convert(inputs, outdir, **options):
             book.close()
         if opts.contact_sheet:
             write_contact_sheets(outdir, book.sheet)
+        if opts.annotations:
+            write_batch_annotations(outdir, book.sheet)
     report = book.report(time.perf_counter() - start, runner, run)
     report.path = os.path.join(outdir, SUMMARY_NAME)
     write_text(report.path, json.dumps(report.to_dict(), indent=1) + "\n")
@@ -262,7 +265,7 @@ def _image_tasks(asset, opts, shared):
         # the file names are the image's key (its identity) plus the formats (and the camera)
         suffixes = [f".{fmt}" for fmt in o.get("formats", opts.formats)]
         extras = dataset_suffixes(opts.dataset, fields["passes"])
-        suffixes += [CAMERA_SUFFIX] * (opts.camera_json and not extras) + extras
+        suffixes += [CAMERA_SUFFIX] * (opts.camera_json and not extras) + extras + [COCO_SUFFIX] * opts.annotations
         # (a metadata file is written by the job that loads the asset: asking for it redoes them)
         extra = {k: v for k, v in (("normalize", opts.normalize), ("asset_meta", opts.asset_meta)) if v}
         views = [(view, image_fingerprint(fields, view.identity(), [f"*{x}" for x in suffixes], opts.ground,

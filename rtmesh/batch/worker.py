@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rtmesh.batch.asset_meta import WarningLog, asset_meta, write_meta
+from rtmesh.batch.coco import COCO_SUFFIX, Instance, image_annotations, image_entry, write_coco
 from rtmesh.batch.identity import OpenedFiles, describe
 from rtmesh.batch.normalize import asset_to_world, transform_points
 from rtmesh.batch.publish import discard
@@ -334,6 +335,9 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
                                                               scene.bounds, to_world))
                     elif name.endswith(DEPTH_PNG_SUFFIX):
                         write_depth_png(path, result.passes["depth"][:, :, 0])
+                    elif name.endswith(COCO_SUFFIX):
+                        write_coco(path, image_fragment(integrator, result, task, settings, to_world, job.asset,
+                                                        job.ground))
                     elif name.endswith(MASK_PNG_SUFFIX):
                         write_display_image(path, (result.passes["alpha"][:, :, :1] > 0.5).astype(np.float64))
                     else:
@@ -362,6 +366,26 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
                                    stage=stage, message=_one_line(exc))
         emit(outcome)
     return _job_result(job, results, start)
+
+
+def image_fragment(integrator, result, task, settings, to_world, asset, ground):
+    """The COCO fragment of one batch image (:mod:`rtmesh.batch.coco`): the asset is one
+    instance of category ``asset``, its model frame the asset file's; the ground plane (the
+    scene's last object when the view has one) is not annotated."""
+    scene = integrator.scene
+    record = camera_record(scene.camera, settings.width, settings.height, scene.bounds, to_world)
+    objects = tuple(range(len(scene.object_names) - _has_ground(ground, task.view)))
+    pictures = [f for f in task.files if f.endswith((".png", ".jpg", ".exr"))
+                and not f.endswith((DEPTH_PNG_SUFFIX, MASK_PNG_SUFFIX))]
+    instance = Instance(asset, asset, objects, np.asarray(to_world, dtype=np.float64))
+    annotations = image_annotations(integrator, record, [instance], result.passes.get("object_id"))
+    return {"image": image_entry(os.path.basename(pictures[0]), record), "annotations": annotations}
+
+
+def _has_ground(ground, view):
+    """Whether ``view`` of a batch with ``ground`` has the ground plane: views from below
+    leave it out, where it would stand between the camera and the asset."""
+    return bool(ground and view.direction[1] >= 0)
 
 
 def _writing(job):
@@ -419,7 +443,7 @@ def _integrator_for_view(built, parts, materials, bounds, view, settings, ground
     geometry (views from below leave the plane out, so an asset has at most two builds);
     later views take it with their own camera and lights (:meth:`Integrator.with_view`).
     """
-    with_ground = bool(ground and view.direction[1] >= 0)
+    with_ground = _has_ground(ground, view)
     integrator = built.get(with_ground)
     if integrator is None:
         scene = _scene_for_view(parts, materials, bounds, view, settings, ground)
@@ -464,8 +488,7 @@ def _scene_for_view(parts, materials, bounds, view, settings, ground):
     """The asset's scene, framed from ``view`` and lit by the default rig."""
     camera, lights = _camera_and_lights(bounds, view, settings)
     parts, materials = list(parts), list(materials) or [Material()]
-    # seen from below, the plane would stand between the camera and the asset
-    if ground and view.direction[1] >= 0:
+    if _has_ground(ground, view):
         parts.append(_ground_part(bounds, len(materials)))
         materials.append(Material(name="ground", diffuse=np.full(3, 0.8)))
     if MaterialTable(materials).any_physical:
