@@ -241,6 +241,11 @@ def _add_batch_parser(commands):
     p.add_argument("--annotations", action="store_true",
                    help="COCO instance annotations: KEY.coco.json per image, merged into "
                    "annotations.coco.json per output folder (docs/DATASETS.md)")
+    p.add_argument("--flow", action="store_true",
+                   help="optical flow between each asset's ordered views: flow_forward and "
+                   "flow_backward EXR layers (X, Y, valid) per view; needs exr among the formats")
+    p.add_argument("--flow-format", choices=("exr", "flo"), default="exr",
+                   help="flo: also Middlebury KEY.flow_forward.flo / .flow_backward.flo files")
     p.add_argument("--asset-meta", action="store_true",
                    help="write ASSET.meta.json per asset: triangle/vertex counts, bounds, materials, "
                    "textures found and missing, load warnings")
@@ -400,9 +405,9 @@ def cmd_batch(args):
         turntable=args.turntable or 0, formats=args.formats, passes=args.passes,
         ground=args.ground, camera_json=args.camera_json, normalize=args.normalize or "",
         ortho=args.ortho, dataset=args.dataset or "", asset_meta=args.asset_meta,
-        annotations=args.annotations, movie=args.movie or "", contact_sheet=args.contact_sheet,
-        seed=args.seed, max_depth=args.max_depth, integrator=args.integrator, exposure=args.exposure,
-        tonemap=args.tonemap, workers=args.workers, threads=args.threads,
+        annotations=args.annotations, flow=args.flow, flow_format=args.flow_format, movie=args.movie or "",
+        contact_sheet=args.contact_sheet, seed=args.seed, max_depth=args.max_depth, integrator=args.integrator,
+        exposure=args.exposure, tonemap=args.tonemap, workers=args.workers, threads=args.threads,
         scheduler=args.scheduler, time_limit=args.time_limit, memory_limit=args.memory_limit,
         force=args.force, trust_mtime=args.trust_mtime, retry_failed=args.retry_failed,
         progress=args.progress, progress_file=args.progress_file, quiet=args.quiet)

@@ -391,3 +391,35 @@ def test_unknown_pass_is_a_one_line_error(tmp_path, capsys):
         main(["render", str(scene_file), "-o", str(tmp_path / "o.exr"), "--passes", "depth,zdepth"])
     assert exit_info.value.code == 2
     assert "zdepth" in capsys.readouterr().err
+
+
+def test_motion_is_where_each_centre_hit_lands_when_the_shutter_closes():
+    # a box spinning and sliding in front of a still wall, shutter open from 0.25 to 0.75
+    import dataclasses
+
+    from rtmesh.geometry.motion import Motion
+    from rtmesh.scene.camera_json import camera_record
+
+    spinner = part("spinner", box(centre=(0.0, 0.0, -4.0)))
+    spinner.motion = Motion([0.6, -0.3, 0.2], [0.2, 1.0, 0.3], 40.0)
+    wall = part("wall", quad([[-9, -9, -8.0], [9, -9, -8.0], [9, 9, -8.0], [-9, 9, -8.0]]))
+    camera = dataclasses.replace(LOOK_DOWN_Z, shutter=(0.25, 0.75))
+    scene = Scene.from_parts([spinner, wall], [Material("m")], [], camera)
+    w, h = 32, 24
+    result = render(scene, width=w, height=h, spp=2, passes=("motion", "position_center", "object_id"))
+    motion = result.passes["motion"].reshape(-1, 2).astype(np.float64)
+    position = result.passes["position_center"].reshape(-1, 3).astype(np.float64)
+    on_box = result.passes["object_id"].reshape(-1) == 0
+    assert on_box.sum() > 20 and (~on_box).sum() > 20
+    assert (motion[~on_box] == 0).all()  # the wall stands still
+    m = scene.motions[0]
+    rest = m.to_rest(position[on_box], np.full(on_box.sum(), 0.25))
+    closed = m.to_world(rest, np.full(on_box.sum(), 0.75))
+    record = camera_record(camera, w, h, scene.bounds)
+    w2c, k = np.array(record["world_to_camera_opencv"]), np.array(record["K"])
+    p = (closed @ w2c[:3, :3].T + w2c[:3, 3]) @ k.T
+    pixel = np.arange(w * h)[on_box]
+    start = np.column_stack([pixel % w + 0.5, pixel // w + 0.5])
+    np.testing.assert_allclose(start + motion[on_box], p[:, :2] / p[:, 2:], atol=1e-3)
+    # it moves right and down in the image (+x right, +y down) on average: the sign convention
+    assert motion[on_box, 0].mean() > 1 and motion[on_box, 1].mean() > 0

@@ -41,6 +41,7 @@ from rtmesh.geometry.motion import scene_at_time
 from rtmesh.io.atomic_files import write_text
 from rtmesh.io.rle import encode, mask_box
 from rtmesh.rendering.centre_rays import centre_hits, centre_passes
+from rtmesh.scene.camera_json import project_points
 
 COCO_SUFFIX = ".coco.json"
 MERGED_NAME = "annotations.coco.json"
@@ -128,19 +129,6 @@ def image_annotations(it, record, instances, object_id=None):
     return annotations
 
 
-def _project(points, record):
-    """Pixel positions ((n, 2)) and camera-frame depths ((n,)) of world points."""
-    w2c, k = np.array(record["world_to_camera_opencv"]), np.array(record["K"])
-    p = points @ w2c[:3, :3].T + w2c[:3, 3]
-    z = p[:, 2]
-    if record["projection"] == "orthographic":
-        xy = p[:, :2]
-    else:
-        with np.errstate(divide="ignore", invalid="ignore"):
-            xy = p[:, :2] / z[:, None]
-    return xy @ k[:2, :2].T + k[:2, 2], z
-
-
 def _amodal_mask(it, vertices, faces, points, record):
     """(h, w) bool: the pixels whose centre ray meets the instance's ``faces`` traced alone,
     over the pixels of its projected bounding box (the whole image when part of the box is
@@ -149,7 +137,7 @@ def _amodal_mask(it, vertices, faces, points, record):
     h, w = s.height, s.width
     corners = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)])
     lo, hi = points.min(axis=0), points.max(axis=0)
-    uv, z = _project(lo + corners * (hi - lo), record)
+    uv, z = project_points(record, lo + corners * (hi - lo))
     if record["projection"] == "perspective" and not (z > 0).all():
         c0, c1, r0, r1 = 0, w, 0, h
     else:
@@ -173,7 +161,7 @@ def _box_keypoints(points, to_world, record):
     lo, hi = model.min(axis=0), model.max(axis=0)
     corners = np.array([[(i >> a) & 1 for a in range(3)] for i in range(8)])
     world = (lo + corners * (hi - lo)) @ to_world[:3, :3].T + to_world[:3, 3]
-    uv, z = _project(world, record)
+    uv, z = project_points(record, world)
     front = z > 0 if record["projection"] == "perspective" else np.ones(8, dtype=bool)
     inside = front & (uv[:, 0] >= 0) & (uv[:, 0] <= record["width"]) & (uv[:, 1] >= 0) & (uv[:, 1] <= record["height"])
     flags = np.where(inside, 2, np.where(front, 1, 0))

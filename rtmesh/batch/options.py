@@ -6,6 +6,7 @@ before anything runs (one line naming the option, exit 2).
 from dataclasses import dataclass
 
 from rtmesh.batch.datasets import DATASETS
+from rtmesh.batch.flow import FLOW_FORMATS
 from rtmesh.batch.inputs import InputError
 from rtmesh.batch.movies import MOVIE_FORMATS, require_mp4
 from rtmesh.batch.normalize import NORMALIZE_MODES
@@ -72,6 +73,12 @@ class BatchOptions:
         Write COCO instance annotations: a fragment ``<image key>.coco.json`` per image
         and, at the end of each run, ``annotations.coco.json`` per output folder merging
         every finished image's (:mod:`rtmesh.batch.coco`).
+    flow : bool
+        Optical flow between each asset's ordered views: ``flow_forward`` and
+        ``flow_backward`` layers in each view's EXR (:mod:`rtmesh.batch.flow`); needs
+        ``exr`` among the formats.
+    flow_format : str
+        ``exr`` (the layers alone) or ``flo`` (also Middlebury ``.flo`` files per view).
     asset_meta : bool
         Write ``<asset>.meta.json`` per asset a job loads: counts, bounds, materials,
         textures found and missing, load warnings (:mod:`rtmesh.batch.asset_meta`).
@@ -131,6 +138,8 @@ class BatchOptions:
     dataset: str = ""
     asset_meta: bool = False
     annotations: bool = False
+    flow: bool = False
+    flow_format: str = "exr"
     movie: str = ""
     contact_sheet: bool = False
     workers: int | None = None
@@ -177,6 +186,9 @@ class BatchOptions:
         if not self.formats:
             raise InputError("formats: give at least one output format")
         check_passes(self.passes, self.formats)
+        check_names("flow format", (self.flow_format,), FLOW_FORMATS)
+        if self.flow and "exr" not in self.formats:
+            raise InputError("flow: the flow passes are written to EXR files: add exr to the formats")
         for name in ("workers", "threads"):
             value = getattr(self, name)
             if value is not None and value < 1:

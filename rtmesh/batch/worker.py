@@ -20,6 +20,7 @@ import numpy as np
 
 from rtmesh.batch.asset_meta import WarningLog, asset_meta, write_meta
 from rtmesh.batch.coco import COCO_SUFFIX, Instance, image_annotations, image_entry, write_coco
+from rtmesh.batch.flow import FLOW_PASSES, flow_suffix, view_flow, write_flo
 from rtmesh.batch.identity import OpenedFiles, describe
 from rtmesh.batch.normalize import asset_to_world, transform_points
 from rtmesh.batch.publish import discard
@@ -28,6 +29,7 @@ from rtmesh.io.atomic_files import staged
 from rtmesh.io.images import write_depth_png, write_display_image, write_image
 from rtmesh.loaders.importers import default_integrator, mesh_file_parts
 from rtmesh.materials.table import Material, MaterialTable
+from rtmesh.rendering.centre_rays import centre_passes
 from rtmesh.rendering.integrator import Integrator
 from rtmesh.rendering.settings import RenderSettings
 from rtmesh.scene.camera import frame_bounds
@@ -127,12 +129,17 @@ class ImageTask:
         Output files relative to the output folder, one per format.
     fingerprint : str
         Hash of everything the image depends on (input file, settings, view, formats).
+    flow : tuple of (View or None)
+        With ``--flow``: the views before and after this one in the asset's order (None at
+        either end), whose flow passes the image gets (:mod:`rtmesh.batch.flow`); empty
+        without.
     """
 
     key: str
     view: View
     files: tuple
     fingerprint: str
+    flow: tuple = ()
 
 
 @dataclass(frozen=True)
@@ -322,6 +329,10 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
             integrator = _integrator_for_view(built, parts, materials, bounds, task.view, settings,
                                               job.ground)
             result = integrator.render(progress=check)
+            passes = result.passes
+            if task.flow:
+                passes = {**passes, **_flows(integrator, result, task, built, parts, materials, bounds, settings,
+                                             job.ground, to_world)}
             stage = "write"
             last_check[0] = 0.0  # always ask just before writing
             check()
@@ -340,8 +351,10 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
                                                         job.ground))
                     elif name.endswith(MASK_PNG_SUFFIX):
                         write_display_image(path, (result.passes["alpha"][:, :, :1] > 0.5).astype(np.float64))
+                    elif name.endswith(".flo"):
+                        write_flo(path, passes[next(f for f in FLOW_PASSES if name.endswith(flow_suffix(f)))])
                     else:
-                        write_image(path, result.image, result.passes, settings.exposure, settings.tonemap,
+                        write_image(path, result.image, passes, settings.exposure, settings.tonemap,
                                     header=settings.header())
                 # superseded while writing: the block's temporaries are removed, not reported.
                 # The run file is read again: a run that took the folder removes the
@@ -380,6 +393,23 @@ def image_fragment(integrator, result, task, settings, to_world, asset, ground):
     instance = Instance(asset, asset, objects, np.asarray(to_world, dtype=np.float64))
     annotations = image_annotations(integrator, record, [instance], result.passes.get("object_id"))
     return {"image": image_entry(os.path.basename(pictures[0]), record), "annotations": annotations}
+
+
+def _flows(integrator, result, task, built, parts, materials, bounds, settings, ground, to_world):
+    """``flow_forward`` and ``flow_backward`` of one view (see :mod:`rtmesh.batch.flow`),
+    towards the views of ``task.flow``, each traced in its own view's scene."""
+    position = result.passes.get("position_center")
+    if position is None:
+        position = centre_passes(integrator, ("position_center",))["position_center"]
+    flows = {}
+    for name, view in zip(("flow_backward", "flow_forward"), task.flow):
+        other = record = None
+        if view is not None:
+            other = _integrator_for_view(built, parts, materials, bounds, view, settings, ground)
+            scene = other.scene
+            record = camera_record(scene.camera, settings.width, settings.height, scene.bounds, to_world)
+        flows[name] = view_flow(position, other, record)
+    return {name: flows[name] for name in FLOW_PASSES}
 
 
 def _has_ground(ground, view):

@@ -27,6 +27,7 @@ EXR naming (one OpenEXR layer per pass, ``layer.channel``)::
     depth_center depth_center.Z                 centre     z-depth; +inf where the ray misses
     position_center  position_center.X .Y .Z    centre     world-space hit point; NaN misses
     normal_center    normal_center.X .Y .Z      centre     shading normal facing the camera; NaN misses
+    motion       motion.X motion.Y              centre     pixels moved, shutter open to close; 0 misses
 
 ``variance`` and ``spp`` are derived passes (:data:`DERIVED_PASSES`): the film computes them
 from its per-pixel sums and sample counts after the render, nothing is recorded per sample.
@@ -256,8 +257,13 @@ CENTRE_PASSES = {
                    "world-space hit point of the pixel-centre ray, NaN for none"),
         CentrePass("normal_center", ("X", "Y", "Z"), np.nan,
                    "world-space unit shading normal facing the camera at the pixel centre, NaN for none"),
+        CentrePass("motion", ("X", "Y"), 0.0,
+                   "image-space motion (pixels, +x right, +y down) of the surface point at the pixel "
+                   "centre from shutter open to shutter close; 0 for none"),
     )
 }
+# channels of the per-view passes a batch adds to its EXR files (rtmesh.batch.flow)
+VIEW_PASS_CHANNELS = {"flow_forward": ("X", "Y", "valid"), "flow_backward": ("X", "Y", "valid")}
 PASS_NAMES = tuple(REGISTRY) + tuple(DERIVED_PASSES) + tuple(CENTRE_PASSES)
 
 
@@ -279,7 +285,7 @@ def exr_channel_names(name, width):
     if name in REGISTRY and REGISTRY[name].width == width:
         return REGISTRY[name].exr_names()
     table = DERIVED_PASSES if name in DERIVED_PASSES else CENTRE_PASSES
-    channels = table[name].channels if name in table else None
+    channels = table[name].channels if name in table else VIEW_PASS_CHANNELS.get(name)
     if channels is None or len(channels) != width:
         channels = ("Y",) if width == 1 else ("X", "Y", "Z") if width == 3 else tuple(map(str, range(width)))
     return [f"{name}.{c}" for c in channels]

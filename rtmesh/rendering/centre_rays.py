@@ -7,7 +7,9 @@ centre ``(column + 0.5, row + 0.5)``, from the centre of a thin lens, at the tim
 shutter opens.  :func:`centre_passes` traces that ray for every pixel after the render (the
 image and its samples are untouched) and writes the passes of
 :data:`rtmesh.io.passes.CENTRE_PASSES`: ``object_id``, ``material_id``, ``instance_id``,
-``depth_center``, ``position_center`` and ``normal_center``.
+``depth_center``, ``position_center``, ``normal_center`` and ``motion`` (where the point
+the ray hits when the shutter opens is in the image when it closes, minus where it was:
+the motion of moving objects; the camera does not move during one render).
 
 :func:`centre_hits` is the same ray for any set of pixels and any scene to trace against
 (the amodal masks of :mod:`rtmesh.batch.coco` trace an object alone).
@@ -16,12 +18,29 @@ image and its samples are untouched) and writes the passes of
 import numpy as np
 
 from rtmesh.core.rays import RayBatch, repeated_row
+from rtmesh.geometry.motion import object_motions
 from rtmesh.io.passes import CENTRE_PASSES
+from rtmesh.scene.camera_json import camera_record, project_points
 
 # pixel-centre rays traced at once (bounds the memory of a large image's label passes)
 CHUNK_RAYS = 1 << 16
 _UNIT = np.ones(3)
 _GEOMETRY = ("depth_center", "position_center", "normal_center")
+
+
+def _motion(points, objects, motions, shutter, record):
+    """(k, 2): how far the world ``points`` (on ``objects``, at the shutter's opening) move
+    in the image until it closes, pixels; 0 on objects that stand still."""
+    opened, closed = shutter
+    moved = points.copy()
+    for k, motion in motions.items():
+        rows = np.flatnonzero(objects == k)
+        if len(rows):
+            rest = motion.to_rest(points[rows], np.full(len(rows), opened))
+            moved[rows] = motion.to_world(rest, np.full(len(rows), closed))
+    start, _ = project_points(record, points)
+    end, _ = project_points(record, moved)
+    return end - start
 
 
 def centre_hits(it, pixels, accel=None):
@@ -71,7 +90,9 @@ def centre_passes(it, names):
         ``object_id``, ``material_id``, ``instance_id``: exact integer indices, -1 where
         the ray meets nothing; ``depth_center``: distance along the view axis (scene
         units), +inf for a miss; ``position_center``: world-space hit point, NaN for a miss;
-        ``normal_center``: world-space unit shading normal facing the ray, NaN for a miss.
+        ``normal_center``: world-space unit shading normal facing the ray, NaN for a miss;
+        ``motion``: pixels the hit point moves between the shutter's opening and closing
+        (+x right, +y down), 0 where nothing moves or nothing is hit.
     """
     specs = [CENTRE_PASSES[n] for n in dict.fromkeys(names) if n in CENTRE_PASSES]
     if not specs:
@@ -81,7 +102,9 @@ def centre_passes(it, names):
     out = {spec.name: np.full((total, len(spec.channels)), spec.miss, dtype=np.float32) for spec in specs}
     ids = [(name, table) for name, table in (("object_id", scene.object_id), ("material_id", scene.material_id),
                                              ("instance_id", scene.object_id)) if name in out]
-    geometry = any(name in out for name in _GEOMETRY)
+    motions = object_motions(scene) if "motion" in out and it.motion is not None else {}
+    geometry = any(name in out for name in _GEOMETRY) or bool(motions)
+    record = camera_record(scene.camera, s.width, s.height, scene.bounds) if motions else None
     forward = it.camera_frame[0]
     for start in range(0, total, CHUNK_RAYS):
         pixels = np.arange(start, min(start + CHUNK_RAYS, total))
@@ -103,4 +126,7 @@ def centre_passes(it, names):
                 out["position_center"][dest] = srf.p + it.shift
             if "normal_center" in out:
                 out["normal_center"][dest] = srf.ns
+            if motions:
+                out["motion"][dest] = _motion(srf.p + it.shift, scene.object_id[prim], motions,
+                                              scene.camera.shutter, record)
     return {name: values.reshape(s.height, s.width, -1) for name, values in out.items()}
