@@ -228,10 +228,12 @@ def _add_batch_parser(commands):
     p.add_argument("--normalize", choices=NORMALIZE_MODES,
                    help="centre each asset and scale it to a unit cube (longest side 1) or unit "
                    "sphere (bounding radius 1) first")
-    p.add_argument("--dataset", choices=("nerfstudio", "colmap"),
+    p.add_argument("--dataset", choices=("nerfstudio", "colmap", "bop"),
                    help="write each asset's dataset files: nerfstudio ASSET.transforms.json (with "
-                   "depth/mask PNGs for --passes depth,alpha) or COLMAP ASSET.colmap/*.txt; implies "
-                   "--camera-json (docs/BATCH.md)")
+                   "depth/mask PNGs for --passes depth,alpha), COLMAP ASSET.colmap/*.txt or a BOP "
+                   "scene ASSET.bop/; implies --camera-json (docs/BATCH.md, docs/DATASETS.md)")
+    p.add_argument("--units", choices=("m", "cm", "mm"), default="m",
+                   help="the assets' units, for --dataset bop's millimetres (default m)")
     p.add_argument("--movie", choices=("webp", "gif", "mp4"),
                    help="with --turntable: each asset's frames as ASSET.turntable.webp|gif|mp4 "
                    "(mp4 needs rtmesh[movie])")
@@ -405,7 +407,8 @@ def cmd_batch(args):
         turntable=args.turntable or 0, formats=args.formats, passes=args.passes,
         ground=args.ground, camera_json=args.camera_json, normalize=args.normalize or "",
         ortho=args.ortho, dataset=args.dataset or "", asset_meta=args.asset_meta,
-        annotations=args.annotations, flow=args.flow, flow_format=args.flow_format, movie=args.movie or "",
+        annotations=args.annotations, flow=args.flow, flow_format=args.flow_format, units=args.units,
+        movie=args.movie or "",
         contact_sheet=args.contact_sheet, seed=args.seed, max_depth=args.max_depth, integrator=args.integrator,
         exposure=args.exposure, tonemap=args.tonemap, workers=args.workers, threads=args.threads,
         scheduler=args.scheduler, time_limit=args.time_limit, memory_limit=args.memory_limit,

@@ -251,7 +251,8 @@ class Books:
             return
         if self.opts.dataset:
             # by image key: the views of a set and the frames of a turntable in order
-            write_dataset(self.opts.dataset, self.outdir, record["asset"], sorted(images, key=lambda i: i["key"]))
+            write_dataset(self.opts.dataset, self.outdir, record["asset"], sorted(images, key=lambda i: i["key"]),
+                          source=record["path"], units=self.opts.units)
         frames = movie_frames(self.outdir, images)
         if self.opts.movie and len(frames) > 1 and all(".turn" in i["key"] for i in images):
             write_movie(os.path.join(self.outdir, f"{record['asset']}.turntable.{self.opts.movie}"), frames,

@@ -116,7 +116,7 @@ def image_annotations(it, record, instances, object_id=None):
         mask = labels == k
         faces = scene.faces[np.isin(scene.object_id, instance.objects)]
         points = scene.vertices[np.unique(faces)]
-        amodal = _amodal_mask(it, scene.vertices, faces, points, record) | mask
+        amodal = amodal_mask(it, scene.vertices, faces, points, record) | mask
         area, area_amodal = int(mask.sum()), int(amodal.sum())
         annotations.append({
             "category": instance.category, "object_name": instance.name, "instance_id": int(k),
@@ -129,29 +129,49 @@ def image_annotations(it, record, instances, object_id=None):
     return annotations
 
 
-def _amodal_mask(it, vertices, faces, points, record):
-    """(h, w) bool: the pixels whose centre ray meets the instance's ``faces`` traced alone,
-    over the pixels of its projected bounding box (the whole image when part of the box is
-    behind a perspective camera)."""
+def amodal_mask(it, vertices, faces, points, record, margin=0):
+    """The pixels whose centre ray meets ``faces`` traced alone.
+
+    One ray per pixel of the faces' projected bounding box (the whole canvas when part of
+    the box is behind a perspective camera).
+
+    Parameters
+    ----------
+    it : rtmesh.rendering.integrator.Integrator
+    vertices : (V, 3) float
+        World vertices ``faces`` index.
+    faces : (F, 3) int
+    points : (k, 3) float
+        The world points of ``faces`` (their bounding box is projected).
+    record : dict
+        The view's camera record.
+    margin : int
+        Canvas margin, in image sizes: 0 for the image, 1 for the BOP toolkit's canvas of
+        three times the image's width and height with the image in its middle.
+
+    Returns
+    -------
+    (h * (1 + 2 margin), w * (1 + 2 margin)) bool
+    """
     s = it.settings
     h, w = s.height, s.width
+    mh, mw = margin * h, margin * w
     corners = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)])
     lo, hi = points.min(axis=0), points.max(axis=0)
     uv, z = project_points(record, lo + corners * (hi - lo))
-    if record["projection"] == "perspective" and not (z > 0).all():
-        c0, c1, r0, r1 = 0, w, 0, h
-    else:
+    c0, c1, r0, r1 = -mw, w + mw, -mh, h + mh
+    if record["projection"] != "perspective" or (z > 0).all():
         # pixels whose centre lies inside the box's projection, and one more on each side
-        c0, r0 = np.maximum(np.floor(uv.min(axis=0) - 0.5).astype(int) - 1, 0)
-        c1, r1 = np.minimum(np.ceil(uv.max(axis=0) - 0.5).astype(int) + 2, (w, h))
-    mask = np.zeros((h, w), dtype=bool)
+        c0, r0 = np.maximum(np.floor(uv.min(axis=0) - 0.5).astype(int) - 1, (c0, r0))
+        c1, r1 = np.minimum(np.ceil(uv.max(axis=0) - 0.5).astype(int) + 2, (c1, r1))
+    mask = np.zeros((h + 2 * mh, w + 2 * mw), dtype=bool)
     if c1 <= c0 or r1 <= r0:
         return mask
     rows, columns = np.mgrid[r0:r1, c0:c1]
-    pixels = (rows * w + columns).ravel()
-    alone = Accel(vertices - it.shift, faces)
-    _, _, _, hits = centre_hits(it, pixels, alone)
-    mask.reshape(-1)[pixels[hits.prim >= 0]] = True
+    rows, columns = rows.ravel(), columns.ravel()
+    _, _, _, hits = centre_hits(it, columns, rows, Accel(vertices - it.shift, faces))
+    hit = hits.prim >= 0
+    mask[rows[hit] + mh, columns[hit] + mw] = True
     return mask
 
 

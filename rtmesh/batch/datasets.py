@@ -1,4 +1,5 @@
-"""Dataset files for multi-view renders: nerfstudio ``transforms.json`` and COLMAP text.
+"""Dataset files for multi-view renders: nerfstudio ``transforms.json``, COLMAP text and the
+BOP layout (:mod:`rtmesh.batch.bop`).
 
 ``rtmesh batch ... --dataset nerfstudio|colmap`` writes, per finished asset, the files
 that reconstruction tools read beside the images, built from each image's camera JSON
@@ -28,13 +29,15 @@ import os
 
 import numpy as np
 
+from rtmesh.batch.bop import BOP_SUFFIXES, write_bop_scene
 from rtmesh.batch.worker import CAMERA_SUFFIX
 from rtmesh.batch.worker import DEPTH_PNG_SUFFIX as DEPTH_SUFFIX
 from rtmesh.batch.worker import MASK_PNG_SUFFIX as MASK_SUFFIX
 from rtmesh.core.errors import OutputError
 from rtmesh.io.atomic_files import write_text
+from rtmesh.loaders.importers import load_trimesh, parts_from_trimesh
 
-DATASETS = ("nerfstudio", "colmap")
+DATASETS = ("nerfstudio", "colmap", "bop")
 # image formats a dataset's frames point at, by preference
 _FRAME_FORMATS = (".png", ".jpg", ".exr")
 
@@ -46,15 +49,17 @@ def dataset_suffixes(dataset, passes):
     suffixes = [CAMERA_SUFFIX]
     if dataset == "nerfstudio":
         suffixes += [DEPTH_SUFFIX] * ("depth" in passes) + [MASK_SUFFIX] * ("alpha" in passes)
+    if dataset == "bop":
+        suffixes += list(BOP_SUFFIXES)
     return suffixes
 
 
-def write_dataset(dataset, outdir, asset, images):
+def write_dataset(dataset, outdir, asset, images, source=None, units="m"):
     """Write the dataset files of one asset.
 
     Parameters
     ----------
-    dataset : {"nerfstudio", "colmap"}
+    dataset : {"nerfstudio", "colmap", "bop"}
     outdir : str
         The batch's output folder.
     asset : str
@@ -62,6 +67,10 @@ def write_dataset(dataset, outdir, asset, images):
     images : list of dict
         The asset's finished images (``key``, ``files``: names relative to ``outdir``), in
         view order; each has a camera JSON among its files.
+    source : str, optional
+        The asset's mesh file (``bop``: its model is written in millimetres).
+    units : str
+        ``bop``: the scene units (:data:`rtmesh.batch.bop.UNITS`).
 
     Returns
     -------
@@ -72,13 +81,19 @@ def write_dataset(dataset, outdir, asset, images):
     for image in images:
         files = image["files"]
         pictures = sorted((f for f in files if os.path.splitext(f)[1].lower() in _FRAME_FORMATS
-                           and not f.endswith((DEPTH_SUFFIX, MASK_SUFFIX))),
+                           and not f.endswith((DEPTH_SUFFIX, MASK_SUFFIX) + BOP_SUFFIXES)),
                           key=lambda f: _FRAME_FORMATS.index(os.path.splitext(f)[1].lower()))
         with open(os.path.join(outdir, image["key"] + CAMERA_SUFFIX), encoding="utf-8") as f:
             record = json.load(f)
         frames.append((record, pictures[0], files))
     if not frames:
         return []
+    if dataset == "bop":
+        parts, _ = parts_from_trimesh(load_trimesh(source), name=source)
+        offsets = np.cumsum([0] + [len(p.vertices) for p in parts])
+        model = (np.concatenate([p.vertices for p in parts]),
+                 np.concatenate([np.asarray(p.faces) + o for p, o in zip(parts, offsets)]))
+        return write_bop_scene(outdir, asset, frames, model, units)
     if dataset == "nerfstudio":
         path = os.path.join(outdir, asset + ".transforms.json")
         write_text(path, json.dumps(nerfstudio_transforms(frames, path), indent=2) + "\n")

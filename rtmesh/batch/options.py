@@ -5,6 +5,7 @@ before anything runs (one line naming the option, exit 2).
 
 from dataclasses import dataclass
 
+from rtmesh.batch.bop import UNITS
 from rtmesh.batch.datasets import DATASETS
 from rtmesh.batch.flow import FLOW_FORMATS
 from rtmesh.batch.inputs import InputError
@@ -73,6 +74,8 @@ class BatchOptions:
         Write COCO instance annotations: a fragment ``<image key>.coco.json`` per image
         and, at the end of each run, ``annotations.coco.json`` per output folder merging
         every finished image's (:mod:`rtmesh.batch.coco`).
+    units : str
+        ``m``, ``cm`` or ``mm``: the scene units, for ``--dataset bop``'s millimetres.
     flow : bool
         Optical flow between each asset's ordered views: ``flow_forward`` and
         ``flow_backward`` layers in each view's EXR (:mod:`rtmesh.batch.flow`); needs
@@ -83,9 +86,10 @@ class BatchOptions:
         Write ``<asset>.meta.json`` per asset a job loads: counts, bounds, materials,
         textures found and missing, load warnings (:mod:`rtmesh.batch.asset_meta`).
     dataset : str
-        ``""``, ``nerfstudio`` or ``colmap``: write each finished asset's dataset files
+        ``""``, ``nerfstudio``, ``colmap`` or ``bop``: write each finished asset's dataset files
         (:mod:`rtmesh.batch.datasets`); implies ``camera_json``.  ``nerfstudio`` takes
-        ``ortho`` (``ORTHOPHOTO``), ``colmap`` does not.  With ``nerfstudio``, the
+        ``ortho`` (``ORTHOPHOTO``), ``colmap`` does not.  ``bop``: the BOP scene layout
+        (:mod:`rtmesh.batch.bop`), perspective views with PNG or JPEG images.  With ``nerfstudio``, the
         ``depth`` and ``alpha`` passes also give depth and mask PNGs per image.
     workers : int or None
         Local worker processes; None uses every core.  Ignored with ``scheduler``.
@@ -138,6 +142,7 @@ class BatchOptions:
     dataset: str = ""
     asset_meta: bool = False
     annotations: bool = False
+    units: str = "m"
     flow: bool = False
     flow_format: str = "exr"
     movie: str = ""
@@ -179,8 +184,11 @@ class BatchOptions:
                 require_mp4()  # before any job: one line naming the extra
         if self.dataset:
             check_names("dataset", (self.dataset,), DATASETS)
-            if self.ortho and self.dataset == "colmap":
-                raise InputError("dataset: colmap describes perspective cameras: leave out --ortho")
+            if self.ortho and self.dataset in ("colmap", "bop"):
+                raise InputError(f"dataset: {self.dataset} describes perspective cameras: leave out --ortho")
+            if self.dataset == "bop" and not {"png", "jpg"} & set(self.formats):
+                raise InputError("dataset: bop's rgb images are PNG or JPEG: add png to the formats")
+        check_names("units", (self.units,), tuple(UNITS))
         if not self.views and not self.turntable:
             raise InputError("views: give at least one view (or a turntable)")
         if not self.formats:

@@ -224,7 +224,7 @@ def plan(assets, outdir, opts, ledger, book, run="", leftovers=None):
             if todo:
                 jobs.append(AssetJob(asset.name, asset.path, outdir, {**fields, "threads": threads},
                                      tuple(todo), opts.ground, run, run_file, opts.normalize,
-                                     opts.asset_meta, staged=True))
+                                     opts.asset_meta, staged=True, units=opts.units))
     return jobs
 
 
@@ -270,7 +270,8 @@ def _image_tasks(asset, opts, shared):
         if opts.flow and opts.flow_format == "flo":
             suffixes += [flow_suffix(name) for name in FLOW_PASSES]
         # (a metadata file is written by the job that loads the asset: asking for it redoes them)
-        extra = {k: v for k, v in (("normalize", opts.normalize), ("asset_meta", opts.asset_meta)) if v}
+        extra = {k: v for k, v in (("normalize", opts.normalize), ("asset_meta", opts.asset_meta),
+                                   ("units", opts.dataset == "bop" and opts.units)) if v}
         flows = [()] * len(views)
         if opts.flow:  # each view's neighbours in order: their cameras make its flow
             flows = [(views[i - 1] if i else None, views[i + 1] if i + 1 < len(views) else None)

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rtmesh.batch.asset_meta import WarningLog, asset_meta, write_meta
+from rtmesh.batch.bop import BOP_SUFFIXES, write_view_files
 from rtmesh.batch.coco import COCO_SUFFIX, Instance, image_annotations, image_entry, write_coco
 from rtmesh.batch.flow import FLOW_PASSES, flow_suffix, view_flow, write_flo
 from rtmesh.batch.identity import OpenedFiles, describe
@@ -171,6 +172,8 @@ class AssetJob:
         :mod:`rtmesh.batch.normalize`).
     meta : bool
         Write ``<asset>.meta.json`` once the asset is loaded (:mod:`rtmesh.batch.asset_meta`).
+    units : str
+        The scene units of ``--dataset bop`` (``m``, ``cm`` or ``mm``).
     staged : bool
         Leave every file at its hidden temporary name and report that name (``staged`` and
         ``side_files`` in the results), for the submitting process to rename into place
@@ -192,6 +195,7 @@ class AssetJob:
     normalize: str = ""
     meta: bool = False
     staged: bool = False
+    units: str = "m"
 
 
 # set by a worker process that runs under an address-space limit, for the failure message
@@ -346,6 +350,14 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
                                                               scene.bounds, to_world))
                     elif name.endswith(DEPTH_PNG_SUFFIX):
                         write_depth_png(path, result.passes["depth"][:, :, 0])
+                    elif name.endswith(BOP_SUFFIXES):
+                        if name.endswith(BOP_SUFFIXES[0]):  # the other three with it
+                            scene = integrator.scene
+                            record = camera_record(scene.camera, settings.width, settings.height, scene.bounds,
+                                                   to_world)
+                            bop_paths = {x: p for x in BOP_SUFFIXES for p in paths if p.endswith(x)}
+                            write_view_files(bop_paths, integrator, result, record,
+                                             _asset_objects(scene, job.ground, task.view), job.units)
                     elif name.endswith(COCO_SUFFIX):
                         write_coco(path, image_fragment(integrator, result, task, settings, to_world, job.asset,
                                                         job.ground))
@@ -387,7 +399,7 @@ def image_fragment(integrator, result, task, settings, to_world, asset, ground):
     scene's last object when the view has one) is not annotated."""
     scene = integrator.scene
     record = camera_record(scene.camera, settings.width, settings.height, scene.bounds, to_world)
-    objects = tuple(range(len(scene.object_names) - _has_ground(ground, task.view)))
+    objects = _asset_objects(scene, ground, task.view)
     pictures = [f for f in task.files if f.endswith((".png", ".jpg", ".exr"))
                 and not f.endswith((DEPTH_PNG_SUFFIX, MASK_PNG_SUFFIX))]
     instance = Instance(asset, asset, objects, np.asarray(to_world, dtype=np.float64))
@@ -410,6 +422,12 @@ def _flows(integrator, result, task, built, parts, materials, bounds, settings, 
             record = camera_record(scene.camera, settings.width, settings.height, scene.bounds, to_world)
         flows[name] = view_flow(position, other, record)
     return {name: flows[name] for name in FLOW_PASSES}
+
+
+def _asset_objects(scene, ground, view):
+    """The objects of a view's scene that make the asset: all but the ground plane (the
+    last object, where the view has it)."""
+    return tuple(range(len(scene.object_names) - _has_ground(ground, view)))
 
 
 def _has_ground(ground, view):

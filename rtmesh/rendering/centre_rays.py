@@ -43,15 +43,16 @@ def _motion(points, objects, motions, shutter, record):
     return end - start
 
 
-def centre_hits(it, pixels, accel=None):
-    """Trace the pixel-centre rays of ``pixels``.
+def centre_hits(it, columns, rows, accel=None):
+    """Trace the rays through the centres of pixels ``(columns, rows)``.
 
     Parameters
     ----------
     it : rtmesh.rendering.integrator.Integrator
         Its camera (in the integrator's shifted frame), image size and scene.
-    pixels : (n,) int
-        Linear pixel indices (``row * width + column``).
+    columns, rows : (n,) int
+        Pixel coordinates; they may lie outside the image (the same camera on a larger
+        canvas, as the BOP toolkit renders whole objects).
     accel : Accel, optional
         What to trace against (default the integrator's scene); it must answer
         ``intersect(origins, directions, time)`` in the integrator's shifted frame.
@@ -66,10 +67,9 @@ def centre_hits(it, pixels, accel=None):
         Embree's hits (``prim`` -1 where the ray meets nothing).
     """
     s = it.settings
-    pixels = np.asarray(pixels, dtype=np.int64)
-    centres = np.full((len(pixels), 2), 0.5)
-    origins, directions = it.camera.generate_rays(centres, s.width, s.height, None, pixels, it.camera_frame)
-    time = np.full(len(pixels), it.camera.shutter[0]) if it.motion is not None else None
+    centres = np.column_stack([np.asarray(columns, dtype=np.float64) + 0.5, np.asarray(rows, dtype=np.float64) + 0.5])
+    origins, directions = it.camera.generate_rays(centres, s.width, s.height, None, None, it.camera_frame)
+    time = np.full(len(centres), it.camera.shutter[0]) if it.motion is not None else None
     hits = (it.accel if accel is None else accel).intersect(origins, directions, time)
     return origins, directions, time, hits
 
@@ -108,7 +108,7 @@ def centre_passes(it, names):
     forward = it.camera_frame[0]
     for start in range(0, total, CHUNK_RAYS):
         pixels = np.arange(start, min(start + CHUNK_RAYS, total))
-        origins, directions, time, hits = centre_hits(it, pixels)
+        origins, directions, time, hits = centre_hits(it, pixels % s.width, pixels // s.width)
         rows = np.flatnonzero(hits.prim >= 0)
         if not len(rows):
             continue
