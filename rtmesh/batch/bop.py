@@ -41,7 +41,6 @@ from rtmesh.batch.coco import amodal_mask
 from rtmesh.core.errors import OutputError
 from rtmesh.io.atomic_files import replace_atomically, write_text
 from rtmesh.io.images import DEPTH_PNG_MAX, write_depth_png, write_display_image
-from rtmesh.rendering.centre_rays import centre_passes
 
 UNITS = {"m": 1000.0, "cm": 10.0, "mm": 1.0}
 BOP_SUFFIXES = (".bop.json", ".bop_depth.png", ".bop_mask.png", ".bop_mask_visib.png")
@@ -68,7 +67,7 @@ def rigid_part(to_world):
     return rigid, scale
 
 
-def write_view_files(paths, it, result, record, objects, units):
+def write_view_files(paths, it, labels, record, objects, units, accels=None):
     """Write one view's BOP ingredients: the ``.bop.json`` fragment and the depth and mask
     PNGs (``paths``: suffix of :data:`BOP_SUFFIXES` -> file).
 
@@ -77,24 +76,26 @@ def write_view_files(paths, it, result, record, objects, units):
     paths : dict of str to str
     it : rtmesh.rendering.integrator.Integrator
         The integrator that rendered the view.
-    result : rtmesh.rendering.render_result.RenderResult
+    labels : dict of str to (h, w, k) float
+        The view's ``object_id`` and ``depth_center`` passes (and others).
     record : dict
         The view's camera record (with ``asset_to_world``, the model's frame).
     objects : tuple of int
         The scene objects that make the asset.
     units : str
         A key of :data:`UNITS`.
+    accels : dict, optional
+        The Embree scenes of the amodal masks, kept between views
+        (:func:`rtmesh.batch.coco.amodal_mask`).
     """
     s, scene = it.settings, it.scene
     h, w = s.height, s.width
     mm = UNITS[units]
-    wanted = [n for n in ("object_id", "depth_center") if n not in result.passes]
-    passes = {**result.passes, **centre_passes(it, wanted)}
-    visible = np.isin(np.rint(passes["object_id"][..., 0]).astype(np.int64), objects)
-    depth = passes["depth_center"][..., 0].astype(np.float64)
+    visible = np.isin(np.rint(labels["object_id"][..., 0]).astype(np.int64), objects)
+    depth = labels["depth_center"][..., 0].astype(np.float64)
     faces = scene.faces[np.isin(scene.object_id, objects)]
-    points = scene.vertices[np.unique(faces)]
-    canvas = amodal_mask(it, scene.vertices, faces, points, record, margin=1)
+    points = scene.vertices[faces.ravel()]  # with repeats: only their bounds are read
+    canvas = amodal_mask(it, scene.vertices, faces, points, record, margin=1, accels=accels)
     canvas[h:2 * h, w:2 * w] |= visible
     mask = canvas[h:2 * h, w:2 * w]
     scale = depth_scale(record["far"] * mm)

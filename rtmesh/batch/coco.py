@@ -78,7 +78,7 @@ def scene_instances(scene):
             for i, (name, category, matrix) in enumerate(zip(scene.object_names, categories, to_world))]
 
 
-def image_annotations(it, record, instances, object_id=None):
+def image_annotations(it, record, instances, object_id=None, accels=None):
     """The annotations of one rendered view.
 
     Parameters
@@ -90,6 +90,9 @@ def image_annotations(it, record, instances, object_id=None):
     instances : list of Instance
     object_id : (h, w) or (h, w, 1) float, optional
         The view's ``object_id`` centre pass, when the render has it; traced otherwise.
+    accels : dict, optional
+        Where to keep each instance's own Embree scene between views of one built scene
+        (see :func:`amodal_mask`); None builds them for this view alone.
 
     Returns
     -------
@@ -115,8 +118,8 @@ def image_annotations(it, record, instances, object_id=None):
         instance = instances[k]
         mask = labels == k
         faces = scene.faces[np.isin(scene.object_id, instance.objects)]
-        points = scene.vertices[np.unique(faces)]
-        amodal = amodal_mask(it, scene.vertices, faces, points, record) | mask
+        points = scene.vertices[faces.ravel()]  # with repeats: only their bounds are read
+        amodal = amodal_mask(it, scene.vertices, faces, points, record, accels=accels) | mask
         area, area_amodal = int(mask.sum()), int(amodal.sum())
         annotations.append({
             "category": instance.category, "object_name": instance.name, "instance_id": int(k),
@@ -129,7 +132,7 @@ def image_annotations(it, record, instances, object_id=None):
     return annotations
 
 
-def amodal_mask(it, vertices, faces, points, record, margin=0):
+def amodal_mask(it, vertices, faces, points, record, margin=0, accels=None):
     """The pixels whose centre ray meets ``faces`` traced alone.
 
     One ray per pixel of the faces' projected bounding box (the whole canvas when part of
@@ -148,6 +151,9 @@ def amodal_mask(it, vertices, faces, points, record, margin=0):
     margin : int
         Canvas margin, in image sizes: 0 for the image, 1 for the BOP toolkit's canvas of
         three times the image's width and height with the image in its middle.
+    accels : dict, optional
+        A cache of the faces' Embree scene for other views of the same built scene (by
+        the identity of ``vertices`` and the faces): the views of a batch asset share one.
 
     Returns
     -------
@@ -169,7 +175,14 @@ def amodal_mask(it, vertices, faces, points, record, margin=0):
         return mask
     rows, columns = np.mgrid[r0:r1, c0:c1]
     rows, columns = rows.ravel(), columns.ravel()
-    _, _, _, hits = centre_hits(it, columns, rows, Accel(vertices - it.shift, faces))
+    # (the cache holds the vertices too, so that their id names them while it lives)
+    key = (id(vertices), hash(faces.tobytes()))
+    vertices, alone = (vertices, None) if accels is None else accels.get(key, (vertices, None))
+    if alone is None:
+        alone = Accel(vertices - it.shift, faces)
+        if accels is not None:
+            accels[key] = (vertices, alone)
+    _, _, _, hits = centre_hits(it, columns, rows, alone)
     hit = hits.prim >= 0
     mask[rows[hit] + mh, columns[hit] + mw] = True
     return mask

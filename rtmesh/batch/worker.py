@@ -325,6 +325,7 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
             return _job_result(job, results, start)
 
     built = {}  # with a ground plane? -> the integrator built for the first such view
+    accels = {}  # the asset's own Embree scene, for the amodal masks of every view
     for i, task in enumerate(job.images):
         image_start = time.perf_counter()
         stage = "render"
@@ -333,9 +334,10 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
             integrator = _integrator_for_view(built, parts, materials, bounds, task.view, settings,
                                               job.ground)
             result = integrator.render(progress=check)
+            labels = _labels(integrator, result, task)
             passes = result.passes
             if task.flow:
-                passes = {**passes, **_flows(integrator, result, task, built, parts, materials, bounds, settings,
+                passes = {**passes, **_flows(labels, task, built, parts, materials, bounds, settings,
                                              job.ground, to_world)}
             stage = "write"
             last_check[0] = 0.0  # always ask just before writing
@@ -356,11 +358,11 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
                             record = camera_record(scene.camera, settings.width, settings.height, scene.bounds,
                                                    to_world)
                             bop_paths = {x: p for x in BOP_SUFFIXES for p in paths if p.endswith(x)}
-                            write_view_files(bop_paths, integrator, result, record,
-                                             _asset_objects(scene, job.ground, task.view), job.units)
+                            write_view_files(bop_paths, integrator, labels, record,
+                                             _asset_objects(scene, job.ground, task.view), job.units, accels)
                     elif name.endswith(COCO_SUFFIX):
-                        write_coco(path, image_fragment(integrator, result, task, settings, to_world, job.asset,
-                                                        job.ground))
+                        write_coco(path, image_fragment(integrator, labels, task, settings, to_world, job.asset,
+                                                        job.ground, accels))
                     elif name.endswith(MASK_PNG_SUFFIX):
                         write_display_image(path, (result.passes["alpha"][:, :, :1] > 0.5).astype(np.float64))
                     elif name.endswith(".flo"):
@@ -393,7 +395,21 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
     return _job_result(job, results, start)
 
 
-def image_fragment(integrator, result, task, settings, to_world, asset, ground):
+def _labels(integrator, result, task):
+    """The render's passes and the pixel-centre passes a view's annotations, BOP files and
+    flow read (:mod:`rtmesh.rendering.centre_rays`), each traced once, only those asked for
+    and not rendered already; they go to no image unless the passes named them."""
+    wanted = set()
+    if any(f.endswith((COCO_SUFFIX,) + BOP_SUFFIXES) for f in task.files):
+        wanted.add("object_id")
+    if any(f.endswith(BOP_SUFFIXES) for f in task.files):
+        wanted.add("depth_center")
+    if task.flow:
+        wanted.add("position_center")
+    return {**centre_passes(integrator, sorted(wanted - set(result.passes))), **result.passes}
+
+
+def image_fragment(integrator, labels, task, settings, to_world, asset, ground, accels=None):
     """The COCO fragment of one batch image (:mod:`rtmesh.batch.coco`): the asset is one
     instance of category ``asset``, its model frame the asset file's; the ground plane (the
     scene's last object when the view has one) is not annotated."""
@@ -403,16 +419,14 @@ def image_fragment(integrator, result, task, settings, to_world, asset, ground):
     pictures = [f for f in task.files if f.endswith((".png", ".jpg", ".exr"))
                 and not f.endswith((DEPTH_PNG_SUFFIX, MASK_PNG_SUFFIX))]
     instance = Instance(asset, asset, objects, np.asarray(to_world, dtype=np.float64))
-    annotations = image_annotations(integrator, record, [instance], result.passes.get("object_id"))
+    annotations = image_annotations(integrator, record, [instance], labels["object_id"], accels)
     return {"image": image_entry(os.path.basename(pictures[0]), record), "annotations": annotations}
 
 
-def _flows(integrator, result, task, built, parts, materials, bounds, settings, ground, to_world):
+def _flows(labels, task, built, parts, materials, bounds, settings, ground, to_world):
     """``flow_forward`` and ``flow_backward`` of one view (see :mod:`rtmesh.batch.flow`),
     towards the views of ``task.flow``, each traced in its own view's scene."""
-    position = result.passes.get("position_center")
-    if position is None:
-        position = centre_passes(integrator, ("position_center",))["position_center"]
+    position = labels["position_center"]
     flows = {}
     for name, view in zip(("flow_backward", "flow_forward"), task.flow):
         other = record = None
@@ -490,20 +504,35 @@ def _integrator_for_view(built, parts, materials, bounds, view, settings, ground
     ``built`` maps "has a ground plane" to the integrator of the first view built with that
     geometry (views from below leave the plane out, so an asset has at most two builds);
     later views take it with their own camera and lights (:meth:`Integrator.with_view`).
+    It also keeps the integrators of the last :data:`_KEPT_VIEWS` views asked for (by
+    ``("view", view)``): a view's flow needs its neighbours', which render next or just did.
     """
+    key = ("view", view)
+    if key in built:
+        return built[key]
     with_ground = _has_ground(ground, view)
     integrator = built.get(with_ground)
     if integrator is None:
         scene = _scene_for_view(parts, materials, bounds, view, settings, ground)
         integrator = built[with_ground] = Integrator(scene, settings)
-        return integrator
-    camera, lights = _camera_and_lights(bounds, view, settings)
-    if integrator.plan.physical:
-        # the studio environment turned to this view's rig camera, as the three-light rig is
-        return integrator.with_view(camera, [], studio_background(_rig_camera(bounds, view, settings)))
-    if settings.integrator == "path":
-        return integrator.with_view(camera, lights, studio_background(_rig_camera(bounds, view, settings)))
-    return integrator.with_view(camera, lights)
+    else:
+        camera, lights = _camera_and_lights(bounds, view, settings)
+        if integrator.plan.physical:
+            # the studio environment turned to this view's rig camera, as the three-light rig is
+            integrator = integrator.with_view(camera, [], studio_background(_rig_camera(bounds, view, settings)))
+        elif settings.integrator == "path":
+            integrator = integrator.with_view(camera, lights, studio_background(_rig_camera(bounds, view, settings)))
+        else:
+            integrator = integrator.with_view(camera, lights)
+    kept = [k for k in built if isinstance(k, tuple)]
+    for old in kept[:max(len(kept) + 1 - _KEPT_VIEWS, 0)]:
+        del built[old]
+    built[key] = integrator
+    return integrator
+
+
+# the previous, current and next view of a --flow sequence
+_KEPT_VIEWS = 3
 
 
 def _camera_and_lights(bounds, view, settings):
