@@ -170,3 +170,13 @@ def test_a_resumed_batch_writes_the_same_merged_annotations(batch):
     report = rtmesh.batch_convert([folder / "src"], folder / "out", **options)
     assert report.counts["skipped"] == 2 and report.counts["done"] == 0
     assert merged.read_bytes() == before
+
+
+def test_an_annotations_file_in_a_missing_folder_is_one_line_before_rendering(tmp_path, capsys):
+    (tmp_path / "s.toml").write_text('[[objects]]\nprimitive = "box"\n')
+    missing = tmp_path / "nowhere" / "a.json"
+    assert main(["render", str(tmp_path / "s.toml"), "-o", str(tmp_path / "o.png"), "--annotations",
+                 str(missing)]) == 2
+    err = capsys.readouterr().err
+    assert str(missing) in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "o.png").exists()

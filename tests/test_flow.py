@@ -156,3 +156,8 @@ def test_flow_without_exr_is_refused(tmp_path):
     with pytest.raises(rtmesh.RtmeshError, match="flow"):
         rtmesh.batch_convert([tmp_path], tmp_path / "out", flow=True, formats=("png",))
     assert not (tmp_path / "out").exists()
+
+
+def test_a_flow_format_without_flow_is_refused(tmp_path):
+    with pytest.raises(rtmesh.RtmeshError, match="flow format"):
+        rtmesh.batch_convert([tmp_path], tmp_path / "out", flow_format="flo", formats=("exr",))

@@ -195,6 +195,8 @@ class BatchOptions:
             raise InputError("formats: give at least one output format")
         check_passes(self.passes, self.formats)
         check_names("flow format", (self.flow_format,), FLOW_FORMATS)
+        if self.flow_format != "exr" and not self.flow:
+            raise InputError(f"flow format: {self.flow_format} files hold the flow of --flow: add --flow")
         if self.flow and "exr" not in self.formats:
             raise InputError("flow: the flow passes are written to EXR files: add exr to the formats")
         for name in ("workers", "threads"):
