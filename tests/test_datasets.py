@@ -167,6 +167,12 @@ def test_quaternions_round_trip_every_rotation_branch():
         np.testing.assert_allclose(Rotation.from_quat([q[1], q[2], q[3], q[0]]).as_matrix(), r, atol=1e-12)
 
 
+def test_nerfstudio_takes_orthographic_views(tmp_path):
+    from rtmesh.batch.options import BatchOptions
+
+    BatchOptions(dataset="nerfstudio", ortho=True).validate()  # ORTHOPHOTO: no error
+
+
 def test_colmap_with_ortho_is_refused(tmp_path):
     with pytest.raises(rtmesh.RtmeshError, match="colmap"):
         rtmesh.batch_convert([tmp_path], tmp_path / "out", dataset="colmap", ortho=True)
