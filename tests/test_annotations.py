@@ -180,3 +180,22 @@ def test_an_annotations_file_in_a_missing_folder_is_one_line_before_rendering(tm
     err = capsys.readouterr().err
     assert str(missing) in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "o.png").exists()
+
+
+@pytest.mark.parametrize("shutter", [(1.0, 1.0), (1.0, 2.0)])
+def test_a_moving_objects_pose_is_where_the_shutter_opens(tmp_path, shutter):
+    scene = (f"[render]\nwidth = 32\nheight = 24\nspp = 1\n[camera]\nposition = [0.0, 0.0, 0.0]\n"
+             f"look_at = [0.0, 0.0, -1.0]\nfov = 40\nshutter = [{shutter[0]}, {shutter[1]}]\n"
+             "[[objects]]\nname = \"slider\"\nprimitive = \"box\"\ntranslate = [-0.5, 0.0, -5.0]\n"
+             "motion = { translate = [0.5, 0.25, 0.0] }\n")
+    (tmp_path / "s.toml").write_text(scene)
+    assert main(["render", str(tmp_path / "s.toml"), "-o", str(tmp_path / "s.png"), "--annotations",
+                 str(tmp_path / "s.json"), "-q"]) == 0
+    (annotation,) = json.loads((tmp_path / "s.json").read_text())["annotations"]
+    # at t = 1 the box's centre is at (0, 0.25, -5): OpenCV axes flip y and z
+    np.testing.assert_allclose(np.array(annotation["pose"])[:3, 3], [0.0, -0.25, 5.0], atol=1e-12)
+    keypoints = np.array(annotation["keypoints_3d_box"]).reshape(8, 3)
+    f = 12 / np.tan(np.radians(20))
+    # corners at y = 0.25 +- 0.5, depths 4.5 and 5.5: their mean image row
+    np.testing.assert_allclose(keypoints[:, :2].mean(axis=0), [16.0, 12 - f * 0.25 * (1 / 4.5 + 1 / 5.5) / 2],
+                               atol=1e-9)

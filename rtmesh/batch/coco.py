@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rtmesh.geometry.accel import Accel
-from rtmesh.geometry.motion import scene_at_time
+from rtmesh.geometry.motion import object_motions, scene_at_time
 from rtmesh.io.atomic_files import write_text
 from rtmesh.io.rle import encode, mask_box
 from rtmesh.rendering.centre_rays import centre_hits, centre_passes
@@ -105,8 +105,9 @@ def image_annotations(it, record, instances, object_id=None, accels=None):
     if object_id is None:
         object_id = centre_passes(it, ("object_id",))["object_id"]
     ids = np.rint(np.asarray(object_id).reshape(h, w)).astype(np.int64)
-    scene = it.scene
+    scene, moving = it.scene, {}
     if it.motion is not None:  # the labels are traced when the shutter opens
+        moving = object_motions(scene)
         scene = scene_at_time(scene, it.camera.shutter[0])
     instance_of = np.full(len(scene.object_names) + 1, -1, dtype=np.int64)  # index -1: no object
     for k, instance in enumerate(instances):
@@ -116,6 +117,9 @@ def image_annotations(it, record, instances, object_id=None, accels=None):
     annotations = []
     for k in np.unique(labels[labels >= 0]):
         instance = instances[k]
+        to_world = instance.to_world
+        if instance.objects[0] in moving:  # its place when the shutter opens
+            to_world = moving[instance.objects[0]].matrix(it.camera.shutter[0]) @ to_world
         mask = labels == k
         faces = scene.faces[np.isin(scene.object_id, instance.objects)]
         points = scene.vertices[faces.ravel()]  # with repeats: only their bounds are read
@@ -126,8 +130,8 @@ def image_annotations(it, record, instances, object_id=None, accels=None):
             "bbox": mask_box(mask), "area": area, "segmentation": encode(mask), "iscrowd": 0,
             "bbox_amodal": mask_box(amodal), "area_amodal": area_amodal,
             "visible_fraction": area / area_amodal,
-            "keypoints_3d_box": _box_keypoints(points, instance.to_world, record),
-            "pose": (w2c @ instance.to_world).tolist(),
+            "keypoints_3d_box": _box_keypoints(points, to_world, record),
+            "pose": (w2c @ to_world).tolist(),
         })
     return annotations
 
