@@ -95,8 +95,7 @@ def write_view_files(paths, it, labels, record, objects, units, accels=None):
     depth = labels["depth_center"][..., 0].astype(np.float64)
     faces = scene.faces[np.isin(scene.object_id, objects)]
     points = scene.vertices[faces.ravel()]  # with repeats: only their bounds are read
-    canvas = amodal_mask(it, scene.vertices, faces, points, record, margin=1, accels=accels)
-    canvas[h:2 * h, w:2 * w] |= visible
+    canvas = amodal_mask(it, scene.vertices, faces, points, record, margin=1, accels=accels, seen=visible)
     mask = canvas[h:2 * h, w:2 * w]
     scale = depth_scale(record["far"] * mm)
     w2c = np.array(record["world_to_camera_opencv"])

@@ -123,7 +123,7 @@ def image_annotations(it, record, instances, object_id=None, accels=None):
         mask = labels == k
         faces = scene.faces[np.isin(scene.object_id, instance.objects)]
         points = scene.vertices[faces.ravel()]  # with repeats: only their bounds are read
-        amodal = amodal_mask(it, scene.vertices, faces, points, record, accels=accels) | mask
+        amodal = amodal_mask(it, scene.vertices, faces, points, record, accels=accels, seen=mask)
         area, area_amodal = int(mask.sum()), int(amodal.sum())
         annotations.append({
             "category": instance.category, "object_name": instance.name, "instance_id": int(k),
@@ -136,7 +136,7 @@ def image_annotations(it, record, instances, object_id=None, accels=None):
     return annotations
 
 
-def amodal_mask(it, vertices, faces, points, record, margin=0, accels=None):
+def amodal_mask(it, vertices, faces, points, record, margin=0, accels=None, seen=None):
     """The pixels whose centre ray meets ``faces`` traced alone.
 
     One ray per pixel of the faces' projected bounding box (the whole canvas when part of
@@ -158,6 +158,8 @@ def amodal_mask(it, vertices, faces, points, record, margin=0, accels=None):
     accels : dict, optional
         A cache of the faces' Embree scene for other views of the same built scene (by
         the identity of ``vertices`` and the faces): the views of a batch asset share one.
+    seen : (h, w) bool, optional
+        Image pixels known to see the faces (the visible mask): set without a ray.
 
     Returns
     -------
@@ -175,10 +177,15 @@ def amodal_mask(it, vertices, faces, points, record, margin=0, accels=None):
         c0, r0 = np.maximum(np.floor(uv.min(axis=0) - 0.5).astype(int) - 1, (c0, r0))
         c1, r1 = np.minimum(np.ceil(uv.max(axis=0) - 0.5).astype(int) + 2, (c1, r1))
     mask = np.zeros((h + 2 * mh, w + 2 * mw), dtype=bool)
+    if seen is not None:
+        mask[mh:mh + h, mw:mw + w] = seen
     if c1 <= c0 or r1 <= r0:
         return mask
     rows, columns = np.mgrid[r0:r1, c0:c1]
     rows, columns = rows.ravel(), columns.ravel()
+    if seen is not None:  # a visible pixel's centre ray meets the faces alone too
+        todo = ~mask[rows + mh, columns + mw]
+        rows, columns = rows[todo], columns[todo]
     # (the cache holds the vertices too, so that their id names them while it lives)
     key = (id(vertices), hash(faces.tobytes()))
     vertices, alone = (vertices, None) if accels is None else accels.get(key, (vertices, None))
