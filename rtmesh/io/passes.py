@@ -251,7 +251,7 @@ CENTRE_PASSES = {
         CentrePass("object_id", ("id",), -1.0, "object index (Scene.object_names) at the pixel centre, -1 for none"),
         CentrePass("material_id", ("id",), -1.0, "material index at the pixel centre, -1 for none"),
         CentrePass("instance_id", ("id",), -1.0,
-                   "placement of a mesh at the pixel centre (the object index: no mesh is placed twice yet)"),
+                   "placement of a mesh at the pixel centre (the object index: every placement is an object)"),
         CentrePass("depth_center", ("Z",), np.inf, "z-depth of the pixel-centre ray's hit, +inf for none"),
         CentrePass("position_center", ("X", "Y", "Z"), np.nan,
                    "world-space hit point of the pixel-centre ray, NaN for none"),
