@@ -161,3 +161,45 @@ def test_flow_without_exr_is_refused(tmp_path):
 def test_a_flow_format_without_flow_is_refused(tmp_path):
     with pytest.raises(rtmesh.RtmeshError, match="flow format"):
         rtmesh.batch_convert([tmp_path], tmp_path / "out", flow_format="flo", formats=("exr",))
+
+
+def test_orthographic_flow_lands_on_the_projection_and_sees_occlusion():
+    import dataclasses
+
+    from scenes import box, part
+
+    from rtmesh.batch.flow import view_flow
+    from rtmesh.materials.table import Material
+    from rtmesh.rendering.centre_rays import centre_passes
+    from rtmesh.rendering.integrator import Integrator
+    from rtmesh.rendering.settings import RenderSettings
+    from rtmesh.scene.camera import Camera
+    from rtmesh.scene.camera_json import camera_record
+    from rtmesh.scene.model import Scene
+
+    # a wall with a block in front of it; the second camera looks from the side, so the
+    # block hides part of the wall that the first camera sees
+    wall = part("wall", box(extents=(4.0, 3.0, 0.2), centre=(0.0, 0.0, -1.0)))
+    block = part("block", box(extents=(0.8, 0.8, 0.8), centre=(0.0, 0.0, 0.6)))
+    first = Camera([0.0, 0.0, 5.0], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0], projection="orthographic", ortho_height=4.0)
+    scene = Scene.from_parts([wall, block], [Material("m")], [], first)
+    settings = RenderSettings(width=32, height=24, spp=1, threads=1)
+    one = Integrator(scene, settings)
+    other = one.with_view(dataclasses.replace(first, position=np.array([3.0, 0.0, 4.0])))
+    position = centre_passes(one, ("position_center",))["position_center"]
+    record = camera_record(other.scene.camera, 32, 24, scene.bounds)
+    flow = view_flow(position, other, record)
+    valid = flow[..., 2] == 1
+    w2c, k = np.array(record["world_to_camera_opencv"]), np.array(record["K"])
+    p = np.nan_to_num(position.astype(np.float64), nan=1e6) @ w2c[:3, :3].T + w2c[:3, 3]
+    uv = p[..., :2] @ k[:2, :2].T + k[:2, 2]
+    np.testing.assert_allclose((_centres_of(32, 24) + flow[..., :2])[valid], uv[valid], atol=0.01)
+    # points of the wall that land inside the other image: most valid, those behind the
+    # block (seen from the side) not
+    inside = (uv[..., 0] > 0) & (uv[..., 0] < 32) & (uv[..., 1] > 0) & (uv[..., 1] < 24)
+    assert valid.sum() > 100 and (inside & ~valid).sum() > 5
+
+
+def _centres_of(w, h):
+    columns, rows = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
+    return np.stack([columns, rows], axis=-1)
