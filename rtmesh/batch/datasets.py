@@ -35,7 +35,7 @@ from rtmesh.batch.worker import DEPTH_PNG_SUFFIX as DEPTH_SUFFIX
 from rtmesh.batch.worker import MASK_PNG_SUFFIX as MASK_SUFFIX
 from rtmesh.core.errors import OutputError
 from rtmesh.io.atomic_files import write_text
-from rtmesh.loaders.importers import load_trimesh, parts_from_trimesh
+from rtmesh.loaders.importers import mesh_file_parts
 
 DATASETS = ("nerfstudio", "colmap", "bop")
 # image formats a dataset's frames point at, by preference
@@ -89,7 +89,8 @@ def write_dataset(dataset, outdir, asset, images, source=None, units="m"):
     if not frames:
         return []
     if dataset == "bop":
-        parts, _ = parts_from_trimesh(load_trimesh(source), name=source)
+        # the geometry alone: no materials read, no vertices split for smooth shading
+        parts, _ = mesh_file_parts(source, material=0, smooth=False)
         offsets = np.cumsum([0] + [len(p.vertices) for p in parts])
         model = (np.concatenate([p.vertices for p in parts]),
                  np.concatenate([np.asarray(p.faces) + o for p, o in zip(parts, offsets)]))
