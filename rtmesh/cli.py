@@ -9,6 +9,7 @@ import traceback
 
 from rtmesh import __version__
 from rtmesh.api import load_scene
+from rtmesh.batch.coco import annotate_render
 from rtmesh.core import compile_ahead, runtime
 from rtmesh.core.errors import OutputError, RtmeshError
 from rtmesh.io.colour import TONEMAPS
@@ -107,6 +108,9 @@ def build_parser():
                    help="also write the camera (intrinsics K, poses in OpenCV and OpenGL conventions) as JSON")
     p.add_argument("--denoise", action="store_true", default=None,
                    help="denoise with Intel Open Image Denoise (needs rtmesh[denoise])")
+    p.add_argument("--annotations", metavar="PATH",
+                   help="also write COCO instance annotations (masks, boxes, amodal boxes, visible "
+                   "fractions, poses) as JSON (docs/DATASETS.md)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     _add_debug_flag(p)
     _add_batch_parser(commands)
@@ -224,16 +228,26 @@ def _add_batch_parser(commands):
     p.add_argument("--normalize", choices=NORMALIZE_MODES,
                    help="centre each asset and scale it to a unit cube (longest side 1) or unit "
                    "sphere (bounding radius 1) first")
-    p.add_argument("--dataset", choices=("nerfstudio", "colmap"),
+    p.add_argument("--dataset", choices=("nerfstudio", "colmap", "bop"),
                    help="write each asset's dataset files: nerfstudio ASSET.transforms.json (with "
-                   "depth/mask PNGs for --passes depth,alpha) or COLMAP ASSET.colmap/*.txt; implies "
-                   "--camera-json (docs/BATCH.md)")
+                   "depth/mask PNGs for --passes depth,alpha), COLMAP ASSET.colmap/*.txt or a BOP "
+                   "scene ASSET.bop/; implies --camera-json (docs/BATCH.md, docs/DATASETS.md)")
+    p.add_argument("--units", choices=("m", "cm", "mm"), default="m",
+                   help="the assets' units, for --dataset bop's millimetres (default m)")
     p.add_argument("--movie", choices=("webp", "gif", "mp4"),
                    help="with --turntable: each asset's frames as ASSET.turntable.webp|gif|mp4 "
                    "(mp4 needs rtmesh[movie])")
     p.add_argument("--contact-sheet", action="store_true",
                    help="one grid image of all thumbnails with names per output folder "
                    "(rtmesh-contact-sheet.png)")
+    p.add_argument("--annotations", action="store_true",
+                   help="COCO instance annotations: KEY.coco.json per image, merged into "
+                   "annotations.coco.json per output folder (docs/DATASETS.md)")
+    p.add_argument("--flow", action="store_true",
+                   help="optical flow between each asset's ordered views: flow_forward and "
+                   "flow_backward EXR layers (X, Y, valid) per view; needs exr among the formats")
+    p.add_argument("--flow-format", choices=("exr", "flo"), default="exr",
+                   help="flo: also Middlebury KEY.flow_forward.flo / .flow_backward.flo files")
     p.add_argument("--asset-meta", action="store_true",
                    help="write ASSET.meta.json per asset: triangle/vertex counts, bounds, materials, "
                    "textures found and missing, load warnings")
@@ -314,8 +328,9 @@ def _pass_png_path(output, name):
 
 def cmd_render(args):
     check_output_path(args.output)
-    if args.camera_json and not os.path.isdir(os.path.dirname(os.path.abspath(args.camera_json))):
-        raise OutputError(f"{args.camera_json}: no such folder for the camera file")
+    for path, what in ((args.camera_json, "camera"), (args.annotations, "annotations")):
+        if path and not os.path.isdir(os.path.dirname(os.path.abspath(path))):
+            raise OutputError(f"{path}: no such folder for the {what} file")
     if args.pass_png:
         for name in args.passes or ():
             check_output_path(_pass_png_path(args.output, name))
@@ -341,7 +356,8 @@ def cmd_render(args):
             scene.background = background
         bar = ProgressBar(enabled=not args.quiet and sys.stderr.isatty())
         try:
-            result = Integrator(scene, settings).render(progress=bar)
+            integrator = Integrator(scene, settings)
+            result = integrator.render(progress=bar)
         finally:
             bar.close()
     write_image(args.output, result.image, result.passes, settings.exposure, settings.tonemap,
@@ -349,6 +365,9 @@ def cmd_render(args):
     if args.camera_json:
         write_camera_json(args.camera_json, camera_record(scene.camera, settings.width, settings.height,
                                                           scene.bounds))
+    if args.annotations:
+        record = camera_record(scene.camera, settings.width, settings.height, scene.bounds)
+        annotate_render(args.annotations, integrator, result, os.path.basename(args.output), record)
     if args.pass_png:
         coverage = result.passes.get("alpha", result.alpha)
         coverage = None if coverage is None else coverage[:, :, 0]
@@ -388,9 +407,10 @@ def cmd_batch(args):
         turntable=args.turntable or 0, formats=args.formats, passes=args.passes,
         ground=args.ground, camera_json=args.camera_json, normalize=args.normalize or "",
         ortho=args.ortho, dataset=args.dataset or "", asset_meta=args.asset_meta,
-        movie=args.movie or "", contact_sheet=args.contact_sheet, seed=args.seed,
-        max_depth=args.max_depth, integrator=args.integrator, exposure=args.exposure,
-        tonemap=args.tonemap, workers=args.workers, threads=args.threads,
+        annotations=args.annotations, flow=args.flow, flow_format=args.flow_format, units=args.units,
+        movie=args.movie or "", contact_sheet=args.contact_sheet, seed=args.seed, max_depth=args.max_depth,
+        integrator=args.integrator,
+        exposure=args.exposure, tonemap=args.tonemap, workers=args.workers, threads=args.threads,
         scheduler=args.scheduler, time_limit=args.time_limit, memory_limit=args.memory_limit,
         force=args.force, trust_mtime=args.trust_mtime, retry_failed=args.retry_failed,
         progress=args.progress, progress_file=args.progress_file, quiet=args.quiet)

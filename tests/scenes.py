@@ -161,4 +161,10 @@ def assert_finite(result):
     assert np.isfinite(result.image).all(), "rendered image holds NaN or Inf"
     assert (result.image >= 0.0).all(), "rendered image holds negative radiance"
     for name, image in result.passes.items():
-        assert np.isfinite(image).all(), f"pass {name!r} holds NaN or Inf"
+        if name == "depth_center":  # +inf marks a pixel-centre ray that meets nothing
+            assert not np.isnan(image).any() and (image > 0).all(), "depth_center holds NaN or <= 0"
+        elif name in ("position_center", "normal_center"):  # NaN in every channel of a miss
+            miss = np.isnan(image)
+            assert (miss == miss[..., :1]).all() and np.isfinite(image[~miss]).all(), f"pass {name!r}"
+        else:
+            assert np.isfinite(image).all(), f"pass {name!r} holds NaN or Inf"

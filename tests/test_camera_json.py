@@ -120,3 +120,26 @@ def test_scene_files_and_gltf_files_give_orthographic_cameras(tmp_path):
             "scenes": [{"nodes": [0]}], "scene": 0}
     ((names, camera),) = cameras_from_gltf(gltf)
     assert camera.orthographic and camera.ortho_height == pytest.approx(6.0)  # 2 ymag x node scale 2
+
+
+def test_centre_positions_project_onto_pixel_centres_whatever_the_sampling_and_lens():
+    """position_center is the hit of the ray K describes: with jittered samples and a thin
+    lens (whose samples blur the image) it still projects back onto each pixel's centre."""
+    import dataclasses
+
+    for scene in (sphere_on_floor_scene(), orthographic_spheres_scene()):
+        camera = scene.camera
+        if not camera.orthographic:
+            scene.camera = camera = dataclasses.replace(camera, aperture=0.3)
+        result = render(scene, width=32, height=24, spp=3, sampler="jittered", passes=("position_center",))
+        record = camera_record(camera, 32, 24, scene.bounds)
+        world = result.passes["position_center"].astype(np.float64)
+        hit = np.isfinite(world).all(axis=2)
+        assert hit.sum() > 20 and (~hit).any()
+        rows, columns = np.nonzero(hit)
+        w2c, k = np.array(record["world_to_camera_opencv"]), np.array(record["K"])
+        p = world[hit] @ w2c[:3, :3].T + w2c[:3, 3]
+        if not camera.orthographic:
+            p = p / p[:, 2:]
+        pixel = p[:, :2] @ k[:2, :2].T + k[:2, 2]
+        np.testing.assert_allclose(pixel, np.column_stack([columns + 0.5, rows + 0.5]), atol=2e-3)

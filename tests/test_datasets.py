@@ -1,7 +1,9 @@
 """Dataset files of multi-view batch renders: nerfstudio transforms.json and COLMAP text,
 read back by small readers that follow each tool's documented format."""
 
+import dataclasses
 import json
+import logging
 import os
 
 import numpy as np
@@ -12,41 +14,45 @@ from scipy.spatial.transform import Rotation
 
 import rtmesh
 from rtmesh.batch.datasets import rotation_to_quaternion, write_dataset
-from rtmesh.io.images import read_image
+from rtmesh.io.images import read_image, write_depth_png
+from rtmesh.scene.camera import frame_bounds
+from rtmesh.scene.camera_json import camera_record
 
 W, H = 21, 16
 
 
 def read_nerfstudio(path):
-    """A reader after nerfstudio's documented ``transforms.json`` schema (its "nerfstudio"
-    data format): intrinsics ``fl_x fl_y cx cy w h`` at the top level or per frame,
-    ``camera_model``, ``frames`` with ``file_path`` (relative to the JSON's folder) and a
-    4x4 camera-to-world ``transform_matrix`` (OpenGL axes: +y up, the camera looks along
-    -z); optional ``depth_file_path`` and ``mask_path`` per frame."""
+    """A reader after nerfstudio's ``transforms.json`` parser (its "nerfstudio" data
+    format): ``camera_model``, intrinsics ``fl_x fl_y cx cy w h`` taken from the top level
+    for every frame whenever the top level has them (nerfstudio's ``fx_fixed = "fl_x" in
+    meta``: per-frame values are then ignored), else from each frame; ``frames`` with
+    ``file_path`` (relative to the JSON's folder) and a 4x4 camera-to-world
+    ``transform_matrix`` (OpenGL axes: +y up, the camera looks along -z); optional
+    ``depth_file_path`` and ``mask_path`` per frame."""
     with open(path, encoding="utf-8") as f:
         meta = json.load(f)
     folder = os.path.dirname(path)
-    assert meta.get("camera_model", "OPENCV") in ("OPENCV", "PINHOLE", "SIMPLE_PINHOLE")
+    model = meta["camera_model"]
+    assert model in ("OPENCV", "PINHOLE", "SIMPLE_PINHOLE", "ORTHOPHOTO")
     frames = []
     for frame in meta["frames"]:
-        intrinsics = {k: float(frame.get(k, meta.get(k))) for k in ("fl_x", "fl_y", "cx", "cy", "w", "h")}
+        intrinsics = {k: float(meta[k] if k in meta else frame[k]) for k in ("fl_x", "fl_y", "cx", "cy", "w", "h")}
         c2w = np.array(frame["transform_matrix"], dtype=np.float64)
         assert c2w.shape == (4, 4) and np.allclose(c2w[3], [0, 0, 0, 1])
-        entry = {"image": os.path.join(folder, frame["file_path"]), "c2w": c2w, **intrinsics}
+        entry = {"image": os.path.join(folder, frame["file_path"]), "c2w": c2w, "model": model, **intrinsics}
         for key in ("depth_file_path", "mask_path"):
             if key in frame:
                 entry[key] = os.path.join(folder, frame[key])
-        for file in [entry["image"]] + [entry[k] for k in ("depth_file_path", "mask_path") if k in entry]:
-            assert os.path.isfile(file), file
         frames.append(entry)
     return frames
 
 
 def project_nerfstudio(frame, points):
-    """Pixel positions of world points in a nerfstudio frame (pixel centres at +0.5)."""
+    """Pixel positions of world points in a nerfstudio frame (pixel centres at +0.5); an
+    ``ORTHOPHOTO`` frame's rays start on a grid of ``(pixel - c) / f`` scene units."""
     w2c = np.linalg.inv(frame["c2w"])
     p = points @ w2c[:3, :3].T + w2c[:3, 3]
-    depth = -p[:, 2]
+    depth = 1.0 if frame["model"] == "ORTHOPHOTO" else -p[:, 2]
     return frame["fl_x"] * p[:, 0] / depth + frame["cx"], -frame["fl_y"] * p[:, 1] / depth + frame["cy"]
 
 
@@ -100,7 +106,13 @@ def test_nerfstudio_transforms_load_and_project_like_the_camera_json(rendered):
     out, vertices, _ = rendered
     frames = read_nerfstudio(str(out / "ball.obj.transforms.json"))
     assert [os.path.basename(f["image"]) for f in frames] == [f"ball.obj.fib{i:03d}.png" for i in range(5)]
+    document = json.loads((out / "ball.obj.transforms.json").read_text())
+    # one set of intrinsics, at the top level only
+    assert document["camera_model"] == "OPENCV" and document["w"] == W
+    assert not any("fl_x" in frame for frame in document["frames"])
     for i, frame in enumerate(frames):
+        for key in ("image", "depth_file_path", "mask_path"):
+            assert os.path.isfile(frame[key]), frame[key]
         assert (frame["w"], frame["h"]) == (W, H) and frame["cx"] == W / 2 and frame["cy"] == H / 2
         record = json.loads((out / f"ball.obj.fib{i:03d}.camera.json").read_text())
         to_world = np.array(record["asset_to_world"])
@@ -155,10 +167,83 @@ def test_quaternions_round_trip_every_rotation_branch():
         np.testing.assert_allclose(Rotation.from_quat([q[1], q[2], q[3], q[0]]).as_matrix(), r, atol=1e-12)
 
 
-def test_dataset_with_ortho_is_refused(tmp_path):
-    with pytest.raises(rtmesh.RtmeshError, match="dataset"):
-        rtmesh.batch_convert([tmp_path], tmp_path / "out", dataset="nerfstudio", ortho=True)
+def test_nerfstudio_takes_orthographic_views(tmp_path):
+    from rtmesh.batch.options import BatchOptions
+
+    BatchOptions(dataset="nerfstudio", ortho=True).validate()  # ORTHOPHOTO: no error
+
+
+def test_colmap_with_ortho_is_refused(tmp_path):
+    with pytest.raises(rtmesh.RtmeshError, match="colmap"):
+        rtmesh.batch_convert([tmp_path], tmp_path / "out", dataset="colmap", ortho=True)
     assert not (tmp_path / "out").exists()
+
+
+def _records(tmp_path, cameras, sizes):
+    """Camera JSON files and image names of views of a unit box, as a batch leaves them."""
+    bounds = np.array([[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]])
+    images = []
+    for i, (camera, (w, h)) in enumerate(zip(cameras, sizes)):
+        key = f"box.obj.v{i}"
+        (tmp_path / f"{key}.camera.json").write_text(json.dumps(camera_record(camera, w, h, bounds)))
+        (tmp_path / f"{key}.png").write_bytes(b"")
+        images.append({"key": key, "files": [f"{key}.png", f"{key}.camera.json"]})
+    return images
+
+
+def _camera(direction, **fields):
+    return dataclasses.replace(frame_bounds(np.array([[-1.0] * 3, [1.0] * 3]), direction=direction), **fields)
+
+
+def test_differing_intrinsics_go_into_the_frames_only(tmp_path):
+    cameras = [_camera((0.3, 0.4, 1.0)), _camera((1.0, 0.2, 0.1), fov=30.0), _camera((0.0, 1.0, 0.2))]
+    images = _records(tmp_path, cameras, [(W, H), (W, H), (2 * W, H)])
+    path = write_dataset("nerfstudio", str(tmp_path), "box.obj", images)[0]
+    document = json.loads(open(path).read())
+    # any top-level intrinsic would make nerfstudio ignore every frame's own
+    assert not {"fl_x", "fl_y", "cx", "cy", "w", "h"} & set(document)
+    frames = read_nerfstudio(path)
+    corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
+    for frame, image in zip(frames, images):
+        record = json.loads((tmp_path / f"{image['key']}.camera.json").read_text())
+        assert (frame["fl_x"], frame["w"]) == (record["fx"], record["width"])
+        np.testing.assert_allclose(np.c_[project_nerfstudio(frame, corners)],
+                                   np.c_[_camera_json_projection(record, corners)], atol=1e-9)
+
+
+def test_orthographic_views_are_orthophoto_and_project_like_the_camera_json(tmp_path):
+    cameras = [_camera(d, projection="orthographic", ortho_height=3.0) for d in ((0, 0, 1), (1, 0.5, 0.2))]
+    images = _records(tmp_path, cameras, [(W, H)] * 2)
+    frames = read_nerfstudio(write_dataset("nerfstudio", str(tmp_path), "box.obj", images)[0])
+    corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
+    for frame, image in zip(frames, images):
+        assert frame["model"] == "ORTHOPHOTO"
+        record = json.loads((tmp_path / f"{image['key']}.camera.json").read_text())
+        w2c, K = np.array(record["world_to_camera_opencv"]), np.array(record["K"])
+        p = corners @ w2c[:3, :3].T + w2c[:3, 3]  # u = fx x + cx: no division by depth
+        expected = np.c_[K[0, 0] * p[:, 0] + K[0, 2], K[1, 1] * p[:, 1] + K[1, 2]]
+        np.testing.assert_allclose(np.c_[project_nerfstudio(frame, corners)], expected, atol=1e-9)
+
+
+def test_mixing_orthographic_and_perspective_views_is_refused_in_one_line(tmp_path):
+    cameras = [_camera((0, 0, 1)), _camera((0, 0, 1), projection="orthographic", ortho_height=3.0)]
+    images = _records(tmp_path, cameras, [(W, H)] * 2)
+    with pytest.raises(rtmesh.RtmeshError, match="box.obj.transforms.json: camera_model") as error:
+        write_dataset("nerfstudio", str(tmp_path), "box.obj", images)
+    assert "\n" not in str(error.value)
+    assert not (tmp_path / "box.obj.transforms.json").exists()
+
+
+def test_a_clipping_depth_png_warns_once_naming_the_file_and_the_farthest_depth(tmp_path, caplog):
+    depth = np.array([[1.0, 70.25], [np.inf, 80.5]])
+    path = tmp_path / "far.depth.png"
+    with caplog.at_level(logging.WARNING, logger="rtmesh.io.images"):
+        write_depth_png(str(path), depth)
+        write_depth_png(str(tmp_path / "near.depth.png"), np.minimum(depth, 65.0))
+    lines = [r.getMessage() for r in caplog.records]
+    assert len(lines) == 1 and str(path) in lines[0] and "80.5" in lines[0] and "65.535" in lines[0]
+    stored = oiio.ImageInput.open(str(path)).read_image("uint16")[..., 0]
+    np.testing.assert_array_equal(stored, [[1000, 65535], [0, 65535]])
 
 
 def test_a_resumed_batch_writes_the_dataset_of_skipped_assets(rendered):

@@ -7,7 +7,7 @@ import pytest
 from scenes import box, part, pixel_centre_rays, quad, render, settings
 
 from rtmesh.cli import main
-from rtmesh.io.images import read_image
+from rtmesh.io.images import read_image, write_image
 from rtmesh.io.passes import LIGHT_PATH_PASSES, PASS_NAMES, display_values, exr_channel_names, id_colours, pass_width
 from rtmesh.materials.table import Material
 from rtmesh.rendering import film_sums
@@ -141,22 +141,65 @@ def film_sample_screen(width, height, spp, sampler, sample, fov=60.0, seed=0):
     return ((2 * fx / width - 1) * tan_half * width / height, (1 - 2 * fy / height) * tan_half)
 
 
-def test_ids_are_the_first_samples_object_and_material_exact_integers():
+def test_ids_are_the_pixel_centre_rays_object_and_material_exact_integers():
     w, h, spp = 24, 12, 4
-    result = render(two_quads_scene(), width=w, height=h, spp=spp, sampler="jittered",
-                    passes=("object_id", "material_id"))
-    # where sample 0 of each pixel lands on the wall plane z = -3
-    x, y = film_sample_screen(w, h, spp, "jittered", 0)
-    x, y = 3 * x, 3 * y
+    scene = two_quads_scene()
+    result = render(scene, width=w, height=h, spp=spp, sampler="jittered",
+                    passes=("object_id", "material_id", "instance_id"))
+    # where each pixel's centre ray meets the wall plane z = -3
+    origins, directions = pixel_centre_rays(scene.camera, w, h)
+    p = origins + (3.0 / -directions[:, 2])[:, None] * directions
+    x, y = p[:, 0], p[:, 1]
     inside_y = np.abs(y) < 0.5
     expected_object = np.where(inside_y & (x > -1.2) & (x < -0.1), 0,
                                np.where(inside_y & (x > 0.1) & (x < 1.2), 1, -1))
     expected_material = np.select([expected_object == 0, expected_object == 1], [2, 1], -1)
     got_object = result.passes["object_id"].reshape(-1)
-    got_material = result.passes["material_id"].reshape(-1)
     np.testing.assert_array_equal(got_object, expected_object)
-    np.testing.assert_array_equal(got_material, expected_material)
+    np.testing.assert_array_equal(result.passes["material_id"].reshape(-1), expected_material)
+    # no mesh is placed twice: an instance is its object
+    np.testing.assert_array_equal(result.passes["instance_id"].reshape(-1), expected_object)
     assert {-1, 0, 1} <= set(got_object.tolist())
+    # the ids are not the jittered sample 0's: some pixel's sample 0 lands on another object
+    x0, y0 = film_sample_screen(w, h, spp, "jittered", 0)
+    x0, y0 = 3 * x0, 3 * y0
+    first = np.where((np.abs(y0) < 0.5) & (x0 > -1.2) & (x0 < -0.1), 0,
+                     np.where((np.abs(y0) < 0.5) & (x0 > 0.1) & (x0 < 1.2), 1, -1))
+    assert (first != expected_object).any()
+
+
+def test_centre_geometry_passes_are_the_pixel_centre_rays_hits_with_marked_misses():
+    scene = box_scene()
+    w, h = 32, 24
+    result = render(scene, width=w, height=h, spp=3,
+                    passes=("depth_center", "position_center", "normal_center", "object_id"))
+    origins, directions = pixel_centre_rays(scene.camera, w, h)
+    t, normal, margin = slab_hits(origins, directions)
+    hit = np.isfinite(t)
+    assert hit.any() and (~hit).any()
+    depth = result.passes["depth_center"].reshape(-1)
+    position = result.passes["position_center"].reshape(-1, 3)
+    shading = result.passes["normal_center"].reshape(-1, 3)
+    np.testing.assert_array_equal(result.passes["object_id"].reshape(-1) == 0, hit)
+    # misses: +inf depth, NaN position and normal
+    assert np.isposinf(depth[~hit]).all() and np.isnan(position[~hit]).all() and np.isnan(shading[~hit]).all()
+    expected = origins + t[:, None] * directions
+    np.testing.assert_allclose(position[hit], expected[hit], atol=2e-6)
+    forward = -scene.camera.position / np.linalg.norm(scene.camera.position)
+    np.testing.assert_allclose(depth[hit], (expected[hit] - scene.camera.position) @ forward, rtol=1e-6)
+    clear = hit & (margin > 1e-4)  # away from the box's edges, where the face is certain
+    np.testing.assert_allclose(shading[clear], normal[clear], atol=1e-6)
+
+
+def test_centre_passes_keep_inf_and_nan_in_the_exr(tmp_path):
+    result = render(box_scene(), width=16, height=12, passes=("depth_center", "position_center"))
+    path = tmp_path / "centre.exr"
+    write_image(path, result.image, result.passes)
+    pixels, names = read_image(path)
+    depth = pixels[..., names.index("depth_center.Z")]
+    np.testing.assert_array_equal(depth, result.passes["depth_center"][..., 0])
+    assert np.isposinf(depth).any()
+    assert np.isnan(pixels[..., names.index("position_center.X")]).any()
 
 
 def test_alpha_is_the_fraction_of_samples_that_hit():
@@ -209,7 +252,8 @@ def test_only_requested_passes_are_computed_and_stored():
     assert "passes" not in plain.stats.stages_enabled
     assert plain.stats.stage_seconds["passes"] == 0.0
     asked = render(scene, width=16, height=16, passes=("depth", "object_id"))
-    assert set(asked.passes) == set(asked.film.pass_sums) == {"depth", "object_id"}
+    # object_id is traced from the pixel centres after the render: the film holds depth alone
+    assert set(asked.passes) == {"depth", "object_id"} and set(asked.film.pass_sums) == {"depth"}
     assert "passes" in asked.stats.stages_enabled
     # passes never change the image
     np.testing.assert_array_equal(asked.image, plain.image)
@@ -347,3 +391,35 @@ def test_unknown_pass_is_a_one_line_error(tmp_path, capsys):
         main(["render", str(scene_file), "-o", str(tmp_path / "o.exr"), "--passes", "depth,zdepth"])
     assert exit_info.value.code == 2
     assert "zdepth" in capsys.readouterr().err
+
+
+def test_motion_is_where_each_centre_hit_lands_when_the_shutter_closes():
+    # a box spinning and sliding in front of a still wall, shutter open from 0.25 to 0.75
+    import dataclasses
+
+    from rtmesh.geometry.motion import Motion
+    from rtmesh.scene.camera_json import camera_record
+
+    spinner = part("spinner", box(centre=(0.0, 0.0, -4.0)))
+    spinner.motion = Motion([0.6, -0.3, 0.2], [0.2, 1.0, 0.3], 40.0)
+    wall = part("wall", quad([[-9, -9, -8.0], [9, -9, -8.0], [9, 9, -8.0], [-9, 9, -8.0]]))
+    camera = dataclasses.replace(LOOK_DOWN_Z, shutter=(0.25, 0.75))
+    scene = Scene.from_parts([spinner, wall], [Material("m")], [], camera)
+    w, h = 32, 24
+    result = render(scene, width=w, height=h, spp=2, passes=("motion", "position_center", "object_id"))
+    motion = result.passes["motion"].reshape(-1, 2).astype(np.float64)
+    position = result.passes["position_center"].reshape(-1, 3).astype(np.float64)
+    on_box = result.passes["object_id"].reshape(-1) == 0
+    assert on_box.sum() > 20 and (~on_box).sum() > 20
+    assert (motion[~on_box] == 0).all()  # the wall stands still
+    m = scene.motions[0]
+    rest = m.to_rest(position[on_box], np.full(on_box.sum(), 0.25))
+    closed = m.to_world(rest, np.full(on_box.sum(), 0.75))
+    record = camera_record(camera, w, h, scene.bounds)
+    w2c, k = np.array(record["world_to_camera_opencv"]), np.array(record["K"])
+    p = (closed @ w2c[:3, :3].T + w2c[:3, 3]) @ k.T
+    pixel = np.arange(w * h)[on_box]
+    start = np.column_stack([pixel % w + 0.5, pixel // w + 0.5])
+    np.testing.assert_allclose(start + motion[on_box], p[:, :2] / p[:, 2:], atol=1e-3)
+    # it moves right and down in the image (+x right, +y down) on average: the sign convention
+    assert motion[on_box, 0].mean() > 1 and motion[on_box, 1].mean() > 0

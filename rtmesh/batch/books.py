@@ -129,7 +129,8 @@ class Books:
         self.counts = {"assets": total, "done": 0, "skipped": 0, "failed": 0, "known_failed": 0,
                        "retried": 0, "not_attempted": 0, "images": 0}
         self.assets, self.pending, self.finished_jobs = [], {}, 0
-        self.sheet = []  # (key, files) of every finished image, for --contact-sheet
+        # (key, files) of every finished image, for --contact-sheet and --annotations
+        self.sheet = []
         self.check_content = opts.scheduler is not None
         self._report = open(os.path.join(outdir, REPORT_NAME), "w", encoding="utf-8")
         self.progress = None
@@ -137,7 +138,7 @@ class Books:
     def planned(self, asset, skipped, known, retried, has_job):
         """Enter an asset as planned: its skipped images, known failures, and whether a job
         will run for it."""
-        if self.opts.contact_sheet:
+        if self.opts.contact_sheet or self.opts.annotations:
             self.sheet.extend((t.key, list(t.files)) for t in skipped)
         record = {"asset": asset.name, "path": asset.path, "status": None, "seconds": 0.0,
                   "retried": retried,
@@ -197,7 +198,7 @@ class Books:
                 self._record(image)
         if image["status"] != "done":
             discard(self.outdir, staged)
-        if self.opts.contact_sheet and image["status"] == "done":
+        if (self.opts.contact_sheet or self.opts.annotations) and image["status"] == "done":
             self.sheet.append((image["key"], image["files"]))
         if record is not None:
             record["images"].append({k: image[k] for k in ("key", "status", "files", "seconds",
@@ -250,7 +251,8 @@ class Books:
             return
         if self.opts.dataset:
             # by image key: the views of a set and the frames of a turntable in order
-            write_dataset(self.opts.dataset, self.outdir, record["asset"], sorted(images, key=lambda i: i["key"]))
+            write_dataset(self.opts.dataset, self.outdir, record["asset"], sorted(images, key=lambda i: i["key"]),
+                          source=record["path"], units=self.opts.units)
         frames = movie_frames(self.outdir, images)
         if self.opts.movie and len(frames) > 1 and all(".turn" in i["key"] for i in images):
             write_movie(os.path.join(self.outdir, f"{record['asset']}.turntable.{self.opts.movie}"), frames,

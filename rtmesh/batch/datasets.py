@@ -1,4 +1,5 @@
-"""Dataset files for multi-view renders: nerfstudio ``transforms.json`` and COLMAP text.
+"""Dataset files for multi-view renders: nerfstudio ``transforms.json``, COLMAP text and the
+BOP layout (:mod:`rtmesh.batch.bop`).
 
 ``rtmesh batch ... --dataset nerfstudio|colmap`` writes, per finished asset, the files
 that reconstruction tools read beside the images, built from each image's camera JSON
@@ -6,8 +7,10 @@ that reconstruction tools read beside the images, built from each image's camera
 
 - ``nerfstudio``: ``<asset>.transforms.json`` in the asset's image folder (the nerfstudio /
   instant-ngp layout): ``camera_model`` ``"OPENCV"`` (no distortion: ``k1 k2 p1 p2`` 0),
-  ``fl_x``, ``fl_y``, ``cx``, ``cy`` (pixels, pixel centres at +0.5), ``w``, ``h`` and
-  ``frames``: ``file_path`` (relative to the JSON file) and ``transform_matrix``, the
+  or ``"ORTHOPHOTO"`` for orthographic views (``--ortho``), ``fl_x``, ``fl_y``, ``cx``,
+  ``cy`` (pixels, pixel centres at +0.5), ``w``, ``h`` (at the top level when every frame
+  shares them, else in each frame only: nerfstudio ignores per-frame intrinsics when
+  top-level ones exist) and ``frames``: ``file_path`` (relative to the JSON file) and ``transform_matrix``, the
   camera-to-world matrix in the OpenGL convention (+x right, +y up, -z forward); with
   ``--passes depth`` each frame has ``depth_file_path`` (16-bit PNG, millimetres: depth in
   scene units times 1000, nerfstudio's default ``depth_unit_scale_factor`` 1e-3), with
@@ -26,12 +29,15 @@ import os
 
 import numpy as np
 
+from rtmesh.batch.bop import BOP_SUFFIXES, write_bop_scene
 from rtmesh.batch.worker import CAMERA_SUFFIX
 from rtmesh.batch.worker import DEPTH_PNG_SUFFIX as DEPTH_SUFFIX
 from rtmesh.batch.worker import MASK_PNG_SUFFIX as MASK_SUFFIX
+from rtmesh.core.errors import OutputError
 from rtmesh.io.atomic_files import write_text
+from rtmesh.loaders.importers import mesh_file_parts
 
-DATASETS = ("nerfstudio", "colmap")
+DATASETS = ("nerfstudio", "colmap", "bop")
 # image formats a dataset's frames point at, by preference
 _FRAME_FORMATS = (".png", ".jpg", ".exr")
 
@@ -43,15 +49,17 @@ def dataset_suffixes(dataset, passes):
     suffixes = [CAMERA_SUFFIX]
     if dataset == "nerfstudio":
         suffixes += [DEPTH_SUFFIX] * ("depth" in passes) + [MASK_SUFFIX] * ("alpha" in passes)
+    if dataset == "bop":
+        suffixes += list(BOP_SUFFIXES)
     return suffixes
 
 
-def write_dataset(dataset, outdir, asset, images):
+def write_dataset(dataset, outdir, asset, images, source=None, units="m"):
     """Write the dataset files of one asset.
 
     Parameters
     ----------
-    dataset : {"nerfstudio", "colmap"}
+    dataset : {"nerfstudio", "colmap", "bop"}
     outdir : str
         The batch's output folder.
     asset : str
@@ -59,6 +67,10 @@ def write_dataset(dataset, outdir, asset, images):
     images : list of dict
         The asset's finished images (``key``, ``files``: names relative to ``outdir``), in
         view order; each has a camera JSON among its files.
+    source : str, optional
+        The asset's mesh file (``bop``: its model is written in millimetres).
+    units : str
+        ``bop``: the scene units (:data:`rtmesh.batch.bop.UNITS`).
 
     Returns
     -------
@@ -69,16 +81,23 @@ def write_dataset(dataset, outdir, asset, images):
     for image in images:
         files = image["files"]
         pictures = sorted((f for f in files if os.path.splitext(f)[1].lower() in _FRAME_FORMATS
-                           and not f.endswith((DEPTH_SUFFIX, MASK_SUFFIX))),
+                           and not f.endswith((DEPTH_SUFFIX, MASK_SUFFIX) + BOP_SUFFIXES)),
                           key=lambda f: _FRAME_FORMATS.index(os.path.splitext(f)[1].lower()))
         with open(os.path.join(outdir, image["key"] + CAMERA_SUFFIX), encoding="utf-8") as f:
             record = json.load(f)
         frames.append((record, pictures[0], files))
     if not frames:
         return []
+    if dataset == "bop":
+        # the geometry alone: no materials read, no vertices split for smooth shading
+        parts, _ = mesh_file_parts(source, material=0, smooth=False)
+        offsets = np.cumsum([0] + [len(p.vertices) for p in parts])
+        model = (np.concatenate([p.vertices for p in parts]),
+                 np.concatenate([np.asarray(p.faces) + o for p, o in zip(parts, offsets)]))
+        return write_bop_scene(outdir, asset, frames, model, units)
     if dataset == "nerfstudio":
         path = os.path.join(outdir, asset + ".transforms.json")
-        write_text(path, json.dumps(nerfstudio_transforms(frames), indent=2) + "\n")
+        write_text(path, json.dumps(nerfstudio_transforms(frames, path), indent=2) + "\n")
         return [path]
     target = os.path.join(outdir, asset + ".colmap")
     os.makedirs(target, exist_ok=True)
@@ -91,18 +110,41 @@ def write_dataset(dataset, outdir, asset, images):
     return written
 
 
-def nerfstudio_transforms(frames):
-    """The ``transforms.json`` document of ``frames`` ((record, image, files) tuples)."""
-    first = frames[0][0]
-    document = {"camera_model": "OPENCV", "fl_x": first["fx"], "fl_y": first["fy"], "cx": first["cx"],
-                "cy": first["cy"], "w": first["width"], "h": first["height"],
-                "k1": 0.0, "k2": 0.0, "p1": 0.0, "p2": 0.0, "frames": []}
-    for record, picture, files in frames:
+_INTRINSICS = (("fl_x", "fx"), ("fl_y", "fy"), ("cx", "cx"), ("cy", "cy"), ("w", "width"), ("h", "height"))
+
+
+def nerfstudio_transforms(frames, where="transforms.json"):
+    """The ``transforms.json`` document of ``frames`` ((record, image, files) tuples).
+
+    Intrinsics go to the top level when every frame shares them, else into each frame
+    only: nerfstudio reads the top-level keys whenever they exist (``fx_fixed = "fl_x" in
+    meta``) and then ignores per-frame ones.  Perspective views are ``"OPENCV"`` (zero
+    distortion), orthographic ones ``"ORTHOPHOTO"`` (``fl_x`` in pixels per scene unit).
+
+    Raises
+    ------
+    OutputError
+        The frames mix orthographic and perspective views (one ``camera_model`` per file);
+        the message names ``where``.
+    """
+    projections = {record["projection"] for record, _, _ in frames}
+    if len(projections) > 1:
+        raise OutputError(f"{where}: camera_model: nerfstudio has one camera model per file, and these "
+                          f"views mix orthographic and perspective cameras")
+    model = "ORTHOPHOTO" if projections == {"orthographic"} else "OPENCV"
+    document = {"camera_model": model}
+    intrinsics = [{key: record[field] for key, field in _INTRINSICS} for record, _, _ in frames]
+    shared = all(i == intrinsics[0] for i in intrinsics)
+    if shared:
+        document.update(intrinsics[0])
+    if model == "OPENCV":
+        document.update(k1=0.0, k2=0.0, p1=0.0, p2=0.0)
+    document["frames"] = []
+    for (record, picture, files), own in zip(frames, intrinsics):
         frame = {"file_path": os.path.basename(picture),
                  "transform_matrix": record["camera_to_world_opengl"]}
-        if any(record[k] != first[k] for k in ("fx", "fy", "cx", "cy", "width", "height")):
-            frame.update(fl_x=record["fx"], fl_y=record["fy"], cx=record["cx"], cy=record["cy"],
-                         w=record["width"], h=record["height"])
+        if not shared:
+            frame.update(own)
         for suffix, field in ((DEPTH_SUFFIX, "depth_file_path"), (MASK_SUFFIX, "mask_path")):
             extra = [f for f in files if f.endswith(suffix)]
             if extra:

@@ -5,7 +5,9 @@ before anything runs (one line naming the option, exit 2).
 
 from dataclasses import dataclass
 
+from rtmesh.batch.bop import UNITS
 from rtmesh.batch.datasets import DATASETS
+from rtmesh.batch.flow import FLOW_FORMATS
 from rtmesh.batch.inputs import InputError
 from rtmesh.batch.movies import MOVIE_FORMATS, require_mp4
 from rtmesh.batch.normalize import NORMALIZE_MODES
@@ -68,12 +70,26 @@ class BatchOptions:
         ``""``, ``webp`` or ``gif``: with ``turntable``, assemble each asset's frames into
         ``<asset>.turntable.webp|gif`` (:mod:`rtmesh.batch.movies`); needs png or jpg
         among the formats.
+    annotations : bool
+        Write COCO instance annotations: a fragment ``<image key>.coco.json`` per image
+        and, at the end of each run, ``annotations.coco.json`` per output folder merging
+        every finished image's (:mod:`rtmesh.batch.coco`).
+    units : str
+        ``m``, ``cm`` or ``mm``: the scene units, for ``--dataset bop``'s millimetres.
+    flow : bool
+        Optical flow between each asset's ordered views: ``flow_forward`` and
+        ``flow_backward`` layers in each view's EXR (:mod:`rtmesh.batch.flow`); needs
+        ``exr`` among the formats.
+    flow_format : str
+        ``exr`` (the layers alone) or ``flo`` (also Middlebury ``.flo`` files per view).
     asset_meta : bool
         Write ``<asset>.meta.json`` per asset a job loads: counts, bounds, materials,
         textures found and missing, load warnings (:mod:`rtmesh.batch.asset_meta`).
     dataset : str
-        ``""``, ``nerfstudio`` or ``colmap``: write each finished asset's dataset files
-        (:mod:`rtmesh.batch.datasets`); implies ``camera_json``.  With ``nerfstudio``, the
+        ``""``, ``nerfstudio``, ``colmap`` or ``bop``: write each finished asset's dataset files
+        (:mod:`rtmesh.batch.datasets`); implies ``camera_json``.  ``nerfstudio`` takes
+        ``ortho`` (``ORTHOPHOTO``), ``colmap`` does not.  ``bop``: the BOP scene layout
+        (:mod:`rtmesh.batch.bop`), perspective views with PNG or JPEG images.  With ``nerfstudio``, the
         ``depth`` and ``alpha`` passes also give depth and mask PNGs per image.
     workers : int or None
         Local worker processes; None uses every core.  Ignored with ``scheduler``.
@@ -125,6 +141,10 @@ class BatchOptions:
     ortho: bool = False
     dataset: str = ""
     asset_meta: bool = False
+    annotations: bool = False
+    units: str = "m"
+    flow: bool = False
+    flow_format: str = "exr"
     movie: str = ""
     contact_sheet: bool = False
     workers: int | None = None
@@ -164,13 +184,21 @@ class BatchOptions:
                 require_mp4()  # before any job: one line naming the extra
         if self.dataset:
             check_names("dataset", (self.dataset,), DATASETS)
-            if self.ortho:
+            if self.ortho and self.dataset in ("colmap", "bop"):
                 raise InputError(f"dataset: {self.dataset} describes perspective cameras: leave out --ortho")
+            if self.dataset == "bop" and not {"png", "jpg"} & set(self.formats):
+                raise InputError("dataset: bop's rgb images are PNG or JPEG: add png to the formats")
+        check_names("units", (self.units,), tuple(UNITS))
         if not self.views and not self.turntable:
             raise InputError("views: give at least one view (or a turntable)")
         if not self.formats:
             raise InputError("formats: give at least one output format")
         check_passes(self.passes, self.formats)
+        check_names("flow format", (self.flow_format,), FLOW_FORMATS)
+        if self.flow_format != "exr" and not self.flow:
+            raise InputError(f"flow format: {self.flow_format} files hold the flow of --flow: add --flow")
+        if self.flow and "exr" not in self.formats:
+            raise InputError("flow: the flow passes are written to EXR files: add exr to the formats")
         for name in ("workers", "threads"):
             value = getattr(self, name)
             if value is not None and value < 1:

@@ -36,7 +36,9 @@ import time
 import uuid
 
 from rtmesh.batch.books import SUMMARY_NAME, Books
+from rtmesh.batch.coco import COCO_SUFFIX, write_batch_annotations
 from rtmesh.batch.contact_sheet import write_contact_sheets
+from rtmesh.batch.flow import FLOW_PASSES, flow_suffix
 from rtmesh.batch.datasets import dataset_suffixes
 from rtmesh.batch.identity import image_fingerprint, inputs_unchanged, unchanged
 from rtmesh.batch.inputs import InputError, discover
@@ -139,6 +141,8 @@ def batch_convert(inputs, outdir, **options):
             book.close()
         if opts.contact_sheet:
             write_contact_sheets(outdir, book.sheet)
+        if opts.annotations:
+            write_batch_annotations(outdir, book.sheet)
     report = book.report(time.perf_counter() - start, runner, run)
     report.path = os.path.join(outdir, SUMMARY_NAME)
     write_text(report.path, json.dumps(report.to_dict(), indent=1) + "\n")
@@ -220,7 +224,7 @@ def plan(assets, outdir, opts, ledger, book, run="", leftovers=None):
             if todo:
                 jobs.append(AssetJob(asset.name, asset.path, outdir, {**fields, "threads": threads},
                                      tuple(todo), opts.ground, run, run_file, opts.normalize,
-                                     opts.asset_meta, staged=True))
+                                     opts.asset_meta, staged=True, units=opts.units))
     return jobs
 
 
@@ -262,18 +266,26 @@ def _image_tasks(asset, opts, shared):
         # the file names are the image's key (its identity) plus the formats (and the camera)
         suffixes = [f".{fmt}" for fmt in o.get("formats", opts.formats)]
         extras = dataset_suffixes(opts.dataset, fields["passes"])
-        suffixes += [CAMERA_SUFFIX] * (opts.camera_json and not extras) + extras
+        suffixes += [CAMERA_SUFFIX] * (opts.camera_json and not extras) + extras + [COCO_SUFFIX] * opts.annotations
+        if opts.flow and opts.flow_format == "flo":
+            suffixes += [flow_suffix(name) for name in FLOW_PASSES]
         # (a metadata file is written by the job that loads the asset: asking for it redoes them)
-        extra = {k: v for k, v in (("normalize", opts.normalize), ("asset_meta", opts.asset_meta)) if v}
-        views = [(view, image_fingerprint(fields, view.identity(), [f"*{x}" for x in suffixes], opts.ground,
-                                          extra))
-                 for view in views]
+        extra = {k: v for k, v in (("normalize", opts.normalize), ("asset_meta", opts.asset_meta),
+                                   ("units", opts.dataset == "bop" and opts.units)) if v}
+        flows = [()] * len(views)
+        if opts.flow:  # each view's neighbours in order: their cameras make its flow
+            flows = [(views[i - 1] if i else None, views[i + 1] if i + 1 < len(views) else None)
+                     for i in range(len(views))]
+        views = [(view, flow, image_fingerprint(
+                    fields, view.identity(), [f"*{x}" for x in suffixes], opts.ground,
+                    {**extra, "flow": [v and v.identity() for v in flow]} if flow else extra))
+                 for view, flow in zip(views, flows)]
         settings = shared[cache_key] = (fields, views, suffixes)
     fields, views, suffixes = settings
     tasks = []
-    for view, fingerprint in views:
+    for view, flow, fingerprint in views:
         key = asset.name if len(views) == 1 else f"{asset.name}.{view.name}"
-        tasks.append(ImageTask(key, view, tuple(f"{key}{x}" for x in suffixes), fingerprint))
+        tasks.append(ImageTask(key, view, tuple(f"{key}{x}" for x in suffixes), fingerprint, flow))
     return asset, fields, tasks
 
 

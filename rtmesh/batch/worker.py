@@ -19,6 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from rtmesh.batch.asset_meta import WarningLog, asset_meta, write_meta
+from rtmesh.batch.bop import BOP_SUFFIXES, write_view_files
+from rtmesh.batch.coco import COCO_SUFFIX, Instance, image_annotations, image_entry, write_coco
+from rtmesh.batch.flow import FLOW_PASSES, flow_suffix, view_flow, write_flo
 from rtmesh.batch.identity import OpenedFiles, describe
 from rtmesh.batch.normalize import asset_to_world, transform_points
 from rtmesh.batch.publish import discard
@@ -27,6 +30,7 @@ from rtmesh.io.atomic_files import staged
 from rtmesh.io.images import write_depth_png, write_display_image, write_image
 from rtmesh.loaders.importers import default_integrator, mesh_file_parts
 from rtmesh.materials.table import Material, MaterialTable
+from rtmesh.rendering.centre_rays import centre_passes
 from rtmesh.rendering.integrator import Integrator
 from rtmesh.rendering.settings import RenderSettings
 from rtmesh.scene.camera import frame_bounds
@@ -126,12 +130,17 @@ class ImageTask:
         Output files relative to the output folder, one per format.
     fingerprint : str
         Hash of everything the image depends on (input file, settings, view, formats).
+    flow : tuple of (View or None)
+        With ``--flow``: the views before and after this one in the asset's order (None at
+        either end), whose flow passes the image gets (:mod:`rtmesh.batch.flow`); empty
+        without.
     """
 
     key: str
     view: View
     files: tuple
     fingerprint: str
+    flow: tuple = ()
 
 
 @dataclass(frozen=True)
@@ -163,6 +172,8 @@ class AssetJob:
         :mod:`rtmesh.batch.normalize`).
     meta : bool
         Write ``<asset>.meta.json`` once the asset is loaded (:mod:`rtmesh.batch.asset_meta`).
+    units : str
+        The scene units of ``--dataset bop`` (``m``, ``cm`` or ``mm``).
     staged : bool
         Leave every file at its hidden temporary name and report that name (``staged`` and
         ``side_files`` in the results), for the submitting process to rename into place
@@ -184,6 +195,7 @@ class AssetJob:
     normalize: str = ""
     meta: bool = False
     staged: bool = False
+    units: str = "m"
 
 
 # set by a worker process that runs under an address-space limit, for the failure message
@@ -313,6 +325,7 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
             return _job_result(job, results, start)
 
     built = {}  # with a ground plane? -> the integrator built for the first such view
+    accels = {}  # the asset's own Embree scene, for the amodal masks of every view
     for i, task in enumerate(job.images):
         image_start = time.perf_counter()
         stage = "render"
@@ -321,6 +334,11 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
             integrator = _integrator_for_view(built, parts, materials, bounds, task.view, settings,
                                               job.ground)
             result = integrator.render(progress=check)
+            labels = _labels(integrator, result, task)
+            passes = result.passes
+            if task.flow:
+                passes = {**passes, **_flows(labels, task, built, parts, materials, bounds, settings,
+                                             job.ground, to_world)}
             stage = "write"
             last_check[0] = 0.0  # always ask just before writing
             check()
@@ -334,10 +352,23 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
                                                               scene.bounds, to_world))
                     elif name.endswith(DEPTH_PNG_SUFFIX):
                         write_depth_png(path, result.passes["depth"][:, :, 0])
+                    elif name.endswith(BOP_SUFFIXES):
+                        if name.endswith(BOP_SUFFIXES[0]):  # the other three with it
+                            scene = integrator.scene
+                            record = camera_record(scene.camera, settings.width, settings.height, scene.bounds,
+                                                   to_world)
+                            bop_paths = {x: p for x in BOP_SUFFIXES for p in paths if p.endswith(x)}
+                            write_view_files(bop_paths, integrator, labels, record,
+                                             _asset_objects(scene, job.ground, task.view), job.units, accels)
+                    elif name.endswith(COCO_SUFFIX):
+                        write_coco(path, image_fragment(integrator, labels, task, settings, to_world, job.asset,
+                                                        job.ground, accels))
                     elif name.endswith(MASK_PNG_SUFFIX):
                         write_display_image(path, (result.passes["alpha"][:, :, :1] > 0.5).astype(np.float64))
+                    elif name.endswith(".flo"):
+                        write_flo(path, passes[next(f for f in FLOW_PASSES if name.endswith(flow_suffix(f)))])
                     else:
-                        write_image(path, result.image, result.passes, settings.exposure, settings.tonemap,
+                        write_image(path, result.image, passes, settings.exposure, settings.tonemap,
                                     header=settings.header())
                 # superseded while writing: the block's temporaries are removed, not reported.
                 # The run file is read again: a run that took the folder removes the
@@ -362,6 +393,61 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
                                    stage=stage, message=_one_line(exc))
         emit(outcome)
     return _job_result(job, results, start)
+
+
+def _labels(integrator, result, task):
+    """The render's passes and the pixel-centre passes a view's annotations, BOP files and
+    flow read (:mod:`rtmesh.rendering.centre_rays`), each traced once, only those asked for
+    and not rendered already; they go to no image unless the passes named them."""
+    wanted = set()
+    if any(f.endswith((COCO_SUFFIX,) + BOP_SUFFIXES) for f in task.files):
+        wanted.add("object_id")
+    if any(f.endswith(BOP_SUFFIXES) for f in task.files):
+        wanted.add("depth_center")
+    if task.flow:
+        wanted.add("position_center")
+    return {**centre_passes(integrator, sorted(wanted - set(result.passes))), **result.passes}
+
+
+def image_fragment(integrator, labels, task, settings, to_world, asset, ground, accels=None):
+    """The COCO fragment of one batch image (:mod:`rtmesh.batch.coco`): the asset is one
+    instance of category ``asset``, its model frame the asset file's; the ground plane (the
+    scene's last object when the view has one) is not annotated."""
+    scene = integrator.scene
+    record = camera_record(scene.camera, settings.width, settings.height, scene.bounds, to_world)
+    objects = _asset_objects(scene, ground, task.view)
+    pictures = [f for f in task.files if f.endswith((".png", ".jpg", ".exr"))
+                and not f.endswith((DEPTH_PNG_SUFFIX, MASK_PNG_SUFFIX))]
+    instance = Instance(asset, asset, objects, np.asarray(to_world, dtype=np.float64))
+    annotations = image_annotations(integrator, record, [instance], labels["object_id"], accels)
+    return {"image": image_entry(os.path.basename(pictures[0]), record), "annotations": annotations}
+
+
+def _flows(labels, task, built, parts, materials, bounds, settings, ground, to_world):
+    """``flow_forward`` and ``flow_backward`` of one view (see :mod:`rtmesh.batch.flow`),
+    towards the views of ``task.flow``, each traced in its own view's scene."""
+    position = labels["position_center"]
+    flows = {}
+    for name, view in zip(("flow_backward", "flow_forward"), task.flow):
+        other = record = None
+        if view is not None:
+            other = _integrator_for_view(built, parts, materials, bounds, view, settings, ground)
+            scene = other.scene
+            record = camera_record(scene.camera, settings.width, settings.height, scene.bounds, to_world)
+        flows[name] = view_flow(position, other, record)
+    return {name: flows[name] for name in FLOW_PASSES}
+
+
+def _asset_objects(scene, ground, view):
+    """The objects of a view's scene that make the asset: all but the ground plane (the
+    last object, where the view has it)."""
+    return tuple(range(len(scene.object_names) - _has_ground(ground, view)))
+
+
+def _has_ground(ground, view):
+    """Whether ``view`` of a batch with ``ground`` has the ground plane: views from below
+    leave it out, where it would stand between the camera and the asset."""
+    return bool(ground and view.direction[1] >= 0)
 
 
 def _writing(job):
@@ -418,20 +504,35 @@ def _integrator_for_view(built, parts, materials, bounds, view, settings, ground
     ``built`` maps "has a ground plane" to the integrator of the first view built with that
     geometry (views from below leave the plane out, so an asset has at most two builds);
     later views take it with their own camera and lights (:meth:`Integrator.with_view`).
+    It also keeps the integrators of the last :data:`_KEPT_VIEWS` views asked for (by
+    ``("view", view)``): a view's flow needs its neighbours', which render next or just did.
     """
-    with_ground = bool(ground and view.direction[1] >= 0)
+    key = ("view", view)
+    if key in built:
+        return built[key]
+    with_ground = _has_ground(ground, view)
     integrator = built.get(with_ground)
     if integrator is None:
         scene = _scene_for_view(parts, materials, bounds, view, settings, ground)
         integrator = built[with_ground] = Integrator(scene, settings)
-        return integrator
-    camera, lights = _camera_and_lights(bounds, view, settings)
-    if integrator.plan.physical:
-        # the studio environment turned to this view's rig camera, as the three-light rig is
-        return integrator.with_view(camera, [], studio_background(_rig_camera(bounds, view, settings)))
-    if settings.integrator == "path":
-        return integrator.with_view(camera, lights, studio_background(_rig_camera(bounds, view, settings)))
-    return integrator.with_view(camera, lights)
+    else:
+        camera, lights = _camera_and_lights(bounds, view, settings)
+        if integrator.plan.physical:
+            # the studio environment turned to this view's rig camera, as the three-light rig is
+            integrator = integrator.with_view(camera, [], studio_background(_rig_camera(bounds, view, settings)))
+        elif settings.integrator == "path":
+            integrator = integrator.with_view(camera, lights, studio_background(_rig_camera(bounds, view, settings)))
+        else:
+            integrator = integrator.with_view(camera, lights)
+    kept = [k for k in built if isinstance(k, tuple)]
+    for old in kept[:max(len(kept) + 1 - _KEPT_VIEWS, 0)]:
+        del built[old]
+    built[key] = integrator
+    return integrator
+
+
+# the previous, current and next view of a --flow sequence
+_KEPT_VIEWS = 3
 
 
 def _camera_and_lights(bounds, view, settings):
@@ -464,8 +565,7 @@ def _scene_for_view(parts, materials, bounds, view, settings, ground):
     """The asset's scene, framed from ``view`` and lit by the default rig."""
     camera, lights = _camera_and_lights(bounds, view, settings)
     parts, materials = list(parts), list(materials) or [Material()]
-    # seen from below, the plane would stand between the camera and the asset
-    if ground and view.direction[1] >= 0:
+    if _has_ground(ground, view):
         parts.append(_ground_part(bounds, len(materials)))
         materials.append(Material(name="ground", diffuse=np.full(3, 0.8)))
     if MaterialTable(materials).any_physical:

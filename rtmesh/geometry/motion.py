@@ -123,6 +123,15 @@ class Motion:
             points = rotate(points - c, self.axis, np.radians(self.degrees) * time) + c
         return points + time[:, None] * self.translate
 
+    def matrix(self, time):
+        """(4, 4) float64: the motion at ``time`` as an affine transform of rest-pose points."""
+        basis = np.vstack([np.zeros(3), np.eye(3)])
+        moved = self.to_world(basis, np.full(4, float(time)))
+        matrix = np.eye(4)
+        matrix[:3, :3] = (moved[1:] - moved[0]).T
+        matrix[:3, 3] = moved[0]
+        return matrix
+
     def to_rest(self, points, time):
         """Inverse of :meth:`to_world`: world points at their times to the rest pose."""
         moved = points - time[:, None] * self.translate
@@ -219,9 +228,11 @@ def scene_at_time(scene, time):
     Returns
     -------
     Scene
-        Without motions.
+        Without motions; each moving object's ``object_to_world`` (where the scene has
+        them) is its motion at ``time`` after its own.
     """
     vertices = scene.vertices.copy()
+    to_world = list(getattr(scene, "object_to_world", None) or [])
     face_normals = scene.face_normals.copy()
     vertex_normals = None if scene.vertex_normals is None else scene.vertex_normals.copy()
     for k, motion in object_motions(scene).items():
@@ -233,8 +244,11 @@ def scene_at_time(scene, time):
         face_normals[faces] = motion.rotate_vectors(face_normals[faces], face_time)
         if vertex_normals is not None:
             vertex_normals[used] = motion.rotate_vectors(vertex_normals[used], t)
+        if k < len(to_world):
+            to_world[k] = motion.matrix(float(time)) @ to_world[k]
+    changes = {"object_to_world": to_world} if to_world else {}
     return dataclasses.replace(scene, vertices=vertices, face_normals=face_normals,
-                               vertex_normals=vertex_normals, motions={})
+                               vertex_normals=vertex_normals, motions={}, **changes)
 
 
 def swept_bounds(scene):

@@ -5,6 +5,7 @@ renamed over the destination only once complete, so a failed or interrupted writ
 leaves a partial image (and never destroys an existing one).
 """
 
+import logging
 import os
 import sys
 
@@ -18,6 +19,10 @@ from rtmesh.io.passes import exr_channel_names
 
 FLOAT_FORMATS = (".exr",)
 DISPLAY_FORMATS = (".png", ".jpg", ".jpeg")
+# the largest value a 16-bit depth PNG stores
+DEPTH_PNG_MAX = 65535
+
+log = logging.getLogger(__name__)
 
 
 def check_output_path(path):
@@ -147,6 +152,9 @@ def write_depth_png(path, depth, scale=1000.0):
     metre units at the default scale), 0 where nothing was hit (depth 0 or not finite),
     clipped at 65535.
 
+    A depth map that clips (a hit farther than ``65535 / scale`` scene units) logs one
+    warning naming the file, the farthest depth and the largest depth the PNG holds.
+
     Parameters
     ----------
     path : str
@@ -158,7 +166,11 @@ def write_depth_png(path, depth, scale=1000.0):
     check_output_path(path)
     depth = np.asarray(depth, dtype=np.float64)
     stored = np.where(np.isfinite(depth) & (depth > 0.0), depth * scale, 0.0)
-    pixels = np.round(np.clip(stored, 0.0, 65535.0)).astype(np.uint16)
+    farthest = float(stored.max(initial=0.0))
+    if farthest > DEPTH_PNG_MAX + 0.5:
+        log.warning("%s: depth clipped at %.6g scene units (16-bit PNG at %g per unit); the farthest "
+                    "depth is %.6g", os.fspath(path), DEPTH_PNG_MAX / scale, scale, farthest / scale)
+    pixels = np.round(np.clip(stored, 0.0, DEPTH_PNG_MAX)).astype(np.uint16)
     h, w = pixels.shape
     _write_atomically(os.fspath(path), oiio.ImageSpec(w, h, 1, oiio.UINT16), np.ascontiguousarray(pixels[:, :, None]))
 

@@ -18,19 +18,29 @@ EXR naming (one OpenEXR layer per pass, ``layer.channel``)::
                                                            metallic-roughness materials)
     position     position.X position.Y position.Z  mean    world-space hit point
     uv           uv.U uv.V                      mean       texture coordinates
-    object_id    object_id.id                   first      Scene.object_names index; -1 none
-    material_id  material_id.id                 first      material index; -1 none
     alpha        A                              mean       camera-ray coverage (image alpha)
     variance     variance.R variance.G variance.B  film   estimated variance of the pixel mean
     spp          spp.Y                          film       samples taken in the pixel
+    object_id    object_id.id                   centre     Scene.object_names index; -1 none
+    material_id  material_id.id                 centre     material index; -1 none
+    instance_id  instance_id.id                 centre     placement index (= object_id today); -1
+    depth_center depth_center.Z                 centre     z-depth; +inf where the ray misses
+    position_center  position_center.X .Y .Z    centre     world-space hit point; NaN misses
+    normal_center    normal_center.X .Y .Z      centre     shading normal facing the camera; NaN misses
+    motion       motion.X motion.Y              centre     pixels moved, shutter open to close; 0 misses
 
 ``variance`` and ``spp`` are derived passes (:data:`DERIVED_PASSES`): the film computes them
 from its per-pixel sums and sample counts after the render, nothing is recorded per sample.
+The ``centre`` passes (:data:`CENTRE_PASSES`) are exact labels: one extra unjittered ray
+through each pixel centre (the ray the exported ``K`` describes, through the centre of a
+thin lens, at the time the shutter opens), traced after the render by
+:mod:`rtmesh.rendering.centre_rays`; no sample of the image is read or changed.
 
 ``mean`` averages every sample of the pixel, misses included with their miss value, so
 ``normal``, ``albedo``, ``position`` and ``uv`` are premultiplied by coverage (divide by
-``A`` to un-premultiply).  ``first`` keeps the pixel's sample 0 (an average of two integer
-ids is no id).  ``min`` keeps the nearest surface any sample saw: an average of a near and a
+``A`` to un-premultiply).  ``first`` keeps the pixel's sample 0 (no registry pass uses it
+since the ids became centre passes: an average of two integer ids is no id, and sample 0
+is a jittered position).  ``min`` keeps the nearest surface any sample saw: an average of a near and a
 far depth at a silhouette is a distance where nothing is, and the nearest is what depth
 compositing needs.
 """
@@ -117,14 +127,6 @@ def _uv(h):
     return uv0 + u[:, None] * (uv1 - uv0) + v[:, None] * (uv2 - uv0)
 
 
-def _object_id(h):
-    return h.recorder.object_id.take(h.prim)
-
-
-def _material_id(h):
-    return h.recorder.material_id.take(h.prim)
-
-
 def _covered(h):
     return 1.0
 
@@ -178,9 +180,6 @@ REGISTRY = {
                  "diffuse reflectance (texture-tinted)"),
         PassSpec("position", ("X", "Y", "Z"), "mean", 0.0, _position, "world-space hit point"),
         PassSpec("uv", ("U", "V"), "mean", 0.0, _uv, "texture coordinates (0 without UVs)"),
-        PassSpec("object_id", ("id",), "first", -1.0, _object_id,
-                 "object index (Scene.object_names), -1 for none"),
-        PassSpec("material_id", ("id",), "first", -1.0, _material_id, "material index, -1 for none"),
         PassSpec("alpha", ("A",), "mean", 0.0, _covered, "coverage of camera rays by geometry"),
     ) + tuple(PassSpec(name, ("R", "G", "B"), "mean", 0.0, None, doc) for name, doc in (
         ("emission", "path: light seen straight from the camera (emitters, lights, the background)"),
@@ -225,12 +224,55 @@ DERIVED_PASSES = {
         DerivedPass("spp", ("Y",), lambda film: film.spp_image(), "samples taken in each pixel"),
     )
 }
-PASS_NAMES = tuple(REGISTRY) + tuple(DERIVED_PASSES)
+
+
+@dataclass(frozen=True)
+class CentrePass:
+    """A pass traced from one unjittered ray through each pixel centre after the render.
+
+    Attributes
+    ----------
+    name : str
+    channels : tuple of str
+        EXR channel names, written as ``name.channel``.
+    miss : float
+        The value of a pixel whose centre ray hits nothing.
+    doc : str
+    """
+
+    name: str
+    channels: tuple
+    miss: float
+    doc: str
+
+
+CENTRE_PASSES = {
+    spec.name: spec for spec in (
+        CentrePass("object_id", ("id",), -1.0, "object index (Scene.object_names) at the pixel centre, -1 for none"),
+        CentrePass("material_id", ("id",), -1.0, "material index at the pixel centre, -1 for none"),
+        CentrePass("instance_id", ("id",), -1.0,
+                   "placement of a mesh at the pixel centre (the object index: every placement is an object)"),
+        CentrePass("depth_center", ("Z",), np.inf, "z-depth of the pixel-centre ray's hit, +inf for none"),
+        CentrePass("position_center", ("X", "Y", "Z"), np.nan,
+                   "world-space hit point of the pixel-centre ray, NaN for none"),
+        CentrePass("normal_center", ("X", "Y", "Z"), np.nan,
+                   "world-space unit shading normal facing the camera at the pixel centre, NaN for none"),
+        CentrePass("motion", ("X", "Y"), 0.0,
+                   "image-space motion (pixels, +x right, +y down) of the surface point at the pixel "
+                   "centre from shutter open to shutter close; 0 for none"),
+    )
+}
+# channels of the per-view passes a batch adds to its EXR files (rtmesh.batch.flow)
+VIEW_PASS_CHANNELS = {"flow_forward": ("X", "Y", "valid"), "flow_backward": ("X", "Y", "valid")}
+PASS_NAMES = tuple(REGISTRY) + tuple(DERIVED_PASSES) + tuple(CENTRE_PASSES)
 
 
 def pass_width(name):
-    """Channels of the registry or derived pass ``name``."""
-    return REGISTRY[name].width if name in REGISTRY else len(DERIVED_PASSES[name].channels)
+    """Channels of the registry, derived or centre pass ``name``."""
+    for table in (REGISTRY, DERIVED_PASSES, CENTRE_PASSES):
+        if name in table:
+            return len(table[name].channels)
+    raise KeyError(name)
 
 
 def derived_pass(name, film):
@@ -242,7 +284,8 @@ def exr_channel_names(name, width):
     """EXR channel names of a pass of ``width`` channels (registry or generic scheme)."""
     if name in REGISTRY and REGISTRY[name].width == width:
         return REGISTRY[name].exr_names()
-    channels = DERIVED_PASSES[name].channels if name in DERIVED_PASSES else None
+    table = DERIVED_PASSES if name in DERIVED_PASSES else CENTRE_PASSES
+    channels = table[name].channels if name in table else VIEW_PASS_CHANNELS.get(name)
     if channels is None or len(channels) != width:
         channels = ("Y",) if width == 1 else ("X", "Y", "Z") if width == 3 else tuple(map(str, range(width)))
     return [f"{name}.{c}" for c in channels]
@@ -309,9 +352,6 @@ class PassRecorder:
         # dielectric, the reflectance at normal incidence of a metal (what a denoiser's
         # albedo guide expects for both)
         self.diffuse = np.where(m.physical[:, None], m.base_color, m.diffuse) if len(m) else m.diffuse
-        # exact float ids: every int32 index below 2^24 is a float32 integer
-        self.object_id = scene.object_id.astype(np.float64)
-        self.material_id = scene.material_id.astype(np.float64)
 
     def __bool__(self):
         return bool(self.names)
@@ -388,11 +428,16 @@ def display_values(name, values, coverage=None):
     ``coverage`` is 0.  ``depth``: the
     nearest covered depth white, the farthest dark grey (0.1), no hit black.  ``position``:
     each axis normalised over the covered pixels' range.  ``uv``: (u, v, 0) wrapped to
-    [0, 1).  ``object_id``/``material_id``: a distinct colour per id (golden-ratio hues),
+    [0, 1).  The centre passes as their sampled twins, misses black.
+    ``object_id``/``material_id``/``instance_id``: a distinct colour per id (golden-ratio hues),
     -1 black.  ``alpha``, ``ao``: grey.  Anything else: each channel divided by its maximum.
     """
     values = np.asarray(values, dtype=np.float64)
     h, w, k = values.shape
+    if name in ("depth_center", "position_center", "normal_center"):
+        # misses are +inf or NaN: shown black, as the sampled passes show them
+        hit = np.isfinite(values).all(axis=2)
+        return display_values(name[:-len("_center")], np.where(hit[:, :, None], values, 0.0), hit.astype(np.float64))
     if name == "depth" or name == "position":
         covered = values.any(axis=2) if coverage is None else coverage > 0
         out = np.zeros((h, w, k))
@@ -414,7 +459,7 @@ def display_values(name, values, coverage=None):
         return np.clip(values, 0.0, 1.0), True
     if name == "uv":
         return np.concatenate([np.mod(values, 1.0), np.zeros((h, w, 1))], axis=2), False
-    if name in ("object_id", "material_id"):
+    if name in ("object_id", "material_id", "instance_id"):
         return id_colours(values[:, :, 0]), False
     if name in ("alpha", "ao"):
         return _rgb(np.clip(values, 0.0, 1.0)), False

@@ -527,7 +527,8 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
             mat = material_ids[key]
         else:
             mat = material
-        parts.append(MeshPart(node_name, vertices, faces, mat, normals, uv=uv, vertex_colors=colours))
+        parts.append(MeshPart(node_name, vertices, faces, mat, normals, uv=uv, vertex_colors=colours,
+                              to_world=matrix))
     for kind, names in skipped.items():
         if names:
             log.warning("%s: %s", name, _SKIPPED[kind](names))

@@ -180,7 +180,7 @@ MATERIAL_KEYS = {
     "emission": _colour, "roughness": _non_negative, "model": _one_of(*MODEL_NAMES),
 }
 OBJECT_KEYS = {
-    "name": _str, "mesh": _str,
+    "name": _str, "mesh": _str, "category": _str,
     "primitive": _one_of("icosphere", "box", "plane"),
     "subdivisions": _int, "radius": _positive, "extents": _vec3, "size": _vec2,
     "material": _str, "smooth": _bool,
@@ -443,8 +443,9 @@ def _object_parts(r, values, where, base_dir, materials, material_index):
             for part in parts:
                 part.material = remap[part.material]
             materials.extend(imported)
-        if name:
-            for part in parts:
+        for part in parts:
+            part.category = values.get("category")
+            if name:
                 part.name = name if len(parts) == 1 else f"{name}/{part.name}"
         if motion is not None:
             # the parts of one object turn about the centre of the whole object
@@ -488,7 +489,8 @@ def _object_parts(r, values, where, base_dir, materials, material_index):
     if smooth:
         normals = np.asarray(mesh.vertex_normals) @ np.linalg.inv(transform[:3, :3])
     return [MeshPart(name or f"{kind}{where[7:]}", vertices, faces,
-                     0 if material is None else material, normals, motion)]
+                     0 if material is None else material, normals, motion,
+                     category=values.get("category"), to_world=transform)]
 
 
 def _mesh_path(values, base_dir):

@@ -48,6 +48,7 @@ from rtmesh.lights.mesh_lights import emissive_mesh_light
 from rtmesh.lights.environment import EnvironmentLighting
 from rtmesh.materials.table import ALPHA_MODES
 from rtmesh.rendering.adaptive import render_rounds
+from rtmesh.rendering.centre_rays import centre_passes
 from rtmesh.rendering.chunk_state import ChunkState, Clock, scatter_add
 from rtmesh.rendering.direct_stage import DirectStage
 from rtmesh.rendering.film import Film
@@ -343,6 +344,7 @@ class Integrator:
         stats.relative_error = (float("nan") if not s.adaptive and s.spp < 2 else film.relative_error())
         passes = {name: film.pass_image(name) for name in film.pass_sums if name in s.passes}
         passes.update({name: derived_pass(name, film) for name in s.passes if name in DERIVED_PASSES})
+        passes.update(centre_passes(self, s.passes))  # exact labels: one pixel-centre ray each
         passes = {name: passes[name] for name in s.passes if name in passes}  # order asked for
         alpha = film.pass_image("alpha") if self.background.transparent else None
         noisy = None

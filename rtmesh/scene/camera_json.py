@@ -90,6 +90,36 @@ def camera_record(camera, width, height, bounds, asset_to_world=None):
     return record
 
 
+def project_points(record, points):
+    """Pixel positions of world points in the view a camera record describes.
+
+    Parameters
+    ----------
+    record : dict
+        From :func:`camera_record`.
+    points : (n, 3) float
+        World points.
+
+    Returns
+    -------
+    uv : (n, 2) float64
+        Pixel positions (pixel centres at +0.5): ``K X / X_z``, or ``K`` without the
+        division for an orthographic camera; not finite for a point in a perspective
+        camera's plane.
+    z : (n,) float64
+        Distance along the view axis (camera-frame z); a perspective camera sees only
+        points with ``z > 0``.
+    """
+    w2c, k = np.array(record["world_to_camera_opencv"]), np.array(record["K"])
+    p = np.asarray(points, dtype=np.float64) @ w2c[:3, :3].T + w2c[:3, 3]
+    z = p[:, 2]
+    xy = p[:, :2]
+    if record["projection"] != "orthographic":
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xy = xy / z[:, None]
+    return xy @ k[:2, :2].T + k[:2, 2], z
+
+
 def write_camera_json(path, record):
     """Write ``record`` as JSON, atomically (see :func:`rtmesh.io.atomic_files.write_text`).
 

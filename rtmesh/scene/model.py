@@ -42,6 +42,12 @@ class MeshPart:
         Texture coordinates per vertex ((0, 0) the bottom-left corner of an image).
     vertex_colors : (v, 4) float or None
         Linear RGBA per vertex, multiplying the material's base colour and opacity.
+    category : str or None
+        What the object is, for dataset annotations (a scene file's ``category`` key);
+        None: its ``name``.
+    to_world : (4, 4) float or None
+        The transform that placed the object's model (its file's or primitive's own
+        coordinates) in the world; None: the identity.
     """
 
     name: str
@@ -52,6 +58,8 @@ class MeshPart:
     motion: object = None
     uv: np.ndarray | None = None
     vertex_colors: np.ndarray | None = None
+    category: str | None = None
+    to_world: np.ndarray | None = None
 
 
 @dataclass
@@ -86,6 +94,11 @@ class Scene:
         them read (0, 0)).
     vertex_colors : (V, 4) float64 or None
         Linear RGBA per vertex; None when no object has any (the others read white).
+    object_categories : list of str
+        Each object's category (:attr:`MeshPart.category`, else its name); empty for a
+        scene not made by :meth:`from_parts`.
+    object_to_world : list of (4, 4) float
+        Each object's model-to-world transform (:attr:`MeshPart.to_world`).
     """
 
     vertices: np.ndarray
@@ -104,6 +117,8 @@ class Scene:
     motions: dict = field(default_factory=dict)
     uv: np.ndarray | None = None
     vertex_colors: np.ndarray | None = None
+    object_categories: list = field(default_factory=list)
+    object_to_world: list = field(default_factory=list)
 
     @property
     def bounds(self):
@@ -164,6 +179,7 @@ class Scene:
         """
         materials = list(materials) if materials else [Material()]
         vertices, faces, normals, vnormals, smooth, mat_ids, obj_ids, names = ([] for _ in range(8))
+        categories, to_world = [], []
         uvs, colours = [], []
         motions = {}
         offset = 0
@@ -218,6 +234,8 @@ class Scene:
             if part.motion is not None:
                 motions[len(names)] = _with_centre(part.motion, v[np.unique(f)])
             names.append(part.name)
+            categories.append(part.name if part.category is None else part.category)
+            to_world.append(np.eye(4) if part.to_world is None else np.asarray(part.to_world, dtype=np.float64))
             offset += len(v)
         _warn_dropped(source, dropped, empty)
         if not faces:
@@ -252,6 +270,8 @@ class Scene:
             motions=motions,
             uv=uv,
             vertex_colors=vertex_colors,
+            object_categories=categories,
+            object_to_world=to_world,
         )
         bounds, keep = framing_bounds(scene.vertices, scene.faces,
                                       None if camera is None else camera.look_at)
