@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from rtmesh.materials import ggx_albedo, lobes, models
+from rtmesh.materials import dielectric, dielectric_albedo, ggx_albedo, lobes, models
 from rtmesh.materials.table import Material
 
-TABLE = ggx_albedo.table()
+TABLE = models.tables()
 
 # one or more parameter sets of every registered model (non-delta unless marked)
 CASES = {
@@ -49,6 +49,10 @@ def _directions(n, rng, hemisphere):
 @pytest.mark.parametrize("name,i", PARAMS)
 def test_reflection_is_reciprocal(name, i):
     tag, params, _ = _rows(CASES[name][i])
+    if name == "dielectric":
+        # the energy compensation divides by the albedo at wo (not reciprocal, by design:
+        # test_compensated_interface_is_the_interface_over_its_albedo); the interface itself is
+        params[0, dielectric.COMPENSATE] = 0.0
     rng = np.random.default_rng(3)
     wo, wi = _directions(2000, rng, True), _directions(2000, rng, True)
     f_oi, _ = models.evaluate_many(tag, params, 0, TABLE, wo, wi)
@@ -161,9 +165,9 @@ def test_white_diffuse_models_reflect_everything(model, extra):
 
 def test_shipped_ggx_albedo_table_is_what_tabulate_computes():
     fresh = ggx_albedo.tabulate(ggx_albedo.MU_CELLS, ggx_albedo.ROUGHNESS_CELLS, ggx_albedo.STRATA)
-    np.testing.assert_allclose(fresh, TABLE, rtol=1e-12)
+    np.testing.assert_allclose(fresh, ggx_albedo.table(), rtol=1e-12)
     # roughness 1 at normal incidence: 1 - ln 2 in closed form
-    assert abs(TABLE[-1, ggx_albedo.MU_CELLS - 1] - (1 - math.log(2))) < 1e-3
+    assert abs(ggx_albedo.table()[-1, ggx_albedo.MU_CELLS - 1] - (1 - math.log(2))) < 1e-3
 
 
 @pytest.mark.parametrize("name,i", PARAMS)
@@ -186,3 +190,38 @@ def test_diffuse_and_transmitted_parts_lie_within_the_whole(name, i):
         through = wo[:, 2] * wi[:, 2] < 0
         np.testing.assert_allclose(transmitted[through], f[through], rtol=1e-12)
         assert not transmitted[~through].any()
+
+
+def test_compensated_interface_is_the_interface_over_its_albedo():
+    material = Material(model="dielectric", ior=1.5, roughness=0.6)
+    tag, compensated, _ = _rows(material)
+    plain = compensated.copy()
+    plain[0, dielectric.COMPENSATE] = 0.0
+    rng = np.random.default_rng(23)
+    wo, wi = _directions(500, rng, False), _directions(500, rng, False)
+    f_c, p_c = models.evaluate_many(tag, compensated, 0, TABLE, wo, wi)
+    f_p, p_p = models.evaluate_many(tag, plain, 0, TABLE, wo, wi)
+    np.testing.assert_array_equal(p_c, p_p)
+    for k in range(len(wo)):
+        e = dielectric_albedo.albedo_of(abs(wo[k, 2]), 0.6, 1.5, wo[k, 2] < 0)
+        np.testing.assert_allclose(f_c[k], f_p[k] / e, rtol=1e-12)
+
+
+@pytest.mark.parametrize("mu", [0.2, 0.7, -0.3, -0.9])
+@pytest.mark.parametrize("roughness", [0.3, 0.7, 1.0])
+def test_compensated_rough_glass_conserves_energy(mu, roughness):
+    """Reflected plus transmitted energy (transmitted radiance times eta'^2) is 1 from either
+    side, where the single-scattering interface loses up to half."""
+    tag, params, _ = _rows(Material(model="dielectric", ior=1.5, roughness=roughness))
+    n = 100000
+    wo = np.tile([math.sqrt(1 - mu * mu), 0.0, mu], (n, 1))
+    wi, weight, _, flags = models.sample_many(tag, params, 0, TABLE, wo, np.random.default_rng(29).random((n, 3)))
+    through = (flags & lobes.TRANSMISSION) != 0
+    eta_ratio = 1.5 if mu > 0 else 1.0 / 1.5
+    energy = np.where(through, weight[:, 0] * eta_ratio ** 2, weight[:, 0])
+    assert abs(energy.mean() - 1.0) < 0.02
+
+
+def test_shipped_dielectric_albedo_table_is_what_tabulate_computes():
+    np.testing.assert_allclose(dielectric_albedo.tabulate(dielectric_albedo.STRATA), dielectric_albedo.table(),
+                               rtol=1e-12)

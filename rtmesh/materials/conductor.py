@@ -39,11 +39,11 @@ def parameters(material):
 @row
 def _compensation(table, oz, wz, r, f0):
     """``f_ms wi.z`` of one channel, and the probability of the single-scattering lobe."""
-    e_o = ggx_albedo.albedo(table, oz, r)
-    e_avg = ggx_albedo.average_albedo(table, r)
+    e_o = ggx_albedo.albedo(table[0], oz, r)
+    e_avg = ggx_albedo.average_albedo(table[0], r)
     f_avg = f0 + (1.0 - f0) / 21.0
     f_ms = f_avg * f_avg * e_avg / (1.0 - f_avg * (1.0 - e_avg))
-    return (1.0 - e_o) * (1.0 - ggx_albedo.albedo(table, wz, r)) / (math.pi * max(1.0 - e_avg, 1e-7)) * f_ms * wz
+    return (1.0 - e_o) * (1.0 - ggx_albedo.albedo(table[0], wz, r)) / (math.pi * max(1.0 - e_avg, 1e-7)) * f_ms * wz
 
 
 @row
@@ -60,7 +60,7 @@ def ggx_reflection(table, ox, oy, oz, wx, wy, wz, r, f0r, f0g, f0b, compensate):
     fb = dg * lobes.schlick(f0b, o_dot_h)
     pdf_ss = masking(oz, alpha) * distribution(hz, alpha) / (4.0 * oz)
     if compensate > 0.0:
-        p_ss = ggx_albedo.albedo(table, oz, r)
+        p_ss = ggx_albedo.albedo(table[0], oz, r)
         fr += _compensation(table, oz, wz, r, f0r)
         fg += _compensation(table, oz, wz, r, f0g)
         fb += _compensation(table, oz, wz, r, f0b)
@@ -84,7 +84,7 @@ def sample_reflection(table, ox, oy, oz, u0, u1, u2, r, f0r, f0g, f0b, compensat
         return (-ox, -oy, oz, lobes.schlick(f0r, oz), lobes.schlick(f0g, oz), lobes.schlick(f0b, oz), 1.0,
                 lobes.DELTA)
     alpha = max(r * r, SMOOTH_ALPHA)
-    p_ss = ggx_albedo.albedo(table, oz, r) if compensate > 0.0 else 1.0
+    p_ss = ggx_albedo.albedo(table[0], oz, r) if compensate > 0.0 else 1.0
     if u0 < p_ss:
         hx, hy, hz = sample_visible_normal(ox, oy, oz, alpha, u1, u2)
         c = 2.0 * (ox * hx + oy * hy + oz * hz)

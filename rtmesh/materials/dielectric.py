@@ -18,13 +18,19 @@ otherwise; a smooth interface draws the mirror or refracted direction the same w
 ``tint`` multiplies transmitted light (coloured glass without a volume).  The interior's
 Beer-Lambert absorption is the path integrator's, not the interface's.
 
-Parameters: ``ior`` (inside over outside), ``roughness``, ``tint`` r, g, b.
+Energy: single-scattering GGX loses light at rough interfaces, most under total internal
+reflection; with ``compensate`` the interface's BSDF is divided by its single-scattering
+energy albedo at ``wo`` (:mod:`rtmesh.materials.dielectric_albedo`), so every event conserves
+energy (a closed rough glass object vanishes in a white furnace) and the model is no longer
+reciprocal.
+
+Parameters: ``ior`` (inside over outside), ``roughness``, ``tint`` r, g, b, ``compensate``.
 """
 
 import math
 
 from rtmesh.core.compiled import row
-from rtmesh.materials import lobes
+from rtmesh.materials import dielectric_albedo, lobes
 from rtmesh.materials.microfacet import (SMOOTH_ALPHA, distribution, masking_shadowing, sample_visible_normal,
                                          visible_normal_pdf)
 
@@ -34,13 +40,19 @@ SLOTS = {"colour": 2}
 
 def parameters(material):
     """``ior``, ``roughness`` (clamped to [0, 1]) and the transmission colour as the tint."""
-    return [float(material.ior), min(max(float(material.roughness), 0.0), 1.0), 1.0, 1.0, 1.0]
+    return [float(material.ior), min(max(float(material.roughness), 0.0), 1.0), 1.0, 1.0, 1.0, 1.0]
+
+
+# the parameter that turns the energy compensation on (1) or off (0)
+COMPENSATE = 5
 
 
 @row
-def rough_interface(ox, oy, oz, wx, wy, wz, eta, alpha):
+def rough_interface(table, ox, oy, oz, wx, wy, wz, eta, roughness, compensate):
     """``f |wi.z|`` (one channel, untinted), density, and whether ``wi`` is transmitted, of
-    a rough interface."""
+    a rough interface (divided by its energy albedo at ``wo`` when ``compensate`` > 0;
+    ``table`` is the models' table pair, :func:`rtmesh.materials.models.tables`)."""
+    alpha = roughness * roughness
     if (oz == 0.0) | (wz == 0.0):
         return 0.0, 0.0, False
     reflect = oz * wz > 0.0
@@ -64,16 +76,17 @@ def rough_interface(ox, oy, oz, wx, wy, wz, eta, alpha):
     d = distribution(hz, alpha)
     g = masking_shadowing(oz, wz, alpha)
     visible = visible_normal_pdf(oz, hz, o_dot_h, alpha)
+    scale = 1.0 / dielectric_albedo.albedo(table[1], abs(oz), roughness, eta, oz < 0.0) if compensate > 0.0 else 1.0
     if reflect:
-        return d * g * f / (4.0 * abs(oz)), visible / (4.0 * abs(o_dot_h)) * f, False
+        return d * g * f / (4.0 * abs(oz)) * scale, visible / (4.0 * abs(o_dot_h)) * f, False
     denom = i_dot_h + o_dot_h / etap
     denom *= denom
     value = (1.0 - f) * d * g * abs(i_dot_h * o_dot_h / (oz * denom)) / (etap * etap)
-    return value, visible * abs(i_dot_h) / denom * (1.0 - f), True
+    return value * scale, visible * abs(i_dot_h) / denom * (1.0 - f), True
 
 
 @row
-def sample_interface(ox, oy, oz, u0, u1, u2, eta, roughness):
+def sample_interface(table, ox, oy, oz, u0, u1, u2, eta, roughness, compensate):
     """Draw ``wi`` at a smooth or rough interface: ``(wx, wy, wz, weight, pdf, flags)``, the
     weight one number (untinted)."""
     alpha = roughness * roughness
@@ -99,7 +112,7 @@ def sample_interface(ox, oy, oz, u0, u1, u2, eta, roughness):
         if (not ok) or not oz * wz < 0.0:
             return wx, wy, wz, 0.0, 0.0, lobes.FAILED
         flags = lobes.GLOSSY | lobes.TRANSMISSION
-    value, pdf, _ = rough_interface(ox, oy, oz, wx, wy, wz, eta, alpha)
+    value, pdf, _ = rough_interface(table, ox, oy, oz, wx, wy, wz, eta, roughness, compensate)
     if not pdf > 0.0:
         return wx, wy, wz, 0.0, 0.0, lobes.FAILED
     return wx, wy, wz, value / pdf, pdf, flags
@@ -111,7 +124,8 @@ def evaluate(params, m, table, ox, oy, oz, wx, wy, wz):
     alpha = params[m, 1] * params[m, 1]
     if alpha < SMOOTH_ALPHA:
         return 0.0, 0.0, 0.0, 0.0
-    value, pdf, transmitted = rough_interface(ox, oy, oz, wx, wy, wz, params[m, 0], alpha)
+    value, pdf, transmitted = rough_interface(table, ox, oy, oz, wx, wy, wz, params[m, 0], params[m, 1],
+                                              params[m, COMPENSATE])
     if transmitted:
         return value * params[m, 2], value * params[m, 3], value * params[m, 4], pdf
     return value, value, value, pdf
@@ -120,7 +134,8 @@ def evaluate(params, m, table, ox, oy, oz, wx, wy, wz):
 @row
 def sample(params, m, table, ox, oy, oz, u0, u1, u2):
     """Draw ``wi``: ``(wx, wy, wz, weight r, g, b, pdf, flags)``."""
-    wx, wy, wz, weight, pdf, flags = sample_interface(ox, oy, oz, u0, u1, u2, params[m, 0], params[m, 1])
+    wx, wy, wz, weight, pdf, flags = sample_interface(table, ox, oy, oz, u0, u1, u2, params[m, 0], params[m, 1],
+                                                      params[m, COMPENSATE])
     if flags & lobes.TRANSMISSION:
         return wx, wy, wz, weight * params[m, 2], weight * params[m, 3], weight * params[m, 4], pdf, flags
     return wx, wy, wz, weight, weight, weight, pdf, flags

@@ -47,8 +47,8 @@ def evaluate(params, m, table, ox, oy, oz, wx, wy, wz):
                                            params[m, 2], params[m, 3], params[m, 4], params[m, 6])
         pdf *= 1.0 - t
     if t > 0.0 and params[m, 5] * params[m, 5] >= dielectric.SMOOTH_ALPHA:
-        value, p, transmitted = dielectric.rough_interface(ox, oy, oz, wx, wy, wz, params[m, 7],
-                                                           params[m, 5] * params[m, 5])
+        value, p, transmitted = dielectric.rough_interface(table, ox, oy, oz, wx, wy, wz, params[m, 7],
+                                                           params[m, 5], 1.0)
         if transmitted:
             fr += t * value * params[m, 0]
             fg += t * value * params[m, 1]
@@ -68,8 +68,8 @@ def sample(params, m, table, ox, oy, oz, u0, u1, u2):
     if u0 < t or not oz > 0.0:
         if t <= 0.0:
             return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, lobes.FAILED
-        wx, wy, wz, weight, pdf, flags = dielectric.sample_interface(ox, oy, oz, min(u0 / t, 1.0), u1, u2,
-                                                                     params[m, 7], params[m, 5])
+        wx, wy, wz, weight, pdf, flags = dielectric.sample_interface(table, ox, oy, oz, min(u0 / t, 1.0), u1, u2,
+                                                                     params[m, 7], params[m, 5], 1.0)
         if flags & lobes.DELTA or flags == lobes.FAILED:
             if flags & lobes.TRANSMISSION:
                 return wx, wy, wz, weight * params[m, 0], weight * params[m, 1], weight * params[m, 2], pdf, flags
@@ -100,7 +100,7 @@ def parts(params, m, table, ox, oy, oz, wx, wy, wz):
         dr, dg, db = d * params[m, 0], d * params[m, 1], d * params[m, 2]
     t = params[m, 6] * (1.0 - params[m, 3])
     if t > 0.0 and oz * wz < 0.0 and params[m, 5] * params[m, 5] >= dielectric.SMOOTH_ALPHA:
-        value, _, _ = dielectric.rough_interface(ox, oy, oz, wx, wy, wz, params[m, 7], params[m, 5] * params[m, 5])
+        value, _, _ = dielectric.rough_interface(table, ox, oy, oz, wx, wy, wz, params[m, 7], params[m, 5], 1.0)
         tr, tg, tb = t * value * params[m, 0], t * value * params[m, 1], t * value * params[m, 2]
     return dr, dg, db, tr, tg, tb
 

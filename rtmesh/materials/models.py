@@ -12,8 +12,8 @@ A model module (:mod:`~rtmesh.materials.lambert`, :mod:`~rtmesh.materials.oren_n
 - ``SLOTS``: which parameters image textures scale per hit (:data:`SLOT_NAMES`: the colour
   the base-colour texture and vertex colours multiply, the specular and mirror colours,
   glTF's metallic, roughness and the alpha formed from it);
-- compiled rows (``@row``) taking the parameter table, the material's row index, the GGX
-  albedo table (:mod:`~rtmesh.materials.ggx_albedo`) and local-frame directions:
+- compiled rows (``@row``) taking the parameter table, the material's row index, the pair of
+  energy tables (:func:`tables`) and local-frame directions:
   ``evaluate(params, m, table, wo..., wi...) -> f|cos| r, g, b, pdf``,
   ``sample(params, m, table, wo..., u0, u1, u2) -> wi..., weight r, g, b, pdf, flags``,
   ``parts(params, m, table, wo..., wi...) -> diffuse r, g, b, transmission r, g, b``, the
@@ -30,7 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from rtmesh.core.compiled import kernel, row
-from rtmesh.materials import conductor, dielectric, gltf_pbr, lambert, lobes, oren_nayar, phong
+from rtmesh.materials import (conductor, dielectric, dielectric_albedo, ggx_albedo, gltf_pbr, lambert, lobes, oren_nayar,
+                              phong)
 
 # the order gives the tags: 0 .. len - 1
 MODULES = (phong, gltf_pbr, lambert, oren_nayar, conductor, dielectric)
@@ -66,6 +67,13 @@ COLOUR_SLOT, SPECULAR_SLOT, MIRROR_SLOT, METALLIC_SLOT, ROUGHNESS_SLOT, ALPHA_SL
 
 REGISTRY = {module.NAME: MaterialModel(module.NAME, tag, module) for tag, module in enumerate(MODULES)}
 MODEL_NAMES = tuple(REGISTRY)
+
+
+def tables():
+    """The energy tables the models read, as the one ``table`` argument of the rows: the GGX
+    albedo of :mod:`~rtmesh.materials.ggx_albedo` (rough metals) and the interface albedo of
+    :mod:`~rtmesh.materials.dielectric_albedo` (rough glass)."""
+    return ggx_albedo.table(), dielectric_albedo.table()
 
 
 def material_rows(materials):

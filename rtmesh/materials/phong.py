@@ -89,7 +89,7 @@ def evaluate(params, m, table, ox, oy, oz, wx, wy, wz):
                                                       params[m, 8], params[m, 9], 0.0)
             fr, fg, fb, pdf = fr + gr, fg + gg, fb + gb, pdf + pr * gp
     if pt > 0.0 and rough * rough >= dielectric.SMOOTH_ALPHA:
-        value, p, _ = dielectric.rough_interface(ox, oy, oz, wx, wy, wz, params[m, 13], rough * rough)
+        value, p, _ = dielectric.rough_interface(table, ox, oy, oz, wx, wy, wz, params[m, 13], rough, 1.0)
         fr += params[m, 10] * value
         fg += params[m, 11] * value
         fb += params[m, 12] * value
@@ -107,7 +107,8 @@ def sample(params, m, table, ox, oy, oz, u0, u1, u2):
         if not pt > 0.0:
             return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, lobes.FAILED
         u = min(max((u0 - (pd + ps + pr)) / pt, 0.0), 1.0) if oz > 0.0 else u0
-        wx, wy, wz, weight, pdf, flags = dielectric.sample_interface(ox, oy, oz, u, u1, u2, params[m, 13], rough)
+        wx, wy, wz, weight, pdf, flags = dielectric.sample_interface(table, ox, oy, oz, u, u1, u2, params[m, 13],
+                                                                     rough, 1.0)
         if flags == lobes.FAILED:
             return wx, wy, wz, 0.0, 0.0, 0.0, 0.0, flags
         if flags & lobes.DELTA:
@@ -154,7 +155,7 @@ def parts(params, m, table, ox, oy, oz, wx, wy, wz):
         dr, dg, db = params[m, 0] * c, params[m, 1] * c, params[m, 2] * c
     rough = _glossy_roughness(params, m)
     if pt > 0.0 and oz * wz < 0.0 and rough * rough >= dielectric.SMOOTH_ALPHA:
-        value, _, _ = dielectric.rough_interface(ox, oy, oz, wx, wy, wz, params[m, 13], rough * rough)
+        value, _, _ = dielectric.rough_interface(table, ox, oy, oz, wx, wy, wz, params[m, 13], rough, 1.0)
         tr, tg, tb = params[m, 10] * value, params[m, 11] * value, params[m, 12] * value
     return dr, dg, db, tr, tg, tb
 

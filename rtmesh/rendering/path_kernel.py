@@ -554,15 +554,16 @@ def _path_signatures():
     from rtmesh.geometry.embree_packets import numba_typeof_query
 
     f64 = types.float64
+    z = np.zeros
     rows = types.Array(f64, 2, "C")
-    bsdf_args = (types.int64, rows, types.int64, rows)
+    energy = (z((2, 3)), z((2, 2, 2, 2)))
+    bsdf_args = (types.int64, rows, types.int64, numba.typeof(energy))
     evaluate = bsdf_args + (f64,) * 6
     sample = bsdf_args + (f64,) * 6
-    z = np.zeros
     geometry = (z((1, 9)), z((1, 3)), z((0, 3)), z((1, 3), np.int32), z(0, bool), z(1, np.int32), z((0, 6)),
                 z((0, 12)), z((0, 6)))
     surface = (z(1, np.int64), z((1, lobes.PARAMETER_WIDTH)), z(1, bool), z((1, 3)), z((1, 3)), z((1, 4)),
-               z((2, 3)), z((1, 6), np.int64), z((1, 6), np.int64), z(1), z(1, np.int64), z(1), z(1),
+               energy, z((1, 6), np.int64), z((1, 6), np.int64), z(1), z(1, np.int64), z(1), z(1),
                z(1, np.float32), z((1, 12)))
     lights = (z((1, lt.WIDTH)), z(1), z(1, np.int64), z(1), z(1, np.int64), z(0, np.int64), -1)
     env = (z((1, 3, 3)), z(2), z((1, 2)), z((1, 1)), 1.0, 1.0, 0.0)

@@ -20,8 +20,7 @@ from rtmesh.io.texture_atlas import TextureAtlas
 from rtmesh.lights.environment import EnvironmentLighting
 from rtmesh.lights.light_table import EnvironmentTables, LightTable
 from rtmesh.lights.mesh_lights import MeshLight
-from rtmesh.materials import ggx_albedo
-from rtmesh.materials.models import SLOTS, material_rows
+from rtmesh.materials.models import SLOTS, material_rows, tables
 from rtmesh.io.passes import LIGHT_PATH_PASSES
 from rtmesh.rendering.path_kernel import BOUNCE, CAMERA, LIGHT_PATHS, PATH_KERNELS, SHADOW, trace_paths
 from rtmesh.rendering.path_surfaces import TEXTURE_COLUMNS
@@ -101,7 +100,7 @@ def scene_tables(scene, accel):
     geometry = (np.ascontiguousarray(triangles), np.ascontiguousarray(scene.face_normals, dtype=np.float64),
                 vertex_normals, np.ascontiguousarray(faces), smooth, material_id, face_uv, face_colours, tangents)
     surface = (tags, params, transmissive, np.ascontiguousarray(m.emission), np.ascontiguousarray(m.absorption),
-               unlit, ggx_albedo.table(), SLOTS, material_textures, np.ascontiguousarray(metal_tint, dtype=np.float64),
+               unlit, tables(), SLOTS, material_textures, np.ascontiguousarray(metal_tint, dtype=np.float64),
                np.ascontiguousarray(m.alpha_mode, dtype=np.int64), np.ascontiguousarray(m.alpha_cutoff),
                np.ascontiguousarray(m.opacity), atlas.texels, atlas.descriptors)
     # what each face emits on average (emission textures by their mean), for choosing lights by power
