@@ -94,15 +94,61 @@ def test_images_do_not_depend_on_the_thread_count(sphere):
     assert np.array_equal(one, two)
 
 
-def test_path_refuses_what_it_cannot_render_yet(sphere):
+def _moving_sphere(sphere, shutter, motion):
     from rtmesh.geometry.motion import Motion
 
-    scene = Scene.from_parts([MeshPart("s", sphere.vertices, sphere.faces, 0,
-                                       motion=Motion(translate=(0.1, 0.0, 0.0)))],
-                             materials=[Material("m", model="lambert")], lights=[],
-                             camera=Camera(np.array([0.0, 0.0, 3.2]), np.zeros(3), np.array([0.0, 1.0, 0.0]),
-                                           shutter=(0.0, 1.0)), background=1.0)
-    with pytest.raises(SceneError, match="integrator 'path' does not render motion blur"):
+    floor = trimesh.creation.box(extents=(8.0, 0.1, 8.0))
+    floor.apply_translation((0.0, -1.05, 0.0))
+    camera = Camera(np.array([0.0, 1.5, 5.0]), np.zeros(3), np.array([0.0, 1.0, 0.0]), fov=45.0, shutter=shutter)
+    parts = [MeshPart("s", sphere.vertices, sphere.faces, 0, vertex_normals=sphere.vertex_normals,
+                      motion=Motion(**motion)),
+             MeshPart("floor", floor.vertices, floor.faces, 1)]
+    materials = [Material("m", model="conductor", mirror=(0.9, 0.6, 0.3), roughness=0.3),
+                 Material("g", model="lambert", diffuse=0.6)]
+    from rtmesh.lights.point_lights import PointLight
+    return Scene.from_parts(parts, materials=materials, lights=[PointLight((2.0, 4.0, 2.0), 30.0)], camera=camera,
+                            background=0.4)
+
+
+def test_motion_blur_is_the_average_of_the_instants(sphere):
+    """A sphere sliding over a floor (shadow and reflections move with it): the blurred image
+    is the mean of the scene frozen at eight instants of the shutter."""
+    from rtmesh.geometry.motion import scene_at_time
+
+    blurred_scene = _moving_sphere(sphere, (0.0, 1.0), {"translate": (1.5, 0.0, 0.0)})
+    blurred = _mean(blurred_scene, spp=128, size=32, integrator="path")
+    frozen = np.mean([_mean(scene_at_time(blurred_scene, (k + 0.5) / 8), spp=16, size=32, integrator="path")
+                      for k in range(8)], axis=0)
+    blocks = lambda image: image.reshape(4, 8, 4, 8, 3).mean(axis=(1, 3))
+    error = np.sqrt(np.mean((blocks(blurred) - blocks(frozen)) ** 2)) / blocks(frozen).mean()
+    assert error < 0.02
+    # and blur is there: the blurred image differs from either end of the shutter
+    start = _mean(scene_at_time(blurred_scene, 0.0), spp=16, size=32, integrator="path")
+    assert np.abs(blocks(blurred) - blocks(start)).max() > 0.05
+
+
+def test_a_sphere_spinning_about_its_centre_looks_still(sphere):
+    still = _mean(_moving_sphere(sphere, (0.0, 0.0), {}), spp=64, size=24, integrator="path")
+    spinning = _mean(_moving_sphere(sphere, (0.0, 1.0), {"axis": (0.0, 1.0, 0.0), "degrees": 90.0,
+                                                         "centre": (0.0, 0.0, 0.0)}),
+                     spp=64, size=24, integrator="path")
+    assert abs(spinning.mean() / still.mean() - 1.0) < 0.01
+
+
+def test_motion_blur_does_not_depend_on_the_thread_count(sphere):
+    scene = _moving_sphere(sphere, (0.0, 1.0), {"translate": (1.0, 0.0, 0.5), "axis": (0.0, 0.0, 1.0),
+                                                "degrees": 40.0})
+    one = Integrator(scene, RenderSettings(width=16, height=12, spp=4, threads=1, integrator="path",
+                                           chunk_samples=128)).render().image
+    two = Integrator(scene, RenderSettings(width=16, height=12, spp=4, threads=2, integrator="path",
+                                           chunk_samples=128)).render().image
+    assert np.array_equal(one, two)
+
+
+def test_path_refuses_what_it_cannot_render_yet(sphere):
+    scene = _moving_sphere(sphere, (0.0, 1.0), {"translate": (1.0, 0.0, 0.0)})
+    scene.materials.emission[0] = 1.0  # a moving emitter
+    with pytest.raises(SceneError, match="integrator 'path' does not render moving emitters"):
         Integrator(scene, RenderSettings(width=8, height=8, spp=1, integrator="path"))
 
 

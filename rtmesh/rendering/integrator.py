@@ -531,20 +531,25 @@ class Integrator:
         the passes come from the camera rays' first hits, as on the Whitted path."""
         origins, directions = self._camera_rays(pixel, sample_in_pixel)
         n = len(pixel)
+        times = None
+        if self.plan.motion:
+            # one time per camera sample, stratified per pixel, as on the Whitted path
+            t_open, t_close = self.camera.shutter
+            times = t_open + (t_close - t_open) * self.sampler.time(pixel, sample_in_pixel)
         clock.lap("camera")
         buffers = self.passes.buffers(n) if self.plan.passes else None
-        radiance = self.path_stage.render(origins, directions, pixel, sample_in_pixel, stats, buffers)
+        radiance = self.path_stage.render(origins, directions, pixel, sample_in_pixel, stats, buffers, times)
         clock.lap("direct")
         if self.plan.passes and any(spec.producer is not None for spec in self.passes.specs):
             # the camera-hit passes (the kernel writes the light-path passes itself)
             chunk = ChunkState(radiance, buffers, pixel, sample_in_pixel, stats, clock, None)
             rays = RayBatch(origins, directions, np.arange(n, dtype=np.int64), repeated_row(_UNIT_THROUGHPUT, n),
                             repeated_row(self._camera_medium, n))
-            hits = self.accel.intersect(origins, directions)
+            hits = self.accel.intersect(origins, directions, times)
             hit = hits.prim >= 0
             rows = None if hit.all() else np.flatnonzero(hit)
             if len(hit) and hit.any():
-                srf = self.surface_stage.records(rays, hits, rows, None)
+                srf = self.surface_stage.records(rays, hits, rows, times)
                 self.passes.record(chunk.passes, srf, hits, rows)
             clock.lap("passes")
         if ragged:

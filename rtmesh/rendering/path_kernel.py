@@ -26,7 +26,16 @@ Records (tuples of arrays, built once by :class:`rtmesh.rendering.path_stage.Pat
 ``lights = (rows, probability, alias, pmf, face_light, analytic, environment)``
 (:class:`rtmesh.lights.light_table.LightTable`); ``env = (pixels, marginal, conditional,
 func, mean, cos_rotation, sin_rotation)`` (:class:`rtmesh.lights.light_table.EnvironmentTables`);
-``options = (max_depth, rr_depth, clamp, offset_scale, background_seen, cutouts, split)``.
+``options = (max_depth, rr_depth, clamp, offset_scale, background_seen, cutouts, split)``;
+``motion = (static, static_faces, movers, face_maps, face_offsets, moves, face_mover)``:
+whether the static scene exists (the packet queries' ``scene`` is its handle), its faces'
+global indices (empty: the identity), the moving objects' Embree scenes (k,) int64, their
+faces' global indices (concatenated, with offsets (k + 1,)), their motions ``moves``
+(k, 10): translation per unit time, unit axis, radians per unit time, centre, and each
+face's mover (-1: static).  A ray then meets the static scene and every mover, each traced
+in its rest pose at the lane's time (rigid motions keep distances), the nearest hit wins,
+and its point and normals are carried to the lane's time (as
+:class:`rtmesh.geometry.motion.MotionAccel`).
 
 With ``split``, every contribution is also added to one of the light-path passes
 (:data:`rtmesh.io.passes.LIGHT_PATH_PASSES`, which sum to the image): what the camera ray
@@ -149,6 +158,45 @@ def sample_li(light, env, px, py, pz, u1, u2):
     return dx, dy, dz, distance, light[lt.RADIANCE], light[lt.RADIANCE + 1], light[lt.RADIANCE + 2], pdf, False
 
 
+@row
+def _rotate(vx, vy, vz, ax, ay, az, angle):
+    """``v`` rotated about the unit axis ``a`` by ``angle`` radians (Rodrigues, as
+    :func:`rtmesh.geometry.motion.rotate`)."""
+    cos, sin = math.cos(angle), math.sin(angle)
+    cx, cy, cz = ay * vz - az * vy, az * vx - ax * vz, ax * vy - ay * vx
+    along = ((vx * ax + vy * ay) + vz * az) * (1.0 - cos)
+    return vx * cos + cx * sin + ax * along, vy * cos + cy * sin + ay * along, vz * cos + cz * sin + az * along
+
+
+@inline_row
+def _to_rest(moves, j, time, px, py, pz, dx, dy, dz):
+    """A world ray at ``time`` in mover ``j``'s rest frame (origin and direction)."""
+    tx, ty, tz = moves[j, 0], moves[j, 1], moves[j, 2]
+    ax, ay, az, radians = moves[j, 3], moves[j, 4], moves[j, 5], moves[j, 6]
+    cx, cy, cz = moves[j, 7], moves[j, 8], moves[j, 9]
+    px, py, pz = px - time * tx, py - time * ty, pz - time * tz
+    if radians == 0.0:
+        return px, py, pz, dx, dy, dz
+    angle = -radians * time
+    qx, qy, qz = _rotate(px - cx, py - cy, pz - cz, ax, ay, az, angle)
+    ex, ey, ez = _rotate(dx, dy, dz, ax, ay, az, angle)
+    return qx + cx, qy + cy, qz + cz, ex, ey, ez
+
+
+@inline_row
+def _to_world(moves, j, time, px, py, pz, gx, gy, gz, nx, ny, nz):
+    """A rest-pose surface point and its two normals carried to ``time`` by mover ``j``."""
+    ax, ay, az, radians = moves[j, 3], moves[j, 4], moves[j, 5], moves[j, 6]
+    if radians != 0.0:
+        angle = radians * time
+        cx, cy, cz = moves[j, 7], moves[j, 8], moves[j, 9]
+        px, py, pz = _rotate(px - cx, py - cy, pz - cz, ax, ay, az, angle)
+        px, py, pz = px + cx, py + cy, pz + cz
+        gx, gy, gz = _rotate(gx, gy, gz, ax, ay, az, angle)
+        nx, ny, nz = _rotate(nx, ny, nz, ax, ay, az, angle)
+    return (px + time * moves[j, 0], py + time * moves[j, 1], pz + time * moves[j, 2], gx, gy, gz, nx, ny, nz)
+
+
 @inline_row
 def _add(total, lane, r, g, b):
     total[lane, 0] += r
@@ -213,8 +261,8 @@ def _shadows_through_cutouts(intersect16, scene, args, shadow, shadow_words, sha
 
 
 @kernel
-def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geometry, surface, lights, env, options,
-                radiance, light_paths, counts):
+def trace_paths(intersect16, occluded16, scene, origins, directions, keys, times, geometry, surface, lights, env,
+                options, motion, radiance, light_paths, counts):
     """Trace one path per camera ray and write its radiance.
 
     Parameters
@@ -227,7 +275,9 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geome
         Camera rays in the re-centred frame (unit directions).
     keys : (n,) uint64
         Each sample's random key (:func:`rtmesh.sampling.hashing.path_key`).
-    geometry, surface, lights, env, options : tuples
+    times : (n,) float64, or (0,)
+        Each sample's time in the shutter (scenes with moving objects).
+    geometry, surface, lights, env, options, motion : tuples
         The records described in the module notes.
     radiance : (n, 3) float64
         Output.
@@ -248,12 +298,21 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geome
     light_rows, light_probability, light_alias, light_pmf, face_light, analytic, env_light = lights
     max_depth, rr_depth, clamp, offset_scale, background_seen, cutouts, split = options
     env_pixels, env_marginal, env_conditional, env_func, env_mean, env_cos, env_sin = env
+    has_static, static_faces, movers, face_maps, face_offsets, moves, face_mover = motion
     has_lights = len(light_rows) > 0
     ray, words, valid, args_coherent = packet_buffers(np.int64(RAYHIT_WORDS), np.int64(1),
                                                       np.int64(RTC_RAY_QUERY_FLAG_COHERENT))
     args_incoherent = query_arguments(np.int64(RTC_RAY_QUERY_FLAG_INCOHERENT))
     shadow, shadow_words, shadow_valid, _ = packet_buffers(np.int64(RAYHIT_WORDS), np.int64(1),
                                                            np.int64(RTC_RAY_QUERY_FLAG_INCOHERENT))
+    # a mover's packet (its rest frame), and the nearest hit of each lane over the scenes
+    rest, rest_words, rest_valid, _ = packet_buffers(np.int64(RAYHIT_WORDS), np.int64(1),
+                                                     np.int64(RTC_RAY_QUERY_FLAG_INCOHERENT))
+    best_t = np.zeros(LANES)
+    best_prim = np.zeros(LANES, np.int64)
+    best_u = np.zeros(LANES)
+    best_v = np.zeros(LANES)
+    lane_time = np.zeros(LANES)
     scratch = np.zeros((LANES, lobes.PARAMETER_WIDTH))
     px = np.zeros(LANES)
     py = np.zeros(LANES)
@@ -292,6 +351,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geome
                 prev_delta[lane] = True
                 lane_depth[lane] = 0
                 layers[lane] = 0
+                lane_time[lane] = times[i] if len(times) else 0.0
         first = True
         while True:
             active = 0
@@ -309,7 +369,35 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geome
                 break
             args = args_coherent if first else args_incoherent
             first = False
-            intersect16(valid.ctypes.data, scene, ray.ctypes.data, args.ctypes.data)
+            if has_static:
+                intersect16(valid.ctypes.data, scene, ray.ctypes.data, args.ctypes.data)
+            for lane in range(LANES):
+                best_t[lane] = math.inf
+                best_prim[lane] = -1
+                if valid[lane] and has_static and words[GEOM_ID * LANES + lane] != INVALID_ID:
+                    best_t[lane] = np.float64(ray[TFAR * LANES + lane])
+                    local = words[PRIM_ID * LANES + lane]
+                    best_prim[lane] = static_faces[local] if len(static_faces) else local
+                    best_u[lane] = np.float64(ray[U * LANES + lane])
+                    best_v[lane] = np.float64(ray[V * LANES + lane])
+            for j in range(len(movers)):
+                for lane in range(LANES):
+                    rest_valid[lane] = valid[lane]
+                    if valid[lane]:
+                        ox, oy, oz, ex, ey, ez = _to_rest(moves, j, lane_time[lane], px[lane], py[lane], pz[lane],
+                                                          dx[lane], dy[lane], dz[lane])
+                        set_lane(rest, rest_words, lane, ox, oy, oz, ex, ey, ez,
+                                 np.float32(min(best_t[lane], np.float64(DEFAULT_TFAR))))
+                        clear_hit(rest_words, lane)
+                intersect16(rest_valid.ctypes.data, movers[j], rest.ctypes.data, args_incoherent.ctypes.data)
+                for lane in range(LANES):
+                    if rest_valid[lane] and rest_words[GEOM_ID * LANES + lane] != INVALID_ID:
+                        tm = np.float64(rest[TFAR * LANES + lane])
+                        if tm < best_t[lane]:  # the static scene wins ties
+                            best_t[lane] = tm
+                            best_prim[lane] = face_maps[face_offsets[j] + rest_words[PRIM_ID * LANES + lane]]
+                            best_u[lane] = np.float64(rest[U * LANES + lane])
+                            best_v[lane] = np.float64(rest[V * LANES + lane])
             shadows = 0
             for lane in range(LANES):
                 shadow_valid[lane] = 0
@@ -319,8 +407,8 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geome
                 depth = lane_depth[lane]
                 base = DIMENSIONS_PER_VERTEX * depth
                 limit = clamp if depth > 1 else 0.0
-                hit = words[GEOM_ID * LANES + lane] != INVALID_ID
-                t = np.float64(ray[TFAR * LANES + lane]) if hit else math.inf
+                hit = best_prim[lane] >= 0
+                t = best_t[lane]
                 # a visible quad or disk light before the surface ends the path there
                 seen = -1
                 for k in range(len(analytic)):
@@ -357,11 +445,13 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geome
                         _add_path(paths, split, lane, _bucket(depth, category[lane]), r, g, b)
                     alive[lane] = False
                     continue
-                prim = words[PRIM_ID * LANES + lane]
-                bu = np.float64(ray[U * LANES + lane])
-                bv = np.float64(ray[V * LANES + lane])
+                prim = best_prim[lane]
+                bu, bv = best_u[lane], best_v[lane]
                 mat = material_id[prim]
                 hx, hy, hz, gx, gy, gz, nx, ny, nz = surface_point(geometry, prim, bu, bv)
+                if len(face_mover) and face_mover[prim] >= 0:
+                    hx, hy, hz, gx, gy, gz, nx, ny, nz = _to_world(moves, face_mover[prim], lane_time[lane], hx, hy, hz,
+                                                                   gx, gy, gz, nx, ny, nz)
                 if cutouts and layers[lane] + 1 < MAX_LAYERS and is_transparent(
                         surface, geometry, mat, prim, bu, bv, _layer_coin(key, depth, layers[lane], _COVERAGE)):
                     # the ray passes this layer: on from just beyond it, same depth
@@ -531,9 +621,27 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, geome
                             if split:
                                 paths[lane] += pending_paths[lane]
                 else:
-                    occluded16(shadow_valid.ctypes.data, scene, shadow.ctypes.data, args_incoherent.ctypes.data)
+                    if has_static:
+                        occluded16(shadow_valid.ctypes.data, scene, shadow.ctypes.data, args_incoherent.ctypes.data)
+                        for lane in range(LANES):
+                            if shadow_valid[lane] and shadow[TFAR * LANES + lane] == -np.inf:
+                                shadow_valid[lane] = 0
+                    for j in range(len(movers)):
+                        for lane in range(LANES):
+                            rest_valid[lane] = shadow_valid[lane]
+                            if shadow_valid[lane]:
+                                ox, oy, oz, ex, ey, ez = _to_rest(
+                                    moves, j, lane_time[lane], np.float64(shadow[lane]),
+                                    np.float64(shadow[LANES + lane]), np.float64(shadow[2 * LANES + lane]),
+                                    np.float64(shadow[4 * LANES + lane]), np.float64(shadow[5 * LANES + lane]),
+                                    np.float64(shadow[6 * LANES + lane]))
+                                set_lane(rest, rest_words, lane, ox, oy, oz, ex, ey, ez, np.float32(reach[lane]))
+                        occluded16(rest_valid.ctypes.data, movers[j], rest.ctypes.data, args_incoherent.ctypes.data)
+                        for lane in range(LANES):
+                            if rest_valid[lane] and rest[TFAR * LANES + lane] == -np.inf:
+                                shadow_valid[lane] = 0
                     for lane in range(LANES):
-                        if shadow_valid[lane] and not shadow[TFAR * LANES + lane] == -np.inf:
+                        if shadow_valid[lane]:
                             _add(total, lane, pending[lane, 0], pending[lane, 1], pending[lane, 2])
                             if split:
                                 paths[lane] += pending_paths[lane]
@@ -568,9 +676,10 @@ def _path_signatures():
     lights = (z((1, lt.WIDTH)), z(1), z(1, np.int64), z(1), z(1, np.int64), z(0, np.int64), -1)
     env = (z((1, 3, 3)), z(2), z((1, 2)), z((1, 1)), 1.0, 1.0, 0.0)
     options = (-1, 3, 0.0, np.float32(1.0), True, False, False)
+    motion = (True, z(0, np.int64), z(0, np.int64), z(0, np.int64), z(1, np.int64), z((0, 10)), z(0, np.int64))
     query = numba_typeof_query()
-    trace = (query, query, types.int64, rows, rows, types.Array(types.uint64, 1, "C")) + tuple(
-        numba.typeof(record) for record in (geometry, surface, lights, env, options)) + (
+    trace = (query, query, types.int64, rows, rows, types.Array(types.uint64, 1, "C"), types.Array(f64, 1, "C")) + tuple(
+        numba.typeof(record) for record in (geometry, surface, lights, env, options, motion)) + (
         rows, types.Array(f64, 3, "C"), types.Array(types.int64, 1, "C"))
     return [(models.evaluate, evaluate), (trace_paths, trace), (models.sample, sample), (models.parts, evaluate)]
 

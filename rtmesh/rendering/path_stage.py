@@ -8,13 +8,14 @@ view.  Per chunk, the camera rays come from the camera (every sampler, depth of 
 orthographic), then one kernel call traces every path of the chunk.
 
 What the path integrator does not render yet gives one clear error when the render is set
-up (a :class:`~rtmesh.core.errors.SceneError`), never a wrong image: motion blur and
-projector lights.
+up (a :class:`~rtmesh.core.errors.SceneError`), never a wrong image: projector lights,
+moving emitters and moving objects with alpha cut-outs.
 """
 
 import numpy as np
 
 from rtmesh.core.errors import SceneError
+from rtmesh.geometry import embree_library
 from rtmesh.geometry.cutouts import CutoutAccel
 from rtmesh.io.texture_atlas import TextureAtlas
 from rtmesh.lights.environment import EnvironmentLighting
@@ -35,10 +36,15 @@ def unsupported(it):
     """What of the scene and settings the path integrator cannot render yet (a list of
     phrases, empty when it can render everything)."""
     missing = []
-    if it.motion is not None:
-        missing.append("motion blur")
-    elif not _packet_accel(it.accel).packets:
+    if not embree_library.packet_library():
         missing.append("the single-ray Embree path (RTMESH_EMBREE=run)")
+    if it.motion is not None:
+        m = it.scene.materials
+        if it.cutouts is not None:
+            missing.append("moving objects with alpha cut-outs")
+        emits = (m.emission > 0).any(axis=1)[it.scene.material_id]
+        if (emits & (it.motion.face_mover >= 0)).any():
+            missing.append("moving emitters")
     if any(not isinstance(light, MeshLight) and not hasattr(light, "corner") and not hasattr(light, "radius")
            and light.kernel_row() is None for light in it.view_lights):
         missing.append("projector lights")
@@ -48,6 +54,29 @@ def unsupported(it):
 def _packet_accel(accel):
     """The Embree scene under a cut-out wrapper (the kernel handles cut-outs itself)."""
     return accel.accel if isinstance(accel, CutoutAccel) else accel
+
+
+def motion_record(it):
+    """The kernel's ``motion`` record (:mod:`rtmesh.rendering.path_kernel`) and the handle
+    of the static scene: everything static without moving objects."""
+    z = np.zeros
+    m = it.motion
+    if m is None:
+        return (True, z(0, np.int64), z(0, np.int64), z(0, np.int64), z(1, np.int64), z((0, 10)),
+                z(0, np.int64)), _packet_accel(it.accel)._shared.handle
+    moves = np.zeros((len(m.movers), 10))
+    for j, mover in enumerate(m.movers):
+        motion = mover.motion
+        moves[j, 0:3] = motion.translate
+        if motion.rotates:
+            moves[j, 3:6], moves[j, 6], moves[j, 7:10] = motion.axis, np.radians(motion.degrees), motion.centre
+    faces = [np.asarray(mover.faces, dtype=np.int64) for mover in m.movers]
+    offsets = np.concatenate([[0], np.cumsum([len(f) for f in faces])]).astype(np.int64)
+    record = (m.static is not None, np.ascontiguousarray(m.static_faces, dtype=np.int64),
+              np.array([mover.accel._shared.handle for mover in m.movers], dtype=np.int64),
+              np.concatenate(faces) if faces else z(0, np.int64), offsets, moves,
+              np.ascontiguousarray(m.face_mover, dtype=np.int64))
+    return record, (m.static._shared.handle if m.static is not None else 0)
 
 
 def scene_tables(scene, accel):
@@ -66,7 +95,7 @@ def scene_tables(scene, accel):
     geometry, surface : tuples
     face_emission : (F, 3) float64
     """
-    triangles, faces = _packet_accel(accel).triangles, _packet_accel(accel).faces
+    triangles, faces = _packet_accel(accel).triangles, np.ascontiguousarray(scene.faces, dtype=np.int32)
     m = scene.materials
     tags, params, transmissive = material_rows(m.materials)
     unlit = np.zeros((len(m), 4))
@@ -155,11 +184,12 @@ class PathStage:
             self._env = (e.pixels, e.marginal, e.conditional, e.func, e.mean, e.cos_rotation, e.sin_rotation)
         with np.errstate(over="ignore"):  # the hash's products wrap modulo 2**64 by design
             self._seed_key = mix64(np.uint64(settings.seed % (1 << 64)) ^ np.uint64(0x5A17_7ACE_D00D_F00D))
-        library = accel._shared.library
-        self._queries = (library.intersect16, library.occluded16, accel._shared.handle)
+        library = embree_library.packet_library()
+        self._motion, handle = motion_record(it)
+        self._queries = (library.intersect16, library.occluded16, handle)
         PATH_KERNELS.prepare()
 
-    def render(self, origins, directions, pixel, sample, stats, passes=None):
+    def render(self, origins, directions, pixel, sample, stats, passes=None, times=None):
         """Radiance of the camera rays of one chunk.
 
         Parameters
@@ -172,6 +202,8 @@ class PathStage:
             Ray counts are added to it.
         passes : PassSink, optional
             The chunk's pass buffers: the light-path passes it wants are written to it.
+        times : (n,) float, optional
+            Each ray's time in the shutter (scenes with moving objects).
 
         Returns
         -------
@@ -192,8 +224,10 @@ class PathStage:
                    not it.background.transparent, self.cutouts, split)
         light_paths = np.zeros((n if split else 0, LIGHT_PATHS, 3))
         trace_paths(intersect16, occluded16, handle, np.ascontiguousarray(origins, dtype=np.float64),
-                    np.ascontiguousarray(directions, dtype=np.float64), keys, self.geometry, self.surface,
-                    light_record, self._env, options, radiance, light_paths, counts)
+                    np.ascontiguousarray(directions, dtype=np.float64), keys,
+                    np.zeros(0) if times is None else np.ascontiguousarray(times, dtype=np.float64),
+                    self.geometry, self.surface, light_record, self._env, options, self._motion, radiance,
+                    light_paths, counts)
         if split:
             for k, name in enumerate(LIGHT_PATH_PASSES):
                 if passes.wants(name):
