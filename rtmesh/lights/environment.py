@@ -38,7 +38,7 @@ import math
 
 import numpy as np
 
-from rtmesh.core.compiled import kernel
+from rtmesh.core.compiled import kernel, row
 from rtmesh.core.rays import take_rows
 from rtmesh.core.vecmath import dot
 from rtmesh.geometry.accel import offset_ray_origins
@@ -195,22 +195,29 @@ def _sample_directions(points, marginal, conditional, func, mean, cos_rotation, 
     pdf : (k,) float64
     """
     k = points.shape[0]
-    h, w = func.shape
     wi = np.empty((k, 3))
     pdf = np.empty(k)
     for i in range(k):
-        u1, u2 = points[i, 0], points[i, 1]
-        row = min(max(np.searchsorted(marginal, u1, side="right") - 1, 0), h - 1)
-        low, high = marginal[row], marginal[row + 1]
-        dv = min(max((u1 - low) / (high - low), 0.0), 1.0)
-        cdf = conditional[row]
-        column = min(max(np.searchsorted(cdf, u2, side="right") - 1, 0), w - 1)
-        low, high = cdf[column], cdf[column + 1]
-        du = min(max((u2 - low) / (high - low), 0.0), 1.0)
-        wi[i, 0], wi[i, 1], wi[i, 2], cos_el = latlong_direction((column + du) / w, 1.0 - (row + dv) / h,
-                                                                 cos_rotation, sin_rotation)
-        pdf[i] = func[row, column] / mean / (2.0 * math.pi ** 2 * cos_el) if cos_el > 0.0 else np.inf
+        wi[i, 0], wi[i, 1], wi[i, 2], pdf[i] = sample_direction(marginal, conditional, func, mean, cos_rotation,
+                                                                 sin_rotation, points[i, 0], points[i, 1])
     return wi, pdf
+
+
+@row
+def sample_direction(marginal, conditional, func, mean, cos_rotation, sin_rotation, u1, u2):
+    """One direction of :func:`_sample_directions` and its solid-angle density (``inf`` at a
+    pole), for one point ``(u1, u2)`` of the square; the path kernel calls it too."""
+    h, w = func.shape
+    row_index = min(max(np.searchsorted(marginal, u1, side="right") - 1, 0), h - 1)
+    low, high = marginal[row_index], marginal[row_index + 1]
+    dv = min(max((u1 - low) / (high - low), 0.0), 1.0)
+    cdf = conditional[row_index]
+    column = min(max(np.searchsorted(cdf, u2, side="right") - 1, 0), w - 1)
+    low, high = cdf[column], cdf[column + 1]
+    du = min(max((u2 - low) / (high - low), 0.0), 1.0)
+    dx, dy, dz, cos_el = latlong_direction((column + du) / w, 1.0 - (row_index + dv) / h, cos_rotation, sin_rotation)
+    pdf = func[row_index, column] / mean / (2.0 * math.pi ** 2 * cos_el) if cos_el > 0.0 else np.inf
+    return dx, dy, dz, pdf
 
 
 def _neighbourhood_max(values):

@@ -26,10 +26,10 @@ import math
 
 import numpy as np
 
-from rtmesh.core.compiled import kernel, row
+from rtmesh.core.compiled import row
 from rtmesh.lights import point_light_rows
 from rtmesh.lights.area_lights import DiskLight, QuadLight
-from rtmesh.sampling.warps import concentric_disk_row, latlong_direction, uniform_triangle_weights
+from rtmesh.sampling.warps import concentric_disk_row, uniform_triangle_weights
 
 QUAD, DISK, TRIANGLE, ENVIRONMENT = 3, 4, 5, 6
 WIDTH = 24
@@ -155,7 +155,8 @@ def _delta_power(packed, scene_radius):
 class EnvironmentTables:
     """The background as compiled code reads it: its radiance on a latitude-longitude grid
     (bilinear, as :class:`rtmesh.scene.background.EnvironmentBackground` looks it up) and
-    the sampling tables of :class:`rtmesh.lights.environment.EnvironmentLighting`.
+    the sampling tables of :class:`rtmesh.lights.environment.EnvironmentLighting` (whose
+    row :func:`rtmesh.lights.environment.sample_direction` draws from them).
 
     Parameters
     ----------
@@ -221,7 +222,7 @@ def environment_radiance(pixels, cos_rotation, sin_rotation, dx, dy, dz):
 
 @row
 def environment_pdf(marginal, conditional, func, mean, cos_rotation, sin_rotation, dx, dy, dz):
-    """Solid-angle density of :func:`environment_sample` at a unit direction (as
+    """Solid-angle density of :func:`rtmesh.lights.environment.sample_direction` at a unit direction (as
     :meth:`rtmesh.lights.environment.EnvironmentLighting.pdf`)."""
     h, w = func.shape
     xr = cos_rotation * dx - sin_rotation * dz
@@ -234,24 +235,6 @@ def environment_pdf(marginal, conditional, func, mean, cos_rotation, sin_rotatio
     if not sin_theta > 0.0:
         return math.inf
     return func[r, c] / mean / (2.0 * math.pi * math.pi * sin_theta)
-
-
-@row
-def environment_sample(marginal, conditional, func, mean, cos_rotation, sin_rotation, u1, u2):
-    """A direction drawn from the environment's density and its solid-angle density (the
-    row of :func:`rtmesh.lights.environment._sample_directions`)."""
-    h, w = func.shape
-    row_index = min(max(np.searchsorted(marginal, u1, side="right") - 1, 0), h - 1)
-    low, high = marginal[row_index], marginal[row_index + 1]
-    dv = min(max((u1 - low) / (high - low), 0.0), 1.0)
-    cdf = conditional[row_index]
-    column = min(max(np.searchsorted(cdf, u2, side="right") - 1, 0), w - 1)
-    low, high = cdf[column], cdf[column + 1]
-    du = min(max((u2 - low) / (high - low), 0.0), 1.0)
-    dx, dy, dz, cos_el = latlong_direction((column + du) / w, 1.0 - (row_index + dv) / h, cos_rotation,
-                                           sin_rotation)
-    pdf = func[row_index, column] / mean / (2.0 * math.pi * math.pi * cos_el) if cos_el > 0.0 else math.inf
-    return dx, dy, dz, pdf
 
 
 @row

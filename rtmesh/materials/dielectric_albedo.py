@@ -100,21 +100,14 @@ def table():
 
 
 @row
-def _grid(x, points):
-    f = min(max(x, 0.0), 1.0) * (points - 1)
-    i = min(int(f), points - 2)
-    return i, f - i
-
-
-@row
 def albedo(albedo_table, mu, r, eta, inside):
     """``E`` at ``|cos theta| = mu``, roughness ``r``, index ratio ``eta`` (inside over
     outside), seen from inside or not: trilinear on the grid (``eta`` clamped to its range)."""
     side = 1 if inside else 0
     x = (math.log(min(max(eta, ETA_MIN), ETA_MAX)) - math.log(ETA_MIN)) / (math.log(ETA_MAX) - math.log(ETA_MIN))
-    k, fk = _grid(x, ETA_POINTS)
-    j, fj = _grid(r, ROUGHNESS_POINTS)
-    i, fi = _grid(mu, MU_POINTS)
+    k, fk = lobes.grid_cell(x, ETA_POINTS)
+    j, fj = lobes.grid_cell(r, ROUGHNESS_POINTS)
+    i, fi = lobes.grid_cell(mu, MU_POINTS)
     out = 0.0
     for dk in range(2):
         wk = fk if dk else 1.0 - fk

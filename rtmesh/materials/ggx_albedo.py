@@ -23,6 +23,7 @@ import os
 import numpy as np
 
 from rtmesh.core.compiled import kernel, row
+from rtmesh.materials import lobes
 from rtmesh.materials.microfacet import SMOOTH_ALPHA, masking, masking_shadowing, sample_visible_normal
 
 MU_CELLS = 32
@@ -91,19 +92,10 @@ def table():
 
 
 @row
-def _cell(x, points):
-    """Interpolation coordinates of ``x`` in [0, 1] on ``points`` evenly spaced grid points
-    from 0 to 1: index and fraction."""
-    f = min(max(x, 0.0), 1.0) * (points - 1)
-    i = min(int(f), points - 2)
-    return i, f - i
-
-
-@row
 def albedo(albedo_table, mu, r):
     """``E(mu, r)``, bilinear on the grid."""
-    j, fr = _cell(r, albedo_table.shape[0])
-    i, fm = _cell(mu, albedo_table.shape[1] - 1)
+    j, fr = lobes.grid_cell(r, albedo_table.shape[0])
+    i, fm = lobes.grid_cell(mu, albedo_table.shape[1] - 1)
     low = albedo_table[j, i] * (1.0 - fm) + albedo_table[j, i + 1] * fm
     high = albedo_table[j + 1, i] * (1.0 - fm) + albedo_table[j + 1, i + 1] * fm
     return low * (1.0 - fr) + high * fr
@@ -112,7 +104,7 @@ def albedo(albedo_table, mu, r):
 @row
 def average_albedo(albedo_table, r):
     """``E_avg(r)``, linear on the grid."""
-    j, fr = _cell(r, albedo_table.shape[0])
+    j, fr = lobes.grid_cell(r, albedo_table.shape[0])
     last = albedo_table.shape[1] - 1
     return albedo_table[j, last] * (1.0 - fr) + albedo_table[j + 1, last] * fr
 

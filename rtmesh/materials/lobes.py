@@ -37,6 +37,27 @@ LUMA_R, LUMA_G, LUMA_B = 0.2126, 0.7152, 0.0722
 
 
 @row
+def mixture_sample(wx, wy, wz, fr, fg, fb, pdf, flags, oz):
+    """The sample of a mixture model that drew ``wi`` from one lobe and evaluated the whole
+    mixture there (``f |cos|`` and its density): ``(wi, weight, pdf, flags)``, failed where
+    the density is 0, flagged as a transmission where ``wi`` crossed the surface."""
+    if not pdf > 0.0:
+        return wx, wy, wz, 0.0, 0.0, 0.0, 0.0, FAILED
+    if oz * wz < 0.0:
+        flags |= TRANSMISSION
+    return wx, wy, wz, fr / pdf, fg / pdf, fb / pdf, pdf, flags
+
+
+@row
+def grid_cell(x, points):
+    """Interpolation coordinates of ``x`` in [0, 1] on ``points`` evenly spaced grid points
+    from 0 to 1 (clamped): the lower index and the fraction (the energy tables' lookups)."""
+    f = min(max(x, 0.0), 1.0) * (points - 1)
+    i = min(int(f), points - 2)
+    return i, f - i
+
+
+@row
 def luminance(r, g, b):
     """Rec. 709 luminance of a linear RGB triple."""
     return (LUMA_R * r + LUMA_G * g) + LUMA_B * b

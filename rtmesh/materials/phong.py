@@ -137,11 +137,7 @@ def sample(params, m, table, ox, oy, oz, u0, u1, u2):
         if flags == lobes.FAILED:
             return wx, wy, wz, 0.0, 0.0, 0.0, 0.0, flags
     fr, fg, fb, pdf = evaluate(params, m, table, ox, oy, oz, wx, wy, wz)
-    if not pdf > 0.0:
-        return wx, wy, wz, 0.0, 0.0, 0.0, 0.0, lobes.FAILED
-    if oz * wz < 0.0:
-        flags |= lobes.TRANSMISSION
-    return wx, wy, wz, fr / pdf, fg / pdf, fb / pdf, pdf, flags
+    return lobes.mixture_sample(wx, wy, wz, fr, fg, fb, pdf, flags, oz)
 
 
 @row

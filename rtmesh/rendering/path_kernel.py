@@ -52,11 +52,12 @@ import numpy as np
 
 from rtmesh.core.compile_ahead import KernelGroup
 from rtmesh.core.compiled import inline_row, kernel, row
-from rtmesh.geometry.embree_packets import (DEFAULT_TFAR, GEOM_ID, INVALID_ID, LANES, PRIM_ID, RAY_WORDS, RAYHIT_WORDS,
+from rtmesh.geometry.embree_packets import (DEFAULT_TFAR, GEOM_ID, INVALID_ID, LANES, PRIM_ID, RAYHIT_WORDS,
                                             RTC_RAY_QUERY_FLAG_COHERENT, RTC_RAY_QUERY_FLAG_INCOHERENT, TFAR, U, V,
                                             clear_hit, packet_buffers, query_arguments, set_lane)
 from rtmesh.geometry.float32_rays import F32_MAX, offset_origin
 from rtmesh.lights import light_table as lt
+from rtmesh.lights.environment import sample_direction
 from rtmesh.lights.point_light_rows import illuminate_row
 from rtmesh.materials import lobes, models
 from rtmesh.rendering.path_surfaces import (NORMAL_TEXTURE, emission_at, is_transparent, normal_mapped, surface_point,
@@ -77,7 +78,7 @@ _area_pdf = inline_row(lt.area_pdf.py_func)
 _hit_analytic = inline_row(lt.hit_analytic.py_func)
 _environment_radiance = inline_row(lt.environment_radiance.py_func)
 _environment_pdf = inline_row(lt.environment_pdf.py_func)
-_environment_sample = inline_row(lt.environment_sample.py_func)
+_environment_sample = inline_row(sample_direction.py_func)
 _sample_area_point = inline_row(lt.sample_area_point.py_func)
 _illuminate_row = inline_row(illuminate_row.py_func)
 
