@@ -63,7 +63,8 @@ from rtmesh.materials import lobes, models
 from rtmesh.rendering.path_surfaces import (NORMAL_TEXTURE, emission_at, is_transparent, normal_mapped, surface_point,
                                             textured_row)
 from rtmesh.sampling.alias import alias_sample
-from rtmesh.sampling.hashing import mix64, uniform
+from rtmesh.sampling.hashing import mix64, pixel_sequence, uniform
+from rtmesh.sampling.lowdiscrepancy import sobol_pair
 from rtmesh.sampling.mis import power_heuristic
 from rtmesh.sampling.warps import uniform_triangle_weights
 
@@ -92,6 +93,8 @@ _SHADOW_SHORTEN = 1.0 - 1e-4
 MAX_LAYERS = 64
 # ray counters
 CAMERA, BOUNCE, SHADOW = 0, 1, 2
+# Sobol sequences hold 2**32 points; later samples take hashed numbers
+SOBOL_LIMIT = 1 << 32
 # light-path passes (rtmesh.io.passes.LIGHT_PATH_PASSES) and the first vertex's lobe categories
 EMISSION, DIRECT, INDIRECT = 0, 1, 4
 DIFFUSE_PATH, GLOSSY_PATH, TRANSMISSION_PATH = 0, 1, 2
@@ -262,8 +265,8 @@ def _shadows_through_cutouts(intersect16, scene, args, shadow, shadow_words, sha
 
 
 @kernel
-def trace_paths(intersect16, occluded16, scene, origins, directions, keys, times, geometry, surface, lights, env,
-                options, motion, radiance, light_paths, counts):
+def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixels, samples, sobol_keys, times,
+                geometry, surface, lights, env, options, motion, radiance, light_paths, counts):
     """Trace one path per camera ray and write its radiance.
 
     Parameters
@@ -276,6 +279,11 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, times
         Camera rays in the re-centred frame (unit directions).
     keys : (n,) uint64
         Each sample's random key (:func:`rtmesh.sampling.hashing.path_key`).
+    pixels, samples : (n,) int64, or (0,)
+        Each ray's pixel and sample index: the first vertex's light and BSDF points are
+        Sobol pairs of the pixel's sequences (``samples`` empty: hashed numbers throughout).
+    sobol_keys : (2,) uint64
+        The dimension keys of those sequences (:func:`rtmesh.sampling.patterns.dimension_key`).
     times : (n,) float64, or (0,)
         Each sample's time in the shutter (scenes with moving objects).
     geometry, surface, lights, env, options, motion : tuples
@@ -513,16 +521,25 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, times
                 loz = (nx * ox + ny * oy) + nz * oz
                 tag = tags[mat]
                 follow = (max_depth < 0) | (depth + 1 <= max_depth)
+                # the first vertex's light and BSDF points: per-pixel Owen-scrambled Sobol pairs
+                # (stratified over the pixel's samples), later vertices' hashed numbers
+                sample_index = samples[start + lane] if len(samples) else -1
+                if (depth == 0) & (sample_index >= 0) & (sample_index < SOBOL_LIMIT):
+                    pixel = np.uint64(pixels[start + lane])
+                    lu1, lu2 = sobol_pair(pixel_sequence(sobol_keys[0], pixel), sample_index)
+                    bu1, bu2 = sobol_pair(pixel_sequence(sobol_keys[1], pixel), sample_index)
+                else:
+                    lu1, lu2 = uniform(key, base + _LIGHT_U1), uniform(key, base + _LIGHT_U2)
+                    bu1, bu2 = uniform(key, base + _BSDF_U1), uniform(key, base + _BSDF_U2)
                 # next-event estimation
                 if follow and has_lights:
                     chosen = alias_sample(light_probability, light_alias, uniform(key, base + _LIGHT_CHOICE))
                     light = light_rows[chosen]
-                    wx, wy, wz, distance, lr, lg, lb, pdf_li, delta = sample_li(
-                        light, env, hx, hy, hz, uniform(key, base + _LIGHT_U1), uniform(key, base + _LIGHT_U2))
+                    wx, wy, wz, distance, lr, lg, lb, pdf_li, delta = sample_li(light, env, hx, hy, hz, lu1, lu2)
                     if light[0] == lt.TRIANGLE:
                         # the emitter's own (textured) radiance at the sampled point
                         face = np.int64(light[lt.FACE])
-                        b1, b2 = uniform_triangle_weights(uniform(key, base + _LIGHT_U1), uniform(key, base + _LIGHT_U2))
+                        b1, b2 = uniform_triangle_weights(lu1, lu2)
                         lr, lg, lb = emission_at(surface, geometry, material_id[face], face, b1, b2)
                     if (pdf_li > 0.0) & ((lr > 0.0) | (lg > 0.0) | (lb > 0.0)):
                         side = (gx * wx + gy * wy) + gz * wz
@@ -569,8 +586,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, times
                     continue
                 # continue the path by sampling the BSDF
                 wx, wy, wz, gr, gg, gb, pdf, flags = models.sample(
-                    tag, bsdf_params, bsdf_row, albedo_table, lox, loy, loz, uniform(key, base + _LOBE),
-                    uniform(key, base + _BSDF_U1), uniform(key, base + _BSDF_U2))
+                    tag, bsdf_params, bsdf_row, albedo_table, lox, loy, loz, uniform(key, base + _LOBE), bu1, bu2)
                 if (flags == lobes.FAILED) | (not ((gr > 0.0) | (gg > 0.0) | (gb > 0.0))):
                     alive[lane] = False
                     continue
@@ -679,7 +695,9 @@ def _path_signatures():
     options = (-1, 3, 0.0, np.float32(1.0), True, False, False)
     motion = (True, z(0, np.int64), z(0, np.int64), z(0, np.int64), z(1, np.int64), z((0, 10)), z(0, np.int64))
     query = numba_typeof_query()
-    trace = (query, query, types.int64, rows, rows, types.Array(types.uint64, 1, "C"), types.Array(f64, 1, "C")) + tuple(
+    index = types.Array(types.int64, 1, "C")
+    trace = (query, query, types.int64, rows, rows, types.Array(types.uint64, 1, "C"), index, index,
+             types.Array(types.uint64, 1, "C"), types.Array(f64, 1, "C")) + tuple(
         numba.typeof(record) for record in (geometry, surface, lights, env, options, motion)) + (
         rows, types.Array(f64, 3, "C"), types.Array(types.int64, 1, "C"))
     return [(models.evaluate, evaluate), (trace_paths, trace), (models.sample, sample), (models.parts, evaluate)]

@@ -27,6 +27,7 @@ from rtmesh.rendering.path_kernel import BOUNCE, CAMERA, LIGHT_PATHS, PATH_KERNE
 from rtmesh.rendering.path_surfaces import TEXTURE_COLUMNS
 from rtmesh.rendering.surface_textures import corner_and_edges, face_tangents
 from rtmesh.sampling.hashing import mix64, path_key
+from rtmesh.sampling.patterns import Dim, dimension_key
 
 # vertices a path takes before Russian roulette may end it (pbrt-v4 starts at its second)
 RR_DEPTH = 3
@@ -182,12 +183,23 @@ class PathStage:
         else:
             e = environment
             self._env = (e.pixels, e.marginal, e.conditional, e.func, e.mean, e.cos_rotation, e.sin_rotation)
+        # the first vertex's light and BSDF points (rtmesh.rendering.path_kernel)
+        self._sobol_keys = np.array([dimension_key(settings.seed, Dim.PATH_LIGHT),
+                                     dimension_key(settings.seed, Dim.PATH_BSDF)], dtype=np.uint64)
         with np.errstate(over="ignore"):  # the hash's products wrap modulo 2**64 by design
             self._seed_key = mix64(np.uint64(settings.seed % (1 << 64)) ^ np.uint64(0x5A17_7ACE_D00D_F00D))
         library = embree_library.packet_library()
         self._motion, handle = motion_record(it)
         self._queries = (library.intersect16, library.occluded16, handle)
         PATH_KERNELS.prepare()
+
+    def _sobol(self, pixel, sample):
+        """The kernel's Sobol arguments: pixels, sample indices and the two dimension keys;
+        empty under the ``random`` sampler (white noise everywhere, as it promises)."""
+        if self.it.settings.sampler == "random":
+            return np.zeros(0, np.int64), np.zeros(0, np.int64), self._sobol_keys
+        return (np.ascontiguousarray(pixel, dtype=np.int64), np.ascontiguousarray(sample, dtype=np.int64),
+                self._sobol_keys)
 
     def render(self, origins, directions, pixel, sample, stats, passes=None, times=None):
         """Radiance of the camera rays of one chunk.
@@ -224,7 +236,7 @@ class PathStage:
                    not it.background.transparent, self.cutouts, split)
         light_paths = np.zeros((n if split else 0, LIGHT_PATHS, 3))
         trace_paths(intersect16, occluded16, handle, np.ascontiguousarray(origins, dtype=np.float64),
-                    np.ascontiguousarray(directions, dtype=np.float64), keys,
+                    np.ascontiguousarray(directions, dtype=np.float64), keys, *self._sobol(pixel, sample),
                     np.zeros(0) if times is None else np.ascontiguousarray(times, dtype=np.float64),
                     self.geometry, self.surface, light_record, self._env, options, self._motion, radiance,
                     light_paths, counts)

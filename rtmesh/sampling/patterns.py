@@ -39,6 +39,8 @@ class Dim(IntEnum):
     ALPHA = 1 << 26  # stochastic transparency of cut-outs, keyed by the ray (see rtmesh.geometry.cutouts)
     ENVIRONMENT = 1 << 27  # environment-light directions; the hits at depth d use ENVIRONMENT + 2*d
     BSDF = 1 << 28  # sampled BSDF directions (pair BSDF + 4*d) and lobe choices (BSDF + 4*d + 2) at depth d
+    PATH_LIGHT = 1 << 29  # the path integrator's light point at its first vertex (a Sobol pair)
+    PATH_BSDF = (1 << 29) + 2  # and its BSDF direction there
 
 
 def dimension_key(seed, dimension):
