@@ -945,7 +945,7 @@ def test_resume_right_after_killing_the_client_gives_each_image_one_writer(tmp_p
 
 # ------------------------------------------------------------------------- failure policy, exit codes
 
-def test_failures_are_retried_once_per_run_or_skipped_as_known(tmp_path):
+def test_failures_are_retried_once_per_run_or_skipped_as_known(tmp_path, capsys):
     src = tmp_path / "src"
     make_mesh(src / "good.obj")
     shutil.copy(os.path.join(DATA, "empty.obj"), src / "bad.obj")
@@ -959,7 +959,9 @@ def test_failures_are_retried_once_per_run_or_skipped_as_known(tmp_path):
     with Ledger(str(out)) as ledger:
         assert ledger.failure("bad.obj")[:2] == (2, "load")
     # --skip-failed: left as a known failure, reported as such, and not an error any more
-    code, stdout, err = run_cli(*args, "--skip-failed")
+    capsys.readouterr()
+    code = main(args + ["--skip-failed"])
+    stdout, err = capsys.readouterr()
     assert code == 0, err
     assert summary(out)["counts"] == counts(assets=2, skipped=1, known_failed=1)
     assert "1 known failures not retried" in stdout
