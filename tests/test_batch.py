@@ -662,15 +662,27 @@ def test_missing_dask_gives_an_install_hint(tmp_path, monkeypatch):
         rtmesh.batch_convert([src], tmp_path / "out", scheduler="tcp://127.0.0.1:1", **TINY)
 
 
-def test_dask_cluster_with_a_worker_killed_mid_batch(tmp_path):
+@pytest.fixture(scope="module")
+def two_worker_cluster():
+    """One local Dask cluster of two worker processes (with nannies, which restart a killed
+    worker), shared by the tests that need nothing else of a cluster: each starts once it
+    has its two workers again."""
+    distributed = pytest.importorskip("distributed")
+    # its dashboard on a free port: the clusters other tests start meanwhile take the default
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=":0", silence_logs=50) as cluster:
+        yield cluster
+
+
+def test_dask_cluster_with_a_worker_killed_mid_batch(tmp_path, two_worker_cluster):
     distributed = pytest.importorskip("distributed")
     src = tmp_path / "src"
     for i in range(14):
         make_mesh(src / f"m{i:02d}.obj", subdivisions=3)
     out = tmp_path / "out"
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None, silence_logs=50) as cluster, \
-            distributed.Client(cluster) as client:
+    cluster = two_worker_cluster
+    with distributed.Client(cluster) as client:
+        wait_for_workers(client, 2)
         pids = list(client.run(os.getpid).values())
         result = {}
 
@@ -891,7 +903,10 @@ def test_a_lost_scheduler_ends_the_batch_with_its_own_exit_code_and_no_failures(
     assert summary(out)["counts"]["not_attempted"] == lost
 
 
-def test_resume_right_after_killing_the_client_gives_each_image_one_writer(tmp_path):
+SIDE = 96  # pixels of the images of the resume after a killed client
+
+
+def test_resume_right_after_killing_the_client_gives_each_image_one_writer(tmp_path, two_worker_cluster):
     """kill -9 of the submitting process at the worst moment (a Dask worker has finished an
     image it has not recorded, others are rendering), and a resume at once: the killed
     run's tasks put nothing in place (only a submitting process does, after recording), so
@@ -903,11 +918,14 @@ def test_resume_right_after_killing_the_client_gives_each_image_one_writer(tmp_p
     out = tmp_path / "out"
     out.mkdir()
     watch = RenameWatch(out)
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None, silence_logs=50) as cluster:
+    cluster = two_worker_cluster
+    with distributed.Client(cluster) as client:
+        wait_for_workers(client, 2)  # after another test's kill, once the nanny has restarted it
+        # each image takes a few tenths of a second: long enough to stop the batch between
+        # its first and its fifth row, with the other worker still rendering
         command = [sys.executable, "-m", "rtmesh.cli", "batch", str(src), "-o", str(out),
-                   "--scheduler", cluster.scheduler_address, "--width", "192", "--height", "192",
-                   "--spp", "160", "-q"]
+                   "--scheduler", cluster.scheduler_address, "--width", str(SIDE), "--height",
+                   str(SIDE), "--spp", "160", "-q"]
         first = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         lost = stop_at_an_unrecorded_image(first, out, lambda rows: 1 <= rows < 5)
         at_kill = len(watch.poll())
@@ -921,13 +939,13 @@ def test_resume_right_after_killing_the_client_gives_each_image_one_writer(tmp_p
     assert len(rows) == 6 and all(r["status"] == "done" for r in rows)
     check_one_writer_per_image(names, at_kill, out, [f"m{i}.obj.png" for i in range(6)], lost)
     for r in rows:
-        assert read_image(out / r["files"][0])[0].shape == (192, 192, 3)
+        assert read_image(out / r["files"][0])[0].shape == (SIDE, SIDE, 3)
     assert temporary_files(out) == []
 
 
 # ------------------------------------------------------------------------- failure policy, exit codes
 
-def test_failures_are_retried_once_per_run_or_skipped_as_known(tmp_path):
+def test_failures_are_retried_once_per_run_or_skipped_as_known(tmp_path, capsys):
     src = tmp_path / "src"
     make_mesh(src / "good.obj")
     shutil.copy(os.path.join(DATA, "empty.obj"), src / "bad.obj")
@@ -941,7 +959,9 @@ def test_failures_are_retried_once_per_run_or_skipped_as_known(tmp_path):
     with Ledger(str(out)) as ledger:
         assert ledger.failure("bad.obj")[:2] == (2, "load")
     # --skip-failed: left as a known failure, reported as such, and not an error any more
-    code, stdout, err = run_cli(*args, "--skip-failed")
+    capsys.readouterr()
+    code = main(args + ["--skip-failed"])
+    stdout, err = capsys.readouterr()
     assert code == 0, err
     assert summary(out)["counts"] == counts(assets=2, skipped=1, known_failed=1)
     assert "1 known failures not retried" in stdout
@@ -974,6 +994,7 @@ def test_a_killed_worker_keeps_the_images_it_finished_and_is_not_called_out_of_m
     psutil = pytest.importorskip("psutil")
     make_mesh(tmp_path / "src" / "a.obj", subdivisions=3)
     out = tmp_path / "out"
+    others = {p.pid for p in psutil.Process().children()}  # say, a shared Dask cluster's
     result = {}
     runner = threading.Thread(target=lambda: result.update(report=rtmesh.batch_convert(
         [tmp_path / "src"], out, workers=1, threads=1, turntable=12, width=96, height=96, spp=16,
@@ -982,7 +1003,8 @@ def test_a_killed_worker_keeps_the_images_it_finished_and_is_not_called_out_of_m
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline and len(list(out.glob("a.obj.turn*.png"))) < 2:
         time.sleep(0.01)
-    (worker,) = [p for p in psutil.Process().children() if "spawn_main" in " ".join(p.cmdline())]
+    (worker,) = [p for p in psutil.Process().children()
+                 if p.pid not in others and "spawn_main" in " ".join(p.cmdline())]
     worker.kill()
     runner.join(timeout=60)
     report = result["report"]
@@ -1074,15 +1096,27 @@ def test_noop_resume_over_a_million_ledger_rows_takes_at_most_5_s(tmp_path):
     assert cost["total"] <= 5.0, cost
 
 
+_RELEASE = threading.Event()
+
+
+def _hold(seconds):
+    """A task that runs ``seconds``, or until the test releases it (an in-process worker
+    runs it in this process)."""
+    _RELEASE.wait(seconds)
+
+
 def test_a_resume_cancels_the_earlier_runs_tasks_of_its_folder_without_waiting():
     distributed = pytest.importorskip("distributed")
     from rtmesh.batch.dask_pool import cancel_earlier_runs, task_prefix
 
+    _RELEASE.clear()
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
                                   dashboard_address=None, silence_logs=50) as cluster, \
             distributed.Client(cluster) as client:
         old = task_prefix("/out", "old")
-        running = client.submit(time.sleep, 3, key=f"{old}0")
+        # a running task that would take 3 s; released once the test is done with it, so
+        # that closing the cluster does not wait for it
+        running = client.submit(_hold, 3, key=f"{old}0")
         queued = client.submit(time.sleep, 0, key=f"{old}1", resources={"none": 1})
         ours = client.submit(time.sleep, 0, key=f"{task_prefix('/out', 'new')}0", resources={"none": 1})
         other = client.submit(time.sleep, 0, key=f"{task_prefix('/elsewhere', 'old')}0",
@@ -1101,6 +1135,7 @@ def test_a_resume_cancels_the_earlier_runs_tasks_of_its_folder_without_waiting()
         assert running.status == "cancelled" and queued.status == "cancelled"
         # this run's own tasks and another folder's batch are left alone
         assert ours.status == "pending" and other.status == "pending"
+        _RELEASE.set()
 
 
 def test_warm_up_converts_a_tiny_asset_one_worker_per_host_first():
