@@ -167,14 +167,19 @@ class EnvironmentTables:
     Attributes
     ----------
     pixels : (h, w + 2, 3) float64
-        Radiance, one wrapped column on each side (the azimuth's seam).
+        Radiance, one wrapped column on each side (the azimuth's seam); a solid background
+        is one row (1, 3, 3) of its colour.
     marginal, conditional, func, mean, cos_rotation, sin_rotation
         As :func:`rtmesh.lights.environment._sample_directions` takes them.
     """
 
     def __init__(self, lighting, background):
         image = getattr(background, "_texture", None)
-        if image is not None:
+        colour = getattr(background, "colour", None)
+        if image is None and colour is not None:
+            # a solid background: one row of one texel (the kernel reads it without a lookup)
+            self.pixels = np.tile(np.asarray(colour, dtype=np.float64).reshape(1, 1, 3), (1, 3, 1))
+        elif image is not None:
             self.pixels = np.ascontiguousarray(image.pixels[:, :, :3], dtype=np.float64)
         else:
             h, w = 64, 128

@@ -442,7 +442,12 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                     continue
                 if not hit:
                     if (env_light >= 0) | ((depth == 0) & background_seen):
-                        lr, lg, lb = _environment_radiance(env_pixels, env_cos, env_sin, dx[lane], dy[lane], dz[lane])
+                        if env_pixels.shape[0] == 1:
+                            # a uniform background (one row of one texel): no lookup
+                            lr, lg, lb = env_pixels[0, 0, 0], env_pixels[0, 0, 1], env_pixels[0, 0, 2]
+                        else:
+                            lr, lg, lb = _environment_radiance(env_pixels, env_cos, env_sin, dx[lane], dy[lane],
+                                                               dz[lane])
                         w = 1.0
                         if not prev_delta[lane]:
                             w = power_heuristic(prev_pdf[lane], light_pmf[env_light] * _environment_pdf(
