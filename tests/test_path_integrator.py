@@ -263,3 +263,30 @@ def test_light_path_passes_sum_to_the_image(sphere):
 def test_light_path_passes_need_the_path_integrator():
     with pytest.raises(ValueError, match="need integrator 'path'"):
         RenderSettings(passes=("direct_diffuse",)).validate()
+
+
+def _nested(sphere, inner_ior):
+    """A water sphere (ior 1.33) holding a smaller sphere of index ``inner_ior`` (None: none),
+    before a sky brighter at the top."""
+    from rtmesh.scene.background import GradientBackground
+
+    parts = [MeshPart("water", sphere.vertices, sphere.faces, 0, vertex_normals=sphere.vertex_normals)]
+    materials = [Material("water", model="dielectric", ior=1.33)]
+    if inner_ior is not None:
+        parts.append(MeshPart("inner", 0.5 * sphere.vertices, sphere.faces, 1, vertex_normals=sphere.vertex_normals))
+        materials.append(Material("inner", model="dielectric", ior=inner_ior))
+    camera = Camera(np.array([0.0, 0.0, 3.2]), np.zeros(3), np.array([0.0, 1.0, 0.0]), fov=30.0)
+    return Scene.from_parts(parts, materials=materials, lights=[], camera=camera,
+                            background=GradientBackground((2.0, 2.0, 2.0), (0.1, 0.1, 0.1)))
+
+
+def test_an_interface_between_media_of_one_index_is_invisible(sphere):
+    """Nested media: inside water, a sphere of index 1.33 bends nothing (the ratio at its
+    surface is 1), one of 1.5 does."""
+    blocks = lambda image: image.reshape(4, 6, 4, 6, 3).mean(axis=(1, 3))
+    alone = blocks(_mean(_nested(sphere, None), spp=64, integrator="path"))
+    same = blocks(_mean(_nested(sphere, 1.33), spp=64, integrator="path"))
+    denser = blocks(_mean(_nested(sphere, 1.5), spp=64, integrator="path"))
+    error = lambda a: np.sqrt(np.mean((a - alone) ** 2)) / alone.mean()
+    assert error(same) < 0.02
+    assert error(denser) > 3 * error(same)

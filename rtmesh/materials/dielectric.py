@@ -35,7 +35,7 @@ from rtmesh.materials.microfacet import (SMOOTH_ALPHA, distribution, masking_sha
                                          visible_normal_pdf)
 
 NAME = "dielectric"
-SLOTS = {"colour": 2}
+SLOTS = {"colour": 2, "ior": 0}
 
 
 def parameters(material):

@@ -21,7 +21,7 @@ from rtmesh.materials.metallic_roughness import (alpha_from_roughness, brdf_cos_
                                                  sample_row, schlick_weight)
 
 NAME = "metallic_roughness"
-SLOTS = {"colour": 0, "metallic": 3, "alpha": 4, "roughness": 5}
+SLOTS = {"colour": 0, "metallic": 3, "alpha": 4, "roughness": 5, "ior": 7}
 
 
 def parameters(material):

@@ -11,7 +11,9 @@ A model module (:mod:`~rtmesh.materials.lambert`, :mod:`~rtmesh.materials.oren_n
 - optionally ``transmissive(material)``: whether light passes through it (default: no);
 - ``SLOTS``: which parameters image textures scale per hit (:data:`SLOT_NAMES`: the colour
   the base-colour texture and vertex colours multiply, the specular and mirror colours,
-  glTF's metallic, roughness and the alpha formed from it);
+  glTF's metallic, roughness and the alpha formed from it), and where a transmissive
+  model's index of refraction is (the path kernel sets the ratio of the media on both
+  sides there, for nested media);
 - compiled rows (``@row``) taking the parameter table, the material's row index, the pair of
   energy tables (:func:`tables`) and local-frame directions:
   ``evaluate(params, m, table, wo..., wi...) -> f|cos| r, g, b, pdf``,
@@ -61,9 +63,9 @@ class MaterialModel:
 
 # the parameters a hit's textures scale, by model tag: column k holds the index of the first
 # parameter of SLOT_NAMES[k] in the model's row, or -1 (rtmesh.rendering.path_kernel)
-SLOT_NAMES = ("colour", "specular", "mirror", "metallic", "roughness", "alpha")
+SLOT_NAMES = ("colour", "specular", "mirror", "metallic", "roughness", "alpha", "ior")
 SLOTS = np.array([[module.SLOTS.get(name, -1) for name in SLOT_NAMES] for module in MODULES], dtype=np.int64)
-COLOUR_SLOT, SPECULAR_SLOT, MIRROR_SLOT, METALLIC_SLOT, ROUGHNESS_SLOT, ALPHA_SLOT = range(len(SLOT_NAMES))
+COLOUR_SLOT, SPECULAR_SLOT, MIRROR_SLOT, METALLIC_SLOT, ROUGHNESS_SLOT, ALPHA_SLOT, IOR_SLOT = range(len(SLOT_NAMES))
 
 REGISTRY = {module.NAME: MaterialModel(module.NAME, tag, module) for tag, module in enumerate(MODULES)}
 MODEL_NAMES = tuple(REGISTRY)

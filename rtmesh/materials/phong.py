@@ -29,7 +29,7 @@ from rtmesh.materials import conductor, dielectric, lobes
 from rtmesh.materials.metallic_roughness import square_to_cosine_hemisphere_row
 
 NAME = "blinn_phong"
-SLOTS = {"colour": 0, "specular": 3, "mirror": 7}
+SLOTS = {"colour": 0, "specular": 3, "mirror": 7, "ior": 13}
 
 
 def parameters(material):

@@ -26,7 +26,17 @@ Records (tuples of arrays, built once by :class:`rtmesh.rendering.path_stage.Pat
 ``lights = (rows, probability, alias, pmf, face_light, analytic, environment)``
 (:class:`rtmesh.lights.light_table.LightTable`); ``env = (pixels, marginal, conditional,
 func, mean, cos_rotation, sin_rotation)`` (:class:`rtmesh.lights.light_table.EnvironmentTables`);
-``options = (max_depth, rr_depth, clamp, offset_scale, background_seen, cutouts, split)``;
+``options = (max_depth, rr_depth, clamp, offset_scale, background_seen, cutouts, split,
+camera_media)``, the last the media the camera sits in (``STACK_DEPTH`` material ids,
+innermost first, -1 padded; :class:`rtmesh.rendering.media.Media`).
+
+Nested media: each lane carries a stack of the transmissive materials it is inside
+(innermost first), as the Whitted path's :mod:`rtmesh.rendering.media` does: entering a
+transmissive surface (its front) pushes the material, leaving it pops it; the interface's
+index ratio is the material's index over that of the medium on the other side (so glass in
+water refracts with 1.5 / 1.33), set in the hit's parameter row (the model's ``ior`` slot);
+Beer-Lambert absorption is the innermost medium's.  (Coincident "twin" faces are not
+merged as the Whitted path does.)
 ``motion = (static, static_faces, movers, face_maps, face_offsets, moves, face_mover)``:
 whether the static scene exists (the packet queries' ``scene`` is its handle), its faces'
 global indices (empty: the identity), the moving objects' Embree scenes (k,) int64, their
@@ -305,7 +315,9 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     for mat in range(len(tags)):
         textured[mat] = len(geometry[7]) > 0 or (len(geometry[6]) > 0 and (material_textures[mat] >= 0).any())
     light_rows, light_probability, light_alias, light_pmf, face_light, analytic, env_light = lights
-    max_depth, rr_depth, clamp, offset_scale, background_seen, cutouts, split = options
+    max_depth, rr_depth, clamp, offset_scale, background_seen, cutouts, split, camera_media = options
+    ior, slots = surface[15], surface[7]
+    media = len(camera_media)
     env_pixels, env_marginal, env_conditional, env_func, env_mean, env_cos, env_sin = env
     has_static, static_faces, movers, face_maps, face_offsets, moves, face_mover = motion
     has_lights = len(light_rows) > 0
@@ -335,6 +347,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     paths = np.zeros((LANES, LIGHT_PATHS, 3))
     pending_paths = np.zeros((LANES, LIGHT_PATHS, 3))
     category = np.zeros(LANES, np.int64)
+    stack = np.full((LANES, max(media, 1)), -1, np.int64)
     sigma = np.zeros((LANES, 3))
     reach = np.zeros(LANES)
     alive = np.zeros(LANES, np.bool_)
@@ -356,6 +369,11 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                     paths[lane, :, :] = 0.0
                 category[lane] = GLOSSY_PATH
                 sigma[lane, 0] = sigma[lane, 1] = sigma[lane, 2] = 0.0
+                for k in range(media):
+                    stack[lane, k] = camera_media[k]
+                if media and camera_media[0] >= 0:
+                    for c in range(3):
+                        sigma[lane, c] = absorption[camera_media[0], c]
                 prev_pdf[lane] = 0.0
                 prev_delta[lane] = True
                 lane_depth[lane] = 0
@@ -482,6 +500,18 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 else:
                     er, eg, eb = emission[mat, 0], emission[mat, 1], emission[mat, 2]
                     bsdf_params, bsdf_row = params, mat
+                if media and transmissive[mat] and slots[tags[mat], models.IOR_SLOT] >= 0:
+                    # the index ratio of this interface between the media on its two sides
+                    top = stack[lane, 0]
+                    if (gx * dx[lane] + gy * dy[lane]) + gz * dz[lane] < 0.0:
+                        other = top  # entering: from the medium the ray is in
+                    else:
+                        other = stack[lane, 1] if top == mat else top  # leaving: into what is below
+                    if not textured[mat]:
+                        for k in range(params.shape[1]):
+                            scratch[lane, k] = params[mat, k]
+                        bsdf_params, bsdf_row = scratch, lane
+                    scratch[lane, slots[tags[mat], models.IOR_SLOT]] = ior[mat] / (ior[other] if other >= 0 else 1.0)
                 # emission, from the front side (the winding's normal), as pbrt's and Mitsuba's
                 # area lights
                 front = (gx * dx[lane] + gy * dy[lane]) + gz * dz[lane] < 0.0
@@ -612,12 +642,18 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 prev_delta[lane] = (flags & lobes.DELTA) != 0
                 if depth == 0:
                     category[lane] = _category(flags)
-                if transmissive[mat] and (flags & lobes.TRANSMISSION):
+                if transmissive[mat] and (flags & lobes.TRANSMISSION) and media:
                     if side < 0.0:  # into the interior (the outward normal faces away from the new ray)
-                        sigma[lane, 0], sigma[lane, 1], sigma[lane, 2] = (absorption[mat, 0], absorption[mat, 1],
-                                                                          absorption[mat, 2])
-                    else:
-                        sigma[lane, 0] = sigma[lane, 1] = sigma[lane, 2] = 0.0
+                        for k in range(media - 1, 0, -1):
+                            stack[lane, k] = stack[lane, k - 1]
+                        stack[lane, 0] = mat
+                    elif stack[lane, 0] == mat:  # out of it
+                        for k in range(media - 1):
+                            stack[lane, k] = stack[lane, k + 1]
+                        stack[lane, media - 1] = -1
+                    top = stack[lane, 0]
+                    for c in range(3):
+                        sigma[lane, c] = absorption[top, c] if top >= 0 else 0.0
                 if depth + 1 >= rr_depth:
                     q = max(beta[lane, 0], max(beta[lane, 1], beta[lane, 2]))
                     if q < 1.0:
@@ -694,10 +730,10 @@ def _path_signatures():
                 z((0, 12)), z((0, 6)))
     surface = (z(1, np.int64), z((1, lobes.PARAMETER_WIDTH)), z(1, bool), z((1, 3)), z((1, 3)), z((1, 4)),
                energy, z((1, 6), np.int64), z((1, 6), np.int64), z(1), z(1, np.int64), z(1), z(1),
-               z(1, np.float32), z((1, 12)))
+               z(1, np.float32), z((1, 12)), z(1))
     lights = (z((1, lt.WIDTH)), z(1), z(1, np.int64), z(1), z(1, np.int64), z(0, np.int64), -1)
     env = (z((1, 3, 3)), z(2), z((1, 2)), z((1, 1)), 1.0, 1.0, 0.0)
-    options = (-1, 3, 0.0, np.float32(1.0), True, False, False)
+    options = (-1, 3, 0.0, np.float32(1.0), True, False, False, z(4, np.int64))
     motion = (True, z(0, np.int64), z(0, np.int64), z(0, np.int64), z(1, np.int64), z((0, 10)), z(0, np.int64))
     query = numba_typeof_query()
     index = types.Array(types.int64, 1, "C")

@@ -15,6 +15,7 @@ moving emitters and moving objects with alpha cut-outs.
 import numpy as np
 
 from rtmesh.core.errors import SceneError
+from rtmesh.core.rays import STACK_DEPTH
 from rtmesh.geometry import embree_library
 from rtmesh.geometry.cutouts import CutoutAccel
 from rtmesh.io.texture_atlas import TextureAtlas
@@ -132,7 +133,8 @@ def scene_tables(scene, accel):
     surface = (tags, params, transmissive, np.ascontiguousarray(m.emission), np.ascontiguousarray(m.absorption),
                unlit, tables(), SLOTS, material_textures, np.ascontiguousarray(metal_tint, dtype=np.float64),
                np.ascontiguousarray(m.alpha_mode, dtype=np.int64), np.ascontiguousarray(m.alpha_cutoff),
-               np.ascontiguousarray(m.opacity), atlas.texels, atlas.descriptors)
+               np.ascontiguousarray(m.opacity), atlas.texels, atlas.descriptors,
+               np.ascontiguousarray(m.ior, dtype=np.float64))
     # what each face emits on average (emission textures by their mean), for choosing lights by power
     mean_tint = np.array([np.ones(3) if material.emission_texture is None or scene.uv is None else
                           np.asarray(material.emission_texture.pixels, dtype=np.float64).reshape(
@@ -183,6 +185,16 @@ class PathStage:
         else:
             e = environment
             self._env = (e.pixels, e.marginal, e.conditional, e.func, e.mean, e.cos_rotation, e.sin_rotation)
+        # the media the camera sits in (no stack at all without transmissive materials).  The
+        # camera's stack comes from rtmesh.rendering.media, which knows the materials with a
+        # Whitted transmission colour; a camera inside an object of another transmissive
+        # model (model = "dielectric") is taken to be outside it
+        if it.media is not None:
+            self._camera_media = np.ascontiguousarray(it._camera_medium, dtype=np.int64)
+        elif self.surface[2].any():
+            self._camera_media = np.full(STACK_DEPTH, -1, np.int64)
+        else:
+            self._camera_media = np.zeros(0, np.int64)
         # the first vertex's light and BSDF points (rtmesh.rendering.path_kernel)
         self._sobol_keys = np.array([dimension_key(settings.seed, Dim.PATH_LIGHT),
                                      dimension_key(settings.seed, Dim.PATH_BSDF)], dtype=np.uint64)
@@ -233,7 +245,7 @@ class PathStage:
                         lights.analytic, lights.environment)
         split = passes is not None and any(passes.wants(name) for name in LIGHT_PATH_PASSES)
         options = (s.max_depth, RR_DEPTH, float(s.clamp), np.float32(it.offset_scale),
-                   not it.background.transparent, self.cutouts, split)
+                   not it.background.transparent, self.cutouts, split, self._camera_media)
         light_paths = np.zeros((n if split else 0, LIGHT_PATHS, 3))
         trace_paths(intersect16, occluded16, handle, np.ascontiguousarray(origins, dtype=np.float64),
                     np.ascontiguousarray(directions, dtype=np.float64), keys, *self._sobol(pixel, sample),
