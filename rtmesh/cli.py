@@ -380,7 +380,8 @@ def cmd_render(args):
 
 def summary_line(output, settings, st):
     """The line a render prints: size, samples, rays, time, threads, estimated error, and
-    for an adaptive render its rounds and why it stopped."""
+    for an adaptive render its rounds and why it stopped; under the path integrator also
+    its rays by kind (active rays only, no idle packet lanes) and samples per second."""
     error = "" if st.relative_error != st.relative_error else f", est. rel. error {st.relative_error:.3g}"
     samples = f"{settings.spp} spp"
     adaptive = ""
@@ -393,9 +394,14 @@ def summary_line(output, settings, st):
         stop = {"target": "target reached", "time_limit": "time limit",
                 "max_spp": "max spp reached"}.get(st.stop_reason, st.stop_reason)
         adaptive = f"; {len(st.rounds)} rounds (pixels/est. error: {rounds}), stopped: {stop}"
+    path = ""
+    if settings.integrator == "path":
+        kinds = " / ".join(f"{st.rays[kind] / 1e6:.2f} {kind}" for kind in ("camera", "bounce", "shadow"))
+        rate = st.samples / st.wall_seconds / 1e6 if st.wall_seconds > 0 else 0.0
+        path = f"; path: M rays {kinds}, {rate:.2f} M samples/s"
     return (f"{output}: {settings.width}x{settings.height}, {samples}, "
             f"{st.total_rays / 1e6:.2f} M rays ({st.rays_per_second / 1e6:.2f} M rays/s), "
-            f"{st.wall_seconds:.2f} s, {st.threads} threads{error}{adaptive}")
+            f"{st.wall_seconds:.2f} s, {st.threads} threads{error}{adaptive}{path}")
 
 
 def cmd_batch(args):

@@ -9,12 +9,17 @@ from benchmarks import bench_real_assets as bench
 from rtmesh.cli import summary_line
 
 
-def test_parses_the_summary_line_the_command_prints():
-    settings = SimpleNamespace(width=320, height=240, spp=16, adaptive=False)
+@pytest.mark.parametrize("integrator", ["whitted", "path"])
+def test_parses_the_summary_line_the_command_prints(integrator):
+    settings = SimpleNamespace(width=320, height=240, spp=16, adaptive=False, integrator=integrator)
     stats = SimpleNamespace(relative_error=0.0062, total_rays=1.47e6, rays_per_second=2.49e6,
-                            wall_seconds=0.59, threads=2)
-    values = bench.parse_summary(summary_line("/tmp/duck.png", settings, stats) + "\n")
+                            wall_seconds=0.59, threads=2, samples=320 * 240 * 16,
+                            rays={"camera": 1.2e6, "bounce": 0.15e6, "shadow": 0.12e6})
+    line = summary_line("/tmp/duck.png", settings, stats)
+    values = bench.parse_summary(line + "\n")
     assert values == {"spp": 16, "rays": 1.47, "rate": 2.49, "seconds": 0.59, "threads": 2}
+    # the path integrator's line adds its rays by kind and its samples per second
+    assert ("path: M rays 1.20 camera / 0.15 bounce / 0.12 shadow, 2.08 M samples/s" in line) == (integrator == "path")
     with pytest.raises(ValueError, match="no render summary"):
         bench.parse_summary("rtmesh: error: cannot read Duck.glb\n")
 
