@@ -7,7 +7,8 @@
   ground quad, one point light), as the core benchmarks measure it and as the peers render it.
 - :func:`run_peer` runs a worker script of this folder in the peers' own venv (Mitsuba 3,
   never a dependency of rtmesh; ``sh benchmarks/peers_setup.sh``), with Dr.Jit pointed at LLVM
-  19 and its kernel cache in a folder of the caller's.
+  19 and its kernel cache in a folder of the caller's; :func:`start_peer` starts one that
+  stays and answers requests line by line.
 - :func:`publish` prints a benchmark's section of docs/BENCHMARKS.md and writes it there;
   :func:`write_side_by_side` shows an image beside its references.
 
@@ -333,3 +334,25 @@ def run_peer(worker, args, home, venv=PEERS_VENV, capture=True):
         return None
     return subprocess.run([python, "-m", f"benchmarks.{worker}", *map(str, args)], cwd=ROOT,
                           env=mitsuba_environment(home), capture_output=capture, text=True)
+
+
+def start_peer(worker, args, home, venv=PEERS_VENV):
+    """Start a worker module of this folder in the peers' venv and leave it running.
+
+    As :func:`run_peer`, but the worker keeps its process (and Mitsuba its compiled kernels)
+    between requests: it reads one request a line on its standard input and answers one
+    line on its standard output (text mode, line-buffered), so a benchmark can alternate
+    renders of rtmesh and of the peer on a shared machine.  The worker's stderr passes
+    through.
+
+    Returns
+    -------
+    subprocess.Popen or None
+        None when there is no venv.  Close its stdin to end it, then ``wait()``.
+    """
+    python = peer_python(venv)
+    if python is None:
+        return None
+    return subprocess.Popen([python, "-m", f"benchmarks.{worker}", *map(str, args)], cwd=ROOT,
+                            env=mitsuba_environment(home), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            text=True, bufsize=1)

@@ -327,12 +327,19 @@ def glb_json(data):
     return json.loads(data[20:20 + length])
 
 
-def scene_text(case, mesh_file, size, spp):
-    """The rtmesh scene file (TOML) of a case."""
+def scene_text(case, mesh_file, size, spp, integrator="whitted", max_depth=None):
+    """The rtmesh scene file (TOML) of a case.
+
+    ``integrator`` and ``max_depth`` (default :data:`MAX_DEPTH` of the case's light) go into
+    ``[render]``; ``cutoff = 0`` only under ``whitted`` (``path`` ignores it, with a warning).
+    benchmarks/bench_equal_error.py writes its ``path`` scene with this.
+    """
     c = case.camera
+    depth = MAX_DEPTH[case.light] if max_depth is None else max_depth
     lines = ["lights = []" if case.light == "env" else "",
              "[render]", f"width = {size}", f"height = {size}", f"spp = {spp}",
-             f"max_depth = {MAX_DEPTH[case.light]}", "cutoff = 0", "",
+             f'integrator = "{integrator}"', f"max_depth = {depth}",
+             "cutoff = 0" if integrator == "whitted" else "", "",
              "[camera]", f"position = {c['position']}", f"look_at = {c['look_at']}", f"up = {c['up']}",
              f"fov = {c['fov']}", "",
              "[environment]", "ambient = 0", ""]
@@ -444,8 +451,11 @@ def sample_counts(case, args):
     return args.spp, args.mitsuba_spp
 
 
-def prepare(case, folder, args):
+def prepare(case, folder, args, **scene_options):
     """Write a case's files; load it in rtmesh.
+
+    ``args`` needs ``size`` and the spp :func:`sample_counts` reads; ``scene_options``
+    (``integrator``, ``max_depth``) go to :func:`scene_text`.
 
     Returns
     -------
@@ -465,7 +475,8 @@ def prepare(case, folder, args):
         factors = None
         mesh_file.write_bytes(trimesh.exchange.gltf.export_glb(trimesh.Scene(mesh), include_normals=True))
     scene_file = case_dir / "scene.toml"
-    scene_file.write_text(scene_text(case, mesh_file, args.size, sample_counts(case, args)[0]))
+    scene_file.write_text(scene_text(case, mesh_file, args.size, sample_counts(case, args)[0],
+                                     **scene_options))
     scene, settings = rtmesh.load_scene(scene_file)
     ply = None
     if case.geometry != "none":
