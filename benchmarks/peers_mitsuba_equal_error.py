@@ -9,7 +9,8 @@ thread count, prints ``ready VERSION``, then answers one request a line on stand
 
 by rendering that scene with ``mi.render(scene, spp=SPP, seed=SEED)``, copying the image to
 NumPy (the clock covers both: Mitsuba evaluates lazily), saving its RGB as ``OUT.npy`` and
-printing ``done SECONDS``.  The process stays up between requests, so Dr.Jit's kernels
+printing ``done SECONDS CPU_SECONDS`` (wall-clock, and the process's CPU time over all its
+threads).  The process stays up between requests, so Dr.Jit's kernels
 compiled by a first (warm-up) render at a sample count are reused by the timed ones, and the
 benchmark can alternate Mitsuba's renders with rtmesh's.  End of input ends it.
 
@@ -54,11 +55,11 @@ def main():
         if not line.strip():
             continue
         sampler, spp, seed, out = line.split()
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.process_time()
         image = np.array(mi.render(scenes[sampler], spp=int(spp), seed=int(seed)), dtype=np.float32)[:, :, :3]
-        seconds = time.perf_counter() - start
+        seconds, cpu = time.perf_counter() - start, time.process_time() - cpu
         np.save(out, image)
-        print(f"done {seconds:.6f}", flush=True)
+        print(f"done {seconds:.6f} {cpu:.6f}", flush=True)
 
 
 if __name__ == "__main__":

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from benchmarks.bench_equal_error import cost_line, power_law, seed_error, time_to_error
+from benchmarks.bench_equal_error import cost_line, exponents, power_law, seed_error, time_to_error
 
 
 def test_seed_error_is_the_noise_of_one_render_over_the_mean():
@@ -51,3 +51,19 @@ def test_time_to_error_on_a_monte_carlo_law():
     assert not inside["extrapolated"] and 16 < inside["spp"] < 64
     with pytest.raises(ValueError):
         time_to_error(spps, [1.0, 4.0], [0.1, 0.2], 0.05)  # error rising with spp
+
+
+def test_time_to_error_uses_the_neighbouring_levels():
+    # a stratifying sampler: k 0.75 from 16 to 64 spp, 0.5 beyond
+    spps = [16, 64, 256]
+    errors = [0.32, 0.32 * 4 ** -0.75, 0.32 * 4 ** -0.75 / 2]
+    seconds = [0.1 * s for s in spps]
+    assert exponents(spps, errors) == pytest.approx([0.75, 0.5])
+    between = time_to_error(spps, seconds, errors, 0.32 * 2 ** -0.75)  # at 32 spp on the first pair
+    assert between["spp"] == pytest.approx(32.0) and between["exponent"] == pytest.approx(0.75)
+    assert not between["extrapolated"]
+    beyond = time_to_error(spps, seconds, errors, errors[-1] / 2)  # past 256 spp: the last pair's k
+    assert beyond["spp"] == pytest.approx(1024.0) and beyond["exponent"] == pytest.approx(0.5)
+    assert beyond["seconds"] == pytest.approx(102.4) and beyond["extrapolated"]
+    below = time_to_error(spps, seconds, errors, 0.64)  # under 16 spp: the first pair's k
+    assert below["spp"] == pytest.approx(16 * 2 ** (-1 / 0.75)) and below["extrapolated"]
