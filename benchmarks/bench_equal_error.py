@@ -8,12 +8,13 @@ The scene of benchmarks/bench_pbr_peers.py's ``duck-env-*`` cases, built by its 
   centred on its bounding box and scaled so its largest half-extent is 1; Mitsuba reads the
   triangles and normals rtmesh built from the file (a float32 PLY);
 - material: ONE glTF ``pbrMetallicRoughness`` material of bench_pbr_peers' set written into
-  the GLB rtmesh reads (default ``dielectric``: metallic 0, base colour (0.8, 0.298, 0.2) as
-  the file stores it, roughness 0.3; ``--material``, ``--roughness``); Mitsuba renders the
-  same BRDF, the glTF Appendix B model written as a Mitsuba BSDF in Python
+  the GLB rtmesh reads, each measured in turn (``--materials``, default both): ``dielectric``
+  (metallic 0, base colour (0.8, 0.298, 0.2) as the file stores it) and ``metal`` (metallic
+  1, base colour (0.949, 0.639, 0.541): copper-like F0), at roughness 0.3 (``--roughness``).
+  Mitsuba renders the same BRDF, the glTF Appendix B model written as a Mitsuba BSDF in Python
   (benchmarks/peers_mitsuba_pbr.py ``GltfBSDF``: traced into Mitsuba's LLVM kernels, it renders
   as fast as Mitsuba's ``principled``, 0.24-0.26 s for both at 16 spp here, so no stand-in is
-  needed).  The Duck's own textured material is not used;
+  needed).  The Duck's own textured material (metallic 0, roughness 1) is not used;
 - light: ``rtmesh/scene/studio.exr`` as the only light: rtmesh ``lights = []``,
   ``[environment] ambient = 0``, ``[background]`` the exr with ``lighting = true``; Mitsuba an
   ``envmap`` of the same radiance function (bench_pbr_peers ``mitsuba_environment_image``,
@@ -68,7 +69,7 @@ pairing is in the table.
 Usage::
 
     python -m benchmarks.bench_equal_error [--spp 16,64] [--mitsuba-spp 16,64,256] [--runs 3] [--threads 2] [--size 256]
-        [--material dielectric] [--roughness 0.3] [--samplers jittered,sobol]
+        [--materials dielectric,metal] [--roughness 0.3] [--samplers jittered,sobol]
         [--mitsuba-samplers stratified,independent] [--variant llvm_ad_rgb]
         [--venv /tmp/peers-venv] [--no-write]
 
@@ -329,27 +330,17 @@ def summarise(results, seeds_of, mask, pixels):
     return rows
 
 
-def report(rows, rt_names, mi_names, args, context):
-    """The BENCHMARKS.md section."""
-    lines = [f"## {SECTION}", "",
-             f"Command: `{context['command']}` (Mitsuba in its own venv, `sh benchmarks/peers_setup.sh`); "
-             "the scene, the error and the extrapolation are in the script's docstring.", "",
-             f"- Date {context['date']}; rtmesh {context['rtmesh']}, Mitsuba {context['mitsuba']} "
-             f"`{args.variant}`; {context['machine']}",
-             f"- /proc/loadavg at the start `{context['load_start']}`, at the end `{context['load_end']}` "
-             f"(2 cores shared with other jobs; {context['wall']:.0f} s in all)",
-             f"- Duck.glb (unit half-extent), glTF material `{args.material}` roughness {args.roughness:g} "
-             f"(Mitsuba: the same BRDF, `GltfBSDF`), studio.exr the only light, {args.size} x {args.size}, "
-             f"box filter, {args.threads} threads; rtmesh `path` max_depth {MAX_DEPTH}, Mitsuba `path` "
-             f"max_depth {MAX_DEPTH + 1}; seeds rtmesh {RTMESH_SEEDS}, Mitsuba {MITSUBA_SEEDS}; times are "
-             f"medians of {args.runs} x 2 renders, alternating renderers, every round through every spp level; "
-             "`CPU s`: the process's CPU seconds (all its threads) of a render, which other jobs' load "
-             "changes far less than wall time",
-             "- error = RMSE(A - B) / sqrt(2) / mean, over all pixels (duck and background); `object`: over "
-             f"the {context['object_pixels']} pixels fully on the duck, over their mean",
-             "",
-             "Measured:", "",
-             "| renderer, sampler | spp | s (median) | CPU s | M samples/s | error | object error | image mean |",
+def material_tables(rows, rt_names, mi_names):
+    """The three tables of one material: measured levels, time to each error, ratios.
+
+    Returns
+    -------
+    lines : list of str
+    headline : dict
+        ``rtmesh``, ``mitsuba`` (each renderer's faster sampler at 2 %), ``worst`` and
+        ``worst_cpu`` (their worst ratio over the targets, wall and CPU seconds).
+    """
+    lines = ["| renderer, sampler | spp | s (median) | CPU s | M samples/s | error | object error | image mean |",
              "|---|---:|---:|---:|---:|---:|---:|---:|"]
     for name, row in rows.items():
         for r in row["levels"]:
@@ -380,11 +371,49 @@ def report(rows, rt_names, mi_names, args, context):
                          + f" | **{max(wall):.2f}** | " + " | ".join(f"{x:.2f}" for x in cpu) + f" | {max(cpu):.2f} |")
     best_rt = min(rt_names, key=lambda n: rows[n]["targets"][TARGETS[-1]]["seconds"])
     best_mi = min(mi_names, key=lambda n: rows[n]["targets"][TARGETS[-1]]["seconds"])
-    worst = max(ratios(best_rt, best_mi, "targets"))
-    worst_cpu = max(ratios(best_rt, best_mi, "targets_cpu"))
-    lines += ["", f"Headline (each renderer's faster sampler at 2 %: {best_rt} against {best_mi}): worst ratio "
-              f"**{worst:.2f}** wall, {worst_cpu:.2f} CPU (target <= 0.5).", "", *NOTES, ""]
-    return "\n".join(lines), worst
+    return lines, {"rtmesh": best_rt, "mitsuba": best_mi, "worst": max(ratios(best_rt, best_mi, "targets")),
+                   "worst_cpu": max(ratios(best_rt, best_mi, "targets_cpu"))}
+
+
+def report(materials, args, context):
+    """The BENCHMARKS.md section.
+
+    Parameters
+    ----------
+    materials : list of (str, dict, list, list)
+        Per material: its name, the rows of :func:`summarise`, the rtmesh and the Mitsuba
+        configuration names.
+    """
+    lines = [f"## {SECTION}", "",
+             f"Command: `{context['command']}` (Mitsuba in its own venv, `sh benchmarks/peers_setup.sh`); "
+             "the scene, the error and the extrapolation are in the script's docstring.", "",
+             f"- Date {context['date']}; rtmesh {context['rtmesh']}, Mitsuba {context['mitsuba']} "
+             f"`{args.variant}`; {context['machine']}",
+             f"- /proc/loadavg at the start `{context['load_start']}`, at the end `{context['load_end']}` "
+             f"(2 cores shared with other jobs; {context['wall']:.0f} s in all)",
+             f"- Duck.glb (unit half-extent) with one glTF material of bench_pbr_peers (roughness "
+             f"{args.roughness:g}; Mitsuba: the same BRDF, `GltfBSDF`), studio.exr the only light, "
+             f"{args.size} x {args.size}, box filter, {args.threads} threads; rtmesh `path` max_depth {MAX_DEPTH}, "
+             f"Mitsuba `path` max_depth {MAX_DEPTH + 1}; seeds rtmesh {RTMESH_SEEDS}, Mitsuba {MITSUBA_SEEDS}; "
+             f"times are medians of {args.runs} x 2 renders, alternating renderers, every round through every "
+             "spp level; `CPU s`: the process's CPU seconds (all its threads) of a render, which other jobs' "
+             "load changes far less than wall time",
+             "- error = RMSE(A - B) / sqrt(2) / mean, over all pixels (duck and background); `object`: over "
+             f"the {context['object_pixels']} pixels fully on the duck, over their mean",
+             ""]
+    headlines = []
+    for material, rows, rt_names, mi_names in materials:
+        values = pbr.MATERIALS[material]
+        tables, headline = material_tables(rows, rt_names, mi_names)
+        headlines.append((material, headline))
+        lines += [f"### {material}: metallic {values['metallic']:g}, base colour {values['base_color']} "
+                  f"(8 bits in the GLB), roughness {args.roughness:g}", "", *tables, ""]
+    lines += ["Headline (each renderer's faster sampler at 2 %), worst ratio over 8, 4 and 2 % (target <= 0.5):",
+              ""]
+    lines += [f"- {material}: {h['rtmesh']} against {h['mitsuba']}: **{h['worst']:.2f}** wall, "
+              f"{h['worst_cpu']:.2f} CPU" for material, h in headlines]
+    lines += ["", *NOTES, ""]
+    return "\n".join(lines), max(h["worst"] for _, h in headlines)
 
 
 # ---------------------------------------------------------------- main
@@ -401,33 +430,21 @@ def parse_list(text, kind=str):
     return [kind(x.strip()) for x in text.split(",") if x.strip()]
 
 
-def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--spp", default="16,64", help="rtmesh's spp levels, comma-separated (two or more)")
-    parser.add_argument("--mitsuba-spp", default="16,64,256", help="Mitsuba's spp levels (two or more)")
-    parser.add_argument("--runs", type=int, default=3, help="rounds of timed renders (each renders both seeds)")
-    parser.add_argument("--threads", type=int, default=2)
-    parser.add_argument("--size", type=int, default=256, help="image width and height")
-    parser.add_argument("--material", default="dielectric", choices=sorted(pbr.MATERIALS))
-    parser.add_argument("--roughness", type=float, default=0.3)
-    parser.add_argument("--samplers", default="jittered,sobol", help="rtmesh samplers")
-    parser.add_argument("--mitsuba-samplers", default="stratified,independent", help="Mitsuba sampler plugins")
-    parser.add_argument("--variant", default="llvm_ad_rgb", help="Mitsuba variant")
-    parser.add_argument("--venv", default=PEERS_VENV, help="the peers' venv (benchmarks/peers_setup.sh)")
-    parser.add_argument("--no-write", action="store_true", help="print only; leave docs/BENCHMARKS.md alone")
-    args = parser.parse_args(argv)
-    spps, mi_spps = sorted(set(parse_list(args.spp, int))), sorted(set(parse_list(args.mitsuba_spp, int)))
-    if min(len(spps), len(mi_spps)) < 2 or min(spps[0], mi_spps[0]) < 1:
-        parser.error("--spp and --mitsuba-spp need two or more positive levels each")
-    rt_samplers, mi_samplers = parse_list(args.samplers), parse_list(args.mitsuba_samplers)
-    if set(mi_samplers) & SQUARE_SAMPLERS and any(math.isqrt(s) ** 2 != s for s in mi_spps):
-        parser.error(f"Mitsuba's {', '.join(sorted(set(mi_samplers) & SQUARE_SAMPLERS))} sampler rounds spp up "
-                     "to a square: give square --mitsuba-spp levels (e.g. 16,64,256)")
-    load_start, machine_start, started = loadavg(), machine(), time.perf_counter()
-    runtime.tune_process()
+def run_material(material, args, spps, mi_spps, rt_samplers, mi_samplers):
+    """Measure one material: files written, scene loaded, a Mitsuba worker for it, the renders.
 
-    case = pbr.Case(f"duck-env-{args.material}-r{args.roughness:g}", "duck", "env", args.material,
-                    args.roughness, ("gltf",))
+    Returns
+    -------
+    rows : dict
+        :func:`summarise`'s.
+    names : list of str
+        The configurations, in the order they alternate.
+    version : str
+        Mitsuba's.
+    object_pixels : int
+    """
+    print(f"{material}, roughness {args.roughness:g}", flush=True)
+    case = pbr.Case(f"duck-env-{material}-r{args.roughness:g}", "duck", "env", material, args.roughness, ("gltf",))
     with tempfile.TemporaryDirectory(prefix="rtmesh-equal-error-") as folder:
         options = types.SimpleNamespace(size=args.size, spp=spps[0], mitsuba_spp=2 * spps[0], point_spp=spps[0],
                                         mitsuba_point_spp=2 * spps[0], variant=args.variant, cache=folder)
@@ -451,14 +468,51 @@ def main(argv=None):
                     s = mi_samplers[i]
                     configs[f"Mitsuba {s}"] = (lambda spp, seed, s=s: mitsuba.render(s, spp, seed), MITSUBA_SEEDS,
                                                mi_spps)
-            seeds_of = {name: seeds for name, (_, seeds, _) in configs.items()}
             results = measure(configs, args.runs)
         finally:
             mitsuba.close()
+    seeds_of = {name: seeds for name, (_, seeds, _) in configs.items()}
     rows = summarise(results, seeds_of, prepared["mask"], args.size * args.size)
+    return rows, list(configs), mitsuba.version, int(prepared["mask"].sum())
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--spp", default="16,64", help="rtmesh's spp levels, comma-separated (two or more)")
+    parser.add_argument("--mitsuba-spp", default="16,64,256", help="Mitsuba's spp levels (two or more)")
+    parser.add_argument("--runs", type=int, default=3, help="rounds of timed renders (each renders both seeds)")
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--size", type=int, default=256, help="image width and height")
+    parser.add_argument("--materials", default="dielectric,metal",
+                        help=f"bench_pbr_peers materials, comma-separated ({', '.join(pbr.MATERIALS)})")
+    parser.add_argument("--roughness", type=float, default=0.3)
+    parser.add_argument("--samplers", default="jittered,sobol", help="rtmesh samplers")
+    parser.add_argument("--mitsuba-samplers", default="stratified,independent", help="Mitsuba sampler plugins")
+    parser.add_argument("--variant", default="llvm_ad_rgb", help="Mitsuba variant")
+    parser.add_argument("--venv", default=PEERS_VENV, help="the peers' venv (benchmarks/peers_setup.sh)")
+    parser.add_argument("--no-write", action="store_true", help="print only; leave docs/BENCHMARKS.md alone")
+    args = parser.parse_args(argv)
+    spps, mi_spps = sorted(set(parse_list(args.spp, int))), sorted(set(parse_list(args.mitsuba_spp, int)))
+    if min(len(spps), len(mi_spps)) < 2 or min(spps[0], mi_spps[0]) < 1:
+        parser.error("--spp and --mitsuba-spp need two or more positive levels each")
+    rt_samplers, mi_samplers = parse_list(args.samplers), parse_list(args.mitsuba_samplers)
+    materials_asked = parse_list(args.materials)
+    if not materials_asked or set(materials_asked) - set(pbr.MATERIALS):
+        parser.error(f"--materials: choose from {', '.join(pbr.MATERIALS)}")
+    if set(mi_samplers) & SQUARE_SAMPLERS and any(math.isqrt(s) ** 2 != s for s in mi_spps):
+        parser.error(f"Mitsuba's {', '.join(sorted(set(mi_samplers) & SQUARE_SAMPLERS))} sampler rounds spp up "
+                     "to a square: give square --mitsuba-spp levels (e.g. 16,64,256)")
+    load_start, machine_start, started = loadavg(), machine(), time.perf_counter()
+    runtime.tune_process()
+
+    materials, object_pixels, version = [], None, "?"
+    for material in materials_asked:
+        rows, names, version, object_pixels = run_material(material, args, spps, mi_spps, rt_samplers, mi_samplers)
+        materials.append((material, rows, [n for n in names if n.startswith("rtmesh")],
+                          [n for n in names if n.startswith("Mitsuba")]))
     words = ["python -m benchmarks.bench_equal_error"]
     defaults = {"spp": "16,64", "mitsuba_spp": "16,64,256", "runs": 3, "threads": 2, "size": 256,
-                "material": "dielectric", "roughness": 0.3, "samplers": "jittered,sobol",
+                "materials": "dielectric,metal", "roughness": 0.3, "samplers": "jittered,sobol",
                 "mitsuba_samplers": "stratified,independent", "variant": "llvm_ad_rgb"}
     for name, default in defaults.items():
         if getattr(args, name) != default:
@@ -467,11 +521,10 @@ def main(argv=None):
     context = {"command": " ".join(words), "date": datetime.datetime.now(datetime.timezone.utc).strftime(
                    "%Y-%m-%d %H:%M UTC"),
                "rtmesh": rtmesh_commit(os.path.dirname(os.path.abspath(rtmesh.__file__))),
-               "mitsuba": mitsuba.version, "machine": machine_start, "load_start": load_start,
+               "mitsuba": version, "machine": machine_start, "load_start": load_start,
                "load_end": loadavg(), "wall": time.perf_counter() - started,
-               "object_pixels": int(prepared["mask"].sum())}
-    text, _ = report(rows, [n for n in configs if n.startswith("rtmesh")],
-                     [n for n in configs if n.startswith("Mitsuba")], args, context)
+               "object_pixels": object_pixels}
+    text, _ = report(materials, args, context)
     publish(text, SECTION, write=not args.no_write)
     return 0
 
