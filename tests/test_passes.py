@@ -4,7 +4,7 @@ the film reductions, EXR channel names and PNG mappings behind them."""
 import numba
 import numpy as np
 import pytest
-from scenes import box, part, pixel_centre_rays, quad, render, settings
+from scenes import box, part, pixel_centre_rays, quad, render
 
 from rtmesh.cli import main
 from rtmesh.io.images import read_image, write_image
@@ -12,7 +12,6 @@ from rtmesh.io.passes import LIGHT_PATH_PASSES, PASS_NAMES, display_values, exr_
 from rtmesh.materials.table import Material
 from rtmesh.rendering import film_sums
 from rtmesh.rendering.film import Film
-from rtmesh.rendering.integrator import Integrator
 from rtmesh.sampling.patterns import pixel_offsets
 from rtmesh.scene.camera import Camera
 from rtmesh.scene.model import Scene
