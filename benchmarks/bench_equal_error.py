@@ -111,23 +111,20 @@ NOTES = (
     "",
     "- Both renderers render the same expected image: the image means agree to about 0.1 % "
     "(column `image mean`).",
-    "- rtmesh's samplers make no difference under `path`: `jittered` and `sobol` give the same errors "
-    "and the exponent k = 0.50 of independent samples. The path kernel draws its light choice, light "
-    "point, lobe, BSDF direction and roulette numbers from `rtmesh.sampling.hashing.uniform` of the "
-    "sample's key and a dimension (rtmesh/rendering/path_kernel.py); the sampler places only the pixel "
-    "position. Mitsuba's `independent` sampler (nothing stratified) is in the same situation and its "
-    "errors match rtmesh's within 5 % at equal spp; its `stratified` sampler stratifies every "
-    "dimension (k of 0.6-0.7 up to 256 spp) and needs several times fewer samples (the `spp` columns).",
-    "- So the table splits the gap in two: `rtmesh / Mitsuba independent` is the cost of a sample "
-    "(equal noise per sample; rtmesh's `M samples/s` against Mitsuba's), `Mitsuba independent / "
-    "stratified` (the ratio of their rows) what stratified sample dimensions win. Issue 27's 0.5x "
-    "needs both: a sample cheaper than Mitsuba's and stratified (or low-discrepancy) light and "
-    "BSDF dimensions in the path kernel.",
-    "- The noise is direct light (next-event estimation of the map and BSDF sampling, MIS): with "
-    "`max_depth = 1` (direct light only) rtmesh's error at 16 spp was 22.3 % against 22.4 % with one "
-    "bounce (Mitsuba stratified 12.9 % against 13.7 %), on the dielectric (measured at rtmesh f82e3e5, "
-    "whose errors in these tables were the same to the last digit). rtmesh's `light_samples` (4) "
-    "does not apply to the environment under `path`: 1 and 4 give the same image.",
+    "- rtmesh's path kernel takes the first vertex's light point and BSDF direction from Owen-scrambled "
+    "Sobol pairs of the pixel's sequences (every sampler but `random`; later vertices, the light "
+    "choice, lobe and roulette numbers are hashed). Its errors at equal spp then match Mitsuba's "
+    "`stratified` sampler (k of about 0.65 between 16 and 64 spp); `jittered` and `sobol` differ only "
+    "in the pixel position. Before that change (rtmesh 0f579e8, every number hashed) rtmesh's errors "
+    "matched Mitsuba's `independent` sampler (k = 0.50) and the worst ratios were 11.0 (dielectric) "
+    "and 30.9 (metal).",
+    "- So what is left is the cost of a sample: rtmesh's `M samples/s` against Mitsuba's (about 3.5-4x "
+    "fewer: the path kernel shades its 16 lanes one at a time, Mitsuba's LLVM back end runs every "
+    "shading step vectorised over its lanes). Issue 27's 0.5x needs a sample about 8x cheaper.",
+    "- The noise is mostly direct light (next-event estimation of the map and BSDF sampling, MIS): "
+    "with `max_depth = 1` (direct light only) rtmesh's error at 16 spp was 22.3 % against 22.4 % with "
+    "one bounce before the Sobol pairs (Mitsuba stratified 12.9 % against 13.7 %). rtmesh's "
+    "`light_samples` (4) does not apply under `path` (one light sample a vertex, as Mitsuba).",
     "- Wall times on this shared machine swing by 2x within seconds (other jobs start and stop): "
     "every round runs through every spp level and the renderers alternate render by render, so both "
     "see the same load, but the fitted fixed cost `a` and the extrapolated seconds move from run to "
