@@ -88,15 +88,9 @@ def tabulate(strata):
     return table
 
 
-_TABLE = None
-
-
 def table():
     """The shipped table (read once)."""
-    global _TABLE
-    if _TABLE is None:
-        _TABLE = np.load(TABLE_PATH)
-    return _TABLE
+    return lobes.shipped_table(TABLE_PATH)
 
 
 @row

@@ -80,15 +80,9 @@ def tabulate(mu_cells, roughness_cells, strata):
     return table
 
 
-_TABLE = None
-
-
 def table():
     """The shipped table, (ROUGHNESS_CELLS, MU_CELLS + 1) float64 (read once)."""
-    global _TABLE
-    if _TABLE is None:
-        _TABLE = np.load(TABLE_PATH)
-    return _TABLE
+    return lobes.shipped_table(TABLE_PATH)
 
 
 @row

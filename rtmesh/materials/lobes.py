@@ -17,7 +17,10 @@ Conventions of the seam (see :mod:`rtmesh.materials.models`)
   scales it by ``1 / eta'^2``, ``eta'`` the ratio of the indices across the interface.
 """
 
+import functools
 import math
+
+import numpy as np
 
 from rtmesh.core.compiled import row
 
@@ -34,6 +37,12 @@ PARAMETER_WIDTH = 16
 
 # Luminance of linear sRGB (Rec. 709, D65): one number for an RGB weight, to choose lobes
 LUMA_R, LUMA_G, LUMA_B = 0.2126, 0.7152, 0.0722
+
+
+@functools.lru_cache(maxsize=None)
+def shipped_table(path):
+    """A table that ships with the package (``.npy``: the energy tables), read once per process."""
+    return np.load(path)
 
 
 @row
