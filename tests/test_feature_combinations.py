@@ -243,6 +243,9 @@ def scene_descriptions(draw):
         # what the path integrator does not render yet: projector lights, and moving objects
         # in a scene with cut-outs or moving emitters (those keep still)
         d["lights"] = [light for light in d["lights"] if light["type"] != "projector"]
+        # the keys only Whitted reads (path warns that it ignores them)
+        d["ambient"] = 0.0
+        d["settings"].update(cutoff=1e-3, ao_samples=0)
         used = [o["material"] for o in d["objects"]] + [d["floor"] or {}]
         if d["camera_media"] is not None:
             used += [d["camera_media"]["glass"], d["camera_media"]["water"] or {}]

@@ -290,3 +290,17 @@ def test_an_interface_between_media_of_one_index_is_invisible(sphere):
     error = lambda a: np.sqrt(np.mean((a - alone) ** 2)) / alone.mean()
     assert error(same) < 0.02
     assert error(denser) > 3 * error(same)
+
+
+def test_whitted_only_keys_are_ignored_under_path_with_one_warning(sphere, caplog):
+    scene = _outside(sphere, Material("m", model="lambert"))
+    scene.ambient = np.full(3, 0.2)
+    with caplog.at_level("WARNING"):
+        Integrator(scene, RenderSettings(width=8, height=8, spp=1, integrator="path", cutoff=0.01)).render()
+    warnings = [r.getMessage() for r in caplog.records if "ignores" in r.getMessage()]
+    assert len(warnings) == 1 and "ambient, cutoff" in warnings[0]
+    caplog.clear()
+    with caplog.at_level("WARNING"):
+        Integrator(_outside(sphere, Material("m", model="lambert")),
+                   RenderSettings(width=8, height=8, spp=1, integrator="path")).render()
+    assert not [r for r in caplog.records if "ignores" in r.getMessage()]

@@ -365,7 +365,9 @@ def scene_from_dict(doc, source="scene", base_dir=".", overrides=None, check_set
 
     scene = Scene.from_parts(
         parts, materials, lights=lights, camera=camera,
-        ambient=environment.get("ambient", np.zeros(3) if lights is not None else np.full(3, 0.05)),
+        # a little ambient light for the default rig under whitted (path has no ambient term)
+        ambient=environment.get("ambient", np.zeros(3) if lights is not None or settings.integrator == "path"
+                                else np.full(3, 0.05)),
         background=_background(r, doc, environment, base_dir),
         source=source, aspect=settings.width / settings.height, physical=settings.integrator == "path",
     )

@@ -12,6 +12,8 @@ up (a :class:`~rtmesh.core.errors.SceneError`), never a wrong image: projector l
 moving emitters and moving objects with alpha cut-outs.
 """
 
+import logging
+
 import numpy as np
 
 from rtmesh.core.errors import SceneError
@@ -26,9 +28,12 @@ from rtmesh.materials.models import SLOTS, material_rows, tables
 from rtmesh.io.passes import LIGHT_PATH_PASSES
 from rtmesh.rendering.path_kernel import BOUNCE, CAMERA, LIGHT_PATHS, PATH_KERNELS, SHADOW, trace_paths
 from rtmesh.rendering.path_surfaces import TEXTURE_COLUMNS
+from rtmesh.rendering.settings import RenderSettings
 from rtmesh.rendering.surface_textures import corner_and_edges, face_tangents
 from rtmesh.sampling.hashing import mix64, path_key
 from rtmesh.sampling.patterns import Dim, dimension_key
+
+log = logging.getLogger(__name__)
 
 # vertices a path takes before Russian roulette may end it (pbrt-v4 starts at its second)
 RR_DEPTH = 3
@@ -165,6 +170,13 @@ class PathStage:
                              + " yet; use integrator = 'whitted'")
         self.it = it
         scene, settings = it.scene, it.settings
+        ignored = [name for name, unused in (
+            ("ambient", bool((np.asarray(scene.ambient) > 0).any())),
+            ("cutoff", settings.cutoff != RenderSettings.cutoff),
+            ("ao_samples", settings.ao_samples > 0 and "ao" not in settings.passes)) if unused]
+        if ignored:
+            log.warning("integrator 'path' ignores %s (it has no ambient term, ends paths by Russian roulette "
+                        "and takes its light from the lights and the background)", ", ".join(ignored))
         accel = _packet_accel(it.accel)
         if it.path_tables is None:
             # formed with the integrator's first view; views made by with_view share them
