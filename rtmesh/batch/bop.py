@@ -37,7 +37,7 @@ import shutil
 
 import numpy as np
 
-from rtmesh.batch.coco import amodal_mask
+from rtmesh.batch.coco import amodal_mask, instance_geometry
 from rtmesh.core.errors import OutputError
 from rtmesh.io.atomic_files import replace_atomically, write_text
 from rtmesh.io.images import DEPTH_PNG_MAX, write_depth_png, write_display_image
@@ -93,9 +93,9 @@ def write_view_files(paths, it, labels, record, objects, units, accels=None):
     mm = UNITS[units]
     visible = np.isin(np.rint(labels["object_id"][..., 0]).astype(np.int64), objects)
     depth = labels["depth_center"][..., 0].astype(np.float64)
-    faces = scene.faces[np.isin(scene.object_id, objects)]
-    points = scene.vertices[faces.ravel()]  # with repeats: only their bounds are read
-    canvas = amodal_mask(it, scene.vertices, faces, points, record, margin=1, accels=accels, seen=visible)
+    geometry = instance_geometry(scene, objects, accels)
+    canvas = amodal_mask(it, scene.vertices, geometry.faces, geometry.bounds, record, margin=1, accels=accels,
+                         seen=visible)
     mask = canvas[h:2 * h, w:2 * w]
     scale = depth_scale(record["far"] * mm)
     w2c = np.array(record["world_to_camera_opencv"])

@@ -91,8 +91,9 @@ def image_annotations(it, record, instances, object_id=None, accels=None):
     object_id : (h, w) or (h, w, 1) float, optional
         The view's ``object_id`` centre pass, when the render has it; traced otherwise.
     accels : dict, optional
-        Where to keep each instance's own Embree scene between views of one built scene
-        (see :func:`amodal_mask`); None builds them for this view alone.
+        Where to keep each instance's faces, bounds (:func:`instance_geometry`) and own
+        Embree scene (:func:`amodal_mask`) between views of one built scene; None forms
+        them for this view alone.
 
     Returns
     -------
@@ -115,25 +116,85 @@ def image_annotations(it, record, instances, object_id=None, accels=None):
     labels = instance_of[ids]
     w2c = np.array(record["world_to_camera_opencv"])
     annotations = []
-    for k in np.unique(labels[labels >= 0]):
+    # the instances seen, in order (a count per instance: no sort of the pixels)
+    for k in np.flatnonzero(np.bincount(labels[labels >= 0], minlength=len(instances))):
         instance = instances[k]
         to_world = instance.to_world
         if instance.objects[0] in moving:  # its place when the shutter opens
             to_world = moving[instance.objects[0]].matrix(it.camera.shutter[0]) @ to_world
         mask = labels == k
-        faces = scene.faces[np.isin(scene.object_id, instance.objects)]
-        points = scene.vertices[faces.ravel()]  # with repeats: only their bounds are read
-        amodal = amodal_mask(it, scene.vertices, faces, points, record, accels=accels, seen=mask)
+        geometry = instance_geometry(scene, instance.objects, accels)
+        amodal = amodal_mask(it, scene.vertices, geometry.faces, geometry.bounds, record, accels=accels, seen=mask)
         area, area_amodal = int(mask.sum()), int(amodal.sum())
         annotations.append({
             "category": instance.category, "object_name": instance.name, "instance_id": int(k),
             "bbox": mask_box(mask), "area": area, "segmentation": encode(mask), "iscrowd": 0,
             "bbox_amodal": mask_box(amodal), "area_amodal": area_amodal,
             "visible_fraction": area / area_amodal,
-            "keypoints_3d_box": _box_keypoints(points, to_world, record),
+            "keypoints_3d_box": _box_keypoints(geometry.model_box(to_world), to_world, record),
             "pose": (w2c @ to_world).tolist(),
         })
     return annotations
+
+
+class InstanceGeometry:
+    """The faces of some objects of a scene and their bounds, kept between the views of one
+    built scene (see :func:`instance_geometry`).
+
+    Attributes
+    ----------
+    faces : (F, 3) int
+        The objects' faces (indices into the scene's vertices).
+    bounds : (2, 3) float
+        The minimum and maximum of their world points.
+    """
+
+    def __init__(self, vertices, faces):
+        self._vertices, self.faces = vertices, faces
+        # the faces' world points, with repeats (only their bounds are read), kept for the
+        # first model box only
+        points = self._points = vertices[faces.ravel()]
+        self.bounds = np.stack([points.min(axis=0), points.max(axis=0)])
+        self._model_boxes = {}
+
+    def model_box(self, to_world):
+        """(2, 3): the minimum and maximum of the points in the model frame of ``to_world``
+        (4x4 model-to-world), computed once per transform."""
+        key = np.asarray(to_world, dtype=np.float64).tobytes()
+        box = self._model_boxes.get(key)
+        if box is None:
+            points = self._vertices[self.faces.ravel()] if self._points is None else self._points
+            self._points = None
+            model = (points - to_world[:3, 3]) @ np.linalg.inv(to_world[:3, :3]).T
+            box = self._model_boxes[key] = np.stack([model.min(axis=0), model.max(axis=0)])
+        return box
+
+
+def instance_geometry(scene, objects, cache=None):
+    """The :class:`InstanceGeometry` of ``objects`` of ``scene``.
+
+    Parameters
+    ----------
+    scene : Scene
+    objects : iterable of int
+        Object indices.
+    cache : dict, optional
+        Where to keep it for other views of the same built scene (by the identity of the
+        scene's vertices, which the entry holds while it lives, and the objects); the
+        views of a batch asset share one.  None computes it for this view alone.
+
+    Returns
+    -------
+    InstanceGeometry
+    """
+    objects = tuple(int(k) for k in objects)
+    key = ("instance", id(scene.vertices), objects)
+    entry = None if cache is None else cache.get(key)
+    if entry is None or entry._vertices is not scene.vertices:
+        entry = InstanceGeometry(scene.vertices, scene.faces[np.isin(scene.object_id, objects)])
+        if cache is not None:
+            cache[key] = entry
+    return entry
 
 
 def amodal_mask(it, vertices, faces, points, record, margin=0, accels=None, seen=None):
@@ -157,7 +218,9 @@ def amodal_mask(it, vertices, faces, points, record, margin=0, accels=None, seen
         three times the image's width and height with the image in its middle.
     accels : dict, optional
         A cache of the faces' Embree scene for other views of the same built scene (by
-        the identity of ``vertices`` and the faces): the views of a batch asset share one.
+        the identity of the ``vertices`` and ``faces`` arrays, which it holds: pass the
+        same arrays for every view, as :func:`instance_geometry` keeps them): the views of
+        a batch asset share one.
     seen : (h, w) bool, optional
         Image pixels known to see the faces (the visible mask): set without a ray.
 
@@ -186,23 +249,30 @@ def amodal_mask(it, vertices, faces, points, record, margin=0, accels=None, seen
     if seen is not None:  # a visible pixel's centre ray meets the faces alone too
         todo = ~mask[rows + mh, columns + mw]
         rows, columns = rows[todo], columns[todo]
-    # (the cache holds the vertices too, so that their id names them while it lives)
-    key = (id(vertices), hash(faces.tobytes()))
-    vertices, alone = (vertices, None) if accels is None else accels.get(key, (vertices, None))
+    # (the cache holds the arrays too, so that their ids name them while it lives)
+    key = ("accel", id(vertices), id(faces))
+    _, _, alone = (None, None, None) if accels is None else accels.get(key, (None, None, None))
     if alone is None:
-        alone = Accel(vertices - it.shift, faces)
+        scene = it.scene
+        if (type(it.accel) is Accel and vertices is scene.vertices and len(faces) == len(scene.faces)
+                and np.array_equal(faces, scene.faces)):
+            # the faces are the whole scene (a batch asset without its ground): the
+            # integrator's Embree scene is the one they would get, without a second build
+            alone = it.accel
+        else:
+            alone = Accel(vertices - it.shift, faces)
         if accels is not None:
-            accels[key] = (vertices, alone)
+            accels[key] = (vertices, faces, alone)
     _, _, _, hits = centre_hits(it, columns, rows, alone)
     hit = hits.prim >= 0
     mask[rows[hit] + mh, columns[hit] + mw] = True
     return mask
 
 
-def _box_keypoints(points, to_world, record):
-    """``[u, v, flag] * 8`` of the model-space bounding box's corners (see the module notes)."""
-    model = (points - to_world[:3, 3]) @ np.linalg.inv(to_world[:3, :3]).T
-    lo, hi = model.min(axis=0), model.max(axis=0)
+def _box_keypoints(model_box, to_world, record):
+    """``[u, v, flag] * 8`` of the model-space bounding box's corners (see the module notes),
+    from its minimum and maximum ``model_box`` (:meth:`InstanceGeometry.model_box`)."""
+    lo, hi = model_box
     corners = np.array([[(i >> a) & 1 for a in range(3)] for i in range(8)])
     world = (lo + corners * (hi - lo)) @ to_world[:3, :3].T + to_world[:3, 3]
     uv, z = project_points(record, world)

@@ -40,7 +40,33 @@ def flow_suffix(name):
     return f".{name}.flo"
 
 
-def view_flow(position, other, record):
+def seen_points(position):
+    """The pixels of a view that see a surface, and the points they see.
+
+    Parameters
+    ----------
+    position : (h, w, 3) float
+        The view's ``position_center`` pass (NaN where the pixel sees nothing).
+
+    Returns
+    -------
+    rows : (k,) intp
+        Flat pixel indices (row-major) whose point is finite.
+    points : (k, 3) float64
+        Their points.
+    """
+    position = np.asarray(position)
+    flat = position.reshape(-1, position.shape[-1])
+    # finite in the pass's own precision (float32 -> float64 keeps every value), one
+    # channel at a time (a reduction along a row of three costs ten times more)
+    finite = np.isfinite(flat[:, 0])
+    for channel in range(1, flat.shape[1]):
+        finite &= np.isfinite(flat[:, channel])
+    rows = np.flatnonzero(finite)
+    return rows, flat[rows].astype(np.float64)
+
+
+def view_flow(position, other, record, seen=None):
     """The flow of one view to another.
 
     Parameters
@@ -51,6 +77,9 @@ def view_flow(position, other, record):
         The integrator of the other view (its camera and scene); None: no other view.
     record : dict or None
         The other view's camera record.
+    seen : tuple, optional
+        :func:`seen_points` of ``position``, when the caller has it (a view's forward and
+        backward flow share it).
 
     Returns
     -------
@@ -61,9 +90,7 @@ def view_flow(position, other, record):
     out = np.zeros((h * w, 3), dtype=np.float32)
     if other is None:
         return out.reshape(h, w, 3)
-    points = np.asarray(position, dtype=np.float64).reshape(-1, 3)
-    rows = np.flatnonzero(np.isfinite(points).all(axis=1))
-    points = points[rows]
+    rows, points = seen_points(position) if seen is None else seen
     uv, z = project_points(record, points)
     inside = (z > 0 if record["projection"] == "perspective" else np.ones(len(z), dtype=bool))
     inside &= (uv[:, 0] >= 0) & (uv[:, 0] < record["width"]) & (uv[:, 1] >= 0) & (uv[:, 1] < record["height"])

@@ -21,10 +21,11 @@ import numpy as np
 from rtmesh.batch.asset_meta import WarningLog, asset_meta, write_meta
 from rtmesh.batch.bop import BOP_SUFFIXES, write_view_files
 from rtmesh.batch.coco import COCO_SUFFIX, Instance, image_annotations, image_entry, write_coco
-from rtmesh.batch.flow import FLOW_PASSES, flow_suffix, view_flow, write_flo
+from rtmesh.batch.flow import FLOW_PASSES, flow_suffix, seen_points, view_flow, write_flo
 from rtmesh.batch.identity import OpenedFiles, describe
 from rtmesh.batch.normalize import asset_to_world, transform_points
 from rtmesh.batch.publish import discard
+from rtmesh.core import runtime
 from rtmesh.core.errors import RtmeshError
 from rtmesh.io.atomic_files import staged
 from rtmesh.io.images import write_depth_png, write_display_image, write_image
@@ -343,26 +344,34 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
             last_check[0] = 0.0  # always ask just before writing
             check()
             paths = [os.path.abspath(os.path.join(job.outdir, name)) for name in task.files]
-            with _writing(job) as pending:
+            with runtime.render_pool(settings.thread_count) as workers, _writing(job) as pending:
+                fragment = None
+                if (workers is not None and any(f.endswith(COCO_SUFFIX) for f in task.files)
+                        and not any(f.endswith(BOP_SUFFIXES) for f in task.files)):
+                    # the COCO fragment formed beside the image writes (its Embree rays and
+                    # OpenImageIO's encoders run without the GIL); BOP files share its cache
+                    fragment = workers.submit(image_fragment, integrator, labels, task, settings, to_world,
+                                              job.asset, job.ground, accels)
                 for name, path in zip(task.files, paths):
                     os.makedirs(os.path.dirname(path), exist_ok=True)
                     if name.endswith(CAMERA_SUFFIX):
                         scene = integrator.scene
                         write_camera_json(path, camera_record(scene.camera, settings.width, settings.height,
-                                                              scene.bounds, to_world))
+                                                              integrator.scene_bounds, to_world))
                     elif name.endswith(DEPTH_PNG_SUFFIX):
                         write_depth_png(path, result.passes["depth"][:, :, 0])
                     elif name.endswith(BOP_SUFFIXES):
                         if name.endswith(BOP_SUFFIXES[0]):  # the other three with it
                             scene = integrator.scene
-                            record = camera_record(scene.camera, settings.width, settings.height, scene.bounds,
-                                                   to_world)
+                            record = camera_record(scene.camera, settings.width, settings.height,
+                                                   integrator.scene_bounds, to_world)
                             bop_paths = {x: p for x in BOP_SUFFIXES for p in paths if p.endswith(x)}
                             write_view_files(bop_paths, integrator, labels, record,
                                              _asset_objects(scene, job.ground, task.view), job.units, accels)
                     elif name.endswith(COCO_SUFFIX):
-                        write_coco(path, image_fragment(integrator, labels, task, settings, to_world, job.asset,
-                                                        job.ground, accels))
+                        write_coco(path, fragment.result() if fragment is not None else
+                                   image_fragment(integrator, labels, task, settings, to_world, job.asset,
+                                                  job.ground, accels))
                     elif name.endswith(MASK_PNG_SUFFIX):
                         write_display_image(path, (result.passes["alpha"][:, :, :1] > 0.5).astype(np.float64))
                     elif name.endswith(".flo"):
@@ -414,7 +423,7 @@ def image_fragment(integrator, labels, task, settings, to_world, asset, ground, 
     instance of category ``asset``, its model frame the asset file's; the ground plane (the
     scene's last object when the view has one) is not annotated."""
     scene = integrator.scene
-    record = camera_record(scene.camera, settings.width, settings.height, scene.bounds, to_world)
+    record = camera_record(scene.camera, settings.width, settings.height, integrator.scene_bounds, to_world)
     objects = _asset_objects(scene, ground, task.view)
     pictures = [f for f in task.files if f.endswith((".png", ".jpg", ".exr"))
                 and not f.endswith((DEPTH_PNG_SUFFIX, MASK_PNG_SUFFIX))]
@@ -425,16 +434,26 @@ def image_fragment(integrator, labels, task, settings, to_world, asset, ground, 
 
 def _flows(labels, task, built, parts, materials, bounds, settings, ground, to_world):
     """``flow_forward`` and ``flow_backward`` of one view (see :mod:`rtmesh.batch.flow`),
-    towards the views of ``task.flow``, each traced in its own view's scene."""
+    towards the views of ``task.flow``, each traced in its own view's scene; the two run
+    side by side on the render's threads (their rays go to Embree without the GIL)."""
     position = labels["position_center"]
-    flows = {}
+    seen = seen_points(position)  # the view's points, for both directions
+    calls = {}
     for name, view in zip(("flow_backward", "flow_forward"), task.flow):
         other = record = None
         if view is not None:
             other = _integrator_for_view(built, parts, materials, bounds, view, settings, ground)
             scene = other.scene
-            record = camera_record(scene.camera, settings.width, settings.height, scene.bounds, to_world)
-        flows[name] = view_flow(position, other, record)
+            record = camera_record(scene.camera, settings.width, settings.height, other.scene_bounds, to_world)
+        calls[name] = (position, other, record, seen)
+    traced = [name for name, call in calls.items() if call[1] is not None]
+    flows = {name: view_flow(*call) for name, call in calls.items() if name not in traced}
+    with runtime.render_pool(min(settings.thread_count, len(traced))) as workers:
+        later = {name: workers.submit(view_flow, *calls[name]) for name in traced[1:]} if workers else {}
+        for name in traced:
+            if name not in later:
+                flows[name] = view_flow(*calls[name])
+        flows.update({name: future.result() for name, future in later.items()})
     return {name: flows[name] for name in FLOW_PASSES}
 
 

@@ -13,17 +13,27 @@ the motion of moving objects; the camera does not move during one render).
 
 :func:`centre_hits` is the same ray for any set of pixels and any scene to trace against
 (the amodal masks of :mod:`rtmesh.batch.coco` trace an object alone).
+
+What it costs: only the pixels of the scene's projected bounding box are traced (in whole
+packets of the image, so each ray's hit is the one a trace of every pixel gives), on the
+render's threads; depth and position of a still scene are interpolated from the hit's
+barycentrics alone, without the rest of a shading record.
 """
 
 import numpy as np
 
+from rtmesh.core import runtime
 from rtmesh.core.rays import RayBatch, repeated_row
+from rtmesh.geometry.accel import barycentric_interpolate
+from rtmesh.geometry.embree_packets import LANES
 from rtmesh.geometry.motion import object_motions
 from rtmesh.io.passes import CENTRE_PASSES
 from rtmesh.scene.camera_json import camera_record, project_points
 
 # pixel-centre rays traced at once (bounds the memory of a large image's label passes)
 CHUNK_RAYS = 1 << 16
+# fewer rays than this are not split between threads (a multiple of LANES)
+_MIN_CHUNK = 1 << 12
 _UNIT = np.ones(3)
 _GEOMETRY = ("depth_center", "position_center", "normal_center")
 
@@ -74,6 +84,64 @@ def centre_hits(it, columns, rows, accel=None):
     return origins, directions, time, hits
 
 
+def box_pixels(record, bounds, width, height):
+    """The pixel rectangle that holds every pixel whose centre ray can meet a box.
+
+    Parameters
+    ----------
+    record : dict
+        The view's camera record (:func:`rtmesh.scene.camera_json.camera_record`).
+    bounds : (2, 3) float
+        The box's minimum and maximum, world units.
+    width, height : int
+        The canvas (pixels ``0 .. width - 1``, ``0 .. height - 1``).
+
+    Returns
+    -------
+    c0, c1, r0, r1 : int
+        Columns ``c0 .. c1 - 1`` and rows ``r0 .. r1 - 1``: the pixels whose centre lies
+        inside the projection of the box's corners, and one more on each side, clipped to
+        the canvas; the whole canvas when part of the box is behind a perspective camera.
+        Empty (``c1 <= c0`` or ``r1 <= r0``) when the box is outside it.
+    """
+    corners = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)])
+    lo, hi = np.asarray(bounds[0], dtype=np.float64), np.asarray(bounds[1], dtype=np.float64)
+    uv, z = project_points(record, lo + corners * (hi - lo))
+    c0, c1, r0, r1 = 0, width, 0, height
+    if record["projection"] != "perspective" or (z > 0).all():
+        c0, r0 = (int(x) for x in np.maximum(np.floor(uv.min(axis=0) - 0.5).astype(int) - 1, (c0, r0)))
+        c1, r1 = (int(x) for x in np.minimum(np.ceil(uv.max(axis=0) - 0.5).astype(int) + 2, (c1, r1)))
+    return c0, c1, r0, r1
+
+
+def _traced_pixels(it):
+    """(n,) int64: the pixels whose centre rays :func:`centre_passes` traces, row-major.
+
+    Only the pixels of the scene's projected bounding box (:func:`box_pixels`) can see
+    anything; the rest are misses without a ray.  Whole packets of :data:`LANES`
+    consecutive pixels of the image are kept (those that hold a pixel of the box), so every
+    ray travels in the same packet as when the whole image is traced: the hits are the same
+    bit for bit.  Every pixel where objects move (their bounds at the shutter's opening
+    are not the scene's).
+    """
+    s, scene = it.settings, it.scene
+    total = s.width * s.height
+    if it.motion is not None or not len(scene.faces):
+        return np.arange(total)
+    bounds = it.scene_bounds
+    c0, c1, r0, r1 = box_pixels(camera_record(scene.camera, s.width, s.height, bounds), bounds, s.width, s.height)
+    if c1 <= c0 or r1 <= r0:
+        return np.zeros(0, dtype=np.int64)
+    rows = np.arange(r0, r1, dtype=np.int64)
+    first, last = (rows * s.width + c0) // LANES, (rows * s.width + c1 - 1) // LANES
+    packets = np.zeros((total + LANES - 1) // LANES + 1, dtype=np.int64)  # +1 at a first, -1 after a last
+    np.add.at(packets, first, 1)
+    np.add.at(packets, last + 1, -1)
+    starts = np.flatnonzero(np.cumsum(packets[:-1]) > 0) * LANES
+    pixels = (starts[:, None] + np.arange(LANES)).ravel()
+    return pixels[pixels < total]
+
+
 def centre_passes(it, names):
     """The centre-ray passes among ``names``, as images.
 
@@ -104,29 +172,51 @@ def centre_passes(it, names):
                                              ("instance_id", scene.object_id)) if name in out]
     motions = object_motions(scene) if "motion" in out and it.motion is not None else {}
     geometry = any(name in out for name in _GEOMETRY) or bool(motions)
-    record = camera_record(scene.camera, s.width, s.height, scene.bounds) if motions else None
+    # points alone (depth, position) of a still scene: the surface kernel's interpolation
+    # without its normals, materials and textures (the same rounding, see below)
+    points_only = it.motion is None and "normal_center" not in out
+    record = camera_record(scene.camera, s.width, s.height, it.scene_bounds) if motions else None
     forward = it.camera_frame[0]
-    for start in range(0, total, CHUNK_RAYS):
-        pixels = np.arange(start, min(start + CHUNK_RAYS, total))
+
+    def trace(pixels):
         origins, directions, time, hits = centre_hits(it, pixels % s.width, pixels // s.width)
         rows = np.flatnonzero(hits.prim >= 0)
         if not len(rows):
-            continue
+            return
         prim, dest = hits.prim[rows].astype(np.intp), pixels[rows]
         for name, table in ids:
             out[name][dest, 0] = table[prim]
-        if geometry:
+        if points_only and geometry:
+            # (u e1 + v0) + v e2 on the rows of the face table the surface kernel reads:
+            # rtmesh.shading.surfaces.surface_from_rows rounds exactly so; component-major like
+            # the kernel's points, so that the depth's product below sums alike
+            points = np.asfortranarray(barycentric_interpolate(it.tables.faces[prim], hits.u[rows], hits.v[rows]))
+        elif geometry:
             n = len(pixels)
             rays = RayBatch(origins, directions, np.arange(n, dtype=np.int64), repeated_row(_UNIT, n),
                             repeated_row(it._camera_medium, n))
             srf = it.surface_stage.records(rays, hits, rows, time)
+            points = srf.p
+        if geometry:
             if "depth_center" in out:
-                out["depth_center"][dest, 0] = (srf.p - it.camera.position) @ forward
+                out["depth_center"][dest, 0] = (points - it.camera.position) @ forward
             if "position_center" in out:
-                out["position_center"][dest] = srf.p + it.shift
+                out["position_center"][dest] = points + it.shift
             if "normal_center" in out:
                 out["normal_center"][dest] = srf.ns
             if motions:
-                out["motion"][dest] = _motion(srf.p + it.shift, scene.object_id[prim], motions,
+                out["motion"][dest] = _motion(points + it.shift, scene.object_id[prim], motions,
                                               scene.camera.shutter, record)
+
+    # chunks of whole packets, one or more per render thread, each writing its own pixels
+    traced = _traced_pixels(it)
+    size = -(-len(traced) // s.thread_count)
+    size = min(CHUNK_RAYS, max(-(-size // LANES) * LANES, _MIN_CHUNK))
+    chunks = [traced[start:start + size] for start in range(0, len(traced), size)]
+    with runtime.render_pool(min(s.thread_count, len(chunks)) or 1) as workers:
+        later = [workers.submit(trace, chunk) for chunk in chunks[1:]] if workers else []
+        for chunk in chunks[:1] if workers else chunks:
+            trace(chunk)
+        for future in later:
+            future.result()
     return {name: values.reshape(s.height, s.width, -1) for name, values in out.items()}

@@ -94,6 +94,8 @@ class Integrator:
     ----------
     plan : RenderPlan
         Which optional stages this scene and these settings need.
+    scene_bounds : (2, 3) float
+        ``scene.bounds`` (world units), formed once for the built scene and its views.
     """
 
     def __init__(self, scene, settings):
@@ -106,7 +108,7 @@ class Integrator:
         # Re-centre the scene on the origin before it meets float32: float32 resolution is
         # relative to the size of the coordinates, so a model 1e6 units from the origin would
         # otherwise be traced on a grid of 1/16 unit.  Shading sees the same shifted frame.
-        scene_bounds = scene.bounds  # a pass over every vertex: formed once
+        scene_bounds = self.scene_bounds = scene.bounds  # a pass over every vertex: formed once
         self.shift = scene_bounds.mean(axis=0)
         # moving objects get Embree scenes of their own, traced at each ray's time
         self.motion = None
