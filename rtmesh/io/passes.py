@@ -168,6 +168,17 @@ class PassSpec:
         return [c if c == "A" else f"{self.name}.{c}" for c in self.channels]
 
 
+# the path integrator's light-path passes, written by its kernel (producer None)
+_LIGHT_PATHS = (
+    ("emission", "path: light seen straight from the camera (emitters, lights, the background)"),
+    ("direct_diffuse", "path: light from a light after one diffuse reflection"),
+    ("direct_glossy", "path: light from a light after one glossy or mirror reflection"),
+    ("direct_transmission", "path: light from a light after one transmission"),
+    ("indirect_diffuse", "path: light after more bounces, the first diffuse"),
+    ("indirect_glossy", "path: light after more bounces, the first glossy or mirror"),
+    ("indirect_transmission", "path: light after more bounces, the first a transmission"),
+)
+
 REGISTRY = {
     spec.name: spec for spec in (
         PassSpec("ao", ("Y",), "mean", 1.0, None,
@@ -181,20 +192,11 @@ REGISTRY = {
         PassSpec("position", ("X", "Y", "Z"), "mean", 0.0, _position, "world-space hit point"),
         PassSpec("uv", ("U", "V"), "mean", 0.0, _uv, "texture coordinates (0 without UVs)"),
         PassSpec("alpha", ("A",), "mean", 0.0, _covered, "coverage of camera rays by geometry"),
-    ) + tuple(PassSpec(name, ("R", "G", "B"), "mean", 0.0, None, doc) for name, doc in (
-        ("emission", "path: light seen straight from the camera (emitters, lights, the background)"),
-        ("direct_diffuse", "path: light from a light after one diffuse reflection"),
-        ("direct_glossy", "path: light from a light after one glossy or mirror reflection"),
-        ("direct_transmission", "path: light from a light after one transmission"),
-        ("indirect_diffuse", "path: light after more bounces, the first diffuse"),
-        ("indirect_glossy", "path: light after more bounces, the first glossy or mirror"),
-        ("indirect_transmission", "path: light after more bounces, the first a transmission"),
-    ))
+    ) + tuple(PassSpec(name, ("R", "G", "B"), "mean", 0.0, None, doc) for name, doc in _LIGHT_PATHS)
 }
 # the path integrator's light-path passes (they sum to the image), in the order of its kernel's
 # categories (rtmesh.rendering.path_kernel)
-LIGHT_PATH_PASSES = ("emission", "direct_diffuse", "direct_glossy", "direct_transmission", "indirect_diffuse",
-                     "indirect_glossy", "indirect_transmission")
+LIGHT_PATH_PASSES = tuple(name for name, _ in _LIGHT_PATHS)
 
 
 @dataclass(frozen=True)

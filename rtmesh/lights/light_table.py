@@ -29,6 +29,7 @@ import numpy as np
 from rtmesh.core.compiled import row
 from rtmesh.lights import point_light_rows
 from rtmesh.lights.area_lights import DiskLight, QuadLight
+from rtmesh.sampling.alias import alias_table
 from rtmesh.sampling.warps import concentric_disk_row, uniform_triangle_weights
 
 QUAD, DISK, TRIANGLE, ENVIRONMENT = 3, 4, 5, 6
@@ -84,8 +85,6 @@ class LightTable:
     """
 
     def __init__(self, lights, triangles, face_normals, face_emission, environment, scene_radius):
-        from rtmesh.sampling.alias import alias_table
-
         rows, power = [], []
         for light in lights:
             if isinstance(light, QuadLight):

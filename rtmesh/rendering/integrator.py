@@ -483,19 +483,7 @@ class Integrator:
         if self.path_stage is not None:
             return self._render_paths(pixel, sample_in_pixel, m, spp, ragged, stats, clock)
         n = len(pixel)
-        # every dimension is stratified in sets of the settings' spp, whatever the round
-        in_pixel = self.sampler.pixel(pixel, sample_in_pixel)
-        lens_uv = None
-        if self.plan.lens:
-            lens_uv = self.sampler.lens(pixel, sample_in_pixel)
-        sample_time = None
-        if self.plan.motion:
-            # one time per camera sample, stratified per pixel; its rays all inherit it
-            t_open, t_close = self.camera.shutter
-            u = self.sampler.time(pixel, sample_in_pixel)
-            sample_time = t_open + (t_close - t_open) * u
-        origins, directions = self.camera.generate_rays(in_pixel, s.width, s.height, lens_uv, pixel,
-                                                        self.camera_frame)
+        origins, directions, sample_time = self._camera_rays(pixel, sample_in_pixel)
         # camera rays have unit throughput: a read-only repeated row costs nothing; _shade
         # does not multiply by it at depth 0 and absorbs only on rows in an absorbing
         # medium (inside one, camera rays lose light on the way: then a real array)
@@ -522,22 +510,32 @@ class Integrator:
         return chunk.radiance.reshape(m, spp, 3), passes, stats
 
     def _camera_rays(self, pixel, sample_in_pixel):
-        """Camera rays of the samples ``(pixel, sample_in_pixel)`` ((n,) each), re-centred frame."""
+        """Camera rays of the samples ``(pixel, sample_in_pixel)`` ((n,) each), in the re-centred
+        frame, and their times in the shutter (None without moving objects).
+
+        Returns
+        -------
+        origins, directions : (n, 3) float64
+        sample_time : (n,) float64 or None
+        """
         s = self.settings
+        # every dimension is stratified in sets of the settings' spp, whatever the round
         in_pixel = self.sampler.pixel(pixel, sample_in_pixel)
         lens_uv = self.sampler.lens(pixel, sample_in_pixel) if self.plan.lens else None
-        return self.camera.generate_rays(in_pixel, s.width, s.height, lens_uv, pixel, self.camera_frame)
+        sample_time = None
+        if self.plan.motion:
+            # one time per camera sample, stratified per pixel; its rays all inherit it
+            t_open, t_close = self.camera.shutter
+            sample_time = t_open + (t_close - t_open) * self.sampler.time(pixel, sample_in_pixel)
+        origins, directions = self.camera.generate_rays(in_pixel, s.width, s.height, lens_uv, pixel,
+                                                        self.camera_frame)
+        return origins, directions, sample_time
 
     def _render_paths(self, pixel, sample_in_pixel, m, spp, ragged, stats, clock):
         """:meth:`render_chunk` under the path integrator: camera rays, then the path kernel;
         the passes come from the camera rays' first hits, as on the Whitted path."""
-        origins, directions = self._camera_rays(pixel, sample_in_pixel)
+        origins, directions, times = self._camera_rays(pixel, sample_in_pixel)
         n = len(pixel)
-        times = None
-        if self.plan.motion:
-            # one time per camera sample, stratified per pixel, as on the Whitted path
-            t_open, t_close = self.camera.shutter
-            times = t_open + (t_close - t_open) * self.sampler.time(pixel, sample_in_pixel)
         clock.lap("camera")
         buffers = self.passes.buffers(n) if self.plan.passes else None
         radiance = self.path_stage.render(origins, directions, pixel, sample_in_pixel, stats, buffers, times)

@@ -66,6 +66,7 @@ from rtmesh.geometry.embree_packets import (DEFAULT_TFAR, GEOM_ID, INVALID_ID, L
                                             RTC_RAY_QUERY_FLAG_COHERENT, RTC_RAY_QUERY_FLAG_INCOHERENT, TFAR, U, V,
                                             clear_hit, packet_buffers, query_arguments, set_lane)
 from rtmesh.geometry.float32_rays import F32_MAX, offset_origin
+from rtmesh.io.passes import LIGHT_PATH_PASSES
 from rtmesh.lights import light_table as lt
 from rtmesh.lights.environment import sample_direction
 from rtmesh.lights.point_light_rows import illuminate_row
@@ -108,7 +109,7 @@ SOBOL_LIMIT = 1 << 32
 # light-path passes (rtmesh.io.passes.LIGHT_PATH_PASSES) and the first vertex's lobe categories
 EMISSION, DIRECT, INDIRECT = 0, 1, 4
 DIFFUSE_PATH, GLOSSY_PATH, TRANSMISSION_PATH = 0, 1, 2
-LIGHT_PATHS = 7
+LIGHT_PATHS = len(LIGHT_PATH_PASSES)
 
 
 @row

@@ -177,7 +177,6 @@ class PathStage:
         if ignored:
             log.warning("integrator 'path' ignores %s (it has no ambient term, ends paths by Russian roulette "
                         "and takes its light from the lights and the background)", ", ".join(ignored))
-        accel = _packet_accel(it.accel)
         if it.path_tables is None:
             # formed with the integrator's first view; views made by with_view share them
             it.path_tables = scene_tables(scene, it.accel)
@@ -187,8 +186,10 @@ class PathStage:
         lights_scene = background.lighting is not False and not background.is_black
         environment = None
         if not background.is_black:
-            environment = EnvironmentTables(EnvironmentLighting(background, accel, settings, it.offset_scale),
-                                            background)
+            # the Whitted stages' sampling tables of this background when the view has them
+            lighting = it.environment_lighting or EnvironmentLighting(background, it.accel, settings,
+                                                                      it.offset_scale)
+            environment = EnvironmentTables(lighting, background)
         self.lights = LightTable([light for light in it.view_lights if not isinstance(light, MeshLight)],
                                  self.geometry[0], self.geometry[1], face_emission,
                                  environment if lights_scene else None, it.offset_scale)
