@@ -71,8 +71,8 @@ from rtmesh.lights import light_table as lt
 from rtmesh.lights.environment import sample_direction
 from rtmesh.lights.point_light_rows import illuminate_row
 from rtmesh.materials import lobes, models
-from rtmesh.rendering.path_surfaces import (NORMAL_TEXTURE, emission_at, is_transparent, normal_mapped, surface_point,
-                                            textured_row)
+from rtmesh.rendering.path_surfaces import (cross_interface, emission_at, interface_ratio, is_transparent,
+                                            shading_normals, surface_point, tangent_frame, textured_row)
 from rtmesh.sampling.alias import alias_sample
 from rtmesh.sampling.hashing import mix64, pixel_sequence, uniform
 from rtmesh.sampling.lowdiscrepancy import sobol_pair
@@ -503,16 +503,12 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                     bsdf_params, bsdf_row = params, mat
                 if media and transmissive[mat] and slots[tags[mat], models.IOR_SLOT] >= 0:
                     # the index ratio of this interface between the media on its two sides
-                    top = stack[lane, 0]
-                    if (gx * dx[lane] + gy * dy[lane]) + gz * dz[lane] < 0.0:
-                        other = top  # entering: from the medium the ray is in
-                    else:
-                        other = stack[lane, 1] if top == mat else top  # leaving: into what is below
                     if not textured[mat]:
                         for k in range(params.shape[1]):
                             scratch[lane, k] = params[mat, k]
                         bsdf_params, bsdf_row = scratch, lane
-                    scratch[lane, slots[tags[mat], models.IOR_SLOT]] = ior[mat] / (ior[other] if other >= 0 else 1.0)
+                    scratch[lane, slots[tags[mat], models.IOR_SLOT]] = interface_ratio(
+                        stack, lane, mat, (gx * dx[lane] + gy * dy[lane]) + gz * dz[lane] < 0.0, ior)
                 # emission, from the front side (the winding's normal), as pbrt's and Mitsuba's
                 # area lights
                 front = (gx * dx[lane] + gy * dy[lane]) + gz * dz[lane] < 0.0
@@ -537,21 +533,9 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 # models turn the frame to the viewer's side, transmissive ones keep the
                 # outward side (inside: wo.z < 0)
                 ox, oy, oz = -dx[lane], -dy[lane], -dz[lane]
-                if (nx * gx + ny * gy) + nz * gz < 0.0:
-                    nx, ny, nz = -nx, -ny, -nz
-                if material_textures[mat, NORMAL_TEXTURE] >= 0:
-                    nx, ny, nz = normal_mapped(surface, geometry, mat, prim, bu, bv, nx, ny, nz)
-                if not transmissive[mat]:
-                    if (gx * ox + gy * oy) + gz * oz < 0.0:
-                        gx, gy, gz, nx, ny, nz = -gx, -gy, -gz, -nx, -ny, -nz
-                    if not (nx * ox + ny * oy) + nz * oz > 0.0:
-                        # a bent shading normal facing away from the viewer: shade flat
-                        nx, ny, nz = gx, gy, gz
-                sign = 1.0 if nz >= 0.0 else -1.0
-                fa = -1.0 / (sign + nz)
-                fb = nx * ny * fa
-                tx, ty, tz = 1.0 + sign * nx * nx * fa, sign * fb, -sign * nx
-                sx, sy, sz = fb, sign + ny * ny * fa, -ny
+                gx, gy, gz, nx, ny, nz = shading_normals(surface, geometry, mat, prim, bu, bv, transmissive[mat],
+                                                         gx, gy, gz, nx, ny, nz, ox, oy, oz)
+                tx, ty, tz, sx, sy, sz = tangent_frame(nx, ny, nz)
                 lox = (tx * ox + ty * oy) + tz * oz
                 loy = (sx * ox + sy * oy) + sz * oz
                 loz = (nx * ox + ny * oy) + nz * oz
@@ -644,15 +628,8 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 if depth == 0:
                     category[lane] = _category(flags)
                 if transmissive[mat] and (flags & lobes.TRANSMISSION) and media:
-                    if side < 0.0:  # into the interior (the outward normal faces away from the new ray)
-                        for k in range(media - 1, 0, -1):
-                            stack[lane, k] = stack[lane, k - 1]
-                        stack[lane, 0] = mat
-                    elif stack[lane, 0] == mat:  # out of it
-                        for k in range(media - 1):
-                            stack[lane, k] = stack[lane, k + 1]
-                        stack[lane, media - 1] = -1
-                    top = stack[lane, 0]
+                    # into the interior when the outward normal faces away from the new ray
+                    top = cross_interface(stack, lane, mat, side < 0.0)
                     for c in range(3):
                         sigma[lane, c] = absorption[top, c] if top >= 0 else 0.0
                 if depth + 1 >= rr_depth:

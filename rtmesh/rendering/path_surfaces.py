@@ -211,3 +211,68 @@ def normal_mapped(surface, geometry, mat, prim, bu, bv, nx, ny, nz):
         return nx, ny, nz
     inv = 1.0 / math.sqrt(length2)
     return mx * inv, my * inv, mz * inv
+
+
+@inline_row
+def shading_normals(surface, geometry, mat, prim, bu, bv, transmissive, gx, gy, gz, nx, ny, nz, ox, oy, oz):
+    """The geometric and shading normals a hit is shaded with, seen along ``o`` (unit,
+    toward where the ray came from): the shading normal turned to the geometric normal's
+    side and bent by a normal map; reflection-only models (``transmissive`` false) turn
+    both to the viewer's side (and shade flat where a bent normal faces away from it),
+    transmissive ones keep the outward side (then ``o`` below it means "inside").
+
+    Returns
+    -------
+    gx, gy, gz, nx, ny, nz : float
+    """
+    if (nx * gx + ny * gy) + nz * gz < 0.0:
+        nx, ny, nz = -nx, -ny, -nz
+    if surface[8][mat, NORMAL_TEXTURE] >= 0:
+        nx, ny, nz = normal_mapped(surface, geometry, mat, prim, bu, bv, nx, ny, nz)
+    if not transmissive:
+        if (gx * ox + gy * oy) + gz * oz < 0.0:
+            gx, gy, gz, nx, ny, nz = -gx, -gy, -gz, -nx, -ny, -nz
+        if not (nx * ox + ny * oy) + nz * oz > 0.0:
+            # a bent shading normal facing away from the viewer: shade flat
+            nx, ny, nz = gx, gy, gz
+    return gx, gy, gz, nx, ny, nz
+
+
+@inline_row
+def tangent_frame(nx, ny, nz):
+    """Two unit tangents ``t, s`` completing the unit normal ``n`` to an orthonormal frame
+    (Duff et al. 2017: no branch on the normal's direction but its sign)."""
+    sign = 1.0 if nz >= 0.0 else -1.0
+    fa = -1.0 / (sign + nz)
+    fb = nx * ny * fa
+    return 1.0 + sign * nx * nx * fa, sign * fb, -sign * nx, fb, sign + ny * ny * fa, -ny
+
+
+@inline_row
+def interface_ratio(stack, lane, mat, entering, ior):
+    """The index ratio of a transmissive material's interface between the media on its two
+    sides: its index over that of the medium the ray comes from (entering) or goes into
+    (leaving); ``stack[lane]`` holds the media the ray is inside, innermost first, -1 padded."""
+    top = stack[lane, 0]
+    if entering:
+        other = top
+    else:
+        other = stack[lane, 1] if top == mat else top
+    return ior[mat] / (ior[other] if other >= 0 else 1.0)
+
+
+@inline_row
+def cross_interface(stack, lane, mat, into):
+    """Update a lane's media stack as its ray refracts through material ``mat``: into its
+    interior (push) or out of it (pop, when it is the innermost).  Returns the innermost
+    medium after (-1: none)."""
+    media = stack.shape[1]
+    if into:
+        for k in range(media - 1, 0, -1):
+            stack[lane, k] = stack[lane, k - 1]
+        stack[lane, 0] = mat
+    elif stack[lane, 0] == mat:
+        for k in range(media - 1):
+            stack[lane, k] = stack[lane, k + 1]
+        stack[lane, media - 1] = -1
+    return stack[lane, 0]
