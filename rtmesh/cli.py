@@ -17,7 +17,7 @@ from rtmesh.io.images import check_output_path, write_display_image, write_image
 from rtmesh.io.passes import display_values
 from rtmesh.rendering import memory
 from rtmesh.rendering.integrator import Integrator
-from rtmesh.rendering.settings import FRESNEL_MODES, INTEGRATORS, PASSES
+from rtmesh.rendering.settings import CAUSTICS, FRESNEL_MODES, INTEGRATORS, PASSES
 from rtmesh.sampling.patterns import SAMPLERS
 from rtmesh.scene.background import background_from_option
 from rtmesh.scene.camera_json import camera_record, write_camera_json
@@ -84,6 +84,11 @@ def build_parser():
                    "camera ray, 1 = direct light only, -1 = unlimited (the default)")
     p.add_argument("--clamp", type=float, metavar="L",
                    help="path: largest value a contribution after the first bounce may add (0 = off)")
+    p.add_argument("--caustics", choices=CAUSTICS,
+                   help="path: photon passes for caustics; auto (the default) when a small or delta light can "
+                   "reach a mirror or smooth glass")
+    p.add_argument("--photons", type=_positive_int, help="path: photons a caustic photon pass traces "
+                   "(default: the pixel count, 65536 to 1048576)")
     p.add_argument("--seed", type=int, help="random seed (same seed, same image)")
     p.add_argument("--threads", type=_positive_int, help="worker threads (default: all cores)")
     p.add_argument("--ao-samples", type=int, help="ambient-occlusion rays per hit (0 = off)")
@@ -342,6 +347,7 @@ def cmd_render(args):
         "time_limit": args.time_limit, "max_spp": args.max_spp,
         "fresnel": args.fresnel, "exposure": args.exposure, "tonemap": args.tonemap,
         "denoise": args.denoise, "integrator": args.integrator, "clamp": args.clamp,
+        "caustics": args.caustics, "photons": args.photons,
     }
     background = None if args.background is None else background_from_option(args.background)
     # the command owns its process: tune it for rendering (allocator, GIL, kept threads)
@@ -399,6 +405,9 @@ def summary_line(output, settings, st):
         kinds = " / ".join(f"{st.rays[kind] / 1e6:.2f} {kind}" for kind in ("camera", "bounce", "shadow"))
         rate = st.samples / st.wall_seconds / 1e6 if st.wall_seconds > 0 else 0.0
         path = f"; path: M rays {kinds}, {rate:.2f} M samples/s"
+        if st.photon_passes:
+            path += (f"; caustics: {st.photon_passes} photon passes of {st.photons} photons "
+                     f"({st.photons_stored / st.photon_passes:.0f} stored a pass), {st.photon_seconds:.2f} s")
     return (f"{output}: {settings.width}x{settings.height}, {samples}, "
             f"{st.total_rays / 1e6:.2f} M rays ({st.rays_per_second / 1e6:.2f} M rays/s), "
             f"{st.wall_seconds:.2f} s, {st.threads} threads{error}{adaptive}{path}")

@@ -28,7 +28,7 @@ from rtmesh.scene.background import (BACKGROUND_TYPES, GradientBackground, Solid
                                      read_environment)
 from rtmesh.scene.camera import Camera
 from rtmesh.materials.models import MODEL_NAMES
-from rtmesh.rendering.settings import INTEGRATORS
+from rtmesh.rendering.settings import CAUSTICS, INTEGRATORS
 from rtmesh.scene.model import MeshPart, Scene
 
 # ---------------------------------------------------------------- value types
@@ -166,7 +166,7 @@ RENDER_KEYS = {
     "light_samples": _int,
     "exposure": _float, "tonemap": _str,
     "target_error": _positive, "time_limit": _positive, "max_spp": _int, "denoise": _bool,
-    "integrator": _one_of(*INTEGRATORS), "clamp": _non_negative,
+    "integrator": _one_of(*INTEGRATORS), "clamp": _non_negative, "caustics": _one_of(*CAUSTICS), "photons": _int,
 }
 CAMERA_KEYS = {
     "position": _vec3, "look_at": _vec3, "up": _vec3, "fov": _fov,

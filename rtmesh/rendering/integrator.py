@@ -329,13 +329,15 @@ class Integrator:
         s = self.settings
         start = time.perf_counter()
         # without later rounds every pixel is added once, and its image value with it
-        film = Film(s.width, s.height, self.passes.film_passes(), one_pass=not s.adaptive)
+        film = Film(s.width, s.height, self.passes.film_passes(), one_pass=not (s.adaptive or self._photon_passes))
         stats = RenderStats(threads=s.thread_count, pixels=s.width * s.height)
         stats.stages_enabled = self.plan.enabled()
         # threads of its own and the caller's switch interval, unless the process is tuned
         # for rendering (rtmesh.core.runtime): then its kept pool and a short interval
         with runtime.render_pool(s.thread_count, pool) as workers, runtime.gil_handoff(s.thread_count):
             render_rounds(self, film, stats, progress, workers)
+            if self.path_stage is not None:
+                self.path_stage.caustics.record(stats)
             image = film.image(workers)
         if self.cutouts is not None:
             stats.rays["cutout"] += self.cutouts.layers_traced
@@ -358,8 +360,14 @@ class Integrator:
             stats.wall_seconds = time.perf_counter() - start
         return RenderResult(image, passes, stats, film, alpha, noisy)
 
+    @property
+    def _photon_passes(self):
+        """Whether the render runs photon passes (caustics, :mod:`rtmesh.rendering.caustics`)."""
+        return self.path_stage is not None and self.path_stage.caustics.enabled
+
     def render_samples(self, film, pixels, first_sample, spp, stats, progress=None, pool=None):
-        """Render samples of a set of pixels into ``film``, in chunks on the threads.
+        """Render samples of a set of pixels into ``film``, in chunks on the threads (with photon
+        passes, one pass a sample index: see :meth:`_render_photon_passes`).
 
         Parameters
         ----------
@@ -386,6 +394,36 @@ class Integrator:
             Workers that render alongside the calling thread (if not given, those of
             :func:`rtmesh.core.runtime.render_pool` for this call).
         """
+        if self._photon_passes:
+            self._render_photon_passes(film, pixels, first_sample, spp, stats, progress, pool)
+            return
+        self._render_batch(film, pixels, first_sample, spp, stats, progress, pool)
+
+    def _render_photon_passes(self, film, pixels, first_sample, spp, stats, progress, pool):
+        """:meth:`render_samples` with photon passes: sample index ``k`` of every pixel is
+        rendered with pass ``k``'s photons, pass after pass (so each pixel's samples still
+        reach the film in order, and one pass's photons exist at a time)."""
+        caustics = self.path_stage.caustics
+        if np.ndim(spp) == 0 and np.ndim(first_sample) == 0:
+            passes = range(first_sample, first_sample + spp)
+            chosen = None
+        else:
+            pixels = np.asarray(pixels, dtype=np.int64)
+            first = np.broadcast_to(np.asarray(first_sample, dtype=np.int64), pixels.shape)
+            end = first + np.broadcast_to(np.asarray(spp, dtype=np.int64), pixels.shape)
+            passes = range(int(first.min()), int(end.max())) if len(pixels) else range(0)
+            chosen = (first, end)
+        rays = caustics.rays
+        for k in passes:
+            with runtime.render_pool(self.settings.thread_count, pool) as workers:
+                self.path_stage.photon_map = caustics.photon_map(k, workers)
+            these = pixels if chosen is None else pixels[(chosen[0] <= k) & (k < chosen[1])]
+            if len(these):
+                self._render_batch(film, these, k, 1, stats, progress, pool)
+        stats.rays["photon"] += caustics.rays - rays
+
+    def _render_batch(self, film, pixels, first_sample, spp, stats, progress=None, pool=None):
+        """:meth:`render_samples` as one batch of chunks."""
         s = self.settings
         uniform = np.ndim(spp) == 0 and np.ndim(first_sample) == 0
         # pixels may be a range (a whole uniform image): each chunk takes its slice of it, so

@@ -71,6 +71,7 @@ from rtmesh.lights import light_table as lt
 from rtmesh.lights.environment import sample_direction
 from rtmesh.lights.point_light_rows import illuminate_row
 from rtmesh.materials import lobes, models
+from rtmesh.rendering.photon_kernel import empty_photon_map, gather
 from rtmesh.rendering.path_surfaces import (cross_interface, emission_at, interface_ratio, is_transparent,
                                             shading_normals, surface_point, tangent_frame, textured_row)
 from rtmesh.sampling.alias import alias_sample
@@ -110,6 +111,10 @@ SOBOL_LIMIT = 1 << 32
 EMISSION, DIRECT, INDIRECT = 0, 1, 4
 DIFFUSE_PATH, GLOSSY_PATH, TRANSMISSION_PATH = 0, 1, 2
 LIGHT_PATHS = len(LIGHT_PATH_PASSES)
+# what a path's last vertices were, for caustics: only delta bounces since the camera; a
+# non-delta bounce last; a non-delta bounce, then delta bounces only (light met now is a
+# caustic path, which photons carry when they are on)
+CHAIN_START, CHAIN_SCATTERED, CHAIN_CAUSTIC = 0, 1, 2
 
 
 @row
@@ -277,7 +282,7 @@ def _shadows_through_cutouts(intersect16, scene, args, shadow, shadow_words, sha
 
 @kernel
 def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixels, samples, sobol_keys, times,
-                geometry, surface, lights, env, options, motion, radiance, light_paths, counts):
+                geometry, surface, lights, env, options, motion, photon_map, radiance, light_paths, counts):
     """Trace one path per camera ray and write its radiance.
 
     Parameters
@@ -297,7 +302,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
         The dimension keys of those sequences (:func:`rtmesh.sampling.patterns.dimension_key`).
     times : (n,) float64, or (0,)
         Each sample's time in the shutter (scenes with moving objects).
-    geometry, surface, lights, env, options, motion : tuples
+    geometry, surface, lights, env, options, motion, photon_map : tuples
         The records described in the module notes.
     radiance : (n, 3) float64
         Output.
@@ -322,6 +327,8 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     env_pixels, env_marginal, env_conditional, env_func, env_mean, env_cos, env_sin = env
     has_static, static_faces, movers, face_maps, face_offsets, moves, face_mover = motion
     has_lights = len(light_rows) > 0
+    photons_on, scatters = photon_map[0], photon_map[10]
+    radius_scale, footprint_a, footprint_b, max_radius = photon_map[6], photon_map[7], photon_map[8], photon_map[9]
     ray, words, valid, args_coherent = packet_buffers(np.int64(RAYHIT_WORDS), np.int64(1),
                                                       np.int64(RTC_RAY_QUERY_FLAG_COHERENT))
     args_incoherent = query_arguments(np.int64(RTC_RAY_QUERY_FLAG_INCOHERENT))
@@ -356,6 +363,9 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     prev_delta = np.zeros(LANES, np.bool_)
     lane_depth = np.zeros(LANES, np.int64)
     layers = np.zeros(LANES, np.int64)
+    # with photons: the path's last vertices (CHAIN_*), its length so far (the gather radius)
+    chain = np.zeros(LANES, np.int64)
+    travelled = np.zeros(LANES)
     for start in range(0, n, LANES):
         count = min(LANES, n - start)
         for lane in range(LANES):
@@ -379,6 +389,8 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 prev_delta[lane] = True
                 lane_depth[lane] = 0
                 layers[lane] = 0
+                chain[lane] = CHAIN_START
+                travelled[lane] = 0.0
                 lane_time[lane] = times[i] if len(times) else 0.0
         first = True
         while True:
@@ -447,6 +459,12 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 if sigma[lane, 0] + sigma[lane, 1] + sigma[lane, 2] > 0.0 and t < math.inf:
                     for c in range(3):
                         beta[lane, c] *= math.exp(-sigma[lane, c] * t)
+                # with photons, light reached through a non-delta vertex and then delta bounces
+                # only is theirs (caustic paths): the camera path does not count it again
+                photon_path = photons_on and chain[lane] == CHAIN_CAUSTIC
+                if seen >= 0 and photon_path:
+                    alive[lane] = False
+                    continue
                 if seen >= 0:
                     light = light_rows[seen]
                     w = 1.0
@@ -460,7 +478,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                     alive[lane] = False
                     continue
                 if not hit:
-                    if (env_light >= 0) | ((depth == 0) & background_seen):
+                    if (env_light >= 0) & (not photon_path) | ((depth == 0) & background_seen):
                         if env_pixels.shape[0] == 1:
                             # a uniform background (one row of one texel): no lookup
                             lr, lg, lb = env_pixels[0, 0, 0], env_pixels[0, 0, 1], env_pixels[0, 0, 2]
@@ -481,6 +499,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 prim = best_prim[lane]
                 bu, bv = best_u[lane], best_v[lane]
                 mat = material_id[prim]
+                travelled[lane] += t
                 hx, hy, hz, gx, gy, gz, nx, ny, nz = surface_point(geometry, prim, bu, bv)
                 if len(face_mover) and face_mover[prim] >= 0:
                     hx, hy, hz, gx, gy, gz, nx, ny, nz = _to_world(moves, face_mover[prim], lane_time[lane], hx, hy, hz,
@@ -512,7 +531,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 # emission, from the front side (the winding's normal), as pbrt's and Mitsuba's
                 # area lights
                 front = (gx * dx[lane] + gy * dy[lane]) + gz * dz[lane] < 0.0
-                if front and er + eg + eb > 0.0:
+                if front and er + eg + eb > 0.0 and not photon_path:
                     w = 1.0
                     if not prev_delta[lane]:
                         light = face_light[prim]
@@ -541,6 +560,32 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 loz = (nx * ox + ny * oy) + nz * oz
                 tag = tags[mat]
                 follow = (max_depth < 0) | (depth + 1 <= max_depth)
+                # caustics: the photons near this vertex (paths of at least two segments)
+                segments = max_depth - depth if max_depth >= 0 else -1
+                if photons_on and scatters[mat] and (segments < 0 or segments >= 2):
+                    radius = min(radius_scale * (footprint_a + footprint_b * travelled[lane]), max_radius)
+                    cr, cg, cb = gather(photon_map, hx, hy, hz, gx, gy, gz, radius, segments, tag, bsdf_params,
+                                        bsdf_row, albedo_table, tx, ty, tz, sx, sy, sz, nx, ny, nz, lox, loy, loz, 0)
+                    cr, cg, cb = _clamped(beta[lane, 0] * cr, beta[lane, 1] * cg, beta[lane, 2] * cb,
+                                          clamp if depth > 0 else 0.0)
+                    _add(total, lane, cr, cg, cb)
+                    if split:
+                        if depth == 0:
+                            # split by the part of the BSDF the photons' light comes through
+                            dr, dg, db = gather(photon_map, hx, hy, hz, gx, gy, gz, radius, segments, tag,
+                                                bsdf_params, bsdf_row, albedo_table, tx, ty, tz, sx, sy, sz, nx, ny,
+                                                nz, lox, loy, loz, 1)
+                            ur, ug, ub = gather(photon_map, hx, hy, hz, gx, gy, gz, radius, segments, tag,
+                                                bsdf_params, bsdf_row, albedo_table, tx, ty, tz, sx, sy, sz, nx, ny,
+                                                nz, lox, loy, loz, 2)
+                            dr, dg, db = beta[lane, 0] * dr, beta[lane, 1] * dg, beta[lane, 2] * db
+                            ur, ug, ub = beta[lane, 0] * ur, beta[lane, 1] * ug, beta[lane, 2] * ub
+                            _add_path(paths, split, lane, INDIRECT + DIFFUSE_PATH, dr, dg, db)
+                            _add_path(paths, split, lane, INDIRECT + TRANSMISSION_PATH, ur, ug, ub)
+                            _add_path(paths, split, lane, INDIRECT + GLOSSY_PATH, cr - (dr + ur), cg - (dg + ug),
+                                      cb - (db + ub))
+                        else:
+                            _add_path(paths, split, lane, INDIRECT + category[lane], cr, cg, cb)
                 # the first vertex's light and BSDF points: per-pixel Owen-scrambled Sobol pairs
                 # (stratified over the pixel's samples), later vertices' hashed numbers
                 sample_index = samples[start + lane] if len(samples) else -1
@@ -625,6 +670,10 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 beta[lane, 2] *= gb
                 prev_pdf[lane] = pdf
                 prev_delta[lane] = (flags & lobes.DELTA) != 0
+                if prev_delta[lane]:
+                    chain[lane] = CHAIN_CAUSTIC if chain[lane] != CHAIN_START else CHAIN_START
+                else:
+                    chain[lane] = CHAIN_SCATTERED
                 if depth == 0:
                     category[lane] = _category(flags)
                 if transmissive[mat] and (flags & lobes.TRANSMISSION) and media:
@@ -713,11 +762,12 @@ def _path_signatures():
     env = (z((1, 3, 3)), z(2), z((1, 2)), z((1, 1)), 1.0, 1.0, 0.0)
     options = (-1, 3, 0.0, np.float32(1.0), True, False, False, z(4, np.int64))
     motion = (True, z(0, np.int64), z(0, np.int64), z(0, np.int64), z(1, np.int64), z((0, 10)), z(0, np.int64))
+    photon_map = empty_photon_map(1)
     query = numba_typeof_query()
     index = types.Array(types.int64, 1, "C")
     trace = (query, query, types.int64, rows, rows, types.Array(types.uint64, 1, "C"), index, index,
              types.Array(types.uint64, 1, "C"), types.Array(f64, 1, "C")) + tuple(
-        numba.typeof(record) for record in (geometry, surface, lights, env, options, motion)) + (
+        numba.typeof(record) for record in (geometry, surface, lights, env, options, motion, photon_map)) + (
         rows, types.Array(f64, 3, "C"), types.Array(types.int64, 1, "C"))
     return [(models.evaluate, evaluate), (trace_paths, trace), (models.sample, sample), (models.parts, evaluate)]
 

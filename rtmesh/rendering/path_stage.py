@@ -26,6 +26,8 @@ from rtmesh.lights.light_table import EnvironmentTables, LightTable
 from rtmesh.lights.mesh_lights import MeshLight
 from rtmesh.materials.models import SLOTS, material_rows, tables
 from rtmesh.io.passes import LIGHT_PATH_PASSES
+from rtmesh.rendering.caustics import Caustics
+from rtmesh.rendering.photon_kernel import empty_photon_map
 from rtmesh.rendering.path_kernel import BOUNCE, CAMERA, LIGHT_PATHS, PATH_KERNELS, SHADOW, trace_paths
 from rtmesh.rendering.path_surfaces import TEXTURE_COLUMNS
 from rtmesh.rendering.settings import RenderSettings
@@ -217,6 +219,9 @@ class PathStage:
         self._motion, handle = motion_record(it)
         self._queries = (library.intersect16, library.occluded16, handle)
         PATH_KERNELS.prepare()
+        # photon passes for caustics, and the photons the chunks gather (the current pass's)
+        self.caustics = Caustics(self, it)
+        self.photon_map = empty_photon_map(len(self.surface[0]))
 
     def _sobol(self, pixel, sample):
         """The kernel's Sobol arguments: pixels, sample indices and the two dimension keys;
@@ -263,8 +268,8 @@ class PathStage:
         trace_paths(intersect16, occluded16, handle, np.ascontiguousarray(origins, dtype=np.float64),
                     np.ascontiguousarray(directions, dtype=np.float64), keys, *self._sobol(pixel, sample),
                     np.zeros(0) if times is None else np.ascontiguousarray(times, dtype=np.float64),
-                    self.geometry, self.surface, light_record, self._env, options, self._motion, radiance,
-                    light_paths, counts)
+                    self.geometry, self.surface, light_record, self._env, options, self._motion, self.photon_map,
+                    radiance, light_paths, counts)
         if split:
             for k, name in enumerate(LIGHT_PATH_PASSES):
                 if passes.wants(name):

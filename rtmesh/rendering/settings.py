@@ -12,6 +12,9 @@ FRESNEL_MODES = ("schlick", "exact")
 # "whitted": Blinn-Phong, lights and followed specular lobes (the values of scene files written
 # for it); "path": physically based path tracing (rtmesh.rendering.path_stage)
 INTEGRATORS = ("whitted", "path")
+CAUSTICS = ("auto", "photons", "off")
+# photons a pass may trace (a pass's photons take 104 bytes each)
+MAX_PHOTONS = 1 << 26
 # max_depth when it is not given: Whitted's bounces; the path integrator's "unlimited"
 DEFAULT_MAX_DEPTH = {"whitted": 5, "path": -1}
 PASSES = PASS_NAMES
@@ -92,6 +95,11 @@ class RenderSettings:
     clamp : float
         Path integrator: the largest channel any contribution after the first bounce may
         add to a sample (fireflies from rare bright paths; biased), 0 for none.
+    caustics : {"auto", "photons", "off"}
+        Path integrator: photon passes for caustics (:mod:`rtmesh.rendering.caustics`);
+        ``auto`` runs them when a small or delta light can reach a specular surface.
+    photons : int or None
+        Photons a photon pass traces; None: the pixel count, within 65536 .. 1048576.
     denoise : bool
         Denoise the image with Intel Open Image Denoise, guided by the albedo and normal
         passes (see :mod:`rtmesh.io.denoising`; needs the ``denoise`` extra).
@@ -119,6 +127,8 @@ class RenderSettings:
     denoise: bool = False
     integrator: str = "whitted"
     clamp: float = 0.0
+    caustics: str = "auto"
+    photons: int | None = None
 
     def validate(self):
         """Raise ValueError naming the first setting out of range (and the value given)."""
@@ -144,6 +154,8 @@ class RenderSettings:
             ("max_depth", whole(self.max_depth, lowest_depth, MAX_DEPTH),
              f">= {lowest_depth} and <= {MAX_DEPTH}"),
             ("clamp", real(self.clamp) and self.clamp >= 0, ">= 0 and finite (0: no clamp)"),
+            ("caustics", self.caustics in CAUSTICS, f"one of {', '.join(CAUSTICS)}"),
+            ("photons", self.photons is None or whole(self.photons, 1, MAX_PHOTONS), f">= 1 and <= {MAX_PHOTONS}"),
             ("seed", whole(self.seed, -2**63, 2**64 - 1), ">= -2**63 and <= 2**64 - 1"),
             ("threads", self.threads is None or whole(self.threads, 1, MAX_THREADS),
              f">= 1 and <= {MAX_THREADS}"),
@@ -176,6 +188,8 @@ class RenderSettings:
              "max_spp needs target_error or time_limit (adaptive sampling)"),
             (self.integrator == "path" or not set(self.passes) & set(LIGHT_PATH_PASSES),
              f"passes {', '.join(p for p in self.passes if p in LIGHT_PATH_PASSES)} need integrator 'path'"),
+            (self.integrator == "path" or self.caustics != "photons",
+             "caustics 'photons' needs integrator 'path'"),
             (self.spp >= 2 or not self.adaptive,
              "spp must be >= 2 with target_error or time_limit (one sample gives no error estimate)"),
         ]

@@ -5,9 +5,10 @@ from dataclasses import dataclass, field
 # "shadow": one per (hit, point/spot/directional light); "area_shadow": light_samples per
 # (hit, area light or emissive object); "cutout": rays traced again beyond a cut-out surface;
 # "bsdf": rays drawn from a metallic-roughness BRDF (see rtmesh.rendering.physical_shading)
-# "bounce": the path integrator's BSDF-sampled segments (its shadow rays count as "shadow")
+# "bounce": the path integrator's BSDF-sampled segments (its shadow rays count as "shadow");
+# "photon": the segments of its photon passes (caustics)
 RAY_KINDS = ("camera", "shadow", "area_shadow", "environment", "reflection", "refraction", "bsdf", "ao", "cutout",
-             "bounce")
+             "bounce", "photon")
 STAGES = ("camera", "intersect", "shade", "passes", "shadow", "ao", "spawn", "direct", "film")
 
 
@@ -33,6 +34,10 @@ class RenderStats:
         Pixels in the image.
     rounds : list of RoundStats
         One record per adaptive round (a uniform render is one round).
+    photon_passes, photons, photons_stored : int
+        Photon passes run for caustics, photons each traced, photons stored in all of them.
+    photon_seconds : float
+        Wall time of the photon passes (tracing and sorting).
     stop_reason : str
         Why an adaptive render stopped: ``"target"`` (every pixel at or below
         ``target_error``), ``"time_limit"``, ``"max_spp"`` (every pixel still above target
@@ -49,6 +54,10 @@ class RenderStats:
     pixels: int = 0
     rounds: list = field(default_factory=list)
     stop_reason: str = "uniform"
+    photon_passes: int = 0
+    photons: int = 0
+    photons_stored: int = 0
+    photon_seconds: float = 0.0
 
     def merge(self, other):
         """Add another (per-chunk) record's ray counts and stage times into this one."""

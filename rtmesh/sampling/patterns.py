@@ -41,6 +41,8 @@ class Dim(IntEnum):
     BSDF = 1 << 28  # sampled BSDF directions (pair BSDF + 4*d) and lobe choices (BSDF + 4*d + 2) at depth d
     PATH_LIGHT = 1 << 29  # the path integrator's light point at its first vertex (a Sobol pair)
     PATH_BSDF = (1 << 29) + 2  # and its BSDF direction there
+    PHOTON_POINT = (1 << 29) + 4  # a photon pass's emission points (Sobol pairs over the photon index)
+    PHOTON_DIRECTION = (1 << 29) + 6  # and its emission directions
 
 
 def dimension_key(seed, dimension):
