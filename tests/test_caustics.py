@@ -120,6 +120,16 @@ def test_photon_renders_do_not_depend_on_threads_and_light_paths_sum_to_the_imag
     assert images[0].passes["indirect_diffuse"].sum() > 0
 
 
+def test_adaptive_rounds_continue_the_passes_the_same_for_any_thread_count():
+    results = [_render(width=32, height=24, spp=4, photons=2048, threads=threads, target_error=0.02, max_spp=16)[1]
+               for threads in (1, 2)]
+    assert np.array_equal(results[0].image, results[1].image)
+    st = results[0].stats
+    assert len(st.rounds) > 1 and st.photon_passes > 4
+    # the later rounds' pixels took passes beyond the first round's four
+    assert results[0].film.count.max() == 16
+
+
 def test_auto_turns_photons_on_only_where_a_small_light_meets_a_specular_surface(tmp_path):
     def scene_file(light, material):
         text = open(SCENE).read().replace("../meshes/", os.path.join(ROOT, "assets", "meshes") + "/")
