@@ -75,7 +75,7 @@ def main():
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--images", action="store_true", help="write docs/images/caustics_*.png")
     args = parser.parse_args()
-    ref = read_image(args.reference)[:, :, :3].astype(np.float64)
+    ref = read_image(args.reference)[0][:, :, :3].astype(np.float64)
     height, width = ref.shape[:2]
     labels = ("material_id", "position_center")
     scene, on, t_on = render(BALL, width, height, spp=args.spp, photons=args.photons, threads=args.threads,
@@ -86,7 +86,8 @@ def main():
     rb = blocks(ref[..., 0])
     for name, result, seconds in (("photons", on, t_on), ("off", off, t_off)):
         ours = blocks(result.image[..., 0].astype(np.float64))
-        rel = np.abs(ours / rb - 1)
+        with np.errstate(divide="ignore", invalid="ignore"):  # blocks of the black background
+            rel = np.abs(ours / rb - 1)
         bright = np.unravel_index(np.argmax(np.where(floor, rb, -1.0)), rb.shape)
         st = result.stats
         print(f"{name}: {width}x{height}, {args.spp} spp, {seconds:.1f} s (photon passes {st.photon_seconds:.1f} s: "

@@ -54,7 +54,7 @@ MAX_RADIUS_CELLS = 4.0
 # "auto" on
 SMALL_LIGHT = 0.1
 # photons a pass traces by default: the pixel count, within these bounds
-DEFAULT_PHOTONS = (1 << 16, 1 << 20)
+DEFAULT_PHOTONS = (1 << 14, 1 << 20)
 # photons a thread traces at a time
 CHUNK_PHOTONS = 8192
 
@@ -76,11 +76,13 @@ def lobe_census(tags, params, table):
             for c in range(3):
                 oz = (0.15 + 0.4 * c) * (1.0 if side == 0 else -1.0)
                 ox = math.sqrt(1.0 - oz * oz)
-                for i in range(32):
+                # lobe choices 1/256 apart: a delta lobe chosen with a few per cent (a clear coat's
+                # Fresnel) is found
+                for i in range(256):
                     for j in range(4):
                         for k in range(4):
                             _, _, _, wr, wg, wb, _, flags = models.sample(
-                                tags[mat], params, mat, table, ox, 0.0, oz, (i + 0.5) / 32.0, (j + 0.5) / 4.0,
+                                tags[mat], params, mat, table, ox, 0.0, oz, (i + 0.5) / 256.0, (j + 0.5) / 4.0,
                                 (k + 0.5) / 4.0)
                             if flags == lobes.FAILED or not ((wr > 0.0) | (wg > 0.0) | (wb > 0.0)):
                                 continue

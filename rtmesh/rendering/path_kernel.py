@@ -72,8 +72,8 @@ from rtmesh.lights.environment import sample_direction
 from rtmesh.lights.point_light_rows import illuminate_row
 from rtmesh.materials import lobes, models
 from rtmesh.rendering.photon_kernel import empty_photon_map, gather
-from rtmesh.rendering.path_surfaces import (cross_interface, emission_at, interface_ratio, is_transparent,
-                                            shading_normals, surface_point, tangent_frame, textured_row)
+from rtmesh.rendering.path_surfaces import (cross_interface, emission_at, hit_parameters, is_transparent,
+                                            shading_normals, surface_point, tangent_frame, textured_materials)
 from rtmesh.sampling.alias import alias_sample
 from rtmesh.sampling.hashing import mix64, pixel_sequence, uniform
 from rtmesh.sampling.lowdiscrepancy import sobol_pair
@@ -313,16 +313,11 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     """
     n = origins.shape[0]
     material_id = geometry[5]
-    tags, params, transmissive, emission = surface[0], surface[1], surface[2], surface[3]
-    absorption, unlit, albedo_table, material_textures = surface[4], surface[5], surface[6], surface[8]
-    # materials whose parameters vary over the surface (textures, vertex colours): only their
-    # hits copy and scale a parameter row (the records' rows cost reference counting per call)
-    textured = np.zeros(len(tags), np.bool_)
-    for mat in range(len(tags)):
-        textured[mat] = len(geometry[7]) > 0 or (len(geometry[6]) > 0 and (material_textures[mat] >= 0).any())
+    tags, transmissive = surface[0], surface[2]
+    absorption, unlit, albedo_table = surface[4], surface[5], surface[6]
+    textured = textured_materials(surface, geometry)
     light_rows, light_probability, light_alias, light_pmf, face_light, analytic, env_light = lights
     max_depth, rr_depth, clamp, offset_scale, background_seen, cutouts, split, camera_media = options
-    ior, slots = surface[15], surface[7]
     media = len(camera_media)
     env_pixels, env_marginal, env_conditional, env_func, env_mean, env_cos, env_sin = env
     has_static, static_faces, movers, face_maps, face_offsets, moves, face_mover = motion
@@ -514,20 +509,9 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                     px[lane], py[lane], pz[lane] = np.float64(qx), np.float64(qy), np.float64(qz)
                     continue
                 layers[lane] = 0
-                if textured[mat]:
-                    er, eg, eb = textured_row(surface, geometry, mat, prim, bu, bv, scratch, lane)
-                    bsdf_params, bsdf_row = scratch, lane
-                else:
-                    er, eg, eb = emission[mat, 0], emission[mat, 1], emission[mat, 2]
-                    bsdf_params, bsdf_row = params, mat
-                if media and transmissive[mat] and slots[tags[mat], models.IOR_SLOT] >= 0:
-                    # the index ratio of this interface between the media on its two sides
-                    if not textured[mat]:
-                        for k in range(params.shape[1]):
-                            scratch[lane, k] = params[mat, k]
-                        bsdf_params, bsdf_row = scratch, lane
-                    scratch[lane, slots[tags[mat], models.IOR_SLOT]] = interface_ratio(
-                        stack, lane, mat, (gx * dx[lane] + gy * dy[lane]) + gz * dz[lane] < 0.0, ior)
+                bsdf_params, bsdf_row, er, eg, eb = hit_parameters(
+                    surface, geometry, textured, mat, prim, bu, bv, scratch, lane, stack, media,
+                    (gx * dx[lane] + gy * dy[lane]) + gz * dz[lane] < 0.0)
                 # emission, from the front side (the winding's normal), as pbrt's and Mitsuba's
                 # area lights
                 front = (gx * dx[lane] + gy * dy[lane]) + gz * dz[lane] < 0.0

@@ -29,6 +29,8 @@ specular and mirror colours by the base texture.
 
 import math
 
+import numpy as np
+
 from rtmesh.core.compiled import inline_row
 from rtmesh.io.texture_atlas import texel
 from rtmesh.materials import models
@@ -211,6 +213,43 @@ def normal_mapped(surface, geometry, mat, prim, bu, bv, nx, ny, nz):
         return nx, ny, nz
     inv = 1.0 / math.sqrt(length2)
     return mx * inv, my * inv, mz * inv
+
+
+@inline_row
+def textured_materials(surface, geometry):
+    """Which materials' parameters vary over the surface (textures, vertex colours), (M,) bool:
+    only their hits copy and scale a parameter row (the records' rows cost reference counting
+    per call)."""
+    tags, material_textures = surface[0], surface[8]
+    textured = np.zeros(len(tags), np.bool_)
+    for mat in range(len(tags)):
+        textured[mat] = len(geometry[7]) > 0 or (len(geometry[6]) > 0 and (material_textures[mat] >= 0).any())
+    return textured
+
+
+@inline_row
+def hit_parameters(surface, geometry, textured, mat, prim, bu, bv, scratch, lane, stack, media, entering):
+    """A hit's BSDF parameters and emission: ``(table, row, er, eg, eb)``, the parameter row
+    being the material's own, or a copy in ``scratch[lane]`` scaled by its textures and
+    vertex colours (:func:`textured_row`), with a transmissive model's index ratio between
+    the media on the interface's two sides (:func:`interface_ratio`; ``media`` the stack's
+    depth, 0 without transmissive materials; ``entering`` whether the ray meets the front)."""
+    tags, params, transmissive, emission, slots, ior = surface[0], surface[1], surface[2], surface[3], surface[7], \
+        surface[15]
+    if textured[mat]:
+        er, eg, eb = textured_row(surface, geometry, mat, prim, bu, bv, scratch, lane)
+        table, index = scratch, lane
+    else:
+        er, eg, eb = emission[mat, 0], emission[mat, 1], emission[mat, 2]
+        table, index = params, mat
+    slot = slots[tags[mat], models.IOR_SLOT]
+    if media and transmissive[mat] and slot >= 0:
+        if not textured[mat]:
+            for k in range(params.shape[1]):
+                scratch[lane, k] = params[mat, k]
+            table, index = scratch, lane
+        scratch[lane, slot] = interface_ratio(stack, lane, mat, entering, ior)
+    return table, index, er, eg, eb
 
 
 @inline_row

@@ -41,10 +41,10 @@ from rtmesh.lights import light_table as lt
 from rtmesh.lights.environment import sample_direction
 from rtmesh.lights.point_light_rows import illuminate_row
 from rtmesh.materials import lobes, models
-from rtmesh.rendering.path_surfaces import (cross_interface, emission_at, interface_ratio, is_transparent,
-                                            shading_normals, surface_point, tangent_frame, textured_row)
+from rtmesh.rendering.path_surfaces import (cross_interface, emission_at, hit_parameters, is_transparent,
+                                            shading_normals, surface_point, tangent_frame, textured_materials)
 from rtmesh.sampling.alias import alias_sample
-from rtmesh.sampling.hashing import GOLDEN, mix64, path_key, pixel_sequence, uniform
+from rtmesh.sampling.hashing import GOLDEN, mix64, path_key, uniform
 from rtmesh.sampling.lowdiscrepancy import sobol_pair
 from rtmesh.sampling.warps import concentric_disk_row, uniform_triangle_weights
 
@@ -207,11 +207,9 @@ def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geomet
     """
     max_bounces, offset_scale, cutouts, media = options
     material_id = geometry[5]
-    tags, params, transmissive, absorption = surface[0], surface[1], surface[2], surface[4]
-    albedo_table, slots, material_textures, ior = surface[6], surface[7], surface[8], surface[15]
-    textured = np.zeros(len(tags), np.bool_)
-    for mat in range(len(tags)):
-        textured[mat] = len(geometry[7]) > 0 or (len(geometry[6]) > 0 and (material_textures[mat] >= 0).any())
+    tags, transmissive, absorption = surface[0], surface[2], surface[4]
+    albedo_table, slots = surface[6], surface[7]
+    textured = textured_materials(surface, geometry)
     light_rows, light_probability, light_alias, light_pmf = lights[0], lights[1], lights[2], lights[3]
     ray, words, valid, args = packet_buffers(np.int64(RAYHIT_WORDS), np.int64(1),
                                              np.int64(RTC_RAY_QUERY_FLAG_INCOHERENT))
@@ -320,18 +318,9 @@ def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geomet
                 if not specular[mat] or bounces[lane] >= max_bounces:
                     alive[lane] = False
                     continue
-                if textured[mat]:
-                    textured_row(surface, geometry, mat, prim, bu, bv, scratch, lane)
-                    bsdf_params, bsdf_row = scratch, lane
-                else:
-                    bsdf_params, bsdf_row = params, mat
+                bsdf_params, bsdf_row, _, _, _ = hit_parameters(surface, geometry, textured, mat, prim, bu, bv, scratch,
+                                                                lane, stack, media, entering)
                 ior_slot = slots[tags[mat], models.IOR_SLOT]
-                if media and transmissive[mat] and ior_slot >= 0:
-                    if not textured[mat]:
-                        for k in range(params.shape[1]):
-                            scratch[lane, k] = params[mat, k]
-                        bsdf_params, bsdf_row = scratch, lane
-                    scratch[lane, ior_slot] = interface_ratio(stack, lane, mat, entering, ior)
                 tx, ty, tz, sx, sy, sz = tangent_frame(nx, ny, nz)
                 lox = (tx * ox + ty * oy) + tz * oz
                 loy = (sx * ox + sy * oy) + sz * oz
@@ -441,6 +430,8 @@ def gather(photon_map, hx, hy, hz, gx, gy, gz, radius, segments, tag, bsdf_param
                                               photon_map[5])
     mask = (1 << bits) - 1
     r2 = radius * radius
+    if not r2 > 0.0:
+        return 0.0, 0.0, 0.0
     ix0, ix1 = np.int64(math.floor((hx - radius) / cell_size)), np.int64(math.floor((hx + radius) / cell_size))
     iy0, iy1 = np.int64(math.floor((hy - radius) / cell_size)), np.int64(math.floor((hy + radius) / cell_size))
     iz0, iz1 = np.int64(math.floor((hz - radius) / cell_size)), np.int64(math.floor((hz + radius) / cell_size))
