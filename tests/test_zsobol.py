@@ -208,3 +208,49 @@ def test_adaptive_rounds_continue_each_pixel_and_estimate_the_error():
     np.testing.assert_array_equal(a.image, b.image)
     assert len(a.stats.rounds) > 1
     assert np.isfinite(a.film.pixel_display_error()).all()
+
+
+def test_path_renders_do_not_depend_on_threads_or_chunks():
+    # the path kernel's first-vertex pairs and the camera's dimensions under zsobol
+    settings = dict(width=20, height=14, spp=4, sampler="zsobol", integrator="path", max_depth=3, seed=2)
+    reference = render(soft_shadow_scene(), threads=1, chunk_samples=50000, **settings)
+    for threads, chunk_samples in ((2, 1000), (2, 61)):
+        result = render(soft_shadow_scene(), threads=threads, chunk_samples=chunk_samples, **settings)
+        np.testing.assert_array_equal(result.image, reference.image)
+    other = render(soft_shadow_scene(), threads=1, chunk_samples=50000, **dict(settings, sampler="sobol"))
+    assert not np.array_equal(other.image, reference.image)
+
+
+@pytest.fixture(scope="module")
+def soft_shadow_errors():
+    """benchmarks/bench_zsobol.py's measurement of assets/effects/soft_shadow.toml at its own
+    size (480x360), one light sample, 2, 4 and 8 spp, eight seeds, against a reference of
+    256 spp x 4 light samples (cached in out/bench_zsobol)."""
+    from benchmarks import _lib, bench_zsobol
+
+    ref = bench_zsobol.reference(480, 360, 256, 2, _lib.ROOT / "out" / "bench_zsobol")
+    rows = bench_zsobol.measure(ref, (2, 4, 8), 8, threads=2, samplers=("sobol", "zsobol"), log=lambda line: None)[0]
+    return {(r["spp"], r["sampler"]): r for r in rows}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("spp", [2, 4, 8])
+def test_soft_shadow_scene_error_is_no_larger_and_blurs_away_better(soft_shadow_errors, spp):
+    # without the emitters and the floor touching the glowing ball (whose 1/r^2 fireflies
+    # decide any RMSE of the whole image: there random comes out below sobol)
+    z, s = soft_shadow_errors[spp, "zsobol"], soft_shadow_errors[spp, "sobol"]
+    assert z["raw_masked"] <= 1.05 * s["raw_masked"]
+    assert z["blurred_masked"] <= 0.9 * s["blurred_masked"]
+    assert z["blue_masked"] > s["blue_masked"]
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="the issue's 0.75x blurred and 2x spectrum criteria hold on smooth images "
+                   "(test_error_of_a_smooth_image_is_blue_noise) but not on this scene: measured 0.81-0.84x and "
+                   "1.2-1.5x (docs/SAMPLERS.md); neighbouring pixels' integrands differ too much (penumbrae at "
+                   "this size, the glowing ball's light) for their complementary points to cancel more")
+@pytest.mark.parametrize("spp", [2, 4, 8])
+def test_soft_shadow_scene_meets_the_issue_blue_noise_criteria(soft_shadow_errors, spp):
+    z, s = soft_shadow_errors[spp, "zsobol"], soft_shadow_errors[spp, "sobol"]
+    assert z["blurred_masked"] <= 0.75 * s["blurred_masked"]
+    assert z["blue_masked"] >= 2.0

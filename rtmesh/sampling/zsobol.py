@@ -121,21 +121,43 @@ def zsobol_index(permutation_key, morton, sample, ray, log2_spp, rays, levels, l
     """
     set_index = sample >> log2_spp
     in_pixel = (sample & ((_ONE << log2_spp) - _ONE)) * rays + ray
-    top = levels + levels + log2_block
-    z = (set_index << top) | (morton << log2_block) | in_pixel
-    index = set_index << top
-    # the quadtree's base-4 digits from the top, each permuted by the digits above it
+    high = block_high(morton, set_index, levels, log2_block)
+    return block_index(permutation_key, high, levels, log2_block) | pixel_bits(permutation_key, high, in_pixel,
+                                                                               log2_block)
+
+
+@row
+def block_high(morton, set_index, levels, log2_block):
+    """The unpermuted index of a pixel's block in one round: the round above the Morton code,
+    the pixel's own ``log2_block`` bits zero (uint64)."""
+    return (set_index << (levels + levels + log2_block)) | (morton << log2_block)
+
+
+@row
+def block_index(permutation_key, high, levels, log2_block):
+    """The permuted index of the block :func:`block_high` gives: the round as it is, the
+    quadtree's base-4 digits from the top, each permuted by the digits above it (the same
+    for all of a pixel's points in a round, so kernels form it once)."""
+    index = (high >> (levels + levels + log2_block)) << (levels + levels + log2_block)
     for level in range(np.int64(levels) - 1, -1, -1):
         shift = log2_block + np.uint64(2 * level)
-        digit = (z >> shift) & _THREE
-        chosen = (mix64((z >> (shift + _TWO)) ^ permutation_key) >> np.uint64(24)) % np.uint64(24)
+        digit = (high >> shift) & _THREE
+        chosen = (mix64((high >> (shift + _TWO)) ^ permutation_key) >> np.uint64(24)) % np.uint64(24)
         index |= PERMUTATIONS[chosen, digit] << shift
-    # the pixel's own bits, each flipped by the bits above it
+    return index
+
+
+@row
+def pixel_bits(permutation_key, high, in_pixel, log2_block):
+    """The pixel's own ``log2_block`` bits of the index (``in_pixel``), each flipped by a
+    hash of the bits above it (those of ``high`` too)."""
+    z = high | in_pixel
+    bits = np.uint64(0)
     for bit in range(np.int64(log2_block) - 1, -1, -1):
         shift = np.uint64(bit)
         flip = mix64((z >> (shift + _ONE)) ^ permutation_key) & _ONE
-        index |= (((z >> shift) & _ONE) ^ flip) << shift
-    return index
+        bits |= (((z >> shift) & _ONE) ^ flip) << shift
+    return bits
 
 
 @row
@@ -167,21 +189,37 @@ def owen_scramble(v, seed):
 
 
 @row
+def permutation_key(key):
+    """The key of a dimension's digit permutations, from its key (uint64)."""
+    return mix64(key + GOLDEN * np.uint64(4))
+
+
+@row
+def zsobol_point(key, index, dims):
+    """Point ``index`` (uint64; its low 32 bits are used) of the (0,2)-sequence of the
+    dimension keyed ``key``, Owen-scrambled: ``(x, y)`` in [0, 1)^2 (``y`` 0 when ``dims``
+    is 1)."""
+    index = index & _LOW32
+    x = np.float64(owen_scramble(reverse_bits(index), scramble_seed(key, 2))) * _TO_UNIT
+    if dims == 1:
+        return x, 0.0
+    return x, np.float64(owen_scramble(sobol_bits(index, SOBOL1_TABLES), scramble_seed(key, 3))) * _TO_UNIT
+
+
+@row
 def zsobol_pair(key, morton, sample, ray, log2_spp, rays, levels, log2_block):
     """Point ``(x, y)`` in [0, 1)^2 of one pixel sample in the dimension keyed ``key``
     (:func:`rtmesh.sampling.patterns.dimension_key`: the same for every pixel): the
     :func:`zsobol_index` point of the (0,2)-sequence, Owen-scrambled per dimension.  The
     other arguments are :func:`zsobol_index`'s."""
-    permutation_key = mix64(key + GOLDEN * np.uint64(4))
-    index = zsobol_index(permutation_key, morton, sample, ray, log2_spp, rays, levels, log2_block) & _LOW32
-    x = owen_scramble(reverse_bits(index), scramble_seed(key, 2))
-    y = owen_scramble(sobol_bits(index, SOBOL1_TABLES), scramble_seed(key, 3))
-    return np.float64(x) * _TO_UNIT, np.float64(y) * _TO_UNIT
+    index = zsobol_index(permutation_key(key), morton, sample, ray, log2_spp, rays, levels, log2_block)
+    return zsobol_point(key, index, 2)
 
 
 @kernel
 def zsobol_points(sample, ray, dimension_key, pixel, width, log2_spp, rays, levels, log2_block, dims):
-    """:func:`zsobol_pair` points of many samples.
+    """:func:`zsobol_pair` points of many samples; a run of points of one pixel and round
+    (the rays of a hit, a pixel's samples) permutes the Morton digits once.
 
     Parameters
     ----------
@@ -208,9 +246,18 @@ def zsobol_points(sample, ray, dimension_key, pixel, width, log2_spp, rays, leve
     points = np.empty((dims, n))
     w, s, r = np.uint64(width), np.uint64(log2_spp), np.uint64(rays)
     lv, lb = np.uint64(levels), np.uint64(log2_block)
+    key = permutation_key(dimension_key)
+    mask = (_ONE << s) - _ONE
+    last_pixel, last_set = np.int64(-1), np.uint64(0)
+    high = start = np.uint64(0)
     for i in range(n):
-        x, y = zsobol_pair(dimension_key, morton_code(np.uint64(pixel[i]), w), np.uint64(sample[i]),
-                           np.uint64(ray[i]), s, r, lv, lb)
+        set_index = np.uint64(sample[i]) >> s
+        if pixel[i] != last_pixel or set_index != last_set:
+            last_pixel, last_set = pixel[i], set_index
+            high = block_high(morton_code(np.uint64(pixel[i]), w), set_index, lv, lb)
+            start = block_index(key, high, lv, lb)
+        in_pixel = (np.uint64(sample[i]) & mask) * r + np.uint64(ray[i])
+        x, y = zsobol_point(dimension_key, start | pixel_bits(key, high, in_pixel, lb), dims)
         points[0, i] = x
         if dims == 2:
             points[1, i] = y
