@@ -173,8 +173,8 @@ def owen_scramble(v, seed):
     which the per-pixel sequences of ``sobol`` use, is cheaper still but leaves a low bit's
     flip nearly independent of the bits far above it: harmless with a seed per pixel, but
     under zsobol's one image-wide scramble the points of a pixel (which differ in their top
-    bits only) got nearly the same offsets inside their strata (correlation 0.8), and the
-    image's error rose 2-3x.
+    bits only) got nearly the same offsets inside their strata (correlation 0.82 of the
+    offsets, against 0.10 with this scrambling; docs/SAMPLERS.md).
     """
     out = v
     for group in range(8):
