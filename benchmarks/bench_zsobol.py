@@ -150,9 +150,9 @@ def palette(path):
 
 
 def figures(spectra, examples, args):
-    """docs/samplers_error.png (seed 0's error at the middle spp in the lower left quarter of
-    the image, raw and blurred (colour scale 3x finer), per sampler) and docs/samplers_spectra.png (the averaged spectra of the error
-    without emitters)."""
+    """docs/samplers_error.png (seed 0's error without emitters at the middle spp in the
+    lower left quarter of the image, raw and blurred (colour scale 3x finer), per sampler)
+    and docs/samplers_spectra.png (the averaged spectra of the error without emitters)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

@@ -165,6 +165,12 @@ def test_spp_not_a_power_of_two_rounds_up_with_a_warning(caplog):
     assert settings.spp == 8
     assert [r.getMessage() for r in caplog.records] == ["sampler 'zsobol' takes a power-of-two spp: 6 rounded up to 8"]
     caplog.clear()
+    # an adaptive render's cap between the two rises with spp
+    settings = RenderSettings(sampler="zsobol", spp=3, max_spp=3, target_error=0.1).validate()
+    assert (settings.spp, settings.max_spp) == (4, 4)
+    assert caplog.records[0].getMessage().endswith("3 rounded up to 4 (max_spp too)")
+    assert RenderSettings(sampler="zsobol", spp=3, max_spp=9, target_error=0.1).validate().max_spp == 9
+    caplog.clear()
     assert RenderSettings(sampler="zsobol", spp=16).validate().spp == 16
     assert RenderSettings(sampler="sobol", spp=6).validate().spp == 6
     assert not caplog.records

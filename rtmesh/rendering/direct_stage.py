@@ -66,9 +66,9 @@ _F64, _F64_2D, _I64 = types.float64[::1], types.float64[:, ::1], types.int64[::1
 # first run can compile them in two processes, see rtmesh.core.compile_ahead)
 FUSED_KERNELS = KernelGroup(__name__, "fused direct", [
     (block_scratch, (_F64, types.int64)),
-    (camera_block, (types.int64, types.uint64[::1], _F64_2D, _F64, types.int64, types.int64, types.int64, types.uint64[::1],
-                    types.uint64[:, ::1], _F64, _F64, types.UniTuple(types.float64, 13), _F64_2D, _F64_2D,
-                    types.float32[::1])),
+    (camera_block, (types.int64, types.uint64[::1], _F64_2D, _F64, types.int64, types.int64, types.int64,
+                    types.uint64[::1], types.uint64[:, ::1], _F64, _F64, types.UniTuple(types.float64, 13), _F64_2D,
+                    _F64_2D, types.float32[::1])),
     (surface_block, (_F64_2D, _I64, _I64, _F64_2D, _F64_2D, types.boolean[::1], _F64_2D, types.int64,
                      types.boolean)),
     (light_block, (_F64, _F64_2D, _F64_2D, types.int64, types.float32, types.float64, types.boolean)),

@@ -75,9 +75,9 @@ from rtmesh.rendering.path_surfaces import (NORMAL_TEXTURE, emission_at, is_tran
                                             textured_row)
 from rtmesh.sampling.alias import alias_sample
 from rtmesh.sampling.hashing import mix64, uniform
-from rtmesh.sampling.zsobol import sequence_pair
 from rtmesh.sampling.mis import power_heuristic
 from rtmesh.sampling.warps import uniform_triangle_weights
+from rtmesh.sampling.zsobol import sequence_pair
 
 # The rows taking arrays that the kernel calls per lane, inlined by numba: a compiled call that
 # passes arrays takes and releases a reference to each (atomic instructions), and LLVM stops

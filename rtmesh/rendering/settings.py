@@ -173,9 +173,14 @@ class RenderSettings:
             if not ok:
                 raise ValueError(f"{name} must be {expected} (got {getattr(self, name)!r})")
         if self.sampler == "zsobol" and rounded_spp(self.spp) != self.spp:
-            log.warning("sampler 'zsobol' takes a power-of-two spp: %d rounded up to %d", self.spp,
-                        rounded_spp(self.spp))
-            self.spp = rounded_spp(self.spp)
+            rounded = rounded_spp(self.spp)
+            # a max_spp between the two would refuse the render: it rises with spp
+            raise_cap = whole(self.max_spp, self.spp, rounded - 1)
+            log.warning("sampler 'zsobol' takes a power-of-two spp: %d rounded up to %d%s", self.spp, rounded,
+                        " (max_spp too)" if raise_cap else "")
+            self.spp = rounded
+            if raise_cap:
+                self.max_spp = rounded
         relations = [
             (self.max_spp is None or whole(self.max_spp, self.spp, MAX_SPP),
              f"max_spp must be >= spp and <= {MAX_SPP} (got {self.max_spp!r})"),
