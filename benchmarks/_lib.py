@@ -2,7 +2,9 @@
 
 - :func:`relative_rmse` is the one error measure of every benchmark and of the tests that
   compare images with references: the RMSE over pixels and channels (optionally of block
-  means, optionally over a mask) divided by the reference's mean.
+  means, optionally over a mask) divided by the reference's mean; :func:`gaussian_blur`,
+  :func:`radial_power_spectrum` and :func:`blue_noise_ratio` say how the error is spread
+  over screen-space frequencies (the samplers' comparison, docs/SAMPLERS.md).
 - :func:`sphere_meshes` and :func:`sphere_scene` build the benchmark scene (an icosphere on a
   ground quad, one point light), as the core benchmarks measure it and as the peers render it.
 - :func:`run_peer` runs a worker script of this folder in the peers' own venv (Mitsuba 3,
@@ -143,6 +145,47 @@ def relative_rmse(image, reference, block=1, mask=None, mean=None):
         image, reference = block_means(image, block), block_means(reference, block)
     denominator = float(np.mean(reference)) if mean is None else float(mean)
     return float(np.sqrt(np.mean((image - reference) ** 2)) / max(denominator, 1e-30))
+
+
+def gaussian_blur(image, sigma=1.0):
+    """An (h, w[, c]) image blurred by a Gaussian of ``sigma`` pixels (cut at 3 sigma, edges
+    mirrored): what an eye or a light denoiser does to pixel noise."""
+    image = np.asarray(image, np.float64)
+    radius = max(1, int(np.ceil(3 * sigma)))
+    taps = np.exp(-0.5 * (np.arange(-radius, radius + 1) / sigma) ** 2)
+    taps /= taps.sum()
+    pad = [(radius, radius), (radius, radius)] + [(0, 0)] * (image.ndim - 2)
+    padded = np.pad(image, pad, mode="reflect")
+    h, w = image.shape[:2]
+    rows = sum(t * padded[k:k + h] for k, t in enumerate(taps))
+    return sum(t * rows[:, k:k + w] for k, t in enumerate(taps))
+
+
+def radial_power_spectrum(error, bins=24):
+    """Radially averaged power spectrum of an (h, w) error image (its mean removed).
+
+    Returns
+    -------
+    frequency : (bins,) float64
+        Centre of each ring, cycles per pixel (0 .. 0.5).
+    power : (bins,) float64
+        Mean of |FFT|^2 / (h w) over the frequencies of each ring (white noise of variance
+        v: v in every ring).
+    """
+    error = np.asarray(error, np.float64)
+    power = np.abs(np.fft.fft2(error - error.mean())) ** 2 / error.size
+    radius = np.hypot(*np.meshgrid(np.fft.fftfreq(error.shape[0]), np.fft.fftfreq(error.shape[1]), indexing="ij"))
+    ring = np.minimum((radius / 0.5 * bins).astype(int), bins)
+    inside = ring < bins
+    power = np.bincount(ring[inside], power[inside], bins) / np.maximum(np.bincount(ring[inside], None, bins), 1)
+    return (np.arange(bins) + 0.5) * 0.5 / bins, power
+
+
+def blue_noise_ratio(power):
+    """Mean power of the top third of a :func:`radial_power_spectrum`'s rings over that of
+    the bottom third (the constant ring left out): 1 for white noise, above 1 for blue."""
+    third = len(power) // 3
+    return float(power[-third:].mean() / power[1:third].mean())
 
 
 def display(image, exposure=0.0, operator="pbr-neutral"):

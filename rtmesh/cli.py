@@ -66,7 +66,8 @@ def build_parser():
     p.add_argument("--width", type=_positive_int, help="image width in pixels")
     p.add_argument("--height", type=_positive_int, help="image height in pixels")
     p.add_argument("--spp", type=_positive_int, help="samples per pixel")
-    p.add_argument("--sampler", choices=SAMPLERS, help="pixel sample pattern (default jittered)")
+    p.add_argument("--sampler", choices=SAMPLERS,
+                   help="sample pattern of every sampled dimension (default jittered; zsobol: blue-noise error)")
     p.add_argument("--target-error", type=_positive_float, metavar="E",
                    help="adaptive sampling: add samples in rounds until every pixel's estimated "
                    "error, standard error / sqrt(mean + 0.01), is <= E (e.g. 0.01); --spp is the "

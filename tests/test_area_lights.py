@@ -444,7 +444,7 @@ def test_each_stratum_of_the_light_holds_exactly_one_sample(sampler):
     assert np.unique(np.round(a, 6)).size > pixels
 
 
-@pytest.mark.parametrize("sampler", ["jittered", "regular", "sobol"])
+@pytest.mark.parametrize("sampler", ["jittered", "regular", "sobol", "zsobol"])
 def test_area_light_and_ao_points_of_a_pixel_are_one_stratified_set(sampler, monkeypatch):
     # spp = 4 camera samples per pixel x 4 rays per hit: the 16 points a pixel's samples
     # send to the light (and the 16 ambient-occlusion directions) fill every stratum of the
@@ -455,8 +455,8 @@ def test_area_light_and_ao_points_of_a_pixel_are_one_stratified_set(sampler, mon
     def recording(module):
         original = module.decorrelated_points
 
-        def draw(sampler, seed, pixel, sample, spp, dimension, ray=0, rays=1):
-            u = original(sampler, seed, pixel, sample, spp, dimension, ray, rays)
+        def draw(sampler, seed, pixel, sample, spp, dimension, ray=0, rays=1, resolution=None):
+            u = original(sampler, seed, pixel, sample, spp, dimension, ray, rays, resolution)
             drawn.append((dimension, np.array(pixel), np.array(sample), ray, np.array(u)))
             return u
         monkeypatch.setattr(module, "decorrelated_points", draw)
@@ -476,7 +476,7 @@ def test_area_light_and_ao_points_of_a_pixel_are_one_stratified_set(sampler, mon
         for p in range(width * height):
             mine = u[pixel == p]
             assert sorted(sample[pixel == p].tolist()) == sorted(list(range(4)) * 4)
-            grids = [(4, 4)] if sampler != "sobol" else [(1, 16), (2, 8), (4, 4), (8, 2), (16, 1)]
+            grids = [(4, 4)] if sampler not in ("sobol", "zsobol") else [(1, 16), (2, 8), (4, 4), (8, 2), (16, 1)]
             for nx, ny in grids:
                 cells = np.floor(mine[:, 0] * nx) * ny + np.floor(mine[:, 1] * ny)
                 assert sorted(cells.astype(int).tolist()) == list(range(16))

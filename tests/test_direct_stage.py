@@ -55,7 +55,7 @@ def assert_same(a, b):
     assert a.stats.samples == b.stats.samples
 
 
-@pytest.mark.parametrize("sampler", ["regular", "random", "jittered", "sobol"])
+@pytest.mark.parametrize("sampler", ["regular", "random", "jittered", "sobol", "zsobol"])
 @pytest.mark.parametrize("spp", [1, 3])
 def test_fused_stage_matches_the_general_path(sampler, spp):
     a, b = render_both(lit_scene(), width=37, height=29, spp=spp, sampler=sampler)
@@ -139,7 +139,7 @@ fused_cases = st.fixed_dictionaries({
     "ambient": st.sampled_from([None, [0.05, 0.1, 0.02]]),
     "background": st.sampled_from([None, [0.2, 0.3, 0.4]]),
     "spp": st.integers(1, 20),
-    "sampler": st.sampled_from(["regular", "random", "jittered", "sobol"]),
+    "sampler": st.sampled_from(["regular", "random", "jittered", "sobol", "zsobol"]),
     "chunk_samples": st.integers(1, 300),
     "threads": st.sampled_from([1, 2]),
     "seed": st.integers(0, 3),

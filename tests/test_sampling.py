@@ -120,11 +120,17 @@ def test_the_spp_times_rays_points_of_a_pixel_are_one_stratified_set(sampler, sp
     assert len(np.unique(points[:, 0, 0, 0])) == pixels
 
 
+# zsobol's points of one pixel are a block of one image-wide sequence: the resolution of
+# the tests' images of `pixels` pixels (more than needed: the pixels are the first row)
+RESOLUTION = (64, 48)
+
+
+@pytest.mark.parametrize("sampler", ["sobol", "zsobol"])
 @pytest.mark.parametrize("spp, rays", [(1, 16), (4, 4), (2, 8), (16, 1)])
-def test_sobol_points_of_a_pixel_and_each_hit_fill_every_elementary_interval(spp, rays):
+def test_sobol_points_of_a_pixel_and_each_hit_fill_every_elementary_interval(sampler, spp, rays):
     pixels, m = 40, int(np.log2(spp * rays))
     pixel, sample, ray = pixel_sets(pixels, spp, rays)
-    u = decorrelated_points("sobol", 3, pixel, sample, spp, Dim.LIGHT, ray, rays)
+    u = decorrelated_points(sampler, 3, pixel, sample, spp, Dim.LIGHT, ray, rays, RESOLUTION)
     sets = u.reshape(pixels, spp * rays, 2)
     hits = u.reshape(pixels * spp, rays, 2)
     for points, k in [(sets, m), (hits, int(np.log2(rays)))]:
@@ -150,12 +156,36 @@ def test_sobol_prefixes_of_any_number_of_rounds_are_stratified():
         assert (strata == np.arange(2 ** k)).all()
 
 
+def test_zsobol_rounds_are_each_stratified():
+    # zsobol continues a pixel's index past spp in rounds of spp samples (adaptive
+    # sampling): each round is a (0, m, 2)-net of its own and one value per 1/spp in time
+    # (the union of rounds is not a finer net, unlike sobol's prefixes: a pixel's next
+    # points lie in the next round's blocks, above the Morton digits)
+    pixels, spp, rays, rounds = 20, 2, 4, 4
+    pixel, sample, ray = pixel_sets(pixels, spp, rays, rounds)
+    u = decorrelated_points("zsobol", 1, pixel, sample, spp, Dim.AO, ray, rays, RESOLUTION)
+    t = stratified_values("zsobol", 1, pixel[::rays], sample[::rays], spp, Dim.TIME, RESOLUTION)
+    u, t = u.reshape(pixels, rounds, spp * rays, 2), t.reshape(pixels, rounds, spp)
+    m = 3
+    for r in range(rounds):
+        for a in range(m + 1):
+            cells = np.sort(cell_of(u[:, r].reshape(-1, 2), 2 ** a, 2 ** (m - a)).reshape(pixels, -1))
+            assert (cells == np.arange(2 ** m)).all(), (r, a)
+        assert (np.sort(np.floor(t[:, r] * spp).astype(int)) == np.arange(spp)).all()
+    # the first round is the points of a render without rounds
+    one_pixel, one_sample, one_ray = pixel_sets(pixels, spp, rays)
+    first = decorrelated_points("zsobol", 1, one_pixel, one_sample, spp, Dim.AO, one_ray, rays, RESOLUTION)
+    np.testing.assert_array_equal(u[:, 0].reshape(-1, 2), first)
+    # later rounds are fresh points
+    assert not np.isin(u[:, 1:, :, 0], u[:, 0, :, 0]).any()
+
+
 @pytest.mark.parametrize("sampler", SAMPLERS)
 def test_stratified_values_of_later_rounds_stay_in_the_unit_interval(sampler):
     # sample indices past spp (later adaptive rounds) once gave times above 1
-    spp, pixels, rounds = 6, 100, 4
+    spp, pixels, rounds = (8 if sampler == "zsobol" else 6), 100, 4  # zsobol: powers of two
     pixel, sample, _ = pixel_sets(pixels, spp, rounds=rounds)
-    t = stratified_values(sampler, 2, pixel, sample, spp, Dim.TIME)
+    t = stratified_values(sampler, 2, pixel, sample, spp, Dim.TIME, RESOLUTION)
     assert ((t >= 0.0) & (t < 1.0)).all()
     if sampler in ("jittered", "regular"):
         # each round of spp samples puts one value in each interval [k / spp, (k + 1) / spp)
@@ -170,11 +200,12 @@ def test_points_are_a_pure_function_of_their_keys(sampler):
     # rays that survive to depth d are a subset of the samples: each keeps its point, and
     # the batch's composition and order do not matter
     pixel, sample, ray = pixel_sets(30, 4, 3, rounds=2)
-    full = decorrelated_points(sampler, 8, pixel, sample, 4, Dim.GLOSSY, ray, 3)
+    full = decorrelated_points(sampler, 8, pixel, sample, 4, Dim.GLOSSY, ray, 3, RESOLUTION)
     rows = np.random.default_rng(0).permutation(len(pixel))[:50]
-    subset = decorrelated_points(sampler, 8, pixel[rows], sample[rows], 4, Dim.GLOSSY, ray[rows], 3)
+    subset = decorrelated_points(sampler, 8, pixel[rows], sample[rows], 4, Dim.GLOSSY, ray[rows], 3, RESOLUTION)
     np.testing.assert_array_equal(subset, full[rows])
-    one_ray = decorrelated_points(sampler, 8, pixel[rows], sample[rows], 4, Dim.GLOSSY, int(ray[rows[0]]), 3)
+    one_ray = decorrelated_points(sampler, 8, pixel[rows], sample[rows], 4, Dim.GLOSSY, int(ray[rows[0]]), 3,
+                                  RESOLUTION)
     same = ray[rows] == ray[rows[0]]
     np.testing.assert_array_equal(one_ray[same], full[rows][same])
 
@@ -377,13 +408,14 @@ def test_cosine_hemisphere_samples_follow_their_pdf():
     assert w[:, 2].mean() == pytest.approx(2.0 / 3.0, abs=0.003)
 
 
-def test_sobol_pixel_samples_are_stratified_in_every_elementary_interval():
+@pytest.mark.parametrize("sampler", ["sobol", "zsobol"])
+def test_sobol_pixel_samples_are_stratified_in_every_elementary_interval(sampler):
     from rtmesh.sampling.patterns import pixel_offsets
 
     spp, pixels = 16, 50
     pixel = np.repeat(np.arange(pixels), spp)
     sample = np.tile(np.arange(spp), pixels)
-    offsets = np.asarray(pixel_offsets("sobol", 7, pixel, sample, spp)).reshape(pixels, spp, 2)
+    offsets = np.asarray(pixel_offsets(sampler, 7, pixel, sample, spp, RESOLUTION)).reshape(pixels, spp, 2)
     for points in offsets:
         for a in range(5):  # 1x16, 2x8, 4x4, 8x2, 16x1 grids: one sample per cell
             cells = np.floor(points[:, 0] * 2 ** a) * 2 ** (4 - a) + np.floor(points[:, 1] * 2 ** (4 - a))

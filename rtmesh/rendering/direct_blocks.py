@@ -102,17 +102,17 @@ def block_scratch(position, flags):
 
 
 @kernel
-def camera_block(code, corners, size, spp, start, count, sample, sequence, column, line, camera, xy, d, rays):
+def camera_block(code, keys, corners, size, spp, start, count, sample, sequence, column, line, camera, xy, d, rays):
     """Writes into ``d`` (3, BLOCK) and into the block's ``RTCRayHit16`` packets ``rays``
     the unit directions of the camera rays of samples ``start .. start + count - 1``
     (lanes past the end repeat sample ``start``), as
     :func:`rtmesh.scene.camera_rays.camera_rays` makes them for a pinhole.
 
     ``sample`` (BLOCK,) uint64 holds each sample's index, and what the caller formed once
-    per pixel: ``sequence`` (2, BLOCK) uint64, the pixel's sequence keys of the two pixel
-    dimensions (:func:`rtmesh.sampling.hashing.pixel_sequence`), and ``column``,
+    per pixel: ``sequence`` (2, BLOCK) uint64, the pixel's keys
+    (:func:`rtmesh.sampling.pixel_samples.pixel_keys`), and ``column``,
     ``line`` (BLOCK,) float64, its column and row; ``b`` for sample ``start + b``.  The
-    positions in the pixels come from the sampler (``code``, ``corners``, ``size``,
+    positions in the pixels come from the sampler (``code``, ``keys``, ``corners``, ``size``,
     ``spp``: the :class:`rtmesh.sampling.pixel_samples.PixelSampler`'s), by
     :func:`rtmesh.sampling.pixel_samples.sample_positions`.
 
@@ -126,7 +126,7 @@ def camera_block(code, corners, size, spp, start, count, sample, sequence, colum
     1 spp).
     """
     ax, bx, ay, by, fx, fy, fz, rx, ry, rz, ux, uy, uz = camera
-    sample_positions(code, corners, size, spp, sample, sequence, count, xy)
+    sample_positions(code, keys, corners, size, spp, sample, sequence, count, xy)
     # inactive lanes of the last packet: a copy of the first ray keeps their words finite
     for b in range(count, BLOCK):
         xy[0, b], xy[1, b], column[b], line[b] = xy[0, 0], xy[1, 0], column[0], line[0]

@@ -45,8 +45,7 @@ from rtmesh.rendering.direct_blocks import (BLOCK, LANES, PACKETS, add_light_row
                                             surface_block, write_rays)
 from rtmesh.materials.blinn_phong import raise_highlight
 from rtmesh.rendering.film_sums import pixel_errors
-from rtmesh.sampling.hashing import pixel_sequence
-from rtmesh.sampling.pixel_samples import PixelSampler
+from rtmesh.sampling.pixel_samples import PixelSampler, pixel_keys
 from rtmesh.scene.background import SolidBackground
 from rtmesh.shading.direct_light import SHADOW_SHORTEN, highlight_to_raise
 
@@ -67,9 +66,9 @@ _F64, _F64_2D, _I64 = types.float64[::1], types.float64[:, ::1], types.int64[::1
 # first run can compile them in two processes, see rtmesh.core.compile_ahead)
 FUSED_KERNELS = KernelGroup(__name__, "fused direct", [
     (block_scratch, (_F64, types.int64)),
-    (camera_block, (types.int64, _F64_2D, _F64, types.int64, types.int64, types.int64, types.uint64[::1],
-                    types.uint64[:, ::1], _F64, _F64, types.UniTuple(types.float64, 13), _F64_2D, _F64_2D,
-                    types.float32[::1])),
+    (camera_block, (types.int64, types.uint64[::1], _F64_2D, _F64, types.int64, types.int64, types.int64,
+                    types.uint64[::1], types.uint64[:, ::1], _F64, _F64, types.UniTuple(types.float64, 13), _F64_2D,
+                    _F64_2D, types.float32[::1])),
     (surface_block, (_F64_2D, _I64, _I64, _F64_2D, _F64_2D, types.boolean[::1], _F64_2D, types.int64,
                      types.boolean)),
     (light_block, (_F64, _F64_2D, _F64_2D, types.int64, types.float32, types.float64, types.boolean)),
@@ -313,7 +312,7 @@ def direct_samples(intersect16, occluded16, scene, flags, sampler, keys, corners
                 left = counts[0] if one_count else counts[current]
                 px_sample = first[0] if one_first else first[current]
                 px = pixel_list[current] if listed else first_pixel + current
-                sequence0, sequence1 = pixel_sequence(keys[0], px), pixel_sequence(keys[1], px)
+                sequence0, sequence1 = pixel_keys(sampler, keys, px)
                 px_row = floor_quotient(px, width, inverse_width)
                 px_column, px_line = np.float64(px - px_row * width), np.float64(px_row)
                 continue
@@ -328,7 +327,7 @@ def direct_samples(intersect16, occluded16, scene, flags, sampler, keys, corners
             b += run
         # camera rays (rtmesh.scene.camera_rays.camera_rays, pinhole) into the packets; lanes past
         # the end repeat sample 0
-        camera_block(sampler, corners, size, spp, start, count, sample, sequence, column, line, camera, xy,
+        camera_block(sampler, keys, corners, size, spp, start, count, sample, sequence, column, line, camera, xy,
                      d, rays)
         for b in range(BLOCK):
             valid[b] = -1 if b < count else 0

@@ -75,10 +75,10 @@ from rtmesh.rendering.photon_kernel import empty_photon_map, gather
 from rtmesh.rendering.path_surfaces import (cross_interface, emission_at, hit_parameters, is_transparent,
                                             shading_normals, surface_point, tangent_frame, textured_materials)
 from rtmesh.sampling.alias import alias_sample
-from rtmesh.sampling.hashing import mix64, pixel_sequence, uniform
-from rtmesh.sampling.lowdiscrepancy import sobol_pair
+from rtmesh.sampling.hashing import mix64, uniform
 from rtmesh.sampling.mis import power_heuristic
 from rtmesh.sampling.warps import uniform_triangle_weights
+from rtmesh.sampling.zsobol import sequence_pair
 
 # The rows taking arrays that the kernel calls per lane, inlined by numba: a compiled call that
 # passes arrays takes and releases a reference to each (atomic instructions), and LLVM stops
@@ -298,8 +298,9 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     pixels, samples : (n,) int64, or (0,)
         Each ray's pixel and sample index: the first vertex's light and BSDF points are
         Sobol pairs of the pixel's sequences (``samples`` empty: hashed numbers throughout).
-    sobol_keys : (2,) uint64
-        The dimension keys of those sequences (:func:`rtmesh.sampling.patterns.dimension_key`).
+    sobol_keys : (6,) uint64
+        Those sequences (sobol or zsobol) and their two dimension keys
+        (:func:`rtmesh.sampling.zsobol.sequence_keys`).
     times : (n,) float64, or (0,)
         Each sample's time in the shutter (scenes with moving objects).
     geometry, surface, lights, env, options, motion, photon_map : tuples
@@ -575,8 +576,8 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 sample_index = samples[start + lane] if len(samples) else -1
                 if (depth == 0) & (sample_index >= 0) & (sample_index < SOBOL_LIMIT):
                     pixel = np.uint64(pixels[start + lane])
-                    lu1, lu2 = sobol_pair(pixel_sequence(sobol_keys[0], pixel), sample_index)
-                    bu1, bu2 = sobol_pair(pixel_sequence(sobol_keys[1], pixel), sample_index)
+                    lu1, lu2 = sequence_pair(sobol_keys, 0, pixel, sample_index)
+                    bu1, bu2 = sequence_pair(sobol_keys, 1, pixel, sample_index)
                 else:
                     lu1, lu2 = uniform(key, base + _LIGHT_U1), uniform(key, base + _LIGHT_U2)
                     bu1, bu2 = uniform(key, base + _BSDF_U1), uniform(key, base + _BSDF_U2)

@@ -33,7 +33,8 @@ from rtmesh.rendering.path_surfaces import TEXTURE_COLUMNS
 from rtmesh.rendering.settings import RenderSettings
 from rtmesh.rendering.surface_textures import corner_and_edges, face_tangents
 from rtmesh.sampling.hashing import mix64, path_key
-from rtmesh.sampling.patterns import Dim, dimension_key
+from rtmesh.sampling.patterns import Dim
+from rtmesh.sampling.zsobol import sequence_keys
 
 log = logging.getLogger(__name__)
 
@@ -211,8 +212,9 @@ class PathStage:
         else:
             self._camera_media = np.zeros(0, np.int64)
         # the first vertex's light and BSDF points (rtmesh.rendering.path_kernel)
-        self._sobol_keys = np.array([dimension_key(settings.seed, Dim.PATH_LIGHT),
-                                     dimension_key(settings.seed, Dim.PATH_BSDF)], dtype=np.uint64)
+        self._sobol_keys = sequence_keys("zsobol" if settings.sampler == "zsobol" else "sobol", settings.seed,
+                                         (Dim.PATH_LIGHT, Dim.PATH_BSDF), settings.spp,
+                                         (settings.width, settings.height))
         with np.errstate(over="ignore"):  # the hash's products wrap modulo 2**64 by design
             self._seed_key = mix64(np.uint64(settings.seed % (1 << 64)) ^ np.uint64(0x5A17_7ACE_D00D_F00D))
         library = embree_library.packet_library()
@@ -224,8 +226,10 @@ class PathStage:
         self.photon_map = empty_photon_map(len(self.surface[0]))
 
     def _sobol(self, pixel, sample):
-        """The kernel's Sobol arguments: pixels, sample indices and the two dimension keys;
-        empty under the ``random`` sampler (white noise everywhere, as it promises)."""
+        """The kernel's Sobol arguments: pixels, sample indices and the sequences' record
+        (:func:`rtmesh.sampling.zsobol.sequence_keys`: zsobol's points under zsobol, sobol's
+        under the other samplers); empty under the ``random`` sampler (white noise
+        everywhere, as it promises)."""
         if self.it.settings.sampler == "random":
             return np.zeros(0, np.int64), np.zeros(0, np.int64), self._sobol_keys
         return (np.ascontiguousarray(pixel, dtype=np.int64), np.ascontiguousarray(sample, dtype=np.int64),

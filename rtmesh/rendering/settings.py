@@ -1,5 +1,6 @@
 """Render settings: what a render is asked to do, validated."""
 
+import logging
 import math
 from dataclasses import dataclass
 
@@ -7,6 +8,9 @@ from rtmesh.core.runtime import usable_cores
 from rtmesh.io.colour import TONEMAPS
 from rtmesh.io.passes import LIGHT_PATH_PASSES, PASS_NAMES
 from rtmesh.sampling.patterns import SAMPLERS
+from rtmesh.sampling.zsobol import MAX_INDEX_BITS, index_bits, rounded_spp
+
+log = logging.getLogger(__name__)
 
 FRESNEL_MODES = ("schlick", "exact")
 # "whitted": Blinn-Phong, lights and followed specular lobes (the values of scene files written
@@ -48,8 +52,10 @@ class RenderSettings:
         Image size in pixels.
     spp : int
         Samples per pixel.
-    sampler : {"regular", "random", "jittered"}
-        Pixel sample pattern (box filter).
+    sampler : {"regular", "random", "jittered", "sobol", "zsobol"}
+        Sample pattern of every sampled dimension (pixel position with a box filter, lens,
+        time, lights, BSDF, AO; docs/SAMPLERS.md).  ``zsobol`` takes a power-of-two
+        ``spp``: another is rounded up, with a warning, when the settings are validated.
     integrator : {"whitted", "path"}
         The light transport (see :data:`INTEGRATORS`).
     max_depth : int or None
@@ -178,12 +184,26 @@ class RenderSettings:
         for name, ok, expected in checks:
             if not ok:
                 raise ValueError(f"{name} must be {expected} (got {getattr(self, name)!r})")
+        if self.sampler == "zsobol" and rounded_spp(self.spp) != self.spp:
+            rounded = rounded_spp(self.spp)
+            # a max_spp between the two would refuse the render: it rises with spp
+            raise_cap = whole(self.max_spp, self.spp, rounded - 1)
+            log.warning("sampler 'zsobol' takes a power-of-two spp: %d rounded up to %d%s", self.spp, rounded,
+                        " (max_spp too)" if raise_cap else "")
+            self.spp = rounded
+            if raise_cap:
+                self.max_spp = rounded
         relations = [
             (self.max_spp is None or whole(self.max_spp, self.spp, MAX_SPP),
              f"max_spp must be >= spp and <= {MAX_SPP} (got {self.max_spp!r})"),
-            (self.sampler != "sobol" or self.sample_cap <= MAX_SOBOL_SPP,
-             f"spp and max_spp must be <= {MAX_SOBOL_SPP} with the sobol sampler (its sample index "
+            (self.sampler not in ("sobol", "zsobol") or self.sample_cap <= MAX_SOBOL_SPP,
+             f"spp and max_spp must be <= {MAX_SOBOL_SPP} with the {self.sampler} sampler (its sample index "
              f"is 32-bit; got {self.sample_cap})"),
+            (self.sampler != "zsobol" or self.spp > MAX_SOBOL_SPP
+             or index_bits(self.width, self.height, self.spp, max(self.light_samples, self.ao_samples, 1))
+             <= MAX_INDEX_BITS,
+             f"the zsobol sampler's index outgrows {MAX_INDEX_BITS} bits at {self.width}x{self.height} with "
+             f"{self.spp} spp and {max(self.light_samples, self.ao_samples, 1)} rays a hit"),
             (self.max_spp is None or self.adaptive,
              "max_spp needs target_error or time_limit (adaptive sampling)"),
             (self.integrator == "path" or not set(self.passes) & set(LIGHT_PATH_PASSES),

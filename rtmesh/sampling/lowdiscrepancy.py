@@ -95,22 +95,34 @@ def sobol_bits(index, tables):
 
 
 @row
+def scramble_seed(key, which):
+    """Independent 32-bit scrambling seed number ``which`` (1, 2, 3, ...) of a sequence keyed
+    ``key`` (uint64), in a uint64 word."""
+    return mix64(key + GOLDEN * np.uint64(which)) >> np.uint64(32)
+
+
+@row
+def owen_sobol_pair(index, seed_x, seed_y):
+    """Point ``index`` (a uint32 in a uint64 word) of the (0,2)-sequence, each coordinate
+    Owen-scrambled with its own seed (:func:`scramble_seed`), ``(x, y)`` in [0, 1)^2: values
+    in 0.32 fixed point, so exact doubles."""
+    # the first dimension's generator is the bit reversal, which the scramble's own
+    # reversal undoes
+    x = reverse_bits(laine_karras_permutation(index, seed_x))
+    y = nested_uniform_scramble(sobol_bits(index, SOBOL1_TABLES), seed_y)
+    return np.float64(x) * _TO_UNIT, np.float64(y) * _TO_UNIT
+
+
+@row
 def sobol_pair(key, index):
     """Point ``index`` (below 2**32) of the Owen-scrambled (0,2)-sequence keyed ``key`` (a
     pixel's sequence key, :func:`rtmesh.sampling.patterns.sequence_key`), ``(x, y)`` in
     [0, 1)^2: values in 0.32 fixed point, so exact doubles."""
-    # three independent 32-bit seeds per sequence: the index shuffle, x and y
-    shuffle_seed = mix64(key + GOLDEN) >> np.uint64(32)
-    seed_x = mix64(key + GOLDEN * np.uint64(2)) >> np.uint64(32)
-    seed_y = mix64(key + GOLDEN * np.uint64(3)) >> np.uint64(32)
-    # scrambling the index permutes points only inside aligned power-of-two blocks, so
-    # every power-of-two prefix is still a whole (0,m,2)-net; it decorrelates pixels
-    shuffled = nested_uniform_scramble(np.uint64(index) & _LOW32, shuffle_seed)
-    # the first dimension's generator is the bit reversal, which the scramble's own
-    # reversal undoes
-    x = reverse_bits(laine_karras_permutation(shuffled, seed_x))
-    y = nested_uniform_scramble(sobol_bits(shuffled, SOBOL1_TABLES), seed_y)
-    return np.float64(x) * _TO_UNIT, np.float64(y) * _TO_UNIT
+    # three independent 32-bit seeds per sequence: the index shuffle, x and y.  Scrambling
+    # the index permutes points only inside aligned power-of-two blocks, so every
+    # power-of-two prefix is still a whole (0,m,2)-net; it decorrelates pixels
+    shuffled = nested_uniform_scramble(np.uint64(index) & _LOW32, scramble_seed(key, 1))
+    return owen_sobol_pair(shuffled, scramble_seed(key, 2), scramble_seed(key, 3))
 
 
 @kernel

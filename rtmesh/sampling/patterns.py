@@ -11,7 +11,10 @@ Dimensions used by the integrator are named in :class:`Dim`.  Every stratified q
 from one machinery, :func:`pixel_offsets`, :func:`decorrelated_points` and
 :func:`stratified_values` over a private ``_stratified``.  A pixel's sample index is global
 across adaptive rounds: samples ``k spp .. (k + 1) spp - 1`` form the k-th stratified set
-(jittered), and any power-of-two prefix of the samples is stratified (Sobol).
+(jittered, zsobol), and any power-of-two prefix of the samples is stratified (Sobol).
+
+``zsobol`` (:mod:`rtmesh.sampling.zsobol`) orders one image-wide sequence along a Morton
+curve, so its points depend on where the pixel is: it needs the image's ``resolution``.
 """
 
 import functools
@@ -23,8 +26,9 @@ import numpy as np
 from rtmesh.core.rays import component_major, take_rows
 from rtmesh.sampling.hashing import GOLDEN, M1, mix64, pixel_sequence
 from rtmesh.sampling.lowdiscrepancy import sobol_points
+from rtmesh.sampling.zsobol import block_bits, check_layout, zorder_levels, zsobol_points
 
-SAMPLERS = ("regular", "random", "jittered", "sobol")
+SAMPLERS = ("regular", "random", "jittered", "sobol", "zsobol")
 
 
 class Dim(IntEnum):
@@ -120,12 +124,12 @@ def strata_shape(spp):
     return spp // ny, ny
 
 
-def pixel_offsets(sampler, seed, pixel, sample, spp):
+def pixel_offsets(sampler, seed, pixel, sample, spp, resolution=None):
     """Sample positions inside the pixel.
 
     Parameters
     ----------
-    sampler : {"regular", "random", "jittered", "sobol"}
+    sampler : {"regular", "random", "jittered", "sobol", "zsobol"}
         See :func:`decorrelated_points`; ``regular`` puts the samples at the stratum centres,
         an ordered supersampling grid.
     seed : int
@@ -135,7 +139,11 @@ def pixel_offsets(sampler, seed, pixel, sample, spp):
         Sample index within its pixel, global across adaptive rounds: the jittered strata
         are ``sample % spp``.
     spp : int
-        Samples per stratified set (the render's samples per pixel).
+        Samples per stratified set (the render's samples per pixel; a power of two for
+        ``zsobol``).
+    resolution : (int, int), optional
+        Image width and height, which ``zsobol`` needs (the pixel's place on the Morton
+        curve); the other samplers ignore it.
 
     Returns
     -------
@@ -143,10 +151,10 @@ def pixel_offsets(sampler, seed, pixel, sample, spp):
         Offsets in [0, 1)^2 from the pixel's top-left corner (x right, y down),
         component-major (see :mod:`rtmesh.core.rays`).
     """
-    return _stratified(sampler, seed, pixel, sample, spp, Dim.PIXEL, 0, 1, 2)
+    return _stratified(sampler, seed, pixel, sample, spp, Dim.PIXEL, 0, 1, 2, resolution)
 
 
-def decorrelated_points(sampler, seed, pixel, sample, spp, dimension, ray=0, rays=1):
+def decorrelated_points(sampler, seed, pixel, sample, spp, dimension, ray=0, rays=1, resolution=None):
     """Points in [0, 1)^2 for a dimension other than the pixel's: lens, glossy, AO, lights.
 
     The one sample machinery of the renderer for two-dimensional quantities.  Pixel
@@ -166,6 +174,10 @@ def decorrelated_points(sampler, seed, pixel, sample, spp, dimension, ray=0, ray
       scrambled per pixel and dimension: every power-of-two prefix of a pixel's points is
       stratified in all elementary intervals, as is, for power-of-two ``rays``, the set of
       one hit;
+    - ``zsobol`` takes point ``sample * rays + ray`` of the pixel's block of one image-wide
+      Owen-scrambled (0,2)-sequence ordered along a Morton curve (:mod:`rtmesh.sampling.zsobol`):
+      each pixel's points are stratified as ``sobol``'s (for power-of-two ``spp * rays``),
+      and neighbouring pixels' points complement each other (blue-noise error);
     - ``random`` places the points uniformly and independently.
 
     Each point is a pure function of ``(seed, pixel, sample, ray, dimension)``; sample
@@ -173,7 +185,7 @@ def decorrelated_points(sampler, seed, pixel, sample, spp, dimension, ray=0, ray
 
     Parameters
     ----------
-    sampler : {"regular", "random", "jittered", "sobol"}
+    sampler : {"regular", "random", "jittered", "sobol", "zsobol"}
     seed : int
     pixel, sample : (n,) int
         Linear pixel index and sample index within the pixel.
@@ -185,16 +197,18 @@ def decorrelated_points(sampler, seed, pixel, sample, spp, dimension, ray=0, ray
         Which of the sample's points, in ``[0, rays)``.
     rays : int, optional
         Points per pixel sample, >= 1.
+    resolution : (int, int), optional
+        Image width and height (``zsobol`` only; see :func:`pixel_offsets`).
 
     Returns
     -------
     (n, 2) float64
         Component-major (see :mod:`rtmesh.core.rays`).
     """
-    return _stratified(sampler, seed, pixel, sample, spp, dimension, ray, rays, 2)
+    return _stratified(sampler, seed, pixel, sample, spp, dimension, ray, rays, 2, resolution)
 
 
-def stratified_values(sampler, seed, pixel, sample, spp, dimension):
+def stratified_values(sampler, seed, pixel, sample, spp, dimension, resolution=None):
     """One number in [0, 1) per pixel sample, the ``spp`` numbers of a set stratified.
 
     For one-dimensional quantities such as the time in the shutter: the one-dimensional
@@ -202,21 +216,23 @@ def stratified_values(sampler, seed, pixel, sample, spp, dimension):
     of each set of ``spp`` samples in each interval ``[k / spp, (k + 1) / spp)``, assigned
     to the samples by :func:`shuffled_strata`; ``sobol`` uses the first coordinate of the
     scrambled (0,2)-sequence, a (0,1)-sequence: every power-of-two prefix is stratified the
-    same way; ``random`` is uniform.
+    same way, as does ``zsobol``'s; ``random`` is uniform.
 
     Parameters
     ----------
-    sampler : {"regular", "random", "jittered", "sobol"}
+    sampler : {"regular", "random", "jittered", "sobol", "zsobol"}
     seed : int
     pixel, sample : (n,) int
     spp : int
     dimension : int
+    resolution : (int, int), optional
+        Image width and height (``zsobol`` only; see :func:`pixel_offsets`).
 
     Returns
     -------
     (n,) float64
     """
-    return _stratified(sampler, seed, pixel, sample, spp, dimension, 0, 1, 1)
+    return _stratified(sampler, seed, pixel, sample, spp, dimension, 0, 1, 1, resolution)
 
 
 def shuffled_strata(seed, pixel, sample, spp, dimension, ray=0, rays=1):
@@ -306,7 +322,7 @@ def _cell_grids(rays, spp, dims):
     return cells, strata, table
 
 
-def _stratified(sampler, seed, pixel, sample, spp, dimension, ray, rays, dims):
+def _stratified(sampler, seed, pixel, sample, spp, dimension, ray, rays, dims, resolution=None):
     """Every sampler's points: see :func:`decorrelated_points`.
 
     ``dims`` is 2 for points in [0, 1)^2, returned as (n, 2) component-major, or 1 for
@@ -325,6 +341,16 @@ def _stratified(sampler, seed, pixel, sample, spp, dimension, ray, rays, dims):
     if sampler == "sobol":
         points = sobol_points(np.ascontiguousarray(index, dtype=np.int64), dimension_key(seed, dimension),
                               np.ascontiguousarray(pixel, dtype=np.int64), dims)
+        return points[0] if dims == 1 else points.T
+    if sampler == "zsobol":
+        if resolution is None:
+            raise ValueError("the zsobol sampler needs the image resolution")
+        width, height = resolution
+        check_layout(width, height, spp, rays)
+        ray = np.ascontiguousarray(np.broadcast_to(np.asarray(ray, dtype=np.int64), sample.shape))
+        points = zsobol_points(np.ascontiguousarray(sample), ray, dimension_key(seed, dimension),
+                               np.ascontiguousarray(pixel, dtype=np.int64), width, (spp - 1).bit_length(), rays,
+                               zorder_levels(width, height), block_bits(spp, rays), dims)
         return points[0] if dims == 1 else points.T
     (cx, cy), (sx, sy), table = _cell_grids(rays, spp, dims)
     if dimension == Dim.PIXEL:

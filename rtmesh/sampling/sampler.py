@@ -20,10 +20,13 @@ class Sampler:
 
     Parameters
     ----------
-    kind : {"regular", "random", "jittered", "sobol"}
+    kind : {"regular", "random", "jittered", "sobol", "zsobol"}
     seed : int
     spp : int
         Samples per stratified set (the render's samples per pixel).
+    resolution : (int, int) or None
+        Image width and height: ``zsobol`` orders its points along a Morton curve over the
+        image (:mod:`rtmesh.sampling.zsobol`); the other kinds ignore it.
 
     Notes
     -----
@@ -36,51 +39,59 @@ class Sampler:
     kind: str
     seed: int
     spp: int
+    resolution: tuple | None = None
 
     @classmethod
     def for_settings(cls, settings):
         """The sampler of a :class:`rtmesh.rendering.settings.RenderSettings`."""
-        return cls(settings.sampler, settings.seed, settings.spp)
+        return cls(settings.sampler, settings.seed, settings.spp, (settings.width, settings.height))
+
+    def _points(self, pixel, sample, dimension, ray=0, rays=1):
+        """:func:`rtmesh.sampling.patterns.decorrelated_points` of this sampler."""
+        return decorrelated_points(self.kind, self.seed, pixel, sample, self.spp, dimension, ray, rays,
+                                   self.resolution)
+
+    def _values(self, pixel, sample, dimension):
+        """:func:`rtmesh.sampling.patterns.stratified_values` of this sampler."""
+        return stratified_values(self.kind, self.seed, pixel, sample, self.spp, dimension, self.resolution)
 
     def pixel(self, pixel, sample):
         """Positions inside the pixel (see :func:`rtmesh.sampling.patterns.pixel_offsets`)."""
-        return pixel_offsets(self.kind, self.seed, pixel, sample, self.spp)
+        return pixel_offsets(self.kind, self.seed, pixel, sample, self.spp, self.resolution)
 
     def lens(self, pixel, sample):
         """Points on the thin-lens aperture (before the disk warp)."""
-        return decorrelated_points(self.kind, self.seed, pixel, sample, self.spp, Dim.LENS)
+        return self._points(pixel, sample, Dim.LENS)
 
     def time(self, pixel, sample):
         """Times in the shutter interval, as fractions of it (one value per sample)."""
-        return stratified_values(self.kind, self.seed, pixel, sample, self.spp, Dim.TIME)
+        return self._values(pixel, sample, Dim.TIME)
 
     def ambient_occlusion(self, pixel, sample, depth, ray, rays):
         """Directions of ambient-occlusion ray ``ray`` of ``rays`` per hit at path ``depth``."""
-        return decorrelated_points(self.kind, self.seed, pixel, sample, self.spp, Dim.AO + 2 * depth, ray, rays)
+        return self._points(pixel, sample, Dim.AO + 2 * depth, ray, rays)
 
     def glossy(self, pixel, sample, depth):
         """Glossy-lobe directions of the rays spawned at path ``depth``."""
-        return decorrelated_points(self.kind, self.seed, pixel, sample, self.spp, Dim.GLOSSY + 2 * depth)
+        return self._points(pixel, sample, Dim.GLOSSY + 2 * depth)
 
     def bsdf(self, pixel, sample, depth):
         """(n, 3) numbers for the BSDF-sampled rays spawned at path ``depth``: column 0
         chooses the lobe, columns 1-2 warp the direction (see
         :func:`rtmesh.materials.metallic_roughness.sample`)."""
-        direction = decorrelated_points(self.kind, self.seed, pixel, sample, self.spp, Dim.BSDF + 4 * depth)
-        lobe = stratified_values(self.kind, self.seed, pixel, sample, self.spp, Dim.BSDF + 4 * depth + 2)
+        direction = self._points(pixel, sample, Dim.BSDF + 4 * depth)
+        lobe = self._values(pixel, sample, Dim.BSDF + 4 * depth + 2)
         return np.column_stack([lobe, direction])
 
     def area_light(self, pixel, sample, depth, light_index, light_count, ray, rays):
         """Points on area light ``light_index`` of ``light_count`` for sample ``ray`` of
         ``rays`` per hit at path ``depth`` (see :func:`light_dimension`)."""
-        return decorrelated_points(self.kind, self.seed, pixel, sample, self.spp,
-                                   light_dimension(depth, light_index, light_count), ray, rays)
+        return self._points(pixel, sample, light_dimension(depth, light_index, light_count), ray, rays)
 
     def environment(self, pixel, sample, depth, ray, rays):
         """Points for environment-light direction ``ray`` of ``rays`` per hit at path ``depth``
         (see :class:`rtmesh.lights.environment.EnvironmentLighting`)."""
-        return decorrelated_points(self.kind, self.seed, pixel, sample, self.spp, Dim.ENVIRONMENT + 2 * depth, ray,
-                                   rays)
+        return self._points(pixel, sample, Dim.ENVIRONMENT + 2 * depth, ray, rays)
 
     def alpha_coin(self, ray_key, layer):
         """Uniform numbers deciding whether rays pass a blended cut-out at crossing ``layer``.
