@@ -89,7 +89,7 @@ def build_parser():
                    help="path: photon passes for caustics; auto (the default) when a small or delta light can "
                    "reach a mirror or smooth glass")
     p.add_argument("--photons", type=_positive_int, help="path: photons a caustic photon pass traces "
-                   "(default: the pixel count, 16384 to 1048576)")
+                   "(default: a quarter of the pixel count, 16384 to 1048576)")
     p.add_argument("--seed", type=int, help="random seed (same seed, same image)")
     p.add_argument("--threads", type=_positive_int, help="worker threads (default: all cores)")
     p.add_argument("--ao-samples", type=int, help="ambient-occlusion rays per hit (0 = off)")

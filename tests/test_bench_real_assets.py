@@ -14,7 +14,7 @@ def test_parses_the_summary_line_the_command_prints(integrator):
     settings = SimpleNamespace(width=320, height=240, spp=16, adaptive=False, integrator=integrator)
     stats = SimpleNamespace(relative_error=0.0062, total_rays=1.47e6, rays_per_second=2.49e6,
                             wall_seconds=0.59, threads=2, samples=320 * 240 * 16,
-                            rays={"camera": 1.2e6, "bounce": 0.15e6, "shadow": 0.12e6})
+                            rays={"camera": 1.2e6, "bounce": 0.15e6, "shadow": 0.12e6}, photon_passes=0)
     line = summary_line("/tmp/duck.png", settings, stats)
     values = bench.parse_summary(line + "\n")
     assert values == {"spp": 16, "rays": 1.47, "rate": 2.49, "seconds": 0.59, "threads": 2}

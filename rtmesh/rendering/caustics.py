@@ -53,8 +53,11 @@ MAX_RADIUS_CELLS = 4.0
 # an area light smaller than this solid angle (sr) seen from the specular surfaces turns
 # "auto" on
 SMALL_LIGHT = 0.1
-# photons a pass traces by default: the pixel count, within these bounds
+# photons a pass traces by default: a quarter of the pixel count, within these bounds (at
+# 320x240 a quarter reached the same error in about half the time of the full count: the
+# gather's cost grows with the photons near each vertex; docs/BENCHMARKS.md, Caustics)
 DEFAULT_PHOTONS = (1 << 14, 1 << 20)
+PHOTONS_PER_PIXEL = 0.25
 # photons a thread traces at a time
 CHUNK_PHOTONS = 8192
 
@@ -172,7 +175,7 @@ class Caustics:
         everything = np.concatenate([triangles[:, 0:3], triangles[:, 0:3] + triangles[:, 3:6],
                                      triangles[:, 0:3] + triangles[:, 6:9]])
         self.scene_sphere = _bounding_sphere(everything)
-        self.photons = s.photons or int(np.clip(s.width * s.height, *DEFAULT_PHOTONS))
+        self.photons = s.photons or int(np.clip(PHOTONS_PER_PIXEL * s.width * s.height, *DEFAULT_PHOTONS))
         self.max_bounces = MAX_BOUNCES if s.max_depth < 0 else max(s.max_depth - 1, 0)
         # one pixel's footprint: a + b * distance (perspective: the pixel's angle; orthographic:
         # its size)

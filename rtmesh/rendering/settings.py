@@ -105,7 +105,7 @@ class RenderSettings:
         Path integrator: photon passes for caustics (:mod:`rtmesh.rendering.caustics`);
         ``auto`` runs them when a small or delta light can reach a specular surface.
     photons : int or None
-        Photons a photon pass traces; None: the pixel count, within 16384 .. 1048576.
+        Photons a photon pass traces; None: a quarter of the pixel count, within 16384 .. 1048576.
     denoise : bool
         Denoise the image with Intel Open Image Denoise, guided by the albedo and normal
         passes (see :mod:`rtmesh.io.denoising`; needs the ``denoise`` extra).
