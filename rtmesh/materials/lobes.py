@@ -32,8 +32,9 @@ TRANSMISSION = 8
 # a failed sample (no direction): weight 0 and these flags
 FAILED = 0
 
-# every model's parameters fit one float64 row of this width (models.PARAMETER_WIDTH)
-PARAMETER_WIDTH = 16
+# every model's parameters fit one float64 row of this width (models.PARAMETER_WIDTH); 32 for
+# the glTF model with every KHR layer (gltf_layered.WIDTH, 29)
+PARAMETER_WIDTH = 32
 
 # Luminance of linear sRGB (Rec. 709, D65): one number for an RGB weight, to choose lobes
 LUMA_R, LUMA_G, LUMA_B = 0.2126, 0.7152, 0.0722

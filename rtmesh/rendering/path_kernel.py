@@ -71,8 +71,8 @@ from rtmesh.lights import light_table as lt
 from rtmesh.lights.environment import sample_direction
 from rtmesh.lights.point_light_rows import illuminate_row
 from rtmesh.materials import lobes, models
-from rtmesh.rendering.path_surfaces import (NORMAL_TEXTURE, emission_at, is_transparent, normal_mapped, surface_point,
-                                            textured_row)
+from rtmesh.rendering.path_surfaces import (NORMAL_TEXTURE, emission_at, is_transparent, normal_mapped, orient_layers,
+                                            surface_point, textured_row)
 from rtmesh.sampling.alias import alias_sample
 from rtmesh.sampling.hashing import mix64, pixel_sequence, uniform
 from rtmesh.sampling.lowdiscrepancy import sobol_pair
@@ -312,12 +312,13 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     absorption, unlit, albedo_table, material_textures = surface[4], surface[5], surface[6], surface[8]
     # materials whose parameters vary over the surface (textures, vertex colours): only their
     # hits copy and scale a parameter row (the records' rows cost reference counting per call)
+    ior, slots = surface[15], surface[7]
     textured = np.zeros(len(tags), np.bool_)
     for mat in range(len(tags)):
-        textured[mat] = len(geometry[7]) > 0 or (len(geometry[6]) > 0 and (material_textures[mat] >= 0).any())
+        textured[mat] = len(geometry[7]) > 0 or (len(geometry[6]) > 0 and (material_textures[mat] >= 0).any()) \
+            or slots[tags[mat], models.COAT_NORMAL_SLOT] >= 0  # layered rows are oriented per hit
     light_rows, light_probability, light_alias, light_pmf, face_light, analytic, env_light = lights
     max_depth, rr_depth, clamp, offset_scale, background_seen, cutouts, split, camera_media = options
-    ior, slots = surface[15], surface[7]
     media = len(camera_media)
     env_pixels, env_marginal, env_conditional, env_func, env_mean, env_cos, env_sin = env
     has_static, static_faces, movers, face_maps, face_offsets, moves, face_mover = motion
@@ -539,6 +540,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 ox, oy, oz = -dx[lane], -dy[lane], -dz[lane]
                 if (nx * gx + ny * gy) + nz * gz < 0.0:
                     nx, ny, nz = -nx, -ny, -nz
+                cnx, cny, cnz = nx, ny, nz  # a clear coat's normal, unbent by the base's map
                 if material_textures[mat, NORMAL_TEXTURE] >= 0:
                     nx, ny, nz = normal_mapped(surface, geometry, mat, prim, bu, bv, nx, ny, nz)
                 if not transmissive[mat]:
@@ -556,6 +558,9 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 loy = (sx * ox + sy * oy) + sz * oz
                 loz = (nx * ox + ny * oy) + nz * oz
                 tag = tags[mat]
+                if slots[tag, models.COAT_NORMAL_SLOT] >= 0:
+                    orient_layers(surface, geometry, mat, prim, bu, bv, scratch, lane, cnx, cny, cnz, gx, gy, gz,
+                                  ox, oy, oz, nx, ny, nz, tx, ty, tz, sx, sy, sz)
                 follow = (max_depth < 0) | (depth + 1 <= max_depth)
                 # the first vertex's light and BSDF points: per-pixel Owen-scrambled Sobol pairs
                 # (stratified over the pixel's samples), later vertices' hashed numbers
@@ -723,7 +728,7 @@ def _path_signatures():
     f64 = types.float64
     z = np.zeros
     rows = types.Array(f64, 2, "C")
-    energy = (z((2, 3)), z((2, 2, 2, 2)))
+    energy = (z((2, 3)), z((2, 2, 2, 2)), z((2, 2)))
     bsdf_args = (types.int64, rows, types.int64, numba.typeof(energy))
     evaluate = bsdf_args + (f64,) * 6
     sample = bsdf_args + (f64,) * 6
