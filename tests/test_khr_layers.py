@@ -134,3 +134,32 @@ def test_whitted_ignores_the_layers_with_one_warning_naming_them(tmp_path, caplo
     assert "KHR_materials_sheen" in lines[0] and "'path' only" in lines[0]
     # Whitted shades it with the metallic-roughness BRDF
     assert scene.materials.physical.all()
+
+
+def _render(path, **settings):
+    from rtmesh.api import load_scene, render
+    scene, loaded = load_scene(path, width=32, height=32, spp=8, **settings)
+    return render(scene, loaded).image
+
+
+def test_layered_materials_render_under_path_with_their_textures(tmp_path):
+    """Every extension at once, with textures (the clear coat's normal map, the film's
+    thickness, ...): finite, and the layers change the image."""
+    layered = _render(write_layered_gltf(tmp_path, json.loads(json.dumps(EXTENSIONS))))
+    plain = _render(write_layered_gltf(tmp_path, {}, name="plain.gltf"))
+    assert np.isfinite(layered).all() and layered.min() >= 0
+    assert np.abs(layered - plain).mean() > 0.01 * plain.mean()
+
+
+def test_a_clear_coat_reflects_over_a_black_base(tmp_path):
+    def black(extensions, name):
+        path = write_layered_gltf(tmp_path, extensions, name)
+        doc = json.loads(path.read_text())
+        doc["materials"][0]["pbrMetallicRoughness"].update(baseColorFactor=[0, 0, 0, 1], metallicFactor=0.0)
+        path.write_text(json.dumps(doc))
+        return _render(path)
+    coated = black({"KHR_materials_clearcoat": {"clearcoatFactor": 1.0}, "KHR_materials_specular": {
+        "specularFactor": 0.0}}, "coated.gltf")
+    bare = black({"KHR_materials_specular": {"specularFactor": 0.0}}, "bare.gltf")
+    # specular 0 on a black base reflects nothing: only the coat (and the background) shows
+    assert coated.sum() > bare.sum() * 1.02

@@ -79,7 +79,7 @@ COAT_F0 = 0.04
 P_MIN = 0.05
 
 
-@dataclass
+@dataclass(eq=False)  # compared by identity, as the textures it holds
 class Layers:
     """The KHR layer extensions of one glTF material (factors; textures by role).
 
