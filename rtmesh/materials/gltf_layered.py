@@ -24,8 +24,9 @@ With ``h = normalize(wo + wi)``, ``w = (1 - |wo.h|)^5`` and GGX's ``D``, ``G2`` 
               F_c = 0.04 + 0.96 (1 - |n_c.wo|)^5                 (KHR_materials_clearcoat)
 
 plus ``t (1 - c F_c) s f_interface`` for KHR_materials_transmission (``t = transmission
-(1 - m)``, the rough interface of :mod:`~rtmesh.materials.dielectric` tinted by the base
-colour where light passes, as :mod:`~rtmesh.materials.gltf_pbr`).  ``n_c`` is the clear
+(1 - m)``, ``s`` the sheen's albedo scaling, the rough interface of
+:mod:`~rtmesh.materials.dielectric` tinted by the base colour where light passes, as
+:mod:`~rtmesh.materials.gltf_pbr`); seen from inside, the interface alone.  ``n_c`` is the clear
 coat's own normal (its normal map, else the unbent shading normal), ``E`` the sheen albedo
 of :mod:`~rtmesh.materials.sheen` (clamped to 1).
 
@@ -308,9 +309,18 @@ def _probabilities(params, m, table, ox, oy, oz):
 
 
 @row
+def _interface_weight(params, m, oz):
+    """What the transmission interface's value is weighed by: ``t = transmission (1 - m)``
+    from outside; 1 from inside, where light meets nothing but the interface (as
+    :mod:`~rtmesh.materials.gltf_pbr`, whose inside is the interface alone)."""
+    t = params[m, TRANSMISSION_AT] * (1.0 - params[m, METALLIC_AT])
+    return t if (oz > 0.0) | (t <= 0.0) else 1.0
+
+
+@row
 def _interface(params, m, table, ox, oy, oz, wx, wy, wz):
     """The KHR transmission interface: ``(value, density, transmitted)`` (0 without)."""
-    t = params[m, TRANSMISSION_AT] * (1.0 - params[m, METALLIC_AT])
+    t = _interface_weight(params, m, oz)
     if t > 0.0 and params[m, ROUGHNESS_AT] * params[m, ROUGHNESS_AT] >= dielectric.SMOOTH_ALPHA:
         value, p, transmitted = dielectric.rough_interface(table, ox, oy, oz, wx, wy, wz, params[m, IOR_AT],
                                                            params[m, ROUGHNESS_AT], 1.0)
@@ -326,6 +336,8 @@ def _terms(params, m, table, ox, oy, oz, wx, wy, wz):
     hx, hy, hz = ox + wx, oy + wy, oz + wz
     length = math.sqrt((hx * hx + hy * hy) + hz * hz)
     sr, sg, sb, scale = _sheen_terms(params, m, table, oz, wz, hz / length if length > 0.0 else 0.0)
+    if not oz > 0.0:
+        scale = 1.0  # seen from inside: the interface alone
     fr = fg = fb = dr = dg = db = tr = tg = tb = 0.0
     pdf = 0.0
     if (oz > 0.0) & (wz > 0.0):
@@ -404,8 +416,9 @@ def sample(params, m, table, ox, oy, oz, u0, u1, u2):
             # a smooth interface: its delta lobes, weighed by the layers over it and the choice
             k, _, _ = _coat(params, m, ox, oy, oz, wx, wy, wz)
             _, _, _, scale = _sheen_terms(params, m, table, oz, wz, 0.0)
-            t = params[m, TRANSMISSION_AT] * (1.0 - params[m, METALLIC_AT])
-            weight *= (1.0 - k) * scale * t / p_interface
+            if not oz > 0.0:
+                scale = 1.0
+            weight *= (1.0 - k) * scale * _interface_weight(params, m, oz) / p_interface
             if flags & lobes.TRANSMISSION:
                 return (wx, wy, wz, weight * params[m, BASE_AT], weight * params[m, BASE_AT + 1],
                         weight * params[m, BASE_AT + 2], pdf * p_interface, flags)

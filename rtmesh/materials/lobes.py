@@ -68,6 +68,17 @@ def grid_cell(x, points):
 
 
 @row
+def bilinear(table, x, y, columns):
+    """Bilinear lookup of an energy table sampled on even grids over [0, 1]: ``y`` over its
+    rows, ``x`` over its first ``columns`` columns (both clamped)."""
+    j, fy = grid_cell(y, table.shape[0])
+    i, fx = grid_cell(x, columns)
+    low = table[j, i] * (1.0 - fx) + table[j, i + 1] * fx
+    high = table[j + 1, i] * (1.0 - fx) + table[j + 1, i + 1] * fx
+    return low * (1.0 - fy) + high * fy
+
+
+@row
 def luminance(r, g, b):
     """Rec. 709 luminance of a linear RGB triple."""
     return (LUMA_R * r + LUMA_G * g) + LUMA_B * b

@@ -142,11 +142,7 @@ def table():
 @row
 def albedo(albedo_table, mu, roughness):
     """``E(mu, r)`` of a white sheen, bilinear on the grid."""
-    j, fr = lobes.grid_cell(roughness, albedo_table.shape[0])
-    i, fm = lobes.grid_cell(abs(mu), albedo_table.shape[1])
-    low = albedo_table[j, i] * (1.0 - fm) + albedo_table[j, i + 1] * fm
-    high = albedo_table[j + 1, i] * (1.0 - fm) + albedo_table[j + 1, i + 1] * fm
-    return low * (1.0 - fr) + high * fr
+    return lobes.bilinear(albedo_table, abs(mu), roughness, albedo_table.shape[1])
 
 
 if __name__ == "__main__":

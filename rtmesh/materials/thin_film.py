@@ -28,6 +28,7 @@ term above 1 would create energy.
 import math
 
 from rtmesh.core.compiled import row
+from rtmesh.materials import lobes
 
 # XYZ -> linear Rec. 709 (sRGB primaries, D65)
 _XYZ_TO_RGB = ((3.2404542, -1.5371385, -0.4985314),
@@ -35,13 +36,6 @@ _XYZ_TO_RGB = ((3.2404542, -1.5371385, -0.4985314),
                (0.0556434, -0.2040259, 1.0572252))
 # F0 of the base is clamped below 1 before it becomes an index (F0 = 1 is an infinite index)
 _MAX_F0 = 0.9999
-
-
-@row
-def _schlick(f0, cos):
-    m = min(max(1.0 - cos, 0.0), 1.0)
-    m2 = m * m
-    return f0 + (1.0 - f0) * (m2 * m2 * m)
 
 
 @row
@@ -67,7 +61,7 @@ def _channel(r12, t121, phi21, cos2, eta2, f0, opd):
     s = math.sqrt(f0)
     base_ior = (1.0 + s) / (1.0 - s)
     q = (base_ior - eta2) / (base_ior + eta2)
-    r23 = _schlick(q * q, cos2)
+    r23 = lobes.schlick(q * q, cos2)
     phi23 = math.pi if base_ior < eta2 else 0.0
     r123 = min(max(r12 * r23, 1e-5), 0.9999)
     root = math.sqrt(r123)
@@ -105,7 +99,7 @@ def fresnel(eta2, cos1, thickness, f0r, f0g, f0b):
         return 1.0, 1.0, 1.0  # total internal reflection inside the film
     cos2 = math.sqrt(cos2sq)
     q = (eta - 1.0) / (eta + 1.0)
-    r12 = _schlick(q * q, cos1)
+    r12 = lobes.schlick(q * q, cos1)
     t121 = 1.0 - r12
     phi21 = 0.0 if eta < 1.0 else math.pi  # pi - phi12, phi12 = pi for a film less dense than outside
     opd = 2.0 * eta * thickness * cos2
