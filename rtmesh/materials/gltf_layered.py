@@ -151,7 +151,7 @@ def parameters(material):
     row_[ANISOTROPY_AT] = layers.anisotropy
     row_[ANISOTROPY_DIRECTION_AT] = 1.0  # the frame's x axis, likewise
     row_[ANISOTROPY_ROTATION_AT] = layers.anisotropy_rotation
-    row_[IRIDESCENCE_AT] = layers.iridescence if layers.thickness_max > 0.0 else 0.0
+    row_[IRIDESCENCE_AT] = layers.iridescence
     row_[IRIDESCENCE_IOR_AT] = layers.iridescence_ior
     row_[THICKNESS_AT] = layers.thickness_max
     row_[THICKNESS_MIN_AT] = layers.thickness_min
@@ -256,8 +256,8 @@ def _fresnel(params, m, vh):
     fdr, fdg, fdb = d0r + (s - d0r) * w, d0g + (s - d0g) * w, d0b + (s - d0b) * w
     fmr, fmg, fmb = br + (1.0 - br) * w, bg + (1.0 - bg) * w, bb + (1.0 - bb) * w
     k = params[m, IRIDESCENCE_AT]
-    if k > 0.0:
-        eta2, thickness = params[m, IRIDESCENCE_IOR_AT], params[m, THICKNESS_AT]
+    eta2, thickness = params[m, IRIDESCENCE_IOR_AT], params[m, THICKNESS_AT]
+    if k > 0.0 and thickness > 0.0:  # a film of thickness 0 is none (the specification)
         ir, ig, ib = thin_film.fresnel(eta2, vh, thickness, d0r, d0g, d0b)
         fdr, fdg, fdb = fdr + k * (ir - fdr), fdg + k * (ig - fdg), fdb + k * (ib - fdb)
         ir, ig, ib = thin_film.fresnel(eta2, vh, thickness, br, bg, bb)
@@ -356,7 +356,9 @@ def _terms(params, m, table, ox, oy, oz, wx, wy, wz):
     pdf += p_interface * p
     # the coat over everything
     keep = 1.0 - k
-    fr, fg, fb = keep * fr + k * coat * wz, keep * fg + k * coat * wz, keep * fb + k * coat * wz
+    fr, fg, fb = keep * fr, keep * fg, keep * fb
+    if wz > 0.0:  # a coat normal bent past the shading normal reflects nothing below the latter
+        fr, fg, fb = fr + k * coat * wz, fg + k * coat * wz, fb + k * coat * wz
     pdf += p_coat * coat_pdf
     return fr, fg, fb, pdf, keep * dr, keep * dg, keep * db, keep * tr, keep * tg, keep * tb
 

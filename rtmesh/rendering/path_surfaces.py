@@ -4,7 +4,9 @@ normal maps, emission and opacity (alpha cut-outs).
 
 The rows are inlined into the kernel (``inline_row``): a call of a compiled row takes and
 releases a reference to every array of its record arguments (atomic instructions, some
-fifteen arrays a record), which made them the kernel's largest cost.
+fifteen arrays a record), which made them the kernel's largest cost.  The KHR layers' rows
+(:func:`layer_textures`, :func:`orient_layers`) are the exception: called for layered
+materials only, they are kept out of the kernel's compile.
 
 The rows take two records (tuples of arrays) that :class:`rtmesh.rendering.path_stage.PathStage`
 builds once per scene:
@@ -32,7 +34,7 @@ anisotropy direction (from the UV tangents) into the hit's local frame.
 
 import math
 
-from rtmesh.core.compiled import inline_row
+from rtmesh.core.compiled import inline_row, row
 from rtmesh.io.texture_atlas import texel
 from rtmesh.materials import models
 from rtmesh.materials.metallic_roughness import alpha_from_roughness_row
@@ -233,7 +235,7 @@ def normal_mapped_by(surface, geometry, t, prim, bu, bv, nx, ny, nz):
     return mx * inv, my * inv, mz * inv
 
 
-@inline_row
+@row
 def _scale(textures, texels, descriptors, mat, column, channel, u, v, scratch, lane, s):
     """``scratch[lane, s] *=`` one channel of the material's texture in ``column`` (if any)."""
     t = textures[mat, column]
@@ -241,7 +243,10 @@ def _scale(textures, texels, descriptors, mat, column, channel, u, v, scratch, l
         scratch[lane, s] *= texel(texels, descriptors, t, u, v)[channel]
 
 
-@inline_row
+# layer_textures and orient_layers are rows the kernel calls, not inlined: only hits of
+# layered materials pay for the call (reference counts of the arrays passed), and inlined
+# they made the path kernel's first compile ~40 % longer
+@row
 def layer_textures(textures, texels, descriptors, mat, slot, u, v, scratch, lane):
     """The KHR layers' textures applied to a layered row (:mod:`rtmesh.materials.gltf_layered`):
     specular strength (alpha), specular colour (rgb), clear coat (red), clear-coat roughness
@@ -271,7 +276,7 @@ def layer_textures(textures, texels, descriptors, mat, slot, u, v, scratch, lane
         scratch[lane, s] = scratch[lane, s + 1] + (scratch[lane, s] - scratch[lane, s + 1]) * g
 
 
-@inline_row
+@row
 def orient_layers(surface, geometry, mat, prim, bu, bv, scratch, lane, cx, cy, cz, gx, gy, gz, ox, oy, oz,
                   nx, ny, nz, tx, ty, tz, sx, sy, sz):
     """Write a layered row's clear-coat normal and anisotropy direction in the hit's local
