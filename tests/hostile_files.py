@@ -195,6 +195,10 @@ def corpus():
         "KHR_materials_emissive_strength": {"emissiveStrength": 1e308},
         "KHR_materials_volume": {"attenuationDistance": -1, "attenuationColor": [2, -1, "x"]}}}]
     files["bad_pbr_extensions.gltf"] = json.dumps(bad_glass)
+    # a KHR layer extension's value out of its specification's range: one error line
+    bad_coat = copy.deepcopy(bad_glass)
+    bad_coat["materials"] = [{"name": "paint", "extensions": {"KHR_materials_clearcoat": {"clearcoatFactor": 2}}}]
+    files["bad_layer_extension.gltf"] = json.dumps(bad_coat)
     good = glb_bytes(zero)
     files["truncated.glb"] = good[: len(good) // 2]
     files["corrupt_texture.glb"] = textured_square_glb(corrupt_png())

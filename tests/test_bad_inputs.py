@@ -43,6 +43,8 @@ EXPECTED = {
     "missing_buffer.gltf": (2, "buffer file gone.bin not found"),
     "bad_pbr_extensions.gltf": (0, "bad_pbr_extensions.gltf: material 'glass': KHR_materials_transmission "
                                    "transmissionFactor = 'lots' is not usable; 0.0 used"),
+    "bad_layer_extension.gltf": (2, "bad_layer_extension.gltf: material 'paint': KHR_materials_clearcoat "
+                                    "clearcoatFactor 2 is out of range (expected [0.0, 1.0])"),
     "truncated.glb": (2, "truncated.glb: cannot read glTF JSON: Unterminated string"),
     "corrupt_texture.glb": (2, "square baseColorTexture: corrupt or unreadable texture"),
     "bad_types.toml": (2, "bad_types.toml: render.width: expected an integer"),

@@ -14,6 +14,7 @@ import numpy as np
 
 from rtmesh.core.errors import MeshError
 from rtmesh.io.texture_images import Texture
+from rtmesh.materials.gltf_layered import Layers
 from rtmesh.materials.table import Material
 
 log = logging.getLogger(__name__)
@@ -61,7 +62,9 @@ def gltf_material(pbr, json_material=None, name="gltf", source=None):
     alpha give the opacity; KHR_materials_emissive_strength scales the emission;
     KHR_materials_transmission / ior / volume make part of the dielectric's diffuse term a
     smooth refraction into an absorbing interior (:func:`_transmission`).
-    KHR_materials_unlit shows the base colour without lighting.
+    KHR_materials_unlit shows the base colour without lighting.  KHR_materials_specular,
+    _clearcoat, _sheen, _anisotropy and _iridescence (:func:`khr_layers`) make the model
+    ``gltf_layered`` (:mod:`rtmesh.materials.gltf_layered`).
 
     Parameters
     ----------
@@ -105,8 +108,12 @@ def gltf_material(pbr, json_material=None, name="gltf", source=None):
     metallic, roughness = float(np.clip(f["metallic"], 0, 1)), float(np.clip(f["roughness"], 0, 1))
     factor, ior, absorption = _transmission(ext, where)
     occlusion = (json_material or {}).get("occlusionTexture") or {}
+    layers = khr_layers(ext, where, json_material, name)
     return Material(
-        model="metallic_roughness",
+        # the KHR layers' model only where a material uses one: plain materials keep the
+        # metallic-roughness rows (their speed, their images bit for bit)
+        model="gltf_layered" if layers is not None else "metallic_roughness",
+        layers=layers,
         base_color=colour,
         metallic=metallic,
         perceptual_roughness=roughness,
@@ -124,6 +131,104 @@ def gltf_material(pbr, json_material=None, name="gltf", source=None):
         normal_texture=texture("normalTexture", False),
         **common,
     )
+
+
+# KHR layer extensions: per extension, its number keys (default, low, high), its colour keys
+# (default, low, high) and its textures (role, sRGB); the specifications' defaults and ranges
+LAYER_EXTENSIONS = {
+    "KHR_materials_specular": (
+        {"specularFactor": (1.0, 0.0, 1.0)}, {"specularColorFactor": ((1.0, 1.0, 1.0), 0.0, np.inf)},
+        (("specularTexture", False), ("specularColorTexture", True))),
+    "KHR_materials_clearcoat": (
+        {"clearcoatFactor": (0.0, 0.0, 1.0), "clearcoatRoughnessFactor": (0.0, 0.0, 1.0)}, {},
+        (("clearcoatTexture", False), ("clearcoatRoughnessTexture", False), ("clearcoatNormalTexture", False))),
+    "KHR_materials_sheen": (
+        {"sheenRoughnessFactor": (0.0, 0.0, 1.0)}, {"sheenColorFactor": ((0.0, 0.0, 0.0), 0.0, 1.0)},
+        (("sheenColorTexture", True), ("sheenRoughnessTexture", False))),
+    "KHR_materials_anisotropy": (
+        {"anisotropyStrength": (0.0, 0.0, 1.0), "anisotropyRotation": (0.0, -np.inf, np.inf)}, {},
+        (("anisotropyTexture", False),)),
+    "KHR_materials_iridescence": (
+        {"iridescenceFactor": (0.0, 0.0, 1.0), "iridescenceIor": (1.3, 1.0, np.inf),
+         "iridescenceThicknessMinimum": (100.0, 0.0, np.inf), "iridescenceThicknessMaximum": (400.0, 0.0, np.inf)},
+        {}, (("iridescenceTexture", False), ("iridescenceThicknessTexture", False))),
+}
+# the texture roles of the layer extensions, and whether each is sRGB
+LAYER_TEXTURE_ROLES = {role: (extension, srgb) for extension, (_, _, roles) in LAYER_EXTENSIONS.items()
+                       for role, srgb in roles}
+# where gltf_json_materials puts a material's decoded layer images ({role: PIL image})
+LAYER_TEXTURES_KEY = "rtmesh:layer images"
+
+
+def _layer_value(table, extension, key, default, low, high, where):
+    """One factor of a layer extension: the default when absent, else finite numbers in
+    [low, high] (a number, or three for a colour); MeshError otherwise (one line)."""
+    value = table.get(key, default)
+    count = 1 if np.ndim(default) == 0 else len(default)
+    try:
+        numbers = _numbers(value, count, f"{extension} {key}")
+    except ValueError as exc:
+        raise MeshError(f"{where}: {exc}") from None
+    if (numbers < low).any() or (numbers > high).any():
+        bounds = f"[{low}, {high}]" if np.isfinite(high) else f">= {low}"
+        raise MeshError(f"{where}: {extension} {key} {value!r} is out of range (expected {bounds})")
+    return float(numbers[0]) if count == 1 else numbers
+
+
+def khr_layers(ext, where, json_material=None, name="gltf"):
+    """The KHR layer extensions of a glTF material as :class:`~rtmesh.materials.gltf_layered.Layers`.
+
+    Parameters
+    ----------
+    ext : dict
+        The material's ``extensions``.
+    where : str
+        The file and material, for messages.
+    json_material : dict, optional
+        The material's object of :func:`gltf_json_materials`: the decoded images of the
+        layers' textures by role (:data:`LAYER_TEXTURES_KEY`) and their wrap modes and
+        transforms (:func:`texture_options`).
+    name : str
+        For the textures' names.
+
+    Returns
+    -------
+    Layers or None
+        None when the material uses none of :data:`LAYER_EXTENSIONS`.
+
+    Raises
+    ------
+    MeshError
+        A factor is not a number (or three), or is outside the specification's range.
+    """
+    used = [extension for extension in LAYER_EXTENSIONS if extension in ext]
+    if not used:
+        return None
+    values, textures = {}, {}
+    images = (json_material or {}).get(LAYER_TEXTURES_KEY, {})
+    for extension in used:
+        table = ext[extension]
+        if not isinstance(table, dict):
+            raise MeshError(f"{where}: {extension} is not an object")
+        numbers, colours, roles = LAYER_EXTENSIONS[extension]
+        for key, (default, low, high) in {**numbers, **colours}.items():
+            values[key] = _layer_value(table, extension, key, default, low, high, where)
+        for role, srgb in roles:
+            if images.get(role) is not None:
+                textures[role] = Texture.from_pil(images[role], srgb=srgb, name=f"{name} {role}",
+                                                  **texture_options(json_material, role))
+    # the defaults of the extensions a material does not use
+    for extension, (numbers, colours, _) in LAYER_EXTENSIONS.items():
+        for key, (default, _, _) in {**numbers, **colours}.items():
+            values.setdefault(key, np.asarray(default, dtype=np.float64) if np.ndim(default) else float(default))
+    return Layers(
+        specular=values["specularFactor"], specular_colour=values["specularColorFactor"],
+        clearcoat=values["clearcoatFactor"], clearcoat_roughness=values["clearcoatRoughnessFactor"],
+        sheen_colour=values["sheenColorFactor"], sheen_roughness=values["sheenRoughnessFactor"],
+        anisotropy=values["anisotropyStrength"], anisotropy_rotation=values["anisotropyRotation"],
+        iridescence=values["iridescenceFactor"], iridescence_ior=values["iridescenceIor"],
+        thickness_min=values["iridescenceThicknessMinimum"], thickness_max=values["iridescenceThicknessMaximum"],
+        textures=textures, extensions=tuple(used))
 
 
 def _transmission(ext, name):
@@ -370,7 +475,7 @@ def _check_decoded(pbr, json_material, name, source=None):
                     ", ".join(ktx2), "is" if len(ktx2) == 1 else "are", BASISU, "it" if len(ktx2) == 1 else "them")
 
 
-def gltf_json_materials(doc, source="glTF"):
+def gltf_json_materials(doc, source="glTF", images=None):
     """``{material name: material object}`` of a glTF JSON document (unnamed ones skipped).
 
     Each object is a copy with, under :data:`OPTIONS_KEY`, per texture role of
@@ -387,12 +492,18 @@ def gltf_json_materials(doc, source="glTF"):
     KHR_texture_transform (ignored), is one warning for the file, naming the materials.
     KHR_texture_transform may be in the file's ``extensionsRequired``: it is read.
 
+    The textures of the KHR layer extensions (:data:`LAYER_TEXTURE_ROLES`, inside the
+    material's ``extensions``) get options likewise, and their images, decoded by
+    ``images``, under :data:`LAYER_TEXTURES_KEY` (``{"clearcoatTexture": PIL image, ...}``).
+
     Parameters
     ----------
     doc : dict
         The file's JSON.
     source : str
         The file, for messages.
+    images : rtmesh.loaders.gltf_images.GltfImages, optional
+        Decodes the layer textures' images (None: they are not read).
 
     Returns
     -------
@@ -404,6 +515,12 @@ def gltf_json_materials(doc, source="glTF"):
             pbr = material.get("pbrMetallicRoughness") or {}
             infos = {role: (pbr if role in _PBR_ROLES else material).get(role) for role in TEXTURE_ROLES}
             infos = {role: info for role, info in infos.items() if isinstance(info, dict)}
+            core = set(infos)
+            extensions = material.get("extensions") if isinstance(material.get("extensions"), dict) else {}
+            for role, (extension, _) in LAYER_TEXTURE_ROLES.items():
+                info = extensions.get(extension, {}).get(role) if isinstance(extensions.get(extension), dict) else None
+                if isinstance(info, dict):
+                    infos[role] = info
             options = {}
             for role, info in infos.items():
                 options[role], coord, problem = _texture_options(doc, info)
@@ -412,8 +529,11 @@ def gltf_json_materials(doc, source="glTF"):
                     other_sets.append(f"{where} (set {coord!r})")
                 if problem:
                     malformed.append(f"{where}: {problem}")
-            images = {role: _texture_image(doc, info) for role, info in infos.items()}
-            out[material["name"]] = {**material, OPTIONS_KEY: options, IMAGES_KEY: images}
+            labels = {role: _texture_image(doc, info) for role, info in infos.items() if role in core}
+            layer_images = {role: _layer_image(doc, info, images, f"material '{material['name']}' {role}")
+                            for role, info in infos.items() if role not in core and images is not None}
+            out[material["name"]] = {**material, OPTIONS_KEY: options, IMAGES_KEY: labels,
+                                     LAYER_TEXTURES_KEY: layer_images}
     if other_sets:
         log.warning("%s: texture coordinate sets other than 0 are not read (trimesh loads "
                     "TEXCOORD_0 only); set 0 used for %s", source, _listed(other_sets))
@@ -421,6 +541,15 @@ def gltf_json_materials(doc, source="glTF"):
         log.warning("%s: malformed %s ignored (texture shown untransformed): %s", source,
                     TEXTURE_TRANSFORM, _listed(malformed))
     return out
+
+
+def _layer_image(doc, info, images, label):
+    """The decoded image of a layer texture's textureInfo (MeshError naming it otherwise)."""
+    try:
+        source = doc["textures"][info["index"]]["source"]
+    except (KeyError, IndexError, TypeError):
+        raise MeshError(f"{images.path}: {label}: texture {info.get('index')!r} is missing or has no image") from None
+    return images.image(source, label)
 
 
 def _listed(items, shown=4):

@@ -15,12 +15,13 @@ from rtmesh.io.texture_images import Texture, image_size_guard
 from rtmesh.loaders import gltf_compression
 from rtmesh.loaders.gltf_nodes import (GLTF_EXTENSIONS, check_external_files, check_node_graph,
                                        file_cameras_and_lights, flattened_size, read_gltf_json)
+from rtmesh.loaders.gltf_images import GltfImages
 from rtmesh.loaders.gltf_materials import gltf_json_materials, gltf_material
 from rtmesh.loaders.mtl_materials import mtl_material, obj_materials
 from rtmesh.loaders.mesh_files import check_content, check_file, format_name
 from rtmesh.loaders.obj_polygons import triangulate_polygons
 from rtmesh.loaders.usd_files import USD_EXTENSIONS, load_usd_scene, read_usd
-from rtmesh.materials.table import Material
+from rtmesh.materials.table import PHYSICAL_MODELS, Material
 from rtmesh.rendering import memory
 from rtmesh.scene.model import MeshPart, Scene
 
@@ -408,7 +409,8 @@ class FileMaterials:
                             os.path.basename(path), nan_colours)
                 self.drop_vertex_colours = True
         elif ext in GLTF_EXTENSIONS:
-            self.gltf = gltf_json_materials(read_gltf_json(path), os.path.basename(path))
+            doc = read_gltf_json(path)
+            self.gltf = gltf_json_materials(doc, os.path.basename(path), GltfImages(path, doc))
 
 
 def vertex_colours(mesh):
@@ -570,7 +572,7 @@ def scene_from_trimesh(obj, name="mesh", **scene_options):
     parts, materials = parts_from_trimesh(obj, name)
     if not parts:
         raise MeshError(f"{name}: nothing to render (no triangles)")
-    if not scene_options.get("physical") and not any(m.model == "metallic_roughness" and not m.unlit
+    if not scene_options.get("physical") and not any(m.model in PHYSICAL_MODELS and not m.unlit
                                                       for m in materials):
         # a little ambient light for the three-light rig; the studio environment of
         # physically based assets lights them from every direction itself

@@ -87,12 +87,8 @@ def table():
 
 @row
 def albedo(albedo_table, mu, r):
-    """``E(mu, r)``, bilinear on the grid."""
-    j, fr = lobes.grid_cell(r, albedo_table.shape[0])
-    i, fm = lobes.grid_cell(mu, albedo_table.shape[1] - 1)
-    low = albedo_table[j, i] * (1.0 - fm) + albedo_table[j, i + 1] * fm
-    high = albedo_table[j + 1, i] * (1.0 - fm) + albedo_table[j + 1, i + 1] * fm
-    return low * (1.0 - fr) + high * fr
+    """``E(mu, r)``, bilinear on the grid (the last column, ``E_avg``, left out)."""
+    return lobes.bilinear(albedo_table, mu, r, albedo_table.shape[1] - 1)
 
 
 @row

@@ -32,8 +32,9 @@ TRANSMISSION = 8
 # a failed sample (no direction): weight 0 and these flags
 FAILED = 0
 
-# every model's parameters fit one float64 row of this width (models.PARAMETER_WIDTH)
-PARAMETER_WIDTH = 16
+# every model's parameters fit one float64 row of this width (models.PARAMETER_WIDTH); 32 for
+# the glTF model with every KHR layer (gltf_layered.WIDTH, 29)
+PARAMETER_WIDTH = 32
 
 # Luminance of linear sRGB (Rec. 709, D65): one number for an RGB weight, to choose lobes
 LUMA_R, LUMA_G, LUMA_B = 0.2126, 0.7152, 0.0722
@@ -64,6 +65,17 @@ def grid_cell(x, points):
     f = min(max(x, 0.0), 1.0) * (points - 1)
     i = min(int(f), points - 2)
     return i, f - i
+
+
+@row
+def bilinear(table, x, y, columns):
+    """Bilinear lookup of an energy table sampled on even grids over [0, 1]: ``y`` over its
+    rows, ``x`` over its first ``columns`` columns (both clamped)."""
+    j, fy = grid_cell(y, table.shape[0])
+    i, fx = grid_cell(x, columns)
+    low = table[j, i] * (1.0 - fx) + table[j, i + 1] * fx
+    high = table[j + 1, i] * (1.0 - fx) + table[j + 1, i + 1] * fx
+    return low * (1.0 - fy) + high * fy
 
 
 @row

@@ -339,8 +339,16 @@ def sample_ggx_visible_normal(vx, vy, vz, alpha, u1, u2):
         Unit normal ``h`` (local frame, ``h.z >= 0``), density ``G1(v) max(0, v.h) D(h) / v.z``
         per steradian.
     """
+    return sample_ggx_visible_normal_anisotropic(vx, vy, vz, alpha, alpha, u1, u2)
+
+
+@row
+def sample_ggx_visible_normal_anisotropic(vx, vy, vz, alpha_x, alpha_y, u1, u2):
+    """:func:`sample_ggx_visible_normal` of an anisotropic GGX, widths ``alpha_x`` along the
+    local x axis and ``alpha_y`` along y (Heitz 2018 stretches by both; with equal widths the
+    arithmetic is the isotropic one, bit for bit)."""
     # the view in the stretched space, where the GGX microsurface is the unit hemisphere
-    sx, sy, sz = normalized3(alpha * vx, alpha * vy, vz, 1.0)
+    sx, sy, sz = normalized3(alpha_x * vx, alpha_y * vy, vz, 1.0)
     # a frame around it; at normal incidence any tangent does
     lensq = sx * sx + sy * sy
     if lensq > 0.0:
@@ -362,7 +370,7 @@ def sample_ggx_visible_normal(vx, vy, vz, alpha, u1, u2):
     mx = p1 * t1x + p2 * t2x + pz * sx
     my = p1 * t1y + p2 * t2y + pz * sy
     mz = p2 * t2z + pz * sz
-    return normalized3(alpha * mx, alpha * my, max(0.0, mz), 1.0)
+    return normalized3(alpha_x * mx, alpha_y * my, max(0.0, mz), 1.0)
 
 
 @row

@@ -6,12 +6,18 @@ conductor and dielectric models use it: ``D``, Smith's masking ``G1`` and height
 Every function takes ``alpha`` (GGX's width, glTF's roughness squared), already floored at
 :data:`MIN_ALPHA`, and takes cosines of either sign (a transmissive model's directions lie on
 both sides): masking uses ``|cos|``.
+
+The anisotropic rows (``*_anisotropic``: KHR_materials_anisotropy) take whole local vectors
+and two widths, ``alpha_x`` along the frame's x axis and ``alpha_y`` along y (Heitz 2014,
+"Understanding the Masking-Shadowing Function in Microfacet-Based BRDFs", eqs. 85-86); with
+equal widths they are the isotropic functions.
 """
 
 import math
 
 from rtmesh.core.compiled import row
-from rtmesh.materials.metallic_roughness import MIN_ALPHA, sample_ggx_visible_normal
+from rtmesh.materials.metallic_roughness import (MIN_ALPHA, sample_ggx_visible_normal,
+                                                 sample_ggx_visible_normal_anisotropic)
 
 # Below this alpha a lobe is handled as a perfect mirror or a smooth interface (a delta
 # lobe): D's peak 1 / (pi alpha^2) is then beyond what float64 evaluates reliably near the
@@ -67,3 +73,43 @@ def sample_visible_normal(ox, oy, oz, alpha, u1, u2):
     if oz < 0.0:
         return sample_ggx_visible_normal(-ox, -oy, -oz, alpha, u1, u2)
     return sample_ggx_visible_normal(ox, oy, oz, alpha, u1, u2)
+
+
+@row
+def distribution_anisotropic(hx, hy, hz, alpha_x, alpha_y):
+    """Anisotropic GGX ``D(h)`` per unit projected area, ``h`` a unit local vector (0 below
+    the horizon): ``1 / (pi ax ay ((hx/ax)^2 + (hy/ay)^2 + hz^2)^2)``."""
+    if not hz > 0.0:
+        return 0.0
+    x, y = hx / alpha_x, hy / alpha_y
+    d = (x * x + y * y) + hz * hz
+    return 1.0 / (math.pi * alpha_x * alpha_y * d * d)
+
+
+@row
+def smith_lambda_anisotropic(wx, wy, wz, alpha_x, alpha_y):
+    """Smith's ``Lambda(w)`` of anisotropic GGX for a unit local ``w`` (either side)."""
+    z2 = wz * wz
+    if not z2 > 0.0:
+        return math.inf
+    a2 = (alpha_x * alpha_x * wx * wx + alpha_y * alpha_y * wy * wy) / z2
+    return 0.5 * (math.sqrt(1.0 + a2) - 1.0)
+
+
+@row
+def masking_shadowing_anisotropic(ox, oy, oz, wx, wy, wz, alpha_x, alpha_y):
+    """Height-correlated ``G2`` of anisotropic GGX."""
+    return 1.0 / (1.0 + smith_lambda_anisotropic(ox, oy, oz, alpha_x, alpha_y)
+                  + smith_lambda_anisotropic(wx, wy, wz, alpha_x, alpha_y))
+
+
+@row
+def masking_anisotropic(ox, oy, oz, alpha_x, alpha_y):
+    """Smith's ``G1(w)`` of anisotropic GGX."""
+    return 1.0 / (1.0 + smith_lambda_anisotropic(ox, oy, oz, alpha_x, alpha_y))
+
+
+@row
+def sample_visible_normal_anisotropic(ox, oy, oz, alpha_x, alpha_y, u1, u2):
+    """:func:`sample_visible_normal` of anisotropic GGX (``wo.z > 0``)."""
+    return sample_ggx_visible_normal_anisotropic(ox, oy, oz, alpha_x, alpha_y, u1, u2)

@@ -3,7 +3,8 @@ and the compiled dispatch by a small integer tag (as pbrt-v4 dispatches its BxDF
 
 A model module (:mod:`~rtmesh.materials.lambert`, :mod:`~rtmesh.materials.oren_nayar`,
 :mod:`~rtmesh.materials.conductor`, :mod:`~rtmesh.materials.dielectric`,
-:mod:`~rtmesh.materials.gltf_pbr`, :mod:`~rtmesh.materials.phong`) provides
+:mod:`~rtmesh.materials.gltf_pbr`, :mod:`~rtmesh.materials.gltf_layered`,
+:mod:`~rtmesh.materials.phong`) provides
 
 - ``NAME``: the name a material's ``model`` field (scene files: ``[materials.X] model``) holds;
 - ``parameters(material)``: its float row (at most :data:`~rtmesh.materials.lobes.PARAMETER_WIDTH`)
@@ -11,9 +12,11 @@ A model module (:mod:`~rtmesh.materials.lambert`, :mod:`~rtmesh.materials.oren_n
 - optionally ``transmissive(material)``: whether light passes through it (default: no);
 - ``SLOTS``: which parameters image textures scale per hit (:data:`SLOT_NAMES`: the colour
   the base-colour texture and vertex colours multiply, the specular and mirror colours,
-  glTF's metallic, roughness and the alpha formed from it), and where a transmissive
-  model's index of refraction is (the path kernel sets the ratio of the media on both
-  sides there, for nested media);
+  glTF's metallic, roughness and the alpha formed from it, the KHR layers' factors their
+  textures scale), where a transmissive model's index of refraction is (the path kernel
+  sets the ratio of the media on both sides there, for nested media), and where a layered
+  model wants its clear coat's normal and anisotropy direction in the local frame
+  (``coat_normal``: :func:`rtmesh.rendering.path_surfaces.orient_layers` writes them per hit);
 - compiled rows (``@row``) taking the parameter table, the material's row index, the pair of
   energy tables (:func:`tables`) and local-frame directions:
   ``evaluate(params, m, table, wo..., wi...) -> f|cos| r, g, b, pdf``,
@@ -32,12 +35,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from rtmesh.core.compiled import kernel, row
-from rtmesh.materials import (conductor, dielectric, dielectric_albedo, ggx_albedo, gltf_pbr, lambert, lobes, oren_nayar,
-                              phong)
+from rtmesh.materials import (conductor, dielectric, dielectric_albedo, ggx_albedo, gltf_layered, gltf_pbr, lambert,
+                              lobes, oren_nayar, phong, sheen)
 
 # the order gives the tags: 0 .. len - 1
-MODULES = (phong, gltf_pbr, lambert, oren_nayar, conductor, dielectric)
-BLINN_PHONG, METALLIC_ROUGHNESS, LAMBERT, OREN_NAYAR, CONDUCTOR, DIELECTRIC = range(len(MODULES))
+MODULES = (phong, gltf_pbr, lambert, oren_nayar, conductor, dielectric, gltf_layered)
+BLINN_PHONG, METALLIC_ROUGHNESS, LAMBERT, OREN_NAYAR, CONDUCTOR, DIELECTRIC, GLTF_LAYERED = range(len(MODULES))
 
 
 @dataclass(frozen=True)
@@ -63,9 +66,15 @@ class MaterialModel:
 
 # the parameters a hit's textures scale, by model tag: column k holds the index of the first
 # parameter of SLOT_NAMES[k] in the model's row, or -1 (rtmesh.rendering.path_kernel)
-SLOT_NAMES = ("colour", "specular", "mirror", "metallic", "roughness", "alpha", "ior")
+SLOT_NAMES = ("colour", "specular", "mirror", "metallic", "roughness", "alpha", "ior",
+              # the KHR layers of glTF (rtmesh.materials.gltf_layered)
+              "specular_colour", "specular_strength", "clearcoat", "clearcoat_roughness", "coat_normal",
+              "sheen_colour", "sheen_roughness", "anisotropy", "iridescence", "iridescence_thickness")
 SLOTS = np.array([[module.SLOTS.get(name, -1) for name in SLOT_NAMES] for module in MODULES], dtype=np.int64)
-COLOUR_SLOT, SPECULAR_SLOT, MIRROR_SLOT, METALLIC_SLOT, ROUGHNESS_SLOT, ALPHA_SLOT, IOR_SLOT = range(len(SLOT_NAMES))
+(COLOUR_SLOT, SPECULAR_SLOT, MIRROR_SLOT, METALLIC_SLOT, ROUGHNESS_SLOT, ALPHA_SLOT, IOR_SLOT,
+ SPECULAR_COLOUR_SLOT, SPECULAR_STRENGTH_SLOT, CLEARCOAT_SLOT, CLEARCOAT_ROUGHNESS_SLOT, COAT_NORMAL_SLOT,
+ SHEEN_COLOUR_SLOT, SHEEN_ROUGHNESS_SLOT, ANISOTROPY_SLOT, IRIDESCENCE_SLOT, IRIDESCENCE_THICKNESS_SLOT) = range(
+    len(SLOT_NAMES))
 
 REGISTRY = {module.NAME: MaterialModel(module.NAME, tag, module) for tag, module in enumerate(MODULES)}
 MODEL_NAMES = tuple(REGISTRY)
@@ -73,9 +82,10 @@ MODEL_NAMES = tuple(REGISTRY)
 
 def tables():
     """The energy tables the models read, as the one ``table`` argument of the rows: the GGX
-    albedo of :mod:`~rtmesh.materials.ggx_albedo` (rough metals) and the interface albedo of
-    :mod:`~rtmesh.materials.dielectric_albedo` (rough glass)."""
-    return ggx_albedo.table(), dielectric_albedo.table()
+    albedo of :mod:`~rtmesh.materials.ggx_albedo` (rough metals), the interface albedo of
+    :mod:`~rtmesh.materials.dielectric_albedo` (rough glass) and the sheen albedo of
+    :mod:`~rtmesh.materials.sheen` (KHR_materials_sheen's albedo scaling)."""
+    return ggx_albedo.table(), dielectric_albedo.table(), sheen.table()
 
 
 def material_rows(materials):
@@ -117,6 +127,8 @@ def evaluate(tag, params, m, table, ox, oy, oz, wx, wy, wz):
         return oren_nayar.evaluate(params, m, table, ox, oy, oz, wx, wy, wz)
     if tag == CONDUCTOR:
         return conductor.evaluate(params, m, table, ox, oy, oz, wx, wy, wz)
+    if tag == GLTF_LAYERED:
+        return gltf_layered.evaluate(params, m, table, ox, oy, oz, wx, wy, wz)
     return dielectric.evaluate(params, m, table, ox, oy, oz, wx, wy, wz)
 
 
@@ -133,6 +145,8 @@ def sample(tag, params, m, table, ox, oy, oz, u0, u1, u2):
         return oren_nayar.sample(params, m, table, ox, oy, oz, u0, u1, u2)
     if tag == CONDUCTOR:
         return conductor.sample(params, m, table, ox, oy, oz, u0, u1, u2)
+    if tag == GLTF_LAYERED:
+        return gltf_layered.sample(params, m, table, ox, oy, oz, u0, u1, u2)
     return dielectric.sample(params, m, table, ox, oy, oz, u0, u1, u2)
 
 
@@ -149,6 +163,8 @@ def parts(tag, params, m, table, ox, oy, oz, wx, wy, wz):
         return oren_nayar.parts(params, m, table, ox, oy, oz, wx, wy, wz)
     if tag == CONDUCTOR:
         return conductor.parts(params, m, table, ox, oy, oz, wx, wy, wz)
+    if tag == GLTF_LAYERED:
+        return gltf_layered.parts(params, m, table, ox, oy, oz, wx, wy, wz)
     return dielectric.parts(params, m, table, ox, oy, oz, wx, wy, wz)
 
 
@@ -177,6 +193,8 @@ def albedo(tag, params, m):
         return oren_nayar.albedo(params, m)
     if tag == CONDUCTOR:
         return conductor.albedo(params, m)
+    if tag == GLTF_LAYERED:
+        return gltf_layered.albedo(params, m)
     return dielectric.albedo(params, m)
 
 

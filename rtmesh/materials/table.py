@@ -34,6 +34,8 @@ ALPHA_MODES = ("opaque", "mask", "blend")
 MODELS = MODEL_NAMES
 COLOUR_FIELDS = ("diffuse", "specular", "ambient", "mirror", "transmission", "absorption",
                  "emission", "base_color")
+# the glTF models the Whitted integrator shades with the metallic-roughness BRDF
+PHYSICAL_MODELS = ("metallic_roughness", "gltf_layered")
 TEXTURE_FIELDS = ("diffuse_texture", "specular_texture", "opacity_texture", "normal_texture", "emission_texture",
                   "metallic_roughness_texture", "occlusion_texture")
 
@@ -112,6 +114,10 @@ class Material:
         glTF textures of a ``metallic_roughness`` material: roughness in the green channel
         and metalness in the blue one (multiplying ``perceptual_roughness`` and
         ``metallic``), and baked ambient occlusion in the red one.
+    layers : rtmesh.materials.gltf_layered.Layers or None
+        The KHR layer extensions (specular, clear coat, sheen, anisotropy, iridescence) of a
+        ``gltf_layered`` material, with their textures; rendered under the path integrator
+        only (Whitted shades such a material as ``metallic_roughness``).
     """
 
     name: str = "default"
@@ -143,6 +149,7 @@ class Material:
     occlusion_strength: float = 1.0
     metallic_roughness_texture: object = None
     occlusion_texture: object = None
+    layers: object = None
 
     def __post_init__(self):
         if self.model not in MODELS:
@@ -183,7 +190,7 @@ class MaterialTable:
             setattr(self, name, np.array([getattr(m, name) for m in self.materials], dtype=np.float64))
         self.alpha_mode = np.array([ALPHA_MODES.index(m.alpha_mode) for m in self.materials], dtype=np.intp)
         self.unlit = np.array([m.unlit for m in self.materials], dtype=bool)
-        self.physical = np.array([m.model == "metallic_roughness" for m in self.materials], dtype=bool) & ~self.unlit
+        self.physical = np.array([m.model in PHYSICAL_MODELS for m in self.materials], dtype=bool) & ~self.unlit
 
     def __len__(self):
         return len(self.materials)

@@ -72,8 +72,8 @@ from rtmesh.lights.environment import sample_direction
 from rtmesh.lights.point_light_rows import illuminate_row
 from rtmesh.materials import lobes, models
 from rtmesh.rendering.photon_kernel import empty_photon_map, gather
-from rtmesh.rendering.path_surfaces import (cross_interface, emission_at, hit_parameters, is_transparent,
-                                            shading_normals, surface_point, tangent_frame, textured_materials)
+from rtmesh.rendering.path_surfaces import (cross_interface, emission_at, hit_frame, hit_parameters, is_transparent,
+                                            surface_point, textured_materials)
 from rtmesh.sampling.alias import alias_sample
 from rtmesh.sampling.hashing import mix64, uniform
 from rtmesh.sampling.mis import power_heuristic
@@ -537,9 +537,9 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 # models turn the frame to the viewer's side, transmissive ones keep the
                 # outward side (inside: wo.z < 0)
                 ox, oy, oz = -dx[lane], -dy[lane], -dz[lane]
-                gx, gy, gz, nx, ny, nz = shading_normals(surface, geometry, mat, prim, bu, bv, transmissive[mat],
-                                                         gx, gy, gz, nx, ny, nz, ox, oy, oz)
-                tx, ty, tz, sx, sy, sz = tangent_frame(nx, ny, nz)
+                gx, gy, gz, nx, ny, nz, tx, ty, tz, sx, sy, sz = hit_frame(
+                    surface, geometry, mat, prim, bu, bv, transmissive[mat], scratch, lane, gx, gy, gz, nx, ny, nz,
+                    ox, oy, oz)
                 lox = (tx * ox + ty * oy) + tz * oz
                 loy = (sx * ox + sy * oy) + sz * oz
                 loz = (nx * ox + ny * oy) + nz * oz
@@ -734,7 +734,7 @@ def _path_signatures():
     f64 = types.float64
     z = np.zeros
     rows = types.Array(f64, 2, "C")
-    energy = (z((2, 3)), z((2, 2, 2, 2)))
+    energy = (z((2, 3)), z((2, 2, 2, 2)), z((2, 2)))
     bsdf_args = (types.int64, rows, types.int64, numba.typeof(energy))
     evaluate = bsdf_args + (f64,) * 6
     sample = bsdf_args + (f64,) * 6

@@ -114,11 +114,11 @@ def scene_tables(scene, accel):
     textures = []
     for material in m.materials:
         for name in TEXTURE_COLUMNS:
-            texture = getattr(material, name)
+            texture = _texture(material, name)
             if texture is not None and not any(texture is known for known in textures):
                 textures.append(texture)
     atlas = TextureAtlas(textures)
-    material_textures = np.array([[atlas.index(getattr(material, name)) for name in TEXTURE_COLUMNS]
+    material_textures = np.array([[atlas.index(_texture(material, name)) for name in TEXTURE_COLUMNS]
                                   for material in m.materials], dtype=np.int64).reshape(len(m), len(TEXTURE_COLUMNS))
     if scene.uv is None:
         material_textures[:] = -1  # no coordinates to read them with
@@ -132,7 +132,11 @@ def scene_tables(scene, accel):
     face_uv = np.zeros((0, 6)) if scene.uv is None else np.ascontiguousarray(corner_and_edges(scene.uv, scene.faces))
     face_colours = (np.zeros((0, 12)) if scene.vertex_colors is None
                     else np.ascontiguousarray(corner_and_edges(scene.vertex_colors, scene.faces)))
-    normal_mapped = scene.uv is not None and (material_textures[:, TEXTURE_COLUMNS.index("normal_texture")] >= 0).any()
+    # UV tangents for normal maps (the base's and clear coats') and anisotropy directions
+    normal_mapped = scene.uv is not None and (
+        (material_textures[:, [TEXTURE_COLUMNS.index("normal_texture"),
+                               TEXTURE_COLUMNS.index("clearcoatNormalTexture")]] >= 0).any()
+        or any(material.layers is not None and material.layers.anisotropy > 0 for material in m.materials))
     tangents = (np.ascontiguousarray(face_tangents(scene.vertices, scene.faces, scene.uv)) if normal_mapped
                 else np.zeros((0, 6)))
     material_id = np.ascontiguousarray(scene.material_id, dtype=np.int32)
@@ -150,6 +154,14 @@ def scene_tables(scene, accel):
                           for material in m.materials]).reshape(-1, 3)
     face_emission = (m.emission * mean_tint)[material_id]
     return geometry, surface, face_emission
+
+
+def _texture(material, column):
+    """The texture of a material in one of :data:`TEXTURE_COLUMNS`: a field of the material,
+    or one of its KHR layers' textures (by the extension's role name); None for none."""
+    if hasattr(material, column):
+        return getattr(material, column)
+    return material.layers.textures.get(column) if material.layers is not None else None
 
 
 class PathStage:

@@ -4,7 +4,9 @@ normal maps, emission and opacity (alpha cut-outs).
 
 The rows are inlined into the kernel (``inline_row``): a call of a compiled row takes and
 releases a reference to every array of its record arguments (atomic instructions, some
-fifteen arrays a record), which made them the kernel's largest cost.
+fifteen arrays a record), which made them the kernel's largest cost.  The KHR layers' rows
+(:func:`layer_textures`, :func:`orient_layers`) are the exception: called for layered
+materials only, they are kept out of the kernel's compile.
 
 The rows take two records (tuples of arrays) that :class:`rtmesh.rendering.path_stage.PathStage`
 builds once per scene:
@@ -15,8 +17,8 @@ face_colours (F, 12) or (0, 12), face_tangents (F, 6) or (0, 6))`` — corners a
 (:func:`rtmesh.rendering.surface_textures.corner_and_edges`) of the UVs and vertex colours.
 
 ``surface``: ``(tags, params, transmissive, emission, absorption, unlit, albedo_table,
-slots, textures (M, 6), metal_tint (M,), alpha_mode (M,), alpha_cutoff (M,), opacity (M,),
-texels, texture_descriptors)``: the material tables of :mod:`rtmesh.materials.models`, each
+slots, textures (M, len(TEXTURE_COLUMNS)), metal_tint (M,), alpha_mode (M,), alpha_cutoff (M,),
+opacity (M,), texels, texture_descriptors)``: the material tables of :mod:`rtmesh.materials.models`, each
 material's texture indices in the atlas (:data:`TEXTURE_COLUMNS`; -1 none) and its
 Whitted metal tint, and the atlas (:mod:`rtmesh.io.texture_atlas`).
 
@@ -24,22 +26,34 @@ Texturing follows :mod:`rtmesh.rendering.surface_textures` (docs/MATERIALS.md): 
 colour texture and vertex colours scale the model's colour, its alpha and the opacity
 texture the opacity, glTF's metallic-roughness texture the roughness (green) and metalness
 (blue), the emission texture the emission; a Whitted material's ``metallic`` tints its
-specular and mirror colours by the base texture.
+specular and mirror colours by the base texture.  The KHR layers' textures scale their
+factors (:func:`layer_textures`, the channels their specifications name), and
+:func:`orient_layers` turns a layered row's clear-coat normal (its own normal map) and
+anisotropy direction (from the UV tangents) into the hit's local frame.
 """
 
 import math
 
 import numpy as np
 
-from rtmesh.core.compiled import inline_row
+from rtmesh.core.compiled import inline_row, row
 from rtmesh.io.texture_atlas import texel
 from rtmesh.materials import models
 from rtmesh.materials.metallic_roughness import alpha_from_roughness_row
 from rtmesh.materials.table import ALPHA_MODES
 
 TEXTURE_COLUMNS = ("diffuse_texture", "metallic_roughness_texture", "normal_texture", "emission_texture",
-                   "specular_texture", "opacity_texture")
-BASE_TEXTURE, MR_TEXTURE, NORMAL_TEXTURE, EMISSION_TEXTURE, SPECULAR_TEXTURE, OPACITY_TEXTURE = range(6)
+                   "specular_texture", "opacity_texture",
+                   # the KHR layers' textures (rtmesh.materials.gltf_layered.Layers.textures, by role)
+                   "specularTexture", "specularColorTexture", "clearcoatTexture", "clearcoatRoughnessTexture",
+                   "clearcoatNormalTexture", "sheenColorTexture", "sheenRoughnessTexture", "anisotropyTexture",
+                   "iridescenceTexture", "iridescenceThicknessTexture")
+(BASE_TEXTURE, MR_TEXTURE, NORMAL_TEXTURE, EMISSION_TEXTURE, SPECULAR_TEXTURE, OPACITY_TEXTURE,
+ SPECULAR_STRENGTH_TEXTURE, SPECULAR_COLOUR_TEXTURE, CLEARCOAT_TEXTURE, CLEARCOAT_ROUGHNESS_TEXTURE,
+ CLEARCOAT_NORMAL_TEXTURE, SHEEN_COLOUR_TEXTURE, SHEEN_ROUGHNESS_TEXTURE, ANISOTROPY_TEXTURE, IRIDESCENCE_TEXTURE,
+ IRIDESCENCE_THICKNESS_TEXTURE) = range(len(TEXTURE_COLUMNS))
+# the first layer texture column: hits of materials with none skip the layers' lookups
+LAYER_TEXTURES = SPECULAR_STRENGTH_TEXTURE
 OPAQUE, MASK, BLEND = (ALPHA_MODES.index(name) for name in ("opaque", "mask", "blend"))
 
 
@@ -152,6 +166,8 @@ def textured_row(surface, geometry, mat, prim, bu, bv, scratch, lane):
                 if slot[models.ALPHA_SLOT] >= 0:
                     scratch[lane, slot[models.ALPHA_SLOT]] = alpha_from_roughness_row(scratch[lane, s])
         er, eg, eb = emission_at(surface, geometry, mat, prim, bu, bv)
+        if slot[models.COAT_NORMAL_SLOT] >= 0:
+            layer_textures(textures, texels, descriptors, mat, slot, u, v, scratch, lane)
     s = slot[models.COLOUR_SLOT]
     if s >= 0:
         scratch[lane, s] *= cr
@@ -178,7 +194,13 @@ def emission_at(surface, geometry, mat, prim, bu, bv):
 def normal_mapped(surface, geometry, mat, prim, bu, bv, nx, ny, nz):
     """The shading normal (on the front side of the face) bent by the material's tangent-space
     normal map, as :meth:`rtmesh.rendering.surface_textures.SurfaceTextures.normal_mapped`."""
-    t = surface[8][mat, NORMAL_TEXTURE]
+    return normal_mapped_by(surface, geometry, surface[8][mat, NORMAL_TEXTURE], prim, bu, bv, nx, ny, nz)
+
+
+@inline_row
+def normal_mapped_by(surface, geometry, t, prim, bu, bv, nx, ny, nz):
+    """:func:`normal_mapped` by the normal map of atlas texture ``t`` (the base's, or a clear
+    coat's)."""
     tangents = geometry[8]
     if t < 0 or not len(tangents):
         return nx, ny, nz
@@ -220,10 +242,12 @@ def textured_materials(surface, geometry):
     """Which materials' parameters vary over the surface (textures, vertex colours), (M,) bool:
     only their hits copy and scale a parameter row (the records' rows cost reference counting
     per call)."""
-    tags, material_textures = surface[0], surface[8]
+    tags, material_textures, slots = surface[0], surface[8], surface[7]
     textured = np.zeros(len(tags), np.bool_)
     for mat in range(len(tags)):
-        textured[mat] = len(geometry[7]) > 0 or (len(geometry[6]) > 0 and (material_textures[mat] >= 0).any())
+        # layered rows (KHR extensions) get their coat normal and anisotropy per hit too
+        textured[mat] = len(geometry[7]) > 0 or (len(geometry[6]) > 0 and (material_textures[mat] >= 0).any()) \
+            or slots[tags[mat], models.COAT_NORMAL_SLOT] >= 0
     return textured
 
 
@@ -278,6 +302,29 @@ def shading_normals(surface, geometry, mat, prim, bu, bv, transmissive, gx, gy, 
 
 
 @inline_row
+def hit_frame(surface, geometry, mat, prim, bu, bv, transmissive, scratch, lane, gx, gy, gz, nx, ny, nz, ox, oy,
+              oz):
+    """The hit's shading frame seen along ``o``: the normals of :func:`shading_normals` and
+    the tangents of :func:`tangent_frame`; a layered row (``scratch[lane]``) gets its clear
+    coat's normal and anisotropy direction in that frame (:func:`orient_layers`).
+
+    Returns
+    -------
+    gx, gy, gz, nx, ny, nz, tx, ty, tz, sx, sy, sz : float
+    """
+    # a clear coat's normal: the shading normal on the geometric front side, unbent by the
+    # base's normal map
+    cx, cy, cz = (nx, ny, nz) if (nx * gx + ny * gy) + nz * gz >= 0.0 else (-nx, -ny, -nz)
+    gx, gy, gz, nx, ny, nz = shading_normals(surface, geometry, mat, prim, bu, bv, transmissive, gx, gy, gz, nx, ny,
+                                             nz, ox, oy, oz)
+    tx, ty, tz, sx, sy, sz = tangent_frame(nx, ny, nz)
+    if surface[7][surface[0][mat], models.COAT_NORMAL_SLOT] >= 0:
+        orient_layers(surface, geometry, mat, prim, bu, bv, scratch, lane, cx, cy, cz, gx, gy, gz, ox, oy, oz,
+                      nx, ny, nz, tx, ty, tz, sx, sy, sz)
+    return gx, gy, gz, nx, ny, nz, tx, ty, tz, sx, sy, sz
+
+
+@inline_row
 def tangent_frame(nx, ny, nz):
     """Two unit tangents ``t, s`` completing the unit normal ``n`` to an orthonormal frame
     (Duff et al. 2017: no branch on the normal's direction but its sign)."""
@@ -315,3 +362,96 @@ def cross_interface(stack, lane, mat, into):
             stack[lane, k] = stack[lane, k + 1]
         stack[lane, media - 1] = -1
     return stack[lane, 0]
+
+
+@row
+def _scale(textures, texels, descriptors, mat, column, channel, u, v, scratch, lane, s):
+    """``scratch[lane, s] *=`` one channel of the material's texture in ``column`` (if any)."""
+    t = textures[mat, column]
+    if t >= 0 and s >= 0:
+        scratch[lane, s] *= texel(texels, descriptors, t, u, v)[channel]
+
+
+# layer_textures and orient_layers are rows the kernel calls, not inlined: only hits of
+# layered materials pay for the call (reference counts of the arrays passed), and inlined
+# they made the path kernel's first compile ~40 % longer
+@row
+def layer_textures(textures, texels, descriptors, mat, slot, u, v, scratch, lane):
+    """The KHR layers' textures applied to a layered row (:mod:`rtmesh.materials.gltf_layered`):
+    specular strength (alpha), specular colour (rgb), clear coat (red), clear-coat roughness
+    (green), sheen colour (rgb), sheen roughness (alpha), anisotropy strength (blue; its
+    direction in red-green is :func:`orient_layers`'), iridescence (red), film thickness
+    (green: between the minimum and the maximum)."""
+    _scale(textures, texels, descriptors, mat, SPECULAR_STRENGTH_TEXTURE, 3, u, v, scratch, lane,
+           slot[models.SPECULAR_STRENGTH_SLOT])
+    for c in range(3):
+        _scale(textures, texels, descriptors, mat, SPECULAR_COLOUR_TEXTURE, c, u, v, scratch, lane,
+               slot[models.SPECULAR_COLOUR_SLOT] + c)
+        _scale(textures, texels, descriptors, mat, SHEEN_COLOUR_TEXTURE, c, u, v, scratch, lane,
+               slot[models.SHEEN_COLOUR_SLOT] + c)
+    _scale(textures, texels, descriptors, mat, CLEARCOAT_TEXTURE, 0, u, v, scratch, lane, slot[models.CLEARCOAT_SLOT])
+    _scale(textures, texels, descriptors, mat, CLEARCOAT_ROUGHNESS_TEXTURE, 1, u, v, scratch, lane,
+           slot[models.CLEARCOAT_ROUGHNESS_SLOT])
+    _scale(textures, texels, descriptors, mat, SHEEN_ROUGHNESS_TEXTURE, 3, u, v, scratch, lane,
+           slot[models.SHEEN_ROUGHNESS_SLOT])
+    _scale(textures, texels, descriptors, mat, ANISOTROPY_TEXTURE, 2, u, v, scratch, lane, slot[models.ANISOTROPY_SLOT])
+    _scale(textures, texels, descriptors, mat, IRIDESCENCE_TEXTURE, 0, u, v, scratch, lane,
+           slot[models.IRIDESCENCE_SLOT])
+    t = textures[mat, IRIDESCENCE_THICKNESS_TEXTURE]
+    s = slot[models.IRIDESCENCE_THICKNESS_SLOT]
+    if t >= 0 and s >= 0:
+        # the row keeps the maximum at s and the minimum at s + 1 (gltf_layered.THICKNESS_MIN_AT)
+        g = texel(texels, descriptors, t, u, v)[1]
+        scratch[lane, s] = scratch[lane, s + 1] + (scratch[lane, s] - scratch[lane, s + 1]) * g
+
+
+@row
+def orient_layers(surface, geometry, mat, prim, bu, bv, scratch, lane, cx, cy, cz, gx, gy, gz, ox, oy, oz,
+                  nx, ny, nz, tx, ty, tz, sx, sy, sz):
+    """Write a layered row's clear-coat normal and anisotropy direction in the hit's local
+    frame (``t, s, n``) into ``scratch[lane]``.
+
+    ``c`` is the shading normal before the base's normal map, on the geometric front side:
+    the clear coat's own normal map bends it (the specification: the coat does not share the
+    base's normal map), then it is turned to the viewer's side with the frame (``g``, the
+    frame's geometric normal), or replaced by ``n`` where it faces away from the viewer.  The
+    anisotropy direction is ``anisotropyRotation`` (and the anisotropy texture's red-green
+    direction) from the UV tangent, projected onto the local tangent plane; without UV
+    tangents, the local frame's first axis.
+    """
+    slot = surface[7][surface[0][mat]]
+    at = slot[models.COAT_NORMAL_SLOT]
+    textures = surface[8]
+    if scratch[lane, slot[models.CLEARCOAT_SLOT]] > 0.0:
+        if textures[mat, CLEARCOAT_NORMAL_TEXTURE] >= 0:
+            cx, cy, cz = normal_mapped_by(surface, geometry, textures[mat, CLEARCOAT_NORMAL_TEXTURE], prim, bu, bv,
+                                          cx, cy, cz)
+        if (cx * gx + cy * gy) + cz * gz < 0.0:
+            cx, cy, cz = -cx, -cy, -cz
+        if not (cx * ox + cy * oy) + cz * oz > 0.0:
+            cx, cy, cz = nx, ny, nz
+        scratch[lane, at] = (tx * cx + ty * cy) + tz * cz
+        scratch[lane, at + 1] = (sx * cx + sy * cy) + sz * cz
+        scratch[lane, at + 2] = (nx * cx + ny * cy) + nz * cz
+    a = slot[models.ANISOTROPY_SLOT]
+    tangents = geometry[8]
+    if scratch[lane, a] > 0.0 and len(tangents):
+        # the direction in the tangent plane of the UVs: (cos, sin) of the rotation, turned by
+        # the texture's direction (red-green in [-1, 1]) when there is one
+        angle = scratch[lane, a + 3]
+        dx, dy = math.cos(angle), math.sin(angle)
+        t = textures[mat, ANISOTROPY_TEXTURE]
+        if t >= 0 and len(geometry[6]):
+            u, v = hit_uv(geometry, prim, bu, bv)
+            r, g, _, _ = texel(surface[13], surface[14], t, u, v)
+            px, py = 2.0 * r - 1.0, 2.0 * g - 1.0
+            dx, dy = px * dx - py * dy, px * dy + py * dx
+        tb = tangents[prim]
+        wx = dx * tb[0] + dy * tb[3]
+        wy = dx * tb[1] + dy * tb[4]
+        wz = dx * tb[2] + dy * tb[5]
+        lx = (tx * wx + ty * wy) + tz * wz
+        ly = (sx * wx + sy * wy) + sz * wz
+        if (lx != 0.0) | (ly != 0.0):
+            scratch[lane, a + 1] = lx
+            scratch[lane, a + 2] = ly

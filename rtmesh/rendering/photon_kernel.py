@@ -41,8 +41,8 @@ from rtmesh.lights import light_table as lt
 from rtmesh.lights.environment import sample_direction
 from rtmesh.lights.point_light_rows import illuminate_row
 from rtmesh.materials import lobes, models
-from rtmesh.rendering.path_surfaces import (cross_interface, emission_at, hit_parameters, is_transparent,
-                                            shading_normals, surface_point, tangent_frame, textured_materials)
+from rtmesh.rendering.path_surfaces import (cross_interface, emission_at, hit_frame, hit_parameters, is_transparent,
+                                            surface_point, tangent_frame, textured_materials)
 from rtmesh.sampling.alias import alias_sample
 from rtmesh.sampling.hashing import GOLDEN, mix64, path_key, uniform
 from rtmesh.sampling.lowdiscrepancy import sobol_pair
@@ -301,8 +301,11 @@ def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geomet
                 layers[lane] = 0
                 ox, oy, oz = -dx[lane], -dy[lane], -dz[lane]
                 entering = (gx * dx[lane] + gy * dy[lane]) + gz * dz[lane] < 0.0
-                gx, gy, gz, nx, ny, nz = shading_normals(surface, geometry, mat, prim, bu, bv, transmissive[mat],
-                                                         gx, gy, gz, nx, ny, nz, ox, oy, oz)
+                bsdf_params, bsdf_row, _, _, _ = hit_parameters(surface, geometry, textured, mat, prim, bu, bv, scratch,
+                                                                lane, stack, media, entering)
+                gx, gy, gz, nx, ny, nz, tx, ty, tz, sx, sy, sz = hit_frame(
+                    surface, geometry, mat, prim, bu, bv, transmissive[mat], scratch, lane, gx, gy, gz, nx, ny, nz,
+                    ox, oy, oz)
                 if bounces[lane] > 0 and scatters[mat]:
                     if written < capacity:
                         # the normal of the side the photon arrived on
@@ -318,10 +321,7 @@ def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geomet
                 if not specular[mat] or bounces[lane] >= max_bounces:
                     alive[lane] = False
                     continue
-                bsdf_params, bsdf_row, _, _, _ = hit_parameters(surface, geometry, textured, mat, prim, bu, bv, scratch,
-                                                                lane, stack, media, entering)
                 ior_slot = slots[tags[mat], models.IOR_SLOT]
-                tx, ty, tz, sx, sy, sz = tangent_frame(nx, ny, nz)
                 lox = (tx * ox + ty * oy) + tz * oz
                 loy = (sx * ox + sy * oy) + sz * oz
                 loz = (nx * ox + ny * oy) + nz * oz

@@ -178,6 +178,8 @@ class Scene:
             If no renderable triangle remains.
         """
         materials = list(materials) if materials else [Material()]
+        if not physical:
+            _warn_layers_ignored(materials, source)
         vertices, faces, normals, vnormals, smooth, mat_ids, obj_ids, names = ([] for _ in range(8))
         categories, to_world = [], []
         uvs, colours = [], []
@@ -403,3 +405,13 @@ def _warn_dropped(source, dropped, empty, most=5):
         more = f" and {len(empty) - most} more" if len(empty) > most else ""
         log.warning("%s: %d objects have no renderable triangles (%s%s); skipped", source, len(empty),
                     ", ".join(f"'{n}'" for n in empty[:most]), more)
+
+
+def _warn_layers_ignored(materials, source):
+    """One warning naming the KHR layer extensions (clear coat, sheen, ...) that the
+    materials of ``source`` use, which only the path integrator renders."""
+    used = sorted({name for material in materials if material.layers is not None
+                   for name in material.layers.extensions})
+    if used:
+        log.warning("%s: %s rendered by integrator 'path' only; integrator 'whitted' shades these materials "
+                    "as plain metallic-roughness", source, ", ".join(used) + (" is" if len(used) == 1 else " are"))
