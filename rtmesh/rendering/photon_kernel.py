@@ -40,7 +40,7 @@ from rtmesh.geometry.float32_rays import offset_origin
 from rtmesh.lights import light_table as lt
 from rtmesh.lights.environment import sample_direction
 from rtmesh.lights.point_light_rows import illuminate_row
-from rtmesh.materials import lobes, models
+from rtmesh.materials import lambert, lobes, models
 from rtmesh.rendering.path_surfaces import (cross_interface, emission_at, hit_frame, hit_parameters, is_transparent,
                                             surface_point, tangent_frame, textured_materials)
 from rtmesh.sampling.alias import alias_sample
@@ -64,6 +64,8 @@ DIMENSIONS_PER_BOUNCE = 4
 MAX_BOUNCES = 64
 # cut-out layers a photon passes before the next surface counts as opaque
 MAX_LAYERS = 64
+# where the Lambert model keeps its albedo (the gather's shortcut for it)
+_ALBEDO = lambert.SLOTS["colour"]
 # a photon's stored fields: position, direction toward its origin, flux, normal (x, y, z each),
 # and the segments of its path from the light (for max_depth)
 POSITION, DIRECTION, FLUX, NORMAL, SEGMENTS = 0, 3, 6, 9, 12
@@ -435,6 +437,28 @@ def gather(photon_map, hx, hy, hz, gx, gy, gz, radius, segments, tag, bsdf_param
     ix0, ix1 = np.int64(math.floor((hx - radius) / cell_size)), np.int64(math.floor((hx + radius) / cell_size))
     iy0, iy1 = np.int64(math.floor((hy - radius) / cell_size)), np.int64(math.floor((hy + radius) / cell_size))
     iz0, iz1 = np.int64(math.floor((hz - radius) / cell_size)), np.int64(math.floor((hz + radius) / cell_size))
+    # a bucket may hold other cells' photons; only when two of the cells visited share a
+    # bucket could one be counted twice, and only then is each photon's cell checked
+    shared = False
+    cells = (ix1 - ix0 + 1) * (iy1 - iy0 + 1) * (iz1 - iz0 + 1)
+    if cells > 27:
+        shared = True
+    elif cells > 1:
+        seen = np.empty(27, np.int64)
+        count = 0
+        for ix in range(ix0, ix1 + 1):
+            for iy in range(iy0, iy1 + 1):
+                for iz in range(iz0, iz1 + 1):
+                    b = cell_bucket(ix, iy, iz, mask)
+                    for other in range(count):
+                        shared |= seen[other] == b
+                    seen[count] = b
+                    count += 1
+    # the Lambert model's f is its albedo over pi: the photons' cosines are summed and the
+    # albedo applied once (no call of the model per photon)
+    lambertian = (part == 0) & (tag == models.LAMBERT)
+    if lambertian and not loz > 0.0:
+        return 0.0, 0.0, 0.0
     total_r = total_g = total_b = 0.0
     for ix in range(ix0, ix1 + 1):
         for iy in range(iy0, iy1 + 1):
@@ -445,9 +469,8 @@ def gather(photon_map, hx, hy, hz, gx, gy, gz, radius, segments, tag, bsdf_param
                     ex, ey, ez = qx - hx, qy - hy, qz - hz
                     if (ex * ex + ey * ey) + ez * ez > r2:
                         continue
-                    # a bucket may hold other cells' photons: keep this cell's only
-                    if (math.floor(qx / cell_size) != ix) | (math.floor(qy / cell_size) != iy) | (
-                            math.floor(qz / cell_size) != iz):
+                    if shared and ((math.floor(qx / cell_size) != ix) | (math.floor(qy / cell_size) != iy) | (
+                            math.floor(qz / cell_size) != iz)):
                         continue
                     if segments >= 0 and photons[k, SEGMENTS] > segments:
                         continue
@@ -457,9 +480,16 @@ def gather(photon_map, hx, hy, hz, gx, gy, gz, radius, segments, tag, bsdf_param
                     cos_g = abs((wx * gx + wy * gy) + wz * gz)
                     if not cos_g > 0.0:
                         continue
+                    liz = (nx * wx + ny * wy) + nz * wz
+                    if lambertian:
+                        if liz > 0.0:
+                            c = liz / cos_g
+                            total_r += c * photons[k, FLUX]
+                            total_g += c * photons[k, FLUX + 1]
+                            total_b += c * photons[k, FLUX + 2]
+                        continue
                     lix = (tx * wx + ty * wy) + tz * wz
                     liy = (sx * wx + sy * wy) + sz * wz
-                    liz = (nx * wx + ny * wy) + nz * wz
                     if part == 0:
                         fr, fg, fb, _ = models.evaluate(tag, bsdf_params, bsdf_row, albedo_table, lox, loy, loz,
                                                         lix, liy, liz)
@@ -470,5 +500,10 @@ def gather(photon_map, hx, hy, hz, gx, gy, gz, radius, segments, tag, bsdf_param
                     total_r += fr * photons[k, FLUX] / cos_g
                     total_g += fg * photons[k, FLUX + 1] / cos_g
                     total_b += fb * photons[k, FLUX + 2] / cos_g
+    if lambertian:
+        k = 1.0 / math.pi
+        total_r *= bsdf_params[bsdf_row, _ALBEDO] * k
+        total_g *= bsdf_params[bsdf_row, _ALBEDO + 1] * k
+        total_b *= bsdf_params[bsdf_row, _ALBEDO + 2] * k
     s = scale / r2
     return total_r * s, total_g * s, total_b * s
