@@ -754,10 +754,14 @@ def _path_signatures():
              types.Array(types.uint64, 1, "C"), types.Array(f64, 1, "C")) + tuple(
         numba.typeof(record) for record in (geometry, surface, lights, env, options, motion, photon_map)) + (
         rows, types.Array(f64, 3, "C"), types.Array(types.int64, 1, "C"))
-    return [(models.evaluate, evaluate), (trace_paths, trace), (models.sample, sample), (models.parts, evaluate)]
+    i64 = types.int64
+    gathered = ((numba.typeof(photon_map),) + (f64,) * 7 + (i64, i64, rows, i64, numba.typeof(energy))
+                + (f64,) * 12 + (i64,))
+    return [(models.evaluate, evaluate), (trace_paths, trace), (models.sample, sample), (models.parts, evaluate),
+            (gather, gathered)]
 
 
 # the path integrator's kernels, in the order a first run best compiles them in two processes:
-# the render the BSDF evaluation, then the path kernel (loading the sampling and parts rows the
-# helper compiled meanwhile from the disk cache); the helper those two first
+# the render the BSDF evaluation, then the path kernel (loading the sampling and parts rows and
+# the photon gather the helper compiled meanwhile from the disk cache); the helper those first
 PATH_KERNELS = KernelGroup(__name__, "path", _path_signatures())

@@ -417,7 +417,7 @@ def photon_grid(photons, cell_size, bits):
     return order, start
 
 
-@inline_row
+@kernel
 def gather(photon_map, hx, hy, hz, gx, gy, gz, radius, segments, tag, bsdf_params, bsdf_row, albedo_table, tx, ty, tz, sx, sy,
            sz, nx, ny, nz, lox, loy, loz, part):
     """The caustic radiance toward ``wo`` at a surface point: the photons within ``radius``
@@ -427,6 +427,10 @@ def gather(photon_map, hx, hy, hz, gx, gy, gz, radius, segments, tag, bsdf_param
     ``part`` 0 sums the whole BSDF; 1 and 2 only its diffuse and transmitted parts
     (:func:`rtmesh.materials.models.parts`, for the light-path passes).  Photons whose paths
     have more than ``segments`` segments are left out (``max_depth``; -1: none).
+
+    A kernel of its own, not inlined into the path kernel: it runs only with photon passes,
+    and three inlined copies (the light-path passes' split) made the path kernel's first
+    compile longer.
     """
     photons, start, cell_size, bits, scale = (photon_map[1], photon_map[2], photon_map[3], photon_map[4],
                                               photon_map[5])
