@@ -28,13 +28,11 @@ Usage::
 
 import argparse
 import sys
-import time
 import tomllib
 from pathlib import Path
 
-from benchmarks.peers_mitsuba_cornell import dr, mi, noise, render  # noqa: F401 (sets up Dr.Jit first)
+from benchmarks.peers_mitsuba_cornell import dr, mi, render_reference  # sets up Dr.Jit first
 from benchmarks.peers_mitsuba import sensor_dict
-import numpy as np
 
 OBJECT_KEYS = {"name", "mesh", "material", "translate", "scale"}
 
@@ -129,20 +127,7 @@ def main():
     mi.set_variant(args.variant)
     dr.set_thread_count(args.threads)
     scene = mi.load_dict(scene_dict(read_scene(args.scene), args.width, args.height, args.integrator))
-    start = time.perf_counter()
-    image, halves = render(scene, args.spp, args.pass_spp, args.seed)
-    seconds = time.perf_counter() - start
-    bitmap = mi.Bitmap(image.astype(np.float32), pixel_format=mi.Bitmap.PixelFormat.RGB)
-    bitmap.write(args.out)
-    if args.png:
-        bitmap.convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.UInt8, srgb_gamma=True).write(args.png)
-    means = ", ".join(f"{m:.5f}" for m in image.reshape(-1, 3).mean(axis=0))
-    print(f"{args.out}: mitsuba {mi.__version__} {args.variant} {args.integrator}, {args.width}x{args.height}, "
-          f"{args.spp} spp ({args.pass_spp} a pass, seeds {args.seed}..), {args.threads} threads, "
-          f"{seconds:.1f} s; mean RGB {means}", flush=True)
-    if halves is not None and args.width % 8 == 0 and args.height % 8 == 0:
-        pixel, blocks = noise(halves)
-        print(f"estimated relative RMSE (two halves): pixels {pixel:.4f}, 8x8 block means {blocks:.5f}")
+    render_reference(scene, args, args.integrator)
     return 0
 
 

@@ -191,6 +191,25 @@ def noise(halves, block=8):
     return (0.5 * relative_rmse(a, b, mean=mean), 0.5 * relative_rmse(a, b, block=block, mean=mean))
 
 
+def render_reference(scene, args, what):
+    """Render ``args.spp`` samples in passes, write the EXR (and ``args.png``) and print what
+    was rendered, its time, mean and estimated error (the arguments of :func:`main`)."""
+    start = time.perf_counter()
+    image, halves = render(scene, args.spp, args.pass_spp, args.seed)
+    seconds = time.perf_counter() - start
+    bitmap = mi.Bitmap(image.astype(np.float32), pixel_format=mi.Bitmap.PixelFormat.RGB)
+    bitmap.write(args.out)
+    if args.png:
+        bitmap.convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.UInt8, srgb_gamma=True).write(args.png)
+    means = ", ".join(f"{m:.5f}" for m in image.reshape(-1, 3).mean(axis=0))
+    print(f"{args.out}: mitsuba {mi.__version__} {args.variant} {what}, "
+          f"{args.width}x{args.height}, {args.spp} spp ({args.pass_spp} a pass, seeds {args.seed}..), "
+          f"{args.threads} threads, {seconds:.1f} s; mean RGB {means}", flush=True)
+    if halves is not None and args.width % 8 == 0 and args.height % 8 == 0:
+        pixel, blocks = noise(halves)
+        print(f"estimated relative RMSE (two halves): pixels {pixel:.4f}, 8x8 block means {blocks:.5f}")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("scene", help="rtmesh scene file (TOML)")
@@ -209,20 +228,7 @@ def main():
     mi.set_variant(args.variant)
     dr.set_thread_count(args.threads)
     scene = mi.load_dict(scene_dict(read_scene(args.scene), args.width, args.height, args.max_depth))
-    start = time.perf_counter()
-    image, halves = render(scene, args.spp, args.pass_spp, args.seed)
-    seconds = time.perf_counter() - start
-    bitmap = mi.Bitmap(image.astype(np.float32), pixel_format=mi.Bitmap.PixelFormat.RGB)
-    bitmap.write(args.out)
-    if args.png:
-        bitmap.convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.UInt8, srgb_gamma=True).write(args.png)
-    means = ", ".join(f"{m:.5f}" for m in image.reshape(-1, 3).mean(axis=0))
-    print(f"{args.out}: mitsuba {mi.__version__} {args.variant} path max_depth {args.max_depth}, "
-          f"{args.width}x{args.height}, {args.spp} spp ({args.pass_spp} a pass, seeds {args.seed}..), "
-          f"{args.threads} threads, {seconds:.1f} s; mean RGB {means}", flush=True)
-    if halves is not None and args.width % 8 == 0 and args.height % 8 == 0:
-        pixel, blocks = noise(halves)
-        print(f"estimated relative RMSE (two halves): pixels {pixel:.4f}, 8x8 block means {blocks:.5f}")
+    render_reference(scene, args, f"path max_depth {args.max_depth}")
     return 0
 
 

@@ -8,6 +8,7 @@ import numpy as np
 import OpenImageIO as oiio
 import pytest
 
+from benchmarks.bench_caustics import blocks, regions
 from rtmesh import api
 from rtmesh.core.errors import SceneError
 from rtmesh.io.passes import LIGHT_PATH_PASSES
@@ -19,14 +20,6 @@ ROOT = os.path.dirname(HERE)
 SCENE = os.path.join(ROOT, "assets", "effects", "caustics.toml")
 REFERENCE = os.path.join(HERE, "data", "caustics_ptracer_64x48.exr")
 W, H = 64, 48
-BALL_CENTRE, BALL_RADIUS = np.array([0.0, 0.85, 0.0]), 0.5
-LIGHT = np.array([0.5, 4.0, -2.5])
-
-
-def _blocks(image):
-    """8x8 block means of an (H, W, k) image."""
-    h, w = image.shape[:2]
-    return image.reshape(h // 8, 8, w // 8, 8, -1).mean(axis=(1, 3))
 
 
 def _render(path=SCENE, **settings):
@@ -48,24 +41,14 @@ def photon_render():
 def _floor_blocks(scene, result):
     """Blocks that see the floor only (a particle tracer cannot render the ball), and among
     them those wholly outside the ball's shadow (lit by next-event estimation alone)."""
-    names = [m.name for m in scene.materials.materials]
-    floor = _blocks((result.passes["material_id"].reshape(H, W, 1) == names.index("floor")).astype(float))[..., 0] == 1
-    p = result.passes["position_center"].reshape(-1, 3)
-    # the segment from each floor point to the light passes the ball: in its shadow
-    d = LIGHT - p
-    length = np.linalg.norm(d, axis=1)
-    d = d / length[:, None]
-    along = np.clip(((BALL_CENTRE - p) * d).sum(axis=1), 0.0, length)
-    gap = np.linalg.norm(p + along[:, None] * d - BALL_CENTRE, axis=1)
-    shadow = _blocks((gap < BALL_RADIUS + 0.05).reshape(H, W, 1).astype(float))[..., 0] > 0
-    return floor, floor & ~shadow
+    return regions(scene, result, W, H)
 
 
 def test_caustic_matches_the_particle_tracer(photon_render, reference):
     scene, result = photon_render
     assert result.stats.photon_passes == 64 and result.stats.photons == 16384
     floor, lit = _floor_blocks(scene, result)
-    ours, ref = _blocks(result.image.astype(np.float64))[..., 0], _blocks(reference)[..., 0]
+    ours, ref = blocks(result.image.astype(np.float64)[..., 0]), blocks(reference[..., 0])
     assert floor.sum() >= 24 and lit.sum() >= 12 and (floor & ~lit).sum() >= 4
     # the floor, the focused spot inside the shadow included, within 5 % as block means
     assert np.abs(ours[floor] / ref[floor] - 1).max() < 0.05
@@ -81,7 +64,7 @@ def test_without_photons_the_caustic_is_missing(reference):
     scene, result = _render(spp=16, caustics="off", passes=("material_id", "position_center"))
     assert result.stats.photon_passes == 0
     floor, lit = _floor_blocks(scene, result)
-    ours, ref = _blocks(result.image.astype(np.float64))[..., 0], _blocks(reference)[..., 0]
+    ours, ref = blocks(result.image.astype(np.float64)[..., 0]), blocks(reference[..., 0])
     assert np.abs(ours[floor] / ref[floor] - 1).max() > 0.3
 
 
@@ -92,7 +75,7 @@ def test_the_caustic_converges_as_passes_go_on(photon_render, reference):
     _, early = _render(spp=4, photons=16384)
 
     def error(image):
-        ours, ref = _blocks(image.astype(np.float64))[..., 0], _blocks(reference)[..., 0]
+        ours, ref = blocks(image.astype(np.float64)[..., 0]), blocks(reference[..., 0])
         return np.sqrt(np.mean((ours[caustic] / ref[caustic] - 1) ** 2))
 
     assert error(result.image) < 0.6 * error(early.image)
@@ -196,5 +179,5 @@ def test_photons_and_path_tracing_agree_under_an_area_light(tmp_path):
     path.write_text(text)
     _, photons = _render(str(path), width=32, height=24, spp=2048, photons=4096, caustics="photons")
     _, off = _render(str(path), width=32, height=24, spp=2048, caustics="off")
-    a, b = _blocks(photons.image.astype(np.float64))[..., 0], _blocks(off.image.astype(np.float64))[..., 0]
+    a, b = blocks(photons.image.astype(np.float64)[..., 0]), blocks(off.image.astype(np.float64)[..., 0])
     assert np.abs(a / b - 1).max() < 0.02

@@ -73,7 +73,7 @@ from rtmesh.lights.point_light_rows import illuminate_row
 from rtmesh.materials import lobes, models
 from rtmesh.rendering.photon_kernel import empty_photon_map, gather
 from rtmesh.rendering.path_surfaces import (cross_interface, emission_at, hit_frame, hit_parameters, is_transparent,
-                                            surface_point, textured_materials)
+                                            surface_point, textured_materials, to_world)
 from rtmesh.sampling.alias import alias_sample
 from rtmesh.sampling.hashing import mix64, uniform
 from rtmesh.sampling.mis import power_heuristic
@@ -640,11 +640,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 if (flags == lobes.FAILED) | (not ((gr > 0.0) | (gg > 0.0) | (gb > 0.0))):
                     alive[lane] = False
                     continue
-                ndx = (wx * tx + wy * sx) + wz * nx
-                ndy = (wx * ty + wy * sy) + wz * ny
-                ndz = (wx * tz + wy * sz) + wz * nz
-                length = math.sqrt((ndx * ndx + ndy * ndy) + ndz * ndz)
-                ndx, ndy, ndz = ndx / length, ndy / length, ndz / length
+                ndx, ndy, ndz = to_world(wx, wy, wz, tx, ty, tz, sx, sy, sz, nx, ny, nz)
                 side = (gx * ndx + gy * ndy) + gz * ndz
                 if (not transmissive[mat]) and not side > 0.0:
                     # a shading-normal sample below the geometric surface

@@ -325,6 +325,17 @@ def hit_frame(surface, geometry, mat, prim, bu, bv, transmissive, scratch, lane,
 
 
 @inline_row
+def to_world(wx, wy, wz, tx, ty, tz, sx, sy, sz, nx, ny, nz):
+    """A local-frame direction (``z`` the shading normal ``n``, ``x`` and ``y`` the tangents
+    ``t`` and ``s``) in world space, normalised."""
+    dx = (wx * tx + wy * sx) + wz * nx
+    dy = (wx * ty + wy * sy) + wz * ny
+    dz = (wx * tz + wy * sz) + wz * nz
+    length = math.sqrt((dx * dx + dy * dy) + dz * dz)
+    return dx / length, dy / length, dz / length
+
+
+@inline_row
 def tangent_frame(nx, ny, nz):
     """Two unit tangents ``t, s`` completing the unit normal ``n`` to an orthonormal frame
     (Duff et al. 2017: no branch on the normal's direction but its sign)."""

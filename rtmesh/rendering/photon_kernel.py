@@ -42,7 +42,7 @@ from rtmesh.lights.environment import sample_direction
 from rtmesh.lights.point_light_rows import illuminate_row
 from rtmesh.materials import lambert, lobes, models
 from rtmesh.rendering.path_surfaces import (cross_interface, emission_at, hit_frame, hit_parameters, is_transparent,
-                                            surface_point, tangent_frame, textured_materials)
+                                            surface_point, tangent_frame, textured_materials, to_world)
 from rtmesh.sampling.alias import alias_sample
 from rtmesh.sampling.hashing import GOLDEN, mix64, path_key, uniform
 from rtmesh.sampling.lowdiscrepancy import sobol_pair
@@ -333,11 +333,7 @@ def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geomet
                 if not (flags & lobes.DELTA) or not ((wr > 0.0) | (wg > 0.0) | (wb > 0.0)):
                     alive[lane] = False  # a photon goes on through delta lobes only
                     continue
-                ndx = (wx * tx + wy * sx) + wz * nx
-                ndy = (wx * ty + wy * sy) + wz * ny
-                ndz = (wx * tz + wy * sz) + wz * nz
-                length = math.sqrt((ndx * ndx + ndy * ndy) + ndz * ndz)
-                ndx, ndy, ndz = ndx / length, ndy / length, ndz / length
+                ndx, ndy, ndz = to_world(wx, wy, wz, tx, ty, tz, sx, sy, sz, nx, ny, nz)
                 side = (gx * ndx + gy * ndy) + gz * ndz
                 if (not transmissive[mat]) and not side > 0.0:
                     alive[lane] = False
