@@ -94,8 +94,8 @@ class KernelGroup:
     def compile_ahead(self):
         """Within :func:`helper`, if the disk cache lacks some of the group: have the helper
         process start compiling it now (from its last kernel back), well before a render
-        :meth:`prepare`\ s it (which then waits for the kernel the helper is compiling and loads
-        what it finished from the disk cache).  Otherwise nothing.
+        calls :meth:`prepare` (which then waits for the kernel the helper is compiling and
+        loads what it finished from the disk cache).  Otherwise nothing.
 
         For a program that knows early that it will need a large group, such as a test
         session (``tests/conftest.py``) and the path kernel.
