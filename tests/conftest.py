@@ -1,6 +1,7 @@
 """Shared pytest configuration: make ``tests/scenes.py`` importable in any import mode, and
-keep the bytecode of what the tests import."""
+keep the bytecode of what the tests import, and compile kernels ahead on a cold cache."""
 
+import contextlib
 import os
 import sys
 
@@ -15,3 +16,30 @@ sys.path.insert(0, os.path.dirname(__file__))
 # others read it.  Python checks each file's time and size against its source, so an edited
 # module never runs stale.
 sys.dont_write_bytecode = False
+
+
+# The session runs inside compile_ahead.helper(), as the rtmesh command runs a render: on a
+# cold numba cache (CI installs from scratch) a helper process compiles each kernel group a
+# render announces from its end while the render compiles it from its start, on the second
+# core.  The path kernel, the largest compile by far (about 34 s of one core, one
+# function), is announced at once, so the helper compiles it while the first tests run;
+# the first path render waits for what remains (its lock file) and loads it from the disk
+# cache.  With a warm cache no helper starts.  Every render computes what it computes
+# outside the block: the helper only fills the disk cache.  Under pytest-xdist each worker
+# process has its own block (and helper); the lock files keep two processes from compiling
+# a grouped kernel twice.
+_session = contextlib.ExitStack()
+
+
+def pytest_configure(config):
+    if getattr(config.option, "numprocesses", None) and not hasattr(config, "workerinput"):
+        return  # pytest-xdist's controller: its workers run the tests
+    from rtmesh.core import compile_ahead
+    from rtmesh.rendering.path_kernel import PATH_KERNELS
+
+    _session.enter_context(compile_ahead.helper())
+    PATH_KERNELS.compile_ahead()
+
+
+def pytest_unconfigure(config):
+    _session.close()

@@ -668,7 +668,8 @@ def two_worker_cluster():
     worker), shared by the tests that need nothing else of a cluster: each starts once it
     has its two workers again."""
     distributed = pytest.importorskip("distributed")
-    # its dashboard on a free port: the clusters other tests start meanwhile take the default
+    # its HTTP server on a free port: clusters started meanwhile (here, or by the other
+    # pytest-xdist worker) would find the default one taken and warn
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   dashboard_address=":0", silence_logs=50) as cluster:
         yield cluster
@@ -754,7 +755,7 @@ def test_dask_worker_with_a_private_output_folder_is_refused(tmp_path, capsys, c
     out.mkdir()
     private.mkdir()
     with distributed.LocalCluster(n_workers=0, threads_per_worker=1, processes=True,
-                                  dashboard_address=None, silence_logs=50) as cluster, \
+                                  dashboard_address=":0", silence_logs=50) as cluster, \
             distributed.Client(cluster) as client:
         script = (f"mount --bind {private} {out} && exec "
                   + " ".join(dask_worker_command(cluster.scheduler_address)))
@@ -1111,7 +1112,7 @@ def test_a_resume_cancels_the_earlier_runs_tasks_of_its_folder_without_waiting()
 
     _RELEASE.clear()
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
-                                  dashboard_address=None, silence_logs=50) as cluster, \
+                                  dashboard_address=":0", silence_logs=50) as cluster, \
             distributed.Client(cluster) as client:
         old = task_prefix("/out", "old")
         # a running task that would take 3 s; released once the test is done with it, so

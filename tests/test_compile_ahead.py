@@ -97,6 +97,9 @@ def test_a_kernel_being_compiled_by_the_other_process_is_waited_for():
 
 
 def test_without_a_helper_prepare_compiles_nothing(monkeypatch):
+    # outside the test session's own helper block (tests/conftest.py)
+    monkeypatch.setattr(compile_ahead, "_enabled", False)
+    monkeypatch.setattr(compile_ahead, "_helper", None)
     started = []
     monkeypatch.setattr(compile_ahead, "_start", lambda: started.append(1))
     group = compile_ahead.KernelGroup(__name__, "test: never prepared ahead", [(_twice, (types.int64,))])
@@ -150,3 +153,22 @@ def test_a_dask_workers_warm_up_runs_inside_a_helper_block(monkeypatch):
     monkeypatch.setattr(dask_pool, "warm_up", lambda: events.append("warm up"))
     dask_pool._warm_up_task()
     assert events == ["helper on", "warm up", "helper off"]
+
+
+def test_a_group_compiled_ahead_is_announced_only_within_a_helper_and_while_not_cached(monkeypatch):
+    announced = []
+    monkeypatch.setattr(compile_ahead, "_announce", announced.append)
+    group = compile_ahead.KernelGroup(__name__, "test: compiled ahead", [(_twice, (types.complex128,))])
+    try:
+        monkeypatch.setattr(compile_ahead, "_enabled", False)
+        group.compile_ahead()  # outside helper(): nothing
+        assert announced == []
+        monkeypatch.setattr(compile_ahead, "_enabled", True)
+        monkeypatch.setattr(group, "cached", lambda: True)
+        group.compile_ahead()
+        assert announced == []
+        monkeypatch.setattr(group, "cached", lambda: False)
+        group.compile_ahead()
+        assert announced == [group] and (types.complex128,) not in _twice.overloads
+    finally:
+        del compile_ahead._GROUPS[group.name]

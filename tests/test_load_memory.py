@@ -1,16 +1,22 @@
 """--memory-limit while loading: a glTF whose nodes would flatten into more copies than the
 limit allows stops with one line naming the file and the estimate, before reading its
-geometry (the USD case is in tests/test_usd_files.py)."""
+geometry, under ``rtmesh render`` and in a batch's workers (the USD case is in
+tests/test_usd_files.py)."""
 
 import base64
 import json
 import resource
+import shutil
+import sqlite3
 import time
 
 import numpy as np
 import pytest
 import trimesh
 
+import rtmesh
+from rtmesh.batch.books import REPORT_NAME
+from rtmesh.batch.ledger import LEDGER_NAME, decode
 from rtmesh.cli import main
 from rtmesh.core.errors import ResourceError
 from rtmesh.loaders.gltf_nodes import flattened_size, read_gltf_json
@@ -64,6 +70,35 @@ def test_ten_thousand_copies_beyond_the_limit_stop_before_the_memory_is_taken(fo
     # refused from the JSON: no geometry read, no copy made
     assert elapsed < 5.0
     assert resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before < 200_000  # KB
+
+
+def test_a_batch_worker_fails_an_asset_beyond_its_limit_at_the_load_stage(forest, tmp_path):
+    src = tmp_path / "src"
+    src.mkdir()
+    shutil.copy(forest, src / "forest.gltf")
+    write_forest(src / "small.gltf", 3)
+    out = tmp_path / "out"
+    report = rtmesh.batch_convert([src], out, workers=1, memory_limit=2 * 2**30, width=16, height=12, spp=1,
+                                  quiet=True)
+    message = (f"{src / 'forest.gltf'}: 10000 mesh nodes of 51200000 triangles in all, each its own copy "
+               "would need about 28.6 GiB of memory to load but --memory-limit is 2 GiB: stopped before "
+               "taking it (set --memory-limit, 0 = no check)")
+    (failed,) = report.failed
+    assert failed["asset"] == "forest.gltf"
+    assert [(e["stage"], e["message"]) for e in failed["errors"]] == [("load", message)]
+    lines = {line["asset"]: line for line in map(json.loads, (out / REPORT_NAME).read_text().splitlines())}
+    assert lines["small.gltf"]["status"] == "done" and (out / "small.gltf.png").exists()
+    assert lines["forest.gltf"]["status"] == "failed" and not (out / "forest.gltf.png").exists()
+    # the ledger records it as any load failure: stage and the one line, the file as an input
+    db = sqlite3.connect(out / LEDGER_NAME)
+    try:
+        rows = db.execute("SELECT status, stage, message, inputs FROM images WHERE asset = ?",
+                          ("forest.gltf",)).fetchall()
+    finally:
+        db.close()
+    assert [(status, stage, text) for status, stage, text, _ in rows] == [("failed", "load", message)]
+    # with the file among its inputs: a smaller file there is a new attempt
+    assert [entry[0] for entry in decode(rows[0][3])] == [""]
 
 
 def test_files_within_the_limit_load_and_no_limit_is_checked_outside_the_command(tmp_path):

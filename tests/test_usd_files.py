@@ -6,6 +6,7 @@ metallic-roughness materials, light and camera: 8x8 block means agree within 2 %
 """
 
 import builtins
+import json
 import logging
 import math
 
@@ -18,6 +19,7 @@ pxr = pytest.importorskip("pxr", reason="usd-core (rtmesh[usd]) is not installed
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade  # noqa: E402
 
 from rtmesh.api import load_scene  # noqa: E402
+from rtmesh.batch.books import REPORT_NAME  # noqa: E402
 from rtmesh.cli import main  # noqa: E402
 from rtmesh.core.errors import MeshError, MissingExtraError, ResourceError  # noqa: E402
 from rtmesh.loaders.usd_files import read_usd  # noqa: E402
@@ -346,6 +348,48 @@ def test_a_missing_texture_is_a_warning_and_the_rest_renders(tmp_path, caplog):
         load_scene(str(tmp_path / "empty.usda"))
 
 
+def _layered_stage(folder):
+    """A stage whose geometry lives in other layers: a sublayer, a reference and a payload
+    (in a layer of its own folder, referencing a fourth layer), and a texture beside them."""
+    def triangle_layer(name, offset):
+        stage = _stage(folder / name)
+        mesh = UsdGeom.Mesh.Define(stage, "/Tri")
+        mesh.CreatePointsAttr([(offset, 0, 0), (offset + 1, 0, 0), (offset, 1, 0)])
+        mesh.CreateFaceVertexCountsAttr([3])
+        mesh.CreateFaceVertexIndicesAttr([0, 1, 2])
+        stage.SetDefaultPrim(mesh.GetPrim())
+        stage.GetRootLayer().Save()
+
+    (folder / "parts").mkdir()
+    _checker().save(folder / "parts" / "checker.png")
+    triangle_layer("sub.usda", 0.0)
+    triangle_layer("ref.usda", 2.0)
+    triangle_layer("parts/deep.usda", 4.0)  # its prim, placed by the payload, is textured
+    payload = _stage(folder / "parts" / "payload.usda")
+    holder = UsdGeom.Xform.Define(payload, "/Holder")
+    payload.DefinePrim("/Holder/Deep").GetReferences().AddReference("./deep.usda")
+    payload.SetDefaultPrim(holder.GetPrim())
+    _bind(payload.GetPrimAtPath("/Holder/Deep"), _preview(payload, "/Holder/Look", None, 0.5, "./checker.png"))
+    payload.GetRootLayer().Save()
+    stage = _stage(folder / "root.usda")
+    stage.GetRootLayer().subLayerPaths.append("./sub.usda")
+    stage.DefinePrim("/Referenced").GetReferences().AddReference("./ref.usda")
+    stage.DefinePrim("/Loaded").GetPayloads().AddPayload("./parts/payload.usda")
+    stage.GetRootLayer().Save()
+    return folder / "root.usda"
+
+
+def test_the_layers_a_stage_composes_are_inputs_of_its_load(tmp_path):
+    from rtmesh.batch.identity import OpenedFiles
+
+    root = _layered_stage(tmp_path)
+    with OpenedFiles() as opened:
+        parts = read_usd(root).parts
+    assert len(parts) == 3
+    names = sorted(entry[0] for entry in opened.entries(root))
+    assert names == ["", "parts/checker.png", "parts/deep.usda", "parts/payload.usda", "ref.usda", "sub.usda"]
+
+
 def test_a_folder_of_usd_files_renders_in_batch(usd_file, tmp_path, capsys):
     import shutil
 
@@ -353,11 +397,21 @@ def test_a_folder_of_usd_files_renders_in_batch(usd_file, tmp_path, capsys):
     source.mkdir()
     shutil.copy(usd_file, source / "scene.usda")
     shutil.copy(usd_file.parent / "checker.png", source / "checker.png")
+    # and a stage made of layers in a folder of its own, the batch given its root file
+    (tmp_path / "layered").mkdir()
+    root = _layered_stage(tmp_path / "layered")
     out = tmp_path / "out"
-    code = main(["batch", str(source), "-o", str(out), "--width", "16", "--height", "16", "--spp", "1",
-                 "--workers", "1", "-q"])
+    args = ["batch", str(source), str(root), "-o", str(out), "--width", "16", "--height", "16", "--spp", "1",
+            "--workers", "1", "-q"]
+    code = main(args)
     assert code == 0, capsys.readouterr().err
-    assert (out / "scene.usda.png").exists()
+    assert (out / "scene.usda.png").exists() and (out / "root.usda.png").exists()
+    # a layer the stage references changed: only that asset's image is redone
+    deep = root.parent / "parts" / "deep.usda"
+    deep.write_text(deep.read_text().replace("(4, 1, 0)", "(4, 2, 0)"))
+    assert main(args) == 0
+    lines = [json.loads(line) for line in (out / REPORT_NAME).read_text().splitlines()]
+    assert [line["asset"] for line in lines if line["status"] == "done"] == ["root.usda"]
 
 
 def test_instanceable_prims_are_placed_as_their_references(tmp_path):

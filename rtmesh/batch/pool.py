@@ -181,7 +181,7 @@ def _worker_main(conn, memory_limit, parent_pid):
         _, hard = resource.getrlimit(resource.RLIMIT_AS)
         limit = memory_limit if hard == resource.RLIM_INFINITY else min(memory_limit, hard)
         resource.setrlimit(resource.RLIMIT_AS, (limit, hard))
-        batch_worker.MEMORY_LIMIT_NOTE = f" (limit {limit / 2**30:.1f} GiB)"
+        batch_worker.set_memory_limit(limit)
     # warnings about a single asset's oddities would scramble the batch's progress bar
     logging.basicConfig(level=logging.ERROR)
     logging.getLogger("trimesh").setLevel(logging.ERROR)

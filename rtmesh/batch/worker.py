@@ -32,6 +32,7 @@ from rtmesh.io.images import write_depth_png, write_display_image, write_image
 from rtmesh.loaders.importers import default_integrator, mesh_file_parts
 from rtmesh.materials.table import Material, MaterialTable
 from rtmesh.rendering.centre_rays import centre_passes
+from rtmesh.rendering import memory
 from rtmesh.rendering.integrator import Integrator
 from rtmesh.rendering.settings import RenderSettings
 from rtmesh.scene.camera import frame_bounds
@@ -199,8 +200,26 @@ class AssetJob:
     units: str = "m"
 
 
-# set by a worker process that runs under an address-space limit, for the failure message
+# set by a worker process that runs under an address-space limit (set_memory_limit): the
+# note of its failure messages, and the bytes each asset's load may take (0: not checked, as
+# on a Dask worker, whose memory the cluster guards)
 MEMORY_LIMIT_NOTE = ""
+LOAD_LIMIT = 0
+
+
+def set_memory_limit(limit):
+    """Tell the jobs of this worker process its address-space limit: each asset's load is
+    checked against it before the memory is taken (:func:`rtmesh.rendering.memory.check_load`,
+    as ``rtmesh render --memory-limit`` checks), and memory failures name it.
+
+    Parameters
+    ----------
+    limit : int
+        Bytes.
+    """
+    global MEMORY_LIMIT_NOTE, LOAD_LIMIT
+    MEMORY_LIMIT_NOTE = f" (limit {limit / 2**30:.1f} GiB)"
+    LOAD_LIMIT = limit
 
 
 class TimeLimitExceeded(Exception):
@@ -302,7 +321,8 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
         return _job_result(job, results, start)
     opened = OpenedFiles()
     try:
-        with opened, WarningLog() as warnings:
+        # a file too large for the worker's limit fails here, at the load stage, in one line
+        with opened, WarningLog() as warnings, memory.loading_limit(LOAD_LIMIT):
             parts, materials, bounds, to_world = _load(job)
     except MemoryError:
         fail_all(job.images, "memory", f"out of memory while loading{MEMORY_LIMIT_NOTE}")

@@ -91,6 +91,21 @@ class KernelGroup:
         for dispatcher, signature in self.kernels:
             compile_locked(dispatcher, signature)
 
+    def compile_ahead(self):
+        """Within :func:`helper`, if the disk cache lacks some of the group: have the helper
+        process start compiling it now (from its last kernel back), well before a render
+        calls :meth:`prepare` (which then waits for the kernel the helper is compiling and
+        loads what it finished from the disk cache).  Otherwise nothing.
+
+        For a program that knows early that it will need a large group, such as a test
+        session (``tests/conftest.py``) and the path kernel.
+        """
+        with _helper_lock:
+            if not _enabled or self._prepared:
+                return
+        if not self.cached():
+            _announce(self)
+
     def compile_backwards(self):
         """Compile the group from its last kernel back (what the helper process does)."""
         for dispatcher, signature in reversed(self.kernels):

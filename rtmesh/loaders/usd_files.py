@@ -39,6 +39,7 @@ import logging
 import math
 import os
 import re
+import sys
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -116,6 +117,9 @@ class UsdContent:
 def open_stage(path):
     """Open a USD file, refusing unreadable files and composition errors in one line.
 
+    The layer files it composed are announced as read (:func:`_announce_layers`), so a
+    batch records them among the asset's inputs.
+
     Parameters
     ----------
     path : str
@@ -142,10 +146,26 @@ def open_stage(path):
         if stage is None:
             raise MeshError(f"{path}: cannot read USD")
         errors = stage.GetCompositionErrors()
+    _announce_layers(stage)
     if errors:
         more = f" (and {len(errors) - 1} more composition errors)" if len(errors) > 1 else ""
         raise MeshError(f"{path}: {_composition_message(errors[0])}{more}")
     return stage
+
+
+def _announce_layers(stage):
+    """Announce each layer file the stage composed (the root layer, its sublayers, references
+    and payloads, at any depth) as Python's own ``open`` does: USD reads them natively, where
+    Python's audit hooks cannot see them, and whoever records the files a load reads (the
+    batch's change detection, :class:`rtmesh.batch.identity.OpenedFiles`) must see these too.
+    Textures are read through Python (:meth:`_Reader._image`) or OpenImageIO, which announces
+    its reads itself."""
+    for layer in stage.GetUsedLayers():
+        if layer.anonymous or not layer.realPath:
+            continue
+        # a layer inside a USDZ package (``a.usdz[inner.usdc]``) is read from the package
+        real = layer.realPath
+        sys.audit("open", real.split("[", 1)[0] if real.endswith("]") else real, "rb", 0)
 
 
 def _tf_message(exc):
