@@ -35,10 +35,12 @@ def pytest_configure(config):
     if getattr(config.option, "numprocesses", None) and not hasattr(config, "workerinput"):
         return  # pytest-xdist's controller: its workers run the tests
     from rtmesh.core import compile_ahead
+    from rtmesh.rendering.caustics import PHOTON_KERNELS
     from rtmesh.rendering.path_kernel import PATH_KERNELS
 
     _session.enter_context(compile_ahead.helper())
     PATH_KERNELS.compile_ahead()
+    PHOTON_KERNELS.compile_ahead()
 
 
 def pytest_unconfigure(config):

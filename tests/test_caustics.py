@@ -179,7 +179,9 @@ def test_photons_and_path_tracing_agree_under_an_area_light(tmp_path):
     path.write_text(text)
     scene, photons = _render(str(path), width=32, height=24, spp=2048, photons=4096, caustics="photons",
                              passes=("material_id",))
-    _, off = _render(str(path), width=32, height=24, spp=2048, caustics="off")
+    # the path tracer's caustic through the ball is noisy (its blocks vary by about 2.5 %
+    # between seeds at 2048 spp): eight times the samples
+    _, off = _render(str(path), width=32, height=24, spp=16384, caustics="off")
     assert photons.stats.photon_passes == 2048
     a, b = blocks(photons.image.astype(np.float64)[..., 0]), blocks(off.image.astype(np.float64)[..., 0])
     # the floor's blocks, the caustic's included (those seeing the glass are the path

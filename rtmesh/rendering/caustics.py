@@ -34,11 +34,13 @@ import time
 import numpy as np
 
 from rtmesh.core import runtime
+from rtmesh.core.compile_ahead import KernelGroup
 from rtmesh.core.compiled import kernel
 from rtmesh.core.errors import SceneError
 from rtmesh.lights import light_table as lt
 from rtmesh.materials import lobes, models
-from rtmesh.rendering.photon_kernel import (FIELDS, MAX_BOUNCES, empty_photon_map, photon_grid, trace_photons)
+from rtmesh.rendering.path_kernel import small_records
+from rtmesh.rendering.photon_kernel import FIELDS, MAX_BOUNCES, empty_photon_map, photon_grid, trace_photons
 from rtmesh.sampling.hashing import mix64
 from rtmesh.sampling.patterns import Dim, sequence_key
 
@@ -94,6 +96,31 @@ def lobe_census(tags, params, table):
                             else:
                                 scatters[mat] = True
     return specular, scatters
+
+
+def _photon_signatures():
+    """The signatures a caustics render calls its kernels with (
+    :func:`~rtmesh.rendering.photon_kernel.trace_photons`,
+    :func:`~rtmesh.rendering.photon_kernel.photon_grid`), from the path kernel's small records."""
+    import numba
+    from numba import types
+
+    from rtmesh.geometry.embree_packets import numba_typeof_query
+
+    energy, geometry, surface, lights, env = small_records()
+    f64, i64 = types.float64, types.int64
+    vector, rows = types.Array(f64, 1, "C"), types.Array(f64, 2, "C")
+    flags, counts = types.Array(types.bool_, 1, "C"), types.Array(i64, 1, "C")
+    options = numba.typeof((0, np.float32(1.0), False, 0))
+    trace = (numba_typeof_query(), i64, types.uint64, types.Array(types.uint64, 1, "C"), i64, i64) + tuple(
+        numba.typeof(record) for record in (geometry, surface, lights, env)) + (
+        vector, vector, flags, flags, options, rows, counts, counts)
+    return [(trace_photons, trace), (photon_grid, (rows, f64, i64))]
+
+
+# the kernels of photon passes, prepared when a render turns them on (and compiled ahead by a
+# test session); the small lobe census, which every path render calls, is not in it
+PHOTON_KERNELS = KernelGroup(__name__, "photons", _photon_signatures())
 
 
 def radius_factor(k):
@@ -172,6 +199,7 @@ class Caustics:
                 log.warning("caustics = 'photons': no photon pass (%s)", reason)
             return
         self.enabled = True
+        PHOTON_KERNELS.prepare()
         everything = np.concatenate([triangles[:, 0:3], triangles[:, 0:3] + triangles[:, 3:6],
                                      triangles[:, 0:3] + triangles[:, 6:9]])
         self.scene_sphere = _bounding_sphere(everything)

@@ -719,9 +719,25 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 light_paths[start + lane] = paths[lane]
 
 
+def small_records():
+    """Small records of the shapes and types :class:`rtmesh.rendering.path_stage.PathStage`
+    builds (the energy tables, ``geometry``, ``surface``, ``lights``, ``env``), for the
+    signatures of the kernels that take them."""
+    z = np.zeros
+    energy = (z((2, 3)), z((2, 2, 2, 2)), z((2, 2)))
+    geometry = (z((1, 9)), z((1, 3)), z((0, 3)), z((1, 3), np.int32), z(0, bool), z(1, np.int32), z((0, 6)),
+                z((0, 12)), z((0, 6)))
+    surface = (z(1, np.int64), z((1, lobes.PARAMETER_WIDTH)), z(1, bool), z((1, 3)), z((1, 3)), z((1, 4)),
+               energy, z((1, 6), np.int64), z((1, 6), np.int64), z(1), z(1, np.int64), z(1), z(1),
+               z(1, np.float32), z((1, 12)), z(1))
+    lights = (z((1, lt.WIDTH)), z(1), z(1, np.int64), z(1), z(1, np.int64), z(0, np.int64), -1)
+    env = (z((1, 3, 3)), z(2), z((1, 2)), z((1, 1)), 1.0, 1.0, 0.0)
+    return energy, geometry, surface, lights, env
+
+
 def _path_signatures():
     """The one signature of the path kernel and of the BSDF dispatch it calls, from the
-    types of small records of the shapes :class:`rtmesh.rendering.path_stage.PathStage` builds."""
+    types of :func:`small_records`."""
     import numba
     from numba import types
 
@@ -730,17 +746,10 @@ def _path_signatures():
     f64 = types.float64
     z = np.zeros
     rows = types.Array(f64, 2, "C")
-    energy = (z((2, 3)), z((2, 2, 2, 2)), z((2, 2)))
+    energy, geometry, surface, lights, env = small_records()
     bsdf_args = (types.int64, rows, types.int64, numba.typeof(energy))
     evaluate = bsdf_args + (f64,) * 6
     sample = bsdf_args + (f64,) * 6
-    geometry = (z((1, 9)), z((1, 3)), z((0, 3)), z((1, 3), np.int32), z(0, bool), z(1, np.int32), z((0, 6)),
-                z((0, 12)), z((0, 6)))
-    surface = (z(1, np.int64), z((1, lobes.PARAMETER_WIDTH)), z(1, bool), z((1, 3)), z((1, 3)), z((1, 4)),
-               energy, z((1, 6), np.int64), z((1, 6), np.int64), z(1), z(1, np.int64), z(1), z(1),
-               z(1, np.float32), z((1, 12)), z(1))
-    lights = (z((1, lt.WIDTH)), z(1), z(1, np.int64), z(1), z(1, np.int64), z(0, np.int64), -1)
-    env = (z((1, 3, 3)), z(2), z((1, 2)), z((1, 1)), 1.0, 1.0, 0.0)
     options = (-1, 3, 0.0, np.float32(1.0), True, False, False, z(4, np.int64))
     motion = (True, z(0, np.int64), z(0, np.int64), z(0, np.int64), z(1, np.int64), z((0, 10)), z(0, np.int64))
     photon_map = empty_photon_map(1)
