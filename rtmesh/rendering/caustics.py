@@ -40,7 +40,7 @@ from rtmesh.core.errors import SceneError
 from rtmesh.lights import light_table as lt
 from rtmesh.materials import lobes, models
 from rtmesh.rendering.path_kernel import small_records
-from rtmesh.rendering.photon_kernel import FIELDS, MAX_BOUNCES, empty_photon_map, photon_grid, trace_photons
+from rtmesh.rendering.photon_kernel import FIELDS, MAX_BOUNCES, photon_grid, trace_photons
 from rtmesh.sampling.hashing import mix64
 from rtmesh.sampling.patterns import Dim, sequence_key
 
@@ -162,10 +162,6 @@ class Caustics:
         s = it.settings
         self.it, self.stage = it, stage
         self.enabled = False
-        self.passes_run = 0
-        self.stored = 0
-        self.rays = 0
-        self.seconds = 0.0
         if s.caustics == "off":
             return
         geometry, surface = stage.geometry, stage.surface
@@ -174,7 +170,8 @@ class Caustics:
         # textures can make a material's parameters anything: count a textured material as
         # both (photons then try it; a gather at a pure-delta texel finds nothing)
         textured = (surface[8] >= 0).any(axis=1) | (len(geometry[7]) > 0)
-        self.specular, self.scatters = specular | textured, scatters | textured
+        self.specular = np.ascontiguousarray(specular | textured)
+        self.scatters = np.ascontiguousarray(scatters | textured)
         material_id = geometry[5]
         triangles = geometry[0]
         faces = np.flatnonzero(self.specular[material_id])
@@ -200,9 +197,8 @@ class Caustics:
             return
         self.enabled = True
         PHOTON_KERNELS.prepare()
-        everything = np.concatenate([triangles[:, 0:3], triangles[:, 0:3] + triangles[:, 3:6],
-                                     triangles[:, 0:3] + triangles[:, 6:9]])
-        self.scene_sphere = _bounding_sphere(everything)
+        # the scene's box in the re-centred frame the triangles are in, and a sphere around it
+        self.scene_sphere = np.array([0.0, 0.0, 0.0, float(np.linalg.norm(np.ptp(it.scene_bounds, axis=0))) / 2.0])
         self.photons = s.photons or int(np.clip(PHOTONS_PER_PIXEL * s.width * s.height, *DEFAULT_PHOTONS))
         self.max_bounces = MAX_BOUNCES if s.max_depth < 0 else max(s.max_depth - 1, 0)
         # one pixel's footprint: a + b * distance (perspective: the pixel's angle; orthographic:
@@ -244,11 +240,10 @@ class Caustics:
             solid.append(emissive)
         return any(a < SMALL_LIGHT for a in solid)
 
-    def photon_map(self, k, pool=None):
+    def photon_map(self, k, stats, pool=None):
         """The path kernel's ``photon_map`` record of pass ``k`` (traced once, kept until
-        another pass is asked for)."""
-        if not self.enabled:
-            return empty_photon_map(len(self.stage.surface[0]))
+        another pass is asked for); a pass traced is added to the render's ``stats``
+        (:class:`~rtmesh.rendering.stats.RenderStats`: passes, photons, rays, time)."""
         if self._map_pass == k:
             return self._map
         self._map = None  # one pass's photons at a time
@@ -259,13 +254,13 @@ class Caustics:
         order, start = photon_grid(photons, cell, bits)
         photons = np.ascontiguousarray(photons[order])
         self._map = (True, photons, start, cell, bits, 1.0 / (math.pi * self.photons), RADIUS_PIXELS * radius_factor(k),
-                     self.footprint[0], self.footprint[1], MAX_RADIUS_CELLS * cell,
-                     np.ascontiguousarray(self.scatters))
+                     self.footprint[0], self.footprint[1], MAX_RADIUS_CELLS * cell, self.scatters)
         self._map_pass = k
-        self.passes_run += 1
-        self.stored += len(photons)
-        self.rays += rays
-        self.seconds += time.perf_counter() - t0
+        stats.photon_passes += 1
+        stats.photons = self.photons
+        stats.photons_stored += len(photons)
+        stats.rays["photon"] += rays
+        stats.photon_seconds += time.perf_counter() - t0
         return self._map
 
     def _trace(self, k, pool):
@@ -276,13 +271,8 @@ class Caustics:
             pass_key = mix64(self._seed_key ^ (np.uint64(k) * np.uint64(0x9E3779B97F4A7C15)))
         sobol_keys = np.array([sequence_key(s.seed, np.array([k]), Dim.PHOTON_POINT)[0],
                                sequence_key(s.seed, np.array([k]), Dim.PHOTON_DIRECTION)[0]], dtype=np.uint64)
-        lights = stage.lights
-        light_record = (lights.rows, lights.probability, lights.alias, lights.pmf, lights.face_light,
-                        lights.analytic, lights.environment)
         intersect16, _, handle = stage._queries
         options = (self.max_bounces, np.float32(self.it.offset_scale), stage.cutouts, len(stage._camera_media))
-        specular = np.ascontiguousarray(self.specular)
-        scatters = np.ascontiguousarray(self.scatters)
 
         def chunk(first):
             count = min(CHUNK_PHOTONS, self.photons - first)
@@ -292,8 +282,8 @@ class Caustics:
                 stored = np.zeros(2, np.int64)
                 counts = np.zeros(1, np.int64)
                 trace_photons(intersect16, handle, pass_key, sobol_keys, first, count, stage.geometry,
-                              stage.surface, light_record, stage._env, self.aim, self.scene_sphere, specular,
-                              scatters, options, rows, stored, counts)
+                              stage.surface, stage.light_record, stage._env, self.aim, self.scene_sphere,
+                              self.specular, self.scatters, options, rows, stored, counts)
                 if stored[1] <= capacity:
                     return rows[:stored[0]], int(counts[0])
                 capacity = int(stored[1])
@@ -303,9 +293,3 @@ class Caustics:
             results = list(workers.map(chunk, starts)) if workers is not None else [chunk(a) for a in starts]
         photons = np.concatenate([r[0] for r in results]) if results else np.zeros((0, FIELDS))
         return photons, sum(r[1] for r in results)
-
-    def record(self, stats):
-        """Write what the photon passes did into a render's :class:`RenderStats`."""
-        if self.enabled:
-            stats.photon_passes, stats.photons = self.passes_run, self.photons
-            stats.photons_stored, stats.photon_seconds = self.stored, self.seconds

@@ -336,8 +336,6 @@ class Integrator:
         # for rendering (rtmesh.core.runtime): then its kept pool and a short interval
         with runtime.render_pool(s.thread_count, pool) as workers, runtime.gil_handoff(s.thread_count):
             render_rounds(self, film, stats, progress, workers)
-            if self.path_stage is not None:
-                self.path_stage.caustics.record(stats)
             image = film.image(workers)
         if self.cutouts is not None:
             stats.rays["cutout"] += self.cutouts.layers_traced
@@ -413,14 +411,12 @@ class Integrator:
             end = first + np.broadcast_to(np.asarray(spp, dtype=np.int64), pixels.shape)
             passes = range(int(first.min()), int(end.max())) if len(pixels) else range(0)
             chosen = (first, end)
-        rays = caustics.rays
-        for k in passes:
-            with runtime.render_pool(self.settings.thread_count, pool) as workers:
-                self.path_stage.photon_map = caustics.photon_map(k, workers)
-            these = pixels if chosen is None else pixels[(chosen[0] <= k) & (k < chosen[1])]
-            if len(these):
-                self._render_batch(film, these, k, 1, stats, progress, pool)
-        stats.rays["photon"] += caustics.rays - rays
+        with runtime.render_pool(self.settings.thread_count, pool) as workers:
+            for k in passes:
+                self.path_stage.photon_map = caustics.photon_map(k, stats, workers)
+                these = pixels if chosen is None else pixels[(chosen[0] <= k) & (k < chosen[1])]
+                if len(these):
+                    self._render_batch(film, these, k, 1, stats, progress, workers)
 
     def _render_batch(self, film, pixels, first_sample, spp, stats, progress=None, pool=None):
         """:meth:`render_samples` as one batch of chunks."""

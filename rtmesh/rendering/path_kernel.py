@@ -72,12 +72,12 @@ from rtmesh.lights.environment import sample_direction
 from rtmesh.lights.point_light_rows import illuminate_row
 from rtmesh.materials import lobes, models
 from rtmesh.rendering.photon_kernel import empty_photon_map, gather
-from rtmesh.rendering.path_surfaces import (cross_interface, emission_at, hit_frame, hit_parameters, is_transparent,
-                                            surface_point, textured_materials, to_world)
+from rtmesh.rendering.path_surfaces import (cross_interface, hit_frame, hit_parameters, is_transparent,
+                                            surface_point, textured_materials, to_world,
+                                            triangle_light_emission)
 from rtmesh.sampling.alias import alias_sample
 from rtmesh.sampling.hashing import mix64, uniform
 from rtmesh.sampling.mis import power_heuristic
-from rtmesh.sampling.warps import uniform_triangle_weights
 from rtmesh.sampling.zsobol import sequence_pair
 
 # The rows taking arrays that the kernel calls per lane, inlined by numba: a compiled call that
@@ -588,9 +588,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                     wx, wy, wz, distance, lr, lg, lb, pdf_li, delta = sample_li(light, env, hx, hy, hz, lu1, lu2)
                     if light[0] == lt.TRIANGLE:
                         # the emitter's own (textured) radiance at the sampled point
-                        face = np.int64(light[lt.FACE])
-                        b1, b2 = uniform_triangle_weights(lu1, lu2)
-                        lr, lg, lb = emission_at(surface, geometry, material_id[face], face, b1, b2)
+                        lr, lg, lb = triangle_light_emission(surface, geometry, light, lu1, lu2)
                     if (pdf_li > 0.0) & ((lr > 0.0) | (lg > 0.0) | (lb > 0.0)):
                         side = (gx * wx + gy * wy) + gz * wz
                         if transmissive[mat] or side > 0.0:

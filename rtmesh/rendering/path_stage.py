@@ -208,6 +208,10 @@ class PathStage:
         self.lights = LightTable([light for light in it.view_lights if not isinstance(light, MeshLight)],
                                  self.geometry[0], self.geometry[1], face_emission,
                                  environment if lights_scene else None, it.offset_scale)
+        lights = self.lights
+        # the kernels' ``lights`` record (rtmesh.rendering.path_kernel), formed once a view
+        self.light_record = (lights.rows, lights.probability, lights.alias, lights.pmf, lights.face_light,
+                             lights.analytic, lights.environment)
         if environment is None:
             self._env = (np.zeros((1, 3, 3)), np.zeros(2), np.zeros((1, 2)), np.ones((1, 1)), 1.0, 1.0, 0.0)
         else:
@@ -273,10 +277,7 @@ class PathStage:
             keys = path_key(self._seed_key, pixel.astype(np.uint64), sample.astype(np.uint64))
         radiance = np.zeros((n, 3))
         counts = np.zeros(3, np.int64)
-        lights = self.lights
         intersect16, occluded16, handle = self._queries
-        light_record = (lights.rows, lights.probability, lights.alias, lights.pmf, lights.face_light,
-                        lights.analytic, lights.environment)
         split = passes is not None and any(passes.wants(name) for name in LIGHT_PATH_PASSES)
         options = (s.max_depth, RR_DEPTH, float(s.clamp), np.float32(it.offset_scale),
                    not it.background.transparent, self.cutouts, split, self._camera_media)
@@ -284,7 +285,7 @@ class PathStage:
         trace_paths(intersect16, occluded16, handle, np.ascontiguousarray(origins, dtype=np.float64),
                     np.ascontiguousarray(directions, dtype=np.float64), keys, *self._sobol(pixel, sample),
                     np.zeros(0) if times is None else np.ascontiguousarray(times, dtype=np.float64),
-                    self.geometry, self.surface, light_record, self._env, options, self._motion, self.photon_map,
+                    self.geometry, self.surface, self.light_record, self._env, options, self._motion, self.photon_map,
                     radiance, light_paths, counts)
         if split:
             for k, name in enumerate(LIGHT_PATH_PASSES):

@@ -38,9 +38,11 @@ import numpy as np
 
 from rtmesh.core.compiled import inline_row, row
 from rtmesh.io.texture_atlas import texel
+from rtmesh.lights.light_table import FACE
 from rtmesh.materials import models
 from rtmesh.materials.metallic_roughness import alpha_from_roughness_row
 from rtmesh.materials.table import ALPHA_MODES
+from rtmesh.sampling.warps import uniform_triangle_weights
 
 TEXTURE_COLUMNS = ("diffuse_texture", "metallic_roughness_texture", "normal_texture", "emission_texture",
                    "specular_texture", "opacity_texture",
@@ -188,6 +190,15 @@ def emission_at(surface, geometry, mat, prim, bu, bv):
         tr, tg, tb, _ = texel(surface[13], surface[14], t, u, v)
         er, eg, eb = er * tr, eg * tg, eb * tb
     return er, eg, eb
+
+
+@inline_row
+def triangle_light_emission(surface, geometry, light, u1, u2):
+    """The (textured) radiance an emissive-triangle light emits at its point ``(u1, u2)``
+    (:func:`rtmesh.lights.light_table.sample_area_point`'s point of the same numbers)."""
+    face = np.int64(light[FACE])
+    b1, b2 = uniform_triangle_weights(u1, u2)
+    return emission_at(surface, geometry, geometry[5][face], face, b1, b2)
 
 
 @inline_row

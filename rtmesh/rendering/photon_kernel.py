@@ -41,12 +41,13 @@ from rtmesh.lights import light_table as lt
 from rtmesh.lights.environment import sample_direction
 from rtmesh.lights.point_light_rows import illuminate_row
 from rtmesh.materials import lambert, lobes, models
-from rtmesh.rendering.path_surfaces import (cross_interface, emission_at, hit_frame, hit_parameters, is_transparent,
-                                            surface_point, tangent_frame, textured_materials, to_world)
+from rtmesh.rendering.path_surfaces import (cross_interface, hit_frame, hit_parameters, is_transparent,
+                                            surface_point, tangent_frame, textured_materials, to_world,
+                                            triangle_light_emission)
 from rtmesh.sampling.alias import alias_sample
 from rtmesh.sampling.hashing import GOLDEN, mix64, path_key, uniform
 from rtmesh.sampling.lowdiscrepancy import sobol_pair
-from rtmesh.sampling.warps import concentric_disk_row, uniform_triangle_weights
+from rtmesh.sampling.warps import concentric_disk_row
 
 set_lane = inline_row(set_lane.py_func)
 clear_hit = inline_row(clear_hit.py_func)
@@ -243,9 +244,7 @@ def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geomet
             ox, oy, oz, ex, ey, ez, fr, fg, fb = sample_emission(light, env, aim, scene_sphere, u1, u2, u3, u4)
             if light[0] == lt.TRIANGLE:
                 # the emitter's own (textured) radiance at the point
-                face = np.int64(light[lt.FACE])
-                b1, b2 = uniform_triangle_weights(u1, u2)
-                er, eg, eb = emission_at(surface, geometry, material_id[face], face, b1, b2)
+                er, eg, eb = triangle_light_emission(surface, geometry, light, u1, u2)
                 fr, fg, fb = fr * er, fg * eg, fb * eb
             p = light_pmf[chosen]
             if not ((fr > 0.0) | (fg > 0.0) | (fb > 0.0)) or not p > 0.0:
