@@ -47,6 +47,22 @@ def test_renders_call_the_declared_kernels_with_the_declared_types():
     assert np.isfinite(general.image).all() and np.isfinite(fused.image).all()
 
 
+def test_a_path_render_of_one_ray_calls_the_path_kernel_with_the_declared_types():
+    # a chunk of one camera ray (its origins a read-only repeated row that NumPy calls
+    # contiguous) once compiled the path kernel a second time, a minute of a first run
+    from rtmesh.rendering.path_kernel import PATH_KERNELS
+
+    for dispatcher, signature in PATH_KERNELS.kernels:
+        compile_ahead.compile_locked(dispatcher, signature)
+    before = {id(d): len(d.signatures) for d, _ in PATH_KERNELS.kernels}
+    for width in (1, 3):
+        result = rtmesh.render(os.path.join(ASSETS, "cornell_box.toml"), width=width, height=1, spp=1,
+                               integrator="path")
+        assert np.isfinite(result.image).all()
+    grew = [d.py_func.__qualname__ for d, _ in PATH_KERNELS.kernels if len(d.signatures) != before[id(d)]]
+    assert grew == []
+
+
 def test_groups_have_unique_names_and_every_render_starts_with_the_build():
     assert BUILD_KERNELS.every_render
     assert not FUSED_KERNELS.every_render and not GENERAL_KERNELS.every_render
@@ -96,19 +112,27 @@ def test_a_kernel_being_compiled_by_the_other_process_is_waited_for():
     assert _twice(1.5) == 3.0
 
 
-def test_without_a_helper_prepare_compiles_nothing(monkeypatch):
-    # outside the test session's own helper block (tests/conftest.py)
+def test_without_a_helper_prepare_compiles_under_the_lock_and_starts_no_process(monkeypatch):
+    # outside the test session's own helper block (tests/conftest.py): a group the cache
+    # lacks is compiled under its lock files (a process compiling it meanwhile is waited
+    # for), and no helper process starts
     monkeypatch.setattr(compile_ahead, "_enabled", False)
     monkeypatch.setattr(compile_ahead, "_helper", None)
-    started = []
+    started, locked = [], []
     monkeypatch.setattr(compile_ahead, "_start", lambda: started.append(1))
-    group = compile_ahead.KernelGroup(__name__, "test: never prepared ahead", [(_twice, (types.int64,))])
+    original_lock = compile_ahead._kernel_lock
+    monkeypatch.setattr(compile_ahead, "_kernel_lock", lambda d: locked.append(d) or original_lock(d))
+    group = compile_ahead.KernelGroup(__name__, "test: prepared without a helper", [(_twice, (types.int16,))])
     try:
-        group.prepare()  # outside helper(): kernels compile on their first call
-        assert (types.int64,) not in _twice.overloads and not started
+        monkeypatch.setattr(group, "cached", lambda: True)
+        group.prepare()  # cached: the kernels load on their first call
+        assert (types.int16,) not in _twice.overloads and locked == []
+        group._prepared = False
+        monkeypatch.setattr(group, "cached", lambda: False)
         with compile_ahead.helper(enabled=False):
             group.prepare()
-        assert (types.int64,) not in _twice.overloads and not started
+            group.prepare()  # once a process
+        assert (types.int16,) in _twice.overloads and locked == [_twice] and not started
     finally:
         del compile_ahead._GROUPS[group.name]
 

@@ -12,8 +12,9 @@ compiles it from its first on (:meth:`KernelGroup.prepare`); a lock file per ker
 the two from compiling the same one, and numba's disk cache hands each kernel's machine
 code to the other process.  They meet in the middle of a group.
 
-Without a helper, :meth:`KernelGroup.prepare` does nothing and kernels compile on their
-first call as they always do.  The helper only compiles: it never changes what a render
+Without a helper, :meth:`KernelGroup.prepare` still compiles a group the cache lacks under
+the lock files (processes that render side by side on a first run, such as a batch's
+workers, then compile each kernel once), but nothing runs ahead.  The helper only compiles: it never changes what a render
 computes, and if it is killed half-way (numba writes its cache files whole, then renames
 them) the render compiles what is missing itself.
 """
@@ -75,19 +76,23 @@ class KernelGroup:
         _GROUPS[name] = self
 
     def prepare(self):
-        """Within :func:`helper`, if the disk cache lacks some of the group: compile the
-        group's kernels from the first on, while the helper process compiles them from the
-        last back (started now if it is not running).  Otherwise nothing: the kernels
-        compile (or load) on their first call, as they always do.
+        """If the disk cache lacks some of the group: compile the group's kernels from the
+        first on, each holding its lock file (:func:`compile_locked`), so that a kernel
+        another process is compiling is waited for and loaded rather than compiled twice
+        (a batch's workers, or a render beside a test session's helper, on a first run).
+        Within :func:`helper`, the helper process meanwhile compiles them from the last back
+        (started now if it is not running).  With the group cached: nothing, the kernels
+        load on their first call.
 
         Call it just before the render first calls the group's kernels.
         """
         with _helper_lock:
-            if not _enabled or self._prepared:
+            if self._prepared:
                 return
             self._prepared = True
-        if self.cached() or not _announce(self):
+        if self.cached():
             return
+        _announce(self)
         for dispatcher, signature in self.kernels:
             compile_locked(dispatcher, signature)
 

@@ -16,6 +16,7 @@ import logging
 
 import numpy as np
 
+from rtmesh.core.compiled import kernel_input
 from rtmesh.core.errors import SceneError
 from rtmesh.core.rays import STACK_DEPTH
 from rtmesh.geometry import embree_library
@@ -248,8 +249,7 @@ class PathStage:
         everywhere, as it promises)."""
         if self.it.settings.sampler == "random":
             return np.zeros(0, np.int64), np.zeros(0, np.int64), self._sobol_keys
-        return (np.ascontiguousarray(pixel, dtype=np.int64), np.ascontiguousarray(sample, dtype=np.int64),
-                self._sobol_keys)
+        return kernel_input(pixel, np.int64), kernel_input(sample, np.int64), self._sobol_keys
 
     def render(self, origins, directions, pixel, sample, stats, passes=None, times=None):
         """Radiance of the camera rays of one chunk.
@@ -282,9 +282,9 @@ class PathStage:
         options = (s.max_depth, RR_DEPTH, float(s.clamp), np.float32(it.offset_scale),
                    not it.background.transparent, self.cutouts, split, self._camera_media)
         light_paths = np.zeros((n if split else 0, LIGHT_PATHS, 3))
-        trace_paths(intersect16, occluded16, handle, np.ascontiguousarray(origins, dtype=np.float64),
-                    np.ascontiguousarray(directions, dtype=np.float64), keys, *self._sobol(pixel, sample),
-                    np.zeros(0) if times is None else np.ascontiguousarray(times, dtype=np.float64),
+        trace_paths(intersect16, occluded16, handle, kernel_input(origins, np.float64),
+                    kernel_input(directions, np.float64), keys, *self._sobol(pixel, sample),
+                    np.zeros(0) if times is None else kernel_input(times, np.float64),
                     self.geometry, self.surface, self.light_record, self._env, options, self._motion, self.photon_map,
                     radiance, light_paths, counts)
         if split:
