@@ -137,9 +137,13 @@ def test_without_a_helper_prepare_compiles_under_the_lock_and_starts_no_process(
         del compile_ahead._GROUPS[group.name]
 
 
+@pytest.mark.slow
 def test_a_first_run_with_the_helper_renders_what_a_later_run_renders(tmp_path):
     # the command line from an empty cache: the helper compiles half of the build and
     # fused-stage groups, and the image is the one a run with everything cached gives
+    # (slow: two processes compile a third of the kernels again, about 40 s of CPU; the
+    # default suite covers the parts: the helper filling a cache from an announced group,
+    # a kernel's lock waited for, the declared types that renders call)
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"), PYTHONPATH=PACKAGE_PARENT)
     code = "import sys; from rtmesh.cli import main; sys.exit(main())"
     images = []

@@ -34,7 +34,7 @@ import numpy as np
 from numba import types
 
 from rtmesh.core.compile_ahead import KernelGroup
-from rtmesh.core.compiled import kernel
+from rtmesh.core.compiled import kernel, kernel_input
 from rtmesh.core.row_vectors import floor_quotient
 from rtmesh.geometry import embree_packets as ep
 from rtmesh.geometry.embree_library import packet_library
@@ -110,7 +110,7 @@ class DirectStage:
         if st.ambient:
             ambient = np.ascontiguousarray(it.tables.ambient_light)
             base = ambient if not st.emission else base + ambient
-        self._base = np.ascontiguousarray(base)
+        self._base = kernel_input(base, np.float64)
         rows = [light.kernel_row() for light in it.lights] if st.lights else []
         self._lights = np.array(rows, dtype=np.float64).reshape(len(rows), ROW_WORDS)
         self._materials = (np.ascontiguousarray(it.tables.shaded), np.ascontiguousarray(it.tables.diffuse),
@@ -118,7 +118,7 @@ class DirectStage:
         # no material with a highlight: the light step forms no highlight cosines
         self._highlights = bool((it.tables.shaded & (it.tables.highlight_exponent >= 0.0)).any())
         background = it.background
-        self._background = (np.ascontiguousarray(background.colour) if st.background else np.zeros(3))
+        self._background = kernel_input(background.colour, np.float64) if st.background else np.zeros(3)
         self._offset_scale = it.tables.offset_scale32
         # the sample positions are formed in the kernel
         sampler = PixelSampler.for_settings(s)
@@ -184,11 +184,12 @@ class DirectStage:
         if isinstance(pixels, range) and pixels.step == 1:
             pixel_list, first_pixel, m = _NO_PIXELS, pixels.start, len(pixels)
         else:
-            pixel_list = np.ascontiguousarray(pixels, dtype=np.int64)
+            pixel_list = kernel_input(pixels, np.int64)
             first_pixel, m = 0, len(pixel_list)
         # one number for all pixels travels as an array of one
-        first = np.ascontiguousarray(np.atleast_1d(first_sample), dtype=np.int64)
-        counts = np.ascontiguousarray(np.atleast_1d(spp), dtype=np.int64)
+        # (writeable arrays, as the kernel was compiled for: kernel_input)
+        first = kernel_input(np.atleast_1d(first_sample), np.int64)
+        counts = kernel_input(np.atleast_1d(spp), np.int64)
         n = m * int(counts[0]) if len(counts) == 1 else int(counts.sum())
         sums = (_NO_SUMS, _NO_SUMS, _NO_COUNT, _NO_IMAGE) if film is None else film.kernel_arrays()
         radiance, shadow_rays = direct_samples(

@@ -71,7 +71,7 @@ from rtmesh.lights import light_table as lt
 from rtmesh.lights.environment import sample_direction
 from rtmesh.lights.point_light_rows import illuminate_row
 from rtmesh.materials import lobes, models
-from rtmesh.rendering.photon_kernel import empty_photon_map, gather
+from rtmesh.rendering.photon_kernel import ALL_PARTS, DIFFUSE_PART, TRANSMITTED_PART, empty_photon_map, gather
 from rtmesh.rendering.path_surfaces import (cross_interface, hit_frame, hit_parameters, is_transparent,
                                             surface_point, textured_materials, to_world,
                                             triangle_light_emission)
@@ -550,7 +550,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 if photons_on and scatters[mat] and (segments < 0 or segments >= 2):
                     radius = min(radius_scale * (footprint_a + footprint_b * travelled[lane]), max_radius)
                     cr, cg, cb = gather(photon_map, hx, hy, hz, gx, gy, gz, radius, segments, tag, bsdf_params,
-                                        bsdf_row, albedo_table, tx, ty, tz, sx, sy, sz, nx, ny, nz, lox, loy, loz, 0)
+                                        bsdf_row, albedo_table, tx, ty, tz, sx, sy, sz, nx, ny, nz, lox, loy, loz, ALL_PARTS)
                     cr, cg, cb = _clamped(beta[lane, 0] * cr, beta[lane, 1] * cg, beta[lane, 2] * cb,
                                           clamp if depth > 0 else 0.0)
                     _add(total, lane, cr, cg, cb)
@@ -559,10 +559,10 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                             # split by the part of the BSDF the photons' light comes through
                             dr, dg, db = gather(photon_map, hx, hy, hz, gx, gy, gz, radius, segments, tag,
                                                 bsdf_params, bsdf_row, albedo_table, tx, ty, tz, sx, sy, sz, nx, ny,
-                                                nz, lox, loy, loz, 1)
+                                                nz, lox, loy, loz, DIFFUSE_PART)
                             ur, ug, ub = gather(photon_map, hx, hy, hz, gx, gy, gz, radius, segments, tag,
                                                 bsdf_params, bsdf_row, albedo_table, tx, ty, tz, sx, sy, sz, nx, ny,
-                                                nz, lox, loy, loz, 2)
+                                                nz, lox, loy, loz, TRANSMITTED_PART)
                             dr, dg, db = beta[lane, 0] * dr, beta[lane, 1] * dg, beta[lane, 2] * db
                             ur, ug, ub = beta[lane, 0] * ur, beta[lane, 1] * ug, beta[lane, 2] * ub
                             _add_path(paths, split, lane, INDIRECT + DIFFUSE_PATH, dr, dg, db)

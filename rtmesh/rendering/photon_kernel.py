@@ -282,7 +282,7 @@ def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geomet
                 key = keys[lane]
                 base = DIMENSIONS_PER_BOUNCE * (bounces[lane] + 1)
                 t = np.float64(ray[TFAR * LANES + lane])
-                prim = words[PRIM_ID * LANES + lane]
+                prim = np.int64(words[PRIM_ID * LANES + lane])  # as the path kernel types it: one compile of the rows
                 bu = np.float64(ray[U * LANES + lane])
                 bv = np.float64(ray[V * LANES + lane])
                 if sigma[lane, 0] + sigma[lane, 1] + sigma[lane, 2] > 0.0:
@@ -412,6 +412,13 @@ def photon_grid(photons, cell_size, bits):
     return order, start
 
 
+# what gather sums (its ``part``): the whole BSDF, its diffuse part, its transmitted part.
+# NumPy integers, not Python ones: numba types a call's Python-int constant as a literal of
+# its value and compiles the called kernel once per value (three more compiles of gather
+# on a first run)
+ALL_PARTS, DIFFUSE_PART, TRANSMITTED_PART = np.int64(0), np.int64(1), np.int64(2)
+
+
 @kernel
 def gather(photon_map, hx, hy, hz, gx, gy, gz, radius, segments, tag, bsdf_params, bsdf_row, albedo_table, tx, ty, tz, sx, sy,
            sz, nx, ny, nz, lox, loy, loz, part):
@@ -419,7 +426,8 @@ def gather(photon_map, hx, hy, hz, gx, gy, gz, radius, segments, tag, bsdf_param
     of it (on the side its geometric normal ``g`` faces), each ``f(wo, wi) |wi.ns| / |wi.ng|
     flux``, over ``pi radius^2`` and the pass's photon count.
 
-    ``part`` 0 sums the whole BSDF; 1 and 2 only its diffuse and transmitted parts
+    ``part`` :data:`ALL_PARTS` sums the whole BSDF; :data:`DIFFUSE_PART` and
+    :data:`TRANSMITTED_PART` only its diffuse and transmitted parts
     (:func:`rtmesh.materials.models.parts`, for the light-path passes).  Photons whose paths
     have more than ``segments`` segments are left out (``max_depth``; -1: none).
 
@@ -455,7 +463,7 @@ def gather(photon_map, hx, hy, hz, gx, gy, gz, radius, segments, tag, bsdf_param
                     count += 1
     # the Lambert model's f is its albedo over pi: the photons' cosines are summed and the
     # albedo applied once (no call of the model per photon)
-    lambertian = (part == 0) & (tag == models.LAMBERT)
+    lambertian = (part == ALL_PARTS) & (tag == models.LAMBERT)
     if lambertian and not loz > 0.0:
         return 0.0, 0.0, 0.0
     total_r = total_g = total_b = 0.0
@@ -489,13 +497,13 @@ def gather(photon_map, hx, hy, hz, gx, gy, gz, radius, segments, tag, bsdf_param
                         continue
                     lix = (tx * wx + ty * wy) + tz * wz
                     liy = (sx * wx + sy * wy) + sz * wz
-                    if part == 0:
+                    if part == ALL_PARTS:
                         fr, fg, fb, _ = models.evaluate(tag, bsdf_params, bsdf_row, albedo_table, lox, loy, loz,
                                                         lix, liy, liz)
                     else:
                         dr, dg, db, ur, ug, ub = models.parts(tag, bsdf_params, bsdf_row, albedo_table, lox, loy,
                                                               loz, lix, liy, liz)
-                        fr, fg, fb = (dr, dg, db) if part == 1 else (ur, ug, ub)
+                        fr, fg, fb = (dr, dg, db) if part == DIFFUSE_PART else (ur, ug, ub)
                     total_r += fr * photons[k, FLUX] / cos_g
                     total_g += fg * photons[k, FLUX + 1] / cos_g
                     total_b += fb * photons[k, FLUX + 2] / cos_g
