@@ -6,6 +6,7 @@ code is compared against them.
 """
 
 import math
+import os
 
 import numpy as np
 import trimesh
@@ -14,8 +15,17 @@ from rtmesh.lights.point_lights import PointLight
 from rtmesh.materials.table import Material
 from rtmesh.rendering.integrator import Integrator
 from rtmesh.rendering.settings import RenderSettings
+from rtmesh.scene.background import EnvironmentBackground, latlong_directions
 from rtmesh.scene.camera import Camera
 from rtmesh.scene.model import MeshPart, Scene
+
+
+# the test folder (this file's), its data, the repository and its assets: test modules live
+# in subfolders that mirror the package, and reach these through here
+TESTS = os.path.dirname(os.path.abspath(__file__))
+DATA = os.path.join(TESTS, "data")
+ROOT = os.path.dirname(TESTS)
+ASSETS = os.path.join(ROOT, "assets")
 
 
 # ---------------------------------------------------------------- geometry builders
@@ -168,3 +178,42 @@ def assert_finite(result):
             assert (miss == miss[..., :1]).all() and np.isfinite(image[~miss]).all(), f"pass {name!r}"
         else:
             assert np.isfinite(image).all(), f"pass {name!r} holds NaN or Inf"
+
+
+# ---------------------------------------------------------------- scenes shared by several test folders
+def every_stage_scene(aperture=0.0):
+    """Diffuse floor, a specular sphere, a mirror box and an absorbing glass sphere."""
+    parts = [
+        part("floor", floor_quad(6.0), 0),
+        part("diffuse", icosphere(2, 0.6, (-1.4, 0.5, 0.6)), 1, smooth=True),
+        part("mirror", box((0.8, 0.8, 1.6), (0.0, 1.2, 0.8)), 2),
+        part("glass", icosphere(3, 0.7, (1.3, -0.4, 0.7)), 3, smooth=True),
+    ]
+    materials = [
+        Material("floor", diffuse=[0.6, 0.55, 0.5]),
+        Material("plastic", diffuse=[0.2, 0.4, 0.8], specular=0.4, shininess=40.0),
+        Material("mirror", diffuse=0.05, mirror=[0.9, 0.85, 0.8]),
+        Material("glass", diffuse=0.0, transmission=1.0, ior=1.5, absorption=[0.1, 0.3, 0.6]),
+    ]
+    camera = Camera([0.5, -5.0, 3.0], [0.0, 0.3, 0.6], [0.0, 0.0, 1.0], 50.0, aperture=aperture,
+                    focus_distance=5.5 if aperture else None)
+    return Scene.from_parts(parts, materials, [PointLight([2.0, -3.0, 5.0], 40.0)], camera,
+                            ambient=[0.2, 0.2, 0.25], background=[0.3, 0.4, 0.6])
+
+
+# settings that run every stage of every_stage_scene (the determinism tests')
+EVERY_STAGE_SETTINGS = dict(width=48, height=36, spp=4, sampler="jittered", ao_samples=3, ao_distance=2.0,
+                            passes=("ao",), seed=7, max_depth=4)
+
+
+def sun_sky(width=64):
+    """A dim blue sky with a small bright sun 50 degrees above the horizon (+Z is not up here:
+    rtmesh's environments have +Y up; the environment-lighting tests' floors use a +Y-up frame
+    for them)."""
+    height = width // 2
+    directions = latlong_directions(width, height)
+    sun = np.array([0.3, math.sin(math.radians(50.0)), 0.5])
+    sun /= np.linalg.norm(sun)
+    pixels = np.broadcast_to([0.2, 0.3, 0.5], (height, width, 3)).copy()
+    pixels[directions @ sun > math.cos(math.radians(6.0))] = [200.0, 180.0, 150.0]
+    return EnvironmentBackground(pixels, rotation=30.0)

@@ -18,7 +18,7 @@ images) do not change by a bit:
 * arc tangents stay in NumPy (:func:`rtmesh.geometry.smoothing.face_normals_and_corner_angles`): its
   vectorised ``arctan2`` need not round like the C library's.
 
-``tests/test_build_kernels.py`` compares every kernel with the NumPy code it replaced, bit
+``tests/geometry/test_build_kernels.py`` compares every kernel with the NumPy code it replaced, bit
 for bit, on the NumPy installed (a NumPy that groups its sums otherwise fails there).  The
 kernels do not check their indices: callers pass faces within range.
 """

@@ -48,7 +48,7 @@ _F32_ZERO = np.float32(0.0)
 # Direction components smaller than this (Embree's min_rcp_input) are given to Embree as 0.
 # Embree clamps 1/d of such components, and its coherent packet traversal then culls
 # boxes that the rays do hit: with components of 1e-19 in a packet, 20-45 % of the rays of
-# random bundles missed what single rays hit (tests/test_embree_packets.py).  Exactly 0 is
+# random bundles missed what single rays hit (tests/geometry/test_embree_packets.py).  Exactly 0 is
 # handled; the intersection itself cannot tell 1e-19 from 0 next to unit components
 # (identical hits to run()'s, on the unflushed rays, for 480000 such rays).
 MIN_RCP_INPUT = np.float32(1e-18)

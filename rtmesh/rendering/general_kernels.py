@@ -6,7 +6,7 @@ point-like lights calls, with the argument types it calls them with, in the orde
 calls them, so that a first run can compile them in two processes
 (:mod:`rtmesh.core.compile_ahead`).  Scenes with more features (textures, area lights,
 reflection) call further kernels, or these with other argument types; those compile on
-their first call as usual.  ``tests/test_compile_ahead.py`` checks that the listed types
+their first call as usual.  ``tests/core/test_compile_ahead.py`` checks that the listed types
 are the ones a render calls.
 """
 

@@ -4,7 +4,7 @@ for kernels that make camera rays.
 The arithmetic is that of :mod:`rtmesh.sampling.patterns` and :mod:`rtmesh.sampling.hashing`, operation for
 operation (64-bit integer hashing wraps in both; the float conversions and divisions are
 the same), so a kernel that forms its positions here renders bit for bit what it would
-render from positions formed by NumPy (tests/test_pixel_samples.py).  The Sobol samplers'
+render from positions formed by NumPy (tests/sampling/test_pixel_samples.py).  The Sobol samplers'
 points come from the rows their NumPy paths call too (:func:`rtmesh.sampling.lowdiscrepancy.sobol_pair`,
 :func:`rtmesh.sampling.zsobol.zsobol_pair`).
 """

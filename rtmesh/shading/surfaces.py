@@ -74,7 +74,7 @@ def surface_record(f, a, b, vx, vy, vz, faces, vertex_normals, smooth, fix_termi
     :func:`surface_records`) and interpolates the vertex normals only where ``smooth``.
     Calling ``surface_from_rows`` here instead cost the general path 5-9 % of a frame on
     the bundled scenes (a call per hit with 28 arguments, and a normalisation on flat faces
-    that a select then drops).  ``tests/test_direct_stage.py`` holds the two forms to the
+    that a select then drops).  ``tests/rendering/test_direct_stage.py`` holds the two forms to the
     same bits (the fused stage uses the other).
     """
     # (u e1 + v0) + v e2: the order of rtmesh.geometry.accel.barycentric_interpolate

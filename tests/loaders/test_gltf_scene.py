@@ -136,7 +136,7 @@ def test_nested_transform_places_the_child_at_parent_times_child(gltf_file):
 
 def test_both_primitives_of_a_mesh_become_parts_with_their_own_materials(gltf_file):
     # flat (smooth=False) keeps the parts' vertices as stored (smoothing by angle keeps the
-    # materials too: tests/test_material_files.py)
+    # materials too: tests/loaders/test_material_files.py)
     parts, materials = parts_from_trimesh(load_trimesh(gltf_file), "scene", smooth=False)
     pair = [p for p in parts if abs(p.vertices[:, 1].mean() + 2.0) < 1e-6]
     assert len(pair) == 2

@@ -12,8 +12,8 @@ import threading
 
 import numpy as np
 import pytest
-from scenes import settings, sphere_on_floor_scene
-from test_determinism import SETTINGS, every_stage_scene
+from scenes import EVERY_STAGE_SETTINGS as SETTINGS
+from scenes import DATA, TESTS, every_stage_scene, settings, sphere_on_floor_scene
 
 from rtmesh.core import runtime
 from rtmesh.rendering.integrator import Integrator
@@ -48,7 +48,7 @@ print("ok")
 
 def test_import_and_library_render_change_no_process_state():
     env = dict(os.environ, PYTHONWARNINGS="error::RuntimeWarning")
-    code = LIBRARY_RENDER.replace("TESTS", repr(os.path.dirname(__file__)))
+    code = LIBRARY_RENDER.replace("TESTS", repr(TESTS))
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
                           timeout=300)
     assert proc.returncode == 0, proc.stderr
@@ -139,7 +139,7 @@ def test_the_image_does_not_depend_on_the_tuning(request, mode):
 def test_the_render_command_tunes_its_process(untuned, tmp_path):
     from rtmesh.cli import main
 
-    mesh = os.path.join(os.path.dirname(__file__), "data", "BoxTextured.glb")
+    mesh = os.path.join(DATA, "BoxTextured.glb")
     out = tmp_path / "box.png"
     assert main(["render", mesh, "-o", str(out), "--width", "40", "--height", "30", "--spp", "1",
                  "--threads", "2", "-q"]) == 0

@@ -17,6 +17,7 @@ import time
 import numpy as np
 import pytest
 import trimesh
+import scenes
 
 import rtmesh
 from rtmesh.batch.books import REPORT_NAME, SUMMARY_NAME
@@ -26,7 +27,7 @@ from rtmesh.cli import main
 from rtmesh.io.atomic_files import target_of
 from rtmesh.io.images import read_image
 
-HERE = os.path.dirname(__file__)
+HERE = scenes.TESTS
 DATA = os.path.join(HERE, "data")
 REPO = os.path.dirname(HERE)
 

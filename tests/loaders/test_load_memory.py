@@ -1,7 +1,7 @@
 """--memory-limit while loading: a glTF whose nodes would flatten into more copies than the
 limit allows stops with one line naming the file and the estimate, before reading its
 geometry, under ``rtmesh render`` and in a batch's workers (the USD case is in
-tests/test_usd_files.py)."""
+tests/loaders/test_usd_files.py)."""
 
 import base64
 import json

@@ -2,36 +2,8 @@
 
 import numpy as np
 import pytest
-from scenes import box, floor_quad, icosphere, part, render
-
-from rtmesh.lights.point_lights import PointLight
-from rtmesh.materials.table import Material
-from rtmesh.scene.camera import Camera
-from rtmesh.scene.model import Scene
-
-
-def every_stage_scene(aperture=0.0):
-    """Diffuse floor, a specular sphere, a mirror box and an absorbing glass sphere."""
-    parts = [
-        part("floor", floor_quad(6.0), 0),
-        part("diffuse", icosphere(2, 0.6, (-1.4, 0.5, 0.6)), 1, smooth=True),
-        part("mirror", box((0.8, 0.8, 1.6), (0.0, 1.2, 0.8)), 2),
-        part("glass", icosphere(3, 0.7, (1.3, -0.4, 0.7)), 3, smooth=True),
-    ]
-    materials = [
-        Material("floor", diffuse=[0.6, 0.55, 0.5]),
-        Material("plastic", diffuse=[0.2, 0.4, 0.8], specular=0.4, shininess=40.0),
-        Material("mirror", diffuse=0.05, mirror=[0.9, 0.85, 0.8]),
-        Material("glass", diffuse=0.0, transmission=1.0, ior=1.5, absorption=[0.1, 0.3, 0.6]),
-    ]
-    camera = Camera([0.5, -5.0, 3.0], [0.0, 0.3, 0.6], [0.0, 0.0, 1.0], 50.0, aperture=aperture,
-                    focus_distance=5.5 if aperture else None)
-    return Scene.from_parts(parts, materials, [PointLight([2.0, -3.0, 5.0], 40.0)], camera,
-                            ambient=[0.2, 0.2, 0.25], background=[0.3, 0.4, 0.6])
-
-
-SETTINGS = dict(width=48, height=36, spp=4, sampler="jittered", ao_samples=3, ao_distance=2.0,
-                passes=("ao",), seed=7, max_depth=4)
+from scenes import EVERY_STAGE_SETTINGS as SETTINGS
+from scenes import every_stage_scene, render
 
 
 @pytest.fixture(scope="module")

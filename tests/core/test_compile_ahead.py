@@ -10,6 +10,7 @@ import time
 import numpy as np
 import pytest
 from numba import types
+import scenes
 
 import rtmesh
 from rtmesh.core import compile_ahead
@@ -20,7 +21,7 @@ from rtmesh.io.images import read_image
 from rtmesh.rendering.direct_stage import FUSED_KERNELS
 from rtmesh.rendering.general_kernels import GENERAL_KERNELS
 
-ASSETS = os.path.join(os.path.dirname(__file__), "..", "assets")
+ASSETS = scenes.ASSETS
 PACKAGE_PARENT = os.path.dirname(os.path.dirname(os.path.abspath(rtmesh.__file__)))
 
 

@@ -7,11 +7,12 @@ import shutil
 import numpy as np
 import pytest
 import trimesh
+import scenes
 
 from rtmesh.core.errors import MeshError
 from rtmesh.loaders.importers import load_mesh_scene, load_trimesh, material_from_trimesh, parts_from_trimesh
 
-DATA = os.path.join(os.path.dirname(__file__), "data")
+DATA = scenes.DATA
 TRIANGLE_OBJ = "mtllib m.mtl\nusemtl m\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"
 
 
@@ -111,7 +112,7 @@ def test_nan_vertex_faces_are_dropped_with_a_warning(caplog):
 
 
 def test_truncated_glb_is_a_one_line_error(tmp_path):
-    source = os.path.join(os.path.dirname(__file__), "..", "assets", "meshes", "bunny.ply")
+    source = os.path.join(scenes.ASSETS, "meshes", "bunny.ply")
     broken = tmp_path / "broken.ply"
     shutil.copy(source, broken)
     with open(broken, "r+b") as f:

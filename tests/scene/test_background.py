@@ -2,12 +2,12 @@
 gradient and environment values seen by camera and mirror rays, transparent output, and the
 scene-file keys."""
 
-import math
 import os
 
 import numpy as np
 import pytest
 from scenes import part, pixel_centre_rays, quad, render
+import scenes
 
 from rtmesh.cli import main
 from rtmesh.core.errors import SceneError
@@ -19,7 +19,7 @@ from rtmesh.scene.background import (EnvironmentBackground, GradientBackground, 
 from rtmesh.scene.camera import Camera
 from rtmesh.scene.model import Scene
 
-ASSETS = os.path.join(os.path.dirname(__file__), "..", "assets")
+ASSETS = scenes.ASSETS
 SKY = os.path.join(ASSETS, "environments", "sky.exr")
 
 

@@ -5,6 +5,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import scenes
 
 from rtmesh.core.errors import SceneError
 from rtmesh.lights.point_lights import DirectionalLight, PointLight, SpotLight
@@ -109,7 +110,7 @@ def test_every_scene_key_is_documented(table):
     # its documentation fails here
     import rtmesh.loaders.scene_file as scene_file
 
-    doc = (Path(__file__).resolve().parent.parent / "docs" / "SCENE_FORMAT.md").read_text()
+    doc = (Path(scenes.ROOT) / "docs" / "SCENE_FORMAT.md").read_text()
     keys = getattr(scene_file, table)
     missing = [key for key in (keys() if callable(keys) else keys) if f"`{key}`" not in doc]
     assert not missing, f"{table} keys missing from docs/SCENE_FORMAT.md: {missing}"
@@ -185,7 +186,7 @@ def test_api_settings_and_cameras_refuse_non_finite_and_out_of_range_values():
 def test_cli_exposure_nan_is_a_one_line_error(tmp_path, capsys):
     from rtmesh.cli import main
 
-    mesh = Path(__file__).parent / "data" / "quadknot.obj"
+    mesh = Path(scenes.DATA) / "quadknot.obj"
     out = tmp_path / "x.png"
     assert main(["render", str(mesh), "-o", str(out), "--exposure", "nan", "-q"]) == 2
     err = capsys.readouterr().err

@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from scenes import floor_quad, part, render, settings
+from scenes import floor_quad, part, render, settings, sun_sky
 
 from rtmesh.core.errors import SceneError
 from rtmesh.lights.environment import EnvironmentLighting
@@ -12,7 +12,7 @@ from rtmesh.loaders.scene_file import scene_from_dict
 from rtmesh.materials.table import Material
 from rtmesh.rendering.integrator import Integrator
 from rtmesh.sampling.warps import direction_to_latlong
-from rtmesh.scene.background import EnvironmentBackground, GradientBackground, SolidBackground, latlong_directions
+from rtmesh.scene.background import GradientBackground, SolidBackground
 from rtmesh.scene.camera import Camera
 from rtmesh.scene.model import Scene
 
@@ -25,18 +25,6 @@ def floor_under(background, kd=0.5, extra_parts=(), extra_materials=()):
     return Scene.from_parts([part("floor", (vertices, faces)), *extra_parts],
                             [Material("floor", diffuse=kd), *extra_materials], [], camera, ambient=0.0,
                             background=background)
-
-
-def sun_sky(width=64):
-    """A dim blue sky with a small bright sun 50 degrees above the horizon (+Z is not up here:
-    rtmesh's environments have +Y up; the floor tests below use a +Y-up frame for them)."""
-    height = width // 2
-    directions = latlong_directions(width, height)
-    sun = np.array([0.3, math.sin(math.radians(50.0)), 0.5])
-    sun /= np.linalg.norm(sun)
-    pixels = np.broadcast_to([0.2, 0.3, 0.5], (height, width, 3)).copy()
-    pixels[directions @ sun > math.cos(math.radians(6.0))] = [200.0, 180.0, 150.0]
-    return EnvironmentBackground(pixels, rotation=30.0)
 
 
 def test_a_uniform_sky_gives_a_diffuse_floor_pi_times_its_radiance():

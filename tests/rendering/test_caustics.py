@@ -7,6 +7,7 @@ import os
 import numpy as np
 import OpenImageIO as oiio
 import pytest
+import scenes
 
 from benchmarks.bench_caustics import blocks, regions
 from rtmesh import api
@@ -15,7 +16,7 @@ from rtmesh.io.passes import LIGHT_PATH_PASSES
 from rtmesh.rendering import caustics
 from rtmesh.rendering.integrator import Integrator
 
-HERE = os.path.dirname(__file__)
+HERE = scenes.TESTS
 ROOT = os.path.dirname(HERE)
 SCENE = os.path.join(ROOT, "assets", "effects", "caustics.toml")
 REFERENCE = os.path.join(HERE, "data", "caustics_ptracer_64x48.exr")

@@ -16,6 +16,7 @@ import math
 import numpy as np
 import pytest
 from scenes import floor_quad, part, pixel_centre_rays, quad, render, settings
+import scenes
 
 from rtmesh.core.errors import SceneError
 from rtmesh.geometry.accel import Accel
@@ -797,7 +798,7 @@ def test_shipped_soft_shadow_scene_renders():
 
     from rtmesh.loaders.scene_file import read_scene_file
 
-    path = os.path.join(os.path.dirname(__file__), "..", "assets", "effects", "soft_shadow.toml")
+    path = os.path.join(scenes.ASSETS, "effects", "soft_shadow.toml")
     scene, _ = read_scene_file(path)
     result = render(scene, width=24, height=18, spp=1, light_samples=2)
     assert {"area_lights", "area_light_visibility", "emission"} <= set(result.stats.stages_enabled)

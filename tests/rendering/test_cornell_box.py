@@ -4,10 +4,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import scenes
 
 from rtmesh.loaders.scene_file import read_scene_file
 
-SCENE = Path(__file__).resolve().parents[1] / "assets" / "cornell_box.toml"
+SCENE = Path(scenes.ASSETS) / "cornell_box.toml"
 
 
 @pytest.fixture(scope="module")
@@ -68,7 +69,7 @@ def test_cornell_box_camera_is_the_published_one(cornell):
     assert settings.width == settings.height
 
 
-DATA = Path(__file__).resolve().parent / "data"
+DATA = Path(scenes.DATA)
 
 
 @pytest.fixture(scope="module")

@@ -9,15 +9,16 @@ import sys
 
 import numpy as np
 import pytest
+import scenes
 
 from rtmesh.api import load_scene, render
 from rtmesh.cli import main
 from rtmesh.core.errors import MeshError
 
-DATA = os.path.join(os.path.dirname(__file__), "data")
+DATA = scenes.DATA
 # every real file: the copies in tests/data plus the bundled bunny (the same file)
 REAL_FILES = sorted(glob.glob(os.path.join(DATA, "*.obj")) + glob.glob(os.path.join(DATA, "*.glb"))
-                    + [os.path.join(os.path.dirname(__file__), "..", "assets", "meshes", "bunny.ply")])
+                    + [os.path.join(scenes.ASSETS, "meshes", "bunny.ply")])
 TINY = dict(width=40, height=40, spp=1, threads=1)
 
 

@@ -144,7 +144,7 @@ def test_mis_weights_sum_to_one_and_handle_the_edges():
 def test_mis_estimate_matches_bsdf_sampling_alone(monkeypatch):
     """Under a sky with a bright region, the MIS estimate of a rough metal equals the estimate
     of BSDF sampling alone (no environment light sampling, background weight 1)."""
-    from test_environment_lighting import sun_sky
+    from scenes import sun_sky
 
     material = physical(base=[0.9, 0.7, 0.5], metallic=1.0, roughness=0.4)
     sky = sun_sky(64)
