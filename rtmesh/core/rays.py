@@ -166,3 +166,24 @@ class RayBatch:
         """A batch of no rays."""
         return RayBatch(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64),
                         np.zeros((0, 3)), np.zeros((0, STACK_DEPTH), np.int32))
+
+
+def kernel_input(values, dtype):
+    """``values`` as a C-contiguous, writeable array of ``dtype`` (a copy only where it is
+    not one already), the one array type a kernel's signature declares for an input.
+
+    numba types a read-only array apart from a writeable one and compiles the kernel again
+    for it: a one-ray tail of a pinhole camera's origins (a repeated row, a read-only view
+    that NumPy calls contiguous) compiled the path kernel a second time, a minute of one
+    core on a first run.
+
+    Parameters
+    ----------
+    values : array_like
+    dtype : numpy dtype
+
+    Returns
+    -------
+    ndarray
+    """
+    return np.require(values, dtype, ("C", "W"))

@@ -34,7 +34,8 @@ import numpy as np
 from numba import types
 
 from rtmesh.core.compile_ahead import KernelGroup
-from rtmesh.core.compiled import kernel, kernel_input
+from rtmesh.core.compiled import kernel
+from rtmesh.core.rays import kernel_input
 from rtmesh.core.row_vectors import floor_quotient
 from rtmesh.geometry import embree_packets as ep
 from rtmesh.geometry.embree_library import packet_library

@@ -290,9 +290,32 @@ class Integrator:
         self.media = Media(m, scene.material_id, scene.vertices, scene.faces,
                            scene.face_normals)
         self._absorbing_medium = (self.media.absorption > 0).any(axis=1)
+        self._camera_medium = self._camera_stack(self.media)
+        self._camera_absorbs = bool((self.media.absorption[self._camera_medium[0]] > 0).any())
+
+    def camera_media(self, refracts):
+        """The media the camera sits in, counting as media the materials ``refracts`` marks
+        (the path integrator's transmissive models, which include some without a Whitted
+        transmission colour).
+
+        Parameters
+        ----------
+        refracts : (M,) bool
+
+        Returns
+        -------
+        (STACK_DEPTH,) int32
+            Material ids, innermost first, -1 padded.
+        """
+        scene = self.scene
+        return self._camera_stack(Media(scene.materials, scene.material_id, scene.vertices, scene.faces,
+                                        scene.face_normals, refracts))
+
+    def _camera_stack(self, media):
+        """``media.camera_stack`` from the camera's position, probing the scene as it is when
+        the shutter opens."""
         trace, to_rest = self.accel.intersect, None
         if self.motion is not None:
-            # the camera's media when the shutter opens
             def at_open(n):
                 return np.full(n, self.camera.shutter[0])
 
@@ -301,9 +324,7 @@ class Integrator:
 
             def to_rest(prim, directions):
                 return self.motion.directions_to_rest(prim, at_open(len(prim)), directions)
-        self._camera_medium = self.media.camera_stack(trace, self.camera.position, self.offset_scale,
-                                                      to_rest)
-        self._camera_absorbs = bool((self.media.absorption[self._camera_medium[0]] > 0).any())
+        return media.camera_stack(trace, self.camera.position, self.offset_scale, to_rest)
 
     # ---------------------------------------------------------------- whole image
     def render(self, progress=None, pool=None):

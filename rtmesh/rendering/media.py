@@ -72,6 +72,10 @@ class Media:
     faces : (F, 3) int
     face_normals : (F, 3) float
         Unit geometric normals (counter-clockwise side).
+    refracts : (M,) bool, optional
+        The materials that bound media; default: those with a Whitted transmission colour
+        (the path integrator passes the transmissive materials of its own models, for the
+        camera's stack).
 
     Attributes
     ----------
@@ -90,10 +94,11 @@ class Media:
         The transmissive materials.
     """
 
-    def __init__(self, materials, material_id, vertices, faces, face_normals):
+    def __init__(self, materials, material_id, vertices, faces, face_normals, refracts=None):
         self.ior = np.concatenate([materials.ior, [1.0]])
         self.absorption = np.concatenate([materials.absorption, np.zeros((1, 3))])
-        refracts = (materials.transmission > 0).any(axis=1)
+        if refracts is None:
+            refracts = (materials.transmission > 0).any(axis=1)
         transmissive = refracts[material_id]
         # a medium is a material: all its surfaces, in whatever objects, bound it together
         # (a water shell may be an outer sphere and an inward-facing inner one)

@@ -16,9 +16,8 @@ import logging
 
 import numpy as np
 
-from rtmesh.core.compiled import kernel_input
 from rtmesh.core.errors import SceneError
-from rtmesh.core.rays import STACK_DEPTH
+from rtmesh.core.rays import kernel_input
 from rtmesh.geometry import embree_library
 from rtmesh.geometry.cutouts import CutoutAccel
 from rtmesh.io.texture_atlas import TextureAtlas
@@ -218,16 +217,12 @@ class PathStage:
         else:
             e = environment
             self._env = (e.pixels, e.marginal, e.conditional, e.func, e.mean, e.cos_rotation, e.sin_rotation)
-        # the media the camera sits in (no stack at all without transmissive materials).  The
-        # camera's stack comes from rtmesh.rendering.media, which knows the materials with a
-        # Whitted transmission colour; a camera inside an object of another transmissive
-        # model (model = "dielectric") is taken to be outside it
-        if it.media is not None:
-            self._camera_media = np.ascontiguousarray(it._camera_medium, dtype=np.int64)
-        elif self.surface[2].any():
-            self._camera_media = np.full(STACK_DEPTH, -1, np.int64)
-        else:
-            self._camera_media = np.zeros(0, np.int64)
+        # the media the camera sits in, by the transmissive materials of the path's own
+        # models (a glass of model = "dielectric" as much as one with a Whitted transmission
+        # colour); no stack at all without transmissive materials
+        transmissive = self.surface[2]
+        self._camera_media = (kernel_input(it.camera_media(transmissive), np.int64) if transmissive.any()
+                              else np.zeros(0, np.int64))
         # the first vertex's light and BSDF points (rtmesh.rendering.path_kernel)
         self._sobol_keys = sequence_keys("zsobol" if settings.sampler == "zsobol" else "sobol", settings.seed,
                                          (Dim.PATH_LIGHT, Dim.PATH_BSDF), settings.spp,

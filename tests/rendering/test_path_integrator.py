@@ -85,6 +85,24 @@ def test_rough_glass_in_a_white_furnace(sphere, roughness):
     assert abs(image.mean() - 1.0) < 0.02
 
 
+def test_a_camera_inside_absorbing_glass_sees_through_it(sphere):
+    """Camera at the centre of a closed smooth glass sphere of the dielectric model (which has
+    no Whitted transmission colour), absorbing sigma = 0.5 per unit, in a uniform environment
+    of radiance 1.  At normal incidence (R = 0.04) each ray leaves the glass with the radiance
+    scaled by n^2 (L / n^2 is invariant across the interface), after e^-sigma on its way out
+    and e^-2 sigma more per internal reflection: n^2 e^-sigma (1 - R) / (1 - R e^-2 sigma).
+    The camera's own segment is absorbed only if the camera is known to sit in the glass."""
+    sigma, n = 0.5, 1.5
+    reflectance = ((n - 1.0) / (n + 1.0)) ** 2
+    expected = n * n * np.exp(-sigma) * (1.0 - reflectance) / (1.0 - reflectance * np.exp(-2.0 * sigma))
+    camera = Camera(np.zeros(3), np.array([0.0, 0.0, -1.0]), np.array([0.0, 1.0, 0.0]), fov=60.0)
+    glass = Material("glass", model="dielectric", ior=n, absorption=sigma)
+    scene = Scene.from_parts([MeshPart("s", sphere.vertices, sphere.faces, 0, vertex_normals=sphere.vertex_normals)],
+                             materials=[glass], lights=[], camera=camera, background=1.0)
+    image = _mean(scene, spp=16, integrator="path")
+    assert abs(image.mean() / expected - 1.0) < 0.01
+
+
 def test_images_do_not_depend_on_the_thread_count(sphere):
     scene = _outside(sphere, Material("m", model="conductor", mirror=(0.9, 0.6, 0.3), roughness=0.4))
     one = Integrator(scene, RenderSettings(width=16, height=12, spp=8, threads=1, integrator="path",
