@@ -31,6 +31,11 @@ Run from the repository root::
     python -m benchmarks.bench_zsobol                      # 480x360, 8 seeds
     python -m benchmarks.bench_zsobol --width 160 --height 120 --seeds 4 --no-figures
     python -m benchmarks.bench_zsobol --lights quad --no-figures
+    python -m benchmarks.bench_zsobol --fixed-point      # each light's estimator at one point
+
+``--fixed-point`` measures each area light's estimator alone, the same integrand in every
+pixel (:func:`fixed_point_errors`): what the sampler makes of the light's sample mapping
+when neighbouring pixels integrate exactly the same function.
 """
 
 import argparse
@@ -88,6 +93,72 @@ def emitter_mask(ref):
     """(h, w) bool: the pixels compared "without emitters", whose reference is at most 1.5
     (leaving out the lights seen directly and the floor touching the glowing ball)."""
     return ref.mean(axis=2) <= 1.5
+
+
+# floor points (world space, the floor's normal +y) where fixed_point_errors evaluates each
+# area light's estimator: beside the quad light's penumbrae, and beside the glowing ball
+FIXED_POINTS = {"quad": (0, (-1.0, 0.0, 2.0)), "mesh": (1, (1.9, 0.0, 1.9))}
+
+
+def fixed_point_errors(spps, seeds=4, size=128, points=FIXED_POINTS):
+    """zsobol against sobol where every pixel integrates the same function: one area light's
+    one-sample estimator ``f cos_s cos_l L / (d^2 pdf_A)`` (diffuse ``f``, channel mean) at
+    one floor point, unoccluded, on a ``size`` x ``size`` image.
+
+    The glowing ball hides its own far side from the floor (it is convex): its faces count
+    only where they face the point (``cos_l > 0``), as the shadow rays of a render find.
+
+    Returns
+    -------
+    list of dict
+        ``light``, ``spp``, ``raw`` and ``blurred`` (zsobol's RMSE over sobol's, pooled over
+        the seeds, blurred with σ = 1 pixel), ``blue`` and ``blue_sobol``
+        (:func:`benchmarks._lib.blue_noise_ratio` of each one's mean spectrum).
+    """
+    from rtmesh import api
+    from rtmesh.rendering.integrator import Integrator
+    from rtmesh.sampling.sampler import light_dimension
+    from rtmesh.sampling.patterns import decorrelated_points
+
+    scene, settings = api.load_scene(str(SCENE), width=size, height=size, light_samples=1)
+    it = Integrator(scene, settings)
+    lights = it.area_lighting.lights
+    rows = []
+    for name, (index, point) in points.items():
+        light = lights[index]
+        for spp in spps:
+            pixel = np.repeat(np.arange(size * size), spp)
+            sample = np.tile(np.arange(spp), size * size)
+            p = np.tile(np.asarray(point, np.float64) - it.shift, (len(pixel), 1))
+            errors = {}
+            for sampler in ("sobol", "zsobol"):
+                images = []
+                for seed in range(seeds):
+                    u = decorrelated_points(sampler, seed, pixel, sample, spp, light_dimension(0, index, len(lights)),
+                                            resolution=(size, size))
+                    y, normal, radiance, inverse_pdf = light.sample(u, p)
+                    to_light = y - p
+                    d2 = np.einsum("ij,ij->i", to_light, to_light)
+                    w = to_light / np.sqrt(d2)[:, None]
+                    cos_l = np.maximum(-np.einsum("ij,ij->i", w, np.broadcast_to(normal, w.shape)), 0.0)
+                    value = (np.maximum(w[:, 1], 0.0) * cos_l / d2 * inverse_pdf
+                             * np.mean(radiance, axis=-1) / np.pi)
+                    images.append(value.reshape(-1, spp).mean(axis=1).reshape(size, size))
+                errors[sampler] = np.array(images)
+            # the exact integral is unknown: the mean over both samplers' 2 x seeds x size^2
+            # pixel estimates stands for it (its own error is 1/(2 seeds size^2) of a pixel's)
+            truth = np.mean([errors["sobol"].mean(), errors["zsobol"].mean()])
+
+            def rmse(e, blur=False):
+                return np.sqrt(np.mean([np.mean(((_lib.gaussian_blur(x) if blur else x) - truth) ** 2) for x in e]))
+
+            def blue(e):
+                return _lib.blue_noise_ratio(np.mean([_lib.radial_power_spectrum(x - truth)[1] for x in e], axis=0))
+
+            z, s = errors["zsobol"], errors["sobol"]
+            rows.append(dict(light=name, spp=spp, raw=rmse(z) / rmse(s), blurred=rmse(z, True) / rmse(s, True),
+                             blue=blue(z), blue_sobol=blue(s)))
+    return rows
 
 
 def far_mask(ref):
@@ -241,9 +312,17 @@ def main(argv=None):
     parser.add_argument("--lights", choices=LIGHTS, default="all",
                         help="the scene's lights (quad or mesh: one alone, against its own reference)")
     parser.add_argument("--no-figures", action="store_true", help="(figures are written for --lights all only)")
+    parser.add_argument("--fixed-point", action="store_true",
+                        help="only each area light's estimator at one point, the same in every pixel")
     args = parser.parse_args(argv)
     args.figures = _lib.ROOT / "docs"
     print(_lib.machine())
+    if args.fixed_point:
+        print("| light | spp | zsobol / sobol: raw | blurred | spectrum: zsobol, sobol |\n|---|---|---|---|---|")
+        for r in fixed_point_errors(args.spp):
+            print(f"| {r['light']} | {r['spp']} | {r['raw']:.2f} | {r['blurred']:.2f} | "
+                  f"{r['blue']:.2f}, {r['blue_sobol']:.2f} |")
+        return
     ref = reference(args.width, args.height, args.ref_spp, args.threads, args.cache, args.lights)
     rows, spectra, examples = measure(ref, args.spp, args.seeds, args.threads,
                                       log=lambda line: print(line, flush=True), lights=args.lights)
