@@ -16,16 +16,30 @@ Errors are pooled over the seeds (root of the mean of the squared errors), spect
 Every figure is also given "without emitters": without the pixels whose reference is
 brighter than 1.5 (:func:`emitter_mask`: the lights seen directly and the floor touching the
 glowing ball, whose 1/r^2 fireflies dominate any RMSE of the whole image at low spp, so much
-that random's can come out below sobol's).  The figures (error images side by side, spectra)
+that random's can come out below sobol's), and "far from emitters": without the pixels
+within 2 pixels of those too (:func:`far_mask`: the antialiased edges of the lights seen
+directly, whose partly covered pixels pass the 1.5 of the first mask).
+
+``--lights quad`` or ``--lights mesh`` render the scene lit by its quad light alone (the
+glowing ball's emission set to 0; the ball stays as a black occluder) or by the emissive
+ball alone (the quad light removed), each against its own reference: which light's
+estimator holds the error that does not turn blue (docs/SAMPLERS.md).  The figures (error images side by side, spectra)
 are written to ``docs/`` for docs/SAMPLERS.md.
 
 Run from the repository root::
 
     python -m benchmarks.bench_zsobol                      # 480x360, 8 seeds
     python -m benchmarks.bench_zsobol --width 160 --height 120 --seeds 4 --no-figures
+    python -m benchmarks.bench_zsobol --lights quad --no-figures
+    python -m benchmarks.bench_zsobol --fixed-point      # each light's estimator at one point
+
+``--fixed-point`` measures each area light's estimator alone, the same integrand in every
+pixel (:func:`fixed_point_errors`): what the sampler makes of the light's sample mapping
+when neighbouring pixels integrate exactly the same function.
 """
 
 import argparse
+import dataclasses
 import time
 from pathlib import Path
 
@@ -35,25 +49,40 @@ from benchmarks import _lib
 
 SCENE = _lib.ROOT / "assets" / "effects" / "soft_shadow.toml"
 SAMPLERS = ("random", "sobol", "zsobol")
+LIGHTS = ("all", "quad", "mesh")
+# pixels this close to an emitter pixel (in pixels) are left out "far from emitters"
+EMITTER_MARGIN = 2
 
 
-def render(width, height, spp, sampler, seed, light_samples, threads):
-    """One linear image of the scene, (h, w, 3) float64, and its render seconds."""
+def render(width, height, spp, sampler, seed, light_samples, threads, lights="all"):
+    """One linear image of the scene, (h, w, 3) float64, and its render seconds.
+
+    ``lights``: ``"all"`` (the scene as it is), ``"quad"`` (no emissive material) or
+    ``"mesh"`` (no quad light), see the module notes.
+    """
     from rtmesh import api
+    from rtmesh.materials.table import MaterialTable
 
     start = time.perf_counter()
-    image = api.render(str(SCENE), width=width, height=height, spp=spp, sampler=sampler, seed=seed,
-                       light_samples=light_samples, threads=threads).image
+    scene, settings = api.load_scene(str(SCENE), width=width, height=height, spp=spp, sampler=sampler, seed=seed,
+                                     light_samples=light_samples, threads=threads)
+    if lights == "quad":
+        scene.materials = MaterialTable([dataclasses.replace(m, emission=np.zeros(3))
+                                         for m in scene.materials.materials])
+    elif lights == "mesh":
+        scene.lights = []
+    image = api.render(scene, settings).image
     return np.asarray(image, np.float64), time.perf_counter() - start
 
 
-def reference(width, height, spp, threads, cache):
+def reference(width, height, spp, threads, cache, lights="all"):
     """The reference image (``spp`` x 4 light samples, jittered), rendered once per size and
-    kept in the folder ``cache``."""
-    path = Path(cache) / f"soft_shadow_{width}x{height}_{spp}spp.npy"
+    lights and kept in the folder ``cache``."""
+    variant = "" if lights == "all" else f"_{lights}"
+    path = Path(cache) / f"soft_shadow{variant}_{width}x{height}_{spp}spp.npy"
     if path.exists():
         return np.load(path)
-    image, took = render(width, height, spp, "jittered", 12345, 4, threads)
+    image, took = render(width, height, spp, "jittered", 12345, 4, threads, lights)
     print(f"reference: {spp} spp x 4 light samples in {took:.0f} s")
     path.parent.mkdir(parents=True, exist_ok=True)
     np.save(path, image)
@@ -66,7 +95,84 @@ def emitter_mask(ref):
     return ref.mean(axis=2) <= 1.5
 
 
-def measure(ref, spps, seeds, threads=1, samplers=SAMPLERS, log=print):
+# floor points (world space, the floor's normal +y) where fixed_point_errors evaluates each
+# area light's estimator: beside the quad light's penumbrae, and beside the glowing ball
+FIXED_POINTS = {"quad": (0, (-1.0, 0.0, 2.0)), "mesh": (1, (1.9, 0.0, 1.9))}
+
+
+def fixed_point_errors(spps, seeds=4, size=128, points=FIXED_POINTS):
+    """zsobol against sobol where every pixel integrates the same function: one area light's
+    one-sample estimator ``f cos_s cos_l L / (d^2 pdf_A)`` (diffuse ``f``, channel mean) at
+    one floor point, unoccluded, on a ``size`` x ``size`` image.
+
+    The glowing ball hides its own far side from the floor (it is convex): its faces count
+    only where they face the point (``cos_l > 0``), as the shadow rays of a render find.
+
+    Returns
+    -------
+    list of dict
+        ``light``, ``spp``, ``raw`` and ``blurred`` (zsobol's RMSE over sobol's, pooled over
+        the seeds, blurred with σ = 1 pixel), ``blue`` and ``blue_sobol``
+        (:func:`benchmarks._lib.blue_noise_ratio` of each one's mean spectrum).
+    """
+    from rtmesh import api
+    from rtmesh.rendering.integrator import Integrator
+    from rtmesh.sampling.sampler import light_dimension
+    from rtmesh.sampling.patterns import decorrelated_points
+
+    scene, settings = api.load_scene(str(SCENE), width=size, height=size, light_samples=1)
+    it = Integrator(scene, settings)
+    lights = it.area_lighting.lights
+    rows = []
+    for name, (index, point) in points.items():
+        light = lights[index]
+        for spp in spps:
+            pixel = np.repeat(np.arange(size * size), spp)
+            sample = np.tile(np.arange(spp), size * size)
+            p = np.tile(np.asarray(point, np.float64) - it.shift, (len(pixel), 1))
+            errors = {}
+            for sampler in ("sobol", "zsobol"):
+                images = []
+                for seed in range(seeds):
+                    u = decorrelated_points(sampler, seed, pixel, sample, spp, light_dimension(0, index, len(lights)),
+                                            resolution=(size, size))
+                    y, normal, radiance, inverse_pdf = light.sample(u, p)
+                    to_light = y - p
+                    d2 = np.einsum("ij,ij->i", to_light, to_light)
+                    w = to_light / np.sqrt(d2)[:, None]
+                    cos_l = np.maximum(-np.einsum("ij,ij->i", w, np.broadcast_to(normal, w.shape)), 0.0)
+                    value = (np.maximum(w[:, 1], 0.0) * cos_l / d2 * inverse_pdf
+                             * np.mean(radiance, axis=-1) / np.pi)
+                    images.append(value.reshape(-1, spp).mean(axis=1).reshape(size, size))
+                errors[sampler] = np.array(images)
+            # the exact integral is unknown: the mean over both samplers' 2 x seeds x size^2
+            # pixel estimates stands for it (its own error is 1/(2 seeds size^2) of a pixel's)
+            truth = np.mean([errors["sobol"].mean(), errors["zsobol"].mean()])
+
+            def rmse(e, blur=False):
+                return np.sqrt(np.mean([np.mean(((_lib.gaussian_blur(x) if blur else x) - truth) ** 2) for x in e]))
+
+            def blue(e):
+                return _lib.blue_noise_ratio(np.mean([_lib.radial_power_spectrum(x - truth)[1] for x in e], axis=0))
+
+            z, s = errors["zsobol"], errors["sobol"]
+            rows.append(dict(light=name, spp=spp, raw=rmse(z) / rmse(s), blurred=rmse(z, True) / rmse(s, True),
+                             blue=blue(z), blue_sobol=blue(s)))
+    return rows
+
+
+def far_mask(ref):
+    """(h, w) bool: the pixels compared "far from emitters": at least
+    :data:`EMITTER_MARGIN` pixels (in x and in y) from any pixel :func:`emitter_mask` leaves
+    out, so that the antialiased edges of the lights seen directly (partly covered pixels,
+    whose reference may stay below 1.5) are left out too."""
+    r = EMITTER_MARGIN
+    bright = np.pad(~emitter_mask(ref), r)
+    windows = np.lib.stride_tricks.sliding_window_view(bright, (2 * r + 1, 2 * r + 1))
+    return ~windows.any(axis=(2, 3))
+
+
+def measure(ref, spps, seeds, threads=1, samplers=SAMPLERS, log=print, lights="all"):
     """Errors, spectra and times of every (spp, sampler), and seed 0's error images.
 
     Returns
@@ -74,62 +180,68 @@ def measure(ref, spps, seeds, threads=1, samplers=SAMPLERS, log=print):
     rows : list of dict
         ``spp``, ``sampler``, ``raw``, ``blurred`` (relative RMSE of the image, pooled over
         the seeds), ``raw_masked``, ``blurred_masked`` (over :func:`emitter_mask`),
-        ``blue``, ``blue_masked`` (:func:`benchmarks._lib.blue_noise_ratio` of the mean
-        spectrum of the error, and of the error with the masked-out pixels set to 0),
-        ``seconds`` (median render time).
+        ``raw_far``, ``blurred_far`` (over :func:`far_mask`), ``blue``, ``blue_masked``,
+        ``blue_far`` (:func:`benchmarks._lib.blue_noise_ratio` of the mean spectrum of the
+        error, and of the error with the masked-out pixels set to 0), ``seconds`` (median
+        render time).
     spectra : dict
         ``(spp, sampler)``: (frequency, power) of the masked error.
     examples : dict
         ``(spp, sampler)``: seed 0's error (channel mean), (h, w).
     """
     height, width = ref.shape[:2]
-    mask = emitter_mask(ref)
+    masks = {"": np.ones((height, width), bool), "_masked": emitter_mask(ref), "_far": far_mask(ref)}
     blurred_ref = _lib.gaussian_blur(ref)
     rows, spectra, examples = [], {}, {}
     for spp in spps:
         for sampler in samplers:
-            sq = np.zeros(4)
-            power, power_masked, times = 0.0, 0.0, []
+            sq = {name: np.zeros(2) for name in masks}
+            power = {name: 0.0 for name in masks}
+            times = []
             for seed in range(seeds):
-                image, took = render(width, height, spp, sampler, seed, 1, threads)
+                image, took = render(width, height, spp, sampler, seed, 1, threads, lights)
                 times.append(took)
                 error = image - ref
                 blurred = _lib.gaussian_blur(image) - blurred_ref
-                sq += [np.mean(error ** 2), np.mean(blurred ** 2), np.mean(error[mask] ** 2),
-                       np.mean(blurred[mask] ** 2)]
-                power = power + _lib.radial_power_spectrum(error.mean(axis=2))[1] / seeds
-                frequency, p = _lib.radial_power_spectrum(np.where(mask, error.mean(axis=2), 0.0))
-                power_masked = power_masked + p / seeds
+                for name, mask in masks.items():
+                    sq[name] += [np.mean(error[mask] ** 2), np.mean(blurred[mask] ** 2)]
+                    frequency, p = _lib.radial_power_spectrum(np.where(mask, error.mean(axis=2), 0.0))
+                    power[name] = power[name] + p / seeds
                 if seed == 0:
-                    examples[spp, sampler] = np.where(mask, error.mean(axis=2), 0.0)
-            rmse = np.sqrt(sq / seeds)
-            rows.append(dict(spp=spp, sampler=sampler, raw=rmse[0] / ref.mean(), blurred=rmse[1] / ref.mean(),
-                             raw_masked=rmse[2] / ref[mask].mean(), blurred_masked=rmse[3] / ref[mask].mean(),
-                             blue=_lib.blue_noise_ratio(power), blue_masked=_lib.blue_noise_ratio(power_masked),
-                             seconds=float(np.median(times))))
-            spectra[spp, sampler] = (frequency, power_masked)
+                    examples[spp, sampler] = np.where(masks["_masked"], error.mean(axis=2), 0.0)
+            row = dict(spp=spp, sampler=sampler, seconds=float(np.median(times)))
+            for name, mask in masks.items():
+                raw, blurred = np.sqrt(sq[name] / seeds) / ref[mask].mean()
+                row.update({"raw" + name: raw, "blurred" + name: blurred,
+                            "blue" + name: _lib.blue_noise_ratio(power[name])})
+            rows.append(row)
+            spectra[spp, sampler] = (frequency, power["_masked"])
             r = rows[-1]
             log(f"{spp:3d} spp {sampler:8s} raw {r['raw']:.4f} blurred {r['blurred']:.4f} "
-                f"(masked {r['raw_masked']:.4f} / {r['blurred_masked']:.4f}) blue {r['blue']:.2f} "
-                f"(masked {r['blue_masked']:.2f}) median {r['seconds']:.2f} s")
+                f"(masked {r['raw_masked']:.4f} / {r['blurred_masked']:.4f}, far {r['raw_far']:.4f} / "
+                f"{r['blurred_far']:.4f}) blue {r['blue']:.2f} (masked {r['blue_masked']:.2f}, far "
+                f"{r['blue_far']:.2f}) median {r['seconds']:.2f} s")
     return rows, spectra, examples
 
 
 def table(rows, args):
-    """The markdown table of the measurements, with zsobol / sobol ratios."""
+    """The markdown tables of the measurements: per sampler, and zsobol / sobol ratios with
+    zsobol's spectrum ratio, over the image, without emitters and far from emitters."""
     by = {(r["spp"], r["sampler"]): r for r in rows}
-    lines = ["| spp | sampler | rel. RMSE | blurred (σ = 1 px) | without emitters: raw / blurred | "
-             "spectrum top/bottom third: image / without emitters | median time (s) |",
-             "|---|---|---|---|---|---|---|"]
+    regions = (("", "image"), ("_masked", "without emitters"), ("_far", "far from emitters"))
+    lines = ["| spp | sampler | " + " | ".join(f"{label}: raw / blurred (σ = 1 px) / spectrum"
+                                             for _, label in regions) + " | median time (s) |",
+             "|---|---|---|---|---|---|"]
     for r in rows:
-        lines.append(f"| {r['spp']} | {r['sampler']} | {r['raw']:.4f} | {r['blurred']:.4f} | "
-                     f"{r['raw_masked']:.4f} / {r['blurred_masked']:.4f} | {r['blue']:.2f} / {r['blue_masked']:.2f} | "
-                     f"{r['seconds']:.2f} |")
-    lines += ["", "| spp | zsobol / sobol: raw | blurred | without emitters: raw | blurred |", "|---|---|---|---|---|"]
+        cells = [f"{r['raw' + k]:.4f} / {r['blurred' + k]:.4f} / {r['blue' + k]:.2f}" for k, _ in regions]
+        lines.append(f"| {r['spp']} | {r['sampler']} | " + " | ".join(cells) + f" | {r['seconds']:.2f} |")
+    lines += ["", "| spp | " + " | ".join(f"{label}: zsobol / sobol raw, blurred; zsobol's spectrum"
+                                        for _, label in regions) + " |", "|---|---|---|---|"]
     for spp in args.spp:
         z, s = by[spp, "zsobol"], by[spp, "sobol"]
-        lines.append(f"| {spp} | {z['raw'] / s['raw']:.3f} | {z['blurred'] / s['blurred']:.3f} | "
-                     f"{z['raw_masked'] / s['raw_masked']:.3f} | {z['blurred_masked'] / s['blurred_masked']:.3f} |")
+        cells = [f"{z['raw' + k] / s['raw' + k]:.2f}, {z['blurred' + k] / s['blurred' + k]:.2f}; {z['blue' + k]:.2f}"
+                 for k, _ in regions]
+        lines.append(f"| {spp} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
@@ -197,16 +309,26 @@ def main(argv=None):
     parser.add_argument("--ref-spp", type=int, default=256)
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--cache", default=str(_lib.ROOT / "out" / "bench_zsobol"))
-    parser.add_argument("--no-figures", action="store_true")
+    parser.add_argument("--lights", choices=LIGHTS, default="all",
+                        help="the scene's lights (quad or mesh: one alone, against its own reference)")
+    parser.add_argument("--no-figures", action="store_true", help="(figures are written for --lights all only)")
+    parser.add_argument("--fixed-point", action="store_true",
+                        help="only each area light's estimator at one point, the same in every pixel")
     args = parser.parse_args(argv)
     args.figures = _lib.ROOT / "docs"
     print(_lib.machine())
-    ref = reference(args.width, args.height, args.ref_spp, args.threads, args.cache)
+    if args.fixed_point:
+        print("| light | spp | zsobol / sobol: raw | blurred | spectrum: zsobol, sobol |\n|---|---|---|---|---|")
+        for r in fixed_point_errors(args.spp):
+            print(f"| {r['light']} | {r['spp']} | {r['raw']:.2f} | {r['blurred']:.2f} | "
+                  f"{r['blue']:.2f}, {r['blue_sobol']:.2f} |")
+        return
+    ref = reference(args.width, args.height, args.ref_spp, args.threads, args.cache, args.lights)
     rows, spectra, examples = measure(ref, args.spp, args.seeds, args.threads,
-                                      log=lambda line: print(line, flush=True))
+                                      log=lambda line: print(line, flush=True), lights=args.lights)
     print()
     print(table(rows, args))
-    if not args.no_figures:
+    if not args.no_figures and args.lights == "all":
         figures(spectra, examples, args)
         print(f"figures written to {args.figures}/samplers_error.png and samplers_spectra.png")
 

@@ -107,6 +107,9 @@ def build_parser():
     p.add_argument("--fresnel", choices=FRESNEL_MODES, help="Fresnel model for dielectrics")
     p.add_argument("--exposure", type=float, help="exposure in stops for 8-bit output")
     p.add_argument("--tonemap", choices=TONEMAPS, help="tone-mapping operator for 8-bit output")
+    p.add_argument("--dither", action="store_true",
+                   help="blue-noise dithering when quantising to 8-bit PNG/JPEG (no bands in smooth "
+                   "gradients; default: round to nearest)")
     p.add_argument("--memory-limit", type=_bytes, metavar="SIZE",
                    help="refuse a render whose estimated memory exceeds SIZE, e.g. 4G; 0 = no check "
                    "(default: the memory available)")
@@ -368,7 +371,7 @@ def cmd_render(args):
         finally:
             bar.close()
     write_image(args.output, result.image, result.passes, settings.exposure, settings.tonemap,
-                alpha=result.alpha, header=settings.header())
+                alpha=result.alpha, header=settings.header(), dither=args.dither)
     if args.camera_json:
         write_camera_json(args.camera_json, camera_record(scene.camera, settings.width, settings.height,
                                                           scene.bounds))

@@ -126,6 +126,14 @@ def test_scene_file_error_names_file_and_key(tmp_path):
     assert "Traceback" not in err
 
 
+def test_dither_moves_png_values_by_at_most_one_step(scene_file, tmp_path):
+    rounded, dithered = tmp_path / "rounded.png", tmp_path / "dithered.png"
+    assert main(["render", str(scene_file), "-o", str(rounded), "-q"]) == 0
+    assert main(["render", str(scene_file), "-o", str(dithered), "--dither", "-q"]) == 0
+    a, b = (np.round(read_image(path)[0] * 255.0) for path in (rounded, dithered))
+    assert np.abs(a - b).max() == 1.0
+
+
 def test_failed_write_keeps_existing_image_and_leaves_no_temporary(scene_file, tmp_path, monkeypatch):
     out = tmp_path / "keep.png"
     out.write_bytes(b"previous image")

@@ -3,8 +3,15 @@
 Writes are atomic: the image goes to a temporary file in the destination folder and is
 renamed over the destination only once complete, so a failed or interrupted write never
 leaves a partial image (and never destroys an existing one).
+
+A rendered image can be written to 8 bits with blue-noise dithering (``dither=True``,
+``--dither``): a smooth gradient then shows no bands of equal values, and the mean of every
+region stays the mean of its display values.  It is off by default: rtmesh's 8-bit images
+are also data (datasets, tests comparing pixels), which round-to-nearest keeps a pure
+function of the display value, and at 8 bits the bands show only in dark, smooth gradients.
 """
 
+import functools
 import logging
 import os
 import sys
@@ -16,11 +23,15 @@ from rtmesh.core.errors import OutputError
 from rtmesh.io.atomic_files import replace_atomically
 from rtmesh.io.colour import linear_to_srgb, tonemap
 from rtmesh.io.passes import exr_channel_names
+from rtmesh.sampling.patterns import Dim, stratified_values
 
 FLOAT_FORMATS = (".exr",)
 DISPLAY_FORMATS = (".png", ".jpg", ".jpeg")
 # the largest value a 16-bit depth PNG stores
 DEPTH_PNG_MAX = 65535
+# side of the tile of dither thresholds repeated over an image: large enough that the
+# repetition does not show as a pattern, small enough to form in a few milliseconds
+DITHER_TILE = 128
 
 log = logging.getLogger(__name__)
 
@@ -53,7 +64,8 @@ def check_output_path(path):
         raise OutputError(f"{path}: is a folder, not a file name")
 
 
-def write_image(path, image, passes=None, exposure=0.0, operator="reinhard", alpha=None, header=None):
+def write_image(path, image, passes=None, exposure=0.0, operator="reinhard", alpha=None, header=None,
+                dither=False):
     """Write a rendered image; the format follows the file extension.
 
     Parameters
@@ -80,6 +92,9 @@ def write_image(path, image, passes=None, exposure=0.0, operator="reinhard", alp
     header : dict of str to str, int or float, optional
         Attributes written into an EXR's header (the render settings,
         :meth:`rtmesh.rendering.settings.RenderSettings.header`); 8-bit formats leave them out.
+    dither : bool
+        Quantise an 8-bit image's colour with blue-noise dithering (:func:`dither_thresholds`)
+        instead of rounding to nearest; EXR and the alpha channel are not affected.
 
     Raises
     ------
@@ -114,7 +129,7 @@ def write_image(path, image, passes=None, exposure=0.0, operator="reinhard", alp
         display = linear_to_srgb(tonemap(image, exposure, operator))
         if straight_alpha:
             display = np.concatenate([display, np.clip(alpha, 0.0, 1.0)], axis=2)
-        pixels, spec = _8bit(display, ext)
+        pixels, spec = _8bit(display, ext, dither)
     _write_atomically(path, spec, pixels)
 
 
@@ -175,11 +190,47 @@ def write_depth_png(path, depth, scale=1000.0):
     _write_atomically(os.fspath(path), oiio.ImageSpec(w, h, 1, oiio.UINT16), np.ascontiguousarray(pixels[:, :, None]))
 
 
-def _8bit(display, ext):
-    """Quantised pixels and the spec of an 8-bit image of display values in [0, 1]."""
+@functools.cache
+def dither_thresholds():
+    """Blue-noise dither thresholds: a (:data:`DITHER_TILE`, :data:`DITHER_TILE`) float64
+    tile of values in [0, 1), repeated over an image.
+
+    The ``zsobol`` sampler's values of one dimension (:attr:`Dim.DITHER`, seed 0) at one
+    sample a pixel: every aligned 2x2, 4x4 ... block of the tile holds one value in each of
+    its 4, 16 ... equal parts of [0, 1), in a random order (Ahmed & Wonka 2020's screen-space
+    blue noise), so neighbouring pixels round in complementary directions and the
+    quantisation error moves to high spatial frequencies.
+    """
+    pixel = np.arange(DITHER_TILE * DITHER_TILE)
+    values = stratified_values("zsobol", 0, pixel, np.zeros_like(pixel), 1, Dim.DITHER,
+                               resolution=(DITHER_TILE, DITHER_TILE))
+    return values.reshape(DITHER_TILE, DITHER_TILE)
+
+
+def dither_offsets(height, width):
+    """(height, width) float64 in [-0.5, 0.5): :func:`dither_thresholds` repeated over an
+    image, centred, to add to values in 8-bit steps before rounding."""
+    tile = dither_thresholds()
+    reps = (-(-height // DITHER_TILE), -(-width // DITHER_TILE))
+    return np.tile(tile, reps)[:height, :width] - 0.5
+
+
+def _8bit(display, ext, dither=False):
+    """Quantised pixels and the spec of an 8-bit image of display values in [0, 1]; with
+    ``dither`` the colour channels are dithered (:func:`dither_offsets`), not alpha."""
     h, w, c = display.shape
+    # in the display values' own precision: undithered output stays what it always was
+    scaled = display * 255.0
+    if dither:
+        scaled = scaled.astype(np.float64)
+        # an offset uniform in [-1/2, 1/2) step before rounding gives the upper of the two
+        # nearest steps with a chance equal to the value's fraction of a step: the mean of
+        # a region is kept, its error is the thresholds' blue noise; one offset for the
+        # three channels, so that greys stay grey.  Clipped: 255 + 0.49 must not wrap.
+        colours = min(c, 3)
+        scaled[:, :, :colours] = np.clip(scaled[:, :, :colours] + dither_offsets(h, w)[:, :, None], 0.0, 255.0)
     # round to nearest: 8-bit quantisation error at most half a step
-    pixels = np.round(display * 255.0).astype(np.uint8)
+    pixels = np.round(scaled).astype(np.uint8)
     spec = oiio.ImageSpec(w, h, c, oiio.UINT8)
     if c == 4:
         spec.alpha_channel = 3

@@ -47,6 +47,7 @@ class Dim(IntEnum):
     PATH_BSDF = (1 << 29) + 2  # and its BSDF direction there
     PHOTON_POINT = (1 << 29) + 4  # a photon pass's emission points (Sobol pairs over the photon index)
     PHOTON_DIRECTION = (1 << 29) + 6  # and its emission directions
+    DITHER = (1 << 29) + 8  # the blue-noise thresholds of 8-bit output (one number; see rtmesh.io.images)
 
 
 def dimension_key(seed, dimension):
