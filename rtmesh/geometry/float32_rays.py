@@ -2,6 +2,7 @@
 offsets, and Embree's float32 closest-hit results as float64 (see :mod:`rtmesh.geometry.accel`).
 """
 
+import functools
 
 import numba
 import numpy as np
@@ -55,12 +56,27 @@ def _ulp32(x):
     return _float32_from_bits(_float32_bits(x) & _EXPONENT_MASK) * _ULP_SCALE
 
 
-@cached(lambda cache: numba.vectorize(["float32(float32)"], nopython=True, cache=cache))
 def ulp32(x):
-    """Spacing of float32 numbers at each element (a ufunc: any shape and layout).
+    """Spacing of float32 numbers at each element (any shape and layout).
 
     ``np.spacing(abs(x))`` for normal floats; 0 for zeros and subnormals.
+
+    Parameters
+    ----------
+    x : float32 array
     """
+    return _ulp32_ufunc()(x)
+
+
+@functools.cache
+def _ulp32_ufunc():
+    """The compiled ufunc behind :func:`ulp32`, made on first use rather than at import:
+    loading it starts numba's code generator (about 0.4 s), which a process that only
+    parses its arguments or reports a bad file never needs."""
+    return cached(lambda cache: numba.vectorize(["float32(float32)"], nopython=True, cache=cache))(_ulp32_element)
+
+
+def _ulp32_element(x):
     return _ulp32(x)
 
 
