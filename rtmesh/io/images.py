@@ -23,15 +23,16 @@ from rtmesh.core.errors import OutputError
 from rtmesh.io.atomic_files import replace_atomically
 from rtmesh.io.colour import linear_to_srgb, tonemap
 from rtmesh.io.passes import exr_channel_names
-from rtmesh.sampling.patterns import Dim, stratified_values
 
 FLOAT_FORMATS = (".exr",)
 DISPLAY_FORMATS = (".png", ".jpg", ".jpeg")
 # the largest value a 16-bit depth PNG stores
 DEPTH_PNG_MAX = 65535
 # side of the tile of dither thresholds repeated over an image: large enough that the
-# repetition does not show as a pattern, small enough to form in a few milliseconds
+# repetition does not show as a pattern; the tile ships as data (made by
+# rtmesh.sampling.dither_tile from the zsobol sampler, a layer above this one)
 DITHER_TILE = 128
+DITHER_TILE_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "dither_tile.npy")
 
 log = logging.getLogger(__name__)
 
@@ -193,18 +194,9 @@ def write_depth_png(path, depth, scale=1000.0):
 @functools.cache
 def dither_thresholds():
     """Blue-noise dither thresholds: a (:data:`DITHER_TILE`, :data:`DITHER_TILE`) float64
-    tile of values in [0, 1), repeated over an image.
-
-    The ``zsobol`` sampler's values of one dimension (:attr:`Dim.DITHER`, seed 0) at one
-    sample a pixel: every aligned 2x2, 4x4 ... block of the tile holds one value in each of
-    its 4, 16 ... equal parts of [0, 1), in a random order (Ahmed & Wonka 2020's screen-space
-    blue noise), so neighbouring pixels round in complementary directions and the
-    quantisation error moves to high spatial frequencies.
-    """
-    pixel = np.arange(DITHER_TILE * DITHER_TILE)
-    values = stratified_values("zsobol", 0, pixel, np.zeros_like(pixel), 1, Dim.DITHER,
-                               resolution=(DITHER_TILE, DITHER_TILE))
-    return values.reshape(DITHER_TILE, DITHER_TILE)
+    tile of values in [0, 1), repeated over an image (what
+    :func:`rtmesh.sampling.dither_tile.blue_noise_tile` computes, read once per process)."""
+    return np.load(DITHER_TILE_PATH)
 
 
 def dither_offsets(height, width):

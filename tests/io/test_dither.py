@@ -6,6 +6,7 @@ import pytest
 from benchmarks._lib import blue_noise_ratio, radial_power_spectrum
 from rtmesh.io.colour import linear_to_srgb, tonemap
 from rtmesh.io.images import DITHER_TILE, dither_thresholds, read_image, write_image
+from rtmesh.sampling.dither_tile import blue_noise_tile
 
 
 def written(tmp_path, image, dither, name="out.png", alpha=None):
@@ -23,6 +24,10 @@ def block_means(values, block=8):
     grey = values.mean(axis=2)
     h, w = grey.shape
     return grey.reshape(h // block, block, w // block, block).mean(axis=(1, 3))
+
+
+def test_shipped_thresholds_are_what_the_zsobol_sampler_gives():
+    assert np.array_equal(dither_thresholds(), blue_noise_tile())
 
 
 def test_thresholds_are_stratified_blue_noise():
