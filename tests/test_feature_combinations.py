@@ -243,9 +243,8 @@ def scene_descriptions(draw):
     integrator = draw(st.sampled_from(["whitted", "path"]))
     d["settings"]["integrator"] = integrator
     if integrator == "path":
-        # what the path integrator does not render yet: projector lights, and moving objects
-        # in a scene with cut-outs or moving emitters (those keep still)
-        d["lights"] = [light for light in d["lights"] if light["type"] != "projector"]
+        # what the path integrator does not render yet: moving objects in a scene with
+        # cut-outs or moving emitters (those keep still)
         # the keys only Whitted reads (path warns that it ignores them)
         d["ambient"] = 0.0
         d["settings"].update(cutoff=1e-3, ao_samples=0)

@@ -23,8 +23,9 @@ does not depend on chunks or threads.
 
 Records (tuples of arrays, built once by :class:`rtmesh.rendering.path_stage.PathStage`):
 ``geometry`` and ``surface`` as :mod:`rtmesh.rendering.path_surfaces` describes them;
-``lights = (rows, probability, alias, pmf, face_light, analytic, environment)``
-(:class:`rtmesh.lights.light_table.LightTable`); ``env = (pixels, marginal, conditional,
+``lights = (rows, probability, alias, pmf, face_light, analytic, environment, texels,
+descriptors)`` (:class:`rtmesh.lights.light_table.LightTable`, the last two its projectors'
+images); ``env = (pixels, marginal, conditional,
 func, mean, cos_rotation, sin_rotation)`` (:class:`rtmesh.lights.light_table.EnvironmentTables`);
 ``options = (max_depth, rr_depth, clamp, offset_scale, background_seen, cutouts, split,
 camera_media)``, the last the media the camera sits in (``STACK_DEPTH`` material ids,
@@ -94,6 +95,7 @@ _environment_pdf = inline_row(lt.environment_pdf.py_func)
 _environment_sample = inline_row(sample_direction.py_func)
 _sample_area_point = inline_row(lt.sample_area_point.py_func)
 _illuminate_row = inline_row(illuminate_row.py_func)
+_projector_incident = inline_row(lt.projector_incident.py_func)
 
 DIMENSIONS_PER_VERTEX = 8
 # dimensions of a vertex, after DIMENSIONS_PER_VERTEX * depth
@@ -151,13 +153,17 @@ def _layer_coin(key, depth, layer, dimension):
 
 
 @inline_row
-def sample_li(light, env, px, py, pz, u1, u2):
+def sample_li(light, env, texels, descriptors, px, py, pz, u1, u2):
     """One light's ``sample_li`` at a point: ``(wx, wy, wz, distance, Lr, Lg, Lb, pdf, delta)``
     with the incident radiance (delta lights: their incident term) and the solid-angle density
-    (delta lights: 1); ``pdf`` 0 for a failed sample."""
+    (delta lights: 1); ``pdf`` 0 for a failed sample.  ``texels, descriptors``: the
+    projectors' images (the ``lights`` record's atlas)."""
     kind = light[0]
     if kind < lt.QUAD:
         wx, wy, wz, distance, er, eg, eb = _illuminate_row(light, px, py, pz)
+        return wx, wy, wz, distance, er, eg, eb, 1.0, True
+    if kind == lt.PROJECTOR:
+        wx, wy, wz, distance, er, eg, eb = _projector_incident(light, texels, descriptors, px, py, pz)
         return wx, wy, wz, distance, er, eg, eb, 1.0, True
     if kind == lt.ENVIRONMENT:
         (pixels, marginal, conditional, func, mean, cos_r, sin_r) = env
@@ -317,7 +323,8 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     tags, transmissive = surface[0], surface[2]
     absorption, unlit, albedo_table = surface[4], surface[5], surface[6]
     textured = textured_materials(surface, geometry)
-    light_rows, light_probability, light_alias, light_pmf, face_light, analytic, env_light = lights
+    light_rows, light_probability, light_alias, light_pmf, face_light, analytic, env_light, light_texels, \
+        light_descriptors = lights
     max_depth, rr_depth, clamp, offset_scale, background_seen, cutouts, split, camera_media = options
     media = len(camera_media)
     env_pixels, env_marginal, env_conditional, env_func, env_mean, env_cos, env_sin = env
@@ -585,7 +592,8 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 if follow and has_lights:
                     chosen = alias_sample(light_probability, light_alias, uniform(key, base + _LIGHT_CHOICE))
                     light = light_rows[chosen]
-                    wx, wy, wz, distance, lr, lg, lb, pdf_li, delta = sample_li(light, env, hx, hy, hz, lu1, lu2)
+                    wx, wy, wz, distance, lr, lg, lb, pdf_li, delta = sample_li(
+                        light, env, light_texels, light_descriptors, hx, hy, hz, lu1, lu2)
                     if light[0] == lt.TRIANGLE:
                         # the emitter's own (textured) radiance at the sampled point
                         lr, lg, lb = triangle_light_emission(surface, geometry, light, lu1, lu2)
@@ -728,7 +736,8 @@ def small_records():
     surface = (z(1, np.int64), z((1, lobes.PARAMETER_WIDTH)), z(1, bool), z((1, 3)), z((1, 3)), z((1, 4)),
                energy, z((1, 6), np.int64), z((1, 6), np.int64), z(1), z(1, np.int64), z(1), z(1),
                z(1, np.float32), z((1, 12)), z(1))
-    lights = (z((1, lt.WIDTH)), z(1), z(1, np.int64), z(1), z(1, np.int64), z(0, np.int64), -1)
+    lights = (z((1, lt.WIDTH)), z(1), z(1, np.int64), z(1), z(1, np.int64), z(0, np.int64), -1, z(1, np.float32),
+              z((0, 12)))
     env = (z((1, 3, 3)), z(2), z((1, 2)), z((1, 1)), 1.0, 1.0, 0.0)
     return energy, geometry, surface, lights, env
 
