@@ -244,7 +244,7 @@ def scene_descriptions(draw):
     d["settings"]["integrator"] = integrator
     if integrator == "path":
         # what the path integrator does not render yet: moving objects in a scene with
-        # cut-outs or moving emitters (those keep still)
+        # cut-outs (those keep still)
         # the keys only Whitted reads (path warns that it ignores them)
         d["ambient"] = 0.0
         d["settings"].update(cutoff=1e-3, ao_samples=0)
@@ -253,7 +253,7 @@ def scene_descriptions(draw):
             used += [d["camera_media"]["glass"], d["camera_media"]["water"] or {}]
         cut = any(m.get("alpha_mode", "opaque") != "opaque" for m in used)
         for o in d["objects"]:
-            if cut or "emission" in o["material"]:
+            if cut:
                 o["motion"] = None
         if d["camera_media"] is not None and cut:
             d["camera_media"]["motion"] = None

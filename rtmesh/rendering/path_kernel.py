@@ -46,7 +46,10 @@ faces' global indices (concatenated, with offsets (k + 1,)), their motions ``mov
 face's mover (-1: static).  A ray then meets the static scene and every mover, each traced
 in its rest pose at the lane's time (rigid motions keep distances), the nearest hit wins,
 and its point and normals are carried to the lane's time (as
-:class:`rtmesh.geometry.motion.MotionAccel`).
+:class:`rtmesh.geometry.motion.MotionAccel`).  The light table holds emissive triangles in
+their rest pose: next-event estimation toward one of a moving object, and the density a
+BSDF sample meeting it is weighted with, take its row carried to the lane's time
+(:func:`_light_at`).
 
 With ``split``, every contribution is also added to one of the light-path passes
 (:data:`rtmesh.io.passes.LIGHT_PATH_PASSES`, which sum to the image): what the camera ray
@@ -224,6 +227,30 @@ def _to_world(moves, j, time, px, py, pz, gx, gy, gz, nx, ny, nz):
 
 
 @inline_row
+def _light_at(light_rows, index, face_mover, moves, time, moved, lane):
+    """Light ``index``'s row at ``time``: its own row, or for an emissive triangle of a moving
+    object the row carried by the object's motion to ``time`` (written into ``moved[lane]``:
+    corner, edges and normal; the motion is rigid, so the area, the radiance and the face
+    stay)."""
+    light = light_rows[index]
+    if light[0] != lt.TRIANGLE or not len(face_mover):
+        return light
+    j = face_mover[np.int64(light[lt.FACE])]
+    if j < 0:
+        return light
+    out = moved[lane]
+    for k in range(lt.WIDTH):
+        out[k] = light[k]
+    # the corner as a point, the edges and the normal as directions
+    out[1], out[2], out[3], out[10], out[11], out[12], out[13], out[14], out[15] = _to_world(
+        moves, j, time, light[1], light[2], light[3], light[10], light[11], light[12], light[13], light[14],
+        light[15])
+    _, _, _, out[4], out[5], out[6], _, _, _ = _to_world(moves, j, time, 0.0, 0.0, 0.0, light[4], light[5], light[6],
+                                                         light[4], light[5], light[6])
+    return out
+
+
+@inline_row
 def _add(total, lane, r, g, b):
     total[lane, 0] += r
     total[lane, 1] += g
@@ -345,6 +372,8 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     best_u = np.zeros(LANES)
     best_v = np.zeros(LANES)
     lane_time = np.zeros(LANES)
+    # each lane's light row carried to its time (an emissive triangle of a moving object)
+    moved = np.zeros((LANES, lt.WIDTH))
     scratch = np.zeros((LANES, lobes.PARAMETER_WIDTH))
     px = np.zeros(LANES)
     py = np.zeros(LANES)
@@ -529,7 +558,8 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                         light = face_light[prim]
                         if light >= 0:
                             w = power_heuristic(prev_pdf[lane], light_pmf[light] * _area_pdf(
-                                light_rows[light], px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], t))
+                                _light_at(light_rows, light, face_mover, moves, lane_time[lane], moved, lane),
+                                px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], t))
                     r, g, b = _clamped(beta[lane, 0] * er * w, beta[lane, 1] * eg * w, beta[lane, 2] * eb * w, limit)
                     _add(total, lane, r, g, b)
                     _add_path(paths, split, lane, _bucket(depth, category[lane]), r, g, b)
@@ -591,7 +621,8 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 # next-event estimation
                 if follow and has_lights:
                     chosen = alias_sample(light_probability, light_alias, uniform(key, base + _LIGHT_CHOICE))
-                    light = light_rows[chosen]
+                    # an emitter on a moving object where it is at the lane's time
+                    light = _light_at(light_rows, chosen, face_mover, moves, lane_time[lane], moved, lane)
                     wx, wy, wz, distance, lr, lg, lb, pdf_li, delta = sample_li(
                         light, env, light_texels, light_descriptors, hx, hy, hz, lu1, lu2)
                     if light[0] == lt.TRIANGLE:

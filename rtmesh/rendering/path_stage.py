@@ -8,8 +8,8 @@ view.  Per chunk, the camera rays come from the camera (every sampler, depth of 
 orthographic), then one kernel call traces every path of the chunk.
 
 What the path integrator does not render yet gives one clear error when the render is set
-up (a :class:`~rtmesh.core.errors.SceneError`), never a wrong image: moving emitters and
-moving objects with alpha cut-outs.
+up (a :class:`~rtmesh.core.errors.SceneError`), never a wrong image: moving objects with
+alpha cut-outs.
 """
 
 import logging
@@ -50,13 +50,8 @@ def unsupported(it):
     missing = []
     if not embree_library.packet_library():
         missing.append("the single-ray Embree path (RTMESH_EMBREE=run)")
-    if it.motion is not None:
-        m = it.scene.materials
-        if it.cutouts is not None:
-            missing.append("moving objects with alpha cut-outs")
-        emits = (m.emission > 0).any(axis=1)[it.scene.material_id]
-        if (emits & (it.motion.face_mover >= 0)).any():
-            missing.append("moving emitters")
+    if it.motion is not None and it.cutouts is not None:
+        missing.append("moving objects with alpha cut-outs")
     others = sorted({type(light).__name__ for light in it.view_lights
                      if not isinstance(light, (MeshLight, ProjectorLight)) and not hasattr(light, "corner")
                      and not hasattr(light, "radius") and light.kernel_row() is None})
