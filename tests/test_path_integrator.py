@@ -5,7 +5,6 @@ import numpy as np
 import pytest
 import trimesh
 
-from rtmesh.core.errors import SceneError
 from rtmesh.materials.table import Material
 from rtmesh.rendering.integrator import Integrator
 from rtmesh.rendering.settings import RenderSettings
@@ -143,17 +142,6 @@ def test_motion_blur_does_not_depend_on_the_thread_count(sphere):
     two = Integrator(scene, RenderSettings(width=16, height=12, spp=4, threads=2, integrator="path",
                                            chunk_samples=128)).render().image
     assert np.array_equal(one, two)
-
-
-def test_path_refuses_what_it_cannot_render_yet(sphere):
-    from rtmesh.geometry.motion import Motion
-
-    part = MeshPart("s", sphere.vertices, sphere.faces, 0, motion=Motion(translate=(1.0, 0.0, 0.0)))
-    camera = Camera(np.array([0.0, 0.0, 4.0]), np.zeros(3), np.array([0.0, 1.0, 0.0]), fov=45.0, shutter=(0.0, 1.0))
-    scene = Scene.from_parts([part], materials=[Material("m", alpha_mode="mask", opacity=0.3)], lights=[],
-                             camera=camera, background=1.0)  # a moving cut-out
-    with pytest.raises(SceneError, match="integrator 'path' does not render moving objects with alpha cut-outs"):
-        Integrator(scene, RenderSettings(width=8, height=8, spp=1, integrator="path"))
 
 
 def _moving_lamp(shutter, motion):

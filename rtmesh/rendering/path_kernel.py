@@ -227,6 +227,35 @@ def _to_world(moves, j, time, px, py, pz, gx, gy, gz, nx, ny, nz):
 
 
 @inline_row
+def _nearest_on_movers(intersect16, motion, lane_time, valid, ox, oy, oz, ex, ey, ez, rest, rest_words, rest_valid,
+                       args, best_t, best_prim, best_u, best_v):
+    """Each valid lane's ray (world origin ``o`` and direction ``e``, (LANES,) float64 each)
+    against every moving object, traced in the object's rest pose at the lane's time up to
+    ``best_t``: a nearer hit replaces the lane's ``best_t``, ``best_prim`` (the global face)
+    and ``best_u, best_v`` (barycentrics on the rest-pose triangle); the static scene's hit
+    already there wins ties."""
+    movers, face_maps, face_offsets, moves = motion[2], motion[3], motion[4], motion[5]
+    for j in range(len(movers)):
+        for lane in range(LANES):
+            rest_valid[lane] = valid[lane]
+            if valid[lane]:
+                qx, qy, qz, fx, fy, fz = _to_rest(moves, j, lane_time[lane], ox[lane], oy[lane], oz[lane], ex[lane],
+                                                  ey[lane], ez[lane])
+                set_lane(rest, rest_words, lane, qx, qy, qz, fx, fy, fz,
+                         np.float32(min(best_t[lane], np.float64(DEFAULT_TFAR))))
+                clear_hit(rest_words, lane)
+        intersect16(rest_valid.ctypes.data, movers[j], rest.ctypes.data, args.ctypes.data)
+        for lane in range(LANES):
+            if rest_valid[lane] and rest_words[GEOM_ID * LANES + lane] != INVALID_ID:
+                tm = np.float64(rest[TFAR * LANES + lane])
+                if tm < best_t[lane]:
+                    best_t[lane] = tm
+                    best_prim[lane] = face_maps[face_offsets[j] + rest_words[PRIM_ID * LANES + lane]]
+                    best_u[lane] = np.float64(rest[U * LANES + lane])
+                    best_v[lane] = np.float64(rest[V * LANES + lane])
+
+
+@inline_row
 def _light_at(light_rows, index, face_mover, moves, time, moved, lane):
     """Light ``index``'s row at ``time``: its own row, or for an emissive triangle of a moving
     object the row carried by the object's motion to ``time`` (written into ``moved[lane]``:
@@ -267,10 +296,15 @@ def _add_path(paths, split, lane, bucket, r, g, b):
 
 @inline_row
 def _shadows_through_cutouts(intersect16, scene, args, shadow, shadow_words, shadow_valid, geometry, surface,
-                             offset_scale, keys, start, lane_depth, reach, counts):
-    """Trace the shadow packet's rays with closest hits, passing cut-out layers, until each
-    is blocked (its ``shadow_valid`` lane cleared) or free; a free ray keeps its lane set."""
+                             offset_scale, keys, start, lane_depth, reach, counts, motion, lane_time, segment, rest,
+                             rest_words, rest_valid, best_t, best_prim, best_u, best_v):
+    """Trace the shadow packet's rays with closest hits over the static scene and every
+    moving object (at each lane's time: :func:`_nearest_on_movers`, the segment's ray read
+    back from the packet into ``segment`` (6, LANES)), passing cut-out layers (decided on the
+    rest-pose triangle's texture coordinates, which motion leaves alone), until each is
+    blocked (its ``shadow_valid`` lane cleared) or free; a free ray keeps its lane set."""
     material_id = geometry[5]
+    has_static, static_faces, movers, moves, face_mover = motion[0], motion[1], motion[2], motion[5], motion[6]
     for layer in range(MAX_LAYERS):
         active = 0
         for lane in range(LANES):
@@ -281,23 +315,41 @@ def _shadows_through_cutouts(intersect16, scene, args, shadow, shadow_words, sha
             return
         if layer > 0:
             counts[SHADOW] += active
-        intersect16(shadow_valid.ctypes.data, scene, shadow.ctypes.data, args.ctypes.data)
+        if has_static:
+            intersect16(shadow_valid.ctypes.data, scene, shadow.ctypes.data, args.ctypes.data)
+        for lane in range(LANES):
+            # nothing nearer than the segment's end, unless the static scene has it
+            best_t[lane] = reach[lane]
+            best_prim[lane] = -1
+            if shadow_valid[lane] and has_static and shadow_words[GEOM_ID * LANES + lane] != INVALID_ID:
+                best_t[lane] = np.float64(shadow[TFAR * LANES + lane])
+                local = shadow_words[PRIM_ID * LANES + lane]
+                best_prim[lane] = static_faces[local] if len(static_faces) else local
+                best_u[lane] = np.float64(shadow[U * LANES + lane])
+                best_v[lane] = np.float64(shadow[V * LANES + lane])
+            for k in range(3):
+                segment[k, lane] = np.float64(shadow[k * LANES + lane])
+                segment[3 + k, lane] = np.float64(shadow[(4 + k) * LANES + lane])
+        if len(movers):
+            _nearest_on_movers(intersect16, motion, lane_time, shadow_valid, segment[0], segment[1], segment[2],
+                               segment[3], segment[4], segment[5], rest, rest_words, rest_valid, args, best_t,
+                               best_prim, best_u, best_v)
         more = False
         for lane in range(LANES):
-            if not shadow_valid[lane] or shadow_words[GEOM_ID * LANES + lane] == INVALID_ID:
+            if not shadow_valid[lane] or best_prim[lane] < 0:
                 continue
-            prim = shadow_words[PRIM_ID * LANES + lane]
-            bu = np.float64(shadow[U * LANES + lane])
-            bv = np.float64(shadow[V * LANES + lane])
+            prim = best_prim[lane]
+            bu, bv = best_u[lane], best_v[lane]
             mat = material_id[prim]
             coin = _layer_coin(keys[start + lane], lane_depth[lane], layer + MAX_LAYERS, _COVERAGE)
             if layer + 1 < MAX_LAYERS and is_transparent(surface, geometry, mat, prim, bu, bv, coin):
                 # on past the layer: the rest of the segment from just beyond it
-                t = np.float64(shadow[TFAR * LANES + lane])
-                hx, hy, hz, gx, gy, gz, _, _, _ = surface_point(geometry, prim, bu, bv)
-                dx = np.float64(shadow[4 * LANES + lane])
-                dy = np.float64(shadow[5 * LANES + lane])
-                dz = np.float64(shadow[6 * LANES + lane])
+                t = best_t[lane]
+                hx, hy, hz, gx, gy, gz, nx, ny, nz = surface_point(geometry, prim, bu, bv)
+                if len(face_mover) and face_mover[prim] >= 0:
+                    hx, hy, hz, gx, gy, gz, nx, ny, nz = _to_world(moves, face_mover[prim], lane_time[lane], hx, hy,
+                                                                   hz, gx, gy, gz, nx, ny, nz)
+                dx, dy, dz = segment[3, lane], segment[4, lane], segment[5, lane]
                 if (gx * dx + gy * dy) + gz * dz < 0.0:
                     gx, gy, gz = -gx, -gy, -gz
                 qx, qy, qz = offset_origin(hx, hy, hz, gx, gy, gz, dx, dy, dz, offset_scale)
@@ -371,6 +423,8 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     best_prim = np.zeros(LANES, np.int64)
     best_u = np.zeros(LANES)
     best_v = np.zeros(LANES)
+    # the shadow packet's rays in float64 (origins, directions) for the movers' rest frames
+    segment = np.zeros((6, LANES))
     lane_time = np.zeros(LANES)
     # each lane's light row carried to its time (an emissive triangle of a moving object)
     moved = np.zeros((LANES, lt.WIDTH))
@@ -452,24 +506,8 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                     best_prim[lane] = static_faces[local] if len(static_faces) else local
                     best_u[lane] = np.float64(ray[U * LANES + lane])
                     best_v[lane] = np.float64(ray[V * LANES + lane])
-            for j in range(len(movers)):
-                for lane in range(LANES):
-                    rest_valid[lane] = valid[lane]
-                    if valid[lane]:
-                        ox, oy, oz, ex, ey, ez = _to_rest(moves, j, lane_time[lane], px[lane], py[lane], pz[lane],
-                                                          dx[lane], dy[lane], dz[lane])
-                        set_lane(rest, rest_words, lane, ox, oy, oz, ex, ey, ez,
-                                 np.float32(min(best_t[lane], np.float64(DEFAULT_TFAR))))
-                        clear_hit(rest_words, lane)
-                intersect16(rest_valid.ctypes.data, movers[j], rest.ctypes.data, args_incoherent.ctypes.data)
-                for lane in range(LANES):
-                    if rest_valid[lane] and rest_words[GEOM_ID * LANES + lane] != INVALID_ID:
-                        tm = np.float64(rest[TFAR * LANES + lane])
-                        if tm < best_t[lane]:  # the static scene wins ties
-                            best_t[lane] = tm
-                            best_prim[lane] = face_maps[face_offsets[j] + rest_words[PRIM_ID * LANES + lane]]
-                            best_u[lane] = np.float64(rest[U * LANES + lane])
-                            best_v[lane] = np.float64(rest[V * LANES + lane])
+            _nearest_on_movers(intersect16, motion, lane_time, valid, px, py, pz, dx, dy, dz, rest, rest_words,
+                               rest_valid, args_incoherent, best_t, best_prim, best_u, best_v)
             shadows = 0
             for lane in range(LANES):
                 shadow_valid[lane] = 0
@@ -717,7 +755,9 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 counts[SHADOW] += shadows
                 if cutouts:
                     _shadows_through_cutouts(intersect16, scene, args_incoherent, shadow, shadow_words, shadow_valid,
-                                             geometry, surface, offset_scale, keys, start, lane_depth, reach, counts)
+                                             geometry, surface, offset_scale, keys, start, lane_depth, reach, counts,
+                                             motion, lane_time, segment, rest, rest_words, rest_valid, best_t,
+                                             best_prim, best_u, best_v)
                     for lane in range(LANES):
                         if shadow_valid[lane]:
                             _add(total, lane, pending[lane, 0], pending[lane, 1], pending[lane, 2])

@@ -7,9 +7,9 @@ the view's part (the light table, with the lights and the background of the view
 view.  Per chunk, the camera rays come from the camera (every sampler, depth of field,
 orthographic), then one kernel call traces every path of the chunk.
 
-What the path integrator does not render yet gives one clear error when the render is set
-up (a :class:`~rtmesh.core.errors.SceneError`), never a wrong image: moving objects with
-alpha cut-outs.
+What the path integrator cannot render gives one clear error when the render is set up (a
+:class:`~rtmesh.core.errors.SceneError`), never a wrong image: the single-ray Embree path
+(its kernel traces packets) and lights of a type without a row in the light table.
 """
 
 import logging
@@ -50,8 +50,6 @@ def unsupported(it):
     missing = []
     if not embree_library.packet_library():
         missing.append("the single-ray Embree path (RTMESH_EMBREE=run)")
-    if it.motion is not None and it.cutouts is not None:
-        missing.append("moving objects with alpha cut-outs")
     others = sorted({type(light).__name__ for light in it.view_lights
                      if not isinstance(light, (MeshLight, ProjectorLight)) and not hasattr(light, "corner")
                      and not hasattr(light, "radius") and light.kernel_row() is None})
