@@ -169,15 +169,22 @@ def projector_floor_scene(image, model="lambert", diffuse=0.8):
     return projector_scene(image, Material("floor", model=model, diffuse=diffuse))
 
 
-def test_path_lights_the_floor_with_the_projected_texel_times_cos_over_d_squared():
+@pytest.mark.parametrize("aim", ["down", "slanted"])
+def test_path_lights_the_floor_with_the_projected_texel_times_cos_over_d_squared(aim):
     """One sample at each pixel centre, max_depth 1 (direct light only): the floor's radiance
     is ``(albedo / pi) I texel cos(theta) / d^2`` with the texel Whitted's projector looks up
     (ProjectorLight.illuminate, the NumPy mapping) at the point the pixel sees, at every
-    pixel: the image's quadrants, the bilinear blends between them and the dark outside."""
+    pixel: the image's quadrants, the bilinear blends between them and the dark outside;
+    looking straight down with a square image, and slanted, turned (its up along x + y) with
+    an image twice as wide as high."""
     from scenes import pixel_centre_rays
 
     image = np.kron(QUADRANTS, np.ones((16, 16, 1))) * np.array([1.0, 0.6, 0.3])
     scene = projector_floor_scene(image)
+    if aim == "slanted":
+        scene.lights[0] = ProjectorLight([0.5, -0.3, 2.0], [-0.3, 0.4, -2.0], 10.0,
+                                         Texture(np.kron(QUADRANTS, np.ones((8, 16, 1))), wrap="clamp"), 50.0,
+                                         up=[1.0, 1.0, 0.0])
     size = 48
     result = render(scene, width=size, height=size, spp=1, sampler="regular", integrator="path", max_depth=1)
     origins, directions = pixel_centre_rays(scene.camera, size, size)
@@ -187,8 +194,9 @@ def test_path_lights_the_floor_with_the_projected_texel_times_cos_over_d_squared
     expected = (0.8 / np.pi) * incident * wi[:, 2:3]  # the floor's normal is +z
     expected = expected.reshape(size, size, 3)
     lit = (expected > 0).any(axis=2)
-    assert lit.sum() > 0.2 * size * size and (~lit).sum() > 0.2 * size * size
+    assert lit.sum() > 0.2 * size * size and (~lit).sum() > 0.1 * size * size
     # float32 texels and image, float32 hit points: agreement to 1e-5 of the brightest pixel
+    # (measured: 1.4e-7 straight down, 2.6e-6 slanted, where float32 hit points meet the blends)
     np.testing.assert_allclose(result.image, expected, rtol=0, atol=1e-5 * expected.max())
 
 
