@@ -14,12 +14,21 @@ QUAD (3)       corner (1-3), normal (4-6), radiance (7-9), edge1 (10-12), edge2 
 DISK (4)       centre (1-3), normal (4-6), radiance (7-9), radius x tangents (10-15)
 TRIANGLE (5)   corner v0 (1-3), normal (4-6), radiance (7-9), e1 (10-12), e2 (13-15)
 ENVIRONMENT (6) the background (its tables are :class:`EnvironmentTables`)
+PROJECTOR (7)  pinhole (1-3), forward (4-6), intensity (7-9), image right (10-12), image
+               up (13-15), its image in the lights' atlas (:data:`IMAGE`), the half-width
+               and half-height of the image plane at unit distance (:data:`HALF_WIDTH`,
+               :data:`HALF_HEIGHT`)
 =============  ==================================================================
 
 with the area (:data:`AREA`), whether it emits on both sides (:data:`TWO_SIDED`) and whether
 rays see it (:data:`VISIBLE`; emissive triangles are seen as geometry).  ``sample_li``
 returns the direction toward the light, the distance, the incident radiance (for delta
 lights the incident term) and the solid-angle density (1 for delta lights, flagged).
+
+The projectors' images are packed into one atlas of the view's lights
+(:class:`rtmesh.io.texture_atlas.TextureAtlas`: ``LightTable.texels``, ``LightTable.descriptors``),
+looked up by :func:`projector_incident` as :meth:`rtmesh.lights.projector.ProjectorLight.illuminate`
+maps them.
 """
 
 import math
@@ -27,15 +36,18 @@ import math
 import numpy as np
 
 from rtmesh.core.compiled import row
+from rtmesh.io.texture_atlas import TextureAtlas, texel
 from rtmesh.lights import point_light_rows
 from rtmesh.lights.area_lights import DiskLight, QuadLight
+from rtmesh.lights.projector import ProjectorLight
 from rtmesh.sampling.alias import alias_table
 from rtmesh.sampling.warps import concentric_disk_row, uniform_triangle_weights
 
-QUAD, DISK, TRIANGLE, ENVIRONMENT = 3, 4, 5, 6
+QUAD, DISK, TRIANGLE, ENVIRONMENT, PROJECTOR = 3, 4, 5, 6, 7
 WIDTH = 24
 RADIANCE = 7
 AREA, TWO_SIDED, VISIBLE, FACE = 16, 17, 18, 19
+IMAGE, HALF_WIDTH, HALF_HEIGHT = 20, 21, 22
 _LUMA = np.array([0.2126, 0.7152, 0.0722])
 
 
@@ -82,12 +94,30 @@ class LightTable:
         The environment's row, or -1.
     analytic : (k,) int64
         The rows of the quad and disk lights that rays see (tested along every ray).
+    texels, descriptors : (n,) float32, (p, DESCRIPTOR_WIDTH) float64
+        The projectors' images (:class:`rtmesh.io.texture_atlas.TextureAtlas`; one texel of
+        zero without projectors).
     """
 
     def __init__(self, lights, triangles, face_normals, face_emission, environment, scene_radius):
         rows, power = [], []
+        images = []
         for light in lights:
-            if isinstance(light, QuadLight):
+            if isinstance(light, ProjectorLight) and not any(light.image is known for known in images):
+                images.append(light.image)
+        atlas = TextureAtlas(images)
+        self.texels, self.descriptors = atlas.texels, atlas.descriptors
+        for light in lights:
+            if isinstance(light, ProjectorLight):
+                forward, right, up = light.frame()
+                half_height = math.tan(math.radians(light.fov) / 2.0)
+                height, width = light.image.pixels.shape[:2]
+                r = _row(PROJECTOR, light.position, forward, light.intensity, right, up, 0.0, 0.0, 0.0)
+                r[IMAGE], r[HALF_WIDTH], r[HALF_HEIGHT] = atlas.index(light.image), half_height * width / height, \
+                    half_height
+                rows.append(r)
+                power.append(_projector_power(light, r[HALF_WIDTH], half_height))
+            elif isinstance(light, QuadLight):
                 rows.append(_row(QUAD, light.corner, light.normal, light.radiance, light.edge1, light.edge2,
                                  light.area, 0.0, float(light.visible)))
                 power.append(math.pi * light.area * _luminance(light.radiance))
@@ -149,6 +179,25 @@ def _delta_power(packed, scene_radius):
         cos_inner, cos_outer = packed[point_light_rows.COS_INNER], packed[point_light_rows.COS_OUTER]
         return 2.0 * math.pi * (1.0 - 0.5 * (cos_inner + cos_outer)) * _luminance(colour)
     return 4.0 * math.pi * _luminance(colour)
+
+
+def _projector_power(light, half_width, half_height):
+    """Power of a projector (W, luminance): its intensity times each texel's colour over the
+    solid angle the texel subtends, summed over the image (the image's mean and its cone:
+    a white image gives ``I * 4 asin(sin a sin b)`` of the frustum's half-angles ``a, b``).
+
+    The image plane at unit distance holds ``(2 half_width) x (2 half_height)``; a texel of
+    area ``dA`` at ``(x, y)`` on it subtends ``dA / (1 + x^2 + y^2)^(3/2)`` (midpoint rule, whose
+    error on the frustum's solid angle is below 1e-3 for images of 8 texels or more).
+    """
+    pixels = np.asarray(light.image.pixels, dtype=np.float64)
+    height, width, channels = pixels.shape
+    colour = pixels[..., :3] if channels >= 3 else np.repeat(pixels[..., :1], 3, axis=2)
+    x = ((np.arange(width) + 0.5) / width * 2.0 - 1.0) * half_width
+    y = ((np.arange(height) + 0.5) / height * 2.0 - 1.0) * half_height
+    texel_area = (2.0 * half_width / width) * (2.0 * half_height / height)
+    solid_angle = texel_area / (1.0 + x[None, :] ** 2 + y[:, None] ** 2) ** 1.5
+    return float(np.sum((colour @ (_LUMA * light.intensity)) * solid_angle))
 
 
 class EnvironmentTables:
@@ -294,3 +343,28 @@ def hit_analytic(light, ox, oy, oz, dx, dy, dz, t_max):
         return t if (a >= 0.0) & (a <= 1.0) & (b >= 0.0) & (b <= 1.0) else math.inf
     r2 = (light[10] * light[10] + light[11] * light[11]) + light[12] * light[12]
     return t if (qx * qx + qy * qy) + qz * qz <= r2 else math.inf
+
+
+@row
+def projector_incident(light, texels, descriptors, px, py, pz):
+    """A projector's direction, distance and incident term at a point, as
+    :meth:`rtmesh.lights.projector.ProjectorLight.illuminate` (its mapping, written for one
+    point): ``(wx, wy, wz, distance, Er, Eg, Eb)`` with ``E = intensity * texel / d^2`` inside
+    the image's frustum, 0 outside it or behind the projector; the texel is the bilinear
+    lookup of the image (``texels``, ``descriptors``: the lights' atlas) where the line from
+    the pinhole to the point crosses the image plane."""
+    tx, ty, tz = light[1] - px, light[2] - py, light[3] - pz
+    distance = math.sqrt((tx * tx + ty * ty) + tz * tz)
+    # a point exactly at the pinhole is lit from nowhere, as for a point light
+    safe = distance if distance > 0.0 else math.inf
+    wx, wy, wz = tx / safe, ty / safe, tz / safe
+    depth = -((wx * light[4] + wy * light[5]) + wz * light[6])
+    if not depth > 0.0:
+        return wx, wy, wz, distance, 0.0, 0.0, 0.0
+    u = 0.5 - ((wx * light[10] + wy * light[11]) + wz * light[12]) / depth / (2.0 * light[HALF_WIDTH])
+    v = 0.5 - ((wx * light[13] + wy * light[14]) + wz * light[15]) / depth / (2.0 * light[HALF_HEIGHT])
+    if not ((u >= 0.0) & (u <= 1.0) & (v >= 0.0) & (v <= 1.0)):
+        return wx, wy, wz, distance, 0.0, 0.0, 0.0
+    r, g, b, _ = texel(texels, descriptors, np.int64(light[IMAGE]), u, v)
+    d2 = safe * safe
+    return wx, wy, wz, distance, light[7] * r / d2, light[8] * g / d2, light[9] * b / d2

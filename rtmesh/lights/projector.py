@@ -9,8 +9,10 @@ projector.  Seen from behind the projector, the projected picture is upright and
 mirrored.
 
 It is a delta light (:class:`rtmesh.lights.interface.PointLikeLight`) that answers
-:meth:`ProjectorLight.illuminate` in NumPy and has no compiled row: renders with it take
-the general path.
+:meth:`ProjectorLight.illuminate` in NumPy and has no compiled row of the Whitted kernels:
+Whitted renders with it take the general path.  The path integrator gives it a row of its
+light table (:mod:`rtmesh.lights.light_table`, kind ``PROJECTOR``), whose
+``projector_incident`` is this mapping written for one point.
 """
 
 from dataclasses import dataclass
@@ -111,7 +113,8 @@ class ProjectorLight:
         return wi, distance, incident
 
     def kernel_row(self):
-        """None: the projector has no compiled row (its texels are looked up in NumPy)."""
+        """None: the projector has no row of the Whitted kernels (its texels are looked up in
+        NumPy there; the path integrator's light table has its own row for it)."""
         return None
 
     @property

@@ -218,7 +218,7 @@ class Caustics:
     def _small_light(self, lights):
         """Whether a delta light or a small area light exists (seen from the aim's centre)."""
         kinds = lights.rows[:, 0]
-        if (kinds < lt.QUAD).any():
+        if ((kinds < lt.QUAD) | (kinds == lt.PROJECTOR)).any():
             return True
         centre = self.aim[:3]
         solid = []

@@ -23,8 +23,9 @@ does not depend on chunks or threads.
 
 Records (tuples of arrays, built once by :class:`rtmesh.rendering.path_stage.PathStage`):
 ``geometry`` and ``surface`` as :mod:`rtmesh.rendering.path_surfaces` describes them;
-``lights = (rows, probability, alias, pmf, face_light, analytic, environment)``
-(:class:`rtmesh.lights.light_table.LightTable`); ``env = (pixels, marginal, conditional,
+``lights = (rows, probability, alias, pmf, face_light, analytic, environment, texels,
+descriptors)`` (:class:`rtmesh.lights.light_table.LightTable`, the last two its projectors'
+images); ``env = (pixels, marginal, conditional,
 func, mean, cos_rotation, sin_rotation)`` (:class:`rtmesh.lights.light_table.EnvironmentTables`);
 ``options = (max_depth, rr_depth, clamp, offset_scale, background_seen, cutouts, split,
 camera_media)``, the last the media the camera sits in (``STACK_DEPTH`` material ids,
@@ -45,7 +46,10 @@ faces' global indices (concatenated, with offsets (k + 1,)), their motions ``mov
 face's mover (-1: static).  A ray then meets the static scene and every mover, each traced
 in its rest pose at the lane's time (rigid motions keep distances), the nearest hit wins,
 and its point and normals are carried to the lane's time (as
-:class:`rtmesh.geometry.motion.MotionAccel`).
+:class:`rtmesh.geometry.motion.MotionAccel`).  The light table holds emissive triangles in
+their rest pose: next-event estimation toward one of a moving object, and the density a
+BSDF sample meeting it is weighted with, take its row carried to the lane's time
+(:func:`_light_at`).
 
 With ``split``, every contribution is also added to one of the light-path passes
 (:data:`rtmesh.io.passes.LIGHT_PATH_PASSES`, which sum to the image): what the camera ray
@@ -94,6 +98,7 @@ _environment_pdf = inline_row(lt.environment_pdf.py_func)
 _environment_sample = inline_row(sample_direction.py_func)
 _sample_area_point = inline_row(lt.sample_area_point.py_func)
 _illuminate_row = inline_row(illuminate_row.py_func)
+_projector_incident = inline_row(lt.projector_incident.py_func)
 
 DIMENSIONS_PER_VERTEX = 8
 # dimensions of a vertex, after DIMENSIONS_PER_VERTEX * depth
@@ -151,13 +156,17 @@ def _layer_coin(key, depth, layer, dimension):
 
 
 @inline_row
-def sample_li(light, env, px, py, pz, u1, u2):
+def sample_li(light, env, texels, descriptors, px, py, pz, u1, u2):
     """One light's ``sample_li`` at a point: ``(wx, wy, wz, distance, Lr, Lg, Lb, pdf, delta)``
     with the incident radiance (delta lights: their incident term) and the solid-angle density
-    (delta lights: 1); ``pdf`` 0 for a failed sample."""
+    (delta lights: 1); ``pdf`` 0 for a failed sample.  ``texels, descriptors``: the
+    projectors' images (the ``lights`` record's atlas)."""
     kind = light[0]
     if kind < lt.QUAD:
         wx, wy, wz, distance, er, eg, eb = _illuminate_row(light, px, py, pz)
+        return wx, wy, wz, distance, er, eg, eb, 1.0, True
+    if kind == lt.PROJECTOR:
+        wx, wy, wz, distance, er, eg, eb = _projector_incident(light, texels, descriptors, px, py, pz)
         return wx, wy, wz, distance, er, eg, eb, 1.0, True
     if kind == lt.ENVIRONMENT:
         (pixels, marginal, conditional, func, mean, cos_r, sin_r) = env
@@ -218,6 +227,59 @@ def _to_world(moves, j, time, px, py, pz, gx, gy, gz, nx, ny, nz):
 
 
 @inline_row
+def _nearest_on_movers(intersect16, motion, lane_time, valid, ox, oy, oz, ex, ey, ez, rest, rest_words, rest_valid,
+                       args, best_t, best_prim, best_u, best_v):
+    """Each valid lane's ray (world origin ``o`` and direction ``e``, (LANES,) float64 each)
+    against every moving object, traced in the object's rest pose at the lane's time up to
+    ``best_t``: a nearer hit replaces the lane's ``best_t``, ``best_prim`` (the global face)
+    and ``best_u, best_v`` (barycentrics on the rest-pose triangle); the static scene's hit
+    already there wins ties."""
+    movers, face_maps, face_offsets, moves = motion[2], motion[3], motion[4], motion[5]
+    for j in range(len(movers)):
+        for lane in range(LANES):
+            rest_valid[lane] = valid[lane]
+            if valid[lane]:
+                qx, qy, qz, fx, fy, fz = _to_rest(moves, j, lane_time[lane], ox[lane], oy[lane], oz[lane], ex[lane],
+                                                  ey[lane], ez[lane])
+                set_lane(rest, rest_words, lane, qx, qy, qz, fx, fy, fz,
+                         np.float32(min(best_t[lane], np.float64(DEFAULT_TFAR))))
+                clear_hit(rest_words, lane)
+        intersect16(rest_valid.ctypes.data, movers[j], rest.ctypes.data, args.ctypes.data)
+        for lane in range(LANES):
+            if rest_valid[lane] and rest_words[GEOM_ID * LANES + lane] != INVALID_ID:
+                tm = np.float64(rest[TFAR * LANES + lane])
+                if tm < best_t[lane]:
+                    best_t[lane] = tm
+                    best_prim[lane] = face_maps[face_offsets[j] + rest_words[PRIM_ID * LANES + lane]]
+                    best_u[lane] = np.float64(rest[U * LANES + lane])
+                    best_v[lane] = np.float64(rest[V * LANES + lane])
+
+
+@inline_row
+def _light_at(light_rows, index, face_mover, moves, time, moved, lane):
+    """Light ``index``'s row at ``time``: its own row, or for an emissive triangle of a moving
+    object the row carried by the object's motion to ``time`` (written into ``moved[lane]``:
+    corner, edges and normal; the motion is rigid, so the area, the radiance and the face
+    stay)."""
+    light = light_rows[index]
+    if light[0] != lt.TRIANGLE or not len(face_mover):
+        return light
+    j = face_mover[np.int64(light[lt.FACE])]
+    if j < 0:
+        return light
+    out = moved[lane]
+    for k in range(lt.WIDTH):
+        out[k] = light[k]
+    # the corner as a point, the edges and the normal as directions
+    out[1], out[2], out[3], out[10], out[11], out[12], out[13], out[14], out[15] = _to_world(
+        moves, j, time, light[1], light[2], light[3], light[10], light[11], light[12], light[13], light[14],
+        light[15])
+    _, _, _, out[4], out[5], out[6], _, _, _ = _to_world(moves, j, time, 0.0, 0.0, 0.0, light[4], light[5], light[6],
+                                                         light[4], light[5], light[6])
+    return out
+
+
+@inline_row
 def _add(total, lane, r, g, b):
     total[lane, 0] += r
     total[lane, 1] += g
@@ -234,10 +296,15 @@ def _add_path(paths, split, lane, bucket, r, g, b):
 
 @inline_row
 def _shadows_through_cutouts(intersect16, scene, args, shadow, shadow_words, shadow_valid, geometry, surface,
-                             offset_scale, keys, start, lane_depth, reach, counts):
-    """Trace the shadow packet's rays with closest hits, passing cut-out layers, until each
-    is blocked (its ``shadow_valid`` lane cleared) or free; a free ray keeps its lane set."""
+                             offset_scale, keys, start, lane_depth, reach, counts, motion, lane_time, segment, rest,
+                             rest_words, rest_valid, best_t, best_prim, best_u, best_v):
+    """Trace the shadow packet's rays with closest hits over the static scene and every
+    moving object (at each lane's time: :func:`_nearest_on_movers`, the segment's ray read
+    back from the packet into ``segment`` (6, LANES)), passing cut-out layers (decided on the
+    rest-pose triangle's texture coordinates, which motion leaves alone), until each is
+    blocked (its ``shadow_valid`` lane cleared) or free; a free ray keeps its lane set."""
     material_id = geometry[5]
+    has_static, static_faces, movers, moves, face_mover = motion[0], motion[1], motion[2], motion[5], motion[6]
     for layer in range(MAX_LAYERS):
         active = 0
         for lane in range(LANES):
@@ -248,23 +315,41 @@ def _shadows_through_cutouts(intersect16, scene, args, shadow, shadow_words, sha
             return
         if layer > 0:
             counts[SHADOW] += active
-        intersect16(shadow_valid.ctypes.data, scene, shadow.ctypes.data, args.ctypes.data)
+        if has_static:
+            intersect16(shadow_valid.ctypes.data, scene, shadow.ctypes.data, args.ctypes.data)
+        for lane in range(LANES):
+            # nothing nearer than the segment's end, unless the static scene has it
+            best_t[lane] = reach[lane]
+            best_prim[lane] = -1
+            if shadow_valid[lane] and has_static and shadow_words[GEOM_ID * LANES + lane] != INVALID_ID:
+                best_t[lane] = np.float64(shadow[TFAR * LANES + lane])
+                local = shadow_words[PRIM_ID * LANES + lane]
+                best_prim[lane] = static_faces[local] if len(static_faces) else local
+                best_u[lane] = np.float64(shadow[U * LANES + lane])
+                best_v[lane] = np.float64(shadow[V * LANES + lane])
+            for k in range(3):
+                segment[k, lane] = np.float64(shadow[k * LANES + lane])
+                segment[3 + k, lane] = np.float64(shadow[(4 + k) * LANES + lane])
+        if len(movers):
+            _nearest_on_movers(intersect16, motion, lane_time, shadow_valid, segment[0], segment[1], segment[2],
+                               segment[3], segment[4], segment[5], rest, rest_words, rest_valid, args, best_t,
+                               best_prim, best_u, best_v)
         more = False
         for lane in range(LANES):
-            if not shadow_valid[lane] or shadow_words[GEOM_ID * LANES + lane] == INVALID_ID:
+            if not shadow_valid[lane] or best_prim[lane] < 0:
                 continue
-            prim = shadow_words[PRIM_ID * LANES + lane]
-            bu = np.float64(shadow[U * LANES + lane])
-            bv = np.float64(shadow[V * LANES + lane])
+            prim = best_prim[lane]
+            bu, bv = best_u[lane], best_v[lane]
             mat = material_id[prim]
             coin = _layer_coin(keys[start + lane], lane_depth[lane], layer + MAX_LAYERS, _COVERAGE)
             if layer + 1 < MAX_LAYERS and is_transparent(surface, geometry, mat, prim, bu, bv, coin):
                 # on past the layer: the rest of the segment from just beyond it
-                t = np.float64(shadow[TFAR * LANES + lane])
-                hx, hy, hz, gx, gy, gz, _, _, _ = surface_point(geometry, prim, bu, bv)
-                dx = np.float64(shadow[4 * LANES + lane])
-                dy = np.float64(shadow[5 * LANES + lane])
-                dz = np.float64(shadow[6 * LANES + lane])
+                t = best_t[lane]
+                hx, hy, hz, gx, gy, gz, nx, ny, nz = surface_point(geometry, prim, bu, bv)
+                if len(face_mover) and face_mover[prim] >= 0:
+                    hx, hy, hz, gx, gy, gz, nx, ny, nz = _to_world(moves, face_mover[prim], lane_time[lane], hx, hy,
+                                                                   hz, gx, gy, gz, nx, ny, nz)
+                dx, dy, dz = segment[3, lane], segment[4, lane], segment[5, lane]
                 if (gx * dx + gy * dy) + gz * dz < 0.0:
                     gx, gy, gz = -gx, -gy, -gz
                 qx, qy, qz = offset_origin(hx, hy, hz, gx, gy, gz, dx, dy, dz, offset_scale)
@@ -317,7 +402,8 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     tags, transmissive = surface[0], surface[2]
     absorption, unlit, albedo_table = surface[4], surface[5], surface[6]
     textured = textured_materials(surface, geometry)
-    light_rows, light_probability, light_alias, light_pmf, face_light, analytic, env_light = lights
+    light_rows, light_probability, light_alias, light_pmf, face_light, analytic, env_light, light_texels, \
+        light_descriptors = lights
     max_depth, rr_depth, clamp, offset_scale, background_seen, cutouts, split, camera_media = options
     media = len(camera_media)
     env_pixels, env_marginal, env_conditional, env_func, env_mean, env_cos, env_sin = env
@@ -337,7 +423,11 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     best_prim = np.zeros(LANES, np.int64)
     best_u = np.zeros(LANES)
     best_v = np.zeros(LANES)
+    # the shadow packet's rays in float64 (origins, directions) for the movers' rest frames
+    segment = np.zeros((6, LANES))
     lane_time = np.zeros(LANES)
+    # each lane's light row carried to its time (an emissive triangle of a moving object)
+    moved = np.zeros((LANES, lt.WIDTH))
     scratch = np.zeros((LANES, lobes.PARAMETER_WIDTH))
     px = np.zeros(LANES)
     py = np.zeros(LANES)
@@ -416,24 +506,8 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                     best_prim[lane] = static_faces[local] if len(static_faces) else local
                     best_u[lane] = np.float64(ray[U * LANES + lane])
                     best_v[lane] = np.float64(ray[V * LANES + lane])
-            for j in range(len(movers)):
-                for lane in range(LANES):
-                    rest_valid[lane] = valid[lane]
-                    if valid[lane]:
-                        ox, oy, oz, ex, ey, ez = _to_rest(moves, j, lane_time[lane], px[lane], py[lane], pz[lane],
-                                                          dx[lane], dy[lane], dz[lane])
-                        set_lane(rest, rest_words, lane, ox, oy, oz, ex, ey, ez,
-                                 np.float32(min(best_t[lane], np.float64(DEFAULT_TFAR))))
-                        clear_hit(rest_words, lane)
-                intersect16(rest_valid.ctypes.data, movers[j], rest.ctypes.data, args_incoherent.ctypes.data)
-                for lane in range(LANES):
-                    if rest_valid[lane] and rest_words[GEOM_ID * LANES + lane] != INVALID_ID:
-                        tm = np.float64(rest[TFAR * LANES + lane])
-                        if tm < best_t[lane]:  # the static scene wins ties
-                            best_t[lane] = tm
-                            best_prim[lane] = face_maps[face_offsets[j] + rest_words[PRIM_ID * LANES + lane]]
-                            best_u[lane] = np.float64(rest[U * LANES + lane])
-                            best_v[lane] = np.float64(rest[V * LANES + lane])
+            _nearest_on_movers(intersect16, motion, lane_time, valid, px, py, pz, dx, dy, dz, rest, rest_words,
+                               rest_valid, args_incoherent, best_t, best_prim, best_u, best_v)
             shadows = 0
             for lane in range(LANES):
                 shadow_valid[lane] = 0
@@ -522,7 +596,8 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                         light = face_light[prim]
                         if light >= 0:
                             w = power_heuristic(prev_pdf[lane], light_pmf[light] * _area_pdf(
-                                light_rows[light], px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], t))
+                                _light_at(light_rows, light, face_mover, moves, lane_time[lane], moved, lane),
+                                px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], t))
                     r, g, b = _clamped(beta[lane, 0] * er * w, beta[lane, 1] * eg * w, beta[lane, 2] * eb * w, limit)
                     _add(total, lane, r, g, b)
                     _add_path(paths, split, lane, _bucket(depth, category[lane]), r, g, b)
@@ -584,8 +659,10 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 # next-event estimation
                 if follow and has_lights:
                     chosen = alias_sample(light_probability, light_alias, uniform(key, base + _LIGHT_CHOICE))
-                    light = light_rows[chosen]
-                    wx, wy, wz, distance, lr, lg, lb, pdf_li, delta = sample_li(light, env, hx, hy, hz, lu1, lu2)
+                    # an emitter on a moving object where it is at the lane's time
+                    light = _light_at(light_rows, chosen, face_mover, moves, lane_time[lane], moved, lane)
+                    wx, wy, wz, distance, lr, lg, lb, pdf_li, delta = sample_li(
+                        light, env, light_texels, light_descriptors, hx, hy, hz, lu1, lu2)
                     if light[0] == lt.TRIANGLE:
                         # the emitter's own (textured) radiance at the sampled point
                         lr, lg, lb = triangle_light_emission(surface, geometry, light, lu1, lu2)
@@ -678,7 +755,9 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 counts[SHADOW] += shadows
                 if cutouts:
                     _shadows_through_cutouts(intersect16, scene, args_incoherent, shadow, shadow_words, shadow_valid,
-                                             geometry, surface, offset_scale, keys, start, lane_depth, reach, counts)
+                                             geometry, surface, offset_scale, keys, start, lane_depth, reach, counts,
+                                             motion, lane_time, segment, rest, rest_words, rest_valid, best_t,
+                                             best_prim, best_u, best_v)
                     for lane in range(LANES):
                         if shadow_valid[lane]:
                             _add(total, lane, pending[lane, 0], pending[lane, 1], pending[lane, 2])
@@ -728,7 +807,8 @@ def small_records():
     surface = (z(1, np.int64), z((1, lobes.PARAMETER_WIDTH)), z(1, bool), z((1, 3)), z((1, 3)), z((1, 4)),
                energy, z((1, 6), np.int64), z((1, 6), np.int64), z(1), z(1, np.int64), z(1), z(1),
                z(1, np.float32), z((1, 12)), z(1))
-    lights = (z((1, lt.WIDTH)), z(1), z(1, np.int64), z(1), z(1, np.int64), z(0, np.int64), -1)
+    lights = (z((1, lt.WIDTH)), z(1), z(1, np.int64), z(1), z(1, np.int64), z(0, np.int64), -1, z(1, np.float32),
+              z((0, 12)))
     env = (z((1, 3, 3)), z(2), z((1, 2)), z((1, 1)), 1.0, 1.0, 0.0)
     return energy, geometry, surface, lights, env
 

@@ -7,9 +7,9 @@ the view's part (the light table, with the lights and the background of the view
 view.  Per chunk, the camera rays come from the camera (every sampler, depth of field,
 orthographic), then one kernel call traces every path of the chunk.
 
-What the path integrator does not render yet gives one clear error when the render is set
-up (a :class:`~rtmesh.core.errors.SceneError`), never a wrong image: projector lights,
-moving emitters and moving objects with alpha cut-outs.
+What the path integrator cannot render gives one clear error when the render is set up (a
+:class:`~rtmesh.core.errors.SceneError`), never a wrong image: the single-ray Embree path
+(its kernel traces packets) and lights of a type without a row in the light table.
 """
 
 import logging
@@ -24,6 +24,7 @@ from rtmesh.io.texture_atlas import TextureAtlas
 from rtmesh.lights.environment import EnvironmentLighting
 from rtmesh.lights.light_table import EnvironmentTables, LightTable
 from rtmesh.lights.mesh_lights import MeshLight
+from rtmesh.lights.projector import ProjectorLight
 from rtmesh.materials.models import SLOTS, material_rows, tables
 from rtmesh.io.passes import LIGHT_PATH_PASSES
 from rtmesh.rendering.caustics import Caustics
@@ -48,16 +49,10 @@ def unsupported(it):
     missing = []
     if not embree_library.packet_library():
         missing.append("the single-ray Embree path (RTMESH_EMBREE=run)")
-    if it.motion is not None:
-        m = it.scene.materials
-        if it.cutouts is not None:
-            missing.append("moving objects with alpha cut-outs")
-        emits = (m.emission > 0).any(axis=1)[it.scene.material_id]
-        if (emits & (it.motion.face_mover >= 0)).any():
-            missing.append("moving emitters")
-    if any(not isinstance(light, MeshLight) and not hasattr(light, "corner") and not hasattr(light, "radius")
-           and light.kernel_row() is None for light in it.view_lights):
-        missing.append("projector lights")
+    others = sorted({type(light).__name__ for light in it.view_lights
+                     if not isinstance(light, (MeshLight, ProjectorLight)) and not hasattr(light, "corner")
+                     and not hasattr(light, "radius") and light.kernel_row() is None})
+    missing.extend(f"lights of type {name}" for name in others)
     return missing
 
 
@@ -211,7 +206,7 @@ class PathStage:
         lights = self.lights
         # the kernels' ``lights`` record (rtmesh.rendering.path_kernel), formed once a view
         self.light_record = (lights.rows, lights.probability, lights.alias, lights.pmf, lights.face_light,
-                             lights.analytic, lights.environment)
+                             lights.analytic, lights.environment, lights.texels, lights.descriptors)
         if environment is None:
             self._env = (np.zeros((1, 3, 3)), np.zeros(2), np.zeros((1, 2)), np.ones((1, 1)), 1.0, 1.0, 0.0)
         else:

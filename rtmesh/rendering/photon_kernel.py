@@ -56,6 +56,7 @@ _environment_radiance = inline_row(lt.environment_radiance.py_func)
 _environment_sample = inline_row(sample_direction.py_func)
 _sample_area_point = inline_row(lt.sample_area_point.py_func)
 _illuminate_row = inline_row(illuminate_row.py_func)
+_projector_incident = inline_row(lt.projector_incident.py_func)
 
 # dimensions of a photon's hashed numbers: its light, then three a bounce
 _CHOICE = 0
@@ -113,14 +114,15 @@ def aim_cone(px, py, pz, aim):
 
 
 @inline_row
-def sample_emission(light, env, aim, scene_sphere, u1, u2, u3, u4):
+def sample_emission(light, env, texels, descriptors, aim, scene_sphere, u1, u2, u3, u4):
     """One photon leaving ``light`` toward the aim sphere: origin, unit direction and flux
     over the densities of the point and direction (not yet over the light's choice
     probability); flux 0 for a failed sample.  An emissive triangle's flux is for radiance 1:
     the caller multiplies it by the (textured) emission at the point.
 
-    Point and spot lights: a direction in the cone around the aim, intensity (the spot's
-    falloff included) times the cone's solid angle.  Quad, disk and emissive-triangle
+    Point, spot and projector lights: a direction in the cone around the aim, intensity
+    (the spot's falloff, the projector's texel there: ``texels, descriptors`` are the
+    projectors' images) times the cone's solid angle.  Quad, disk and emissive-triangle
     lights: a uniform point, a direction in its cone, ``L cos * area * solid angle`` (0 from
     behind a one-sided light).  Directional and environment lights: a point on the disk of
     the aim's radius across the beam, placed outside the scene's bounding sphere,
@@ -149,12 +151,15 @@ def sample_emission(light, env, aim, scene_sphere, u1, u2, u3, u4):
         oz = aim[2] + a * tz + b * sz - back * dz
         scale = math.pi * aim[3] * aim[3] / density
         return ox, oy, oz, dx, dy, dz, fr * scale, fg * scale, fb * scale
-    if kind < lt.QUAD:  # point, spot
+    if kind < lt.QUAD or kind == lt.PROJECTOR:  # point, spot, projector
         ox, oy, oz = light[1], light[2], light[3]
         ax, ay, az, cos_max, solid_angle = aim_cone(ox, oy, oz, aim)
         dx, dy, dz = cone_direction(ax, ay, az, cos_max, u3, u4)
         # the incident term one unit away along the direction: the intensity that way
-        _, _, _, _, fr, fg, fb = _illuminate_row(light, ox + dx, oy + dy, oz + dz)
+        if kind == lt.PROJECTOR:
+            _, _, _, _, fr, fg, fb = _projector_incident(light, texels, descriptors, ox + dx, oy + dy, oz + dz)
+        else:
+            _, _, _, _, fr, fg, fb = _illuminate_row(light, ox + dx, oy + dy, oz + dz)
         return ox, oy, oz, dx, dy, dz, fr * solid_angle, fg * solid_angle, fb * solid_angle
     ox, oy, oz = _sample_area_point(light, u1, u2)
     ax, ay, az, cos_max, solid_angle = aim_cone(ox, oy, oz, aim)
@@ -241,7 +246,8 @@ def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geomet
             u1, u2 = sobol_pair(sobol_keys[0], index)
             u3, u4 = sobol_pair(sobol_keys[1], index)
             light = light_rows[chosen]
-            ox, oy, oz, ex, ey, ez, fr, fg, fb = sample_emission(light, env, aim, scene_sphere, u1, u2, u3, u4)
+            ox, oy, oz, ex, ey, ez, fr, fg, fb = sample_emission(light, env, lights[7], lights[8], aim, scene_sphere,
+                                                                 u1, u2, u3, u4)
             if light[0] == lt.TRIANGLE:
                 # the emitter's own (textured) radiance at the point
                 er, eg, eb = triangle_light_emission(surface, geometry, light, u1, u2)

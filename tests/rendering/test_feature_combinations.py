@@ -226,7 +226,7 @@ def render_settings(draw):
 @st.composite
 def scene_descriptions(draw):
     """Everything one example renders: scene, camera, lights, background and settings, under
-    either integrator (under path without what it does not render yet)."""
+    either integrator."""
     d = {
         "objects": draw(objects()),
         "floor": draw(st.one_of(st.none(), materials(("diffuse", "specular", "mirror", "glossy")))),
@@ -243,21 +243,9 @@ def scene_descriptions(draw):
     integrator = draw(st.sampled_from(["whitted", "path"]))
     d["settings"]["integrator"] = integrator
     if integrator == "path":
-        # what the path integrator does not render yet: projector lights, and moving objects
-        # in a scene with cut-outs or moving emitters (those keep still)
-        d["lights"] = [light for light in d["lights"] if light["type"] != "projector"]
         # the keys only Whitted reads (path warns that it ignores them)
         d["ambient"] = 0.0
         d["settings"].update(cutoff=1e-3, ao_samples=0)
-        used = [o["material"] for o in d["objects"]] + [d["floor"] or {}]
-        if d["camera_media"] is not None:
-            used += [d["camera_media"]["glass"], d["camera_media"]["water"] or {}]
-        cut = any(m.get("alpha_mode", "opaque") != "opaque" for m in used)
-        for o in d["objects"]:
-            if cut or "emission" in o["material"]:
-                o["motion"] = None
-        if d["camera_media"] is not None and cut:
-            d["camera_media"]["motion"] = None
     if integrator == "whitted":
         # the light-path passes exist under the path integrator only
         d["settings"]["passes"] = tuple(p for p in d["settings"]["passes"] if p not in LIGHT_PATH_PASSES)
