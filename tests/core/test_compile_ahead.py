@@ -71,30 +71,46 @@ def test_groups_have_unique_names_and_every_render_starts_with_the_build():
         compile_ahead.KernelGroup(__name__, BUILD_KERNELS.name, [])
 
 
-def _cached_in(cache_dir, module, group):
+def _cached_in(cache_dir, module, group, path=()):
     """Whether ``group`` of ``module`` is in the disk cache at ``cache_dir`` (asked of a
-    fresh process, which reads NUMBA_CACHE_DIR when numba is imported)."""
+    fresh process, which reads NUMBA_CACHE_DIR when numba is imported; ``path``: more
+    folders to import from)."""
     code = f"import {module} as m, sys; from rtmesh.core import compile_ahead as c; " \
            f"sys.exit(0 if c._GROUPS[{group!r}].cached() else 3)"
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache_dir), PYTHONPATH=PACKAGE_PARENT)
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache_dir), PYTHONPATH=os.pathsep.join([PACKAGE_PARENT, *map(str, path)]))
     return subprocess.run([sys.executable, "-c", code], env=env).returncode == 0
 
 
+# a group of one small kernel in a module of its own, for the helper process to import
+# and compile (a real group would cost the test several seconds of compiling)
+TINY_GROUP = """
+from numba import types
+from rtmesh.core.compile_ahead import KernelGroup
+from rtmesh.core.compiled import kernel
+
+@kernel
+def halve(x):
+    return 0.5 * x
+
+GROUP = KernelGroup(__name__, "test: tiny", [(halve, (types.float64,))])
+"""
+
+
 def test_the_helper_compiles_an_announced_group_into_the_shared_disk_cache(tmp_path):
-    group = embree_packets.QUERY_KERNELS
-    cache = tmp_path / "cache"
-    assert not _cached_in(cache, "rtmesh.geometry.embree_packets", group.name)
+    modules, cache = tmp_path / "modules", tmp_path / "cache"
+    modules.mkdir()
+    (modules / "tiny_group.py").write_text(TINY_GROUP)
+    assert not _cached_in(cache, "tiny_group", "test: tiny", [modules])
     # started in a folder with another rtmesh (as `rtmesh render` run in the source tree
     # that `pip install .` installed from), the helper still imports this one
     (tmp_path / "rtmesh").mkdir()
     (tmp_path / "rtmesh" / "__init__.py").write_text("raise ImportError('the helper imported the wrong rtmesh')\n")
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
-    env.pop("PYTHONPATH", None)
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), PYTHONPATH=str(modules))
     # what the render writes when it prepares the group; end of input ends the helper
     done = subprocess.run(compile_ahead.helper_command(), env=env, cwd=tmp_path, timeout=300,
-                          input=f"{group.module}\t{group.name}\n", text=True)
+                          input="tiny_group\ttest: tiny\n", text=True)
     assert done.returncode == 0
-    assert _cached_in(cache, "rtmesh.geometry.embree_packets", group.name)
+    assert _cached_in(cache, "tiny_group", "test: tiny", [modules])
 
 
 def test_a_kernel_being_compiled_by_the_other_process_is_waited_for():
