@@ -110,8 +110,8 @@ def _albedo_at(mu, alpha, cells):
 
 
 @kernel
-def tabulate(mu_cells, roughness_cells, cells):
-    """The table of ``E(mu, r)`` (``mu`` 0 taken as 1e-4, ``r`` floored at
+def tabulate(mu_cells, roughness_cells, cells, rows, columns):
+    """Entries of the table of ``E(mu, r)`` (``mu`` 0 taken as 1e-4, ``r`` floored at
     :data:`MIN_ROUGHNESS`).
 
     Parameters
@@ -120,17 +120,20 @@ def tabulate(mu_cells, roughness_cells, cells):
         Grid points over ``mu`` and ``r``, both ends included.
     cells : int
         ``cells^2`` quadrature cells per value.
+    rows, columns : (a,) int64, (b,) int64
+        The roughness rows and ``mu`` columns of the grid wanted: all of them
+        (``np.arange``) for the shipped table, a few to check its entries.
 
     Returns
     -------
-    (roughness_cells, mu_cells) float64
+    (a, b) float64
         Dimensionless albedos in [0, 1].
     """
-    table = np.zeros((roughness_cells, mu_cells))
-    for j in range(roughness_cells):
-        alpha = sheen_alpha(j / (roughness_cells - 1))
-        for i in range(mu_cells):
-            table[j, i] = _albedo_at(max(i / (mu_cells - 1), 1e-4), alpha, cells)
+    table = np.zeros((len(rows), len(columns)))
+    for a in range(len(rows)):
+        alpha = sheen_alpha(rows[a] / (roughness_cells - 1))
+        for b in range(len(columns)):
+            table[a, b] = _albedo_at(max(columns[b] / (mu_cells - 1), 1e-4), alpha, cells)
     return table
 
 
@@ -146,4 +149,4 @@ def albedo(albedo_table, mu, roughness):
 
 
 if __name__ == "__main__":
-    np.save(TABLE_PATH, tabulate(MU_CELLS, ROUGHNESS_CELLS, QUADRATURE))
+    np.save(TABLE_PATH, tabulate(MU_CELLS, ROUGHNESS_CELLS, QUADRATURE, np.arange(ROUGHNESS_CELLS), np.arange(MU_CELLS)))

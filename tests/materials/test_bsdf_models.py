@@ -333,8 +333,10 @@ def _sheen_albedo(mu, roughness):
 
 
 def test_shipped_sheen_albedo_table_is_what_tabulate_computes():
-    np.testing.assert_allclose(sheen.tabulate(sheen.MU_CELLS, sheen.ROUGHNESS_CELLS, sheen.QUADRATURE), sheen.table(),
-                               rtol=1e-12)
+    # both ends and inner points of each axis (the whole table takes 5 s to compute)
+    rows, columns = np.array([0, 1, 9, 17, 30, 31]), np.array([0, 1, 7, 16, 25, 31])
+    computed = sheen.tabulate(sheen.MU_CELLS, sheen.ROUGHNESS_CELLS, sheen.QUADRATURE, rows, columns)
+    np.testing.assert_allclose(computed, sheen.table()[np.ix_(rows, columns)], rtol=1e-12)
 
 
 def test_layers_at_their_defaults_are_the_metallic_roughness_brdf():
