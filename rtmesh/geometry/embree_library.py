@@ -32,6 +32,8 @@ VERIFIED_VERSIONS = ((4, 4),)
 
 _RTC_SCENE_FLAG_ROBUST = 1 << 2
 _RTC_GEOMETRY_TYPE_TRIANGLE = 0
+_RTC_GEOMETRY_TYPE_INSTANCE = 121
+_RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR = 0x9234
 _RTC_BUFFER_TYPE_INDEX, _RTC_BUFFER_TYPE_VERTEX = 0, 1
 _RTC_FORMAT_UINT3, _RTC_FORMAT_FLOAT3 = 0x5003, 0x9003
 _RTC_DEVICE_PROPERTY_VERSION_MAJOR, _RTC_DEVICE_PROPERTY_VERSION_MINOR = 1, 2
@@ -86,6 +88,8 @@ class PacketLibrary:
             getattr(lib, name).argtypes = [ctypes.c_void_p]
         lib.rtcAttachGeometry.restype = ctypes.c_uint
         lib.rtcAttachGeometry.argtypes = [ctypes.c_void_p, ctypes.c_void_p]
+        lib.rtcSetGeometryInstancedScene.argtypes = [ctypes.c_void_p, ctypes.c_void_p]
+        lib.rtcSetGeometryTransform.argtypes = [ctypes.c_void_p, ctypes.c_uint, ctypes.c_int, ctypes.c_void_p]
         self.device = lib.rtcNewDevice(None)
         if not self.device:
             raise OSError(f"{path}: rtcNewDevice failed (error {lib.rtcGetDeviceError(None)})")
@@ -95,7 +99,7 @@ class PacketLibrary:
         self.intersect16 = PACKET_QUERY(ctypes.cast(lib.rtcIntersect16, ctypes.c_void_p).value)
         self.occluded16 = PACKET_QUERY(ctypes.cast(lib.rtcOccluded16, ctypes.c_void_p).value)
 
-    def new_scene(self, vertices32, faces32):
+    def new_scene(self, vertices32, faces32, instances=()):
         """Build and commit a robust triangle scene over shared (not copied) buffers.
 
         Parameters
@@ -104,26 +108,45 @@ class PacketLibrary:
             Vertex positions and one row of padding: Embree reads 16 bytes per vertex, so
             4 bytes past the last one must be readable.
         faces32 : (F, 3) uint32 or int32, C-contiguous
+            May be empty (a scene of instances only: no triangle geometry is attached).
+        instances : sequence of (int, (3, 4) float32 array), optional
+            Committed scenes (:meth:`new_scene` handles) placed by affine transforms
+            (model to world: the linear part and the translation, row-major ``[A | t]``).
+            They are attached after the triangles, so instance ``j`` is geometry
+            ``j + (1 if faces32 else 0)`` of the scene, the ``instID`` Embree reports for
+            its hits (one instance level: the library is compiled with
+            ``RTC_MAX_INSTANCE_LEVEL_COUNT = 1``).  Embree copies the transforms.
 
         Returns
         -------
         int
             The committed ``RTCScene`` handle; release it with :meth:`release_scene` only
-            after the last query, and keep both arrays alive until then.
+            after the last query, and keep both arrays (and every instanced scene) alive
+            until then.
         """
         lib = self._lib
         scene = lib.rtcNewScene(self.device)
         # robust: the same traversal as embreex's scenes (rtmesh builds those robust), so
         # rays through edges and vertices cannot slip between triangles
         lib.rtcSetSceneFlags(scene, _RTC_SCENE_FLAG_ROBUST)
-        geometry = lib.rtcNewGeometry(self.device, _RTC_GEOMETRY_TYPE_TRIANGLE)
-        lib.rtcSetSharedGeometryBuffer(geometry, _RTC_BUFFER_TYPE_VERTEX, 0, _RTC_FORMAT_FLOAT3,
-                                       vertices32.ctypes.data, 0, 12, len(vertices32) - 1)
-        lib.rtcSetSharedGeometryBuffer(geometry, _RTC_BUFFER_TYPE_INDEX, 0, _RTC_FORMAT_UINT3,
-                                       faces32.ctypes.data, 0, 12, len(faces32))
-        lib.rtcCommitGeometry(geometry)
-        lib.rtcAttachGeometry(scene, geometry)
-        lib.rtcReleaseGeometry(geometry)  # the scene holds it now
+        if len(faces32):
+            geometry = lib.rtcNewGeometry(self.device, _RTC_GEOMETRY_TYPE_TRIANGLE)
+            lib.rtcSetSharedGeometryBuffer(geometry, _RTC_BUFFER_TYPE_VERTEX, 0, _RTC_FORMAT_FLOAT3,
+                                           vertices32.ctypes.data, 0, 12, len(vertices32) - 1)
+            lib.rtcSetSharedGeometryBuffer(geometry, _RTC_BUFFER_TYPE_INDEX, 0, _RTC_FORMAT_UINT3,
+                                           faces32.ctypes.data, 0, 12, len(faces32))
+            lib.rtcCommitGeometry(geometry)
+            lib.rtcAttachGeometry(scene, geometry)
+            lib.rtcReleaseGeometry(geometry)  # the scene holds it now
+        for instanced, transform in instances:
+            # Embree's column-major 3x4: the columns of A, then t (the transpose's rows)
+            columns = np.ascontiguousarray(np.asarray(transform, dtype=np.float32).T)
+            geometry = lib.rtcNewGeometry(self.device, _RTC_GEOMETRY_TYPE_INSTANCE)
+            lib.rtcSetGeometryInstancedScene(geometry, instanced)
+            lib.rtcSetGeometryTransform(geometry, 0, _RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR, columns.ctypes.data)
+            lib.rtcCommitGeometry(geometry)
+            lib.rtcAttachGeometry(scene, geometry)
+            lib.rtcReleaseGeometry(geometry)
         lib.rtcCommitScene(scene)
         error = lib.rtcGetDeviceError(self.device)
         if error:
@@ -276,6 +299,8 @@ class SharedScene:
     library : PacketLibrary
     vertices : (V, 3) float
     faces : (F, 3) int
+    instances : sequence of (SharedScene, (3, 4) float), optional
+        Scenes placed by affine transforms (see :meth:`PacketLibrary.new_scene`).
 
     Attributes
     ----------
@@ -286,7 +311,7 @@ class SharedScene:
     faces32 : (F, 3) uint32
     """
 
-    def __init__(self, library, vertices, faces):
+    def __init__(self, library, vertices, faces, instances=()):
         self.library = library
         padded = np.empty((len(vertices) + 1, 3), dtype=np.float32)
         padded[:-1] = vertices
@@ -294,7 +319,10 @@ class SharedScene:
         self._padded = padded
         self.vertices32 = padded[:-1]
         self.faces32 = np.ascontiguousarray(faces, dtype=np.uint32)
-        self.handle = library.new_scene(padded, self.faces32)
+        # the instanced scenes live as long as this one (Embree keeps them by handle)
+        self._instanced = [scene for scene, _ in instances]
+        self.handle = library.new_scene(padded, self.faces32,
+                                        [(scene.handle, transform) for scene, transform in instances])
 
     def close(self):
         # getattr: __del__ runs on an object whose __init__ failed before setting it
