@@ -3,16 +3,16 @@
 Two measurements (results in docs/BENCHMARKS.md, "Instancing"):
 
 ``crossover``
-    One mesh of ``n`` triangles (an icosphere; ``n`` = 20 .. 20480) placed 400 times over a
-    floor, rendered under the path integrator at 128x96, 16 spp, one thread: build
-    (``Integrator``: Embree scenes and tables) and render time, instanced against the
-    flattened copies (medians of 3).  This sets ``rtmesh.scene.instances.MIN_TRIANGLES``.
+    One mesh of ``n`` triangles (an icosphere; ``n`` = 20 .. 20480) placed 400 or 1600
+    times over a floor, rendered under the path integrator at 128x96, 16 spp, one thread:
+    build (``Integrator``: Embree scenes and tables; the loader's copying not counted) and
+    render time, instanced against the flattened copies (medians of 5, interleaved).  This sets ``rtmesh.scene.instances.MIN_TRIANGLES``.
 ``issue``
     A glTF of 10,000 nodes placing one ~50k-triangle mesh, loaded and rendered at 256x256,
     against a glTF of that mesh alone, each in a fresh process: peak RSS
     (``resource.getrusage``) and the time to load and build.
 
-Run: ``PYTHONPATH=. python benchmarks/bench_instancing.py crossover|issue``.
+Run from the repository root: ``python -m benchmarks.bench_instancing crossover|issue``.
 """
 
 import json
@@ -47,19 +47,20 @@ def _scene(triangles, count=400):
                                                                      [f"b{j}" for j in range(count)])])
 
 
-def crossover():
+def crossover(repeats=5):
     from rtmesh.rendering.integrator import Integrator
     from rtmesh.rendering.settings import RenderSettings
     from rtmesh.scene import instances
 
     settings = RenderSettings(width=128, height=96, spp=16, integrator="path", threads=1)
     Integrator(_scene(80)[1], settings).render()  # compile and warm up
-    print("triangles  build inst/flat ms   render inst/flat ms")
-    for n in (20, 80, 320, 1280, 5120, 20480):
-        triangles, scene = _scene(n)
+    print("placements triangles   build inst/flat ms   render inst/flat ms   both inst/flat ms")
+    for count, n in ((400, 20), (400, 80), (400, 320), (400, 1280), (400, 5120), (400, 20480),
+                     (1600, 20), (1600, 80), (1600, 320)):
+        triangles, scene = _scene(n, count)
         flat = instances.flattened(scene)
         times = {"instanced": ([], []), "flattened": ([], [])}
-        for _ in range(3):
+        for _ in range(repeats):  # interleaved, medians
             for name, s in (("instanced", scene), ("flattened", flat)):
                 start = time.perf_counter()
                 it = Integrator(s, settings)
@@ -68,22 +69,29 @@ def crossover():
                 times[name][0].append(built - start)
                 times[name][1].append(time.perf_counter() - built)
         med = {k: [1000 * statistics.median(v) for v in pair] for k, pair in times.items()}
-        print(f"{triangles:9d}  {med['instanced'][0]:8.1f} {med['flattened'][0]:8.1f}   "
-              f"{med['instanced'][1]:8.1f} {med['flattened'][1]:8.1f}")
+        print(f"{count:10d} {triangles:9d}   {med['instanced'][0]:8.1f} {med['flattened'][0]:8.1f}   "
+              f"{med['instanced'][1]:8.1f} {med['flattened'][1]:8.1f}   {sum(med['instanced']):8.1f} "
+              f"{sum(med['flattened']):8.1f}", flush=True)
 
 
 def write_gltf(path, copies, subdivisions=None):
-    """A GLB of ``copies`` nodes placing one mesh (an icosphere: level 6 is 81,920 triangles;
-    ``subdivisions`` None: a 50k-triangle torus-like grid of 224x224 quads)."""
+    """A GLB of ``copies`` nodes placing one mesh on a square grid, each turned about y: a
+    torus of 50,000 triangles, or an icosphere of ``subdivisions``."""
     if subdivisions is None:
         mesh = trimesh.creation.torus(1.0, 0.35, major_sections=250, minor_sections=100)
     else:
         mesh = trimesh.creation.icosphere(subdivisions)
     scene = trimesh.Scene()
     side = int(np.ceil(np.sqrt(copies)))
+    rng = np.random.default_rng(2)
     for j in range(copies):
-        transform = trimesh.transformations.translation_matrix([3.0 * (j % side), 0.0, 3.0 * (j // side)])
-        scene.add_geometry(mesh, node_name=f"n{j}", geom_name="shape", transform=transform)
+        transform = (trimesh.transformations.translation_matrix([3.0 * (j % side), 0.0, 3.0 * (j // side)])
+                     @ trimesh.transformations.rotation_matrix(rng.uniform(0, 2 * np.pi), [0, 1, 0]))
+        if j == 0:
+            scene.add_geometry(mesh, node_name="n0", geom_name="shape", transform=transform)
+        else:  # the same mesh again (add_geometry would store a copy)
+            scene.graph.update(frame_to=f"n{j}", frame_from=scene.graph.base_frame, geometry="shape",
+                               matrix=transform)
     scene.export(path)
     return len(mesh.faces)
 

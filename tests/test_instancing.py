@@ -73,7 +73,8 @@ def test_instances_render_as_their_copies_under_path():
 def test_whitted_and_passes_render_the_copies(caplog):
     scene = placed_scene(count=5)
     for settings in (RenderSettings(width=32, height=24, spp=2, integrator="whitted"),
-                     RenderSettings(width=32, height=24, spp=2, integrator="path", passes=("object_id",))):
+                     RenderSettings(width=32, height=24, spp=2, integrator="path",
+                                    passes=("object_id", "instance_id"))):
         with caplog.at_level(logging.INFO, logger="rtmesh.rendering.integrator"):
             it = Integrator(scene, settings)
         assert it.instances is None and "flattened into 5 copies" in caplog.text
@@ -82,6 +83,9 @@ def test_whitted_and_passes_render_the_copies(caplog):
         assert np.array_equal(result.image, expected.image)
         if settings.passes:
             assert np.array_equal(result.passes["object_id"], expected.passes["object_id"])
+            # every placement is an object: the id passes tell the copies apart
+            seen = set(np.unique(result.passes["instance_id"]).tolist()) - {-1.0, 0.0}
+            assert len(seen) >= 2 and seen <= set(range(1, 6))
 
 
 @pytest.mark.parametrize("bad, why", [(np.nan, "non-finite"), (0.0, "singular")])

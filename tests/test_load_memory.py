@@ -24,18 +24,19 @@ from rtmesh.loaders.importers import load_trimesh
 from rtmesh.rendering import memory
 
 
-def write_forest(path, nodes, subdivisions=4):
-    """A glTF of ``nodes`` nodes placing one sphere: 5120 triangles (2562 vertices), which
-    is instanced (rtmesh.scene.instances.worth_instancing); with ``subdivisions=2`` 320
-    (162 vertices), which every node copies."""
-    ball = trimesh.creation.icosphere(subdivisions=subdivisions)
+def write_forest(path, nodes, distinct=False):
+    """A glTF of ``nodes`` nodes placing one 5120-triangle sphere (2562 vertices), which is
+    instanced (rtmesh.scene.instances); ``distinct``: each node places a mesh of its own
+    (all of them reading the same accessors), which nothing instances."""
+    ball = trimesh.creation.icosphere(subdivisions=4)
     positions = ball.vertices.astype("<f4").tobytes()
     indices = ball.faces.astype("<u4").tobytes()
     data = positions + indices
     doc = {
         "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": list(range(nodes))}],
-        "nodes": [{"mesh": 0, "translation": [3.0 * (i % 100), 3.0 * (i // 100), 0.0]} for i in range(nodes)],
-        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+        "nodes": [{"mesh": i if distinct else 0, "translation": [3.0 * (i % 100), 3.0 * (i // 100), 0.0]}
+                  for i in range(nodes)],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}] * (nodes if distinct else 1),
         "buffers": [{"byteLength": len(data),
                      "uri": "data:application/octet-stream;base64," + base64.b64encode(data).decode()}],
         "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": len(positions)},
@@ -50,27 +51,27 @@ def write_forest(path, nodes, subdivisions=4):
 
 @pytest.fixture(scope="module")
 def forest(tmp_path_factory):
-    """20,000 copies of a small sphere (too small to instance)."""
-    return write_forest(tmp_path_factory.mktemp("forest") / "forest.gltf", 20_000, subdivisions=2)
+    """10,000 copies: each node places a mesh of its own."""
+    return write_forest(tmp_path_factory.mktemp("forest") / "forest.gltf", 10_000, distinct=True)
 
 
 def test_flattened_size_counts_every_copy_and_an_instanced_mesh_once(forest, tmp_path):
-    assert flattened_size(read_gltf_json(forest)) == (20_000, 20_000 * 162, 20_000 * 320)
+    assert flattened_size(read_gltf_json(forest)) == (10_000, 10_000 * 2562, 10_000 * 5120)
     instanced = write_forest(tmp_path / "instanced.gltf", 10_000)
     assert flattened_size(read_gltf_json(instanced)) == (10_000, 2562, 5120)
 
 
-def test_twenty_thousand_copies_beyond_the_limit_stop_before_the_memory_is_taken(forest, tmp_path, capsys):
+def test_ten_thousand_copies_beyond_the_limit_stop_before_the_memory_is_taken(forest, tmp_path, capsys):
     out = tmp_path / "out.png"
     before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     start = time.perf_counter()
     status = main(["render", str(forest), "-o", str(out), "--width", "32", "--height", "24", "-q",
-                   "--memory-limit", "2G"])
+                   "--memory-limit", "4G"])
     elapsed = time.perf_counter() - start
     err = capsys.readouterr().err
     assert status == 2 and not out.exists()
-    assert err == (f"rtmesh: error: {forest}: 20000 mesh nodes of 6400000 triangles in all, copied where not "
-                   "instanced would need about 3.59 GiB of memory to load but --memory-limit is 2 GiB: stopped "
+    assert err == (f"rtmesh: error: {forest}: 10000 mesh nodes of 51200000 triangles in all, copied where not "
+                   "instanced would need about 28.6 GiB of memory to load but --memory-limit is 4 GiB: stopped "
                    "before taking it (set --memory-limit, 0 = no check)\n")
     # refused from the JSON: no geometry read, no copy made
     assert elapsed < 5.0
@@ -85,8 +86,8 @@ def test_a_batch_worker_fails_an_asset_beyond_its_limit_at_the_load_stage(forest
     out = tmp_path / "out"
     report = rtmesh.batch_convert([src], out, workers=1, memory_limit=2 * 2**30, width=16, height=12, spp=1,
                                   quiet=True)
-    message = (f"{src / 'forest.gltf'}: 20000 mesh nodes of 6400000 triangles in all, copied where not instanced "
-               "would need about 3.59 GiB of memory to load but --memory-limit is 2 GiB: stopped before "
+    message = (f"{src / 'forest.gltf'}: 10000 mesh nodes of 51200000 triangles in all, copied where not instanced "
+               "would need about 28.6 GiB of memory to load but --memory-limit is 2 GiB: stopped before "
                "taking it (set --memory-limit, 0 = no check)")
     (failed,) = report.failed
     assert failed["asset"] == "forest.gltf"
@@ -107,10 +108,10 @@ def test_a_batch_worker_fails_an_asset_beyond_its_limit_at_the_load_stage(forest
 
 
 def test_files_within_the_limit_load_and_no_limit_is_checked_outside_the_command(tmp_path):
-    small = write_forest(tmp_path / "small.gltf", 3, subdivisions=2)
-    with memory.loading_limit(1_000_000):
+    small = write_forest(tmp_path / "small.gltf", 3, distinct=True)
+    with memory.loading_limit(10_000_000):
         assert len(load_trimesh(small).graph.nodes_geometry) == 3
-    with memory.loading_limit(500_000), pytest.raises(ResourceError, match="3 mesh nodes of 960 triangles"):
+    with memory.loading_limit(1_000_000), pytest.raises(ResourceError, match="3 mesh nodes of 15360 triangles"):
         load_trimesh(small)
     with memory.loading_limit(0):
         load_trimesh(small)

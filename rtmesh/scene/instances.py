@@ -22,10 +22,12 @@ import trimesh
 from rtmesh.geometry import build_kernels
 
 # A mesh placed more than once is built once and placed by Embree instances when it has at
-# least this many triangles (smaller ones are copied: flattening them costs little memory,
-# and their copies trace faster than instances: benchmarks/bench_instancing.py crossover,
-# docs/BENCHMARKS.md "Instancing")
-MIN_TRIANGLES = 512
+# least this many triangles; smaller ones are copied.  Measured (benchmarks/bench_instancing.py
+# crossover, docs/BENCHMARKS.md "Instancing"): the copies' build grows by ~0.6 us a triangle
+# a copy while the instances' stays ~40 ms, and a frame renders 0-14 % slower through
+# instances of a small mesh; build and one 128x96, 16 spp frame break even between 20 and
+# 80 triangles (400 and 1600 placements)
+MIN_TRIANGLES = 64
 # Hull points transformed per block of instances when forming the bounds: (block, 3, hull)
 # float64 temporaries of a few tens of MB at most
 _BOUNDS_BLOCK = 512
@@ -157,8 +159,8 @@ def unsupported(scene, settings):
         missing.append(f"integrator {settings.integrator!r}")
     if not embree_library.packet_library():
         missing.append("the single-ray Embree path")
-    if settings.passes:
-        missing.append("passes")
+    if settings.passes or settings.denoise:
+        missing.append("passes" + (" (the denoiser's guides)" if settings.denoise else ""))
     if settings.caustics == "photons":
         missing.append("photon passes for caustics")
     if as_background(scene.background).transparent:
