@@ -64,8 +64,9 @@ def test_instances_render_as_their_copies_under_path():
     copies = Integrator(instances.flattened(scene), settings).render().image
     a, b = block_means(image), block_means(copies)
     # the same scene to float32 rounding of the triangles (the copies' world-space corners
-    # against the prototype's model-space ones under Embree's float32 transform): block
-    # means agree to ~0.15 % (1 % is the requirement)
+    # against the prototype's model-space ones under Embree's float32 transform): measured,
+    # the largest block difference 0.28 % of the block (0.5 % of the image mean); 1 % is
+    # the requirement
     assert np.abs(a - b).max() <= 0.01 * b.mean()
     assert (np.abs(a - b) <= 0.01 * np.maximum(b, 0.05)).all()
 

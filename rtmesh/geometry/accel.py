@@ -318,12 +318,11 @@ class _InstancedScene:
     ----------
     handle : int
         The top-level ``RTCScene``: the world-space triangles (geometry 0 when there are
-        any), then one instance per placement.
+        any), then one instance array of every placement (a hit's ``instPrimID`` is the
+        placement).
     vertices32 : (V, 3) float32
         Every vertex as Embree holds it (world-space ones, then each prototype's, in model
         coordinates), for the per-face tables.
-    first_instance : int
-        The geometry id of placement 0 (Embree's ``instID``).
     """
 
     def __init__(self, library, vertices, faces, instances):
@@ -333,11 +332,9 @@ class _InstancedScene:
             fa, fb = instances.prototype_faces[p], instances.prototype_faces[p + 1]
             va, vb = instances.prototype_vertices[p], instances.prototype_vertices[p + 1]
             self._prototypes.append(embree_library.SharedScene(library, vertices[va:vb], faces[fa:fb] - va))
-        placed = [(self._prototypes[p], instances.transforms[j, :3, :4])
-                  for j, p in enumerate(instances.prototype)]
-        self._top = embree_library.SharedScene(library, vertices[:v0], faces[:f0], placed)
+        self._top = embree_library.SharedScene(library, vertices[:v0], faces[:f0],
+                                               (self._prototypes, instances.prototype, instances.transforms[:, :3, :]))
         self.handle = self._top.handle
-        self.first_instance = 1 if f0 else 0
         self.vertices32 = np.concatenate([self._top.vertices32] + [p.vertices32 for p in self._prototypes])
 
 

@@ -32,7 +32,9 @@ VERIFIED_VERSIONS = ((4, 4),)
 
 _RTC_SCENE_FLAG_ROBUST = 1 << 2
 _RTC_GEOMETRY_TYPE_TRIANGLE = 0
-_RTC_GEOMETRY_TYPE_INSTANCE = 121
+_RTC_GEOMETRY_TYPE_INSTANCE_ARRAY = 122
+_RTC_BUFFER_TYPE_TRANSFORM = 23
+_RTC_FORMAT_UINT = 0x5001
 _RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR = 0x9234
 _RTC_BUFFER_TYPE_INDEX, _RTC_BUFFER_TYPE_VERTEX = 0, 1
 _RTC_FORMAT_UINT3, _RTC_FORMAT_FLOAT3 = 0x5003, 0x9003
@@ -88,8 +90,7 @@ class PacketLibrary:
             getattr(lib, name).argtypes = [ctypes.c_void_p]
         lib.rtcAttachGeometry.restype = ctypes.c_uint
         lib.rtcAttachGeometry.argtypes = [ctypes.c_void_p, ctypes.c_void_p]
-        lib.rtcSetGeometryInstancedScene.argtypes = [ctypes.c_void_p, ctypes.c_void_p]
-        lib.rtcSetGeometryTransform.argtypes = [ctypes.c_void_p, ctypes.c_uint, ctypes.c_int, ctypes.c_void_p]
+        lib.rtcSetGeometryInstancedScenes.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_size_t]
         self.device = lib.rtcNewDevice(None)
         if not self.device:
             raise OSError(f"{path}: rtcNewDevice failed (error {lib.rtcGetDeviceError(None)})")
@@ -99,7 +100,7 @@ class PacketLibrary:
         self.intersect16 = PACKET_QUERY(ctypes.cast(lib.rtcIntersect16, ctypes.c_void_p).value)
         self.occluded16 = PACKET_QUERY(ctypes.cast(lib.rtcOccluded16, ctypes.c_void_p).value)
 
-    def new_scene(self, vertices32, faces32, instances=()):
+    def new_scene(self, vertices32, faces32, instances=None):
         """Build and commit a robust triangle scene over shared (not copied) buffers.
 
         Parameters
@@ -109,13 +110,16 @@ class PacketLibrary:
             4 bytes past the last one must be readable.
         faces32 : (F, 3) uint32 or int32, C-contiguous
             May be empty (a scene of instances only: no triangle geometry is attached).
-        instances : sequence of (int, (3, 4) float32 array), optional
-            Committed scenes (:meth:`new_scene` handles) placed by affine transforms
-            (model to world: the linear part and the translation, row-major ``[A | t]``).
-            They are attached after the triangles, so instance ``j`` is geometry
-            ``j + (1 if faces32 else 0)`` of the scene, the ``instID`` Embree reports for
-            its hits (one instance level: the library is compiled with
-            ``RTC_MAX_INSTANCE_LEVEL_COUNT = 1``).  Embree copies the transforms.
+        instances : (scenes, prototype, columns), optional
+            Committed scenes placed by affine transforms, as one instance array
+            (``RTC_GEOMETRY_TYPE_INSTANCE_ARRAY``, attached after the triangles):
+            ``scenes`` (P,) uintp their handles (:meth:`new_scene`), ``prototype`` (k,)
+            uint32 each placement's scene, ``columns`` (k, 12) float32 each placement's
+            model-to-world transform in Embree's ``FLOAT3X4_COLUMN_MAJOR`` (the columns of
+            the linear part, then the translation).  A hit on placement ``j`` has the
+            array's geometry id as ``instID`` and ``j`` as ``instPrimID`` (one instance
+            level: the library is compiled with ``RTC_MAX_INSTANCE_LEVEL_COUNT = 1``).
+            Embree shares the three arrays: keep them alive with the scene.
 
         Returns
         -------
@@ -138,12 +142,16 @@ class PacketLibrary:
             lib.rtcCommitGeometry(geometry)
             lib.rtcAttachGeometry(scene, geometry)
             lib.rtcReleaseGeometry(geometry)  # the scene holds it now
-        for instanced, transform in instances:
-            # Embree's column-major 3x4: the columns of A, then t (the transpose's rows)
-            columns = np.ascontiguousarray(np.asarray(transform, dtype=np.float32).T)
-            geometry = lib.rtcNewGeometry(self.device, _RTC_GEOMETRY_TYPE_INSTANCE)
-            lib.rtcSetGeometryInstancedScene(geometry, instanced)
-            lib.rtcSetGeometryTransform(geometry, 0, _RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR, columns.ctypes.data)
+        if instances is not None:
+            # one instance array for every placement: a handful of calls however many there
+            # are (10,000 instance geometries took 0.09 s of ctypes calls alone)
+            scenes, prototype, columns = instances
+            geometry = lib.rtcNewGeometry(self.device, _RTC_GEOMETRY_TYPE_INSTANCE_ARRAY)
+            lib.rtcSetGeometryInstancedScenes(geometry, scenes.ctypes.data, len(scenes))
+            lib.rtcSetSharedGeometryBuffer(geometry, _RTC_BUFFER_TYPE_INDEX, 0, _RTC_FORMAT_UINT,
+                                           prototype.ctypes.data, 0, 4, len(prototype))
+            lib.rtcSetSharedGeometryBuffer(geometry, _RTC_BUFFER_TYPE_TRANSFORM, 0, _RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR,
+                                           columns.ctypes.data, 0, 48, len(columns))
             lib.rtcCommitGeometry(geometry)
             lib.rtcAttachGeometry(scene, geometry)
             lib.rtcReleaseGeometry(geometry)
@@ -299,8 +307,10 @@ class SharedScene:
     library : PacketLibrary
     vertices : (V, 3) float
     faces : (F, 3) int
-    instances : sequence of (SharedScene, (3, 4) float), optional
-        Scenes placed by affine transforms (see :meth:`PacketLibrary.new_scene`).
+    instances : (scenes, prototype, transforms), optional
+        Placements (see :meth:`PacketLibrary.new_scene`): ``scenes`` a list of
+        :class:`SharedScene`, ``prototype`` (k,) int each placement's, ``transforms``
+        (k, 3, 4) float its model-to-world ``[A | t]``.
 
     Attributes
     ----------
@@ -311,7 +321,7 @@ class SharedScene:
     faces32 : (F, 3) uint32
     """
 
-    def __init__(self, library, vertices, faces, instances=()):
+    def __init__(self, library, vertices, faces, instances=None):
         self.library = library
         padded = np.empty((len(vertices) + 1, 3), dtype=np.float32)
         padded[:-1] = vertices
@@ -319,10 +329,20 @@ class SharedScene:
         self._padded = padded
         self.vertices32 = padded[:-1]
         self.faces32 = np.ascontiguousarray(faces, dtype=np.uint32)
-        # the instanced scenes live as long as this one (Embree keeps them by handle)
-        self._instanced = [scene for scene, _ in instances]
-        self.handle = library.new_scene(padded, self.faces32,
-                                        [(scene.handle, transform) for scene, transform in instances])
+        placed = None
+        if instances is not None:
+            scenes, prototype, transforms = instances
+            # Embree's column-major 3x4 (the columns of A, then t: the rows of the transpose),
+            # shared: 4 spare bytes after each buffer, as Embree may read 16-byte vectors
+            columns = np.zeros((len(transforms) + 1, 12), np.float32)
+            columns[:-1] = np.asarray(transforms, dtype=np.float32).transpose(0, 2, 1).reshape(-1, 12)
+            index = np.zeros(len(prototype) + 4, np.uint32)
+            index[:len(prototype)] = prototype
+            handles = np.array([scene.handle for scene in scenes], dtype=np.uintp)
+            # the instanced scenes and the shared arrays live as long as this scene
+            self._instanced = (scenes, handles, index, columns)
+            placed = (handles, index[:len(prototype)], columns[:-1])
+        self.handle = library.new_scene(padded, self.faces32, placed)
 
     def close(self):
         # getattr: __del__ runs on an object whose __init__ failed before setting it

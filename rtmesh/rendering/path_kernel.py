@@ -46,8 +46,8 @@ face's mover (-1: static).  A ray then meets the static scene and every mover, e
 in its rest pose at the lane's time (rigid motions keep distances), the nearest hit wins,
 and its point and normals are carried to the lane's time (as
 :class:`rtmesh.geometry.motion.MotionAccel`).
-``instances = (first, face_offset, to_world, normal_to_world)``: meshes placed by Embree
-instances (:mod:`rtmesh.scene.instances`): ``first`` the ``instID`` of placement 0,
+``instances = (face_offset, to_world, normal_to_world)``: meshes placed by an Embree
+instance array (:mod:`rtmesh.scene.instances`; a hit's ``instPrimID`` is the placement):
 ``face_offset`` (k,) each placement's first face in the per-face tables (its prototype's),
 ``to_world`` (k, 12) its model-to-world transform (the linear part row by row, then the
 translation) and ``normal_to_world`` (k, 9) the inverse transpose of the linear part.  A hit
@@ -71,7 +71,7 @@ import numpy as np
 
 from rtmesh.core.compile_ahead import KernelGroup
 from rtmesh.core.compiled import inline_row, kernel, row
-from rtmesh.geometry.embree_packets import (DEFAULT_TFAR, GEOM_ID, INST_ID, INVALID_ID, LANES, PRIM_ID,
+from rtmesh.geometry.embree_packets import (DEFAULT_TFAR, GEOM_ID, INST_ID, INST_PRIM_ID, INVALID_ID, LANES, PRIM_ID,
                                             RAYHIT_WORDS, RTC_RAY_QUERY_FLAG_COHERENT, RTC_RAY_QUERY_FLAG_INCOHERENT,
                                             TFAR, U, V, clear_hit, packet_buffers, query_arguments, set_lane)
 from rtmesh.geometry.float32_rays import F32_MAX, offset_origin
@@ -350,7 +350,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     media = len(camera_media)
     env_pixels, env_marginal, env_conditional, env_func, env_mean, env_cos, env_sin = env
     has_static, static_faces, movers, face_maps, face_offsets, moves, face_mover = motion
-    first_instance, instance_faces, instance_to_world, instance_normals = instances
+    instance_faces, instance_to_world, instance_normals = instances
     has_lights = len(light_rows) > 0
     photons_on, scatters = photon_map[0], photon_map[10]
     radius_scale, footprint_a, footprint_b, max_radius = photon_map[6], photon_map[7], photon_map[8], photon_map[9]
@@ -444,11 +444,11 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 if valid[lane] and has_static and words[GEOM_ID * LANES + lane] != INVALID_ID:
                     best_t[lane] = np.float64(ray[TFAR * LANES + lane])
                     local = words[PRIM_ID * LANES + lane]
-                    placed = words[INST_ID * LANES + lane]
-                    if placed != INVALID_ID:
+                    if words[INST_ID * LANES + lane] != INVALID_ID:
                         # a placement: the face of its prototype in the per-face tables
-                        best_instance[lane] = placed - first_instance
-                        best_prim[lane] = instance_faces[placed - first_instance] + local
+                        placed = words[INST_PRIM_ID * LANES + lane]
+                        best_instance[lane] = placed
+                        best_prim[lane] = instance_faces[placed] + local
                     else:
                         best_prim[lane] = static_faces[local] if len(static_faces) else local
                     best_u[lane] = np.float64(ray[U * LANES + lane])
@@ -760,7 +760,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
 
 def no_instances():
     """The kernel's ``instances`` record of a scene without placed meshes."""
-    return (0, np.zeros(0, np.int64), np.zeros((0, 12)), np.zeros((0, 9)))
+    return (np.zeros(0, np.int64), np.zeros((0, 12)), np.zeros((0, 9)))
 
 
 def small_records():

@@ -100,8 +100,8 @@ def instance_record(it):
     linear = placed.transforms[:, :3, :3]
     to_world = np.concatenate([linear.reshape(-1, 9), placed.transforms[:, :3, 3]], axis=1)
     normal_to_world = np.linalg.inv(linear).transpose(0, 2, 1).reshape(-1, 9)
-    return (np.int64(_packet_accel(it.accel)._shared.first_instance), np.ascontiguousarray(placed.face_offset),
-            np.ascontiguousarray(to_world), np.ascontiguousarray(normal_to_world))
+    return (np.ascontiguousarray(placed.face_offset), np.ascontiguousarray(to_world),
+            np.ascontiguousarray(normal_to_world))
 
 
 def scene_tables(scene, accel):

@@ -13,12 +13,13 @@ through them yet); everything else renders :func:`flattened`, the copies the loa
 before instancing existed.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.spatial
 import trimesh
 
+from rtmesh.core.compiled import kernel
 from rtmesh.geometry import build_kernels
 
 # A mesh placed more than once is built once and placed by Embree instances when it has at
@@ -28,9 +29,6 @@ from rtmesh.geometry import build_kernels
 # instances of a small mesh; build and one 128x96, 16 spp frame break even between 20 and
 # 80 triangles (400 and 1600 placements)
 MIN_TRIANGLES = 64
-# Hull points transformed per block of instances when forming the bounds: (block, 3, hull)
-# float64 temporaries of a few tens of MB at most
-_BOUNDS_BLOCK = 512
 
 
 @dataclass
@@ -60,6 +58,8 @@ class Instances:
     transforms: np.ndarray
     prototype: np.ndarray
     object_id: np.ndarray
+    # bounds(), formed once (the prototypes' vertices do not change once the scene is made)
+    _bounds: list = field(default_factory=list, init=False, repr=False, compare=False)
 
     def __len__(self):
         return len(self.prototype)
@@ -77,17 +77,22 @@ class Instances:
         """(2, 3) float64: world bounds of every placement.
 
         The extremes of an affine image of a point set are images of its convex hull's
-        vertices, so only those are transformed (exact: the same products as the copies'
-        vertices, up to the order of the sum).
+        vertices, so only those are transformed (exact up to the rounding of the products,
+        which the copies' vertices may sum in another order), and only for the placements
+        whose box reaches beyond the bounds found so far (:func:`placed_bounds`); formed
+        once.
 
         Parameters
         ----------
         vertices : (V, 3) float64
             The scene's vertices.
         """
-        low, high = np.full(3, np.inf), np.full(3, -np.inf)
+        if self._bounds:
+            return self._bounds[0].copy()
+        bounds = np.array([np.full(3, np.inf), np.full(3, -np.inf)])
+        transforms = np.ascontiguousarray(self.transforms[:, :3, :], dtype=np.float64)
         for p in range(len(self.prototype_vertices) - 1):
-            placed = np.flatnonzero(self.prototype == p)
+            placed = np.flatnonzero(self.prototype == p).astype(np.int64)
             if not len(placed):
                 continue
             points = vertices[self.prototype_vertices[p]:self.prototype_vertices[p + 1]]
@@ -95,12 +100,61 @@ class Instances:
                 points = points[scipy.spatial.ConvexHull(points).vertices]
             except scipy.spatial.QhullError:  # flat or degenerate: every vertex counts
                 pass
-            for start in range(0, len(placed), _BOUNDS_BLOCK):
-                m = self.transforms[placed[start:start + _BOUNDS_BLOCK]]
-                world = m[:, :3, :3] @ points.T + m[:, :3, 3:4]  # (block, 3, hull)
-                low = np.minimum(low, world.min(axis=(0, 2)))
-                high = np.maximum(high, world.max(axis=(0, 2)))
-        return np.stack([low, high])
+            # each placement's box from the prototype's box (cheap, and never smaller than its
+            # exact image but for rounding): only the placements whose box reaches beyond the
+            # exact bounds found so far are transformed (a placement whose box only touches
+            # them is skipped: its exact image could pass them by rounding alone, ~1e-16
+            # relative, which keeps placements side by side on a plane from all being walked)
+            low, high = points.min(axis=0), points.max(axis=0)
+            centre, half = (low + high) / 2, (high - low) / 2
+            linear = transforms[placed, :, :3]
+            middle = linear @ centre + transforms[placed, :, 3]
+            reach = np.abs(linear) @ half
+            conservative = np.ascontiguousarray(np.stack([middle - reach, middle + reach], axis=1))
+            # per side and axis, the placements in the order they may reach furthest out
+            order = np.ascontiguousarray(np.stack([np.argsort(conservative[:, 0, :], axis=0, kind="stable").T,
+                                                   np.argsort(-conservative[:, 1, :], axis=0, kind="stable").T]),
+                                         dtype=np.int64)
+            placed_bounds(np.ascontiguousarray(points, dtype=np.float64), transforms, placed, conservative, order,
+                          bounds)
+        self._bounds.append(bounds)
+        return bounds.copy()
+
+
+@kernel
+def placed_bounds(points, transforms, placed, conservative, order, bounds):
+    """Grow ``bounds`` by the images of ``points`` under the placements ``placed``.
+
+    Parameters
+    ----------
+    points : (h, 3) float64
+    transforms : (k, 3, 4) float64
+        Model-to-world affine transforms.
+    placed : (m,) int64
+        Which transforms.
+    conservative : (m, 2, 3) float64
+        A box around each placement's image of ``points``.
+    order : (2, 3, m) int64
+        Per side (low, high) and axis, the placements (indices into ``placed``) by how far
+        out their conservative box reaches: the walk stops at the first that cannot reach
+        beyond what is found, so typically a handful are transformed, not all ``m``.
+    bounds : (2, 3) float64
+        Low and high corners, grown in place.
+    """
+    for c in range(3):
+        for side in range(2):
+            best = bounds[side, c]
+            for r in range(order.shape[2]):
+                i = order[side, c, r]
+                if (conservative[i, side, c] >= best) if side == 0 else (conservative[i, side, c] <= best):
+                    break
+                j = placed[i]
+                a0, a1, a2, t = transforms[j, c, 0], transforms[j, c, 1], transforms[j, c, 2], transforms[j, c, 3]
+                for q in range(points.shape[0]):
+                    # the row of A times the point, then the translation: the copies' order
+                    x = ((a0 * points[q, 0] + a1 * points[q, 1]) + a2 * points[q, 2]) + t
+                    best = min(best, x) if side == 0 else max(best, x)
+            bounds[side, c] = best
 
 
 def worth_instancing(triangles, placements):
