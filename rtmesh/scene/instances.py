@@ -24,10 +24,10 @@ from rtmesh.geometry import build_kernels
 
 # A mesh placed more than once is built once and placed by Embree instances when it has at
 # least this many triangles; smaller ones are copied.  Measured (benchmarks/bench_instancing.py
-# crossover, docs/BENCHMARKS.md "Instancing"): the copies' build grows by ~0.6 us a triangle
-# a copy while the instances' stays ~40 ms, and a frame renders 0-14 % slower through
-# instances of a small mesh; build and one 128x96, 16 spp frame break even between 20 and
-# 80 triangles (400 and 1600 placements)
+# crossover, docs/BENCHMARKS.md "Instancing"): the copies' build costs ~1 us a triangle a
+# copy while the instances' stays ~20 ms, and a frame renders up to 12 % slower through
+# instances of a small mesh (a second level of traversal); build and one 128x96, 16 spp
+# frame break even between 20 and 80 triangles (400 and 1600 placements)
 MIN_TRIANGLES = 64
 
 
