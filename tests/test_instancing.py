@@ -189,3 +189,14 @@ def test_instanced_images_do_not_depend_on_the_thread_count():
     images = [Integrator(scene, RenderSettings(width=40, height=30, spp=4, integrator="path", threads=threads))
               .render().image for threads in (1, 2)]
     assert np.array_equal(*images)
+
+
+@pytest.mark.parametrize("change, why", [
+    (lambda m: m[0].__setattr__("alpha_mode", "blend"), "alpha cut-outs"),
+    (lambda m: m[1].__setattr__("emission", np.full(3, 2.0)), "emissive prototypes")])
+def test_what_the_kernel_cannot_trace_through_instances_renders_the_copies(change, why):
+    scene = placed_scene(count=5)
+    change(scene.materials.materials)
+    scene.materials = type(scene.materials)(scene.materials.materials)
+    assert why in instances.unsupported(scene, RenderSettings(integrator="path"))
+    assert Integrator(scene, RenderSettings(width=16, height=12, spp=1, integrator="path")).instances is None

@@ -205,7 +205,6 @@ def unsupported(scene, settings):
     settings : RenderSettings
     """
     from rtmesh.geometry import embree_library
-    from rtmesh.materials.table import ALPHA_MODES
     from rtmesh.scene.background import as_background
 
     missing = []
@@ -227,7 +226,8 @@ def unsupported(scene, settings):
         missing.append("emissive prototypes")
     if m.any_transmission:
         missing.append("transmissive materials (media)")
-    if (m.alpha_mode[used] != ALPHA_MODES.index("opaque")).any():
+    if m.any_cutout:
+        # anywhere: shadow rays through cut-outs read their hits as world-space faces
         missing.append("alpha cut-outs")
     if any(material.normal_texture is not None or (material.layers is not None and (
             material.layers.anisotropy > 0 or material.layers.textures.get("clearcoatNormalTexture") is not None))

@@ -1,4 +1,5 @@
-"""The flattened scene: one triangle soup with per-face material and object ids."""
+"""The scene: one triangle soup with per-face material and object ids (meshes placed many
+times kept once, :mod:`rtmesh.scene.instances`)."""
 
 import collections
 import dataclasses
