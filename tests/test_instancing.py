@@ -200,3 +200,13 @@ def test_what_the_kernel_cannot_trace_through_instances_renders_the_copies(chang
     scene.materials = type(scene.materials)(scene.materials.materials)
     assert why in instances.unsupported(scene, RenderSettings(integrator="path"))
     assert Integrator(scene, RenderSettings(width=16, height=12, spp=1, integrator="path")).instances is None
+
+
+def test_a_view_with_a_transparent_background_is_refused_on_instances():
+    from rtmesh.scene.background import TransparentBackground
+
+    it = Integrator(placed_scene(count=5), RenderSettings(width=16, height=12, spp=1, integrator="path"))
+    assert it.instances is not None
+    with pytest.raises(ValueError, match="transparent background"):
+        it.with_view(it.scene.camera, background=TransparentBackground())
+    assert it.with_view(it.scene.camera).instances is not None
