@@ -69,10 +69,6 @@ class Instances:
         """(k,) int64: each placement's first face in the scene's per-face tables."""
         return self.prototype_faces[self.prototype]
 
-    def placed_faces(self):
-        """int: triangles the placements stand for (what flattening would make)."""
-        return int(np.diff(self.prototype_faces)[self.prototype].sum())
-
     def bounds(self, vertices):
         """(2, 3) float64: world bounds of every placement.
 
