@@ -157,6 +157,12 @@ class Accel:
         :func:`rtmesh.geometry.embree_library.packet_library` verified them.  Both give the same
         hits on scenes without coplanar overlapping triangles; where two triangles are hit
         at exactly the same distance, each path keeps the one its traversal meets first.
+    instances : rtmesh.scene.instances.Instances, optional
+        Faces from ``instances.first_face`` on are prototypes in model coordinates (their
+        ``vertices`` not re-centred): each is built once into an Embree scene of its own
+        and placed by ``instances.transforms`` (already re-centred) as Embree instances of
+        the top-level scene, after the world-space faces.  Packets only; only the path
+        kernel reads such hits (:meth:`intersect` and :meth:`occluded` refuse).
 
     Attributes
     ----------
@@ -178,13 +184,18 @@ class Accel:
     GIL while they trace.
     """
 
-    def __init__(self, vertices, faces, packets=None):
-        library = embree_library.packet_library() if packets is None or packets else None
-        if packets and library is None:
+    def __init__(self, vertices, faces, packets=None, instances=None):
+        library = embree_library.packet_library() if packets is None or packets or instances is not None else None
+        if (packets or instances is not None) and library is None:
             raise RuntimeError("Embree packet queries are not available here (see the log)")
         self.packets = library is not None
+        self.instances = instances
         self.faces = np.ascontiguousarray(faces, dtype=np.int32)
-        if self.packets:
+        if instances is not None:
+            self._shared = _InstancedScene(library, vertices, self.faces, instances)
+            self.vertices32 = self._shared.vertices32
+            self._intersect16, self._occluded16 = library.intersect16, library.occluded16
+        elif self.packets:
             self._shared = embree_library.SharedScene(library, vertices, self.faces)
             self.vertices32 = self._shared.vertices32
             self._intersect16, self._occluded16 = library.intersect16, library.occluded16
@@ -218,6 +229,7 @@ class Accel:
         -------
         Hits
         """
+        self._flat_only()
         n = len(origins)
         if n == 0:
             empty = np.zeros(0)
@@ -251,6 +263,7 @@ class Accel:
         -------
         (n,) or (k,) bool
         """
+        self._flat_only()
         if self.packets:
             rows = _NO_ROWS if rows is None else np.asarray(rows, dtype=np.int64)
             o, d, t = embree_packets.shadow_rays(origins, directions, t_max)
@@ -266,6 +279,12 @@ class Accel:
         t = np.minimum(t_max, F32_MAX).astype(np.float32, copy=False)
         o, d = _embree_rays(origins, rows), _embree_rays(directions, rows)
         return self._scene.run(o, d, dists=t, query="OCCLUDED") != -1
+
+    def _flat_only(self):
+        # the batched queries report a placement's primID without its instance: only the
+        # path kernel, which reads instID, traces instanced scenes
+        if self.instances is not None:
+            raise NotImplementedError("the batched queries do not trace Embree instances")
 
     def hit_points(self, hits, mask=None):
         """World positions of hits, interpolated on the float32 triangles Embree traced.
@@ -289,6 +308,34 @@ class Accel:
         if mask is not None:
             prim, u, v = prim[mask], u[mask], v[mask]
         return barycentric_interpolate(take_rows(self.triangles, prim), u, v)
+
+
+class _InstancedScene:
+    """World-space faces and prototypes placed by instances, as one top-level Embree scene
+    (see :class:`Accel`'s ``instances``).
+
+    Attributes
+    ----------
+    handle : int
+        The top-level ``RTCScene``: the world-space triangles (geometry 0 when there are
+        any), then one instance array of every placement (a hit's ``instPrimID`` is the
+        placement).
+    vertices32 : (V, 3) float32
+        Every vertex as Embree holds it (world-space ones, then each prototype's, in model
+        coordinates), for the per-face tables.
+    """
+
+    def __init__(self, library, vertices, faces, instances):
+        f0, v0 = instances.first_face, instances.first_vertex
+        self._prototypes = []
+        for p in range(len(instances.prototype_faces) - 1):
+            fa, fb = instances.prototype_faces[p], instances.prototype_faces[p + 1]
+            va, vb = instances.prototype_vertices[p], instances.prototype_vertices[p + 1]
+            self._prototypes.append(embree_library.SharedScene(library, vertices[va:vb], faces[fa:fb] - va))
+        self._top = embree_library.SharedScene(library, vertices[:v0], faces[:f0],
+                                               (self._prototypes, instances.prototype, instances.transforms[:, :3, :]))
+        self.handle = self._top.handle
+        self.vertices32 = np.concatenate([self._top.vertices32] + [p.vertices32 for p in self._prototypes])
 
 
 def _embree_rays(array, rows=None):

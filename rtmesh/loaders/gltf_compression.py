@@ -13,9 +13,10 @@ converted to float32 as the glTF specification defines (``c / (2^(b-1) - 1)`` cl
 when not normalised).  Node transforms are left as they are: the dequantising transforms
 a quantiser writes on the nodes then place the float attributes as they placed the
 integers.  ``EXT_mesh_gpu_instancing`` nodes become a child node per instance (its
-translation, rotation and scale), which trimesh then flattens into copies as it does any
-node tree (Embree instancing is future work).  Files that use none of these extensions are
-read by trimesh as before.
+translation, rotation and scale); the loader then builds a mesh that several nodes place
+once and places it by Embree instances (:mod:`rtmesh.scene.instances`).  An instance whose
+values are not finite or make its transform singular is refused in one line.  Files that
+use none of these extensions are read by trimesh as before.
 
 Draco needs ``DracoPy`` and meshopt the ``meshopt`` package (meshoptimizer's codecs), both
 in the ``rtmesh[compressed]`` extra; a file that needs a missing one is refused in one
@@ -292,6 +293,12 @@ class _Writer:
                                  f"components; expected {count if count is not None else 'n'} of {width}")
             if not np.isfinite(read).all():
                 raise self.error(f"{where}.attributes.{name}", "values that are not finite")
+            # a zero scale or quaternion makes the instance's transform singular
+            singular = (read == 0.0).any(axis=1) if name == "SCALE" else \
+                (read == 0.0).all(axis=1) if name == "ROTATION" else np.zeros(len(read), bool)
+            if singular.any():
+                raise self.error(f"{where}.attributes.{name}", f"instance {int(np.flatnonzero(singular)[0])} has a "
+                                 f"singular transform (a zero {name.lower()})")
             values[name.lower()], count = read, len(read)
         if count is None or "mesh" not in node:
             return

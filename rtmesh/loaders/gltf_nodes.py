@@ -26,6 +26,7 @@ Conventions (glTF 2.0)
   lights fall off as 1/d^2 without a cut-off).
 """
 
+import collections
 import json
 import logging
 import math
@@ -38,6 +39,7 @@ import numpy as np
 from rtmesh.core.errors import MeshError
 from rtmesh.lights.point_lights import DirectionalLight, PointLight, SpotLight
 from rtmesh.scene.camera import Camera
+from rtmesh.scene.instances import worth_instancing
 
 log = logging.getLogger(__name__)
 
@@ -180,9 +182,10 @@ def node_world_transforms(doc):
 
 
 def flattened_size(doc):
-    """What the file's meshes come to once every node that places one has its own copy (as
-    trimesh and rtmesh flatten them): counted from accessor counts, before reading a byte
-    of geometry.
+    """What the file's meshes come to in memory: a mesh placed by several nodes once when it
+    is large enough to be instanced (:func:`rtmesh.scene.instances.worth_instancing`), else
+    a copy for every node that places it; counted from accessor counts, before reading a
+    byte of geometry.
 
     Parameters
     ----------
@@ -194,7 +197,7 @@ def flattened_size(doc):
     copies : int
         Mesh nodes of the default scene (each EXT_mesh_gpu_instancing instance a node).
     vertices, triangles : int
-        Over all copies.
+        Over every copy and instanced mesh held.
     """
     accessors = doc.get("accessors") or []
     meshes = doc.get("meshes") or []
@@ -217,18 +220,20 @@ def flattened_size(doc):
                 corners = count(primitive["indices"])
             triangles += corners // 3
         sizes.append((vertices, triangles))
-    copies = vertices = triangles = 0
     nodes = doc.get("nodes") or []
+    placements = collections.Counter()
     for index, _ in node_world_transforms(doc):
         mesh = nodes[index].get("mesh") if isinstance(nodes[index], dict) else None
         if isinstance(mesh, int) and 0 <= mesh < len(sizes):
-            # EXT_mesh_gpu_instancing: a copy for each instance
+            # EXT_mesh_gpu_instancing: a placement for each instance
             instancing = (nodes[index].get("extensions") or {}).get("EXT_mesh_gpu_instancing") or {}
             attributes = list((instancing.get("attributes") or {}).values())
-            placed = count(attributes[0]) if attributes else 1
-            copies += placed
-            vertices += placed * sizes[mesh][0]
-            triangles += placed * sizes[mesh][1]
+            placements[mesh] += count(attributes[0]) if attributes else 1
+    copies = sum(placements.values())
+    # a mesh worth instancing is built once (rtmesh.scene.instances), the others copied
+    held = {mesh: 1 if worth_instancing(sizes[mesh][1], placed) else placed for mesh, placed in placements.items()}
+    vertices = sum(held[mesh] * sizes[mesh][0] for mesh in held)
+    triangles = sum(held[mesh] * sizes[mesh][1] for mesh in held)
     return copies, vertices, triangles
 
 

@@ -1,5 +1,6 @@
 """trimesh -> rtmesh: meshes, scene graphs and their materials as :class:`MeshPart` lists."""
 
+import collections
 import io
 import logging
 import os
@@ -23,7 +24,8 @@ from rtmesh.loaders.obj_polygons import triangulate_polygons
 from rtmesh.loaders.usd_files import USD_EXTENSIONS, load_usd_scene, read_usd
 from rtmesh.materials.table import PHYSICAL_MODELS, Material
 from rtmesh.rendering import memory
-from rtmesh.scene.model import MeshPart, Scene
+from rtmesh.scene.instances import worth_instancing
+from rtmesh.scene.model import MeshPart, Placement, Scene
 
 log = logging.getLogger(__name__)
 
@@ -105,7 +107,7 @@ def _gltf_source(path, ext):
     doc = read_gltf_json(path)
     check_node_graph(path, doc)
     copies, vertices, triangles = flattened_size(doc)
-    memory.check_load(path, f"{copies} mesh nodes of {triangles} triangles in all, each its own copy",
+    memory.check_load(path, f"{copies} mesh nodes of {triangles} triangles in all, copied where not instanced",
                       memory.load_estimate(vertices, triangles))
     if not gltf_compression.uses_decoded_extensions(doc):
         return dict(file_obj=path)
@@ -434,7 +436,7 @@ def vertex_colours(mesh):
     return colours
 
 
-def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=None):
+def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=None, placements=None):
     """Flatten a trimesh object (mesh or scene graph) into world-space parts.
 
     Parameters
@@ -450,6 +452,11 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
         True forces smooth shading, False flat; None uses the file's vertex normals where it
         has them and smooths by angle where it does not (split along edges of 20 degrees
         or more, see :mod:`rtmesh.geometry.smoothing`).
+    placements : list, optional
+        Given, a mesh that several nodes place and that is large enough to pay
+        (:func:`rtmesh.scene.instances.worth_instancing`) is appended to it as one
+        :class:`~rtmesh.scene.model.Placement` (the mesh once, in its own coordinates, and
+        each node's transform) instead of a copy per node.
 
     Returns
     -------
@@ -478,11 +485,25 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
 
     file_materials = getattr(obj, "metadata", {}).get("rtmesh_file_materials")
     parts, materials, material_ids = [], [], {}
+    # meshes built once and placed by instances: id(mesh) -> (prototype part, transforms, names)
+    uses = collections.Counter(id(mesh) for _, _, mesh in nodes)
+    placed = {}
     for node_name, node_transform, mesh in nodes:
         if not isinstance(mesh, trimesh.Trimesh):
             skipped["not_a_mesh"].append(f"{node_name} ({type(mesh).__name__})")
             continue
         if len(mesh.faces) == 0:
+            continue
+        instanced = placements is not None and worth_instancing(len(mesh.faces), uses[id(mesh)])
+        if instanced and id(mesh) in placed:
+            # the mesh is built already: only this node's placement
+            with np.errstate(invalid="ignore", over="ignore"):
+                matrix = transform @ node_transform
+            if not (np.isfinite(matrix).all() and np.linalg.det(matrix[:3, :3]) != 0.0):
+                skipped["hidden"].append(node_name)
+                continue
+            placed[id(mesh)][1].append(matrix)
+            placed[id(mesh)][2].append(node_name)
             continue
         # the material and per-vertex attributes come from the mesh as loaded
         visual = mesh.visual
@@ -506,6 +527,8 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
             # exporters hide parts with a zero scale: nothing of them would be seen
             skipped["hidden"].append(node_name)
             continue
+        # the mesh in its own coordinates, which a placed mesh keeps
+        model = (vertices, faces, normals)
         vertices = trimesh.transform_points(vertices, matrix)
         if np.linalg.det(matrix[:3, :3]) < 0:
             faces = faces[:, ::-1]  # a mirroring transform flips the winding
@@ -529,8 +552,15 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
             mat = material_ids[key]
         else:
             mat = material
+        if instanced:
+            # built once in its own coordinates; each placement's transform takes it to the world
+            part = MeshPart(node_name, model[0], model[1], mat, model[2], uv=uv, vertex_colors=colours)
+            placed[id(mesh)] = (part, [matrix], [node_name])
+            continue
         parts.append(MeshPart(node_name, vertices, faces, mat, normals, uv=uv, vertex_colors=colours,
                               to_world=matrix))
+    for part, matrices, names in placed.values():
+        placements.append(Placement(part, np.array(matrices), names))
     for kind, names in skipped.items():
         if names:
             log.warning("%s: %s", name, _SKIPPED[kind](names))
@@ -569,15 +599,16 @@ def scene_from_trimesh(obj, name="mesh", **scene_options):
     **scene_options
         Passed to :meth:`Scene.from_parts` (``camera``, ``lights``, ``ambient``, ``background``).
     """
-    parts, materials = parts_from_trimesh(obj, name)
-    if not parts:
+    placements = []
+    parts, materials = parts_from_trimesh(obj, name, placements=placements)
+    if not parts and not placements:
         raise MeshError(f"{name}: nothing to render (no triangles)")
     if not scene_options.get("physical") and not any(m.model in PHYSICAL_MODELS and not m.unlit
                                                       for m in materials):
         # a little ambient light for the three-light rig; the studio environment of
         # physically based assets lights them from every direction itself
         scene_options.setdefault("ambient", np.full(3, 0.05))
-    return Scene.from_parts(parts, materials, source=name, **scene_options)
+    return Scene.from_parts(parts, materials, source=name, placements=placements, **scene_options)
 
 
 def default_integrator(path):

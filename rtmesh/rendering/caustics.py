@@ -182,6 +182,10 @@ class Caustics:
             if s.caustics == "photons":
                 raise SceneError("caustics = 'photons' does not render scenes with moving objects yet; "
                                  "use caustics = 'off'")
+        elif it.instances is not None:
+            # the photon tracer reads hits as world-space faces (caustics = 'photons' renders
+            # such scenes flattened: rtmesh.scene.instances.unsupported)
+            reason = "meshes placed by Embree instances"
         elif not len(faces):
             reason = "no surface scatters by a delta lobe (mirror, smooth glass)"
         elif not len(lights.rows):

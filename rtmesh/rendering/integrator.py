@@ -66,6 +66,7 @@ from rtmesh.rendering.stats import RenderStats
 from rtmesh.rendering.surface_stage import SurfaceStage
 from rtmesh.rendering.surface_textures import SurfaceTextures
 from rtmesh.sampling.sampler import Sampler
+from rtmesh.scene import instances
 from rtmesh.scene.background import as_background
 
 log = logging.getLogger(__name__)
@@ -104,6 +105,13 @@ class Integrator:
         if object_motions(scene) and not blurs(scene):
             # an instantaneous shutter: moving objects stand still where the shutter finds them
             scene = scene_at_time(scene, scene.camera.shutter[0])
+        if scene.instances is not None:
+            missing = instances.unsupported(scene, self.settings)
+            if missing:
+                # today's copies: every stage but the path kernel reads world-space faces
+                log.info("placed meshes flattened into %d copies (instances are not traced with %s)",
+                         len(scene.instances), ", ".join(missing))
+                scene = instances.flattened(scene)
         self.scene = scene
         # Re-centre the scene on the origin before it meets float32: float32 resolution is
         # relative to the size of the coordinates, so a model 1e6 units from the origin would
@@ -116,7 +124,16 @@ class Integrator:
             motions = {k: m.shifted(self.shift) for k, m in object_motions(scene).items()}
             self.motion = MotionAccel(scene.vertices - self.shift, scene.faces, scene.object_id,
                                       motions, scene.camera.shutter)
-        self.accel = self.motion or Accel(scene.vertices - self.shift, scene.faces)
+        # placed meshes: the prototypes stay in their own coordinates, their placements move
+        self.instances = None
+        shifted = scene.vertices - self.shift
+        if scene.instances is not None:
+            first = scene.instances.first_vertex
+            shifted[first:] = scene.vertices[first:]
+            transforms = scene.instances.transforms.copy()
+            transforms[:, :3, 3] -= self.shift
+            self.instances = dataclasses.replace(scene.instances, transforms=transforms)
+        self.accel = self.motion or Accel(shifted, scene.faces, instances=self.instances)
         # the scene's size in the re-centred frame bounds the triangles' size, which sets
         # part of the origin offset (see offset_ray_origins); it cannot be zero for a scene
         # that renders.  With motion,
@@ -202,10 +219,15 @@ class Integrator:
         ------
         ValueError
             The scene has moving objects and ``camera``'s shutter differs from the built
-            one's (the built geometry depends on the shutter).
+            one's (the built geometry depends on the shutter).  Or the scene's placed meshes are traced as instances and
+            ``background`` is transparent (see :mod:`rtmesh.scene.instances`).
         """
         if object_motions(self.scene) and tuple(camera.shutter) != tuple(self.scene.camera.shutter):
             raise ValueError("with_view: a scene with moving objects needs the built camera's shutter")
+        if self.instances is not None and background is not None and as_background(background).transparent:
+            # its alpha pass comes from the batched queries, which do not trace instances
+            raise ValueError("with_view: a transparent background needs the placed meshes' copies; build the "
+                             "Integrator with it (Integrator(scene with that background, settings))")
         view = copy.copy(self)
         view.scene = dataclasses.replace(self.scene, camera=camera,
                                          lights=list(self.scene.lights if lights is None else lights),

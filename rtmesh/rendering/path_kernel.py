@@ -50,6 +50,15 @@ and its point and normals are carried to the lane's time (as
 their rest pose: next-event estimation toward one of a moving object, and the density a
 BSDF sample meeting it is weighted with, take its row carried to the lane's time
 (:func:`_light_at`).
+``instances = (face_offset, to_world, normal_to_world)``: meshes placed by an Embree
+instance array (:mod:`rtmesh.scene.instances`; a hit's ``instPrimID`` is the placement):
+``face_offset`` (k,) each placement's first face in the per-face tables (its prototype's),
+``to_world`` (k, 12) its model-to-world transform (the linear part row by row, then the
+translation) and ``normal_to_world`` (k, 9) the inverse transpose of the linear part.  A hit
+on placement ``j`` is face ``face_offset[j] + primID``; its point is formed on the
+prototype's float32 triangle and carried to the world in float64, its normals by the
+inverse transpose and normalised again (a mirroring transform needs no flip: the copies'
+reversed winding gives the same direction).  Empty arrays: no instances.
 
 With ``split``, every contribution is also added to one of the light-path passes
 (:data:`rtmesh.io.passes.LIGHT_PATH_PASSES`, which sum to the image): what the camera ray
@@ -66,9 +75,9 @@ import numpy as np
 
 from rtmesh.core.compile_ahead import KernelGroup
 from rtmesh.core.compiled import inline_row, kernel, row
-from rtmesh.geometry.embree_packets import (DEFAULT_TFAR, GEOM_ID, INVALID_ID, LANES, PRIM_ID, RAYHIT_WORDS,
-                                            RTC_RAY_QUERY_FLAG_COHERENT, RTC_RAY_QUERY_FLAG_INCOHERENT, TFAR, U, V,
-                                            clear_hit, packet_buffers, query_arguments, set_lane)
+from rtmesh.geometry.embree_packets import (DEFAULT_TFAR, GEOM_ID, INST_ID, INST_PRIM_ID, INVALID_ID, LANES, PRIM_ID,
+                                            RAYHIT_WORDS, RTC_RAY_QUERY_FLAG_COHERENT, RTC_RAY_QUERY_FLAG_INCOHERENT,
+                                            TFAR, U, V, clear_hit, packet_buffers, query_arguments, set_lane)
 from rtmesh.geometry.float32_rays import F32_MAX, offset_origin
 from rtmesh.io.passes import LIGHT_PATH_PASSES
 from rtmesh.lights import light_table as lt
@@ -280,6 +289,24 @@ def _light_at(light_rows, index, face_mover, moves, time, moved, lane):
 
 
 @inline_row
+def _placed(to_world, normal_to_world, j, px, py, pz, gx, gy, gz, nx, ny, nz):
+    """A prototype's surface point and its two unit normals carried to the world by
+    placement ``j`` (see the module notes on ``instances``)."""
+    a = to_world[j]
+    wx = ((a[0] * px + a[1] * py) + a[2] * pz) + a[9]
+    wy = ((a[3] * px + a[4] * py) + a[5] * pz) + a[10]
+    wz = ((a[6] * px + a[7] * py) + a[8] * pz) + a[11]
+    b = normal_to_world[j]
+    gx, gy, gz = (b[0] * gx + b[1] * gy) + b[2] * gz, (b[3] * gx + b[4] * gy) + b[5] * gz, \
+        (b[6] * gx + b[7] * gy) + b[8] * gz
+    nx, ny, nz = (b[0] * nx + b[1] * ny) + b[2] * nz, (b[3] * nx + b[4] * ny) + b[5] * nz, \
+        (b[6] * nx + b[7] * ny) + b[8] * nz
+    g = math.sqrt((gx * gx + gy * gy) + gz * gz)
+    n = math.sqrt((nx * nx + ny * ny) + nz * nz)
+    return wx, wy, wz, gx / g, gy / g, gz / g, nx / n, ny / n, nz / n
+
+
+@inline_row
 def _add(total, lane, r, g, b):
     total[lane, 0] += r
     total[lane, 1] += g
@@ -367,7 +394,8 @@ def _shadows_through_cutouts(intersect16, scene, args, shadow, shadow_words, sha
 
 @kernel
 def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixels, samples, sobol_keys, times,
-                geometry, surface, lights, env, options, motion, photon_map, radiance, light_paths, counts):
+                geometry, surface, lights, env, options, motion, instances, photon_map, radiance, light_paths,
+                counts):
     """Trace one path per camera ray and write its radiance.
 
     Parameters
@@ -388,7 +416,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
         (:func:`rtmesh.sampling.zsobol.sequence_keys`).
     times : (n,) float64, or (0,)
         Each sample's time in the shutter (scenes with moving objects).
-    geometry, surface, lights, env, options, motion, photon_map : tuples
+    geometry, surface, lights, env, options, motion, instances, photon_map : tuples
         The records described in the module notes.
     radiance : (n, 3) float64
         Output.
@@ -408,6 +436,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     media = len(camera_media)
     env_pixels, env_marginal, env_conditional, env_func, env_mean, env_cos, env_sin = env
     has_static, static_faces, movers, face_maps, face_offsets, moves, face_mover = motion
+    instance_faces, instance_to_world, instance_normals = instances
     has_lights = len(light_rows) > 0
     photons_on, scatters = photon_map[0], photon_map[10]
     radius_scale, footprint_a, footprint_b, max_radius = photon_map[6], photon_map[7], photon_map[8], photon_map[9]
@@ -421,6 +450,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                                                      np.int64(RTC_RAY_QUERY_FLAG_INCOHERENT))
     best_t = np.zeros(LANES)
     best_prim = np.zeros(LANES, np.int64)
+    best_instance = np.full(LANES, -1, np.int64)
     best_u = np.zeros(LANES)
     best_v = np.zeros(LANES)
     # the shadow packet's rays in float64 (origins, directions) for the movers' rest frames
@@ -500,12 +530,21 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
             for lane in range(LANES):
                 best_t[lane] = math.inf
                 best_prim[lane] = -1
+                best_instance[lane] = -1
                 if valid[lane] and has_static and words[GEOM_ID * LANES + lane] != INVALID_ID:
                     best_t[lane] = np.float64(ray[TFAR * LANES + lane])
                     local = words[PRIM_ID * LANES + lane]
-                    best_prim[lane] = static_faces[local] if len(static_faces) else local
+                    if words[INST_ID * LANES + lane] != INVALID_ID:
+                        # a placement: the face of its prototype in the per-face tables
+                        placed = words[INST_PRIM_ID * LANES + lane]
+                        best_instance[lane] = placed
+                        best_prim[lane] = instance_faces[placed] + local
+                    else:
+                        best_prim[lane] = static_faces[local] if len(static_faces) else local
                     best_u[lane] = np.float64(ray[U * LANES + lane])
                     best_v[lane] = np.float64(ray[V * LANES + lane])
+            # (a scene with moving objects has no placements: rtmesh.scene.instances.unsupported
+            # renders it from copies, so a mover's hit leaves best_instance at -1)
             _nearest_on_movers(intersect16, motion, lane_time, valid, px, py, pz, dx, dy, dz, rest, rest_words,
                                rest_valid, args_incoherent, best_t, best_prim, best_u, best_v)
             shadows = 0
@@ -574,6 +613,9 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 if len(face_mover) and face_mover[prim] >= 0:
                     hx, hy, hz, gx, gy, gz, nx, ny, nz = _to_world(moves, face_mover[prim], lane_time[lane], hx, hy, hz,
                                                                    gx, gy, gz, nx, ny, nz)
+                if best_instance[lane] >= 0:
+                    hx, hy, hz, gx, gy, gz, nx, ny, nz = _placed(instance_to_world, instance_normals, best_instance[lane],
+                                                                 hx, hy, hz, gx, gy, gz, nx, ny, nz)
                 if cutouts and layers[lane] + 1 < MAX_LAYERS and is_transparent(
                         surface, geometry, mat, prim, bu, bv, _layer_coin(key, depth, layers[lane], _COVERAGE)):
                     # the ray passes this layer: on from just beyond it, same depth
@@ -796,6 +838,11 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 light_paths[start + lane] = paths[lane]
 
 
+def no_instances():
+    """The kernel's ``instances`` record of a scene without placed meshes."""
+    return (np.zeros(0, np.int64), np.zeros((0, 12)), np.zeros((0, 9)))
+
+
 def small_records():
     """Small records of the shapes and types :class:`rtmesh.rendering.path_stage.PathStage`
     builds (the energy tables, ``geometry``, ``surface``, ``lights``, ``env``), for the
@@ -830,12 +877,13 @@ def _path_signatures():
     sample = bsdf_args + (f64,) * 6
     options = (-1, 3, 0.0, np.float32(1.0), True, False, False, z(4, np.int64))
     motion = (True, z(0, np.int64), z(0, np.int64), z(0, np.int64), z(1, np.int64), z((0, 10)), z(0, np.int64))
+    instances = no_instances()
     photon_map = empty_photon_map(1)
     query = numba_typeof_query()
     index = types.Array(types.int64, 1, "C")
     trace = (query, query, types.int64, rows, rows, types.Array(types.uint64, 1, "C"), index, index,
              types.Array(types.uint64, 1, "C"), types.Array(f64, 1, "C")) + tuple(
-        numba.typeof(record) for record in (geometry, surface, lights, env, options, motion, photon_map)) + (
+        numba.typeof(record) for record in (geometry, surface, lights, env, options, motion, instances, photon_map)) + (
         rows, types.Array(f64, 3, "C"), types.Array(types.int64, 1, "C"))
     i64 = types.int64
     gathered = ((numba.typeof(photon_map),) + (f64,) * 7 + (i64, i64, rows, i64, numba.typeof(energy))

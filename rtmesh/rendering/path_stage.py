@@ -29,7 +29,8 @@ from rtmesh.materials.models import SLOTS, material_rows, tables
 from rtmesh.io.passes import LIGHT_PATH_PASSES
 from rtmesh.rendering.caustics import Caustics
 from rtmesh.rendering.photon_kernel import empty_photon_map
-from rtmesh.rendering.path_kernel import BOUNCE, CAMERA, LIGHT_PATHS, PATH_KERNELS, SHADOW, trace_paths
+from rtmesh.rendering.path_kernel import (BOUNCE, CAMERA, LIGHT_PATHS, PATH_KERNELS, SHADOW, no_instances,
+                                          trace_paths)
 from rtmesh.rendering.path_surfaces import TEXTURE_COLUMNS
 from rtmesh.rendering.settings import RenderSettings
 from rtmesh.rendering.surface_textures import corner_and_edges, face_tangents
@@ -82,6 +83,19 @@ def motion_record(it):
               np.concatenate(faces) if faces else z(0, np.int64), offsets, moves,
               np.ascontiguousarray(m.face_mover, dtype=np.int64))
     return record, (m.static._shared.handle if m.static is not None else 0)
+
+
+def instance_record(it):
+    """The kernel's ``instances`` record (:mod:`rtmesh.rendering.path_kernel`): the
+    placements of meshes built once, in the re-centred frame."""
+    placed = it.instances
+    if placed is None:
+        return no_instances()
+    linear = placed.transforms[:, :3, :3]
+    to_world = np.concatenate([linear.reshape(-1, 9), placed.transforms[:, :3, 3]], axis=1)
+    normal_to_world = np.linalg.inv(linear).transpose(0, 2, 1).reshape(-1, 9)
+    return (np.ascontiguousarray(placed.face_offset), np.ascontiguousarray(to_world),
+            np.ascontiguousarray(normal_to_world))
 
 
 def scene_tables(scene, accel):
@@ -226,6 +240,7 @@ class PathStage:
             self._seed_key = mix64(np.uint64(settings.seed % (1 << 64)) ^ np.uint64(0x5A17_7ACE_D00D_F00D))
         library = embree_library.packet_library()
         self._motion, handle = motion_record(it)
+        self._instances = instance_record(it)
         self._queries = (library.intersect16, library.occluded16, handle)
         PATH_KERNELS.prepare()
         # photon passes for caustics, and the photons the chunks gather (the current pass's)
@@ -275,8 +290,8 @@ class PathStage:
         trace_paths(intersect16, occluded16, handle, kernel_input(origins, np.float64),
                     kernel_input(directions, np.float64), keys, *self._sobol(pixel, sample),
                     np.zeros(0) if times is None else kernel_input(times, np.float64),
-                    self.geometry, self.surface, self.light_record, self._env, options, self._motion, self.photon_map,
-                    radiance, light_paths, counts)
+                    self.geometry, self.surface, self.light_record, self._env, options, self._motion, self._instances,
+                    self.photon_map, radiance, light_paths, counts)
         if split:
             for k, name in enumerate(LIGHT_PATH_PASSES):
                 if passes.wants(name):

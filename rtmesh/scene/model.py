@@ -1,4 +1,5 @@
-"""The flattened scene: one triangle soup with per-face material and object ids."""
+"""The scene: one triangle soup with per-face material and object ids (meshes placed many
+times kept once, :mod:`rtmesh.scene.instances`)."""
 
 import collections
 import dataclasses
@@ -11,6 +12,7 @@ from rtmesh.core.errors import MeshError
 from rtmesh.geometry import build_kernels
 from rtmesh.lights.point_lights import DirectionalLight
 from rtmesh.materials.table import Material, MaterialTable
+from rtmesh.scene import instances
 from rtmesh.scene.camera import Camera, frame_bounds, framing_bounds
 from rtmesh.scene.studio import studio_background
 
@@ -63,6 +65,26 @@ class MeshPart:
 
 
 @dataclass
+class Placement:
+    """One mesh placed many times: built once, placed by Embree instances
+    (:mod:`rtmesh.scene.instances`).
+
+    Attributes
+    ----------
+    part : MeshPart
+        The mesh in its own (model) coordinates (``to_world`` and ``motion`` unused).
+    transforms : (k, 4, 4) float
+        Each placement's model-to-world transform.
+    names : list of str
+        Each placement's object name.
+    """
+
+    part: MeshPart
+    transforms: np.ndarray
+    names: list
+
+
+@dataclass
 class Scene:
     """Everything the renderer needs, as flat arrays.
 
@@ -99,6 +121,10 @@ class Scene:
         scene not made by :meth:`from_parts`.
     object_to_world : list of (4, 4) float
         Each object's model-to-world transform (:attr:`MeshPart.to_world`).
+    instances : rtmesh.scene.instances.Instances or None
+        Meshes placed many times: their faces (after the world-space ones) are in model
+        coordinates, built once and placed by Embree instances (see
+        :mod:`rtmesh.scene.instances`); None: every face is in the world.
     """
 
     vertices: np.ndarray
@@ -119,15 +145,23 @@ class Scene:
     vertex_colors: np.ndarray | None = None
     object_categories: list = field(default_factory=list)
     object_to_world: list = field(default_factory=list)
+    instances: object = None
 
     @property
     def bounds(self):
-        """(2, 3) float: axis-aligned bounds of the geometry."""
+        """(2, 3) float: axis-aligned bounds of the geometry (every placement of an
+        instanced mesh included)."""
+        faces = self.faces if self.instances is None else self.faces[:self.instances.first_face]
         # a mask, not np.unique: sorting a million faces' indices takes seconds
         used = np.zeros(len(self.vertices), dtype=bool)
-        used[self.faces.ravel()] = True
+        used[faces.ravel()] = True
         points = self.vertices if used.all() else self.vertices[used]
-        return np.stack([points.min(axis=0), points.max(axis=0)])
+        bounds = (np.stack([points.min(axis=0), points.max(axis=0)]) if len(points)
+                  else np.array([np.full(3, np.inf), np.full(3, -np.inf)]))
+        if self.instances is not None:
+            placed = self.instances.bounds(self.vertices)
+            bounds = np.stack([np.minimum(bounds[0], placed[0]), np.maximum(bounds[1], placed[1])])
+        return bounds
 
     def _keep_faces(self, keep):
         """Keep only the faces ``keep`` (indices) and their per-face data."""
@@ -141,7 +175,7 @@ class Scene:
 
     @classmethod
     def from_parts(cls, parts, materials=None, lights=None, camera=None, ambient=None,
-                   background=None, source="scene", aspect=1.0, physical=False):
+                   background=None, source="scene", aspect=1.0, physical=False, placements=()):
         """Flatten mesh parts into one scene, dropping faces that cannot render.
 
         Faces that touch a non-finite vertex or have zero area are removed with a warning
@@ -189,7 +223,17 @@ class Scene:
         # faces dropped by kind: (object, count); one warning a kind, after the loop
         dropped = collections.defaultdict(list)
         empty = []
-        for part in parts:
+        for placement in placements:
+            problem = instances.check_transforms(placement.transforms, placement.names, source)
+            if problem:
+                raise MeshError(problem)
+        # the placed meshes' prototypes come last (rtmesh.scene.instances); per prototype its
+        # first face and vertex, its placements' transforms and object indices
+        prototypes, first = [], None
+        face_count = 0
+        for part, placement in [(part, None) for part in parts] + [(p.part, p) for p in placements]:
+            if placement is not None and first is None:
+                first = (face_count, offset)
             # row-major, as most loaders give it: the build passes are compiled for one layout
             v = np.ascontiguousarray(part.vertices, dtype=np.float64).reshape(-1, 3)
             f = np.asarray(part.faces, dtype=np.int64).reshape(-1, 3)
@@ -233,12 +277,21 @@ class Scene:
                                              source, part.name))
             mat_ids.append(np.full(len(f), part.material, dtype=np.int32))
             obj_ids.append(np.full(len(f), len(names), dtype=np.int32))
-            if part.motion is not None:
-                motions[len(names)] = _with_centre(part.motion, v[np.unique(f)])
-            names.append(part.name)
-            categories.append(part.name if part.category is None else part.category)
-            to_world.append(np.eye(4) if part.to_world is None else np.asarray(part.to_world, dtype=np.float64))
+            if placement is not None:
+                k = len(placement.names)
+                prototypes.append((face_count, offset, np.asarray(placement.transforms, dtype=np.float64),
+                                   np.arange(len(names), len(names) + k, dtype=np.int32)))
+                names.extend(placement.names)
+                categories.extend(placement.names if part.category is None else [part.category] * k)
+                to_world.extend(np.asarray(placement.transforms, dtype=np.float64))
+            else:
+                if part.motion is not None:
+                    motions[len(names)] = _with_centre(part.motion, v[np.unique(f)])
+                names.append(part.name)
+                categories.append(part.name if part.category is None else part.category)
+                to_world.append(np.eye(4) if part.to_world is None else np.asarray(part.to_world, dtype=np.float64))
             offset += len(v)
+            face_count += len(f)
         _warn_dropped(source, dropped, empty)
         if not faces:
             raise MeshError(f"{source}: nothing to render (no non-degenerate triangles with finite vertices)")
@@ -275,8 +328,18 @@ class Scene:
             object_categories=categories,
             object_to_world=to_world,
         )
-        bounds, keep = framing_bounds(scene.vertices, scene.faces,
-                                      None if camera is None else camera.look_at)
+        if prototypes:
+            scene.instances = instances.Instances(
+                first_face=first[0], first_vertex=first[1],
+                prototype_faces=np.array([p[0] for p in prototypes] + [face_count], dtype=np.int64),
+                prototype_vertices=np.array([p[1] for p in prototypes] + [offset], dtype=np.int64),
+                transforms=np.concatenate([p[2] for p in prototypes]),
+                prototype=np.concatenate([np.full(len(p[3]), j, np.int64) for j, p in enumerate(prototypes)]),
+                object_id=np.concatenate([p[3] for p in prototypes]))
+            bounds, keep = scene.bounds, None
+        else:
+            bounds, keep = framing_bounds(scene.vertices, scene.faces,
+                                          None if camera is None else camera.look_at)
         if keep is not None:
             # the rest would be far below a pixel (and below float32's grid once the renderer
             # centres the scene on its bounds): drop the far faces, saying so (with a camera

@@ -24,16 +24,19 @@ from rtmesh.loaders.importers import load_trimesh
 from rtmesh.rendering import memory
 
 
-def write_forest(path, nodes):
-    """A glTF of ``nodes`` nodes placing one 5120-triangle sphere (2562 vertices)."""
+def write_forest(path, nodes, distinct=False):
+    """A glTF of ``nodes`` nodes placing one 5120-triangle sphere (2562 vertices), which is
+    instanced (rtmesh.scene.instances); ``distinct``: each node places a mesh of its own
+    (all of them reading the same accessors), which nothing instances."""
     ball = trimesh.creation.icosphere(subdivisions=4)
     positions = ball.vertices.astype("<f4").tobytes()
     indices = ball.faces.astype("<u4").tobytes()
     data = positions + indices
     doc = {
         "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": list(range(nodes))}],
-        "nodes": [{"mesh": 0, "translation": [3.0 * (i % 100), 3.0 * (i // 100), 0.0]} for i in range(nodes)],
-        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+        "nodes": [{"mesh": i if distinct else 0, "translation": [3.0 * (i % 100), 3.0 * (i // 100), 0.0]}
+                  for i in range(nodes)],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}] * (nodes if distinct else 1),
         "buffers": [{"byteLength": len(data),
                      "uri": "data:application/octet-stream;base64," + base64.b64encode(data).decode()}],
         "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": len(positions)},
@@ -48,11 +51,14 @@ def write_forest(path, nodes):
 
 @pytest.fixture(scope="module")
 def forest(tmp_path_factory):
-    return write_forest(tmp_path_factory.mktemp("forest") / "forest.gltf", 10_000)
+    """10,000 copies: each node places a mesh of its own."""
+    return write_forest(tmp_path_factory.mktemp("forest") / "forest.gltf", 10_000, distinct=True)
 
 
-def test_flattened_size_counts_every_node_that_places_a_mesh(forest):
+def test_flattened_size_counts_every_copy_and_an_instanced_mesh_once(forest, tmp_path):
     assert flattened_size(read_gltf_json(forest)) == (10_000, 10_000 * 2562, 10_000 * 5120)
+    instanced = write_forest(tmp_path / "instanced.gltf", 10_000)
+    assert flattened_size(read_gltf_json(instanced)) == (10_000, 2562, 5120)
 
 
 def test_ten_thousand_copies_beyond_the_limit_stop_before_the_memory_is_taken(forest, tmp_path, capsys):
@@ -64,9 +70,9 @@ def test_ten_thousand_copies_beyond_the_limit_stop_before_the_memory_is_taken(fo
     elapsed = time.perf_counter() - start
     err = capsys.readouterr().err
     assert status == 2 and not out.exists()
-    assert err == (f"rtmesh: error: {forest}: 10000 mesh nodes of 51200000 triangles in all, each its own copy "
-                   "would need about 28.6 GiB of memory to load but --memory-limit is 4 GiB: stopped before "
-                   "taking it (set --memory-limit, 0 = no check)\n")
+    assert err == (f"rtmesh: error: {forest}: 10000 mesh nodes of 51200000 triangles in all, copied where not "
+                   "instanced would need about 28.6 GiB of memory to load but --memory-limit is 4 GiB: stopped "
+                   "before taking it (set --memory-limit, 0 = no check)\n")
     # refused from the JSON: no geometry read, no copy made
     assert elapsed < 5.0
     assert resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before < 200_000  # KB
@@ -80,7 +86,7 @@ def test_a_batch_worker_fails_an_asset_beyond_its_limit_at_the_load_stage(forest
     out = tmp_path / "out"
     report = rtmesh.batch_convert([src], out, workers=1, memory_limit=2 * 2**30, width=16, height=12, spp=1,
                                   quiet=True)
-    message = (f"{src / 'forest.gltf'}: 10000 mesh nodes of 51200000 triangles in all, each its own copy "
+    message = (f"{src / 'forest.gltf'}: 10000 mesh nodes of 51200000 triangles in all, copied where not instanced "
                "would need about 28.6 GiB of memory to load but --memory-limit is 2 GiB: stopped before "
                "taking it (set --memory-limit, 0 = no check)")
     (failed,) = report.failed
@@ -102,7 +108,7 @@ def test_a_batch_worker_fails_an_asset_beyond_its_limit_at_the_load_stage(forest
 
 
 def test_files_within_the_limit_load_and_no_limit_is_checked_outside_the_command(tmp_path):
-    small = write_forest(tmp_path / "small.gltf", 3)
+    small = write_forest(tmp_path / "small.gltf", 3, distinct=True)
     with memory.loading_limit(10_000_000):
         assert len(load_trimesh(small).graph.nodes_geometry) == 3
     with memory.loading_limit(1_000_000), pytest.raises(ResourceError, match="3 mesh nodes of 15360 triangles"):
@@ -111,3 +117,12 @@ def test_files_within_the_limit_load_and_no_limit_is_checked_outside_the_command
         load_trimesh(small)
     load_trimesh(small)  # the Python API: no limit
     assert np.isfinite(memory.load_estimate(2562, 5120))
+
+
+def test_ten_thousand_placements_of_a_large_mesh_render_within_a_small_limit(tmp_path, capsys):
+    """The file that grew to 22 GB as copies: the mesh is built once, placed by instances."""
+    forest = write_forest(tmp_path / "instanced.gltf", 10_000)
+    out = tmp_path / "out.png"
+    status = main(["render", str(forest), "-o", str(out), "--width", "32", "--height", "24", "--spp", "1", "-q",
+                   "--memory-limit", "2G"])
+    assert status == 0 and out.exists(), capsys.readouterr().err

@@ -1,0 +1,140 @@
+"""Meshes placed many times: Embree instances against flattened copies.
+
+Two measurements (results in docs/BENCHMARKS.md, "Instancing"):
+
+``crossover``
+    One mesh of ``n`` triangles (an icosphere; ``n`` = 20 .. 20480) placed 400 or 1600
+    times over a floor, rendered under the path integrator at 128x96, 16 spp, one thread:
+    build (``Integrator``: Embree scenes and tables; the loader's copying not counted) and
+    render time, instanced against the flattened copies (medians of 5, interleaved).  This sets ``rtmesh.scene.instances.MIN_TRIANGLES``.
+``issue``
+    A glTF of 10,000 nodes placing one ~50k-triangle mesh, loaded and rendered at 256x256,
+    against a glTF of that mesh alone, each in a fresh process: peak RSS
+    (``resource.getrusage``) and the time to load and build.
+
+Run from the repository root: ``python -m benchmarks.bench_instancing crossover|issue``.
+"""
+
+import json
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+import trimesh
+
+
+def _scene(triangles, count=400):
+    from rtmesh.materials.table import Material
+    from rtmesh.scene.model import MeshPart, Placement, Scene
+
+    level = int(round(np.log(triangles / 20) / np.log(4)))
+    sphere = trimesh.creation.icosphere(level)
+    floor = trimesh.creation.box((40, 0.2, 40))
+    rng = np.random.default_rng(1)
+    transforms = np.tile(np.eye(4), (count, 1, 1))
+    transforms[:, 0, 3], transforms[:, 2, 3] = rng.uniform(-18, 18, count), rng.uniform(-18, 18, count)
+    transforms[:, 1, 3] = 1.1
+    prototype = MeshPart("ball", sphere.vertices, sphere.faces, 1, sphere.vertex_normals)
+    materials = [Material(diffuse=np.full(3, 0.6)), Material(diffuse=np.array([0.8, 0.3, 0.2]))]
+    return len(sphere.faces), Scene.from_parts([MeshPart("floor", floor.vertices, floor.faces, 0)], materials,
+                                               physical=True,
+                                               placements=[Placement(prototype, transforms,
+                                                                     [f"b{j}" for j in range(count)])])
+
+
+def crossover(repeats=5):
+    from rtmesh.rendering.integrator import Integrator
+    from rtmesh.rendering.settings import RenderSettings
+    from rtmesh.scene import instances
+
+    settings = RenderSettings(width=128, height=96, spp=16, integrator="path", threads=1)
+    Integrator(_scene(80)[1], settings).render()  # compile and warm up
+    print("placements triangles   build inst/flat ms   render inst/flat ms   both inst/flat ms")
+    for count, n in ((400, 20), (400, 80), (400, 320), (400, 1280), (400, 5120), (400, 20480),
+                     (1600, 20), (1600, 80), (1600, 320)):
+        triangles, scene = _scene(n, count)
+        flat = instances.flattened(scene)
+        times = {"instanced": ([], []), "flattened": ([], [])}
+        for _ in range(repeats):  # interleaved, medians
+            for name, s in (("instanced", scene), ("flattened", flat)):
+                start = time.perf_counter()
+                it = Integrator(s, settings)
+                built = time.perf_counter()
+                it.render()
+                times[name][0].append(built - start)
+                times[name][1].append(time.perf_counter() - built)
+        med = {k: [1000 * statistics.median(v) for v in pair] for k, pair in times.items()}
+        print(f"{count:10d} {triangles:9d}   {med['instanced'][0]:8.1f} {med['flattened'][0]:8.1f}   "
+              f"{med['instanced'][1]:8.1f} {med['flattened'][1]:8.1f}   {sum(med['instanced']):8.1f} "
+              f"{sum(med['flattened']):8.1f}", flush=True)
+
+
+def write_gltf(path, copies, subdivisions=None):
+    """A GLB of ``copies`` nodes placing one mesh on a square grid, each turned about y: a
+    torus of 50,000 triangles, or an icosphere of ``subdivisions``."""
+    if subdivisions is None:
+        mesh = trimesh.creation.torus(1.0, 0.35, major_sections=250, minor_sections=100)
+    else:
+        mesh = trimesh.creation.icosphere(subdivisions)
+    scene = trimesh.Scene()
+    side = int(np.ceil(np.sqrt(copies)))
+    rng = np.random.default_rng(2)
+    for j in range(copies):
+        transform = (trimesh.transformations.translation_matrix([3.0 * (j % side), 0.0, 3.0 * (j // side)])
+                     @ trimesh.transformations.rotation_matrix(rng.uniform(0, 2 * np.pi), [0, 1, 0]))
+        if j == 0:
+            scene.add_geometry(mesh, node_name="n0", geom_name="shape", transform=transform)
+        else:  # the same mesh again (add_geometry would store a copy)
+            scene.graph.update(frame_to=f"n{j}", frame_from=scene.graph.base_frame, geometry="shape",
+                               matrix=transform)
+    scene.export(path)
+    return len(mesh.faces)
+
+
+def _measure(path):
+    """Load, build and render ``path`` in this process; print JSON."""
+    from rtmesh import api
+    from rtmesh.rendering.integrator import Integrator
+
+    start = time.perf_counter()
+    scene, settings = api.load_scene(path, width=256, height=256, spp=4, caustics="off")
+    loaded = time.perf_counter()
+    it = Integrator(scene, settings)
+    built = time.perf_counter()
+    it.render()
+    done = time.perf_counter()
+    print(json.dumps({"load": loaded - start, "build": built - loaded, "render": done - built,
+                      "instanced": it.instances is not None, "faces": len(scene.faces),
+                      "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+
+
+def issue(copies=10_000):
+    with tempfile.TemporaryDirectory() as folder:
+        results = {}
+        for name, count in (("one copy", 1), (f"{copies} placements", copies)):
+            path = os.path.join(folder, f"{count}.glb")
+            triangles = write_gltf(path, count)
+            run = [sys.executable, __file__, "measure", path]
+            subprocess.run(run, check=True, capture_output=True)  # warm the kernel cache
+            out = subprocess.run(run, check=True, capture_output=True, text=True).stdout
+            results[name] = json.loads(out.strip().splitlines()[-1])
+            print(name, f"({triangles} triangles a mesh, {os.path.getsize(path) / 1e6:.1f} MB):", results[name])
+        one, many = results["one copy"], results[f"{copies} placements"]
+        print(f"peak RSS x{many['peak_rss_mb'] / one['peak_rss_mb']:.2f}, load+build "
+              f"x{(many['load'] + many['build']) / (one['load'] + one['build']):.2f}, "
+              f"render x{many['render'] / one['render']:.2f}")
+
+
+if __name__ == "__main__":
+    what = sys.argv[1] if len(sys.argv) > 1 else "crossover"
+    if what == "measure":
+        _measure(sys.argv[2])
+    elif what == "issue":
+        issue()
+    else:
+        crossover()

@@ -1,0 +1,295 @@
+"""Meshes placed many times: each built once (a prototype) and placed by Embree instances.
+
+A :class:`~rtmesh.scene.model.Scene` with ``instances`` keeps, after its flat (world-space)
+triangles, each prototype's triangles once, in the prototype's own (model) coordinates; an
+:class:`Instances` record places them.  Every per-face and per-vertex table of the scene
+(materials, normals, UVs, colours) covers the prototypes' faces once, so a hit on instance
+``j`` reads face ``Instances.face_offset[j] + primID`` of those tables, and its point and
+normals are carried to the world by the instance's transform
+(:mod:`rtmesh.rendering.path_kernel`).
+
+Only the path integrator traces instances (:func:`unsupported` says what it does not trace
+through them yet); everything else renders :func:`flattened`, the copies the loaders made
+before instancing existed.
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.spatial
+import trimesh
+
+from rtmesh.core.compiled import kernel
+from rtmesh.geometry import build_kernels
+
+# A mesh placed more than once is built once and placed by Embree instances when it has at
+# least this many triangles; smaller ones are copied.  Measured (benchmarks/bench_instancing.py
+# crossover, docs/BENCHMARKS.md "Instancing"): the copies' build costs ~1 us a triangle a
+# copy while the instances' stays ~20 ms, and a frame renders up to 12 % slower through
+# instances of a small mesh (a second level of traversal); build and one 128x96, 16 spp
+# frame break even between 20 and 80 triangles (400 and 1600 placements)
+MIN_TRIANGLES = 64
+
+
+@dataclass
+class Instances:
+    """Where a scene's prototypes are and where they are placed.
+
+    Attributes
+    ----------
+    first_face, first_vertex : int
+        ``Scene.faces[first_face:]`` and ``Scene.vertices[first_vertex:]`` belong to the
+        prototypes (model coordinates); everything before is world-space geometry.
+    prototype_faces, prototype_vertices : (P + 1,) int64
+        Prototype ``p``'s faces are ``Scene.faces[prototype_faces[p]:prototype_faces[p + 1]]``,
+        its vertices likewise (face indices are global, as for every face of the scene).
+    transforms : (k, 4, 4) float64
+        Each placement's model-to-world transform (finite, non-singular, affine).
+    prototype : (k,) int64
+        Each placement's prototype.
+    object_id : (k,) int32
+        Each placement's object index (``Scene.object_names``).
+    """
+
+    first_face: int
+    first_vertex: int
+    prototype_faces: np.ndarray
+    prototype_vertices: np.ndarray
+    transforms: np.ndarray
+    prototype: np.ndarray
+    object_id: np.ndarray
+    # bounds(), formed once (the prototypes' vertices do not change once the scene is made)
+    _bounds: list = field(default_factory=list, init=False, repr=False, compare=False)
+
+    def __len__(self):
+        return len(self.prototype)
+
+    @property
+    def face_offset(self):
+        """(k,) int64: each placement's first face in the scene's per-face tables."""
+        return self.prototype_faces[self.prototype]
+
+    def bounds(self, vertices):
+        """(2, 3) float64: world bounds of every placement.
+
+        The extremes of an affine image of a point set are images of its convex hull's
+        vertices, so only those are transformed (exact up to the rounding of the products,
+        which the copies' vertices may sum in another order), and only for the placements
+        whose box reaches beyond the bounds found so far (:func:`placed_bounds`); formed
+        once.
+
+        Parameters
+        ----------
+        vertices : (V, 3) float64
+            The scene's vertices.
+        """
+        if self._bounds:
+            return self._bounds[0].copy()
+        bounds = np.array([np.full(3, np.inf), np.full(3, -np.inf)])
+        transforms = np.ascontiguousarray(self.transforms[:, :3, :], dtype=np.float64)
+        for p in range(len(self.prototype_vertices) - 1):
+            placed = np.flatnonzero(self.prototype == p).astype(np.int64)
+            if not len(placed):
+                continue
+            points = vertices[self.prototype_vertices[p]:self.prototype_vertices[p + 1]]
+            try:
+                points = points[scipy.spatial.ConvexHull(points).vertices]
+            except scipy.spatial.QhullError:  # flat or degenerate: every vertex counts
+                pass
+            # each placement's box from the prototype's box (cheap, and never smaller than its
+            # exact image but for rounding): only the placements whose box reaches beyond the
+            # exact bounds found so far are transformed (a placement whose box only touches
+            # them is skipped: its exact image could pass them by rounding alone, ~1e-16
+            # relative, which keeps placements side by side on a plane from all being walked)
+            low, high = points.min(axis=0), points.max(axis=0)
+            centre, half = (low + high) / 2, (high - low) / 2
+            linear = transforms[placed, :, :3]
+            middle = linear @ centre + transforms[placed, :, 3]
+            reach = np.abs(linear) @ half
+            conservative = np.ascontiguousarray(np.stack([middle - reach, middle + reach], axis=1))
+            # per side and axis, the placements in the order they may reach furthest out
+            order = np.ascontiguousarray(np.stack([np.argsort(conservative[:, 0, :], axis=0, kind="stable").T,
+                                                   np.argsort(-conservative[:, 1, :], axis=0, kind="stable").T]),
+                                         dtype=np.int64)
+            placed_bounds(np.ascontiguousarray(points, dtype=np.float64), transforms, placed, conservative, order,
+                          bounds)
+        self._bounds.append(bounds)
+        return bounds.copy()
+
+
+@kernel
+def placed_bounds(points, transforms, placed, conservative, order, bounds):
+    """Grow ``bounds`` by the images of ``points`` under the placements ``placed``.
+
+    Parameters
+    ----------
+    points : (h, 3) float64
+    transforms : (k, 3, 4) float64
+        Model-to-world affine transforms.
+    placed : (m,) int64
+        Which transforms.
+    conservative : (m, 2, 3) float64
+        A box around each placement's image of ``points``.
+    order : (2, 3, m) int64
+        Per side (low, high) and axis, the placements (indices into ``placed``) by how far
+        out their conservative box reaches: the walk stops at the first that cannot reach
+        beyond what is found, so typically a handful are transformed, not all ``m``.
+    bounds : (2, 3) float64
+        Low and high corners, grown in place.
+    """
+    for c in range(3):
+        for side in range(2):
+            best = bounds[side, c]
+            for r in range(order.shape[2]):
+                i = order[side, c, r]
+                if (conservative[i, side, c] >= best) if side == 0 else (conservative[i, side, c] <= best):
+                    break
+                j = placed[i]
+                a0, a1, a2, t = transforms[j, c, 0], transforms[j, c, 1], transforms[j, c, 2], transforms[j, c, 3]
+                for q in range(points.shape[0]):
+                    # the row of A times the point, then the translation: the copies' order
+                    x = ((a0 * points[q, 0] + a1 * points[q, 1]) + a2 * points[q, 2]) + t
+                    best = min(best, x) if side == 0 else max(best, x)
+            bounds[side, c] = best
+
+
+def worth_instancing(triangles, placements):
+    """Whether a mesh of ``triangles`` placed ``placements`` times is built once and placed
+    by instances (else copied): placed more than once and at least :data:`MIN_TRIANGLES`."""
+    return placements > 1 and triangles >= MIN_TRIANGLES
+
+
+def check_transforms(transforms, names, source):
+    """The placements whose transform cannot place a mesh: non-finite, singular or not
+    affine (bottom row other than ``0 0 0 1``).
+
+    Parameters
+    ----------
+    transforms : (k, 4, 4) float
+    names : sequence of str
+        Each placement's name, for the message.
+    source : str
+
+    Returns
+    -------
+    str or None
+        A one-line description of the first bad placement, or None.
+    """
+    t = np.asarray(transforms, dtype=np.float64)
+    with np.errstate(invalid="ignore", over="ignore"):
+        finite = np.isfinite(t).all(axis=(1, 2))
+        affine = (t[:, 3] == (0.0, 0.0, 0.0, 1.0)).all(axis=1)
+        det = np.where(finite, np.linalg.det(np.where(finite[:, None, None], t, 0.0)[:, :3, :3]), 0.0)
+    bad = np.flatnonzero(~finite | ~affine | (det == 0.0))
+    if not len(bad):
+        return None
+    j = int(bad[0])
+    why = ("a non-finite transform" if not finite[j] else "a transform that is not affine" if not affine[j]
+           else "a singular transform (zero scale)")
+    more = f" ({len(bad) - 1} more placements likewise)" if len(bad) > 1 else ""
+    return f"{source}: instance {names[j]!r} has {why}{more}"
+
+
+def unsupported(scene, settings):
+    """What keeps a scene's instances from being traced as instances (phrases; empty: the
+    path integrator traces them).
+
+    Parameters
+    ----------
+    scene : Scene
+        With ``instances``.
+    settings : RenderSettings
+    """
+    from rtmesh.geometry import embree_library
+    from rtmesh.scene.background import as_background
+
+    missing = []
+    if settings.integrator != "path":
+        missing.append(f"integrator {settings.integrator!r}")
+    if not embree_library.packet_library():
+        missing.append("the single-ray Embree path")
+    if settings.passes or settings.denoise:
+        missing.append("passes" + (" (the denoiser's guides)" if settings.denoise else ""))
+    if settings.caustics == "photons":
+        missing.append("photon passes for caustics")
+    if as_background(scene.background).transparent:
+        missing.append("a transparent background (the alpha pass)")
+    if scene.motions:
+        missing.append("moving objects")
+    m, inst = scene.materials, scene.instances
+    used = np.unique(scene.material_id[inst.first_face:])
+    if (m.emission[used] > 0).any():
+        missing.append("emissive prototypes")
+    if m.any_transmission:
+        missing.append("transmissive materials (media)")
+    if m.any_cutout:
+        # anywhere: shadow rays through cut-outs read their hits as world-space faces
+        missing.append("alpha cut-outs")
+    if any(material.normal_texture is not None or (material.layers is not None and (
+            material.layers.anisotropy > 0 or material.layers.textures.get("clearcoatNormalTexture") is not None))
+           for material in (m.materials[k] for k in used)):
+        missing.append("normal maps and anisotropy (tangent frames)")
+    return missing
+
+
+def flattened(scene):
+    """The scene with every placement as a copy of its prototype (what the loaders made
+    before instancing): vertices placed as :func:`trimesh.transform_points` places them,
+    the winding reversed under a mirroring transform, normals by the inverse transpose.
+
+    Parameters
+    ----------
+    scene : Scene
+        With ``instances``.
+
+    Returns
+    -------
+    Scene
+        Without ``instances``; the prototypes' own faces are gone.
+    """
+    import dataclasses
+
+    inst = scene.instances
+    f0, v0 = inst.first_face, inst.first_vertex
+    flat = slice(0, f0)
+    parts = {name: [] for name in ("vertices", "faces", "face_normals", "vertex_normals", "smooth", "material_id",
+                                   "object_id", "uv", "vertex_colors")}
+
+    def take(vertices, faces, normals, face_normals, faces_of, vertices_of, object_id):
+        offset = sum(len(v) for v in parts["vertices"])
+        parts["vertices"].append(vertices)
+        parts["faces"].append(faces + offset)
+        parts["face_normals"].append(face_normals)
+        if scene.vertex_normals is not None:
+            parts["vertex_normals"].append(normals)
+            parts["smooth"].append(scene.smooth[faces_of])
+        parts["material_id"].append(scene.material_id[faces_of])
+        parts["object_id"].append(np.full(len(faces), object_id, np.int32) if object_id is not None
+                                  else scene.object_id[faces_of])
+        for name in ("uv", "vertex_colors"):
+            if getattr(scene, name) is not None:
+                parts[name].append(getattr(scene, name)[vertices_of])
+
+    take(scene.vertices[:v0], scene.faces[flat], None if scene.vertex_normals is None else scene.vertex_normals[:v0],
+         scene.face_normals[flat], flat, slice(0, v0), None)
+    for j in range(len(inst)):
+        p = inst.prototype[j]
+        faces_of = slice(int(inst.prototype_faces[p]), int(inst.prototype_faces[p + 1]))
+        vertices_of = slice(int(inst.prototype_vertices[p]), int(inst.prototype_vertices[p + 1]))
+        matrix = inst.transforms[j]
+        vertices = np.ascontiguousarray(trimesh.transform_points(scene.vertices[vertices_of], matrix))
+        faces = np.asarray(scene.faces[faces_of], dtype=np.int64) - vertices_of.start
+        if np.linalg.det(matrix[:3, :3]) < 0:
+            faces = np.ascontiguousarray(faces[:, ::-1])  # a mirroring transform flips the winding
+        face_normals, _ = build_kernels.face_crosses(vertices, faces)
+        normals = None
+        if scene.vertex_normals is not None:
+            normals = scene.vertex_normals[vertices_of] @ np.linalg.inv(matrix[:3, :3])
+            normals, _ = build_kernels.unit_rows(np.ascontiguousarray(normals), faces)
+        take(vertices, faces, normals, face_normals, faces_of, vertices_of, int(inst.object_id[j]))
+    joined = {name: (np.concatenate(arrays) if arrays else None) for name, arrays in parts.items()}
+    return dataclasses.replace(scene, instances=None, vertices=joined["vertices"],
+                               faces=joined["faces"].astype(np.int32), face_normals=joined["face_normals"],
+                               vertex_normals=joined["vertex_normals"], smooth=joined["smooth"],
+                               material_id=joined["material_id"], object_id=joined["object_id"],
+                               uv=joined["uv"], vertex_colors=joined["vertex_colors"])
