@@ -197,10 +197,12 @@ class PathStage:
         ignored = [name for name, unused in (
             ("ambient", bool((np.asarray(scene.ambient) > 0).any())),
             ("cutoff", settings.cutoff != RenderSettings.cutoff),
-            ("ao_samples", settings.ao_samples > 0 and "ao" not in settings.passes)) if unused]
+            ("ao_samples", settings.ao_samples > 0 and "ao" not in settings.passes),
+            ("light_samples", settings.light_samples != RenderSettings.light_samples)) if unused]
         if ignored:
-            log.warning("integrator 'path' ignores %s (it has no ambient term, ends paths by Russian roulette "
-                        "and takes its light from the lights and the background)", ", ".join(ignored))
+            log.warning("integrator 'path' ignores %s (it has no ambient term, ends paths by Russian roulette, "
+                        "takes one light sample a vertex and its light from the lights and the background)",
+                        ", ".join(ignored))
         if it.path_tables is None:
             # formed with the integrator's first view; views made by with_view share them
             it.path_tables = scene_tables(scene, it.accel)

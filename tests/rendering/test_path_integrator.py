@@ -354,9 +354,10 @@ def test_whitted_only_keys_are_ignored_under_path_with_one_warning(sphere, caplo
     scene = _outside(sphere, Material("m", model="lambert"))
     scene.ambient = np.full(3, 0.2)
     with caplog.at_level("WARNING"):
-        Integrator(scene, RenderSettings(width=8, height=8, spp=1, integrator="path", cutoff=0.01)).render()
+        Integrator(scene, RenderSettings(width=8, height=8, spp=1, integrator="path", cutoff=0.01,
+                                         light_samples=16)).render()
     warnings = [r.getMessage() for r in caplog.records if "ignores" in r.getMessage()]
-    assert len(warnings) == 1 and "ambient, cutoff" in warnings[0]
+    assert len(warnings) == 1 and "ambient, cutoff, light_samples" in warnings[0]
     caplog.clear()
     with caplog.at_level("WARNING"):
         Integrator(_outside(sphere, Material("m", model="lambert")),
