@@ -86,7 +86,7 @@ from rtmesh.lights.point_light_rows import illuminate_row
 from rtmesh.materials import lobes, models
 from rtmesh.rendering.photon_kernel import ALL_PARTS, DIFFUSE_PART, TRANSMITTED_PART, empty_photon_map, gather
 from rtmesh.rendering.path_surfaces import (cross_interface, hit_frame, hit_parameters, is_transparent,
-                                            surface_point, textured_materials, to_world,
+                                            leave_surface, surface_point, textured_materials, to_world,
                                             triangle_light_emission)
 from rtmesh.sampling.alias import alias_sample
 from rtmesh.sampling.hashing import mix64, uniform
@@ -620,10 +620,8 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                         surface, geometry, mat, prim, bu, bv, _layer_coin(key, depth, layers[lane], _COVERAGE)):
                     # the ray passes this layer: on from just beyond it, same depth
                     layers[lane] += 1
-                    sgx, sgy, sgz = (gx, gy, gz) if (gx * dx[lane] + gy * dy[lane]) + gz * dz[lane] > 0.0 \
-                        else (-gx, -gy, -gz)
-                    qx, qy, qz = offset_origin(hx, hy, hz, sgx, sgy, sgz, dx[lane], dy[lane], dz[lane], offset_scale)
-                    px[lane], py[lane], pz[lane] = np.float64(qx), np.float64(qy), np.float64(qz)
+                    px[lane], py[lane], pz[lane] = leave_surface(hx, hy, hz, gx, gy, gz, dx[lane], dy[lane], dz[lane],
+                                                                 offset_scale)
                     continue
                 layers[lane] = 0
                 bsdf_params, bsdf_row, er, eg, eb = hit_parameters(
@@ -741,11 +739,9 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                                     else:
                                         _add_path(pending_paths, split, lane, INDIRECT + category[lane],
                                                   pending[lane, 0], pending[lane, 1], pending[lane, 2])
-                                sgx, sgy, sgz = (gx, gy, gz) if side > 0.0 else (-gx, -gy, -gz)
-                                qx, qy, qz = offset_origin(hx, hy, hz, sgx, sgy, sgz, wx, wy, wz, offset_scale)
+                                qx, qy, qz = leave_surface(hx, hy, hz, gx, gy, gz, wx, wy, wz, offset_scale)
                                 reach[lane] = F32_MAX if math.isinf(distance) else distance * _SHADOW_SHORTEN
-                                set_lane(shadow, shadow_words, lane, np.float64(qx), np.float64(qy), np.float64(qz),
-                                         wx, wy, wz, np.float32(reach[lane]))
+                                set_lane(shadow, shadow_words, lane, qx, qy, qz, wx, wy, wz, np.float32(reach[lane]))
                                 shadow_valid[lane] = -1
                                 shadows += 1
                 if not follow:
@@ -788,9 +784,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                         beta[lane, 0] /= q
                         beta[lane, 1] /= q
                         beta[lane, 2] /= q
-                sgx, sgy, sgz = (gx, gy, gz) if side > 0.0 else (-gx, -gy, -gz)
-                qx, qy, qz = offset_origin(hx, hy, hz, sgx, sgy, sgz, ndx, ndy, ndz, offset_scale)
-                px[lane], py[lane], pz[lane] = np.float64(qx), np.float64(qy), np.float64(qz)
+                px[lane], py[lane], pz[lane] = leave_surface(hx, hy, hz, gx, gy, gz, ndx, ndy, ndz, offset_scale)
                 dx[lane], dy[lane], dz[lane] = ndx, ndy, ndz
                 lane_depth[lane] = depth + 1
             if shadows:

@@ -37,6 +37,7 @@ import math
 import numpy as np
 
 from rtmesh.core.compiled import inline_row, row
+from rtmesh.geometry.float32_rays import offset_origin
 from rtmesh.io.texture_atlas import texel
 from rtmesh.lights.light_table import FACE
 from rtmesh.materials import models
@@ -344,6 +345,18 @@ def to_world(wx, wy, wz, tx, ty, tz, sx, sy, sz, nx, ny, nz):
     dz = (wx * tz + wy * sz) + wz * nz
     length = math.sqrt((dx * dx + dy * dy) + dz * dz)
     return dx / length, dy / length, dz / length
+
+
+@inline_row
+def leave_surface(hx, hy, hz, gx, gy, gz, wx, wy, wz, scale):
+    """The origin of a ray that leaves the surface point ``h`` along ``w``: ``h`` moved off
+    the side of the geometric normal ``g`` that ``w`` points to
+    (:func:`rtmesh.geometry.float32_rays.offset_origin`), as float64 ``(x, y, z)``."""
+    if (gx * wx + gy * wy) + gz * wz > 0.0:
+        qx, qy, qz = offset_origin(hx, hy, hz, gx, gy, gz, wx, wy, wz, scale)
+    else:
+        qx, qy, qz = offset_origin(hx, hy, hz, -gx, -gy, -gz, wx, wy, wz, scale)
+    return np.float64(qx), np.float64(qy), np.float64(qz)
 
 
 @inline_row

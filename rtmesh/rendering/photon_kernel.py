@@ -36,14 +36,13 @@ from rtmesh.core.compiled import inline_row, kernel, row
 from rtmesh.geometry.embree_packets import (DEFAULT_TFAR, GEOM_ID, INVALID_ID, LANES, PRIM_ID, RAYHIT_WORDS,
                                             RTC_RAY_QUERY_FLAG_INCOHERENT, TFAR, U, V, clear_hit, packet_buffers,
                                             set_lane)
-from rtmesh.geometry.float32_rays import offset_origin
 from rtmesh.lights import light_table as lt
 from rtmesh.lights.environment import sample_direction
 from rtmesh.lights.point_light_rows import illuminate_row
 from rtmesh.materials import lambert, lobes, models
 from rtmesh.rendering.path_surfaces import (cross_interface, hit_frame, hit_parameters, is_transparent,
-                                            surface_point, tangent_frame, textured_materials, to_world,
-                                            triangle_light_emission)
+                                            leave_surface, surface_point, tangent_frame, textured_materials,
+                                            to_world, triangle_light_emission)
 from rtmesh.sampling.alias import alias_sample
 from rtmesh.sampling.hashing import GOLDEN, mix64, path_key, uniform
 from rtmesh.sampling.lowdiscrepancy import sobol_pair
@@ -300,10 +299,8 @@ def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geomet
                         surface, geometry, mat, prim, bu, bv,
                         uniform(mix64(key ^ np.uint64(layers[lane] + 1)), base + _COVERAGE)):
                     layers[lane] += 1
-                    sgx, sgy, sgz = (gx, gy, gz) if (gx * dx[lane] + gy * dy[lane]) + gz * dz[lane] > 0.0 \
-                        else (-gx, -gy, -gz)
-                    qx, qy, qz = offset_origin(hx, hy, hz, sgx, sgy, sgz, dx[lane], dy[lane], dz[lane], offset_scale)
-                    px[lane], py[lane], pz[lane] = np.float64(qx), np.float64(qy), np.float64(qz)
+                    px[lane], py[lane], pz[lane] = leave_surface(hx, hy, hz, gx, gy, gz, dx[lane], dy[lane], dz[lane],
+                                                                 offset_scale)
                     continue
                 layers[lane] = 0
                 ox, oy, oz = -dx[lane], -dy[lane], -dz[lane]
@@ -362,9 +359,7 @@ def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geomet
                     top = cross_interface(stack, lane, mat, side < 0.0)
                     for c in range(3):
                         sigma[lane, c] = absorption[top, c] if top >= 0 else 0.0
-                sgx, sgy, sgz = (gx, gy, gz) if side > 0.0 else (-gx, -gy, -gz)
-                qx, qy, qz = offset_origin(hx, hy, hz, sgx, sgy, sgz, ndx, ndy, ndz, offset_scale)
-                px[lane], py[lane], pz[lane] = np.float64(qx), np.float64(qy), np.float64(qz)
+                px[lane], py[lane], pz[lane] = leave_surface(hx, hy, hz, gx, gy, gz, ndx, ndy, ndz, offset_scale)
                 dx[lane], dy[lane], dz[lane] = ndx, ndy, ndz
                 bounces[lane] += 1
     stored[0] = written
