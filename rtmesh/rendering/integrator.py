@@ -329,6 +329,8 @@ class Integrator:
         (STACK_DEPTH,) int32
             Material ids, innermost first, -1 padded.
         """
+        if self.media is not None and np.array_equal(self.media.group_material, np.flatnonzero(refracts)):
+            return self._camera_medium  # the same media as Whitted's: their stack, probed once
         scene = self.scene
         return self._camera_stack(Media(scene.materials, scene.material_id, scene.vertices, scene.faces,
                                         scene.face_normals, refracts))
