@@ -77,18 +77,21 @@ from rtmesh.core.compile_ahead import KernelGroup
 from rtmesh.core.compiled import inline_row, kernel, row
 from rtmesh.geometry.embree_packets import (DEFAULT_TFAR, GEOM_ID, INST_ID, INST_PRIM_ID, INVALID_ID, LANES, PRIM_ID,
                                             RAYHIT_WORDS, RTC_RAY_QUERY_FLAG_COHERENT, RTC_RAY_QUERY_FLAG_INCOHERENT,
-                                            TFAR, U, V, clear_hit, packet_buffers, query_arguments, set_lane)
+                                            TFAR, U, V, packet_buffers, query_arguments)
 from rtmesh.geometry.float32_rays import F32_MAX, offset_origin
 from rtmesh.io.passes import LIGHT_PATH_PASSES
 from rtmesh.lights import light_table as lt
-from rtmesh.lights.environment import sample_direction
-from rtmesh.lights.point_light_rows import illuminate_row
 from rtmesh.materials import lobes, models
 from rtmesh.rendering.photon_kernel import ALL_PARTS, DIFFUSE_PART, TRANSMITTED_PART, empty_photon_map, gather
+from rtmesh.rendering.path_surfaces import alias_sample, clear_hit, load_lanes, set_lane
+from rtmesh.rendering.path_surfaces import environment_radiance as _environment_radiance
+from rtmesh.rendering.path_surfaces import environment_sample as _environment_sample
+from rtmesh.rendering.path_surfaces import illuminate as _illuminate_row
+from rtmesh.rendering.path_surfaces import projector_incident as _projector_incident
+from rtmesh.rendering.path_surfaces import sample_area_point as _sample_area_point
 from rtmesh.rendering.path_surfaces import (cross_interface, hit_frame, hit_parameters, is_transparent,
                                             leave_surface, surface_point, textured_materials, to_world,
                                             triangle_light_emission)
-from rtmesh.sampling.alias import alias_sample
 from rtmesh.sampling.hashing import mix64, uniform
 from rtmesh.sampling.mis import power_heuristic
 from rtmesh.sampling.zsobol import sequence_pair
@@ -97,17 +100,9 @@ from rtmesh.sampling.zsobol import sequence_pair
 # passes arrays takes and releases a reference to each (atomic instructions), and LLVM stops
 # inlining small rows into a function this large (those calls doubled the kernel's time);
 # rows of numbers only stay calls (inlining them too cost compile time, no speed)
-set_lane = inline_row(set_lane.py_func)
-clear_hit = inline_row(clear_hit.py_func)
-alias_sample = inline_row(alias_sample.py_func)
 _area_pdf = inline_row(lt.area_pdf.py_func)
 _hit_analytic = inline_row(lt.hit_analytic.py_func)
-_environment_radiance = inline_row(lt.environment_radiance.py_func)
 _environment_pdf = inline_row(lt.environment_pdf.py_func)
-_environment_sample = inline_row(sample_direction.py_func)
-_sample_area_point = inline_row(lt.sample_area_point.py_func)
-_illuminate_row = inline_row(illuminate_row.py_func)
-_projector_incident = inline_row(lt.projector_incident.py_func)
 
 DIMENSIONS_PER_VERTEX = 8
 # dimensions of a vertex, after DIMENSIONS_PER_VERTEX * depth
@@ -510,19 +505,11 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 lane_time[lane] = times[i] if len(times) else 0.0
         first = True
         while True:
-            active = 0
+            if load_lanes(alive, ray, words, valid, px, py, pz, dx, dy, dz, DEFAULT_TFAR) == 0:
+                break
             for lane in range(LANES):
                 if alive[lane]:
-                    set_lane(ray, words, lane, px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane],
-                             DEFAULT_TFAR)
-                    clear_hit(words, lane)
-                    valid[lane] = -1
-                    active += 1
                     counts[CAMERA if lane_depth[lane] == 0 else BOUNCE] += 1
-                else:
-                    valid[lane] = 0
-            if active == 0:
-                break
             args = args_coherent if first else args_incoherent
             first = False
             if has_static:

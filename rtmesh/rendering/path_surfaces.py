@@ -37,12 +37,17 @@ import math
 import numpy as np
 
 from rtmesh.core.compiled import inline_row, row
+from rtmesh.geometry import embree_packets
 from rtmesh.geometry.float32_rays import offset_origin
 from rtmesh.io.texture_atlas import texel
+from rtmesh.lights import light_table
+from rtmesh.lights.environment import sample_direction
 from rtmesh.lights.light_table import FACE
+from rtmesh.lights.point_light_rows import illuminate_row
 from rtmesh.materials import models
 from rtmesh.materials.metallic_roughness import alpha_from_roughness_row
 from rtmesh.materials.table import ALPHA_MODES
+from rtmesh.sampling.alias import alias_sample as _alias_sample
 from rtmesh.sampling.warps import uniform_triangle_weights
 
 TEXTURE_COLUMNS = ("diffuse_texture", "metallic_roughness_texture", "normal_texture", "emission_texture",
@@ -58,6 +63,44 @@ TEXTURE_COLUMNS = ("diffuse_texture", "metallic_roughness_texture", "normal_text
 # the first layer texture column: hits of materials with none skip the layers' lookups
 LAYER_TEXTURES = SPECULAR_STRENGTH_TEXTURE
 OPAQUE, MASK, BLEND = (ALPHA_MODES.index(name) for name in ("opaque", "mask", "blend"))
+
+
+# Rows of other modules that take arrays, which the path and photon kernels call per lane,
+# inlined by numba: a compiled call that passes arrays takes and releases a reference to
+# each (atomic instructions), and LLVM stops inlining small rows into functions as large as
+# the kernels (those calls doubled the path kernel's time); rows of numbers only stay calls
+# (inlining them too cost compile time, no speed)
+set_lane = inline_row(embree_packets.set_lane.py_func)
+clear_hit = inline_row(embree_packets.clear_hit.py_func)
+alias_sample = inline_row(_alias_sample.py_func)
+environment_radiance = inline_row(light_table.environment_radiance.py_func)
+environment_sample = inline_row(sample_direction.py_func)
+sample_area_point = inline_row(light_table.sample_area_point.py_func)
+illuminate = inline_row(illuminate_row.py_func)
+projector_incident = inline_row(light_table.projector_incident.py_func)
+
+
+@inline_row
+def load_lanes(alive, ray, words, valid, px, py, pz, dx, dy, dz, tfar):
+    """Write the living lanes' rays (origins ``p``, directions ``d``: (LANES,) float64 each)
+    into a packet with an empty hit and mark them valid for Embree (-1; 0 for the others).
+
+    Returns
+    -------
+    int
+        The lanes loaded.
+    """
+    active = 0
+    for lane in range(embree_packets.LANES):
+        if alive[lane]:
+            set_lane(ray, words, lane, px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], tfar)
+            clear_hit(words, lane)
+            valid[lane] = -1
+            active += 1
+        else:
+            valid[lane] = 0
+    return active
+
 
 
 @inline_row

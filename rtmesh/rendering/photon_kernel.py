@@ -34,28 +34,22 @@ import numpy as np
 
 from rtmesh.core.compiled import inline_row, kernel, row
 from rtmesh.geometry.embree_packets import (DEFAULT_TFAR, GEOM_ID, INVALID_ID, LANES, PRIM_ID, RAYHIT_WORDS,
-                                            RTC_RAY_QUERY_FLAG_INCOHERENT, TFAR, U, V, clear_hit, packet_buffers,
-                                            set_lane)
+                                            RTC_RAY_QUERY_FLAG_INCOHERENT, TFAR, U, V, packet_buffers)
 from rtmesh.lights import light_table as lt
-from rtmesh.lights.environment import sample_direction
-from rtmesh.lights.point_light_rows import illuminate_row
 from rtmesh.materials import lambert, lobes, models
+from rtmesh.rendering.path_surfaces import alias_sample, load_lanes
+from rtmesh.rendering.path_surfaces import environment_radiance as _environment_radiance
+from rtmesh.rendering.path_surfaces import environment_sample as _environment_sample
+from rtmesh.rendering.path_surfaces import illuminate as _illuminate_row
+from rtmesh.rendering.path_surfaces import projector_incident as _projector_incident
+from rtmesh.rendering.path_surfaces import sample_area_point as _sample_area_point
 from rtmesh.rendering.path_surfaces import (cross_interface, hit_frame, hit_parameters, is_transparent,
                                             leave_surface, surface_point, tangent_frame, textured_materials,
                                             to_world, triangle_light_emission)
-from rtmesh.sampling.alias import alias_sample
 from rtmesh.sampling.hashing import GOLDEN, mix64, path_key, uniform
 from rtmesh.sampling.lowdiscrepancy import sobol_pair
 from rtmesh.sampling.warps import concentric_disk_row
 
-set_lane = inline_row(set_lane.py_func)
-clear_hit = inline_row(clear_hit.py_func)
-alias_sample = inline_row(alias_sample.py_func)
-_environment_radiance = inline_row(lt.environment_radiance.py_func)
-_environment_sample = inline_row(sample_direction.py_func)
-_sample_area_point = inline_row(lt.sample_area_point.py_func)
-_illuminate_row = inline_row(illuminate_row.py_func)
-_projector_incident = inline_row(lt.projector_incident.py_func)
 
 # dimensions of a photon's hashed numbers: its light, then three a bounce
 _CHOICE = 0
@@ -264,16 +258,7 @@ def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geomet
             bounces[lane] = 0
             layers[lane] = 0
         while True:
-            active = 0
-            for lane in range(LANES):
-                if alive[lane]:
-                    set_lane(ray, words, lane, px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane],
-                             DEFAULT_TFAR)
-                    clear_hit(words, lane)
-                    valid[lane] = -1
-                    active += 1
-                else:
-                    valid[lane] = 0
+            active = load_lanes(alive, ray, words, valid, px, py, pz, dx, dy, dz, DEFAULT_TFAR)
             if active == 0:
                 break
             counts[0] += active
