@@ -317,6 +317,20 @@ def _add_path(paths, split, lane, bucket, r, g, b):
 
 
 @inline_row
+def _accept_shadows(shadow_valid, pending, pending_paths, split, total, paths):
+    """Add the light of the lanes whose shadow rays arrived, element by element (an array
+    assigned to a slice compiles numba's shape-mismatch message, string formatting that
+    took seconds of a first run)."""
+    for lane in range(LANES):
+        if shadow_valid[lane]:
+            _add(total, lane, pending[lane, 0], pending[lane, 1], pending[lane, 2])
+            if split:
+                for bucket in range(LIGHT_PATHS):
+                    for c in range(3):
+                        paths[lane, bucket, c] += pending_paths[lane, bucket, c]
+
+
+@inline_row
 def _shadows_through_cutouts(intersect16, scene, args, shadow, shadow_words, shadow_valid, geometry, surface,
                              offset_scale, keys, start, lane_depth, reach, counts, motion, lane_time, segment, rest,
                              rest_words, rest_valid, best_t, best_prim, best_u, best_v):
@@ -781,11 +795,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                                              geometry, surface, offset_scale, keys, start, lane_depth, reach, counts,
                                              motion, lane_time, segment, rest, rest_words, rest_valid, best_t,
                                              best_prim, best_u, best_v)
-                    for lane in range(LANES):
-                        if shadow_valid[lane]:
-                            _add(total, lane, pending[lane, 0], pending[lane, 1], pending[lane, 2])
-                            if split:
-                                paths[lane] += pending_paths[lane]
+                    _accept_shadows(shadow_valid, pending, pending_paths, split, total, paths)
                 else:
                     if has_static:
                         occluded16(shadow_valid.ctypes.data, scene, shadow.ctypes.data, args_incoherent.ctypes.data)
@@ -806,17 +816,15 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                         for lane in range(LANES):
                             if rest_valid[lane] and rest[TFAR * LANES + lane] == -np.inf:
                                 shadow_valid[lane] = 0
-                    for lane in range(LANES):
-                        if shadow_valid[lane]:
-                            _add(total, lane, pending[lane, 0], pending[lane, 1], pending[lane, 2])
-                            if split:
-                                paths[lane] += pending_paths[lane]
+                    _accept_shadows(shadow_valid, pending, pending_paths, split, total, paths)
         for lane in range(count):
             radiance[start + lane, 0] = total[lane, 0]
             radiance[start + lane, 1] = total[lane, 1]
             radiance[start + lane, 2] = total[lane, 2]
             if split:
-                light_paths[start + lane] = paths[lane]
+                for bucket in range(LIGHT_PATHS):
+                    for c in range(3):
+                        light_paths[start + lane, bucket, c] = paths[lane, bucket, c]
 
 
 def no_instances():
