@@ -157,11 +157,17 @@ def check(settings, limit=None, option="--memory-limit"):
 # 3.08 MB a copy above one copy's render (32x24, 1 spp, 1 thread).
 LOAD_BYTES_PER_VERTEX = 300
 LOAD_BYTES_PER_TRIANGLE = 450
+# A placement of an instanced mesh: its transform (the loader's, the scene's, the object's
+# and Embree's), its object name and category and the per-object tables (see BENCHMARKS).
+LOAD_BYTES_PER_PLACEMENT = 1000
 
 
-def load_estimate(vertices, triangles):
-    """Bytes a scene of ``vertices`` and ``triangles`` (all copies counted) takes loaded."""
-    return LOAD_BYTES_PER_VERTEX * int(vertices) + LOAD_BYTES_PER_TRIANGLE * int(triangles)
+def load_estimate(vertices, triangles, placements=0):
+    """Bytes a scene of ``vertices`` and ``triangles`` (all copies counted) takes loaded, with
+    ``placements`` placements of instanced meshes (their transforms, names and Embree's
+    instance records)."""
+    return (LOAD_BYTES_PER_VERTEX * int(vertices) + LOAD_BYTES_PER_TRIANGLE * int(triangles)
+            + LOAD_BYTES_PER_PLACEMENT * int(placements))
 
 
 # the limit loaders check against (loading_limit): (bytes or None, option name), or None
