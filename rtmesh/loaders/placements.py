@@ -11,7 +11,7 @@ import numpy as np
 
 from rtmesh.rendering import memory
 from rtmesh.scene.instances import worth_instancing
-from rtmesh.scene.model import MeshPart, Placement
+from rtmesh.scene.model import MeshPart
 
 
 def held_copies(triangles, placements):
@@ -66,38 +66,3 @@ def copied(part, transforms, name=None):
                     normals, uv=None if part.uv is None else np.tile(part.uv, (m, 1)),
                     vertex_colors=None if part.vertex_colors is None else np.tile(part.vertex_colors, (m, 1)),
                     category=part.category)
-
-
-def place(part, transforms, names, placements, count=None, categories=None):
-    """Place ``part`` by each of ``transforms``: as a :class:`Placement` appended to
-    ``placements`` when it is worth instancing, else as copies.
-
-    Parameters
-    ----------
-    part : MeshPart
-        In its own (model) coordinates.
-    transforms : (k, 4, 4) float
-        Model-to-world transforms.
-    names : list of str
-        Each placement's object name (k of them); copies are one object, named by the
-        part.
-    placements : list of Placement
-        Appended to.
-    count : int, optional
-        How many times the mesh is placed in all (default ``k``): a loader that places one
-        mesh from several places decides by the total.
-    categories : list of str, optional
-        Each placement's category (default: the part's, else its name).
-
-    Returns
-    -------
-    list of MeshPart
-        The copies (one part), or empty when placed by instances or ``k`` is 0.
-    """
-    transforms = np.asarray(transforms, dtype=np.float64).reshape(-1, 4, 4)
-    if not len(transforms):
-        return []
-    if worth_instancing(len(part.faces), len(transforms) if count is None else count):
-        placements.append(Placement(part, transforms, list(names), categories))
-        return []
-    return [copied(part, transforms)]

@@ -24,7 +24,7 @@ from rtmesh.geometry.motion import Motion
 from rtmesh.loaders.gltf_nodes import file_cameras_and_lights
 from rtmesh.loaders.importers import mesh_file_parts
 from rtmesh.loaders.light_registry import LIGHT_TYPES
-from rtmesh.loaders.placements import copied, place
+from rtmesh.loaders.placements import copied
 from rtmesh.materials.table import Material
 from rtmesh.rendering.settings import RenderSettings
 from rtmesh.scene.background import (BACKGROUND_TYPES, GradientBackground, SolidBackground, TransparentBackground,

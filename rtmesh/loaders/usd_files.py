@@ -11,9 +11,12 @@ What is read (docs/ASSETS.md has the full mapping):
   corners with equal point and values are one vertex again.
 * **Transforms** composed by ``UsdGeom.XformCache``; the stage's ``upAxis`` (Z-up stages
   are turned to rtmesh's Y-up) and ``metersPerUnit`` (scenes are in metres) honoured.
-* **Point instancers** and **instanceable prims**, flattened into copies (one part per
-  prototype mesh and instancer, all its instances in it; Embree instancing is future
-  work).  Prims under a point instancer render only through it.
+* **Point instancers** and **instanceable prims**: a prototype mesh placed more than once
+  and large enough (:func:`rtmesh.scene.instances.worth_instancing`) is read once and
+  placed by Embree instances (:attr:`UsdContent.placements`, every instance an object);
+  smaller ones are copied (one part per prototype mesh and instancer, all its instances in
+  it; one part per instance proxy).  Nested instancing is multiplied out to one level.
+  Prims under a point instancer render only through it.
 * **Materials**: ``UsdPreviewSurface`` (with ``UsdUVTexture`` textures read through
   ``UsdPrimvarReader_float2``) mapped onto the glTF metallic-roughness model that glTF
   files load as (:func:`rtmesh.loaders.gltf_materials.gltf_material`); a prim without a
@@ -217,8 +220,8 @@ def read_usd(path, physical=True):
     MeshError
         Unreadable file, composition error, malformed mesh or texture.
     ResourceError
-        Flattening its instances would take more memory than a loading limit allows
-        (:func:`rtmesh.rendering.memory.check_load`).
+        Its meshes and their copies would take more memory than a loading limit allows
+        (:func:`rtmesh.rendering.memory.check_load`; an instanced mesh counts once).
     """
     path = os.fspath(path)
     stage = open_stage(path)

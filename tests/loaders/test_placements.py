@@ -159,7 +159,7 @@ def test_copies_beyond_the_memory_limit_stop_before_they_are_made(tmp_path, caps
                '[[objects]]\nprimitive = "icosphere"\ninstances = "rows.npy"\n')
     path = _scene_file(tmp_path, objects, rows)
     out = tmp_path / "out.png"
-    # 20,000 boxes copied: ~180 MB; 20,000 instances of one sphere: ~20 MB of records
+    # 20,000 boxes copied: ~180 MB; 20,000 instances of one sphere: ~25 MB, its records
     status = main(["render", str(path), "-o", str(out), "--width", "16", "--height", "12", "-q",
                    "--memory-limit", "100M"])
     err = capsys.readouterr().err
