@@ -509,8 +509,11 @@ class _Placing:
     Such a file is read once, in its own coordinates; each of its meshes that is worth
     instancing (:func:`rtmesh.scene.instances.worth_instancing`, counted over every
     placement in the scene) becomes one :class:`~rtmesh.scene.model.Placement` with a
-    transform per placement, the others are copied (one part an object).  A file imported
-    once without ``instances`` is read as before: by the object's transform.
+    transform per placement (each row of ``instances``, then the object's transform), the
+    others are copied (one part an object, :func:`rtmesh.loaders.placements.copied`).  A
+    file imported once, or several times without a mesh worth instancing, and without
+    ``instances``, is read by each object as before: by the object's transform (the same
+    arithmetic, the same image).
 
     Attributes
     ----------
@@ -539,40 +542,65 @@ class _Placing:
             return None
         return os.path.realpath(_mesh_path(values, self.base_dir)), values.get("material"), values.get("smooth")
 
+    def _read(self, values, where, material, transform=None):
+        """``[parts, placements, imported materials]`` of an object's mesh file
+        (``transform`` applied; None: in the file's coordinates); placements (the file's own
+        meshes placed many times) unless the object moves."""
+        mesh_path = _mesh_path(values, self.base_dir)
+        inner = None if "motion" in values else []
+        try:
+            # trimesh's formats and USD (its meshes and materials; not its lights or cameras)
+            parts, imported = mesh_file_parts(mesh_path, values.get("name") or os.path.basename(mesh_path),
+                                              transform, material, values.get("smooth"), inner)
+        except RtmeshError as exc:
+            raise self.r.error(f"{where}.mesh", str(exc)) from None
+        return [parts, inner or [], imported]
+
+    @staticmethod
+    def _adopt(read, materials, material_index):
+        """Append the imported materials of a ``_read`` to ``materials`` (once) and point its
+        parts at them: after the scene file's own, and one whose name a [materials.NAME]
+        table defines replaced by that table.  Returns ``(parts, placements)``."""
+        parts, inner, imported = read
+        if imported:
+            remap = [material_index.get(m.name, len(materials) + i) if m.name != "default"
+                     else len(materials) + i for i, m in enumerate(imported)]
+            for part in parts + [p.part for p in inner]:
+                part.material = remap[part.material]
+            materials.extend(imported)
+            read[2] = []
+        return parts, inner
+
+    def _model(self, key, values, where, material):
+        """An object's mesh file in its own coordinates, read once per ``key`` (every time
+        for a None key: a moving object)."""
+        if key is None:
+            return self._read(values, where, material)
+        if key not in self.files:
+            self.files[key] = self._read(values, where, material)
+        return self.files[key]
+
     def file_parts(self, values, where, index, material, materials, material_index):
         """The parts of a mesh object (its meshes placed by instances kept for
-        :meth:`placements`); the file's materials join ``materials`` once."""
+        :meth:`placements`)."""
         key, rows = self._key(values), self.rows[index]
-        name, mesh_path = values.get("name"), _mesh_path(values, self.base_dir)
-        shared = rows is not None or (key is not None and self.uses[key] > 1)
-        if shared and key in self.files:
-            parts, inner = self.files[key]
+        name, category = values.get("name"), values.get("category")
+        shared = rows is not None
+        if rows is None and key is not None and self.uses[key] > 1:
+            # shared when the file places a mesh many times itself or one of its meshes is
+            # worth instancing; else each object reads it as before (the same arithmetic)
+            parts, inner, _ = self._model(key, values, where, material)
+            shared = bool(inner) or any(worth_instancing(len(part.faces), self.uses[key]) for part in parts)
+        if shared:
+            parts, inner = self._adopt(self._model(key, values, where, material), materials, material_index)
         else:
-            inner = None if "motion" in values else []
-            try:
-                # trimesh's formats and USD (its meshes and materials; not its lights or cameras)
-                parts, imported = mesh_file_parts(mesh_path, name or os.path.basename(mesh_path),
-                                                  None if shared else _transform(values), material,
-                                                  values.get("smooth"), inner)
-            except RtmeshError as exc:
-                raise self.r.error(f"{where}.mesh", str(exc)) from None
-            inner = inner or []
-            # imported materials are appended after the scene file's own; one whose name a
-            # [materials.NAME] table defines is replaced by that table
-            if material is None:
-                remap = [material_index.get(m.name, len(materials) + i) if m.name != "default"
-                         else len(materials) + i for i, m in enumerate(imported)]
-                for part in parts + [p.part for p in inner]:
-                    part.material = remap[part.material]
-                materials.extend(imported)
-            if shared:
-                self.files[key] = parts, inner
-        single = len(parts) + len(inner) == 1
+            parts, inner = self._adopt(self._read(values, where, material, _transform(values)), materials,
+                                       material_index)
+        single = len(parts) + sum(len(placement.names) for placement in inner) == 1  # one mesh, placed once
 
         def label(own):
             return (name if single else f"{name}/{own}") if name else own
 
-        category = values.get("category")
         if not shared:
             for part in parts:
                 part.category = category

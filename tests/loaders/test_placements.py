@@ -97,6 +97,28 @@ def test_objects_importing_one_file_share_it(tmp_path, monkeypatch):
     _same_image(scene, settings, copies)
 
 
+def test_a_files_own_node_reuse_is_kept_through_the_objects_placements(tmp_path):
+    ball = trimesh.creation.icosphere(2, radius=0.6)
+    graph = trimesh.Scene()
+    moves = [trimesh.transformations.translation_matrix([x, 0.6, 0]) for x in (-2.0, 0.0, 2.0)]
+    graph.add_geometry(ball, node_name="b0", geom_name="ball", transform=moves[0])
+    for j in (1, 2):
+        graph.graph.update(frame_to=f"b{j}", frame_from=graph.graph.base_frame, geometry="ball", matrix=moves[j])
+    (tmp_path / "three.glb").write_bytes(trimesh.exchange.gltf.export_glb(graph))
+    rows = np.stack([trimesh.transformations.translation_matrix([0, 0, z]) for z in (-2.0, 2.0)])
+    once = '[[objects]]\nname = "row"\nmesh = "three.glb"\n'
+    scene, _ = load_scene(str(_scene_file(tmp_path, once)), **SIZE)
+    assert len(scene.instances) == 3 and len(scene.faces) == 12 + 320
+    twice = '[[objects]]\nname = "row"\nmesh = "three.glb"\ninstances = "rows.npy"\n'
+    scene, _ = load_scene(str(_scene_file(tmp_path, twice, rows)), **SIZE)
+    inst = scene.instances
+    assert len(inst) == 6 and len(scene.faces) == 12 + 320
+    assert sorted(scene.object_names[1:]) == [f"row/b{i}[{j}]" for i in range(3) for j in range(2)]
+    # one level: each row after the file's node
+    expected = {(x, 0.6, z) for x in (-2.0, 0.0, 2.0) for z in (-2.0, 2.0)}
+    assert {tuple(np.round(t[:3, 3], 9) + 0.0) for t in inst.transforms} == expected
+
+
 def test_a_small_mesh_is_copied_and_a_primitive_can_be_placed(tmp_path):
     rows = scattered_transforms(5)
     objects = ('[[objects]]\nprimitive = "box"\nname = "crate"\ninstances = "rows.npy"\n'
