@@ -18,6 +18,8 @@ import contextvars
 import os
 from dataclasses import dataclass
 
+import numpy as np
+
 from rtmesh.core.errors import ResourceError
 from rtmesh.io.passes import pass_width
 
@@ -224,3 +226,30 @@ def check_load(source, what, needed):
     if limit is not None and needed > limit:
         raise ResourceError(f"{source}: {what} would need about {format_bytes(needed)} of memory to "
                             f"load but {told}: stopped before taking it (set {option}, 0 = no check)")
+
+
+def check_flattening(placed, why):
+    """Refuse, like :func:`check_load`, flattening a scene's instances into copies (what a
+    render that cannot trace instances does, :func:`rtmesh.scene.instances.flattened`)
+    when the copies would exceed the loading limit.
+
+    Parameters
+    ----------
+    placed : rtmesh.scene.instances.Instances
+    why : str
+        What cannot trace instances, for the message.
+
+    Raises
+    ------
+    ResourceError
+        ``the scene: 10000 placements flattened into copies (instances are not traced with
+        integrator 'whitted') would need about 280 GiB ...``.
+    """
+    if _LOAD_LIMIT.get() is None:
+        return
+    counts = np.bincount(placed.prototype, minlength=len(placed.prototype_faces) - 1)
+    vertices = int(counts @ np.diff(placed.prototype_vertices))
+    triangles = int(counts @ np.diff(placed.prototype_faces))
+    check_load("the scene", f"{len(placed)} placements flattened into copies of {triangles} triangles in all "
+               f"(instances are not traced with {why}; integrator = \"path\" traces them)",
+               load_estimate(vertices, triangles, len(placed)))
