@@ -269,3 +269,49 @@ def test_usd_instancers_and_instanceable_prims_place_one_mesh(tmp_path, monkeypa
     assert copies.instances is None and len(copies.faces) == 2 + 12 * 80
     np.testing.assert_allclose(scene.bounds, copies.bounds, rtol=0, atol=1e-9)
     _same_image(scene, settings, copies)
+
+
+def test_nested_usd_instancing_is_multiplied_out_to_one_level(tmp_path, monkeypatch, pxr):
+    from pxr import Gf, Sdf, Usd, UsdGeom
+
+    stage = Usd.Stage.CreateNew(str(tmp_path / "nested.usda"))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    ball = trimesh.creation.icosphere(1, radius=0.3)  # 80 triangles
+
+    def ball_at(path):
+        mesh = UsdGeom.Mesh.Define(stage, path)
+        mesh.CreatePointsAttr([Gf.Vec3f(*p) for p in ball.vertices])
+        mesh.CreateFaceVertexCountsAttr([3] * len(ball.faces))
+        mesh.CreateFaceVertexIndicesAttr(ball.faces.ravel().tolist())
+
+    # three instanceable rows, each a point instancer of five balls
+    stage.DefinePrim("/Rows", "Xform").SetSpecifier(Sdf.SpecifierClass)
+    row = UsdGeom.PointInstancer.Define(stage, "/Rows/Row")
+    ball_at("/Rows/Row/Prototypes/Ball")
+    row.CreatePrototypesRel().SetTargets(["/Rows/Row/Prototypes/Ball"])
+    row.CreateProtoIndicesAttr([0] * 5)
+    row.CreatePositionsAttr([Gf.Vec3f(i, 0, 0) for i in range(5)])
+    for j in range(3):
+        holder = UsdGeom.Xform.Define(stage, f"/World/Row{j}")
+        holder.AddTranslateOp().Set(Gf.Vec3d(0, 0, 2 * j))
+        holder.GetPrim().GetReferences().AddInternalReference("/Rows")
+        holder.GetPrim().SetInstanceable(True)
+    # a point instancer of four instanceable prims
+    stage.DefinePrim("/Balls", "Xform").SetSpecifier(Sdf.SpecifierClass)
+    ball_at("/Balls/Ball")
+    instancer = UsdGeom.PointInstancer.Define(stage, "/World/Instancer")
+    prototype = UsdGeom.Xform.Define(stage, "/World/Instancer/Prototypes/Holder")
+    prototype.GetPrim().GetReferences().AddInternalReference("/Balls")
+    prototype.GetPrim().SetInstanceable(True)
+    instancer.CreatePrototypesRel().SetTargets([prototype.GetPath()])
+    instancer.CreateProtoIndicesAttr([0] * 4)
+    instancer.CreatePositionsAttr([Gf.Vec3f(i, 3, 0) for i in range(4)])
+    stage.GetRootLayer().Save()
+    scene, _ = load_scene(str(tmp_path / "nested.usda"), width=16, height=12)
+    assert len(scene.instances) == 3 * 5 + 4 and len(scene.faces) == 2 * 80
+    monkeypatch.setattr(instances, "MIN_TRIANGLES", 10 ** 9)
+    copies, _ = load_scene(str(tmp_path / "nested.usda"), width=16, height=12)
+    assert len(copies.faces) == 19 * 80
+    np.testing.assert_allclose(scene.bounds, copies.bounds, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(scene.bounds, [[-0.3, -0.3, -0.3], [4.3, 3.3, 4.3]], atol=1e-6)
