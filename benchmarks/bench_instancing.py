@@ -12,7 +12,12 @@ Two measurements (results in docs/BENCHMARKS.md, "Instancing"):
     against a glTF of that mesh alone, each in a fresh process: peak RSS
     (``resource.getrusage``) and the time to load and build.
 
-Run from the repository root: ``python -m benchmarks.bench_instancing crossover|issue``.
+``loaders``
+    The same through the scene-file and USD loaders: a scene file placing the torus by
+    ``[[objects]] instances`` (10,000 rows of a ``.npy``) and a USD point instancer of
+    10,000 instances of it, against one placement, each in a fresh process.
+
+Run from the repository root: ``python -m benchmarks.bench_instancing crossover|issue|loaders``.
 """
 
 import json
@@ -74,19 +79,26 @@ def crossover(repeats=5):
               f"{sum(med['flattened']):8.1f}", flush=True)
 
 
+def _torus():
+    """The issue's mesh: a torus of 50,000 triangles."""
+    return trimesh.creation.torus(1.0, 0.35, major_sections=250, minor_sections=100)
+
+
+def _grid(copies):
+    """(copies, 4, 4): placements on a square grid 3 apart, each turned about y."""
+    side = int(np.ceil(np.sqrt(copies)))
+    rng = np.random.default_rng(2)
+    return np.array([trimesh.transformations.translation_matrix([3.0 * (j % side), 0.0, 3.0 * (j // side)])
+                     @ trimesh.transformations.rotation_matrix(rng.uniform(0, 2 * np.pi), [0, 1, 0])
+                     for j in range(copies)])
+
+
 def write_gltf(path, copies, subdivisions=None):
     """A GLB of ``copies`` nodes placing one mesh on a square grid, each turned about y: a
     torus of 50,000 triangles, or an icosphere of ``subdivisions``."""
-    if subdivisions is None:
-        mesh = trimesh.creation.torus(1.0, 0.35, major_sections=250, minor_sections=100)
-    else:
-        mesh = trimesh.creation.icosphere(subdivisions)
+    mesh = _torus() if subdivisions is None else trimesh.creation.icosphere(subdivisions)
     scene = trimesh.Scene()
-    side = int(np.ceil(np.sqrt(copies)))
-    rng = np.random.default_rng(2)
-    for j in range(copies):
-        transform = (trimesh.transformations.translation_matrix([3.0 * (j % side), 0.0, 3.0 * (j // side)])
-                     @ trimesh.transformations.rotation_matrix(rng.uniform(0, 2 * np.pi), [0, 1, 0]))
+    for j, transform in enumerate(_grid(copies)):
         if j == 0:
             scene.add_geometry(mesh, node_name="n0", geom_name="shape", transform=transform)
         else:  # the same mesh again (add_geometry would store a copy)
@@ -130,11 +142,63 @@ def issue(copies=10_000):
               f"render x{many['render'] / one['render']:.2f}")
 
 
+def write_scene_file(folder, copies):
+    """A scene file placing the torus (torus.glb) by ``copies`` rows of ``instances``."""
+    mesh = _torus()
+    mesh.export(os.path.join(folder, "torus.glb"))
+    np.save(os.path.join(folder, f"rows{copies}.npy"), _grid(copies))
+    path = os.path.join(folder, f"{copies}.toml")
+    with open(path, "w") as f:
+        # under path, which traces instances (Whitted would flatten them into copies)
+        f.write(f'[render]\nintegrator = "path"\n[[objects]]\nmesh = "torus.glb"\ninstances = "rows{copies}.npy"\n')
+    return path, len(mesh.faces)
+
+
+def write_usd(folder, copies):
+    """A USD stage of one point instancer placing the torus ``copies`` times (the grid's
+    positions, without the turns)."""
+    from pxr import Usd, UsdGeom, Vt
+
+    mesh = _torus()
+    path = os.path.join(folder, f"{copies}.usdc")
+    stage = Usd.Stage.CreateNew(path)
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    prototype = UsdGeom.Mesh.Define(stage, "/World/Tori/Prototypes/Torus")
+    prototype.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(mesh.vertices.astype(np.float32)))
+    prototype.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(mesh.faces), 3, np.int32)))
+    prototype.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(mesh.faces.ravel().astype(np.int32)))
+    instancer = UsdGeom.PointInstancer.Define(stage, "/World/Tori")
+    instancer.CreatePrototypesRel().SetTargets([prototype.GetPath()])
+    instancer.CreateProtoIndicesAttr(Vt.IntArray.FromNumpy(np.zeros(copies, np.int32)))
+    instancer.CreatePositionsAttr(Vt.Vec3fArray.FromNumpy(_grid(copies)[:, :3, 3].astype(np.float32)))
+    stage.GetRootLayer().Save()
+    return path, len(mesh.faces)
+
+
+def loaders(copies=10_000):
+    with tempfile.TemporaryDirectory() as folder:
+        for kind, write in (("scene file", write_scene_file), ("USD", write_usd)):
+            results = {}
+            for count in (1, copies):
+                path, triangles = write(folder, count)
+                run = [sys.executable, __file__, "measure", path]
+                subprocess.run(run, check=True, capture_output=True)  # warm the kernel cache
+                out = subprocess.run(run, check=True, capture_output=True, text=True).stdout
+                results[count] = json.loads(out.strip().splitlines()[-1])
+                print(kind, count, f"({triangles} triangles a mesh):", results[count])
+            one, many = results[1], results[copies]
+            print(f"{kind}: peak RSS x{many['peak_rss_mb'] / one['peak_rss_mb']:.2f}, load+build "
+                  f"x{(many['load'] + many['build']) / (one['load'] + one['build']):.2f}, "
+                  f"render x{many['render'] / one['render']:.2f}")
+
+
 if __name__ == "__main__":
     what = sys.argv[1] if len(sys.argv) > 1 else "crossover"
     if what == "measure":
         _measure(sys.argv[2])
     elif what == "issue":
         issue()
+    elif what == "loaders":
+        loaders()
     else:
         crossover()

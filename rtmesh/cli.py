@@ -359,14 +359,15 @@ def cmd_render(args):
     # on a first run, a second process compiles kernels alongside this one
     with compile_ahead.helper():
         # the memory check runs on the settings before any mesh is read, and the loaders
-        # check what a file would take before they take it
+        # check what a file would take before they take it (and the integrator what
+        # flattening instances would)
         with memory.loading_limit(args.memory_limit):
             scene, settings = load_scene(args.input, lambda s: memory.check(s, args.memory_limit), **overrides)
-        if background is not None:
-            scene.background = background
+            if background is not None:
+                scene.background = background
+            integrator = Integrator(scene, settings)
         bar = ProgressBar(enabled=not args.quiet and sys.stderr.isatty())
         try:
-            integrator = Integrator(scene, settings)
             result = integrator.render(progress=bar)
         finally:
             bar.close()

@@ -7,6 +7,7 @@ memory.
 """
 
 import copy
+import io
 import json
 import os
 import struct
@@ -207,6 +208,14 @@ def corpus():
                              '[[objects]]\nprimitive = "box"\n')
     files["huge_spp.toml"] = '[render]\nspp = 100000000000\n[[objects]]\nprimitive = "box"\n'
     files["not_utf8.toml"] = b"[render]\nwidth = 4\n# \xff\xfe\n"
+    # a box placed by three transforms, the second singular (a zero scale along y)
+    rows = np.tile(np.eye(4), (3, 1, 1))
+    rows[:, 0, 3] = [-2.0, 0.0, 2.0]
+    rows[1, 1, 1] = 0.0
+    npy = io.BytesIO()
+    np.save(npy, rows)
+    files["singular_instances.npy"] = npy.getvalue()
+    files["singular_instances.toml"] = '[[objects]]\nprimitive = "box"\ninstances = "singular_instances.npy"\n'
     return files
 
 

@@ -90,6 +90,26 @@ def sphere_on_floor_scene(shift=(0.0, 0.0, 0.0), subdivisions=3, smooth=False):
 
 
 # ---------------------------------------------------------------- scalar references
+def scattered_transforms(count, seed=3):
+    """(count, 4, 4) model-to-world transforms: random rotations, non-uniform scales (every
+    seventh mirroring) and positions over a floor (instancing tests)."""
+    rng = np.random.default_rng(seed)
+    out = np.tile(np.eye(4), (count, 1, 1))
+    for j in range(count):
+        s = rng.uniform(0.3, 0.7)
+        rotation = trimesh.transformations.rotation_matrix(rng.uniform(0, 2 * np.pi), rng.normal(size=3))
+        scale = np.diag([s * (-1 if j % 7 == 0 else 1), s * rng.uniform(0.7, 1.3), s, 1.0])
+        out[j] = trimesh.transformations.translation_matrix(
+            [rng.uniform(-5, 5), s + 0.1, rng.uniform(-5, 5)]) @ rotation @ scale
+    return out
+
+
+def block_means(image, size=8):
+    """(h // size, w // size, c): the means of ``size`` x ``size`` pixel blocks of an image."""
+    h, w = image.shape[0] // size * size, image.shape[1] // size * size
+    return image[:h, :w].reshape(h // size, size, w // size, size, -1).mean(axis=(1, 3))
+
+
 def ray_sphere_distance(origin, direction, centre, radius):
     """Distance to the first hit of a ray with a sphere, or None when it misses.
 

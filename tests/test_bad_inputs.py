@@ -51,7 +51,10 @@ EXPECTED = {
     "fov_270.toml": (2, "fov_270.toml: camera.fov: expected degrees more than 0 and less than 180"),
     "huge_spp.toml": (2, "render at 100000000000 spp on "),
     "not_utf8.toml": (2, "not_utf8.toml: not a UTF-8 text file"),
+    "singular_instances.toml": (2, "singular_instances.toml: objects[0].instances: "),
 }
+# what the scene files above read besides (a singular transform, named in the error line)
+READ_THROUGH = {"singular_instances.npy": "singular_instances.npy: instance 1 has a singular transform"}
 
 
 def test_the_corpus_is_what_hostile_files_writes_and_small():
@@ -63,8 +66,9 @@ def test_the_corpus_is_what_hostile_files_writes_and_small():
         with open(os.path.join(BAD, name), "rb") as f:
             assert f.read() == (content if isinstance(content, bytes) else content.encode()), name
     assert sum(os.path.getsize(os.path.join(BAD, n)) for n in on_disk) < 1_000_000
-    # every input file of the corpus has an expectation (the MTL is read through its OBJ)
-    assert sorted(EXPECTED) == sorted(n for n in on_disk if not n.endswith(".mtl"))
+    # every input file of the corpus has an expectation (the MTL is read through its OBJ, the
+    # .npy through its scene file)
+    assert sorted(EXPECTED) == sorted(n for n in on_disk if not n.endswith(".mtl") and n not in READ_THROUGH)
 
 
 def run(path, tmp_path, capsys, caplog, *extra):
@@ -87,6 +91,7 @@ def test_bad_input(name, tmp_path, capsys, caplog):
     if status == 2:
         assert len(errors) == 1 and len(err.strip().splitlines()) == 1, err
         assert message in errors[0], errors[0]
+        assert all(why in errors[0] for file, why in READ_THROUGH.items() if name == file.replace(".npy", ".toml"))
         assert not out.exists()
     else:
         assert not errors and out.exists()

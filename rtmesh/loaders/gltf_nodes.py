@@ -39,7 +39,7 @@ import numpy as np
 from rtmesh.core.errors import MeshError
 from rtmesh.lights.point_lights import DirectionalLight, PointLight, SpotLight
 from rtmesh.scene.camera import Camera
-from rtmesh.scene.instances import worth_instancing
+from rtmesh.loaders.placements import held_copies
 
 log = logging.getLogger(__name__)
 
@@ -183,7 +183,7 @@ def node_world_transforms(doc):
 
 def flattened_size(doc):
     """What the file's meshes come to in memory: a mesh placed by several nodes once when it
-    is large enough to be instanced (:func:`rtmesh.scene.instances.worth_instancing`), else
+    is large enough to be instanced (:func:`rtmesh.loaders.placements.held_copies`), else
     a copy for every node that places it; counted from accessor counts, before reading a
     byte of geometry.
 
@@ -231,7 +231,7 @@ def flattened_size(doc):
             placements[mesh] += count(attributes[0]) if attributes else 1
     copies = sum(placements.values())
     # a mesh worth instancing is built once (rtmesh.scene.instances), the others copied
-    held = {mesh: 1 if worth_instancing(sizes[mesh][1], placed) else placed for mesh, placed in placements.items()}
+    held = {mesh: held_copies(sizes[mesh][1], placed) for mesh, placed in placements.items()}
     vertices = sum(held[mesh] * sizes[mesh][0] for mesh in held)
     triangles = sum(held[mesh] * sizes[mesh][1] for mesh in held)
     return copies, vertices, triangles

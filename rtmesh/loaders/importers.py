@@ -21,6 +21,7 @@ from rtmesh.loaders.gltf_materials import gltf_json_materials, gltf_material
 from rtmesh.loaders.mtl_materials import mtl_material, obj_materials
 from rtmesh.loaders.mesh_files import check_content, check_file, format_name
 from rtmesh.loaders.obj_polygons import triangulate_polygons
+from rtmesh.loaders.placements import copied
 from rtmesh.loaders.usd_files import USD_EXTENSIONS, load_usd_scene, read_usd
 from rtmesh.materials.table import PHYSICAL_MODELS, Material
 from rtmesh.rendering import memory
@@ -108,7 +109,7 @@ def _gltf_source(path, ext):
     check_node_graph(path, doc)
     copies, vertices, triangles = flattened_size(doc)
     memory.check_load(path, f"{copies} mesh nodes of {triangles} triangles in all, copied where not instanced",
-                      memory.load_estimate(vertices, triangles))
+                      memory.load_estimate(vertices, triangles, copies))
     if not gltf_compression.uses_decoded_extensions(doc):
         return dict(file_obj=path)
     return dict(file_obj=io.BytesIO(gltf_compression.plain_glb(path, doc)), file_type="glb",
@@ -619,7 +620,7 @@ def default_integrator(path):
     return "path" if ext in GLTF_EXTENSIONS or ext in USD_EXTENSIONS else "whitted"
 
 
-def mesh_file_parts(path, name=None, transform=None, material=None, smooth=None):
+def mesh_file_parts(path, name=None, transform=None, material=None, smooth=None, placements=None):
     """The parts and materials of any mesh file rtmesh renders (trimesh's formats and USD),
     without camera or lights (the batch and scene files' objects read files this way).
 
@@ -635,6 +636,11 @@ def mesh_file_parts(path, name=None, transform=None, material=None, smooth=None)
     smooth : bool, optional
         As :func:`parts_from_trimesh`'s; for USD, False drops the normals and True or None
         keeps them (meshes without normals are smoothed by angle).
+    placements : list, optional
+        Given, the file's meshes placed many times and worth instancing (glTF node reuse,
+        USD point instancers and instanceable prims) are appended to it as
+        :class:`~rtmesh.scene.model.Placement` (their transforms after ``transform``);
+        None: they are copied into the parts.
 
     Returns
     -------
@@ -644,11 +650,16 @@ def mesh_file_parts(path, name=None, transform=None, material=None, smooth=None)
     """
     path = os.fspath(path)
     if os.path.splitext(path)[1].lower() not in USD_EXTENSIONS:
-        return parts_from_trimesh(load_trimesh(path), name or path, transform, material, smooth)
+        return parts_from_trimesh(load_trimesh(path), name or path, transform, material, smooth, placements)
     content = read_usd(path)
     parts, materials = content.parts, content.materials
-    if transform is not None:
-        matrix = np.asarray(transform, dtype=np.float64)
+    for part in parts + [placement.part for placement in content.placements]:
+        if smooth is False:
+            part.vertex_normals = None
+        if material is not None:
+            part.material = material
+    matrix = None if transform is None else np.asarray(transform, dtype=np.float64)
+    if matrix is not None:
         normal_matrix = np.linalg.inv(matrix[:3, :3]).T
         mirrored = np.linalg.det(matrix[:3, :3]) < 0
         for part in parts:
@@ -656,11 +667,16 @@ def mesh_file_parts(path, name=None, transform=None, material=None, smooth=None)
             part.faces = part.faces[:, ::-1] if mirrored else part.faces
             if part.vertex_normals is not None:
                 part.vertex_normals = part.vertex_normals @ normal_matrix.T
-    for part in parts:
-        if smooth is False:
-            part.vertex_normals = None
-        if material is not None:
-            part.material = material
+    for placement in content.placements:
+        if matrix is not None:
+            placement.transforms = matrix @ placement.transforms
+        if placements is None:  # copied: one part of all the copies
+            k, mesh = len(placement.transforms), placement.part
+            memory.check_load(path, f"{mesh.name}: {k} copies of {len(mesh.faces)} triangles",
+                              memory.load_estimate(k * len(mesh.vertices), k * len(mesh.faces), k))
+            parts.append(copied(placement.part, placement.transforms, f"{placement.part.name} ({k} copies)"))
+        else:
+            placements.append(placement)
     return parts, [] if material is not None else materials
 
 

@@ -11,9 +11,12 @@ What is read (docs/ASSETS.md has the full mapping):
   corners with equal point and values are one vertex again.
 * **Transforms** composed by ``UsdGeom.XformCache``; the stage's ``upAxis`` (Z-up stages
   are turned to rtmesh's Y-up) and ``metersPerUnit`` (scenes are in metres) honoured.
-* **Point instancers** and **instanceable prims**, flattened into copies (one part per
-  prototype mesh and instancer, all its instances in it; Embree instancing is future
-  work).  Prims under a point instancer render only through it.
+* **Point instancers** and **instanceable prims**: a prototype mesh placed more than once
+  and large enough (:func:`rtmesh.scene.instances.worth_instancing`) is read once and
+  placed by Embree instances (:attr:`UsdContent.placements`, every instance an object);
+  smaller ones are copied (one part per prototype mesh and instancer, all its instances in
+  it; one part per instance proxy).  Nested instancing is multiplied out to one level.
+  Prims under a point instancer render only through it.
 * **Materials**: ``UsdPreviewSurface`` (with ``UsdUVTexture`` textures read through
   ``UsdPrimvarReader_float2``) mapped onto the glTF metallic-roughness model that glTF
   files load as (:func:`rtmesh.loaders.gltf_materials.gltf_material`); a prim without a
@@ -51,10 +54,12 @@ from rtmesh.lights.area_lights import DiskLight, QuadLight
 from rtmesh.lights.point_lights import DirectionalLight, PointLight
 from rtmesh.loaders.gltf_materials import OPTIONS_KEY, gltf_material
 from rtmesh.loaders.mesh_files import check_file
+from rtmesh.loaders.placements import copied, held_copies, placed_estimate
 from rtmesh.rendering import memory
 from rtmesh.scene.background import SolidBackground, read_environment
 from rtmesh.scene.camera import Camera
-from rtmesh.scene.model import MeshPart
+from rtmesh.scene.instances import worth_instancing
+from rtmesh.scene.model import MeshPart, Placement
 
 log = logging.getLogger(__name__)
 
@@ -97,6 +102,11 @@ class UsdContent:
     Attributes
     ----------
     parts : list of MeshPart
+        World-space meshes (copies of small placed meshes among them).
+    placements : list of Placement
+        Meshes placed by point instancers or instanceable prims and worth instancing
+        (:mod:`rtmesh.loaders.placements`): each once, in its own space, with every copy's
+        transform to rtmesh's frame.
     materials : list of Material
         Indexed by the parts' ``material``.
     lights : list
@@ -108,6 +118,7 @@ class UsdContent:
     """
 
     parts: list = field(default_factory=list)
+    placements: list = field(default_factory=list)
     materials: list = field(default_factory=list)
     lights: list = field(default_factory=list)
     camera: object = None
@@ -209,8 +220,8 @@ def read_usd(path, physical=True):
     MeshError
         Unreadable file, composition error, malformed mesh or texture.
     ResourceError
-        Flattening its instances would take more memory than a loading limit allows
-        (:func:`rtmesh.rendering.memory.check_load`).
+        Its meshes and their copies would take more memory than a loading limit allows
+        (:func:`rtmesh.rendering.memory.check_load`; an instanced mesh counts once).
     """
     path = os.fspath(path)
     stage = open_stage(path)
@@ -242,6 +253,8 @@ class _Reader:
         frame[:3, :3] *= scale
         self.frame = frame
         self.content = UsdContent()
+        # instance proxies' meshes by (prototype prim, bound material), placed after the walk
+        self.proxies = {}
         self.material_ids = {}
         self.skipped = {}
         self.estimated = 0
@@ -250,6 +263,7 @@ class _Reader:
 
     def read(self):
         self._walk(self.stage.GetPseudoRoot(), None, self.frame[None])
+        self._place_proxies()
         for kind, paths in self.skipped.items():
             names = ", ".join(sorted(paths)[:5]) + (f" and {len(paths) - 5} more" if len(paths) > 5 else "")
             log.warning("%s: %d %s: %s", self.path, len(paths), kind, names)
@@ -321,41 +335,95 @@ class _Reader:
     # ------------------------------------------------------------ meshes
 
     def _mesh(self, prim, local, placements):
-        geometry = self._geometry(prim)
+        """A mesh placed once per row of ``placements @ local`` (rtmesh's frame): built once
+        and placed by instances when it is worth it (:mod:`rtmesh.loaders.placements`), else
+        one part of all its copies.  An instance proxy (a prim under an instanceable prim)
+        waits for the end of the traversal (:meth:`_place_proxies`), where every instance of
+        its prototype's prim is known."""
+        if prim.IsInstanceProxy():
+            self._proxy(prim, local, placements)
+            return
+        geometry = self._prepared(prim, len(placements))
         if geometry is None:
             return
+        matrices = self._kept(prim, placements @ local[None])
+        name = str(prim.GetPath())
+        if worth_instancing(len(geometry.faces), len(matrices)):
+            names = [f"{name}[{j}]" for j in range(len(matrices))]
+            self.content.placements.append(Placement(geometry, matrices, names))
+        elif len(matrices):
+            self.content.parts.append(copied(geometry, matrices,
+                                             name + (f" ({len(matrices)} copies)" if len(matrices) > 1 else "")))
+
+    def _prepared(self, prim, copies, geometry=None):
+        """A mesh's geometry in its own space as a MeshPart (normals smoothed by angle where
+        it has none), after the memory check for ``copies`` placements; None for an empty
+        mesh.  ``geometry``: what :meth:`_geometry` read of it already (an instance proxy's,
+        read from its prototype's prim once)."""
+        geometry = self._geometry(prim) if geometry is None else geometry
+        if geometry is None:
+            return None
         vertices, faces, normals, uv, colours, material = geometry
-        self._check_memory(prim, len(placements), len(vertices), len(faces))
+        self._check_memory(prim, copies, len(vertices), len(faces))
         if normals is None:
             vertices, faces, normals, original = smooth_vertex_normals(vertices, faces, CREASE_ANGLE)
             uv = None if uv is None else uv[original]
             colours = None if colours is None else colours[original]
-        matrices = placements @ local[None]  # (m, 4, 4)
-        linear = matrices[:, :3, :3]
-        determinant = np.linalg.det(linear)
-        keep = np.isfinite(matrices).all(axis=(1, 2)) & (determinant != 0.0)
+        return MeshPart(str(prim.GetPath()), vertices, faces, material, normals, uv=uv, vertex_colors=colours)
+
+    def _kept(self, prim, matrices):
+        """The placements (m, 4, 4) that can place a mesh: finite and non-singular (the others
+        skipped with a warning), their bottom row ``0 0 0 1`` (copies ignore it)."""
+        keep = np.isfinite(matrices).all(axis=(1, 2)) & (np.linalg.det(matrices[:, :3, :3]) != 0.0)
         if not keep.all():
             self._skip("copies with a zero scale or a non-finite transform (not rendered)", prim)
-        matrices, linear, determinant = matrices[keep], linear[keep], determinant[keep]
-        m, v = len(matrices), len(vertices)
-        if not m:
-            return
-        placed = np.einsum("mij,vj->mvi", linear, vertices) + matrices[:, None, :3, 3]
-        normal_matrices = np.linalg.inv(linear).transpose(0, 2, 1)
-        placed_normals = np.einsum("mij,vj->mvi", normal_matrices, normals)
-        copies = np.where((determinant < 0.0)[:, None, None], faces[None, :, ::-1], faces[None])
-        copies = copies + (np.arange(m) * v)[:, None, None]
-        name = str(prim.GetPath()) + (f" ({m} copies)" if m > 1 else "")
-        self.content.parts.append(MeshPart(
-            name, placed.reshape(-1, 3), copies.reshape(-1, 3), material, placed_normals.reshape(-1, 3),
-            uv=None if uv is None else np.tile(uv, (m, 1)),
-            vertex_colors=None if colours is None else np.tile(colours, (m, 1))))
+        matrices = matrices[keep]
+        matrices[:, 3] = (0.0, 0.0, 0.0, 1.0)
+        return matrices
+
+    def _proxy(self, prim, local, placements):
+        """An instance proxy's mesh: its prototype's geometry read once (per bound material),
+        a slot kept in the parts where its copies go should they be copied."""
+        material, _ = self._material(prim)
+        key = (str(prim.GetPrimInPrototype().GetPath()), None if material is None else str(material.GetPath()))
+        group = self.proxies.get(key)
+        if group is None:
+            group = self.proxies[key] = dict(geometry=self._geometry(prim), slots=[], prim=prim)
+        group["slots"].append((len(self.content.parts), self._kept(prim, placements @ local[None]), prim))
+        self.content.parts.append(None)
+
+    def _place_proxies(self):
+        """Every instanceable prim's meshes: a prototype mesh placed by all the instances of
+        its prototype built once and placed by instances when worth it, else copied into
+        each proxy's own slot (as each proxy was read before)."""
+        for group in self.proxies.values():
+            if group["geometry"] is None:
+                continue
+            slots = group["slots"]
+            count = sum(len(matrices) for _, matrices, _ in slots)
+            faces = len(group["geometry"][1])
+            if worth_instancing(faces, count):
+                part = self._prepared(group["prim"], count, group["geometry"])
+                names = [str(prim.GetPath()) + (f"[{j}]" if len(matrices) > 1 else "")
+                         for _, matrices, prim in slots for j in range(len(matrices))]
+                self.content.placements.append(Placement(part, np.concatenate([m for _, m, _ in slots]), names))
+                continue
+            for index, matrices, prim in slots:
+                part = self._prepared(prim, len(matrices), group["geometry"])
+                if len(matrices):
+                    self.content.parts[index] = copied(part, matrices, part.name + (
+                        f" ({len(matrices)} copies)" if len(matrices) > 1 else ""))
+        self.content.parts = [part for part in self.content.parts if part is not None]
 
     def _check_memory(self, prim, copies, vertices, faces):
-        """Refuse, before flattening, copies whose memory exceeds the loading limit."""
-        self.estimated += memory.load_estimate(copies * vertices, copies * faces)
-        memory.check_load(self.path, f"{prim.GetPath()} and the prims before it, flattened "
-                                     f"({copies} copies of {faces} triangles here)", self.estimated)
+        """Refuse, before flattening, copies whose memory exceeds the loading limit (a mesh
+        worth instancing counts once, :func:`rtmesh.loaders.placements.placed_estimate`)."""
+        self.estimated += placed_estimate(vertices, faces, copies)
+        held = held_copies(faces, copies)
+        here = (f"{copies} copies of {faces} triangles here" if held == copies
+                else f"{copies} instances of one mesh of {faces} triangles here")
+        memory.check_load(self.path, f"{prim.GetPath()} and the prims before it, flattened ({here})",
+                          self.estimated)
 
     def _geometry(self, prim):
         """(vertices, faces, normals or None, uv or None, colours or None, material index) of
@@ -799,7 +867,7 @@ def load_usd_scene(path, physical=True, **scene_options):
 
     content = read_usd(path, physical)
     scene_options["physical"] = physical
-    if not content.parts:
+    if not content.parts and not content.placements:
         raise MeshError(f"{os.fspath(path)}: nothing to render (no meshes)")
     if content.camera is not None:
         scene_options.setdefault("camera", content.camera)
@@ -808,4 +876,5 @@ def load_usd_scene(path, physical=True, **scene_options):
     if content.background is not None:
         scene_options.setdefault("background", content.background)
         scene_options.setdefault("lights", [])
-    return Scene.from_parts(content.parts, content.materials, source=os.fspath(path), **scene_options)
+    return Scene.from_parts(content.parts, content.materials, source=os.fspath(path), placements=content.placements,
+                            **scene_options)

@@ -54,6 +54,7 @@ from rtmesh.rendering.direct_stage import DirectStage
 from rtmesh.rendering.film import Film
 from rtmesh.rendering.general_kernels import GENERAL_KERNELS
 from rtmesh.rendering.local_shading import LocalShading
+from rtmesh.rendering import memory
 from rtmesh.rendering.media import Media
 from rtmesh.rendering.path_stage import PathStage
 from rtmesh.rendering.physical_shading import PhysicalShading, bsdf_weight
@@ -111,6 +112,7 @@ class Integrator:
                 # today's copies: every stage but the path kernel reads world-space faces
                 log.info("placed meshes flattened into %d copies (instances are not traced with %s)",
                          len(scene.instances), ", ".join(missing))
+                memory.check_flattening(scene.instances, ", ".join(missing))  # within a loading limit
                 scene = instances.flattened(scene)
         self.scene = scene
         # Re-centre the scene on the origin before it meets float32: float32 resolution is

@@ -77,11 +77,15 @@ class Placement:
         Each placement's model-to-world transform.
     names : list of str
         Each placement's object name.
+    categories : list of str or None
+        Each placement's category (dataset annotations); None: the part's ``category``,
+        else each placement's name.
     """
 
     part: MeshPart
     transforms: np.ndarray
     names: list
+    categories: list | None = None
 
 
 @dataclass
@@ -282,7 +286,8 @@ class Scene:
                 prototypes.append((face_count, offset, np.asarray(placement.transforms, dtype=np.float64),
                                    np.arange(len(names), len(names) + k, dtype=np.int32)))
                 names.extend(placement.names)
-                categories.extend(placement.names if part.category is None else [part.category] * k)
+                categories.extend(placement.categories if placement.categories is not None else
+                                  placement.names if part.category is None else [part.category] * k)
                 to_world.extend(np.asarray(placement.transforms, dtype=np.float64))
             else:
                 if part.motion is not None:

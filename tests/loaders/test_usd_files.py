@@ -25,6 +25,7 @@ from rtmesh.core.errors import MeshError, MissingExtraError, ResourceError  # no
 from rtmesh.loaders.usd_files import read_usd  # noqa: E402
 from rtmesh.rendering import memory  # noqa: E402
 from rtmesh.rendering.integrator import Integrator  # noqa: E402
+from rtmesh.scene import instances  # noqa: E402
 
 # the comparison is of what the loaders make: both scenes under one integrator
 SIZE = dict(width=64, height=48, spp=8, integrator="whitted")
@@ -198,7 +199,11 @@ def _blocks(image):
 def test_a_usd_stage_renders_as_the_same_scene_file(usd_file, tmp_path):
     scene, settings = load_scene(str(usd_file), **SIZE)
     reference, ref_settings = load_scene(str(write_scene_file(tmp_path)), **SIZE)
-    assert len(scene.faces) == len(reference.faces) == 12 + 2 + 100 * 80
+    # the instancer's ball (80 triangles) and the scene file's 100 objects naming one ball
+    # file: built once, placed 100 times (Whitted renders the copies)
+    assert len(scene.faces) == len(reference.faces) == 12 + 2 + 80
+    assert len(scene.instances) == len(reference.instances) == 100
+    assert len(instances.flattened(scene).faces) == len(instances.flattened(reference).faces) == 12 + 2 + 100 * 80
     assert len(scene.lights) == 1 and np.allclose(scene.lights[0].intensity, reference.lights[0].intensity)
     image = Integrator(scene, settings).render().image.astype(np.float64)
     expected = Integrator(reference, ref_settings).render().image.astype(np.float64)
@@ -211,7 +216,11 @@ def test_a_usd_stage_renders_as_the_same_scene_file(usd_file, tmp_path):
 def test_usd_content_is_mapped_in_rtmesh_units(usd_file):
     content = read_usd(usd_file)
     names = [p.name for p in content.parts]
-    assert names == ["/World/Cube", "/World/Quad", "/World/Balls/Prototypes/Ball (100 copies)"]
+    assert names == ["/World/Cube", "/World/Quad"]
+    (balls,) = content.placements
+    assert balls.part.name == "/World/Balls/Prototypes/Ball" and len(balls.part.faces) == 80
+    assert balls.transforms.shape == (100, 4, 4) and balls.names[:2] == ["/World/Balls/Prototypes/Ball[0]",
+                                                                         "/World/Balls/Prototypes/Ball[1]"]
     quad = content.parts[1]
     assert quad.uv is not None and len(quad.vertices) == 4
     materials = {m.name: m for m in content.materials}
@@ -313,8 +322,13 @@ def test_a_usd_file_renders_on_the_command_line(usd_file, tmp_path, capsys):
     assert status == 0 and out.exists() and "error" not in err
 
 
-def test_flattening_instances_beyond_the_memory_limit_stops_before_taking_it(usd_file, tmp_path, capsys):
-    # 100 balls of 80 triangles: about 3.5 MB flattened, refused under a 1 MB limit
+def test_flattening_instances_beyond_the_memory_limit_stops_before_taking_it(usd_file, tmp_path, capsys,
+                                                                            monkeypatch):
+    # 100 balls of 80 triangles, instanced: the ball counted once (and a record a placement)
+    with memory.loading_limit(1_000_000):
+        assert len(read_usd(usd_file).placements) == 1
+    # copied (as balls below the instancing size are): about 3.5 MB, refused under 1 MB
+    monkeypatch.setattr(instances, "MIN_TRIANGLES", 10 ** 9)
     with memory.loading_limit(1_000_000), pytest.raises(ResourceError) as caught:
         read_usd(usd_file)
     assert str(caught.value).startswith(f"{usd_file}: /World/Balls/Prototypes/Ball and the prims before it, "
@@ -342,7 +356,7 @@ def test_a_missing_texture_is_a_warning_and_the_rest_renders(tmp_path, caplog):
     with caplog.at_level(logging.WARNING):
         content = read_usd(path)
     assert any("texture gone.png cannot be read" in r.getMessage() for r in caplog.records)
-    assert len(content.parts) == 3
+    assert len(content.parts) + len(content.placements) == 3
     with pytest.raises(MeshError, match="nothing to render"):
         (tmp_path / "empty.usda").write_text("#usda 1.0\n")
         load_scene(str(tmp_path / "empty.usda"))
@@ -440,7 +454,7 @@ def test_a_usdz_package_reads_its_textures_from_the_package(usd_file, tmp_path):
     assert UsdUtils.CreateNewUsdzPackage(Sdf.AssetPath(str(usd_file)), str(package))
     content = read_usd(package)
     assert {m.name: m for m in content.materials}["Checker"].diffuse_texture is not None
-    assert len(content.parts) == 3
+    assert len(content.parts) + len(content.placements) == 3
 
 
 def test_usds_own_diagnostics_stay_off_the_terminal(tmp_path):
@@ -465,5 +479,9 @@ def test_a_scene_file_object_places_a_usd_file_with_its_materials(usd_file, tmp_
     scene, _ = load_scene(str(scene_file), width=16, height=12, spp=1)
     direct = read_usd(usd_file)
     points = np.concatenate([p.vertices for p in direct.parts])
-    assert np.allclose(scene.vertices.min(axis=0), 2 * points.min(axis=0) + [0, 5, 0], atol=1e-6)
+    # the balls placed by instances, the object's transform after the instancer's
+    assert len(scene.instances) == 100
+    assert np.allclose(scene.bounds[0], 2 * points.min(axis=0) + [0, 5, 0], atol=1e-6)
+    flat = instances.flattened(scene)
+    assert np.allclose(flat.vertices.min(axis=0), 2 * points.min(axis=0) + [0, 5, 0], atol=1e-6)
     assert {"Red", "Checker", "Blue"} <= {m.name for m in scene.materials.materials}

@@ -12,19 +12,7 @@ from rtmesh.rendering.integrator import Integrator
 from rtmesh.rendering.settings import RenderSettings
 from rtmesh.scene import instances
 from rtmesh.scene.model import MeshPart, Placement, Scene
-
-
-def _transforms(count, seed=3):
-    """Random rotations, non-uniform scales (a few mirroring) and positions over a floor."""
-    rng = np.random.default_rng(seed)
-    out = np.tile(np.eye(4), (count, 1, 1))
-    for j in range(count):
-        s = rng.uniform(0.3, 0.7)
-        rotation = trimesh.transformations.rotation_matrix(rng.uniform(0, 2 * np.pi), rng.normal(size=3))
-        scale = np.diag([s * (-1 if j % 7 == 0 else 1), s * rng.uniform(0.7, 1.3), s, 1.0])
-        out[j] = trimesh.transformations.translation_matrix(
-            [rng.uniform(-5, 5), s + 0.1, rng.uniform(-5, 5)]) @ rotation @ scale
-    return out
+from scenes import block_means, scattered_transforms
 
 
 def placed_scene(count=50, subdivisions=2):
@@ -34,13 +22,8 @@ def placed_scene(count=50, subdivisions=2):
     materials = [Material(diffuse=np.array([0.6, 0.6, 0.6])), Material(diffuse=np.array([0.8, 0.3, 0.2]))]
     prototype = MeshPart("ball", sphere.vertices.copy(), sphere.faces.copy(), 1, sphere.vertex_normals.copy())
     return Scene.from_parts([MeshPart("floor", floor.vertices, floor.faces, 0)], materials, physical=True,
-                            placements=[Placement(prototype, _transforms(count),
+                            placements=[Placement(prototype, scattered_transforms(count),
                                                   [f"ball {j}" for j in range(count)])])
-
-
-def block_means(image, size=8):
-    h, w = image.shape[0] // size * size, image.shape[1] // size * size
-    return image[:h, :w].reshape(h // size, size, w // size, size, -1).mean(axis=(1, 3))
 
 
 def test_a_placed_mesh_is_kept_once():
@@ -91,7 +74,7 @@ def test_whitted_and_passes_render_the_copies(caplog):
 
 @pytest.mark.parametrize("bad, why", [(np.nan, "non-finite"), (0.0, "singular")])
 def test_a_bad_placement_is_one_line(bad, why):
-    transforms = _transforms(3)
+    transforms = scattered_transforms(3)
     transforms[1, 1, :3] = bad  # NaN, or a zero row: singular
     sphere = trimesh.creation.icosphere(1)
     with pytest.raises(MeshError) as error:
@@ -116,7 +99,7 @@ def _reusing_glb(path, count=50, subdivisions=3, instancing=False):
         baseColorFactor=[0.3, 0.6, 0.9, 1.0], metallicFactor=0.0, roughnessFactor=0.7))
     scene = trimesh.Scene()
     scene.add_geometry(floor, node_name="floor", transform=trimesh.transformations.translation_matrix([0, -0.1, 0]))
-    transforms = _transforms(count)
+    transforms = scattered_transforms(count)
     scene.add_geometry(ball, node_name="ball0", geom_name="ball", transform=np.eye(4) if instancing else transforms[0])
     for j in range(1, 1 if instancing else count):
         scene.graph.update(frame_to=f"ball{j}", frame_from=scene.graph.base_frame, geometry="ball",
