@@ -352,3 +352,46 @@ def flattened(scene):
                                vertex_normals=joined["vertex_normals"], smooth=joined["smooth"],
                                material_id=joined["material_id"], object_id=joined["object_id"],
                                uv=joined["uv"], vertex_colors=joined["vertex_colors"])
+
+
+def object_geometry(scene, objects):
+    """World vertices and faces of some objects of a scene, placements copied as
+    :func:`flattened` copies them (for what traces objects alone: the amodal masks of
+    :mod:`rtmesh.batch.coco`), one placement's copy at a time, never the whole scene's.
+
+    Parameters
+    ----------
+    scene : Scene
+    objects : iterable of int
+        Object indices (``Scene.object_names``).
+
+    Returns
+    -------
+    vertices : (V', 3) float64
+        ``scene.vertices`` itself when none of the objects is a placement (the faces index
+        it), else the vertices the faces use, world-space ones then each copy's.
+    faces : (F', 3) int
+    """
+    objects = np.asarray(list(objects), dtype=np.int64)
+    inst = scene.instances
+    if inst is None:
+        return scene.vertices, scene.faces[np.isin(scene.object_id, objects)]
+    f0 = inst.first_face
+    world = scene.faces[:f0][np.isin(scene.object_id[:f0], objects)]
+    placed = np.flatnonzero(np.isin(inst.object_id, objects))
+    if not len(placed):
+        return scene.vertices, world
+    used, corners = np.unique(np.asarray(world).ravel(), return_inverse=True)
+    vertices, faces = [scene.vertices[used]], [corners.reshape(-1, 3)]
+    offset = len(used)
+    for j in placed:
+        p = inst.prototype[j]
+        va, vb = int(inst.prototype_vertices[p]), int(inst.prototype_vertices[p + 1])
+        matrix = inst.transforms[j]
+        copy = np.asarray(scene.faces[inst.prototype_faces[p]:inst.prototype_faces[p + 1]], dtype=np.int64) - va
+        if np.linalg.det(matrix[:3, :3]) < 0:
+            copy = copy[:, ::-1]  # a mirroring transform flips the winding
+        vertices.append(trimesh.transform_points(scene.vertices[va:vb], matrix))
+        faces.append(copy + offset)
+        offset += vb - va
+    return np.concatenate(vertices), np.ascontiguousarray(np.concatenate(faces), dtype=np.int32)
