@@ -1,6 +1,6 @@
 """Meshes placed many times: Embree instances against flattened copies.
 
-Two measurements (results in docs/BENCHMARKS.md, "Instancing"):
+Four measurements (results in docs/BENCHMARKS.md, "Instancing"):
 
 ``crossover``
     One mesh of ``n`` triangles (an icosphere; ``n`` = 20 .. 20480) placed 400 or 1600
@@ -17,7 +17,13 @@ Two measurements (results in docs/BENCHMARKS.md, "Instancing"):
     ``[[objects]] instances`` (10,000 rows of a ``.npy``) and a USD point instancer of
     10,000 instances of it, against one placement, each in a fresh process.
 
-Run from the repository root: ``python -m benchmarks.bench_instancing crossover|issue|loaders``.
+``passes``
+    2,000 placements of a 5,120-triangle icosphere over a floor (the ``crossover`` scene),
+    path integrator, 128x96, 4 spp, each in a fresh process after a warm-up run: peak RSS
+    and times instanced without passes, instanced with passes and the denoiser, and
+    flattened (what passes forced before the batched queries traced instances) with them.
+
+Run from the repository root: ``python -m benchmarks.bench_instancing crossover|issue|loaders|passes``.
 """
 
 import json
@@ -192,13 +198,55 @@ def loaders(copies=10_000):
                   f"render x{many['render'] / one['render']:.2f}")
 
 
+# the passes of the ``passes`` measurement (with the denoiser, whose guides are albedo and normal)
+PASSES = ("depth", "normal", "albedo", "position", "uv", "alpha", "object_id", "material_id", "instance_id",
+          "depth_center", "normal_center", "direct_diffuse")
+PASS_MODES = ("instanced", "instanced, passes + denoiser", "flattened, passes + denoiser")
+
+
+def _measure_passes(mode):
+    """Build and render the ``passes`` scene in this process as ``mode`` (an index into
+    :data:`PASS_MODES`); print JSON."""
+    from rtmesh.rendering.integrator import Integrator
+    from rtmesh.rendering.settings import RenderSettings
+    from rtmesh.scene import instances
+
+    mode = int(mode)
+    _, scene = _scene(5120, 2000)
+    settings = RenderSettings(width=128, height=96, spp=4, integrator="path", passes=PASSES if mode else (),
+                              denoise=bool(mode))
+    start = time.perf_counter()
+    if mode == 2:
+        scene = instances.flattened(scene)
+    it = Integrator(scene, settings)
+    built = time.perf_counter()
+    result = it.render()
+    done = time.perf_counter()
+    print(json.dumps({"build": built - start, "render": done - built, "instanced": it.instances is not None,
+                      "faces": len(it.scene.faces),
+                      "ids": len(np.unique(result.passes["instance_id"])) if result.passes else 0,
+                      "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+
+
+def passes():
+    for mode, name in enumerate(PASS_MODES):
+        run = [sys.executable, __file__, "measure_passes", str(mode)]
+        subprocess.run(run, check=True, capture_output=True)  # warm the kernel cache
+        out = subprocess.run(run, check=True, capture_output=True, text=True).stdout
+        print(f"{name}:", json.loads(out.strip().splitlines()[-1]))
+
+
 if __name__ == "__main__":
     what = sys.argv[1] if len(sys.argv) > 1 else "crossover"
     if what == "measure":
         _measure(sys.argv[2])
+    elif what == "measure_passes":
+        _measure_passes(sys.argv[2])
     elif what == "issue":
         issue()
     elif what == "loaders":
         loaders()
+    elif what == "passes":
+        passes()
     else:
         crossover()

@@ -94,7 +94,7 @@ def write_view_files(paths, it, labels, record, objects, units, accels=None):
     visible = np.isin(np.rint(labels["object_id"][..., 0]).astype(np.int64), objects)
     depth = labels["depth_center"][..., 0].astype(np.float64)
     geometry = instance_geometry(scene, objects, accels)
-    canvas = amodal_mask(it, scene.vertices, geometry.faces, geometry.bounds, record, margin=1, accels=accels,
+    canvas = amodal_mask(it, geometry.vertices, geometry.faces, geometry.bounds, record, margin=1, accels=accels,
                          seen=visible)
     mask = canvas[h:2 * h, w:2 * w]
     scale = depth_scale(record["far"] * mm)

@@ -42,6 +42,7 @@ from rtmesh.io.atomic_files import write_text
 from rtmesh.io.rle import encode, mask_box
 from rtmesh.rendering.centre_rays import centre_hits, centre_passes
 from rtmesh.scene.camera_json import project_points
+from rtmesh.scene.instances import object_geometry
 
 COCO_SUFFIX = ".coco.json"
 MERGED_NAME = "annotations.coco.json"
@@ -124,7 +125,8 @@ def image_annotations(it, record, instances, object_id=None, accels=None):
             to_world = moving[instance.objects[0]].matrix(it.camera.shutter[0]) @ to_world
         mask = labels == k
         geometry = instance_geometry(scene, instance.objects, accels)
-        amodal = amodal_mask(it, scene.vertices, geometry.faces, geometry.bounds, record, accels=accels, seen=mask)
+        amodal = amodal_mask(it, geometry.vertices, geometry.faces, geometry.bounds, record, accels=accels,
+                             seen=mask)
         area, area_amodal = int(mask.sum()), int(amodal.sum())
         annotations.append({
             "category": instance.category, "object_name": instance.name, "instance_id": int(k),
@@ -143,14 +145,17 @@ class InstanceGeometry:
 
     Attributes
     ----------
+    vertices : (V, 3) float
+        The world vertices ``faces`` index: the scene's, or the objects' own where one is a
+        placement of a mesh kept once (:func:`rtmesh.scene.instances.object_geometry`).
     faces : (F, 3) int
-        The objects' faces (indices into the scene's vertices).
+        The objects' faces (indices into ``vertices``).
     bounds : (2, 3) float
         The minimum and maximum of their world points.
     """
 
     def __init__(self, vertices, faces):
-        self._vertices, self.faces = vertices, faces
+        self.vertices, self.faces = vertices, faces
         # the faces' world points, with repeats (only their bounds are read), kept for the
         # first model box only
         points = self._points = vertices[faces.ravel()]
@@ -163,7 +168,7 @@ class InstanceGeometry:
         key = np.asarray(to_world, dtype=np.float64).tobytes()
         box = self._model_boxes.get(key)
         if box is None:
-            points = self._vertices[self.faces.ravel()] if self._points is None else self._points
+            points = self.vertices[self.faces.ravel()] if self._points is None else self._points
             self._points = None
             model = (points - to_world[:3, 3]) @ np.linalg.inv(to_world[:3, :3]).T
             box = self._model_boxes[key] = np.stack([model.min(axis=0), model.max(axis=0)])
@@ -189,11 +194,13 @@ def instance_geometry(scene, objects, cache=None):
     """
     objects = tuple(int(k) for k in objects)
     key = ("instance", id(scene.vertices), objects)
-    entry = None if cache is None else cache.get(key)
-    if entry is None or entry._vertices is not scene.vertices:
-        entry = InstanceGeometry(scene.vertices, scene.faces[np.isin(scene.object_id, objects)])
-        if cache is not None:
-            cache[key] = entry
+    held = None if cache is None else cache.get(key)
+    if held is not None and held[0] is scene.vertices:
+        return held[1]
+    # (placements of a mesh kept once are copied, for these objects alone)
+    entry = InstanceGeometry(*object_geometry(scene, objects))
+    if cache is not None:
+        cache[key] = (scene.vertices, entry)
     return entry
 
 

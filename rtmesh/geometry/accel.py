@@ -125,12 +125,17 @@ class Hits:
         Triangle index; -1 for misses.
     u, v : (n,) float64
         Barycentric coordinates of the hit (weights of vertices 1 and 2).
+    instance : (n,) int32 or None
+        In a scene with placed meshes (:mod:`rtmesh.scene.instances`): the placement hit,
+        -1 for a world-space face or a miss; ``prim`` is then the prototype's face in the
+        per-face tables and ``u``, ``v`` are on the prototype's triangle.  None for a
+        scene without placements.
     """
 
-    __slots__ = ("t", "prim", "u", "v")
+    __slots__ = ("t", "prim", "u", "v", "instance")
 
-    def __init__(self, t, prim, u, v):
-        self.t, self.prim, self.u, self.v = t, prim, u, v
+    def __init__(self, t, prim, u, v, instance=None):
+        self.t, self.prim, self.u, self.v, self.instance = t, prim, u, v, instance
 
     def __len__(self):
         return len(self.prim)
@@ -161,8 +166,8 @@ class Accel:
         Faces from ``instances.first_face`` on are prototypes in model coordinates (their
         ``vertices`` not re-centred): each is built once into an Embree scene of its own
         and placed by ``instances.transforms`` (already re-centred) as Embree instances of
-        the top-level scene, after the world-space faces.  Packets only; only the path
-        kernel reads such hits (:meth:`intersect` and :meth:`occluded` refuse).
+        the top-level scene, after the world-space faces.  Packets only; :meth:`intersect`
+        reports the placement of each hit (:attr:`Hits.instance`).
 
     Attributes
     ----------
@@ -191,6 +196,8 @@ class Accel:
         self.packets = library is not None
         self.instances = instances
         self.faces = np.ascontiguousarray(faces, dtype=np.int32)
+        # what intersect maps a placement's primID by (empty: no placements)
+        self._face_offset = _NO_ROWS if instances is None else instances.world_rows()[0]
         if instances is not None:
             self._shared = _InstancedScene(library, vertices, self.faces, instances)
             self.vertices32 = self._shared.vertices32
@@ -229,16 +236,17 @@ class Accel:
         -------
         Hits
         """
-        self._flat_only()
         n = len(origins)
+        placed = self.instances is not None
         if n == 0:
             empty = np.zeros(0)
-            return Hits(empty, np.zeros(0, np.int32), empty, empty)
+            return Hits(empty, np.zeros(0, np.int32), empty, empty, np.zeros(0, np.int32) if placed else None)
         if self.packets:
             intersect_rays, _ = embree_packets.query_kernels()
-            t, prim, u, v = intersect_rays(self._intersect16, self._shared.handle,
-                                           *embree_packets.closest_rays(origins, directions), _PACKET_FLAGS)
-            return Hits(t, prim, u, v)
+            t, prim, u, v, instance = intersect_rays(self._intersect16, self._shared.handle,
+                                                     *embree_packets.closest_rays(origins, directions), _PACKET_FLAGS,
+                                                     self._face_offset)
+            return Hits(t, prim, u, v, instance if placed else None)
         result = self._scene.run(_embree_rays(origins), _embree_rays(directions), output=1)
         prim = result["primID"]
         t, u, v = float32_rays.closest_hits(result["tfar"], prim, result["u"], result["v"])
@@ -263,7 +271,7 @@ class Accel:
         -------
         (n,) or (k,) bool
         """
-        self._flat_only()
+        # (rtcOccluded16 on the top-level scene sees the placements: nothing to map)
         if self.packets:
             rows = _NO_ROWS if rows is None else np.asarray(rows, dtype=np.int64)
             o, d, t = embree_packets.shadow_rays(origins, directions, t_max)
@@ -279,12 +287,6 @@ class Accel:
         t = np.minimum(t_max, F32_MAX).astype(np.float32, copy=False)
         o, d = _embree_rays(origins, rows), _embree_rays(directions, rows)
         return self._scene.run(o, d, dists=t, query="OCCLUDED") != -1
-
-    def _flat_only(self):
-        # the batched queries report a placement's primID without its instance: only the
-        # path kernel, which reads instID, traces instanced scenes
-        if self.instances is not None:
-            raise NotImplementedError("the batched queries do not trace Embree instances")
 
     def hit_points(self, hits, mask=None):
         """World positions of hits, interpolated on the float32 triangles Embree traced.
@@ -302,12 +304,18 @@ class Accel:
         Returns
         -------
         (k, 3) float64
-            Component-major (see :mod:`rtmesh.core.rays`).
+            Component-major (see :mod:`rtmesh.core.rays`) without placements; hits on a
+            placement are interpolated on the prototype's triangle and carried to the
+            world by its transform (:meth:`rtmesh.scene.instances.Instances.world_points`).
         """
-        prim, u, v = hits.prim, hits.u, hits.v
+        prim, u, v, instance = hits.prim, hits.u, hits.v, hits.instance
         if mask is not None:
             prim, u, v = prim[mask], u[mask], v[mask]
-        return barycentric_interpolate(take_rows(self.triangles, prim), u, v)
+            instance = None if instance is None else instance[mask]
+        points = barycentric_interpolate(take_rows(self.triangles, prim), u, v)
+        if instance is None or not (instance >= 0).any():
+            return points
+        return self.instances.world_points(points, instance)
 
 
 class _InstancedScene:

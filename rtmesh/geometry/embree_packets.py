@@ -248,7 +248,7 @@ def _intersect_packet(intersect16, scene, ray, words, valid, args, origins, dire
 
 
 @kernel
-def intersect_rays(intersect16, scene, origins, directions, flags):
+def intersect_rays(intersect16, scene, origins, directions, flags, face_offset):
     """Closest hits of rays, 16 at a time through ``rtcIntersect16``.
 
     Parameters
@@ -262,27 +262,35 @@ def intersect_rays(intersect16, scene, origins, directions, flags):
     flags : int
         ``RTC_RAY_QUERY_FLAG_COHERENT`` for rays that travel together (camera rays of
         neighbouring samples), else ``RTC_RAY_QUERY_FLAG_INCOHERENT``.
+    face_offset : (k,) int64
+        A scene with an instance array (:mod:`rtmesh.scene.instances`): each placement's
+        first face in the per-face tables, so that a hit on placement ``j`` (its
+        ``instPrimID``) reports face ``face_offset[j] + primID``; empty for a scene without.
 
     Returns
     -------
     t : (n,) float64
         Distances, ``inf`` for misses.
     prim : (n,) int32
-        Triangle hit, -1 for a miss.
+        Triangle hit (its index in the per-face tables), -1 for a miss.
     u, v : (n,) float64
         Barycentric coordinates (0 for misses).
+    instance : (n,) int32
+        The placement hit, -1 for a world-space face or a miss.
     """
     n = origins.shape[0]
     t = np.empty(n)
     prim = np.empty(n, np.int32)
     u = np.empty(n)
     v = np.empty(n)
+    instance = np.empty(n, np.int32)
     ray, words, valid, args = packet_buffers(np.int64(RAYHIT_WORDS), np.int64(1), flags)
     for start in range(0, n, LANES):
         count = min(LANES, n - start)
         _intersect_packet(intersect16, scene, ray, words, valid, args, origins, directions, start, count)
         for lane in range(count):
             i = start + lane
+            instance[i] = -1
             if words[GEOM_ID * LANES + lane] == INVALID_ID:
                 prim[i] = -1
                 t[i] = np.inf
@@ -290,10 +298,15 @@ def intersect_rays(intersect16, scene, origins, directions, flags):
                 v[i] = 0.0
             else:
                 prim[i] = words[PRIM_ID * LANES + lane]
+                if len(face_offset) and words[INST_ID * LANES + lane] != INVALID_ID:
+                    # a placement (one instance level): its prototype's face
+                    placed = words[INST_PRIM_ID * LANES + lane]
+                    instance[i] = placed
+                    prim[i] = np.int32(face_offset[placed] + prim[i])
                 t[i] = np.float64(ray[TFAR * LANES + lane])
                 u[i] = np.float64(ray[U * LANES + lane])
                 v[i] = np.float64(ray[V * LANES + lane])
-    return t, prim, u, v
+    return t, prim, u, v, instance
 
 
 @kernel
@@ -340,7 +353,7 @@ def _query_signatures():
     vectors64 = types.Array(types.float64, 2, "A", readonly=True)
     vectors32 = types.Array(types.float32, 2, "A", readonly=True)
     lengths32 = types.Array(types.float32, 1, "A", readonly=True)
-    return [(intersect_rays, (query, types.int64, vectors64, vectors64, types.int64)),
+    return [(intersect_rays, (query, types.int64, vectors64, vectors64, types.int64, rows)),
             (occluded_rays, (query, types.int64, vectors32, vectors32, lengths32, rows, types.int64))]
 
 

@@ -173,8 +173,9 @@ def centre_passes(it, names):
     motions = object_motions(scene) if "motion" in out and it.motion is not None else {}
     geometry = any(name in out for name in _GEOMETRY) or bool(motions)
     # points alone (depth, position) of a still scene: the surface kernel's interpolation
-    # without its normals, materials and textures (the same rounding, see below)
-    points_only = it.motion is None and "normal_center" not in out
+    # without its normals, materials and textures (the same rounding, see below); a
+    # placement's points are carried to the world by the surface stage
+    points_only = it.motion is None and it.instances is None and "normal_center" not in out
     record = camera_record(scene.camera, s.width, s.height, it.scene_bounds) if motions else None
     forward = it.camera_frame[0]
 
@@ -184,8 +185,12 @@ def centre_passes(it, names):
         if not len(rows):
             return
         prim, dest = hits.prim[rows].astype(np.intp), pixels[rows]
+        objects = None
+        if hits.instance is not None and any(name != "material_id" for name, _ in ids):
+            # a placement is an object of its own; its prototype's faces name only the first
+            objects = it.instances.hit_objects(scene.object_id, prim, hits.instance[rows])
         for name, table in ids:
-            out[name][dest, 0] = table[prim]
+            out[name][dest, 0] = table[prim] if objects is None or name == "material_id" else objects
         if points_only and geometry:
             # (u e1 + v0) + v e2 on the rows of the face table the surface kernel reads:
             # rtmesh.shading.surfaces.surface_from_rows rounds exactly so; component-major like

@@ -109,7 +109,7 @@ class Integrator:
         if scene.instances is not None:
             missing = instances.unsupported(scene, self.settings)
             if missing:
-                # today's copies: every stage but the path kernel reads world-space faces
+                # today's copies: the Whitted stages and some of the path kernel's read world-space faces
                 log.info("placed meshes flattened into %d copies (instances are not traced with %s)",
                          len(scene.instances), ", ".join(missing))
                 memory.check_flattening(scene.instances, ", ".join(missing))  # within a loading limit
@@ -221,15 +221,10 @@ class Integrator:
         ------
         ValueError
             The scene has moving objects and ``camera``'s shutter differs from the built
-            one's (the built geometry depends on the shutter).  Or the scene's placed meshes are traced as instances and
-            ``background`` is transparent (see :mod:`rtmesh.scene.instances`).
+            one's (the built geometry depends on the shutter).
         """
         if object_motions(self.scene) and tuple(camera.shutter) != tuple(self.scene.camera.shutter):
             raise ValueError("with_view: a scene with moving objects needs the built camera's shutter")
-        if self.instances is not None and background is not None and as_background(background).transparent:
-            # its alpha pass comes from the batched queries, which do not trace instances
-            raise ValueError("with_view: a transparent background needs the placed meshes' copies; build the "
-                             "Integrator with it (Integrator(scene with that background, settings))")
         view = copy.copy(self)
         view.scene = dataclasses.replace(self.scene, camera=camera,
                                          lights=list(self.scene.lights if lights is None else lights),

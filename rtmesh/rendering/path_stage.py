@@ -91,11 +91,7 @@ def instance_record(it):
     placed = it.instances
     if placed is None:
         return no_instances()
-    linear = placed.transforms[:, :3, :3]
-    to_world = np.concatenate([linear.reshape(-1, 9), placed.transforms[:, :3, 3]], axis=1)
-    normal_to_world = np.linalg.inv(linear).transpose(0, 2, 1).reshape(-1, 9)
-    return (np.ascontiguousarray(placed.face_offset), np.ascontiguousarray(to_world),
-            np.ascontiguousarray(normal_to_world))
+    return placed.world_rows()
 
 
 def scene_tables(scene, accel):

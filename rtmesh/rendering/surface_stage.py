@@ -1,6 +1,7 @@
 """The surface stage: shading records of the rays that hit (points, normals facing the
 incoming ray, materials, texture tints), with motion blur formed on the rest pose of the
-object hit and moved to the ray's time.
+object hit and moved to the ray's time, and hits on placed meshes carried to the world by
+their placement (:mod:`rtmesh.scene.instances`).
 """
 
 import numpy as np
@@ -8,7 +9,9 @@ import numpy as np
 from rtmesh.core.compiled import by_component
 from rtmesh.core.rays import NO_VECTORS, take_rows
 from rtmesh.rendering.chunk_state import Stage, SurfaceRecords
-from rtmesh.shading.surfaces import face_viewer, surface_records
+from rtmesh.shading.surfaces import face_viewer, placed_surface_records, surface_records
+
+_NO_NORMALS = np.zeros((0, 3))
 
 
 class SurfaceStage(Stage):
@@ -36,10 +39,21 @@ class SurfaceStage(Stage):
         normal_maps = it.plan.normal_maps
         # the shading-normal terminator fix (see face_viewer) runs in the kernel unless
         # normal maps, applied below, change the normals after it
-        srf.p, srf.ng, srf.ns, srf.front, srf.mat = surface_records(
-            hits.prim, hits.u, hits.v, np.arange(len(hits)) if rows is None else rows, by_component(rays.directions),
-            view, it.tables.faces, it.tables.vertex_normals, it.tables.smooth, it.tables.material_id,
-            it.plan.smooth_normals and not normal_maps)
+        fix_terminator = it.plan.smooth_normals and not normal_maps
+        hit_rows = np.arange(len(hits)) if rows is None else rows
+        if hits.instance is not None:
+            # placed meshes: the hits on a placement carried to the world, as their copies read
+            _, to_world, normal_to_world = it.instances.world_rows()
+            scene = it.scene
+            srf.p, srf.ng, srf.ns, srf.front, srf.mat = placed_surface_records(
+                hits.prim, hits.u, hits.v, hits.instance, hit_rows, by_component(rays.directions),
+                it.tables.faces, it.tables.vertex_normals, it.tables.smooth, it.tables.material_id, fix_terminator,
+                to_world, normal_to_world, scene.faces,
+                _NO_NORMALS if scene.vertex_normals is None else scene.vertex_normals)
+        else:
+            srf.p, srf.ng, srf.ns, srf.front, srf.mat = surface_records(
+                hits.prim, hits.u, hits.v, hit_rows, by_component(rays.directions), view, it.tables.faces,
+                it.tables.vertex_normals, it.tables.smooth, it.tables.material_id, fix_terminator)
         srf.tints = None
         if it.plan.textures:
             u, v = take_rows(hits.u, rows), take_rows(hits.v, rows)

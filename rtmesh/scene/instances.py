@@ -6,11 +6,13 @@ triangles, each prototype's triangles once, in the prototype's own (model) coord
 (materials, normals, UVs, colours) covers the prototypes' faces once, so a hit on instance
 ``j`` reads face ``Instances.face_offset[j] + primID`` of those tables, and its point and
 normals are carried to the world by the instance's transform
-(:mod:`rtmesh.rendering.path_kernel`).
+(:mod:`rtmesh.rendering.path_kernel`; for the batched queries' hits, which report the
+placement as ``Hits.instance``, :func:`rtmesh.shading.surfaces.placed_surface_records`).
 
-Only the path integrator traces instances (:func:`unsupported` says what it does not trace
-through them yet); everything else renders :func:`flattened`, the copies the loaders made
-before instancing existed.
+Only the path integrator traces instances, its passes, denoiser guides and transparent
+backgrounds included (:func:`unsupported` says what it does not trace through them yet);
+everything else renders :func:`flattened`, the copies the loaders made before instancing
+existed.
 """
 
 from dataclasses import dataclass, field
@@ -58,8 +60,10 @@ class Instances:
     transforms: np.ndarray
     prototype: np.ndarray
     object_id: np.ndarray
-    # bounds(), formed once (the prototypes' vertices do not change once the scene is made)
+    # bounds() and world_rows(), formed once (the prototypes' vertices and the placements
+    # do not change once the scene is made)
     _bounds: list = field(default_factory=list, init=False, repr=False, compare=False)
+    _rows: list = field(default_factory=list, init=False, repr=False, compare=False)
 
     def __len__(self):
         return len(self.prototype)
@@ -68,6 +72,66 @@ class Instances:
     def face_offset(self):
         """(k,) int64: each placement's first face in the scene's per-face tables."""
         return self.prototype_faces[self.prototype]
+
+    def world_rows(self):
+        """The placements as compiled code reads them (the path kernel's ``instances``
+        record, :func:`rtmesh.shading.surfaces.placed_surface_records`); formed once.
+
+        Returns
+        -------
+        face_offset : (k,) int64
+            :attr:`face_offset`.
+        to_world : (k, 12) float64
+            Each model-to-world transform: the linear part row by row, then the translation.
+        normal_to_world : (k, 9) float64
+            The inverse transpose of each linear part, row by row.
+        """
+        if not self._rows:
+            linear = self.transforms[:, :3, :3]
+            to_world = np.concatenate([linear.reshape(-1, 9), self.transforms[:, :3, 3]], axis=1)
+            normal_to_world = np.linalg.inv(linear).transpose(0, 2, 1).reshape(-1, 9)
+            self._rows.append((np.ascontiguousarray(self.face_offset, dtype=np.int64),
+                               np.ascontiguousarray(to_world), np.ascontiguousarray(normal_to_world)))
+        return self._rows[0]
+
+    def world_points(self, points, instance):
+        """Points on the prototypes carried to the world by their placements, in the
+        arithmetic of :func:`rtmesh.shading.surfaces.placed_surface_record`.
+
+        Parameters
+        ----------
+        points : (n, 3) float64
+            Model coordinates where ``instance >= 0``, world coordinates elsewhere.
+        instance : (n,) int
+            Each point's placement, -1 for a point already in the world.
+
+        Returns
+        -------
+        (n, 3) float64
+            A new array.
+        """
+        out = np.array(points, dtype=np.float64)
+        rows = np.flatnonzero(instance >= 0)
+        if len(rows):
+            a = self.world_rows()[1][instance[rows]]
+            x, y, z = (out[rows, c] for c in range(3))
+            for c in range(3):
+                out[rows, c] = ((a[:, 3 * c] * x + a[:, 3 * c + 1] * y) + a[:, 3 * c + 2] * z) + a[:, 9 + c]
+        return out
+
+    def hit_objects(self, object_id, prim, instance):
+        """(n,) int32: the object each hit belongs to: a placement's own for a hit on a
+        placement (every placement is an object), else its face's.
+
+        Parameters
+        ----------
+        object_id : (F,) int
+            The scene's per-face object index (a prototype's faces hold its first
+            placement's).
+        prim, instance : (n,) int
+            Faces hit (in the per-face tables) and placements (-1: a world-space face).
+        """
+        return np.where(instance >= 0, self.object_id[np.maximum(instance, 0)], object_id[prim]).astype(np.int32)
 
     def bounds(self, vertices):
         """(2, 3) float64: world bounds of every placement.
@@ -201,19 +265,14 @@ def unsupported(scene, settings):
     settings : RenderSettings
     """
     from rtmesh.geometry import embree_library
-    from rtmesh.scene.background import as_background
 
     missing = []
     if settings.integrator != "path":
         missing.append(f"integrator {settings.integrator!r}")
     if not embree_library.packet_library():
         missing.append("the single-ray Embree path")
-    if settings.passes or settings.denoise:
-        missing.append("passes" + (" (the denoiser's guides)" if settings.denoise else ""))
     if settings.caustics == "photons":
         missing.append("photon passes for caustics")
-    if as_background(scene.background).transparent:
-        missing.append("a transparent background (the alpha pass)")
     if scene.motions:
         missing.append("moving objects")
     m, inst = scene.materials, scene.instances
@@ -293,3 +352,46 @@ def flattened(scene):
                                vertex_normals=joined["vertex_normals"], smooth=joined["smooth"],
                                material_id=joined["material_id"], object_id=joined["object_id"],
                                uv=joined["uv"], vertex_colors=joined["vertex_colors"])
+
+
+def object_geometry(scene, objects):
+    """World vertices and faces of some objects of a scene, placements copied as
+    :func:`flattened` copies them (for what traces objects alone: the amodal masks of
+    :mod:`rtmesh.batch.coco`), one placement's copy at a time, never the whole scene's.
+
+    Parameters
+    ----------
+    scene : Scene
+    objects : iterable of int
+        Object indices (``Scene.object_names``).
+
+    Returns
+    -------
+    vertices : (V', 3) float64
+        ``scene.vertices`` itself when none of the objects is a placement (the faces index
+        it), else the vertices the faces use, world-space ones then each copy's.
+    faces : (F', 3) int
+    """
+    objects = np.asarray(list(objects), dtype=np.int64)
+    inst = scene.instances
+    if inst is None:
+        return scene.vertices, scene.faces[np.isin(scene.object_id, objects)]
+    f0 = inst.first_face
+    world = scene.faces[:f0][np.isin(scene.object_id[:f0], objects)]
+    placed = np.flatnonzero(np.isin(inst.object_id, objects))
+    if not len(placed):
+        return scene.vertices, world
+    used, corners = np.unique(np.asarray(world).ravel(), return_inverse=True)
+    vertices, faces = [scene.vertices[used]], [corners.reshape(-1, 3)]
+    offset = len(used)
+    for j in placed:
+        p = inst.prototype[j]
+        va, vb = int(inst.prototype_vertices[p]), int(inst.prototype_vertices[p + 1])
+        matrix = inst.transforms[j]
+        copy = np.asarray(scene.faces[inst.prototype_faces[p]:inst.prototype_faces[p + 1]], dtype=np.int64) - va
+        if np.linalg.det(matrix[:3, :3]) < 0:
+            copy = copy[:, ::-1]  # a mirroring transform flips the winding
+        vertices.append(trimesh.transform_points(scene.vertices[va:vb], matrix))
+        faces.append(copy + offset)
+        offset += vb - va
+    return np.concatenate(vertices), np.ascontiguousarray(np.concatenate(faces), dtype=np.int32)

@@ -3,6 +3,8 @@ a batch of rays, and the shading-normal terminator fix.
 """
 
 
+import math
+
 import numpy as np
 
 from rtmesh.core.compiled import inline_row, kernel, row
@@ -200,4 +202,127 @@ def surface_records(prim_all, u_all, v_all, rows, directions_t, view, faces, ver
         (p[0, i], p[1, i], p[2, i], ng[0, i], ng[1, i], ng[2, i], ns[0, i], ns[1, i], ns[2, i],
          front[i]) = surface_record(f, np.float64(u_all[r]), np.float64(v_all[r]), vx, vy, vz, faces,
                                      vertex_normals, has_smooth and smooth[f], fix_terminator)
+    return p.T, ng.T, ns.T, front, mat
+
+
+# ------------------------------------------------------------------ placed surfaces
+@row
+def _placed_direction(m, x, y, z):
+    """A direction times a 3x3 matrix held row by row in ``m[0:9]``, summed as the path
+    kernel sums it (``(m0 x + m1 y) + m2 z``), and its length."""
+    wx = (m[0] * x + m[1] * y) + m[2] * z
+    wy = (m[3] * x + m[4] * y) + m[5] * z
+    wz = (m[6] * x + m[7] * y) + m[8] * z
+    return wx, wy, wz, math.sqrt((wx * wx + wy * wy) + wz * wz)
+
+
+@row
+def _placed_unit(m, unit_normals, i):
+    """Vertex normal ``i`` carried by the matrix ``m`` and normalised as
+    :func:`rtmesh.geometry.build_kernels.unit_rows` normalises the copies' (zero where its
+    length is not finite and positive)."""
+    x, y, z, length = _placed_direction(m, unit_normals[i, 0], unit_normals[i, 1], unit_normals[i, 2])
+    if math.isfinite(length) and length > 0.0:
+        return x / length, y / length, z / length
+    return 0.0, 0.0, 0.0
+
+
+@row
+def placed_surface_record(f, j, a, b, vx, vy, vz, faces, corners, unit_normals, smooth, fix_terminator, to_world,
+                          normal_to_world):
+    """One hit on placement ``j`` of a prototype's face ``f`` (model coordinates) as the
+    hit on its flattened copy reads (:func:`rtmesh.scene.instances.flattened`), seen along
+    the world direction ``(vx, vy, vz)``; returns what :func:`surface_record` returns, in the
+    world.
+
+    Operation for operation what the copy's tables give, but for the point: the copy's
+    is interpolated on its float32 world triangle, this one on the prototype's float32
+    triangle and carried by the placement's float64 transform (the two agree to float32
+    rounding).  The geometric normal is the prototype's by the inverse transpose,
+    normalised (the copy's cross product, a mirrored copy's winding reversed, points the
+    same way); smooth faces interpolate the vertex normals each carried by the inverse
+    transpose and normalised first, as the copy's vertex normals are, so a non-uniform
+    scale bends them as it bends the copy's.  Sides and the terminator fix are decided in
+    the world, as on the copy.
+    """
+    p = to_world[j]
+    m = normal_to_world[j]
+    # (u e1 + v0) + v e2 on the prototype's triangle, then the placement
+    px = (faces[f, 3] * a + faces[f, 0]) + faces[f, 6] * b
+    py = (faces[f, 4] * a + faces[f, 1]) + faces[f, 7] * b
+    pz = (faces[f, 5] * a + faces[f, 2]) + faces[f, 8] * b
+    wx = ((p[0] * px + p[1] * py) + p[2] * pz) + p[9]
+    wy = ((p[3] * px + p[4] * py) + p[5] * pz) + p[10]
+    wz = ((p[6] * px + p[7] * py) + p[8] * pz) + p[11]
+    gx, gy, gz, length = _placed_direction(m, faces[f, 9], faces[f, 10], faces[f, 11])
+    gx, gy, gz = gx / length, gy / length, gz / length
+    front = dot3(vx, vy, vz, gx, gy, gz) < 0.0
+    flip = 1.0 if front else -1.0
+    gx, gy, gz = gx * flip, gy * flip, gz * flip
+    sx, sy, sz = gx, gy, gz
+    if smooth:
+        # the copy's unit vertex normals (rtmesh.geometry.build_kernels.unit_rows), then its
+        # corner row [n0, n1 - n0, n2 - n0] interpolated as surface_record does
+        n0x, n0y, n0z = _placed_unit(m, unit_normals, corners[f, 0])
+        n1x, n1y, n1z = _placed_unit(m, unit_normals, corners[f, 1])
+        n2x, n2y, n2z = _placed_unit(m, unit_normals, corners[f, 2])
+        sx, sy, sz = normalized3(((n1x - n0x) * a + n0x) + (n2x - n0x) * b,
+                                 ((n1y - n0y) * a + n0y) + (n2y - n0y) * b,
+                                 ((n1z - n0z) * a + n0z) + (n2z - n0z) * b, flip)
+    if fix_terminator:
+        sx, sy, sz = face_viewer_row(sx, sy, sz, gx, gy, gz, vx, vy, vz)
+    return wx, wy, wz, gx, gy, gz, sx, sy, sz, front
+
+
+@kernel
+def placed_surface_records(prim_all, u_all, v_all, instance_all, rows, directions_t, faces, vertex_normals, smooth,
+                           material_id, fix_terminator, to_world, normal_to_world, corners, unit_normals):
+    """:func:`surface_records` of a batch whose rays may hit placed meshes (Embree
+    instances, :mod:`rtmesh.scene.instances`): rows on world-space faces exactly as
+    there, rows on a placement by :func:`placed_surface_record`.
+
+    Parameters
+    ----------
+    prim_all, u_all, v_all, rows, directions_t, faces, vertex_normals, smooth, material_id, fix_terminator
+        As for :func:`surface_records` (``prim_all`` the faces in the per-face tables, a
+        placement's being its prototype's; no motion: a scene with placements has none).
+    instance_all : (n,) int32
+        The placement each ray hit, -1 for a world-space face.
+    to_world : (k, 12) float64
+        Each placement's model-to-world transform (the linear part row by row, then the
+        translation), in the integrator's frame.
+    normal_to_world : (k, 9) float64
+        The inverse transpose of each linear part, row by row.
+    corners : (F, 3) int
+        The scene's faces (vertex indices).
+    unit_normals : (V, 3) float64 or (0, 3)
+        The scene's unit vertex normals (model coordinates on the prototypes); empty
+        without smooth shading.
+
+    Returns
+    -------
+    p, ng, ns, front, mat
+        As for :func:`surface_records`, in the world.
+    """
+    directions = directions_t.T
+    k = len(rows)
+    p, ng, ns = np.empty((3, k)), np.empty((3, k)), np.empty((3, k))
+    front = np.empty(k, np.bool_)
+    mat = np.empty(k, np.intp)
+    has_smooth = len(vertex_normals) > 0
+    for i in range(k):
+        r = rows[i]
+        f = np.intp(prim_all[r])
+        j = instance_all[r]
+        mat[i] = material_id[f]
+        vx, vy, vz = directions[r, 0], directions[r, 1], directions[r, 2]
+        if j < 0:
+            (p[0, i], p[1, i], p[2, i], ng[0, i], ng[1, i], ng[2, i], ns[0, i], ns[1, i], ns[2, i],
+             front[i]) = surface_record(f, np.float64(u_all[r]), np.float64(v_all[r]), vx, vy, vz, faces,
+                                         vertex_normals, has_smooth and smooth[f], fix_terminator)
+        else:
+            (p[0, i], p[1, i], p[2, i], ng[0, i], ng[1, i], ng[2, i], ns[0, i], ns[1, i], ns[2, i],
+             front[i]) = placed_surface_record(f, j, np.float64(u_all[r]), np.float64(v_all[r]), vx, vy, vz, faces,
+                                               corners, unit_normals, has_smooth and smooth[f], fix_terminator,
+                                               to_world, normal_to_world)
     return p.T, ng.T, ns.T, front, mat
