@@ -230,7 +230,7 @@ def _to_world(moves, j, time, px, py, pz, gx, gy, gz, nx, ny, nz):
     return (px + time * moves[j, 0], py + time * moves[j, 1], pz + time * moves[j, 2], gx, gy, gz, nx, ny, nz)
 
 
-@inline_row
+@row
 def _nearest_on_movers(intersect16, motion, lane_time, valid, ox, oy, oz, ex, ey, ez, rest, rest_words, rest_valid,
                        args, best_t, best_prim, best_u, best_v):
     """Each valid lane's ray (world origin ``o`` and direction ``e``, (LANES,) float64 each)
@@ -330,7 +330,7 @@ def _accept_shadows(shadow_valid, pending, pending_paths, split, total, paths):
                         paths[lane, bucket, c] += pending_paths[lane, bucket, c]
 
 
-@inline_row
+@row
 def _shadows_through_cutouts(intersect16, scene, args, shadow, shadow_words, shadow_valid, geometry, surface,
                              offset_scale, keys, start, lane_depth, reach, counts, motion, lane_time, segment, rest,
                              rest_words, rest_valid, best_t, best_prim, best_u, best_v):
@@ -401,6 +401,67 @@ def _shadows_through_cutouts(intersect16, scene, args, shadow, shadow_words, sha
             return
 
 
+@row
+def _nearest_hits(intersect16, scene, args, args_incoherent, ray, words, valid, motion, instance_faces, lane_time,
+                  px, py, pz, dx, dy, dz, rest, rest_words, rest_valid, best_t, best_prim, best_instance, best_u,
+                  best_v):
+    """Trace the packet ``ray`` (its ``valid`` lanes) against the static scene and every
+    moving object and keep each lane's nearest hit: ``best_t``, ``best_prim`` (the face in
+    the per-face tables), ``best_instance`` (the placement, or -1) and ``best_u, best_v``
+    (``best_prim`` -1 and ``best_t`` inf for a miss).  Once a packet, so a call (not
+    inlined: the path kernel's first-run compile grows faster than its length)."""
+    has_static, static_faces = motion[0], motion[1]
+    if has_static:
+        intersect16(valid.ctypes.data, scene, ray.ctypes.data, args.ctypes.data)
+    for lane in range(LANES):
+        best_t[lane] = math.inf
+        best_prim[lane] = -1
+        best_instance[lane] = -1
+        if valid[lane] and has_static and words[GEOM_ID * LANES + lane] != INVALID_ID:
+            best_t[lane] = np.float64(ray[TFAR * LANES + lane])
+            local = words[PRIM_ID * LANES + lane]
+            if words[INST_ID * LANES + lane] != INVALID_ID:
+                # a placement: the face of its prototype in the per-face tables
+                placed = words[INST_PRIM_ID * LANES + lane]
+                best_instance[lane] = placed
+                best_prim[lane] = instance_faces[placed] + local
+            else:
+                best_prim[lane] = static_faces[local] if len(static_faces) else local
+            best_u[lane] = np.float64(ray[U * LANES + lane])
+            best_v[lane] = np.float64(ray[V * LANES + lane])
+    # (a scene with moving objects has no placements: rtmesh.scene.instances.unsupported
+    # renders it from copies, so a mover's hit leaves best_instance at -1)
+    _nearest_on_movers(intersect16, motion, lane_time, valid, px, py, pz, dx, dy, dz, rest, rest_words,
+                       rest_valid, args_incoherent, best_t, best_prim, best_u, best_v)
+
+
+@row
+def _occluded(occluded16, scene, args, shadow, shadow_valid, motion, lane_time, reach, rest, rest_words, rest_valid):
+    """Clear ``shadow_valid`` of the lanes whose shadow ray (the packet ``shadow``, each
+    lane ``reach[lane]`` long) meets the static scene or a moving object (at the lane's
+    time, in the object's rest pose).  Once a packet: a call, as :func:`_nearest_hits`."""
+    has_static, movers, moves = motion[0], motion[2], motion[5]
+    if has_static:
+        occluded16(shadow_valid.ctypes.data, scene, shadow.ctypes.data, args.ctypes.data)
+        for lane in range(LANES):
+            if shadow_valid[lane] and shadow[TFAR * LANES + lane] == -np.inf:
+                shadow_valid[lane] = 0
+    for j in range(len(movers)):
+        for lane in range(LANES):
+            rest_valid[lane] = shadow_valid[lane]
+            if shadow_valid[lane]:
+                ox, oy, oz, ex, ey, ez = _to_rest(
+                    moves, j, lane_time[lane], np.float64(shadow[lane]),
+                    np.float64(shadow[LANES + lane]), np.float64(shadow[2 * LANES + lane]),
+                    np.float64(shadow[4 * LANES + lane]), np.float64(shadow[5 * LANES + lane]),
+                    np.float64(shadow[6 * LANES + lane]))
+                set_lane(rest, rest_words, lane, ox, oy, oz, ex, ey, ez, np.float32(reach[lane]))
+        occluded16(rest_valid.ctypes.data, movers[j], rest.ctypes.data, args.ctypes.data)
+        for lane in range(LANES):
+            if rest_valid[lane] and rest[TFAR * LANES + lane] == -np.inf:
+                shadow_valid[lane] = 0
+
+
 @kernel
 def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixels, samples, sobol_keys, times,
                 geometry, surface, lights, env, options, motion, instances, photon_map, radiance, light_paths,
@@ -444,7 +505,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     max_depth, rr_depth, clamp, offset_scale, background_seen, cutouts, split, camera_media = options
     media = len(camera_media)
     env_pixels, env_marginal, env_conditional, env_func, env_mean, env_cos, env_sin = env
-    has_static, static_faces, movers, face_maps, face_offsets, moves, face_mover = motion
+    moves, face_mover = motion[5], motion[6]
     instance_faces, instance_to_world, instance_normals = instances
     has_lights = len(light_rows) > 0
     photons_on, scatters = photon_map[0], photon_map[10]
@@ -526,28 +587,9 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                     counts[CAMERA if lane_depth[lane] == 0 else BOUNCE] += 1
             args = args_coherent if first else args_incoherent
             first = False
-            if has_static:
-                intersect16(valid.ctypes.data, scene, ray.ctypes.data, args.ctypes.data)
-            for lane in range(LANES):
-                best_t[lane] = math.inf
-                best_prim[lane] = -1
-                best_instance[lane] = -1
-                if valid[lane] and has_static and words[GEOM_ID * LANES + lane] != INVALID_ID:
-                    best_t[lane] = np.float64(ray[TFAR * LANES + lane])
-                    local = words[PRIM_ID * LANES + lane]
-                    if words[INST_ID * LANES + lane] != INVALID_ID:
-                        # a placement: the face of its prototype in the per-face tables
-                        placed = words[INST_PRIM_ID * LANES + lane]
-                        best_instance[lane] = placed
-                        best_prim[lane] = instance_faces[placed] + local
-                    else:
-                        best_prim[lane] = static_faces[local] if len(static_faces) else local
-                    best_u[lane] = np.float64(ray[U * LANES + lane])
-                    best_v[lane] = np.float64(ray[V * LANES + lane])
-            # (a scene with moving objects has no placements: rtmesh.scene.instances.unsupported
-            # renders it from copies, so a mover's hit leaves best_instance at -1)
-            _nearest_on_movers(intersect16, motion, lane_time, valid, px, py, pz, dx, dy, dz, rest, rest_words,
-                               rest_valid, args_incoherent, best_t, best_prim, best_u, best_v)
+            _nearest_hits(intersect16, scene, args, args_incoherent, ray, words, valid, motion, instance_faces,
+                          lane_time, px, py, pz, dx, dy, dz, rest, rest_words, rest_valid, best_t, best_prim,
+                          best_instance, best_u, best_v)
             shadows = 0
             for lane in range(LANES):
                 shadow_valid[lane] = 0
@@ -797,25 +839,8 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                                              best_prim, best_u, best_v)
                     _accept_shadows(shadow_valid, pending, pending_paths, split, total, paths)
                 else:
-                    if has_static:
-                        occluded16(shadow_valid.ctypes.data, scene, shadow.ctypes.data, args_incoherent.ctypes.data)
-                        for lane in range(LANES):
-                            if shadow_valid[lane] and shadow[TFAR * LANES + lane] == -np.inf:
-                                shadow_valid[lane] = 0
-                    for j in range(len(movers)):
-                        for lane in range(LANES):
-                            rest_valid[lane] = shadow_valid[lane]
-                            if shadow_valid[lane]:
-                                ox, oy, oz, ex, ey, ez = _to_rest(
-                                    moves, j, lane_time[lane], np.float64(shadow[lane]),
-                                    np.float64(shadow[LANES + lane]), np.float64(shadow[2 * LANES + lane]),
-                                    np.float64(shadow[4 * LANES + lane]), np.float64(shadow[5 * LANES + lane]),
-                                    np.float64(shadow[6 * LANES + lane]))
-                                set_lane(rest, rest_words, lane, ox, oy, oz, ex, ey, ez, np.float32(reach[lane]))
-                        occluded16(rest_valid.ctypes.data, movers[j], rest.ctypes.data, args_incoherent.ctypes.data)
-                        for lane in range(LANES):
-                            if rest_valid[lane] and rest[TFAR * LANES + lane] == -np.inf:
-                                shadow_valid[lane] = 0
+                    _occluded(occluded16, scene, args_incoherent, shadow, shadow_valid, motion, lane_time, reach,
+                              rest, rest_words, rest_valid)
                     _accept_shadows(shadow_valid, pending, pending_paths, split, total, paths)
         for lane in range(count):
             radiance[start + lane, 0] = total[lane, 0]
