@@ -89,7 +89,7 @@ from rtmesh.rendering.path_surfaces import environment_sample as _environment_sa
 from rtmesh.rendering.path_surfaces import illuminate as _illuminate_row
 from rtmesh.rendering.path_surfaces import projector_incident as _projector_incident
 from rtmesh.rendering.path_surfaces import sample_area_point as _sample_area_point
-from rtmesh.rendering.path_surfaces import (cross_interface, hit_frame, hit_parameters, is_transparent,
+from rtmesh.rendering.path_surfaces import (cross_interface, twin_material, hit_frame, hit_parameters, is_transparent,
                                             leave_surface, surface_point, textured_materials, to_world,
                                             triangle_light_emission)
 from rtmesh.sampling.hashing import mix64, uniform
@@ -815,7 +815,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                     category[lane] = _category(flags)
                 if transmissive[mat] and (flags & lobes.TRANSMISSION) and media:
                     # into the interior when the outward normal faces away from the new ray
-                    top = cross_interface(stack, lane, mat, side < 0.0)
+                    top = cross_interface(stack, lane, mat, side < 0.0, twin_material(surface, prim))
                     for c in range(3):
                         sigma[lane, c] = absorption[top, c] if top >= 0 else 0.0
                 if depth + 1 >= rr_depth:
@@ -867,7 +867,7 @@ def small_records():
                 z((0, 12)), z((0, 6)))
     surface = (z(1, np.int64), z((1, lobes.PARAMETER_WIDTH)), z(1, bool), z((1, 3)), z((1, 3)), z((1, 4)),
                energy, z((1, 6), np.int64), z((1, 6), np.int64), z(1), z(1, np.int64), z(1), z(1),
-               z(1, np.float32), z((1, 12)), z(1))
+               z(1, np.float32), z((1, 12)), z(1), z(0, np.int64))
     lights = (z((1, lt.WIDTH)), z(1), z(1, np.int64), z(1), z(1, np.int64), z(0, np.int64), -1, z(1, np.float32),
               z((0, 12)))
     env = (z((1, 3, 3)), z(2), z((1, 2)), z((1, 1)), 1.0, 1.0, 0.0)

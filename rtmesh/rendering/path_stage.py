@@ -28,6 +28,7 @@ from rtmesh.lights.projector import ProjectorLight
 from rtmesh.materials.models import SLOTS, material_rows, tables
 from rtmesh.io.passes import LIGHT_PATH_PASSES
 from rtmesh.rendering.caustics import Caustics
+from rtmesh.rendering.media import coincident_faces
 from rtmesh.rendering.photon_kernel import empty_photon_map
 from rtmesh.rendering.path_kernel import (BOUNCE, CAMERA, LIGHT_PATHS, PATH_KERNELS, SHADOW, no_instances,
                                           trace_paths)
@@ -94,6 +95,33 @@ def instance_record(it):
     return placed.world_rows()
 
 
+def _twin_materials(scene, transmissive):
+    """Each face's touching twin's material (:func:`rtmesh.rendering.media.coincident_faces`
+    among the faces of transmissive models, with the opposite winding: two media touching),
+    -1 for none; an empty array when no face has one.
+
+    Parameters
+    ----------
+    scene : Scene
+    transmissive : (M,) bool
+        The materials whose models transmit.
+
+    Returns
+    -------
+    (F,) or (0,) int64
+    """
+    twin = coincident_faces(scene.vertices, scene.faces, transmissive[scene.material_id])
+    paired = np.flatnonzero(twin >= 0)
+    normals = np.asarray(scene.face_normals, dtype=np.float64)
+    # faces of the same winding at one place are two copies of one surface, not two media
+    opposite = paired[np.einsum("ij,ij->i", normals[paired], normals[twin[paired]]) < 0.0]
+    if not len(opposite):
+        return np.zeros(0, np.int64)
+    twins = np.full(len(scene.faces), -1, np.int64)
+    twins[opposite] = np.asarray(scene.material_id)[twin[opposite]]
+    return twins
+
+
 def scene_tables(scene, accel):
     """What the path kernel reads of a scene, formed once and shared by every view: its
     ``geometry`` and ``surface`` records (see :mod:`rtmesh.rendering.path_surfaces`) and the
@@ -151,7 +179,7 @@ def scene_tables(scene, accel):
                unlit, tables(), SLOTS, material_textures, np.ascontiguousarray(metal_tint, dtype=np.float64),
                np.ascontiguousarray(m.alpha_mode, dtype=np.int64), np.ascontiguousarray(m.alpha_cutoff),
                np.ascontiguousarray(m.opacity), atlas.texels, atlas.descriptors,
-               np.ascontiguousarray(m.ior, dtype=np.float64))
+               np.ascontiguousarray(m.ior, dtype=np.float64), _twin_materials(scene, transmissive))
     # what each face emits on average (emission textures by their mean), for choosing lights by power
     mean_tint = np.array([np.ones(3) if material.emission_texture is None or scene.uv is None else
                           np.asarray(material.emission_texture.pixels, dtype=np.float64).reshape(

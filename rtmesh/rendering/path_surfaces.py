@@ -18,9 +18,11 @@ face_colours (F, 12) or (0, 12), face_tangents (F, 6) or (0, 6))`` — corners a
 
 ``surface``: ``(tags, params, transmissive, emission, absorption, unlit, albedo_table,
 slots, textures (M, len(TEXTURE_COLUMNS)), metal_tint (M,), alpha_mode (M,), alpha_cutoff (M,),
-opacity (M,), texels, texture_descriptors)``: the material tables of :mod:`rtmesh.materials.models`, each
+opacity (M,), texels, texture_descriptors, ior (M,), twins (F,) or (0,))``: the material tables of :mod:`rtmesh.materials.models`, each
 material's texture indices in the atlas (:data:`TEXTURE_COLUMNS`; -1 none) and its
-Whitted metal tint, and the atlas (:mod:`rtmesh.io.texture_atlas`).
+Whitted metal tint, the atlas (:mod:`rtmesh.io.texture_atlas`), each material's index of
+refraction, and each face's touching twin's material (:func:`twin_material`; empty when no
+two transmissive faces touch).
 
 Texturing follows :mod:`rtmesh.rendering.surface_textures` (docs/MATERIALS.md): the base
 colour texture and vertex colours scale the model's colour, its alpha and the opacity
@@ -327,7 +329,7 @@ def hit_parameters(surface, geometry, textured, mat, prim, bu, bv, scratch, lane
             for k in range(params.shape[1]):
                 scratch[lane, k] = params[mat, k]
             table, index = scratch, lane
-        scratch[lane, slot] = interface_ratio(stack, lane, mat, entering, ior)
+        scratch[lane, slot] = interface_ratio(stack, lane, mat, entering, ior, twin_material(surface, prim))
     return table, index, er, eg, eb
 
 
@@ -413,10 +415,25 @@ def tangent_frame(nx, ny, nz):
 
 
 @inline_row
-def interface_ratio(stack, lane, mat, entering, ior):
+def twin_material(surface, prim):
+    """The material of the transmissive face that touches face ``prim`` from the other side
+    (the same three vertex positions, the opposite winding: glass touching water), -1 for
+    none (:func:`rtmesh.rendering.media.coincident_faces`)."""
+    twins = surface[16]
+    return twins[prim] if len(twins) else -1
+
+
+@inline_row
+def interface_ratio(stack, lane, mat, entering, ior, twin):
     """The index ratio of a transmissive material's interface between the media on its two
     sides: its index over that of the medium the ray comes from (entering) or goes into
-    (leaving); ``stack[lane]`` holds the media the ray is inside, innermost first, -1 padded."""
+    (leaving); ``stack[lane]`` holds the media the ray is inside, innermost first, -1 padded.
+    A face touching another medium's (``twin`` its material, -1 none) has that medium on
+    its other side, whichever of the two faces the ray met (as the Whitted integrator's
+    twins, :mod:`rtmesh.rendering.media`): one medium to the other directly, and an
+    interface between two bodies of one material is invisible (ratio 1)."""
+    if twin >= 0:
+        return ior[mat] / ior[twin]
     top = stack[lane, 0]
     if entering:
         other = top
@@ -426,10 +443,22 @@ def interface_ratio(stack, lane, mat, entering, ior):
 
 
 @inline_row
-def cross_interface(stack, lane, mat, into):
+def cross_interface(stack, lane, mat, into, twin):
     """Update a lane's media stack as its ray refracts through material ``mat``: into its
-    interior (push) or out of it (pop, when it is the innermost).  Returns the innermost
-    medium after (-1: none)."""
+    interior (push) or out of it (pop, when it is the innermost); through touching faces
+    (``twin`` the other face's material, :func:`twin_material`) out of the one medium and
+    into the other, leaving first.  Returns the innermost medium after (-1: none)."""
+    if twin >= 0 and into:
+        _cross(stack, lane, twin, False)
+    _cross(stack, lane, mat, into)
+    if twin >= 0 and not into:
+        _cross(stack, lane, twin, True)
+    return stack[lane, 0]
+
+
+@inline_row
+def _cross(stack, lane, mat, into):
+    """One crossing of :func:`cross_interface`."""
     media = stack.shape[1]
     if into:
         for k in range(media - 1, 0, -1):
@@ -439,7 +468,6 @@ def cross_interface(stack, lane, mat, into):
         for k in range(media - 1):
             stack[lane, k] = stack[lane, k + 1]
         stack[lane, media - 1] = -1
-    return stack[lane, 0]
 
 
 @row

@@ -43,7 +43,7 @@ from rtmesh.rendering.path_surfaces import environment_sample as _environment_sa
 from rtmesh.rendering.path_surfaces import illuminate as _illuminate_row
 from rtmesh.rendering.path_surfaces import projector_incident as _projector_incident
 from rtmesh.rendering.path_surfaces import sample_area_point as _sample_area_point
-from rtmesh.rendering.path_surfaces import (cross_interface, hit_frame, hit_parameters, is_transparent,
+from rtmesh.rendering.path_surfaces import (cross_interface, twin_material, hit_frame, hit_parameters, is_transparent,
                                             leave_surface, surface_point, tangent_frame, textured_materials,
                                             to_world, triangle_light_emission)
 from rtmesh.sampling.hashing import GOLDEN, mix64, path_key, uniform
@@ -341,7 +341,7 @@ def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geomet
                 beta[lane, 1] *= wg * adjoint
                 beta[lane, 2] *= wb * adjoint
                 if transmissive[mat] and (flags & lobes.TRANSMISSION) and media:
-                    top = cross_interface(stack, lane, mat, side < 0.0)
+                    top = cross_interface(stack, lane, mat, side < 0.0, twin_material(surface, prim))
                     for c in range(3):
                         sigma[lane, c] = absorption[top, c] if top >= 0 else 0.0
                 px[lane], py[lane], pz[lane] = leave_surface(hx, hy, hz, gx, gy, gz, ndx, ndy, ndz, offset_scale)
