@@ -2,8 +2,11 @@
 keep the bytecode of what the tests import, and compile kernels ahead on a cold cache."""
 
 import contextlib
+import logging
 import os
 import sys
+
+import pytest
 
 sys.path.insert(0, os.path.dirname(__file__))
 
@@ -45,3 +48,33 @@ def pytest_configure(config):
 
 def pytest_unconfigure(config):
     _session.close()
+
+
+@pytest.fixture
+def cli(capsys, caplog):
+    """Run the ``rtmesh`` command in this process, as ``python -m rtmesh.cli ARGS`` would:
+    ``cli(*args)`` returns (exit status, stdout, stderr).
+
+    For the tests of what a command says, not of the process: a process costs about 1 s
+    of CPU to import rtmesh (the tests of the real entry point run one).  argparse's
+    SystemExit gives its status.  The command's log lines go to stderr through the handler
+    its ``logging.basicConfig`` installs, which pytest's own handlers pre-empt here: every
+    record of WARNING and above is added to stderr as that handler writes it, so a stray
+    warning still breaks a one-line check.
+    """
+    from rtmesh.cli import main
+
+    def run(*args):
+        capsys.readouterr()
+        caplog.clear()
+        with caplog.at_level(logging.WARNING):
+            try:
+                code = main([str(a) for a in args])
+            except SystemExit as exc:
+                code = exc.code
+        out, err = capsys.readouterr()
+        err += "".join(f"rtmesh: warning: {r.getMessage()}\n" for r in caplog.records
+                       if r.levelno >= logging.WARNING)
+        return code, out, err
+
+    return run
