@@ -78,3 +78,13 @@ def cli(capsys, caplog):
         return code, out, err
 
     return run
+
+
+@pytest.fixture
+def in_process_jobs():
+    """Local batches of the test run their jobs in the test process, not in worker
+    processes (tests/local_jobs.py): for tests that are not about the pool."""
+    from local_jobs import jobs_in_this_process
+
+    with jobs_in_this_process():
+        yield

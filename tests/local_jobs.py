@@ -1,13 +1,14 @@
-"""Batch tests' shared fixture: run a local batch's jobs in the test process.
+"""Run a local batch's jobs in the test process.
 
 A local batch (``rtmesh.batch_convert`` without a scheduler) hands its jobs to
 :func:`rtmesh.batch.pool.run_local`, which starts worker processes; each one imports rtmesh
 and renders a warm-up asset before its first job, about 1.7 s of CPU per batch, several
 times what the tiny assets of most tests cost.  Tests about the ledger, names, resumes,
 fingerprints and outputs do not depend on where a job runs: with :func:`jobs_in_this_process`
-the same jobs go through the same :func:`rtmesh.batch.worker.run_job` as in a worker, their
-results through the same callbacks, and every job and result makes the round trip through
-pickle that the worker's pipe makes.  The tests of the pool itself (worker processes, time
+(or the ``in_process_jobs`` fixture of tests/conftest.py) the same jobs go through the same
+:func:`rtmesh.batch.worker.run_job` as in a worker, their results through the same
+callbacks, and every job and result makes the round trip through pickle that the worker's
+pipe makes.  The tests of the pool itself (worker processes, time
 and memory limits, a killed worker, signals, the command in a process of its own) keep the
 real pool: they do not use this.
 """
@@ -41,11 +42,4 @@ def jobs_in_this_process():
     """Local batches started inside run their jobs in this process (for module fixtures)."""
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(pool, "run_local", run_jobs_here)
-        yield
-
-
-@pytest.fixture
-def in_process_jobs():
-    """Local batches of the test run their jobs in the test process (see the module)."""
-    with jobs_in_this_process():
         yield
