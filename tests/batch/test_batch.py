@@ -651,14 +651,21 @@ def test_a_superseded_task_removes_what_it_wrote_and_says_so(tmp_path):
 
 # ------------------------------------------------------------------------- entry points, Dask
 
-def test_tool_script_runs_the_batch_command(tmp_path):
+@pytest.mark.usefixtures("in_process_jobs")
+def test_tool_script_runs_the_batch_command(tmp_path, monkeypatch, capsys):
+    # ``python -m benchmarks.batch_convert ARGS`` from the repository root, in this process
+    # (the rtmesh command's own process is tested above: the closed pipe, the kill)
+    import runpy
+
     src = make_mesh(tmp_path / "a.obj")
-    proc = subprocess.run([sys.executable, "-m", "benchmarks.batch_convert", src,
-                           "-o", str(tmp_path / "out"), "--width", "16", "--height", "16",
-                           "--spp", "1", "--formats", "png,exr", "-q"],
-                          capture_output=True, text=True, timeout=120, cwd=REPO)
-    assert proc.returncode == 0, proc.stderr
-    assert "1 done" in proc.stdout
+    monkeypatch.chdir(REPO)
+    monkeypatch.setattr(sys, "argv", ["batch_convert.py", src, "-o", str(tmp_path / "out"), "--width", "16",
+                                      "--height", "16", "--spp", "1", "--formats", "png,exr", "-q"])
+    with pytest.raises(SystemExit) as exit_status:
+        runpy.run_module("benchmarks.batch_convert", run_name="__main__")
+    stdout, err = capsys.readouterr()
+    assert exit_status.value.code == 0, err
+    assert "1 done" in stdout
     images = sorted(n for n in os.listdir(tmp_path / "out") if n.startswith("a."))
     assert images == ["a.obj.exr", "a.obj.png"]
 
