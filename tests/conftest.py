@@ -5,6 +5,7 @@ import contextlib
 import logging
 import os
 import sys
+import warnings
 
 import pytest
 
@@ -57,17 +58,23 @@ def cli(capsys, caplog):
 
     For the tests of what a command says, not of the process: a process costs about 1 s
     of CPU to import rtmesh (the tests of the real entry point run one).  argparse's
-    SystemExit gives its status.  The command's log lines go to stderr through the handler
-    its ``logging.basicConfig`` installs, which pytest's own handlers pre-empt here: every
-    record of WARNING and above is added to stderr as that handler writes it, so a stray
-    warning still breaks a one-line check.
+    SystemExit gives its status.  What a process would print to stderr and pytest catches
+    here is added to stderr, so a stray line still breaks a one-line check: the command's
+    log records of WARNING and above (its ``logging.basicConfig`` handler, which pytest's
+    own handlers pre-empt), and Python warnings a process shows (not the deprecation,
+    import and resource warnings its default filters hide; a RuntimeWarning still fails
+    the test, as the suite's filter says).
     """
     from rtmesh.cli import main
+
+    hidden = (DeprecationWarning, PendingDeprecationWarning, ImportWarning, ResourceWarning)
 
     def run(*args):
         capsys.readouterr()
         caplog.clear()
-        with caplog.at_level(logging.WARNING):
+        with caplog.at_level(logging.WARNING), warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            warnings.simplefilter("error", RuntimeWarning)
             try:
                 code = main([str(a) for a in args])
             except SystemExit as exc:
@@ -75,6 +82,8 @@ def cli(capsys, caplog):
         out, err = capsys.readouterr()
         err += "".join(f"rtmesh: warning: {r.getMessage()}\n" for r in caplog.records
                        if r.levelno >= logging.WARNING)
+        err += "".join(f"{w.filename}:{w.lineno}: {w.category.__name__}: {w.message}\n" for w in caught
+                       if not issubclass(w.category, hidden))
         return code, out, err
 
     return run
