@@ -2,8 +2,12 @@
 keep the bytecode of what the tests import, and compile kernels ahead on a cold cache."""
 
 import contextlib
+import logging
 import os
 import sys
+import warnings
+
+import pytest
 
 sys.path.insert(0, os.path.dirname(__file__))
 
@@ -45,3 +49,51 @@ def pytest_configure(config):
 
 def pytest_unconfigure(config):
     _session.close()
+
+
+@pytest.fixture
+def cli(capsys, caplog):
+    """Run the ``rtmesh`` command in this process, as ``python -m rtmesh.cli ARGS`` would:
+    ``cli(*args)`` returns (exit status, stdout, stderr).
+
+    For the tests of what a command says, not of the process: a process costs about 1 s
+    of CPU to import rtmesh (the tests of the real entry point run one).  argparse's
+    SystemExit gives its status.  What a process would print to stderr and pytest catches
+    here is added to stderr, so a stray line still breaks a one-line check: the command's
+    log records of WARNING and above (its ``logging.basicConfig`` handler, which pytest's
+    own handlers pre-empt), and Python warnings a process shows (not the deprecation,
+    import and resource warnings its default filters hide; a RuntimeWarning still fails
+    the test, as the suite's filter says).
+    """
+    from rtmesh.cli import main
+
+    hidden = (DeprecationWarning, PendingDeprecationWarning, ImportWarning, ResourceWarning)
+
+    def run(*args):
+        capsys.readouterr()
+        caplog.clear()
+        with caplog.at_level(logging.WARNING), warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            warnings.simplefilter("error", RuntimeWarning)
+            try:
+                code = main([str(a) for a in args])
+            except SystemExit as exc:
+                code = exc.code
+        out, err = capsys.readouterr()
+        err += "".join(f"rtmesh: warning: {r.getMessage()}\n" for r in caplog.records
+                       if r.levelno >= logging.WARNING)
+        err += "".join(f"{w.filename}:{w.lineno}: {w.category.__name__}: {w.message}\n" for w in caught
+                       if not issubclass(w.category, hidden))
+        return code, out, err
+
+    return run
+
+
+@pytest.fixture
+def in_process_jobs():
+    """Local batches of the test run their jobs in the test process, not in worker
+    processes (tests/local_jobs.py): for tests that are not about the pool."""
+    from local_jobs import jobs_in_this_process
+
+    with jobs_in_this_process():
+        yield

@@ -53,7 +53,9 @@ def scene_file(tmp_path):
 
 
 def run_cli(*args):
-    """Run ``python -m rtmesh.cli`` as a user would; returns (exit code, stdout, stderr)."""
+    """Run ``python -m rtmesh.cli`` as a user would, in a process of its own; returns (exit
+    code, stdout, stderr).  Most tests use the ``cli`` fixture (tests/conftest.py), the same
+    command in this process; this one is for the real entry point."""
     proc = subprocess.run([sys.executable, "-m", "rtmesh.cli", *map(str, args)],
                           capture_output=True, text=True, timeout=120)
     return proc.returncode, proc.stdout, proc.stderr
@@ -105,11 +107,11 @@ def test_bare_mesh_file_renders(tmp_path):
         (["render", "{tmp}/notes.txt", "-o", "{tmp}/x.png"], "unsupported mesh format"),
     ],
 )
-def test_bad_input_is_one_line_exit_2_no_traceback_no_file(args, message, scene_file, tmp_path):
+def test_bad_input_is_one_line_exit_2_no_traceback_no_file(args, message, scene_file, tmp_path, cli):
     (tmp_path / "notes.txt").write_text("hello")
     fill = {"data": DATA, "tmp": tmp_path, "scene": scene_file}
     args = [a.format(**fill) for a in args]
-    code, out, err = run_cli(*args)
+    code, out, err = cli(*args)
     assert code == 2
     assert message in err
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
@@ -117,10 +119,10 @@ def test_bad_input_is_one_line_exit_2_no_traceback_no_file(args, message, scene_
     assert not [p for p in os.listdir(tmp_path) if ".tmp" in p]
 
 
-def test_scene_file_error_names_file_and_key(tmp_path):
+def test_scene_file_error_names_file_and_key(tmp_path, cli):
     path = tmp_path / "bad.toml"
     path.write_text(SMALL_SCENE.replace('material = "red"', 'material = "red"\nsmoth = true'))
-    code, _, err = run_cli("render", path, "-o", tmp_path / "x.png")
+    code, _, err = cli("render", path, "-o", tmp_path / "x.png")
     assert code == 2
     assert f"{path}: objects[0].smoth: unknown key" in err
     assert "Traceback" not in err
@@ -214,10 +216,10 @@ def test_running_out_of_memory_is_a_user_error(scene_file, tmp_path, monkeypatch
 
 @pytest.mark.parametrize("args", [["--width", "100000", "--height", "100000"],
                                   ["--width", "64", "--height", "48", "--memory-limit", "1M"]])
-def test_a_render_too_large_for_memory_is_refused_in_one_line(args, tmp_path):
+def test_a_render_too_large_for_memory_is_refused_in_one_line(args, tmp_path, cli):
     mesh = os.path.join(ASSETS, "meshes", "bunny.ply")
     out = tmp_path / "x.png"
-    code, _, err = run_cli("render", mesh, "-o", out, *args)
+    code, _, err = cli("render", mesh, "-o", out, *args)
     assert code == 2 and "Traceback" not in err
     assert len(err.strip().splitlines()) == 1
     size = "x".join(args[1::2][:2])

@@ -137,7 +137,10 @@ def batch(tmp_path_factory):
     trimesh.creation.icosphere(subdivisions=2).export(folder / "src" / "ball.obj")
     options = dict(workers=1, width=32, height=24, spp=1, views=("front", "iso"), ground=True,
                    annotations=True, progress="none")
-    report = rtmesh.batch_convert([folder / "src"], folder / "out", **options)
+    from local_jobs import jobs_in_this_process
+
+    with jobs_in_this_process():
+        report = rtmesh.batch_convert([folder / "src"], folder / "out", **options)
     assert report.exit_code == 0
     return folder, options
 

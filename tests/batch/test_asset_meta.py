@@ -25,6 +25,7 @@ def textured_obj(tmp_path):
     return src
 
 
+@pytest.mark.usefixtures("in_process_jobs")
 def test_asset_meta_json_says_what_the_asset_is_made_of(textured_obj, tmp_path):
     out = tmp_path / "out"
     report = rtmesh.batch_convert([textured_obj], out, workers=1, width=8, height=8, spp=1,

@@ -1,7 +1,11 @@
 """Batch conversion: inputs, names, resume after a kill, bad assets, limits, Dask.
 
-Every batch here renders tiny images (16-64 pixels, 1 spp) so the whole file stays quick;
-most of the time goes into starting worker processes, which is what these tests exercise.
+Every batch here renders tiny images (16-64 pixels, 1 spp) so the whole file stays quick.
+Starting worker processes costs more than such images: the tests of names, manifests,
+resumes, the ledger and failures run their jobs in the test process (the
+``in_process_jobs`` fixture, tests/batch/conftest.py); those of the pool and the processes
+(two local workers, time and memory limits, kills, a closed pipe, the scripts, Dask)
+start real ones.
 """
 
 import json
@@ -92,14 +96,9 @@ def temporary_files(folder):
             for f in files if ".tmp" in f]
 
 
-def run_cli(*args, **kwargs):
-    proc = subprocess.run([sys.executable, "-m", "rtmesh.cli", *map(str, args)],
-                          capture_output=True, text=True, timeout=120, **kwargs)
-    return proc.returncode, proc.stdout, proc.stderr
-
-
 # ------------------------------------------------------------------------- inputs and names
 
+@pytest.mark.usefixtures("in_process_jobs")
 def test_duplicate_file_names_in_different_folders_get_distinct_outputs(tmp_path):
     src = tmp_path / "assets"
     make_mesh(src / "chairs" / "model.obj")
@@ -127,7 +126,7 @@ def test_names_are_relative_to_the_input_they_were_found_under(tmp_path):
     assert [a.name for a in discover([tmp_path / "x" / "b", first])] == ["deep/m.obj", "m.obj"]
 
 
-def test_empty_input_is_a_one_line_error(tmp_path):
+def test_empty_input_is_a_one_line_error(tmp_path, cli):
     (tmp_path / "empty").mkdir()
     (tmp_path / "list.txt").write_text("# nothing yet\n\n")
     for inputs in ([tmp_path / "empty"], [tmp_path / "list.txt"]):
@@ -136,11 +135,12 @@ def test_empty_input_is_a_one_line_error(tmp_path):
     with pytest.raises(InputError, match="no mesh files"):
         rtmesh.batch_convert([tmp_path / "empty"], tmp_path / "out", **TINY)
     assert not (tmp_path / "out").exists()  # nothing created for nothing to do
-    code, out, err = run_cli("batch", tmp_path / "missing", "-o", tmp_path / "out")
+    code, out, err = cli("batch", tmp_path / "missing", "-o", tmp_path / "out")
     assert code == 2 and err.strip().count("\n") == 0
     assert err.startswith("rtmesh: error:") and "missing" in err
 
 
+@pytest.mark.usefixtures("in_process_jobs")
 def test_manifests_line_and_csv_with_per_asset_overrides(tmp_path):
     a = make_mesh(tmp_path / "m" / "a.obj")
     b = make_mesh(tmp_path / "m" / "b.stl", kind="box")
@@ -191,20 +191,21 @@ def test_corrupt_files_in_the_middle_of_a_batch_fail_alone(tmp_path):
     assert temporary_files(out) == []
 
 
-def test_unwritable_output_folder_is_a_one_line_error(tmp_path):
+def test_unwritable_output_folder_is_a_one_line_error(tmp_path, cli):
     src = make_mesh(tmp_path / "a.obj")
     blocker = tmp_path / "file"
     blocker.write_text("not a folder")
-    code, out, err = run_cli("batch", src, "-o", blocker / "out")
+    code, out, err = cli("batch", src, "-o", blocker / "out")
     assert code == 2 and err.count("\n") == 1 and err.startswith("rtmesh: error:")
     assert blocker.read_text() == "not a folder"
     if os.geteuid() != 0:  # root writes anywhere: the permission case needs a normal user
         locked = tmp_path / "locked"
         locked.mkdir(mode=0o500)
-        code, out, err = run_cli("batch", src, "-o", locked)
+        code, out, err = cli("batch", src, "-o", locked)
         assert code == 2 and "not writable" in err
 
 
+@pytest.mark.usefixtures("in_process_jobs")
 def test_an_output_path_that_cannot_be_written_fails_only_that_asset(tmp_path):
     make_mesh(tmp_path / "src" / "sub" / "a.obj")
     make_mesh(tmp_path / "src" / "b.obj")
@@ -242,6 +243,7 @@ def test_memory_guard_fails_an_asset_that_needs_too_much(tmp_path):
 
 # ------------------------------------------------------------------------- resume
 
+@pytest.mark.usefixtures("in_process_jobs")
 def test_rerun_skips_finished_images_and_redoes_changed_or_deleted_ones(tmp_path):
     make_mesh(tmp_path / "src" / "a.obj")
     make_mesh(tmp_path / "src" / "b.obj", kind="box")
@@ -260,7 +262,7 @@ def test_rerun_skips_finished_images_and_redoes_changed_or_deleted_ones(tmp_path
     assert again.counts["done"] == 2
 
 
-def test_ledger_rows_commit_per_asset_and_refuse_old_or_foreign_formats(tmp_path):
+def test_ledger_rows_commit_per_asset_and_refuse_old_or_foreign_formats(tmp_path, cli):
     with Ledger(str(tmp_path)) as ledger:
         ledger.record("a", "a.obj", "f1", "done", outputs=[["a.obj.png", 3, 1, "x"]])
         ledger.record("b", "b.obj", "f2", "failed", stage="load", message="bad")
@@ -282,11 +284,12 @@ def test_ledger_rows_commit_per_asset_and_refuse_old_or_foreign_formats(tmp_path
     old = tmp_path / "old"
     old.mkdir()
     (old / "rtmesh-batch-ledger.jsonl").write_text('{"key": "a", "status": "done"}\n')
-    code, out, err = run_cli("batch", make_mesh(tmp_path / "m.obj"), "-o", old)
+    code, out, err = cli("batch", make_mesh(tmp_path / "m.obj"), "-o", old)
     assert code == 2 and err.count("\n") == 1 and "rtmesh 0.1" in err and "delete it" in err
     assert sorted(os.listdir(old)) == ["rtmesh-batch-ledger.jsonl"]
 
 
+@pytest.mark.usefixtures("in_process_jobs")
 def test_an_output_folder_without_locks_runs_the_batch_with_one_warning(tmp_path, monkeypatch, caplog):
     """flock fails on file systems without locks (NFS without its lock service): the batch
     runs and says once that nothing keeps a second batch out."""
@@ -306,6 +309,7 @@ def test_an_output_folder_without_locks_runs_the_batch_with_one_warning(tmp_path
                     "no other batch writes to it at the same time")
 
 
+@pytest.mark.usefixtures("in_process_jobs")
 def test_no_temporary_file_outlives_a_killed_run(tmp_path):
     """The SQLite ledger is never copied (no compaction); what a killed run of any version
     left behind (image, summary, probe and old compaction temporaries) is removed."""
@@ -326,6 +330,7 @@ def test_no_temporary_file_outlives_a_killed_run(tmp_path):
 
 # ------------------------------------------------------------------------- identity, changes
 
+@pytest.mark.usefixtures("in_process_jobs")
 def test_adding_an_input_or_reaching_the_library_through_a_link_renames_nothing(tmp_path):
     make_mesh(tmp_path / "A" / "chairs" / "oak.obj")
     make_mesh(tmp_path / "A" / "m.obj")
@@ -366,6 +371,7 @@ def obj_with_material(folder, colour="1 0 0", texture=None):
     return folder / "m.obj"
 
 
+@pytest.mark.usefixtures("in_process_jobs")
 def test_editing_a_dependency_or_damaging_an_image_redoes_it(tmp_path):
     from PIL import Image
 
@@ -592,6 +598,7 @@ def test_resume_after_sigkill_writes_every_image_exactly_once(tmp_path):
     assert temporary_files(out) == []  # leftovers of the killed run are cleaned up
 
 
+@pytest.mark.usefixtures("in_process_jobs")
 def test_a_run_killed_between_recording_and_renaming_is_rolled_forward(tmp_path):
     """A kill after an image's ledger row is committed but before all its files are renamed
     into place leaves their temporaries: the next run puts them in place after checking
@@ -644,14 +651,21 @@ def test_a_superseded_task_removes_what_it_wrote_and_says_so(tmp_path):
 
 # ------------------------------------------------------------------------- entry points, Dask
 
-def test_tool_script_runs_the_batch_command(tmp_path):
+@pytest.mark.usefixtures("in_process_jobs")
+def test_tool_script_runs_the_batch_command(tmp_path, monkeypatch, capsys):
+    # ``python -m benchmarks.batch_convert ARGS`` from the repository root, in this process
+    # (the rtmesh command's own process is tested above: the closed pipe, the kill)
+    import runpy
+
     src = make_mesh(tmp_path / "a.obj")
-    proc = subprocess.run([sys.executable, "-m", "benchmarks.batch_convert", src,
-                           "-o", str(tmp_path / "out"), "--width", "16", "--height", "16",
-                           "--spp", "1", "--formats", "png,exr", "-q"],
-                          capture_output=True, text=True, timeout=120, cwd=REPO)
-    assert proc.returncode == 0, proc.stderr
-    assert "1 done" in proc.stdout
+    monkeypatch.chdir(REPO)
+    monkeypatch.setattr(sys, "argv", ["batch_convert.py", src, "-o", str(tmp_path / "out"), "--width", "16",
+                                      "--height", "16", "--spp", "1", "--formats", "png,exr", "-q"])
+    with pytest.raises(SystemExit) as exit_status:
+        runpy.run_module("benchmarks.batch_convert", run_name="__main__")
+    stdout, err = capsys.readouterr()
+    assert exit_status.value.code == 0, err
+    assert "1 done" in stdout
     images = sorted(n for n in os.listdir(tmp_path / "out") if n.startswith("a."))
     assert images == ["a.obj.exr", "a.obj.png"]
 
@@ -947,6 +961,7 @@ def test_resume_right_after_killing_the_client_gives_each_image_one_writer(tmp_p
 
 # ------------------------------------------------------------------------- failure policy, exit codes
 
+@pytest.mark.usefixtures("in_process_jobs")
 def test_failures_are_retried_once_per_run_or_skipped_as_known(tmp_path, capsys):
     src = tmp_path / "src"
     make_mesh(src / "good.obj")
@@ -1019,6 +1034,7 @@ def test_a_killed_worker_keeps_the_images_it_finished_and_is_not_called_out_of_m
     assert "SIGKILL" in errors[0]["message"] and "out of memory?" not in errors[0]["message"]
 
 
+@pytest.mark.usefixtures("in_process_jobs")
 def test_nothing_to_do_starts_no_worker(tmp_path, monkeypatch):
     make_mesh(tmp_path / "src" / "a.obj")
     rtmesh.batch_convert([tmp_path / "src"], tmp_path / "out", workers=1, **TINY)
@@ -1032,6 +1048,7 @@ def test_nothing_to_do_starts_no_worker(tmp_path, monkeypatch):
     assert report.counts["skipped"] == 1 and report.runner == "nothing to do"
 
 
+@pytest.mark.usefixtures("in_process_jobs")
 def test_ground_under_a_view_from_below_does_not_hide_the_asset(tmp_path):
     src = make_mesh(tmp_path / "a.obj", kind="box")
     images = {}
@@ -1046,6 +1063,7 @@ def test_ground_under_a_view_from_below_does_not_hide_the_asset(tmp_path):
     assert not np.array_equal(images[True]["front"], images[False]["front"])  # ground elsewhere
 
 
+@pytest.mark.usefixtures("in_process_jobs")
 def test_summary_to_a_closed_pipe_and_jsonl_progress(tmp_path):
     make_mesh(tmp_path / "src" / "a.obj")
     make_mesh(tmp_path / "src" / "b.obj", kind="box")

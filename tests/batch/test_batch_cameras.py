@@ -45,6 +45,7 @@ def _bilinear(image, u, v):
     return top * (1 - fy) + bottom * fy, inside
 
 
+@pytest.mark.usefixtures("in_process_jobs")
 @pytest.mark.parametrize("ortho, normalize", [(False, ""), (True, "unit-sphere"), (False, "unit-cube")])
 def test_vertices_project_onto_the_pixels_whose_position_pass_holds_them(assets, tmp_path, ortho, normalize):
     folder, vertices, normals = assets
@@ -101,6 +102,7 @@ def test_vertices_project_onto_the_pixels_whose_position_pass_holds_them(assets,
     assert tested > 100
 
 
+@pytest.mark.usefixtures("in_process_jobs")
 def test_camera_json_changes_the_fingerprint_only_when_asked(assets, tmp_path):
     """Without the new options, images keep the fingerprints of earlier batches (nothing is
     redone); asking for the camera files redoes the images with them."""

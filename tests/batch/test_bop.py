@@ -7,6 +7,7 @@ import numpy as np
 import OpenImageIO as oiio
 import pytest
 import trimesh
+from local_jobs import jobs_in_this_process
 
 import rtmesh
 
@@ -20,9 +21,10 @@ def bop(tmp_path_factory):
     brick = trimesh.creation.box(extents=(4.0, 3.0, 2.0)).subdivide().subdivide()
     brick.apply_translation([10.0, -3.0, 5.0])
     brick.export(folder / "src" / "brick.obj")
-    report = rtmesh.batch_convert([folder / "src"], folder / "out", workers=1, width=W, height=H, spp=1,
-                                  views=("front", "iso", "left"), ground=True, normalize="unit-cube",
-                                  dataset="bop", units="cm", progress="none")
+    with jobs_in_this_process():
+        report = rtmesh.batch_convert([folder / "src"], folder / "out", workers=1, width=W, height=H, spp=1,
+                                      views=("front", "iso", "left"), ground=True, normalize="unit-cube",
+                                      dataset="bop", units="cm", progress="none")
     assert report.exit_code == 0
     return folder / "out" / "brick.obj.bop"
 

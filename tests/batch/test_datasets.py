@@ -10,6 +10,7 @@ import numpy as np
 import OpenImageIO as oiio
 import pytest
 import trimesh
+from local_jobs import jobs_in_this_process
 from scipy.spatial.transform import Rotation
 
 import rtmesh
@@ -89,9 +90,10 @@ def rendered(tmp_path_factory):
     (folder / "src").mkdir()
     mesh.export(folder / "src" / "ball.obj")
     out = folder / "out"
-    report = rtmesh.batch_convert([folder / "src"], out, workers=1, width=W, height=H, spp=4,
-                                  views=("fibonacci:5",), formats=("png", "exr"), passes=("depth", "alpha"),
-                                  dataset="nerfstudio", normalize="unit-sphere", progress="none")
+    with jobs_in_this_process():
+        report = rtmesh.batch_convert([folder / "src"], out, workers=1, width=W, height=H, spp=4,
+                                      views=("fibonacci:5",), formats=("png", "exr"), passes=("depth", "alpha"),
+                                      dataset="nerfstudio", normalize="unit-sphere", progress="none")
     assert report.exit_code == 0
     return out, np.asarray(mesh.vertices), report
 

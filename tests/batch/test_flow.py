@@ -6,6 +6,7 @@ import json
 import numpy as np
 import pytest
 import trimesh
+from local_jobs import jobs_in_this_process
 
 import rtmesh
 from rtmesh.io.images import read_image
@@ -24,10 +25,11 @@ def turntable(tmp_path_factory):
     block = trimesh.creation.box(extents=(0.45, 0.45, 0.45))
     block.apply_translation([0.1, 0.0, 0.5])
     trimesh.util.concatenate([slab, block]).export(folder / "src" / "pair.obj")
-    report = rtmesh.batch_convert([folder / "src"], folder / "out", workers=1, width=W, height=H, spp=1,
-                                  turntable=FRAMES, formats=("exr",),
-                                  passes=("position_center", "depth_center", "normal_center"), camera_json=True,
-                                  flow=True, flow_format="flo", progress="none")
+    with jobs_in_this_process():
+        report = rtmesh.batch_convert([folder / "src"], folder / "out", workers=1, width=W, height=H, spp=1,
+                                      turntable=FRAMES, formats=("exr",),
+                                      passes=("position_center", "depth_center", "normal_center"),
+                                      camera_json=True, flow=True, flow_format="flo", progress="none")
     assert report.exit_code == 0
     views = []
     for i in range(FRAMES):

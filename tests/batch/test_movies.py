@@ -19,6 +19,7 @@ def _check_movie(path, frames, size):
         assert movie.convert("RGB").tobytes() != first
 
 
+@pytest.mark.usefixtures("in_process_jobs")
 def test_turntable_movies_have_every_frame_at_the_image_size(tmp_path):
     trimesh.creation.box(extents=(1.0, 2.0, 0.5)).export(tmp_path / "a.obj")
     out = tmp_path / "out"
@@ -39,6 +40,7 @@ def test_a_movie_needs_a_turntable_and_8_bit_frames(tmp_path):
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.usefixtures("in_process_jobs")
 def test_contact_sheet_has_a_named_thumbnail_per_image_per_folder(tmp_path):
     src = tmp_path / "src"
     for name in ("a.obj", "b.obj", "sub/c.obj"):

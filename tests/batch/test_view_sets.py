@@ -94,6 +94,7 @@ def test_fibonacci_directions_cover_both_poles():
     assert d[0, 1] > 0.8 and d[-1, 1] < -0.8
 
 
+@pytest.mark.usefixtures("in_process_jobs")
 def test_a_batch_renders_a_view_set_with_its_cameras(tmp_path):
     trimesh.creation.box().export(tmp_path / "a.obj")
     report = rtmesh.batch_convert([tmp_path / "a.obj"], tmp_path / "out", workers=1, width=8, height=8,

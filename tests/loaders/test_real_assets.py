@@ -4,8 +4,6 @@ status 2."""
 
 import glob
 import os
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -81,18 +79,14 @@ def test_missing_texture_file_warns_naming_it_and_uses_the_factor(tmp_path, capl
     np.testing.assert_array_equal(material.diffuse, [0.2, 0.4, 0.6])
 
 
-def run_cli(*args):
-    proc = subprocess.run([sys.executable, "-m", "rtmesh.cli", *map(str, args)],
-                          capture_output=True, text=True, timeout=120)
-    return proc.returncode, proc.stderr
-
-
-def test_corrupt_texture_is_a_one_line_cli_error(tmp_path):
+def test_corrupt_texture_is_a_one_line_cli_error(tmp_path, cli):
+    # in this process (the cli fixture); tests/test_bad_inputs.py runs a corrupt texture's
+    # command in a process of its own
     (tmp_path / "bad.png").write_bytes(b"\x89PNG\r\n\x1a\n not really")
     (tmp_path / "m.mtl").write_text("newmtl m\nmap_Kd bad.png\n")
     (tmp_path / "t.obj").write_text("mtllib m.mtl\nusemtl m\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
                                     "vt 0 0\nvt 1 0\nvt 0 1\nf 1/1 2/2 3/3\n")
-    code, err = run_cli("render", tmp_path / "t.obj", "-o", tmp_path / "x.png", "-q")
+    code, _, err = cli("render", tmp_path / "t.obj", "-o", tmp_path / "x.png", "-q")
     assert code == 2
     assert "bad.png" in err and "texture" in err
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
@@ -122,7 +116,7 @@ def test_real_files_are_all_here():
 @pytest.mark.parametrize("path", REAL_FILES, ids=os.path.basename)
 def test_real_asset_renders_or_fails_with_one_line(path, tmp_path, capsys):
     # every real file either renders (exit 0) or is a one-line error (exit 2); in-process
-    # (the subprocess tests above check the same path once, without the start-up cost)
+    # (tests/test_bad_inputs.py runs the command in a process of its own)
     code = main(["render", path, "-o", str(tmp_path / "x.png"), "--width", "24", "--height", "24",
                  "--spp", "1", "--threads", "1", "-q"])
     err = capsys.readouterr().err

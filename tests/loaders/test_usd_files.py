@@ -404,6 +404,7 @@ def test_the_layers_a_stage_composes_are_inputs_of_its_load(tmp_path):
     assert names == ["", "parts/checker.png", "parts/deep.usda", "parts/payload.usda", "ref.usda", "sub.usda"]
 
 
+@pytest.mark.usefixtures("in_process_jobs")  # a batch's USD inputs, not its worker processes
 def test_a_folder_of_usd_files_renders_in_batch(usd_file, tmp_path, capsys):
     import shutil
 
