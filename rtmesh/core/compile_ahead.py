@@ -137,6 +137,21 @@ def compile_locked(dispatcher, signature):
         dispatcher.compile(signature)
 
 
+def compile_for(dispatcher, args):
+    """:func:`compile_locked` for the types of ``args``, as a call of ``dispatcher`` with
+    them would type them: for a kernel whose signature is only known from its arguments
+    (records, ctypes functions, the film's arrays or none), so that two processes of a first
+    run (test workers, batch workers) do not both compile it.
+
+    Parameters
+    ----------
+    dispatcher : numba dispatcher with a disk cache
+    args : tuple
+        The arguments of the coming call.
+    """
+    compile_locked(dispatcher, tuple(dispatcher.typeof_pyval(a) for a in args))
+
+
 @contextlib.contextmanager
 def _kernel_lock(dispatcher):
     """Hold the lock file of ``dispatcher`` (in its cache folder) within the block; where

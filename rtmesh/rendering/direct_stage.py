@@ -33,7 +33,7 @@ a separate pass.
 import numpy as np
 from numba import types
 
-from rtmesh.core.compile_ahead import KernelGroup
+from rtmesh.core.compile_ahead import KernelGroup, compile_for
 from rtmesh.core.compiled import kernel
 from rtmesh.core.rays import kernel_input
 from rtmesh.core.row_vectors import floor_quotient
@@ -91,6 +91,8 @@ class DirectStage:
 
     def __init__(self, integrator):
         FUSED_KERNELS.prepare()
+        # the kinds of call (with or without a film) direct_samples is ready for
+        self._compiled = set()
         it = integrator
         accel = it.accel
         m = it.scene.materials
@@ -193,10 +195,15 @@ class DirectStage:
         counts = kernel_input(np.atleast_1d(spp), np.int64)
         n = m * int(counts[0]) if len(counts) == 1 else int(counts.sum())
         sums = (_NO_SUMS, _NO_SUMS, _NO_COUNT, _NO_IMAGE) if film is None else film.kernel_arrays()
-        radiance, shadow_rays = direct_samples(
-            *self._queries, *self._sampler_arrays, pixel_list, first_pixel, first, counts, n, *sums,
-            *self._camera, *self._surfaces, self._base, self._background, self._lights, *self._materials,
-            self._offset_scale, SHADOW_SHORTEN, self._highlights)
+        args = (*self._queries, *self._sampler_arrays, pixel_list, first_pixel, first, counts, n, *sums,
+                *self._camera, *self._surfaces, self._base, self._background, self._lights, *self._materials,
+                self._offset_scale, SHADOW_SHORTEN, self._highlights)
+        if (film is None) not in self._compiled:
+            # its steps are FUSED_KERNELS; the kernel around them is compiled (or loaded) under
+            # its lock file too, once per process and kind of call
+            compile_for(direct_samples, args)
+            self._compiled.add(film is None)
+        radiance, shadow_rays = direct_samples(*args)
         stats.rays["camera"] += n
         stats.rays["shadow"] += shadow_rays
         return None if film is not None else radiance
