@@ -497,7 +497,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     """
     n = origins.shape[0]
     material_id = geometry[5]
-    tags, transmissive = surface[0], surface[2]
+    tags, transmissive, slots = surface[0], surface[2], surface[7]
     absorption, unlit, albedo_table = surface[4], surface[5], surface[6]
     textured = textured_materials(surface, geometry)
     light_rows, light_probability, light_alias, light_pmf, face_light, analytic, env_light, light_texels, \
@@ -547,6 +547,8 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     alive = np.zeros(LANES, np.bool_)
     prev_pdf = np.zeros(LANES)
     prev_delta = np.zeros(LANES, np.bool_)
+    # the product of eta'^2 over the path's crossings (undoes their radiance scaling)
+    eta_scale = np.ones(LANES)
     lane_depth = np.zeros(LANES, np.int64)
     layers = np.zeros(LANES, np.int64)
     # with photons: the path's last vertices (CHAIN_*), its length so far (the gather radius)
@@ -573,6 +575,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                         sigma[lane, c] = absorption[camera_media[0], c]
                 prev_pdf[lane] = 0.0
                 prev_delta[lane] = True
+                eta_scale[lane] = 1.0
                 lane_depth[lane] = 0
                 layers[lane] = 0
                 chain[lane] = CHAIN_START
@@ -818,8 +821,19 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                     top = cross_interface(stack, lane, mat, side < 0.0, twin_material(surface, prim))
                     for c in range(3):
                         sigma[lane, c] = absorption[top, c] if top >= 0 else 0.0
+                if flags & lobes.TRANSMISSION:
+                    ior_slot = slots[tag, models.IOR_SLOT]
+                    if ior_slot >= 0:
+                        # the radiance scaling 1 / eta'^2 of the crossing, kept apart for the
+                        # roulette (pbrt-v4's etaScale)
+                        eta = bsdf_params[bsdf_row, ior_slot]
+                        etap = eta if loz > 0.0 else 1.0 / eta
+                        eta_scale[lane] *= etap * etap
                 if depth + 1 >= rr_depth:
-                    q = max(beta[lane, 0], max(beta[lane, 1], beta[lane, 2]))
+                    # on the throughput without the radiance scaling of the crossings: inside
+                    # glass (1 / 1.5^2 of it) paths would otherwise end by roulette without
+                    # carrying less light out, only noise
+                    q = max(beta[lane, 0], max(beta[lane, 1], beta[lane, 2])) * eta_scale[lane]
                     if q < 1.0:
                         if uniform(key, base + _ROULETTE) >= q:
                             alive[lane] = False
