@@ -428,7 +428,7 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
                         write_flo(path, passes[next(f for f in FLOW_PASSES if name.endswith(flow_suffix(f)))])
                     else:
                         write_image(path, result.image, passes, settings.exposure, settings.tonemap,
-                                    header=settings.header())
+                                    header=settings.header(), dither=settings.dither)
                 # superseded while writing: the block's temporaries are removed, not reported.
                 # The run file is read again: a run that took the folder removes the
                 # temporaries already there when it did; later ones are this task's to remove

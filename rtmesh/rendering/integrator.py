@@ -398,7 +398,7 @@ class Integrator:
             clean = not (self.plan.lens or self.plan.motion or self._stochastic_coverage)
             image = denoising.denoise(image, film.pass_image("albedo"), film.pass_image("normal"), clean)
             stats.wall_seconds = time.perf_counter() - start
-        return RenderResult(image, passes, stats, film, alpha, noisy)
+        return RenderResult(image, passes, stats, film, alpha, noisy, self.settings)
 
     @property
     def _photon_passes(self):
