@@ -15,15 +15,17 @@ from rtmesh.io.images import read_image
 from rtmesh.scene import instances
 
 PLACED = 8
-# every file a view of a batch can hold that depends on the geometry: the image, the COCO
-# fragment, the camera, the BOP ingredients and the coverage mask
-SUFFIXES = (".png", COCO_SUFFIX, worker.CAMERA_SUFFIX, worker.MASK_PNG_SUFFIX) + BOP_SUFFIXES
+VIEWS = ("iso", "front", "bottom")
+# every file a view of a batch can hold that depends on the geometry: the image, the EXR
+# with the flow, the COCO fragment, the camera, the BOP ingredients and the coverage mask
+SUFFIXES = (".png", ".exr", COCO_SUFFIX, worker.CAMERA_SUFFIX, worker.MASK_PNG_SUFFIX) + BOP_SUFFIXES
 FIELDS = {"width": 32, "height": 24, "spp": 2, "threads": 1, "caustics": "off", "passes": ("alpha",)}
 
 
 def _convert(folder, mesh, monkeypatch, copied):
-    """One job over ``mesh`` (a view with the ground plane and one from below, without it),
-    its mesh placed (or ``copied``, below the instancing size); the integrators it built."""
+    """One job over ``mesh`` (two views with the ground plane and the flow between them, one
+    from below, without the plane), its mesh placed (or ``copied``, below the instancing
+    size); the integrators it built."""
     built = []
 
     class Recording(worker.Integrator):
@@ -35,12 +37,14 @@ def _convert(folder, mesh, monkeypatch, copied):
         patch.setattr(worker, "Integrator", Recording)
         if copied:
             patch.setattr(instances, "MIN_TRIANGLES", 10 ** 9)
-        views = [worker.fixed_view("iso"), worker.fixed_view("bottom")]
-        tasks = tuple(worker.ImageTask(v.name, v, tuple(v.name + s for s in SUFFIXES), "") for v in views)
+        views = [worker.fixed_view(name) for name in VIEWS]
+        flows = [(None, views[1]), (views[0], None), ()]
+        tasks = tuple(worker.ImageTask(v.name, v, tuple(v.name + s for s in SUFFIXES), "", flow)
+                      for v, flow in zip(views, flows))
         job = worker.AssetJob("reuse.glb", str(mesh), str(folder), FIELDS, tasks, ground=True,
                               normalize="unit-cube", meta=True)
         result = worker.run_job(job)
-    assert [image["status"] for image in result["images"]] == ["done", "done"], result
+    assert [image["status"] for image in result["images"]] == ["done"] * len(VIEWS), result
     return built
 
 
@@ -66,7 +70,7 @@ def test_the_worker_traces_the_placements_as_instances(converted):
 
 def test_instanced_batch_images_are_those_of_the_copies(converted):
     folder, _, _ = converted
-    for view in ("iso", "bottom"):
+    for view in VIEWS:
         a, b = (read_image(folder / kind / f"{view}.png")[0] for kind in ("placed", "copies"))
         assert a.std() > 0.05  # something to compare
         a, b = block_means(a), block_means(b)
@@ -93,7 +97,7 @@ def _close(a, b, where=""):
 def test_instanced_batch_labels_are_those_of_the_copies(converted):
     folder, _, _ = converted
     placed, copies = folder / "placed", folder / "copies"
-    for view in ("iso", "bottom"):
+    for view in VIEWS:
         for suffix in (COCO_SUFFIX, worker.CAMERA_SUFFIX, ".bop.json"):
             documents = [json.loads((kind / f"{view}{suffix}").read_text()) for kind in (placed, copies)]
             _close(*documents, where=f"{view}{suffix}")
@@ -104,6 +108,13 @@ def test_instanced_batch_labels_are_those_of_the_copies(converted):
         for suffix in (worker.MASK_PNG_SUFFIX, ".bop_mask.png", ".bop_mask_visib.png", ".bop_depth.png"):
             a, b = (read_image(kind / f"{view}{suffix}")[0] for kind in (placed, copies))
             assert np.array_equal(a, b), f"{view}{suffix}"
+    # the flow between the two views with the ground plane: the placements' points are the copies'
+    for view, layer in (("iso", "flow_forward"), ("front", "flow_backward")):
+        (a, names), (b, _) = (read_image(kind / f"{view}.exr") for kind in (placed, copies))
+        x, y, valid = (names.index(f"{layer}.{c}") for c in ("X", "Y", "valid"))
+        assert np.array_equal(a[..., valid], b[..., valid]) and a[..., valid].sum() > 20, (view, layer)
+        # pixel positions of the same points, rounded differently (measured: 1e-6 pixels apart)
+        np.testing.assert_allclose(a[..., [x, y]], b[..., [x, y]], atol=1e-4, err_msg=f"{view} {layer}")
     meta = [json.loads((kind / "reuse.glb.meta.json").read_text()) for kind in (placed, copies)]
     # the placed asset's counts are its copies', and it says what it places
     (placement,) = meta[0].pop("placements")
