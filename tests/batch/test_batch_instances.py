@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 from scenes import block_means, reusing_glb
 
-from rtmesh.batch import worker
+from rtmesh.batch import coco, worker
 from rtmesh.batch.bop import BOP_SUFFIXES
 from rtmesh.batch.coco import COCO_SUFFIX
 from rtmesh.io.images import read_image
+from rtmesh.rendering.integrator import recentred
 from rtmesh.scene import instances
 
 PLACED = 8
@@ -25,16 +26,21 @@ FIELDS = {"width": 32, "height": 24, "spp": 2, "threads": 1, "caustics": "off", 
 def _convert(folder, mesh, monkeypatch, copied):
     """One job over ``mesh`` (two views with the ground plane and the flow between them, one
     from below, without the plane), its mesh placed (or ``copied``, below the instancing
-    size); the integrators it built."""
-    built = []
+    size); the integrators it built and how many amodal masks traced placements."""
+    built, placed = [], []
 
     class Recording(worker.Integrator):
         def __init__(self, scene, settings):
             super().__init__(scene, settings)
             built.append(self)
 
+    def recording_placed(*args):
+        placed.append(1)
+        return recentred(*args)
+
     with monkeypatch.context() as patch:
         patch.setattr(worker, "Integrator", Recording)
+        patch.setattr(coco, "recentred", recording_placed)
         if copied:
             patch.setattr(instances, "MIN_TRIANGLES", 10 ** 9)
         views = [worker.fixed_view(name) for name in VIEWS]
@@ -45,7 +51,7 @@ def _convert(folder, mesh, monkeypatch, copied):
                               normalize="unit-cube", meta=True)
         result = worker.run_job(job)
     assert [image["status"] for image in result["images"]] == ["done"] * len(VIEWS), result
-    return built
+    return built, len(placed)
 
 
 @pytest.fixture(scope="module")
@@ -59,9 +65,12 @@ def converted(tmp_path_factory):
 
 
 def test_the_worker_traces_the_placements_as_instances(converted):
-    _, placed, copies = converted
+    _, (placed, amodal), (copies, copied_amodal) = converted
     # one build with the ground plane, one without (the view from below); path traced
     assert len(placed) == len(copies) == 2
+    # the asset traced alone for its amodal masks: its placements (once for the two views
+    # with the ground plane; without it, the view's own scene), not a copy
+    assert (amodal, copied_amodal) == (1, 0)
     for it in placed:
         assert it.settings.integrator == "path" and it.instances is not None
         assert len(it.scene.instances) == PLACED and len(it.scene.faces) < 2 * 320
