@@ -56,6 +56,7 @@ class RenderResult:
         OutputError
             If the file cannot be written; nothing is left at ``path``.
         """
-        s = self.settings if self.settings is not None else RenderSettings()  # (made by hand)
+        # a result made without settings (by hand) is written by the defaults
+        s = self.settings if self.settings is not None else RenderSettings()
         write_image(path, self.image, self.passes, s.exposure, s.tonemap, alpha=self.alpha,
                     header=None if self.settings is None else s.header(), dither=s.dither)
