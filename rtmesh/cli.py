@@ -13,7 +13,7 @@ from rtmesh.batch.coco import annotate_render
 from rtmesh.core import compile_ahead, runtime
 from rtmesh.core.errors import OutputError, RtmeshError
 from rtmesh.io.colour import TONEMAPS
-from rtmesh.io.images import check_output_path, write_display_image, write_image
+from rtmesh.io.images import check_output_path, write_display_image
 from rtmesh.io.passes import display_values
 from rtmesh.rendering import memory
 from rtmesh.rendering.integrator import Integrator
@@ -107,9 +107,9 @@ def build_parser():
     p.add_argument("--fresnel", choices=FRESNEL_MODES, help="Fresnel model for dielectrics")
     p.add_argument("--exposure", type=float, help="exposure in stops for 8-bit output")
     p.add_argument("--tonemap", choices=TONEMAPS, help="tone-mapping operator for 8-bit output")
-    p.add_argument("--dither", action="store_true",
+    p.add_argument("--dither", action=argparse.BooleanOptionalAction,
                    help="blue-noise dithering when quantising to 8-bit PNG/JPEG (no bands in smooth "
-                   "gradients; default: round to nearest)")
+                   "gradients; default: a scene file's [render] dither, else round to nearest)")
     p.add_argument("--memory-limit", type=_bytes, metavar="SIZE",
                    help="refuse a render whose estimated memory exceeds SIZE, e.g. 4G; 0 = no check "
                    "(default: the memory available)")
@@ -271,6 +271,9 @@ def _add_batch_parser(commands):
                    "camera ray (default -1, unlimited)")
     p.add_argument("--exposure", type=float, default=0.0, help="exposure in stops for 8-bit output")
     p.add_argument("--tonemap", choices=TONEMAPS, default="reinhard", help="tone mapping for 8-bit output")
+    p.add_argument("--dither", action="store_true",
+                   help="blue-noise dithering when quantising to 8-bit PNG/JPEG (no bands in smooth "
+                   "gradients; default: round to nearest)")
     p.add_argument("--workers", type=_positive_int, help="local worker processes (default: all cores)")
     p.add_argument("--threads", type=_positive_int,
                    help="render threads per asset (default: cores / workers locally, 1 on Dask)")
@@ -351,7 +354,7 @@ def cmd_render(args):
         "time_limit": args.time_limit, "max_spp": args.max_spp,
         "fresnel": args.fresnel, "exposure": args.exposure, "tonemap": args.tonemap,
         "denoise": args.denoise, "integrator": args.integrator, "clamp": args.clamp,
-        "caustics": args.caustics, "photons": args.photons,
+        "caustics": args.caustics, "photons": args.photons, "dither": args.dither,
     }
     background = None if args.background is None else background_from_option(args.background)
     # the command owns its process: tune it for rendering (allocator, GIL, kept threads)
@@ -371,8 +374,7 @@ def cmd_render(args):
             result = integrator.render(progress=bar)
         finally:
             bar.close()
-    write_image(args.output, result.image, result.passes, settings.exposure, settings.tonemap,
-                alpha=result.alpha, header=settings.header(), dither=args.dither)
+    result.write(args.output)  # by the settings: exposure, tone map, dither
     if args.camera_json:
         write_camera_json(args.camera_json, camera_record(scene.camera, settings.width, settings.height,
                                                           scene.bounds))
@@ -430,7 +432,7 @@ def cmd_batch(args):
         annotations=args.annotations, flow=args.flow, flow_format=args.flow_format, units=args.units,
         movie=args.movie or "", contact_sheet=args.contact_sheet, seed=args.seed, max_depth=args.max_depth,
         integrator=args.integrator,
-        exposure=args.exposure, tonemap=args.tonemap, workers=args.workers, threads=args.threads,
+        exposure=args.exposure, tonemap=args.tonemap, dither=args.dither, workers=args.workers, threads=args.threads,
         scheduler=args.scheduler, time_limit=args.time_limit, memory_limit=args.memory_limit,
         force=args.force, trust_mtime=args.trust_mtime, retry_failed=args.retry_failed,
         progress=args.progress, progress_file=args.progress_file, quiet=args.quiet)

@@ -104,6 +104,40 @@ def scattered_transforms(count, seed=3):
     return out
 
 
+def reusing_glb(path, count=50, subdivisions=3, instancing=False):
+    """A GLB whose ``count`` nodes place one textured, smooth sphere (1280 triangles at 3
+    subdivisions) over a floor; with ``instancing`` one node places it by
+    EXT_mesh_gpu_instancing instead (instancing tests)."""
+    from PIL import Image
+
+    ball = trimesh.creation.icosphere(subdivisions, radius=0.6)
+    uv = ball.vertices[:, :2] * (0.5 / 0.6) + 0.5
+    checker = (np.indices((8, 8)).sum(0) % 2)[..., None] * np.array([200, 60, 30]) + 40
+    ball.visual = trimesh.visual.TextureVisuals(uv=uv, material=trimesh.visual.material.PBRMaterial(
+        baseColorTexture=Image.fromarray(checker.astype(np.uint8)), metallicFactor=0.0, roughnessFactor=0.5))
+    floor = trimesh.creation.box(extents=[14, 0.2, 14])
+    floor.visual = trimesh.visual.TextureVisuals(material=trimesh.visual.material.PBRMaterial(
+        baseColorFactor=[0.3, 0.6, 0.9, 1.0], metallicFactor=0.0, roughnessFactor=0.7))
+    scene = trimesh.Scene()
+    scene.add_geometry(floor, node_name="floor", transform=trimesh.transformations.translation_matrix([0, -0.1, 0]))
+    transforms = scattered_transforms(count)
+    scene.add_geometry(ball, node_name="ball0", geom_name="ball", transform=np.eye(4) if instancing else transforms[0])
+    for j in range(1, 1 if instancing else count):
+        scene.graph.update(frame_to=f"ball{j}", frame_from=scene.graph.base_frame, geometry="ball",
+                           matrix=transforms[j])  # the same mesh again
+    data = trimesh.exchange.gltf.export_glb(scene, include_normals=True)
+    if instancing:
+        import gltf_codecs
+
+        doc, _ = gltf_codecs.split_glb(data)
+        node = next(k for k, n in enumerate(doc["nodes"]) if n.get("name") == "ball0")
+        quaternions = np.array([trimesh.transformations.quaternion_from_matrix(t) for t in transforms])
+        data = gltf_codecs.gpu_instanced_glb(data, node, transforms[:, :3, 3], quaternions[:, [1, 2, 3, 0]],
+                                             np.full((count, 3), 0.5))
+    path.write_bytes(data)
+    return path
+
+
 def block_means(image, size=8):
     """(h // size, w // size, c): the means of ``size`` x ``size`` pixel blocks of an image."""
     h, w = image.shape[0] // size * size, image.shape[1] // size * size

@@ -114,6 +114,15 @@ def test_a_huge_texture_made_at_test_time_is_one_line(tmp_path, capsys, caplog):
                    "rtmesh reads (67108864 pixels, e.g. 8192x8192): downsample it\n")
 
 
+@pytest.mark.parametrize("value", ['"yes"', "1", "[true]"])
+def test_a_bad_dither_in_a_scene_file_is_one_line(tmp_path, capsys, caplog, value):
+    path = tmp_path / "dither.toml"
+    path.write_text(f"[render]\ndither = {value}\n[[objects]]\nprimitive = \"box\"\n")
+    code, err, _, out = run(path, tmp_path, capsys, caplog)
+    assert code == 2 and not out.exists()
+    assert err == f"rtmesh: error: {path}: render.dither: expected true or false\n"
+
+
 @pytest.mark.parametrize("args, message", [
     (["--width", "100000", "--height", "100000"], "a 100000x100000 render at 4 spp on "),
     (["--exposure", "nan"], "exposure must be a number of stops from -64 to 64 (got nan)"),

@@ -4,7 +4,10 @@
 each time a job loads it, with
 
 - ``asset``, ``path``: the asset's name in the batch and its mesh file;
-- ``triangles``, ``vertices``: counts over all the asset's meshes as loaded;
+- ``triangles``, ``vertices``: counts over all the asset's meshes as loaded, every
+  placement of a mesh the file places many times counted as a copy (the flattened
+  asset's counts), and ``placements`` for such meshes: per mesh its ``mesh`` name,
+  ``triangles`` and how often it is ``placed`` (built once, placed by Embree instances);
 - ``bounds``: ``[[xmin, ymin, zmin], [xmax, ymax, zmax]]`` in the file's units and axes,
   and ``asset_to_world`` (4x4) with ``bounds_world`` when ``--normalize`` moved it;
 - ``materials``: per material its ``name`` and the ``textures`` it uses (slot -> image
@@ -56,7 +59,7 @@ class WarningLog(logging.Handler):
         logger.propagate = self._saved[1]
 
 
-def asset_meta(asset, path, parts, materials, bounds, to_world, inputs, warnings):
+def asset_meta(asset, path, parts, materials, bounds, to_world, inputs, warnings, placements=()):
     """The metadata document of one loaded asset (see the module notes).
 
     Parameters
@@ -72,6 +75,8 @@ def asset_meta(asset, path, parts, materials, bounds, to_world, inputs, warnings
         Entries ``[name, size, mtime_ns, checksum]`` of the files the load read
         (:class:`rtmesh.batch.identity.OpenedFiles`); size None for a missing file.
     warnings : list of str
+    placements : list of Placement
+        Meshes placed many times (see the module notes).
 
     Returns
     -------
@@ -93,8 +98,10 @@ def asset_meta(asset, path, parts, materials, bounds, to_world, inputs, warnings
         described.append({"name": material.name, "textures": textures})
     meta = {
         "asset": asset, "path": path,
-        "triangles": int(sum(len(p.faces) for p in parts)),
-        "vertices": int(sum(len(p.vertices) for p in parts)),
+        "triangles": int(sum(len(p.faces) for p in parts) + sum(len(p.part.faces) * len(p.transforms)
+                                                                 for p in placements)),
+        "vertices": int(sum(len(p.vertices) for p in parts) + sum(len(p.part.vertices) * len(p.transforms)
+                                                                  for p in placements)),
         "bounds": np.asarray(file_bounds, dtype=np.float64).tolist(),
         "materials": described,
         "textures_found": sorted(set(used)),
@@ -102,6 +109,9 @@ def asset_meta(asset, path, parts, materials, bounds, to_world, inputs, warnings
         "files_missing": sorted(e[0] for e in inputs if e[0] and e[1] is None),
         "warnings": list(warnings),
     }
+    if placements:
+        meta["placements"] = [{"mesh": p.part.name, "triangles": len(p.part.faces), "placed": len(p.transforms)}
+                              for p in placements]
     if moved:
         meta["asset_to_world"] = to_world.tolist()
         meta["bounds_world"] = np.asarray(bounds, dtype=np.float64).tolist()

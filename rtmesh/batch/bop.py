@@ -95,7 +95,7 @@ def write_view_files(paths, it, labels, record, objects, units, accels=None):
     depth = labels["depth_center"][..., 0].astype(np.float64)
     geometry = instance_geometry(scene, objects, accels)
     canvas = amodal_mask(it, geometry.vertices, geometry.faces, geometry.bounds, record, margin=1, accels=accels,
-                         seen=visible)
+                         seen=visible, placed=geometry.placed)
     mask = canvas[h:2 * h, w:2 * w]
     scale = depth_scale(record["far"] * mm)
     w2c = np.array(record["world_to_camera_opencv"])

@@ -30,6 +30,7 @@ output folder at the end of each run; the merge reads only the fragments, so a r
 writes the same file again (idempotent).
 """
 
+import dataclasses
 import json
 import os
 from dataclasses import dataclass
@@ -41,6 +42,7 @@ from rtmesh.geometry.motion import object_motions, scene_at_time
 from rtmesh.io.atomic_files import write_text
 from rtmesh.io.rle import encode, mask_box
 from rtmesh.rendering.centre_rays import centre_hits, centre_passes
+from rtmesh.rendering.integrator import recentred
 from rtmesh.scene.camera_json import project_points
 from rtmesh.scene.instances import object_geometry
 
@@ -126,7 +128,7 @@ def image_annotations(it, record, instances, object_id=None, accels=None):
         mask = labels == k
         geometry = instance_geometry(scene, instance.objects, accels)
         amodal = amodal_mask(it, geometry.vertices, geometry.faces, geometry.bounds, record, accels=accels,
-                             seen=mask)
+                             seen=mask, placed=geometry.placed)
         area, area_amodal = int(mask.sum()), int(amodal.sum())
         annotations.append({
             "category": instance.category, "object_name": instance.name, "instance_id": int(k),
@@ -146,21 +148,30 @@ class InstanceGeometry:
     Attributes
     ----------
     vertices : (V, 3) float
-        The world vertices ``faces`` index: the scene's, or the objects' own where one is a
-        placement of a mesh kept once (:func:`rtmesh.scene.instances.object_geometry`).
+        The vertices ``faces`` index: the scene's, or the objects' own where one of them is
+        the one placement of a mesh kept once among them (copied:
+        :func:`rtmesh.scene.instances.object_geometry`).
     faces : (F, 3) int
         The objects' faces (indices into ``vertices``).
+    placed : rtmesh.scene.instances.Instances or None
+        Where the objects hold several placements of meshes kept once: the scene's
+        prototypes, ``faces[placed.first_face:]`` (model coordinates), and those placements,
+        traced as Embree instances instead of copies (:func:`instance_geometry`); None:
+        every face is in the world.
     bounds : (2, 3) float
         The minimum and maximum of their world points.
     """
 
-    def __init__(self, vertices, faces):
-        self.vertices, self.faces = vertices, faces
-        # the faces' world points, with repeats (only their bounds are read), kept for the
+    def __init__(self, vertices, faces, placed=None):
+        self.vertices, self.faces, self.placed = vertices, faces, placed
+        # the world faces' points, with repeats (only their bounds are read), kept for the
         # first model box only
-        points = self._points = vertices[faces.ravel()]
-        self.bounds = np.stack([points.min(axis=0), points.max(axis=0)])
+        points = self._points = vertices[self._world_faces().ravel()]
+        self.bounds = _extent(points, placed, vertices)
         self._model_boxes = {}
+
+    def _world_faces(self):
+        return self.faces if self.placed is None else self.faces[:self.placed.first_face]
 
     def model_box(self, to_world):
         """(2, 3): the minimum and maximum of the points in the model frame of ``to_world``
@@ -168,11 +179,23 @@ class InstanceGeometry:
         key = np.asarray(to_world, dtype=np.float64).tobytes()
         box = self._model_boxes.get(key)
         if box is None:
-            points = self.vertices[self.faces.ravel()] if self._points is None else self._points
+            points = self.vertices[self._world_faces().ravel()] if self._points is None else self._points
             self._points = None
             model = (points - to_world[:3, 3]) @ np.linalg.inv(to_world[:3, :3]).T
-            box = self._model_boxes[key] = np.stack([model.min(axis=0), model.max(axis=0)])
+            placed = self.placed
+            if placed is not None:  # the placements seen from the model frame
+                placed = dataclasses.replace(placed, transforms=np.linalg.inv(to_world) @ placed.transforms)
+            box = self._model_boxes[key] = _extent(model, placed, self.vertices)
         return box
+
+
+def _extent(points, placed, vertices):
+    """(2, 3): the minimum and maximum of ``points`` and of every placement of ``placed``
+    (:meth:`rtmesh.scene.instances.Instances.bounds` of the prototypes' ``vertices``)."""
+    boxes = [np.stack([points.min(axis=0), points.max(axis=0)])] if len(points) or placed is None else []
+    if placed is not None:
+        boxes.append(placed.bounds(vertices))
+    return np.stack([np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0)])
 
 
 def instance_geometry(scene, objects, cache=None):
@@ -197,14 +220,32 @@ def instance_geometry(scene, objects, cache=None):
     held = None if cache is None else cache.get(key)
     if held is not None and held[0] is scene.vertices:
         return held[1]
-    # (placements of a mesh kept once are copied, for these objects alone)
-    entry = InstanceGeometry(*object_geometry(scene, objects))
+    entry = InstanceGeometry(*_placed_geometry(scene, objects))
     if cache is not None:
         cache[key] = (scene.vertices, entry)
     return entry
 
 
-def amodal_mask(it, vertices, faces, points, record, margin=0, accels=None, seen=None):
+def _placed_geometry(scene, objects):
+    """``(vertices, faces, placed)`` of :class:`InstanceGeometry` for ``objects``: where they
+    hold several placements of meshes kept once, the scene's vertices, the objects' world
+    faces followed by the prototypes' and those placements (an Embree instance each: the
+    asset of a batch placing a mesh 10,000 times costs no copy); else, with one placement
+    copied, what :func:`rtmesh.scene.instances.object_geometry` gives, and None."""
+    inst = scene.instances
+    chosen = None if inst is None else np.isin(inst.object_id, objects)
+    if chosen is None or chosen.sum() < 2:
+        return (*object_geometry(scene, objects), None)
+    f0 = inst.first_face
+    world = scene.faces[:f0][np.isin(scene.object_id[:f0], objects)]
+    faces = np.ascontiguousarray(np.concatenate([world, scene.faces[f0:]]), dtype=np.int32)
+    placed = dataclasses.replace(inst, first_face=len(world), prototype_faces=inst.prototype_faces + (len(world) - f0),
+                                 transforms=inst.transforms[chosen], prototype=inst.prototype[chosen],
+                                 object_id=inst.object_id[chosen])
+    return scene.vertices, faces, placed
+
+
+def amodal_mask(it, vertices, faces, points, record, margin=0, accels=None, seen=None, placed=None):
     """The pixels whose centre ray meets ``faces`` traced alone.
 
     One ray per pixel of the faces' projected bounding box (the whole canvas when part of
@@ -230,6 +271,9 @@ def amodal_mask(it, vertices, faces, points, record, margin=0, accels=None, seen
         a batch asset share one.
     seen : (h, w) bool, optional
         Image pixels known to see the faces (the visible mask): set without a ray.
+    placed : rtmesh.scene.instances.Instances, optional
+        ``faces[placed.first_face:]`` are prototypes in model coordinates, traced as
+        Embree instances placed by it (:attr:`InstanceGeometry.placed`).
 
     Returns
     -------
@@ -261,11 +305,16 @@ def amodal_mask(it, vertices, faces, points, record, margin=0, accels=None, seen
     _, _, alone = (None, None, None) if accels is None else accels.get(key, (None, None, None))
     if alone is None:
         scene = it.scene
-        if (type(it.accel) is Accel and vertices is scene.vertices and len(faces) == len(scene.faces)
+        everything = placed is None if scene.instances is None else placed is not None and len(placed) == len(
+            scene.instances)
+        if (type(it.accel) is Accel and everything and vertices is scene.vertices and len(faces) == len(scene.faces)
                 and np.array_equal(faces, scene.faces)):
             # the faces are the whole scene (a batch asset without its ground): the
             # integrator's Embree scene is the one they would get, without a second build
             alone = it.accel
+        elif placed is not None:
+            shifted, placed = recentred(vertices, placed, it.shift)
+            alone = Accel(shifted, faces, instances=placed)
         else:
             alone = Accel(vertices - it.shift, faces)
         if accels is not None:

@@ -48,7 +48,7 @@ class BatchOptions:
         ``png``, ``exr`` (linear float, with passes), ``jpg``; one render, written in each.
     passes : tuple of str
         Extra EXR channels (``ao``); they need ``exr`` among the formats.
-    seed, max_depth, integrator, exposure, tonemap
+    seed, max_depth, integrator, exposure, tonemap, dither
         As for ``rtmesh render``.
     ground : bool
         Put a grey ground plane under each asset, catching its shadow (left out of views
@@ -135,6 +135,7 @@ class BatchOptions:
     integrator: str | None = None
     exposure: float = 0.0
     tonemap: str = "reinhard"
+    dither: bool = False
     ground: bool = False
     camera_json: bool = False
     normalize: str = ""
@@ -227,6 +228,9 @@ class BatchOptions:
         fields = {**pick, "passes": tuple(overrides.get("passes", self.passes)),
                   "max_depth": self.max_depth, "exposure": self.exposure, "tonemap": self.tonemap,
                   "threads": self.threads}
+        if self.dither is not False:
+            # only when asked: the fingerprints of images written before the option stay theirs
+            fields["dither"] = self.dither
         if self.integrator is not None:
             # unset, each asset takes its file's default (rtmesh.loaders.importers.default_integrator)
             fields["integrator"] = self.integrator

@@ -222,6 +222,37 @@ def set_memory_limit(limit):
     LOAD_LIMIT = limit
 
 
+@dataclass(frozen=True)
+class LoadedAsset:
+    """One asset as loaded for all its views (:func:`_load`).
+
+    Attributes
+    ----------
+    parts : list of MeshPart
+        World-space meshes, normalised if asked.
+    placements : list of Placement
+        Meshes the file places many times, built once and placed by Embree instances as
+        ``rtmesh render`` places them (:mod:`rtmesh.loaders.placements`); their transforms
+        include the normalisation.
+    materials : list of Material
+    bounds : (2, 3) float
+        The asset's bounds, every placement included, after normalisation.
+    to_world : (4, 4) float
+        What normalisation applied to the file's coordinates (identity without).
+    world_objects : int
+        How many objects the world-space parts make: a view's ground plane, added after
+        them and before the placements' objects (:meth:`Scene.from_parts` puts placements
+        last), is object ``world_objects``.
+    """
+
+    parts: list
+    placements: list
+    materials: list
+    bounds: np.ndarray
+    to_world: np.ndarray
+    world_objects: int
+
+
 class TimeLimitExceeded(Exception):
     """Raised inside a render when the job's deadline passes (cooperative time limit)."""
 
@@ -323,7 +354,7 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
     try:
         # a file too large for the worker's limit fails here, at the load stage, in one line
         with opened, WarningLog() as warnings, memory.loading_limit(LOAD_LIMIT):
-            parts, materials, bounds, to_world = _load(job)
+            loaded = _load(job)
     except MemoryError:
         fail_all(job.images, "memory", f"out of memory while loading{MEMORY_LIMIT_NOTE}")
         return _job_result(job, results, start)
@@ -336,8 +367,9 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
         try:
             check()
             with _writing(job) as pending:
-                write_meta(job.outdir, job.asset, asset_meta(job.asset, job.path, parts, materials, bounds,
-                                                             to_world, inputs, warnings.lines))
+                write_meta(job.outdir, job.asset, asset_meta(job.asset, job.path, loaded.parts, loaded.materials,
+                                                             loaded.bounds, loaded.to_world, inputs, warnings.lines,
+                                                             loaded.placements))
             side.extend(_relative(job, pending))
         except (Superseded, TimeLimitExceeded):
             pass  # the images' loop below stops the same way
@@ -352,14 +384,12 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
         stage = "render"
         try:
             check()
-            integrator = _integrator_for_view(built, parts, materials, bounds, task.view, settings,
-                                              job.ground)
+            integrator = _integrator_for_view(built, loaded, task.view, settings, job.ground)
             result = integrator.render(progress=check)
             labels = _labels(integrator, result, task)
             passes = result.passes
             if task.flow:
-                passes = {**passes, **_flows(labels, task, built, parts, materials, bounds, settings,
-                                             job.ground, to_world)}
+                passes = {**passes, **_flows(labels, task, built, loaded, settings, job.ground)}
             stage = "write"
             last_check[0] = 0.0  # always ask just before writing
             check()
@@ -370,27 +400,27 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
                         and not any(f.endswith(BOP_SUFFIXES) for f in task.files)):
                     # the COCO fragment formed beside the image writes (its Embree rays and
                     # OpenImageIO's encoders run without the GIL); BOP files share its cache
-                    fragment = workers.submit(image_fragment, integrator, labels, task, settings, to_world,
+                    fragment = workers.submit(image_fragment, integrator, labels, task, settings, loaded,
                                               job.asset, job.ground, accels)
                 for name, path in zip(task.files, paths):
                     os.makedirs(os.path.dirname(path), exist_ok=True)
                     if name.endswith(CAMERA_SUFFIX):
                         scene = integrator.scene
                         write_camera_json(path, camera_record(scene.camera, settings.width, settings.height,
-                                                              integrator.scene_bounds, to_world))
+                                                              integrator.scene_bounds, loaded.to_world))
                     elif name.endswith(DEPTH_PNG_SUFFIX):
                         write_depth_png(path, result.passes["depth"][:, :, 0])
                     elif name.endswith(BOP_SUFFIXES):
                         if name.endswith(BOP_SUFFIXES[0]):  # the other three with it
                             scene = integrator.scene
                             record = camera_record(scene.camera, settings.width, settings.height,
-                                                   integrator.scene_bounds, to_world)
+                                                   integrator.scene_bounds, loaded.to_world)
                             bop_paths = {x: p for x in BOP_SUFFIXES for p in paths if p.endswith(x)}
                             write_view_files(bop_paths, integrator, labels, record,
-                                             _asset_objects(scene, job.ground, task.view), job.units, accels)
+                                             _asset_objects(scene, job.ground, task.view, loaded), job.units, accels)
                     elif name.endswith(COCO_SUFFIX):
                         write_coco(path, fragment.result() if fragment is not None else
-                                   image_fragment(integrator, labels, task, settings, to_world, job.asset,
+                                   image_fragment(integrator, labels, task, settings, loaded, job.asset,
                                                   job.ground, accels))
                     elif name.endswith(MASK_PNG_SUFFIX):
                         write_display_image(path, (result.passes["alpha"][:, :, :1] > 0.5).astype(np.float64))
@@ -398,7 +428,7 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
                         write_flo(path, passes[next(f for f in FLOW_PASSES if name.endswith(flow_suffix(f)))])
                     else:
                         write_image(path, result.image, passes, settings.exposure, settings.tonemap,
-                                    header=settings.header())
+                                    header=settings.header(), dither=settings.dither)
                 # superseded while writing: the block's temporaries are removed, not reported.
                 # The run file is read again: a run that took the folder removes the
                 # temporaries already there when it did; later ones are this task's to remove
@@ -438,13 +468,15 @@ def _labels(integrator, result, task):
     return {**centre_passes(integrator, sorted(wanted - set(result.passes))), **result.passes}
 
 
-def image_fragment(integrator, labels, task, settings, to_world, asset, ground, accels=None):
-    """The COCO fragment of one batch image (:mod:`rtmesh.batch.coco`): the asset is one
-    instance of category ``asset``, its model frame the asset file's; the ground plane (the
-    scene's last object when the view has one) is not annotated."""
+def image_fragment(integrator, labels, task, settings, loaded, asset, ground, accels=None):
+    """The COCO fragment of one batch image (:mod:`rtmesh.batch.coco`): the asset
+    (:class:`LoadedAsset` ``loaded``, named ``asset``) is one instance of category ``asset``,
+    its model frame the asset file's; the ground plane is not annotated
+    (:func:`_asset_objects`)."""
     scene = integrator.scene
+    to_world = loaded.to_world
     record = camera_record(scene.camera, settings.width, settings.height, integrator.scene_bounds, to_world)
-    objects = _asset_objects(scene, ground, task.view)
+    objects = _asset_objects(scene, ground, task.view, loaded)
     pictures = [f for f in task.files if f.endswith((".png", ".jpg", ".exr"))
                 and not f.endswith((DEPTH_PNG_SUFFIX, MASK_PNG_SUFFIX))]
     instance = Instance(asset, asset, objects, np.asarray(to_world, dtype=np.float64))
@@ -452,7 +484,7 @@ def image_fragment(integrator, labels, task, settings, to_world, asset, ground, 
     return {"image": image_entry(os.path.basename(pictures[0]), record), "annotations": annotations}
 
 
-def _flows(labels, task, built, parts, materials, bounds, settings, ground, to_world):
+def _flows(labels, task, built, loaded, settings, ground):
     """``flow_forward`` and ``flow_backward`` of one view (see :mod:`rtmesh.batch.flow`),
     towards the views of ``task.flow``, each traced in its own view's scene; the two run
     side by side on the render's threads (their rays go to Embree without the GIL)."""
@@ -462,9 +494,10 @@ def _flows(labels, task, built, parts, materials, bounds, settings, ground, to_w
     for name, view in zip(("flow_backward", "flow_forward"), task.flow):
         other = record = None
         if view is not None:
-            other = _integrator_for_view(built, parts, materials, bounds, view, settings, ground)
+            other = _integrator_for_view(built, loaded, view, settings, ground)
             scene = other.scene
-            record = camera_record(scene.camera, settings.width, settings.height, other.scene_bounds, to_world)
+            record = camera_record(scene.camera, settings.width, settings.height, other.scene_bounds,
+                                   loaded.to_world)
         calls[name] = (position, other, record, seen)
     traced = [name for name, call in calls.items() if call[1] is not None]
     flows = {name: view_flow(*call) for name, call in calls.items() if name not in traced}
@@ -477,10 +510,14 @@ def _flows(labels, task, built, parts, materials, bounds, settings, ground, to_w
     return {name: flows[name] for name in FLOW_PASSES}
 
 
-def _asset_objects(scene, ground, view):
-    """The objects of a view's scene that make the asset: all but the ground plane (the
-    last object, where the view has it)."""
-    return tuple(range(len(scene.object_names) - _has_ground(ground, view)))
+def _asset_objects(scene, ground, view, loaded):
+    """The objects of a view's scene that make the asset: all but the ground plane, where
+    the view has it (object ``loaded.world_objects``: after the asset's world-space parts,
+    before its placements; the last object of an asset without placements)."""
+    objects = range(len(scene.object_names))
+    if not _has_ground(ground, view):
+        return tuple(objects)
+    return tuple(k for k in objects if k != loaded.world_objects)
 
 
 def _has_ground(ground, view):
@@ -514,30 +551,32 @@ def warm_up():
 
 
 def _load(job):
-    """Read the mesh once for all its views.
+    """Read the mesh once for all its views, with the placements of the meshes it places
+    many times (glTF node reuse and ``EXT_mesh_gpu_instancing``, USD instancers), as
+    ``rtmesh render`` reads it: the path integrator traces them as Embree instances, the
+    others render their copies (:class:`rtmesh.rendering.integrator.Integrator`).
 
     Returns
     -------
-    parts, materials
-        As :func:`rtmesh.loaders.importers.parts_from_trimesh`, normalised if asked.
-    bounds : (2, 3) float
-        The asset's bounds, after normalisation.
-    to_world : (4, 4) float
-        What normalisation applied to the file's coordinates (identity without).
+    LoadedAsset
     """
-    parts, materials = mesh_file_parts(job.path)  # trimesh's formats and USD
+    placements = []
+    parts, materials = mesh_file_parts(job.path, placements=placements)  # trimesh's formats and USD
     # Scene.from_parts drops broken triangles and raises when nothing is left; build the
     # scene once here so an empty asset fails at the load stage, and frame its clean bounds
-    bounds = Scene.from_parts(parts, materials, lights=[], source=job.path).bounds  # (no light rig needed)
+    scene = Scene.from_parts(parts, materials, lights=[], source=job.path, placements=placements)  # (no rig needed)
+    bounds = scene.bounds
+    world_objects = len(scene.object_names) - (0 if scene.instances is None else len(scene.instances))
     to_world = asset_to_world(bounds, job.normalize)
     if job.normalize:
         # uniform scale and shift: normals, uv and colours stay as they are
         parts = [dataclasses.replace(p, vertices=transform_points(to_world, p.vertices)) for p in parts]
+        placements = [dataclasses.replace(p, transforms=to_world @ p.transforms) for p in placements]
         bounds = transform_points(to_world, bounds)
-    return parts, materials, bounds, to_world
+    return LoadedAsset(parts, placements, materials, bounds, to_world, world_objects)
 
 
-def _integrator_for_view(built, parts, materials, bounds, view, settings, ground):
+def _integrator_for_view(built, loaded, view, settings, ground):
     """The integrator rendering ``view``, sharing one built scene between views.
 
     ``built`` maps "has a ground plane" to the integrator of the first view built with that
@@ -551,9 +590,13 @@ def _integrator_for_view(built, parts, materials, bounds, view, settings, ground
         return built[key]
     with_ground = _has_ground(ground, view)
     integrator = built.get(with_ground)
+    bounds = loaded.bounds
     if integrator is None:
-        scene = _scene_for_view(parts, materials, bounds, view, settings, ground)
-        integrator = built[with_ground] = Integrator(scene, settings)
+        scene = _scene_for_view(loaded, view, settings, ground)
+        # an integrator that cannot trace the placements flattens them, within the worker's
+        # limit (rtmesh.rendering.memory.check_flattening), as rtmesh render does
+        with memory.loading_limit(LOAD_LIMIT):
+            integrator = built[with_ground] = Integrator(scene, settings)
     else:
         camera, lights = _camera_and_lights(bounds, view, settings)
         if integrator.plan.physical:
@@ -600,10 +643,12 @@ def _rig_camera(bounds, view, settings):
                         direction=view.light_direction or view.direction, up=view.up)
 
 
-def _scene_for_view(parts, materials, bounds, view, settings, ground):
-    """The asset's scene, framed from ``view`` and lit by the default rig."""
+def _scene_for_view(loaded, view, settings, ground):
+    """The asset's scene (a :class:`LoadedAsset`), framed from ``view`` and lit by the
+    default rig; its placements stay placements (:attr:`Scene.instances`)."""
+    bounds, placements = loaded.bounds, loaded.placements
     camera, lights = _camera_and_lights(bounds, view, settings)
-    parts, materials = list(parts), list(materials) or [Material()]
+    parts, materials = list(loaded.parts), list(loaded.materials) or [Material()]
     if _has_ground(ground, view):
         parts.append(_ground_part(bounds, len(materials)))
         materials.append(Material(name="ground", diffuse=np.full(3, 0.8)))
@@ -612,14 +657,14 @@ def _scene_for_view(parts, materials, bounds, view, settings, ground):
         # camera, instead of the three-light rig (see rtmesh.scene.studio)
         return Scene.from_parts(parts, materials, lights=[], camera=camera, ambient=np.zeros(3),
                                 background=studio_background(_rig_camera(bounds, view, settings)),
-                                source=view.name)
+                                source=view.name, placements=placements)
     if settings.integrator == "path":
         # the rig in the path integrator's units, with the studio environment instead of ambient light
         return Scene.from_parts(parts, materials, lights=lights, camera=camera, ambient=np.zeros(3),
                                 background=studio_background(_rig_camera(bounds, view, settings)),
-                                source=view.name)
+                                source=view.name, placements=placements)
     return Scene.from_parts(parts, materials, lights=lights, camera=camera,
-                            ambient=np.full(3, 0.05), source=view.name)
+                            ambient=np.full(3, 0.05), source=view.name, placements=placements)
 
 
 def _ground_part(bounds, material):

@@ -172,7 +172,7 @@ RENDER_KEYS = {
     "seed": _int, "threads": _int, "chunk_samples": _int, "cutoff": _non_negative,
     "fresnel": _str, "ao_samples": _int, "ao_distance": _positive, "passes": _str_list,
     "light_samples": _int,
-    "exposure": _float, "tonemap": _str,
+    "exposure": _float, "tonemap": _str, "dither": _bool,
     "target_error": _positive, "time_limit": _positive, "max_spp": _int, "denoise": _bool,
     "integrator": _one_of(*INTEGRATORS), "clamp": _non_negative, "caustics": _one_of(*CAUSTICS), "photons": _int,
 }

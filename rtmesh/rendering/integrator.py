@@ -84,6 +84,34 @@ def _translated(obj, shift):
     return dataclasses.replace(obj, **changes) if changes else obj
 
 
+def recentred(vertices, placed, shift):
+    """What an Embree scene of ``vertices`` is built from in the frame re-centred on
+    ``shift``: world-space vertices moved by ``-shift``; the prototypes of placed meshes
+    left in their own coordinates, their placements' translations moved instead.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float64
+    placed : rtmesh.scene.instances.Instances or None
+        Where the prototypes' vertices start and the placements.
+    shift : (3,) float64
+
+    Returns
+    -------
+    shifted : (V, 3) float64
+        A new array.
+    placed : Instances or None
+        ``placed`` with its transforms moved (a copy).
+    """
+    shifted = vertices - shift
+    if placed is None:
+        return shifted, None
+    shifted[placed.first_vertex:] = vertices[placed.first_vertex:]
+    transforms = placed.transforms.copy()
+    transforms[:, :3, 3] -= shift
+    return shifted, dataclasses.replace(placed, transforms=transforms)
+
+
 class Integrator:
     """Renders one scene with one set of settings.
 
@@ -127,14 +155,7 @@ class Integrator:
             self.motion = MotionAccel(scene.vertices - self.shift, scene.faces, scene.object_id,
                                       motions, scene.camera.shutter)
         # placed meshes: the prototypes stay in their own coordinates, their placements move
-        self.instances = None
-        shifted = scene.vertices - self.shift
-        if scene.instances is not None:
-            first = scene.instances.first_vertex
-            shifted[first:] = scene.vertices[first:]
-            transforms = scene.instances.transforms.copy()
-            transforms[:, :3, 3] -= self.shift
-            self.instances = dataclasses.replace(scene.instances, transforms=transforms)
+        shifted, self.instances = recentred(scene.vertices, scene.instances, self.shift)
         self.accel = self.motion or Accel(shifted, scene.faces, instances=self.instances)
         # the scene's size in the re-centred frame bounds the triangles' size, which sets
         # part of the origin offset (see offset_ray_origins); it cannot be zero for a scene
@@ -398,7 +419,7 @@ class Integrator:
             clean = not (self.plan.lens or self.plan.motion or self._stochastic_coverage)
             image = denoising.denoise(image, film.pass_image("albedo"), film.pass_image("normal"), clean)
             stats.wall_seconds = time.perf_counter() - start
-        return RenderResult(image, passes, stats, film, alpha, noisy)
+        return RenderResult(image, passes, stats, film, alpha, noisy, self.settings)
 
     @property
     def _photon_passes(self):

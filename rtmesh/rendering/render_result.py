@@ -4,7 +4,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rtmesh.io.images import write_image
 from rtmesh.rendering.film import Film
+from rtmesh.rendering.settings import RenderSettings
 from rtmesh.rendering.stats import RenderStats
 
 
@@ -26,6 +28,8 @@ class RenderResult:
     noisy : (height, width, 3) float32 or None
         With ``denoise``, the image before denoising (``image`` is the denoised one; the
         film's error estimate describes this one).
+    settings : RenderSettings or None
+        The settings the image was rendered with (:meth:`write` writes it by them).
     """
 
     image: np.ndarray
@@ -34,3 +38,25 @@ class RenderResult:
     film: Film
     alpha: np.ndarray | None = None
     noisy: np.ndarray | None = None
+    settings: RenderSettings | None = None
+
+    def write(self, path):
+        """Write the image as ``rtmesh render`` writes it
+        (:func:`rtmesh.io.images.write_image`): EXR with the passes, the alpha channel and
+        the settings in its header; PNG and JPEG with the settings' ``exposure``,
+        ``tonemap`` and ``dither``.
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            ``.exr``, ``.png``, ``.jpg`` or ``.jpeg``.
+
+        Raises
+        ------
+        OutputError
+            If the file cannot be written; nothing is left at ``path``.
+        """
+        # a result made without settings (by hand) is written by the defaults
+        s = self.settings if self.settings is not None else RenderSettings()
+        write_image(path, self.image, self.passes, s.exposure, s.tonemap, alpha=self.alpha,
+                    header=None if self.settings is None else s.header(), dither=s.dither)

@@ -85,6 +85,9 @@ class RenderSettings:
         Stops, applied when writing 8-bit images.
     tonemap : {"clamp", "reinhard", "aces", "pbr-neutral", "agx"}
         Operator for 8-bit images.
+    dither : bool
+        Quantise 8-bit images with blue-noise dithering instead of rounding to nearest
+        (:func:`rtmesh.io.images.write_image`; EXR is not affected).
     target_error : float or None
         Adaptive sampling (see :mod:`rtmesh.rendering.adaptive`): render in rounds until every pixel's
         estimated display error is at most this (e.g. 0.01):
@@ -127,6 +130,7 @@ class RenderSettings:
     passes: tuple = ()
     exposure: float = 0.0
     tonemap: str = "reinhard"
+    dither: bool = False
     target_error: float | None = None
     time_limit: float | None = None
     max_spp: int | None = None
@@ -177,6 +181,7 @@ class RenderSettings:
             ("exposure", real(self.exposure) and abs(self.exposure) <= MAX_EXPOSURE_STOPS,
              f"a number of stops from {-MAX_EXPOSURE_STOPS:g} to {MAX_EXPOSURE_STOPS:g}"),
             ("tonemap", self.tonemap in TONEMAPS, f"one of {', '.join(TONEMAPS)}"),
+            ("dither", isinstance(self.dither, bool), "true or false"),
             ("target_error", self.target_error is None or real(self.target_error, 0.0), "a number > 0 (finite)"),
             ("time_limit", self.time_limit is None or real(self.time_limit, 0.0),
              "a number of seconds > 0 (finite)"),

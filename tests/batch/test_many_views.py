@@ -73,10 +73,10 @@ def test_a_batch_job_loads_once_and_builds_once_per_ground_variant(tmp_path, mon
     # one load; one build with the ground plane (the turntable), one without (from below)
     assert len(loads) == 1 and len(builds) == 2
 
-    parts, materials, bounds, _ = worker._load(worker.AssetJob("a.obj", str(mesh), str(tmp_path), fields, ()))
+    loaded = worker._load(worker.AssetJob("a.obj", str(mesh), str(tmp_path), fields, ()))
     rs = worker.RenderSettings(**fields).validate()
     for view in (views[3], views[-1]):
-        fresh = Integrator(worker._scene_for_view(parts, materials, bounds, view, rs, True), rs).render()
+        fresh = Integrator(worker._scene_for_view(loaded, view, rs, True), rs).render()
         written = oiio.ImageInput.open(str(tmp_path / f"{view.name}.exr")).read_image("float")
         np.testing.assert_array_equal(written[..., :3], fresh.image[..., :3])
 
@@ -99,12 +99,12 @@ def test_physical_assets_get_the_studio_turned_to_each_view(tmp_path):
     fields = {"width": 12, "height": 12, "spp": 2, "threads": 1}
     result = worker.run_job(worker.AssetJob("ball.glb", str(mesh), str(tmp_path), fields, tasks))
     assert [i["status"] for i in result["images"]] == ["done"] * 2
-    parts, materials, bounds, _ = worker._load(worker.AssetJob("ball.glb", str(mesh), str(tmp_path), fields, ()))
+    loaded = worker._load(worker.AssetJob("ball.glb", str(mesh), str(tmp_path), fields, ()))
     # a glTF asset in a batch renders with the path integrator unless the batch says otherwise
     rs = worker.RenderSettings(**fields, integrator="path").validate()
     rotations = []
     for view in views:
-        scene = worker._scene_for_view(parts, materials, bounds, view, rs, False)
+        scene = worker._scene_for_view(loaded, view, rs, False)
         assert scene.lights == [] and scene.background.name == STUDIO_PATH and scene.background.lighting
         rotations.append(scene.background.rotation)
         fresh = Integrator(scene, rs).render()

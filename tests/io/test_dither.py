@@ -78,3 +78,24 @@ def test_alpha_and_exr_are_not_dithered(tmp_path):
     write_image(tmp_path / "a.exr", image, dither=True)
     linear, _ = read_image(tmp_path / "a.exr")
     np.testing.assert_array_equal(linear[:, :, :3], image)
+
+
+def test_a_render_result_writes_itself_as_its_settings_say(tmp_path):
+    """``RenderResult.write``: the settings' dither (a scene file's ``[render] dither``, or an
+    override of ``rtmesh.render``), exposure and tone map, as ``write_image`` with them."""
+    import rtmesh
+    from scenes import settings, sphere_on_floor_scene
+
+    result = rtmesh.render(sphere_on_floor_scene(subdivisions=1), settings(width=32, height=24), dither=True,
+                           exposure=0.5, tonemap="agx")
+    assert result.settings.dither
+    result.write(tmp_path / "result.png")
+    for dither in (True, False):
+        write_image(tmp_path / f"{dither}.png", result.image, exposure=0.5, operator="agx", dither=dither)
+    written, dithered, rounded = (read_image(tmp_path / f"{name}.png")[0] for name in ("result", True, False))
+    assert np.array_equal(written, dithered) and not np.array_equal(written, rounded)
+    result.write(tmp_path / "result.exr")  # the settings in the header, as the command writes them
+    import OpenImageIO as oiio
+
+    header = oiio.ImageInput.open(str(tmp_path / "result.exr")).spec()
+    assert header.getattribute("rtmesh:spp") == 1 and header.getattribute("rtmesh:sampler") == "regular"

@@ -12,7 +12,7 @@ from rtmesh.rendering.integrator import Integrator
 from rtmesh.rendering.settings import RenderSettings
 from rtmesh.scene import instances
 from rtmesh.scene.model import MeshPart, Placement, Scene
-from scenes import block_means, scattered_transforms
+from scenes import block_means, reusing_glb, scattered_transforms
 
 
 def placed_scene(count=50, subdivisions=2, textured=False):
@@ -191,43 +191,10 @@ def test_a_bad_placement_is_one_line(bad, why):
     assert "\n" not in message and message.startswith("file.glb: instance 'b'") and why in message
 
 
-def _reusing_glb(path, count=50, subdivisions=3, instancing=False):
-    """A GLB whose ``count`` nodes place one textured, smooth sphere (1280 triangles) over a
-    floor; with ``instancing`` one node places it by EXT_mesh_gpu_instancing instead."""
-    from PIL import Image
-
-    ball = trimesh.creation.icosphere(subdivisions, radius=0.6)
-    uv = ball.vertices[:, :2] * (0.5 / 0.6) + 0.5
-    checker = (np.indices((8, 8)).sum(0) % 2)[..., None] * np.array([200, 60, 30]) + 40
-    ball.visual = trimesh.visual.TextureVisuals(uv=uv, material=trimesh.visual.material.PBRMaterial(
-        baseColorTexture=Image.fromarray(checker.astype(np.uint8)), metallicFactor=0.0, roughnessFactor=0.5))
-    floor = trimesh.creation.box(extents=[14, 0.2, 14])
-    floor.visual = trimesh.visual.TextureVisuals(material=trimesh.visual.material.PBRMaterial(
-        baseColorFactor=[0.3, 0.6, 0.9, 1.0], metallicFactor=0.0, roughnessFactor=0.7))
-    scene = trimesh.Scene()
-    scene.add_geometry(floor, node_name="floor", transform=trimesh.transformations.translation_matrix([0, -0.1, 0]))
-    transforms = scattered_transforms(count)
-    scene.add_geometry(ball, node_name="ball0", geom_name="ball", transform=np.eye(4) if instancing else transforms[0])
-    for j in range(1, 1 if instancing else count):
-        scene.graph.update(frame_to=f"ball{j}", frame_from=scene.graph.base_frame, geometry="ball",
-                           matrix=transforms[j])  # the same mesh again
-    data = trimesh.exchange.gltf.export_glb(scene, include_normals=True)
-    if instancing:
-        import gltf_codecs
-
-        doc, _ = gltf_codecs.split_glb(data)
-        node = next(k for k, n in enumerate(doc["nodes"]) if n.get("name") == "ball0")
-        quaternions = np.array([trimesh.transformations.quaternion_from_matrix(t) for t in transforms])
-        data = gltf_codecs.gpu_instanced_glb(data, node, transforms[:, :3, 3], quaternions[:, [1, 2, 3, 0]],
-                                             np.full((count, 3), 0.5))
-    path.write_bytes(data)
-    return path
-
-
 def test_a_gltf_reusing_a_mesh_renders_as_its_copies(tmp_path, monkeypatch):
     from rtmesh import api
 
-    path = _reusing_glb(tmp_path / "reuse.glb")
+    path = reusing_glb(tmp_path / "reuse.glb")
     options = dict(width=64, height=48, spp=8, caustics="off", passes=("albedo", "normal", "instance_id"))
     scene, settings = api.load_scene(path, **options)
     assert settings.integrator == "path" and len(scene.instances) == 50
@@ -255,7 +222,7 @@ def test_a_gltf_reusing_a_mesh_renders_as_its_copies(tmp_path, monkeypatch):
 def test_gpu_instancing_places_one_mesh(tmp_path):
     from rtmesh import api
 
-    path = _reusing_glb(tmp_path / "gpu.glb", count=20, instancing=True)
+    path = reusing_glb(tmp_path / "gpu.glb", count=20, instancing=True)
     scene, _ = api.load_scene(path, width=32, height=24)
     assert len(scene.instances) == 20 and len(scene.faces) == 12 + 1280
     assert sorted(scene.object_names[1:]) == sorted(f"ball0[{k}]" for k in range(20))
@@ -266,7 +233,7 @@ def test_a_bad_gpu_instance_is_one_line(tmp_path, capsys, caplog, column, value,
     import gltf_codecs
     from rtmesh.cli import main
 
-    path = _reusing_glb(tmp_path / "one.glb", count=1)
+    path = reusing_glb(tmp_path / "one.glb", count=1)
     doc, _ = gltf_codecs.split_glb(path.read_bytes())
     node = next(k for k, n in enumerate(doc["nodes"]) if n.get("name") == "ball0")
     translations = np.zeros((4, 3))
