@@ -73,6 +73,28 @@ def test_light_samples_of_a_point_light_agree_and_each_sends_a_shadow_ray():
     assert three.stats.rays["shadow"] == 3 * one.stats.rays["shadow"] > 0
 
 
+def test_what_the_camera_sees_in_a_mirror_takes_the_light_samples():
+    """The first vertex that can take light is the first after delta bounces only: a smooth
+    metal ball filling the view reflects a diffuse floor under a point light, and every
+    floor point it shows sends light_samples shadow rays (the mirror's own vertex none, the
+    floor's next vertex none: max_depth 2), its light the one-sample image's to rounding."""
+    ball = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
+    floor = trimesh.creation.box(extents=(8.0, 0.1, 8.0))
+    floor.apply_translation((0.0, -1.1, 0.0))
+    parts = [MeshPart("ball", ball.vertices, ball.faces, 0, vertex_normals=ball.vertex_normals),
+             MeshPart("floor", floor.vertices, floor.faces, 1)]
+    materials = [Material("mirror", model="conductor", mirror=0.9, roughness=0.0),
+                 Material("white", model="lambert", diffuse=0.7)]
+    camera = Camera(np.array([0.0, 0.0, 1.6]), np.zeros(3), np.array([0.0, 1.0, 0.0]), fov=30.0)
+    scene = Scene.from_parts(parts, materials=materials, lights=[PointLight([2.0, 3.0, 2.0], 10.0)], camera=camera,
+                             background=0.0)
+    one = _render(scene, spp=2, max_depth=2, width=16, height=16)
+    three = _render(scene, spp=2, max_depth=2, width=16, height=16, light_samples=3)
+    assert three.stats.rays["shadow"] == 3 * one.stats.rays["shadow"] > 0
+    np.testing.assert_allclose(three.image, one.image, rtol=1e-12, atol=1e-15)
+    assert one.image.max() > 0
+
+
 def test_light_samples_converge_to_the_one_sample_answer():
     """Four light samples at 16 spp estimate what one light sample at 64 spp does (one
     indirect bounce, a large area light close above a diffuse floor, met by BSDF samples
