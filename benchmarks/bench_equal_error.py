@@ -124,7 +124,8 @@ NOTES = (
     "- The noise is mostly direct light (next-event estimation of the map and BSDF sampling, MIS): "
     "with `max_depth = 1` (direct light only) rtmesh's error at 16 spp was 22.3 % against 22.4 % with "
     "one bounce before the Sobol pairs (Mitsuba stratified 12.9 % against 13.7 %). rtmesh's "
-    "`light_samples` (4) does not apply under `path` (one light sample a vertex, as Mitsuba).",
+    "`light_samples` is 1 here (the default under `path`: one light sample a vertex, as Mitsuba; "
+    "more take several at the first vertex).",
     "- Wall times on this shared machine swing by 2x within seconds (other jobs start and stop): "
     "every round runs through every spp level and the renderers alternate render by render, so both "
     "see the same load, but the fitted fixed cost `a` and the extrapolated seconds move from run to "

@@ -95,7 +95,8 @@ def build_parser():
     p.add_argument("--ao-samples", type=int, help="ambient-occlusion rays per hit (0 = off)")
     p.add_argument("--ao-distance", type=float, help="ambient-occlusion reach, scene units")
     p.add_argument("--light-samples", type=_positive_int,
-                   help="shadow rays per hit and area light (soft shadows; default 4)")
+                   help="whitted: shadow rays per hit and area light (soft shadows; default 4); path: "
+                   "light samples at a path's first vertex (default 1)")
     p.add_argument("--passes", type=_names(PASSES),
                    help="extra outputs (EXR layers), comma-separated: " + ", ".join(PASSES))
     p.add_argument("--background", metavar="BG",

@@ -3,7 +3,8 @@ estimation and multiple importance sampling, over Embree packets.
 
 Each block of 16 camera samples is one 16-wide packet: the camera rays are traced with the
 coherent flag, every later segment of the 16 paths as one incoherent packet of the lanes
-still alive, and each round's shadow rays as one occlusion packet.  Per lane and vertex:
+still alive, and each round's shadow rays as one occlusion packet per light sample.  Per
+lane and vertex:
 
 1. the ray meets a visible quad or disk light, a surface or nothing (the background);
    emission found there is weighted against light sampling by the power heuristic
@@ -13,6 +14,12 @@ still alive, and each round's shadow rays as one occlusion packet.  Per lane and
    light chosen by power (alias table, :mod:`rtmesh.sampling.alias`), a point or direction on
    it (:func:`sample_li`), the BSDF toward it (:func:`rtmesh.materials.models.evaluate`),
    weighted against BSDF sampling (delta lights: weight 1), its shadow ray into the packet;
+   at the path's first vertex with a non-delta part (reached through delta lobes only)
+   ``light_samples`` such estimates, each light and point drawn independently, each
+   weighted by the power heuristic with the strategies' sample counts (``light_samples``
+   light samples, one BSDF sample: Veach 1997, 9.2.2), their sum divided by
+   ``light_samples``, and their shadow rays in one packet per light sample (emission a
+   BSDF sample of that vertex meets is weighted with the same counts);
 3. a BSDF sample continues the path (:func:`rtmesh.materials.models.sample`); after
    ``rr_depth`` vertices Russian roulette on the throughput's largest channel ends it.
 
@@ -28,8 +35,12 @@ descriptors)`` (:class:`rtmesh.lights.light_table.LightTable`, the last two its 
 images); ``env = (pixels, marginal, conditional,
 func, mean, cos_rotation, sin_rotation)`` (:class:`rtmesh.lights.light_table.EnvironmentTables`);
 ``options = (max_depth, rr_depth, clamp, offset_scale, background_seen, cutouts, split,
-camera_media)``, the last the media the camera sits in (``STACK_DEPTH`` material ids,
-innermost first, -1 padded; :class:`rtmesh.rendering.media.Media`).
+camera_media, light_samples, light_block)``: ``camera_media`` the media the camera sits in
+(``STACK_DEPTH`` material ids, innermost first, -1 padded;
+:class:`rtmesh.rendering.media.Media`), ``light_samples`` the next-event estimates at a
+path's first vertex and ``light_block`` :func:`rtmesh.sampling.zsobol.block_bits` of the
+spp and ``light_samples`` (the first vertex's light points are point ``sample *
+light_samples + k`` of the pixel's Sobol set: :func:`rtmesh.sampling.zsobol.sequence_ray_pair`).
 
 Nested media: each lane carries a stack of the transmissive materials it is inside
 (innermost first), as the Whitted path's :mod:`rtmesh.rendering.media` does: entering a
@@ -94,7 +105,7 @@ from rtmesh.rendering.path_surfaces import (cross_interface, twin_material, hit_
                                             triangle_light_emission)
 from rtmesh.sampling.hashing import mix64, uniform
 from rtmesh.sampling.mis import power_heuristic
-from rtmesh.sampling.zsobol import sequence_pair
+from rtmesh.sampling.zsobol import sequence_pair, sequence_ray_pair
 
 # The rows taking arrays that the kernel calls per lane, inlined by numba: a compiled call that
 # passes arrays takes and releases a reference to each (atomic instructions), and LLVM stops
@@ -116,6 +127,9 @@ MAX_LAYERS = 64
 CAMERA, BOUNCE, SHADOW = 0, 1, 2
 # Sobol sequences hold 2**32 points; later samples take hashed numbers
 SOBOL_LIMIT = 1 << 32
+# the key of light sample k > 0 of a vertex is mix64(key + k * _LIGHT_ROUND) (sample 0 takes
+# the path's own key): its choice and point are the vertex's usual dimensions of that key
+_LIGHT_ROUND = np.uint64(0xD1B54A32D192ED03)
 # light-path passes (rtmesh.io.passes.LIGHT_PATH_PASSES) and the first vertex's lobe categories
 EMISSION, DIRECT, INDIRECT = 0, 1, 4
 DIFFUSE_PATH, GLOSSY_PATH, TRANSMISSION_PATH = 0, 1, 2
@@ -333,12 +347,14 @@ def _accept_shadows(shadow_valid, pending, pending_paths, split, total, paths):
 @row
 def _shadows_through_cutouts(intersect16, scene, args, shadow, shadow_words, shadow_valid, geometry, surface,
                              offset_scale, keys, start, lane_depth, reach, counts, motion, lane_time, segment, rest,
-                             rest_words, rest_valid, best_t, best_prim, best_u, best_v):
+                             rest_words, rest_valid, best_t, best_prim, best_u, best_v, first_layer):
     """Trace the shadow packet's rays with closest hits over the static scene and every
     moving object (at each lane's time: :func:`_nearest_on_movers`, the segment's ray read
     back from the packet into ``segment`` (6, LANES)), passing cut-out layers (decided on the
     rest-pose triangle's texture coordinates, which motion leaves alone), until each is
-    blocked (its ``shadow_valid`` lane cleared) or free; a free ray keeps its lane set."""
+    blocked (its ``shadow_valid`` lane cleared) or free; a free ray keeps its lane set.
+    Layer ``j``'s blend coin is that of layer ``first_layer + j`` (each light sample of a
+    vertex its own coins)."""
     material_id = geometry[5]
     has_static, static_faces, movers, moves, face_mover = motion[0], motion[1], motion[2], motion[5], motion[6]
     for layer in range(MAX_LAYERS):
@@ -377,7 +393,7 @@ def _shadows_through_cutouts(intersect16, scene, args, shadow, shadow_words, sha
             prim = best_prim[lane]
             bu, bv = best_u[lane], best_v[lane]
             mat = material_id[prim]
-            coin = _layer_coin(keys[start + lane], lane_depth[lane], layer + MAX_LAYERS, _COVERAGE)
+            coin = _layer_coin(keys[start + lane], lane_depth[lane], first_layer + layer, _COVERAGE)
             if layer + 1 < MAX_LAYERS and is_transparent(surface, geometry, mat, prim, bu, bv, coin):
                 # on past the layer: the rest of the segment from just beyond it
                 t = best_t[lane]
@@ -502,7 +518,8 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     textured = textured_materials(surface, geometry)
     light_rows, light_probability, light_alias, light_pmf, face_light, analytic, env_light, light_texels, \
         light_descriptors = lights
-    max_depth, rr_depth, clamp, offset_scale, background_seen, cutouts, split, camera_media = options
+    (max_depth, rr_depth, clamp, offset_scale, background_seen, cutouts, split, camera_media, light_samples,
+     light_block) = options
     media = len(camera_media)
     env_pixels, env_marginal, env_conditional, env_func, env_mean, env_cos, env_sin = env
     moves, face_mover = motion[5], motion[6]
@@ -537,9 +554,14 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     dz = np.zeros(LANES)
     beta = np.zeros((LANES, 3))
     total = np.zeros((LANES, 3))
-    pending = np.zeros((LANES, 3))
+    # per light sample of a vertex (rtmesh.rendering.settings.RenderSettings.light_samples):
+    # each lane's shadow ray (origin, direction, length) and the light it brings if free
+    shadow_rays = np.zeros((light_samples, LANES, 7))
+    shadow_set = np.zeros((light_samples, LANES), np.bool_)
+    shadow_count = np.zeros(light_samples, np.int64)
+    pending = np.zeros((light_samples, LANES, 3))
     paths = np.zeros((LANES, LIGHT_PATHS, 3))
-    pending_paths = np.zeros((LANES, LIGHT_PATHS, 3))
+    pending_paths = np.zeros((light_samples if split else 1, LANES, LIGHT_PATHS, 3))
     category = np.zeros(LANES, np.int64)
     stack = np.full((LANES, max(media, 1)), -1, np.int64)
     sigma = np.zeros((LANES, 3))
@@ -549,6 +571,9 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     prev_delta = np.zeros(LANES, np.bool_)
     # the product of eta'^2 over the path's crossings (undoes their radiance scaling)
     eta_scale = np.ones(LANES)
+    # light samples taken at the path's last vertex (the light strategy's sample count in the
+    # MIS weight of emission its BSDF sample meets)
+    prev_count = np.ones(LANES)
     lane_depth = np.zeros(LANES, np.int64)
     layers = np.zeros(LANES, np.int64)
     # with photons: the path's last vertices (CHAIN_*), its length so far (the gather radius)
@@ -576,6 +601,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 prev_pdf[lane] = 0.0
                 prev_delta[lane] = True
                 eta_scale[lane] = 1.0
+                prev_count[lane] = 1.0
                 lane_depth[lane] = 0
                 layers[lane] = 0
                 chain[lane] = CHAIN_START
@@ -593,9 +619,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
             _nearest_hits(intersect16, scene, args, args_incoherent, ray, words, valid, motion, instance_faces,
                           lane_time, px, py, pz, dx, dy, dz, rest, rest_words, rest_valid, best_t, best_prim,
                           best_instance, best_u, best_v)
-            shadows = 0
             for lane in range(LANES):
-                shadow_valid[lane] = 0
                 if not alive[lane]:
                     continue
                 key = keys[start + lane]
@@ -625,7 +649,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                     w = 1.0
                     if not prev_delta[lane]:
                         w = power_heuristic(prev_pdf[lane], light_pmf[seen] * _area_pdf(
-                            light, px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], t))
+                            light, px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], t) * prev_count[lane])
                     r, g, b = _clamped(beta[lane, 0] * light[lt.RADIANCE] * w, beta[lane, 1] * light[lt.RADIANCE + 1] * w,
                                        beta[lane, 2] * light[lt.RADIANCE + 2] * w, limit)
                     _add(total, lane, r, g, b)
@@ -644,7 +668,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                         if not prev_delta[lane]:
                             w = power_heuristic(prev_pdf[lane], light_pmf[env_light] * _environment_pdf(
                                 env_marginal, env_conditional, env_func, env_mean, env_cos, env_sin,
-                                dx[lane], dy[lane], dz[lane]))
+                                dx[lane], dy[lane], dz[lane]) * prev_count[lane])
                         r, g, b = _clamped(beta[lane, 0] * lr * w, beta[lane, 1] * lg * w, beta[lane, 2] * lb * w,
                                            limit)
                         _add(total, lane, r, g, b)
@@ -683,7 +707,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                         if light >= 0:
                             w = power_heuristic(prev_pdf[lane], light_pmf[light] * _area_pdf(
                                 _light_at(light_rows, light, face_mover, moves, lane_time[lane], moved, lane),
-                                px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], t))
+                                px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], t) * prev_count[lane])
                     r, g, b = _clamped(beta[lane, 0] * er * w, beta[lane, 1] * eg * w, beta[lane, 2] * eb * w, limit)
                     _add(total, lane, r, g, b)
                     _add_path(paths, split, lane, _bucket(depth, category[lane]), r, g, b)
@@ -733,63 +757,82 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                         else:
                             _add_path(paths, split, lane, INDIRECT + category[lane], cr, cg, cb)
                 # the first vertex's light and BSDF points: per-pixel Owen-scrambled Sobol pairs
-                # (stratified over the pixel's samples), later vertices' hashed numbers
+                # (stratified over the pixel's samples; its light points over the pixel's
+                # samples and each sample's light samples), later vertices' hashed numbers
                 sample_index = samples[start + lane] if len(samples) else -1
-                if (depth == 0) & (sample_index >= 0) & (sample_index < SOBOL_LIMIT):
-                    pixel = np.uint64(pixels[start + lane])
-                    lu1, lu2 = sequence_pair(sobol_keys, 0, pixel, sample_index)
+                sobol = (depth == 0) & (sample_index >= 0) & (sample_index < SOBOL_LIMIT)
+                pixel = np.uint64(pixels[start + lane]) if sobol else np.uint64(0)
+                if sobol:
                     bu1, bu2 = sequence_pair(sobol_keys, 1, pixel, sample_index)
                 else:
-                    lu1, lu2 = uniform(key, base + _LIGHT_U1), uniform(key, base + _LIGHT_U2)
                     bu1, bu2 = uniform(key, base + _BSDF_U1), uniform(key, base + _BSDF_U2)
-                # next-event estimation
+                # next-event estimation: light_samples estimates at the first vertex that can
+                # take light (reached from the camera through delta lobes only), one at later
+                # vertices; each weighted against the one BSDF sample by the power heuristic
+                # with the strategies' sample counts (Veach 1997, 9.2.2) and divided by their number
+                rounds = light_samples if chain[lane] == CHAIN_START else 1
+                prev_count[lane] = np.float64(rounds)
                 if follow and has_lights:
-                    chosen = alias_sample(light_probability, light_alias, uniform(key, base + _LIGHT_CHOICE))
-                    # an emitter on a moving object where it is at the lane's time
-                    light = _light_at(light_rows, chosen, face_mover, moves, lane_time[lane], moved, lane)
-                    wx, wy, wz, distance, lr, lg, lb, pdf_li, delta = sample_li(
-                        light, env, light_texels, light_descriptors, hx, hy, hz, lu1, lu2)
-                    if light[0] == lt.TRIANGLE:
-                        # the emitter's own (textured) radiance at the sampled point
-                        lr, lg, lb = triangle_light_emission(surface, geometry, light, lu1, lu2)
-                    if (pdf_li > 0.0) & ((lr > 0.0) | (lg > 0.0) | (lb > 0.0)):
+                    count_f = np.float64(rounds)
+                    nee_limit = (clamp if depth > 0 else 0.0) / count_f
+                    for k in range(rounds):
+                        light_key = key if k == 0 else mix64(key + np.uint64(k) * _LIGHT_ROUND)
+                        if sobol and sample_index * light_samples + k < SOBOL_LIMIT:
+                            lu1, lu2 = sequence_ray_pair(sobol_keys, 0, pixel, sample_index, k, light_samples,
+                                                         light_block)
+                        else:
+                            lu1, lu2 = uniform(light_key, base + _LIGHT_U1), uniform(light_key, base + _LIGHT_U2)
+                        chosen = alias_sample(light_probability, light_alias, uniform(light_key, base + _LIGHT_CHOICE))
+                        # an emitter on a moving object where it is at the lane's time
+                        light = _light_at(light_rows, chosen, face_mover, moves, lane_time[lane], moved, lane)
+                        wx, wy, wz, distance, lr, lg, lb, pdf_li, delta = sample_li(
+                            light, env, light_texels, light_descriptors, hx, hy, hz, lu1, lu2)
+                        if light[0] == lt.TRIANGLE:
+                            # the emitter's own (textured) radiance at the sampled point
+                            lr, lg, lb = triangle_light_emission(surface, geometry, light, lu1, lu2)
+                        if not ((pdf_li > 0.0) & ((lr > 0.0) | (lg > 0.0) | (lb > 0.0))):
+                            continue
                         side = (gx * wx + gy * wy) + gz * wz
-                        if transmissive[mat] or side > 0.0:
-                            lix = (tx * wx + ty * wy) + tz * wz
-                            liy = (sx * wx + sy * wy) + sz * wz
-                            liz = (nx * wx + ny * wy) + nz * wz
-                            fr, fg, fbb, pdf_bsdf = models.evaluate(tag, bsdf_params, bsdf_row, albedo_table, lox, loy, loz,
-                                                                    lix, liy, liz)
-                            if (fr > 0.0) | (fg > 0.0) | (fbb > 0.0):
-                                p_light = light_pmf[chosen] * pdf_li
-                                w = 1.0 if delta else power_heuristic(p_light, pdf_bsdf)
-                                scale = w / p_light
-                                pending[lane, 0], pending[lane, 1], pending[lane, 2] = _clamped(
-                                    beta[lane, 0] * fr * lr * scale, beta[lane, 1] * fg * lg * scale,
-                                    beta[lane, 2] * fbb * lb * scale, clamp if depth > 0 else 0.0)
-                                if split:
-                                    pending_paths[lane, :, :] = 0.0
-                                    if depth == 0:
-                                        # split by the part of the BSDF the light comes through
-                                        dr, dg, db, ur, ug, ub = models.parts(tag, bsdf_params, bsdf_row, albedo_table,
-                                                                              lox, loy, loz, lix, liy, liz)
-                                        cr, cg, cb = (beta[lane, 0] * lr * scale, beta[lane, 1] * lg * scale,
-                                                      beta[lane, 2] * lb * scale)
-                                        _add_path(pending_paths, split, lane, DIRECT + DIFFUSE_PATH,
-                                                  dr * cr, dg * cg, db * cb)
-                                        _add_path(pending_paths, split, lane, DIRECT + TRANSMISSION_PATH,
-                                                  ur * cr, ug * cg, ub * cb)
-                                        _add_path(pending_paths, split, lane, DIRECT + GLOSSY_PATH,
-                                                  pending[lane, 0] - (dr + ur) * cr, pending[lane, 1] - (dg + ug) * cg,
-                                                  pending[lane, 2] - (db + ub) * cb)
-                                    else:
-                                        _add_path(pending_paths, split, lane, INDIRECT + category[lane],
-                                                  pending[lane, 0], pending[lane, 1], pending[lane, 2])
-                                qx, qy, qz = leave_surface(hx, hy, hz, gx, gy, gz, wx, wy, wz, offset_scale)
-                                reach[lane] = F32_MAX if math.isinf(distance) else distance * _SHADOW_SHORTEN
-                                set_lane(shadow, shadow_words, lane, qx, qy, qz, wx, wy, wz, np.float32(reach[lane]))
-                                shadow_valid[lane] = -1
-                                shadows += 1
+                        if not (transmissive[mat] or side > 0.0):
+                            continue
+                        lix = (tx * wx + ty * wy) + tz * wz
+                        liy = (sx * wx + sy * wy) + sz * wz
+                        liz = (nx * wx + ny * wy) + nz * wz
+                        fr, fg, fbb, pdf_bsdf = models.evaluate(tag, bsdf_params, bsdf_row, albedo_table, lox, loy, loz,
+                                                                lix, liy, liz)
+                        if not ((fr > 0.0) | (fg > 0.0) | (fbb > 0.0)):
+                            continue
+                        p_light = light_pmf[chosen] * pdf_li
+                        w = 1.0 if delta else power_heuristic(p_light * count_f, pdf_bsdf)
+                        scale = w / (p_light * count_f)
+                        pending[k, lane, 0], pending[k, lane, 1], pending[k, lane, 2] = _clamped(
+                            beta[lane, 0] * fr * lr * scale, beta[lane, 1] * fg * lg * scale,
+                            beta[lane, 2] * fbb * lb * scale, nee_limit)
+                        if split:
+                            pending_paths[k, lane, :, :] = 0.0
+                            if depth == 0:
+                                # split by the part of the BSDF the light comes through
+                                dr, dg, db, ur, ug, ub = models.parts(tag, bsdf_params, bsdf_row, albedo_table,
+                                                                      lox, loy, loz, lix, liy, liz)
+                                cr, cg, cb = (beta[lane, 0] * lr * scale, beta[lane, 1] * lg * scale,
+                                              beta[lane, 2] * lb * scale)
+                                _add_path(pending_paths[k], split, lane, DIRECT + DIFFUSE_PATH,
+                                          dr * cr, dg * cg, db * cb)
+                                _add_path(pending_paths[k], split, lane, DIRECT + TRANSMISSION_PATH,
+                                          ur * cr, ug * cg, ub * cb)
+                                _add_path(pending_paths[k], split, lane, DIRECT + GLOSSY_PATH,
+                                          pending[k, lane, 0] - (dr + ur) * cr, pending[k, lane, 1] - (dg + ug) * cg,
+                                          pending[k, lane, 2] - (db + ub) * cb)
+                            else:
+                                _add_path(pending_paths[k], split, lane, INDIRECT + category[lane],
+                                          pending[k, lane, 0], pending[k, lane, 1], pending[k, lane, 2])
+                        # its shadow ray, traced with the packet's others of this light sample
+                        qx, qy, qz = leave_surface(hx, hy, hz, gx, gy, gz, wx, wy, wz, offset_scale)
+                        ray_k = shadow_rays[k, lane]
+                        ray_k[0], ray_k[1], ray_k[2], ray_k[3], ray_k[4], ray_k[5] = qx, qy, qz, wx, wy, wz
+                        ray_k[6] = F32_MAX if math.isinf(distance) else distance * _SHADOW_SHORTEN
+                        shadow_set[k, lane] = True
+                        shadow_count[k] += 1
                 if not follow:
                     alive[lane] = False
                     continue
@@ -844,18 +887,30 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 px[lane], py[lane], pz[lane] = leave_surface(hx, hy, hz, gx, gy, gz, ndx, ndy, ndz, offset_scale)
                 dx[lane], dy[lane], dz[lane] = ndx, ndy, ndz
                 lane_depth[lane] = depth + 1
-            if shadows:
-                counts[SHADOW] += shadows
+            # the shadow rays: one packet per light sample of the vertices
+            for k in range(light_samples):
+                if shadow_count[k] == 0:
+                    continue
+                counts[SHADOW] += shadow_count[k]
+                shadow_count[k] = 0
+                for lane in range(LANES):
+                    shadow_valid[lane] = 0
+                    if shadow_set[k, lane]:
+                        shadow_set[k, lane] = False
+                        ray_k = shadow_rays[k, lane]
+                        reach[lane] = ray_k[6]
+                        set_lane(shadow, shadow_words, lane, ray_k[0], ray_k[1], ray_k[2], ray_k[3], ray_k[4],
+                                 ray_k[5], np.float32(reach[lane]))
+                        shadow_valid[lane] = -1
                 if cutouts:
                     _shadows_through_cutouts(intersect16, scene, args_incoherent, shadow, shadow_words, shadow_valid,
                                              geometry, surface, offset_scale, keys, start, lane_depth, reach, counts,
                                              motion, lane_time, segment, rest, rest_words, rest_valid, best_t,
-                                             best_prim, best_u, best_v)
-                    _accept_shadows(shadow_valid, pending, pending_paths, split, total, paths)
+                                             best_prim, best_u, best_v, (k + 1) * MAX_LAYERS)
                 else:
                     _occluded(occluded16, scene, args_incoherent, shadow, shadow_valid, motion, lane_time, reach,
                               rest, rest_words, rest_valid)
-                    _accept_shadows(shadow_valid, pending, pending_paths, split, total, paths)
+                _accept_shadows(shadow_valid, pending[k], pending_paths[k if split else 0], split, total, paths)
         for lane in range(count):
             radiance[start + lane, 0] = total[lane, 0]
             radiance[start + lane, 1] = total[lane, 1]
@@ -903,7 +958,7 @@ def _path_signatures():
     bsdf_args = (types.int64, rows, types.int64, numba.typeof(energy))
     evaluate = bsdf_args + (f64,) * 6
     sample = bsdf_args + (f64,) * 6
-    options = (-1, 3, 0.0, np.float32(1.0), True, False, False, z(4, np.int64))
+    options = (-1, 3, 0.0, np.float32(1.0), True, False, False, z(4, np.int64), 1, 0)
     motion = (True, z(0, np.int64), z(0, np.int64), z(0, np.int64), z(1, np.int64), z((0, 10)), z(0, np.int64))
     instances = no_instances()
     photon_map = empty_photon_map(1)

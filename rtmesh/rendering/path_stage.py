@@ -37,7 +37,7 @@ from rtmesh.rendering.settings import RenderSettings
 from rtmesh.rendering.surface_textures import corner_and_edges, face_tangents
 from rtmesh.sampling.hashing import mix64, path_key
 from rtmesh.sampling.patterns import Dim
-from rtmesh.sampling.zsobol import sequence_keys
+from rtmesh.sampling.zsobol import block_bits, sequence_keys
 
 log = logging.getLogger(__name__)
 
@@ -221,12 +221,10 @@ class PathStage:
         ignored = [name for name, unused in (
             ("ambient", bool((np.asarray(scene.ambient) > 0).any())),
             ("cutoff", settings.cutoff != RenderSettings.cutoff),
-            ("ao_samples", settings.ao_samples > 0 and "ao" not in settings.passes),
-            ("light_samples", settings.light_samples != RenderSettings.light_samples)) if unused]
+            ("ao_samples", settings.ao_samples > 0 and "ao" not in settings.passes)) if unused]
         if ignored:
-            log.warning("integrator 'path' ignores %s (it has no ambient term, ends paths by Russian roulette, "
-                        "takes one light sample a vertex and its light from the lights and the background)",
-                        ", ".join(ignored))
+            log.warning("integrator 'path' ignores %s (it has no ambient term, ends paths by Russian roulette "
+                        "and takes its light from the lights and the background)", ", ".join(ignored))
         if it.path_tables is None:
             # formed with the integrator's first view; views made by with_view share them
             it.path_tables = scene_tables(scene, it.accel)
@@ -311,7 +309,8 @@ class PathStage:
         intersect16, occluded16, handle = self._queries
         split = passes is not None and any(passes.wants(name) for name in LIGHT_PATH_PASSES)
         options = (s.max_depth, RR_DEPTH, float(s.clamp), np.float32(it.offset_scale),
-                   not it.background.transparent, self.cutouts, split, self._camera_media)
+                   not it.background.transparent, self.cutouts, split, self._camera_media, int(s.light_samples),
+                   block_bits(s.spp, s.light_samples))
         light_paths = np.zeros((n if split else 0, LIGHT_PATHS, 3))
         trace_paths(intersect16, occluded16, handle, kernel_input(origins, np.float64),
                     kernel_input(directions, np.float64), keys, *self._sobol(pixel, sample),

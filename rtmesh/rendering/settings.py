@@ -21,6 +21,9 @@ CAUSTICS = ("auto", "photons", "off")
 MAX_PHOTONS = 1 << 26
 # max_depth when it is not given: Whitted's bounces; the path integrator's "unlimited"
 DEFAULT_MAX_DEPTH = {"whitted": 5, "path": -1}
+# light_samples when it is not given: Whitted's shadow rays per area light; the path
+# integrator's next-event estimates at a path's first vertex (one, as Mitsuba and pbrt-v4)
+DEFAULT_LIGHT_SAMPLES = {"whitted": 4, "path": 1}
 PASSES = PASS_NAMES
 # adaptive sampling's cap on samples per pixel when max_spp is not given
 DEFAULT_MAX_SPP = 1024
@@ -76,9 +79,14 @@ class RenderSettings:
         Ambient-occlusion rays per hit; 0 turns AO off (unless the ``ao`` pass is asked for).
     ao_distance : float or None
         Occluders farther than this do not count; None means 0.2 x the scene's diagonal.
-    light_samples : int
-        Shadow rays per (hit, area light) toward stratified points on the light (soft
-        shadows); point, spot and directional lights always take one.
+    light_samples : int or None
+        Under ``whitted``, shadow rays per (hit, area light) toward stratified points on the
+        light (soft shadows; point, spot and directional lights always take one; default 4).
+        Under ``path``, next-event estimates at a path's first vertex with a non-delta part
+        (the camera ray's hit, or what it sees through mirrors and smooth glass): each a
+        light chosen by power and a point on it, weighted against the BSDF sample by the
+        power heuristic, their sum divided by this (default 1; later vertices take one).
+        None takes the integrator's default when validated.
     passes : tuple of str
         Extra output passes (see :data:`rtmesh.io.passes.REGISTRY`).
     exposure : float
@@ -126,7 +134,7 @@ class RenderSettings:
     fresnel: str = "schlick"
     ao_samples: int = 0
     ao_distance: float | None = None
-    light_samples: int = 4
+    light_samples: int | None = None
     passes: tuple = ()
     exposure: float = 0.0
     tonemap: str = "reinhard"
@@ -154,6 +162,8 @@ class RenderSettings:
 
         if self.max_depth is None and self.integrator in INTEGRATORS:
             self.max_depth = DEFAULT_MAX_DEPTH[self.integrator]
+        if self.light_samples is None and self.integrator in INTEGRATORS:
+            self.light_samples = DEFAULT_LIGHT_SAMPLES[self.integrator]
         lowest_depth = -1 if self.integrator == "path" else 0
         checks = [
             ("integrator", self.integrator in INTEGRATORS, f"one of {', '.join(INTEGRATORS)}"),

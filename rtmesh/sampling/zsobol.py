@@ -316,3 +316,20 @@ def sequence_pair(keys, which, pixel, sample):
         return zsobol_pair(key, morton_code(np.uint64(pixel), keys[WIDTH]), np.uint64(sample), np.uint64(0),
                            log2_spp, _ONE, keys[LEVELS], log2_spp)
     return sobol_pair(pixel_sequence(key, np.uint64(pixel)), sample)
+
+
+@row
+def sequence_ray_pair(keys, which, pixel, sample, ray, rays, log2_block):
+    """Point ``(x, y)`` of ray ``ray`` of the ``rays`` a pixel sample sends (int64 all) in
+    the dimension ``which`` of a :func:`sequence_keys` record: index ``sample * rays + ray``
+    of the pixel's own sequence (sobol), or in-pixel index ``sample * rays + ray`` of its
+    block of ``2^log2_block`` points (:func:`block_bits` of ``spp`` and ``rays``) of the
+    image's Morton-ordered one (zsobol), so the ``spp * rays`` points of a pixel form one
+    stratified set and the rays of one sample an aligned block of it.  One ray
+    (``ray`` 0, ``rays`` 1, ``log2_block`` the record's ``log2(spp)``) is
+    :func:`sequence_pair`'s point."""
+    key = keys[4 + which]
+    if keys[ZORDER] == _ONE:
+        return zsobol_pair(key, morton_code(np.uint64(pixel), keys[WIDTH]), np.uint64(sample), np.uint64(ray),
+                           keys[LOG2_SPP], np.uint64(rays), keys[LEVELS], np.uint64(log2_block))
+    return sobol_pair(pixel_sequence(key, np.uint64(pixel)), sample * rays + ray)

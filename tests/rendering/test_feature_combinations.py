@@ -51,7 +51,6 @@ from rtmesh.lights.point_lights import DirectionalLight, PointLight, SpotLight
 from rtmesh.lights.projector import ProjectorLight
 from rtmesh.materials.table import Material, as_colour
 from rtmesh.rendering.integrator import Integrator
-from rtmesh.rendering.settings import RenderSettings
 from rtmesh.sampling.patterns import SAMPLERS
 from rtmesh.scene.background import EnvironmentBackground, GradientBackground, TransparentBackground
 from rtmesh.scene.camera import Camera
@@ -244,9 +243,10 @@ def scene_descriptions(draw):
     integrator = draw(st.sampled_from(["whitted", "path"]))
     d["settings"]["integrator"] = integrator
     if integrator == "path":
-        # the keys only Whitted reads (path warns that it ignores them)
+        # the keys only Whitted reads (path warns that it ignores them); light_samples is
+        # read by both
         d["ambient"] = 0.0
-        d["settings"].update(cutoff=1e-3, ao_samples=0, light_samples=RenderSettings.light_samples)
+        d["settings"].update(cutoff=1e-3, ao_samples=0)
     if integrator == "whitted":
         # the light-path passes exist under the path integrator only
         d["settings"]["passes"] = tuple(p for p in d["settings"]["passes"] if p not in LIGHT_PATH_PASSES)

@@ -15,7 +15,8 @@ from rtmesh.lights.point_lights import PointLight
 from rtmesh.materials.table import Material
 from rtmesh.rendering.settings import RenderSettings
 from rtmesh.sampling.patterns import Dim, decorrelated_points, dimension_key, pixel_offsets
-from rtmesh.sampling.zsobol import PERMUTATIONS, sequence_keys, sequence_pair, zsobol_index
+from rtmesh.sampling.zsobol import (PERMUTATIONS, block_bits, sequence_keys, sequence_pair, sequence_ray_pair,
+                                    zsobol_index)
 from rtmesh.scene.camera import Camera
 from rtmesh.scene.model import Scene
 
@@ -182,6 +183,34 @@ def test_path_kernel_pairs_are_the_samplers_points(sampler):
         expected = decorrelated_points(sampler, 9, pixel, sample, spp, dimension, resolution=(width, height))
         np.testing.assert_array_equal(_path_pairs(keys, which, pixel, sample), expected)
     assert keys[4] == dimension_key(9, Dim.PATH_LIGHT)
+
+
+@numba.njit
+def _path_ray_pairs(keys, which, pixel, sample, ray, rays, log2_block):
+    out = np.empty((len(pixel), 2))
+    for i in range(len(pixel)):
+        out[i, 0], out[i, 1] = sequence_ray_pair(keys, which, np.uint64(pixel[i]), sample[i], ray, rays, log2_block)
+    return out
+
+
+@pytest.mark.parametrize("sampler", ["sobol", "zsobol"])
+@pytest.mark.parametrize("rays", [1, 3, 4])
+def test_path_kernel_light_samples_are_the_samplers_rays_of_a_hit(sampler, rays):
+    # the path integrator's first-vertex light samples (light_samples = rays) are the
+    # sampler's points of several rays a hit, as the Whitted stages' shadow rays; one ray
+    # is sequence_pair's point
+    rng = np.random.default_rng(2)
+    width, height, spp = 50, 30, 8
+    pixel, sample = rng.integers(0, width * height, 300), rng.integers(0, 3 * spp, 300)
+    keys = sequence_keys(sampler, 9, (Dim.PATH_LIGHT, Dim.PATH_BSDF), spp, (width, height))
+    for ray in range(rays):
+        expected = decorrelated_points(sampler, 9, pixel, sample, spp, Dim.PATH_LIGHT, ray=ray, rays=rays,
+                                       resolution=(width, height))
+        got = _path_ray_pairs(keys, 0, pixel, sample, ray, rays, block_bits(spp, rays))
+        np.testing.assert_array_equal(got, expected)
+    if rays == 1:
+        np.testing.assert_array_equal(_path_ray_pairs(keys, 0, pixel, sample, 0, 1, block_bits(spp)),
+                                      _path_pairs(keys, 0, pixel, sample))
 
 
 def test_spp_not_a_power_of_two_rounds_up_with_a_warning(caplog):
