@@ -21,7 +21,11 @@ lane and vertex:
    ``light_samples``, and their shadow rays in one packet per light sample (emission a
    BSDF sample of that vertex meets is weighted with the same counts);
 3. a BSDF sample continues the path (:func:`rtmesh.materials.models.sample`); after
-   ``rr_depth`` vertices Russian roulette on the throughput's largest channel ends it.
+   ``rr_depth`` vertices Russian roulette on the throughput's largest channel ends it (the
+   throughput without the radiance scaling of the refractions so far, pbrt-v4's ``etaScale``).
+
+The packet queries (nearest hits, shadow rays, moving objects, placements, cut-out layers)
+are :mod:`rtmesh.rendering.path_packets`' rows, the light rows :mod:`rtmesh.rendering.path_lights`'.
 
 ``max_depth`` counts segments after the camera ray (1: direct light only; -1: unlimited,
 Russian roulette ends paths).  Every random number is :func:`rtmesh.sampling.hashing.uniform`
@@ -47,8 +51,8 @@ Nested media: each lane carries a stack of the transmissive materials it is insi
 transmissive surface (its front) pushes the material, leaving it pops it; the interface's
 index ratio is the material's index over that of the medium on the other side (so glass in
 water refracts with 1.5 / 1.33), set in the hit's parameter row (the model's ``ior`` slot);
-Beer-Lambert absorption is the innermost medium's.  (Coincident "twin" faces are not
-merged as the Whitted path does.)
+Beer-Lambert absorption is the innermost medium's.  Touching media (coincident "twin"
+faces) are crossed together, as the Whitted path does (:func:`rtmesh.rendering.path_surfaces.twin_material`).
 ``motion = (static, static_faces, movers, face_maps, face_offsets, moves, face_mover)``:
 whether the static scene exists (the packet queries' ``scene`` is its handle), its faces'
 global indices (empty: the identity), the moving objects' Embree scenes (k,) int64, their
@@ -60,7 +64,7 @@ and its point and normals are carried to the lane's time (as
 :class:`rtmesh.geometry.motion.MotionAccel`).  The light table holds emissive triangles in
 their rest pose: next-event estimation toward one of a moving object, and the density a
 BSDF sample meeting it is weighted with, take its row carried to the lane's time
-(:func:`_light_at`).
+(:func:`light_at`).
 ``instances = (face_offset, to_world, normal_to_world)``: meshes placed by an Embree
 instance array (:mod:`rtmesh.scene.instances`; a hit's ``instPrimID`` is the placement):
 ``face_offset`` (k,) each placement's first face in the per-face tables (its prototype's),
@@ -86,20 +90,19 @@ import numpy as np
 
 from rtmesh.core.compile_ahead import KernelGroup
 from rtmesh.core.compiled import inline_row, kernel, row
-from rtmesh.geometry.embree_packets import (DEFAULT_TFAR, GEOM_ID, INST_ID, INST_PRIM_ID, INVALID_ID, LANES, PRIM_ID,
-                                            RAYHIT_WORDS, RTC_RAY_QUERY_FLAG_COHERENT, RTC_RAY_QUERY_FLAG_INCOHERENT,
-                                            TFAR, U, V, packet_buffers, query_arguments)
-from rtmesh.geometry.float32_rays import F32_MAX, offset_origin
+from rtmesh.geometry.embree_packets import (DEFAULT_TFAR, LANES, RAYHIT_WORDS, RTC_RAY_QUERY_FLAG_COHERENT,
+                                            RTC_RAY_QUERY_FLAG_INCOHERENT, packet_buffers, query_arguments)
+from rtmesh.geometry.float32_rays import F32_MAX
 from rtmesh.io.passes import LIGHT_PATH_PASSES
 from rtmesh.lights import light_table as lt
 from rtmesh.materials import lobes, models
 from rtmesh.rendering.photon_kernel import ALL_PARTS, DIFFUSE_PART, TRANSMITTED_PART, empty_photon_map, gather
-from rtmesh.rendering.path_surfaces import alias_sample, clear_hit, load_lanes, set_lane
+from rtmesh.rendering.path_lights import area_pdf, environment_pdf, hit_analytic, light_at, sample_li
+from rtmesh.rendering.path_packets import (BOUNCE, BSDF_U1, BSDF_U2, CAMERA, COVERAGE, DIMENSIONS_PER_VERTEX, LIGHT_CHOICE,
+                                           LIGHT_U1, LIGHT_U2, LOBE, MAX_LAYERS, ROULETTE, SHADOW, layer_coin,
+                                           mover_to_world, nearest_hits, occluded, placed, shadows_through_cutouts)
+from rtmesh.rendering.path_surfaces import alias_sample, load_lanes, set_lane
 from rtmesh.rendering.path_surfaces import environment_radiance as _environment_radiance
-from rtmesh.rendering.path_surfaces import environment_sample as _environment_sample
-from rtmesh.rendering.path_surfaces import illuminate as _illuminate_row
-from rtmesh.rendering.path_surfaces import projector_incident as _projector_incident
-from rtmesh.rendering.path_surfaces import sample_area_point as _sample_area_point
 from rtmesh.rendering.path_surfaces import (cross_interface, twin_material, hit_frame, hit_parameters, is_transparent,
                                             leave_surface, surface_point, textured_materials, to_world,
                                             triangle_light_emission)
@@ -107,24 +110,9 @@ from rtmesh.sampling.hashing import mix64, uniform
 from rtmesh.sampling.mis import power_heuristic
 from rtmesh.sampling.zsobol import sequence_pair, sequence_ray_pair
 
-# The rows taking arrays that the kernel calls per lane, inlined by numba: a compiled call that
-# passes arrays takes and releases a reference to each (atomic instructions), and LLVM stops
-# inlining small rows into a function this large (those calls doubled the kernel's time);
-# rows of numbers only stay calls (inlining them too cost compile time, no speed)
-_area_pdf = inline_row(lt.area_pdf.py_func)
-_hit_analytic = inline_row(lt.hit_analytic.py_func)
-_environment_pdf = inline_row(lt.environment_pdf.py_func)
-
-DIMENSIONS_PER_VERTEX = 8
-# dimensions of a vertex, after DIMENSIONS_PER_VERTEX * depth
-_LIGHT_CHOICE, _LIGHT_U1, _LIGHT_U2, _LOBE, _BSDF_U1, _BSDF_U2, _ROULETTE, _COVERAGE = range(8)
 # shadow rays toward a point stop this fraction short of it, so they do not meet the
 # light's own surface (an emissive triangle) in float32
 _SHADOW_SHORTEN = 1.0 - 1e-4
-# cut-out layers a ray passes before the next surface counts as opaque
-MAX_LAYERS = 64
-# ray counters
-CAMERA, BOUNCE, SHADOW = 0, 1, 2
 # Sobol sequences hold 2**32 points; later samples take hashed numbers
 SOBOL_LIMIT = 1 << 32
 # the key of light sample k > 0 of a vertex is mix64(key + k * _LIGHT_ROUND) (sample 0 takes
@@ -167,154 +155,6 @@ def _clamped(r, g, b, limit):
     return r, g, b
 
 
-@row
-def _layer_coin(key, depth, layer, dimension):
-    """The coin of an alpha-blend layer: one number per (vertex, layer)."""
-    return uniform(mix64(key ^ np.uint64(layer + 1)), DIMENSIONS_PER_VERTEX * depth + dimension)
-
-
-@inline_row
-def sample_li(light, env, texels, descriptors, px, py, pz, u1, u2):
-    """One light's ``sample_li`` at a point: ``(wx, wy, wz, distance, Lr, Lg, Lb, pdf, delta)``
-    with the incident radiance (delta lights: their incident term) and the solid-angle density
-    (delta lights: 1); ``pdf`` 0 for a failed sample.  ``texels, descriptors``: the
-    projectors' images (the ``lights`` record's atlas)."""
-    kind = light[0]
-    if kind < lt.QUAD:
-        wx, wy, wz, distance, er, eg, eb = _illuminate_row(light, px, py, pz)
-        return wx, wy, wz, distance, er, eg, eb, 1.0, True
-    if kind == lt.PROJECTOR:
-        wx, wy, wz, distance, er, eg, eb = _projector_incident(light, texels, descriptors, px, py, pz)
-        return wx, wy, wz, distance, er, eg, eb, 1.0, True
-    if kind == lt.ENVIRONMENT:
-        (pixels, marginal, conditional, func, mean, cos_r, sin_r) = env
-        dx, dy, dz, pdf = _environment_sample(marginal, conditional, func, mean, cos_r, sin_r, u1, u2)
-        if not (pdf > 0.0 and pdf < math.inf):
-            return dx, dy, dz, math.inf, 0.0, 0.0, 0.0, 0.0, False
-        lr, lg, lb = _environment_radiance(pixels, cos_r, sin_r, dx, dy, dz)
-        return dx, dy, dz, math.inf, lr, lg, lb, pdf, False
-    qx, qy, qz = _sample_area_point(light, u1, u2)
-    dx, dy, dz = qx - px, qy - py, qz - pz
-    distance = math.sqrt((dx * dx + dy * dy) + dz * dz)
-    if not distance > 0.0:
-        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, False
-    dx, dy, dz = dx / distance, dy / distance, dz / distance
-    pdf = _area_pdf(light, px, py, pz, dx, dy, dz, distance)
-    if not pdf > 0.0:
-        return dx, dy, dz, distance, 0.0, 0.0, 0.0, 0.0, False
-    return dx, dy, dz, distance, light[lt.RADIANCE], light[lt.RADIANCE + 1], light[lt.RADIANCE + 2], pdf, False
-
-
-@row
-def _rotate(vx, vy, vz, ax, ay, az, angle):
-    """``v`` rotated about the unit axis ``a`` by ``angle`` radians (Rodrigues, as
-    :func:`rtmesh.geometry.motion.rotate`)."""
-    cos, sin = math.cos(angle), math.sin(angle)
-    cx, cy, cz = ay * vz - az * vy, az * vx - ax * vz, ax * vy - ay * vx
-    along = ((vx * ax + vy * ay) + vz * az) * (1.0 - cos)
-    return vx * cos + cx * sin + ax * along, vy * cos + cy * sin + ay * along, vz * cos + cz * sin + az * along
-
-
-@inline_row
-def _to_rest(moves, j, time, px, py, pz, dx, dy, dz):
-    """A world ray at ``time`` in mover ``j``'s rest frame (origin and direction)."""
-    tx, ty, tz = moves[j, 0], moves[j, 1], moves[j, 2]
-    ax, ay, az, radians = moves[j, 3], moves[j, 4], moves[j, 5], moves[j, 6]
-    cx, cy, cz = moves[j, 7], moves[j, 8], moves[j, 9]
-    px, py, pz = px - time * tx, py - time * ty, pz - time * tz
-    if radians == 0.0:
-        return px, py, pz, dx, dy, dz
-    angle = -radians * time
-    qx, qy, qz = _rotate(px - cx, py - cy, pz - cz, ax, ay, az, angle)
-    ex, ey, ez = _rotate(dx, dy, dz, ax, ay, az, angle)
-    return qx + cx, qy + cy, qz + cz, ex, ey, ez
-
-
-@inline_row
-def _to_world(moves, j, time, px, py, pz, gx, gy, gz, nx, ny, nz):
-    """A rest-pose surface point and its two normals carried to ``time`` by mover ``j``."""
-    ax, ay, az, radians = moves[j, 3], moves[j, 4], moves[j, 5], moves[j, 6]
-    if radians != 0.0:
-        angle = radians * time
-        cx, cy, cz = moves[j, 7], moves[j, 8], moves[j, 9]
-        px, py, pz = _rotate(px - cx, py - cy, pz - cz, ax, ay, az, angle)
-        px, py, pz = px + cx, py + cy, pz + cz
-        gx, gy, gz = _rotate(gx, gy, gz, ax, ay, az, angle)
-        nx, ny, nz = _rotate(nx, ny, nz, ax, ay, az, angle)
-    return (px + time * moves[j, 0], py + time * moves[j, 1], pz + time * moves[j, 2], gx, gy, gz, nx, ny, nz)
-
-
-@row
-def _nearest_on_movers(intersect16, motion, lane_time, valid, ox, oy, oz, ex, ey, ez, rest, rest_words, rest_valid,
-                       args, best_t, best_prim, best_u, best_v):
-    """Each valid lane's ray (world origin ``o`` and direction ``e``, (LANES,) float64 each)
-    against every moving object, traced in the object's rest pose at the lane's time up to
-    ``best_t``: a nearer hit replaces the lane's ``best_t``, ``best_prim`` (the global face)
-    and ``best_u, best_v`` (barycentrics on the rest-pose triangle); the static scene's hit
-    already there wins ties."""
-    movers, face_maps, face_offsets, moves = motion[2], motion[3], motion[4], motion[5]
-    for j in range(len(movers)):
-        for lane in range(LANES):
-            rest_valid[lane] = valid[lane]
-            if valid[lane]:
-                qx, qy, qz, fx, fy, fz = _to_rest(moves, j, lane_time[lane], ox[lane], oy[lane], oz[lane], ex[lane],
-                                                  ey[lane], ez[lane])
-                set_lane(rest, rest_words, lane, qx, qy, qz, fx, fy, fz,
-                         np.float32(min(best_t[lane], np.float64(DEFAULT_TFAR))))
-                clear_hit(rest_words, lane)
-        intersect16(rest_valid.ctypes.data, movers[j], rest.ctypes.data, args.ctypes.data)
-        for lane in range(LANES):
-            if rest_valid[lane] and rest_words[GEOM_ID * LANES + lane] != INVALID_ID:
-                tm = np.float64(rest[TFAR * LANES + lane])
-                if tm < best_t[lane]:
-                    best_t[lane] = tm
-                    best_prim[lane] = face_maps[face_offsets[j] + rest_words[PRIM_ID * LANES + lane]]
-                    best_u[lane] = np.float64(rest[U * LANES + lane])
-                    best_v[lane] = np.float64(rest[V * LANES + lane])
-
-
-@inline_row
-def _light_at(light_rows, index, face_mover, moves, time, moved, lane):
-    """Light ``index``'s row at ``time``: its own row, or for an emissive triangle of a moving
-    object the row carried by the object's motion to ``time`` (written into ``moved[lane]``:
-    corner, edges and normal; the motion is rigid, so the area, the radiance and the face
-    stay)."""
-    light = light_rows[index]
-    if light[0] != lt.TRIANGLE or not len(face_mover):
-        return light
-    j = face_mover[np.int64(light[lt.FACE])]
-    if j < 0:
-        return light
-    out = moved[lane]
-    for k in range(lt.WIDTH):
-        out[k] = light[k]
-    # the corner as a point, the edges and the normal as directions
-    out[1], out[2], out[3], out[10], out[11], out[12], out[13], out[14], out[15] = _to_world(
-        moves, j, time, light[1], light[2], light[3], light[10], light[11], light[12], light[13], light[14],
-        light[15])
-    _, _, _, out[4], out[5], out[6], _, _, _ = _to_world(moves, j, time, 0.0, 0.0, 0.0, light[4], light[5], light[6],
-                                                         light[4], light[5], light[6])
-    return out
-
-
-@inline_row
-def _placed(to_world, normal_to_world, j, px, py, pz, gx, gy, gz, nx, ny, nz):
-    """A prototype's surface point and its two unit normals carried to the world by
-    placement ``j`` (see the module notes on ``instances``)."""
-    a = to_world[j]
-    wx = ((a[0] * px + a[1] * py) + a[2] * pz) + a[9]
-    wy = ((a[3] * px + a[4] * py) + a[5] * pz) + a[10]
-    wz = ((a[6] * px + a[7] * py) + a[8] * pz) + a[11]
-    b = normal_to_world[j]
-    gx, gy, gz = (b[0] * gx + b[1] * gy) + b[2] * gz, (b[3] * gx + b[4] * gy) + b[5] * gz, \
-        (b[6] * gx + b[7] * gy) + b[8] * gz
-    nx, ny, nz = (b[0] * nx + b[1] * ny) + b[2] * nz, (b[3] * nx + b[4] * ny) + b[5] * nz, \
-        (b[6] * nx + b[7] * ny) + b[8] * nz
-    g = math.sqrt((gx * gx + gy * gy) + gz * gz)
-    n = math.sqrt((nx * nx + ny * ny) + nz * nz)
-    return wx, wy, wz, gx / g, gy / g, gz / g, nx / n, ny / n, nz / n
-
-
 @inline_row
 def _add(total, lane, r, g, b):
     total[lane, 0] += r
@@ -342,140 +182,6 @@ def _accept_shadows(shadow_valid, pending, pending_paths, split, total, paths):
                 for bucket in range(LIGHT_PATHS):
                     for c in range(3):
                         paths[lane, bucket, c] += pending_paths[lane, bucket, c]
-
-
-@row
-def _shadows_through_cutouts(intersect16, scene, args, shadow, shadow_words, shadow_valid, geometry, surface,
-                             offset_scale, keys, start, lane_depth, reach, counts, motion, lane_time, segment, rest,
-                             rest_words, rest_valid, best_t, best_prim, best_u, best_v, first_layer):
-    """Trace the shadow packet's rays with closest hits over the static scene and every
-    moving object (at each lane's time: :func:`_nearest_on_movers`, the segment's ray read
-    back from the packet into ``segment`` (6, LANES)), passing cut-out layers (decided on the
-    rest-pose triangle's texture coordinates, which motion leaves alone), until each is
-    blocked (its ``shadow_valid`` lane cleared) or free; a free ray keeps its lane set.
-    Layer ``j``'s blend coin is that of layer ``first_layer + j`` (each light sample of a
-    vertex its own coins)."""
-    material_id = geometry[5]
-    has_static, static_faces, movers, moves, face_mover = motion[0], motion[1], motion[2], motion[5], motion[6]
-    for layer in range(MAX_LAYERS):
-        active = 0
-        for lane in range(LANES):
-            if shadow_valid[lane]:
-                clear_hit(shadow_words, lane)
-                active += 1
-        if active == 0:
-            return
-        if layer > 0:
-            counts[SHADOW] += active
-        if has_static:
-            intersect16(shadow_valid.ctypes.data, scene, shadow.ctypes.data, args.ctypes.data)
-        for lane in range(LANES):
-            # nothing nearer than the segment's end, unless the static scene has it
-            best_t[lane] = reach[lane]
-            best_prim[lane] = -1
-            if shadow_valid[lane] and has_static and shadow_words[GEOM_ID * LANES + lane] != INVALID_ID:
-                best_t[lane] = np.float64(shadow[TFAR * LANES + lane])
-                local = shadow_words[PRIM_ID * LANES + lane]
-                best_prim[lane] = static_faces[local] if len(static_faces) else local
-                best_u[lane] = np.float64(shadow[U * LANES + lane])
-                best_v[lane] = np.float64(shadow[V * LANES + lane])
-            for k in range(3):
-                segment[k, lane] = np.float64(shadow[k * LANES + lane])
-                segment[3 + k, lane] = np.float64(shadow[(4 + k) * LANES + lane])
-        if len(movers):
-            _nearest_on_movers(intersect16, motion, lane_time, shadow_valid, segment[0], segment[1], segment[2],
-                               segment[3], segment[4], segment[5], rest, rest_words, rest_valid, args, best_t,
-                               best_prim, best_u, best_v)
-        more = False
-        for lane in range(LANES):
-            if not shadow_valid[lane] or best_prim[lane] < 0:
-                continue
-            prim = best_prim[lane]
-            bu, bv = best_u[lane], best_v[lane]
-            mat = material_id[prim]
-            coin = _layer_coin(keys[start + lane], lane_depth[lane], first_layer + layer, _COVERAGE)
-            if layer + 1 < MAX_LAYERS and is_transparent(surface, geometry, mat, prim, bu, bv, coin):
-                # on past the layer: the rest of the segment from just beyond it
-                t = best_t[lane]
-                hx, hy, hz, gx, gy, gz, nx, ny, nz = surface_point(geometry, prim, bu, bv)
-                if len(face_mover) and face_mover[prim] >= 0:
-                    hx, hy, hz, gx, gy, gz, nx, ny, nz = _to_world(moves, face_mover[prim], lane_time[lane], hx, hy,
-                                                                   hz, gx, gy, gz, nx, ny, nz)
-                dx, dy, dz = segment[3, lane], segment[4, lane], segment[5, lane]
-                if (gx * dx + gy * dy) + gz * dz < 0.0:
-                    gx, gy, gz = -gx, -gy, -gz
-                qx, qy, qz = offset_origin(hx, hy, hz, gx, gy, gz, dx, dy, dz, offset_scale)
-                reach[lane] = reach[lane] - t
-                if not reach[lane] > 0.0:
-                    continue  # the layer was the end of the segment: free
-                set_lane(shadow, shadow_words, lane, np.float64(qx), np.float64(qy), np.float64(qz), dx, dy, dz,
-                         np.float32(reach[lane]))
-                more = True
-            else:
-                shadow_valid[lane] = 0
-        if not more:
-            return
-
-
-@row
-def _nearest_hits(intersect16, scene, args, args_incoherent, ray, words, valid, motion, instance_faces, lane_time,
-                  px, py, pz, dx, dy, dz, rest, rest_words, rest_valid, best_t, best_prim, best_instance, best_u,
-                  best_v):
-    """Trace the packet ``ray`` (its ``valid`` lanes) against the static scene and every
-    moving object and keep each lane's nearest hit: ``best_t``, ``best_prim`` (the face in
-    the per-face tables), ``best_instance`` (the placement, or -1) and ``best_u, best_v``
-    (``best_prim`` -1 and ``best_t`` inf for a miss).  Once a packet, so a call (not
-    inlined: the path kernel's first-run compile grows faster than its length)."""
-    has_static, static_faces = motion[0], motion[1]
-    if has_static:
-        intersect16(valid.ctypes.data, scene, ray.ctypes.data, args.ctypes.data)
-    for lane in range(LANES):
-        best_t[lane] = math.inf
-        best_prim[lane] = -1
-        best_instance[lane] = -1
-        if valid[lane] and has_static and words[GEOM_ID * LANES + lane] != INVALID_ID:
-            best_t[lane] = np.float64(ray[TFAR * LANES + lane])
-            local = words[PRIM_ID * LANES + lane]
-            if words[INST_ID * LANES + lane] != INVALID_ID:
-                # a placement: the face of its prototype in the per-face tables
-                placed = words[INST_PRIM_ID * LANES + lane]
-                best_instance[lane] = placed
-                best_prim[lane] = instance_faces[placed] + local
-            else:
-                best_prim[lane] = static_faces[local] if len(static_faces) else local
-            best_u[lane] = np.float64(ray[U * LANES + lane])
-            best_v[lane] = np.float64(ray[V * LANES + lane])
-    # (a scene with moving objects has no placements: rtmesh.scene.instances.unsupported
-    # renders it from copies, so a mover's hit leaves best_instance at -1)
-    _nearest_on_movers(intersect16, motion, lane_time, valid, px, py, pz, dx, dy, dz, rest, rest_words,
-                       rest_valid, args_incoherent, best_t, best_prim, best_u, best_v)
-
-
-@row
-def _occluded(occluded16, scene, args, shadow, shadow_valid, motion, lane_time, reach, rest, rest_words, rest_valid):
-    """Clear ``shadow_valid`` of the lanes whose shadow ray (the packet ``shadow``, each
-    lane ``reach[lane]`` long) meets the static scene or a moving object (at the lane's
-    time, in the object's rest pose).  Once a packet: a call, as :func:`_nearest_hits`."""
-    has_static, movers, moves = motion[0], motion[2], motion[5]
-    if has_static:
-        occluded16(shadow_valid.ctypes.data, scene, shadow.ctypes.data, args.ctypes.data)
-        for lane in range(LANES):
-            if shadow_valid[lane] and shadow[TFAR * LANES + lane] == -np.inf:
-                shadow_valid[lane] = 0
-    for j in range(len(movers)):
-        for lane in range(LANES):
-            rest_valid[lane] = shadow_valid[lane]
-            if shadow_valid[lane]:
-                ox, oy, oz, ex, ey, ez = _to_rest(
-                    moves, j, lane_time[lane], np.float64(shadow[lane]),
-                    np.float64(shadow[LANES + lane]), np.float64(shadow[2 * LANES + lane]),
-                    np.float64(shadow[4 * LANES + lane]), np.float64(shadow[5 * LANES + lane]),
-                    np.float64(shadow[6 * LANES + lane]))
-                set_lane(rest, rest_words, lane, ox, oy, oz, ex, ey, ez, np.float32(reach[lane]))
-        occluded16(rest_valid.ctypes.data, movers[j], rest.ctypes.data, args.ctypes.data)
-        for lane in range(LANES):
-            if rest_valid[lane] and rest[TFAR * LANES + lane] == -np.inf:
-                shadow_valid[lane] = 0
 
 
 @kernel
@@ -616,7 +322,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                     counts[CAMERA if lane_depth[lane] == 0 else BOUNCE] += 1
             args = args_coherent if first else args_incoherent
             first = False
-            _nearest_hits(intersect16, scene, args, args_incoherent, ray, words, valid, motion, instance_faces,
+            nearest_hits(intersect16, scene, args, args_incoherent, ray, words, valid, motion, instance_faces,
                           lane_time, px, py, pz, dx, dy, dz, rest, rest_words, rest_valid, best_t, best_prim,
                           best_instance, best_u, best_v)
             for lane in range(LANES):
@@ -632,7 +338,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 seen = -1
                 for k in range(len(analytic)):
                     a = analytic[k]
-                    ta = _hit_analytic(light_rows[a], px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], t)
+                    ta = hit_analytic(light_rows[a], px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], t)
                     if ta < t:
                         t, seen = ta, a
                 if sigma[lane, 0] + sigma[lane, 1] + sigma[lane, 2] > 0.0 and t < math.inf:
@@ -648,7 +354,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                     light = light_rows[seen]
                     w = 1.0
                     if not prev_delta[lane]:
-                        w = power_heuristic(prev_pdf[lane], light_pmf[seen] * _area_pdf(
+                        w = power_heuristic(prev_pdf[lane], light_pmf[seen] * area_pdf(
                             light, px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], t) * prev_count[lane])
                     r, g, b = _clamped(beta[lane, 0] * light[lt.RADIANCE] * w, beta[lane, 1] * light[lt.RADIANCE + 1] * w,
                                        beta[lane, 2] * light[lt.RADIANCE + 2] * w, limit)
@@ -666,7 +372,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                                                                dz[lane])
                         w = 1.0
                         if not prev_delta[lane]:
-                            w = power_heuristic(prev_pdf[lane], light_pmf[env_light] * _environment_pdf(
+                            w = power_heuristic(prev_pdf[lane], light_pmf[env_light] * environment_pdf(
                                 env_marginal, env_conditional, env_func, env_mean, env_cos, env_sin,
                                 dx[lane], dy[lane], dz[lane]) * prev_count[lane])
                         r, g, b = _clamped(beta[lane, 0] * lr * w, beta[lane, 1] * lg * w, beta[lane, 2] * lb * w,
@@ -681,13 +387,13 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 travelled[lane] += t
                 hx, hy, hz, gx, gy, gz, nx, ny, nz = surface_point(geometry, prim, bu, bv)
                 if len(face_mover) and face_mover[prim] >= 0:
-                    hx, hy, hz, gx, gy, gz, nx, ny, nz = _to_world(moves, face_mover[prim], lane_time[lane], hx, hy, hz,
+                    hx, hy, hz, gx, gy, gz, nx, ny, nz = mover_to_world(moves, face_mover[prim], lane_time[lane], hx, hy, hz,
                                                                    gx, gy, gz, nx, ny, nz)
                 if best_instance[lane] >= 0:
-                    hx, hy, hz, gx, gy, gz, nx, ny, nz = _placed(instance_to_world, instance_normals, best_instance[lane],
+                    hx, hy, hz, gx, gy, gz, nx, ny, nz = placed(instance_to_world, instance_normals, best_instance[lane],
                                                                  hx, hy, hz, gx, gy, gz, nx, ny, nz)
                 if cutouts and layers[lane] + 1 < MAX_LAYERS and is_transparent(
-                        surface, geometry, mat, prim, bu, bv, _layer_coin(key, depth, layers[lane], _COVERAGE)):
+                        surface, geometry, mat, prim, bu, bv, layer_coin(key, depth, layers[lane], COVERAGE)):
                     # the ray passes this layer: on from just beyond it, same depth
                     layers[lane] += 1
                     px[lane], py[lane], pz[lane] = leave_surface(hx, hy, hz, gx, gy, gz, dx[lane], dy[lane], dz[lane],
@@ -705,8 +411,8 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                     if not prev_delta[lane]:
                         light = face_light[prim]
                         if light >= 0:
-                            w = power_heuristic(prev_pdf[lane], light_pmf[light] * _area_pdf(
-                                _light_at(light_rows, light, face_mover, moves, lane_time[lane], moved, lane),
+                            w = power_heuristic(prev_pdf[lane], light_pmf[light] * area_pdf(
+                                light_at(light_rows, light, face_mover, moves, lane_time[lane], moved, lane),
                                 px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], t) * prev_count[lane])
                     r, g, b = _clamped(beta[lane, 0] * er * w, beta[lane, 1] * eg * w, beta[lane, 2] * eb * w, limit)
                     _add(total, lane, r, g, b)
@@ -765,7 +471,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 if sobol:
                     bu1, bu2 = sequence_pair(sobol_keys, 1, pixel, sample_index)
                 else:
-                    bu1, bu2 = uniform(key, base + _BSDF_U1), uniform(key, base + _BSDF_U2)
+                    bu1, bu2 = uniform(key, base + BSDF_U1), uniform(key, base + BSDF_U2)
                 # next-event estimation: light_samples estimates at the first vertex that can
                 # take light (reached from the camera through delta lobes only), one at later
                 # vertices; each weighted against the one BSDF sample by the power heuristic
@@ -781,10 +487,10 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                             lu1, lu2 = sequence_ray_pair(sobol_keys, 0, pixel, sample_index, k, light_samples,
                                                          light_block)
                         else:
-                            lu1, lu2 = uniform(light_key, base + _LIGHT_U1), uniform(light_key, base + _LIGHT_U2)
-                        chosen = alias_sample(light_probability, light_alias, uniform(light_key, base + _LIGHT_CHOICE))
+                            lu1, lu2 = uniform(light_key, base + LIGHT_U1), uniform(light_key, base + LIGHT_U2)
+                        chosen = alias_sample(light_probability, light_alias, uniform(light_key, base + LIGHT_CHOICE))
                         # an emitter on a moving object where it is at the lane's time
-                        light = _light_at(light_rows, chosen, face_mover, moves, lane_time[lane], moved, lane)
+                        light = light_at(light_rows, chosen, face_mover, moves, lane_time[lane], moved, lane)
                         wx, wy, wz, distance, lr, lg, lb, pdf_li, delta = sample_li(
                             light, env, light_texels, light_descriptors, hx, hy, hz, lu1, lu2)
                         if light[0] == lt.TRIANGLE:
@@ -838,7 +544,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                     continue
                 # continue the path by sampling the BSDF
                 wx, wy, wz, gr, gg, gb, pdf, flags = models.sample(
-                    tag, bsdf_params, bsdf_row, albedo_table, lox, loy, loz, uniform(key, base + _LOBE), bu1, bu2)
+                    tag, bsdf_params, bsdf_row, albedo_table, lox, loy, loz, uniform(key, base + LOBE), bu1, bu2)
                 if (flags == lobes.FAILED) | (not ((gr > 0.0) | (gg > 0.0) | (gb > 0.0))):
                     alive[lane] = False
                     continue
@@ -878,7 +584,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                     # carrying less light out, only noise
                     q = max(beta[lane, 0], max(beta[lane, 1], beta[lane, 2])) * eta_scale[lane]
                     if q < 1.0:
-                        if uniform(key, base + _ROULETTE) >= q:
+                        if uniform(key, base + ROULETTE) >= q:
                             alive[lane] = False
                             continue
                         beta[lane, 0] /= q
@@ -903,12 +609,12 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                                  ray_k[5], np.float32(reach[lane]))
                         shadow_valid[lane] = -1
                 if cutouts:
-                    _shadows_through_cutouts(intersect16, scene, args_incoherent, shadow, shadow_words, shadow_valid,
+                    shadows_through_cutouts(intersect16, scene, args_incoherent, shadow, shadow_words, shadow_valid,
                                              geometry, surface, offset_scale, keys, start, lane_depth, reach, counts,
                                              motion, lane_time, segment, rest, rest_words, rest_valid, best_t,
                                              best_prim, best_u, best_v, (k + 1) * MAX_LAYERS)
                 else:
-                    _occluded(occluded16, scene, args_incoherent, shadow, shadow_valid, motion, lane_time, reach,
+                    occluded(occluded16, scene, args_incoherent, shadow, shadow_valid, motion, lane_time, reach,
                               rest, rest_words, rest_valid)
                 _accept_shadows(shadow_valid, pending[k], pending_paths[k if split else 0], split, total, paths)
         for lane in range(count):

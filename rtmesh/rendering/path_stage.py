@@ -30,8 +30,8 @@ from rtmesh.io.passes import LIGHT_PATH_PASSES
 from rtmesh.rendering.caustics import Caustics
 from rtmesh.rendering.media import coincident_faces
 from rtmesh.rendering.photon_kernel import empty_photon_map
-from rtmesh.rendering.path_kernel import (BOUNCE, CAMERA, LIGHT_PATHS, PATH_KERNELS, SHADOW, no_instances,
-                                          trace_paths)
+from rtmesh.rendering.path_kernel import LIGHT_PATHS, PATH_KERNELS, no_instances, trace_paths
+from rtmesh.rendering.path_packets import BOUNCE, CAMERA, SHADOW
 from rtmesh.rendering.path_surfaces import TEXTURE_COLUMNS
 from rtmesh.rendering.settings import RenderSettings
 from rtmesh.rendering.surface_textures import corner_and_edges, face_tangents

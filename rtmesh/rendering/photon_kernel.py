@@ -37,6 +37,7 @@ from rtmesh.geometry.embree_packets import (DEFAULT_TFAR, GEOM_ID, INVALID_ID, L
                                             RTC_RAY_QUERY_FLAG_INCOHERENT, TFAR, U, V, packet_buffers)
 from rtmesh.lights import light_table as lt
 from rtmesh.materials import lambert, lobes, models
+from rtmesh.rendering.path_packets import MAX_LAYERS
 from rtmesh.rendering.path_surfaces import alias_sample, load_lanes
 from rtmesh.rendering.path_surfaces import environment_radiance as _environment_radiance
 from rtmesh.rendering.path_surfaces import environment_sample as _environment_sample
@@ -57,8 +58,6 @@ _LOBE, _U1, _U2, _COVERAGE = range(4)
 DIMENSIONS_PER_BOUNCE = 4
 # delta bounces a photon takes at most when max_depth does not bound them
 MAX_BOUNCES = 64
-# cut-out layers a photon passes before the next surface counts as opaque
-MAX_LAYERS = 64
 # where the Lambert model keeps its albedo (the gather's shortcut for it)
 _ALBEDO = lambert.SLOTS["colour"]
 # a photon's stored fields: position, direction toward its origin, flux, normal (x, y, z each),

@@ -93,13 +93,21 @@ def test_blocked_reductions_equal_whole_film_formulas(monkeypatch, block_pixels)
                                   radiance[:, :, 0].min(axis=1).astype(np.float32))
 
 
+def validated(**overrides):
+    """:func:`scenes.settings`, validated as the command line's memory check has them (the
+    integrator's defaults, such as ``light_samples``, filled in)."""
+    s = settings(**overrides)
+    s.validate()
+    return s
+
+
 def test_the_memory_estimate_covers_the_measured_film_and_chunks():
     from rtmesh.io.passes import pass_width
     from rtmesh.rendering.memory import estimate
 
     # the film: its arrays (with passes) and the float32 image, with room for the output
     passes = ("depth", "normal", "ao")
-    s = settings(width=96, height=64, spp=4, threads=THREADS, chunk_samples=CHUNK_SAMPLES, passes=passes)
+    s = validated(width=96, height=64, spp=4, threads=THREADS, chunk_samples=CHUNK_SAMPLES, passes=passes)
     film = Film(96, 64, {name: pass_width(name) for name in passes}, one_pass=True)
     assert film.nbytes < estimate(s).film < 2 * film.nbytes
     # the chunks: the measured chunk phase of renders below the estimate, whatever the spp
@@ -109,8 +117,8 @@ def test_the_memory_estimate_covers_the_measured_film_and_chunks():
     for width, height, spp in ((128, 128, 4), (16, 16, 4096)):
         for passes in ((), ("depth",)):
             measured = chunk_phase(width, height, spp, passes=passes)
-            expected = estimate(settings(width=width, height=height, spp=spp, threads=THREADS,
-                                         chunk_samples=CHUNK_SAMPLES, passes=passes)).chunks
+            expected = estimate(validated(width=width, height=height, spp=spp, threads=THREADS,
+                                          chunk_samples=CHUNK_SAMPLES, passes=passes)).chunks
             assert measured < expected, (width, height, spp, passes, measured, expected)
             # and, on the general path the estimate is made for, not absurdly above (this
             # scene: one light, many background samples)
