@@ -1,7 +1,8 @@
 """rtmesh's path integrator against the Mitsuba 3 references of the Cornell box.
 
 Renders ``assets/cornell_box.toml`` under ``integrator = "path"`` at 128 x 128 (``--spp``,
-2 threads), with ``max_depth`` -1 (global illumination) and 1 (direct light only), and
+2 threads, the scene file's ``light_samples``: 4 next-event estimates at a path's first
+vertex), with ``max_depth`` -1 (global illumination) and 1 (direct light only), and
 compares each with its Mitsuba 3 reference (``tests/data/cornell_mitsuba_128.exr`` and
 ``cornell_mitsuba_128_direct.exr``, 32768 spp; tests/data/README.md says how they were made):
 the ratio of the image means per channel, and the relative RMSE
@@ -53,11 +54,12 @@ def main(argv=None):
     args = parser.parse_args(argv)
     scene, settings = read_scene_file(SCENE)
     at_start = machine()
-    rows, images = [], {}
+    rows, images, light_samples = [], {}, set()
     for name, max_depth, reference_file in CASES:
         reference, _ = read_image(DATA / reference_file)
         case = dataclasses.replace(settings, width=128, height=128, spp=args.spp, integrator="path",
                                    max_depth=max_depth, threads=args.threads)
+        light_samples.add(case.light_samples)
         result = Integrator(scene, case).render()
         image = result.image[..., :3]
         images[name] = (image, reference)
@@ -77,7 +79,9 @@ def main(argv=None):
         f"{datetime.date.today().isoformat()}; {at_start}",
         "",
         f"`assets/cornell_box.toml` under `integrator = \"path\"`, 128 x 128, {args.spp} spp, {args.threads} "
-        "threads, against Mitsuba 3.9.1 `path` at 32768 spp on the same triangles (tests/data/README.md; "
+        f"threads, `light_samples` {' and '.join(str(n) for n in sorted(light_samples))} (the scene file's: "
+        "next-event estimates at a path's first vertex; Mitsuba's `path` takes one), against Mitsuba 3.9.1 "
+        "`path` at 32768 spp on the same triangles (tests/data/README.md; "
         "Mitsuba's `max_depth` is rtmesh's + 1). Relative RMSE: over the reference's mean; 8 x 8 block "
         "means are the issue's measure (targets: image mean within 1 %, blocks within 2 %). The "
         "references' own error is 0.10 % (global) and 0.13 % (direct) in 8 x 8 blocks.",

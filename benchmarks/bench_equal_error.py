@@ -25,7 +25,12 @@ The scene of benchmarks/bench_pbr_peers.py's ``duck-env-*`` cases, built by its 
   (segments after the camera ray), Mitsuba ``path`` with ``max_depth = 3``;
 - threads: 2 for both (``threads = 2``; Dr.Jit ``set_thread_count(2)``);
 - samplers: rtmesh ``jittered`` (its default) and ``sobol`` (``--samplers``); Mitsuba
-  ``stratified`` and ``independent`` (its default) (``--mitsuba-samplers``).
+  ``stratified`` and ``independent`` (its default) (``--mitsuba-samplers``);
+- light samples: rtmesh's ``light_samples`` (next-event estimates at a path's first vertex
+  that takes light), ``--light-samples`` (default 1, the default under ``path``, as Mitsuba's
+  ``path`` takes one; a comma-separated list measures each value as its own configuration,
+  ``rtmesh <sampler>, light_samples <n>``, in the same alternating rounds).  Mitsuba is
+  unchanged by it.
 
 Error and time
 --------------
@@ -70,7 +75,7 @@ Usage::
 
     python -m benchmarks.bench_equal_error [--spp 16,64] [--mitsuba-spp 16,64,256] [--runs 3] [--threads 2] [--size 256]
         [--materials dielectric,metal] [--roughness 0.3] [--samplers jittered,sobol]
-        [--mitsuba-samplers stratified,independent] [--variant llvm_ad_rgb]
+        [--mitsuba-samplers stratified,independent] [--light-samples 1[,4]] [--variant llvm_ad_rgb]
         [--venv /tmp/peers-venv] [--no-write]
 
 Mitsuba runs in its own venv (``sh benchmarks/peers_setup.sh``; ``--venv``, default
@@ -118,14 +123,32 @@ NOTES = (
     "in the pixel position. Before that change (rtmesh 0f579e8, every number hashed) rtmesh's errors "
     "matched Mitsuba's `independent` sampler (k = 0.50) and the worst ratios were 11.0 (dielectric) "
     "and 30.9 (metal).",
-    "- So what is left is the cost of a sample: rtmesh's `M samples/s` against Mitsuba's (about 3.5-4x "
-    "fewer: the path kernel shades its 16 lanes one at a time, Mitsuba's LLVM back end runs every "
-    "shading step vectorised over its lanes). Issue 27's 0.5x needs a sample about 8x cheaper.",
+    "- So what is left is the cost of a sample: rtmesh's `M samples/s` against Mitsuba's. At 739a369 "
+    "(2026-12-03 11:25) rtmesh drew 1.4-1.8 M samples/s here against Mitsuba's 5.3-8.1 (3.5-4.5x fewer: the "
+    "path kernel shades its 16 lanes one at a time, Mitsuba's LLVM back end runs every shading step "
+    "vectorised over its lanes; worst ratios 3.52 dielectric and 2.86 metal in CPU seconds, 3.80 and 2.68 "
+    "wall); at 5be8397 it draws 0.72-0.75, about 7x fewer, for the same images (the "
+    "`light_samples 1` errors and means are those of 739a369 digit for digit). That is not the load: the "
+    "same render (dielectric, jittered, 16 spp, 2 threads) alternating the two trees on a quiet machine "
+    "(load 1.2-1.6) took 0.78-0.80 CPU s at 739a369 and 1.43-1.45 at 5be8397, 1.83x. A bisection (one "
+    "process a commit, cold compile, the min of two renders, load 1.6-3) puts it in two steps: 12e7df7 "
+    "(the path and photon kernels share `path_surfaces.hit_parameters`) 0.82 -> 1.20 s, and the merge of "
+    "`khrmat` 9b87a94 (the kernels share `hit_frame`; the branch alone stays at 0.82) 1.24 -> 1.47 s. "
+    "Issue 27's 0.5x needs a sample about 13x cheaper than today's (about 7x cheaper than 739a369's).",
     "- The noise is mostly direct light (next-event estimation of the map and BSDF sampling, MIS): "
     "with `max_depth = 1` (direct light only) rtmesh's error at 16 spp was 22.3 % against 22.4 % with "
-    "one bounce before the Sobol pairs (Mitsuba stratified 12.9 % against 13.7 %). rtmesh's "
-    "`light_samples` is 1 here (the default under `path`: one light sample a vertex, as Mitsuba; "
-    "more take several at the first vertex).",
+    "one bounce before the Sobol pairs (Mitsuba stratified 12.9 % against 13.7 %).",
+    "- `light_samples` (rtmesh's next-event estimates at the first vertex; 1 is the default under `path` "
+    "and what Mitsuba's `path` takes). Dielectric: 4 light samples cut the error at 16 spp from 14.0 % to "
+    "8.6 % (0.61x; 5.7 % to 3.7 % at 64 spp) for 1.53x the CPU seconds of a render, so the CPU time to "
+    "each error falls to 0.74x (8 %), 0.78x (4 %), 0.84x (2 %; the exponent k falls from 0.65 to 0.61): "
+    "the worst ratio against Mitsuba stratified goes from 6.60 to 5.09 CPU (6.85 to 5.01 wall), 0.77x, "
+    "still 10x from 0.5. Metal (roughness 0.3): the error falls only to 0.85x (19.7 % to 16.7 % at 16 "
+    "spp) for the same 1.5x cost, so 4 light samples are slower to every error (5.35 to 7.57 CPU): a "
+    "glossy conductor's noise is the BSDF-sampled reflection of the map, which the light samples, weighted "
+    "against the BSDF by MIS, hardly reduce. Either way the gap is the cost of a sample (above); "
+    "`light_samples` trades within it and makes each sample 1.5x dearer here (0.48 M samples/s; its "
+    "shadow rays and light evaluations are not free beside a sample's camera ray, shading and bounce).",
     "- Wall times on this shared machine swing by 2x within seconds (other jobs start and stop): "
     "every round runs through every spp level and the renderers alternate render by render, so both "
     "see the same load, but the fitted fixed cost `a` and the extrapolated seconds move from run to "
@@ -255,11 +278,12 @@ class Mitsuba:
         self.process.wait()
 
 
-def rtmesh_render(scene, settings, sampler, spp, seed, threads):
+def rtmesh_render(scene, settings, sampler, spp, seed, threads, light_samples=1):
     """Wall and CPU seconds of one rtmesh render on a loaded scene (CPU: every thread of this
     process), and its image."""
     start, cpu = time.perf_counter(), time.process_time()
-    image = rtmesh.render(scene, settings, spp=spp, seed=seed, threads=threads, sampler=sampler).image
+    image = rtmesh.render(scene, settings, spp=spp, seed=seed, threads=threads, sampler=sampler,
+                          light_samples=light_samples).image
     return time.perf_counter() - start, time.process_time() - cpu, np.asarray(image)
 
 
@@ -329,15 +353,22 @@ def summarise(results, seeds_of, mask, pixels):
     return rows
 
 
-def material_tables(rows, rt_names, mi_names):
+def material_tables(rows, rt_names, mi_names, rt_groups=None):
     """The three tables of one material: measured levels, time to each error, ratios.
+
+    Parameters
+    ----------
+    rt_groups : dict of str to list of str, optional
+        rtmesh configurations grouped by a label (its ``light_samples``): one headline per
+        group.  One group of every rtmesh configuration when None.
 
     Returns
     -------
     lines : list of str
-    headline : dict
-        ``rtmesh``, ``mitsuba`` (each renderer's faster sampler at 2 %), ``worst`` and
-        ``worst_cpu`` (their worst ratio over the targets, wall and CPU seconds).
+    headlines : list of (str, dict)
+        Per group: its label and ``rtmesh``, ``mitsuba`` (each renderer's faster configuration
+        at 2 %), ``worst`` and ``worst_cpu`` (their worst ratio over the targets, wall and CPU
+        seconds).
     """
     lines = ["| renderer, sampler | spp | s (median) | CPU s | M samples/s | error | object error | image mean |",
              "|---|---:|---:|---:|---:|---:|---:|---:|"]
@@ -368,10 +399,14 @@ def material_tables(rows, rt_names, mi_names):
             wall, cpu = ratios(rt, mi_name, "targets"), ratios(rt, mi_name, "targets_cpu")
             lines.append(f"| {rt} | {mi_name} | " + " | ".join(f"{x:.2f}" for x in wall)
                          + f" | **{max(wall):.2f}** | " + " | ".join(f"{x:.2f}" for x in cpu) + f" | {max(cpu):.2f} |")
-    best_rt = min(rt_names, key=lambda n: rows[n]["targets"][TARGETS[-1]]["seconds"])
     best_mi = min(mi_names, key=lambda n: rows[n]["targets"][TARGETS[-1]]["seconds"])
-    return lines, {"rtmesh": best_rt, "mitsuba": best_mi, "worst": max(ratios(best_rt, best_mi, "targets")),
-                   "worst_cpu": max(ratios(best_rt, best_mi, "targets_cpu"))}
+    headlines = []
+    for label, names in (rt_groups or {"": rt_names}).items():
+        best_rt = min(names, key=lambda n: rows[n]["targets"][TARGETS[-1]]["seconds"])
+        headlines.append((label, {"rtmesh": best_rt, "mitsuba": best_mi,
+                                  "worst": max(ratios(best_rt, best_mi, "targets")),
+                                  "worst_cpu": max(ratios(best_rt, best_mi, "targets_cpu"))}))
+    return lines, headlines
 
 
 def report(materials, args, context):
@@ -379,9 +414,9 @@ def report(materials, args, context):
 
     Parameters
     ----------
-    materials : list of (str, dict, list, list)
+    materials : list of (str, dict, list, list, dict)
         Per material: its name, the rows of :func:`summarise`, the rtmesh and the Mitsuba
-        configuration names.
+        configuration names, the rtmesh names by ``light_samples``.
     """
     lines = [f"## {SECTION}", "",
              f"Command: `{context['command']}` (Mitsuba in its own venv, `sh benchmarks/peers_setup.sh`); "
@@ -393,7 +428,9 @@ def report(materials, args, context):
              f"- Duck.glb (unit half-extent) with one glTF material of bench_pbr_peers (roughness "
              f"{args.roughness:g}; Mitsuba: the same BRDF, `GltfBSDF`), studio.exr the only light, "
              f"{args.size} x {args.size}, box filter, {args.threads} threads; rtmesh `path` max_depth {MAX_DEPTH}, "
-             f"Mitsuba `path` max_depth {MAX_DEPTH + 1}; seeds rtmesh {RTMESH_SEEDS}, Mitsuba {MITSUBA_SEEDS}; "
+             f"Mitsuba `path` max_depth {MAX_DEPTH + 1}; rtmesh `light_samples` "
+             f"{' and '.join(str(n) for n in context['light_samples'])} (next-event estimates at the first vertex; "
+             f"Mitsuba's `path` takes one); seeds rtmesh {RTMESH_SEEDS}, Mitsuba {MITSUBA_SEEDS}; "
              f"times are medians of {args.runs} x 2 renders, alternating renderers, every round through every "
              "spp level; `CPU s`: the process's CPU seconds (all its threads) of a render, which other jobs' "
              "load changes far less than wall time",
@@ -401,14 +438,15 @@ def report(materials, args, context):
              f"the {context['object_pixels']} pixels fully on the duck, over their mean",
              ""]
     headlines = []
-    for material, rows, rt_names, mi_names in materials:
+    for material, rows, rt_names, mi_names, rt_groups in materials:
         values = pbr.MATERIALS[material]
-        tables, headline = material_tables(rows, rt_names, mi_names)
-        headlines.append((material, headline))
+        tables, groups = material_tables(rows, rt_names, mi_names, rt_groups)
+        headlines += [(material + (f", light_samples {label}" if len(groups) > 1 else ""), h)
+                      for label, h in groups]
         lines += [f"### {material}: metallic {values['metallic']:g}, base colour {values['base_color']} "
                   f"(8 bits in the GLB), roughness {args.roughness:g}", "", *tables, ""]
-    lines += ["Headline (each renderer's faster sampler at 2 %), worst ratio over 8, 4 and 2 % (target <= 0.5):",
-              ""]
+    lines += ["Headline (each renderer's faster sampler at 2 %, rtmesh's per `light_samples`), worst ratio over "
+              "8, 4 and 2 % (target <= 0.5):", ""]
     lines += [f"- {material}: {h['rtmesh']} against {h['mitsuba']}: **{h['worst']:.2f}** wall, "
               f"{h['worst_cpu']:.2f} CPU" for material, h in headlines]
     lines += ["", *NOTES, ""]
@@ -429,7 +467,13 @@ def parse_list(text, kind=str):
     return [kind(x.strip()) for x in text.split(",") if x.strip()]
 
 
-def run_material(material, args, spps, mi_spps, rt_samplers, mi_samplers):
+def rtmesh_name(sampler, light_samples, several):
+    """A configuration's name: ``rtmesh <sampler>``, with ``, light_samples <n>`` when the run
+    measures several values."""
+    return f"rtmesh {sampler}" + (f", light_samples {light_samples}" if several else "")
+
+
+def run_material(material, args, spps, mi_spps, rt_samplers, mi_samplers, light_samples=(1,)):
     """Measure one material: files written, scene loaded, a Mitsuba worker for it, the renders.
 
     Returns
@@ -457,12 +501,15 @@ def run_material(material, args, spps, mi_spps, rt_samplers, mi_samplers):
         mitsuba = Mitsuba(job_path, args, folder)
         try:
             configs = {}
+            several = len(light_samples) > 1
+            rt_configs = [(s, n) for s in rt_samplers for n in light_samples]
             # alternate: rtmesh, Mitsuba, rtmesh, Mitsuba, ...
-            for i in range(max(len(rt_samplers), len(mi_samplers))):
-                if i < len(rt_samplers):
-                    s = rt_samplers[i]
-                    configs[f"rtmesh {s}"] = (lambda spp, seed, s=s: rtmesh_render(scene, settings, s, spp, seed,
-                                                                                   args.threads), RTMESH_SEEDS, spps)
+            for i in range(max(len(rt_configs), len(mi_samplers))):
+                if i < len(rt_configs):
+                    s, n = rt_configs[i]
+                    configs[rtmesh_name(s, n, several)] = (
+                        lambda spp, seed, s=s, n=n: rtmesh_render(scene, settings, s, spp, seed, args.threads, n),
+                        RTMESH_SEEDS, spps)
                 if i < len(mi_samplers):
                     s = mi_samplers[i]
                     configs[f"Mitsuba {s}"] = (lambda spp, seed, s=s: mitsuba.render(s, spp, seed), MITSUBA_SEEDS,
@@ -487,6 +534,8 @@ def main(argv=None):
     parser.add_argument("--roughness", type=float, default=0.3)
     parser.add_argument("--samplers", default="jittered,sobol", help="rtmesh samplers")
     parser.add_argument("--mitsuba-samplers", default="stratified,independent", help="Mitsuba sampler plugins")
+    parser.add_argument("--light-samples", default="1",
+                        help="rtmesh's light_samples, comma-separated: each value is its own configuration")
     parser.add_argument("--variant", default="llvm_ad_rgb", help="Mitsuba variant")
     parser.add_argument("--venv", default=PEERS_VENV, help="the peers' venv (benchmarks/peers_setup.sh)")
     parser.add_argument("--no-write", action="store_true", help="print only; leave docs/BENCHMARKS.md alone")
@@ -495,6 +544,12 @@ def main(argv=None):
     if min(len(spps), len(mi_spps)) < 2 or min(spps[0], mi_spps[0]) < 1:
         parser.error("--spp and --mitsuba-spp need two or more positive levels each")
     rt_samplers, mi_samplers = parse_list(args.samplers), parse_list(args.mitsuba_samplers)
+    try:
+        light_samples = sorted(set(parse_list(args.light_samples, int)))
+    except ValueError:
+        light_samples = []
+    if not light_samples or min(light_samples) < 1:
+        parser.error("--light-samples: one or more whole numbers >= 1, comma-separated")
     materials_asked = parse_list(args.materials)
     if not materials_asked or set(materials_asked) - set(pbr.MATERIALS):
         parser.error(f"--materials: choose from {', '.join(pbr.MATERIALS)}")
@@ -506,13 +561,16 @@ def main(argv=None):
 
     materials, object_pixels, version = [], None, "?"
     for material in materials_asked:
-        rows, names, version, object_pixels = run_material(material, args, spps, mi_spps, rt_samplers, mi_samplers)
+        rows, names, version, object_pixels = run_material(material, args, spps, mi_spps, rt_samplers, mi_samplers,
+                                                           light_samples)
+        several = len(light_samples) > 1
+        groups = {n: [rtmesh_name(s, n, several) for s in rt_samplers] for n in light_samples}
         materials.append((material, rows, [n for n in names if n.startswith("rtmesh")],
-                          [n for n in names if n.startswith("Mitsuba")]))
+                          [n for n in names if n.startswith("Mitsuba")], groups))
     words = ["python -m benchmarks.bench_equal_error"]
     defaults = {"spp": "16,64", "mitsuba_spp": "16,64,256", "runs": 3, "threads": 2, "size": 256,
                 "materials": "dielectric,metal", "roughness": 0.3, "samplers": "jittered,sobol",
-                "mitsuba_samplers": "stratified,independent", "variant": "llvm_ad_rgb"}
+                "mitsuba_samplers": "stratified,independent", "light_samples": "1", "variant": "llvm_ad_rgb"}
     for name, default in defaults.items():
         if getattr(args, name) != default:
             words.append(f"--{name.replace('_', '-')} {getattr(args, name)}")
@@ -522,7 +580,7 @@ def main(argv=None):
                "rtmesh": rtmesh_commit(os.path.dirname(os.path.abspath(rtmesh.__file__))),
                "mitsuba": version, "machine": machine_start, "load_start": load_start,
                "load_end": loadavg(), "wall": time.perf_counter() - started,
-               "object_pixels": object_pixels}
+               "object_pixels": object_pixels, "light_samples": light_samples}
     text, _ = report(materials, args, context)
     publish(text, SECTION, write=not args.no_write)
     return 0
