@@ -25,6 +25,7 @@ its entries.
 import hashlib
 import json
 import os
+import re
 import sys
 import threading
 
@@ -129,6 +130,11 @@ _WRITE_FLAGS = os.O_WRONLY | os.O_RDWR | os.O_CREAT | os.O_APPEND | os.O_TRUNC
 # Python's own files (lazy imports during a load), compiled-kernel caches, the OS's
 _IGNORED_SUFFIXES = (".py", ".pyc", ".so", ".pyd", ".pth", ".nbi", ".nbc", ".dylib", ".dll")
 _IGNORED_PREFIXES = ("/proc/", "/sys/", "/dev/")
+# rtmesh's own files (lazily read data), wherever it is installed
+_PACKAGE = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+# installed packages' metadata, which a lazy entry-point lookup reads (an editable install's
+# egg-info lies outside the Python prefix)
+_METADATA = re.compile(r"\.(dist|egg)-info(/|\\)")
 
 
 def _audit(event, args):
@@ -186,13 +192,13 @@ class OpenedFiles:
         mesh_path = os.path.abspath(mesh_path)
         folder = os.path.dirname(mesh_path)
         ignored = tuple(p + os.sep for p in {sys.prefix, sys.base_prefix, sys.exec_prefix})
-        ignored += _IGNORED_PREFIXES + (os.path.dirname(os.path.abspath(__file__)) + os.sep,)
+        ignored += _IGNORED_PREFIXES + (_PACKAGE + os.sep,)
         found = [describe(mesh_path, "")]
         seen = {mesh_path}
         for path in self.paths:
             path = os.path.abspath(path)
             if (path in seen or path.endswith(_IGNORED_SUFFIXES) or path.startswith(ignored)
-                    or "__pycache__" in path or os.path.isdir(path)):
+                    or "__pycache__" in path or _METADATA.search(path) or os.path.isdir(path)):
                 continue
             seen.add(path)
             name = os.path.relpath(path, folder)

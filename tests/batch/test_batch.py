@@ -1190,3 +1190,26 @@ def test_images_read_by_openimageio_are_recorded_as_inputs(tmp_path):
     with OpenedFiles() as opened:
         read_image(str(exr))
     assert os.fspath(exr) in opened.paths
+
+
+def test_package_metadata_and_rtmesh_files_read_during_a_load_are_not_inputs(tmp_path):
+    """A lazy entry-point lookup during a load reads packages' metadata (an editable install's
+    egg-info lies outside the Python prefix), and rtmesh reads its own data lazily: neither
+    is a file of the asset, whose fingerprint would otherwise depend on how rtmesh is
+    installed and on which load came first in the process."""
+    import rtmesh
+    from rtmesh.batch.identity import OpenedFiles
+
+    mesh = tmp_path / "m.obj"
+    mesh.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    texture = tmp_path / "tex.png"
+    texture.write_bytes(b"png")
+    metadata = tmp_path / "site" / "somepackage.egg-info" / "entry_points.txt"
+    metadata.parent.mkdir(parents=True)
+    metadata.write_text("[x]\n")
+    own = os.path.join(os.path.dirname(rtmesh.__file__), "io", "dither_tile.npy")
+    with OpenedFiles() as opened:
+        for path in (texture, metadata, own):
+            with open(path, "rb"):
+                pass
+    assert [entry[0] for entry in opened.entries(str(mesh))] == ["", "tex.png"]
