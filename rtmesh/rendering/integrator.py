@@ -201,6 +201,9 @@ class Integrator:
         self.tables = ShadingTables.build(scene, self.accel.triangles, self.offset_scale)
         # the path kernel's scene records, formed by the first PathStage and shared by every view
         self.path_tables = None
+        # the medium tables of the path integrator's transmissive models where they are not
+        # Whitted's (media_of), built once
+        self._path_media = None
         self._set_view()
 
     def _set_background(self, background):
@@ -333,10 +336,32 @@ class Integrator:
         self._camera_medium = self._camera_stack(self.media)
         self._camera_absorbs = bool((self.media.absorption[self._camera_medium[0]] > 0).any())
 
+    def media_of(self, refracts):
+        """The medium tables (:class:`rtmesh.rendering.media.Media`) counting as media the
+        materials ``refracts`` marks (the path integrator's transmissive models, which
+        include some without a Whitted transmission colour): Whitted's own ``media`` when
+        they are the same materials, else tables built once for them.
+
+        Parameters
+        ----------
+        refracts : (M,) bool
+
+        Returns
+        -------
+        Media
+        """
+        groups = np.flatnonzero(refracts)
+        if self.media is not None and np.array_equal(self.media.group_material, groups):
+            return self.media
+        if self._path_media is None or not np.array_equal(self._path_media.group_material, groups):
+            scene = self.scene
+            self._path_media = Media(scene.materials, scene.material_id, scene.vertices, scene.faces,
+                                     scene.face_normals, refracts)
+        return self._path_media
+
     def camera_media(self, refracts):
         """The media the camera sits in, counting as media the materials ``refracts`` marks
-        (the path integrator's transmissive models, which include some without a Whitted
-        transmission colour).
+        (:meth:`media_of`).
 
         Parameters
         ----------
@@ -347,11 +372,10 @@ class Integrator:
         (STACK_DEPTH,) int32
             Material ids, innermost first, -1 padded.
         """
-        if self.media is not None and np.array_equal(self.media.group_material, np.flatnonzero(refracts)):
+        media = self.media_of(refracts)
+        if media is self.media:
             return self._camera_medium  # the same media as Whitted's: their stack, probed once
-        scene = self.scene
-        return self._camera_stack(Media(scene.materials, scene.material_id, scene.vertices, scene.faces,
-                                        scene.face_normals, refracts))
+        return self._camera_stack(media)
 
     def _camera_stack(self, media):
         """``media.camera_stack`` from the camera's position, probing the scene as it is when

@@ -28,7 +28,6 @@ from rtmesh.lights.projector import ProjectorLight
 from rtmesh.materials.models import SLOTS, material_rows, tables
 from rtmesh.io.passes import LIGHT_PATH_PASSES
 from rtmesh.rendering.caustics import Caustics
-from rtmesh.rendering.media import coincident_faces
 from rtmesh.rendering.photon_kernel import empty_photon_map
 from rtmesh.rendering.path_kernel import LIGHT_PATHS, PATH_KERNELS, no_instances, trace_paths
 from rtmesh.rendering.path_packets import BOUNCE, CAMERA, SHADOW
@@ -95,34 +94,31 @@ def instance_record(it):
     return placed.world_rows()
 
 
-def _twin_materials(scene, transmissive):
-    """Each face's touching twin's material (:func:`rtmesh.rendering.media.coincident_faces`
-    among the faces of transmissive models, with the opposite winding: two media touching),
-    -1 for none; an empty array when no face has one.
+def _twin_materials(media, faces):
+    """Each face's touching twin's material (``media.twin`` with the opposite winding: two
+    media touching; faces of one winding at one place are two copies of one surface, not two
+    media), -1 for none; an empty array when no face has one.
 
     Parameters
     ----------
-    scene : Scene
-    transmissive : (M,) bool
-        The materials whose models transmit.
+    media : Media or None
+        The medium tables of the path models' transmissive materials (None: none transmits).
+    faces : int
+        The scene's face count.
 
     Returns
     -------
     (F,) or (0,) int64
     """
-    twin = coincident_faces(scene.vertices, scene.faces, transmissive[scene.material_id])
-    paired = np.flatnonzero(twin >= 0)
-    normals = np.asarray(scene.face_normals, dtype=np.float64)
-    # faces of the same winding at one place are two copies of one surface, not two media
-    opposite = paired[np.einsum("ij,ij->i", normals[paired], normals[twin[paired]]) < 0.0]
-    if not len(opposite):
+    touching = None if media is None else (media.twin >= 0) & media.twin_opposite
+    if touching is None or not touching.any():
         return np.zeros(0, np.int64)
-    twins = np.full(len(scene.faces), -1, np.int64)
-    twins[opposite] = np.asarray(scene.material_id)[twin[opposite]]
+    twins = np.full(faces, -1, np.int64)
+    twins[touching] = media.material_id[media.twin[touching]]
     return twins
 
 
-def scene_tables(scene, accel):
+def scene_tables(scene, accel, media_of):
     """What the path kernel reads of a scene, formed once and shared by every view: its
     ``geometry`` and ``surface`` records (see :mod:`rtmesh.rendering.path_surfaces`) and the
     per-face emission the light table chooses by.
@@ -132,6 +128,9 @@ def scene_tables(scene, accel):
     scene : Scene
     accel : Accel or CutoutAccel
         The built Embree scene (its float32 triangles).
+    media_of : callable
+        ``media_of(transmissive)``: the medium tables of these materials
+        (:meth:`rtmesh.rendering.integrator.Integrator.media_of`).
 
     Returns
     -------
@@ -179,7 +178,8 @@ def scene_tables(scene, accel):
                unlit, tables(), SLOTS, material_textures, np.ascontiguousarray(metal_tint, dtype=np.float64),
                np.ascontiguousarray(m.alpha_mode, dtype=np.int64), np.ascontiguousarray(m.alpha_cutoff),
                np.ascontiguousarray(m.opacity), atlas.texels, atlas.descriptors,
-               np.ascontiguousarray(m.ior, dtype=np.float64), _twin_materials(scene, transmissive))
+               np.ascontiguousarray(m.ior, dtype=np.float64),
+               _twin_materials(media_of(transmissive) if transmissive.any() else None, len(faces)))
     # what each face emits on average (emission textures by their mean), for choosing lights by power
     mean_tint = np.array([np.ones(3) if material.emission_texture is None or scene.uv is None else
                           np.asarray(material.emission_texture.pixels, dtype=np.float64).reshape(
@@ -227,7 +227,7 @@ class PathStage:
                         "and takes its light from the lights and the background)", ", ".join(ignored))
         if it.path_tables is None:
             # formed with the integrator's first view; views made by with_view share them
-            it.path_tables = scene_tables(scene, it.accel)
+            it.path_tables = scene_tables(scene, it.accel, it.media_of)
         self.geometry, self.surface, face_emission = it.path_tables
         self.cutouts = it.cutouts is not None
         background = it.background
