@@ -103,7 +103,7 @@ from rtmesh.rendering.path_packets import (BOUNCE, BSDF_U1, BSDF_U2, CAMERA, COV
                                            mover_to_world, nearest_hits, occluded, placed, shadows_through_cutouts)
 from rtmesh.rendering.path_surfaces import alias_sample, load_lanes, set_lane
 from rtmesh.rendering.path_surfaces import environment_radiance as _environment_radiance
-from rtmesh.rendering.path_surfaces import (cross_interface, twin_material, hit_frame, hit_parameters, is_transparent,
+from rtmesh.rendering.path_surfaces import (cross_interface, crossing_scale, twin_material, hit_frame, hit_parameters, is_transparent,
                                             leave_surface, surface_point, textured_materials, to_world,
                                             triangle_light_emission)
 from rtmesh.sampling.hashing import mix64, uniform
@@ -570,14 +570,9 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                     top = cross_interface(stack, lane, mat, side < 0.0, twin_material(surface, prim))
                     for c in range(3):
                         sigma[lane, c] = absorption[top, c] if top >= 0 else 0.0
-                if flags & lobes.TRANSMISSION:
-                    ior_slot = slots[tag, models.IOR_SLOT]
-                    if ior_slot >= 0:
-                        # the radiance scaling 1 / eta'^2 of the crossing, kept apart for the
-                        # roulette (pbrt-v4's etaScale)
-                        eta = bsdf_params[bsdf_row, ior_slot]
-                        etap = eta if loz > 0.0 else 1.0 / eta
-                        eta_scale[lane] *= etap * etap
+                # the radiance scaling 1 / eta'^2 of a refraction, kept apart for the roulette
+                # (pbrt-v4's etaScale)
+                eta_scale[lane] *= crossing_scale(slots, tag, bsdf_params, bsdf_row, loz, flags)
                 if depth + 1 >= rr_depth:
                     # on the throughput without the radiance scaling of the crossings: inside
                     # glass (1 / 1.5^2 of it) paths would otherwise end by roulette without

@@ -46,7 +46,7 @@ from rtmesh.lights import light_table
 from rtmesh.lights.environment import sample_direction
 from rtmesh.lights.light_table import FACE
 from rtmesh.lights.point_light_rows import illuminate_row
-from rtmesh.materials import models
+from rtmesh.materials import lobes, models
 from rtmesh.materials.metallic_roughness import alpha_from_roughness_row
 from rtmesh.materials.table import ALPHA_MODES
 from rtmesh.sampling.alias import alias_sample as _alias_sample
@@ -440,6 +440,21 @@ def interface_ratio(stack, lane, mat, entering, ior, twin):
     else:
         other = stack[lane, 1] if top == mat else top
     return ior[mat] / (ior[other] if other >= 0 else 1.0)
+
+
+@inline_row
+def crossing_scale(slots, tag, bsdf_params, bsdf_row, loz, flags):
+    """``eta'^2`` of a sampled refraction (``flags`` with ``lobes.TRANSMISSION``, a model
+    with an ``ior`` slot; ``loz`` the outgoing direction's local z, positive outside), the
+    inverse of the radiance scaling ``1 / eta'^2`` the seam applies to it for camera paths;
+    1 for any other sample."""
+    if flags & lobes.TRANSMISSION:
+        slot = slots[tag, models.IOR_SLOT]
+        if slot >= 0:
+            eta = bsdf_params[bsdf_row, slot]
+            etap = eta if loz > 0.0 else 1.0 / eta
+            return etap * etap
+    return 1.0
 
 
 @inline_row

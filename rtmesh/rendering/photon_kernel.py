@@ -44,7 +44,7 @@ from rtmesh.rendering.path_surfaces import environment_sample as _environment_sa
 from rtmesh.rendering.path_surfaces import illuminate as _illuminate_row
 from rtmesh.rendering.path_surfaces import projector_incident as _projector_incident
 from rtmesh.rendering.path_surfaces import sample_area_point as _sample_area_point
-from rtmesh.rendering.path_surfaces import (cross_interface, twin_material, hit_frame, hit_parameters, is_transparent,
+from rtmesh.rendering.path_surfaces import (cross_interface, crossing_scale, twin_material, hit_frame, hit_parameters, is_transparent,
                                             leave_surface, surface_point, tangent_frame, textured_materials,
                                             to_world, triangle_light_emission)
 from rtmesh.sampling.hashing import GOLDEN, mix64, path_key, uniform
@@ -309,7 +309,6 @@ def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geomet
                 if not specular[mat] or bounces[lane] >= max_bounces:
                     alive[lane] = False
                     continue
-                ior_slot = slots[tags[mat], models.IOR_SLOT]
                 lox = (tx * ox + ty * oy) + tz * oz
                 loy = (sx * ox + sy * oy) + sz * oz
                 loz = (nx * ox + ny * oy) + nz * oz
@@ -332,10 +331,7 @@ def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geomet
                     alive[lane] = False
                     continue
                 adjoint = abs(loz) * abs(side) / (o_g * i_n)
-                if flags & lobes.TRANSMISSION and ior_slot >= 0:
-                    eta = bsdf_params[bsdf_row, ior_slot]
-                    etap = eta if loz > 0.0 else 1.0 / eta
-                    adjoint *= etap * etap
+                adjoint *= crossing_scale(slots, tags[mat], bsdf_params, bsdf_row, loz, flags)
                 beta[lane, 0] *= wr * adjoint
                 beta[lane, 1] *= wg * adjoint
                 beta[lane, 2] *= wb * adjoint
