@@ -200,7 +200,7 @@ def _bytes(text):
 def _add_batch_parser(commands):
     from rtmesh.batch.normalize import NORMALIZE_MODES
     from rtmesh.batch.options import FORMATS, PROGRESS_MODES
-    from rtmesh.batch.worker import VIEWS
+    from rtmesh.batch.jobs import VIEWS
 
     p = commands.add_parser(
         "batch", help="render many mesh files (folders, manifests) to images, resumably",

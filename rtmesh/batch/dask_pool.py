@@ -1,6 +1,6 @@
 """Dask batch runner: the jobs of a batch on a dask.distributed cluster.
 
-It takes the same :class:`~rtmesh.batch.worker.AssetJob` list as the local pool
+It takes the same :class:`~rtmesh.batch.jobs.AssetJob` list as the local pool
 (:mod:`rtmesh.batch.pool`) and reports through the same callbacks, in the submitting
 process.  On a cluster the workers write the images into the output folder, which must be
 the same storage for them and for the submitting machine; and the cluster can outlive or

@@ -30,9 +30,9 @@ import os
 import numpy as np
 
 from rtmesh.batch.bop import BOP_SUFFIXES, write_bop_scene
-from rtmesh.batch.worker import CAMERA_SUFFIX
-from rtmesh.batch.worker import DEPTH_PNG_SUFFIX as DEPTH_SUFFIX
-from rtmesh.batch.worker import MASK_PNG_SUFFIX as MASK_SUFFIX
+from rtmesh.batch.jobs import CAMERA_SUFFIX
+from rtmesh.batch.jobs import DEPTH_PNG_SUFFIX as DEPTH_SUFFIX
+from rtmesh.batch.jobs import MASK_PNG_SUFFIX as MASK_SUFFIX
 from rtmesh.core.errors import OutputError
 from rtmesh.io.atomic_files import write_text
 from rtmesh.loaders.importers import mesh_file_parts

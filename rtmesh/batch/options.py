@@ -12,7 +12,7 @@ from rtmesh.batch.inputs import InputError
 from rtmesh.batch.movies import MOVIE_FORMATS, require_mp4
 from rtmesh.batch.normalize import NORMALIZE_MODES
 from rtmesh.batch.view_sets import is_view_set, parse_elevation, view_set
-from rtmesh.batch.worker import VIEWS
+from rtmesh.batch.jobs import VIEWS
 from rtmesh.rendering.settings import PASSES, RenderSettings
 
 FORMATS = ("png", "exr", "jpg")

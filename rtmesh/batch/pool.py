@@ -1,6 +1,6 @@
 """Local batch runner: a pool of worker processes on this machine.
 
-It takes the same :class:`~rtmesh.batch.worker.AssetJob` list as the Dask runner
+It takes the same :class:`~rtmesh.batch.jobs.AssetJob` list as the Dask runner
 (:mod:`rtmesh.batch.dask_pool`) and reports through the same two callbacks,
 ``on_image(image_result)`` and ``on_job(job_result)``, always called in the calling process:
 the caller alone writes the ledger, so a batch leaves the same ledger wherever it ran.
@@ -22,6 +22,7 @@ import time
 from collections import deque
 from multiprocessing.connection import wait
 
+from rtmesh.batch import view_scenes
 from rtmesh.batch import worker as batch_worker
 from rtmesh.batch.worker import image_result, run_job
 from rtmesh.core import compile_ahead, runtime
@@ -181,7 +182,7 @@ def _worker_main(conn, memory_limit, parent_pid):
         _, hard = resource.getrlimit(resource.RLIMIT_AS)
         limit = memory_limit if hard == resource.RLIM_INFINITY else min(memory_limit, hard)
         resource.setrlimit(resource.RLIMIT_AS, (limit, hard))
-        batch_worker.set_memory_limit(limit)
+        view_scenes.set_memory_limit(limit)
     # warnings about a single asset's oddities would scramble the batch's progress bar
     logging.basicConfig(level=logging.ERROR)
     logging.getLogger("trimesh").setLevel(logging.ERROR)

@@ -17,7 +17,9 @@ The pieces, one job each:
   and :mod:`rtmesh.batch.progress` shows the progress;
 - :mod:`rtmesh.batch.publish` puts the images in place, only from this process and only once
   they are recorded, and deals with what a killed run left;
-- :mod:`rtmesh.batch.worker` converts one asset inside a worker;
+- :mod:`rtmesh.batch.jobs` describes the jobs, :mod:`rtmesh.batch.worker` converts one asset
+  inside a worker (its views' scenes from :mod:`rtmesh.batch.view_scenes`, their labels from
+  :mod:`rtmesh.batch.view_labels`);
 - :mod:`rtmesh.batch.pool` runs the jobs on local processes, :mod:`rtmesh.batch.dask_pool` on a
   Dask cluster;
 - :mod:`rtmesh.batch.ledger` remembers finished and failed images so a re-run resumes.
@@ -46,7 +48,7 @@ from rtmesh.batch.ledger import FINGERPRINT, INPUTS, OUTPUTS, STATUS, Ledger, de
 from rtmesh.batch.options import FORMATS, BatchOptions, check_names, check_passes
 from rtmesh.batch.publish import Leftovers
 from rtmesh.batch.view_sets import view_set
-from rtmesh.batch.worker import CAMERA_SUFFIX, VIEWS, AssetJob, ImageTask, fixed_view, turntable_views
+from rtmesh.batch.jobs import CAMERA_SUFFIX, VIEWS, AssetJob, ImageTask, fixed_view, turntable_views
 from rtmesh.core.errors import OutputError
 from rtmesh.core.runtime import usable_cores
 from rtmesh.io.atomic_files import write_text

@@ -20,7 +20,7 @@ import re
 
 import numpy as np
 
-from rtmesh.batch.worker import VIEWS, View
+from rtmesh.batch.jobs import VIEWS, View
 
 VIEW_SET_KINDS = ("fibonacci", "random", "rings")
 MAX_VIEWS = 100_000

@@ -628,7 +628,8 @@ def test_a_run_killed_between_recording_and_renaming_is_rolled_forward(tmp_path)
 
 
 def test_a_superseded_task_removes_what_it_wrote_and_says_so(tmp_path):
-    from rtmesh.batch.worker import AssetJob, ImageTask, fixed_view, run_job
+    from rtmesh.batch.jobs import AssetJob, ImageTask, fixed_view
+    from rtmesh.batch.worker import run_job
 
     mesh = make_mesh(tmp_path / "a.obj")
     out = tmp_path / "out"

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from rtmesh.batch import runner, worker
+from rtmesh.batch import jobs, runner, worker
 from rtmesh.batch.inputs import InputError
 from rtmesh.batch.options import BatchOptions
 from rtmesh.cli import main
@@ -28,12 +28,12 @@ def test_dither_reaches_the_workers_png(tmp_path, monkeypatch):
     assert fields["dither"] is True
     # without the option the fields, and so the fingerprints of earlier images, are as before
     assert "dither" not in BatchOptions().render_fields({})
-    task = worker.ImageTask("iso", worker.fixed_view("iso"), ("iso.png",), "")
+    task = jobs.ImageTask("iso", jobs.fixed_view("iso"), ("iso.png",), "")
     steps = []
     for dither in (True, False):
         folder = tmp_path / str(dither)
         settings = dict(fields, dither=dither)
-        (image,) = worker.run_job(worker.AssetJob("ball.obj", str(mesh), str(folder), settings, (task,)))["images"]
+        (image,) = worker.run_job(jobs.AssetJob("ball.obj", str(mesh), str(folder), settings, (task,)))["images"]
         assert image["status"] == "done", image
         steps.append(np.round(read_image(folder / "iso.png")[0] * 255.0))
     difference = steps[0] - steps[1]

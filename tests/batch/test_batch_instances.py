@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scenes import block_means, reusing_glb
 
-from rtmesh.batch import coco, worker
+from rtmesh.batch import coco, jobs, view_scenes, worker
 from rtmesh.batch.bop import BOP_SUFFIXES
 from rtmesh.batch.coco import COCO_SUFFIX
 from rtmesh.io.images import read_image
@@ -19,7 +19,7 @@ PLACED = 8
 VIEWS = ("iso", "front", "bottom")
 # every file a view of a batch can hold that depends on the geometry: the image, the EXR
 # with the flow, the COCO fragment, the camera, the BOP ingredients and the coverage mask
-SUFFIXES = (".png", ".exr", COCO_SUFFIX, worker.CAMERA_SUFFIX, worker.MASK_PNG_SUFFIX) + BOP_SUFFIXES
+SUFFIXES = (".png", ".exr", COCO_SUFFIX, jobs.CAMERA_SUFFIX, jobs.MASK_PNG_SUFFIX) + BOP_SUFFIXES
 FIELDS = {"width": 32, "height": 24, "spp": 2, "threads": 1, "caustics": "off", "passes": ("alpha",)}
 
 
@@ -29,7 +29,7 @@ def _convert(folder, mesh, monkeypatch, copied):
     size); the integrators it built and how many amodal masks traced placements."""
     built, placed = [], []
 
-    class Recording(worker.Integrator):
+    class Recording(view_scenes.Integrator):
         def __init__(self, scene, settings):
             super().__init__(scene, settings)
             built.append(self)
@@ -39,16 +39,16 @@ def _convert(folder, mesh, monkeypatch, copied):
         return recentred(*args)
 
     with monkeypatch.context() as patch:
-        patch.setattr(worker, "Integrator", Recording)
+        patch.setattr(view_scenes, "Integrator", Recording)
         patch.setattr(coco, "recentred", recording_placed)
         if copied:
             patch.setattr(instances, "MIN_TRIANGLES", 10 ** 9)
-        views = [worker.fixed_view(name) for name in VIEWS]
+        views = [jobs.fixed_view(name) for name in VIEWS]
         flows = [(None, views[1]), (views[0], None), ()]
-        tasks = tuple(worker.ImageTask(v.name, v, tuple(v.name + s for s in SUFFIXES), "", flow)
+        tasks = tuple(jobs.ImageTask(v.name, v, tuple(v.name + s for s in SUFFIXES), "", flow)
                       for v, flow in zip(views, flows))
-        job = worker.AssetJob("reuse.glb", str(mesh), str(folder), FIELDS, tasks, ground=True,
-                              normalize="unit-cube", meta=True)
+        job = jobs.AssetJob("reuse.glb", str(mesh), str(folder), FIELDS, tasks, ground=True,
+                            normalize="unit-cube", meta=True)
         result = worker.run_job(job)
     assert [image["status"] for image in result["images"]] == ["done"] * len(VIEWS), result
     return built, len(placed)
@@ -107,14 +107,14 @@ def test_instanced_batch_labels_are_those_of_the_copies(converted):
     folder, _, _ = converted
     placed, copies = folder / "placed", folder / "copies"
     for view in VIEWS:
-        for suffix in (COCO_SUFFIX, worker.CAMERA_SUFFIX, ".bop.json"):
+        for suffix in (COCO_SUFFIX, jobs.CAMERA_SUFFIX, ".bop.json"):
             documents = [json.loads((kind / f"{view}{suffix}").read_text()) for kind in (placed, copies)]
             _close(*documents, where=f"{view}{suffix}")
         coco = json.loads((placed / f"{view}{COCO_SUFFIX}").read_text())
         # the asset, its ground plane left out, is one instance, seen and partly hidden
         (annotation,) = coco["annotations"]
         assert annotation["object_name"] == "reuse.glb" and 0 < annotation["visible_fraction"] <= 1
-        for suffix in (worker.MASK_PNG_SUFFIX, ".bop_mask.png", ".bop_mask_visib.png", ".bop_depth.png"):
+        for suffix in (jobs.MASK_PNG_SUFFIX, ".bop_mask.png", ".bop_mask_visib.png", ".bop_depth.png"):
             a, b = (read_image(kind / f"{view}{suffix}")[0] for kind in (placed, copies))
             assert np.array_equal(a, b), f"{view}{suffix}"
     # the flow between the two views with the ground plane: the placements' points are the copies'
@@ -135,10 +135,10 @@ def test_copies_beyond_a_workers_limit_fail_the_asset_in_one_line(tmp_path, monk
     """Under whitted the view's build flattens the placements: a local worker refuses copies
     beyond its limit before taking the memory (the load itself, instanced, fits)."""
     mesh = reusing_glb(tmp_path / "reuse.glb", count=PLACED, subdivisions=2)
-    monkeypatch.setattr(worker, "LOAD_LIMIT", 600_000)
-    task = worker.ImageTask("iso", worker.fixed_view("iso"), ("iso.png",), "")
+    monkeypatch.setattr(view_scenes, "LOAD_LIMIT", 600_000)
+    task = jobs.ImageTask("iso", jobs.fixed_view("iso"), ("iso.png",), "")
     fields = dict(FIELDS, integrator="whitted", passes=())
-    (image,) = worker.run_job(worker.AssetJob("reuse.glb", str(mesh), str(tmp_path), fields, (task,)))["images"]
+    (image,) = worker.run_job(jobs.AssetJob("reuse.glb", str(mesh), str(tmp_path), fields, (task,)))["images"]
     assert (image["status"], image["stage"]) == ("failed", "render")
     assert "\n" not in image["message"] and f"{PLACED} placements flattened into copies" in image["message"]
     assert not (tmp_path / "iso.png").exists()

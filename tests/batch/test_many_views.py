@@ -6,10 +6,11 @@ import numpy as np
 import OpenImageIO as oiio
 from scenes import settings, sphere_on_floor_scene
 
-from rtmesh.batch import worker
+from rtmesh.batch import jobs, view_scenes, worker
 from rtmesh.geometry import accel as accel_module
 from rtmesh.lights.point_lights import DirectionalLight
 from rtmesh.rendering.integrator import Integrator
+from rtmesh.rendering.settings import RenderSettings
 from rtmesh.scene.camera import Camera
 
 
@@ -53,7 +54,7 @@ def test_a_batch_job_loads_once_and_builds_once_per_ground_variant(tmp_path, mon
     mesh = tmp_path / "a.obj"
     mesh.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n")
     builds, loads = [], []
-    real_accel, real_load = accel_module.Accel.__init__, worker.mesh_file_parts
+    real_accel, real_load = accel_module.Accel.__init__, view_scenes.mesh_file_parts
 
     def counting_accel(self, *args, **kwargs):
         builds.append(1)
@@ -64,19 +65,19 @@ def test_a_batch_job_loads_once_and_builds_once_per_ground_variant(tmp_path, mon
         return real_load(*args, **kwargs)
 
     monkeypatch.setattr(accel_module.Accel, "__init__", counting_accel)
-    monkeypatch.setattr(worker, "mesh_file_parts", counting_load)
-    views = worker.turntable_views(8) + [worker.fixed_view("bottom")]
-    tasks = tuple(worker.ImageTask(v.name, v, (f"{v.name}.exr",), "") for v in views)
+    monkeypatch.setattr(view_scenes, "mesh_file_parts", counting_load)
+    views = jobs.turntable_views(8) + [jobs.fixed_view("bottom")]
+    tasks = tuple(jobs.ImageTask(v.name, v, (f"{v.name}.exr",), "") for v in views)
     fields = {"width": 16, "height": 12, "spp": 1, "threads": 1}
-    result = worker.run_job(worker.AssetJob("a.obj", str(mesh), str(tmp_path), fields, tasks, ground=True))
+    result = worker.run_job(jobs.AssetJob("a.obj", str(mesh), str(tmp_path), fields, tasks, ground=True))
     assert [i["status"] for i in result["images"]] == ["done"] * 9
     # one load; one build with the ground plane (the turntable), one without (from below)
     assert len(loads) == 1 and len(builds) == 2
 
-    loaded = worker._load(worker.AssetJob("a.obj", str(mesh), str(tmp_path), fields, ()))
-    rs = worker.RenderSettings(**fields).validate()
+    loaded = view_scenes.load_asset(jobs.AssetJob("a.obj", str(mesh), str(tmp_path), fields, ()))
+    rs = RenderSettings(**fields).validate()
     for view in (views[3], views[-1]):
-        fresh = Integrator(worker._scene_for_view(loaded, view, rs, True), rs).render()
+        fresh = Integrator(view_scenes._scene_for_view(loaded, view, rs, True), rs).render()
         written = oiio.ImageInput.open(str(tmp_path / f"{view.name}.exr")).read_image("float")
         np.testing.assert_array_equal(written[..., :3], fresh.image[..., :3])
 
@@ -94,17 +95,17 @@ def test_physical_assets_get_the_studio_turned_to_each_view(tmp_path):
         material=PBRMaterial(name="m", baseColorFactor=[0.9, 0.6, 0.3, 1.0], metallicFactor=1.0, roughnessFactor=0.4))
     mesh = tmp_path / "ball.glb"
     sphere.export(mesh)
-    views = [worker.fixed_view("iso"), worker.fixed_view("left")]
-    tasks = tuple(worker.ImageTask(v.name, v, (f"{v.name}.exr",), "") for v in views)
+    views = [jobs.fixed_view("iso"), jobs.fixed_view("left")]
+    tasks = tuple(jobs.ImageTask(v.name, v, (f"{v.name}.exr",), "") for v in views)
     fields = {"width": 12, "height": 12, "spp": 2, "threads": 1}
-    result = worker.run_job(worker.AssetJob("ball.glb", str(mesh), str(tmp_path), fields, tasks))
+    result = worker.run_job(jobs.AssetJob("ball.glb", str(mesh), str(tmp_path), fields, tasks))
     assert [i["status"] for i in result["images"]] == ["done"] * 2
-    loaded = worker._load(worker.AssetJob("ball.glb", str(mesh), str(tmp_path), fields, ()))
+    loaded = view_scenes.load_asset(jobs.AssetJob("ball.glb", str(mesh), str(tmp_path), fields, ()))
     # a glTF asset in a batch renders with the path integrator unless the batch says otherwise
-    rs = worker.RenderSettings(**fields, integrator="path").validate()
+    rs = RenderSettings(**fields, integrator="path").validate()
     rotations = []
     for view in views:
-        scene = worker._scene_for_view(loaded, view, rs, False)
+        scene = view_scenes._scene_for_view(loaded, view, rs, False)
         assert scene.lights == [] and scene.background.name == STUDIO_PATH and scene.background.lighting
         rotations.append(scene.background.rotation)
         fresh = Integrator(scene, rs).render()

@@ -8,7 +8,7 @@ import trimesh
 from scipy import stats
 
 import rtmesh
-from rtmesh.batch import worker
+from rtmesh.batch import jobs, view_scenes
 from rtmesh.batch.view_sets import fibonacci_directions, view_set
 from rtmesh.cli import main
 from rtmesh.rendering.settings import RenderSettings
@@ -69,7 +69,7 @@ def test_rings_hit_their_elevations_exactly():
             azimuth = np.degrees(np.arctan2(d[:, 0], d[:, 2])) % 360.0
             np.testing.assert_allclose(azimuth, np.arange(6) * 60.0, atol=1e-9)
         for view in ring_views:  # the auto-framed camera too
-            camera, _ = worker._camera_and_lights(bounds, view, settings)
+            camera, _ = view_scenes._camera_and_lights(bounds, view, settings)
             offset = camera.position - camera.look_at
             assert np.degrees(np.arcsin(offset[1] / np.linalg.norm(offset))) == pytest.approx(elevation, abs=1e-9)
 
@@ -83,8 +83,8 @@ def test_radius_jitter_moves_cameras_out_only_and_is_seeded():
     scales = np.array([v.distance_scale for v in jittered])
     assert scales.min() >= 1.0 and scales.max() <= 1.5 and scales.std() > 0.1
     for a, b in zip(plain[:5], jittered[:5]):
-        ca, _ = worker._camera_and_lights(bounds, a, settings)
-        cb, _ = worker._camera_and_lights(bounds, b, settings)
+        ca, _ = view_scenes._camera_and_lights(bounds, a, settings)
+        cb, _ = view_scenes._camera_and_lights(bounds, b, settings)
         np.testing.assert_allclose(np.linalg.norm(cb.position - cb.look_at),
                                    b.distance_scale * np.linalg.norm(ca.position - ca.look_at))
 
@@ -129,6 +129,6 @@ def test_bad_view_set_options_give_one_line_and_exit_2_with_no_files(tmp_path, c
 
 def test_views_of_earlier_batches_keep_their_fingerprint_fields():
     """Fields added to View are left out of the fingerprint at their defaults."""
-    for view in [worker.fixed_view("iso"), worker.turntable_views(3)[1]]:
+    for view in [jobs.fixed_view("iso"), jobs.turntable_views(3)[1]]:
         assert set(view.identity()) == {"name", "direction", "up", "light_direction"}
     assert view_set("fibonacci:2", radius_jitter=0.5)[0].identity()["distance_scale"] > 1.0
