@@ -2,7 +2,8 @@
 
 What is rendered
 ----------------
-The scene of benchmarks/bench_pbr_peers.py's ``duck-env-*`` cases, built by its functions:
+The scene of benchmarks/bench_pbr_peers.py's ``duck-env-*`` cases, built by their functions
+(benchmarks/pbr_cases.py):
 
 - geometry: the triangles and vertex normals of ``Duck.glb`` (``../shared/assets/real/``),
   centred on its bounding box and scaled so its largest half-extent is 1; Mitsuba reads the
@@ -17,7 +18,7 @@ The scene of benchmarks/bench_pbr_peers.py's ``duck-env-*`` cases, built by its 
   needed).  The Duck's own textured material (metallic 0, roughness 1) is not used;
 - light: ``rtmesh/scene/studio.exr`` as the only light: rtmesh ``lights = []``,
   ``[environment] ambient = 0``, ``[background]`` the exr with ``lighting = true``; Mitsuba an
-  ``envmap`` of the same radiance function (bench_pbr_peers ``mitsuba_environment_image``,
+  ``envmap`` of the same radiance function (pbr_cases ``mitsuba_environment_image``,
   rotated +90 degrees about +Y), ``hide_emitters = false``: the background is seen in both;
 - camera: bench_pbr_peers' (from (0, 0.6, 3.6) toward the origin, +Y up, 36 degree vertical
   field of view), ``--size`` 256 x 256, box filter (each sample counts in its own pixel);
@@ -44,7 +45,7 @@ where rtmesh's stays 0.5).  The error of one render is
 
 over every pixel and channel of the 256 x 256 image, the duck and the background (the
 headline; the column "object" gives the same over the pixels fully covered by the duck,
-bench_pbr_peers ``object_mask``, divided by their own mean).  Times are wall-clock seconds of
+pbr_cases ``object_mask``, divided by their own mean).  Times are wall-clock seconds of
 one render call, scene loading and process start-up excluded (rtmesh: ``rtmesh.render`` on a
 loaded scene, its ``Integrator`` construction included, ~0.03 s; Mitsuba: ``mi.render`` plus
 the copy of the image to NumPy, in a worker process that stays up,
@@ -96,7 +97,7 @@ import types
 import numpy as np
 
 import rtmesh
-from benchmarks import bench_pbr_peers as pbr
+from benchmarks import pbr_cases as pbr
 from benchmarks._lib import PEERS_VENV, machine, publish, relative_rmse, rtmesh_commit, start_peer
 from rtmesh.core import runtime
 
