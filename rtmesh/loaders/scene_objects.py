@@ -333,4 +333,3 @@ def _motion(r, table, where):
                       values.get("rotate_axis", np.array([0.0, 1.0, 0.0])), degrees)
     except ValueError as exc:
         raise r.error(where, str(exc)) from None
-
