@@ -21,7 +21,8 @@ from rtmesh.loaders.obj_polygons import triangulate_polygons
 from rtmesh.loaders.placements import copied
 from rtmesh.loaders.trimesh_materials import FileMaterials
 from rtmesh.loaders.trimesh_parts import parts_from_trimesh
-from rtmesh.loaders.usd_files import USD_EXTENSIONS, load_usd_scene, read_usd
+from rtmesh.loaders.usd_files import load_usd_scene, read_usd
+from rtmesh.loaders.usd_stage import USD_EXTENSIONS
 from rtmesh.materials.table import PHYSICAL_MODELS
 from rtmesh.rendering import memory
 from rtmesh.scene.model import Scene
