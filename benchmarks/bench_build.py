@@ -7,8 +7,8 @@ its first ray, in a process tuned as that command tunes its own
 
 * ``load``: :func:`rtmesh.loaders.importers.load_trimesh`, of which ``trimesh.load`` is trimesh
   reading the PLY (with trimesh's processing, the vertex merge, where rtmesh leaves it to
-  trimesh) and the rest rtmesh's own (:func:`rtmesh.loaders.importers.process`);
-* ``parts``: :func:`rtmesh.loaders.importers.parts_from_trimesh`, of which ``smooth normals`` is
+  trimesh) and the rest rtmesh's own (:func:`rtmesh.loaders.mesh_processing.process`);
+* ``parts``: :func:`rtmesh.loaders.trimesh_parts.parts_from_trimesh`, of which ``smooth normals`` is
   :func:`rtmesh.geometry.smoothing.smooth_vertex_normals` (normals split at creases) and the rest
   the world transform;
 * ``scene``: :meth:`rtmesh.scene.model.Scene.from_parts` (flattening, degenerate-face filter,
@@ -49,12 +49,13 @@ import trimesh
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
-import rtmesh.loaders.importers
+import rtmesh.loaders.trimesh_parts
 import rtmesh.rendering.integrator
 from benchmarks._lib import machine, publish
 from rtmesh.core import runtime
 from rtmesh.geometry import embree_library
-from rtmesh.loaders.importers import load_trimesh, parts_from_trimesh
+from rtmesh.loaders.importers import load_trimesh
+from rtmesh.loaders.trimesh_parts import parts_from_trimesh
 from rtmesh.rendering.integrator import Integrator
 from rtmesh.rendering.settings import RenderSettings
 from rtmesh.rendering.shading_tables import ShadingTables
@@ -64,7 +65,7 @@ SECTION = "Scene build time, 1M+ triangles"
 # (stage, sub-stage, where the sub-stage's function is looked up, its name there)
 SUB_STAGES = (
     ("load", "trimesh.load", trimesh, "load"),
-    ("parts", "smooth normals", rtmesh.loaders.importers, "smooth_vertex_normals"),
+    ("parts", "smooth normals", rtmesh.loaders.trimesh_parts, "smooth_vertex_normals"),
     ("integrator", "accel", rtmesh.rendering.integrator, "Accel"),
     ("integrator", "shading tables", ShadingTables, "build"),
 )

@@ -271,13 +271,13 @@ def test_memory_limit_zero_turns_the_check_off(scene_file, tmp_path):
 
 def test_the_memory_check_comes_before_any_mesh_is_read(tmp_path, monkeypatch, capsys):
     import rtmesh.api
-    import rtmesh.loaders.scene_file
+    import rtmesh.loaders.scene_objects
 
     def no_mesh(*args, **kwargs):
         raise AssertionError("a mesh was read before the memory check")
 
     monkeypatch.setattr(rtmesh.api, "load_mesh_scene", no_mesh)
-    monkeypatch.setattr(rtmesh.loaders.scene_file, "mesh_file_parts", no_mesh)
+    monkeypatch.setattr(rtmesh.loaders.scene_objects, "mesh_file_parts", no_mesh)
     mesh = os.path.join(ASSETS, "meshes", "bunny.ply")
     scene = tmp_path / "s.toml"
     scene.write_text(f'[render]\nwidth = 100000\nheight = 100000\n[[objects]]\nmesh = "{mesh}"\n')

@@ -61,7 +61,7 @@ def scan_obj(path):
     nan_colours : int
         Vertex statements with NaN among their colour values (trimesh turns a NaN colour
         into black).  NaN coordinates are counted where their faces are dropped
-        (:func:`rtmesh.loaders.importers.process`).
+        (:func:`rtmesh.loaders.mesh_processing.process`).
     """
     with open(path, "rb") as f:
         text = f.read()

@@ -1,7 +1,7 @@
 """A mesh that a loader places many times: kept once and placed by Embree instances, or
 copied, by the rule of :func:`rtmesh.scene.instances.worth_instancing`.
 
-The glTF loader (:func:`rtmesh.loaders.importers.parts_from_trimesh`, node reuse and
+The glTF loader (:func:`rtmesh.loaders.trimesh_parts.parts_from_trimesh`, node reuse and
 ``EXT_mesh_gpu_instancing``), scene files (objects that import one file several times,
 ``[[objects]] instances = "file.npy"``) and USD (point instancers, instanceable prims) decide
 the same way and count the same memory before they take it.

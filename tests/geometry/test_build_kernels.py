@@ -11,7 +11,9 @@ from scipy.sparse.csgraph import connected_components
 from rtmesh.geometry import build_kernels
 from rtmesh.geometry.accel import corner_table
 from rtmesh.geometry.smoothing import face_normals_and_corner_angles, smooth_vertex_normals
-from rtmesh.loaders.importers import _merge_keeps_everything, load_trimesh, parts_from_trimesh
+from rtmesh.loaders.importers import load_trimesh
+from rtmesh.loaders.mesh_processing import _merge_keeps_everything
+from rtmesh.loaders.trimesh_parts import parts_from_trimesh
 from rtmesh.rendering.integrator import Integrator
 from rtmesh.rendering.settings import RenderSettings
 from rtmesh.scene.model import MeshPart, Scene

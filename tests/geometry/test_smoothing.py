@@ -9,7 +9,7 @@ import trimesh
 from scenes import icosphere
 
 from rtmesh.geometry.smoothing import face_normals_and_corner_angles, smooth_vertex_normals
-from rtmesh.loaders.importers import parts_from_trimesh
+from rtmesh.loaders.trimesh_parts import parts_from_trimesh
 
 
 def corner_normals(faces, normals):

@@ -19,7 +19,8 @@ from PIL import Image
 from rtmesh.api import render
 from rtmesh.cli import main
 from rtmesh.core.errors import MissingExtraError
-from rtmesh.loaders.importers import load_trimesh, parts_from_trimesh
+from rtmesh.loaders.importers import load_trimesh
+from rtmesh.loaders.trimesh_parts import parts_from_trimesh
 
 SIZE = dict(width=32, height=24, spp=4)
 

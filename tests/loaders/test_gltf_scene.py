@@ -18,8 +18,9 @@ from rtmesh.api import load_scene
 from rtmesh.core.errors import SceneError
 from rtmesh.lights.point_lights import DirectionalLight, PointLight, SpotLight
 from rtmesh.loaders.gltf_nodes import cameras_from_gltf, lights_from_gltf, node_world_transforms, read_gltf_json
-from rtmesh.loaders.importers import load_trimesh, parts_from_trimesh
+from rtmesh.loaders.importers import load_trimesh
 from rtmesh.loaders.scene_file import scene_from_dict
+from rtmesh.loaders.trimesh_parts import parts_from_trimesh
 from rtmesh.rendering.integrator import Integrator
 
 HALF = 0.1  # the cube's half side

@@ -10,7 +10,9 @@ import trimesh
 import scenes
 
 from rtmesh.core.errors import MeshError
-from rtmesh.loaders.importers import load_mesh_scene, load_trimesh, material_from_trimesh, parts_from_trimesh
+from rtmesh.loaders.importers import load_mesh_scene, load_trimesh
+from rtmesh.loaders.trimesh_materials import material_from_trimesh
+from rtmesh.loaders.trimesh_parts import parts_from_trimesh
 
 DATA = scenes.DATA
 TRIANGLE_OBJ = "mtllib m.mtl\nusemtl m\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"

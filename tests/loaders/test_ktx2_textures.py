@@ -7,7 +7,8 @@ import gltf_codecs
 import hostile_files
 import numpy as np
 
-from rtmesh.loaders.importers import load_trimesh, parts_from_trimesh
+from rtmesh.loaders.importers import load_trimesh
+from rtmesh.loaders.trimesh_parts import parts_from_trimesh
 
 # the identifier of a KTX2 file, then bytes no decoder here reads
 KTX2 = b"\xabKTX 20\xbb\r\n\x1a\n" + bytes(range(64))

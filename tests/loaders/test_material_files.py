@@ -6,10 +6,11 @@ import trimesh
 from PIL import Image
 from trimesh.visual.material import PBRMaterial
 
-from rtmesh.loaders.importers import load_mesh_scene, parts_from_trimesh
+from rtmesh.loaders.importers import load_mesh_scene
 from rtmesh.loaders.gltf_materials import gltf_material
 from rtmesh.loaders.mtl_materials import map_statement, mtl_material
 from rtmesh.loaders.scene_file import scene_from_dict
+from rtmesh.loaders.trimesh_parts import parts_from_trimesh
 
 # ---------------------------------------------------------------- MTL
 

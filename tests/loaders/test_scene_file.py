@@ -108,10 +108,10 @@ def test_command_line_overrides_scene_settings():
 def test_every_scene_key_is_documented(table):
     # docs/SCENE_FORMAT.md promises to list every key: a key added to the schema without
     # its documentation fails here
-    import rtmesh.loaders.scene_file as scene_file
+    import rtmesh.loaders.scene_keys as scene_keys
 
     doc = (Path(scenes.ROOT) / "docs" / "SCENE_FORMAT.md").read_text()
-    keys = getattr(scene_file, table)
+    keys = getattr(scene_keys, table)
     missing = [key for key in (keys() if callable(keys) else keys) if f"`{key}`" not in doc]
     assert not missing, f"{table} keys missing from docs/SCENE_FORMAT.md: {missing}"
 
