@@ -205,3 +205,55 @@ def cached(compiler):
             return compiler(cache=False)(function)
 
     return decorate
+
+
+def _borrow(context, builder, typ, value):
+    """``value`` of numba type ``typ`` with every array in it (nested tuples included)
+    rebuilt without its memory owner (see :func:`borrowed`)."""
+    from numba.core import cgutils, types
+
+    if isinstance(typ, types.Array):
+        source = context.make_array(typ)(context, builder, value=value)
+        view = context.make_array(typ)(context, builder)
+        for field in ("data", "shape", "strides", "itemsize", "nitems"):
+            setattr(view, field, getattr(source, field))
+        view.meminfo = cgutils.get_null_value(view.meminfo.type)
+        view.parent = cgutils.get_null_value(view.parent.type)
+        return view._getvalue()
+    if isinstance(typ, types.BaseTuple):
+        items = [_borrow(context, builder, t, builder.extract_value(value, i)) for i, t in enumerate(typ.types)]
+        return context.make_tuple(builder, typ, items)
+    return value
+
+
+@numba.extending.intrinsic
+def borrowed(typingctx, value):
+    """``value`` (an array, a number, or a tuple of them, nested) with its arrays as views
+    that own nothing: no reference count is kept for them.
+
+    numba counts references to an array wherever compiled code binds it to a variable: every
+    argument of a row, every tuple of arrays (a kernel's records) unpacked or passed on,
+    each an atomic increment and decrement of its memory owner's count.  In the path
+    kernel's per-lane code those counts took half the render's time (``perf``: ``NRT_incref``
+    and ``NRT_decref``).  A kernel reads its inputs, and its own scratch arrays, through
+    borrowed views instead: the counting calls find no owner and return at once.  The owners
+    must outlive the views: a kernel's arguments do (its caller holds them), and an array it
+    allocates itself must stay bound to a variable used after the last use of its views
+    (:func:`keep_alive`).
+    """
+    def codegen(context, builder, signature, args):
+        return _borrow(context, builder, signature.args[0], args[0])
+
+    return value(value), codegen
+
+
+@numba.extending.intrinsic
+def keep_alive(typingctx, value):
+    """Nothing, but a use of ``value``: an array owning the memory of :func:`borrowed` views
+    stays alive (numba releases a variable after its last use) until this point."""
+    from numba.core import types
+
+    def codegen(context, builder, signature, args):
+        return context.get_dummy_value()
+
+    return types.none(value), codegen

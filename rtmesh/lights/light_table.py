@@ -41,9 +41,16 @@ from rtmesh.lights import point_light_rows
 from rtmesh.lights.area_lights import DiskLight, QuadLight
 from rtmesh.lights.projector import ProjectorLight
 from rtmesh.sampling.alias import alias_table
-from rtmesh.sampling.warps import concentric_disk_row, uniform_triangle_weights
+from rtmesh.sampling.warps import (concentric_disk_row, spherical_triangle_area_row, spherical_triangle_row,
+                                   uniform_triangle_weights)
 
 QUAD, DISK, TRIANGLE, ENVIRONMENT, PROJECTOR = 3, 4, 5, 6, 7
+# A triangle light seen under a solid angle in this range is sampled uniformly in that solid
+# angle (Arvo's spherical triangles), not by area: beside a lamp, area samples weigh the near
+# part by 1 / d^2 (rare, very bright values).  Below the range the angle sums lose their
+# digits and area sampling is as good; above it the triangle covers nearly a hemisphere,
+# where the construction degenerates (pbrt-v4's Triangle::Sample bounds, 3e-4 and 6.22 sr).
+SOLID_ANGLE_FROM, SOLID_ANGLE_TO = 1e-3, 6.22
 WIDTH = 24
 RADIANCE = 7
 AREA, TWO_SIDED, VISIBLE, FACE = 16, 17, 18, 19
@@ -80,6 +87,9 @@ class LightTable:
     scene_radius : float
         Bounds the power of lights at infinity (directional, environment): what falls on
         the scene.
+    two_sided_emitters : bool
+        Emissive triangles emit on both sides (the Whitted integrator's convention), not
+        toward their winding's normal only.
 
     Attributes
     ----------
@@ -99,7 +109,8 @@ class LightTable:
         zero without projectors).
     """
 
-    def __init__(self, lights, triangles, face_normals, face_emission, environment, scene_radius):
+    def __init__(self, lights, triangles, face_normals, face_emission, environment, scene_radius,
+                 two_sided_emitters=False):
         rows, power = [], []
         images = []
         for light in lights:
@@ -145,8 +156,10 @@ class LightTable:
             block[:, 1:4], block[:, 10:13], block[:, 13:16] = (triangles[emissive, 0:3], triangles[emissive, 3:6],
                                                                triangles[emissive, 6:9])
             block[:, 4:7], block[:, 7:10] = face_normals[emissive], face_emission[emissive]
-            # one-sided, toward the winding's normal (as pbrt's and Mitsuba's area lights)
-            block[:, AREA], block[:, TWO_SIDED], block[:, VISIBLE], block[:, FACE] = area, 0.0, 1.0, emissive
+            # one-sided, toward the winding's normal (as pbrt's and Mitsuba's area lights), or
+            # on both sides (the Whitted convention, rtmesh.lights.mesh_lights)
+            block[:, AREA], block[:, TWO_SIDED], block[:, VISIBLE], block[:, FACE] = (area, float(two_sided_emitters),
+                                                                                      1.0, emissive)
             self.face_light[emissive] = len(rows) + np.arange(len(emissive))
             rows.extend(block)
             power.extend(math.pi * area * (face_emission[emissive] @ _LUMA))
@@ -167,6 +180,43 @@ class LightTable:
 
     def __len__(self):
         return len(self.rows)
+
+    def light_groups(self):
+        """The lights as the Whitted integrator samples them: every delta light (point, spot,
+        directional, projector) once; each quad and disk light, the environment, and the
+        emissive triangles together (one light, their faces by power), ``light_samples``
+        times each.
+
+        Returns
+        -------
+        delta_rows : (D,) int64
+            The delta lights' rows.
+        group_start : (G + 1,) int64
+            Group ``g`` holds the rows ``order[group_start[g]:group_start[g + 1]]``.
+        order : (L - D,) int64
+            The rows of the groups, group by group.
+        probability, alias : (L - D,) float64, int64
+            Each group's alias table over its rows (aliases are positions within the group).
+        pmf : (L,) float64
+            Each row's probability within its group (0 for delta lights).
+        """
+        kinds = self.rows[:, 0] if len(self.rows) else np.zeros(0)
+        triangles = np.flatnonzero(kinds == TRIANGLE)
+        alone = np.flatnonzero((kinds == QUAD) | (kinds == DISK) | (kinds == ENVIRONMENT))
+        delta_rows = np.flatnonzero(kinds < QUAD) if len(kinds) else np.zeros(0, np.int64)
+        delta_rows = np.union1d(delta_rows, np.flatnonzero(kinds == PROJECTOR)).astype(np.int64)
+        groups = [[row] for row in alone] + ([triangles] if len(triangles) else [])
+        order, probability, alias, start = [], [], [], [0]
+        pmf = np.zeros(len(self.rows))
+        for rows in groups:
+            rows = np.asarray(rows, dtype=np.int64)
+            weights = self.pmf[rows] if self.pmf[rows].sum() > 0.0 else np.ones(len(rows))
+            p, a, pmf[rows] = alias_table(weights)
+            order.append(rows), probability.append(p), alias.append(a)
+            start.append(start[-1] + len(rows))
+        cat = (lambda parts, dtype: np.concatenate(parts).astype(dtype) if parts else np.zeros(0, dtype))
+        return (delta_rows, np.array(start, dtype=np.int64), cat(order, np.int64), cat(probability, np.float64),
+                cat(alias, np.int64), pmf)
 
 
 def _delta_power(packed, scene_radius):
@@ -293,13 +343,72 @@ def environment_pdf(marginal, conditional, func, mean, cos_rotation, sin_rotatio
 @row
 def area_pdf(light, px, py, pz, dx, dy, dz, distance):
     """Solid-angle density of ``sample_li`` reaching a point of an area light from ``p``
-    along unit ``d`` at ``distance``; 0 from behind a one-sided light."""
+    along unit ``d`` at ``distance``; 0 from behind a one-sided light.  A triangle that
+    :func:`solid_angle_sampled` says is sampled in solid angle has ``1 / omega``."""
     cos_l = -((light[4] * dx + light[5] * dy) + light[6] * dz)
     if light[TWO_SIDED] > 0.0:
         cos_l = abs(cos_l)
     if not cos_l > 0.0:
         return 0.0
+    if light[0] == TRIANGLE:
+        omega = triangle_solid_angle(light, px, py, pz)
+        if solid_angle_sampled(omega):
+            return 1.0 / omega
     return distance * distance / (light[AREA] * cos_l)
+
+
+@row
+def triangle_solid_angle(light, px, py, pz):
+    """Solid angle (sr) a triangle light's row subtends from ``p``."""
+    ax, ay, az = light[1] - px, light[2] - py, light[3] - pz
+    bx, by, bz = ax + light[10], ay + light[11], az + light[12]
+    cx, cy, cz = ax + light[13], ay + light[14], az + light[15]
+    la = 1.0 / math.sqrt((ax * ax + ay * ay) + az * az)
+    lb = 1.0 / math.sqrt((bx * bx + by * by) + bz * bz)
+    lc = 1.0 / math.sqrt((cx * cx + cy * cy) + cz * cz)
+    return spherical_triangle_area_row(ax * la, ay * la, az * la, bx * lb, by * lb, bz * lb, cx * lc, cy * lc,
+                                       cz * lc)
+
+
+@row
+def solid_angle_sampled(omega):
+    """Whether a triangle light seen under ``omega`` sr is sampled in solid angle."""
+    return (omega > SOLID_ANGLE_FROM) & (omega < SOLID_ANGLE_TO)
+
+
+@row
+def sample_triangle_solid_angle(light, px, py, pz, u1, u2, omega):
+    """A point of a triangle light uniform in the solid angle ``omega`` it subtends from
+    ``p``: ``(wx, wy, wz, distance, b1, b2, ok)``, the unit direction, the distance to the
+    point and its barycentric weights of the corners 1 and 2 (least squares on the edges);
+    ``ok`` False where the direction misses the triangle's plane (seen edge-on)."""
+    ax, ay, az = light[1] - px, light[2] - py, light[3] - pz
+    bx, by, bz = ax + light[10], ay + light[11], az + light[12]
+    cx, cy, cz = ax + light[13], ay + light[14], az + light[15]
+    la = 1.0 / math.sqrt((ax * ax + ay * ay) + az * az)
+    lb = 1.0 / math.sqrt((bx * bx + by * by) + bz * bz)
+    lc = 1.0 / math.sqrt((cx * cx + cy * cy) + cz * cz)
+    wx, wy, wz = spherical_triangle_row(u1, u2, ax * la, ay * la, az * la, bx * lb, by * lb, bz * lb, cx * lc,
+                                        cy * lc, cz * lc, omega)
+    nx, ny, nz = light[4], light[5], light[6]
+    cos = (wx * nx + wy * ny) + wz * nz
+    if cos == 0.0:
+        return wx, wy, wz, 0.0, 0.0, 0.0, False
+    t = ((ax * nx + ay * ny) + az * nz) / cos
+    if not (t > 0.0 and t < math.inf):
+        return wx, wy, wz, 0.0, 0.0, 0.0, False
+    # barycentrics of the point, for textured emission
+    rx, ry, rz = t * wx - ax, t * wy - ay, t * wz - az
+    e1x, e1y, e1z, e2x, e2y, e2z = light[10], light[11], light[12], light[13], light[14], light[15]
+    d00 = (e1x * e1x + e1y * e1y) + e1z * e1z
+    d01 = (e1x * e2x + e1y * e2y) + e1z * e2z
+    d11 = (e2x * e2x + e2y * e2y) + e2z * e2z
+    d20 = (rx * e1x + ry * e1y) + rz * e1z
+    d21 = (rx * e2x + ry * e2y) + rz * e2z
+    det = d00 * d11 - d01 * d01
+    b1 = min(max((d11 * d20 - d01 * d21) / det, 0.0), 1.0)
+    b2 = min(max((d00 * d21 - d01 * d20) / det, 0.0), 1.0 - b1)
+    return wx, wy, wz, t, b1, b2, True
 
 
 @row

@@ -88,12 +88,14 @@ def tables():
     return ggx_albedo.table(), dielectric_albedo.table(), sheen.table()
 
 
-def material_rows(materials):
+def material_rows(materials, names=None):
     """The tables the path integrator reads per hit.
 
     Parameters
     ----------
     materials : sequence of Material
+    names : sequence of str, optional
+        The model of each material (default: its ``model``).
 
     Returns
     -------
@@ -102,7 +104,7 @@ def material_rows(materials):
     params : (m, PARAMETER_WIDTH) float64
     transmissive : (m,) bool
     """
-    models = [REGISTRY[material.model] for material in materials]
+    models = [REGISTRY[name] for name in (names or [material.model for material in materials])]
     tags = np.array([model.tag for model in models], dtype=np.int64)
     params = np.array([model.parameters(material) for model, material in zip(models, materials)],
                       dtype=np.float64).reshape(len(models), lobes.PARAMETER_WIDTH)

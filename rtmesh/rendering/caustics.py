@@ -162,7 +162,7 @@ class Caustics:
         s = it.settings
         self.it, self.stage = it, stage
         self.enabled = False
-        if s.caustics == "off":
+        if s.caustics == "off" or s.integrator != "path":
             return
         geometry, surface = stage.geometry, stage.surface
         tags, params = surface[0], surface[1]

@@ -56,7 +56,7 @@ from rtmesh.rendering.general_kernels import GENERAL_KERNELS
 from rtmesh.rendering.local_shading import LocalShading
 from rtmesh.rendering import memory
 from rtmesh.rendering.media import Media
-from rtmesh.rendering.path_stage import PathStage
+from rtmesh.rendering.path_stage import PathStage, whitted_unsupported
 from rtmesh.rendering.physical_shading import PhysicalShading, bsdf_weight
 from rtmesh.rendering.render_plan import RenderPlan
 from rtmesh.rendering.render_result import RenderResult
@@ -73,6 +73,14 @@ from rtmesh.scene.background import as_background
 log = logging.getLogger(__name__)
 
 _UNIT_THROUGHPUT = np.ones(3)
+
+
+# Whitted renders that the fused stage does not take go through the path kernel configured
+# as the Whitted integrator (rtmesh.rendering.whitted_rows) instead of the general wavefront:
+# complete but for ambient occlusion, its images within noise of the wavefront's
+# (tests/rendering/test_whitted_kernel.py), but off until the kernel is the faster of the
+# two (docs/ARCHITECTURE.md, "Not built yet")
+WHITTED_THROUGH_KERNEL = False
 
 
 def _translated(obj, shift):
@@ -311,6 +319,10 @@ class Integrator:
         self.path_stage = PathStage(self) if settings.integrator == "path" else None
         # scenes that need only direct light take one compiled stage per chunk
         self.direct_stage = DirectStage.plan(self) if self.path_stage is None else None
+        if (WHITTED_THROUGH_KERNEL and self.direct_stage is None and self.path_stage is None
+                and not whitted_unsupported(self)):
+            # the others the path kernel, configured as the Whitted integrator
+            self.path_stage = PathStage(self)
         self.plan = dataclasses.replace(self.plan, fused_direct=self.direct_stage is not None)
         if self.direct_stage is None and self.path_stage is None:
             GENERAL_KERNELS.prepare()

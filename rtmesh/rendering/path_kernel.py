@@ -89,30 +89,27 @@ import math
 import numpy as np
 
 from rtmesh.core.compile_ahead import KernelGroup
-from rtmesh.core.compiled import inline_row, kernel, row
+from rtmesh.core.compiled import borrowed, inline_row, keep_alive, kernel, row
 from rtmesh.geometry.embree_packets import (DEFAULT_TFAR, LANES, RAYHIT_WORDS, RTC_RAY_QUERY_FLAG_COHERENT,
                                             RTC_RAY_QUERY_FLAG_INCOHERENT, packet_buffers, query_arguments)
-from rtmesh.geometry.float32_rays import F32_MAX
 from rtmesh.io.passes import LIGHT_PATH_PASSES
 from rtmesh.lights import light_table as lt
 from rtmesh.materials import lobes, models
 from rtmesh.rendering.photon_kernel import ALL_PARTS, DIFFUSE_PART, TRANSMITTED_PART, empty_photon_map, gather
-from rtmesh.rendering.path_lights import area_pdf, environment_pdf, hit_analytic, light_at, sample_li
+from rtmesh.rendering.path_lights import area_pdf, environment_pdf, hit_analytic, light_at, sample_li, shadow_segment
 from rtmesh.rendering.path_packets import (BOUNCE, BSDF_U1, BSDF_U2, CAMERA, COVERAGE, DIMENSIONS_PER_VERTEX, LIGHT_CHOICE,
                                            LIGHT_U1, LIGHT_U2, LOBE, MAX_LAYERS, ROULETTE, SHADOW, layer_coin,
                                            mover_to_world, nearest_hits, occluded, placed, shadows_through_cutouts)
-from rtmesh.rendering.path_surfaces import alias_sample, load_lanes, set_lane
+from rtmesh.rendering.path_surfaces import alias_sample, colour_tint, load_lanes, occlusion_at, set_lane
 from rtmesh.rendering.path_surfaces import environment_radiance as _environment_radiance
 from rtmesh.rendering.path_surfaces import (cross_interface, crossing_scale, twin_material, hit_frame, hit_parameters, is_transparent,
                                             leave_surface, surface_point, textured_materials, to_world,
                                             triangle_light_emission)
+from rtmesh.rendering.whitted_rows import BRANCH_WORDS, branches, light_factor, pop_branch, push_branch
 from rtmesh.sampling.hashing import mix64, uniform
 from rtmesh.sampling.mis import power_heuristic
 from rtmesh.sampling.zsobol import sequence_pair, sequence_ray_pair
 
-# shadow rays toward a point stop this fraction short of it, so they do not meet the
-# light's own surface (an emissive triangle) in float32
-_SHADOW_SHORTEN = 1.0 - 1e-4
 # Sobol sequences hold 2**32 points; later samples take hashed numbers
 SOBOL_LIMIT = 1 << 32
 # the key of light sample k > 0 of a vertex is mix64(key + k * _LIGHT_ROUND) (sample 0 takes
@@ -186,7 +183,7 @@ def _accept_shadows(shadow_valid, pending, pending_paths, split, total, paths):
 
 @kernel
 def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixels, samples, sobol_keys, times,
-                geometry, surface, lights, env, options, motion, instances, photon_map, radiance, light_paths,
+                geometry, surface, lights, env, options, whitted, motion, instances, photon_map, radiance, light_paths,
                 counts):
     """Trace one path per camera ray and write its radiance.
 
@@ -208,7 +205,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
         (:func:`rtmesh.sampling.zsobol.sequence_keys`).
     times : (n,) float64, or (0,)
         Each sample's time in the shutter (scenes with moving objects).
-    geometry, surface, lights, env, options, motion, instances, photon_map : tuples
+    geometry, surface, lights, env, options, whitted, motion, instances, photon_map : tuples
         The records described in the module notes.
     radiance : (n, 3) float64
         Output.
@@ -217,6 +214,12 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     counts : (3,) int64
         Camera, bounce and shadow rays traced (active lanes only), added to.
     """
+    # read through views that own nothing: no reference counts in the per-lane rows
+    # (rtmesh.core.compiled.borrowed; the caller holds the arrays)
+    geometry, surface, lights, env, options, whitted, motion, instances, photon_map = borrowed(
+        (geometry, surface, lights, env, options, whitted, motion, instances, photon_map))
+    origins, directions, keys, pixels, samples, sobol_keys, times, radiance, light_paths, counts = borrowed(
+        (origins, directions, keys, pixels, samples, sobol_keys, times, radiance, light_paths, counts))
     n = origins.shape[0]
     material_id = geometry[5]
     tags, transmissive, slots = surface[0], surface[2], surface[7]
@@ -227,6 +230,14 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     (max_depth, rr_depth, clamp, offset_scale, background_seen, cutouts, split, camera_media, light_samples,
      light_block) = options
     media = len(camera_media)
+    (whitted_on, delta_rows, group_start, group_order, group_probability, group_alias, group_pmf, ambient,
+     occlusion_strength, cutoff, exact_fresnel, branch_depth) = whitted
+    # which light a light sample takes: one by power among all (path), or every delta light
+    # once and light_samples of each other light (whitted: LightTable.light_groups, the
+    # emissive triangles one light); the density of a light's choice, for MIS
+    deltas = len(delta_rows) if whitted_on else 0
+    choice_pmf = group_pmf if whitted_on else light_pmf
+    area_rounds = light_samples * (len(group_start) - 1) if whitted_on else light_samples
     env_pixels, env_marginal, env_conditional, env_func, env_mean, env_cos, env_sin = env
     moves, face_mover = motion[5], motion[6]
     instance_faces, instance_to_world, instance_normals = instances
@@ -262,14 +273,19 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     total = np.zeros((LANES, 3))
     # per light sample of a vertex (rtmesh.rendering.settings.RenderSettings.light_samples):
     # each lane's shadow ray (origin, direction, length) and the light it brings if free
-    shadow_rays = np.zeros((light_samples, LANES, 7))
-    shadow_set = np.zeros((light_samples, LANES), np.bool_)
-    shadow_count = np.zeros(light_samples, np.int64)
-    pending = np.zeros((light_samples, LANES, 3))
+    light_slots = deltas + area_rounds
+    shadow_rays = np.zeros((light_slots, LANES, 7))
+    shadow_set = np.zeros((light_slots, LANES), np.bool_)
+    shadow_count = np.zeros(light_slots, np.int64)
+    pending = np.zeros((light_slots, LANES, 3))
     paths = np.zeros((LANES, LIGHT_PATHS, 3))
-    pending_paths = np.zeros((light_samples if split else 1, LANES, LIGHT_PATHS, 3))
+    pending_paths = np.zeros((light_slots if split else 1, LANES, LIGHT_PATHS, 3))
     category = np.zeros(LANES, np.int64)
     stack = np.full((LANES, max(media, 1)), -1, np.int64)
+    # whitted: the rays a lane's hits split off, followed when its current ray ends
+    branch = np.zeros((LANES, branch_depth, BRANCH_WORDS))
+    branch_media = np.full((LANES, branch_depth, max(media, 1)), -1, np.int64)
+    branch_top = np.zeros(LANES, np.int64)
     sigma = np.zeros((LANES, 3))
     reach = np.zeros(LANES)
     alive = np.zeros(LANES, np.bool_)
@@ -285,10 +301,22 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     # with photons: the path's last vertices (CHAIN_*), its length so far (the gather radius)
     chain = np.zeros(LANES, np.int64)
     travelled = np.zeros(LANES)
+    # the scratch arrays too, through views that own nothing (owned stays alive to the end)
+    owned = (ray, words, valid, args_coherent, args_incoherent, shadow, shadow_words, shadow_valid, rest, rest_words,
+             rest_valid, best_t, best_prim, best_instance, best_u, best_v, segment, lane_time, moved, scratch, px,
+             py, pz, dx, dy, dz, beta, total, shadow_rays, shadow_set, shadow_count, pending, paths, pending_paths,
+             category, stack, branch, branch_media, branch_top, sigma, reach, alive, prev_pdf, prev_delta, eta_scale,
+             prev_count, lane_depth, layers, chain, travelled)
+    (ray, words, valid, args_coherent, args_incoherent, shadow, shadow_words, shadow_valid, rest, rest_words,
+     rest_valid, best_t, best_prim, best_instance, best_u, best_v, segment, lane_time, moved, scratch, px,
+     py, pz, dx, dy, dz, beta, total, shadow_rays, shadow_set, shadow_count, pending, paths, pending_paths,
+     category, stack, branch, branch_media, branch_top, sigma, reach, alive, prev_pdf, prev_delta, eta_scale,
+     prev_count, lane_depth, layers, chain, travelled) = borrowed(owned)
     for start in range(0, n, LANES):
         count = min(LANES, n - start)
         for lane in range(LANES):
             alive[lane] = lane < count
+            branch_top[lane] = 0
             if lane < count:
                 i = start + lane
                 px[lane], py[lane], pz[lane] = origins[i, 0], origins[i, 1], origins[i, 2]
@@ -315,6 +343,19 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 lane_time[lane] = times[i] if len(times) else 0.0
         first = True
         while True:
+            if whitted_on:
+                for lane in range(LANES):
+                    if (not alive[lane]) and branch_top[lane] > 0:
+                        # a ray an earlier hit of this lane split off
+                        top = pop_branch(branch, branch_media, branch_top, lane, px, py, pz, dx, dy, dz, beta,
+                                         lane_depth, stack)
+                        for c in range(3):
+                            sigma[lane, c] = absorption[top, c] if top >= 0 else 0.0
+                        alive[lane] = True
+                        prev_pdf[lane] = 0.0
+                        prev_delta[lane] = True
+                        prev_count[lane] = 1.0
+                        layers[lane] = 0
             if load_lanes(alive, ray, words, valid, px, py, pz, dx, dy, dz, DEFAULT_TFAR) == 0:
                 break
             for lane in range(LANES):
@@ -354,7 +395,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                     light = light_rows[seen]
                     w = 1.0
                     if not prev_delta[lane]:
-                        w = power_heuristic(prev_pdf[lane], light_pmf[seen] * area_pdf(
+                        w = power_heuristic(prev_pdf[lane], choice_pmf[seen] * area_pdf(
                             light, px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], t) * prev_count[lane])
                     r, g, b = _clamped(beta[lane, 0] * light[lt.RADIANCE] * w, beta[lane, 1] * light[lt.RADIANCE + 1] * w,
                                        beta[lane, 2] * light[lt.RADIANCE + 2] * w, limit)
@@ -363,7 +404,9 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                     alive[lane] = False
                     continue
                 if not hit:
-                    if (env_light >= 0) & (not photon_path) | ((depth == 0) & background_seen):
+                    # (whitted: what mirrors and glass show of the background, lighting or not)
+                    if ((env_light >= 0) & (not photon_path) | ((depth == 0) & background_seen)
+                            | (whitted_on & (depth > 0) & prev_delta[lane])):
                         if env_pixels.shape[0] == 1:
                             # a uniform background (one row of one texel): no lookup
                             lr, lg, lb = env_pixels[0, 0, 0], env_pixels[0, 0, 1], env_pixels[0, 0, 2]
@@ -372,7 +415,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                                                                dz[lane])
                         w = 1.0
                         if not prev_delta[lane]:
-                            w = power_heuristic(prev_pdf[lane], light_pmf[env_light] * environment_pdf(
+                            w = power_heuristic(prev_pdf[lane], choice_pmf[env_light] * environment_pdf(
                                 env_marginal, env_conditional, env_func, env_mean, env_cos, env_sin,
                                 dx[lane], dy[lane], dz[lane]) * prev_count[lane])
                         r, g, b = _clamped(beta[lane, 0] * lr * w, beta[lane, 1] * lg * w, beta[lane, 2] * lb * w,
@@ -404,14 +447,14 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                     surface, geometry, textured, mat, prim, bu, bv, scratch, lane, stack, media,
                     (gx * dx[lane] + gy * dy[lane]) + gz * dz[lane] < 0.0)
                 # emission, from the front side (the winding's normal), as pbrt's and Mitsuba's
-                # area lights
+                # area lights (whitted: from both)
                 front = (gx * dx[lane] + gy * dy[lane]) + gz * dz[lane] < 0.0
-                if front and er + eg + eb > 0.0 and not photon_path:
+                if (front or whitted_on) and er + eg + eb > 0.0 and not photon_path:
                     w = 1.0
                     if not prev_delta[lane]:
                         light = face_light[prim]
                         if light >= 0:
-                            w = power_heuristic(prev_pdf[lane], light_pmf[light] * area_pdf(
+                            w = power_heuristic(prev_pdf[lane], choice_pmf[light] * area_pdf(
                                 light_at(light_rows, light, face_mover, moves, lane_time[lane], moved, lane),
                                 px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], t) * prev_count[lane])
                     r, g, b = _clamped(beta[lane, 0] * er * w, beta[lane, 1] * eg * w, beta[lane, 2] * eb * w, limit)
@@ -436,6 +479,16 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 loz = (nx * ox + ny * oy) + nz * oz
                 tag = tags[mat]
                 follow = (max_depth < 0) | (depth + 1 <= max_depth)
+                # whitted: Blinn-Phong hits light by Whitted's factor and split into their mirror
+                # and refracted rays (rtmesh.rendering.whitted_rows); every hit takes the ambient
+                # light (tinted by the colour's textures, darkened by glTF's baked occlusion)
+                whitted_hit = whitted_on and tag == models.BLINN_PHONG
+                if whitted_on and (ambient[mat, 0] > 0.0) | (ambient[mat, 1] > 0.0) | (ambient[mat, 2] > 0.0):
+                    cr, cg, cb, _, _, _ = colour_tint(surface, geometry, mat, prim, bu, bv)
+                    occluded_part = occlusion_at(surface, geometry, mat, prim, bu, bv, occlusion_strength[mat])
+                    _add(total, lane, beta[lane, 0] * (ambient[mat, 0] * cr * occluded_part),
+                         beta[lane, 1] * (ambient[mat, 1] * cg * occluded_part),
+                         beta[lane, 2] * (ambient[mat, 2] * cb * occluded_part))
                 # caustics: the photons near this vertex (paths of at least two segments)
                 segments = max_depth - depth if max_depth >= 0 else -1
                 if photons_on and scatters[mat] and (segments < 0 or segments >= 2):
@@ -476,26 +529,44 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 # take light (reached from the camera through delta lobes only), one at later
                 # vertices; each weighted against the one BSDF sample by the power heuristic
                 # with the strategies' sample counts (Veach 1997, 9.2.2) and divided by their number
-                rounds = light_samples if chain[lane] == CHAIN_START else 1
-                prev_count[lane] = np.float64(rounds)
+                # (whitted: every delta light once, then light_samples among the others, at every vertex)
+                area_count = area_rounds if whitted_on or chain[lane] == CHAIN_START else 1
+                rounds = deltas + area_count
+                prev_count[lane] = np.float64(light_samples if whitted_on else area_count)
                 if follow and has_lights:
-                    count_f = np.float64(rounds)
-                    nee_limit = (clamp if depth > 0 else 0.0) / count_f
                     for k in range(rounds):
                         light_key = key if k == 0 else mix64(key + np.uint64(k) * _LIGHT_ROUND)
-                        if sobol and sample_index * light_samples + k < SOBOL_LIMIT:
-                            lu1, lu2 = sequence_ray_pair(sobol_keys, 0, pixel, sample_index, k, light_samples,
+                        # kk: the light sample's index among its light's (-1: a delta light)
+                        kk = k - deltas
+                        group = 0
+                        if whitted_on and kk >= 0:
+                            group = kk // light_samples
+                            kk -= group * light_samples
+                        if kk < 0:
+                            lu1 = lu2 = 0.5
+                        elif sobol and sample_index * light_samples + kk < SOBOL_LIMIT:
+                            lu1, lu2 = sequence_ray_pair(sobol_keys, 0, pixel, sample_index, kk, light_samples,
                                                          light_block)
                         else:
                             lu1, lu2 = uniform(light_key, base + LIGHT_U1), uniform(light_key, base + LIGHT_U2)
-                        chosen = alias_sample(light_probability, light_alias, uniform(light_key, base + LIGHT_CHOICE))
+                        if kk < 0:
+                            chosen, count_f = delta_rows[k], 1.0
+                        elif whitted_on:
+                            lo, hi = group_start[group], group_start[group + 1]
+                            chosen = group_order[lo + alias_sample(group_probability[lo:hi], group_alias[lo:hi],
+                                                                   uniform(light_key, base + LIGHT_CHOICE))]
+                            count_f = np.float64(light_samples)
+                        else:
+                            chosen = alias_sample(light_probability, light_alias, uniform(light_key, base + LIGHT_CHOICE))
+                            count_f = np.float64(area_count)
+                        nee_limit = (clamp if depth > 0 else 0.0) / count_f
                         # an emitter on a moving object where it is at the lane's time
                         light = light_at(light_rows, chosen, face_mover, moves, lane_time[lane], moved, lane)
-                        wx, wy, wz, distance, lr, lg, lb, pdf_li, delta = sample_li(
+                        wx, wy, wz, distance, lr, lg, lb, pdf_li, delta, b1, b2 = sample_li(
                             light, env, light_texels, light_descriptors, hx, hy, hz, lu1, lu2)
-                        if light[0] == lt.TRIANGLE:
+                        if light[0] == lt.TRIANGLE and pdf_li > 0.0:
                             # the emitter's own (textured) radiance at the sampled point
-                            lr, lg, lb = triangle_light_emission(surface, geometry, light, lu1, lu2)
+                            lr, lg, lb = triangle_light_emission(surface, geometry, light, b1, b2)
                         if not ((pdf_li > 0.0) & ((lr > 0.0) | (lg > 0.0) | (lb > 0.0))):
                             continue
                         side = (gx * wx + gy * wy) + gz * wz
@@ -504,11 +575,15 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                         lix = (tx * wx + ty * wy) + tz * wz
                         liy = (sx * wx + sy * wy) + sz * wz
                         liz = (nx * wx + ny * wy) + nz * wz
-                        fr, fg, fbb, pdf_bsdf = models.evaluate(tag, bsdf_params, bsdf_row, albedo_table, lox, loy, loz,
-                                                                lix, liy, liz)
+                        if whitted_hit:
+                            fr, fg, fbb = light_factor(bsdf_params, bsdf_row, lox, loy, loz, lix, liy, liz)
+                            pdf_bsdf = 0.0
+                        else:
+                            fr, fg, fbb, pdf_bsdf = models.evaluate(tag, bsdf_params, bsdf_row, albedo_table, lox, loy,
+                                                                    loz, lix, liy, liz)
                         if not ((fr > 0.0) | (fg > 0.0) | (fbb > 0.0)):
                             continue
-                        p_light = light_pmf[chosen] * pdf_li
+                        p_light = (1.0 if kk < 0 else choice_pmf[chosen]) * pdf_li
                         w = 1.0 if delta else power_heuristic(p_light * count_f, pdf_bsdf)
                         scale = w / (p_light * count_f)
                         pending[k, lane, 0], pending[k, lane, 1], pending[k, lane, 2] = _clamped(
@@ -533,14 +608,45 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                                 _add_path(pending_paths[k], split, lane, INDIRECT + category[lane],
                                           pending[k, lane, 0], pending[k, lane, 1], pending[k, lane, 2])
                         # its shadow ray, traced with the packet's others of this light sample
-                        qx, qy, qz = leave_surface(hx, hy, hz, gx, gy, gz, wx, wy, wz, offset_scale)
                         ray_k = shadow_rays[k, lane]
-                        ray_k[0], ray_k[1], ray_k[2], ray_k[3], ray_k[4], ray_k[5] = qx, qy, qz, wx, wy, wz
-                        ray_k[6] = F32_MAX if math.isinf(distance) else distance * _SHADOW_SHORTEN
+                        ray_k[0], ray_k[1], ray_k[2], ray_k[3], ray_k[4], ray_k[5], ray_k[6] = shadow_segment(
+                            hx, hy, hz, gx, gy, gz, wx, wy, wz, distance, delta, light, offset_scale)
                         shadow_set[k, lane] = True
                         shadow_count[k] += 1
-                if not follow:
+                if not follow or (whitted_on and depth + 2 > max_depth):
+                    # (whitted: the last hit a ray may reach takes light, but sends no ray on)
                     alive[lane] = False
+                    continue
+                if whitted_hit:
+                    # the Whitted split: on along the refracted ray (or the mirror ray), the
+                    # other kept for later; rays whose throughput falls under the cutoff are not followed
+                    rx, ry, rz, wr, wg, wb, ux, uy, uz, ur, ug, ub = branches(
+                        bsdf_params, bsdf_row, ox, oy, oz, nx, ny, nz, gx, gy, gz, front, exact_fresnel, bu1, bu2)
+                    reflects = max(beta[lane, 0] * wr, max(beta[lane, 1] * wg, beta[lane, 2] * wb)) >= cutoff
+                    refracts = max(beta[lane, 0] * ur, max(beta[lane, 1] * ug, beta[lane, 2] * ub)) >= cutoff
+                    reflects &= (wr > 0.0) | (wg > 0.0) | (wb > 0.0)
+                    refracts &= (ur > 0.0) | (ug > 0.0) | (ub > 0.0)
+                    if reflects and refracts:
+                        qx, qy, qz = leave_surface(hx, hy, hz, gx, gy, gz, rx, ry, rz, offset_scale)
+                        push_branch(branch, branch_media, branch_top, lane, qx, qy, qz, rx, ry, rz,
+                                    beta[lane, 0] * wr, beta[lane, 1] * wg, beta[lane, 2] * wb, depth + 1, stack)
+                    if refracts:
+                        rx, ry, rz, wr, wg, wb = ux, uy, uz, ur, ug, ub
+                        if media:
+                            top = cross_interface(stack, lane, mat, front, twin_material(surface, prim))
+                            for c in range(3):
+                                sigma[lane, c] = absorption[top, c] if top >= 0 else 0.0
+                    elif not reflects:
+                        alive[lane] = False
+                        continue
+                    beta[lane, 0] *= wr
+                    beta[lane, 1] *= wg
+                    beta[lane, 2] *= wb
+                    prev_pdf[lane] = 0.0
+                    prev_delta[lane] = True
+                    px[lane], py[lane], pz[lane] = leave_surface(hx, hy, hz, gx, gy, gz, rx, ry, rz, offset_scale)
+                    dx[lane], dy[lane], dz[lane] = rx, ry, rz
+                    lane_depth[lane] = depth + 1
                     continue
                 # continue the path by sampling the BSDF
                 wx, wy, wz, gr, gg, gb, pdf, flags = models.sample(
@@ -589,7 +695,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 dx[lane], dy[lane], dz[lane] = ndx, ndy, ndz
                 lane_depth[lane] = depth + 1
             # the shadow rays: one packet per light sample of the vertices
-            for k in range(light_samples):
+            for k in range(light_slots):
                 if shadow_count[k] == 0:
                     continue
                 counts[SHADOW] += shadow_count[k]
@@ -620,11 +726,18 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 for bucket in range(LIGHT_PATHS):
                     for c in range(3):
                         light_paths[start + lane, bucket, c] = paths[lane, bucket, c]
+    keep_alive(owned)
 
 
 def no_instances():
     """The kernel's ``instances`` record of a scene without placed meshes."""
     return (np.zeros(0, np.int64), np.zeros((0, 12)), np.zeros((0, 9)))
+
+
+def no_whitted(materials):
+    """The kernel's ``whitted`` record under the path integrator (``materials``: the count)."""
+    return (False, np.zeros(0, np.int64), np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros(0),
+            np.zeros(0, np.int64), np.zeros(0), np.zeros((materials, 3)), np.zeros(materials), 0.0, False, 0)
 
 
 def small_records():
@@ -660,6 +773,7 @@ def _path_signatures():
     evaluate = bsdf_args + (f64,) * 6
     sample = bsdf_args + (f64,) * 6
     options = (-1, 3, 0.0, np.float32(1.0), True, False, False, z(4, np.int64), 1, 0)
+    whitted = no_whitted(1)
     motion = (True, z(0, np.int64), z(0, np.int64), z(0, np.int64), z(1, np.int64), z((0, 10)), z(0, np.int64))
     instances = no_instances()
     photon_map = empty_photon_map(1)
@@ -667,7 +781,8 @@ def _path_signatures():
     index = types.Array(types.int64, 1, "C")
     trace = (query, query, types.int64, rows, rows, types.Array(types.uint64, 1, "C"), index, index,
              types.Array(types.uint64, 1, "C"), types.Array(f64, 1, "C")) + tuple(
-        numba.typeof(record) for record in (geometry, surface, lights, env, options, motion, instances, photon_map)) + (
+        numba.typeof(record) for record in (geometry, surface, lights, env, options, whitted, motion, instances,
+                                            photon_map)) + (
         rows, types.Array(f64, 3, "C"), types.Array(types.int64, 1, "C"))
     i64 = types.int64
     gathered = ((numba.typeof(photon_map),) + (f64,) * 7 + (i64, i64, rows, i64, numba.typeof(energy))

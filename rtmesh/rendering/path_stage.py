@@ -26,10 +26,11 @@ from rtmesh.lights.light_table import EnvironmentTables, LightTable
 from rtmesh.lights.mesh_lights import MeshLight
 from rtmesh.lights.projector import ProjectorLight
 from rtmesh.materials.models import SLOTS, material_rows, tables
+from rtmesh.materials.table import PHYSICAL_MODELS
 from rtmesh.io.passes import LIGHT_PATH_PASSES
 from rtmesh.rendering.caustics import Caustics
 from rtmesh.rendering.photon_kernel import empty_photon_map
-from rtmesh.rendering.path_kernel import LIGHT_PATHS, PATH_KERNELS, no_instances, trace_paths
+from rtmesh.rendering.path_kernel import LIGHT_PATHS, PATH_KERNELS, no_instances, no_whitted, trace_paths
 from rtmesh.rendering.path_packets import BOUNCE, CAMERA, SHADOW
 from rtmesh.rendering.path_surfaces import TEXTURE_COLUMNS
 from rtmesh.rendering.settings import RenderSettings
@@ -42,6 +43,8 @@ log = logging.getLogger(__name__)
 
 # vertices a path takes before Russian roulette may end it (pbrt-v4 starts at its second)
 RR_DEPTH = 3
+# the Whitted integrator's rays end by max_depth and the cutoff only
+NO_ROULETTE = 1 << 30
 
 
 def unsupported(it):
@@ -54,6 +57,15 @@ def unsupported(it):
                      if not isinstance(light, (MeshLight, ProjectorLight)) and not hasattr(light, "corner")
                      and not hasattr(light, "radius") and light.kernel_row() is None})
     missing.extend(f"lights of type {name}" for name in others)
+    return missing
+
+
+def whitted_unsupported(it):
+    """What of a Whitted render the path kernel does not do yet (the general wavefront
+    renders it): a list of phrases, empty when the kernel renders everything."""
+    missing = unsupported(it)
+    if it.plan.ao:
+        missing.append("ambient occlusion")
     return missing
 
 
@@ -118,7 +130,14 @@ def _twin_materials(media, faces):
     return twins
 
 
-def scene_tables(scene, accel, media_of):
+def whitted_model(material):
+    """The path kernel's model of a material under the Whitted integrator: glTF's
+    metallic-roughness (its KHR layers shaded as plain metallic-roughness, as the Whitted
+    stages did), every other model read by its Blinn-Phong fields."""
+    return "metallic_roughness" if material.model in PHYSICAL_MODELS else "blinn_phong"
+
+
+def scene_tables(scene, accel, media_of, whitted=False):
     """What the path kernel reads of a scene, formed once and shared by every view: its
     ``geometry`` and ``surface`` records (see :mod:`rtmesh.rendering.path_surfaces`) and the
     per-face emission the light table chooses by.
@@ -131,6 +150,8 @@ def scene_tables(scene, accel, media_of):
     media_of : callable
         ``media_of(transmissive)``: the medium tables of these materials
         (:meth:`rtmesh.rendering.integrator.Integrator.media_of`).
+    whitted : bool
+        Tables for the Whitted integrator (:func:`whitted_model`; glTF's baked occlusion).
 
     Returns
     -------
@@ -139,18 +160,19 @@ def scene_tables(scene, accel, media_of):
     """
     triangles, faces = _packet_accel(accel).triangles, np.ascontiguousarray(scene.faces, dtype=np.int32)
     m = scene.materials
-    tags, params, transmissive = material_rows(m.materials)
+    tags, params, transmissive = material_rows(m.materials, [whitted_model(material) for material in m.materials]
+                                               if whitted else None)
     unlit = np.zeros((len(m), 4))
     unlit[:, 0] = m.unlit
     unlit[:, 1:] = m.diffuse
     textures = []
     for material in m.materials:
         for name in TEXTURE_COLUMNS:
-            texture = _texture(material, name)
+            texture = _texture(material, name, whitted)
             if texture is not None and not any(texture is known for known in textures):
                 textures.append(texture)
     atlas = TextureAtlas(textures)
-    material_textures = np.array([[atlas.index(_texture(material, name)) for name in TEXTURE_COLUMNS]
+    material_textures = np.array([[atlas.index(_texture(material, name, whitted)) for name in TEXTURE_COLUMNS]
                                   for material in m.materials], dtype=np.int64).reshape(len(m), len(TEXTURE_COLUMNS))
     if scene.uv is None:
         material_textures[:] = -1  # no coordinates to read them with
@@ -189,9 +211,12 @@ def scene_tables(scene, accel, media_of):
     return geometry, surface, face_emission
 
 
-def _texture(material, column):
+def _texture(material, column, whitted):
     """The texture of a material in one of :data:`TEXTURE_COLUMNS`: a field of the material,
-    or one of its KHR layers' textures (by the extension's role name); None for none."""
+    or one of its KHR layers' textures (by the extension's role name); None for none (and
+    for the baked occlusion but under the Whitted integrator, whose ambient term it darkens)."""
+    if column == "occlusion_texture" and not whitted:
+        return None
     if hasattr(material, column):
         return getattr(material, column)
     return material.layers.textures.get(column) if material.layers is not None else None
@@ -218,7 +243,8 @@ class PathStage:
                              + " yet; use integrator = 'whitted'")
         self.it = it
         scene, settings = it.scene, it.settings
-        ignored = [name for name, unused in (
+        self.whitted = settings.integrator == "whitted"
+        ignored = [] if self.whitted else [name for name, unused in (
             ("ambient", bool((np.asarray(scene.ambient) > 0).any())),
             ("cutoff", settings.cutoff != RenderSettings.cutoff),
             ("ao_samples", settings.ao_samples > 0 and "ao" not in settings.passes)) if unused]
@@ -227,11 +253,13 @@ class PathStage:
                         "and takes its light from the lights and the background)", ", ".join(ignored))
         if it.path_tables is None:
             # formed with the integrator's first view; views made by with_view share them
-            it.path_tables = scene_tables(scene, it.accel, it.media_of)
+            it.path_tables = scene_tables(scene, it.accel, it.media_of, self.whitted)
         self.geometry, self.surface, face_emission = it.path_tables
         self.cutouts = it.cutouts is not None
         background = it.background
-        lights_scene = background.lighting is not False and not background.is_black
+        # (whitted: when it lights the scene under the Whitted stages' rule, Integrator._set_background)
+        lights_scene = (it.environment_lighting is not None if self.whitted
+                        else background.lighting is not False and not background.is_black)
         environment = None
         if not background.is_black:
             # the Whitted stages' sampling tables of this background when the view has them
@@ -240,11 +268,12 @@ class PathStage:
             environment = EnvironmentTables(lighting, background)
         self.lights = LightTable([light for light in it.view_lights if not isinstance(light, MeshLight)],
                                  self.geometry[0], self.geometry[1], face_emission,
-                                 environment if lights_scene else None, it.offset_scale)
+                                 environment if lights_scene else None, it.offset_scale, self.whitted)
         lights = self.lights
         # the kernels' ``lights`` record (rtmesh.rendering.path_kernel), formed once a view
         self.light_record = (lights.rows, lights.probability, lights.alias, lights.pmf, lights.face_light,
                              lights.analytic, lights.environment, lights.texels, lights.descriptors)
+        self._whitted = self._whitted_record() if self.whitted else no_whitted(len(self.surface[0]))
         if environment is None:
             self._env = (np.zeros((1, 3, 3)), np.zeros(2), np.zeros((1, 2)), np.ones((1, 1)), 1.0, 1.0, 0.0)
         else:
@@ -270,6 +299,19 @@ class PathStage:
         # photon passes for caustics, and the photons the chunks gather (the current pass's)
         self.caustics = Caustics(self, it)
         self.photon_map = empty_photon_map(len(self.surface[0]))
+
+    def _whitted_record(self):
+        """The kernel's ``whitted`` record (:mod:`rtmesh.rendering.path_kernel`): the lights
+        as Whitted samples them (:meth:`~rtmesh.lights.light_table.LightTable.light_groups`),
+        each material's ambient light (its ambient colour times the scene's; none for
+        unlit materials) and baked-occlusion strength, the cutoff, the Fresnel reflectance
+        and the depth of a lane's stack of split rays (at most one a bounce)."""
+        it, s = self.it, self.it.settings
+        m = it.scene.materials
+        ambient = np.where(m.unlit[:, None], 0.0, m.ambient * np.asarray(it.scene.ambient, dtype=np.float64))
+        return (True, *self.lights.light_groups(), np.ascontiguousarray(ambient, dtype=np.float64),
+                np.ascontiguousarray(m.occlusion_strength, dtype=np.float64), float(s.cutoff), s.fresnel == "exact",
+                max(int(s.max_depth), 1))
 
     def _sobol(self, pixel, sample):
         """The kernel's Sobol arguments: pixels, sample indices and the sequences' record
@@ -308,14 +350,18 @@ class PathStage:
         counts = np.zeros(3, np.int64)
         intersect16, occluded16, handle = self._queries
         split = passes is not None and any(passes.wants(name) for name in LIGHT_PATH_PASSES)
-        options = (s.max_depth, RR_DEPTH, float(s.clamp), np.float32(it.offset_scale),
+        # whitted: max_depth counts the bounces (one segment more: the light of the last hit),
+        # no roulette
+        options = (s.max_depth + 1 if self.whitted else s.max_depth, NO_ROULETTE if self.whitted else RR_DEPTH,
+                   float(s.clamp), np.float32(it.offset_scale),
                    not it.background.transparent, self.cutouts, split, self._camera_media, int(s.light_samples),
                    block_bits(s.spp, s.light_samples))
         light_paths = np.zeros((n if split else 0, LIGHT_PATHS, 3))
         trace_paths(intersect16, occluded16, handle, kernel_input(origins, np.float64),
                     kernel_input(directions, np.float64), keys, *self._sobol(pixel, sample),
                     np.zeros(0) if times is None else kernel_input(times, np.float64),
-                    self.geometry, self.surface, self.light_record, self._env, options, self._motion, self._instances,
+                    self.geometry, self.surface, self.light_record, self._env, options, self._whitted, self._motion,
+                    self._instances,
                     self.photon_map, radiance, light_paths, counts)
         if split:
             for k, name in enumerate(LIGHT_PATH_PASSES):

@@ -50,15 +50,16 @@ from rtmesh.materials import lobes, models
 from rtmesh.materials.metallic_roughness import alpha_from_roughness_row
 from rtmesh.materials.table import ALPHA_MODES
 from rtmesh.sampling.alias import alias_sample as _alias_sample
-from rtmesh.sampling.warps import uniform_triangle_weights
 
 TEXTURE_COLUMNS = ("diffuse_texture", "metallic_roughness_texture", "normal_texture", "emission_texture",
                    "specular_texture", "opacity_texture",
+                   # glTF's baked occlusion, which darkens the Whitted integrator's ambient term
+                   "occlusion_texture",
                    # the KHR layers' textures (rtmesh.materials.gltf_layered.Layers.textures, by role)
                    "specularTexture", "specularColorTexture", "clearcoatTexture", "clearcoatRoughnessTexture",
                    "clearcoatNormalTexture", "sheenColorTexture", "sheenRoughnessTexture", "anisotropyTexture",
                    "iridescenceTexture", "iridescenceThicknessTexture")
-(BASE_TEXTURE, MR_TEXTURE, NORMAL_TEXTURE, EMISSION_TEXTURE, SPECULAR_TEXTURE, OPACITY_TEXTURE,
+(BASE_TEXTURE, MR_TEXTURE, NORMAL_TEXTURE, EMISSION_TEXTURE, SPECULAR_TEXTURE, OPACITY_TEXTURE, OCCLUSION_TEXTURE,
  SPECULAR_STRENGTH_TEXTURE, SPECULAR_COLOUR_TEXTURE, CLEARCOAT_TEXTURE, CLEARCOAT_ROUGHNESS_TEXTURE,
  CLEARCOAT_NORMAL_TEXTURE, SHEEN_COLOUR_TEXTURE, SHEEN_ROUGHNESS_TEXTURE, ANISOTROPY_TEXTURE, IRIDESCENCE_TEXTURE,
  IRIDESCENCE_THICKNESS_TEXTURE) = range(len(TEXTURE_COLUMNS))
@@ -181,14 +182,11 @@ def textured_row(surface, geometry, mat, prim, bu, bv, scratch, lane):
         scratch[lane, k] = params[mat, k]
     er, eg, eb = emission[mat, 0], emission[mat, 1], emission[mat, 2]
     slot = slots[tags[mat]]
-    cr, cg, cb, _ = vertex_colour(geometry, prim, bu, bv)
+    cr, cg, cb, br, bg, bb = colour_tint(surface, geometry, mat, prim, bu, bv)
     if len(geometry[6]):
         texels, descriptors = surface[13], surface[14]
         u, v = hit_uv(geometry, prim, bu, bv)
-        t = textures[mat, BASE_TEXTURE]
-        if t >= 0:
-            br, bg, bb, _ = texel(texels, descriptors, t, u, v)
-            cr, cg, cb = cr * br, cg * bg, cb * bb
+        if textures[mat, BASE_TEXTURE] >= 0:
             m = surface[9][mat]
             if m > 0.0:
                 for s in (slot[models.SPECULAR_SLOT], slot[models.MIRROR_SLOT]):
@@ -225,6 +223,32 @@ def textured_row(surface, geometry, mat, prim, bu, bv, scratch, lane):
 
 
 @inline_row
+def colour_tint(surface, geometry, mat, prim, bu, bv):
+    """What scales a material's colour at a point of a face: its vertex colour times its
+    base texture's texel (r, g, b), and that texel alone (1 without a texture)."""
+    cr, cg, cb, _ = vertex_colour(geometry, prim, bu, bv)
+    br = bg = bb = 1.0
+    t = surface[8][mat, BASE_TEXTURE]
+    if t >= 0 and len(geometry[6]):
+        u, v = hit_uv(geometry, prim, bu, bv)
+        br, bg, bb, _ = texel(surface[13], surface[14], t, u, v)
+        cr, cg, cb = cr * br, cg * bg, cb * bb
+    return cr, cg, cb, br, bg, bb
+
+
+@inline_row
+def occlusion_at(surface, geometry, mat, prim, bu, bv, strength):
+    """glTF's baked ambient occlusion at a point of a face: ``1 + strength (red - 1)`` of the
+    material's occlusion texture (1 without one)."""
+    t = surface[8][mat, OCCLUSION_TEXTURE]
+    if t < 0 or not len(geometry[6]):
+        return 1.0
+    u, v = hit_uv(geometry, prim, bu, bv)
+    red, _, _, _ = texel(surface[13], surface[14], t, u, v)
+    return 1.0 + strength * (red - 1.0)
+
+
+@inline_row
 def emission_at(surface, geometry, mat, prim, bu, bv):
     """Emitted radiance (r, g, b) at a point of a face: the material's, times its emission
     texture."""
@@ -239,11 +263,10 @@ def emission_at(surface, geometry, mat, prim, bu, bv):
 
 
 @inline_row
-def triangle_light_emission(surface, geometry, light, u1, u2):
-    """The (textured) radiance an emissive-triangle light emits at its point ``(u1, u2)``
-    (:func:`rtmesh.lights.light_table.sample_area_point`'s point of the same numbers)."""
+def triangle_light_emission(surface, geometry, light, b1, b2):
+    """The (textured) radiance an emissive-triangle light emits at the point of barycentric
+    weights ``(b1, b2)`` (of its corners 1 and 2)."""
     face = np.int64(light[FACE])
-    b1, b2 = uniform_triangle_weights(u1, u2)
     return emission_at(surface, geometry, geometry[5][face], face, b1, b2)
 
 

@@ -32,7 +32,7 @@ import math
 
 import numpy as np
 
-from rtmesh.core.compiled import inline_row, kernel, row
+from rtmesh.core.compiled import borrowed, keep_alive, inline_row, kernel, row
 from rtmesh.geometry.embree_packets import (DEFAULT_TFAR, GEOM_ID, INVALID_ID, LANES, PRIM_ID, RAYHIT_WORDS,
                                             RTC_RAY_QUERY_FLAG_INCOHERENT, TFAR, U, V, packet_buffers)
 from rtmesh.lights import light_table as lt
@@ -49,7 +49,7 @@ from rtmesh.rendering.path_surfaces import (cross_interface, crossing_scale, twi
                                             to_world, triangle_light_emission)
 from rtmesh.sampling.hashing import GOLDEN, mix64, path_key, uniform
 from rtmesh.sampling.lowdiscrepancy import sobol_pair
-from rtmesh.sampling.warps import concentric_disk_row
+from rtmesh.sampling.warps import concentric_disk_row, uniform_triangle_weights
 
 
 # dimensions of a photon's hashed numbers: its light, then three a bounce
@@ -205,6 +205,9 @@ def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geomet
     counts : (1,) int64
         Photon rays traced (active lanes), added to.
     """
+    # views that own nothing: no reference counts in the per-lane rows (rtmesh.core.compiled.borrowed)
+    geometry, surface, lights, env, aim, scene_sphere, specular, scatters, sobol_keys, photons, stored, counts = borrowed(
+        (geometry, surface, lights, env, aim, scene_sphere, specular, scatters, sobol_keys, photons, stored, counts))
     max_bounces, offset_scale, cutouts, media = options
     material_id = geometry[5]
     tags, transmissive, absorption = surface[0], surface[2], surface[4]
@@ -223,6 +226,9 @@ def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geomet
     bounces = np.zeros(LANES, np.int64)
     layers = np.zeros(LANES, np.int64)
     stack = np.full((LANES, max(media, 1)), -1, np.int64)
+    owned = (ray, words, valid, args, scratch, px, py, pz, dx, dy, dz, beta, sigma, keys, alive, bounces, layers, stack)
+    ray, words, valid, args, scratch, px, py, pz, dx, dy, dz, beta, sigma, keys, alive, bounces, layers, stack = borrowed(
+        owned)
     capacity = photons.shape[0]
     written = 0
     needed = 0
@@ -242,7 +248,8 @@ def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geomet
                                                                  u1, u2, u3, u4)
             if light[0] == lt.TRIANGLE:
                 # the emitter's own (textured) radiance at the point
-                er, eg, eb = triangle_light_emission(surface, geometry, light, u1, u2)
+                b1, b2 = uniform_triangle_weights(u1, u2)
+                er, eg, eb = triangle_light_emission(surface, geometry, light, b1, b2)
                 fr, fg, fb = fr * er, fg * eg, fb * eb
             p = light_pmf[chosen]
             if not ((fr > 0.0) | (fg > 0.0) | (fb > 0.0)) or not p > 0.0:
@@ -344,6 +351,7 @@ def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geomet
                 bounces[lane] += 1
     stored[0] = written
     stored[1] = needed
+    keep_alive(owned)
 
 
 @row

@@ -189,6 +189,47 @@ def square_to_spherical_triangle(u, a, b, c):
     return normalize(directions), omega
 
 
+@row
+def _unit(x, y, z):
+    """``(x, y, z)`` over its length."""
+    inv = 1.0 / math.sqrt((x * x + y * y) + z * z)
+    return x * inv, y * inv, z * inv
+
+
+@row
+def spherical_triangle_area_row(ax, ay, az, bx, by, bz, cx, cy, cz):
+    """:func:`spherical_triangle_area` of one triangle of unit corners (sr), in compiled code."""
+    triple = abs((ax * (by * cz - bz * cy) + ay * (bz * cx - bx * cz)) + az * (bx * cy - by * cx))
+    return 2.0 * math.atan2(triple, ((1.0 + ((ax * bx + ay * by) + az * bz)) + ((bx * cx + by * cy) + bz * cz))
+                            + ((cx * ax + cy * ay) + cz * az))
+
+
+@row
+def spherical_triangle_row(u0, u1, ax, ay, az, bx, by, bz, cx, cy, cz, omega):
+    """:func:`square_to_spherical_triangle` of one point ``(u0, u1)`` and one triangle of
+    unit corners whose solid angle is ``omega``, in compiled code: the unit direction."""
+    nbx, nby, nbz = _unit(ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx)
+    ncx, ncy, ncz = _unit(ay * cz - az * cy, az * cx - ax * cz, ax * cy - ay * cx)
+    alpha = math.acos(min(max((nbx * ncx + nby * ncy) + nbz * ncz, -1.0), 1.0))
+    area = u0 * omega
+    s, t = math.sin(area - alpha), math.cos(area - alpha)
+    cos_alpha, sin_alpha = math.cos(alpha), math.sin(alpha)
+    uu = t - cos_alpha
+    vv = s + sin_alpha * ((ax * bx + ay * by) + az * bz)
+    denominator = (vv * s + uu * t) * sin_alpha
+    q = ((vv * t - uu * s) * cos_alpha - vv) / (denominator if denominator != 0.0 else 1.0)
+    q = min(max(q, -1.0), 1.0)
+    ca = (cx * ax + cy * ay) + cz * az
+    ox, oy, oz = _unit(cx - ca * ax, cy - ca * ay, cz - ca * az)
+    r = math.sqrt(max(1.0 - q * q, 0.0))
+    nx, ny, nz = q * ax + r * ox, q * ay + r * oy, q * az + r * oz
+    z = 1.0 - u1 * (1.0 - ((nx * bx + ny * by) + nz * bz))
+    nb = (nx * bx + ny * by) + nz * bz
+    px, py, pz = _unit(nx - nb * bx, ny - nb * by, nz - nb * bz)
+    r = math.sqrt(max(1.0 - z * z, 0.0))
+    return _unit(z * bx + r * px, z * by + r * py, z * bz + r * pz)
+
+
 def spherical_triangle_to_square(directions, a, b, c):
     """Inverse of :func:`square_to_spherical_triangle`: directions inside the spherical
     triangles ``a, b, c`` back to ``u``, (n, 3) -> (n, 2).
