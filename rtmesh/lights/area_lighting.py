@@ -31,12 +31,9 @@ from rtmesh.core.compiled import by_component, kernel
 from rtmesh.core.rays import take_rows
 from rtmesh.core.row_vectors import dot3
 from rtmesh.geometry.float32_rays import offset_origin
+from rtmesh.lights.light_table import FLUSH_MARGIN
 from rtmesh.sampling.sampler import Sampler
 
-# Rays meeting a visible light and a surface at the same distance (a light placed flush on a
-# ceiling) see the light: Embree's float32 distance to the surface carries a relative error
-# of a few 1e-7, so the light wins within this relative margin.
-_FLUSH_MARGIN = 1.0 + 1e-5
 
 
 class AreaLighting:
@@ -141,7 +138,7 @@ class AreaLighting:
         which = None
         for index, light in enumerate(self.visible):
             t = light.intersect(origins, directions)
-            closer = (t < np.inf) & (t <= nearest * _FLUSH_MARGIN)
+            closer = (t < np.inf) & (t <= nearest * FLUSH_MARGIN)
             if closer.any():
                 nearest = np.where(closer, t, nearest)
                 which = np.where(closer, index, -1 if which is None else which)

@@ -51,6 +51,10 @@ QUAD, DISK, TRIANGLE, ENVIRONMENT, PROJECTOR = 3, 4, 5, 6, 7
 # digits and area sampling is as good; above it the triangle covers nearly a hemisphere,
 # where the construction degenerates (pbrt-v4's Triangle::Sample bounds, 3e-4 and 6.22 sr).
 SOLID_ANGLE_FROM, SOLID_ANGLE_TO = 1e-3, 6.22
+# Rays meeting a visible light and a surface at the same distance (a light placed flush on a
+# ceiling) see the light: Embree's float32 distance to the surface carries a relative error
+# of a few 1e-7, so the light wins within this relative margin.
+FLUSH_MARGIN = 1.0 + 1e-5
 WIDTH = 24
 RADIANCE = 7
 AREA, TWO_SIDED, VISIBLE, FACE = 16, 17, 18, 19
@@ -280,7 +284,9 @@ class EnvironmentTables:
         elif image is not None:
             self.pixels = np.ascontiguousarray(image.pixels[:, :, :3], dtype=np.float64)
         else:
-            h, w = 64, 128
+            # a procedural background (a gradient) tabulated finely enough that the bilinear
+            # lookup stays within 1e-5 of it (its sampling tables are the lighting's)
+            h, w = 256, 512
             v = 1.0 - (np.arange(h) + 0.5) / h
             u = (np.arange(w) + 0.5) / w
             uv = np.stack(np.meshgrid(u, v), axis=2).reshape(-1, 2)

@@ -351,7 +351,9 @@ def _terms(params, m, table, ox, oy, oz, wx, wy, wz):
             tr, tg, tb = scale * value * params[m, BASE_AT], scale * value * params[m, BASE_AT + 1], \
                 scale * value * params[m, BASE_AT + 2]
             fr, fg, fb = fr + tr, fg + tg, fb + tb
-        else:
+        elif oz < 0.0:
+            # reflected inside; outside the specular layer is the interface's reflection
+            # (rtmesh.materials.gltf_pbr: counted once)
             fr, fg, fb = fr + scale * value, fg + scale * value, fb + scale * value
     pdf += p_interface * p
     # the coat over everything
@@ -424,7 +426,9 @@ def sample(params, m, table, ox, oy, oz, u0, u1, u2):
             if flags & lobes.TRANSMISSION:
                 return (wx, wy, wz, weight * params[m, BASE_AT], weight * params[m, BASE_AT + 1],
                         weight * params[m, BASE_AT + 2], pdf * p_interface, flags)
-            return wx, wy, wz, weight, weight, weight, pdf * p_interface, flags
+            if oz < 0.0:
+                return wx, wy, wz, weight, weight, weight, pdf * p_interface, flags
+            return wx, wy, wz, 0.0, 0.0, 0.0, 0.0, lobes.FAILED
     elif u0 < p_coat + p_sheen + p_interface + p_spec:
         at, ab, ax, ay = _widths(params, m)
         wx, wy, wz = _reflect_about(ox, oy, oz, 0.0, 0.0, 1.0, u1, u2, at, ab, ax, ay)

@@ -5,9 +5,15 @@ plus KHR_materials_transmission's part as a dielectric interface
 
 Model
 -----
-``f = f_brdf + t f_interface`` with ``t = transmission (1 - metallic)``; the BRDF already
-leaves out the transmitted part of its diffuse term.  Sampling chooses the interface with
-probability ``t``, the BRDF otherwise; the density is the mixture.
+``f = f_brdf + t f_transmitted`` with ``t = transmission (1 - metallic)``: the BRDF (its
+specular layer over the diffuse base) already leaves out the transmitted part of its
+diffuse term, and KHR_materials_transmission replaces only that base, so of the interface
+only what it lets through is added; its reflection is the specular layer's, counted once
+(with both, a clear ball in a white furnace returned 1.036), but inside (``wo.z < 0``),
+where the one-sided BRDF has nothing, the interface reflects (and totally reflects) itself.  Sampling chooses the interface
+with probability ``t``, the BRDF otherwise; the density is the mixture (a reflection the
+interface draws outside is weighed by ``f`` over that density; a smooth interface's delta
+reflection outside, which ``f`` does not have, gives no sample).
 
 Parameters: ``base`` r, g, b, ``metallic``, ``alpha`` (roughness squared), ``roughness``,
 ``transmission``, ``ior``.
@@ -53,7 +59,8 @@ def evaluate(params, m, table, ox, oy, oz, wx, wy, wz):
             fr += t * value * params[m, 0]
             fg += t * value * params[m, 1]
             fb += t * value * params[m, 2]
-        else:
+        elif oz < 0.0:
+            # reflected inside: the one-sided BRDF has no part there
             fr += t * value
             fg += t * value
             fb += t * value
@@ -73,7 +80,9 @@ def sample(params, m, table, ox, oy, oz, u0, u1, u2):
         if flags & lobes.DELTA or flags == lobes.FAILED:
             if flags & lobes.TRANSMISSION:
                 return wx, wy, wz, weight * params[m, 0], weight * params[m, 1], weight * params[m, 2], pdf, flags
-            return wx, wy, wz, weight, weight, weight, pdf, flags
+            if oz < 0.0:
+                return wx, wy, wz, weight, weight, weight, pdf, flags
+            return wx, wy, wz, 0.0, 0.0, 0.0, 0.0, lobes.FAILED
     else:
         u = (u0 - t) / (1.0 - t)
         wx, wy, wz, g0, g1, g2, pdf = sample_row(ox, oy, oz, 0.0, 0.0, 1.0, u, u1, u2, params[m, 0], params[m, 1],

@@ -76,11 +76,11 @@ _UNIT_THROUGHPUT = np.ones(3)
 
 
 # Whitted renders that the fused stage does not take go through the path kernel configured
-# as the Whitted integrator (rtmesh.rendering.whitted_rows) instead of the general wavefront:
-# complete but for ambient occlusion, its images within noise of the wavefront's
-# (tests/rendering/test_whitted_kernel.py), but off until the kernel is the faster of the
-# two (docs/ARCHITECTURE.md, "Not built yet")
-WHITTED_THROUGH_KERNEL = False
+# as the Whitted integrator (rtmesh.rendering.whitted_rows), not the general wavefront, which
+# renders only what the kernel does not do yet (ambient occlusion): images within noise of
+# the wavefront's (tests/rendering/test_whitted_kernel.py), 0.9-1.8x faster (docs/BENCHMARKS.md).
+# Tests of the wavefront's own stages turn it off.
+WHITTED_THROUGH_KERNEL = True
 
 
 def _translated(obj, shift):

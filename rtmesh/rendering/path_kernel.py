@@ -97,8 +97,9 @@ from rtmesh.lights import light_table as lt
 from rtmesh.materials import lobes, models
 from rtmesh.rendering.photon_kernel import ALL_PARTS, DIFFUSE_PART, TRANSMITTED_PART, empty_photon_map, gather
 from rtmesh.rendering.path_lights import area_pdf, environment_pdf, hit_analytic, light_at, sample_li, shadow_segment
-from rtmesh.rendering.path_packets import (BOUNCE, BSDF_U1, BSDF_U2, CAMERA, COVERAGE, DIMENSIONS_PER_VERTEX, LIGHT_CHOICE,
-                                           LIGHT_U1, LIGHT_U2, LOBE, MAX_LAYERS, ROULETTE, SHADOW, layer_coin,
+from rtmesh.rendering.path_packets import (AREA_SHADOW, BOUNCE, BSDF, BSDF_U1, BSDF_U2, CAMERA, COVERAGE, CUTOUT,
+                                           DIMENSIONS_PER_VERTEX, ENVIRONMENT, LIGHT_CHOICE, LIGHT_U1, LIGHT_U2, LOBE,
+                                           MAX_LAYERS, REFLECTION, REFRACTION, ROULETTE, SHADOW, layer_coin,
                                            mover_to_world, nearest_hits, occluded, placed, shadows_through_cutouts)
 from rtmesh.rendering.path_surfaces import alias_sample, colour_tint, load_lanes, occlusion_at, set_lane
 from rtmesh.rendering.path_surfaces import environment_radiance as _environment_radiance
@@ -211,8 +212,10 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
         Output.
     light_paths : (n, LIGHT_PATHS, 3) float64, or (0, LIGHT_PATHS, 3)
         Output of the light-path passes, with ``split``.
-    counts : (3,) int64
-        Camera, bounce and shadow rays traced (active lanes only), added to.
+    counts : (len(COUNTER_NAMES),) int64
+        Rays traced (active lanes only) by :data:`rtmesh.rendering.path_packets.COUNTER_NAMES`,
+        added to: camera, bounce and shadow rays (whitted: camera, reflection, refraction,
+        BSDF-sampled, cut-out, shadow, area-light shadow and environment shadow rays).
     """
     # read through views that own nothing: no reference counts in the per-lane rows
     # (rtmesh.core.compiled.borrowed; the caller holds the arrays)
@@ -277,6 +280,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     shadow_rays = np.zeros((light_slots, LANES, 7))
     shadow_set = np.zeros((light_slots, LANES), np.bool_)
     shadow_count = np.zeros(light_slots, np.int64)
+    shadow_kind = np.full(light_slots, SHADOW, np.int64)
     pending = np.zeros((light_slots, LANES, 3))
     paths = np.zeros((LANES, LIGHT_PATHS, 3))
     pending_paths = np.zeros((light_slots if split else 1, LANES, LIGHT_PATHS, 3))
@@ -301,22 +305,25 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     # with photons: the path's last vertices (CHAIN_*), its length so far (the gather radius)
     chain = np.zeros(LANES, np.int64)
     travelled = np.zeros(LANES)
+    # what each lane's ray is, for the counters (whitted)
+    ray_kind = np.zeros(LANES, np.int64)
     # the scratch arrays too, through views that own nothing (owned stays alive to the end)
     owned = (ray, words, valid, args_coherent, args_incoherent, shadow, shadow_words, shadow_valid, rest, rest_words,
              rest_valid, best_t, best_prim, best_instance, best_u, best_v, segment, lane_time, moved, scratch, px,
              py, pz, dx, dy, dz, beta, total, shadow_rays, shadow_set, shadow_count, pending, paths, pending_paths,
              category, stack, branch, branch_media, branch_top, sigma, reach, alive, prev_pdf, prev_delta, eta_scale,
-             prev_count, lane_depth, layers, chain, travelled)
+             prev_count, lane_depth, layers, chain, travelled, ray_kind, shadow_kind)
     (ray, words, valid, args_coherent, args_incoherent, shadow, shadow_words, shadow_valid, rest, rest_words,
      rest_valid, best_t, best_prim, best_instance, best_u, best_v, segment, lane_time, moved, scratch, px,
      py, pz, dx, dy, dz, beta, total, shadow_rays, shadow_set, shadow_count, pending, paths, pending_paths,
      category, stack, branch, branch_media, branch_top, sigma, reach, alive, prev_pdf, prev_delta, eta_scale,
-     prev_count, lane_depth, layers, chain, travelled) = borrowed(owned)
+     prev_count, lane_depth, layers, chain, travelled, ray_kind, shadow_kind) = borrowed(owned)
     for start in range(0, n, LANES):
         count = min(LANES, n - start)
         for lane in range(LANES):
             alive[lane] = lane < count
             branch_top[lane] = 0
+            ray_kind[lane] = CAMERA
             if lane < count:
                 i = start + lane
                 px[lane], py[lane], pz[lane] = origins[i, 0], origins[i, 1], origins[i, 2]
@@ -349,6 +356,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                         # a ray an earlier hit of this lane split off
                         top = pop_branch(branch, branch_media, branch_top, lane, px, py, pz, dx, dy, dz, beta,
                                          lane_depth, stack)
+                        ray_kind[lane] = REFLECTION
                         for c in range(3):
                             sigma[lane, c] = absorption[top, c] if top >= 0 else 0.0
                         alive[lane] = True
@@ -360,7 +368,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 break
             for lane in range(LANES):
                 if alive[lane]:
-                    counts[CAMERA if lane_depth[lane] == 0 else BOUNCE] += 1
+                    counts[ray_kind[lane] if whitted_on else (CAMERA if lane_depth[lane] == 0 else BOUNCE)] += 1
             args = args_coherent if first else args_incoherent
             first = False
             nearest_hits(intersect16, scene, args, args_incoherent, ray, words, valid, motion, instance_faces,
@@ -377,10 +385,12 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 t = best_t[lane]
                 # a visible quad or disk light before the surface ends the path there
                 seen = -1
+                # (within lt.FLUSH_MARGIN of the surface: a light flush with a ceiling is seen)
                 for k in range(len(analytic)):
                     a = analytic[k]
-                    ta = hit_analytic(light_rows[a], px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], t)
-                    if ta < t:
+                    ta = hit_analytic(light_rows[a], px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane],
+                                      t * lt.FLUSH_MARGIN)
+                    if ta < t * lt.FLUSH_MARGIN:
                         t, seen = ta, a
                 if sigma[lane, 0] + sigma[lane, 1] + sigma[lane, 2] > 0.0 and t < math.inf:
                     for c in range(3):
@@ -439,6 +449,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                         surface, geometry, mat, prim, bu, bv, layer_coin(key, depth, layers[lane], COVERAGE)):
                     # the ray passes this layer: on from just beyond it, same depth
                     layers[lane] += 1
+                    ray_kind[lane] = CUTOUT
                     px[lane], py[lane], pz[lane] = leave_surface(hx, hy, hz, gx, gy, gz, dx[lane], dy[lane], dz[lane],
                                                                  offset_scale)
                     continue
@@ -613,6 +624,9 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                             hx, hy, hz, gx, gy, gz, wx, wy, wz, distance, delta, light, offset_scale)
                         shadow_set[k, lane] = True
                         shadow_count[k] += 1
+                        if whitted_on:
+                            shadow_kind[k] = SHADOW if delta else (ENVIRONMENT if light[0] == lt.ENVIRONMENT
+                                                                   else AREA_SHADOW)
                 if not follow or (whitted_on and depth + 2 > max_depth):
                     # (whitted: the last hit a ray may reach takes light, but sends no ray on)
                     alive[lane] = False
@@ -642,6 +656,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                     beta[lane, 0] *= wr
                     beta[lane, 1] *= wg
                     beta[lane, 2] *= wb
+                    ray_kind[lane] = REFRACTION if refracts else REFLECTION
                     prev_pdf[lane] = 0.0
                     prev_delta[lane] = True
                     px[lane], py[lane], pz[lane] = leave_surface(hx, hy, hz, gx, gy, gz, rx, ry, rz, offset_scale)
@@ -663,6 +678,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 beta[lane, 0] *= gr
                 beta[lane, 1] *= gg
                 beta[lane, 2] *= gb
+                ray_kind[lane] = REFRACTION if flags & lobes.TRANSMISSION else BSDF
                 prev_pdf[lane] = pdf
                 prev_delta[lane] = (flags & lobes.DELTA) != 0
                 if prev_delta[lane]:
@@ -698,7 +714,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
             for k in range(light_slots):
                 if shadow_count[k] == 0:
                     continue
-                counts[SHADOW] += shadow_count[k]
+                counts[shadow_kind[k]] += shadow_count[k]
                 shadow_count[k] = 0
                 for lane in range(LANES):
                     shadow_valid[lane] = 0

@@ -27,8 +27,12 @@ DIMENSIONS_PER_VERTEX = 8
 LIGHT_CHOICE, LIGHT_U1, LIGHT_U2, LOBE, BSDF_U1, BSDF_U2, ROULETTE, COVERAGE = range(8)
 # cut-out layers a ray passes before the next surface counts as opaque
 MAX_LAYERS = 64
-# ray counters
-CAMERA, BOUNCE, SHADOW = 0, 1, 2
+# ray counters, by the names of rtmesh.rendering.stats.RenderStats.rays (the path integrator
+# counts camera, bounce and shadow rays; its Whitted configuration every kind the Whitted
+# stages count)
+COUNTER_NAMES = ("camera", "bounce", "shadow", "reflection", "refraction", "bsdf", "area_shadow", "environment",
+                 "cutout")
+CAMERA, BOUNCE, SHADOW, REFLECTION, REFRACTION, BSDF, AREA_SHADOW, ENVIRONMENT, CUTOUT = range(len(COUNTER_NAMES))
 
 
 @row

@@ -31,7 +31,7 @@ from rtmesh.io.passes import LIGHT_PATH_PASSES
 from rtmesh.rendering.caustics import Caustics
 from rtmesh.rendering.photon_kernel import empty_photon_map
 from rtmesh.rendering.path_kernel import LIGHT_PATHS, PATH_KERNELS, no_instances, no_whitted, trace_paths
-from rtmesh.rendering.path_packets import BOUNCE, CAMERA, SHADOW
+from rtmesh.rendering.path_packets import COUNTER_NAMES
 from rtmesh.rendering.path_surfaces import TEXTURE_COLUMNS
 from rtmesh.rendering.settings import RenderSettings
 from rtmesh.rendering.surface_textures import corner_and_edges, face_tangents
@@ -203,9 +203,10 @@ def scene_tables(scene, accel, media_of, whitted=False):
                np.ascontiguousarray(m.ior, dtype=np.float64),
                _twin_materials(media_of(transmissive) if transmissive.any() else None, len(faces)))
     # what each face emits on average (emission textures by their mean), for choosing lights by power
+    # (a grey texture's one channel tints all three)
     mean_tint = np.array([np.ones(3) if material.emission_texture is None or scene.uv is None else
-                          np.asarray(material.emission_texture.pixels, dtype=np.float64).reshape(
-                              -1, material.emission_texture.channels)[:, :3].mean(axis=0)
+                          np.broadcast_to(np.asarray(material.emission_texture.pixels, dtype=np.float64).reshape(
+                              -1, material.emission_texture.channels)[:, :3].mean(axis=0), 3)
                           for material in m.materials]).reshape(-1, 3)
     face_emission = (m.emission * mean_tint)[material_id]
     return geometry, surface, face_emission
@@ -347,7 +348,7 @@ class PathStage:
         with np.errstate(over="ignore"):
             keys = path_key(self._seed_key, pixel.astype(np.uint64), sample.astype(np.uint64))
         radiance = np.zeros((n, 3))
-        counts = np.zeros(3, np.int64)
+        counts = np.zeros(len(COUNTER_NAMES), np.int64)
         intersect16, occluded16, handle = self._queries
         split = passes is not None and any(passes.wants(name) for name in LIGHT_PATH_PASSES)
         # whitted: max_depth counts the bounces (one segment more: the light of the last hit),
@@ -367,7 +368,7 @@ class PathStage:
             for k, name in enumerate(LIGHT_PATH_PASSES):
                 if passes.wants(name):
                     passes.write(name, slice(None), light_paths[:, k])
-        stats.rays["camera"] += int(counts[CAMERA])
-        stats.rays["bounce"] += int(counts[BOUNCE])
-        stats.rays["shadow"] += int(counts[SHADOW])
+        for name, count in zip(COUNTER_NAMES, counts):
+            if count:
+                stats.rays[name] += int(count)
         return radiance

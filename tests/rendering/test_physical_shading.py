@@ -143,8 +143,14 @@ def test_mis_weights_sum_to_one_and_handle_the_edges():
 
 def test_mis_estimate_matches_bsdf_sampling_alone(monkeypatch):
     """Under a sky with a bright region, the MIS estimate of a rough metal equals the estimate
-    of BSDF sampling alone (no environment light sampling, background weight 1)."""
+    of BSDF sampling alone (no environment light sampling, background weight 1).  The Whitted
+    stages' MIS (rendering/physical_shading.py, which renders with ambient occlusion take),
+    not the path kernel's (tests/rendering/test_path_integrator.py)."""
     from scenes import sun_sky
+
+    from rtmesh.rendering import integrator as integrator_module
+
+    monkeypatch.setattr(integrator_module, "WHITTED_THROUGH_KERNEL", False)
 
     material = physical(base=[0.9, 0.7, 0.5], metallic=1.0, roughness=0.4)
     sky = sun_sky(64)
@@ -222,9 +228,11 @@ def test_mis_tames_the_reflection_of_a_small_light_in_a_smooth_metal(monkeypatch
     """A smooth metal floor mirroring a small quad light: light sampling alone finds the
     narrow lobe rarely (fireflies), BSDF sampling finds the light every time.  MIS keeps the
     mean of BSDF sampling alone, and its noise (the RMS difference of two seeds) is a
-    fraction of light sampling's."""
+    fraction of light sampling's.  The Whitted stages' strategies, as above."""
     from rtmesh.rendering import integrator as integrator_module
     from rtmesh.rendering import local_shading, physical_shading
+
+    monkeypatch.setattr(integrator_module, "WHITTED_THROUGH_KERNEL", False)
 
     floor = tilted_quad(0.0, half=3.0)
     camera = Camera([0.0, -2.0, 1.5], [0.0, 0.0, 0.0], [0.0, 0.0, 1.0], 50.0)

@@ -103,8 +103,10 @@ def test_gradient_rows_match_the_closed_form_of_their_ray_directions():
     result = render(empty_scene(GradientBackground(top, bottom), camera), width=12, height=10)
     _, d = pixel_centre_rays(camera, 12, 10)
     expected = (bottom + (top - bottom) * (0.5 + 0.5 * d[:, 1:2])).reshape(10, 12, 3)
-    np.testing.assert_allclose(result.image[0], expected[0], rtol=1e-6)
-    np.testing.assert_allclose(result.image[-1], expected[-1], rtol=1e-6)
+    # (the path kernel reads a gradient from a 256 x 512 table, bilinear in latitude: within
+    # 1e-4 of the closed form)
+    np.testing.assert_allclose(result.image[0], expected[0], rtol=1e-4)
+    np.testing.assert_allclose(result.image[-1], expected[-1], rtol=1e-4)
     # the top row is bluer than the bottom row, the middle straddles the horizon average
     assert (result.image[0, :, 2] > result.image[-1, :, 2]).all()
 
