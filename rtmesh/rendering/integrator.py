@@ -75,12 +75,14 @@ log = logging.getLogger(__name__)
 _UNIT_THROUGHPUT = np.ones(3)
 
 
-# Whitted renders that the fused stage does not take go through the path kernel configured
-# as the Whitted integrator (rtmesh.rendering.whitted_rows), not the general wavefront, which
-# renders only what the kernel does not do yet (ambient occlusion): images within noise of
-# the wavefront's (tests/rendering/test_whitted_kernel.py), 0.9-1.8x faster (docs/BENCHMARKS.md).
-# Tests of the wavefront's own stages turn it off.
-WHITTED_THROUGH_KERNEL = True
+# Whether Whitted renders that the fused stage does not take go through the path kernel
+# configured as the Whitted integrator (rtmesh.rendering.whitted_rows) instead of the general
+# wavefront.  The kernel renders every Whitted scene, its images within noise of the
+# wavefront's (tests/rendering/test_whitted_kernel.py), and renders most of them faster, but
+# its first compile costs a first render of the showcase 81 s instead of 7 s
+# (docs/BENCHMARKS.md, "Whitted through the path kernel"): off until the kernel compiles
+# in pieces.  Tests of the wavefront's own stages pin it off.
+WHITTED_THROUGH_KERNEL = False
 
 
 def _translated(obj, shift):
@@ -673,7 +675,9 @@ class Integrator:
         buffers = self.passes.buffers(n) if self.plan.passes else None
         radiance = self.path_stage.render(origins, directions, pixel, sample_in_pixel, stats, buffers, times)
         clock.lap("direct")
-        if self.plan.passes and any(spec.producer is not None for spec in self.passes.specs):
+        # the ambient-occlusion pass, of the camera rays' hits as the Whitted stages form it
+        wants_ao = buffers is not None and buffers.wants("ao")
+        if self.plan.passes and (wants_ao or any(spec.producer is not None for spec in self.passes.specs)):
             # the camera-hit passes (the kernel writes the light-path passes itself)
             chunk = ChunkState(radiance, buffers, pixel, sample_in_pixel, stats, clock, None)
             rays = RayBatch(origins, directions, np.arange(n, dtype=np.int64), repeated_row(_UNIT_THROUGHPUT, n),
@@ -684,6 +688,8 @@ class Integrator:
             if len(hit) and hit.any():
                 srf = self.surface_stage.records(rays, hits, rows, times)
                 self.passes.record(chunk.passes, srf, hits, rows)
+                if wants_ao:
+                    chunk.passes.write("ao", srf.sample, self.local_shading.ambient_occlusion(srf, 0, chunk))
             clock.lap("passes")
         if ragged:
             return radiance, (self.passes.per_sample(buffers, n) or None) if buffers is not None else None, stats

@@ -97,15 +97,16 @@ from rtmesh.lights import light_table as lt
 from rtmesh.materials import lobes, models
 from rtmesh.rendering.photon_kernel import ALL_PARTS, DIFFUSE_PART, TRANSMITTED_PART, empty_photon_map, gather
 from rtmesh.rendering.path_lights import area_pdf, environment_pdf, hit_analytic, light_at, sample_li, shadow_segment
-from rtmesh.rendering.path_packets import (AREA_SHADOW, BOUNCE, BSDF, BSDF_U1, BSDF_U2, CAMERA, COVERAGE, CUTOUT,
+from rtmesh.rendering.path_packets import (AO, AREA_SHADOW, BOUNCE, BSDF, BSDF_U1, BSDF_U2, CAMERA, COVERAGE, CUTOUT,
                                            DIMENSIONS_PER_VERTEX, ENVIRONMENT, LIGHT_CHOICE, LIGHT_U1, LIGHT_U2, LOBE,
                                            MAX_LAYERS, REFLECTION, REFRACTION, ROULETTE, SHADOW, layer_coin,
                                            mover_to_world, nearest_hits, occluded, placed, shadows_through_cutouts)
 from rtmesh.rendering.path_surfaces import alias_sample, colour_tint, load_lanes, occlusion_at, set_lane
 from rtmesh.rendering.path_surfaces import environment_radiance as _environment_radiance
 from rtmesh.rendering.path_surfaces import (cross_interface, crossing_scale, twin_material, hit_frame, hit_parameters, is_transparent,
-                                            leave_surface, surface_point, textured_materials, to_world,
+                                            leave_surface, surface_point, tangent_frame, textured_materials, to_world,
                                             triangle_light_emission)
+from rtmesh.materials.metallic_roughness import square_to_cosine_hemisphere_row
 from rtmesh.rendering.whitted_rows import BRANCH_WORDS, branches, light_factor, pop_branch, push_branch
 from rtmesh.sampling.hashing import mix64, uniform
 from rtmesh.sampling.mis import power_heuristic
@@ -234,7 +235,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
      light_block) = options
     media = len(camera_media)
     (whitted_on, delta_rows, group_start, group_order, group_probability, group_alias, group_pmf, ambient,
-     occlusion_strength, cutoff, exact_fresnel, branch_depth) = whitted
+     occlusion_strength, cutoff, exact_fresnel, branch_depth, ao_samples, ao_distance) = whitted
     # which light a light sample takes: one by power among all (path), or every delta light
     # once and light_samples of each other light (whitted: LightTable.light_groups, the
     # emissive triangles one light); the density of a light's choice, for MIS
@@ -276,7 +277,8 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     total = np.zeros((LANES, 3))
     # per light sample of a vertex (rtmesh.rendering.settings.RenderSettings.light_samples):
     # each lane's shadow ray (origin, direction, length) and the light it brings if free
-    light_slots = deltas + area_rounds
+    # (whitted: then ao_samples ambient-occlusion rays)
+    light_slots = deltas + area_rounds + ao_samples
     shadow_rays = np.zeros((light_slots, LANES, 7))
     shadow_set = np.zeros((light_slots, LANES), np.bool_)
     shadow_count = np.zeros(light_slots, np.int64)
@@ -494,12 +496,15 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 # and refracted rays (rtmesh.rendering.whitted_rows); every hit takes the ambient
                 # light (tinted by the colour's textures, darkened by glTF's baked occlusion)
                 whitted_hit = whitted_on and tag == models.BLINN_PHONG
+                ambient_r = ambient_g = ambient_b = 0.0
                 if whitted_on and (ambient[mat, 0] > 0.0) | (ambient[mat, 1] > 0.0) | (ambient[mat, 2] > 0.0):
                     cr, cg, cb, _, _, _ = colour_tint(surface, geometry, mat, prim, bu, bv)
                     occluded_part = occlusion_at(surface, geometry, mat, prim, bu, bv, occlusion_strength[mat])
-                    _add(total, lane, beta[lane, 0] * (ambient[mat, 0] * cr * occluded_part),
-                         beta[lane, 1] * (ambient[mat, 1] * cg * occluded_part),
-                         beta[lane, 2] * (ambient[mat, 2] * cb * occluded_part))
+                    ambient_r = beta[lane, 0] * (ambient[mat, 0] * cr * occluded_part)
+                    ambient_g = beta[lane, 1] * (ambient[mat, 1] * cg * occluded_part)
+                    ambient_b = beta[lane, 2] * (ambient[mat, 2] * cb * occluded_part)
+                    if ao_samples == 0:
+                        _add(total, lane, ambient_r, ambient_g, ambient_b)
                 # caustics: the photons near this vertex (paths of at least two segments)
                 segments = max_depth - depth if max_depth >= 0 else -1
                 if photons_on and scatters[mat] and (segments < 0 or segments >= 2):
@@ -627,6 +632,30 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                         if whitted_on:
                             shadow_kind[k] = SHADOW if delta else (ENVIRONMENT if light[0] == lt.ENVIRONMENT
                                                                    else AREA_SHADOW)
+                if ao_samples > 0 and (ambient_r > 0.0) | (ambient_g > 0.0) | (ambient_b > 0.0):
+                    # ambient occlusion (whitted): the ambient term over ao_samples cosine-weighted
+                    # rays about the geometric normal (on the viewer's side), each counting if
+                    # nothing lies within ao_distance
+                    if (gx * ox + gy * oy) + gz * oz < 0.0:
+                        ux, uy, uz = -gx, -gy, -gz
+                    else:
+                        ux, uy, uz = gx, gy, gz
+                    ax, ay, az, cx, cy, cz = tangent_frame(ux, uy, uz)
+                    for j in range(ao_samples):
+                        k = deltas + area_rounds + j
+                        ao_key = mix64(key + np.uint64(k) * _LIGHT_ROUND)
+                        lx, ly, lz = square_to_cosine_hemisphere_row(uniform(ao_key, base + LIGHT_U1),
+                                                                     uniform(ao_key, base + LIGHT_U2))
+                        wx, wy, wz = (ax * lx + cx * ly) + ux * lz, (ay * lx + cy * ly) + uy * lz, (az * lx + cz * ly) + uz * lz
+                        ray_k = shadow_rays[k, lane]
+                        ray_k[0], ray_k[1], ray_k[2] = leave_surface(hx, hy, hz, ux, uy, uz, wx, wy, wz, offset_scale)
+                        ray_k[3], ray_k[4], ray_k[5], ray_k[6] = wx, wy, wz, ao_distance
+                        pending[k, lane, 0] = ambient_r / ao_samples
+                        pending[k, lane, 1] = ambient_g / ao_samples
+                        pending[k, lane, 2] = ambient_b / ao_samples
+                        shadow_set[k, lane] = True
+                        shadow_count[k] += 1
+                        shadow_kind[k] = AO
                 if not follow or (whitted_on and depth + 2 > max_depth):
                     # (whitted: the last hit a ray may reach takes light, but sends no ray on)
                     alive[lane] = False
@@ -753,7 +782,7 @@ def no_instances():
 def no_whitted(materials):
     """The kernel's ``whitted`` record under the path integrator (``materials``: the count)."""
     return (False, np.zeros(0, np.int64), np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros(0),
-            np.zeros(0, np.int64), np.zeros(0), np.zeros((materials, 3)), np.zeros(materials), 0.0, False, 0)
+            np.zeros(0, np.int64), np.zeros(0), np.zeros((materials, 3)), np.zeros(materials), 0.0, False, 0, 0, 0.0)
 
 
 def small_records():

@@ -31,8 +31,8 @@ MAX_LAYERS = 64
 # counts camera, bounce and shadow rays; its Whitted configuration every kind the Whitted
 # stages count)
 COUNTER_NAMES = ("camera", "bounce", "shadow", "reflection", "refraction", "bsdf", "area_shadow", "environment",
-                 "cutout")
-CAMERA, BOUNCE, SHADOW, REFLECTION, REFRACTION, BSDF, AREA_SHADOW, ENVIRONMENT, CUTOUT = range(len(COUNTER_NAMES))
+                 "cutout", "ao")
+CAMERA, BOUNCE, SHADOW, REFLECTION, REFRACTION, BSDF, AREA_SHADOW, ENVIRONMENT, CUTOUT, AO = range(len(COUNTER_NAMES))
 
 
 @row

@@ -63,10 +63,7 @@ def unsupported(it):
 def whitted_unsupported(it):
     """What of a Whitted render the path kernel does not do yet (the general wavefront
     renders it): a list of phrases, empty when the kernel renders everything."""
-    missing = unsupported(it)
-    if it.plan.ao:
-        missing.append("ambient occlusion")
-    return missing
+    return unsupported(it)
 
 
 def _packet_accel(accel):
@@ -305,14 +302,16 @@ class PathStage:
         """The kernel's ``whitted`` record (:mod:`rtmesh.rendering.path_kernel`): the lights
         as Whitted samples them (:meth:`~rtmesh.lights.light_table.LightTable.light_groups`),
         each material's ambient light (its ambient colour times the scene's; none for
-        unlit materials) and baked-occlusion strength, the cutoff, the Fresnel reflectance
-        and the depth of a lane's stack of split rays (at most one a bounce)."""
+        unlit materials) and baked-occlusion strength, the cutoff, the Fresnel reflectance,
+        the depth of a lane's stack of split rays (at most one a bounce), and the ambient
+        occlusion rays a hit's ambient term takes (0: none) and their length."""
         it, s = self.it, self.it.settings
         m = it.scene.materials
         ambient = np.where(m.unlit[:, None], 0.0, m.ambient * np.asarray(it.scene.ambient, dtype=np.float64))
         return (True, *self.lights.light_groups(), np.ascontiguousarray(ambient, dtype=np.float64),
                 np.ascontiguousarray(m.occlusion_strength, dtype=np.float64), float(s.cutoff), s.fresnel == "exact",
-                max(int(s.max_depth), 1))
+                max(int(s.max_depth), 1), int(it.ao_samples) if it.plan.ao and it.plan.ambient else 0,
+                float(it.ao_distance))
 
     def _sobol(self, pixel, sample):
         """The kernel's Sobol arguments: pixels, sample indices and the sequences' record

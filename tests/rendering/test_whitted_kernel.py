@@ -21,7 +21,9 @@ from rtmesh.rendering.integrator import Integrator
 from scenes import ASSETS
 
 DETERMINISTIC = ["showcase", "passes", "effects/dof", "effects/motion_blur"]
-SAMPLED = ["glass_edges", "effects/glossy", "effects/soft_shadow", "cornell_box"]
+SAMPLED = [("glass_edges", {}), ("effects/glossy", {}), ("effects/soft_shadow", {}), ("cornell_box", {}),
+           # ambient occlusion: the ambient term over rays that escape within ao_distance
+           ("showcase", {"ao_samples": 4})]
 
 
 def _render(scene, settings, kernel, seed=0):
@@ -48,9 +50,9 @@ def test_deterministic_whitted_scenes_agree_to_rounding(name):
     assert _relative_rmse(wavefront, kernel) < 2e-4
 
 
-@pytest.mark.parametrize("name", SAMPLED)
-def test_sampled_whitted_scenes_agree_within_noise(name):
-    scene, settings = load_scene(f"{ASSETS}/{name}.toml", width=40, height=32, spp=16, threads=2)
+@pytest.mark.parametrize("name,overrides", SAMPLED)
+def test_sampled_whitted_scenes_agree_within_noise(name, overrides):
+    scene, settings = load_scene(f"{ASSETS}/{name}.toml", width=40, height=32, spp=16, threads=2, **overrides)
     wavefront, other_seed = _render(scene, settings, False), _render(scene, settings, False, seed=7)
     kernel = _render(scene, settings, True)
     noise = _relative_rmse(_blocks(wavefront), _blocks(other_seed))
