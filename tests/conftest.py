@@ -94,6 +94,7 @@ _PATH_TESTS = {
     "rendering/test_media.py": ("test_path_through_glass_in_water_matches_the_closed_form",
                                 "test_roulette_inside_glass_adds_no_noise"),
     "rendering/test_path_integrator.py": ("*",),
+    "rendering/test_whitted_kernel.py": ("*",),
     "sampling/test_zsobol.py": ("test_path_renders_do_not_depend_on_threads_or_chunks",),
     "scene/test_instancing.py": ("*",),
     "test_bad_inputs.py": ("test_bad_input[bad_pbr_extensions.gltf]", "test_bad_input[zero_scale.gltf]"),
