@@ -364,16 +364,22 @@ def area_pdf(light, px, py, pz, dx, dy, dz, distance):
 
 
 @row
-def triangle_solid_angle(light, px, py, pz):
-    """Solid angle (sr) a triangle light's row subtends from ``p``."""
+def _corner_directions(light, px, py, pz):
+    """The unit directions from ``p`` to a triangle light's three corners (nine numbers)."""
     ax, ay, az = light[1] - px, light[2] - py, light[3] - pz
     bx, by, bz = ax + light[10], ay + light[11], az + light[12]
     cx, cy, cz = ax + light[13], ay + light[14], az + light[15]
     la = 1.0 / math.sqrt((ax * ax + ay * ay) + az * az)
     lb = 1.0 / math.sqrt((bx * bx + by * by) + bz * bz)
     lc = 1.0 / math.sqrt((cx * cx + cy * cy) + cz * cz)
-    return spherical_triangle_area_row(ax * la, ay * la, az * la, bx * lb, by * lb, bz * lb, cx * lc, cy * lc,
-                                       cz * lc)
+    return ax * la, ay * la, az * la, bx * lb, by * lb, bz * lb, cx * lc, cy * lc, cz * lc
+
+
+@row
+def triangle_solid_angle(light, px, py, pz):
+    """Solid angle (sr) a triangle light's row subtends from ``p``."""
+    ax, ay, az, bx, by, bz, cx, cy, cz = _corner_directions(light, px, py, pz)
+    return spherical_triangle_area_row(ax, ay, az, bx, by, bz, cx, cy, cz)
 
 
 @row
@@ -388,18 +394,13 @@ def sample_triangle_solid_angle(light, px, py, pz, u1, u2, omega):
     ``p``: ``(wx, wy, wz, distance, b1, b2, ok)``, the unit direction, the distance to the
     point and its barycentric weights of the corners 1 and 2 (least squares on the edges);
     ``ok`` False where the direction misses the triangle's plane (seen edge-on)."""
-    ax, ay, az = light[1] - px, light[2] - py, light[3] - pz
-    bx, by, bz = ax + light[10], ay + light[11], az + light[12]
-    cx, cy, cz = ax + light[13], ay + light[14], az + light[15]
-    la = 1.0 / math.sqrt((ax * ax + ay * ay) + az * az)
-    lb = 1.0 / math.sqrt((bx * bx + by * by) + bz * bz)
-    lc = 1.0 / math.sqrt((cx * cx + cy * cy) + cz * cz)
-    wx, wy, wz = spherical_triangle_row(u1, u2, ax * la, ay * la, az * la, bx * lb, by * lb, bz * lb, cx * lc,
-                                        cy * lc, cz * lc, omega)
+    ax, ay, az, bx, by, bz, cx, cy, cz = _corner_directions(light, px, py, pz)
+    wx, wy, wz = spherical_triangle_row(u1, u2, ax, ay, az, bx, by, bz, cx, cy, cz, omega)
     nx, ny, nz = light[4], light[5], light[6]
     cos = (wx * nx + wy * ny) + wz * nz
     if cos == 0.0:
         return wx, wy, wz, 0.0, 0.0, 0.0, False
+    ax, ay, az = light[1] - px, light[2] - py, light[3] - pz  # the corner, not its direction
     t = ((ax * nx + ay * ny) + az * nz) / cos
     if not (t > 0.0 and t < math.inf):
         return wx, wy, wz, 0.0, 0.0, 0.0, False
@@ -415,6 +416,30 @@ def sample_triangle_solid_angle(light, px, py, pz, u1, u2, omega):
     b1 = min(max((d11 * d20 - d01 * d21) / det, 0.0), 1.0)
     b2 = min(max((d00 * d21 - d01 * d20) / det, 0.0), 1.0 - b1)
     return wx, wy, wz, t, b1, b2, True
+
+
+@row
+def sample_triangle(light, px, py, pz, u1, u2):
+    """A triangle light's sample toward ``p``: ``(wx, wy, wz, distance, pdf, b1, b2)``, the
+    unit direction, the distance, the solid-angle density (0: no sample, e.g. from behind a
+    one-sided light) and the point's barycentric weights of the corners 1 and 2 (textured
+    emitters).  Uniform in the solid angle the triangle subtends where
+    :func:`solid_angle_sampled`, by area elsewhere (and where the solid-angle direction
+    misses the triangle's plane)."""
+    omega = triangle_solid_angle(light, px, py, pz)
+    if solid_angle_sampled(omega):
+        dx, dy, dz, distance, b1, b2, ok = sample_triangle_solid_angle(light, px, py, pz, u1, u2, omega)
+        if ok:
+            return dx, dy, dz, distance, area_pdf(light, px, py, pz, dx, dy, dz, distance), b1, b2
+    b1, b2 = uniform_triangle_weights(u1, u2)
+    dx = (light[1] + b1 * light[10] + b2 * light[13]) - px
+    dy = (light[2] + b1 * light[11] + b2 * light[14]) - py
+    dz = (light[3] + b1 * light[12] + b2 * light[15]) - pz
+    distance = math.sqrt((dx * dx + dy * dy) + dz * dz)
+    if not distance > 0.0:
+        return 0.0, 0.0, 1.0, 0.0, 0.0, b1, b2
+    dx, dy, dz = dx / distance, dy / distance, dz / distance
+    return dx, dy, dz, distance, area_pdf(light, px, py, pz, dx, dy, dz, distance), b1, b2
 
 
 @row

@@ -11,7 +11,6 @@ import pytest
 from rtmesh.lights import light_table as lt
 from rtmesh.lights.area_lights import QuadLight
 from rtmesh.lights.point_lights import PointLight
-from rtmesh.rendering.path_lights import sample_li
 
 
 def _table(triangles, emission, lights=(), two_sided=False):
@@ -24,22 +23,20 @@ def _table(triangles, emission, lights=(), two_sided=False):
 
 
 @numba.njit
-def _samples(light, env, texels, descriptors, p, u):
-    out = np.zeros((len(u), 9))
+def _samples(light, p, u):
+    """lt.sample_triangle's samples (the path kernel's sample_li for triangle lights):
+    direction, distance, pdf, barycentrics, and area_pdf of the sampled direction."""
+    out = np.zeros((len(u), 8))
     for i in range(len(u)):
-        wx, wy, wz, d, lr, lg, lb, pdf, delta, b1, b2 = sample_li(light, env, texels, descriptors, p[0], p[1], p[2],
-                                                                  u[i, 0], u[i, 1])
-        out[i, 0], out[i, 1], out[i, 2], out[i, 3], out[i, 4], out[i, 5], out[i, 6], out[i, 7], out[i, 8] = (
-            wx, wy, wz, d, lr, pdf, b1, b2, lt.area_pdf(light, p[0], p[1], p[2], wx, wy, wz, d))
+        wx, wy, wz, d, pdf, b1, b2 = lt.sample_triangle(light, p[0], p[1], p[2], u[i, 0], u[i, 1])
+        out[i, 0], out[i, 1], out[i, 2], out[i, 3], out[i, 4], out[i, 5], out[i, 6], out[i, 7] = (
+            wx, wy, wz, d, pdf, b1, b2, lt.area_pdf(light, p[0], p[1], p[2], wx, wy, wz, d))
     return out
 
 
 @numba.njit
 def _solid_angle(light, p):
     return lt.triangle_solid_angle(light, p[0], p[1], p[2])
-
-
-ENV = (np.zeros((1, 3, 3)), np.zeros(2), np.zeros((1, 2)), np.ones((1, 1)), 1.0, 1.0, 0.0)
 
 
 @pytest.mark.parametrize("height", [0.02, 0.3, 100.0])
@@ -52,14 +49,14 @@ def test_a_triangle_lights_a_point_with_its_analytic_irradiance(height):
     table = _table(corners[::-1], [3.0, 3.0, 3.0])  # wound to face down (-z), toward the point
     p = np.array([0.1, 0.05, -height])
     u = np.random.default_rng(5).random((200_000, 2))
-    s = _samples(table.rows[0], ENV, table.texels, table.descriptors, p, u)
-    ok = s[:, 5] > 0
+    s = _samples(table.rows[0], p, u)
+    ok = s[:, 4] > 0
     assert ok.mean() > 0.99
-    np.testing.assert_allclose(s[ok, 5], s[ok, 8], rtol=1e-12)  # sample_li's pdf is area_pdf's
+    np.testing.assert_allclose(s[ok, 4], s[ok, 7], rtol=1e-12)  # the sample's pdf is area_pdf's
     omega = _solid_angle(table.rows[0], p)
     if lt.SOLID_ANGLE_FROM < omega < lt.SOLID_ANGLE_TO:
-        np.testing.assert_allclose(s[ok, 5], 1.0 / omega, rtol=1e-12)
-    estimate = np.where(ok, 3.0 * np.maximum(s[:, 2], 0.0) / np.where(ok, s[:, 5], 1.0), 0.0)
+        np.testing.assert_allclose(s[ok, 4], 1.0 / omega, rtol=1e-12)
+    estimate = np.where(ok, 3.0 * np.maximum(s[:, 2], 0.0) / np.where(ok, s[:, 4], 1.0), 0.0)
     # Lambert: E = L / 2 sum over edges of (angle subtended) x (cos of the edge plane's normal with n)
     v = [np.asarray(c) - p for c in corners]
     exact = 0.0
@@ -78,10 +75,10 @@ def test_solid_angle_samples_carry_their_barycentrics():
     corners = np.array([[-1.0, -1.0, 0.0], [2.0, -0.5, 0.0], [0.0, 1.5, 0.0]])
     table = _table(corners[::-1], [1.0, 1.0, 1.0])
     p = np.array([0.2, 0.1, -0.05])
-    s = _samples(table.rows[0], ENV, table.texels, table.descriptors, p, np.random.default_rng(6).random((500, 2)))
+    s = _samples(table.rows[0], p, np.random.default_rng(6).random((500, 2)))
     row = table.rows[0]
     points = p + s[:, :3] * s[:, 3:4]
-    rebuilt = row[1:4] + s[:, 6:7] * row[10:13] + s[:, 7:8] * row[13:16]
+    rebuilt = row[1:4] + s[:, 5:6] * row[10:13] + s[:, 6:7] * row[13:16]
     np.testing.assert_allclose(rebuilt, points, atol=1e-9)
 
 
@@ -91,8 +88,8 @@ def test_one_sided_triangles_are_dark_from_behind_unless_two_sided():
     u = np.random.default_rng(7).random((100, 2))
     one = _table(corners[::-1], [1.0, 1.0, 1.0])
     two = _table(corners[::-1], [1.0, 1.0, 1.0], two_sided=True)
-    assert (_samples(one.rows[0], ENV, one.texels, one.descriptors, p, u)[:, 5] == 0).all()
-    assert (_samples(two.rows[0], ENV, two.texels, two.descriptors, p, u)[:, 5] > 0).all()
+    assert (_samples(one.rows[0], p, u)[:, 4] == 0).all()
+    assert (_samples(two.rows[0], p, u)[:, 4] > 0).all()
 
 
 def test_light_groups_take_delta_lights_once_and_emitters_as_one_light():
