@@ -40,7 +40,7 @@ def pytest_configure(config):
         return  # pytest-xdist's controller: its workers run the tests
     from rtmesh.core import compile_ahead
     from rtmesh.rendering.caustics import PHOTON_KERNELS
-    from rtmesh.rendering.path_kernel import PATH_KERNELS
+    from rtmesh.rendering.path_signatures import PATH_KERNELS
 
     _session.enter_context(compile_ahead.helper())
     PATH_KERNELS.compile_ahead()

@@ -115,7 +115,7 @@ def material_rows(materials, names=None):
 
 # evaluate and sample are kernels of their own (cached on disk), not rows inlined into every
 # caller: a first run's helper process compiles them while the render compiles the path
-# kernel that calls them (rtmesh.rendering.path_kernel.PATH_KERNELS)
+# kernel that calls them (rtmesh.rendering.path_signatures.PATH_KERNELS)
 @kernel
 def evaluate(tag, params, m, table, ox, oy, oz, wx, wy, wz):
     """``f(wo, wi) |wi.z|`` (r, g, b) and the density with which :func:`sample` draws ``wi``."""

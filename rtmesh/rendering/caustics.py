@@ -39,7 +39,7 @@ from rtmesh.core.compiled import kernel
 from rtmesh.core.errors import SceneError
 from rtmesh.lights import light_table as lt
 from rtmesh.materials import lobes, models
-from rtmesh.rendering.path_kernel import small_records
+from rtmesh.rendering.path_signatures import small_records
 from rtmesh.rendering.photon_kernel import FIELDS, MAX_BOUNCES, photon_grid, trace_photons
 from rtmesh.sampling.hashing import mix64
 from rtmesh.sampling.patterns import Dim, sequence_key

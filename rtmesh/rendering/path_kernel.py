@@ -25,7 +25,10 @@ lane and vertex:
    throughput without the radiance scaling of the refractions so far, pbrt-v4's ``etaScale``).
 
 The packet queries (nearest hits, shadow rays, moving objects, placements, cut-out layers)
-are :mod:`rtmesh.rendering.path_packets`' rows, the light rows :mod:`rtmesh.rendering.path_lights`'.
+are :mod:`rtmesh.rendering.path_packets`' rows, the light rows :mod:`rtmesh.rendering.path_lights`',
+the sums and the light-path passes :mod:`rtmesh.rendering.path_sums`', the Whitted
+configuration's :mod:`rtmesh.rendering.whitted_rows`; the kernel's compile-ahead group and
+signature are in :mod:`rtmesh.rendering.path_signatures`.
 
 ``max_depth`` counts segments after the camera ray (1: direct light only; -1: unlimited,
 Russian roulette ends paths).  Every random number is :func:`rtmesh.sampling.hashing.uniform`
@@ -88,14 +91,12 @@ import math
 
 import numpy as np
 
-from rtmesh.core.compile_ahead import KernelGroup
-from rtmesh.core.compiled import borrowed, inline_row, keep_alive, kernel, row
+from rtmesh.core.compiled import borrowed, keep_alive, kernel
 from rtmesh.geometry.embree_packets import (DEFAULT_TFAR, LANES, RAYHIT_WORDS, RTC_RAY_QUERY_FLAG_COHERENT,
                                             RTC_RAY_QUERY_FLAG_INCOHERENT, packet_buffers, query_arguments)
-from rtmesh.io.passes import LIGHT_PATH_PASSES
 from rtmesh.lights import light_table as lt
 from rtmesh.materials import lobes, models
-from rtmesh.rendering.photon_kernel import ALL_PARTS, DIFFUSE_PART, TRANSMITTED_PART, empty_photon_map, gather
+from rtmesh.rendering.photon_kernel import ALL_PARTS, DIFFUSE_PART, TRANSMITTED_PART, gather
 from rtmesh.rendering.path_lights import area_pdf, environment_pdf, hit_analytic, light_at, sample_li, shadow_segment
 from rtmesh.rendering.path_packets import (AO, AREA_SHADOW, BOUNCE, BSDF, BSDF_U1, BSDF_U2, CAMERA, COVERAGE, CUTOUT,
                                            DIMENSIONS_PER_VERTEX, ENVIRONMENT, LIGHT_CHOICE, LIGHT_U1, LIGHT_U2, LOBE,
@@ -107,6 +108,8 @@ from rtmesh.rendering.path_surfaces import (cross_interface, crossing_scale, twi
                                             leave_surface, surface_point, tangent_frame, textured_materials, to_world,
                                             triangle_light_emission)
 from rtmesh.materials.metallic_roughness import square_to_cosine_hemisphere_row
+from rtmesh.rendering.path_sums import (DIFFUSE_PATH, DIRECT, GLOSSY_PATH, INDIRECT, LIGHT_PATHS, TRANSMISSION_PATH,
+                                        accept_shadows, add_radiance, add_to_pass, clamped, lobe_category, pass_bucket)
 from rtmesh.rendering.whitted_rows import BRANCH_WORDS, branches, light_factor, pop_branch, push_branch
 from rtmesh.sampling.hashing import mix64, uniform
 from rtmesh.sampling.mis import power_heuristic
@@ -117,70 +120,10 @@ SOBOL_LIMIT = 1 << 32
 # the key of light sample k > 0 of a vertex is mix64(key + k * _LIGHT_ROUND) (sample 0 takes
 # the path's own key): its choice and point are the vertex's usual dimensions of that key
 _LIGHT_ROUND = np.uint64(0xD1B54A32D192ED03)
-# light-path passes (rtmesh.io.passes.LIGHT_PATH_PASSES) and the first vertex's lobe categories
-EMISSION, DIRECT, INDIRECT = 0, 1, 4
-DIFFUSE_PATH, GLOSSY_PATH, TRANSMISSION_PATH = 0, 1, 2
-LIGHT_PATHS = len(LIGHT_PATH_PASSES)
 # what a path's last vertices were, for caustics: only delta bounces since the camera; a
 # non-delta bounce last; a non-delta bounce, then delta bounces only (light met now is a
 # caustic path, which photons carry when they are on)
 CHAIN_START, CHAIN_SCATTERED, CHAIN_CAUSTIC = 0, 1, 2
-
-
-@row
-def _bucket(depth, category):
-    """The light-path pass of emission met at vertex ``depth`` of a path whose first lobe was
-    ``category``."""
-    if depth == 0:
-        return EMISSION
-    return (DIRECT if depth == 1 else INDIRECT) + category
-
-
-@row
-def _category(flags):
-    """The light-path category of a sampled lobe."""
-    if flags & lobes.TRANSMISSION:
-        return TRANSMISSION_PATH
-    return DIFFUSE_PATH if flags & lobes.DIFFUSE else GLOSSY_PATH
-
-
-@row
-def _clamped(r, g, b, limit):
-    """``(r, g, b)`` scaled down so that its largest channel is at most ``limit`` (> 0)."""
-    peak = max(r, max(g, b))
-    if limit > 0.0 and peak > limit:
-        s = limit / peak
-        return r * s, g * s, b * s
-    return r, g, b
-
-
-@inline_row
-def _add(total, lane, r, g, b):
-    total[lane, 0] += r
-    total[lane, 1] += g
-    total[lane, 2] += b
-
-
-@inline_row
-def _add_path(paths, split, lane, bucket, r, g, b):
-    if split:
-        paths[lane, bucket, 0] += r
-        paths[lane, bucket, 1] += g
-        paths[lane, bucket, 2] += b
-
-
-@inline_row
-def _accept_shadows(shadow_valid, pending, pending_paths, split, total, paths):
-    """Add the light of the lanes whose shadow rays arrived, element by element (an array
-    assigned to a slice compiles numba's shape-mismatch message, string formatting that
-    took seconds of a first run)."""
-    for lane in range(LANES):
-        if shadow_valid[lane]:
-            _add(total, lane, pending[lane, 0], pending[lane, 1], pending[lane, 2])
-            if split:
-                for bucket in range(LIGHT_PATHS):
-                    for c in range(3):
-                        paths[lane, bucket, c] += pending_paths[lane, bucket, c]
 
 
 @kernel
@@ -409,10 +352,10 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                     if not prev_delta[lane]:
                         w = power_heuristic(prev_pdf[lane], choice_pmf[seen] * area_pdf(
                             light, px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], t) * prev_count[lane])
-                    r, g, b = _clamped(beta[lane, 0] * light[lt.RADIANCE] * w, beta[lane, 1] * light[lt.RADIANCE + 1] * w,
+                    r, g, b = clamped(beta[lane, 0] * light[lt.RADIANCE] * w, beta[lane, 1] * light[lt.RADIANCE + 1] * w,
                                        beta[lane, 2] * light[lt.RADIANCE + 2] * w, limit)
-                    _add(total, lane, r, g, b)
-                    _add_path(paths, split, lane, _bucket(depth, category[lane]), r, g, b)
+                    add_radiance(total, lane, r, g, b)
+                    add_to_pass(paths, split, lane, pass_bucket(depth, category[lane]), r, g, b)
                     alive[lane] = False
                     continue
                 if not hit:
@@ -430,10 +373,10 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                             w = power_heuristic(prev_pdf[lane], choice_pmf[env_light] * environment_pdf(
                                 env_marginal, env_conditional, env_func, env_mean, env_cos, env_sin,
                                 dx[lane], dy[lane], dz[lane]) * prev_count[lane])
-                        r, g, b = _clamped(beta[lane, 0] * lr * w, beta[lane, 1] * lg * w, beta[lane, 2] * lb * w,
+                        r, g, b = clamped(beta[lane, 0] * lr * w, beta[lane, 1] * lg * w, beta[lane, 2] * lb * w,
                                            limit)
-                        _add(total, lane, r, g, b)
-                        _add_path(paths, split, lane, _bucket(depth, category[lane]), r, g, b)
+                        add_radiance(total, lane, r, g, b)
+                        add_to_pass(paths, split, lane, pass_bucket(depth, category[lane]), r, g, b)
                     alive[lane] = False
                     continue
                 prim = best_prim[lane]
@@ -470,13 +413,13 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                             w = power_heuristic(prev_pdf[lane], choice_pmf[light] * area_pdf(
                                 light_at(light_rows, light, face_mover, moves, lane_time[lane], moved, lane),
                                 px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], t) * prev_count[lane])
-                    r, g, b = _clamped(beta[lane, 0] * er * w, beta[lane, 1] * eg * w, beta[lane, 2] * eb * w, limit)
-                    _add(total, lane, r, g, b)
-                    _add_path(paths, split, lane, _bucket(depth, category[lane]), r, g, b)
+                    r, g, b = clamped(beta[lane, 0] * er * w, beta[lane, 1] * eg * w, beta[lane, 2] * eb * w, limit)
+                    add_radiance(total, lane, r, g, b)
+                    add_to_pass(paths, split, lane, pass_bucket(depth, category[lane]), r, g, b)
                 if unlit[mat, 0] > 0.0:
-                    _add(total, lane, beta[lane, 0] * unlit[mat, 1], beta[lane, 1] * unlit[mat, 2],
+                    add_radiance(total, lane, beta[lane, 0] * unlit[mat, 1], beta[lane, 1] * unlit[mat, 2],
                          beta[lane, 2] * unlit[mat, 3])
-                    _add_path(paths, split, lane, _bucket(depth, category[lane]), beta[lane, 0] * unlit[mat, 1],
+                    add_to_pass(paths, split, lane, pass_bucket(depth, category[lane]), beta[lane, 0] * unlit[mat, 1],
                               beta[lane, 1] * unlit[mat, 2], beta[lane, 2] * unlit[mat, 3])
                     alive[lane] = False
                     continue
@@ -504,16 +447,16 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                     ambient_g = beta[lane, 1] * (ambient[mat, 1] * cg * occluded_part)
                     ambient_b = beta[lane, 2] * (ambient[mat, 2] * cb * occluded_part)
                     if ao_samples == 0:
-                        _add(total, lane, ambient_r, ambient_g, ambient_b)
+                        add_radiance(total, lane, ambient_r, ambient_g, ambient_b)
                 # caustics: the photons near this vertex (paths of at least two segments)
                 segments = max_depth - depth if max_depth >= 0 else -1
                 if photons_on and scatters[mat] and (segments < 0 or segments >= 2):
                     radius = min(radius_scale * (footprint_a + footprint_b * travelled[lane]), max_radius)
                     cr, cg, cb = gather(photon_map, hx, hy, hz, gx, gy, gz, radius, segments, tag, bsdf_params,
                                         bsdf_row, albedo_table, tx, ty, tz, sx, sy, sz, nx, ny, nz, lox, loy, loz, ALL_PARTS)
-                    cr, cg, cb = _clamped(beta[lane, 0] * cr, beta[lane, 1] * cg, beta[lane, 2] * cb,
+                    cr, cg, cb = clamped(beta[lane, 0] * cr, beta[lane, 1] * cg, beta[lane, 2] * cb,
                                           clamp if depth > 0 else 0.0)
-                    _add(total, lane, cr, cg, cb)
+                    add_radiance(total, lane, cr, cg, cb)
                     if split:
                         if depth == 0:
                             # split by the part of the BSDF the photons' light comes through
@@ -525,12 +468,12 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                                                 nz, lox, loy, loz, TRANSMITTED_PART)
                             dr, dg, db = beta[lane, 0] * dr, beta[lane, 1] * dg, beta[lane, 2] * db
                             ur, ug, ub = beta[lane, 0] * ur, beta[lane, 1] * ug, beta[lane, 2] * ub
-                            _add_path(paths, split, lane, INDIRECT + DIFFUSE_PATH, dr, dg, db)
-                            _add_path(paths, split, lane, INDIRECT + TRANSMISSION_PATH, ur, ug, ub)
-                            _add_path(paths, split, lane, INDIRECT + GLOSSY_PATH, cr - (dr + ur), cg - (dg + ug),
+                            add_to_pass(paths, split, lane, INDIRECT + DIFFUSE_PATH, dr, dg, db)
+                            add_to_pass(paths, split, lane, INDIRECT + TRANSMISSION_PATH, ur, ug, ub)
+                            add_to_pass(paths, split, lane, INDIRECT + GLOSSY_PATH, cr - (dr + ur), cg - (dg + ug),
                                       cb - (db + ub))
                         else:
-                            _add_path(paths, split, lane, INDIRECT + category[lane], cr, cg, cb)
+                            add_to_pass(paths, split, lane, INDIRECT + category[lane], cr, cg, cb)
                 # the first vertex's light and BSDF points: per-pixel Owen-scrambled Sobol pairs
                 # (stratified over the pixel's samples; its light points over the pixel's
                 # samples and each sample's light samples), later vertices' hashed numbers
@@ -602,7 +545,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                         p_light = (1.0 if kk < 0 else choice_pmf[chosen]) * pdf_li
                         w = 1.0 if delta else power_heuristic(p_light * count_f, pdf_bsdf)
                         scale = w / (p_light * count_f)
-                        pending[k, lane, 0], pending[k, lane, 1], pending[k, lane, 2] = _clamped(
+                        pending[k, lane, 0], pending[k, lane, 1], pending[k, lane, 2] = clamped(
                             beta[lane, 0] * fr * lr * scale, beta[lane, 1] * fg * lg * scale,
                             beta[lane, 2] * fbb * lb * scale, nee_limit)
                         if split:
@@ -613,15 +556,15 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                                                                       lox, loy, loz, lix, liy, liz)
                                 cr, cg, cb = (beta[lane, 0] * lr * scale, beta[lane, 1] * lg * scale,
                                               beta[lane, 2] * lb * scale)
-                                _add_path(pending_paths[k], split, lane, DIRECT + DIFFUSE_PATH,
+                                add_to_pass(pending_paths[k], split, lane, DIRECT + DIFFUSE_PATH,
                                           dr * cr, dg * cg, db * cb)
-                                _add_path(pending_paths[k], split, lane, DIRECT + TRANSMISSION_PATH,
+                                add_to_pass(pending_paths[k], split, lane, DIRECT + TRANSMISSION_PATH,
                                           ur * cr, ug * cg, ub * cb)
-                                _add_path(pending_paths[k], split, lane, DIRECT + GLOSSY_PATH,
+                                add_to_pass(pending_paths[k], split, lane, DIRECT + GLOSSY_PATH,
                                           pending[k, lane, 0] - (dr + ur) * cr, pending[k, lane, 1] - (dg + ug) * cg,
                                           pending[k, lane, 2] - (db + ub) * cb)
                             else:
-                                _add_path(pending_paths[k], split, lane, INDIRECT + category[lane],
+                                add_to_pass(pending_paths[k], split, lane, INDIRECT + category[lane],
                                           pending[k, lane, 0], pending[k, lane, 1], pending[k, lane, 2])
                         # its shadow ray, traced with the packet's others of this light sample
                         ray_k = shadow_rays[k, lane]
@@ -715,7 +658,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 else:
                     chain[lane] = CHAIN_SCATTERED
                 if depth == 0:
-                    category[lane] = _category(flags)
+                    category[lane] = lobe_category(flags)
                 if transmissive[mat] and (flags & lobes.TRANSMISSION) and media:
                     # into the interior when the outward normal faces away from the new ray
                     top = cross_interface(stack, lane, mat, side < 0.0, twin_material(surface, prim))
@@ -762,7 +705,7 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 else:
                     occluded(occluded16, scene, args_incoherent, shadow, shadow_valid, motion, lane_time, reach,
                               rest, rest_words, rest_valid)
-                _accept_shadows(shadow_valid, pending[k], pending_paths[k if split else 0], split, total, paths)
+                accept_shadows(shadow_valid, pending[k], pending_paths[k if split else 0], split, total, paths)
         for lane in range(count):
             radiance[start + lane, 0] = total[lane, 0]
             radiance[start + lane, 1] = total[lane, 1]
@@ -772,71 +715,3 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                     for c in range(3):
                         light_paths[start + lane, bucket, c] = paths[lane, bucket, c]
     keep_alive(owned)
-
-
-def no_instances():
-    """The kernel's ``instances`` record of a scene without placed meshes."""
-    return (np.zeros(0, np.int64), np.zeros((0, 12)), np.zeros((0, 9)))
-
-
-def no_whitted(materials):
-    """The kernel's ``whitted`` record under the path integrator (``materials``: the count)."""
-    return (False, np.zeros(0, np.int64), np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros(0),
-            np.zeros(0, np.int64), np.zeros(0), np.zeros((materials, 3)), np.zeros(materials), 0.0, False, 0, 0, 0.0)
-
-
-def small_records():
-    """Small records of the shapes and types :class:`rtmesh.rendering.path_stage.PathStage`
-    builds (the energy tables, ``geometry``, ``surface``, ``lights``, ``env``), for the
-    signatures of the kernels that take them."""
-    z = np.zeros
-    energy = (z((2, 3)), z((2, 2, 2, 2)), z((2, 2)))
-    geometry = (z((1, 9)), z((1, 3)), z((0, 3)), z((1, 3), np.int32), z(0, bool), z(1, np.int32), z((0, 6)),
-                z((0, 12)), z((0, 6)))
-    surface = (z(1, np.int64), z((1, lobes.PARAMETER_WIDTH)), z(1, bool), z((1, 3)), z((1, 3)), z((1, 4)),
-               energy, z((1, 6), np.int64), z((1, 6), np.int64), z(1), z(1, np.int64), z(1), z(1),
-               z(1, np.float32), z((1, 12)), z(1), z(0, np.int64))
-    lights = (z((1, lt.WIDTH)), z(1), z(1, np.int64), z(1), z(1, np.int64), z(0, np.int64), -1, z(1, np.float32),
-              z((0, 12)))
-    env = (z((1, 3, 3)), z(2), z((1, 2)), z((1, 1)), 1.0, 1.0, 0.0)
-    return energy, geometry, surface, lights, env
-
-
-def _path_signatures():
-    """The one signature of the path kernel and of the BSDF dispatch it calls, from the
-    types of :func:`small_records`."""
-    import numba
-    from numba import types
-
-    from rtmesh.geometry.embree_packets import numba_typeof_query
-
-    f64 = types.float64
-    z = np.zeros
-    rows = types.Array(f64, 2, "C")
-    energy, geometry, surface, lights, env = small_records()
-    bsdf_args = (types.int64, rows, types.int64, numba.typeof(energy))
-    evaluate = bsdf_args + (f64,) * 6
-    sample = bsdf_args + (f64,) * 6
-    options = (-1, 3, 0.0, np.float32(1.0), True, False, False, z(4, np.int64), 1, 0)
-    whitted = no_whitted(1)
-    motion = (True, z(0, np.int64), z(0, np.int64), z(0, np.int64), z(1, np.int64), z((0, 10)), z(0, np.int64))
-    instances = no_instances()
-    photon_map = empty_photon_map(1)
-    query = numba_typeof_query()
-    index = types.Array(types.int64, 1, "C")
-    trace = (query, query, types.int64, rows, rows, types.Array(types.uint64, 1, "C"), index, index,
-             types.Array(types.uint64, 1, "C"), types.Array(f64, 1, "C")) + tuple(
-        numba.typeof(record) for record in (geometry, surface, lights, env, options, whitted, motion, instances,
-                                            photon_map)) + (
-        rows, types.Array(f64, 3, "C"), types.Array(types.int64, 1, "C"))
-    i64 = types.int64
-    gathered = ((numba.typeof(photon_map),) + (f64,) * 7 + (i64, i64, rows, i64, numba.typeof(energy))
-                + (f64,) * 12 + (i64,))
-    return [(models.evaluate, evaluate), (trace_paths, trace), (models.sample, sample), (models.parts, evaluate),
-            (gather, gathered)]
-
-
-# the path integrator's kernels, in the order a first run best compiles them in two processes:
-# the render the BSDF evaluation, then the path kernel (loading the sampling and parts rows and
-# the photon gather the helper compiled meanwhile from the disk cache); the helper those first
-PATH_KERNELS = KernelGroup(__name__, "path", _path_signatures())

@@ -30,7 +30,9 @@ from rtmesh.materials.table import PHYSICAL_MODELS
 from rtmesh.io.passes import LIGHT_PATH_PASSES
 from rtmesh.rendering.caustics import Caustics
 from rtmesh.rendering.photon_kernel import empty_photon_map
-from rtmesh.rendering.path_kernel import LIGHT_PATHS, PATH_KERNELS, no_instances, no_whitted, trace_paths
+from rtmesh.rendering.path_kernel import trace_paths
+from rtmesh.rendering.path_signatures import PATH_KERNELS, no_instances, no_whitted
+from rtmesh.rendering.path_sums import LIGHT_PATHS
 from rtmesh.rendering.path_packets import COUNTER_NAMES
 from rtmesh.rendering.path_surfaces import TEXTURE_COLUMNS
 from rtmesh.rendering.settings import RenderSettings

@@ -51,7 +51,7 @@ def test_renders_call_the_declared_kernels_with_the_declared_types():
 def test_a_path_render_of_one_ray_calls_the_path_kernel_with_the_declared_types():
     # a chunk of one camera ray (its origins a read-only repeated row that NumPy calls
     # contiguous) once compiled the path kernel a second time, a minute of a first run
-    from rtmesh.rendering.path_kernel import PATH_KERNELS
+    from rtmesh.rendering.path_signatures import PATH_KERNELS
 
     for dispatcher, signature in PATH_KERNELS.kernels:
         compile_ahead.compile_locked(dispatcher, signature)

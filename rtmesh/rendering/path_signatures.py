@@ -1,0 +1,80 @@
+"""The path integrator's compile-ahead group (:mod:`rtmesh.core.compile_ahead`): the one
+signature of the path kernel and of the BSDF rows and photon gather it calls, from small
+records of the types :class:`rtmesh.rendering.path_stage.PathStage` builds, and the records
+of a scene without placements (``no_instances``) and of the path integrator's kernel
+configuration (``no_whitted``)."""
+
+import numpy as np
+
+from rtmesh.core.compile_ahead import KernelGroup
+from rtmesh.lights import light_table as lt
+from rtmesh.materials import lobes, models
+from rtmesh.rendering.path_kernel import trace_paths
+from rtmesh.rendering.photon_kernel import empty_photon_map, gather
+
+def no_instances():
+    """The kernel's ``instances`` record of a scene without placed meshes."""
+    return (np.zeros(0, np.int64), np.zeros((0, 12)), np.zeros((0, 9)))
+
+
+def no_whitted(materials):
+    """The kernel's ``whitted`` record under the path integrator (``materials``: the count)."""
+    return (False, np.zeros(0, np.int64), np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros(0),
+            np.zeros(0, np.int64), np.zeros(0), np.zeros((materials, 3)), np.zeros(materials), 0.0, False, 0, 0, 0.0)
+
+
+def small_records():
+    """Small records of the shapes and types :class:`rtmesh.rendering.path_stage.PathStage`
+    builds (the energy tables, ``geometry``, ``surface``, ``lights``, ``env``), for the
+    signatures of the kernels that take them."""
+    z = np.zeros
+    energy = (z((2, 3)), z((2, 2, 2, 2)), z((2, 2)))
+    geometry = (z((1, 9)), z((1, 3)), z((0, 3)), z((1, 3), np.int32), z(0, bool), z(1, np.int32), z((0, 6)),
+                z((0, 12)), z((0, 6)))
+    surface = (z(1, np.int64), z((1, lobes.PARAMETER_WIDTH)), z(1, bool), z((1, 3)), z((1, 3)), z((1, 4)),
+               energy, z((1, 6), np.int64), z((1, 6), np.int64), z(1), z(1, np.int64), z(1), z(1),
+               z(1, np.float32), z((1, 12)), z(1), z(0, np.int64))
+    lights = (z((1, lt.WIDTH)), z(1), z(1, np.int64), z(1), z(1, np.int64), z(0, np.int64), -1, z(1, np.float32),
+              z((0, 12)))
+    env = (z((1, 3, 3)), z(2), z((1, 2)), z((1, 1)), 1.0, 1.0, 0.0)
+    return energy, geometry, surface, lights, env
+
+
+def _path_signatures():
+    """The one signature of the path kernel and of the BSDF dispatch it calls, from the
+    types of :func:`small_records`."""
+    import numba
+    from numba import types
+
+    from rtmesh.geometry.embree_packets import numba_typeof_query
+
+    f64 = types.float64
+    z = np.zeros
+    rows = types.Array(f64, 2, "C")
+    energy, geometry, surface, lights, env = small_records()
+    bsdf_args = (types.int64, rows, types.int64, numba.typeof(energy))
+    evaluate = bsdf_args + (f64,) * 6
+    sample = bsdf_args + (f64,) * 6
+    options = (-1, 3, 0.0, np.float32(1.0), True, False, False, z(4, np.int64), 1, 0)
+    whitted = no_whitted(1)
+    motion = (True, z(0, np.int64), z(0, np.int64), z(0, np.int64), z(1, np.int64), z((0, 10)), z(0, np.int64))
+    instances = no_instances()
+    photon_map = empty_photon_map(1)
+    query = numba_typeof_query()
+    index = types.Array(types.int64, 1, "C")
+    trace = (query, query, types.int64, rows, rows, types.Array(types.uint64, 1, "C"), index, index,
+             types.Array(types.uint64, 1, "C"), types.Array(f64, 1, "C")) + tuple(
+        numba.typeof(record) for record in (geometry, surface, lights, env, options, whitted, motion, instances,
+                                            photon_map)) + (
+        rows, types.Array(f64, 3, "C"), types.Array(types.int64, 1, "C"))
+    i64 = types.int64
+    gathered = ((numba.typeof(photon_map),) + (f64,) * 7 + (i64, i64, rows, i64, numba.typeof(energy))
+                + (f64,) * 12 + (i64,))
+    return [(models.evaluate, evaluate), (trace_paths, trace), (models.sample, sample), (models.parts, evaluate),
+            (gather, gathered)]
+
+
+# the path integrator's kernels, in the order a first run best compiles them in two processes:
+# the render the BSDF evaluation, then the path kernel (loading the sampling and parts rows and
+# the photon gather the helper compiled meanwhile from the disk cache); the helper those first
+PATH_KERNELS = KernelGroup(__name__, "path", _path_signatures())
