@@ -36,7 +36,7 @@ import time
 import numpy as np
 
 from rtmesh.core import runtime
-from rtmesh.core.rays import RayBatch, repeated_row, take_rows
+from rtmesh.core.rays import RayBatch, repeated_row
 from rtmesh.geometry.accel import Accel
 from rtmesh.geometry.cutouts import CutoutAccel
 from rtmesh.geometry.motion import MotionAccel, blurs, object_motions, scene_at_time, swept_bounds
@@ -49,7 +49,7 @@ from rtmesh.lights.environment import EnvironmentLighting
 from rtmesh.materials.table import ALPHA_MODES
 from rtmesh.rendering.adaptive import render_rounds
 from rtmesh.rendering.centre_rays import centre_passes
-from rtmesh.rendering.chunk_state import ChunkState, Clock, scatter_add
+from rtmesh.rendering.chunk_state import ChunkState, Clock
 from rtmesh.rendering.direct_stage import DirectStage
 from rtmesh.rendering.film import Film
 from rtmesh.rendering.general_kernels import GENERAL_KERNELS
@@ -57,7 +57,7 @@ from rtmesh.rendering.local_shading import LocalShading
 from rtmesh.rendering import memory
 from rtmesh.rendering.media import Media
 from rtmesh.rendering.path_stage import PathStage, whitted_unsupported
-from rtmesh.rendering.physical_shading import PhysicalShading, bsdf_weight
+from rtmesh.rendering.physical_shading import PhysicalShading
 from rtmesh.rendering.render_plan import RenderPlan
 from rtmesh.rendering.render_result import RenderResult
 from rtmesh.rendering.scheduler import pixel_chunks, run_on_threads, sample_indices
@@ -66,13 +66,12 @@ from rtmesh.rendering.shading_tables import ShadingTables
 from rtmesh.rendering.stats import RenderStats
 from rtmesh.rendering.surface_stage import SurfaceStage
 from rtmesh.rendering.surface_textures import SurfaceTextures
+from rtmesh.rendering.wavefront import UNIT_THROUGHPUT, Wavefront
 from rtmesh.sampling.sampler import Sampler
 from rtmesh.scene import instances
 from rtmesh.scene.background import as_background
 
 log = logging.getLogger(__name__)
-
-_UNIT_THROUGHPUT = np.ones(3)
 
 
 # Whether Whitted renders that the fused stage does not take go through the path kernel
@@ -317,6 +316,7 @@ class Integrator:
         self.local_shading = LocalShading(self)
         self.secondary_rays = SecondaryRays(self)
         self.physical_shading = PhysicalShading(self) if self.plan.physical else None
+        self.wavefront = Wavefront(self)
         # the path integrator: one compiled kernel per chunk (rtmesh.rendering.path_stage)
         self.path_stage = PathStage(self) if settings.integrator == "path" else None
         # scenes that need only direct light take one compiled stage per chunk
@@ -597,7 +597,6 @@ class Integrator:
         stats : RenderStats
             Ray counts and stage times of this chunk.
         """
-        s = self.settings
         stats = RenderStats()
         clock = Clock(stats.stage_seconds)
         m = len(pixels)
@@ -617,32 +616,7 @@ class Integrator:
         pixel, sample_in_pixel = sample_indices(pixels, first_sample, spp)
         if self.path_stage is not None:
             return self._render_paths(pixel, sample_in_pixel, m, spp, ragged, stats, clock)
-        n = len(pixel)
-        origins, directions, sample_time = self._camera_rays(pixel, sample_in_pixel)
-        # camera rays have unit throughput: a read-only repeated row costs nothing; _shade
-        # does not multiply by it at depth 0 and absorbs only on rows in an absorbing
-        # medium (inside one, camera rays lose light on the way: then a real array)
-        throughput = (np.ones((n, 3), order="F") if self._camera_absorbs
-                      else repeated_row(_UNIT_THROUGHPUT, n))
-        rays = RayBatch(origins, directions, np.arange(n, dtype=np.int64), throughput,
-                        repeated_row(self._camera_medium, n))
-        chunk = ChunkState(np.zeros((n, 3), order="F"), self.passes.buffers(n), pixel, sample_in_pixel, stats,
-                           clock, sample_time)
-        stats.rays["camera"] += n
-        clock.lap("camera")
-
-        for depth in range(s.max_depth + 1):
-            if not len(rays):
-                break
-            hits = self.accel.intersect(rays.origins, rays.directions,
-                                        None if sample_time is None else sample_time[rays.sample])
-            clock.lap("intersect")
-            rays = self._shade(rays, hits, depth, chunk)
-
-        if ragged:
-            return chunk.radiance, self.passes.per_sample(chunk.passes, n) or None, stats
-        passes = self.passes.per_pixel(chunk.passes, m, spp) or None
-        return chunk.radiance.reshape(m, spp, 3), passes, stats
+        return self.wavefront.render(pixel, sample_in_pixel, m, spp, ragged, stats, clock)
 
     def _camera_rays(self, pixel, sample_in_pixel):
         """Camera rays of the samples ``(pixel, sample_in_pixel)`` ((n,) each), in the re-centred
@@ -680,7 +654,7 @@ class Integrator:
         if self.plan.passes and (wants_ao or any(spec.producer is not None for spec in self.passes.specs)):
             # the camera-hit passes (the kernel writes the light-path passes itself)
             chunk = ChunkState(radiance, buffers, pixel, sample_in_pixel, stats, clock, None)
-            rays = RayBatch(origins, directions, np.arange(n, dtype=np.int64), repeated_row(_UNIT_THROUGHPUT, n),
+            rays = RayBatch(origins, directions, np.arange(n, dtype=np.int64), repeated_row(UNIT_THROUGHPUT, n),
                             repeated_row(self._camera_medium, n))
             hits = self.accel.intersect(origins, directions, times)
             hit = hits.prim >= 0
@@ -695,95 +669,6 @@ class Integrator:
             return radiance, (self.passes.per_sample(buffers, n) or None) if buffers is not None else None, stats
         passes = (self.passes.per_pixel(buffers, m, spp) or None) if buffers is not None else None
         return radiance.reshape(m, spp, 3), passes, stats
-
-    # ---------------------------------------------------------------- stages
-    def _shade(self, rays, hits, depth, chunk):
-        """Shade one depth level; returns the rays of the next level."""
-        radiance = chunk.radiance
-        m = self.scene.materials
-        # camera rays (depth 0) are one per sample, in sample order, with unit throughput
-        # unless the camera sits in an absorbing medium
-        primary = depth == 0
-        unit_throughput = primary and not self._camera_absorbs
-
-        # area lights seen directly: rays meeting one before any surface end there
-        on_light = None
-        if self.plan.area_light_visibility:
-            on_light = self.area_lighting.intersect(rays.origins, rays.directions, hits)
-        hit = hits.prim >= 0
-
-        # absorption: rays inside an absorbing medium lose light over the distance they
-        # travelled.  Only those rows are written: the others would be multiplied by 1.0
-        # (no change), and camera rays in a clear medium share the read-only unit row.
-        if self.plan.absorption:
-            medium = rays.medium[:, 0]
-            # -1 (outside every medium) maps to the last entry, which is False
-            absorbing = np.flatnonzero(self._absorbing_medium[medium])
-            if len(absorbing):
-                sigma = m.absorption[medium[absorbing]]
-                t = hits.t[absorbing][:, None]
-                # exp(-0 * inf) would be NaN for a channel that does not absorb, on a ray
-                # that left the medium through a hole
-                with np.errstate(invalid="ignore"):
-                    rays.throughput[absorbing] *= np.where(sigma > 0, np.exp(-sigma * t), 1.0)
-
-        if on_light is not None and len(on_light[0]):
-            ended, emitted, lights = on_light
-            if rays.pdf is not None:
-                # BSDF-sampled rays weigh the light against light sampling (see physical_shading)
-                light_pdf = self.area_lighting.pdf_of_visible(lights, take_rows(rays.origins, ended),
-                                                              take_rows(rays.directions, ended), hits.t[ended])
-                emitted = emitted * bsdf_weight(rays.pdf[ended], light_pdf, self.area_lighting.samples)[:, None]
-            scatter_add(radiance, rays.sample[ended], take_rows(rays.throughput, ended) * emitted,
-                         unique=primary)
-
-        # misses: rays leaving the scene see the background
-        n_hit = int(np.count_nonzero(hit))
-        if self.plan.background and n_hit < len(hit):
-            miss = np.flatnonzero(hits.prim == -1)  # -2: ended on an area light
-            directions = take_rows(rays.directions, miss)
-            seen = self.background.radiance(directions)
-            if rays.pdf is not None:
-                seen = seen * self._background_weight(rays.pdf[miss], directions)[:, None]
-            scatter_add(radiance, rays.sample[miss], take_rows(rays.throughput, miss) * seen,
-                         unique=primary)
-
-        if not n_hit:
-            return RayBatch.empty()
-        # the rows of the rays that hit; None when all did (no gathers needed)
-        rows = None if n_hit == len(hit) else np.flatnonzero(hit)
-        srf = self.surface_stage.records(rays, hits, rows, chunk.sample_time)
-        chunk.clock.lap("shade")
-        if primary and self.plan.passes:
-            self.passes.record(chunk.passes, srf, hits, rows)
-            chunk.clock.lap("passes")
-
-        local = self.local_shading.shade(srf, depth, chunk)
-        if local is not None:
-            if not unit_throughput:
-                local = local * take_rows(rays.throughput, rows)
-            scatter_add(radiance, None if primary and rows is None else srf.sample, local,
-                         unique=primary)
-        chunk.clock.lap("shade")
-
-        if depth >= self.settings.max_depth or not self.plan.reflection:
-            return RayBatch.empty()
-        hit_rays = rays.subset(rows)
-        next_rays = self.secondary_rays.spawn(srf, hit_rays, depth, chunk)
-        if self.plan.physical:
-            next_rays = RayBatch.concatenate([next_rays, self.physical_shading.spawn(srf, hit_rays, depth, chunk)])
-        chunk.clock.lap("spawn")
-        return next_rays
-
-    def _background_weight(self, pdf, directions):
-        """Weight of the background seen by rays that left the scene, from the density of
-        their BSDF samples ((k,) -> (k,)): 1 for camera rays and delta lobes; the MIS
-        weight against environment light sampling where the background lights the scene,
-        else 0 (see :mod:`rtmesh.rendering.physical_shading`)."""
-        lighting = self.environment_lighting if self.plan.environment_lighting else None
-        if lighting is None:
-            return np.isinf(pdf).astype(np.float64)
-        return bsdf_weight(pdf, lighting.pdf(directions), lighting.samples)
 
 def render(scene, settings, progress=None):
     """Render ``scene`` with ``settings``; see :meth:`Integrator.render`."""

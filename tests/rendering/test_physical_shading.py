@@ -16,6 +16,7 @@ from rtmesh.materials import metallic_roughness as brdf
 from rtmesh.materials.table import Material
 from rtmesh.rendering.integrator import Integrator
 from rtmesh.rendering.physical_shading import bsdf_weight
+from rtmesh.rendering.wavefront import Wavefront
 from rtmesh.scene.background import SolidBackground
 from rtmesh.scene.camera import Camera
 from rtmesh.scene.model import Scene
@@ -161,7 +162,7 @@ def test_mis_estimate_matches_bsdf_sampling_alone(monkeypatch):
     sky.lighting = True
     mis = render(scene, width=20, height=20, spp=64, light_samples=1, max_depth=1).image
     sky.lighting = False
-    monkeypatch.setattr(Integrator, "_background_weight", lambda self, pdf, directions: np.ones(len(pdf)))
+    monkeypatch.setattr(Wavefront, "background_weight", lambda self, pdf, directions: np.ones(len(pdf)))
     alone = render(scene, width=20, height=20, spp=256, light_samples=1, max_depth=1).image
     np.testing.assert_allclose(mis.mean(axis=(0, 1)), alone.mean(axis=(0, 1)), rtol=0.03)
 
@@ -230,7 +231,7 @@ def test_mis_tames_the_reflection_of_a_small_light_in_a_smooth_metal(monkeypatch
     mean of BSDF sampling alone, and its noise (the RMS difference of two seeds) is a
     fraction of light sampling's.  The Whitted stages' strategies, as above."""
     from rtmesh.rendering import integrator as integrator_module
-    from rtmesh.rendering import local_shading, physical_shading
+    from rtmesh.rendering import local_shading, physical_shading, wavefront
 
     monkeypatch.setattr(integrator_module, "WHITTED_THROUGH_KERNEL", False)
 
@@ -248,7 +249,7 @@ def test_mis_tames_the_reflection_of_a_small_light_in_a_smooth_metal(monkeypatch
     mis_mean, mis_noise = two_seeds(64)
 
     def strategy(weight):
-        for module in (integrator_module, local_shading, physical_shading):
+        for module in (wavefront, local_shading, physical_shading):
             monkeypatch.setattr(module, "bsdf_weight", lambda bsdf_pdf, light_pdf, samples: np.full(len(bsdf_pdf),
                                                                                                    weight))
 
