@@ -61,6 +61,18 @@ def test_sampled_whitted_scenes_agree_within_noise(name, overrides):
     assert np.mean(kernel) == pytest.approx(np.mean(wavefront), rel=max(2 * noise, 0.01))
 
 
+def test_the_kernels_ambient_occlusion_darkens_as_the_wavefronts_does():
+    """The ambient term's occlusion rays: the kernel's image with AO is nearer the
+    wavefront's with AO than to its own without (the occlusion is traced, not dropped)."""
+    scene, settings = load_scene(f"{ASSETS}/showcase.toml", width=40, height=32, spp=16, threads=2, ao_samples=4)
+    wavefront, kernel = _render(scene, settings, False), _render(scene, settings, True)
+    open_sky = _render(scene, dataclasses.replace(settings, ao_samples=0), True)
+    effect = _relative_rmse(_blocks(wavefront), _blocks(open_sky))
+    assert effect > 0.005
+    assert _relative_rmse(_blocks(wavefront), _blocks(kernel)) < 0.2 * effect
+    assert kernel.mean() < open_sky.mean()
+
+
 def test_whitted_kernel_renders_are_the_same_for_any_thread_count():
     scene, settings = load_scene(f"{ASSETS}/glass_edges.toml", width=32, height=24, spp=4, threads=1)
     one = _render(scene, settings, True)
