@@ -204,12 +204,11 @@ class LightTable:
         pmf : (L,) float64
             Each row's probability within its group (0 for delta lights).
         """
-        kinds = self.rows[:, 0] if len(self.rows) else np.zeros(0)
+        kinds = self.rows[:, 0]
         triangles = np.flatnonzero(kinds == TRIANGLE)
-        alone = np.flatnonzero((kinds == QUAD) | (kinds == DISK) | (kinds == ENVIRONMENT))
-        delta_rows = np.flatnonzero(kinds < QUAD) if len(kinds) else np.zeros(0, np.int64)
-        delta_rows = np.union1d(delta_rows, np.flatnonzero(kinds == PROJECTOR)).astype(np.int64)
-        groups = [[row] for row in alone] + ([triangles] if len(triangles) else [])
+        alone = (kinds == QUAD) | (kinds == DISK) | (kinds == ENVIRONMENT)
+        delta_rows = np.flatnonzero(~alone & (kinds != TRIANGLE)).astype(np.int64)
+        groups = [[row] for row in np.flatnonzero(alone)] + ([triangles] if len(triangles) else [])
         order, probability, alias, start = [], [], [], [0]
         pmf = np.zeros(len(self.rows))
         for rows in groups:
@@ -419,22 +418,23 @@ def sample_triangle_solid_angle(light, px, py, pz, u1, u2, omega):
 
 
 @row
-def sample_triangle(light, px, py, pz, u1, u2):
-    """A triangle light's sample toward ``p``: ``(wx, wy, wz, distance, pdf, b1, b2)``, the
-    unit direction, the distance, the solid-angle density (0: no sample, e.g. from behind a
-    one-sided light) and the point's barycentric weights of the corners 1 and 2 (textured
-    emitters).  Uniform in the solid angle the triangle subtends where
-    :func:`solid_angle_sampled`, by area elsewhere (and where the solid-angle direction
-    misses the triangle's plane)."""
-    omega = triangle_solid_angle(light, px, py, pz)
-    if solid_angle_sampled(omega):
-        dx, dy, dz, distance, b1, b2, ok = sample_triangle_solid_angle(light, px, py, pz, u1, u2, omega)
-        if ok:
-            return dx, dy, dz, distance, area_pdf(light, px, py, pz, dx, dy, dz, distance), b1, b2
-    b1, b2 = uniform_triangle_weights(u1, u2)
-    dx = (light[1] + b1 * light[10] + b2 * light[13]) - px
-    dy = (light[2] + b1 * light[11] + b2 * light[14]) - py
-    dz = (light[3] + b1 * light[12] + b2 * light[15]) - pz
+def sample_area(light, px, py, pz, u1, u2):
+    """A quad, disk or triangle light's sample toward ``p``: ``(wx, wy, wz, distance, pdf, b1,
+    b2)``, the unit direction, the distance, the solid-angle density (0: no sample, e.g. from
+    behind a one-sided light) and, for a triangle, the point's barycentric weights of the
+    corners 1 and 2 (textured emitters).  A triangle is sampled uniformly in the solid angle
+    it subtends where :func:`solid_angle_sampled` (and the direction meets its plane), every
+    light by area elsewhere (:func:`sample_area_point`)."""
+    b1 = b2 = 0.0
+    if light[0] == TRIANGLE:
+        omega = triangle_solid_angle(light, px, py, pz)
+        if solid_angle_sampled(omega):
+            dx, dy, dz, distance, b1, b2, ok = sample_triangle_solid_angle(light, px, py, pz, u1, u2, omega)
+            if ok:
+                return dx, dy, dz, distance, area_pdf(light, px, py, pz, dx, dy, dz, distance), b1, b2
+        b1, b2 = uniform_triangle_weights(u1, u2)
+    qx, qy, qz = sample_area_point(light, u1, u2)
+    dx, dy, dz = qx - px, qy - py, qz - pz
     distance = math.sqrt((dx * dx + dy * dy) + dz * dz)
     if not distance > 0.0:
         return 0.0, 0.0, 1.0, 0.0, 0.0, b1, b2

@@ -56,7 +56,7 @@ from rtmesh.rendering.general_kernels import GENERAL_KERNELS
 from rtmesh.rendering.local_shading import LocalShading
 from rtmesh.rendering import memory
 from rtmesh.rendering.media import Media
-from rtmesh.rendering.path_stage import PathStage, whitted_unsupported
+from rtmesh.rendering.path_stage import PathStage, unsupported
 from rtmesh.rendering.physical_shading import PhysicalShading
 from rtmesh.rendering.render_plan import RenderPlan
 from rtmesh.rendering.render_result import RenderResult
@@ -322,7 +322,7 @@ class Integrator:
         # scenes that need only direct light take one compiled stage per chunk
         self.direct_stage = DirectStage.plan(self) if self.path_stage is None else None
         if (WHITTED_THROUGH_KERNEL and self.direct_stage is None and self.path_stage is None
-                and not whitted_unsupported(self)):
+                and not unsupported(self)):
             # the others the path kernel, configured as the Whitted integrator
             self.path_stage = PathStage(self)
         self.plan = dataclasses.replace(self.plan, fused_direct=self.direct_stage is not None)

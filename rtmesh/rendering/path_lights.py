@@ -17,7 +17,6 @@ from rtmesh.rendering.path_surfaces import environment_radiance as _environment_
 from rtmesh.rendering.path_surfaces import environment_sample as _environment_sample
 from rtmesh.rendering.path_surfaces import illuminate as _illuminate_row
 from rtmesh.rendering.path_surfaces import projector_incident as _projector_incident
-from rtmesh.rendering.path_surfaces import sample_area_point as _sample_area_point
 
 # The rows taking arrays that the kernel calls per lane, inlined by numba: a compiled call that
 # passes arrays takes and releases a reference to each (atomic instructions), and LLVM stops
@@ -51,23 +50,11 @@ def sample_li(light, env, texels, descriptors, px, py, pz, u1, u2):
             return dx, dy, dz, math.inf, 0.0, 0.0, 0.0, 0.0, False, 0.0, 0.0
         lr, lg, lb = _environment_radiance(pixels, cos_r, sin_r, dx, dy, dz)
         return dx, dy, dz, math.inf, lr, lg, lb, pdf, False, 0.0, 0.0
-    if kind == lt.TRIANGLE:
-        dx, dy, dz, distance, pdf, b1, b2 = lt.sample_triangle(light, px, py, pz, u1, u2)
-        if not pdf > 0.0:
-            return dx, dy, dz, distance, 0.0, 0.0, 0.0, 0.0, False, b1, b2
-        return (dx, dy, dz, distance, light[lt.RADIANCE], light[lt.RADIANCE + 1], light[lt.RADIANCE + 2], pdf, False,
-                b1, b2)
-    qx, qy, qz = _sample_area_point(light, u1, u2)
-    dx, dy, dz = qx - px, qy - py, qz - pz
-    distance = math.sqrt((dx * dx + dy * dy) + dz * dz)
-    if not distance > 0.0:
-        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, False, 0.0, 0.0
-    dx, dy, dz = dx / distance, dy / distance, dz / distance
-    pdf = area_pdf(light, px, py, pz, dx, dy, dz, distance)
+    dx, dy, dz, distance, pdf, b1, b2 = lt.sample_area(light, px, py, pz, u1, u2)
     if not pdf > 0.0:
-        return dx, dy, dz, distance, 0.0, 0.0, 0.0, 0.0, False, 0.0, 0.0
+        return dx, dy, dz, distance, 0.0, 0.0, 0.0, 0.0, False, b1, b2
     return (dx, dy, dz, distance, light[lt.RADIANCE], light[lt.RADIANCE + 1], light[lt.RADIANCE + 2], pdf, False,
-            0.0, 0.0)
+            b1, b2)
 
 
 @inline_row

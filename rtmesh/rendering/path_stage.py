@@ -62,12 +62,6 @@ def unsupported(it):
     return missing
 
 
-def whitted_unsupported(it):
-    """What of a Whitted render the path kernel does not do yet (the general wavefront
-    renders it): a list of phrases, empty when the kernel renders everything."""
-    return unsupported(it)
-
-
 def _packet_accel(accel):
     """The Embree scene under a cut-out wrapper (the kernel handles cut-outs itself)."""
     return accel.accel if isinstance(accel, CutoutAccel) else accel

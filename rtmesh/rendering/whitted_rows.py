@@ -29,7 +29,7 @@ import numpy as np
 from rtmesh.core.compiled import inline_row, row
 from rtmesh.core.row_vectors import tangent_frame
 from rtmesh.materials import lobes
-from rtmesh.materials.blinn_phong import raise_highlight
+from rtmesh.materials.blinn_phong import blinn_phong_row, highlight_cosine, raise_highlight
 from rtmesh.materials.glossy import lobe_direction
 
 # the Blinn-Phong row of a material (rtmesh.materials.phong.parameters)
@@ -49,19 +49,14 @@ def light_factor(params, m, ox, oy, oz, wx, wy, wz):
         oz, wz = -oz, -wz
     if not wz > 0.0:
         return 0.0, 0.0, 0.0
-    r, g, b = params[m, _KD] * wz, params[m, _KD + 1] * wz, params[m, _KD + 2] * wz
     ks_r, ks_g, ks_b = params[m, _KS], params[m, _KS + 1], params[m, _KS + 2]
+    power = 0.0
     if (ks_r > 0.0) | (ks_g > 0.0) | (ks_b > 0.0):
-        hx, hy, hz = ox + wx, oy + wy, oz + wz
-        length = math.sqrt((hx * hx + hy * hy) + hz * hz)
-        cosine = max(hz / length, 0.0) if length > 0.0 else 0.0
         exponent = params[m, _SHININESS]
-        if exponent == 0.0:
-            cosine = 1.0
+        cosine = 1.0 if exponent == 0.0 else highlight_cosine(0.0, 0.0, 1.0, ox, oy, oz, wx, wy, wz)
         if cosine > 0.0:
             power = raise_highlight(cosine, exponent)
-            r, g, b = r + ks_r * power, g + ks_g * power, b + ks_b * power
-    return r, g, b
+    return blinn_phong_row(params[m, _KD], params[m, _KD + 1], params[m, _KD + 2], ks_r, ks_g, ks_b, wz, power)
 
 
 @row
