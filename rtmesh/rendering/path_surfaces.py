@@ -333,14 +333,16 @@ def textured_materials(surface, geometry):
 
 @inline_row
 def hit_parameters(surface, geometry, textured, mat, prim, bu, bv, scratch, lane, stack, media, entering):
-    """A hit's BSDF parameters and emission: ``(table, row, er, eg, eb)``, the parameter row
-    being the material's own, or a copy in ``scratch[lane]`` scaled by its textures and
-    vertex colours (:func:`textured_row`), with a transmissive model's index ratio between
-    the media on the interface's two sides (:func:`interface_ratio`; ``media`` the stack's
-    depth, 0 without transmissive materials; ``entering`` whether the ray meets the front)."""
+    """A hit's BSDF parameters and emission: ``(table, row, er, eg, eb, in_scratch)``, the
+    parameter row being the material's own, or (``in_scratch``) a copy in ``scratch[lane]``
+    scaled by its textures and vertex colours (:func:`textured_row`), with a transmissive
+    model's index ratio between the media on the interface's two sides
+    (:func:`interface_ratio`; ``media`` the stack's depth, 0 without transmissive materials;
+    ``entering`` whether the ray meets the front)."""
     tags, params, transmissive, emission, slots, ior = surface[0], surface[1], surface[2], surface[3], surface[7], \
         surface[15]
-    if textured[mat]:
+    in_scratch = textured[mat]
+    if in_scratch:
         er, eg, eb = textured_row(surface, geometry, mat, prim, bu, bv, scratch, lane)
         table, index = scratch, lane
     else:
@@ -348,12 +350,12 @@ def hit_parameters(surface, geometry, textured, mat, prim, bu, bv, scratch, lane
         table, index = params, mat
     slot = slots[tags[mat], models.IOR_SLOT]
     if media and transmissive[mat] and slot >= 0:
-        if not textured[mat]:
+        if not in_scratch:
             for k in range(params.shape[1]):
                 scratch[lane, k] = params[mat, k]
-            table, index = scratch, lane
+            table, index, in_scratch = scratch, lane, True
         scratch[lane, slot] = interface_ratio(stack, lane, mat, entering, ior, twin_material(surface, prim))
-    return table, index, er, eg, eb
+    return table, index, er, eg, eb, in_scratch
 
 
 @inline_row

@@ -296,7 +296,7 @@ def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geomet
                 layers[lane] = 0
                 ox, oy, oz = -dx[lane], -dy[lane], -dz[lane]
                 entering = (gx * dx[lane] + gy * dy[lane]) + gz * dz[lane] < 0.0
-                bsdf_params, bsdf_row, _, _, _ = hit_parameters(surface, geometry, textured, mat, prim, bu, bv, scratch,
+                bsdf_params, bsdf_row, _, _, _, _ = hit_parameters(surface, geometry, textured, mat, prim, bu, bv, scratch,
                                                                 lane, stack, media, entering)
                 gx, gy, gz, nx, ny, nz, tx, ty, tz, sx, sy, sz = hit_frame(
                     surface, geometry, mat, prim, bu, bv, transmissive[mat], scratch, lane, gx, gy, gz, nx, ny, nz,

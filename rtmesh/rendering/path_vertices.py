@@ -1,0 +1,605 @@
+"""The path kernel's work at a vertex, as three stages over a packet's lanes: what each
+lane's segment meets (:func:`meet`), its next-event estimates and ambient-occlusion rays
+(:func:`sample_lights`), and the ray that continues it (:func:`scatter`).
+
+:func:`rtmesh.rendering.path_kernel.trace_paths` calls them once per packet and bounce, in
+that order, between its packet queries.  Each is a kernel of its own, compiled and cached by
+itself: one function holding all three took numba about 60 s to compile (its front end's
+passes grow faster than the function), and a first run's two processes compile them side
+by side (:data:`rtmesh.rendering.path_signatures.PATH_KERNELS`).  A call per packet, not
+per lane: each call passes every array of its records (numba's calling convention), which
+per lane would cost as much as the lane's arithmetic.
+
+Records: ``lanes`` (per-lane state, :data:`LANE_RECORD`), ``hits`` (each lane's nearest
+hit: ``t``, primitive, placement, barycentrics), ``vertices = (vertex, vertex_ids, shaded)``
+(what :func:`meet` leaves for the other two: ``vertex`` (16, :data:`VERTEX_WORDS`) the
+hit point, geometric and shading normals, tangent frame, the direction toward where the
+ray came from in that frame and the ambient term, by :data:`POINT` ... :data:`AMBIENT`;
+``vertex_ids`` (16, 4) int64 the material, face, parameter row and whether that row is the
+lane's ``scratch`` copy; ``shaded`` which lanes reached a surface to shade), ``shadows =
+(rays, set, count, kind, pending, pending_paths)`` (each light sample's shadow rays and
+what they carry) and ``branches = (branch, branch_media, branch_top)`` (the Whitted
+configuration's split rays); the scene's records (``geometry``, ``surface``, ``lights``,
+``env``, ``options``, ``whitted``, ``motion``, ``instances``, ``photon_map``) as
+:mod:`rtmesh.rendering.path_kernel` describes them.
+"""
+
+import math
+
+import numpy as np
+
+from rtmesh.core.compiled import borrowed, inline_row, kernel
+from rtmesh.geometry.embree_packets import LANES
+from rtmesh.lights import light_table as lt
+from rtmesh.materials import lobes, models
+from rtmesh.materials.metallic_roughness import square_to_cosine_hemisphere_row
+from rtmesh.rendering.path_lights import area_pdf, environment_pdf, hit_analytic, light_at, sample_li, shadow_segment
+from rtmesh.rendering.path_packets import (AO, AREA_SHADOW, BSDF, BSDF_U1, BSDF_U2, COVERAGE, CUTOUT,
+                                           DIMENSIONS_PER_VERTEX, ENVIRONMENT, LIGHT_CHOICE, LIGHT_U1, LIGHT_U2, LOBE,
+                                           MAX_LAYERS, REFLECTION, REFRACTION, ROULETTE, SHADOW, layer_coin,
+                                           mover_to_world, placed)
+from rtmesh.rendering.path_surfaces import (alias_sample, colour_tint, cross_interface, crossing_scale,
+                                            environment_radiance, hit_frame, hit_parameters, is_transparent,
+                                            leave_surface, occlusion_at, surface_point, tangent_frame, to_world,
+                                            triangle_light_emission, twin_material)
+from rtmesh.rendering.path_sums import (DIFFUSE_PATH, DIRECT, GLOSSY_PATH, INDIRECT, TRANSMISSION_PATH, add_radiance,
+                                        add_to_pass, clamped, lobe_category, pass_bucket)
+from rtmesh.rendering.photon_kernel import ALL_PARTS, DIFFUSE_PART, TRANSMITTED_PART, gather
+from rtmesh.rendering.whitted_rows import branches, light_factor, push_branch
+from rtmesh.sampling.hashing import mix64, uniform
+from rtmesh.sampling.mis import power_heuristic
+from rtmesh.sampling.zsobol import sequence_pair, sequence_ray_pair
+
+# Sobol sequences hold 2**32 points; later samples take hashed numbers
+SOBOL_LIMIT = 1 << 32
+# the key of light sample k > 0 of a vertex is mix64(key + k * _LIGHT_ROUND) (sample 0 takes
+# the path's own key): its choice and point are the vertex's usual dimensions of that key
+_LIGHT_ROUND = np.uint64(0xD1B54A32D192ED03)
+# what a path's last vertices were, for caustics: only delta bounces since the camera; a
+# non-delta bounce last; a non-delta bounce, then delta bounces only (light met now is a
+# caustic path, which photons carry when they are on)
+CHAIN_START, CHAIN_SCATTERED, CHAIN_CAUSTIC = 0, 1, 2
+# the lanes a call of the stages takes: this many packets of Embree's 16 (a call passes every
+# array of its records, which per packet cost a third of the path kernel's time)
+PACKETS = 4
+WIDTH = PACKETS * LANES
+# the per-lane state of the lanes record, in its order
+LANE_RECORD = ("px", "py", "pz", "dx", "dy", "dz", "beta", "total", "paths", "category", "stack", "sigma", "alive",
+               "prev_pdf", "prev_delta", "eta_scale", "prev_count", "lane_depth", "layers", "chain", "travelled",
+               "ray_kind", "lane_time", "moved", "scratch")
+# a shaded vertex's columns: hit point, geometric normal, shading normal, tangent, bitangent
+# (world), the direction toward the ray's origin in the shading frame, the ambient term
+POINT, GEOMETRIC, NORMAL, TANGENT, BITANGENT, OUTGOING, AMBIENT = 0, 3, 6, 9, 12, 15, 18
+VERTEX_WORDS = 21
+# vertex_ids' columns
+MATERIAL, FACE, PARAMETER_ROW, IN_SCRATCH, FRONT = 0, 1, 2, 3, 4
+VERTEX_IDS = 5
+
+
+@inline_row
+def vertex_frame(vertex, lane):
+    """A shaded vertex's point, normals, tangent frame and outgoing direction (in that frame),
+    as :func:`meet` left them: 18 floats."""
+    return (vertex[lane, 0], vertex[lane, 1], vertex[lane, 2], vertex[lane, 3], vertex[lane, 4], vertex[lane, 5],
+            vertex[lane, 6], vertex[lane, 7], vertex[lane, 8], vertex[lane, 9], vertex[lane, 10], vertex[lane, 11],
+            vertex[lane, 12], vertex[lane, 13], vertex[lane, 14], vertex[lane, 15], vertex[lane, 16],
+            vertex[lane, 17])
+
+
+@kernel
+def meet(lanes, hits, vertices, keys, start, geometry, surface, textured, lights, env, options, whitted, motion,
+         instances, photon_map):
+    """What each live lane's segment meets: a visible quad or disk light, the background, a
+    cut-out layer it passes, or a surface, whose emission it takes (MIS-weighted), whose
+    shading frame it forms and, with photons, whose photons it gathers.  Lanes whose path
+    ends here are no longer ``alive``; those at a surface to shade are ``shaded``, their
+    vertex in ``vertices``.
+
+    Parameters
+    ----------
+    lanes, hits, vertices : tuples
+        The module's records.
+    keys : (n,) uint64
+        Each sample's random key; lane ``j`` is sample ``start + j``.
+    start : int
+    textured : (M,) bool
+        :func:`rtmesh.rendering.path_surfaces.textured_materials`.
+    geometry, surface, lights, env, options, whitted, motion, instances, photon_map : tuples
+        The scene's records.
+    """
+    # views that own nothing, known so here: no reference counts (rtmesh.core.compiled.borrowed)
+    lanes, hits, vertices, keys, geometry, surface, textured, lights, env, options, whitted, motion, instances, \
+        photon_map = borrowed((lanes, hits, vertices, keys, geometry, surface, textured, lights, env, options, whitted,
+                               motion, instances, photon_map))
+    (px, py, pz, dx, dy, dz, beta, total, paths, category, stack, sigma, alive, prev_pdf, prev_delta, eta_scale,
+     prev_count, lane_depth, layers, chain, travelled, ray_kind, lane_time, moved, scratch) = lanes
+    vertex, vertex_ids, shaded = vertices
+    best_t, best_prim, best_instance, best_u, best_v = hits
+    material_id = geometry[5]
+    tags, transmissive, unlit, albedo_table = surface[0], surface[2], surface[5], surface[6]
+    light_rows, light_pmf, face_light, analytic, env_light = lights[0], lights[3], lights[4], lights[5], lights[6]
+    max_depth, clamp, offset_scale, background_seen, cutouts, split = (options[0], options[2], options[3], options[4],
+                                                                       options[5], options[6])
+    media = len(options[7])
+    whitted_on, group_pmf, ambient, occlusion_strength, ao_samples = whitted[0], whitted[6], whitted[7], whitted[8], \
+        whitted[12]
+    choice_pmf = group_pmf if whitted_on else light_pmf
+    env_pixels, env_marginal, env_conditional, env_func, env_mean, env_cos, env_sin = env
+    moves, face_mover = motion[5], motion[6]
+    instance_to_world, instance_normals = instances[1], instances[2]
+    photons_on, scatters = photon_map[0], photon_map[10]
+    radius_scale, footprint_a, footprint_b, max_radius = photon_map[6], photon_map[7], photon_map[8], photon_map[9]
+    for lane in range(len(alive)):
+        shaded[lane] = False
+        if not alive[lane]:
+            continue
+        key = keys[start + lane]
+        depth = lane_depth[lane]
+        limit = clamp if depth > 1 else 0.0
+        hit = best_prim[lane] >= 0
+        t = best_t[lane]
+        # a visible quad or disk light before the surface ends the path there
+        seen = -1
+        # (within lt.FLUSH_MARGIN of the surface: a light flush with a ceiling is seen)
+        for k in range(len(analytic)):
+            a = analytic[k]
+            ta = hit_analytic(light_rows[a], px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane],
+                              t * lt.FLUSH_MARGIN)
+            if ta < t * lt.FLUSH_MARGIN:
+                t, seen = ta, a
+        if sigma[lane, 0] + sigma[lane, 1] + sigma[lane, 2] > 0.0 and t < math.inf:
+            for c in range(3):
+                beta[lane, c] *= math.exp(-sigma[lane, c] * t)
+        # with photons, light reached through a non-delta vertex and then delta bounces
+        # only is theirs (caustic paths): the camera path does not count it again
+        photon_path = photons_on and chain[lane] == CHAIN_CAUSTIC
+        if seen >= 0 and photon_path:
+            alive[lane] = False
+            continue
+        if seen >= 0:
+            light = light_rows[seen]
+            w = 1.0
+            if not prev_delta[lane]:
+                w = power_heuristic(prev_pdf[lane], choice_pmf[seen] * area_pdf(
+                    light, px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], t) * prev_count[lane])
+            r, g, b = clamped(beta[lane, 0] * light[lt.RADIANCE] * w, beta[lane, 1] * light[lt.RADIANCE + 1] * w,
+                               beta[lane, 2] * light[lt.RADIANCE + 2] * w, limit)
+            add_radiance(total, lane, r, g, b)
+            add_to_pass(paths, split, lane, pass_bucket(depth, category[lane]), r, g, b)
+            alive[lane] = False
+            continue
+        if not hit:
+            # (whitted: what mirrors and glass show of the background, lighting or not)
+            if ((env_light >= 0) & (not photon_path) | ((depth == 0) & background_seen)
+                    | (whitted_on & (depth > 0) & prev_delta[lane])):
+                if env_pixels.shape[0] == 1:
+                    # a uniform background (one row of one texel): no lookup
+                    lr, lg, lb = env_pixels[0, 0, 0], env_pixels[0, 0, 1], env_pixels[0, 0, 2]
+                else:
+                    lr, lg, lb = environment_radiance(env_pixels, env_cos, env_sin, dx[lane], dy[lane],
+                                                       dz[lane])
+                w = 1.0
+                if not prev_delta[lane]:
+                    w = power_heuristic(prev_pdf[lane], choice_pmf[env_light] * environment_pdf(
+                        env_marginal, env_conditional, env_func, env_mean, env_cos, env_sin,
+                        dx[lane], dy[lane], dz[lane]) * prev_count[lane])
+                r, g, b = clamped(beta[lane, 0] * lr * w, beta[lane, 1] * lg * w, beta[lane, 2] * lb * w,
+                                   limit)
+                add_radiance(total, lane, r, g, b)
+                add_to_pass(paths, split, lane, pass_bucket(depth, category[lane]), r, g, b)
+            alive[lane] = False
+            continue
+        prim = best_prim[lane]
+        bu, bv = best_u[lane], best_v[lane]
+        mat = material_id[prim]
+        travelled[lane] += t
+        hx, hy, hz, gx, gy, gz, nx, ny, nz = surface_point(geometry, prim, bu, bv)
+        if len(face_mover) and face_mover[prim] >= 0:
+            hx, hy, hz, gx, gy, gz, nx, ny, nz = mover_to_world(moves, face_mover[prim], lane_time[lane], hx, hy, hz,
+                                                           gx, gy, gz, nx, ny, nz)
+        if best_instance[lane] >= 0:
+            hx, hy, hz, gx, gy, gz, nx, ny, nz = placed(instance_to_world, instance_normals, best_instance[lane],
+                                                         hx, hy, hz, gx, gy, gz, nx, ny, nz)
+        if cutouts and layers[lane] + 1 < MAX_LAYERS and is_transparent(
+                surface, geometry, mat, prim, bu, bv, layer_coin(key, depth, layers[lane], COVERAGE)):
+            # the ray passes this layer: on from just beyond it, same depth
+            layers[lane] += 1
+            ray_kind[lane] = CUTOUT
+            px[lane], py[lane], pz[lane] = leave_surface(hx, hy, hz, gx, gy, gz, dx[lane], dy[lane], dz[lane],
+                                                         offset_scale)
+            continue
+        layers[lane] = 0
+        bsdf_params, bsdf_row, er, eg, eb, in_scratch = hit_parameters(
+            surface, geometry, textured, mat, prim, bu, bv, scratch, lane, stack, media,
+            (gx * dx[lane] + gy * dy[lane]) + gz * dz[lane] < 0.0)
+        # emission, from the front side (the winding's normal), as pbrt's and Mitsuba's
+        # area lights (whitted: from both)
+        front = (gx * dx[lane] + gy * dy[lane]) + gz * dz[lane] < 0.0
+        if (front or whitted_on) and er + eg + eb > 0.0 and not photon_path:
+            w = 1.0
+            if not prev_delta[lane]:
+                light = face_light[prim]
+                if light >= 0:
+                    w = power_heuristic(prev_pdf[lane], choice_pmf[light] * area_pdf(
+                        light_at(light_rows, light, face_mover, moves, lane_time[lane], moved, lane),
+                        px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], t) * prev_count[lane])
+            r, g, b = clamped(beta[lane, 0] * er * w, beta[lane, 1] * eg * w, beta[lane, 2] * eb * w, limit)
+            add_radiance(total, lane, r, g, b)
+            add_to_pass(paths, split, lane, pass_bucket(depth, category[lane]), r, g, b)
+        if unlit[mat, 0] > 0.0:
+            add_radiance(total, lane, beta[lane, 0] * unlit[mat, 1], beta[lane, 1] * unlit[mat, 2],
+                 beta[lane, 2] * unlit[mat, 3])
+            add_to_pass(paths, split, lane, pass_bucket(depth, category[lane]), beta[lane, 0] * unlit[mat, 1],
+                      beta[lane, 1] * unlit[mat, 2], beta[lane, 2] * unlit[mat, 3])
+            alive[lane] = False
+            continue
+        # the shading frame: normal maps bend the front side's normal; reflection-only
+        # models turn the frame to the viewer's side, transmissive ones keep the
+        # outward side (inside: wo.z < 0)
+        ox, oy, oz = -dx[lane], -dy[lane], -dz[lane]
+        gx, gy, gz, nx, ny, nz, tx, ty, tz, sx, sy, sz = hit_frame(
+            surface, geometry, mat, prim, bu, bv, transmissive[mat], scratch, lane, gx, gy, gz, nx, ny, nz,
+            ox, oy, oz)
+        lox = (tx * ox + ty * oy) + tz * oz
+        loy = (sx * ox + sy * oy) + sz * oz
+        loz = (nx * ox + ny * oy) + nz * oz
+        tag = tags[mat]
+        # whitted: every hit takes the ambient light (tinted by the colour's textures,
+        # darkened by glTF's baked occlusion)
+        ambient_r = ambient_g = ambient_b = 0.0
+        if whitted_on and (ambient[mat, 0] > 0.0) | (ambient[mat, 1] > 0.0) | (ambient[mat, 2] > 0.0):
+            cr, cg, cb, _, _, _ = colour_tint(surface, geometry, mat, prim, bu, bv)
+            occluded_part = occlusion_at(surface, geometry, mat, prim, bu, bv, occlusion_strength[mat])
+            ambient_r = beta[lane, 0] * (ambient[mat, 0] * cr * occluded_part)
+            ambient_g = beta[lane, 1] * (ambient[mat, 1] * cg * occluded_part)
+            ambient_b = beta[lane, 2] * (ambient[mat, 2] * cb * occluded_part)
+            if ao_samples == 0:
+                add_radiance(total, lane, ambient_r, ambient_g, ambient_b)
+        # caustics: the photons near this vertex (paths of at least two segments)
+        segments = max_depth - depth if max_depth >= 0 else -1
+        if photons_on and scatters[mat] and (segments < 0 or segments >= 2):
+            radius = min(radius_scale * (footprint_a + footprint_b * travelled[lane]), max_radius)
+            cr, cg, cb = gather(photon_map, hx, hy, hz, gx, gy, gz, radius, segments, tag, bsdf_params,
+                                bsdf_row, albedo_table, tx, ty, tz, sx, sy, sz, nx, ny, nz, lox, loy, loz, ALL_PARTS)
+            cr, cg, cb = clamped(beta[lane, 0] * cr, beta[lane, 1] * cg, beta[lane, 2] * cb,
+                                  clamp if depth > 0 else 0.0)
+            add_radiance(total, lane, cr, cg, cb)
+            if split:
+                if depth == 0:
+                    # split by the part of the BSDF the photons' light comes through
+                    dr, dg, db = gather(photon_map, hx, hy, hz, gx, gy, gz, radius, segments, tag,
+                                        bsdf_params, bsdf_row, albedo_table, tx, ty, tz, sx, sy, sz, nx, ny,
+                                        nz, lox, loy, loz, DIFFUSE_PART)
+                    ur, ug, ub = gather(photon_map, hx, hy, hz, gx, gy, gz, radius, segments, tag,
+                                        bsdf_params, bsdf_row, albedo_table, tx, ty, tz, sx, sy, sz, nx, ny,
+                                        nz, lox, loy, loz, TRANSMITTED_PART)
+                    dr, dg, db = beta[lane, 0] * dr, beta[lane, 1] * dg, beta[lane, 2] * db
+                    ur, ug, ub = beta[lane, 0] * ur, beta[lane, 1] * ug, beta[lane, 2] * ub
+                    add_to_pass(paths, split, lane, INDIRECT + DIFFUSE_PATH, dr, dg, db)
+                    add_to_pass(paths, split, lane, INDIRECT + TRANSMISSION_PATH, ur, ug, ub)
+                    add_to_pass(paths, split, lane, INDIRECT + GLOSSY_PATH, cr - (dr + ur), cg - (dg + ug),
+                              cb - (db + ub))
+                else:
+                    add_to_pass(paths, split, lane, INDIRECT + category[lane], cr, cg, cb)
+        for c, value in enumerate((hx, hy, hz, gx, gy, gz, nx, ny, nz, tx, ty, tz, sx, sy, sz, lox, loy, loz,
+                                   ambient_r, ambient_g, ambient_b)):
+            vertex[lane, c] = value
+        vertex_ids[lane, MATERIAL], vertex_ids[lane, FACE], vertex_ids[lane, PARAMETER_ROW] = mat, prim, bsdf_row
+        vertex_ids[lane, IN_SCRATCH], vertex_ids[lane, FRONT] = in_scratch, front
+        shaded[lane] = True
+
+
+@kernel
+def sample_lights(lanes, vertices, shadows, keys, pixels, samples, sobol_keys, start, geometry, surface, lights, env,
+                  options, whitted, motion):
+    """Next-event estimation at each shaded lane's vertex: ``light_samples`` estimates at a
+    path's first vertex that can take light, one at later ones (whitted: every delta light
+    once and ``light_samples`` of each other light, at every vertex), each a shadow ray in
+    ``shadows`` with what it carries if unoccluded; and (whitted) the ambient occlusion rays.
+
+    Parameters
+    ----------
+    lanes, vertices, shadows : tuples
+        The module's records.
+    keys, pixels, samples : (n,) arrays
+        Each sample's random key, pixel and sample index (:func:`rtmesh.rendering.path_kernel.trace_paths`).
+    sobol_keys : (6,) uint64
+    start : int
+        Lane ``j`` is sample ``start + j``.
+    geometry, surface, lights, env, options, whitted, motion : tuples
+        The scene's records.
+    """
+    # views that own nothing, known so here: no reference counts (rtmesh.core.compiled.borrowed)
+    lanes, vertices, shadows, keys, pixels, samples, sobol_keys, geometry, surface, lights, env, options, whitted, \
+        motion = borrowed((lanes, vertices, shadows, keys, pixels, samples, sobol_keys, geometry, surface, lights, env,
+                           options, whitted, motion))
+    (px, py, pz, dx, dy, dz, beta, total, paths, category, stack, sigma, alive, prev_pdf, prev_delta, eta_scale,
+     prev_count, lane_depth, layers, chain, travelled, ray_kind, lane_time, moved, scratch) = lanes
+    vertex, vertex_ids, shaded = vertices
+    shadow_rays, shadow_set, shadow_count, shadow_kind, pending, pending_paths = shadows
+    tags, params, transmissive, albedo_table = surface[0], surface[1], surface[2], surface[6]
+    light_rows, light_probability, light_alias, light_pmf = lights[0], lights[1], lights[2], lights[3]
+    light_texels, light_descriptors = lights[7], lights[8]
+    max_depth, clamp, offset_scale, split, light_samples, light_block = (options[0], options[2], options[3],
+                                                                         options[6], options[8], options[9])
+    (whitted_on, delta_rows, group_start, group_order, group_probability, group_alias, group_pmf) = whitted[:7]
+    ao_samples, ao_distance = whitted[12], whitted[13]
+    deltas = len(delta_rows) if whitted_on else 0
+    choice_pmf = group_pmf if whitted_on else light_pmf
+    area_rounds = light_samples * (len(group_start) - 1) if whitted_on else light_samples
+    moves, face_mover = motion[5], motion[6]
+    has_lights = len(light_rows) > 0
+    for lane in range(len(alive)):
+        if not shaded[lane]:
+            continue
+        key = keys[start + lane]
+        depth = lane_depth[lane]
+        base = DIMENSIONS_PER_VERTEX * depth
+        mat, bsdf_row = vertex_ids[lane, MATERIAL], vertex_ids[lane, PARAMETER_ROW]
+        bsdf_params = scratch if vertex_ids[lane, IN_SCRATCH] else params
+        tag = tags[mat]
+        (hx, hy, hz, gx, gy, gz, nx, ny, nz, tx, ty, tz, sx, sy, sz, lox, loy,
+         loz) = vertex_frame(vertex, lane)
+        ox, oy, oz = -dx[lane], -dy[lane], -dz[lane]
+        follow = (max_depth < 0) | (depth + 1 <= max_depth)
+        whitted_hit = whitted_on and tag == models.BLINN_PHONG
+        ambient_r, ambient_g, ambient_b = vertex[lane, AMBIENT], vertex[lane, AMBIENT + 1], vertex[lane, AMBIENT + 2]
+        # the first vertex's light points: per-pixel Owen-scrambled Sobol pairs (stratified
+        # over the pixel's samples and each sample's light samples), later vertices' hashed
+        # numbers
+        sample_index = samples[start + lane] if len(samples) else -1
+        sobol = (depth == 0) & (sample_index >= 0) & (sample_index < SOBOL_LIMIT)
+        pixel = np.uint64(pixels[start + lane]) if sobol else np.uint64(0)
+        # next-event estimation: light_samples estimates at the first vertex that can
+        # take light (reached from the camera through delta lobes only), one at later
+        # vertices; each weighted against the one BSDF sample by the power heuristic
+        # with the strategies' sample counts (Veach 1997, 9.2.2) and divided by their number
+        # (whitted: every delta light once, then light_samples among the others, at every vertex)
+        area_count = area_rounds if whitted_on or chain[lane] == CHAIN_START else 1
+        rounds = deltas + area_count
+        prev_count[lane] = np.float64(light_samples if whitted_on else area_count)
+        if follow and has_lights:
+            for k in range(rounds):
+                light_key = key if k == 0 else mix64(key + np.uint64(k) * _LIGHT_ROUND)
+                # kk: the light sample's index among its light's (-1: a delta light)
+                kk = k - deltas
+                group = 0
+                if whitted_on and kk >= 0:
+                    group = kk // light_samples
+                    kk -= group * light_samples
+                if kk < 0:
+                    lu1 = lu2 = 0.5
+                elif sobol and sample_index * light_samples + kk < SOBOL_LIMIT:
+                    lu1, lu2 = sequence_ray_pair(sobol_keys, 0, pixel, sample_index, kk, light_samples,
+                                                 light_block)
+                else:
+                    lu1, lu2 = uniform(light_key, base + LIGHT_U1), uniform(light_key, base + LIGHT_U2)
+                if kk < 0:
+                    chosen, count_f = delta_rows[k], 1.0
+                elif whitted_on:
+                    lo, hi = group_start[group], group_start[group + 1]
+                    chosen = group_order[lo + alias_sample(group_probability[lo:hi], group_alias[lo:hi],
+                                                           uniform(light_key, base + LIGHT_CHOICE))]
+                    count_f = np.float64(light_samples)
+                else:
+                    chosen = alias_sample(light_probability, light_alias, uniform(light_key, base + LIGHT_CHOICE))
+                    count_f = np.float64(area_count)
+                nee_limit = (clamp if depth > 0 else 0.0) / count_f
+                # an emitter on a moving object where it is at the lane's time
+                light = light_at(light_rows, chosen, face_mover, moves, lane_time[lane], moved, lane)
+                wx, wy, wz, distance, lr, lg, lb, pdf_li, delta, b1, b2 = sample_li(
+                    light, env, light_texels, light_descriptors, hx, hy, hz, lu1, lu2)
+                if light[0] == lt.TRIANGLE and pdf_li > 0.0:
+                    # the emitter's own (textured) radiance at the sampled point
+                    lr, lg, lb = triangle_light_emission(surface, geometry, light, b1, b2)
+                if not ((pdf_li > 0.0) & ((lr > 0.0) | (lg > 0.0) | (lb > 0.0))):
+                    continue
+                side = (gx * wx + gy * wy) + gz * wz
+                if not (transmissive[mat] or side > 0.0):
+                    continue
+                lix = (tx * wx + ty * wy) + tz * wz
+                liy = (sx * wx + sy * wy) + sz * wz
+                liz = (nx * wx + ny * wy) + nz * wz
+                if whitted_hit:
+                    fr, fg, fbb = light_factor(bsdf_params, bsdf_row, lox, loy, loz, lix, liy, liz)
+                    pdf_bsdf = 0.0
+                else:
+                    fr, fg, fbb, pdf_bsdf = models.evaluate(tag, bsdf_params, bsdf_row, albedo_table, lox, loy,
+                                                            loz, lix, liy, liz)
+                if not ((fr > 0.0) | (fg > 0.0) | (fbb > 0.0)):
+                    continue
+                p_light = (1.0 if kk < 0 else choice_pmf[chosen]) * pdf_li
+                w = 1.0 if delta else power_heuristic(p_light * count_f, pdf_bsdf)
+                scale = w / (p_light * count_f)
+                pending[k, lane, 0], pending[k, lane, 1], pending[k, lane, 2] = clamped(
+                    beta[lane, 0] * fr * lr * scale, beta[lane, 1] * fg * lg * scale,
+                    beta[lane, 2] * fbb * lb * scale, nee_limit)
+                if split:
+                    pending_paths[k, lane, :, :] = 0.0
+                    if depth == 0:
+                        # split by the part of the BSDF the light comes through
+                        dr, dg, db, ur, ug, ub = models.parts(tag, bsdf_params, bsdf_row, albedo_table,
+                                                              lox, loy, loz, lix, liy, liz)
+                        cr, cg, cb = (beta[lane, 0] * lr * scale, beta[lane, 1] * lg * scale,
+                                      beta[lane, 2] * lb * scale)
+                        add_to_pass(pending_paths[k], split, lane, DIRECT + DIFFUSE_PATH,
+                                  dr * cr, dg * cg, db * cb)
+                        add_to_pass(pending_paths[k], split, lane, DIRECT + TRANSMISSION_PATH,
+                                  ur * cr, ug * cg, ub * cb)
+                        add_to_pass(pending_paths[k], split, lane, DIRECT + GLOSSY_PATH,
+                                  pending[k, lane, 0] - (dr + ur) * cr, pending[k, lane, 1] - (dg + ug) * cg,
+                                  pending[k, lane, 2] - (db + ub) * cb)
+                    else:
+                        add_to_pass(pending_paths[k], split, lane, INDIRECT + category[lane],
+                                  pending[k, lane, 0], pending[k, lane, 1], pending[k, lane, 2])
+                # its shadow ray, traced with the packet's others of this light sample
+                ray_k = shadow_rays[k, lane]
+                ray_k[0], ray_k[1], ray_k[2], ray_k[3], ray_k[4], ray_k[5], ray_k[6] = shadow_segment(
+                    hx, hy, hz, gx, gy, gz, wx, wy, wz, distance, delta, light, offset_scale)
+                shadow_set[k, lane] = True
+                shadow_count[k] += 1
+                if whitted_on:
+                    shadow_kind[k] = SHADOW if delta else (ENVIRONMENT if light[0] == lt.ENVIRONMENT
+                                                           else AREA_SHADOW)
+        if ao_samples > 0 and (ambient_r > 0.0) | (ambient_g > 0.0) | (ambient_b > 0.0):
+            # ambient occlusion (whitted): the ambient term over ao_samples cosine-weighted
+            # rays about the geometric normal (on the viewer's side), each counting if
+            # nothing lies within ao_distance
+            if (gx * ox + gy * oy) + gz * oz < 0.0:
+                ux, uy, uz = -gx, -gy, -gz
+            else:
+                ux, uy, uz = gx, gy, gz
+            ax, ay, az, cx, cy, cz = tangent_frame(ux, uy, uz)
+            for j in range(ao_samples):
+                k = deltas + area_rounds + j
+                ao_key = mix64(key + np.uint64(k) * _LIGHT_ROUND)
+                lx, ly, lz = square_to_cosine_hemisphere_row(uniform(ao_key, base + LIGHT_U1),
+                                                             uniform(ao_key, base + LIGHT_U2))
+                wx, wy, wz = (ax * lx + cx * ly) + ux * lz, (ay * lx + cy * ly) + uy * lz, (az * lx + cz * ly) + uz * lz
+                ray_k = shadow_rays[k, lane]
+                ray_k[0], ray_k[1], ray_k[2] = leave_surface(hx, hy, hz, ux, uy, uz, wx, wy, wz, offset_scale)
+                ray_k[3], ray_k[4], ray_k[5], ray_k[6] = wx, wy, wz, ao_distance
+                pending[k, lane, 0] = ambient_r / ao_samples
+                pending[k, lane, 1] = ambient_g / ao_samples
+                pending[k, lane, 2] = ambient_b / ao_samples
+                shadow_set[k, lane] = True
+                shadow_count[k] += 1
+                shadow_kind[k] = AO
+
+
+@kernel
+def scatter(lanes, vertices, branches_, keys, pixels, samples, sobol_keys, start, surface, options, whitted):
+    """The ray that continues each shaded lane's path: a BSDF sample (then Russian roulette
+    after ``rr_depth`` vertices), or (whitted, Blinn-Phong hits) the mirror or refracted
+    ray, the other kept on the lane's stack of ``branches_``; lanes past ``max_depth`` end.
+
+    Parameters
+    ----------
+    lanes, vertices, branches_ : tuples
+        The module's records.
+    keys, pixels, samples : (n,) arrays
+    sobol_keys : (6,) uint64
+    start : int
+        Lane ``j`` is sample ``start + j``.
+    surface, options, whitted : tuples
+        The scene's records.
+    """
+    # views that own nothing, known so here: no reference counts (rtmesh.core.compiled.borrowed)
+    lanes, vertices, branches_, keys, pixels, samples, sobol_keys, surface, options, whitted = borrowed(
+        (lanes, vertices, branches_, keys, pixels, samples, sobol_keys, surface, options, whitted))
+    (px, py, pz, dx, dy, dz, beta, total, paths, category, stack, sigma, alive, prev_pdf, prev_delta, eta_scale,
+     prev_count, lane_depth, layers, chain, travelled, ray_kind, lane_time, moved, scratch) = lanes
+    vertex, vertex_ids, shaded = vertices
+    branch, branch_media, branch_top = branches_
+    tags, params, transmissive, absorption, albedo_table, slots = (surface[0], surface[1], surface[2], surface[4],
+                                                                   surface[6], surface[7])
+    max_depth, rr_depth, offset_scale = options[0], options[1], options[3]
+    media = len(options[7])
+    whitted_on, cutoff, exact_fresnel = whitted[0], whitted[9], whitted[10]
+    for lane in range(len(alive)):
+        if not shaded[lane]:
+            continue
+        key = keys[start + lane]
+        depth = lane_depth[lane]
+        base = DIMENSIONS_PER_VERTEX * depth
+        mat, prim, bsdf_row = vertex_ids[lane, MATERIAL], vertex_ids[lane, FACE], vertex_ids[lane, PARAMETER_ROW]
+        bsdf_params = scratch if vertex_ids[lane, IN_SCRATCH] else params
+        tag = tags[mat]
+        (hx, hy, hz, gx, gy, gz, nx, ny, nz, tx, ty, tz, sx, sy, sz, lox, loy,
+         loz) = vertex_frame(vertex, lane)
+        ox, oy, oz = -dx[lane], -dy[lane], -dz[lane]
+        follow = (max_depth < 0) | (depth + 1 <= max_depth)
+        whitted_hit = whitted_on and tag == models.BLINN_PHONG
+        front = vertex_ids[lane, FRONT] != 0
+        # the first vertex's BSDF point: a per-pixel Owen-scrambled Sobol pair (stratified
+        # over the pixel's samples), later vertices' hashed numbers
+        sample_index = samples[start + lane] if len(samples) else -1
+        sobol = (depth == 0) & (sample_index >= 0) & (sample_index < SOBOL_LIMIT)
+        pixel = np.uint64(pixels[start + lane]) if sobol else np.uint64(0)
+        if sobol:
+            bu1, bu2 = sequence_pair(sobol_keys, 1, pixel, sample_index)
+        else:
+            bu1, bu2 = uniform(key, base + BSDF_U1), uniform(key, base + BSDF_U2)
+        if not follow or (whitted_on and depth + 2 > max_depth):
+            # (whitted: the last hit a ray may reach takes light, but sends no ray on)
+            alive[lane] = False
+            continue
+        if whitted_hit:
+            # the Whitted split: on along the refracted ray (or the mirror ray), the
+            # other kept for later; rays whose throughput falls under the cutoff are not followed
+            rx, ry, rz, wr, wg, wb, ux, uy, uz, ur, ug, ub = branches(
+                bsdf_params, bsdf_row, ox, oy, oz, nx, ny, nz, gx, gy, gz, front, exact_fresnel, bu1, bu2)
+            reflects = max(beta[lane, 0] * wr, max(beta[lane, 1] * wg, beta[lane, 2] * wb)) >= cutoff
+            refracts = max(beta[lane, 0] * ur, max(beta[lane, 1] * ug, beta[lane, 2] * ub)) >= cutoff
+            reflects &= (wr > 0.0) | (wg > 0.0) | (wb > 0.0)
+            refracts &= (ur > 0.0) | (ug > 0.0) | (ub > 0.0)
+            if reflects and refracts:
+                qx, qy, qz = leave_surface(hx, hy, hz, gx, gy, gz, rx, ry, rz, offset_scale)
+                push_branch(branch, branch_media, branch_top, lane, qx, qy, qz, rx, ry, rz,
+                            beta[lane, 0] * wr, beta[lane, 1] * wg, beta[lane, 2] * wb, depth + 1, stack)
+            if refracts:
+                rx, ry, rz, wr, wg, wb = ux, uy, uz, ur, ug, ub
+                if media:
+                    top = cross_interface(stack, lane, mat, front, twin_material(surface, prim))
+                    for c in range(3):
+                        sigma[lane, c] = absorption[top, c] if top >= 0 else 0.0
+            elif not reflects:
+                alive[lane] = False
+                continue
+            beta[lane, 0] *= wr
+            beta[lane, 1] *= wg
+            beta[lane, 2] *= wb
+            ray_kind[lane] = REFRACTION if refracts else REFLECTION
+            prev_pdf[lane] = 0.0
+            prev_delta[lane] = True
+            px[lane], py[lane], pz[lane] = leave_surface(hx, hy, hz, gx, gy, gz, rx, ry, rz, offset_scale)
+            dx[lane], dy[lane], dz[lane] = rx, ry, rz
+            lane_depth[lane] = depth + 1
+            continue
+        # continue the path by sampling the BSDF
+        wx, wy, wz, gr, gg, gb, pdf, flags = models.sample(
+            tag, bsdf_params, bsdf_row, albedo_table, lox, loy, loz, uniform(key, base + LOBE), bu1, bu2)
+        if (flags == lobes.FAILED) | (not ((gr > 0.0) | (gg > 0.0) | (gb > 0.0))):
+            alive[lane] = False
+            continue
+        ndx, ndy, ndz = to_world(wx, wy, wz, tx, ty, tz, sx, sy, sz, nx, ny, nz)
+        side = (gx * ndx + gy * ndy) + gz * ndz
+        if (not transmissive[mat]) and not side > 0.0:
+            # a shading-normal sample below the geometric surface
+            alive[lane] = False
+            continue
+        beta[lane, 0] *= gr
+        beta[lane, 1] *= gg
+        beta[lane, 2] *= gb
+        ray_kind[lane] = REFRACTION if flags & lobes.TRANSMISSION else BSDF
+        prev_pdf[lane] = pdf
+        prev_delta[lane] = (flags & lobes.DELTA) != 0
+        if prev_delta[lane]:
+            chain[lane] = CHAIN_CAUSTIC if chain[lane] != CHAIN_START else CHAIN_START
+        else:
+            chain[lane] = CHAIN_SCATTERED
+        if depth == 0:
+            category[lane] = lobe_category(flags)
+        if transmissive[mat] and (flags & lobes.TRANSMISSION) and media:
+            # into the interior when the outward normal faces away from the new ray
+            top = cross_interface(stack, lane, mat, side < 0.0, twin_material(surface, prim))
+            for c in range(3):
+                sigma[lane, c] = absorption[top, c] if top >= 0 else 0.0
+        # the radiance scaling 1 / eta'^2 of a refraction, kept apart for the roulette
+        # (pbrt-v4's etaScale)
+        eta_scale[lane] *= crossing_scale(slots, tag, bsdf_params, bsdf_row, loz, flags)
+        if depth + 1 >= rr_depth:
+            # on the throughput without the radiance scaling of the crossings: inside
+            # glass (1 / 1.5^2 of it) paths would otherwise end by roulette without
+            # carrying less light out, only noise
+            q = max(beta[lane, 0], max(beta[lane, 1], beta[lane, 2])) * eta_scale[lane]
+            if q < 1.0:
+                if uniform(key, base + ROULETTE) >= q:
+                    alive[lane] = False
+                    continue
+                beta[lane, 0] /= q
+                beta[lane, 1] /= q
+                beta[lane, 2] /= q
+        px[lane], py[lane], pz[lane] = leave_surface(hx, hy, hz, gx, gy, gz, ndx, ndy, ndz, offset_scale)
+        dx[lane], dy[lane], dz[lane] = ndx, ndy, ndz
+        lane_depth[lane] = depth + 1
