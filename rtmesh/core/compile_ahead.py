@@ -63,20 +63,14 @@ class KernelGroup:
         Every render prepares the group (the scene build's): while it is not cached, a
         first run is under way, and :func:`helper` starts the helper process at once
         rather than when a render first prepares a group the cache lacks.
-    callers : sequence of (dispatcher, tuple of numba types)
-        Kernels that call the others (numba compiles a kernel's callees with it, outside the
-        lock files): both processes compile them after the others, in this order, so each
-        finds its callees in the disk cache.  ``kernels`` lists them last.
     """
 
-    def __init__(self, module, name, kernels, every_render=False, callers=()):
+    def __init__(self, module, name, kernels, every_render=False):
         if name in _GROUPS:
             raise ValueError(f"kernel group {name!r} is declared twice")
         self.module = module
         self.name = name
-        self._callees = tuple((dispatcher, tuple(signature)) for dispatcher, signature in kernels)
-        self._callers = tuple((dispatcher, tuple(signature)) for dispatcher, signature in callers)
-        self.kernels = self._callees + self._callers
+        self.kernels = tuple((dispatcher, tuple(signature)) for dispatcher, signature in kernels)
         self.every_render = every_render
         self._prepared = False
         _GROUPS[name] = self
@@ -118,11 +112,8 @@ class KernelGroup:
             _announce(self)
 
     def compile_backwards(self):
-        """Compile the group from its last kernel back, its ``callers`` after them (what the
-        helper process does)."""
-        for dispatcher, signature in reversed(self._callees):
-            compile_locked(dispatcher, signature)
-        for dispatcher, signature in self._callers:
+        """Compile the group from its last kernel back (what the helper process does)."""
+        for dispatcher, signature in reversed(self.kernels):
             compile_locked(dispatcher, signature)
 
     def cached(self):

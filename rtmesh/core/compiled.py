@@ -257,3 +257,65 @@ def keep_alive(typingctx, value):
         return context.get_dummy_value()
 
     return types.none(value), codegen
+
+
+def signature_token(argument_types):
+    """A 63-bit number naming a kernel signature (numba types), the same in every process:
+    what :func:`call_at` checks a kernel address against."""
+    text = "|".join(str(t) for t in argument_types)
+    return int.from_bytes(hashlib.sha256(text.encode()).digest()[:8], "little") >> 1
+
+
+@numba.extending.intrinsic
+def call_at(typingctx, address, token, arguments):
+    """Call the kernel compiled at ``address`` with the tuple ``arguments`` (its arguments,
+    in order) and return True, if ``token`` is the :func:`signature_token` of their types;
+    otherwise call nothing and return False.
+
+    A kernel that calls another the usual way compiles with it: numba links the callee's
+    module into the caller's and optimises the whole again, and the caller's first compile
+    waits for the callee's.  Called through its address (:func:`entry_point`), the callee is
+    compiled and cached on its own, in parallel with its caller on a first run, and the
+    caller's compile does not see its code.  The token keeps a wrong address (a kernel
+    compiled for other types) from being called: the caller reports it instead.
+
+    Parameters
+    ----------
+    address, token : int64
+        From :func:`entry_point` for the callee and the types of ``arguments``.
+    arguments : tuple
+    """
+    from llvmlite import ir
+    from numba.core import cgutils, types
+
+    argument_types = tuple(arguments.types)
+    expected = signature_token(argument_types)
+
+    def codegen(context, builder, signature, args):
+        address_value, token_value, packed = args
+        items = [builder.extract_value(packed, i) for i in range(len(argument_types))]
+        function_type = context.call_conv.get_function_type(types.none, argument_types)
+        matches = builder.icmp_signed("==", token_value, ir.Constant(token_value.type, expected))
+        with builder.if_then(matches):
+            callee = builder.inttoptr(address_value, ir.PointerType(function_type))
+            status, _ = context.call_conv.call_function(builder, callee, types.none, argument_types, items)
+            with cgutils.if_unlikely(builder, status.is_error):
+                context.call_conv.return_status_propagate(builder, status)
+        return matches
+
+    return types.boolean(types.int64, types.int64, arguments), codegen
+
+
+def entry_point(dispatcher, signature):
+    """The machine-code address of ``dispatcher`` compiled for ``signature`` (compiled, or
+    loaded from the disk cache, now) and that signature's token: what :func:`call_at`
+    takes.  The dispatcher keeps the code alive.
+
+    Returns
+    -------
+    address, token : int
+    """
+    signature = tuple(signature)
+    dispatcher.compile(signature)
+    result = dispatcher.overloads[signature]
+    return result.library.get_pointer_to_function(result.fndesc.llvm_func_name), signature_token(signature)

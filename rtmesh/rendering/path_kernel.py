@@ -91,24 +91,22 @@ sample's lobe); everything after more vertices by the first vertex's sampled lob
 
 import numpy as np
 
-from rtmesh.core.compiled import borrowed, keep_alive, kernel
-from rtmesh.geometry.embree_packets import (DEFAULT_TFAR, LANES, RAYHIT_WORDS, RTC_RAY_QUERY_FLAG_COHERENT,
+from rtmesh.core.compiled import borrowed, call_at, keep_alive, kernel
+from rtmesh.geometry.embree_packets import (LANES, RAYHIT_WORDS, RTC_RAY_QUERY_FLAG_COHERENT,
                                             RTC_RAY_QUERY_FLAG_INCOHERENT, packet_buffers, query_arguments)
 from rtmesh.lights import light_table as lt
 from rtmesh.materials import lobes
-from rtmesh.rendering.path_packets import (BOUNCE, CAMERA, MAX_LAYERS, REFLECTION, SHADOW, nearest_hits, occluded,
-                                           shadows_through_cutouts)
-from rtmesh.rendering.path_surfaces import load_lanes, set_lane, textured_materials
-from rtmesh.rendering.path_sums import GLOSSY_PATH, LIGHT_PATHS, accept_shadows
-from rtmesh.rendering.path_vertices import (CHAIN_START, VERTEX_IDS, VERTEX_WORDS, WIDTH, meet, sample_lights,
-                                            scatter)
+from rtmesh.rendering.path_packets import BOUNCE, CAMERA, REFLECTION, SHADOW
+from rtmesh.rendering.path_surfaces import textured_materials
+from rtmesh.rendering.path_sums import GLOSSY_PATH, LIGHT_PATHS
+from rtmesh.rendering.path_vertices import CHAIN_START, VERTEX_IDS, VERTEX_WORDS, WIDTH
 from rtmesh.rendering.whitted_rows import BRANCH_WORDS, pop_branch
 
 
 @kernel
 def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixels, samples, sobol_keys, times,
-                geometry, surface, lights, env, options, whitted, motion, instances, photon_map, radiance, light_paths,
-                counts):
+                geometry, surface, lights, env, options, whitted, motion, instances, photon_map, stages, radiance,
+                light_paths, counts):
     """Trace one path per camera ray and write its radiance.
 
     Parameters
@@ -131,6 +129,8 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
         Each sample's time in the shutter (scenes with moving objects).
     geometry, surface, lights, env, options, whitted, motion, instances, photon_map : tuples
         The records described in the module notes.
+    stages : (10,) int64
+        The stages' entry points, :func:`rtmesh.rendering.path_signatures.stage_entries`.
     radiance : (n, 3) float64
         Output.
     light_paths : (n, LIGHT_PATHS, 3) float64, or (0, LIGHT_PATHS, 3)
@@ -139,18 +139,23 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
         Rays traced (active lanes only) by :data:`rtmesh.rendering.path_packets.COUNTER_NAMES`,
         added to: camera, bounce and shadow rays (whitted: camera, reflection, refraction,
         BSDF-sampled, cut-out, shadow, area-light shadow and environment shadow rays).
+
+    Returns
+    -------
+    bool
+        False if ``stages`` were compiled for other types than this kernel passes them (it
+        then stops, its outputs incomplete).
     """
     # read through views that own nothing: no reference counts in the per-lane rows
     # (rtmesh.core.compiled.borrowed; the caller holds the arrays)
     geometry, surface, lights, env, options, whitted, motion, instances, photon_map = borrowed(
         (geometry, surface, lights, env, options, whitted, motion, instances, photon_map))
-    origins, directions, keys, pixels, samples, sobol_keys, times, radiance, light_paths, counts = borrowed(
-        (origins, directions, keys, pixels, samples, sobol_keys, times, radiance, light_paths, counts))
+    origins, directions, keys, pixels, samples, sobol_keys, times, stages, radiance, light_paths, counts = borrowed(
+        (origins, directions, keys, pixels, samples, sobol_keys, times, stages, radiance, light_paths, counts))
     n = origins.shape[0]
     absorption = surface[4]
     textured = textured_materials(surface, geometry)
     split, camera_media, light_samples = options[6], options[7], options[8]
-    cutouts, offset_scale = options[5], options[3]
     media = len(camera_media)
     whitted_on, delta_rows, group_start, branch_depth, ao_samples = (whitted[0], whitted[1], whitted[2], whitted[11],
                                                                     whitted[12])
@@ -158,7 +163,6 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     # light once and light_samples of each other light (whitted: LightTable.light_groups)
     deltas = len(delta_rows) if whitted_on else 0
     area_rounds = light_samples * (len(group_start) - 1) if whitted_on else light_samples
-    instance_faces = instances[0]
     ray, words, valid, args_coherent = packet_buffers(np.int64(RAYHIT_WORDS), np.int64(1),
                                                       np.int64(RTC_RAY_QUERY_FLAG_COHERENT))
     args_incoherent = query_arguments(np.int64(RTC_RAY_QUERY_FLAG_INCOHERENT))
@@ -243,6 +247,9 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     vertices = (vertex, vertex_ids, shaded)
     shadows = (shadow_rays, shadow_set, shadow_count, shadow_kind, pending, pending_paths)
     branches = (branch, branch_media, branch_top)
+    queries = (intersect16, occluded16, scene, args_coherent, args_incoherent)
+    packet, shadow_packet, rest_packet = (ray, words, valid), (shadow, shadow_words, shadow_valid), (rest, rest_words,
+                                                                                                   rest_valid)
     for start in range(0, n, WIDTH):
         count = min(WIDTH, n - start)
         for lane in range(WIDTH):
@@ -292,59 +299,29 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
             for lane in range(WIDTH):
                 if alive[lane]:
                     counts[ray_kind[lane] if whitted_on else (CAMERA if lane_depth[lane] == 0 else BOUNCE)] += 1
-            args = args_coherent if first else args_incoherent
-            first = False
-            traced = 0
-            for lo in range(0, WIDTH, LANES):
-                hi = lo + LANES
-                if load_lanes(alive[lo:hi], ray, words, valid, px[lo:hi], py[lo:hi], pz[lo:hi], dx[lo:hi], dy[lo:hi],
-                              dz[lo:hi], DEFAULT_TFAR) == 0:
-                    continue
-                traced += 1
-                nearest_hits(intersect16, scene, args, args_incoherent, ray, words, valid, motion, instance_faces,
-                             lane_time[lo:hi], px[lo:hi], py[lo:hi], pz[lo:hi], dx[lo:hi], dy[lo:hi], dz[lo:hi], rest,
-                             rest_words, rest_valid, best_t[lo:hi], best_prim[lo:hi], best_instance[lo:hi],
-                             best_u[lo:hi], best_v[lo:hi])
-            if traced == 0:
+            if not alive.any():
                 break
+            # the rays: each live lane's nearest hit (rtmesh.rendering.path_rays)
+            if not call_at(stages[0], stages[1], (queries, first, packet, rest_packet, lanes, hits, motion,
+                                                  instances)):
+                return False
+            first = False
             # the vertex: what each lane meets, its light samples, the ray that continues it
-            meet(lanes, hits, vertices, keys, start, geometry, surface, textured, lights, env, options, whitted,
-                 motion, instances, photon_map)
-            sample_lights(lanes, vertices, shadows, keys, pixels, samples, sobol_keys, start, geometry, surface,
-                          lights, env, options, whitted, motion)
-            scatter(lanes, vertices, branches, keys, pixels, samples, sobol_keys, start, surface, options, whitted)
+            # (rtmesh.rendering.path_vertices: meet, sample_lights, scatter, through their
+            # entry points, so that they compile apart from this kernel)
+            if not call_at(stages[2], stages[3], (lanes, hits, vertices, keys, start, geometry, surface, textured,
+                                                  lights, env, options, whitted, motion, instances, photon_map)):
+                return False
+            if not call_at(stages[4], stages[5], (lanes, vertices, shadows, keys, pixels, samples, sobol_keys, start,
+                                                  geometry, surface, lights, env, options, whitted, motion)):
+                return False
+            if not call_at(stages[6], stages[7], (lanes, vertices, branches, keys, pixels, samples, sobol_keys, start,
+                                                  surface, options, whitted)):
+                return False
             # the shadow rays: one packet per light sample of the vertices and packet of lanes
-            for k in range(light_slots):
-                if shadow_count[k] == 0:
-                    continue
-                counts[shadow_kind[k]] += shadow_count[k]
-                shadow_count[k] = 0
-                for lo in range(0, WIDTH, LANES):
-                    hi = lo + LANES
-                    set_count = 0
-                    for lane in range(LANES):
-                        shadow_valid[lane] = 0
-                        if shadow_set[k, lo + lane]:
-                            shadow_set[k, lo + lane] = False
-                            ray_k = shadow_rays[k, lo + lane]
-                            reach[lo + lane] = ray_k[6]
-                            set_lane(shadow, shadow_words, lane, ray_k[0], ray_k[1], ray_k[2], ray_k[3], ray_k[4],
-                                     ray_k[5], np.float32(ray_k[6]))
-                            shadow_valid[lane] = -1
-                            set_count += 1
-                    if set_count == 0:
-                        continue
-                    if cutouts:
-                        shadows_through_cutouts(intersect16, scene, args_incoherent, shadow, shadow_words,
-                                                shadow_valid, geometry, surface, offset_scale, keys, start + lo,
-                                                lane_depth[lo:hi], reach[lo:hi], counts, motion, lane_time[lo:hi],
-                                                segment, rest, rest_words, rest_valid, best_t[lo:hi],
-                                                best_prim[lo:hi], best_u[lo:hi], best_v[lo:hi], (k + 1) * MAX_LAYERS)
-                    else:
-                        occluded(occluded16, scene, args_incoherent, shadow, shadow_valid, motion, lane_time[lo:hi],
-                                 reach[lo:hi], rest, rest_words, rest_valid)
-                    accept_shadows(shadow_valid, pending[k, lo:hi], pending_paths[k if split else 0, lo:hi], split,
-                                   total[lo:hi], paths[lo:hi])
+            if not call_at(stages[8], stages[9], (queries, shadow_packet, rest_packet, segment, reach, lanes, hits,
+                                                  shadows, keys, start, counts, geometry, surface, options, motion)):
+                return False
         for lane in range(count):
             radiance[start + lane, 0] = total[lane, 0]
             radiance[start + lane, 1] = total[lane, 1]
@@ -354,3 +331,4 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                     for c in range(3):
                         light_paths[start + lane, bucket, c] = paths[lane, bucket, c]
     keep_alive(owned)
+    return True

@@ -5,11 +5,15 @@ records of the types :class:`rtmesh.rendering.path_stage.PathStage` builds, and 
 of a scene without placements (``no_instances``) and of the path integrator's kernel
 configuration (``no_whitted``)."""
 
+import functools
+
 import numpy as np
 
-from rtmesh.core.compile_ahead import KernelGroup
+from rtmesh.core.compile_ahead import KernelGroup, compile_locked
+from rtmesh.core.compiled import entry_point
 from rtmesh.lights import light_table as lt
 from rtmesh.materials import lobes, models
+from rtmesh.rendering import path_rays
 from rtmesh.rendering import path_vertices as pv
 from rtmesh.rendering.path_kernel import trace_paths
 from rtmesh.rendering.photon_kernel import empty_photon_map, gather
@@ -62,13 +66,13 @@ def lane_records():
 
 
 def _path_signatures():
-    """The path kernel's vertex stages and the rows they call, and the path kernel that calls
-    them, each with its one signature, from the types of :func:`small_records` and
+    """The path kernel, its vertex stages and the rows they call, each with its one
+    signature, from the types of :func:`small_records` and
     :func:`lane_records`.
 
     Returns
     -------
-    stages, callers : lists of (dispatcher, tuple of numba types)
+    list of (dispatcher, tuple of numba types)
     """
     import numba
     from numba import types
@@ -93,7 +97,7 @@ def _path_signatures():
              types.Array(types.uint64, 1, "C"), types.Array(f64, 1, "C")) + tuple(
         numba.typeof(record) for record in (geometry, surface, lights, env, options, whitted, motion, instances,
                                             photon_map)) + (
-        rows, types.Array(f64, 3, "C"), types.Array(types.int64, 1, "C"))
+        index, rows, types.Array(f64, 3, "C"), types.Array(types.int64, 1, "C"))
     i64 = types.int64
     gathered = ((numba.typeof(photon_map),) + (f64,) * 7 + (i64, i64, rows, i64, numba.typeof(energy))
                 + (f64,) * 12 + (i64,))
@@ -109,14 +113,35 @@ def _path_signatures():
         "geometry", "surface", "lights", "env", "options", "whitted", "motion"))
     scatter = (lanes, vertices, branches, u64s, index, index, u64s, start, records["surface"], records["options"],
                records["whitted"])
+    words = types.Array(types.int32, 1, "C")
+    packet = types.BaseTuple.from_types((types.Array(types.float32, 1, "C"), words, words))
+    queries = types.BaseTuple.from_types((query, query, types.int64, words, words))
+    segments = (queries, types.boolean, packet, packet, lanes, hits, records["motion"], records["instances"])
+    shadow_rays = (queries, packet, packet, rows, types.Array(f64, 1, "C"), lanes, hits, shadows, u64s, start, index,
+                   records["geometry"], records["surface"], records["options"], records["motion"])
     return [(models.evaluate, evaluate), (models.parts, evaluate), (pv.sample_lights, sample_lights),
-            (gather, gathered), (pv.meet, meet), (models.sample, sample), (pv.scatter, scatter)], [(trace_paths, trace)]
+            (trace_paths, trace), (path_rays.trace_segments, segments), (gather, gathered), (pv.meet, meet),
+            (models.sample, sample), (pv.scatter, scatter), (path_rays.trace_shadows, shadow_rays)]
 
 
-# the path integrator's kernels, in the order a first run best compiles them in two processes:
-# the render the BSDF evaluation and the light samples' stage, the helper the scattering and
-# surface stages (their rows and the photon gather first); the path kernel, which links them
-# all, after them (cold, one process: meet 17.6 s, sample_lights 9.4, scatter 5.5, evaluate
-# 5.4, sample 2.8, gather 1.1, parts 1.0, then trace_paths 13.1)
-_STAGES, _CALLERS = _path_signatures()
-PATH_KERNELS = KernelGroup(__name__, "path", _STAGES, callers=_CALLERS)
+# the path integrator's kernels, in the order a first run best compiles them in two processes
+# (cold, one process: meet 17.6 s with the gather, sample_lights 9.4 with the BSDF evaluation,
+# scatter 5.5 with the BSDF sampling; trace_paths, which calls the stages through their entry
+# points, alone): the render the BSDF evaluation, the light samples' stage and the path
+# kernel; the helper the scattering and surface stages
+PATH_KERNELS = KernelGroup(__name__, "path", _path_signatures())
+
+
+@functools.cache
+def stage_entries():
+    """The path kernel's stages' entry points (:func:`rtmesh.core.compiled.entry_point`:
+    address and signature token of ``trace_segments``, ``meet``, ``sample_lights``,
+    ``scatter`` and ``trace_shadows``, in that order) for
+    :func:`rtmesh.rendering.path_kernel.trace_paths`, as a (10,) int64 array; each stage
+    compiled, or loaded from the disk cache, on the first call."""
+    stages = {dispatcher: signature for dispatcher, signature in PATH_KERNELS.kernels}
+    entries = []
+    for stage in (path_rays.trace_segments, pv.meet, pv.sample_lights, pv.scatter, path_rays.trace_shadows):
+        compile_locked(stage, stages[stage])
+        entries.extend(entry_point(stage, stages[stage]))
+    return np.array(entries, np.int64)

@@ -31,7 +31,7 @@ from rtmesh.io.passes import LIGHT_PATH_PASSES
 from rtmesh.rendering.caustics import Caustics
 from rtmesh.rendering.photon_kernel import empty_photon_map
 from rtmesh.rendering.path_kernel import trace_paths
-from rtmesh.rendering.path_signatures import PATH_KERNELS, no_instances, no_whitted
+from rtmesh.rendering.path_signatures import PATH_KERNELS, no_instances, no_whitted, stage_entries
 from rtmesh.rendering.path_sums import LIGHT_PATHS
 from rtmesh.rendering.path_packets import COUNTER_NAMES
 from rtmesh.rendering.path_surfaces import TEXTURE_COLUMNS
@@ -353,12 +353,15 @@ class PathStage:
                    not it.background.transparent, self.cutouts, split, self._camera_media, int(s.light_samples),
                    block_bits(s.spp, s.light_samples))
         light_paths = np.zeros((n if split else 0, LIGHT_PATHS, 3))
-        trace_paths(intersect16, occluded16, handle, kernel_input(origins, np.float64),
+        complete = trace_paths(intersect16, occluded16, handle, kernel_input(origins, np.float64),
                     kernel_input(directions, np.float64), keys, *self._sobol(pixel, sample),
                     np.zeros(0) if times is None else kernel_input(times, np.float64),
                     self.geometry, self.surface, self.light_record, self._env, options, self._whitted, self._motion,
                     self._instances,
-                    self.photon_map, radiance, light_paths, counts)
+                    self.photon_map, stage_entries(), radiance, light_paths, counts)
+        if not complete:
+            raise RuntimeError("the path kernel's vertex stages were compiled for other argument types than it passes "
+                               "(rtmesh.rendering.path_signatures declares them)")
         if split:
             for k, name in enumerate(LIGHT_PATH_PASSES):
                 if passes.wants(name):

@@ -1,8 +1,12 @@
-"""Compiled kernels share one disk-cache stamp covering every module with compiled code."""
+"""Compiled kernels share one disk-cache stamp covering every module with compiled code; a
+kernel called by its entry point runs only for its signature."""
 
 import pathlib
 import re
 import shutil
+
+import numba
+import numpy as np
 
 from rtmesh.core import compiled
 from rtmesh.geometry import embree_packets
@@ -48,3 +52,30 @@ def test_the_stamp_changes_with_any_kernel_module(tmp_path, monkeypatch):
     monkeypatch.undo()
     compiled.package_stamp.cache_clear()
     assert len(set(stamps)) == len(stamps)
+
+
+@numba.njit
+def _add_scaled(out, pair, k):
+    x, y = pair
+    for i in range(len(out)):
+        out[i] += x[i] * y[i] + k
+
+
+@numba.njit
+def _call_twice(address, token, out, pair, k):
+    called = compiled.call_at(address, token, (out, pair, k))
+    called &= compiled.call_at(address, token, (out, pair, k))
+    return called
+
+
+def test_a_kernel_called_at_its_entry_point_runs_only_with_its_signature_token():
+    out, pair = np.zeros(3), (np.arange(3.0), np.full(3, 2.0))
+    signature = (numba.typeof(out), numba.typeof(pair), numba.types.int64)
+    address, token = compiled.entry_point(_add_scaled, signature)
+    assert token == compiled.signature_token(signature)
+    assert _call_twice(address, token, out, pair, 1)
+    np.testing.assert_array_equal(out, 2 * (np.arange(3.0) * 2.0 + 1))
+    # a token for other types: nothing is called
+    other = compiled.signature_token((numba.typeof(out), numba.typeof(pair), numba.types.float64))
+    assert not _call_twice(address, other, out, pair, 1)
+    np.testing.assert_array_equal(out, 2 * (np.arange(3.0) * 2.0 + 1))
