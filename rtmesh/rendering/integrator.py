@@ -77,11 +77,10 @@ log = logging.getLogger(__name__)
 # Whether Whitted renders that the fused stage does not take go through the path kernel
 # configured as the Whitted integrator (rtmesh.rendering.whitted_rows) instead of the general
 # wavefront.  The kernel renders every Whitted scene, its images within noise of the
-# wavefront's (tests/rendering/test_whitted_kernel.py), and renders most of them faster, but
-# its first compile costs a first render of the showcase 81 s instead of 7 s
-# (docs/BENCHMARKS.md, "Whitted through the path kernel"): off until the kernel compiles
-# in pieces.  Tests of the wavefront's own stages pin it off.
-WHITTED_THROUGH_KERNEL = False
+# wavefront's (tests/rendering/test_whitted_kernel.py), most of them faster; its first
+# compile is the path integrator's (docs/BENCHMARKS.md, "Whitted through the path kernel").
+# Tests of the wavefront's own stages pin it off.
+WHITTED_THROUGH_KERNEL = True
 
 
 def _translated(obj, shift):

@@ -449,8 +449,13 @@ def test_each_stratum_of_the_light_holds_exactly_one_sample(sampler):
 def test_area_light_and_ao_points_of_a_pixel_are_one_stratified_set(sampler, monkeypatch):
     # spp = 4 camera samples per pixel x 4 rays per hit: the 16 points a pixel's samples
     # send to the light (and the 16 ambient-occlusion directions) fill every stratum of the
-    # 4 x 4 grid once (for Sobol every elementary interval), as the renderer draws them
+    # 4 x 4 grid once (for Sobol every elementary interval), as the general wavefront draws
+    # them (the path kernel's Whitted configuration draws a pixel's light points from its
+    # Sobol set under sobol and zsobol, hashed numbers otherwise and for AO)
     import rtmesh.sampling.sampler
+    from rtmesh.rendering import integrator as integrator_module
+
+    monkeypatch.setattr(integrator_module, "WHITTED_THROUGH_KERNEL", False)
     drawn = []
 
     def recording(module):
