@@ -14,6 +14,7 @@ from rtmesh.core.compiled import entry_point
 from rtmesh.lights import light_table as lt
 from rtmesh.materials import lobes, models
 from rtmesh.rendering import path_rays
+from rtmesh.rendering.film_sums import accumulate_samples
 from rtmesh.rendering import path_vertices as pv
 from rtmesh.rendering.path_kernel import trace_paths
 from rtmesh.rendering.photon_kernel import empty_photon_map, gather
@@ -119,7 +120,11 @@ def _path_signatures():
     segments = (queries, types.boolean, packet, packet, lanes, hits, records["motion"], records["instances"])
     shadow_rays = (queries, packet, packet, rows, types.Array(f64, 1, "C"), lanes, hits, shadows, u64s, start, index,
                    records["geometry"], records["surface"], records["options"], records["motion"])
-    return [(models.evaluate, evaluate), (models.parts, evaluate), (pv.sample_lights, sample_lights),
+    # the film's sums of the kernel's (pixels, spp, 3) radiance, row-major
+    components, indices = types.float64[:, ::1], types.int64[::1]
+    film = (components, components, indices, indices, types.float64[:, :, ::1], types.float32[:, ::1])
+    return [(models.evaluate, evaluate), (models.parts, evaluate), (accumulate_samples, film),
+            (pv.sample_lights, sample_lights),
             (trace_paths, trace), (path_rays.trace_segments, segments), (path_rays.trace_shadows, shadow_rays),
             (models.sample, sample), (pv.scatter, scatter), (gather, gathered), (pv.meet, meet)]
 

@@ -33,7 +33,9 @@ def _twice(x):
 def test_renders_call_the_declared_kernels_with_the_declared_types():
     # a declared type that a render does not use would have the helper compile a version
     # nobody calls, while the render compiles its own
-    groups = (BUILD_KERNELS, FUSED_KERNELS, GENERAL_KERNELS, embree_packets.QUERY_KERNELS)
+    from rtmesh.rendering.path_signatures import PATH_KERNELS
+
+    groups = (BUILD_KERNELS, FUSED_KERNELS, GENERAL_KERNELS, embree_packets.QUERY_KERNELS, PATH_KERNELS)
     for group in groups:
         for dispatcher, signature in group.kernels:
             compile_ahead.compile_locked(dispatcher, signature)
