@@ -418,6 +418,22 @@ def to_world(wx, wy, wz, tx, ty, tz, sx, sy, sz, nx, ny, nz):
 
 
 @inline_row
+def sampled_direction(wx, wy, wz, tx, ty, tz, sx, sy, sz, nx, ny, nz, gx, gy, gz, transmissive):
+    """A BSDF sample's local direction ``w`` in world space (:func:`to_world`), its cosine
+    with the geometric normal ``g``, and whether it is lost: a reflection-only model's
+    sample below the geometric surface (the shading normal tilts the hemisphere).
+
+    Returns
+    -------
+    dx, dy, dz, side : float
+    below : bool
+    """
+    dx, dy, dz = to_world(wx, wy, wz, tx, ty, tz, sx, sy, sz, nx, ny, nz)
+    side = (gx * dx + gy * dy) + gz * dz
+    return dx, dy, dz, side, (not transmissive) and not side > 0.0
+
+
+@inline_row
 def leave_surface(hx, hy, hz, gx, gy, gz, wx, wy, wz, scale):
     """The origin of a ray that leaves the surface point ``h`` along ``w``: ``h`` moved off
     the side of the geometric normal ``g`` that ``w`` points to

@@ -40,7 +40,7 @@ from rtmesh.rendering.path_packets import (AO, AREA_SHADOW, BSDF, BSDF_U1, BSDF_
                                            mover_to_world, placed)
 from rtmesh.rendering.path_surfaces import (alias_sample, colour_tint, cross_interface, crossing_scale,
                                             environment_radiance, hit_frame, hit_parameters, is_transparent,
-                                            leave_surface, occlusion_at, surface_point, tangent_frame, to_world,
+                                            leave_surface, occlusion_at, sampled_direction, surface_point, tangent_frame,
                                             triangle_light_emission, twin_material)
 from rtmesh.rendering.path_sums import (DIFFUSE_PATH, DIRECT, GLOSSY_PATH, INDIRECT, TRANSMISSION_PATH, add_radiance,
                                         add_to_pass, clamped, lobe_category, pass_bucket)
@@ -562,10 +562,9 @@ def scatter(lanes, vertices, branches_, keys, pixels, samples, sobol_keys, start
         if (flags == lobes.FAILED) | (not ((gr > 0.0) | (gg > 0.0) | (gb > 0.0))):
             alive[lane] = False
             continue
-        ndx, ndy, ndz = to_world(wx, wy, wz, tx, ty, tz, sx, sy, sz, nx, ny, nz)
-        side = (gx * ndx + gy * ndy) + gz * ndz
-        if (not transmissive[mat]) and not side > 0.0:
-            # a shading-normal sample below the geometric surface
+        ndx, ndy, ndz, side, below = sampled_direction(wx, wy, wz, tx, ty, tz, sx, sy, sz, nx, ny, nz, gx, gy, gz,
+                                                       transmissive[mat])
+        if below:
             alive[lane] = False
             continue
         beta[lane, 0] *= gr

@@ -46,7 +46,7 @@ from rtmesh.rendering.path_surfaces import projector_incident as _projector_inci
 from rtmesh.rendering.path_surfaces import sample_area_point as _sample_area_point
 from rtmesh.rendering.path_surfaces import (cross_interface, crossing_scale, twin_material, hit_frame, hit_parameters, is_transparent,
                                             leave_surface, surface_point, tangent_frame, textured_materials,
-                                            to_world, triangle_light_emission)
+                                            sampled_direction, triangle_light_emission)
 from rtmesh.sampling.hashing import GOLDEN, mix64, path_key, uniform
 from rtmesh.sampling.lowdiscrepancy import sobol_pair
 from rtmesh.sampling.warps import concentric_disk_row, uniform_triangle_weights
@@ -325,9 +325,9 @@ def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geomet
                 if not (flags & lobes.DELTA) or not ((wr > 0.0) | (wg > 0.0) | (wb > 0.0)):
                     alive[lane] = False  # a photon goes on through delta lobes only
                     continue
-                ndx, ndy, ndz = to_world(wx, wy, wz, tx, ty, tz, sx, sy, sz, nx, ny, nz)
-                side = (gx * ndx + gy * ndy) + gz * ndz
-                if (not transmissive[mat]) and not side > 0.0:
+                ndx, ndy, ndz, side, below = sampled_direction(wx, wy, wz, tx, ty, tz, sx, sy, sz, nx, ny, nz, gx, gy,
+                                                               gz, transmissive[mat])
+                if below:
                     alive[lane] = False
                     continue
                 # the adjoint's shading-normal correction, and flux rather than radiance
