@@ -451,7 +451,8 @@ def test_area_light_and_ao_points_of_a_pixel_are_one_stratified_set(sampler, mon
     # send to the light (and the 16 ambient-occlusion directions) fill every stratum of the
     # 4 x 4 grid once (for Sobol every elementary interval), as the general wavefront draws
     # them (the path kernel's Whitted configuration draws a pixel's light points from its
-    # Sobol set under sobol and zsobol, hashed numbers otherwise and for AO)
+    # Owen-scrambled Sobol set under every sampler but random, its AO rays from hashed
+    # numbers)
     import rtmesh.sampling.sampler
     from rtmesh.rendering import integrator as integrator_module
 
