@@ -147,7 +147,7 @@ class DirectStage:
                          "motion")
         if any(getattr(st, name) for name in needs_general):
             return None
-        if type(it.accel) is not Accel or not it.accel.packets or it.media is not None:
+        if type(it.accel) is not Accel or not it.accel.packets or it.media is not None or it.instances is not None:
             return None
         if it.camera.orthographic:  # the fused camera step forms pinhole rays
             return None

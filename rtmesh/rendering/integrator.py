@@ -56,7 +56,7 @@ from rtmesh.rendering.general_kernels import GENERAL_KERNELS
 from rtmesh.rendering.local_shading import LocalShading
 from rtmesh.rendering import memory
 from rtmesh.rendering.media import Media
-from rtmesh.rendering.path_stage import PathStage, unsupported
+from rtmesh.rendering.path_stage import PathStage, unsupported, unsupported_lights
 from rtmesh.rendering.physical_shading import PhysicalShading
 from rtmesh.rendering.render_plan import RenderPlan
 from rtmesh.rendering.render_result import RenderResult
@@ -144,8 +144,13 @@ class Integrator:
             scene = scene_at_time(scene, scene.camera.shutter[0])
         if scene.instances is not None:
             missing = instances.unsupported(scene, self.settings)
+            if self.settings.integrator == "whitted":
+                # Whitted renders trace instances through the path kernel's Whitted configuration
+                if not WHITTED_THROUGH_KERNEL:
+                    missing.append("integrator 'whitted' through the general wavefront")
+                missing.extend(unsupported_lights(scene.lights))
             if missing:
-                # today's copies: the Whitted stages and some of the path kernel's read world-space faces
+                # today's copies: the general wavefront and some of the path kernel's stages read world-space faces
                 log.info("placed meshes flattened into %d copies (instances are not traced with %s)",
                          len(scene.instances), ", ".join(missing))
                 memory.check_flattening(scene.instances, ", ".join(missing))  # within a loading limit

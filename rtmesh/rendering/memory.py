@@ -251,5 +251,5 @@ def check_flattening(placed, why):
     vertices = int(counts @ np.diff(placed.prototype_vertices))
     triangles = int(counts @ np.diff(placed.prototype_faces))
     check_load("the scene", f"{len(placed)} placements flattened into copies of {triangles} triangles in all "
-               f"(instances are not traced with {why}; integrator = \"path\" traces them)",
+               f"(instances are not traced with {why})",
                load_estimate(vertices, triangles, len(placed)))

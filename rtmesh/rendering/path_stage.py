@@ -55,11 +55,15 @@ def unsupported(it):
     missing = []
     if not embree_library.packet_library():
         missing.append("the single-ray Embree path (RTMESH_EMBREE=run)")
-    others = sorted({type(light).__name__ for light in it.view_lights
+    return missing + unsupported_lights(it.view_lights)
+
+
+def unsupported_lights(lights):
+    """Which of ``lights`` the path kernel has no rows for (phrases naming their types)."""
+    others = sorted({type(light).__name__ for light in lights
                      if not isinstance(light, (MeshLight, ProjectorLight)) and not hasattr(light, "corner")
                      and not hasattr(light, "radius") and light.kernel_row() is None})
-    missing.extend(f"lights of type {name}" for name in others)
-    return missing
+    return [f"lights of type {name}" for name in others]
 
 
 def _packet_accel(accel):

@@ -9,10 +9,10 @@ normals are carried to the world by the instance's transform
 (:mod:`rtmesh.rendering.path_kernel`; for the batched queries' hits, which report the
 placement as ``Hits.instance``, :func:`rtmesh.shading.surfaces.placed_surface_records`).
 
-Only the path integrator traces instances, its passes, denoiser guides and transparent
-backgrounds included (:func:`unsupported` says what it does not trace through them yet);
-everything else renders :func:`flattened`, the copies the loaders made before instancing
-existed.
+Only the path kernel traces instances (under path, and in its Whitted configuration), its
+passes, denoiser guides and transparent backgrounds included (:func:`unsupported` says what
+it does not trace through them yet); everything else renders :func:`flattened`, the copies
+the loaders made before instancing existed.
 """
 
 from dataclasses import dataclass, field
@@ -256,7 +256,8 @@ def check_transforms(transforms, names, source):
 
 def unsupported(scene, settings):
     """What keeps a scene's instances from being traced as instances (phrases; empty: the
-    path integrator traces them).
+    path kernel traces them, under path or in its Whitted configuration; the integrator
+    adds what only it knows, :class:`rtmesh.rendering.integrator.Integrator`).
 
     Parameters
     ----------
@@ -267,8 +268,9 @@ def unsupported(scene, settings):
     from rtmesh.geometry import embree_library
 
     missing = []
-    if settings.integrator != "path":
-        missing.append(f"integrator {settings.integrator!r}")
+    if settings.integrator == "whitted" and "ao" in settings.passes:
+        # the Whitted stages' AO estimate at the camera hits reads world-space faces
+        missing.append("the ao pass under whitted")
     if not embree_library.packet_library():
         missing.append("the single-ray Embree path")
     if settings.caustics == "photons":
