@@ -46,6 +46,7 @@ from rtmesh.rendering.path_sums import (DIFFUSE_PATH, DIRECT, GLOSSY_PATH, INDIR
                                         add_to_pass, clamped, lobe_category, pass_bucket)
 from rtmesh.rendering.photon_kernel import ALL_PARTS, DIFFUSE_PART, TRANSMITTED_PART, gather
 from rtmesh.rendering.whitted_rows import branches, light_factor, push_branch
+from rtmesh.sampling.alias import alias_sample_remapped
 from rtmesh.sampling.hashing import mix64, uniform
 from rtmesh.sampling.mis import power_heuristic
 from rtmesh.sampling.zsobol import sequence_pair, sequence_ray_pair
@@ -377,9 +378,12 @@ def sample_lights(lanes, vertices, shadows, keys, pixels, samples, sobol_keys, s
                 if kk < 0:
                     chosen, count_f = delta_rows[k], 1.0
                 elif whitted_on:
+                    # the light within its group by the sample's first number, rescaled to
+                    # sample the light too (the emissive triangles: a pixel's stratified
+                    # points stay stratified over the mesh, as the Whitted stages' faces)
                     lo, hi = group_start[group], group_start[group + 1]
-                    chosen = group_order[lo + alias_sample(group_probability[lo:hi], group_alias[lo:hi],
-                                                           uniform(light_key, base + LIGHT_CHOICE))]
+                    pick, lu1 = alias_sample_remapped(group_probability[lo:hi], group_alias[lo:hi], lu1)
+                    chosen = group_order[lo + pick]
                     count_f = np.float64(light_samples)
                 else:
                     chosen = alias_sample(light_probability, light_alias, uniform(light_key, base + LIGHT_CHOICE))

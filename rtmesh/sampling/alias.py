@@ -80,3 +80,30 @@ def alias_sample(probability, alias, u):
     x = u * n
     column = min(int(x), n - 1)
     return column if x - column < probability[column] else alias[column]
+
+
+# the largest float64 below 1: a remapped number stays in [0, 1) despite rounding
+_ONE_MINUS_EPSILON = 1.0 - 2.0 ** -53
+
+
+@row
+def alias_sample_remapped(probability, alias, u):
+    """The item chosen by a uniform ``u`` in [0, 1), as :func:`alias_sample`, and ``u``
+    rescaled to [0, 1) within the part of [0, 1) that chose it (as pbrt-v4's
+    ``AliasTable::Sample``): one number picks an item and then serves again, so the
+    stratification of a point set carries over to the chosen item's own sampling.
+
+    Returns
+    -------
+    item : int
+    u_remapped : float
+    """
+    n = len(probability)
+    x = u * n
+    column = min(int(x), n - 1)
+    coin = x - column
+    keep = probability[column]
+    if coin < keep:
+        return column, min(coin / keep, _ONE_MINUS_EPSILON)
+    return alias[column], min((coin - keep) / (1.0 - keep), _ONE_MINUS_EPSILON)
+
