@@ -19,6 +19,7 @@ from rtmesh.core.compiled import borrowed, kernel
 from rtmesh.geometry.embree_packets import DEFAULT_TFAR, LANES
 from rtmesh.rendering.path_packets import MAX_LAYERS, nearest_hits, occluded, shadows_through_cutouts
 from rtmesh.rendering.path_surfaces import load_lanes, set_lane
+from rtmesh.rendering.path_vertices import ALIVE, DX, DY, DZ, LANE_DEPTH, LANE_TIME, PATHS, PX, PY, PZ, TOTAL
 from rtmesh.rendering.path_sums import accept_shadows
 
 
@@ -42,8 +43,8 @@ def trace_segments(queries, first, packet, rest, lanes, hits, motion, instances)
     intersect16, scene, coherent, incoherent = queries[0], queries[2], queries[3], queries[4]
     ray, words, valid = packet
     rest_ray, rest_words, rest_valid = rest
-    px, py, pz, dx, dy, dz = lanes[0], lanes[1], lanes[2], lanes[3], lanes[4], lanes[5]
-    alive, lane_time = lanes[12], lanes[22]
+    px, py, pz, dx, dy, dz = lanes[PX], lanes[PY], lanes[PZ], lanes[DX], lanes[DY], lanes[DZ]
+    alive, lane_time = lanes[ALIVE], lanes[LANE_TIME]
     best_t, best_prim, best_instance, best_u, best_v = hits
     args = coherent if first else incoherent
     for lo in range(0, len(alive), LANES):
@@ -87,7 +88,7 @@ def trace_shadows(queries, packet, rest, segment, reach, lanes, hits, shadows, k
     intersect16, occluded16, scene, incoherent = queries[0], queries[1], queries[2], queries[4]
     shadow, shadow_words, shadow_valid = packet
     rest_ray, rest_words, rest_valid = rest
-    total, paths, lane_depth, lane_time = lanes[7], lanes[8], lanes[17], lanes[22]
+    total, paths, lane_depth, lane_time = lanes[TOTAL], lanes[PATHS], lanes[LANE_DEPTH], lanes[LANE_TIME]
     best_t, best_prim, best_u, best_v = hits[0], hits[1], hits[3], hits[4]
     shadow_rays, shadow_set, shadow_count, shadow_kind, pending, pending_paths = shadows
     offset_scale, cutouts, split = options[3], options[5], options[6]

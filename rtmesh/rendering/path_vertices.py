@@ -40,8 +40,8 @@ from rtmesh.rendering.path_packets import (AO, AREA_SHADOW, BSDF, BSDF_U1, BSDF_
                                            mover_to_world, placed)
 from rtmesh.rendering.path_surfaces import (alias_sample, colour_tint, cross_interface, crossing_scale,
                                             environment_radiance, hit_frame, hit_parameters, is_transparent,
-                                            leave_surface, occlusion_at, sampled_direction, surface_point, tangent_frame,
-                                            triangle_light_emission, twin_material)
+                                            leave_surface, occlusion_at, sampled_direction, surface_point,
+                                            tangent_frame, triangle_light_emission, twin_material)
 from rtmesh.rendering.path_sums import (DIFFUSE_PATH, DIRECT, GLOSSY_PATH, INDIRECT, TRANSMISSION_PATH, add_radiance,
                                         add_to_pass, clamped, lobe_category, pass_bucket)
 from rtmesh.rendering.photon_kernel import ALL_PARTS, DIFFUSE_PART, TRANSMITTED_PART, gather
@@ -64,10 +64,12 @@ CHAIN_START, CHAIN_SCATTERED, CHAIN_CAUSTIC = 0, 1, 2
 # array of its records, which per packet cost a third of the path kernel's time)
 PACKETS = 4
 WIDTH = PACKETS * LANES
-# the per-lane state of the lanes record, in its order
+# the per-lane state of the lanes record, in its order, and each item's index
 LANE_RECORD = ("px", "py", "pz", "dx", "dy", "dz", "beta", "total", "paths", "category", "stack", "sigma", "alive",
                "prev_pdf", "prev_delta", "eta_scale", "prev_count", "lane_depth", "layers", "chain", "travelled",
                "ray_kind", "lane_time", "moved", "scratch")
+(PX, PY, PZ, DX, DY, DZ, BETA, TOTAL, PATHS, CATEGORY, STACK, SIGMA, ALIVE, PREV_PDF, PREV_DELTA, ETA_SCALE, PREV_COUNT,
+ LANE_DEPTH, LAYERS, CHAIN, TRAVELLED, RAY_KIND, LANE_TIME, MOVED, SCRATCH) = range(len(LANE_RECORD))
 # a shaded vertex's columns: hit point, geometric normal, shading normal, tangent, bitangent
 # (world), the direction toward the ray's origin in the shading frame, the ambient term
 POINT, GEOMETRIC, NORMAL, TANGENT, BITANGENT, OUTGOING, AMBIENT = 0, 3, 6, 9, 12, 15, 18
@@ -78,13 +80,16 @@ VERTEX_IDS = 5
 
 
 @inline_row
-def vertex_frame(vertex, lane):
-    """A shaded vertex's point, normals, tangent frame and outgoing direction (in that frame),
-    as :func:`meet` left them: 18 floats."""
-    return (vertex[lane, 0], vertex[lane, 1], vertex[lane, 2], vertex[lane, 3], vertex[lane, 4], vertex[lane, 5],
-            vertex[lane, 6], vertex[lane, 7], vertex[lane, 8], vertex[lane, 9], vertex[lane, 10], vertex[lane, 11],
-            vertex[lane, 12], vertex[lane, 13], vertex[lane, 14], vertex[lane, 15], vertex[lane, 16],
-            vertex[lane, 17])
+def shaded_vertex(vertex, vertex_ids, lane, scratch, params, tags):
+    """A shaded vertex as :func:`meet` left it: its material, face, model tag, parameter table
+    and row, then its point, normals, tangent frame and outgoing direction (in that frame):
+    5 values and 18 floats."""
+    mat = vertex_ids[lane, MATERIAL]
+    return (mat, vertex_ids[lane, FACE], tags[mat], scratch if vertex_ids[lane, IN_SCRATCH] else params,
+            vertex_ids[lane, PARAMETER_ROW], vertex[lane, 0], vertex[lane, 1], vertex[lane, 2], vertex[lane, 3],
+            vertex[lane, 4], vertex[lane, 5], vertex[lane, 6], vertex[lane, 7], vertex[lane, 8], vertex[lane, 9],
+            vertex[lane, 10], vertex[lane, 11], vertex[lane, 12], vertex[lane, 13], vertex[lane, 14],
+            vertex[lane, 15], vertex[lane, 16], vertex[lane, 17])
 
 
 @kernel
@@ -314,8 +319,9 @@ def sample_lights(lanes, vertices, shadows, keys, pixels, samples, sobol_keys, s
     lanes, vertices, shadows, keys, pixels, samples, sobol_keys, geometry, surface, lights, env, options, whitted, \
         motion = borrowed((lanes, vertices, shadows, keys, pixels, samples, sobol_keys, geometry, surface, lights, env,
                            options, whitted, motion))
-    (px, py, pz, dx, dy, dz, beta, total, paths, category, stack, sigma, alive, prev_pdf, prev_delta, eta_scale,
-     prev_count, lane_depth, layers, chain, travelled, ray_kind, lane_time, moved, scratch) = lanes
+    dx, dy, dz, beta, category, alive = lanes[DX], lanes[DY], lanes[DZ], lanes[BETA], lanes[CATEGORY], lanes[ALIVE]
+    prev_count, lane_depth, chain = lanes[PREV_COUNT], lanes[LANE_DEPTH], lanes[CHAIN]
+    lane_time, moved, scratch = lanes[LANE_TIME], lanes[MOVED], lanes[SCRATCH]
     vertex, vertex_ids, shaded = vertices
     shadow_rays, shadow_set, shadow_count, shadow_kind, pending, pending_paths = shadows
     tags, params, transmissive, albedo_table = surface[0], surface[1], surface[2], surface[6]
@@ -333,17 +339,13 @@ def sample_lights(lanes, vertices, shadows, keys, pixels, samples, sobol_keys, s
     for lane in range(len(alive)):
         if not shaded[lane]:
             continue
-        key = keys[start + lane]
-        depth = lane_depth[lane]
+        (mat, _, tag, bsdf_params, bsdf_row, hx, hy, hz, gx, gy, gz, nx, ny, nz, tx, ty, tz, sx, sy, sz, lox, loy,
+         loz) = shaded_vertex(vertex, vertex_ids, lane, scratch, params, tags)
+        key, depth = keys[start + lane], lane_depth[lane]
         base = DIMENSIONS_PER_VERTEX * depth
-        mat, bsdf_row = vertex_ids[lane, MATERIAL], vertex_ids[lane, PARAMETER_ROW]
-        bsdf_params = scratch if vertex_ids[lane, IN_SCRATCH] else params
-        tag = tags[mat]
-        (hx, hy, hz, gx, gy, gz, nx, ny, nz, tx, ty, tz, sx, sy, sz, lox, loy,
-         loz) = vertex_frame(vertex, lane)
         ox, oy, oz = -dx[lane], -dy[lane], -dz[lane]
-        follow = (max_depth < 0) | (depth + 1 <= max_depth)
         whitted_hit = whitted_on and tag == models.BLINN_PHONG
+        follow = (max_depth < 0) | (depth + 1 <= max_depth)
         ambient_r, ambient_g, ambient_b = vertex[lane, AMBIENT], vertex[lane, AMBIENT + 1], vertex[lane, AMBIENT + 2]
         # the first vertex's light points: per-pixel Owen-scrambled Sobol pairs (stratified
         # over the pixel's samples and each sample's light samples), later vertices' hashed
@@ -491,8 +493,10 @@ def scatter(lanes, vertices, branches_, keys, pixels, samples, sobol_keys, start
     # views that own nothing, known so here: no reference counts (rtmesh.core.compiled.borrowed)
     lanes, vertices, branches_, keys, pixels, samples, sobol_keys, surface, options, whitted = borrowed(
         (lanes, vertices, branches_, keys, pixels, samples, sobol_keys, surface, options, whitted))
-    (px, py, pz, dx, dy, dz, beta, total, paths, category, stack, sigma, alive, prev_pdf, prev_delta, eta_scale,
-     prev_count, lane_depth, layers, chain, travelled, ray_kind, lane_time, moved, scratch) = lanes
+    px, py, pz, dx, dy, dz = lanes[PX], lanes[PY], lanes[PZ], lanes[DX], lanes[DY], lanes[DZ]
+    beta, category, stack, sigma, alive = lanes[BETA], lanes[CATEGORY], lanes[STACK], lanes[SIGMA], lanes[ALIVE]
+    prev_pdf, prev_delta, eta_scale = lanes[PREV_PDF], lanes[PREV_DELTA], lanes[ETA_SCALE]
+    lane_depth, chain, ray_kind, scratch = lanes[LANE_DEPTH], lanes[CHAIN], lanes[RAY_KIND], lanes[SCRATCH]
     vertex, vertex_ids, shaded = vertices
     branch, branch_media, branch_top = branches_
     tags, params, transmissive, absorption, albedo_table, slots = (surface[0], surface[1], surface[2], surface[4],
@@ -503,16 +507,16 @@ def scatter(lanes, vertices, branches_, keys, pixels, samples, sobol_keys, start
     for lane in range(len(alive)):
         if not shaded[lane]:
             continue
-        key = keys[start + lane]
+        (mat, prim, tag, bsdf_params, bsdf_row, hx, hy, hz, gx, gy, gz, nx, ny, nz, tx, ty, tz, sx, sy, sz, lox,
+         loy, loz) = shaded_vertex(vertex, vertex_ids, lane, scratch, params, tags)
         depth = lane_depth[lane]
+        if not ((max_depth < 0) | (depth + 1 <= max_depth)) or (whitted_on and depth + 2 > max_depth):
+            # (whitted: the last hit a ray may reach takes light, but sends no ray on)
+            alive[lane] = False
+            continue
+        key = keys[start + lane]
         base = DIMENSIONS_PER_VERTEX * depth
-        mat, prim, bsdf_row = vertex_ids[lane, MATERIAL], vertex_ids[lane, FACE], vertex_ids[lane, PARAMETER_ROW]
-        bsdf_params = scratch if vertex_ids[lane, IN_SCRATCH] else params
-        tag = tags[mat]
-        (hx, hy, hz, gx, gy, gz, nx, ny, nz, tx, ty, tz, sx, sy, sz, lox, loy,
-         loz) = vertex_frame(vertex, lane)
         ox, oy, oz = -dx[lane], -dy[lane], -dz[lane]
-        follow = (max_depth < 0) | (depth + 1 <= max_depth)
         whitted_hit = whitted_on and tag == models.BLINN_PHONG
         front = vertex_ids[lane, FRONT] != 0
         # the first vertex's BSDF point: a per-pixel Owen-scrambled Sobol pair (stratified
@@ -524,10 +528,6 @@ def scatter(lanes, vertices, branches_, keys, pixels, samples, sobol_keys, start
             bu1, bu2 = sequence_pair(sobol_keys, 1, pixel, sample_index)
         else:
             bu1, bu2 = uniform(key, base + BSDF_U1), uniform(key, base + BSDF_U2)
-        if not follow or (whitted_on and depth + 2 > max_depth):
-            # (whitted: the last hit a ray may reach takes light, but sends no ray on)
-            alive[lane] = False
-            continue
         if whitted_hit:
             # the Whitted split: on along the refracted ray (or the mirror ray), the
             # other kept for later; rays whose throughput falls under the cutoff are not followed
