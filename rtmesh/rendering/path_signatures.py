@@ -27,7 +27,7 @@ def no_instances():
 def no_whitted(materials):
     """The kernel's ``whitted`` record under the path integrator (``materials``: the count)."""
     return (False, np.zeros(0, np.int64), np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros(0),
-            np.zeros(0, np.int64), np.zeros(0), np.zeros((materials, 3)), np.zeros(materials), 0.0, False, 0, 0, 0.0)
+            np.zeros(0, np.int64), np.zeros(0), np.zeros((materials, 3)), np.zeros(materials), 0.0, False, 0, 0, 0.0, 0)
 
 
 def small_records():

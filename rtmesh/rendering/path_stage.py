@@ -304,14 +304,15 @@ class PathStage:
         each material's ambient light (its ambient colour times the scene's; none for
         unlit materials) and baked-occlusion strength, the cutoff, the Fresnel reflectance,
         the depth of a lane's stack of split rays (at most one a bounce), and the ambient
-        occlusion rays a hit's ambient term takes (0: none) and their length."""
+        occlusion rays a hit's ambient term takes (0: none), their length and the
+        :func:`~rtmesh.sampling.zsobol.block_bits` of the first vertex's (spp x ao_samples)."""
         it, s = self.it, self.it.settings
         m = it.scene.materials
+        ao_samples = int(it.ao_samples) if it.plan.ao and it.plan.ambient else 0
         ambient = np.where(m.unlit[:, None], 0.0, m.ambient * np.asarray(it.scene.ambient, dtype=np.float64))
         return (True, *self.lights.light_groups(), np.ascontiguousarray(ambient, dtype=np.float64),
                 np.ascontiguousarray(m.occlusion_strength, dtype=np.float64), float(s.cutoff), s.fresnel == "exact",
-                max(int(s.max_depth), 1), int(it.ao_samples) if it.plan.ao and it.plan.ambient else 0,
-                float(it.ao_distance))
+                max(int(s.max_depth), 1), ao_samples, float(it.ao_distance), block_bits(s.spp, max(ao_samples, 1)))
 
     def _sobol(self, pixel, sample):
         """The kernel's Sobol arguments: pixels, sample indices and the sequences' record

@@ -49,13 +49,16 @@ from rtmesh.rendering.whitted_rows import branches, light_factor, push_branch
 from rtmesh.sampling.alias import alias_sample_remapped
 from rtmesh.sampling.hashing import mix64, uniform
 from rtmesh.sampling.mis import power_heuristic
-from rtmesh.sampling.zsobol import sequence_pair, sequence_ray_pair
+from rtmesh.sampling.zsobol import keyed_ray_pair, sequence_pair, sequence_ray_pair
 
 # Sobol sequences hold 2**32 points; later samples take hashed numbers
 SOBOL_LIMIT = 1 << 32
 # the key of light sample k > 0 of a vertex is mix64(key + k * _LIGHT_ROUND) (sample 0 takes
 # the path's own key): its choice and point are the vertex's usual dimensions of that key
 _LIGHT_ROUND = np.uint64(0xD1B54A32D192ED03)
+# the first vertex's ambient-occlusion directions: the light points' Sobol set, scrambled by
+# the light sequence's key mixed with this
+_AO_SEQUENCE = np.uint64(0xA0A0_5EED_0C1C_1E55)
 # what a path's last vertices were, for caustics: only delta bounces since the camera; a
 # non-delta bounce last; a non-delta bounce, then delta bounces only (light met now is a
 # caustic path, which photons carry when they are on)
@@ -330,7 +333,7 @@ def sample_lights(lanes, vertices, shadows, keys, pixels, samples, sobol_keys, s
     max_depth, clamp, offset_scale, split, light_samples, light_block = (options[0], options[2], options[3],
                                                                          options[6], options[8], options[9])
     (whitted_on, delta_rows, group_start, group_order, group_probability, group_alias, group_pmf) = whitted[:7]
-    ao_samples, ao_distance = whitted[12], whitted[13]
+    ao_samples, ao_distance, ao_block = whitted[12], whitted[13], whitted[14]
     deltas = len(delta_rows) if whitted_on else 0
     choice_pmf = group_pmf if whitted_on else light_pmf
     area_rounds = light_samples * (len(group_start) - 1) if whitted_on else light_samples
@@ -458,9 +461,15 @@ def sample_lights(lanes, vertices, shadows, keys, pixels, samples, sobol_keys, s
             ax, ay, az, cx, cy, cz = tangent_frame(ux, uy, uz)
             for j in range(ao_samples):
                 k = deltas + area_rounds + j
-                ao_key = mix64(key + np.uint64(k) * _LIGHT_ROUND)
-                lx, ly, lz = square_to_cosine_hemisphere_row(uniform(ao_key, base + LIGHT_U1),
-                                                             uniform(ao_key, base + LIGHT_U2))
+                if sobol and sample_index * ao_samples + j < SOBOL_LIMIT:
+                    # the first vertex's: a pixel's spp x ao_samples directions one stratified set
+                    # (as the Whitted stages' AO), of a scrambling of its own
+                    au1, au2 = keyed_ray_pair(sobol_keys, mix64(sobol_keys[4] ^ _AO_SEQUENCE), pixel, sample_index,
+                                              j, ao_samples, ao_block)
+                else:
+                    ao_key = mix64(key + np.uint64(k) * _LIGHT_ROUND)
+                    au1, au2 = uniform(ao_key, base + LIGHT_U1), uniform(ao_key, base + LIGHT_U2)
+                lx, ly, lz = square_to_cosine_hemisphere_row(au1, au2)
                 wx, wy, wz = (ax * lx + cx * ly) + ux * lz, (ay * lx + cy * ly) + uy * lz, (az * lx + cz * ly) + uz * lz
                 ray_k = shadow_rays[k, lane]
                 ray_k[0], ray_k[1], ray_k[2] = leave_surface(hx, hy, hz, ux, uy, uz, wx, wy, wz, offset_scale)
