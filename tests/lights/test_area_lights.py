@@ -450,9 +450,8 @@ def test_area_light_and_ao_points_of_a_pixel_are_one_stratified_set(sampler, mon
     # spp = 4 camera samples per pixel x 4 rays per hit: the 16 points a pixel's samples
     # send to the light (and the 16 ambient-occlusion directions) fill every stratum of the
     # 4 x 4 grid once (for Sobol every elementary interval), as the general wavefront draws
-    # them (the path kernel's Whitted configuration draws a pixel's light points from its
-    # Owen-scrambled Sobol set under every sampler but random, its AO rays from hashed
-    # numbers)
+    # them (the path kernel's Whitted configuration draws a pixel's light points and AO
+    # directions from Owen-scrambled Sobol sets under every sampler but random)
     import rtmesh.sampling.sampler
     from rtmesh.rendering import integrator as integrator_module
 
