@@ -120,10 +120,11 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     keys : (n,) uint64
         Each sample's random key (:func:`rtmesh.sampling.hashing.path_key`).
     pixels, samples : (n,) int64, or (0,)
-        Each ray's pixel and sample index: the first vertex's light and BSDF points are
-        Sobol pairs of the pixel's sequences (``samples`` empty: hashed numbers throughout).
-    sobol_keys : (6,) uint64
-        Those sequences (sobol or zsobol) and their two dimension keys
+        Each ray's pixel and sample index: the first vertex's light, BSDF and (whitted) AO
+        points are Sobol pairs of the pixel's sequences (``samples`` empty: hashed numbers
+        throughout).
+    sobol_keys : (7,) uint64
+        Those sequences (sobol or zsobol) and their three dimension keys
         (:func:`rtmesh.sampling.zsobol.sequence_keys`).
     times : (n,) float64, or (0,)
         Each sample's time in the shutter (scenes with moving objects).

@@ -49,16 +49,13 @@ from rtmesh.rendering.whitted_rows import branches, light_factor, push_branch
 from rtmesh.sampling.alias import alias_sample_remapped
 from rtmesh.sampling.hashing import mix64, uniform
 from rtmesh.sampling.mis import power_heuristic
-from rtmesh.sampling.zsobol import keyed_ray_pair, sequence_pair, sequence_ray_pair
+from rtmesh.sampling.zsobol import sequence_pair, sequence_ray_pair
 
 # Sobol sequences hold 2**32 points; later samples take hashed numbers
 SOBOL_LIMIT = 1 << 32
 # the key of light sample k > 0 of a vertex is mix64(key + k * _LIGHT_ROUND) (sample 0 takes
 # the path's own key): its choice and point are the vertex's usual dimensions of that key
 _LIGHT_ROUND = np.uint64(0xD1B54A32D192ED03)
-# the first vertex's ambient-occlusion directions: the light points' Sobol set, scrambled by
-# the light sequence's key mixed with this
-_AO_SEQUENCE = np.uint64(0xA0A0_5EED_0C1C_1E55)
 # what a path's last vertices were, for caustics: only delta bounces since the camera; a
 # non-delta bounce last; a non-delta bounce, then delta bounces only (light met now is a
 # caustic path, which photons carry when they are on)
@@ -312,7 +309,7 @@ def sample_lights(lanes, vertices, shadows, keys, pixels, samples, sobol_keys, s
         The module's records.
     keys, pixels, samples : (n,) arrays
         Each sample's random key, pixel and sample index (:func:`rtmesh.rendering.path_kernel.trace_paths`).
-    sobol_keys : (6,) uint64
+    sobol_keys : (7,) uint64
     start : int
         Lane ``j`` is sample ``start + j``.
     geometry, surface, lights, env, options, whitted, motion : tuples
@@ -463,9 +460,8 @@ def sample_lights(lanes, vertices, shadows, keys, pixels, samples, sobol_keys, s
                 k = deltas + area_rounds + j
                 if sobol and sample_index * ao_samples + j < SOBOL_LIMIT:
                     # the first vertex's: a pixel's spp x ao_samples directions one stratified set
-                    # (as the Whitted stages' AO), of a scrambling of its own
-                    au1, au2 = keyed_ray_pair(sobol_keys, mix64(sobol_keys[4] ^ _AO_SEQUENCE), pixel, sample_index,
-                                              j, ao_samples, ao_block)
+                    # in the sampler's AO dimension (the Whitted stages' points under sobol)
+                    au1, au2 = sequence_ray_pair(sobol_keys, 2, pixel, sample_index, j, ao_samples, ao_block)
                 else:
                     ao_key = mix64(key + np.uint64(k) * _LIGHT_ROUND)
                     au1, au2 = uniform(ao_key, base + LIGHT_U1), uniform(ao_key, base + LIGHT_U2)
@@ -493,7 +489,7 @@ def scatter(lanes, vertices, branches_, keys, pixels, samples, sobol_keys, start
     lanes, vertices, branches_ : tuples
         The module's records.
     keys, pixels, samples : (n,) arrays
-    sobol_keys : (6,) uint64
+    sobol_keys : (7,) uint64
     start : int
         Lane ``j`` is sample ``start + j``.
     surface, options, whitted : tuples

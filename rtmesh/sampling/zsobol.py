@@ -328,14 +328,7 @@ def sequence_ray_pair(keys, which, pixel, sample, ray, rays, log2_block):
     stratified set and the rays of one sample an aligned block of it.  One ray
     (``ray`` 0, ``rays`` 1, ``log2_block`` the record's ``log2(spp)``) is
     :func:`sequence_pair`'s point."""
-    return keyed_ray_pair(keys, keys[4 + which], pixel, sample, ray, rays, log2_block)
-
-
-@row
-def keyed_ray_pair(keys, key, pixel, sample, ray, rays, log2_block):
-    """:func:`sequence_ray_pair` in the dimension of ``key`` (uint64) rather than one of the
-    record's: another scrambling of the same sequence (ambient-occlusion directions, say),
-    laid out by the record."""
+    key = keys[4 + which]
     if keys[ZORDER] == _ONE:
         return zsobol_pair(key, morton_code(np.uint64(pixel), keys[WIDTH]), np.uint64(sample), np.uint64(ray),
                            keys[LOG2_SPP], np.uint64(rays), keys[LEVELS], np.uint64(log2_block))

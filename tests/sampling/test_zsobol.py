@@ -196,18 +196,19 @@ def _path_ray_pairs(keys, which, pixel, sample, ray, rays, log2_block):
 @pytest.mark.parametrize("sampler", ["sobol", "zsobol"])
 @pytest.mark.parametrize("rays", [1, 3, 4])
 def test_path_kernel_light_samples_are_the_samplers_rays_of_a_hit(sampler, rays):
-    # the path integrator's first-vertex light samples (light_samples = rays) are the
-    # sampler's points of several rays a hit, as the Whitted stages' shadow rays; one ray
-    # is sequence_pair's point
+    # the path integrator's first-vertex light samples (light_samples = rays) and the Whitted
+    # configuration's AO directions (ao_samples = rays) are the sampler's points of several
+    # rays a hit, as the Whitted stages' shadow and AO rays; one ray is sequence_pair's point
     rng = np.random.default_rng(2)
     width, height, spp = 50, 30, 8
     pixel, sample = rng.integers(0, width * height, 300), rng.integers(0, 3 * spp, 300)
-    keys = sequence_keys(sampler, 9, (Dim.PATH_LIGHT, Dim.PATH_BSDF), spp, (width, height))
-    for ray in range(rays):
-        expected = decorrelated_points(sampler, 9, pixel, sample, spp, Dim.PATH_LIGHT, ray=ray, rays=rays,
-                                       resolution=(width, height))
-        got = _path_ray_pairs(keys, 0, pixel, sample, ray, rays, block_bits(spp, rays))
-        np.testing.assert_array_equal(got, expected)
+    keys = sequence_keys(sampler, 9, (Dim.PATH_LIGHT, Dim.PATH_BSDF, Dim.AO), spp, (width, height))
+    for which, dimension in ((0, Dim.PATH_LIGHT), (2, Dim.AO)):
+        for ray in range(rays):
+            expected = decorrelated_points(sampler, 9, pixel, sample, spp, dimension, ray=ray, rays=rays,
+                                           resolution=(width, height))
+            got = _path_ray_pairs(keys, which, pixel, sample, ray, rays, block_bits(spp, rays))
+            np.testing.assert_array_equal(got, expected)
     if rays == 1:
         np.testing.assert_array_equal(_path_ray_pairs(keys, 0, pixel, sample, 0, 1, block_bits(spp)),
                                       _path_pairs(keys, 0, pixel, sample))
