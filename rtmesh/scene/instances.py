@@ -268,9 +268,6 @@ def unsupported(scene, settings):
     from rtmesh.geometry import embree_library
 
     missing = []
-    if settings.integrator == "whitted" and "ao" in settings.passes:
-        # the Whitted stages' AO estimate at the camera hits reads world-space faces
-        missing.append("the ao pass under whitted")
     if not embree_library.packet_library():
         missing.append("the single-ray Embree path")
     if settings.caustics == "photons":

@@ -72,7 +72,9 @@ def test_instances_render_as_their_copies_under_path():
 
 def test_whitted_traces_instances_through_the_kernel():
     scene = placed_scene(count=5)
-    settings = RenderSettings(width=48, height=36, spp=4, integrator="whitted", passes=("object_id", "instance_id"))
+    scene.ambient = np.array([0.3, 0.3, 0.3])
+    settings = RenderSettings(width=48, height=36, spp=4, integrator="whitted",
+                              passes=("object_id", "instance_id", "ao"), ao_samples=4)
     placed = Integrator(scene, settings)
     assert placed.instances is not None and placed.path_stage is not None and placed.direct_stage is None
     result = placed.render()
@@ -84,6 +86,9 @@ def test_whitted_traces_instances_through_the_kernel():
     seen = set(np.unique(result.passes["instance_id"]).tolist()) - {-1.0, 0.0}
     assert len(seen) >= 2 and seen <= set(range(1, 6))
     assert np.mean(result.passes["object_id"] == copies.passes["object_id"]) > 0.99
+    # the ambient-occlusion pass and rays see the placements as the copies
+    ao, ao_copies = block_means(result.passes["ao"]), block_means(copies.passes["ao"])
+    assert np.abs(ao - ao_copies).max() <= 0.01 * ao_copies.mean() and ao_copies.min() < 0.95
 
 
 def test_whitted_through_the_wavefront_renders_the_copies(caplog, monkeypatch):
