@@ -1,11 +1,11 @@
 """The path integrator's compiled kernel: unidirectional path tracing with next-event
 estimation and multiple importance sampling, over Embree packets.
 
-Each block of 64 camera samples (:data:`rtmesh.rendering.path_vertices.WIDTH`) is four
+Each block of 256 camera samples (:data:`rtmesh.rendering.path_vertices.WIDTH`) is sixteen
 16-wide packets: the camera rays are traced with the coherent flag, every later segment of
 the paths as one incoherent packet of each packet's lanes still alive, and each round's
 shadow rays as one occlusion packet per light sample and packet.  Between the queries the
-vertex's stages run over the 64 lanes (:mod:`rtmesh.rendering.path_vertices`, kernels of
+vertex's stages run over the 256 lanes (:mod:`rtmesh.rendering.path_vertices`, kernels of
 their own: ``meet``, ``sample_lights``, ``scatter``).  Per lane and vertex:
 
 1. the ray meets a visible quad or disk light, a surface or nothing (the background);
