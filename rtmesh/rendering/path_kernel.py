@@ -5,8 +5,10 @@ Each block of 256 camera samples (:data:`rtmesh.rendering.path_vertices.WIDTH`) 
 16-wide packets: the camera rays are traced with the coherent flag, every later segment of
 the paths as one incoherent packet of each packet's lanes still alive, and each round's
 shadow rays as one occlusion packet per light sample and packet.  Between the queries the
-vertex's stages run over the 256 lanes (:mod:`rtmesh.rendering.path_vertices`, kernels of
-their own: ``meet``, ``sample_lights``, ``scatter``).  Per lane and vertex:
+vertex's stages run over the 256 lanes (kernels of their own: ``meet`` and
+``sample_lights`` of :mod:`rtmesh.rendering.path_vertices`, ``scatter`` of
+:mod:`rtmesh.rendering.path_scatter`; the queries are :mod:`rtmesh.rendering.path_rays`'
+stages).  Per lane and vertex:
 
 1. the ray meets a visible quad or disk light, a surface or nothing (the background);
    emission found there is weighted against light sampling by the power heuristic
@@ -308,8 +310,8 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 return False
             first = False
             # the vertex: what each lane meets, its light samples, the ray that continues it
-            # (rtmesh.rendering.path_vertices: meet, sample_lights, scatter, through their
-            # entry points, so that they compile apart from this kernel)
+            # (path_vertices.meet and sample_lights, path_scatter.scatter, through their entry
+            # points, so that they compile apart from this kernel)
             if not call_at(stages[2], stages[3], (lanes, hits, vertices, keys, start, geometry, surface, textured,
                                                   lights, env, options, whitted, motion, instances, photon_map)):
                 return False

@@ -13,7 +13,7 @@ from rtmesh.core.compile_ahead import KernelGroup, compile_locked
 from rtmesh.core.compiled import entry_point
 from rtmesh.lights import light_table as lt
 from rtmesh.materials import lobes, models
-from rtmesh.rendering import path_rays
+from rtmesh.rendering import path_rays, path_scatter
 from rtmesh.rendering.film_sums import accumulate_samples
 from rtmesh.rendering import path_vertices as pv
 from rtmesh.rendering.path_kernel import trace_paths
@@ -126,7 +126,7 @@ def _path_signatures():
     return [(models.evaluate, evaluate), (models.parts, evaluate), (accumulate_samples, film),
             (pv.sample_lights, sample_lights),
             (trace_paths, trace), (path_rays.trace_segments, segments), (path_rays.trace_shadows, shadow_rays),
-            (models.sample, sample), (pv.scatter, scatter), (gather, gathered), (pv.meet, meet)]
+            (models.sample, sample), (path_scatter.scatter, scatter), (gather, gathered), (pv.meet, meet)]
 
 
 # the path integrator's kernels, in the order a first run best compiles them in two processes:
@@ -146,7 +146,7 @@ def stage_entries():
     compiled, or loaded from the disk cache, on the first call."""
     stages = {dispatcher: signature for dispatcher, signature in PATH_KERNELS.kernels}
     entries = []
-    for stage in (path_rays.trace_segments, pv.meet, pv.sample_lights, pv.scatter, path_rays.trace_shadows):
+    for stage in (path_rays.trace_segments, pv.meet, pv.sample_lights, path_scatter.scatter, path_rays.trace_shadows):
         compile_locked(stage, stages[stage])
         entries.extend(entry_point(stage, stages[stage]))
     return np.array(entries, np.int64)

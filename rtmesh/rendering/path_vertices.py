@@ -1,14 +1,16 @@
-"""The path kernel's work at a vertex, as three stages over a packet's lanes: what each
-lane's segment meets (:func:`meet`), its next-event estimates and ambient-occlusion rays
-(:func:`sample_lights`), and the ray that continues it (:func:`scatter`).
+"""The path kernel's work at a vertex, as stages over a block of lanes: what each lane's
+segment meets (:func:`meet`), its next-event estimates and ambient-occlusion rays
+(:func:`sample_lights`), and the ray that continues it
+(:func:`rtmesh.rendering.path_scatter.scatter`).
 
-:func:`rtmesh.rendering.path_kernel.trace_paths` calls them once per packet and bounce, in
-that order, between its packet queries.  Each is a kernel of its own, compiled and cached by
-itself: one function holding all three took numba about 60 s to compile (its front end's
-passes grow faster than the function), and a first run's two processes compile them side
-by side (:data:`rtmesh.rendering.path_signatures.PATH_KERNELS`).  A call per packet, not
-per lane: each call passes every array of its records (numba's calling convention), which
-per lane would cost as much as the lane's arithmetic.
+:func:`rtmesh.rendering.path_kernel.trace_paths` calls them once per block of
+:data:`WIDTH` lanes and bounce, in that order, between its packet queries, through their
+entry points (:func:`rtmesh.core.compiled.call_at`).  Each is a kernel of its own, compiled
+and cached by itself: one function holding them all took numba about 60 s to compile (its
+front end's passes grow faster than the function), and a first run's two processes compile
+them side by side (:data:`rtmesh.rendering.path_signatures.PATH_KERNELS`).  A call per
+block, not per lane: each call passes every array of its records (numba's calling
+convention), which per lane would cost as much as the lane's arithmetic.
 
 Records: ``lanes`` (per-lane state, :data:`LANE_RECORD`), ``hits`` (each lane's nearest
 hit: ``t``, primitive, placement, barycentrics), ``vertices = (vertex, vertex_ids, shaded)``
@@ -31,25 +33,23 @@ import numpy as np
 from rtmesh.core.compiled import borrowed, inline_row, kernel
 from rtmesh.geometry.embree_packets import LANES
 from rtmesh.lights import light_table as lt
-from rtmesh.materials import lobes, models
+from rtmesh.materials import models
 from rtmesh.materials.metallic_roughness import square_to_cosine_hemisphere_row
 from rtmesh.rendering.path_lights import area_pdf, environment_pdf, hit_analytic, light_at, sample_li, shadow_segment
-from rtmesh.rendering.path_packets import (AO, AREA_SHADOW, BSDF, BSDF_U1, BSDF_U2, COVERAGE, CUTOUT,
-                                           DIMENSIONS_PER_VERTEX, ENVIRONMENT, LIGHT_CHOICE, LIGHT_U1, LIGHT_U2, LOBE,
-                                           MAX_LAYERS, REFLECTION, REFRACTION, ROULETTE, SHADOW, layer_coin,
+from rtmesh.rendering.path_packets import (AO, AREA_SHADOW, COVERAGE, CUTOUT, DIMENSIONS_PER_VERTEX, ENVIRONMENT,
+                                           LIGHT_CHOICE, LIGHT_U1, LIGHT_U2, MAX_LAYERS, SHADOW, layer_coin,
                                            mover_to_world, placed)
-from rtmesh.rendering.path_surfaces import (alias_sample, colour_tint, cross_interface, crossing_scale,
-                                            environment_radiance, hit_frame, hit_parameters, is_transparent,
-                                            leave_surface, occlusion_at, sampled_direction, surface_point,
-                                            tangent_frame, triangle_light_emission, twin_material)
+from rtmesh.rendering.path_surfaces import (alias_sample, colour_tint, environment_radiance, hit_frame, hit_parameters,
+                                            is_transparent, leave_surface, occlusion_at, surface_point, tangent_frame,
+                                            triangle_light_emission)
 from rtmesh.rendering.path_sums import (DIFFUSE_PATH, DIRECT, GLOSSY_PATH, INDIRECT, TRANSMISSION_PATH, add_radiance,
-                                        add_to_pass, clamped, lobe_category, pass_bucket)
+                                        add_to_pass, clamped, pass_bucket)
 from rtmesh.rendering.photon_kernel import ALL_PARTS, DIFFUSE_PART, TRANSMITTED_PART, gather
-from rtmesh.rendering.whitted_rows import branches, light_factor, push_branch
+from rtmesh.rendering.whitted_rows import light_factor
 from rtmesh.sampling.alias import alias_sample_remapped
 from rtmesh.sampling.hashing import mix64, uniform
 from rtmesh.sampling.mis import power_heuristic
-from rtmesh.sampling.zsobol import sequence_pair, sequence_ray_pair
+from rtmesh.sampling.zsobol import sequence_ray_pair
 
 # Sobol sequences hold 2**32 points; later samples take hashed numbers
 SOBOL_LIMIT = 1 << 32
@@ -477,138 +477,3 @@ def sample_lights(lanes, vertices, shadows, keys, pixels, samples, sobol_keys, s
                 shadow_set[k, lane] = True
                 shadow_count[k] += 1
                 shadow_kind[k] = AO
-
-
-@kernel
-def scatter(lanes, vertices, branches_, keys, pixels, samples, sobol_keys, start, surface, options, whitted):
-    """The ray that continues each shaded lane's path: a BSDF sample (then Russian roulette
-    after ``rr_depth`` vertices), or (whitted, Blinn-Phong hits) the mirror or refracted
-    ray, the other kept on the lane's stack of ``branches_``; lanes past ``max_depth`` end.
-
-    Parameters
-    ----------
-    lanes, vertices, branches_ : tuples
-        The module's records.
-    keys, pixels, samples : (n,) arrays
-    sobol_keys : (7,) uint64
-    start : int
-        Lane ``j`` is sample ``start + j``.
-    surface, options, whitted : tuples
-        The scene's records.
-    """
-    # views that own nothing, known so here: no reference counts (rtmesh.core.compiled.borrowed)
-    lanes, vertices, branches_, keys, pixels, samples, sobol_keys, surface, options, whitted = borrowed(
-        (lanes, vertices, branches_, keys, pixels, samples, sobol_keys, surface, options, whitted))
-    px, py, pz, dx, dy, dz = lanes[PX], lanes[PY], lanes[PZ], lanes[DX], lanes[DY], lanes[DZ]
-    beta, category, stack, sigma, alive = lanes[BETA], lanes[CATEGORY], lanes[STACK], lanes[SIGMA], lanes[ALIVE]
-    prev_pdf, prev_delta, eta_scale = lanes[PREV_PDF], lanes[PREV_DELTA], lanes[ETA_SCALE]
-    lane_depth, chain, ray_kind, scratch = lanes[LANE_DEPTH], lanes[CHAIN], lanes[RAY_KIND], lanes[SCRATCH]
-    vertex, vertex_ids, shaded = vertices
-    branch, branch_media, branch_top = branches_
-    tags, params, transmissive, absorption, albedo_table, slots = (surface[0], surface[1], surface[2], surface[4],
-                                                                   surface[6], surface[7])
-    max_depth, rr_depth, offset_scale = options[0], options[1], options[3]
-    media = len(options[7])
-    whitted_on, cutoff, exact_fresnel = whitted[0], whitted[9], whitted[10]
-    for lane in range(len(alive)):
-        if not shaded[lane]:
-            continue
-        (mat, prim, tag, bsdf_params, bsdf_row, hx, hy, hz, gx, gy, gz, nx, ny, nz, tx, ty, tz, sx, sy, sz, lox,
-         loy, loz) = shaded_vertex(vertex, vertex_ids, lane, scratch, params, tags)
-        depth = lane_depth[lane]
-        if not ((max_depth < 0) | (depth + 1 <= max_depth)) or (whitted_on and depth + 2 > max_depth):
-            # (whitted: the last hit a ray may reach takes light, but sends no ray on)
-            alive[lane] = False
-            continue
-        key = keys[start + lane]
-        base = DIMENSIONS_PER_VERTEX * depth
-        ox, oy, oz = -dx[lane], -dy[lane], -dz[lane]
-        whitted_hit = whitted_on and tag == models.BLINN_PHONG
-        front = vertex_ids[lane, FRONT] != 0
-        # the first vertex's BSDF point: a per-pixel Owen-scrambled Sobol pair (stratified
-        # over the pixel's samples), later vertices' hashed numbers
-        sample_index = samples[start + lane] if len(samples) else -1
-        sobol = (depth == 0) & (sample_index >= 0) & (sample_index < SOBOL_LIMIT)
-        pixel = np.uint64(pixels[start + lane]) if sobol else np.uint64(0)
-        if sobol:
-            bu1, bu2 = sequence_pair(sobol_keys, 1, pixel, sample_index)
-        else:
-            bu1, bu2 = uniform(key, base + BSDF_U1), uniform(key, base + BSDF_U2)
-        if whitted_hit:
-            # the Whitted split: on along the refracted ray (or the mirror ray), the
-            # other kept for later; rays whose throughput falls under the cutoff are not followed
-            rx, ry, rz, wr, wg, wb, ux, uy, uz, ur, ug, ub = branches(
-                bsdf_params, bsdf_row, ox, oy, oz, nx, ny, nz, gx, gy, gz, front, exact_fresnel, bu1, bu2)
-            reflects = max(beta[lane, 0] * wr, max(beta[lane, 1] * wg, beta[lane, 2] * wb)) >= cutoff
-            refracts = max(beta[lane, 0] * ur, max(beta[lane, 1] * ug, beta[lane, 2] * ub)) >= cutoff
-            reflects &= (wr > 0.0) | (wg > 0.0) | (wb > 0.0)
-            refracts &= (ur > 0.0) | (ug > 0.0) | (ub > 0.0)
-            if reflects and refracts:
-                qx, qy, qz = leave_surface(hx, hy, hz, gx, gy, gz, rx, ry, rz, offset_scale)
-                push_branch(branch, branch_media, branch_top, lane, qx, qy, qz, rx, ry, rz,
-                            beta[lane, 0] * wr, beta[lane, 1] * wg, beta[lane, 2] * wb, depth + 1, stack)
-            if refracts:
-                rx, ry, rz, wr, wg, wb = ux, uy, uz, ur, ug, ub
-                if media:
-                    top = cross_interface(stack, lane, mat, front, twin_material(surface, prim))
-                    for c in range(3):
-                        sigma[lane, c] = absorption[top, c] if top >= 0 else 0.0
-            elif not reflects:
-                alive[lane] = False
-                continue
-            beta[lane, 0] *= wr
-            beta[lane, 1] *= wg
-            beta[lane, 2] *= wb
-            ray_kind[lane] = REFRACTION if refracts else REFLECTION
-            prev_pdf[lane] = 0.0
-            prev_delta[lane] = True
-            px[lane], py[lane], pz[lane] = leave_surface(hx, hy, hz, gx, gy, gz, rx, ry, rz, offset_scale)
-            dx[lane], dy[lane], dz[lane] = rx, ry, rz
-            lane_depth[lane] = depth + 1
-            continue
-        # continue the path by sampling the BSDF
-        wx, wy, wz, gr, gg, gb, pdf, flags = models.sample(
-            tag, bsdf_params, bsdf_row, albedo_table, lox, loy, loz, uniform(key, base + LOBE), bu1, bu2)
-        if (flags == lobes.FAILED) | (not ((gr > 0.0) | (gg > 0.0) | (gb > 0.0))):
-            alive[lane] = False
-            continue
-        ndx, ndy, ndz, side, below = sampled_direction(wx, wy, wz, tx, ty, tz, sx, sy, sz, nx, ny, nz, gx, gy, gz,
-                                                       transmissive[mat])
-        if below:
-            alive[lane] = False
-            continue
-        beta[lane, 0] *= gr
-        beta[lane, 1] *= gg
-        beta[lane, 2] *= gb
-        ray_kind[lane] = REFRACTION if flags & lobes.TRANSMISSION else BSDF
-        prev_pdf[lane] = pdf
-        prev_delta[lane] = (flags & lobes.DELTA) != 0
-        if prev_delta[lane]:
-            chain[lane] = CHAIN_CAUSTIC if chain[lane] != CHAIN_START else CHAIN_START
-        else:
-            chain[lane] = CHAIN_SCATTERED
-        if depth == 0:
-            category[lane] = lobe_category(flags)
-        if transmissive[mat] and (flags & lobes.TRANSMISSION) and media:
-            # into the interior when the outward normal faces away from the new ray
-            top = cross_interface(stack, lane, mat, side < 0.0, twin_material(surface, prim))
-            for c in range(3):
-                sigma[lane, c] = absorption[top, c] if top >= 0 else 0.0
-        # the radiance scaling 1 / eta'^2 of a refraction, kept apart for the roulette
-        # (pbrt-v4's etaScale)
-        eta_scale[lane] *= crossing_scale(slots, tag, bsdf_params, bsdf_row, loz, flags)
-        if depth + 1 >= rr_depth:
-            # on the throughput without the radiance scaling of the crossings: inside
-            # glass (1 / 1.5^2 of it) paths would otherwise end by roulette without
-            # carrying less light out, only noise
-            q = max(beta[lane, 0], max(beta[lane, 1], beta[lane, 2])) * eta_scale[lane]
-            if q < 1.0:
-                if uniform(key, base + ROULETTE) >= q:
-                    alive[lane] = False
-                    continue
-                beta[lane, 0] /= q
-                beta[lane, 1] /= q
-                beta[lane, 2] /= q
-        px[lane], py[lane], pz[lane] = leave_surface(hx, hy, hz, gx, gy, gz, ndx, ndy, ndz, offset_scale)
-        dx[lane], dy[lane], dz[lane] = ndx, ndy, ndz
-        lane_depth[lane] = depth + 1
