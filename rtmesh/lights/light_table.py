@@ -36,6 +36,7 @@ import math
 import numpy as np
 
 from rtmesh.core.compiled import row
+from rtmesh.core.row_vectors import normalized3
 from rtmesh.io.texture_atlas import TextureAtlas, texel
 from rtmesh.lights import point_light_rows
 from rtmesh.lights.area_lights import DiskLight, QuadLight
@@ -368,10 +369,7 @@ def _corner_directions(light, px, py, pz):
     ax, ay, az = light[1] - px, light[2] - py, light[3] - pz
     bx, by, bz = ax + light[10], ay + light[11], az + light[12]
     cx, cy, cz = ax + light[13], ay + light[14], az + light[15]
-    la = 1.0 / math.sqrt((ax * ax + ay * ay) + az * az)
-    lb = 1.0 / math.sqrt((bx * bx + by * by) + bz * bz)
-    lc = 1.0 / math.sqrt((cx * cx + cy * cy) + cz * cz)
-    return ax * la, ay * la, az * la, bx * lb, by * lb, bz * lb, cx * lc, cy * lc, cz * lc
+    return normalized3(ax, ay, az, 1.0) + normalized3(bx, by, bz, 1.0) + normalized3(cx, cy, cz, 1.0)
 
 
 @row

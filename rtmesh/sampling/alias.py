@@ -106,4 +106,3 @@ def alias_sample_remapped(probability, alias, u):
     if coin < keep:
         return column, min(coin / keep, _ONE_MINUS_EPSILON)
     return alias[column], min((coin - keep) / (1.0 - keep), _ONE_MINUS_EPSILON)
-

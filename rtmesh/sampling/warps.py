@@ -11,6 +11,7 @@ import numpy as np
 from numba.extending import register_jitable
 
 from rtmesh.core.compiled import kernel, row
+from rtmesh.core.row_vectors import normalized3
 from rtmesh.core.vecmath import dot, normalize
 
 
@@ -190,13 +191,6 @@ def square_to_spherical_triangle(u, a, b, c):
 
 
 @row
-def _unit(x, y, z):
-    """``(x, y, z)`` over its length."""
-    inv = 1.0 / math.sqrt((x * x + y * y) + z * z)
-    return x * inv, y * inv, z * inv
-
-
-@row
 def spherical_triangle_area_row(ax, ay, az, bx, by, bz, cx, cy, cz):
     """:func:`spherical_triangle_area` of one triangle of unit corners (sr), in compiled code."""
     triple = abs((ax * (by * cz - bz * cy) + ay * (bz * cx - bx * cz)) + az * (bx * cy - by * cx))
@@ -208,8 +202,8 @@ def spherical_triangle_area_row(ax, ay, az, bx, by, bz, cx, cy, cz):
 def spherical_triangle_row(u0, u1, ax, ay, az, bx, by, bz, cx, cy, cz, omega):
     """:func:`square_to_spherical_triangle` of one point ``(u0, u1)`` and one triangle of
     unit corners whose solid angle is ``omega``, in compiled code: the unit direction."""
-    nbx, nby, nbz = _unit(ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx)
-    ncx, ncy, ncz = _unit(ay * cz - az * cy, az * cx - ax * cz, ax * cy - ay * cx)
+    nbx, nby, nbz = normalized3(ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx, 1.0)
+    ncx, ncy, ncz = normalized3(ay * cz - az * cy, az * cx - ax * cz, ax * cy - ay * cx, 1.0)
     alpha = math.acos(min(max((nbx * ncx + nby * ncy) + nbz * ncz, -1.0), 1.0))
     area = u0 * omega
     s, t = math.sin(area - alpha), math.cos(area - alpha)
@@ -220,14 +214,14 @@ def spherical_triangle_row(u0, u1, ax, ay, az, bx, by, bz, cx, cy, cz, omega):
     q = ((vv * t - uu * s) * cos_alpha - vv) / (denominator if denominator != 0.0 else 1.0)
     q = min(max(q, -1.0), 1.0)
     ca = (cx * ax + cy * ay) + cz * az
-    ox, oy, oz = _unit(cx - ca * ax, cy - ca * ay, cz - ca * az)
+    ox, oy, oz = normalized3(cx - ca * ax, cy - ca * ay, cz - ca * az, 1.0)
     r = math.sqrt(max(1.0 - q * q, 0.0))
     nx, ny, nz = q * ax + r * ox, q * ay + r * oy, q * az + r * oz
     z = 1.0 - u1 * (1.0 - ((nx * bx + ny * by) + nz * bz))
     nb = (nx * bx + ny * by) + nz * bz
-    px, py, pz = _unit(nx - nb * bx, ny - nb * by, nz - nb * bz)
+    px, py, pz = normalized3(nx - nb * bx, ny - nb * by, nz - nb * bz, 1.0)
     r = math.sqrt(max(1.0 - z * z, 0.0))
-    return _unit(z * bx + r * px, z * by + r * py, z * bz + r * pz)
+    return normalized3(z * bx + r * px, z * by + r * py, z * bz + r * pz, 1.0)
 
 
 def spherical_triangle_to_square(directions, a, b, c):
