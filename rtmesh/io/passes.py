@@ -63,31 +63,39 @@ class CameraHits:
 
     Attributes
     ----------
-    srf : rtmesh.rendering.chunk_state.SurfaceRecords
-        Shading records: ``p`` (hit points in the integrator's shifted frame), ``ns``
-        (shading normals facing the ray), ``mat`` (material ids), ``sample`` (camera-sample
-        rows), and ``tints`` where the scene has textures.
+    p : (k, 3) float64
+        Hit points in the integrator's re-centred frame.
+    ns : (k, 3) float64
+        Unit shading normals facing the camera.
+    albedo : (k, 3) float64
+        Each material's pass albedo (:attr:`PassRecorder.diffuse`) times its texture and
+        vertex-colour tint.
+    uv : (k, 2) float64 or float
+        Texture coordinates (0.0 where the scene has none).
     recorder : PassRecorder
-        Scene-wide tables (camera frame, shift, id tables).
+        Scene-wide tables (camera frame, shift).
     """
 
-    __slots__ = ("srf", "recorder", "_hits", "_rows", "_prim")
+    __slots__ = ("p", "ns", "albedo", "uv", "recorder")
 
-    def __init__(self, srf, hits, rows, recorder):
-        self.srf, self.recorder = srf, recorder
-        self._hits, self._rows, self._prim = hits, rows, None
+    def __init__(self, p, ns, albedo, uv, recorder):
+        self.p, self.ns, self.albedo, self.uv, self.recorder = p, ns, albedo, uv, recorder
 
-    @property
-    def prim(self):
-        """(k,) intp: the triangle each ray hit (gathered once, on first use)."""
-        if self._prim is None:
-            self._prim = take_rows(self._hits.prim, self._rows).astype(np.intp)
-        return self._prim
-
-    @property
-    def barycentrics(self):
-        """(k,) float, (k,) float: Embree's u and v of each hit."""
-        return take_rows(self._hits.u, self._rows), take_rows(self._hits.v, self._rows)
+    @classmethod
+    def of_records(cls, srf, hits, rows, recorder):
+        """The hits from the general path's surface records (``srf``; ``hits`` the camera
+        rays' Embree hits, ``rows`` those that hit in the order of ``srf``, None for all)."""
+        albedo = take_rows(recorder.diffuse, srf.mat)
+        tints = getattr(srf, "tints", None)  # texture and vertex-colour multipliers
+        if tints is not None and getattr(tints, "diffuse", None) is not None:
+            albedo = albedo * tints.diffuse
+        uv = 0.0
+        if recorder.uv is not None and "uv" in recorder.names:
+            corners = recorder.faces[take_rows(hits.prim, rows).astype(np.intp)]
+            u, v = take_rows(hits.u, rows), take_rows(hits.v, rows)
+            uv0, uv1, uv2 = (recorder.uv[corners[:, i]] for i in range(3))
+            uv = uv0 + u[:, None] * (uv1 - uv0) + v[:, None] * (uv2 - uv0)
+        return cls(srf.p, srf.ns, albedo, uv, recorder)
 
 
 # ---------------------------------------------------------------- producers
@@ -98,33 +106,23 @@ def _depth(h):
     # distance from the lens plane along the view axis: the same for a pinhole and a thin
     # lens, whose ray origins all lie in that plane
     rec = h.recorder
-    return (h.srf.p - rec.eye) @ rec.forward
+    return (h.p - rec.eye) @ rec.forward
 
 
 def _normal(h):
-    return h.srf.ns
+    return h.ns
 
 
 def _albedo(h):
-    values = take_rows(h.recorder.diffuse, h.srf.mat)
-    tints = getattr(h.srf, "tints", None)  # texture and vertex-colour multipliers
-    if tints is not None and getattr(tints, "diffuse", None) is not None:
-        values = values * tints.diffuse
-    return values
+    return h.albedo
 
 
 def _position(h):
-    return h.srf.p + h.recorder.shift
+    return h.p + h.recorder.shift
 
 
 def _uv(h):
-    uv = h.recorder.uv
-    if uv is None:
-        return 0.0
-    corners = h.recorder.faces[h.prim]
-    u, v = h.barycentrics
-    uv0, uv1, uv2 = (uv[corners[:, i]] for i in range(3))
-    return uv0 + u[:, None] * (uv1 - uv0) + v[:, None] * (uv2 - uv0)
+    return h.uv
 
 
 def _covered(h):
@@ -197,6 +195,8 @@ REGISTRY = {
 # the path integrator's light-path passes (they sum to the image), in the order of its kernel's
 # categories (rtmesh.rendering.path_kernel)
 LIGHT_PATH_PASSES = tuple(name for name, _ in _LIGHT_PATHS)
+# the passes of the camera rays' first surfaces (the producers', and the ao pass)
+CAMERA_HIT_PASSES = tuple(name for name, spec in REGISTRY.items() if spec.producer is not None) + ("ao",)
 
 
 @dataclass(frozen=True)
@@ -385,11 +385,14 @@ class PassRecorder:
         rows : (k,) int or None
             Rays of ``hits`` that hit, in the order of ``srf``; None when all did.
         """
-        camera_hits = CameraHits(srf, hits, rows, self)
+        self.record_hits(sink, srf.sample, CameraHits.of_records(srf, hits, rows, self))
+
+    def record_hits(self, sink, rows, camera_hits):
+        """Write every producer's pass of ``camera_hits`` (a :class:`CameraHits`) to the
+        sink's ``rows`` ((k,) int: the camera samples that hit)."""
         for spec in self.specs:
-            if spec.producer is None:
-                continue
-            sink.write(spec.name, srf.sample, spec.producer(camera_hits))
+            if spec.producer is not None:
+                sink.write(spec.name, rows, spec.producer(camera_hits))
 
     def per_pixel(self, sink, m, spp):
         """The sink's buffers as ``(m, spp, k)`` for :meth:`Film.add_tile`."""

@@ -36,7 +36,6 @@ import time
 import numpy as np
 
 from rtmesh.core import runtime
-from rtmesh.core.rays import RayBatch, repeated_row
 from rtmesh.geometry.accel import Accel
 from rtmesh.geometry.cutouts import CutoutAccel
 from rtmesh.geometry.motion import MotionAccel, blurs, object_motions, scene_at_time, swept_bounds
@@ -49,7 +48,7 @@ from rtmesh.lights.environment import EnvironmentLighting
 from rtmesh.materials.table import ALPHA_MODES
 from rtmesh.rendering.adaptive import render_rounds
 from rtmesh.rendering.centre_rays import centre_passes
-from rtmesh.rendering.chunk_state import ChunkState, Clock
+from rtmesh.rendering.chunk_state import Clock
 from rtmesh.rendering.direct_stage import DirectStage
 from rtmesh.rendering.film import Film
 from rtmesh.rendering.general_kernels import GENERAL_KERNELS
@@ -66,7 +65,7 @@ from rtmesh.rendering.shading_tables import ShadingTables
 from rtmesh.rendering.stats import RenderStats
 from rtmesh.rendering.surface_stage import SurfaceStage
 from rtmesh.rendering.surface_textures import SurfaceTextures
-from rtmesh.rendering.wavefront import UNIT_THROUGHPUT, Wavefront
+from rtmesh.rendering.wavefront import Wavefront
 from rtmesh.sampling.sampler import Sampler
 from rtmesh.scene import instances
 from rtmesh.scene.background import as_background
@@ -645,30 +644,14 @@ class Integrator:
         return origins, directions, sample_time
 
     def _render_paths(self, pixel, sample_in_pixel, m, spp, ragged, stats, clock):
-        """:meth:`render_chunk` under the path integrator: camera rays, then the path kernel;
-        the passes come from the camera rays' first hits, as on the Whitted path."""
+        """:meth:`render_chunk` under the path integrator (and the Whitted configuration of
+        its kernel): camera rays, then the path kernel, which writes the passes too."""
         origins, directions, times = self._camera_rays(pixel, sample_in_pixel)
         n = len(pixel)
         clock.lap("camera")
         buffers = self.passes.buffers(n) if self.plan.passes else None
         radiance = self.path_stage.render(origins, directions, pixel, sample_in_pixel, stats, buffers, times)
         clock.lap("direct")
-        # the ambient-occlusion pass, of the camera rays' hits as the Whitted stages form it
-        wants_ao = buffers is not None and buffers.wants("ao")
-        if self.plan.passes and (wants_ao or any(spec.producer is not None for spec in self.passes.specs)):
-            # the camera-hit passes (the kernel writes the light-path passes itself)
-            chunk = ChunkState(radiance, buffers, pixel, sample_in_pixel, stats, clock, None)
-            rays = RayBatch(origins, directions, np.arange(n, dtype=np.int64), repeated_row(UNIT_THROUGHPUT, n),
-                            repeated_row(self._camera_medium, n))
-            hits = self.accel.intersect(origins, directions, times)
-            hit = hits.prim >= 0
-            rows = None if hit.all() else np.flatnonzero(hit)
-            if len(hit) and hit.any():
-                srf = self.surface_stage.records(rays, hits, rows, times)
-                self.passes.record(chunk.passes, srf, hits, rows)
-                if wants_ao:
-                    chunk.passes.write("ao", srf.sample, self.local_shading.ambient_occlusion(srf, 0, chunk))
-            clock.lap("passes")
         if ragged:
             return radiance, (self.passes.per_sample(buffers, n) or None) if buffers is not None else None, stats
         passes = (self.passes.per_pixel(buffers, m, spp) or None) if buffers is not None else None

@@ -46,7 +46,11 @@ descriptors)`` (:class:`rtmesh.lights.light_table.LightTable`, the last two its 
 images); ``env = (pixels, marginal, conditional,
 func, mean, cos_rotation, sin_rotation)`` (:class:`rtmesh.lights.light_table.EnvironmentTables`);
 ``options = (max_depth, rr_depth, clamp, offset_scale, background_seen, cutouts, split,
-camera_media, light_samples, light_block)``: ``camera_media`` the media the camera sits in
+camera_media, light_samples, light_block, record_hits, ao_pass, pass_albedo)``:
+``record_hits`` whether to record the camera-hit passes' surfaces, ``ao_pass`` whether to
+cast the ``ao`` pass's rays there (the ``whitted`` record's ``ao_samples`` of them),
+``pass_albedo`` (M, 3) each material's albedo for the pass
+(:mod:`rtmesh.rendering.path_camera_hits`); ``camera_media`` the media the camera sits in
 (``STACK_DEPTH`` material ids, innermost first, -1 padded;
 :class:`rtmesh.rendering.media.Media`), ``light_samples`` the next-event estimates at a
 path's first vertex and ``light_block`` :func:`rtmesh.sampling.zsobol.block_bits` of the
@@ -98,6 +102,7 @@ from rtmesh.geometry.embree_packets import (LANES, RAYHIT_WORDS, RTC_RAY_QUERY_F
                                             RTC_RAY_QUERY_FLAG_INCOHERENT, packet_buffers, query_arguments)
 from rtmesh.lights import light_table as lt
 from rtmesh.materials import lobes
+from rtmesh.rendering.path_camera_hits import CAMERA_HIT_WORDS, FIRST_HIT_WORDS
 from rtmesh.rendering.path_packets import BOUNCE, CAMERA, REFLECTION, SHADOW
 from rtmesh.rendering.path_surfaces import textured_materials
 from rtmesh.rendering.path_sums import GLOSSY_PATH, LIGHT_PATHS
@@ -108,7 +113,7 @@ from rtmesh.rendering.whitted_rows import BRANCH_WORDS, pop_branch
 @kernel
 def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixels, samples, sobol_keys, times,
                 geometry, surface, lights, env, options, whitted, motion, instances, photon_map, stages, radiance,
-                light_paths, counts):
+                light_paths, camera_hits, counts):
     """Trace one path per camera ray and write its radiance.
 
     Parameters
@@ -138,6 +143,9 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
         Output.
     light_paths : (n, LIGHT_PATHS, 3) float64, or (0, LIGHT_PATHS, 3)
         Output of the light-path passes, with ``split``.
+    camera_hits : (n, CAMERA_HIT_WORDS) float64, or (0, CAMERA_HIT_WORDS)
+        Output for the camera-hit passes, with ``options``' ``record_hits``: each camera
+        ray's first shaded surface (:mod:`rtmesh.rendering.path_camera_hits`).
     counts : (len(COUNTER_NAMES),) int64
         Rays traced (active lanes only) by :data:`rtmesh.rendering.path_packets.COUNTER_NAMES`,
         added to: camera, bounce and shadow rays (whitted: camera, reflection, refraction,
@@ -153,12 +161,13 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     # (rtmesh.core.compiled.borrowed; the caller holds the arrays)
     geometry, surface, lights, env, options, whitted, motion, instances, photon_map = borrowed(
         (geometry, surface, lights, env, options, whitted, motion, instances, photon_map))
-    origins, directions, keys, pixels, samples, sobol_keys, times, stages, radiance, light_paths, counts = borrowed(
-        (origins, directions, keys, pixels, samples, sobol_keys, times, stages, radiance, light_paths, counts))
+    origins, directions, keys, pixels, samples, sobol_keys, times, stages, radiance, light_paths, camera_hits, \
+        counts = borrowed((origins, directions, keys, pixels, samples, sobol_keys, times, stages, radiance,
+                           light_paths, camera_hits, counts))
     n = origins.shape[0]
     absorption = surface[4]
     textured = textured_materials(surface, geometry)
-    split, camera_media, light_samples = options[6], options[7], options[8]
+    split, camera_media, light_samples, record_hits = options[6], options[7], options[8], options[10]
     media = len(camera_media)
     whitted_on, delta_rows, group_start, branch_depth, ao_samples = (whitted[0], whitted[1], whitted[2], whitted[11],
                                                                     whitted[12])
@@ -231,21 +240,23 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     vertex = np.zeros((WIDTH, VERTEX_WORDS))
     vertex_ids = np.zeros((WIDTH, VERTEX_IDS), np.int64)
     shaded = np.zeros(WIDTH, np.bool_)
+    # the camera-hit passes' record of each lane (rtmesh.rendering.path_camera_hits)
+    first_hit = np.zeros((WIDTH, FIRST_HIT_WORDS))
     # the scratch arrays too, through views that own nothing (owned stays alive to the end)
     owned = (ray, words, valid, args_coherent, args_incoherent, shadow, shadow_words, shadow_valid, rest, rest_words,
              rest_valid, best_t, best_prim, best_instance, best_u, best_v, segment, lane_time, moved, scratch, px,
              py, pz, dx, dy, dz, beta, total, shadow_rays, shadow_set, shadow_count, pending, paths, pending_paths,
              category, stack, branch, branch_media, branch_top, sigma, reach, alive, prev_pdf, prev_delta, eta_scale,
              prev_count, lane_depth, layers, chain, travelled, ray_kind, shadow_kind, vertex, vertex_ids, shaded,
-             textured)
+             textured, first_hit)
     (ray, words, valid, args_coherent, args_incoherent, shadow, shadow_words, shadow_valid, rest, rest_words,
      rest_valid, best_t, best_prim, best_instance, best_u, best_v, segment, lane_time, moved, scratch, px,
      py, pz, dx, dy, dz, beta, total, shadow_rays, shadow_set, shadow_count, pending, paths, pending_paths,
      category, stack, branch, branch_media, branch_top, sigma, reach, alive, prev_pdf, prev_delta, eta_scale,
      prev_count, lane_depth, layers, chain, travelled, ray_kind, shadow_kind, vertex, vertex_ids, shaded,
-     textured) = borrowed(owned)
+     textured, first_hit) = borrowed(owned)
     lanes = (px, py, pz, dx, dy, dz, beta, total, paths, category, stack, sigma, alive, prev_pdf, prev_delta, eta_scale,
-             prev_count, lane_depth, layers, chain, travelled, ray_kind, lane_time, moved, scratch)
+             prev_count, lane_depth, layers, chain, travelled, ray_kind, lane_time, moved, scratch, first_hit)
     hits = (best_t, best_prim, best_instance, best_u, best_v)
     vertices = (vertex, vertex_ids, shaded)
     shadows = (shadow_rays, shadow_set, shadow_count, shadow_kind, pending, pending_paths)
@@ -283,6 +294,9 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 chain[lane] = CHAIN_START
                 travelled[lane] = 0.0
                 lane_time[lane] = times[i] if len(times) else 0.0
+                if record_hits:
+                    for c in range(FIRST_HIT_WORDS):
+                        first_hit[lane, c] = 0.0
         first = True
         while True:
             if whitted_on:
@@ -333,5 +347,8 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                 for bucket in range(LIGHT_PATHS):
                     for c in range(3):
                         light_paths[start + lane, bucket, c] = paths[lane, bucket, c]
+            if record_hits:
+                for c in range(CAMERA_HIT_WORDS):
+                    camera_hits[start + lane, c] = first_hit[lane, c]
     keep_alive(owned)
     return True

@@ -17,9 +17,11 @@ import numpy as np
 
 from rtmesh.core.compiled import borrowed, kernel
 from rtmesh.geometry.embree_packets import DEFAULT_TFAR, LANES
-from rtmesh.rendering.path_packets import MAX_LAYERS, nearest_hits, occluded, shadows_through_cutouts
+from rtmesh.rendering.path_camera_hits import count_escaped
+from rtmesh.rendering.path_packets import AO, MAX_LAYERS, nearest_hits, occluded, shadows_through_cutouts
 from rtmesh.rendering.path_surfaces import load_lanes, set_lane
-from rtmesh.rendering.path_vertices import ALIVE, DX, DY, DZ, LANE_DEPTH, LANE_TIME, PATHS, PX, PY, PZ, TOTAL
+from rtmesh.rendering.path_vertices import (ALIVE, DX, DY, DZ, FIRST_HIT, LANE_DEPTH, LANE_TIME, PATHS, PX, PY, PZ,
+                                            TOTAL)
 from rtmesh.rendering.path_sums import accept_shadows
 
 
@@ -89,9 +91,10 @@ def trace_shadows(queries, packet, rest, segment, reach, lanes, hits, shadows, k
     shadow, shadow_words, shadow_valid = packet
     rest_ray, rest_words, rest_valid = rest
     total, paths, lane_depth, lane_time = lanes[TOTAL], lanes[PATHS], lanes[LANE_DEPTH], lanes[LANE_TIME]
+    first_hit = lanes[FIRST_HIT]
     best_t, best_prim, best_u, best_v = hits[0], hits[1], hits[3], hits[4]
     shadow_rays, shadow_set, shadow_count, shadow_kind, pending, pending_paths = shadows
-    offset_scale, cutouts, split = options[3], options[5], options[6]
+    offset_scale, cutouts, split, ao_pass = options[3], options[5], options[6], options[11]
     width = len(total)
     for k in range(len(shadow_count)):
         if shadow_count[k] == 0:
@@ -122,5 +125,7 @@ def trace_shadows(queries, packet, rest, segment, reach, lanes, hits, shadows, k
             else:
                 occluded(occluded16, scene, incoherent, shadow, shadow_valid, motion, lane_time[lo:hi], reach[lo:hi],
                          rest_ray, rest_words, rest_valid)
+            if ao_pass and shadow_kind[k] == AO:
+                count_escaped(shadow_valid, first_hit[lo:hi])
             accept_shadows(shadow_valid, pending[k, lo:hi], pending_paths[k if split else 0, lo:hi], split,
                            total[lo:hi], paths[lo:hi])

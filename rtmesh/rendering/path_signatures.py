@@ -16,6 +16,7 @@ from rtmesh.materials import lobes, models
 from rtmesh.rendering import path_rays, path_scatter
 from rtmesh.rendering.film_sums import accumulate_samples
 from rtmesh.rendering import path_vertices as pv
+from rtmesh.rendering.path_camera_hits import FIRST_HIT_WORDS
 from rtmesh.rendering.path_kernel import trace_paths
 from rtmesh.rendering.photon_kernel import empty_photon_map, gather
 
@@ -24,10 +25,13 @@ def no_instances():
     return (np.zeros(0, np.int64), np.zeros((0, 12)), np.zeros((0, 9)))
 
 
-def no_whitted(materials):
-    """The kernel's ``whitted`` record under the path integrator (``materials``: the count)."""
+def no_whitted(materials, ao_samples=0, ao_distance=0.0, ao_block=0):
+    """The kernel's ``whitted`` record under the path integrator (``materials``: the count),
+    with the ``ao`` pass's rays (``ao_samples`` of ``ao_distance`` a camera ray's surface,
+    ``ao_block`` the :func:`~rtmesh.sampling.zsobol.block_bits` of spp x ``ao_samples``)."""
     return (False, np.zeros(0, np.int64), np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros(0),
-            np.zeros(0, np.int64), np.zeros(0), np.zeros((materials, 3)), np.zeros(materials), 0.0, False, 0, 0, 0.0, 0)
+            np.zeros(0, np.int64), np.zeros(0), np.zeros((materials, 3)), np.zeros(materials), 0.0, False, 0,
+            int(ao_samples), float(ao_distance), int(ao_block))
 
 
 def small_records():
@@ -56,7 +60,8 @@ def lane_records():
     floats = {"px", "py", "pz", "dx", "dy", "dz", "prev_pdf", "eta_scale", "prev_count", "travelled", "lane_time"}
     shapes = {"beta": (z((1, 3)),), "total": (z((1, 3)),), "paths": (z((1, 1, 3)),), "stack": (z((1, 1), i64),),
               "sigma": (z((1, 3)),), "alive": (z(1, bool),), "prev_delta": (z(1, bool),),
-              "moved": (z((1, lt.WIDTH)),), "scratch": (z((1, lobes.PARAMETER_WIDTH)),)}
+              "moved": (z((1, lt.WIDTH)),), "scratch": (z((1, lobes.PARAMETER_WIDTH)),),
+              "first_hit": (z((1, FIRST_HIT_WORDS)),)}
     lanes = tuple(z(1) if name in floats else shapes[name][0] if name in shapes else z(1, i64)
                   for name in pv.LANE_RECORD)
     hits = (z(1), z(1, i64), z(1, i64), z(1), z(1))
@@ -87,7 +92,7 @@ def _path_signatures():
     bsdf_args = (types.int64, rows, types.int64, numba.typeof(energy))
     evaluate = bsdf_args + (f64,) * 6
     sample = bsdf_args + (f64,) * 6
-    options = (-1, 3, 0.0, np.float32(1.0), True, False, False, z(4, np.int64), 1, 0)
+    options = (-1, 3, 0.0, np.float32(1.0), True, False, False, z(4, np.int64), 1, 0, False, False, z((1, 3)))
     whitted = no_whitted(1)
     motion = (True, z(0, np.int64), z(0, np.int64), z(0, np.int64), z(1, np.int64), z((0, 10)), z(0, np.int64))
     instances = no_instances()
@@ -98,7 +103,7 @@ def _path_signatures():
              types.Array(types.uint64, 1, "C"), types.Array(f64, 1, "C")) + tuple(
         numba.typeof(record) for record in (geometry, surface, lights, env, options, whitted, motion, instances,
                                             photon_map)) + (
-        index, rows, types.Array(f64, 3, "C"), types.Array(types.int64, 1, "C"))
+        index, rows, types.Array(f64, 3, "C"), rows, types.Array(types.int64, 1, "C"))
     i64 = types.int64
     gathered = ((numba.typeof(photon_map),) + (f64,) * 7 + (i64, i64, rows, i64, numba.typeof(energy))
                 + (f64,) * 12 + (i64,))

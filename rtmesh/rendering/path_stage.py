@@ -27,9 +27,10 @@ from rtmesh.lights.mesh_lights import MeshLight
 from rtmesh.lights.projector import ProjectorLight
 from rtmesh.materials.models import SLOTS, material_rows, tables
 from rtmesh.materials.table import PHYSICAL_MODELS
-from rtmesh.io.passes import LIGHT_PATH_PASSES
+from rtmesh.io.passes import CAMERA_HIT_PASSES, LIGHT_PATH_PASSES, CameraHits
 from rtmesh.rendering.caustics import Caustics
 from rtmesh.rendering.photon_kernel import empty_photon_map
+from rtmesh.rendering import path_camera_hits as ch
 from rtmesh.rendering.path_kernel import trace_paths
 from rtmesh.rendering.path_signatures import PATH_KERNELS, no_instances, no_whitted, stage_entries
 from rtmesh.rendering.path_sums import LIGHT_PATHS
@@ -271,7 +272,11 @@ class PathStage:
         # the kernels' ``lights`` record (rtmesh.rendering.path_kernel), formed once a view
         self.light_record = (lights.rows, lights.probability, lights.alias, lights.pmf, lights.face_light,
                              lights.analytic, lights.environment, lights.texels, lights.descriptors)
-        self._whitted = self._whitted_record() if self.whitted else no_whitted(len(self.surface[0]))
+        # the ao pass's rays at the camera rays' surfaces (rtmesh.rendering.path_camera_hits)
+        self._ao_pass = "ao" in settings.passes and it.ao_samples > 0
+        self._pass_albedo = np.ascontiguousarray(it.passes.diffuse, dtype=np.float64).reshape(-1, 3)
+        self._whitted = self._whitted_record() if self.whitted else no_whitted(
+            len(self.surface[0]), *self._ao_rays() if self._ao_pass else ())
         if environment is None:
             self._env = (np.zeros((1, 3, 3)), np.zeros(2), np.zeros((1, 2)), np.ones((1, 1)), 1.0, 1.0, 0.0)
         else:
@@ -308,11 +313,17 @@ class PathStage:
         :func:`~rtmesh.sampling.zsobol.block_bits` of the first vertex's (spp x ao_samples)."""
         it, s = self.it, self.it.settings
         m = it.scene.materials
-        ao_samples = int(it.ao_samples) if it.plan.ao and it.plan.ambient else 0
+        ao_rays = self._ao_rays() if it.plan.ao else (0, float(it.ao_distance), block_bits(s.spp, 1))
         ambient = np.where(m.unlit[:, None], 0.0, m.ambient * np.asarray(it.scene.ambient, dtype=np.float64))
         return (True, *self.lights.light_groups(), np.ascontiguousarray(ambient, dtype=np.float64),
                 np.ascontiguousarray(m.occlusion_strength, dtype=np.float64), float(s.cutoff), s.fresnel == "exact",
-                max(int(s.max_depth), 1), ao_samples, float(it.ao_distance), block_bits(s.spp, max(ao_samples, 1)))
+                max(int(s.max_depth), 1), *ao_rays)
+
+    def _ao_rays(self):
+        """The ambient-occlusion rays a surface takes (the Whitted ambient term's, and the ao
+        pass's): ``(ao_samples, ao_distance, block_bits(spp, ao_samples))``."""
+        it = self.it
+        return int(it.ao_samples), float(it.ao_distance), block_bits(it.settings.spp, int(it.ao_samples))
 
     def _sobol(self, pixel, sample):
         """The kernel's Sobol arguments: pixels, sample indices and the sequences' record
@@ -322,6 +333,20 @@ class PathStage:
         if self.it.settings.sampler == "random":
             return np.zeros(0, np.int64), np.zeros(0, np.int64), self._sobol_keys
         return kernel_input(pixel, np.int64), kernel_input(sample, np.int64), self._sobol_keys
+
+    def _record_surfaces(self, passes, camera_hits):
+        """Write the camera-hit passes from the kernel's records of the camera rays' first
+        shaded surfaces (``camera_hits`` (n, CAMERA_HIT_WORDS), :mod:`rtmesh.rendering.path_camera_hits`)."""
+        rows = np.flatnonzero(camera_hits[:, ch.HIT_COVERED] > 0.0)
+        if not len(rows):
+            return
+        hit = camera_hits[rows]
+        self.it.passes.record_hits(passes, rows, CameraHits(
+            hit[:, ch.HIT_POINT:ch.HIT_POINT + 3], hit[:, ch.HIT_NORMAL:ch.HIT_NORMAL + 3],
+            hit[:, ch.HIT_ALBEDO:ch.HIT_ALBEDO + 3], hit[:, ch.HIT_UV:ch.HIT_UV + 2], self.it.passes))
+        if passes.wants("ao") and self._ao_pass:
+            # the fraction of the surface's ambient-occlusion rays that escaped
+            passes.write("ao", rows, hit[:, ch.HIT_FREE] / self._whitted[12])
 
     def render(self, origins, directions, pixel, sample, stats, passes=None, times=None):
         """Radiance of the camera rays of one chunk.
@@ -335,7 +360,8 @@ class PathStage:
         stats : RenderStats
             Ray counts are added to it.
         passes : PassSink, optional
-            The chunk's pass buffers: the light-path passes it wants are written to it.
+            The chunk's pass buffers: the light-path and camera-hit passes it wants are
+            written to it (:meth:`rtmesh.io.passes.PassRecorder.record_surfaces`).
         times : (n,) float, optional
             Each ray's time in the shutter (scenes with moving objects).
 
@@ -351,19 +377,22 @@ class PathStage:
         counts = np.zeros(len(COUNTER_NAMES), np.int64)
         intersect16, occluded16, handle = self._queries
         split = passes is not None and any(passes.wants(name) for name in LIGHT_PATH_PASSES)
+        record_hits = passes is not None and any(passes.wants(name) for name in CAMERA_HIT_PASSES)
         # whitted: max_depth counts the bounces (one segment more: the light of the last hit),
         # no roulette
         options = (s.max_depth + 1 if self.whitted else s.max_depth, NO_ROULETTE if self.whitted else RR_DEPTH,
                    float(s.clamp), np.float32(it.offset_scale),
                    not it.background.transparent, self.cutouts, split, self._camera_media, int(s.light_samples),
-                   block_bits(s.spp, s.light_samples))
+                   block_bits(s.spp, s.light_samples), record_hits, record_hits and self._ao_pass,
+                   self._pass_albedo)
         light_paths = np.zeros((n if split else 0, LIGHT_PATHS, 3))
+        camera_hits = np.zeros((n if record_hits else 0, ch.CAMERA_HIT_WORDS))
         complete = trace_paths(intersect16, occluded16, handle, kernel_input(origins, np.float64),
                     kernel_input(directions, np.float64), keys, *self._sobol(pixel, sample),
                     np.zeros(0) if times is None else kernel_input(times, np.float64),
                     self.geometry, self.surface, self.light_record, self._env, options, self._whitted, self._motion,
                     self._instances,
-                    self.photon_map, stage_entries(), radiance, light_paths, counts)
+                    self.photon_map, stage_entries(), radiance, light_paths, camera_hits, counts)
         if not complete:
             raise RuntimeError("the path kernel's vertex stages were compiled for other argument types than it passes "
                                "(rtmesh.rendering.path_signatures declares them)")
@@ -371,6 +400,8 @@ class PathStage:
             for k, name in enumerate(LIGHT_PATH_PASSES):
                 if passes.wants(name):
                     passes.write(name, slice(None), light_paths[:, k])
+        if record_hits:
+            self._record_surfaces(passes, camera_hits)
         for name, count in zip(COUNTER_NAMES, counts):
             if count:
                 stats.rays[name] += int(count)

@@ -35,6 +35,7 @@ from rtmesh.geometry.embree_packets import LANES
 from rtmesh.lights import light_table as lt
 from rtmesh.materials import models
 from rtmesh.materials.metallic_roughness import square_to_cosine_hemisphere_row
+from rtmesh.rendering.path_camera_hits import HIT_AO_HERE, record_camera_hit
 from rtmesh.rendering.path_lights import area_pdf, environment_pdf, hit_analytic, light_at, sample_li, shadow_segment
 from rtmesh.rendering.path_packets import (AO, AREA_SHADOW, COVERAGE, CUTOUT, DIMENSIONS_PER_VERTEX, ENVIRONMENT,
                                            LIGHT_CHOICE, LIGHT_U1, LIGHT_U2, MAX_LAYERS, SHADOW, layer_coin,
@@ -68,9 +69,9 @@ WIDTH = PACKETS * LANES
 # the per-lane state of the lanes record, in its order, and each item's index
 LANE_RECORD = ("px", "py", "pz", "dx", "dy", "dz", "beta", "total", "paths", "category", "stack", "sigma", "alive",
                "prev_pdf", "prev_delta", "eta_scale", "prev_count", "lane_depth", "layers", "chain", "travelled",
-               "ray_kind", "lane_time", "moved", "scratch")
+               "ray_kind", "lane_time", "moved", "scratch", "first_hit")
 (PX, PY, PZ, DX, DY, DZ, BETA, TOTAL, PATHS, CATEGORY, STACK, SIGMA, ALIVE, PREV_PDF, PREV_DELTA, ETA_SCALE, PREV_COUNT,
- LANE_DEPTH, LAYERS, CHAIN, TRAVELLED, RAY_KIND, LANE_TIME, MOVED, SCRATCH) = range(len(LANE_RECORD))
+ LANE_DEPTH, LAYERS, CHAIN, TRAVELLED, RAY_KIND, LANE_TIME, MOVED, SCRATCH, FIRST_HIT) = range(len(LANE_RECORD))
 # a shaded vertex's columns: hit point, geometric normal, shading normal, tangent, bitangent
 # (world), the direction toward the ray's origin in the shading frame, the ambient term
 POINT, GEOMETRIC, NORMAL, TANGENT, BITANGENT, OUTGOING, AMBIENT = 0, 3, 6, 9, 12, 15, 18
@@ -119,7 +120,7 @@ def meet(lanes, hits, vertices, keys, start, geometry, surface, textured, lights
         photon_map = borrowed((lanes, hits, vertices, keys, geometry, surface, textured, lights, env, options, whitted,
                                motion, instances, photon_map))
     (px, py, pz, dx, dy, dz, beta, total, paths, category, stack, sigma, alive, prev_pdf, prev_delta, eta_scale,
-     prev_count, lane_depth, layers, chain, travelled, ray_kind, lane_time, moved, scratch) = lanes
+     prev_count, lane_depth, layers, chain, travelled, ray_kind, lane_time, moved, scratch, first_hit) = lanes
     vertex, vertex_ids, shaded = vertices
     best_t, best_prim, best_instance, best_u, best_v = hits
     material_id = geometry[5]
@@ -128,6 +129,7 @@ def meet(lanes, hits, vertices, keys, start, geometry, surface, textured, lights
     max_depth, clamp, offset_scale, background_seen, cutouts, split = (options[0], options[2], options[3], options[4],
                                                                        options[5], options[6])
     media = len(options[7])
+    record_hits, pass_albedo = options[10], options[12]
     whitted_on, group_pmf, ambient, occlusion_strength, ao_samples = whitted[0], whitted[6], whitted[7], whitted[8], \
         whitted[12]
     choice_pmf = group_pmf if whitted_on else light_pmf
@@ -233,6 +235,10 @@ def meet(lanes, hits, vertices, keys, start, geometry, surface, textured, lights
             r, g, b = clamped(beta[lane, 0] * er * w, beta[lane, 1] * eg * w, beta[lane, 2] * eb * w, limit)
             add_radiance(total, lane, r, g, b)
             add_to_pass(paths, split, lane, pass_bucket(depth, category[lane]), r, g, b)
+        if record_hits and depth == 0:
+            # the camera-hit passes' surface (rtmesh.rendering.path_camera_hits)
+            record_camera_hit(first_hit, lane, surface, geometry, pass_albedo, mat, prim, bu, bv, hx, hy, hz, gx, gy,
+                              gz, nx, ny, nz, dx[lane], dy[lane], dz[lane])
         if unlit[mat, 0] > 0.0:
             add_radiance(total, lane, beta[lane, 0] * unlit[mat, 1], beta[lane, 1] * unlit[mat, 2],
                  beta[lane, 2] * unlit[mat, 3])
@@ -322,7 +328,7 @@ def sample_lights(lanes, vertices, shadows, keys, pixels, samples, sobol_keys, s
                            options, whitted, motion))
     dx, dy, dz, beta, category, alive = lanes[DX], lanes[DY], lanes[DZ], lanes[BETA], lanes[CATEGORY], lanes[ALIVE]
     prev_count, lane_depth, chain = lanes[PREV_COUNT], lanes[LANE_DEPTH], lanes[CHAIN]
-    lane_time, moved, scratch = lanes[LANE_TIME], lanes[MOVED], lanes[SCRATCH]
+    lane_time, moved, scratch, first_hit = lanes[LANE_TIME], lanes[MOVED], lanes[SCRATCH], lanes[FIRST_HIT]
     vertex, vertex_ids, shaded = vertices
     shadow_rays, shadow_set, shadow_count, shadow_kind, pending, pending_paths = shadows
     tags, params, transmissive, albedo_table = surface[0], surface[1], surface[2], surface[6]
@@ -332,6 +338,7 @@ def sample_lights(lanes, vertices, shadows, keys, pixels, samples, sobol_keys, s
                                                                          options[6], options[8], options[9])
     (whitted_on, delta_rows, group_start, group_order, group_probability, group_alias, group_pmf) = whitted[:7]
     ao_samples, ao_distance, ao_block = whitted[12], whitted[13], whitted[14]
+    ao_pass = options[11]
     deltas = len(delta_rows) if whitted_on else 0
     choice_pmf = group_pmf if whitted_on else light_pmf
     area_rounds = light_samples * (len(group_start) - 1) if whitted_on else light_samples
@@ -448,10 +455,13 @@ def sample_lights(lanes, vertices, shadows, keys, pixels, samples, sobol_keys, s
                 if whitted_on:
                     shadow_kind[k] = SHADOW if delta else (ENVIRONMENT if light[0] == lt.ENVIRONMENT
                                                            else AREA_SHADOW)
-        if ao_samples > 0 and (ambient_r > 0.0) | (ambient_g > 0.0) | (ambient_b > 0.0):
+        # the ao pass's rays: those of the camera ray's surface (rtmesh.rendering.path_camera_hits)
+        ao_here = ao_pass and depth == 0
+        first_hit[lane, HIT_AO_HERE] = 1.0 if ao_here else 0.0
+        if ao_samples > 0 and (ao_here | (ambient_r > 0.0) | (ambient_g > 0.0) | (ambient_b > 0.0)):
             # ambient occlusion (whitted): the ambient term over ao_samples cosine-weighted
             # rays about the geometric normal (on the viewer's side), each counting if
-            # nothing lies within ao_distance
+            # nothing lies within ao_distance (and for the ao pass at the camera ray's surface)
             if (gx * ox + gy * oy) + gz * oz < 0.0:
                 ux, uy, uz = -gx, -gy, -gz
             else:

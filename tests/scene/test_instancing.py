@@ -116,9 +116,12 @@ PATH_PASSES = ("depth", "normal", "albedo", "position", "uv", "alpha", "ao", "va
 # triangle under a float64 transform: Embree's distances and barycentrics differ in their
 # last float32 bits), which moves the point, the interpolated normal and UV and the
 # bilinear texture lookup by as much; measured largest differences (hits 4-30 units away):
-# depth 1.5e-5, position 1.0e-5, normal 7.7e-6, albedo 7.3e-6, uv 3.5e-6, depth_center
-# 3.8e-6, position_center 5.0e-6, normal_center 1.4e-5
-ROUNDED = {"depth": 1e-4, "position": 5e-5, "normal": 1e-4, "albedo": 1e-4, "uv": 5e-5, "depth_center": 1e-4,
+# depth 1.5e-5, position 1.0e-5, albedo 7.3e-6, uv 3.5e-6, depth_center 3.8e-6,
+# position_center 5.0e-6, normal_center 1.4e-5; the normal pass is the path kernel's shading
+# normal, 1.5e-3 (27 of 768 pixels above 1e-4): under a non-uniform scale a placement's
+# interpolated normal is carried to the world, while a copy's vertex normals are carried and
+# normalised one by one before they are interpolated
+ROUNDED = {"depth": 1e-4, "position": 5e-5, "normal": 3e-3, "albedo": 1e-4, "uv": 5e-5, "depth_center": 1e-4,
            "position_center": 5e-5, "normal_center": 1e-4}
 # what the sampled paths add up (the image's parts and its variance): as the image
 SAMPLED = ("variance", "emission", "direct_diffuse", "direct_glossy", "direct_transmission", "indirect_diffuse",
@@ -230,11 +233,13 @@ def test_a_gltf_reusing_a_mesh_renders_as_its_copies(tmp_path, monkeypatch):
     # measured: largest block difference 0.4 % of the block (float32 rounding of the
     # placed triangles moves hits by ulps; the sampled paths stay the same)
     assert (np.abs(a - b) <= 0.01 * np.maximum(b, 0.05)).all()
-    # the passes through the placements: the textured albedo and the normals to rounding
-    # (measured 2.6e-5 and 9e-6), every pixel's placement the same node (the loader numbers
-    # the objects of the two files in another order)
-    for name in ("albedo", "normal"):
-        assert np.abs(placed.passes[name] - expected.passes[name]).max() < 2e-4, name
+    # the passes through the placements: the textured albedo to rounding (measured 2.6e-5),
+    # the normals as the kernel shades them (measured 3.2e-4: a placement's interpolated
+    # normal is carried to the world, a copy's vertex normals are carried and normalised
+    # one by one before they are interpolated), every pixel's placement the same node (the
+    # loader numbers the objects of the two files in another order)
+    for name, tolerance in (("albedo", 2e-4), ("normal", 1e-3)):
+        assert np.abs(placed.passes[name] - expected.passes[name]).max() < tolerance, name
     names = [np.array(["-"] + result_scene.object_names)[result.passes["instance_id"].astype(int) + 1]
              for result, result_scene in ((placed, scene), (expected, copies))]
     assert np.array_equal(*names) and len(np.unique(names[0])) > 10
