@@ -314,12 +314,8 @@ class Integrator:
             motion=self.motion is not None,
         )
         self._init_media(scene)
-        # the general path's stages, each reading the tables above
+        # surface records of the centre passes' rays (and of the general wavefront's hits)
         self.surface_stage = SurfaceStage(self)
-        self.local_shading = LocalShading(self)
-        self.secondary_rays = SecondaryRays(self)
-        self.physical_shading = PhysicalShading(self) if self.plan.physical else None
-        self.wavefront = Wavefront(self)
         # the path integrator: one compiled kernel per chunk (rtmesh.rendering.path_stage)
         self.path_stage = PathStage(self) if settings.integrator == "path" else None
         # scenes that need only direct light take one compiled stage per chunk
@@ -329,8 +325,21 @@ class Integrator:
             # the others the path kernel, configured as the Whitted integrator
             self.path_stage = PathStage(self)
         self.plan = dataclasses.replace(self.plan, fused_direct=self.direct_stage is not None)
+        self.wavefront = None
         if self.direct_stage is None and self.path_stage is None:
-            GENERAL_KERNELS.prepare()
+            self.use_general_wavefront()
+
+    def use_general_wavefront(self):
+        """Render the chunks through the general wavefront (:mod:`rtmesh.rendering.wavefront`):
+        build its stages, each reading the integrator's tables.  For the renders neither
+        the fused stage nor the path kernel takes (the single-ray Embree path, lights
+        without compiled rows), and for tests that take it as their reference (after
+        setting ``direct_stage`` and ``path_stage`` to None)."""
+        self.local_shading = LocalShading(self)
+        self.secondary_rays = SecondaryRays(self)
+        self.physical_shading = PhysicalShading(self) if self.plan.physical else None
+        self.wavefront = Wavefront(self)
+        GENERAL_KERNELS.prepare()
 
     def _init_media(self, scene):
         """Medium stacks (see :mod:`rtmesh.rendering.media`), only for scenes that refract.

@@ -299,6 +299,9 @@ class PathStage:
         self._instances = instance_record(it)
         self._queries = (library.intersect16, library.occluded16, handle)
         PATH_KERNELS.prepare()
+        # the stages' libraries, loaded from the disk cache once a process (about 0.2 s) as
+        # the scene is set up, not within the first render's time
+        stage_entries()
         # photon passes for caustics, and the photons the chunks gather (the current pass's)
         self.caustics = Caustics(self, it)
         self.photon_map = empty_photon_map(len(self.surface[0]))

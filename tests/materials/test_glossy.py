@@ -15,6 +15,7 @@ from rtmesh.rendering.integrator import Integrator
 from rtmesh.sampling.patterns import Dim, decorrelated_points
 from rtmesh.scene.camera import Camera
 from rtmesh.scene.model import Scene
+from rtmesh.rendering.secondary_rays import SecondaryRays
 
 EXPONENTS = [0.0, 1.0, 7.5, 100.0, 1e4]
 
@@ -151,7 +152,7 @@ def test_integrator_draws_glossy_directions_from_the_lobe_with_the_renders_sampl
     mirror = np.tile([0.0, 0.0, 1.0], (k, 1))
     ng = mirror.copy()
     mat = np.full(k, 1, dtype=np.intp)
-    reflection, _ = integrator.secondary_rays.scattering.sample(
+    reflection, _ = SecondaryRays(integrator).scattering.sample(
         mirror, mirror, ng, mat, None, None, lambda rows, weight: np.ones(len(weight), dtype=bool),
         lambda rows: integrator.sampler.glossy(pixel.take(rows), sample_in_pixel.take(rows), 2))
     wi = reflection.directions

@@ -44,6 +44,7 @@ def render_both(scene, **overrides):
     assert fused.direct_stage is not None
     general = Integrator(scene, settings(**overrides))
     general.direct_stage = None
+    general.use_general_wavefront()
     a, b = fused.render(), general.render()
     assert_finite(a)
     return a, b
