@@ -147,9 +147,12 @@ def stage_entries():
     """The path kernel's stages' entry points (:func:`rtmesh.core.compiled.entry_point`:
     address and signature token of ``trace_segments``, ``meet``, ``sample_lights``,
     ``scatter`` and ``trace_shadows``, in that order) for
-    :func:`rtmesh.rendering.path_kernel.trace_paths`, as a (10,) int64 array; each stage
-    compiled, or loaded from the disk cache, on the first call."""
+    :func:`rtmesh.rendering.path_kernel.trace_paths`, as a (10,) int64 array; each stage,
+    and ``trace_paths`` itself, compiled or loaded from the disk cache on the first call
+    (:class:`rtmesh.rendering.path_stage.PathStage` makes it as it sets a scene up, so that
+    a process's first render does not load them)."""
     stages = {dispatcher: signature for dispatcher, signature in PATH_KERNELS.kernels}
+    compile_locked(trace_paths, stages[trace_paths])
     entries = []
     for stage in (path_rays.trace_segments, pv.meet, pv.sample_lights, path_scatter.scatter, path_rays.trace_shadows):
         compile_locked(stage, stages[stage])

@@ -299,8 +299,8 @@ class PathStage:
         self._instances = instance_record(it)
         self._queries = (library.intersect16, library.occluded16, handle)
         PATH_KERNELS.prepare()
-        # the stages' libraries, loaded from the disk cache once a process (about 0.2 s) as
-        # the scene is set up, not within the first render's time
+        # the kernel's and its stages' libraries, loaded from the disk cache once a process
+        # (about 0.25 s) as the scene is set up, not within the first render
         stage_entries()
         # photon passes for caustics, and the photons the chunks gather (the current pass's)
         self.caustics = Caustics(self, it)
