@@ -36,6 +36,7 @@ import time
 import numpy as np
 
 from rtmesh.core import runtime
+from rtmesh.core.rays import kernel_input
 from rtmesh.geometry.accel import Accel
 from rtmesh.geometry.cutouts import CutoutAccel
 from rtmesh.geometry.motion import MotionAccel, blurs, object_motions, scene_at_time, swept_bounds
@@ -66,6 +67,7 @@ from rtmesh.rendering.stats import RenderStats
 from rtmesh.rendering.surface_stage import SurfaceStage
 from rtmesh.rendering.surface_textures import SurfaceTextures
 from rtmesh.rendering.wavefront import Wavefront
+from rtmesh.sampling.pixel_samples import PixelSampler, pixel_positions
 from rtmesh.sampling.sampler import Sampler
 from rtmesh.scene import instances
 from rtmesh.scene.background import as_background
@@ -138,6 +140,7 @@ class Integrator:
     def __init__(self, scene, settings):
         self.settings = settings.validate()
         self.sampler = Sampler.for_settings(self.settings)
+        self.pixel_sampler = PixelSampler.for_settings(self.settings)
         if object_motions(scene) and not blurs(scene):
             # an instantaneous shutter: moving objects stand still where the shutter finds them
             scene = scene_at_time(scene, scene.camera.shutter[0])
@@ -640,8 +643,11 @@ class Integrator:
         sample_time : (n,) float64 or None
         """
         s = self.settings
-        # every dimension is stratified in sets of the settings' spp, whatever the round
-        in_pixel = self.sampler.pixel(pixel, sample_in_pixel)
+        # every dimension is stratified in sets of the settings' spp, whatever the round; the
+        # positions in the pixels by the compiled twin of Sampler.pixel (the same numbers)
+        ps = self.pixel_sampler
+        in_pixel = pixel_positions(ps.code, ps.keys, ps.corners, ps.size, ps.spp, kernel_input(pixel, np.int64),
+                                   kernel_input(sample_in_pixel, np.int64))
         lens_uv = self.sampler.lens(pixel, sample_in_pixel) if self.plan.lens else None
         sample_time = None
         if self.plan.motion:
