@@ -42,7 +42,7 @@ from rtmesh.geometry.motion import object_motions, scene_at_time
 from rtmesh.io.atomic_files import write_text
 from rtmesh.io.rle import encode, mask_box
 from rtmesh.rendering.centre_rays import centre_hits, centre_passes
-from rtmesh.rendering.integrator import recentred
+from rtmesh.rendering.built_scene import recentred
 from rtmesh.scene.camera_json import project_points
 from rtmesh.scene.instances import object_geometry
 

@@ -1,25 +1,23 @@
-"""The wavefront Whitted integrator.
+"""One view of a built scene, rendered: the integrator.
 
-Each chunk of pixel samples is rendered as a sequence of named stages, every stage working
-on whole ray batches (no per-ray Python loop)::
+:class:`Integrator` renders a view (camera, lights, background, passes) of a
+:class:`~rtmesh.rendering.built_scene.BuiltScene` (the scene's Embree scene and tables,
+built once; :meth:`Integrator.with_view` renders another view of the same build).  A render
+is one or more rounds (:mod:`~rtmesh.rendering.adaptive`) of chunks of whole pixels on
+threads (:mod:`~rtmesh.rendering.scheduler`); each chunk goes to one of three stages:
 
-    camera rays -> [intersect -> misses -> absorption -> surfaces -> local shading
-                    (ambient/AO, lights with shadow rays) -> spawn reflection and
-                    refraction rays] repeated until max depth or no ray is left
-                -> film
+- the path kernel (:mod:`~rtmesh.rendering.path_stage`, :mod:`~rtmesh.rendering.path_kernel`):
+  every ``integrator = "path"`` render, and every Whitted render the fused stage does not
+  take, in the kernel's Whitted configuration (:mod:`~rtmesh.rendering.whitted_rows`);
+- the fused direct-lighting stage (:mod:`~rtmesh.rendering.direct_stage`): Whitted scenes
+  that need only direct light from point-like lights;
+- the general wavefront (:mod:`~rtmesh.rendering.wavefront`, NumPy batches a depth level
+  at a time): what neither can render (the single-ray Embree path, lights without compiled
+  rows), and the tests that take it as their reference.
 
-The surface, local-shading and secondary-ray stages are modules of their own
-(:mod:`~rtmesh.rendering.surface_stage`, :mod:`~rtmesh.rendering.local_shading`,
-:mod:`~rtmesh.rendering.secondary_rays`); a chunk's state travels through them in one
-:class:`~rtmesh.rendering.chunk_state.ChunkState`.  Scenes that need only direct light take
-the fused compiled stage instead (:mod:`~rtmesh.rendering.direct_stage`).
-
-Rays carry the index of the sample they belong to and their throughput; contributions go
-back to the sample by scattering.  Chunks run on a thread pool (Embree, NumPy and the
-compiled kernels release the GIL).  Every random number is a
-function of (seed, pixel, sample, dimension), each pixel is rendered whole inside one
-chunk, and the chunks do not depend on the thread count (see :mod:`rtmesh.rendering.scheduler`), so
-the image is bit-identical whatever the thread count.
+Every random number is a function of (seed, pixel, sample, dimension), each pixel is
+rendered whole inside one chunk, and the chunks do not depend on the thread count (see
+:mod:`rtmesh.rendering.scheduler`), so the image is bit-identical whatever the thread count.
 
 Before rendering, :class:`Integrator` looks at the scene and the settings and enables only
 the stages that can contribute (see :attr:`Integrator.plan`).  Building and running it
@@ -28,7 +26,6 @@ interval, kept thread pools) is :mod:`rtmesh.core.runtime`'s, turned on by the p
 own their process.
 """
 
-import copy
 import dataclasses
 import logging
 import time
@@ -37,24 +34,19 @@ import numpy as np
 
 from rtmesh.core import runtime
 from rtmesh.core.rays import kernel_input
-from rtmesh.geometry.accel import Accel
-from rtmesh.geometry.cutouts import CutoutAccel
-from rtmesh.geometry.motion import MotionAccel, blurs, object_motions, scene_at_time, swept_bounds
+from rtmesh.geometry.motion import object_motions
 from rtmesh.io import denoising
 from rtmesh.io.passes import DERIVED_PASSES, PassRecorder, derived_pass
 from rtmesh.lights.area_lighting import AreaLighting
 from rtmesh.lights.area_lights import is_area_light
-from rtmesh.lights.mesh_lights import emissive_mesh_light
-from rtmesh.lights.environment import EnvironmentLighting
-from rtmesh.materials.table import ALPHA_MODES
 from rtmesh.rendering.adaptive import render_rounds
+from rtmesh.rendering.built_scene import BuiltScene
 from rtmesh.rendering.centre_rays import centre_passes
 from rtmesh.rendering.chunk_state import Clock
 from rtmesh.rendering.direct_stage import DirectStage
 from rtmesh.rendering.film import Film
 from rtmesh.rendering.general_kernels import GENERAL_KERNELS
 from rtmesh.rendering.local_shading import LocalShading
-from rtmesh.rendering import memory
 from rtmesh.rendering.media import Media
 from rtmesh.rendering.path_stage import PathStage, unsupported, unsupported_lights
 from rtmesh.rendering.physical_shading import PhysicalShading
@@ -62,10 +54,8 @@ from rtmesh.rendering.render_plan import RenderPlan
 from rtmesh.rendering.render_result import RenderResult
 from rtmesh.rendering.scheduler import pixel_chunks, run_on_threads, sample_indices
 from rtmesh.rendering.secondary_rays import SecondaryRays
-from rtmesh.rendering.shading_tables import ShadingTables
 from rtmesh.rendering.stats import RenderStats
 from rtmesh.rendering.surface_stage import SurfaceStage
-from rtmesh.rendering.surface_textures import SurfaceTextures
 from rtmesh.rendering.wavefront import Wavefront
 from rtmesh.sampling.pixel_samples import PixelSampler, pixel_positions
 from rtmesh.sampling.sampler import Sampler
@@ -93,41 +83,16 @@ def _translated(obj, shift):
     return dataclasses.replace(obj, **changes) if changes else obj
 
 
-def recentred(vertices, placed, shift):
-    """What an Embree scene of ``vertices`` is built from in the frame re-centred on
-    ``shift``: world-space vertices moved by ``-shift``; the prototypes of placed meshes
-    left in their own coordinates, their placements' translations moved instead.
-
-    Parameters
-    ----------
-    vertices : (V, 3) float64
-    placed : rtmesh.scene.instances.Instances or None
-        Where the prototypes' vertices start and the placements.
-    shift : (3,) float64
-
-    Returns
-    -------
-    shifted : (V, 3) float64
-        A new array.
-    placed : Instances or None
-        ``placed`` with its transforms moved (a copy).
-    """
-    shifted = vertices - shift
-    if placed is None:
-        return shifted, None
-    shifted[placed.first_vertex:] = vertices[placed.first_vertex:]
-    transforms = placed.transforms.copy()
-    transforms[:, :3, 3] -= shift
-    return shifted, dataclasses.replace(placed, transforms=transforms)
-
-
 class Integrator:
-    """Renders one scene with one set of settings.
+    """Renders one view of a scene with one set of settings.
 
     Parameters
     ----------
     scene : Scene
     settings : RenderSettings
+    built : BuiltScene, optional
+        The scene as built for another view (:meth:`with_view`): ``scene`` is then that
+        build's scene with this view's camera, lights and background.  Default: built here.
 
     Attributes
     ----------
@@ -137,102 +102,42 @@ class Integrator:
         ``scene.bounds`` (world units), formed once for the built scene and its views.
     """
 
-    def __init__(self, scene, settings):
+    def __init__(self, scene, settings, built=None):
         self.settings = settings.validate()
         self.sampler = Sampler.for_settings(self.settings)
         self.pixel_sampler = PixelSampler.for_settings(self.settings)
-        if object_motions(scene) and not blurs(scene):
-            # an instantaneous shutter: moving objects stand still where the shutter finds them
-            scene = scene_at_time(scene, scene.camera.shutter[0])
-        if scene.instances is not None:
-            missing = instances.unsupported(scene, self.settings)
-            if self.settings.integrator == "whitted":
-                # Whitted renders trace instances through the path kernel's Whitted configuration
-                if not WHITTED_THROUGH_KERNEL:
-                    missing.append("integrator 'whitted' through the general wavefront")
-                missing.extend(unsupported_lights(scene.lights))
-            if missing:
-                # today's copies: the general wavefront and some of the path kernel's stages read world-space faces
-                log.info("placed meshes flattened into %d copies (instances are not traced with %s)",
-                         len(scene.instances), ", ".join(missing))
-                memory.check_flattening(scene.instances, ", ".join(missing))  # within a loading limit
-                scene = instances.flattened(scene)
+        if built is None:
+            built = BuiltScene(scene, self.settings, self.sampler, self._flattening_reasons(scene))
+            scene = built.scene
+        self.built = built
+        # the build's tables, read by the stages as the integrator's own
         self.scene = scene
-        # Re-centre the scene on the origin before it meets float32: float32 resolution is
-        # relative to the size of the coordinates, so a model 1e6 units from the origin would
-        # otherwise be traced on a grid of 1/16 unit.  Shading sees the same shifted frame.
-        scene_bounds = self.scene_bounds = scene.bounds  # a pass over every vertex: formed once
-        self.shift = scene_bounds.mean(axis=0)
-        # moving objects get Embree scenes of their own, traced at each ray's time
-        self.motion = None
-        if blurs(scene):
-            motions = {k: m.shifted(self.shift) for k, m in object_motions(scene).items()}
-            self.motion = MotionAccel(scene.vertices - self.shift, scene.faces, scene.object_id,
-                                      motions, scene.camera.shutter)
-        # placed meshes: the prototypes stay in their own coordinates, their placements move
-        shifted, self.instances = recentred(scene.vertices, scene.instances, self.shift)
-        self.accel = self.motion or Accel(shifted, scene.faces, instances=self.instances)
-        # the scene's size in the re-centred frame bounds the triangles' size, which sets
-        # part of the origin offset (see offset_ray_origins); it cannot be zero for a scene
-        # that renders.  With motion,
-        # the size of the space the objects sweep during the shutter.
-        bounds = swept_bounds(scene) if self.motion else scene_bounds
-        self.offset_scale = max(float(np.abs(bounds - self.shift).max()), 1e-30)
-        m = scene.materials
-        # textures and vertex colours, looked up per hit only where the scene has them
-        self.textures = SurfaceTextures(scene)
-        self.cutouts = None
-        if m.any_cutout:
-            # every query (camera, secondary, shadow, area-light, AO rays) sees the cut-outs,
-            # at each ray's time when objects move
-            self.cutouts = CutoutAccel(self.accel, scene.face_normals, scene.material_id, m.cutout,
-                                       m.alpha_mode == ALPHA_MODES.index("blend"), m.alpha_cutoff,
-                                       self.textures, self.offset_scale, self.sampler)
-            self.accel = self.cutouts
-        self._emitters = None
-        if m.any_emission:
-            tint = mean_tint = None
-            if self.textures.emission_textured:
-                material_id = scene.material_id
-
-                def tint(prim, u, v):
-                    return self.textures.emission_tints(prim, u, v, material_id[prim])
-
-                mean_tint = self.textures.mean_emission_tints()[material_id]
-            self._emitters = emissive_mesh_light(self.accel.triangles, scene.face_normals,
-                                                 m.emission[scene.material_id], tint, mean_tint)
+        self.scene_bounds, self.shift, self.motion, self.instances = (built.scene_bounds, built.shift, built.motion,
+                                                                      built.instances)
+        self.accel, self.offset_scale, self.textures, self.cutouts = (built.accel, built.offset_scale, built.textures,
+                                                                      built.cutouts)
+        self.ao_distance, self.ao_samples, self.tables = built.ao_distance, built.ao_samples, built.tables
         self._set_background(scene.background)
-        lit = ~m.unlit[:, None]
-        self._shaded_any = bool((((m.diffuse > 0) | (m.specular > 0)) & lit).any()) or m.any_physical
-        self.ao_distance = settings.ao_distance or 0.2 * float(np.linalg.norm(np.ptp(scene_bounds, axis=0)))
-        self._ambient_on = bool((scene.ambient > 0).any() and (m.ambient > 0).any())
-        if settings.denoise:
-            denoising.require()  # before any work: one line naming the extra when it is missing
-        # alpha-blend materials are let through at random: camera hits then vary per sample
-        self._stochastic_coverage = bool((m.alpha_mode == ALPHA_MODES.index("blend")).any())
-        # the AO pass alone asks for 16 rays per camera hit unless ao_samples says otherwise
-        self.ao_samples = settings.ao_samples or (16 if "ao" in settings.passes else 0)
-        # what the stages read per hit (per-material colours and flags, per-face rows)
-        self.tables = ShadingTables.build(scene, self.accel.triangles, self.offset_scale)
-        # the path kernel's scene records, formed by the first PathStage and shared by every view
-        self.path_tables = None
-        # the medium tables of the path integrator's transmissive models where they are not
-        # Whitted's (media_of), built once
-        self._path_media = None
         self._set_view()
 
+    def _flattening_reasons(self, scene):
+        """Why ``scene``'s placements cannot be traced as Embree instances under these
+        settings (phrases; empty when they can be, or when there are none)."""
+        if scene.instances is None:
+            return []
+        missing = instances.unsupported(scene, self.settings)
+        if self.settings.integrator == "whitted":
+            # Whitted renders trace instances through the path kernel's Whitted configuration
+            if not WHITTED_THROUGH_KERNEL:
+                missing.append("integrator 'whitted' through the general wavefront")
+            missing.extend(unsupported_lights(scene.lights))
+        return missing
+
     def _set_background(self, background):
-        """The background rays see and, when it lights the scene, its light sampler."""
+        """The background rays see and, when it lights the scene, its light sampler (the
+        build's, :meth:`BuiltScene.environment_lighting`)."""
         self.background = as_background(background)
-        m = self.scene.materials
-        self.environment_lighting = None
-        # it lights the scene when asked (scene files: [background] lighting); unset (None),
-        # it lights scenes with physically based materials, which are made to be seen under
-        # their environment, and no others (whose images stay as they were)
-        lighting = m.any_physical if self.background.lighting is None else self.background.lighting
-        if lighting and not self.background.is_black:
-            self.environment_lighting = EnvironmentLighting(self.background, self.accel, self.settings,
-                                                            self.offset_scale)
+        self.environment_lighting = self.built.environment_lighting(self.background, background)
 
     def with_view(self, camera, lights=None, background=None):
         """The same built scene seen from another camera (and lit by other lights).
@@ -264,14 +169,10 @@ class Integrator:
         """
         if object_motions(self.scene) and tuple(camera.shutter) != tuple(self.scene.camera.shutter):
             raise ValueError("with_view: a scene with moving objects needs the built camera's shutter")
-        view = copy.copy(self)
-        view.scene = dataclasses.replace(self.scene, camera=camera,
-                                         lights=list(self.scene.lights if lights is None else lights),
-                                         background=self.scene.background if background is None else background)
-        if background is not None:
-            view._set_background(background)
-        view._set_view()
-        return view
+        scene = self.built.scene
+        view = dataclasses.replace(scene, camera=camera, lights=list(self.scene.lights if lights is None else lights),
+                                   background=self.scene.background if background is None else background)
+        return Integrator(view, self.settings, self.built)
 
     def _set_view(self):
         """Form what depends on the camera and the lights (after the geometry's tables)."""
@@ -283,10 +184,10 @@ class Integrator:
         self.view_lights = lights
         self.lights = [light for light in lights if not is_area_light(light)]
         area_lights = [light for light in lights if is_area_light(light)]
-        area_lights += [self._emitters] if self._emitters is not None else []
+        area_lights += [self.built.emitters] if self.built.emitters is not None else []
         self.area_lighting = (AreaLighting(area_lights, self.accel, self.settings, self.offset_scale)
                               if area_lights else None)
-        shaded_any = self._shaded_any
+        shaded_any = self.built.shaded_any
         # only the passes asked for are computed; a transparent background needs coverage;
         # the denoiser's guides are computed even when they are not written
         guides = ("albedo", "normal") if settings.denoise else ()
@@ -294,7 +195,7 @@ class Integrator:
                                    + guides, self.camera, self.shift)
         self.plan = RenderPlan(
             emission=m.any_emission,
-            ambient=self._ambient_on,
+            ambient=self.built.ambient_on,
             lights=bool(self.lights) and shaded_any,
             area_lights=self.area_lighting is not None and shaded_any,
             area_light_visibility=self.area_lighting is not None and bool(self.area_lighting.visible),
@@ -312,7 +213,7 @@ class Integrator:
             absorption=m.any_absorption,
             background=not self.background.is_black,
             passes=bool(self.passes),
-            ao=self.ao_samples > 0 and (self._ambient_on or "ao" in settings.passes),
+            ao=self.ao_samples > 0 and (self.built.ambient_on or "ao" in settings.passes),
             lens=self.camera.aperture > 0.0,
             motion=self.motion is not None,
         )
@@ -382,11 +283,11 @@ class Integrator:
         groups = np.flatnonzero(refracts)
         if self.media is not None and np.array_equal(self.media.group_material, groups):
             return self.media
-        if self._path_media is None or not np.array_equal(self._path_media.group_material, groups):
+        if self.built.path_media is None or not np.array_equal(self.built.path_media.group_material, groups):
             scene = self.scene
-            self._path_media = Media(scene.materials, scene.material_id, scene.vertices, scene.faces,
+            self.built.path_media = Media(scene.materials, scene.material_id, scene.vertices, scene.faces,
                                      scene.face_normals, refracts)
-        return self._path_media
+        return self.built.path_media
 
     def camera_media(self, refracts):
         """The media the camera sits in, counting as media the materials ``refracts`` marks
@@ -469,7 +370,7 @@ class Integrator:
         if s.denoise:
             noisy = image
             # the guides average each pixel's camera hits: noise-free unless those are random
-            clean = not (self.plan.lens or self.plan.motion or self._stochastic_coverage)
+            clean = not (self.plan.lens or self.plan.motion or self.built.stochastic_coverage)
             image = denoising.denoise(image, film.pass_image("albedo"), film.pass_image("normal"), clean)
             stats.wall_seconds = time.perf_counter() - start
         return RenderResult(image, passes, stats, film, alpha, noisy, self.settings)

@@ -250,10 +250,10 @@ class PathStage:
         if ignored:
             log.warning("integrator 'path' ignores %s (it has no ambient term, ends paths by Russian roulette "
                         "and takes its light from the lights and the background)", ", ".join(ignored))
-        if it.path_tables is None:
+        if it.built.path_tables is None:
             # formed with the integrator's first view; views made by with_view share them
-            it.path_tables = scene_tables(scene, it.accel, it.media_of, self.whitted)
-        self.geometry, self.surface, face_emission = it.path_tables
+            it.built.path_tables = scene_tables(scene, it.accel, it.media_of, self.whitted)
+        self.geometry, self.surface, face_emission = it.built.path_tables
         self.cutouts = it.cutouts is not None
         background = it.background
         # (whitted: when it lights the scene under the Whitted stages' rule, Integrator._set_background)

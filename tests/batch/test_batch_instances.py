@@ -12,7 +12,7 @@ from rtmesh.batch import coco, jobs, view_scenes, worker
 from rtmesh.batch.bop import BOP_SUFFIXES
 from rtmesh.batch.coco import COCO_SUFFIX
 from rtmesh.io.images import read_image
-from rtmesh.rendering.integrator import recentred
+from rtmesh.rendering.built_scene import recentred
 from rtmesh.scene import instances
 
 PLACED = 8

@@ -97,7 +97,7 @@ def test_whitted_through_the_wavefront_renders_the_copies(caplog, monkeypatch):
     monkeypatch.setattr(integrator_module, "WHITTED_THROUGH_KERNEL", False)
     scene = placed_scene(count=5)
     settings = RenderSettings(width=32, height=24, spp=2, integrator="whitted", passes=("object_id", "instance_id"))
-    with caplog.at_level(logging.INFO, logger="rtmesh.rendering.integrator"):
+    with caplog.at_level(logging.INFO, logger="rtmesh.rendering.built_scene"):
         it = Integrator(scene, settings)
     assert it.instances is None and "flattened into 5 copies" in caplog.text
     expected = Integrator(instances.flattened(scene), settings).render()
