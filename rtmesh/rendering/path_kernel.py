@@ -63,7 +63,7 @@ transmissive surface (its front) pushes the material, leaving it pops it; the in
 index ratio is the material's index over that of the medium on the other side (so glass in
 water refracts with 1.5 / 1.33), set in the hit's parameter row (the model's ``ior`` slot);
 Beer-Lambert absorption is the innermost medium's.  Touching media (coincident "twin"
-faces) are crossed together, as the Whitted path does (:func:`rtmesh.rendering.path_surfaces.twin_material`).
+faces) are crossed together, as the Whitted path does (:func:`rtmesh.rendering.path_media.twin_material`).
 ``motion = (static, static_faces, movers, face_maps, face_offsets, moves, face_mover)``:
 whether the static scene exists (the packet queries' ``scene`` is its handle), its faces'
 global indices (empty: the identity), the moving objects' Embree scenes (k,) int64, their

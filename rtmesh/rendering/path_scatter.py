@@ -10,8 +10,8 @@ from rtmesh.core.compiled import borrowed, kernel
 from rtmesh.materials import lobes, models
 from rtmesh.rendering.path_packets import (BSDF, BSDF_U1, BSDF_U2, DIMENSIONS_PER_VERTEX, LOBE, REFLECTION,
                                            REFRACTION, ROULETTE)
-from rtmesh.rendering.path_surfaces import (cross_interface, crossing_scale, leave_surface, sampled_direction,
-                                            twin_material)
+from rtmesh.rendering.path_media import cross_interface, crossing_scale, twin_material
+from rtmesh.rendering.path_surfaces import leave_surface, sampled_direction
 from rtmesh.rendering.path_sums import lobe_category
 from rtmesh.rendering.path_vertices import (ALIVE, BETA, CATEGORY, CHAIN, CHAIN_CAUSTIC, CHAIN_SCATTERED, CHAIN_START,
                                             DX, DY, DZ, ETA_SCALE, FRONT, LANE_DEPTH, PREV_DELTA, PREV_PDF, PX, PY,

@@ -38,7 +38,7 @@ from rtmesh.rendering.path_packets import COUNTER_NAMES
 from rtmesh.rendering.path_surfaces import TEXTURE_COLUMNS
 from rtmesh.rendering.settings import RenderSettings
 from rtmesh.rendering.surface_textures import corner_and_edges, face_tangents
-from rtmesh.sampling.hashing import mix64, path_key
+from rtmesh.sampling.hashing import mix64, path_keys
 from rtmesh.sampling.patterns import Dim
 from rtmesh.sampling.zsobol import block_bits, sequence_keys
 
@@ -329,13 +329,14 @@ class PathStage:
         return int(it.ao_samples), float(it.ao_distance), block_bits(it.settings.spp, int(it.ao_samples))
 
     def _sobol(self, pixel, sample):
-        """The kernel's Sobol arguments: pixels, sample indices and the sequences' record
+        """The kernel's Sobol arguments from the chunk's pixels and sample indices ((n,)
+        int64 each): those and the sequences' record
         (:func:`rtmesh.sampling.zsobol.sequence_keys`: zsobol's points under zsobol, sobol's
         under the other samplers); empty under the ``random`` sampler (white noise
         everywhere, as it promises)."""
         if self.it.settings.sampler == "random":
             return np.zeros(0, np.int64), np.zeros(0, np.int64), self._sobol_keys
-        return kernel_input(pixel, np.int64), kernel_input(sample, np.int64), self._sobol_keys
+        return pixel, sample, self._sobol_keys
 
     def _record_surfaces(self, passes, camera_hits):
         """Write the camera-hit passes from the kernel's records of the camera rays' first
@@ -374,8 +375,8 @@ class PathStage:
         """
         it, s = self.it, self.it.settings
         n = len(pixel)
-        with np.errstate(over="ignore"):
-            keys = path_key(self._seed_key, pixel.astype(np.uint64), sample.astype(np.uint64))
+        pixel_index, sample_index = kernel_input(pixel, np.int64), kernel_input(sample, np.int64)
+        keys = path_keys(self._seed_key, pixel_index, sample_index)
         radiance = np.zeros((n, 3))
         counts = np.zeros(len(COUNTER_NAMES), np.int64)
         intersect16, occluded16, handle = self._queries
@@ -391,7 +392,7 @@ class PathStage:
         light_paths = np.zeros((n if split else 0, LIGHT_PATHS, 3))
         camera_hits = np.zeros((n if record_hits else 0, ch.CAMERA_HIT_WORDS))
         complete = trace_paths(intersect16, occluded16, handle, kernel_input(origins, np.float64),
-                    kernel_input(directions, np.float64), keys, *self._sobol(pixel, sample),
+                    kernel_input(directions, np.float64), keys, *self._sobol(pixel_index, sample_index),
                     np.zeros(0) if times is None else kernel_input(times, np.float64),
                     self.geometry, self.surface, self.light_record, self._env, options, self._whitted, self._motion,
                     self._instances,

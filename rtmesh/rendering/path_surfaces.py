@@ -21,7 +21,8 @@ slots, textures (M, len(TEXTURE_COLUMNS)), metal_tint (M,), alpha_mode (M,), alp
 opacity (M,), texels, texture_descriptors, ior (M,), twins (F,) or (0,))``: the material tables of :mod:`rtmesh.materials.models`, each
 material's texture indices in the atlas (:data:`TEXTURE_COLUMNS`; -1 none) and its
 Whitted metal tint, the atlas (:mod:`rtmesh.io.texture_atlas`), each material's index of
-refraction, and each face's touching twin's material (:func:`twin_material`; empty when no
+refraction, and each face's touching twin's material
+(:func:`rtmesh.rendering.path_media.twin_material`; empty when no
 two transmissive faces touch).
 
 Texturing follows :mod:`rtmesh.rendering.surface_textures` (docs/MATERIALS.md): the base
@@ -46,9 +47,10 @@ from rtmesh.lights import light_table
 from rtmesh.lights.environment import sample_direction
 from rtmesh.lights.light_table import FACE
 from rtmesh.lights.point_light_rows import illuminate_row
-from rtmesh.materials import lobes, models
+from rtmesh.materials import models
 from rtmesh.materials.metallic_roughness import alpha_from_roughness_row
 from rtmesh.materials.table import ALPHA_MODES
+from rtmesh.rendering.path_media import interface_ratio, twin_material
 from rtmesh.sampling.alias import alias_sample as _alias_sample
 
 TEXTURE_COLUMNS = ("diffuse_texture", "metallic_roughness_texture", "normal_texture", "emission_texture",
@@ -337,7 +339,7 @@ def hit_parameters(surface, geometry, textured, mat, prim, bu, bv, scratch, lane
     parameter row being the material's own, or (``in_scratch``) a copy in ``scratch[lane]``
     scaled by its textures and vertex colours (:func:`textured_row`), with a transmissive
     model's index ratio between the media on the interface's two sides
-    (:func:`interface_ratio`; ``media`` the stack's depth, 0 without transmissive materials;
+    (:func:`rtmesh.rendering.path_media.interface_ratio`; ``media`` the stack's depth, 0 without transmissive materials;
     ``entering`` whether the ray meets the front)."""
     tags, params, transmissive, emission, slots, ior = surface[0], surface[1], surface[2], surface[3], surface[7], \
         surface[15]
@@ -453,77 +455,6 @@ def tangent_frame(nx, ny, nz):
     fa = -1.0 / (sign + nz)
     fb = nx * ny * fa
     return 1.0 + sign * nx * nx * fa, sign * fb, -sign * nx, fb, sign + ny * ny * fa, -ny
-
-
-@inline_row
-def twin_material(surface, prim):
-    """The material of the transmissive face that touches face ``prim`` from the other side
-    (the same three vertex positions, the opposite winding: glass touching water), -1 for
-    none (:func:`rtmesh.rendering.media.coincident_faces`)."""
-    twins = surface[16]
-    return twins[prim] if len(twins) else -1
-
-
-@inline_row
-def interface_ratio(stack, lane, mat, entering, ior, twin):
-    """The index ratio of a transmissive material's interface between the media on its two
-    sides: its index over that of the medium the ray comes from (entering) or goes into
-    (leaving); ``stack[lane]`` holds the media the ray is inside, innermost first, -1 padded.
-    A face touching another medium's (``twin`` its material, -1 none) has that medium on
-    its other side, whichever of the two faces the ray met (as the Whitted integrator's
-    twins, :mod:`rtmesh.rendering.media`): one medium to the other directly, and an
-    interface between two bodies of one material is invisible (ratio 1)."""
-    if twin >= 0:
-        return ior[mat] / ior[twin]
-    top = stack[lane, 0]
-    if entering:
-        other = top
-    else:
-        other = stack[lane, 1] if top == mat else top
-    return ior[mat] / (ior[other] if other >= 0 else 1.0)
-
-
-@inline_row
-def crossing_scale(slots, tag, bsdf_params, bsdf_row, loz, flags):
-    """``eta'^2`` of a sampled refraction (``flags`` with ``lobes.TRANSMISSION``, a model
-    with an ``ior`` slot; ``loz`` the outgoing direction's local z, positive outside), the
-    inverse of the radiance scaling ``1 / eta'^2`` the seam applies to it for camera paths;
-    1 for any other sample."""
-    if flags & lobes.TRANSMISSION:
-        slot = slots[tag, models.IOR_SLOT]
-        if slot >= 0:
-            eta = bsdf_params[bsdf_row, slot]
-            etap = eta if loz > 0.0 else 1.0 / eta
-            return etap * etap
-    return 1.0
-
-
-@inline_row
-def cross_interface(stack, lane, mat, into, twin):
-    """Update a lane's media stack as its ray refracts through material ``mat``: into its
-    interior (push) or out of it (pop, when it is the innermost); through touching faces
-    (``twin`` the other face's material, :func:`twin_material`) out of the one medium and
-    into the other, leaving first.  Returns the innermost medium after (-1: none)."""
-    if twin >= 0 and into:
-        _cross(stack, lane, twin, False)
-    _cross(stack, lane, mat, into)
-    if twin >= 0 and not into:
-        _cross(stack, lane, twin, True)
-    return stack[lane, 0]
-
-
-@inline_row
-def _cross(stack, lane, mat, into):
-    """One crossing of :func:`cross_interface`."""
-    media = stack.shape[1]
-    if into:
-        for k in range(media - 1, 0, -1):
-            stack[lane, k] = stack[lane, k - 1]
-        stack[lane, 0] = mat
-    elif stack[lane, 0] == mat:
-        for k in range(media - 1):
-            stack[lane, k] = stack[lane, k + 1]
-        stack[lane, media - 1] = -1
 
 
 @row

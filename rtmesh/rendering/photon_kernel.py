@@ -44,9 +44,9 @@ from rtmesh.rendering.path_surfaces import environment_sample as _environment_sa
 from rtmesh.rendering.path_surfaces import illuminate as _illuminate_row
 from rtmesh.rendering.path_surfaces import projector_incident as _projector_incident
 from rtmesh.rendering.path_surfaces import sample_area_point as _sample_area_point
-from rtmesh.rendering.path_surfaces import (cross_interface, crossing_scale, twin_material, hit_frame, hit_parameters, is_transparent,
-                                            leave_surface, surface_point, tangent_frame, textured_materials,
-                                            sampled_direction, triangle_light_emission)
+from rtmesh.rendering.path_media import cross_interface, crossing_scale, twin_material
+from rtmesh.rendering.path_surfaces import (hit_frame, hit_parameters, is_transparent, leave_surface, sampled_direction,
+                                            surface_point, tangent_frame, textured_materials, triangle_light_emission)
 from rtmesh.sampling.hashing import GOLDEN, mix64, path_key, uniform
 from rtmesh.sampling.lowdiscrepancy import sobol_pair
 from rtmesh.sampling.warps import concentric_disk_row, uniform_triangle_weights

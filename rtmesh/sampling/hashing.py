@@ -3,6 +3,8 @@
 import numpy as np
 from numba.extending import register_jitable
 
+from rtmesh.core.compiled import kernel
+
 M1 = np.uint64(0xBF58476D1CE4E5B9)
 M2 = np.uint64(0x94D049BB133111EB)
 GOLDEN = np.uint64(0x9E3779B97F4A7C15)
@@ -51,6 +53,26 @@ def path_key(key, pixel, sample):
     ``key`` mixed with the pixel and the sample index (a pure function of the three, so
     images do not depend on chunks or threads)."""
     return mix64(pixel_sequence(key, pixel) ^ (np.uint64(sample) * M2))
+
+
+@kernel
+def path_keys(key, pixel, sample):
+    """:func:`path_key` of many samples, compiled (one pass, no temporaries).
+
+    Parameters
+    ----------
+    key : uint64
+    pixel, sample : (n,) int64
+        Each sample's pixel and index in it.
+
+    Returns
+    -------
+    (n,) uint64
+    """
+    out = np.empty(len(pixel), np.uint64)
+    for i in range(len(pixel)):
+        out[i] = path_key(key, pixel[i], sample[i])
+    return out
 
 
 @register_jitable

@@ -152,7 +152,7 @@ def test_ray_through_glass_in_water_matches_the_closed_form(coincident):
 
 @pytest.mark.parametrize("coincident", [False, "shell-first", "shell-last"])
 def test_path_through_glass_in_water_matches_the_closed_form(coincident):
-    # the path integrator's media stack and touching faces (path_surfaces.cross_interface):
+    # the path integrator's media stack and touching faces (path_media.cross_interface):
     # a narrow view (every pixel head on), Fresnel sampled per path, so the image mean
     # converges to the transmittance (paths with two extra reflections add about 4e-4)
     sigma_glass, sigma_water = np.array([0.3, 0.0, 0.0]), np.array([0.0, 0.0, 0.2])
