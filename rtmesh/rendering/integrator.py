@@ -562,7 +562,9 @@ class Integrator:
     def _render_paths(self, pixel, sample_in_pixel, m, spp, ragged, stats, clock):
         """:meth:`render_chunk` under the path integrator (and the Whitted configuration of
         its kernel): camera rays, then the path kernel, which writes the passes too."""
-        origins, directions, times = self._camera_rays(pixel, sample_in_pixel)
+        origins = directions = times = None
+        if not self.path_stage.camera_in_kernel:
+            origins, directions, times = self._camera_rays(pixel, sample_in_pixel)
         n = len(pixel)
         clock.lap("camera")
         buffers = self.passes.buffers(n) if self.plan.passes else None

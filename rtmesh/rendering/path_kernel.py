@@ -102,6 +102,7 @@ from rtmesh.geometry.embree_packets import (LANES, RAYHIT_WORDS, RTC_RAY_QUERY_F
                                             RTC_RAY_QUERY_FLAG_INCOHERENT, packet_buffers, query_arguments)
 from rtmesh.lights import light_table as lt
 from rtmesh.materials import lobes
+from rtmesh.rendering.path_camera import camera_lanes
 from rtmesh.rendering.path_camera_hits import CAMERA_HIT_WORDS, FIRST_HIT_WORDS
 from rtmesh.rendering.path_packets import BOUNCE, CAMERA, REFLECTION, SHADOW
 from rtmesh.rendering.path_surfaces import textured_materials
@@ -111,7 +112,7 @@ from rtmesh.rendering.whitted_rows import BRANCH_WORDS, pop_branch
 
 
 @kernel
-def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixels, samples, sobol_keys, times,
+def trace_paths(intersect16, occluded16, scene, camera, origins, directions, keys, pixels, samples, sobol_keys, times,
                 geometry, surface, lights, env, options, whitted, motion, instances, photon_map, stages, radiance,
                 light_paths, camera_hits, counts):
     """Trace one path per camera ray and write its radiance.
@@ -122,8 +123,11 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
         Embree's packet queries (:class:`rtmesh.geometry.embree_library.PacketLibrary`).
     scene : int
         The committed ``RTCScene``.
-    origins, directions : (n, 3) float64
-        Camera rays in the re-centred frame (unit directions).
+    camera : tuple
+        The camera rays the kernel forms itself (:mod:`rtmesh.rendering.path_camera`),
+        when its first item is true.
+    origins, directions : (n, 3) float64, or (0, 3)
+        Otherwise the camera rays in the re-centred frame (unit directions).
     keys : (n,) uint64
         Each sample's random key (:func:`rtmesh.sampling.hashing.path_key`).
     pixels, samples : (n,) int64, or (0,)
@@ -161,10 +165,11 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     # (rtmesh.core.compiled.borrowed; the caller holds the arrays)
     geometry, surface, lights, env, options, whitted, motion, instances, photon_map = borrowed(
         (geometry, surface, lights, env, options, whitted, motion, instances, photon_map))
-    origins, directions, keys, pixels, samples, sobol_keys, times, stages, radiance, light_paths, camera_hits, \
-        counts = borrowed((origins, directions, keys, pixels, samples, sobol_keys, times, stages, radiance,
-                           light_paths, camera_hits, counts))
-    n = origins.shape[0]
+    camera, origins, directions, keys, pixels, samples, sobol_keys, times, stages, radiance, light_paths, \
+        camera_hits, counts = borrowed((camera, origins, directions, keys, pixels, samples, sobol_keys, times, stages,
+                                        radiance, light_paths, camera_hits, counts))
+    n = keys.shape[0]
+    camera_on, eye = camera[0], camera[8]
     absorption = surface[4]
     textured = textured_materials(surface, geometry)
     split, camera_media, light_samples, record_hits = options[6], options[7], options[8], options[10]
@@ -242,19 +247,23 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
     shaded = np.zeros(WIDTH, np.bool_)
     # the camera-hit passes' record of each lane (rtmesh.rendering.path_camera_hits)
     first_hit = np.zeros((WIDTH, FIRST_HIT_WORDS))
+    # the camera rays' pixel sequences, sample indices and positions in their pixels
+    sequence = np.zeros((2, WIDTH), np.uint64)
+    index = np.zeros(WIDTH, np.uint64)
+    xy = np.zeros((2, WIDTH))
     # the scratch arrays too, through views that own nothing (owned stays alive to the end)
     owned = (ray, words, valid, args_coherent, args_incoherent, shadow, shadow_words, shadow_valid, rest, rest_words,
              rest_valid, best_t, best_prim, best_instance, best_u, best_v, segment, lane_time, moved, scratch, px,
              py, pz, dx, dy, dz, beta, total, shadow_rays, shadow_set, shadow_count, pending, paths, pending_paths,
              category, stack, branch, branch_media, branch_top, sigma, reach, alive, prev_pdf, prev_delta, eta_scale,
              prev_count, lane_depth, layers, chain, travelled, ray_kind, shadow_kind, vertex, vertex_ids, shaded,
-             textured, first_hit)
+             textured, first_hit, sequence, index, xy)
     (ray, words, valid, args_coherent, args_incoherent, shadow, shadow_words, shadow_valid, rest, rest_words,
      rest_valid, best_t, best_prim, best_instance, best_u, best_v, segment, lane_time, moved, scratch, px,
      py, pz, dx, dy, dz, beta, total, shadow_rays, shadow_set, shadow_count, pending, paths, pending_paths,
      category, stack, branch, branch_media, branch_top, sigma, reach, alive, prev_pdf, prev_delta, eta_scale,
      prev_count, lane_depth, layers, chain, travelled, ray_kind, shadow_kind, vertex, vertex_ids, shaded,
-     textured, first_hit) = borrowed(owned)
+     textured, first_hit, sequence, index, xy) = borrowed(owned)
     lanes = (px, py, pz, dx, dy, dz, beta, total, paths, category, stack, sigma, alive, prev_pdf, prev_delta, eta_scale,
              prev_count, lane_depth, layers, chain, travelled, ray_kind, lane_time, moved, scratch, first_hit)
     hits = (best_t, best_prim, best_instance, best_u, best_v)
@@ -266,14 +275,19 @@ def trace_paths(intersect16, occluded16, scene, origins, directions, keys, pixel
                                                                                                    rest_valid)
     for start in range(0, n, WIDTH):
         count = min(WIDTH, n - start)
+        if camera_on:
+            camera_lanes(camera, start, count, sequence, index, xy, dx, dy, dz)
         for lane in range(WIDTH):
             alive[lane] = lane < count
             branch_top[lane] = 0
             ray_kind[lane] = CAMERA
             if lane < count:
                 i = start + lane
-                px[lane], py[lane], pz[lane] = origins[i, 0], origins[i, 1], origins[i, 2]
-                dx[lane], dy[lane], dz[lane] = directions[i, 0], directions[i, 1], directions[i, 2]
+                if camera_on:
+                    px[lane], py[lane], pz[lane] = eye[0], eye[1], eye[2]
+                else:
+                    px[lane], py[lane], pz[lane] = origins[i, 0], origins[i, 1], origins[i, 2]
+                    dx[lane], dy[lane], dz[lane] = directions[i, 0], directions[i, 1], directions[i, 2]
                 beta[lane, 0] = beta[lane, 1] = beta[lane, 2] = 1.0
                 total[lane, 0] = total[lane, 1] = total[lane, 2] = 0.0
                 if split:

@@ -34,6 +34,13 @@ def no_whitted(materials, ao_samples=0, ao_distance=0.0, ao_block=0):
             int(ao_samples), float(ao_distance), int(ao_block))
 
 
+def no_camera():
+    """The kernel's ``camera`` record when the camera rays are handed to it
+    (:mod:`rtmesh.rendering.path_camera`)."""
+    z = np.zeros
+    return (False, 0, z(5, np.uint64), z((1, 2)), z(2), 1, 1, z(13), z(3), z(0, np.int64), z(0, np.int64))
+
+
 def small_records():
     """Small records of the shapes and types :class:`rtmesh.rendering.path_stage.PathStage`
     builds (the energy tables, ``geometry``, ``surface``, ``lights``, ``env``), for the
@@ -99,7 +106,9 @@ def _path_signatures():
     photon_map = empty_photon_map(1)
     query = numba_typeof_query()
     index = types.Array(types.int64, 1, "C")
-    trace = (query, query, types.int64, rows, rows, types.Array(types.uint64, 1, "C"), index, index,
+    camera = no_camera()
+    trace = (query, query, types.int64, numba.typeof(camera), rows, rows, types.Array(types.uint64, 1, "C"), index,
+             index,
              types.Array(types.uint64, 1, "C"), types.Array(f64, 1, "C")) + tuple(
         numba.typeof(record) for record in (geometry, surface, lights, env, options, whitted, motion, instances,
                                             photon_map)) + (
@@ -109,7 +118,7 @@ def _path_signatures():
                 + (f64,) * 12 + (i64,))
     lanes, hits, vertices, shadows, branches = (numba.typeof(record) for record in lane_records())
     records = dict(zip(("geometry", "surface", "lights", "env", "options", "whitted", "motion", "instances",
-                        "photon_map"), trace[10:19]))
+                        "photon_map"), trace[11:20]))
     u64s = types.Array(types.uint64, 1, "C")
     start = types.int64
     meet = (lanes, hits, vertices, u64s, start, records["geometry"], records["surface"],

@@ -32,11 +32,12 @@ from rtmesh.rendering.caustics import Caustics
 from rtmesh.rendering.photon_kernel import empty_photon_map
 from rtmesh.rendering import path_camera_hits as ch
 from rtmesh.rendering.path_kernel import trace_paths
-from rtmesh.rendering.path_signatures import PATH_KERNELS, no_instances, no_whitted, stage_entries
+from rtmesh.rendering.path_signatures import PATH_KERNELS, no_camera, no_instances, no_whitted, stage_entries
 from rtmesh.rendering.path_sums import LIGHT_PATHS
 from rtmesh.rendering.path_packets import COUNTER_NAMES
 from rtmesh.rendering.path_surfaces import TEXTURE_COLUMNS
 from rtmesh.rendering.settings import RenderSettings
+from rtmesh.scene.camera import Camera
 from rtmesh.rendering.surface_textures import corner_and_edges, face_tangents
 from rtmesh.sampling.hashing import mix64, path_keys
 from rtmesh.sampling.patterns import Dim
@@ -298,6 +299,17 @@ class PathStage:
         self._motion, handle = motion_record(it)
         self._instances = instance_record(it)
         self._queries = (library.intersect16, library.occluded16, handle)
+        # a pinhole camera's rays are formed in the kernel (rtmesh.rendering.path_camera);
+        # a thin lens, an orthographic camera, moving objects' times and a camera class
+        # with rays of its own hand it theirs
+        camera = it.camera
+        self.camera_in_kernel = not (camera.orthographic or it.plan.lens or it.plan.motion
+                                     or type(camera).generate_rays is not Camera.generate_rays)
+        sampler = it.pixel_sampler
+        self._camera = (self.camera_in_kernel, sampler.code, sampler.keys, sampler.corners, sampler.size, sampler.spp,
+                        int(settings.width),
+                        np.concatenate([camera.image_plane(settings.width, settings.height), *it.camera_frame]),
+                        np.ascontiguousarray(camera.position, dtype=np.float64))
         PATH_KERNELS.prepare()
         # the kernel's and its stages' libraries, loaded from the disk cache once a process
         # (about 0.25 s) as the scene is set up, not within the first render
@@ -357,8 +369,9 @@ class PathStage:
 
         Parameters
         ----------
-        origins, directions : (n, 3) float
-            Camera rays in the re-centred frame.
+        origins, directions : (n, 3) float, or None
+            Camera rays in the re-centred frame; None where the kernel forms them
+            (:attr:`camera_in_kernel`).
         pixel, sample : (n,) int64
             Each ray's pixel and global sample index.
         stats : RenderStats
@@ -391,8 +404,13 @@ class PathStage:
                    self._pass_albedo)
         light_paths = np.zeros((n if split else 0, LIGHT_PATHS, 3))
         camera_hits = np.zeros((n if record_hits else 0, ch.CAMERA_HIT_WORDS))
-        complete = trace_paths(intersect16, occluded16, handle, kernel_input(origins, np.float64),
-                    kernel_input(directions, np.float64), keys, *self._sobol(pixel_index, sample_index),
+        if origins is None:
+            camera, origins = self._camera + (pixel_index, sample_index), np.zeros((0, 3))
+            directions = origins
+        else:
+            camera = no_camera()
+            origins, directions = kernel_input(origins, np.float64), kernel_input(directions, np.float64)
+        complete = trace_paths(intersect16, occluded16, handle, camera, origins, directions, keys, *self._sobol(pixel_index, sample_index),
                     np.zeros(0) if times is None else kernel_input(times, np.float64),
                     self.geometry, self.surface, self.light_record, self._env, options, self._whitted, self._motion,
                     self._instances,

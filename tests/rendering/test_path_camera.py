@@ -1,0 +1,48 @@
+"""The path kernel's own camera rays (rtmesh.rendering.path_camera) against the rays the
+integrator forms with Camera.generate_rays and hands to the kernel: the same image, bit for
+bit, under every sampler, in both of the kernel's configurations."""
+
+import os
+
+import numpy as np
+import pytest
+
+from rtmesh.api import load_scene
+from rtmesh.rendering.integrator import Integrator
+from rtmesh.rendering.path_stage import PathStage
+
+from scenes import ASSETS
+
+
+def _render(scene, settings, in_kernel, monkeypatch):
+    built = PathStage.__init__
+
+    def forced(self, it):
+        built(self, it)
+        self.camera_in_kernel = in_kernel
+        self._camera = (in_kernel,) + self._camera[1:]
+
+    with monkeypatch.context() as patch:
+        patch.setattr(PathStage, "__init__", forced)
+        integrator = Integrator(scene, settings)
+        assert integrator.path_stage is not None and integrator.path_stage.camera_in_kernel == in_kernel
+        return integrator.render()
+
+
+@pytest.mark.parametrize("sampler", ["regular", "jittered", "random", "sobol", "zsobol"])
+@pytest.mark.parametrize("source, integrator", [("showcase.toml", "whitted"), ("glass_edges.toml", "path")])
+def test_the_kernels_camera_rays_are_the_cameras(source, integrator, sampler, monkeypatch):
+    scene, settings = load_scene(os.path.join(ASSETS, source), width=24, height=16, spp=2, sampler=sampler,
+                                 integrator=integrator, passes=("depth", "normal"))
+    ours = _render(scene, settings, True, monkeypatch)
+    handed = _render(scene, settings, False, monkeypatch)
+    assert np.array_equal(ours.image, handed.image)
+    for name in ("depth", "normal"):
+        assert np.array_equal(ours.passes[name], handed.passes[name]), name
+    assert ours.stats.rays == handed.stats.rays
+
+
+def test_a_thin_lens_hands_the_kernel_its_rays():
+    scene, settings = load_scene(os.path.join(ASSETS, "effects", "dof.toml"), width=16, height=12, spp=1)
+    integrator = Integrator(scene, settings)
+    assert integrator.path_stage is not None and not integrator.path_stage.camera_in_kernel
