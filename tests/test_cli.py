@@ -284,3 +284,17 @@ def test_the_memory_check_comes_before_any_mesh_is_read(tmp_path, monkeypatch, c
     for source, args in ((mesh, ["--width", "100000", "--height", "100000"]), (scene, [])):
         assert main(["render", str(source), "-o", str(tmp_path / "x.png"), "-q", *args]) == 2
         assert "a 100000x100000 render at 4 spp" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("integrator", ["whitted", "path"])
+def test_without_embree_packets_a_render_is_refused_in_one_line(scene_file, tmp_path, integrator):
+    # rtmesh renders through its compiled kernels over Embree's packet queries; embreex's
+    # one-ray-at-a-time run() (RTMESH_EMBREE=run) is no render path of its own
+    out = tmp_path / "out.png"
+    env = dict(os.environ, RTMESH_EMBREE="run")
+    proc = subprocess.run([sys.executable, "-m", "rtmesh.cli", "render", str(scene_file), "-o", str(out),
+                           "--integrator", integrator, "--spp", "1"], capture_output=True, text=True, timeout=120,
+                          env=env)
+    assert proc.returncode == 2 and not out.exists()
+    assert proc.stderr.strip().splitlines() == ["rtmesh: error: rtmesh cannot render without Embree's packet queries "
+                                                "(RTMESH_EMBREE=run)"]

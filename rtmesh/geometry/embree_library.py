@@ -168,6 +168,7 @@ class PacketLibrary:
 
 _library = None
 _library_checked = False
+_library_failure = None
 _library_lock = threading.Lock()
 
 
@@ -182,19 +183,26 @@ def packet_library():
     -------
     PacketLibrary or None
     """
-    global _library, _library_checked
+    global _library, _library_checked, _library_failure
     with _library_lock:
         if _library_checked:
             return _library
         _library_checked = True
         _library, reason = _open_verified()
         if _library is None:
+            _library_failure = reason
             log.info("tracing with embreex run(), one ray at a time: %s", reason)
         else:
             log.info("tracing with Embree %s 16-wide packets (%s)",
                      ".".join(map(str, _library.version)), _library.path)
         return _library
 
+
+
+def packet_failure():
+    """Why :func:`packet_library` is None (a phrase), or None when packets trace."""
+    packet_library()
+    return _library_failure
 
 
 def _open_verified():

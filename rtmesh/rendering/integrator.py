@@ -12,8 +12,9 @@ threads (:mod:`~rtmesh.rendering.scheduler`); each chunk goes to one of three st
 - the fused direct-lighting stage (:mod:`~rtmesh.rendering.direct_stage`): Whitted scenes
   that need only direct light from point-like lights;
 - the general wavefront (:mod:`~rtmesh.rendering.wavefront`, NumPy batches a depth level
-  at a time): what neither can render (the single-ray Embree path, lights without compiled
-  rows), and the tests that take it as their reference.
+  at a time): only for the tests that take it as the kernel's reference
+  (:meth:`Integrator.use_general_wavefront`).  What the kernel cannot render (without
+  Embree's packet queries, lights without compiled rows) is refused in one line.
 
 Every random number is a function of (seed, pixel, sample, dimension), each pixel is
 rendered whole inside one chunk, and the chunks do not depend on the thread count (see
@@ -48,7 +49,7 @@ from rtmesh.rendering.film import Film
 from rtmesh.rendering.general_kernels import GENERAL_KERNELS
 from rtmesh.rendering.local_shading import LocalShading
 from rtmesh.rendering.media import Media
-from rtmesh.rendering.path_stage import PathStage, unsupported, unsupported_lights
+from rtmesh.rendering.path_stage import PathStage, unsupported_lights
 from rtmesh.rendering.physical_shading import PhysicalShading
 from rtmesh.rendering.render_plan import RenderPlan
 from rtmesh.rendering.render_result import RenderResult
@@ -66,11 +67,9 @@ log = logging.getLogger(__name__)
 
 
 # Whether Whitted renders that the fused stage does not take go through the path kernel
-# configured as the Whitted integrator (rtmesh.rendering.whitted_rows) instead of the general
-# wavefront.  The kernel renders every Whitted scene, its images within noise of the
-# wavefront's (tests/rendering/test_whitted_kernel.py), most of them faster; its first
-# compile is the path integrator's (docs/BENCHMARKS.md, "Whitted through the path kernel").
-# Tests of the wavefront's own stages pin it off.
+# configured as the Whitted integrator (rtmesh.rendering.whitted_rows), as every render does;
+# off, they go through the general wavefront, the kernel's test reference (its images within
+# noise of the kernel's: tests/rendering/test_whitted_kernel.py).  Only tests turn it off.
 WHITTED_THROUGH_KERNEL = True
 
 
@@ -224,21 +223,21 @@ class Integrator:
         self.path_stage = PathStage(self) if settings.integrator == "path" else None
         # scenes that need only direct light take one compiled stage per chunk
         self.direct_stage = DirectStage.plan(self) if self.path_stage is None else None
-        if (WHITTED_THROUGH_KERNEL and self.direct_stage is None and self.path_stage is None
-                and not unsupported(self)):
-            # the others the path kernel, configured as the Whitted integrator
-            self.path_stage = PathStage(self)
-        self.plan = dataclasses.replace(self.plan, fused_direct=self.direct_stage is not None)
         self.wavefront = None
         if self.direct_stage is None and self.path_stage is None:
-            self.use_general_wavefront()
+            if WHITTED_THROUGH_KERNEL:
+                # the others the path kernel, configured as the Whitted integrator (a
+                # SceneError for what it cannot render)
+                self.path_stage = PathStage(self)
+            else:
+                self.use_general_wavefront()  # the kernel's test reference
+        self.plan = dataclasses.replace(self.plan, fused_direct=self.direct_stage is not None)
 
     def use_general_wavefront(self):
         """Render the chunks through the general wavefront (:mod:`rtmesh.rendering.wavefront`):
-        build its stages, each reading the integrator's tables.  For the renders neither
-        the fused stage nor the path kernel takes (the single-ray Embree path, lights
-        without compiled rows), and for tests that take it as their reference (after
-        setting ``direct_stage`` and ``path_stage`` to None)."""
+        build its stages, each reading the integrator's tables.  For the tests that take it
+        as the kernel's reference (after setting ``direct_stage`` and ``path_stage`` to None,
+        or with ``WHITTED_THROUGH_KERNEL`` off)."""
         self.local_shading = LocalShading(self)
         self.secondary_rays = SecondaryRays(self)
         self.physical_shading = PhysicalShading(self) if self.plan.physical else None

@@ -56,7 +56,7 @@ def unsupported(it):
     phrases, empty when it can render everything)."""
     missing = []
     if not embree_library.packet_library():
-        missing.append("the single-ray Embree path (RTMESH_EMBREE=run)")
+        missing.append(f"without Embree's packet queries ({embree_library.packet_failure()})")
     return missing + unsupported_lights(it.view_lights)
 
 
@@ -65,7 +65,7 @@ def unsupported_lights(lights):
     others = sorted({type(light).__name__ for light in lights
                      if not isinstance(light, (MeshLight, ProjectorLight)) and not hasattr(light, "corner")
                      and not hasattr(light, "radius") and light.kernel_row() is None})
-    return [f"lights of type {name}" for name in others]
+    return [f"lights of type {name} (no compiled row: kernel_row() is None)" for name in others]
 
 
 def _packet_accel(accel):
@@ -228,19 +228,19 @@ class PathStage:
     Parameters
     ----------
     it : Integrator
-        Built with ``settings.integrator == "path"``.
+        Under ``integrator = "path"``, or ``"whitted"`` for the kernel's Whitted configuration.
 
     Raises
     ------
     SceneError
-        The scene needs something the path integrator does not render yet.
+        The scene needs what the kernel does not render (:func:`unsupported`): Embree's
+        packet queries are not available, or a light has no compiled row.
     """
 
     def __init__(self, it):
         missing = unsupported(it)
         if missing:
-            raise SceneError("integrator 'path' does not render " + ", ".join(missing)
-                             + " yet; use integrator = 'whitted'")
+            raise SceneError("rtmesh cannot render " + ", ".join(missing))
         self.it = it
         scene, settings = it.scene, it.settings
         self.whitted = settings.integrator == "whitted"
