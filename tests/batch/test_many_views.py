@@ -27,7 +27,8 @@ def test_with_view_renders_what_a_fresh_build_renders():
     lights = [DirectionalLight(np.array([0.3, -0.2, -1.0]), 2.0)]
     fresh = Integrator(dataclasses.replace(scene, camera=camera, lights=lights), s).render()
     shared = built.with_view(camera, lights)
-    assert shared.accel is built.accel
+    # one build (rtmesh.rendering.built_scene): the Embree scene, tables and kernel records
+    assert shared.built is built.built and shared.accel is built.accel and shared.tables is built.tables
     again = shared.render()
     np.testing.assert_array_equal(again.image, fresh.image)
     for name in ("depth", "position", "normal"):
@@ -112,3 +113,21 @@ def test_physical_assets_get_the_studio_turned_to_each_view(tmp_path):
         written = oiio.ImageInput.open(str(tmp_path / f"{view.name}.exr")).read_image("float")
         np.testing.assert_array_equal(written[..., :3], fresh.image[..., :3])
     assert abs(rotations[0] - rotations[1]) > 1.0
+
+
+def test_views_that_keep_the_background_share_its_light_sampler():
+    """A lit environment is built once per background a view names, not once per view."""
+    from rtmesh.scene.background import background_from_option
+
+    def lighting_map():
+        background = background_from_option("rtmesh/scene/studio.exr")
+        background.lighting = True  # as a scene file's [background] lighting = true
+        return background
+
+    scene = dataclasses.replace(sphere_on_floor_scene(), background=lighting_map())
+    s = settings(width=16, height=12, spp=1)
+    built = Integrator(scene, s)
+    assert built.environment_lighting is not None
+    assert built.with_view(_other_camera()).environment_lighting is built.environment_lighting
+    other = built.with_view(_other_camera(), background=lighting_map())
+    assert other.environment_lighting is not None and other.environment_lighting is not built.environment_lighting
