@@ -33,7 +33,7 @@ FIRST_HIT_WORDS = CAMERA_HIT_WORDS + 1
 
 @inline_row
 def record_camera_hit(first_hit, lane, surface, geometry, pass_albedo, mat, prim, bu, bv, hx, hy, hz, gx, gy, gz,
-                      nx, ny, nz, dx, dy, dz):
+                      nx, ny, nz, dx, dy, dz, instances, placement):
     """Record a camera segment's shaded surface in ``first_hit[lane]``.
 
     Parameters
@@ -51,6 +51,10 @@ def record_camera_hit(first_hit, lane, surface, geometry, pass_albedo, mat, prim
         The point, the unit geometric normal (winding) and the unit interpolated normal.
     dx, dy, dz : float
         The camera ray's unit direction.
+    instances : tuple
+        The kernel's ``instances`` record.
+    placement : int
+        The placement hit (-1: none), whose transform carries the face's UV tangents.
     """
     # the shading normal as the general path's surface records form it: on the geometric
     # normal's side, bent by the normal map, both turned to the viewer, then the
@@ -58,7 +62,7 @@ def record_camera_hit(first_hit, lane, surface, geometry, pass_albedo, mat, prim
     if (nx * gx + ny * gy) + nz * gz < 0.0:
         nx, ny, nz = -nx, -ny, -nz
     if surface[8][mat, NORMAL_TEXTURE] >= 0:
-        nx, ny, nz = normal_mapped(surface, geometry, mat, prim, bu, bv, nx, ny, nz)
+        nx, ny, nz = normal_mapped(surface, geometry, mat, prim, bu, bv, nx, ny, nz, instances, placement)
     if (gx * dx + gy * dy) + gz * dz > 0.0:
         gx, gy, gz, nx, ny, nz = -gx, -gy, -gz, -nx, -ny, -nz
     nx, ny, nz = face_viewer_row(nx, ny, nz, gx, gy, gz, dx, dy, dz)

@@ -273,25 +273,41 @@ def triangle_light_emission(surface, geometry, light, b1, b2):
 
 
 @inline_row
-def normal_mapped(surface, geometry, mat, prim, bu, bv, nx, ny, nz):
-    """The shading normal (on the front side of the face) bent by the material's tangent-space
-    normal map, as :meth:`rtmesh.rendering.surface_textures.SurfaceTextures.normal_mapped`."""
-    return normal_mapped_by(surface, geometry, surface[8][mat, NORMAL_TEXTURE], prim, bu, bv, nx, ny, nz)
+def face_tangents(geometry, instances, placement, prim):
+    """A face's UV tangent and bitangent (:func:`rtmesh.rendering.surface_textures.face_tangents`,
+    6 floats), carried to the world by the linear part of ``placement``'s transform (the
+    kernel's ``instances`` record; -1: a face of the world-space scene)."""
+    tb = geometry[8][prim]
+    tx, ty, tz, bx, by, bz = tb[0], tb[1], tb[2], tb[3], tb[4], tb[5]
+    if placement >= 0:
+        m = instances[1][placement]
+        tx, ty, tz = (m[0] * tx + m[1] * ty) + m[2] * tz, (m[3] * tx + m[4] * ty) + m[5] * tz, \
+            (m[6] * tx + m[7] * ty) + m[8] * tz
+        bx, by, bz = (m[0] * bx + m[1] * by) + m[2] * bz, (m[3] * bx + m[4] * by) + m[5] * bz, \
+            (m[6] * bx + m[7] * by) + m[8] * bz
+    return tx, ty, tz, bx, by, bz
 
 
 @inline_row
-def normal_mapped_by(surface, geometry, t, prim, bu, bv, nx, ny, nz):
+def normal_mapped(surface, geometry, mat, prim, bu, bv, nx, ny, nz, instances, placement):
+    """The shading normal (on the front side of the face) bent by the material's tangent-space
+    normal map, as :meth:`rtmesh.rendering.surface_textures.SurfaceTextures.normal_mapped`
+    (``instances``, ``placement``: :func:`face_tangents`)."""
+    return normal_mapped_by(surface, geometry, surface[8][mat, NORMAL_TEXTURE], prim, bu, bv, nx, ny, nz, instances,
+                            placement)
+
+
+@inline_row
+def normal_mapped_by(surface, geometry, t, prim, bu, bv, nx, ny, nz, instances, placement):
     """:func:`normal_mapped` by the normal map of atlas texture ``t`` (the base's, or a clear
     coat's)."""
-    tangents = geometry[8]
-    if t < 0 or not len(tangents):
+    if t < 0 or not len(geometry[8]):
         return nx, ny, nz
     texels, descriptors = surface[13], surface[14]
     u, v = hit_uv(geometry, prim, bu, bv)
     lr, lg, lb, _ = texel(texels, descriptors, t, u, v)
     lx, ly, lz = 2.0 * lr - 1.0, 2.0 * lg - 1.0, 2.0 * lb - 1.0
-    tb = tangents[prim]
-    tx, ty, tz, bx, by, bz = tb[0], tb[1], tb[2], tb[3], tb[4], tb[5]
+    tx, ty, tz, bx, by, bz = face_tangents(geometry, instances, placement, prim)
     d = descriptors[t]
     a00, a01, a10, a11 = d[6], d[7], d[9], d[10]
     det = a00 * a11 - a01 * a10
@@ -361,7 +377,8 @@ def hit_parameters(surface, geometry, textured, mat, prim, bu, bv, scratch, lane
 
 
 @inline_row
-def shading_normals(surface, geometry, mat, prim, bu, bv, transmissive, gx, gy, gz, nx, ny, nz, ox, oy, oz):
+def shading_normals(surface, geometry, mat, prim, bu, bv, transmissive, gx, gy, gz, nx, ny, nz, ox, oy, oz, instances,
+                    placement):
     """The geometric and shading normals a hit is shaded with, seen along ``o`` (unit,
     toward where the ray came from): the shading normal turned to the geometric normal's
     side and bent by a normal map; reflection-only models (``transmissive`` false) turn
@@ -375,7 +392,7 @@ def shading_normals(surface, geometry, mat, prim, bu, bv, transmissive, gx, gy, 
     if (nx * gx + ny * gy) + nz * gz < 0.0:
         nx, ny, nz = -nx, -ny, -nz
     if surface[8][mat, NORMAL_TEXTURE] >= 0:
-        nx, ny, nz = normal_mapped(surface, geometry, mat, prim, bu, bv, nx, ny, nz)
+        nx, ny, nz = normal_mapped(surface, geometry, mat, prim, bu, bv, nx, ny, nz, instances, placement)
     if not transmissive:
         if (gx * ox + gy * oy) + gz * oz < 0.0:
             gx, gy, gz, nx, ny, nz = -gx, -gy, -gz, -nx, -ny, -nz
@@ -387,10 +404,12 @@ def shading_normals(surface, geometry, mat, prim, bu, bv, transmissive, gx, gy, 
 
 @inline_row
 def hit_frame(surface, geometry, mat, prim, bu, bv, transmissive, scratch, lane, gx, gy, gz, nx, ny, nz, ox, oy,
-              oz):
+              oz, instances, placement):
     """The hit's shading frame seen along ``o``: the normals of :func:`shading_normals` and
     the tangents of :func:`tangent_frame`; a layered row (``scratch[lane]``) gets its clear
-    coat's normal and anisotropy direction in that frame (:func:`orient_layers`).
+    coat's normal and anisotropy direction in that frame (:func:`orient_layers`).  A hit on a
+    placed mesh (``placement`` >= 0 in the ``instances`` record) takes its face's UV tangents
+    carried to the world by the placement (:func:`face_tangents`).
 
     Returns
     -------
@@ -400,11 +419,11 @@ def hit_frame(surface, geometry, mat, prim, bu, bv, transmissive, scratch, lane,
     # base's normal map
     cx, cy, cz = (nx, ny, nz) if (nx * gx + ny * gy) + nz * gz >= 0.0 else (-nx, -ny, -nz)
     gx, gy, gz, nx, ny, nz = shading_normals(surface, geometry, mat, prim, bu, bv, transmissive, gx, gy, gz, nx, ny,
-                                             nz, ox, oy, oz)
+                                             nz, ox, oy, oz, instances, placement)
     tx, ty, tz, sx, sy, sz = tangent_frame(nx, ny, nz)
     if surface[7][surface[0][mat], models.COAT_NORMAL_SLOT] >= 0:
         orient_layers(surface, geometry, mat, prim, bu, bv, scratch, lane, cx, cy, cz, gx, gy, gz, ox, oy, oz,
-                      nx, ny, nz, tx, ty, tz, sx, sy, sz)
+                      nx, ny, nz, tx, ty, tz, sx, sy, sz, instances, placement)
     return gx, gy, gz, nx, ny, nz, tx, ty, tz, sx, sy, sz
 
 
@@ -500,7 +519,7 @@ def layer_textures(textures, texels, descriptors, mat, slot, u, v, scratch, lane
 
 @row
 def orient_layers(surface, geometry, mat, prim, bu, bv, scratch, lane, cx, cy, cz, gx, gy, gz, ox, oy, oz,
-                  nx, ny, nz, tx, ty, tz, sx, sy, sz):
+                  nx, ny, nz, tx, ty, tz, sx, sy, sz, instances, placement):
     """Write a layered row's clear-coat normal and anisotropy direction in the hit's local
     frame (``t, s, n``) into ``scratch[lane]``.
 
@@ -518,7 +537,7 @@ def orient_layers(surface, geometry, mat, prim, bu, bv, scratch, lane, cx, cy, c
     if scratch[lane, slot[models.CLEARCOAT_SLOT]] > 0.0:
         if textures[mat, CLEARCOAT_NORMAL_TEXTURE] >= 0:
             cx, cy, cz = normal_mapped_by(surface, geometry, textures[mat, CLEARCOAT_NORMAL_TEXTURE], prim, bu, bv,
-                                          cx, cy, cz)
+                                          cx, cy, cz, instances, placement)
         if (cx * gx + cy * gy) + cz * gz < 0.0:
             cx, cy, cz = -cx, -cy, -cz
         if not (cx * ox + cy * oy) + cz * oz > 0.0:
@@ -539,10 +558,10 @@ def orient_layers(surface, geometry, mat, prim, bu, bv, scratch, lane, cx, cy, c
             r, g, _, _ = texel(surface[13], surface[14], t, u, v)
             px, py = 2.0 * r - 1.0, 2.0 * g - 1.0
             dx, dy = px * dx - py * dy, px * dy + py * dx
-        tb = tangents[prim]
-        wx = dx * tb[0] + dy * tb[3]
-        wy = dx * tb[1] + dy * tb[4]
-        wz = dx * tb[2] + dy * tb[5]
+        ux, uy, uz, vx, vy, vz = face_tangents(geometry, instances, placement, prim)
+        wx = dx * ux + dy * vx
+        wy = dx * uy + dy * vy
+        wz = dx * uz + dy * vz
         lx = (tx * wx + ty * wy) + tz * wz
         ly = (sx * wx + sy * wy) + sz * wz
         if (lx != 0.0) | (ly != 0.0):

@@ -238,7 +238,7 @@ def meet(lanes, hits, vertices, keys, start, geometry, surface, textured, lights
         if record_hits and depth == 0:
             # the camera-hit passes' surface (rtmesh.rendering.path_camera_hits)
             record_camera_hit(first_hit, lane, surface, geometry, pass_albedo, mat, prim, bu, bv, hx, hy, hz, gx, gy,
-                              gz, nx, ny, nz, dx[lane], dy[lane], dz[lane])
+                              gz, nx, ny, nz, dx[lane], dy[lane], dz[lane], instances, best_instance[lane])
         if unlit[mat, 0] > 0.0:
             add_radiance(total, lane, beta[lane, 0] * unlit[mat, 1], beta[lane, 1] * unlit[mat, 2],
                  beta[lane, 2] * unlit[mat, 3])
@@ -252,7 +252,7 @@ def meet(lanes, hits, vertices, keys, start, geometry, surface, textured, lights
         ox, oy, oz = -dx[lane], -dy[lane], -dz[lane]
         gx, gy, gz, nx, ny, nz, tx, ty, tz, sx, sy, sz = hit_frame(
             surface, geometry, mat, prim, bu, bv, transmissive[mat], scratch, lane, gx, gy, gz, nx, ny, nz,
-            ox, oy, oz)
+            ox, oy, oz, instances, best_instance[lane])
         lox = (tx * ox + ty * oy) + tz * oz
         loy = (sx * ox + sy * oy) + sz * oz
         loz = (nx * ox + ny * oy) + nz * oz

@@ -226,9 +226,12 @@ def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geomet
     bounces = np.zeros(LANES, np.int64)
     layers = np.zeros(LANES, np.int64)
     stack = np.full((LANES, max(media, 1)), -1, np.int64)
-    owned = (ray, words, valid, args, scratch, px, py, pz, dx, dy, dz, beta, sigma, keys, alive, bounces, layers, stack)
-    ray, words, valid, args, scratch, px, py, pz, dx, dy, dz, beta, sigma, keys, alive, bounces, layers, stack = borrowed(
-        owned)
+    # photons trace world-space faces (placed meshes are flattened for photon passes)
+    no_placements = (np.zeros(0, np.int64), np.zeros((0, 12)), np.zeros((0, 9)))
+    owned = (ray, words, valid, args, scratch, px, py, pz, dx, dy, dz, beta, sigma, keys, alive, bounces, layers, stack,
+             no_placements)
+    (ray, words, valid, args, scratch, px, py, pz, dx, dy, dz, beta, sigma, keys, alive, bounces, layers, stack,
+     no_placements) = borrowed(owned)
     capacity = photons.shape[0]
     written = 0
     needed = 0
@@ -300,7 +303,7 @@ def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geomet
                                                                 lane, stack, media, entering)
                 gx, gy, gz, nx, ny, nz, tx, ty, tz, sx, sy, sz = hit_frame(
                     surface, geometry, mat, prim, bu, bv, transmissive[mat], scratch, lane, gx, gy, gz, nx, ny, nz,
-                    ox, oy, oz)
+                    ox, oy, oz, no_placements, -1)
                 if bounces[lane] > 0 and scatters[mat]:
                     if written < capacity:
                         # the normal of the side the photon arrived on

@@ -60,7 +60,12 @@ class SurfaceStage(Stage):
             srf.tints = it.textures.tints(srf.prim, u, v, srf.mat)
             if normal_maps:
                 flip = np.where(srf.front, 1.0, -1.0)
-                srf.ns = it.textures.normal_mapped(srf.ns, srf.prim, u, v, srf.mat, flip)
+                tangents = None
+                if hits.instance is not None:
+                    # a placed face's UV tangents carried to the world, as the copies' read
+                    tangents = it.instances.world_tangents(it.textures.tangents[srf.prim],
+                                                           take_rows(hits.instance, rows))
+                srf.ns = it.textures.normal_mapped(srf.ns, srf.prim, u, v, srf.mat, flip, tangents)
                 # in the rest frame, like ns and ng
                 srf.ns = face_viewer(srf.ns, srf.ng, srf.d if srf.time is None else view)
         if srf.time is not None:

@@ -333,7 +333,7 @@ class SurfaceTextures:
                 alpha[rows] *= texel[:, -1] if field == "diffuse_texture" else texel[:, 0]
         return np.clip(alpha, 0.0, 1.0)
 
-    def normal_mapped(self, ns, prim, u, v, mat, flip):
+    def normal_mapped(self, ns, prim, u, v, mat, flip, tangents=None):
         """Shading normals perturbed by the materials' tangent-space normal maps.
 
         The map's texel ``t`` in [0, 1]^3 is the normal ``2 t - 1`` in the frame (T, B, N)
@@ -349,6 +349,10 @@ class SurfaceTextures:
         prim, u, v, mat : (k,) arrays
         flip : (k,) float
             +1 where the ray hit the front of the face, -1 at the back.
+        tangents : (k, 6) float, optional
+            The hits' UV tangents and bitangents in the world (hits on placed meshes: their
+            face's carried by the placement, :meth:`Instances.world_tangents`); default: the
+            faces' own.
 
         Returns
         -------
@@ -362,7 +366,7 @@ class SurfaceTextures:
             texel = texture.sample(self.uv_at(prim[rows], u[rows], v[rows]))
             local = 2.0 * texel[:, :3] - 1.0
             n = np.ascontiguousarray(ns[rows])
-            tb = self.tangents[prim[rows]]
+            tb = self.tangents[prim[rows]] if tangents is None else tangents[rows]
             if texture.transformed:
                 tb = transformed_tangents(tb, texture.transform)
             t = tb[:, :3] - n * dot(n, tb[:, :3])[:, None]

@@ -119,6 +119,33 @@ class Instances:
                 out[rows, c] = ((a[:, 3 * c] * x + a[:, 3 * c + 1] * y) + a[:, 3 * c + 2] * z) + a[:, 9 + c]
         return out
 
+    def world_tangents(self, tangents, instance):
+        """UV tangents and bitangents of prototype faces carried to the world by the linear
+        part of their placements, in the arithmetic of the path kernel's
+        :func:`rtmesh.rendering.path_surfaces.face_tangents`.
+
+        Parameters
+        ----------
+        tangents : (n, 6) float64
+            Model-space rows where ``instance >= 0``, world rows elsewhere.
+        instance : (n,) int
+            Each row's placement, -1 for a row already in the world.
+
+        Returns
+        -------
+        (n, 6) float64
+            A new array.
+        """
+        out = np.array(tangents, dtype=np.float64)
+        rows = np.flatnonzero(instance >= 0)
+        if len(rows):
+            a = self.world_rows()[1][instance[rows]]
+            for base in (0, 3):
+                x, y, z = (out[rows, base + c] for c in range(3))
+                for c in range(3):
+                    out[rows, base + c] = (a[:, 3 * c] * x + a[:, 3 * c + 1] * y) + a[:, 3 * c + 2] * z
+        return out
+
     def hit_objects(self, object_id, prim, instance):
         """(n,) int32: the object each hit belongs to: a placement's own for a hit on a
         placement (every placement is an object), else its face's.
@@ -283,10 +310,6 @@ def unsupported(scene, settings):
     if m.any_cutout:
         # anywhere: shadow rays through cut-outs read their hits as world-space faces
         missing.append("alpha cut-outs")
-    if any(material.normal_texture is not None or (material.layers is not None and (
-            material.layers.anisotropy > 0 or material.layers.textures.get("clearcoatNormalTexture") is not None))
-           for material in (m.materials[k] for k in used)):
-        missing.append("normal maps and anisotropy (tangent frames)")
     return missing
 
 

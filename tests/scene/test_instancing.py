@@ -1,5 +1,6 @@
 """Meshes placed many times: built once, placed by Embree instances (rtmesh.scene.instances)."""
 
+import dataclasses
 import logging
 
 import numpy as np
@@ -291,6 +292,39 @@ def test_what_the_kernel_cannot_trace_through_instances_renders_the_copies(chang
     scene.materials = type(scene.materials)(scene.materials.materials)
     assert why in instances.unsupported(scene, RenderSettings(integrator="path"))
     assert Integrator(scene, RenderSettings(width=16, height=12, spp=1, integrator="path")).instances is None
+
+
+@pytest.mark.parametrize("integrator", ["path", "whitted"])
+def test_normal_maps_bend_placed_meshes_as_their_copies(integrator):
+    """A normal-mapped prototype: its faces' UV tangents carried to the world by each
+    placement (mirroring ones among them), as the copies' own tangents are."""
+    from rtmesh.io.texture_images import Texture
+
+    unmapped = placed_scene(count=12, textured=True)
+    scene = placed_scene(count=12, textured=True)
+    # ridges along u: a map that tilts the normal one way, then the other
+    ridges = np.zeros((8, 8, 3))
+    ridges[:, :, 0] = np.where(np.arange(8) % 4 < 2, 0.85, 0.15)[None, :]
+    ridges[:, :, 2] = 0.9
+    scene.materials.materials[1].normal_texture = Texture(ridges)
+    scene.materials = type(scene.materials)(scene.materials.materials)
+    assert instances.unsupported(scene, RenderSettings(integrator=integrator)) == []
+    settings = RenderSettings(width=48, height=36, spp=4, integrator=integrator, passes=("normal",))
+    it = Integrator(scene, settings)
+    assert it.instances is not None and it.textures.tangents is not None
+    placed = it.render()
+    copies = Integrator(instances.flattened(scene), settings).render()
+    a, b = block_means(placed.image), block_means(copies.image)
+    assert (np.abs(a - b) <= 0.01 * np.maximum(b, 0.05)).all()
+    # the map bends the normals: far more than the placements and the copies differ
+    bent = np.abs(placed.passes["normal"] - Integrator(unmapped, settings).render().passes["normal"]).max()
+    assert bent > 0.1
+    assert np.abs(placed.passes["normal"] - copies.passes["normal"]).max() < 3e-3
+    # the centre-ray normals (the general path's surface records) likewise
+    centre = dataclasses.replace(settings, passes=("normal_center",))
+    np.testing.assert_allclose(Integrator(scene, centre).render().passes["normal_center"],
+                               Integrator(instances.flattened(scene), centre).render().passes["normal_center"],
+                               atol=3e-3)
 
 
 def test_a_view_with_a_transparent_background_keeps_instances():
