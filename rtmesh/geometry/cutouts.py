@@ -130,6 +130,10 @@ class CutoutAccel:
         if time is not None:
             # the triangles and normals are the rest pose: move them to the rays' time
             p, ng, _ = self.accel.surfaces_to_world(prim, time[rows], p, ng, ng)
+        if getattr(hits, "instance", None) is not None:
+            # a placed prototype's face: its point and normal carried to the world
+            placed, instance = self.accel.instances, hits.instance[rows]
+            p, ng = placed.world_points(p, instance), placed.world_normals(ng, instance)
         ng = ng * np.where((ng * d).sum(axis=1) < 0.0, -1.0, 1.0)[:, None]
         return offset_ray_origins(p, ng, np.float64, self.offset_scale, d)
 
@@ -172,6 +176,8 @@ class CutoutAccel:
             retraced += len(through)
             travelled[through] += hits.t[through]
             hits.prim[through], hits.u[through], hits.v[through] = step.prim, step.u, step.v
+            if getattr(hits, "instance", None) is not None:
+                hits.instance[through] = step.instance
             hits.t[through] = step.t
             active = through
         with self._lock:

@@ -351,7 +351,8 @@ def trace_paths(intersect16, occluded16, scene, camera, origins, directions, key
                 return False
             # the shadow rays: one packet per light sample of the vertices and packet of lanes
             if not call_at(stages[8], stages[9], (queries, shadow_packet, rest_packet, segment, reach, lanes, hits,
-                                                  shadows, keys, start, counts, geometry, surface, options, motion)):
+                                                  shadows, keys, start, counts, geometry, surface, options, motion,
+                                                  instances)):
                 return False
         for lane in range(count):
             radiance[start + lane, 0] = total[lane, 0]

@@ -129,17 +129,20 @@ def placed(to_world, normal_to_world, j, px, py, pz, gx, gy, gz, nx, ny, nz):
 
 @row
 def shadows_through_cutouts(intersect16, scene, args, shadow, shadow_words, shadow_valid, geometry, surface,
-                             offset_scale, keys, start, lane_depth, reach, counts, motion, lane_time, segment, rest,
-                             rest_words, rest_valid, best_t, best_prim, best_u, best_v, first_layer):
+                             offset_scale, keys, start, lane_depth, reach, counts, motion, instances, lane_time,
+                             segment, rest, rest_words, rest_valid, best_t, best_prim, best_instance, best_u, best_v,
+                             first_layer):
     """Trace the shadow packet's rays with closest hits over the static scene and every
     moving object (at each lane's time: :func:`nearest_on_movers`, the segment's ray read
     back from the packet into ``segment`` (6, LANES)), passing cut-out layers (decided on the
     rest-pose triangle's texture coordinates, which motion leaves alone), until each is
     blocked (its ``shadow_valid`` lane cleared) or free; a free ray keeps its lane set.
     Layer ``j``'s blend coin is that of layer ``first_layer + j`` (each light sample of a
-    vertex its own coins)."""
+    vertex its own coins).  A layer of a placed mesh is passed where its prototype's face
+    is transparent, from its point carried to the world (``instances``, the kernel's record)."""
     material_id = geometry[5]
     has_static, static_faces, movers, moves, face_mover = motion[0], motion[1], motion[2], motion[5], motion[6]
+    instance_faces, to_world, normal_to_world = instances
     for layer in range(MAX_LAYERS):
         active = 0
         for lane in range(LANES):
@@ -156,10 +159,17 @@ def shadows_through_cutouts(intersect16, scene, args, shadow, shadow_words, shad
             # nothing nearer than the segment's end, unless the static scene has it
             best_t[lane] = reach[lane]
             best_prim[lane] = -1
+            best_instance[lane] = -1
             if shadow_valid[lane] and has_static and shadow_words[GEOM_ID * LANES + lane] != INVALID_ID:
                 best_t[lane] = np.float64(shadow[TFAR * LANES + lane])
                 local = shadow_words[PRIM_ID * LANES + lane]
-                best_prim[lane] = static_faces[local] if len(static_faces) else local
+                if shadow_words[INST_ID * LANES + lane] != INVALID_ID:
+                    # a placement: the face of its prototype in the per-face tables
+                    placement = shadow_words[INST_PRIM_ID * LANES + lane]
+                    best_instance[lane] = placement
+                    best_prim[lane] = instance_faces[placement] + local
+                else:
+                    best_prim[lane] = static_faces[local] if len(static_faces) else local
                 best_u[lane] = np.float64(shadow[U * LANES + lane])
                 best_v[lane] = np.float64(shadow[V * LANES + lane])
             for k in range(3):
@@ -184,6 +194,9 @@ def shadows_through_cutouts(intersect16, scene, args, shadow, shadow_words, shad
                 if len(face_mover) and face_mover[prim] >= 0:
                     hx, hy, hz, gx, gy, gz, nx, ny, nz = mover_to_world(moves, face_mover[prim], lane_time[lane], hx, hy,
                                                                    hz, gx, gy, gz, nx, ny, nz)
+                if best_instance[lane] >= 0:
+                    hx, hy, hz, gx, gy, gz, nx, ny, nz = placed(to_world, normal_to_world, best_instance[lane], hx, hy,
+                                                                hz, gx, gy, gz, nx, ny, nz)
                 dx, dy, dz = segment[3, lane], segment[4, lane], segment[5, lane]
                 if (gx * dx + gy * dy) + gz * dz < 0.0:
                     gx, gy, gz = -gx, -gy, -gz

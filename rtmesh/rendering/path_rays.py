@@ -62,7 +62,7 @@ def trace_segments(queries, first, packet, rest, lanes, hits, motion, instances)
 
 @kernel
 def trace_shadows(queries, packet, rest, segment, reach, lanes, hits, shadows, keys, start, counts, geometry,
-                  surface, options, motion):
+                  surface, options, motion, instances):
     """The shadow rays the vertex stages set: one occlusion packet per light sample and
     packet of lanes (through cut-out layers with ``cutouts``), the light of each that
     arrives added to its lane's radiance (and light-path passes), the rays counted by kind.
@@ -80,19 +80,19 @@ def trace_shadows(queries, packet, rest, segment, reach, lanes, hits, shadows, k
     start : int
     counts : (len(COUNTER_NAMES),) int64
         Rays traced, by kind, added to.
-    geometry, surface, options, motion : tuples
+    geometry, surface, options, motion, instances : tuples
         The scene's records.
     """
     # views that own nothing, known so here: no reference counts (rtmesh.core.compiled.borrowed)
     queries, packet, rest, segment, reach, lanes, hits, shadows, keys, counts, geometry, surface, options, \
-        motion = borrowed((queries, packet, rest, segment, reach, lanes, hits, shadows, keys, counts, geometry,
-                           surface, options, motion))
+        motion, instances = borrowed((queries, packet, rest, segment, reach, lanes, hits, shadows, keys, counts,
+                                      geometry, surface, options, motion, instances))
     intersect16, occluded16, scene, incoherent = queries[0], queries[1], queries[2], queries[4]
     shadow, shadow_words, shadow_valid = packet
     rest_ray, rest_words, rest_valid = rest
     total, paths, lane_depth, lane_time = lanes[TOTAL], lanes[PATHS], lanes[LANE_DEPTH], lanes[LANE_TIME]
     first_hit = lanes[FIRST_HIT]
-    best_t, best_prim, best_u, best_v = hits[0], hits[1], hits[3], hits[4]
+    best_t, best_prim, best_instance, best_u, best_v = hits
     shadow_rays, shadow_set, shadow_count, shadow_kind, pending, pending_paths = shadows
     offset_scale, cutouts, split, ao_pass = options[3], options[5], options[6], options[11]
     width = len(total)
@@ -119,9 +119,9 @@ def trace_shadows(queries, packet, rest, segment, reach, lanes, hits, shadows, k
             if cutouts:
                 shadows_through_cutouts(intersect16, scene, incoherent, shadow, shadow_words, shadow_valid, geometry,
                                         surface, offset_scale, keys, start + lo, lane_depth[lo:hi], reach[lo:hi],
-                                        counts, motion, lane_time[lo:hi], segment, rest_ray, rest_words, rest_valid,
-                                        best_t[lo:hi], best_prim[lo:hi], best_u[lo:hi], best_v[lo:hi],
-                                        (k + 1) * MAX_LAYERS)
+                                        counts, motion, instances, lane_time[lo:hi], segment, rest_ray, rest_words,
+                                        rest_valid, best_t[lo:hi], best_prim[lo:hi], best_instance[lo:hi],
+                                        best_u[lo:hi], best_v[lo:hi], (k + 1) * MAX_LAYERS)
             else:
                 occluded(occluded16, scene, incoherent, shadow, shadow_valid, motion, lane_time[lo:hi], reach[lo:hi],
                          rest_ray, rest_words, rest_valid)

@@ -133,7 +133,8 @@ def _path_signatures():
     queries = types.BaseTuple.from_types((query, query, types.int64, words, words))
     segments = (queries, types.boolean, packet, packet, lanes, hits, records["motion"], records["instances"])
     shadow_rays = (queries, packet, packet, rows, types.Array(f64, 1, "C"), lanes, hits, shadows, u64s, start, index,
-                   records["geometry"], records["surface"], records["options"], records["motion"])
+                   records["geometry"], records["surface"], records["options"], records["motion"],
+                   records["instances"])
     # the film's sums of the kernel's (pixels, spp, 3) radiance, row-major
     components, indices = types.float64[:, ::1], types.int64[::1]
     film = (components, components, indices, indices, types.float64[:, :, ::1], types.float32[:, ::1])

@@ -119,6 +119,34 @@ class Instances:
                 out[rows, c] = ((a[:, 3 * c] * x + a[:, 3 * c + 1] * y) + a[:, 3 * c + 2] * z) + a[:, 9 + c]
         return out
 
+    def world_normals(self, normals, instance):
+        """Unit normals of prototype faces carried to the world by the inverse transpose of
+        their placements' linear parts and normalised again, in the arithmetic of the path
+        kernel's :func:`rtmesh.rendering.path_packets.placed`.
+
+        Parameters
+        ----------
+        normals : (n, 3) float64
+            Model-space rows where ``instance >= 0``, world rows elsewhere.
+        instance : (n,) int
+            Each row's placement, -1 for a row already in the world.
+
+        Returns
+        -------
+        (n, 3) float64
+            A new array.
+        """
+        out = np.array(normals, dtype=np.float64)
+        rows = np.flatnonzero(instance >= 0)
+        if len(rows):
+            b = self.world_rows()[2][instance[rows]]
+            x, y, z = (out[rows, c] for c in range(3))
+            for c in range(3):
+                out[rows, c] = (b[:, 3 * c] * x + b[:, 3 * c + 1] * y) + b[:, 3 * c + 2] * z
+            out[rows] /= np.sqrt((out[rows, 0] * out[rows, 0] + out[rows, 1] * out[rows, 1])
+                                 + out[rows, 2] * out[rows, 2])[:, None]
+        return out
+
     def world_tangents(self, tangents, instance):
         """UV tangents and bitangents of prototype faces carried to the world by the linear
         part of their placements, in the arithmetic of the path kernel's
@@ -307,9 +335,6 @@ def unsupported(scene, settings):
         missing.append("emissive prototypes")
     if m.any_transmission:
         missing.append("transmissive materials (media)")
-    if m.any_cutout:
-        # anywhere: shadow rays through cut-outs read their hits as world-space faces
-        missing.append("alpha cut-outs")
     return missing
 
 
