@@ -127,6 +127,18 @@ def placed(to_world, normal_to_world, j, px, py, pz, gx, gy, gz, nx, ny, nz):
     return wx, wy, wz, gx / g, gy / g, gz / g, nx / n, ny / n, nz / n
 
 
+@inline_row
+def hit_face(words, lane, instance_faces, static_faces):
+    """The face a packet lane hit, in the per-face tables, and its placement (-1: none):
+    a placement's hit is its prototype's face ``instance_faces[placement] + primID``, the
+    static scene's its ``static_faces`` entry (empty: the identity)."""
+    local = words[PRIM_ID * LANES + lane]
+    if words[INST_ID * LANES + lane] != INVALID_ID:
+        placement = np.int64(words[INST_PRIM_ID * LANES + lane])
+        return instance_faces[placement] + local, placement
+    return (static_faces[local] if len(static_faces) else np.int64(local)), np.int64(-1)
+
+
 @row
 def shadows_through_cutouts(intersect16, scene, args, shadow, shadow_words, shadow_valid, geometry, surface,
                              offset_scale, keys, start, lane_depth, reach, counts, motion, instances, lane_time,
@@ -162,14 +174,7 @@ def shadows_through_cutouts(intersect16, scene, args, shadow, shadow_words, shad
             best_instance[lane] = -1
             if shadow_valid[lane] and has_static and shadow_words[GEOM_ID * LANES + lane] != INVALID_ID:
                 best_t[lane] = np.float64(shadow[TFAR * LANES + lane])
-                local = shadow_words[PRIM_ID * LANES + lane]
-                if shadow_words[INST_ID * LANES + lane] != INVALID_ID:
-                    # a placement: the face of its prototype in the per-face tables
-                    placement = shadow_words[INST_PRIM_ID * LANES + lane]
-                    best_instance[lane] = placement
-                    best_prim[lane] = instance_faces[placement] + local
-                else:
-                    best_prim[lane] = static_faces[local] if len(static_faces) else local
+                best_prim[lane], best_instance[lane] = hit_face(shadow_words, lane, instance_faces, static_faces)
                 best_u[lane] = np.float64(shadow[U * LANES + lane])
                 best_v[lane] = np.float64(shadow[V * LANES + lane])
             for k in range(3):
@@ -231,14 +236,7 @@ def nearest_hits(intersect16, scene, args, args_incoherent, ray, words, valid, m
         best_instance[lane] = -1
         if valid[lane] and has_static and words[GEOM_ID * LANES + lane] != INVALID_ID:
             best_t[lane] = np.float64(ray[TFAR * LANES + lane])
-            local = words[PRIM_ID * LANES + lane]
-            if words[INST_ID * LANES + lane] != INVALID_ID:
-                # a placement: the face of its prototype in the per-face tables
-                placed = words[INST_PRIM_ID * LANES + lane]
-                best_instance[lane] = placed
-                best_prim[lane] = instance_faces[placed] + local
-            else:
-                best_prim[lane] = static_faces[local] if len(static_faces) else local
+            best_prim[lane], best_instance[lane] = hit_face(words, lane, instance_faces, static_faces)
             best_u[lane] = np.float64(ray[U * LANES + lane])
             best_v[lane] = np.float64(ray[V * LANES + lane])
     # (a scene with moving objects has no placements: rtmesh.scene.instances.unsupported

@@ -33,6 +33,13 @@ from rtmesh.geometry import build_kernels
 MIN_TRIANGLES = 64
 
 
+def _linear(m, v):
+    """(k, 3) vectors ``v`` through (k, 9+) row-major 3 x 3 matrices ``m`` (their first nine
+    columns), each component summed in the order the kernels sum it."""
+    x, y, z = v[:, 0], v[:, 1], v[:, 2]
+    return np.stack([(m[:, 3 * c] * x + m[:, 3 * c + 1] * y) + m[:, 3 * c + 2] * z for c in range(3)], axis=1)
+
+
 @dataclass
 class Instances:
     """Where a scene's prototypes are and where they are placed.
@@ -114,9 +121,7 @@ class Instances:
         rows = np.flatnonzero(instance >= 0)
         if len(rows):
             a = self.world_rows()[1][instance[rows]]
-            x, y, z = (out[rows, c] for c in range(3))
-            for c in range(3):
-                out[rows, c] = ((a[:, 3 * c] * x + a[:, 3 * c + 1] * y) + a[:, 3 * c + 2] * z) + a[:, 9 + c]
+            out[rows] = _linear(a, out[rows]) + a[:, 9:12]
         return out
 
     def world_normals(self, normals, instance):
@@ -139,12 +144,8 @@ class Instances:
         out = np.array(normals, dtype=np.float64)
         rows = np.flatnonzero(instance >= 0)
         if len(rows):
-            b = self.world_rows()[2][instance[rows]]
-            x, y, z = (out[rows, c] for c in range(3))
-            for c in range(3):
-                out[rows, c] = (b[:, 3 * c] * x + b[:, 3 * c + 1] * y) + b[:, 3 * c + 2] * z
-            out[rows] /= np.sqrt((out[rows, 0] * out[rows, 0] + out[rows, 1] * out[rows, 1])
-                                 + out[rows, 2] * out[rows, 2])[:, None]
+            n = _linear(self.world_rows()[2][instance[rows]], out[rows])
+            out[rows] = n / np.sqrt((n[:, 0] * n[:, 0] + n[:, 1] * n[:, 1]) + n[:, 2] * n[:, 2])[:, None]
         return out
 
     def world_tangents(self, tangents, instance):
@@ -168,10 +169,7 @@ class Instances:
         rows = np.flatnonzero(instance >= 0)
         if len(rows):
             a = self.world_rows()[1][instance[rows]]
-            for base in (0, 3):
-                x, y, z = (out[rows, base + c] for c in range(3))
-                for c in range(3):
-                    out[rows, base + c] = (a[:, 3 * c] * x + a[:, 3 * c + 1] * y) + a[:, 3 * c + 2] * z
+            out[rows, :3], out[rows, 3:] = _linear(a, out[rows, :3]), _linear(a, out[rows, 3:])
         return out
 
     def hit_objects(self, object_id, prim, instance):
