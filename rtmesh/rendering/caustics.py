@@ -39,7 +39,7 @@ from rtmesh.core.compiled import kernel
 from rtmesh.core.errors import SceneError
 from rtmesh.lights import light_table as lt
 from rtmesh.materials import lobes, models
-from rtmesh.rendering.path_signatures import small_records
+from rtmesh.rendering.path_signatures import no_instances, small_records
 from rtmesh.rendering.photon_kernel import FIELDS, MAX_BOUNCES, photon_grid, trace_photons
 from rtmesh.sampling.hashing import mix64
 from rtmesh.sampling.patterns import Dim, sequence_key
@@ -113,7 +113,7 @@ def _photon_signatures():
     flags, counts = types.Array(types.bool_, 1, "C"), types.Array(i64, 1, "C")
     options = numba.typeof((0, np.float32(1.0), False, 0))
     trace = (numba_typeof_query(), i64, types.uint64, types.Array(types.uint64, 1, "C"), i64, i64) + tuple(
-        numba.typeof(record) for record in (geometry, surface, lights, env)) + (
+        numba.typeof(record) for record in (geometry, surface, lights, env, no_instances())) + (
         vector, vector, flags, flags, options, rows, counts, counts)
     return [(trace_photons, trace), (photon_grid, (rows, f64, i64))]
 
@@ -127,6 +127,40 @@ def radius_factor(k):
     """The pass-``k`` (0-based) radius over the first pass's: ``sqrt(prod_{i=1..k} (i + alpha) / (i + 1))``,
     through log-gamma (no product of thousands of factors)."""
     return math.exp(0.5 * (math.lgamma(k + 1 + ALPHA) - math.lgamma(1 + ALPHA) - math.lgamma(k + 2)))
+
+
+def _specular_corners(triangles, faces, placed):
+    """World-space points whose bounding sphere holds every specular face: the corners of
+    the world-space ones and, for each placement of a prototype with specular faces, the
+    eight corners of their box carried to the world (one box a placement, not its copy).
+
+    Parameters
+    ----------
+    triangles : (F, 9) float
+        Per face: a corner and the two edges from it (the path kernel's ``geometry[0]``).
+    faces : (m,) int
+        The specular faces.
+    placed : rtmesh.scene.instances.Instances or None
+        The placements (re-centred).
+
+    Returns
+    -------
+    (n, 3) float64
+    """
+    tri = triangles[faces].astype(np.float64)
+    corners = np.concatenate([tri[:, 0:3], tri[:, 0:3] + tri[:, 3:6], tri[:, 0:3] + tri[:, 6:9]]).reshape(3, -1, 3)
+    if placed is None:
+        return corners.reshape(-1, 3)
+    world = faces < placed.first_face
+    points = [corners[:, world].reshape(-1, 3)]
+    prototype = np.searchsorted(placed.prototype_faces, faces, side="right") - 1
+    for p in np.unique(prototype[~world]):
+        own = corners[:, prototype == p].reshape(-1, 3)
+        low, high = own.min(axis=0), own.max(axis=0)
+        box = np.array([[(low, high)[i >> k & 1][k] for k in range(3)] for i in range(8)])
+        where = np.flatnonzero(placed.prototype == p)
+        points.append(placed.world_points(np.tile(box, (len(where), 1)), np.repeat(where, 8)))
+    return np.concatenate(points)
 
 
 def _bounding_sphere(points):
@@ -182,17 +216,11 @@ class Caustics:
             if s.caustics == "photons":
                 raise SceneError("caustics = 'photons' does not render scenes with moving objects yet; "
                                  "use caustics = 'off'")
-        elif it.instances is not None:
-            # the photon tracer reads hits as world-space faces (caustics = 'photons' renders
-            # such scenes flattened: rtmesh.scene.instances.unsupported)
-            reason = "meshes placed by Embree instances"
         elif not len(faces):
             reason = "no surface scatters by a delta lobe (mirror, smooth glass)"
         elif not len(lights.rows):
             reason = "no lights"
-        corners = np.concatenate([triangles[faces, 0:3], triangles[faces, 0:3] + triangles[faces, 3:6],
-                                  triangles[faces, 0:3] + triangles[faces, 6:9]]) if len(faces) else np.zeros((0, 3))
-        self.aim = _bounding_sphere(corners) if len(faces) else np.zeros(4)
+        self.aim = _bounding_sphere(_specular_corners(triangles, faces, it.instances)) if len(faces) else np.zeros(4)
         if reason is None and s.caustics == "auto" and not self._small_light(lights):
             reason = "every light is large seen from the specular surfaces"
         if reason is not None:
@@ -286,7 +314,8 @@ class Caustics:
                 stored = np.zeros(2, np.int64)
                 counts = np.zeros(1, np.int64)
                 trace_photons(intersect16, handle, pass_key, sobol_keys, first, count, stage.geometry,
-                              stage.surface, stage.light_record, stage._env, self.aim, self.scene_sphere,
+                              stage.surface, stage.light_record, stage._env, stage._instances, self.aim,
+                              self.scene_sphere,
                               self.specular, self.scatters, options, rows, stored, counts)
                 if stored[1] <= capacity:
                     return rows[:stored[0]], int(counts[0])

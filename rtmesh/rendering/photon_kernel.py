@@ -33,11 +33,11 @@ import math
 import numpy as np
 
 from rtmesh.core.compiled import borrowed, keep_alive, inline_row, kernel, row
-from rtmesh.geometry.embree_packets import (DEFAULT_TFAR, GEOM_ID, INVALID_ID, LANES, PRIM_ID, RAYHIT_WORDS,
+from rtmesh.geometry.embree_packets import (DEFAULT_TFAR, GEOM_ID, INVALID_ID, LANES, RAYHIT_WORDS,
                                             RTC_RAY_QUERY_FLAG_INCOHERENT, TFAR, U, V, packet_buffers)
 from rtmesh.lights import light_table as lt
 from rtmesh.materials import lambert, lobes, models
-from rtmesh.rendering.path_packets import MAX_LAYERS
+from rtmesh.rendering.path_packets import MAX_LAYERS, hit_face, placed
 from rtmesh.rendering.path_surfaces import alias_sample, load_lanes
 from rtmesh.rendering.path_surfaces import environment_radiance as _environment_radiance
 from rtmesh.rendering.path_surfaces import environment_sample as _environment_sample
@@ -168,8 +168,8 @@ def sample_emission(light, env, texels, descriptors, aim, scene_sphere, u1, u2, 
 
 
 @kernel
-def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geometry, surface, lights, env, aim,
-                  scene_sphere, specular, scatters, options, photons, stored, counts):
+def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geometry, surface, lights, env, instances,
+                  aim, scene_sphere, specular, scatters, options, photons, stored, counts):
     """Trace photons ``first .. first + count - 1`` of a pass and store where they land.
 
     Parameters
@@ -184,8 +184,9 @@ def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geomet
         Sequence keys of the pass's emission points and directions.
     first, count : int
         The photons to trace.
-    geometry, surface, lights, env : tuples
-        The path kernel's records (:mod:`rtmesh.rendering.path_kernel`).
+    geometry, surface, lights, env, instances : tuples
+        The path kernel's records (:mod:`rtmesh.rendering.path_kernel`): a photon meeting a
+        placed mesh meets its prototype's face at the placement's world-space point.
     aim : (4,) float64
         Centre and radius of the sphere bounding every specular surface.
     scene_sphere : (4,) float64
@@ -206,8 +207,11 @@ def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geomet
         Photon rays traced (active lanes), added to.
     """
     # views that own nothing: no reference counts in the per-lane rows (rtmesh.core.compiled.borrowed)
-    geometry, surface, lights, env, aim, scene_sphere, specular, scatters, sobol_keys, photons, stored, counts = borrowed(
-        (geometry, surface, lights, env, aim, scene_sphere, specular, scatters, sobol_keys, photons, stored, counts))
+    geometry, surface, lights, env, instances, aim, scene_sphere, specular, scatters, sobol_keys, photons, stored, \
+        counts = borrowed((geometry, surface, lights, env, instances, aim, scene_sphere, specular, scatters, sobol_keys,
+                           photons, stored, counts))
+    instance_faces, to_world, normal_to_world = instances
+    static_faces = np.zeros(0, np.int64)  # (photon passes refuse moving objects: one static scene)
     max_bounces, offset_scale, cutouts, media = options
     material_id = geometry[5]
     tags, transmissive, absorption = surface[0], surface[2], surface[4]
@@ -226,12 +230,10 @@ def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geomet
     bounces = np.zeros(LANES, np.int64)
     layers = np.zeros(LANES, np.int64)
     stack = np.full((LANES, max(media, 1)), -1, np.int64)
-    # photons trace world-space faces (placed meshes are flattened for photon passes)
-    no_placements = (np.zeros(0, np.int64), np.zeros((0, 12)), np.zeros((0, 9)))
     owned = (ray, words, valid, args, scratch, px, py, pz, dx, dy, dz, beta, sigma, keys, alive, bounces, layers, stack,
-             no_placements)
+             static_faces)
     (ray, words, valid, args, scratch, px, py, pz, dx, dy, dz, beta, sigma, keys, alive, bounces, layers, stack,
-     no_placements) = borrowed(owned)
+     static_faces) = borrowed(owned)
     capacity = photons.shape[0]
     written = 0
     needed = 0
@@ -281,7 +283,7 @@ def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geomet
                 key = keys[lane]
                 base = DIMENSIONS_PER_BOUNCE * (bounces[lane] + 1)
                 t = np.float64(ray[TFAR * LANES + lane])
-                prim = np.int64(words[PRIM_ID * LANES + lane])  # as the path kernel types it: one compile of the rows
+                prim, placement = hit_face(words, lane, instance_faces, static_faces)
                 bu = np.float64(ray[U * LANES + lane])
                 bv = np.float64(ray[V * LANES + lane])
                 if sigma[lane, 0] + sigma[lane, 1] + sigma[lane, 2] > 0.0:
@@ -289,6 +291,9 @@ def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geomet
                         beta[lane, c] *= math.exp(-sigma[lane, c] * t)
                 mat = material_id[prim]
                 hx, hy, hz, gx, gy, gz, nx, ny, nz = surface_point(geometry, prim, bu, bv)
+                if placement >= 0:
+                    hx, hy, hz, gx, gy, gz, nx, ny, nz = placed(to_world, normal_to_world, placement, hx, hy, hz, gx,
+                                                                gy, gz, nx, ny, nz)
                 if cutouts and layers[lane] + 1 < MAX_LAYERS and is_transparent(
                         surface, geometry, mat, prim, bu, bv,
                         uniform(mix64(key ^ np.uint64(layers[lane] + 1)), base + _COVERAGE)):
@@ -303,7 +308,7 @@ def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geomet
                                                                 lane, stack, media, entering)
                 gx, gy, gz, nx, ny, nz, tx, ty, tz, sx, sy, sz = hit_frame(
                     surface, geometry, mat, prim, bu, bv, transmissive[mat], scratch, lane, gx, gy, gz, nx, ny, nz,
-                    ox, oy, oz, no_placements, -1)
+                    ox, oy, oz, instances, placement)
                 if bounces[lane] > 0 and scatters[mat]:
                     if written < capacity:
                         # the normal of the side the photon arrived on

@@ -323,8 +323,6 @@ def unsupported(scene, settings):
     missing = []
     if not embree_library.packet_library():
         missing.append("the single-ray Embree path")
-    if settings.caustics == "photons":
-        missing.append("photon passes for caustics")
     if scene.motions:
         missing.append("moving objects")
     m, inst = scene.materials, scene.instances

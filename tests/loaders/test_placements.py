@@ -190,18 +190,19 @@ def test_copies_beyond_the_memory_limit_stop_before_they_are_made(tmp_path, caps
 
 
 def test_flattening_instances_beyond_the_memory_limit_stops_before_it(tmp_path, capsys):
-    # 20,000 spheres of 1280 triangles: loaded once (~25 MB); photon passes would flatten
-    # them into copies (~15 GB): refused, one line, before the render takes the memory
+    # 20,000 glowing spheres of 1280 triangles: loaded once (~25 MB); emissive prototypes
+    # are flattened into copies (~15 GB): refused, one line, before the render takes the memory
     rows = np.tile(np.eye(4), (20_000, 1, 1))
     rows[:, 0, 3] = np.arange(20_000)
-    path = _scene_file(tmp_path, '[[objects]]\nprimitive = "icosphere"\ninstances = "rows.npy"\n', rows)
+    path = _scene_file(tmp_path, '[materials.glow]\nemission = [1, 1, 1]\n[[objects]]\nprimitive = "icosphere"\n'
+                                 'material = "glow"\ninstances = "rows.npy"\n', rows)
     out = tmp_path / "out.png"
     status = main(["render", str(path), "-o", str(out), "--width", "16", "--height", "12", "-q",
-                   "--memory-limit", "100M", "--integrator", "path", "--caustics", "photons"])
+                   "--memory-limit", "100M", "--integrator", "path"])
     err = capsys.readouterr().err
     assert status == 2 and not out.exists() and err.count("\n") == 1, err
     assert ("the scene: 20000 placements flattened into copies of 25600000 triangles in all (instances are not "
-            "traced with photon passes for caustics) would need about") in err
+            "traced with emissive prototypes) would need about") in err
 
 
 # ---------------------------------------------------------------- USD
