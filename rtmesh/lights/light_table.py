@@ -305,13 +305,18 @@ class EnvironmentTables:
 
 # ------------------------------------------------------------------ compiled rows
 @row
-def environment_radiance(pixels, cos_rotation, sin_rotation, dx, dy, dz):
-    """Background radiance along a unit direction: :func:`rtmesh.sampling.warps.direction_to_latlong`
-    and the clamped bilinear lookup of the padded image (r, g, b)."""
+def latlong_uv(cos_rotation, sin_rotation, dx, dy, dz):
+    """The environment map's ``(u, v)`` of a unit direction: :func:`rtmesh.sampling.warps.direction_to_latlong`
+    of the direction turned by the map's rotation."""
     xr = cos_rotation * dx - sin_rotation * dz
     zr = sin_rotation * dx + cos_rotation * dz
-    u = 0.5 + math.atan2(zr, xr) / (2.0 * math.pi)
-    v = 0.5 + math.asin(min(max(dy, -1.0), 1.0)) / math.pi
+    return 0.5 + math.atan2(zr, xr) / (2.0 * math.pi), 0.5 + math.asin(min(max(dy, -1.0), 1.0)) / math.pi
+
+
+@row
+def environment_radiance_uv(pixels, u, v):
+    """Background radiance at the map's ``(u, v)``: the clamped bilinear lookup of the padded
+    image (r, g, b)."""
     h, w2 = pixels.shape[0], pixels.shape[1]
     w = w2 - 2
     x = (u * w + 1.0) / (w + 2.0) * w2 - 0.5
@@ -330,14 +335,11 @@ def environment_radiance(pixels, cos_rotation, sin_rotation, dx, dy, dz):
 
 
 @row
-def environment_pdf(marginal, conditional, func, mean, cos_rotation, sin_rotation, dx, dy, dz):
-    """Solid-angle density of :func:`rtmesh.lights.environment.sample_direction` at a unit direction (as
-    :meth:`rtmesh.lights.environment.EnvironmentLighting.pdf`)."""
+def environment_pdf_uv(func, mean, u, v, dy):
+    """Solid-angle density of :func:`rtmesh.lights.environment.sample_direction` (as
+    :meth:`rtmesh.lights.environment.EnvironmentLighting.pdf`) at the map's ``(u, v)``
+    (:func:`latlong_uv`) of a unit direction whose ``y`` is ``dy``."""
     h, w = func.shape
-    xr = cos_rotation * dx - sin_rotation * dz
-    zr = sin_rotation * dx + cos_rotation * dz
-    u = 0.5 + math.atan2(zr, xr) / (2.0 * math.pi)
-    v = 0.5 + math.asin(min(max(dy, -1.0), 1.0)) / math.pi
     r = min(max(int((1.0 - v) * h), 0), h - 1)
     c = min(max(int(u * w), 0), w - 1)
     sin_theta = math.sqrt(max(1.0 - dy * dy, 0.0))

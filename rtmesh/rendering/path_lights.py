@@ -24,7 +24,7 @@ from rtmesh.rendering.path_surfaces import projector_incident as _projector_inci
 # rows of numbers only stay calls (inlining them too cost compile time, no speed)
 area_pdf = inline_row(lt.area_pdf.py_func)
 hit_analytic = inline_row(lt.hit_analytic.py_func)
-environment_pdf = inline_row(lt.environment_pdf.py_func)
+environment_pdf_uv = inline_row(lt.environment_pdf_uv.py_func)
 
 
 @inline_row

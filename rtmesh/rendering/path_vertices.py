@@ -36,11 +36,11 @@ from rtmesh.lights import light_table as lt
 from rtmesh.materials import models
 from rtmesh.materials.metallic_roughness import square_to_cosine_hemisphere_row
 from rtmesh.rendering.path_camera_hits import HIT_AO_HERE, record_camera_hit
-from rtmesh.rendering.path_lights import area_pdf, environment_pdf, hit_analytic, light_at, sample_li, shadow_segment
+from rtmesh.rendering.path_lights import area_pdf, environment_pdf_uv, hit_analytic, light_at, sample_li, shadow_segment
 from rtmesh.rendering.path_packets import (AO, AREA_SHADOW, COVERAGE, CUTOUT, DIMENSIONS_PER_VERTEX, ENVIRONMENT,
                                            LIGHT_CHOICE, LIGHT_U1, LIGHT_U2, MAX_LAYERS, SHADOW, layer_coin,
                                            mover_to_world, placed)
-from rtmesh.rendering.path_surfaces import (alias_sample, colour_tint, environment_radiance, hit_frame, hit_parameters,
+from rtmesh.rendering.path_surfaces import (alias_sample, colour_tint, environment_radiance_uv, hit_frame, hit_parameters,
                                             is_transparent, leave_surface, occlusion_at, surface_point, tangent_frame,
                                             triangle_light_emission)
 from rtmesh.rendering.path_sums import (DIFFUSE_PATH, DIRECT, GLOSSY_PATH, INDIRECT, TRANSMISSION_PATH, add_radiance,
@@ -133,7 +133,7 @@ def meet(lanes, hits, vertices, keys, start, geometry, surface, textured, lights
     whitted_on, group_pmf, ambient, occlusion_strength, ao_samples = whitted[0], whitted[6], whitted[7], whitted[8], \
         whitted[12]
     choice_pmf = group_pmf if whitted_on else light_pmf
-    env_pixels, env_marginal, env_conditional, env_func, env_mean, env_cos, env_sin = env
+    env_pixels, env_func, env_mean, env_cos, env_sin = env[0], env[3], env[4], env[5], env[6]
     moves, face_mover = motion[5], motion[6]
     instance_to_world, instance_normals = instances[1], instances[2]
     photons_on, scatters = photon_map[0], photon_map[10]
@@ -181,17 +181,20 @@ def meet(lanes, hits, vertices, keys, start, geometry, surface, textured, lights
             # (whitted: what mirrors and glass show of the background, lighting or not)
             if ((env_light >= 0) & (not photon_path) | ((depth == 0) & background_seen)
                     | (whitted_on & (depth > 0) & prev_delta[lane])):
-                if env_pixels.shape[0] == 1:
+                # the map's (u, v) of the direction, once for its radiance and its density
+                mapped = env_pixels.shape[0] != 1
+                u = v = 0.0
+                if mapped or not prev_delta[lane]:
+                    u, v = lt.latlong_uv(env_cos, env_sin, dx[lane], dy[lane], dz[lane])
+                if mapped:
+                    lr, lg, lb = environment_radiance_uv(env_pixels, u, v)
+                else:
                     # a uniform background (one row of one texel): no lookup
                     lr, lg, lb = env_pixels[0, 0, 0], env_pixels[0, 0, 1], env_pixels[0, 0, 2]
-                else:
-                    lr, lg, lb = environment_radiance(env_pixels, env_cos, env_sin, dx[lane], dy[lane],
-                                                       dz[lane])
                 w = 1.0
                 if not prev_delta[lane]:
-                    w = power_heuristic(prev_pdf[lane], choice_pmf[env_light] * environment_pdf(
-                        env_marginal, env_conditional, env_func, env_mean, env_cos, env_sin,
-                        dx[lane], dy[lane], dz[lane]) * prev_count[lane])
+                    w = power_heuristic(prev_pdf[lane], choice_pmf[env_light] * environment_pdf_uv(
+                        env_func, env_mean, u, v, dy[lane]) * prev_count[lane])
                 r, g, b = clamped(beta[lane, 0] * lr * w, beta[lane, 1] * lg * w, beta[lane, 2] * lb * w,
                                    limit)
                 add_radiance(total, lane, r, g, b)
