@@ -21,6 +21,7 @@ from rtmesh.lights.environment import EnvironmentLighting
 from rtmesh.lights.mesh_lights import emissive_mesh_light
 from rtmesh.materials.table import ALPHA_MODES
 from rtmesh.rendering import memory
+from rtmesh.rendering.media import Media
 from rtmesh.rendering.shading_tables import ShadingTables
 from rtmesh.rendering.surface_textures import SurfaceTextures
 from rtmesh.scene import instances
@@ -103,6 +104,8 @@ class BuiltScene:
     path_tables : tuple or None
         The path kernel's ``geometry`` and ``surface`` records and the faces' emission,
         formed by the first :class:`rtmesh.rendering.path_stage.PathStage` of any view.
+    media : Media or None
+        The media of the materials with a Whitted transmission colour (None: none).
     path_media : Media or None
         The medium tables of the path integrator's transmissive models where they are
         not the Whitted integrator's (:meth:`Integrator.media_of`).
@@ -175,6 +178,9 @@ class BuiltScene:
         self.ao_samples = settings.ao_samples or (16 if "ao" in settings.passes else 0)
         # what the stages read per hit (per-material colours and flags, per-face rows)
         self.tables = ShadingTables.build(scene, self.accel.triangles, self.offset_scale)
+        # nested dielectric media (rtmesh.rendering.media), only for scenes that refract
+        self.media = (Media(m, scene.material_id, scene.vertices, scene.faces, scene.face_normals)
+                      if m.any_transmission else None)
         self.path_tables = None
         self.path_media = None
         self._lit_background = (None, None)

@@ -216,7 +216,7 @@ class Integrator:
             lens=self.camera.aperture > 0.0,
             motion=self.motion is not None,
         )
-        self._init_media(scene)
+        self._init_media()
         # surface records of the centre passes' rays (and of the general wavefront's hits)
         self.surface_stage = SurfaceStage(self)
         # the path integrator: one compiled kernel per chunk (rtmesh.rendering.path_stage)
@@ -244,7 +244,7 @@ class Integrator:
         self.wavefront = Wavefront(self)
         GENERAL_KERNELS.prepare()
 
-    def _init_media(self, scene):
+    def _init_media(self):
         """Medium stacks (see :mod:`rtmesh.rendering.media`), only for scenes that refract.
 
         Sets ``media`` (None without transmissive materials), ``_camera_medium`` (the
@@ -252,15 +252,12 @@ class Integrator:
         (camera rays lose light before their first hit, so their throughput is not 1) and
         ``_absorbing_medium`` (bool by medium id, the last entry, -1, for the outside).
         """
-        m = scene.materials
-        self.media = None
+        self.media = self.built.media  # the build's: they depend on the geometry alone
         self._camera_medium = np.zeros(0, dtype=np.int32)
         self._camera_absorbs = False
         self._absorbing_medium = np.zeros(1, dtype=bool)
-        if not m.any_transmission:
+        if self.media is None:
             return
-        self.media = Media(m, scene.material_id, scene.vertices, scene.faces,
-                           scene.face_normals)
         self._absorbing_medium = (self.media.absorption > 0).any(axis=1)
         self._camera_medium = self._camera_stack(self.media)
         self._camera_absorbs = bool((self.media.absorption[self._camera_medium[0]] > 0).any())
@@ -285,7 +282,7 @@ class Integrator:
         if self.built.path_media is None or not np.array_equal(self.built.path_media.group_material, groups):
             scene = self.scene
             self.built.path_media = Media(scene.materials, scene.material_id, scene.vertices, scene.faces,
-                                     scene.face_normals, refracts)
+                                          scene.face_normals, refracts)
         return self.built.path_media
 
     def camera_media(self, refracts):

@@ -37,11 +37,11 @@ from rtmesh.rendering.path_sums import LIGHT_PATHS
 from rtmesh.rendering.path_packets import COUNTER_NAMES
 from rtmesh.rendering.path_surfaces import TEXTURE_COLUMNS
 from rtmesh.rendering.settings import RenderSettings
-from rtmesh.scene.camera import Camera
 from rtmesh.rendering.surface_textures import corner_and_edges, face_tangents
 from rtmesh.sampling.hashing import mix64, path_keys
 from rtmesh.sampling.patterns import Dim
 from rtmesh.sampling.zsobol import block_bits, sequence_keys
+from rtmesh.scene.camera import Camera
 
 log = logging.getLogger(__name__)
 
@@ -362,7 +362,7 @@ class PathStage:
             hit[:, ch.HIT_ALBEDO:ch.HIT_ALBEDO + 3], hit[:, ch.HIT_UV:ch.HIT_UV + 2], self.it.passes))
         if passes.wants("ao") and self._ao_pass:
             # the fraction of the surface's ambient-occlusion rays that escaped
-            passes.write("ao", rows, hit[:, ch.HIT_FREE] / self._whitted[12])
+            passes.write("ao", rows, hit[:, ch.HIT_FREE] / self.it.ao_samples)
 
     def render(self, origins, directions, pixel, sample, stats, passes=None, times=None):
         """Radiance of the camera rays of one chunk.
@@ -378,7 +378,7 @@ class PathStage:
             Ray counts are added to it.
         passes : PassSink, optional
             The chunk's pass buffers: the light-path and camera-hit passes it wants are
-            written to it (:meth:`rtmesh.io.passes.PassRecorder.record_surfaces`).
+            written to it (:meth:`rtmesh.io.passes.PassRecorder.record_hits`).
         times : (n,) float, optional
             Each ray's time in the shutter (scenes with moving objects).
 
@@ -410,11 +410,12 @@ class PathStage:
         else:
             camera = no_camera()
             origins, directions = kernel_input(origins, np.float64), kernel_input(directions, np.float64)
-        complete = trace_paths(intersect16, occluded16, handle, camera, origins, directions, keys, *self._sobol(pixel_index, sample_index),
-                    np.zeros(0) if times is None else kernel_input(times, np.float64),
-                    self.geometry, self.surface, self.light_record, self._env, options, self._whitted, self._motion,
-                    self._instances,
-                    self.photon_map, stage_entries(), radiance, light_paths, camera_hits, counts)
+        complete = trace_paths(intersect16, occluded16, handle, camera, origins, directions, keys,
+                               *self._sobol(pixel_index, sample_index),
+                               np.zeros(0) if times is None else kernel_input(times, np.float64),
+                               self.geometry, self.surface, self.light_record, self._env, options, self._whitted,
+                               self._motion, self._instances, self.photon_map, stage_entries(), radiance,
+                               light_paths, camera_hits, counts)
         if not complete:
             raise RuntimeError("the path kernel's vertex stages were compiled for other argument types than it passes "
                                "(rtmesh.rendering.path_signatures declares them)")

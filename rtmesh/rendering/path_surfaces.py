@@ -363,8 +363,8 @@ def hit_parameters(surface, geometry, textured, mat, prim, bu, bv, scratch, lane
     parameter row being the material's own, or (``in_scratch``) a copy in ``scratch[lane]``
     scaled by its textures and vertex colours (:func:`textured_row`), with a transmissive
     model's index ratio between the media on the interface's two sides
-    (:func:`rtmesh.rendering.path_media.interface_ratio`; ``media`` the stack's depth, 0 without transmissive materials;
-    ``entering`` whether the ray meets the front)."""
+    (:func:`rtmesh.rendering.path_media.interface_ratio`; ``media`` the stack's depth, 0
+    without transmissive materials; ``entering`` whether the ray meets the front)."""
     tags, params, transmissive, emission, slots, ior = surface[0], surface[1], surface[2], surface[3], surface[7], \
         surface[15]
     in_scratch = textured[mat]

@@ -40,9 +40,9 @@ from rtmesh.rendering.path_lights import area_pdf, environment_pdf_uv, hit_analy
 from rtmesh.rendering.path_packets import (AO, AREA_SHADOW, COVERAGE, CUTOUT, DIMENSIONS_PER_VERTEX, ENVIRONMENT,
                                            LIGHT_CHOICE, LIGHT_U1, LIGHT_U2, MAX_LAYERS, SHADOW, layer_coin,
                                            mover_to_world, placed)
-from rtmesh.rendering.path_surfaces import (alias_sample, colour_tint, environment_radiance_uv, hit_frame, hit_parameters,
-                                            is_transparent, leave_surface, occlusion_at, surface_point, tangent_frame,
-                                            triangle_light_emission)
+from rtmesh.rendering.path_surfaces import (alias_sample, colour_tint, environment_radiance_uv, hit_frame,
+                                            hit_parameters, is_transparent, leave_surface, occlusion_at, surface_point,
+                                            tangent_frame, triangle_light_emission)
 from rtmesh.rendering.path_sums import (DIFFUSE_PATH, DIRECT, GLOSSY_PATH, INDIRECT, TRANSMISSION_PATH, add_radiance,
                                         add_to_pass, clamped, pass_bucket)
 from rtmesh.rendering.photon_kernel import ALL_PARTS, DIFFUSE_PART, TRANSMITTED_PART, gather
