@@ -235,8 +235,9 @@ def scene_at_time(scene, time):
     to_world = list(getattr(scene, "object_to_world", None) or [])
     face_normals = scene.face_normals.copy()
     vertex_normals = None if scene.vertex_normals is None else scene.vertex_normals.copy()
+    world = np.arange(len(scene.faces)) < (len(scene.faces) if scene.instances is None else scene.instances.first_face)
     for k, motion in object_motions(scene).items():
-        faces = scene.object_id == k
+        faces = (scene.object_id == k) & world  # (a prototype's faces carry its first placement's id)
         used = np.unique(scene.faces[faces])
         t = np.full(len(used), float(time))
         vertices[used] = motion.to_world(vertices[used], t)
@@ -321,6 +322,10 @@ class MotionAccel:
         Moving objects, in the same (re-centred) frame as ``vertices``.
     shutter : (2,) float
         The interval every query time lies in.
+    instances : rtmesh.scene.instances.Instances, optional
+        Placed meshes (static: a moving placement is copied into the world first), traced
+        in the static scene as Embree instances; ``faces`` from ``instances.first_face`` on
+        are their prototypes.
 
     Attributes
     ----------
@@ -329,20 +334,32 @@ class MotionAccel:
         scene saw it (see :attr:`Accel.triangles`).
     face_mover : (F,) intp
         Index of the face's moving object in :attr:`movers`, -1 for static faces.
+    instances : Instances or None
+        As given: a hit's ``instance`` is its placement (:meth:`intersect`).
     """
 
-    def __init__(self, vertices, faces, object_id, motions, shutter=(0.0, 1.0)):
+    def __init__(self, vertices, faces, object_id, motions, shutter=(0.0, 1.0), instances=None):
         faces = np.asarray(faces)
         object_id = np.asarray(object_id)
+        self.instances = instances
+        first_placed = len(faces) if instances is None else instances.first_face
         self.face_mover = np.full(len(faces), -1, dtype=np.intp)
         self.movers = []
         for k in sorted(motions):
-            face_ids = np.flatnonzero(object_id == k)
+            # (a prototype's faces carry its first placement's object id: world faces only)
+            face_ids = np.flatnonzero(object_id[:first_placed] == k)
             if len(face_ids):
                 self.face_mover[face_ids] = len(self.movers)
                 self.movers.append(_Mover(vertices, faces, face_ids, motions[k], shutter))
+        # the static scene: the static world faces, then the prototypes (its own face numbers
+        # map to the scene's through static_faces)
         self.static_faces = np.flatnonzero(self.face_mover < 0)
-        self.static = Accel(vertices, faces[self.static_faces]) if len(self.static_faces) else None
+        placed = None
+        if instances is not None:
+            static_world = int(np.count_nonzero(self.face_mover < 0)) - (len(faces) - first_placed)
+            placed = dataclasses.replace(instances, first_face=static_world,
+                                         prototype_faces=instances.prototype_faces - first_placed + static_world)
+        self.static = Accel(vertices, faces[self.static_faces], instances=placed) if len(self.static_faces) else None
         triangles = np.zeros((9, len(faces)))
         if self.static is not None:
             triangles[:, self.static_faces] = self.static.triangles.T
@@ -368,13 +385,16 @@ class MotionAccel:
         if time is None:
             raise ValueError("a scene with moving objects is traced at each ray's time")
         n = len(directions)
+        instance = None
         if self.static is not None:
             hits = self.static.intersect(origins, directions)
             prim = np.where(hits.prim >= 0, self.static_faces.take(np.maximum(hits.prim, 0)), -1)
-            t, u, v = hits.t, hits.u, hits.v
+            t, u, v, instance = hits.t, hits.u, hits.v, hits.instance
         else:
             t, prim = np.full(n, np.inf), np.full(n, -1, dtype=np.int64)
             u, v = np.zeros(n), np.zeros(n)
+            if self.instances is not None:
+                instance = np.full(n, -1, dtype=np.int32)
         for mover in self.movers:
             m = mover.motion
             rows = mover.candidates(origins, directions, t)
@@ -390,7 +410,9 @@ class MotionAccel:
                 prim[hit_rows] = mover.faces[h.prim[closer]]
                 u[hit_rows] = h.u[closer]
                 v[hit_rows] = h.v[closer]
-        return Hits(t, prim.astype(np.int32), u, v)
+                if instance is not None:
+                    instance[hit_rows] = -1
+        return Hits(t, prim.astype(np.int32), u, v, instance)
 
     def occluded(self, origins, directions, t_max, rows=None, time=None):
         """Whether anything lies on each ray before ``t_max`` at the ray's time.

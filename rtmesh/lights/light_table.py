@@ -67,6 +67,37 @@ def _luminance(colour):
     return float(np.dot(_LUMA, np.asarray(colour, dtype=np.float64)))
 
 
+# memory of one light: its row, its alias table entry and its choice probability (bytes)
+BYTES_PER_LIGHT = WIDTH * 8 + 24
+
+
+def placed_light_count(instances, face_emission):
+    """How many lights the placements of emissive prototype faces make in a
+    :class:`LightTable` (at most: faces of zero area make none), for a memory estimate
+    (:data:`BYTES_PER_LIGHT` each)."""
+    emits = np.concatenate([[0], np.cumsum((face_emission[instances.first_face:] > 0).any(axis=1))])
+    bounds = instances.prototype_faces - instances.first_face
+    per_prototype = emits[bounds[1:]] - emits[bounds[:-1]]
+    return int(per_prototype[instances.prototype].sum())
+
+
+def _triangle_block(corner, e1, e2, normals, emission, faces, two_sided, keep_all=False):
+    """Rows of emissive triangles (corner, edges, normals and radiance as (n, 3) arrays,
+    ``faces`` their faces in the per-face tables) and the faces kept: those of non-zero area
+    (all of them with ``keep_all``)."""
+    area = 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
+    keep = np.ones(len(area), bool) if keep_all else area > 0.0
+    block = np.zeros((int(keep.sum()), WIDTH))
+    block[:, 0] = TRIANGLE
+    block[:, 1:4], block[:, 10:13], block[:, 13:16] = corner[keep], e1[keep], e2[keep]
+    block[:, 4:7], block[:, 7:10] = normals[keep], emission[keep]
+    # one-sided, toward the winding's normal (as pbrt's and Mitsuba's area lights), or
+    # on both sides (the Whitted convention, rtmesh.lights.mesh_lights)
+    block[:, AREA], block[:, TWO_SIDED], block[:, VISIBLE], block[:, FACE] = area[keep], float(two_sided), 1.0, \
+        faces[keep]
+    return block, faces[keep]
+
+
 def _row(kind, point, normal, radiance, a, b, area, two_sided, visible, face=-1.0):
     r = np.zeros(WIDTH)
     r[0] = kind
@@ -95,6 +126,10 @@ class LightTable:
     two_sided_emitters : bool
         Emissive triangles emit on both sides (the Whitted integrator's convention), not
         toward their winding's normal only.
+    instances : rtmesh.scene.instances.Instances, optional
+        The scene's placements: ``triangles`` from ``instances.first_face`` on are the
+        prototypes' (model coordinates), and every placement of an emissive prototype face
+        is a light of its own, its triangle carried to the world.
 
     Attributes
     ----------
@@ -104,7 +139,11 @@ class LightTable:
     pmf : (L,) float64
         Each light's choice probability.
     face_light : (F,) int64
-        The light of each emissive face, -1 elsewhere.
+        The light of each emissive face, -1 elsewhere; for a prototype's face, its rank among
+        its prototype's emissive faces (the light is ``placement_light[j]`` plus the rank).
+    placement_light : (k,) int64
+        Each placement's first light (its prototype's emissive faces in order), -1 where the
+        prototype emits nothing; empty without placements.
     environment : int
         The environment's row, or -1.
     analytic : (k,) int64
@@ -115,7 +154,7 @@ class LightTable:
     """
 
     def __init__(self, lights, triangles, face_normals, face_emission, environment, scene_radius,
-                 two_sided_emitters=False):
+                 two_sided_emitters=False, instances=None):
         rows, power = [], []
         images = []
         for light in lights:
@@ -150,24 +189,20 @@ class LightTable:
                 rows.append(r)
                 power.append(_delta_power(packed, scene_radius))
         emissive = np.flatnonzero((face_emission > 0).any(axis=1))
+        first_placed = len(triangles) if instances is None else instances.first_face
         self.face_light = np.full(len(triangles), -1, dtype=np.int64)
-        if len(emissive):
-            e1, e2 = triangles[emissive, 3:6], triangles[emissive, 6:9]
-            area = 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
-            keep = area > 0.0
-            emissive, area = emissive[keep], area[keep]
-            block = np.zeros((len(emissive), WIDTH))
-            block[:, 0] = TRIANGLE
-            block[:, 1:4], block[:, 10:13], block[:, 13:16] = (triangles[emissive, 0:3], triangles[emissive, 3:6],
-                                                               triangles[emissive, 6:9])
-            block[:, 4:7], block[:, 7:10] = face_normals[emissive], face_emission[emissive]
-            # one-sided, toward the winding's normal (as pbrt's and Mitsuba's area lights), or
-            # on both sides (the Whitted convention, rtmesh.lights.mesh_lights)
-            block[:, AREA], block[:, TWO_SIDED], block[:, VISIBLE], block[:, FACE] = (area, float(two_sided_emitters),
-                                                                                      1.0, emissive)
-            self.face_light[emissive] = len(rows) + np.arange(len(emissive))
+        self.placement_light = np.full(0 if instances is None else len(instances), -1, dtype=np.int64)
+        world = emissive[emissive < first_placed]
+        if len(world):
+            block, world = _triangle_block(triangles[world, 0:3], triangles[world, 3:6], triangles[world, 6:9],
+                                           face_normals[world], face_emission[world], world, two_sided_emitters)
+            self.face_light[world] = len(rows) + np.arange(len(world))
             rows.extend(block)
-            power.extend(math.pi * area * (face_emission[emissive] @ _LUMA))
+            power.extend(math.pi * block[:, AREA] * (block[:, RADIANCE:RADIANCE + 3] @ _LUMA))
+        prototype_emitters = emissive[emissive >= first_placed]
+        if len(prototype_emitters):
+            self._place_emitters(instances, prototype_emitters, triangles, face_normals, face_emission,
+                                 two_sided_emitters, rows, power)
         self.environment = -1
         if environment is not None:
             self.environment = len(rows)
@@ -182,6 +217,33 @@ class LightTable:
         kinds = self.rows[:, 0] if len(self.rows) else np.zeros(0)
         self.analytic = np.flatnonzero(((kinds == QUAD) | (kinds == DISK)) & (self.rows[:, VISIBLE] > 0)
                                        if len(self.rows) else np.zeros(0, bool)).astype(np.int64)
+
+    def _place_emitters(self, instances, faces, triangles, face_normals, face_emission, two_sided, rows, power):
+        """Append a light for every placement of every emissive prototype face in ``faces``
+        (ascending), carried to the world by the placement's transform (as
+        :meth:`~rtmesh.scene.instances.Instances.world_points` and ``world_normals`` carry
+        the traced surface); set :attr:`face_light` (ranks) and :attr:`placement_light`."""
+        # faces of zero area emit nothing (as in the world)
+        e1, e2 = triangles[faces, 3:6], triangles[faces, 6:9]
+        faces = faces[np.linalg.norm(np.cross(e1, e2), axis=1) > 0.0]
+        prototype_of = np.searchsorted(instances.prototype_faces, faces, side="right") - 1
+        first_of = np.searchsorted(prototype_of, np.arange(len(instances.prototype_faces) - 1))
+        count_of = np.bincount(prototype_of, minlength=len(first_of))
+        self.face_light[faces] = np.arange(len(faces)) - first_of[prototype_of]
+        counts = count_of[instances.prototype]
+        total = int(counts.sum())
+        block_start = np.cumsum(counts) - counts
+        self.placement_light = np.where(counts > 0, len(rows) + block_start, -1).astype(np.int64)
+        placement = np.repeat(np.arange(len(counts)), counts)
+        face = faces[np.repeat(first_of[instances.prototype], counts) + np.arange(total) - np.repeat(block_start,
+                                                                                                     counts)]
+        corner = instances.world_points(triangles[face, 0:3], placement)
+        edges = [instances.world_vectors(triangles[face, k:k + 3], placement) for k in (3, 6)]
+        normals = instances.world_normals(face_normals[face], placement)
+        block, _ = _triangle_block(corner, edges[0], edges[1], normals, face_emission[face], face, two_sided,
+                                   keep_all=True)
+        rows.extend(block)
+        power.extend(math.pi * block[:, AREA] * (block[:, RADIANCE:RADIANCE + 3] @ _LUMA))
 
     def __len__(self):
         return len(self.rows)

@@ -112,6 +112,13 @@ class BuiltScene:
     """
 
     def __init__(self, scene, settings, sampler, flatten_for):
+        moving = [] if scene.instances is None else np.flatnonzero(np.isin(scene.instances.object_id,
+                                                                           list(object_motions(scene))))
+        if len(moving) and not flatten_for:
+            # a moving placement is copied into the world (its own Embree scene, traced in
+            # its rest frame, as every moving object); the others stay placed
+            memory.check_flattening(instances.subset(scene.instances, moving), "moving objects")
+            scene = instances.flattened(scene, moving)
         if object_motions(scene) and not blurs(scene):
             # an instantaneous shutter: moving objects stand still where the shutter finds them
             scene = scene_at_time(scene, scene.camera.shutter[0])
@@ -129,13 +136,13 @@ class BuiltScene:
         scene_bounds = self.scene_bounds = scene.bounds  # a pass over every vertex: formed once
         self.shift = scene_bounds.mean(axis=0)
         # moving objects get Embree scenes of their own, traced at each ray's time
+        # placed meshes: the prototypes stay in their own coordinates, their placements move
+        shifted, self.instances = recentred(scene.vertices, scene.instances, self.shift)
         self.motion = None
         if blurs(scene):
             motions = {k: m.shifted(self.shift) for k, m in object_motions(scene).items()}
-            self.motion = MotionAccel(scene.vertices - self.shift, scene.faces, scene.object_id,
-                                      motions, scene.camera.shutter)
-        # placed meshes: the prototypes stay in their own coordinates, their placements move
-        shifted, self.instances = recentred(scene.vertices, scene.instances, self.shift)
+            self.motion = MotionAccel(shifted, scene.faces, scene.object_id, motions, scene.camera.shutter,
+                                      self.instances)
         self.accel = self.motion or Accel(shifted, scene.faces, instances=self.instances)
         # the scene's size in the re-centred frame bounds the triangles' size, which sets
         # part of the origin offset (see offset_ray_origins); it cannot be zero for a scene
@@ -164,8 +171,13 @@ class BuiltScene:
                     return self.textures.emission_tints(prim, u, v, material_id[prim])
 
                 mean_tint = self.textures.mean_emission_tints()[material_id]
-            self.emitters = emissive_mesh_light(self.accel.triangles, scene.face_normals,
-                                                m.emission[scene.material_id], tint, mean_tint)
+            emission = m.emission[scene.material_id]
+            if self.instances is not None:
+                # placed emitters are the path kernel's lights (one per placement,
+                # rtmesh.lights.light_table.LightTable); these are the world's faces only
+                emission[self.instances.first_face:] = 0.0
+            self.emitters = emissive_mesh_light(self.accel.triangles, scene.face_normals, emission, tint,
+                                                mean_tint)
         lit = ~m.unlit[:, None]
         self.shaded_any = bool((((m.diffuse > 0) | (m.specular > 0)) & lit).any()) or m.any_physical
         self.ao_distance = settings.ao_distance or 0.2 * float(np.linalg.norm(np.ptp(scene_bounds, axis=0)))

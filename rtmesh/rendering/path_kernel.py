@@ -42,8 +42,8 @@ does not depend on chunks or threads.
 Records (tuples of arrays, built once by :class:`rtmesh.rendering.path_stage.PathStage`):
 ``geometry`` and ``surface`` as :mod:`rtmesh.rendering.path_surfaces` describes them;
 ``lights = (rows, probability, alias, pmf, face_light, analytic, environment, texels,
-descriptors)`` (:class:`rtmesh.lights.light_table.LightTable`, the last two its projectors'
-images); ``env = (pixels, marginal, conditional,
+descriptors, placement_light)`` (:class:`rtmesh.lights.light_table.LightTable`, ``texels``
+and ``descriptors`` its projectors' images); ``env = (pixels, marginal, conditional,
 func, mean, cos_rotation, sin_rotation)`` (:class:`rtmesh.lights.light_table.EnvironmentTables`);
 ``options = (max_depth, rr_depth, clamp, offset_scale, background_seen, cutouts, split,
 camera_media, light_samples, light_block, record_hits, ao_pass, pass_albedo)``:

@@ -53,7 +53,7 @@ def small_records():
                energy, z((1, 6), np.int64), z((1, 6), np.int64), z(1), z(1, np.int64), z(1), z(1),
                z(1, np.float32), z((1, 12)), z(1), z(0, np.int64))
     lights = (z((1, lt.WIDTH)), z(1), z(1, np.int64), z(1), z(1, np.int64), z(0, np.int64), -1, z(1, np.float32),
-              z((0, 12)))
+              z((0, 12)), z(0, np.int64))
     env = (z((1, 3, 3)), z(2), z((1, 2)), z((1, 1)), 1.0, 1.0, 0.0)
     return energy, geometry, surface, lights, env
 

@@ -22,12 +22,13 @@ from rtmesh.geometry import embree_library
 from rtmesh.geometry.cutouts import CutoutAccel
 from rtmesh.io.texture_atlas import TextureAtlas
 from rtmesh.lights.environment import EnvironmentLighting
-from rtmesh.lights.light_table import EnvironmentTables, LightTable
+from rtmesh.lights.light_table import BYTES_PER_LIGHT, EnvironmentTables, LightTable, placed_light_count
 from rtmesh.lights.mesh_lights import MeshLight
 from rtmesh.lights.projector import ProjectorLight
 from rtmesh.materials.models import SLOTS, material_rows, tables
 from rtmesh.materials.table import PHYSICAL_MODELS
 from rtmesh.io.passes import CAMERA_HIT_PASSES, LIGHT_PATH_PASSES, CameraHits
+from rtmesh.rendering import memory
 from rtmesh.rendering.caustics import Caustics
 from rtmesh.rendering.photon_kernel import empty_photon_map
 from rtmesh.rendering import path_camera_hits as ch
@@ -266,13 +267,19 @@ class PathStage:
             lighting = it.environment_lighting or EnvironmentLighting(background, it.accel, settings,
                                                                       it.offset_scale)
             environment = EnvironmentTables(lighting, background)
+        if it.instances is not None:
+            # a light for every placement of an emissive prototype face
+            placed = placed_light_count(it.instances, face_emission)
+            memory.check_load("the scene", f"{placed} placed emissive triangles as lights",
+                              placed * BYTES_PER_LIGHT)
         self.lights = LightTable([light for light in it.view_lights if not isinstance(light, MeshLight)],
                                  self.geometry[0], self.geometry[1], face_emission,
-                                 environment if lights_scene else None, it.offset_scale, self.whitted)
+                                 environment if lights_scene else None, it.offset_scale, self.whitted, it.instances)
         lights = self.lights
         # the kernels' ``lights`` record (rtmesh.rendering.path_kernel), formed once a view
         self.light_record = (lights.rows, lights.probability, lights.alias, lights.pmf, lights.face_light,
-                             lights.analytic, lights.environment, lights.texels, lights.descriptors)
+                             lights.analytic, lights.environment, lights.texels, lights.descriptors,
+                             lights.placement_light)
         # the ao pass's rays at the camera rays' surfaces (rtmesh.rendering.path_camera_hits)
         self._ao_pass = "ao" in settings.passes and it.ao_samples > 0
         self._pass_albedo = np.ascontiguousarray(it.passes.diffuse, dtype=np.float64).reshape(-1, 3)

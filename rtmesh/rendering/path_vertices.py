@@ -126,6 +126,7 @@ def meet(lanes, hits, vertices, keys, start, geometry, surface, textured, lights
     material_id = geometry[5]
     tags, transmissive, unlit, albedo_table = surface[0], surface[2], surface[5], surface[6]
     light_rows, light_pmf, face_light, analytic, env_light = lights[0], lights[3], lights[4], lights[5], lights[6]
+    placement_light = lights[9]
     max_depth, clamp, offset_scale, background_seen, cutouts, split = (options[0], options[2], options[3], options[4],
                                                                        options[5], options[6])
     media = len(options[7])
@@ -231,6 +232,9 @@ def meet(lanes, hits, vertices, keys, start, geometry, surface, textured, lights
             w = 1.0
             if not prev_delta[lane]:
                 light = face_light[prim]
+                if light >= 0 and best_instance[lane] >= 0:
+                    # a placed emitter: its placement's lights, by the face's rank
+                    light += placement_light[best_instance[lane]]
                 if light >= 0:
                     w = power_heuristic(prev_pdf[lane], choice_pmf[light] * area_pdf(
                         light_at(light_rows, light, face_mover, moves, lane_time[lane], moved, lane),

@@ -124,6 +124,28 @@ class Instances:
             out[rows] = _linear(a, out[rows]) + a[:, 9:12]
         return out
 
+    def world_vectors(self, vectors, instance):
+        """Directions (edges, tangents) of the prototypes carried to the world by the linear
+        parts of their placements (not normalised).
+
+        Parameters
+        ----------
+        vectors : (n, 3) float64
+            Model-space rows where ``instance >= 0``, world rows elsewhere.
+        instance : (n,) int
+            Each row's placement, -1 for a row already in the world.
+
+        Returns
+        -------
+        (n, 3) float64
+            A new array.
+        """
+        out = np.array(vectors, dtype=np.float64)
+        rows = np.flatnonzero(instance >= 0)
+        if len(rows):
+            out[rows] = _linear(self.world_rows()[1][instance[rows]], out[rows])
+        return out
+
     def world_normals(self, normals, instance):
         """Unit normals of prototype faces carried to the world by the inverse transpose of
         their placements' linear parts and normalised again, in the arithmetic of the path
@@ -323,31 +345,39 @@ def unsupported(scene, settings):
     missing = []
     if not embree_library.packet_library():
         missing.append("the single-ray Embree path")
-    if scene.motions:
-        missing.append("moving objects")
-    m, inst = scene.materials, scene.instances
-    used = np.unique(scene.material_id[inst.first_face:])
-    if (m.emission[used] > 0).any():
-        missing.append("emissive prototypes")
-    if m.any_transmission:
+    if scene.materials.any_transmission:
         missing.append("transmissive materials (media)")
     return missing
 
 
-def flattened(scene):
-    """The scene with every placement as a copy of its prototype (what the loaders made
-    before instancing): vertices placed as :func:`trimesh.transform_points` places them,
-    the winding reversed under a mirroring transform, normals by the inverse transpose.
+def subset(placed, placements):
+    """The :class:`Instances` of the ``placements`` (indices) of ``placed`` alone (for a
+    memory estimate of their copies)."""
+    import dataclasses
+
+    return dataclasses.replace(placed, transforms=placed.transforms[placements],
+                               prototype=placed.prototype[placements], object_id=placed.object_id[placements])
+
+
+def flattened(scene, placements=None):
+    """The scene with every placement (or those named) as a copy of its prototype (what the
+    loaders made before instancing): vertices placed as :func:`trimesh.transform_points`
+    places them, the winding reversed under a mirroring transform, normals by the inverse
+    transpose.
 
     Parameters
     ----------
     scene : Scene
         With ``instances``.
+    placements : (m,) int, optional
+        The placements to copy; the others stay placed (their prototypes kept after the
+        copies, the world-space faces).  Default: all of them.
 
     Returns
     -------
     Scene
-        Without ``instances``; the prototypes' own faces are gone.
+        Without ``instances`` when every placement is copied (the prototypes' own faces
+        are gone), else with the placements left.
     """
     import dataclasses
 
@@ -374,7 +404,8 @@ def flattened(scene):
 
     take(scene.vertices[:v0], scene.faces[flat], None if scene.vertex_normals is None else scene.vertex_normals[:v0],
          scene.face_normals[flat], flat, slice(0, v0), None)
-    for j in range(len(inst)):
+    copied = np.arange(len(inst)) if placements is None else np.unique(np.asarray(placements, dtype=np.int64))
+    for j in copied:
         p = inst.prototype[j]
         faces_of = slice(int(inst.prototype_faces[p]), int(inst.prototype_faces[p + 1]))
         vertices_of = slice(int(inst.prototype_vertices[p]), int(inst.prototype_vertices[p + 1]))
@@ -389,8 +420,23 @@ def flattened(scene):
             normals = scene.vertex_normals[vertices_of] @ np.linalg.inv(matrix[:3, :3])
             normals, _ = build_kernels.unit_rows(np.ascontiguousarray(normals), faces)
         take(vertices, faces, normals, face_normals, faces_of, vertices_of, int(inst.object_id[j]))
+    left = np.setdiff1d(np.arange(len(inst)), copied)
+    placed = None
+    if len(left):
+        # the prototypes after the copies, placed by the placements left
+        first_face = sum(len(f) for f in parts["faces"])
+        first_vertex = sum(len(v) for v in parts["vertices"])
+        prototypes = slice(f0, len(scene.faces))
+        take(scene.vertices[v0:], np.asarray(scene.faces[prototypes], dtype=np.int64) - v0,
+             None if scene.vertex_normals is None else scene.vertex_normals[v0:], scene.face_normals[prototypes],
+             prototypes, slice(v0, len(scene.vertices)), None)
+        placed = dataclasses.replace(inst, first_face=first_face, first_vertex=first_vertex,
+                                     prototype_faces=inst.prototype_faces - f0 + first_face,
+                                     prototype_vertices=inst.prototype_vertices - v0 + first_vertex,
+                                     transforms=inst.transforms[left], prototype=inst.prototype[left],
+                                     object_id=inst.object_id[left])
     joined = {name: (np.concatenate(arrays) if arrays else None) for name, arrays in parts.items()}
-    return dataclasses.replace(scene, instances=None, vertices=joined["vertices"],
+    return dataclasses.replace(scene, instances=placed, vertices=joined["vertices"],
                                faces=joined["faces"].astype(np.int32), face_normals=joined["face_normals"],
                                vertex_normals=joined["vertex_normals"], smooth=joined["smooth"],
                                material_id=joined["material_id"], object_id=joined["object_id"],

@@ -133,13 +133,13 @@ def test_instanced_batch_labels_are_those_of_the_copies(converted):
 
 def test_copies_beyond_a_workers_limit_fail_the_asset_in_one_line(tmp_path, monkeypatch):
     """When the view's build flattens the placements (here by fiat: a scene the kernel cannot
-    trace through instances, as emissive prototypes), a local worker refuses copies beyond
+    trace through instances, as transmissive ones), a local worker refuses copies beyond
     its limit before taking the memory (the load itself, instanced, fits)."""
     from rtmesh.scene import instances
 
     mesh = reusing_glb(tmp_path / "reuse.glb", count=PLACED, subdivisions=2)
     monkeypatch.setattr(view_scenes, "LOAD_LIMIT", 600_000)
-    monkeypatch.setattr(instances, "unsupported", lambda scene, settings: ["emissive prototypes"])
+    monkeypatch.setattr(instances, "unsupported", lambda scene, settings: ["transmissive materials (media)"])
     task = jobs.ImageTask("iso", jobs.fixed_view("iso"), ("iso.png",), "")
     fields = dict(FIELDS, integrator="path", passes=())
     (image,) = worker.run_job(jobs.AssetJob("reuse.glb", str(mesh), str(tmp_path), fields, (task,)))["images"]

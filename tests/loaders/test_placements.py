@@ -189,9 +189,9 @@ def test_copies_beyond_the_memory_limit_stop_before_they_are_made(tmp_path, caps
     assert "objects[1]: 20000 copies of 12 triangles would need about" in err and "--memory-limit is 100 MiB" in err
 
 
-def test_flattening_instances_beyond_the_memory_limit_stops_before_it(tmp_path, capsys):
-    # 20,000 glowing spheres of 1280 triangles: loaded once (~25 MB); emissive prototypes
-    # are flattened into copies (~15 GB): refused, one line, before the render takes the memory
+def test_placed_emitters_beyond_the_memory_limit_stop_before_them(tmp_path, capsys):
+    # 20,000 glowing spheres of 1280 triangles: loaded once (~25 MB); every placed face is a
+    # light of its own (~5 GB of light rows): refused, one line, before the render takes them
     rows = np.tile(np.eye(4), (20_000, 1, 1))
     rows[:, 0, 3] = np.arange(20_000)
     path = _scene_file(tmp_path, '[materials.glow]\nemission = [1, 1, 1]\n[[objects]]\nprimitive = "icosphere"\n'
@@ -201,8 +201,23 @@ def test_flattening_instances_beyond_the_memory_limit_stops_before_it(tmp_path, 
                    "--memory-limit", "100M", "--integrator", "path"])
     err = capsys.readouterr().err
     assert status == 2 and not out.exists() and err.count("\n") == 1, err
+    assert "the scene: 25600000 placed emissive triangles as lights would need about" in err
+
+
+def test_flattening_instances_beyond_the_memory_limit_stops_before_it(tmp_path, capsys):
+    # 20,000 glass spheres of 1280 triangles: loaded once (~25 MB); transmissive prototypes
+    # are flattened into copies (~15 GB): refused, one line, before the render takes the memory
+    rows = np.tile(np.eye(4), (20_000, 1, 1))
+    rows[:, 0, 3] = np.arange(20_000)
+    path = _scene_file(tmp_path, '[materials.glass]\ntransmission = [1, 1, 1]\n[[objects]]\nprimitive = "icosphere"\n'
+                                 'material = "glass"\ninstances = "rows.npy"\n', rows)
+    out = tmp_path / "out.png"
+    status = main(["render", str(path), "-o", str(out), "--width", "16", "--height", "12", "-q",
+                   "--memory-limit", "100M", "--integrator", "path"])
+    err = capsys.readouterr().err
+    assert status == 2 and not out.exists() and err.count("\n") == 1, err
     assert ("the scene: 20000 placements flattened into copies of 25600000 triangles in all (instances are not "
-            "traced with emissive prototypes) would need about") in err
+            "traced with transmissive materials (media)) would need about") in err
 
 
 # ---------------------------------------------------------------- USD
