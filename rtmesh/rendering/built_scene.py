@@ -117,13 +117,15 @@ class BuiltScene:
         if len(moving) and not flatten_for:
             # a moving placement is copied into the world (its own Embree scene, traced in
             # its rest frame, as every moving object); the others stay placed
+            log.info("%d moving placements copied into the world (moving objects have Embree scenes of their own)",
+                     len(moving))
             memory.check_flattening(instances.subset(scene.instances, moving), "moving objects")
             scene = instances.flattened(scene, moving)
         if object_motions(scene) and not blurs(scene):
             # an instantaneous shutter: moving objects stand still where the shutter finds them
             scene = scene_at_time(scene, scene.camera.shutter[0])
         if scene.instances is not None and flatten_for:
-            # today's copies: the general wavefront and some of the path kernel's stages read world-space faces
+            # the copies: the general wavefront (a test reference) reads world-space faces
             log.info("placed meshes flattened into %d copies (instances are not traced with %s)",
                      len(scene.instances), ", ".join(flatten_for))
             memory.check_flattening(scene.instances, ", ".join(flatten_for))  # within a loading limit
@@ -191,7 +193,8 @@ class BuiltScene:
         # what the stages read per hit (per-material colours and flags, per-face rows)
         self.tables = ShadingTables.build(scene, self.accel.triangles, self.offset_scale)
         # nested dielectric media (rtmesh.rendering.media), only for scenes that refract
-        self.media = (Media(m, scene.material_id, scene.vertices, scene.faces, scene.face_normals)
+        self.media = (Media(m, scene.material_id, scene.vertices, scene.faces, scene.face_normals,
+                            instances=self.instances)
                       if m.any_transmission else None)
         self.path_tables = None
         self.path_media = None

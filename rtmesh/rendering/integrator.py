@@ -282,7 +282,7 @@ class Integrator:
         if self.built.path_media is None or not np.array_equal(self.built.path_media.group_material, groups):
             scene = self.scene
             self.built.path_media = Media(scene.materials, scene.material_id, scene.vertices, scene.faces,
-                                          scene.face_normals, refracts)
+                                          scene.face_normals, refracts, self.instances)
         return self.built.path_media
 
     def camera_media(self, refracts):

@@ -33,6 +33,8 @@ that, and so on; unused entries are -1.
   Coplanar faces that overlap without having identical vertices are not twins: the ray
   sees only the face Embree reports (the spawned ray starts beyond both), so model touching
   media with shared triangles, or with a small overlap (the medium entered last wins).
+  Placed meshes (:mod:`rtmesh.scene.instances`) find twins within each prototype (in its
+  own coordinates) and within the world's faces, not between two placements.
 
 The camera's own stack is found by probe rays from its position (:meth:`Media.camera_stack`):
 for every transmissive material, the winding number along a probe ray
@@ -76,6 +78,11 @@ class Media:
         The materials that bound media; default: those with a Whitted transmission colour
         (the path integrator passes the transmissive materials of its own models, for the
         camera's stack).
+    instances : rtmesh.scene.instances.Instances, optional
+        The scene's placements: faces from ``instances.first_face`` on are prototypes in
+        model coordinates.  Twins are found within the world's faces and within each
+        prototype (a placement's faces touch each other as in the model); the camera's
+        probes read a placed face's normal in the world.
 
     Attributes
     ----------
@@ -94,7 +101,7 @@ class Media:
         The transmissive materials.
     """
 
-    def __init__(self, materials, material_id, vertices, faces, face_normals, refracts=None):
+    def __init__(self, materials, material_id, vertices, faces, face_normals, refracts=None, instances=None):
         self.ior = np.concatenate([materials.ior, [1.0]])
         self.absorption = np.concatenate([materials.absorption, np.zeros((1, 3))])
         if refracts is None:
@@ -105,7 +112,14 @@ class Media:
         self.group_material = np.flatnonzero(refracts).astype(np.int32)
         group_of_material = np.cumsum(refracts) - 1
         self.group = np.where(transmissive, group_of_material[material_id], -1).astype(np.intp)
-        self.twin = coincident_faces(vertices, faces, transmissive)
+        space = None
+        if instances is not None:
+            # the world's vertices, then each prototype's in its own coordinates
+            space = np.zeros(len(vertices))
+            space[instances.first_vertex:] = np.repeat(np.arange(1, len(instances.prototype_vertices)),
+                                                       np.diff(instances.prototype_vertices))
+        self.instances = instances
+        self.twin = coincident_faces(vertices, faces, transmissive, space)
         has_twin = self.twin >= 0
         self.twin_opposite = np.zeros(len(material_id), dtype=bool)
         self.twin_opposite[has_twin] = np.einsum(
@@ -210,7 +224,10 @@ class Media:
             travelled[active] += t
             d = directions[active]
             d_rest = d if to_rest is None else to_rest(prim, d)
-            leaving = dot(d_rest, self.face_normals[prim]) > 0.0
+            normals = self.face_normals[prim]
+            if self.instances is not None and hits.instance is not None:
+                normals = self.instances.world_normals(normals, hits.instance[hit])
+            leaving = dot(d_rest, normals) > 0.0
             crossed = [(prim, leaving)]
             if self.any_twins:
                 twin = self.twin.take(prim)
@@ -276,7 +293,7 @@ def _apply(stack, mat, entering):
     return after, found
 
 
-def coincident_faces(vertices, faces, candidates):
+def coincident_faces(vertices, faces, candidates, space=None):
     """Pairs of candidate faces with exactly the same three vertex positions.
 
     Parameters
@@ -285,6 +302,9 @@ def coincident_faces(vertices, faces, candidates):
     faces : (F, 3) int
     candidates : (F,) bool
         Faces that may pair up (the transmissive ones).
+    space : (V,) float, optional
+        The coordinate frame of each vertex (placed prototypes each have their own): only
+        positions in the same frame are equal.
 
     Returns
     -------
@@ -297,7 +317,8 @@ def coincident_faces(vertices, faces, candidates):
     if len(ids) < 2:
         return twin
     # equal positions get equal ids even where the mesh has duplicate vertices
-    _, position = np.unique(np.asarray(vertices), axis=0, return_inverse=True)
+    points = np.asarray(vertices) if space is None else np.column_stack([vertices, space])
+    _, position = np.unique(points, axis=0, return_inverse=True)
     corners = np.sort(position.reshape(-1)[np.asarray(faces)[ids]], axis=1)
     _, triangle, counts = np.unique(corners, axis=0, return_inverse=True, return_counts=True)
     triangle = triangle.reshape(-1)

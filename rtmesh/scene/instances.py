@@ -345,8 +345,6 @@ def unsupported(scene, settings):
     missing = []
     if not embree_library.packet_library():
         missing.append("the single-ray Embree path")
-    if scene.materials.any_transmission:
-        missing.append("transmissive materials (media)")
     return missing
 
 

@@ -283,12 +283,51 @@ def test_instanced_images_do_not_depend_on_the_thread_count():
     assert np.array_equal(*images)
 
 
-def test_transmissive_prototypes_render_the_copies():
-    scene = placed_scene(count=5)
-    scene.materials.materials[1].transmission = np.full(3, 0.9)
+@pytest.mark.parametrize("integrator", ["path", "whitted"])
+def test_glass_prototypes_stay_placed_and_refract_as_their_copies(integrator):
+    """Glass spheres placed twelve times (mirroring placements among them: the probes and
+    the refraction read a placed face's side in the world), the camera inside one of them."""
+    scene = placed_scene(count=12)
+    glass = scene.materials.materials[1]
+    glass.transmission, glass.ior, glass.diffuse = np.full(3, 0.9), 1.5, np.full(3, 0.05)
     scene.materials = type(scene.materials)(scene.materials.materials)
-    assert "transmissive materials (media)" in instances.unsupported(scene, RenderSettings(integrator="path"))
-    assert Integrator(scene, RenderSettings(width=16, height=12, spp=1, integrator="path")).instances is None
+    assert instances.unsupported(scene, RenderSettings(integrator=integrator)) == []
+    settings = RenderSettings(width=48, height=36, spp=8, integrator=integrator)
+    refracts = (scene.materials.transmission > 0).any(axis=1)
+    # outside every sphere, then at the centre of the first (a mirroring placement)
+    for camera, inside in ((scene.camera, False),
+                           (dataclasses.replace(scene.camera, position=scene.instances.transforms[0, :3, 3]), True)):
+        view = dataclasses.replace(scene, camera=camera)
+        it = Integrator(view, settings)
+        assert it.instances is not None
+        copies_it = Integrator(instances.flattened(view), settings)
+        stack = it.camera_media(refracts)
+        assert np.array_equal(stack, copies_it.camera_media(refracts)) and (stack[0] == 1) == inside
+        # paths through glass part ways at the last bits of a hit (placed triangles against
+        # copies), so the two renders differ by noise: measured 0.4-2.1 % block RMSE against
+        # 3.3-5.5 % from seed to seed at 8 spp (0.5 % against 0.8 % at 256 spp, inside)
+        a, b = block_means(it.render().image), block_means(copies_it.render().image)
+        other_seed = block_means(Integrator(instances.flattened(view), dataclasses.replace(settings, seed=1))
+                                 .render().image)
+        assert _block_rmse(a, b) <= 0.6 * _block_rmse(other_seed, b)
+
+
+def _block_rmse(a, b):
+    return float(np.sqrt(np.mean((a - b) ** 2)) / b.mean())
+
+
+def test_moving_placements_beyond_the_memory_limit_stop_before_their_copies():
+    from rtmesh.core.errors import ResourceError
+    from rtmesh.geometry.motion import Motion
+    from rtmesh.rendering import memory
+
+    scene = placed_scene(count=50, subdivisions=4)
+    scene.motions = {k: Motion(translate=np.array([0.1, 0.0, 0.0])) for k in range(1, 51)}
+    scene.camera = dataclasses.replace(scene.camera, shutter=(0.0, 1.0))
+    with memory.loading_limit(1_000_000), pytest.raises(ResourceError, match="50 placements flattened into copies "
+                                                        "of 256000 triangles in all .instances are not traced with "
+                                                        "moving objects. would need about"):
+        Integrator(scene, RenderSettings(width=16, height=12, spp=1, integrator="path"))
 
 
 @pytest.mark.parametrize("integrator", ["path", "whitted"])
