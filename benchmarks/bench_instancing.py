@@ -23,7 +23,13 @@ Four measurements (results in docs/BENCHMARKS.md, "Instancing"):
     and times instanced without passes, instanced with passes and the denoiser, and
     flattened (what passes forced before the batched queries traced instances) with them.
 
-Run from the repository root: ``python -m benchmarks.bench_instancing crossover|issue|loaders|passes``.
+``emitters``, ``glass``
+    400 placements of a 1,280-triangle icosphere over a floor (the ``crossover`` scene) that
+    glows (every placed face a light) or is glass (nested media), path integrator, 128x96,
+    4 spp, each in a fresh process after a warm-up run: peak RSS and times instanced
+    against flattened (what both forced before they were traced through placements).
+
+Run from the repository root: ``python -m benchmarks.bench_instancing crossover|issue|loaders|passes|emitters|glass``.
 """
 
 import json
@@ -39,7 +45,7 @@ import numpy as np
 import trimesh
 
 
-def _scene(triangles, count=400):
+def _scene(triangles, count=400, kind=None):
     from rtmesh.materials.table import Material
     from rtmesh.scene.model import MeshPart, Placement, Scene
 
@@ -52,6 +58,10 @@ def _scene(triangles, count=400):
     transforms[:, 1, 3] = 1.1
     prototype = MeshPart("ball", sphere.vertices, sphere.faces, 1, sphere.vertex_normals)
     materials = [Material(diffuse=np.full(3, 0.6)), Material(diffuse=np.array([0.8, 0.3, 0.2]))]
+    if kind == "emitters":
+        materials[1].emission = np.full(3, 2.0)
+    elif kind == "glass":
+        materials[1].transmission, materials[1].ior = np.full(3, 0.9), 1.5
     return len(sphere.faces), Scene.from_parts([MeshPart("floor", floor.vertices, floor.faces, 0)], materials,
                                                physical=True,
                                                placements=[Placement(prototype, transforms,
@@ -236,6 +246,37 @@ def passes():
         print(f"{name}:", json.loads(out.strip().splitlines()[-1]))
 
 
+def _measure_kind(kind, flatten):
+    """Build and render the ``emitters`` or ``glass`` scene in this process, flattened or
+    not; print JSON."""
+    from rtmesh.rendering.integrator import Integrator
+    from rtmesh.rendering.settings import RenderSettings
+    from rtmesh.scene import instances
+
+    _, scene = _scene(1280, 400, kind)
+    settings = RenderSettings(width=128, height=96, spp=4, integrator="path")
+    start = time.perf_counter()
+    if flatten == "1":
+        scene = instances.flattened(scene)
+    it = Integrator(scene, settings)
+    built = time.perf_counter()
+    it.render()
+    done = time.perf_counter()
+    print(json.dumps({"build": built - start, "render": done - built, "instanced": it.instances is not None,
+                      "faces": len(it.scene.faces), "lights": len(it.path_stage.lights),
+                      "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+
+
+def kinds(kind, repeats=3):
+    for flatten, name in (("0", "instanced"), ("1", "flattened")):
+        run = [sys.executable, __file__, "measure_kind", kind, flatten]
+        subprocess.run(run, check=True, capture_output=True)  # warm the kernel cache
+        outs = [json.loads(subprocess.run(run, check=True, capture_output=True, text=True).stdout.strip()
+                           .splitlines()[-1]) for _ in range(repeats)]
+        print(f"{kind}, {name}:", {k: (statistics.median(o[k] for o in outs) if isinstance(outs[0][k], float)
+                                       else outs[0][k]) for k in outs[0]})
+
+
 if __name__ == "__main__":
     what = sys.argv[1] if len(sys.argv) > 1 else "crossover"
     if what == "measure":
@@ -248,5 +289,9 @@ if __name__ == "__main__":
         loaders()
     elif what == "passes":
         passes()
+    elif what == "measure_kind":
+        _measure_kind(sys.argv[2], sys.argv[3])
+    elif what in ("emitters", "glass"):
+        kinds(what)
     else:
         crossover()

@@ -71,6 +71,27 @@ def _luminance(colour):
 BYTES_PER_LIGHT = WIDTH * 8 + 24
 
 
+class _Blocks:
+    """Rows gathered one by one (``append``) or in blocks (``extend``), joined once."""
+
+    def __init__(self):
+        self._blocks, self._count = [], 0
+
+    def append(self, row):
+        self.extend(np.asarray(row, dtype=np.float64)[None, :])
+
+    def extend(self, block):
+        self._blocks.append(block)
+        self._count += len(block)
+
+    def __len__(self):
+        return self._count
+
+    def array(self):
+        """(L, WIDTH) float64."""
+        return np.concatenate(self._blocks) if self._blocks else np.zeros((0, WIDTH))
+
+
 def placed_light_count(instances, face_emission):
     """How many lights the placements of emissive prototype faces make in a
     :class:`LightTable` (at most: faces of zero area make none), for a memory estimate
@@ -155,7 +176,8 @@ class LightTable:
 
     def __init__(self, lights, triangles, face_normals, face_emission, environment, scene_radius,
                  two_sided_emitters=False, instances=None):
-        rows, power = [], []
+        # blocks of rows and their powers (emissive triangles come in blocks of many)
+        rows, power = _Blocks(), []
         images = []
         for light in lights:
             if isinstance(light, ProjectorLight) and not any(light.image is known for known in images):
@@ -198,7 +220,7 @@ class LightTable:
                                            face_normals[world], face_emission[world], world, two_sided_emitters)
             self.face_light[world] = len(rows) + np.arange(len(world))
             rows.extend(block)
-            power.extend(math.pi * block[:, AREA] * (block[:, RADIANCE:RADIANCE + 3] @ _LUMA))
+            power.append(math.pi * block[:, AREA] * (block[:, RADIANCE:RADIANCE + 3] @ _LUMA))
         prototype_emitters = emissive[emissive >= first_placed]
         if len(prototype_emitters):
             self._place_emitters(instances, prototype_emitters, triangles, face_normals, face_emission,
@@ -209,8 +231,9 @@ class LightTable:
             rows.append(_row(ENVIRONMENT, np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3),
                              0.0, 0.0, 1.0))
             power.append(environment.power(scene_radius))
-        self.rows = np.array(rows, dtype=np.float64).reshape(-1, WIDTH)
-        power = np.maximum(np.asarray(power, dtype=np.float64), 0.0)
+        self.rows = rows.array()
+        power = np.maximum(np.concatenate([np.atleast_1d(np.asarray(p, dtype=np.float64)) for p in power])
+                           if power else np.zeros(0), 0.0)
         if len(power) and not power.sum() > 0.0:
             power = np.ones_like(power)
         self.probability, self.alias, self.pmf = alias_table(power)
@@ -243,7 +266,7 @@ class LightTable:
         block, _ = _triangle_block(corner, edges[0], edges[1], normals, face_emission[face], face, two_sided,
                                    keep_all=True)
         rows.extend(block)
-        power.extend(math.pi * block[:, AREA] * (block[:, RADIANCE:RADIANCE + 3] @ _LUMA))
+        power.append(math.pi * block[:, AREA] * (block[:, RADIANCE:RADIANCE + 3] @ _LUMA))
 
     def __len__(self):
         return len(self.rows)
