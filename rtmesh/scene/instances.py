@@ -124,7 +124,7 @@ class Instances:
             out[rows] = _linear(a, out[rows]) + a[:, 9:12]
         return out
 
-    def world_vectors(self, vectors, instance):
+    def world_vectors(self, vectors, instance, matrices=1):
         """Directions (edges, tangents) of the prototypes carried to the world by the linear
         parts of their placements (not normalised).
 
@@ -134,6 +134,9 @@ class Instances:
             Model-space rows where ``instance >= 0``, world rows elsewhere.
         instance : (n,) int
             Each row's placement, -1 for a row already in the world.
+        matrices : int
+            Which of :meth:`world_rows`' matrices: 1 the linear parts, 2 their inverse
+            transposes (for normals).
 
         Returns
         -------
@@ -143,31 +146,18 @@ class Instances:
         out = np.array(vectors, dtype=np.float64)
         rows = np.flatnonzero(instance >= 0)
         if len(rows):
-            out[rows] = _linear(self.world_rows()[1][instance[rows]], out[rows])
+            out[rows] = _linear(self.world_rows()[matrices][instance[rows]], out[rows])
         return out
 
     def world_normals(self, normals, instance):
-        """Unit normals of prototype faces carried to the world by the inverse transpose of
-        their placements' linear parts and normalised again, in the arithmetic of the path
-        kernel's :func:`rtmesh.rendering.path_packets.placed`.
-
-        Parameters
-        ----------
-        normals : (n, 3) float64
-            Model-space rows where ``instance >= 0``, world rows elsewhere.
-        instance : (n,) int
-            Each row's placement, -1 for a row already in the world.
-
-        Returns
-        -------
-        (n, 3) float64
-            A new array.
-        """
-        out = np.array(normals, dtype=np.float64)
+        """Unit normals of prototype faces (``(n, 3)``, rows as :meth:`world_vectors` takes
+        them) carried to the world by the inverse transpose of their placements' linear
+        parts and normalised again, in the arithmetic of the path kernel's
+        :func:`rtmesh.rendering.path_packets.placed`; a new array."""
+        out = self.world_vectors(normals, instance, matrices=2)
         rows = np.flatnonzero(instance >= 0)
-        if len(rows):
-            n = _linear(self.world_rows()[2][instance[rows]], out[rows])
-            out[rows] = n / np.sqrt((n[:, 0] * n[:, 0] + n[:, 1] * n[:, 1]) + n[:, 2] * n[:, 2])[:, None]
+        n = out[rows]
+        out[rows] = n / np.sqrt((n[:, 0] * n[:, 0] + n[:, 1] * n[:, 1]) + n[:, 2] * n[:, 2])[:, None]
         return out
 
     def world_tangents(self, tangents, instance):

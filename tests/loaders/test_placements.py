@@ -189,32 +189,31 @@ def test_copies_beyond_the_memory_limit_stop_before_they_are_made(tmp_path, caps
     assert "objects[1]: 20000 copies of 12 triangles would need about" in err and "--memory-limit is 100 MiB" in err
 
 
-def test_placed_emitters_beyond_the_memory_limit_stop_before_them(tmp_path, capsys):
-    # 20,000 glowing spheres of 1280 triangles: loaded once (~25 MB); every placed face is a
-    # light of its own (~5 GB of light rows): refused, one line, before the render takes them
+def _placed_spheres(tmp_path, capsys, material, limit):
+    """Render 20,000 placements of a 1280-triangle sphere of ``material`` (a scene-file
+    table) under ``--memory-limit limit``: (exit status, error text, output path)."""
     rows = np.tile(np.eye(4), (20_000, 1, 1))
     rows[:, 0, 3] = np.arange(20_000)
-    path = _scene_file(tmp_path, '[materials.glow]\nemission = [1, 1, 1]\n[[objects]]\nprimitive = "icosphere"\n'
-                                 'material = "glow"\ninstances = "rows.npy"\n', rows)
+    path = _scene_file(tmp_path, f'[materials.m]\n{material}\n[[objects]]\nprimitive = "icosphere"\n'
+                                 'material = "m"\ninstances = "rows.npy"\n', rows)
     out = tmp_path / "out.png"
     status = main(["render", str(path), "-o", str(out), "--width", "16", "--height", "12", "-q",
-                   "--memory-limit", "100M", "--integrator", "path"])
-    err = capsys.readouterr().err
+                   "--memory-limit", limit, "--integrator", "path"])
+    return status, capsys.readouterr().err, out
+
+
+def test_placed_emitters_beyond_the_memory_limit_stop_before_them(tmp_path, capsys):
+    # loaded once (~25 MB); every placed face is a light of its own (~5 GB of light rows):
+    # refused, one line, before the render takes them
+    status, err, out = _placed_spheres(tmp_path, capsys, "emission = [1, 1, 1]", "100M")
     assert status == 2 and not out.exists() and err.count("\n") == 1, err
     assert "the scene: 25600000 placed emissive triangles as lights would need about" in err
 
 
 def test_placed_glass_stays_placed_within_the_memory_limit(tmp_path, capsys):
-    # 20,000 glass spheres of 1280 triangles: loaded once (~25 MB) and traced as instances,
-    # media included (their copies would take ~15 GB)
-    rows = np.tile(np.eye(4), (20_000, 1, 1))
-    rows[:, 0, 3] = np.arange(20_000)
-    path = _scene_file(tmp_path, '[materials.glass]\ntransmission = [1, 1, 1]\n[[objects]]\nprimitive = "icosphere"\n'
-                                 'material = "glass"\ninstances = "rows.npy"\n', rows)
-    out = tmp_path / "out.png"
-    status = main(["render", str(path), "-o", str(out), "--width", "16", "--height", "12", "-q",
-                   "--memory-limit", "200M", "--integrator", "path"])
-    assert status == 0 and out.exists(), capsys.readouterr().err
+    # loaded once (~25 MB) and traced as instances, media included (copies: ~15 GB)
+    status, err, out = _placed_spheres(tmp_path, capsys, "transmission = [1, 1, 1]", "200M")
+    assert status == 0 and out.exists(), err
 
 
 # ---------------------------------------------------------------- USD
