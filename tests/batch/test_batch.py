@@ -1104,21 +1104,14 @@ def bench_batch():
 def test_noop_resume_ledger_cost_and_bookkeeping_per_asset(tmp_path):
     """A no-op resume over a 50,000-image ledger (open, fetch and decode every row, close)
     and the bookkeeping of a finished asset; limits ten times what an idle 2-core machine
-    takes, to catch a cost that grows faster than the ledger (the 1M case is marked slow)."""
+    takes, to catch a cost that grows faster than the ledger (the 1M case is a benchmark:
+    ``python -m benchmarks.bench_batch --ledger 1000000``)."""
     bench = bench_batch()
     keys, _ = bench.synthetic_ledger(str(tmp_path), 50_000)
     cost = bench.noop_resume_ledger_cost(str(tmp_path), keys)
     assert cost["total"] < 2.5, cost
     (tmp_path / "books").mkdir()
     assert bench.bookkeeping_cost(str(tmp_path / "books"), 300) < 1.0  # ms per asset
-
-
-@pytest.mark.slow
-def test_noop_resume_over_a_million_ledger_rows_takes_at_most_5_s(tmp_path):
-    bench = bench_batch()
-    keys, _ = bench.synthetic_ledger(str(tmp_path), 1_000_000)
-    cost = bench.noop_resume_ledger_cost(str(tmp_path), keys)
-    assert cost["total"] <= 5.0, cost
 
 
 _RELEASE = threading.Event()
