@@ -20,7 +20,7 @@ terms are evaluated toward the lights and not sampled, so Blinn-Phong offers no
 ``sample``.  The physically based model of glTF materials
 (:mod:`rtmesh.materials.metallic_roughness`) offers all three for one lobe set (per-hit
 parameters instead of a material table's rows), and its stage
-(:mod:`rtmesh.rendering.physical_shading`) uses its ``pdf`` for multiple importance
+(the tests' wavefront, ``tests/wavefront/physical_shading.py``) uses its ``pdf`` for multiple importance
 sampling.
 """
 

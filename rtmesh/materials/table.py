@@ -53,7 +53,7 @@ class Material:
         ``metallic_roughness`` (glTF materials): the glTF 2.0 BRDF of
         :mod:`rtmesh.materials.metallic_roughness` with ``base_color``, ``metallic`` and
         ``perceptual_roughness`` (times the base-colour and metallic-roughness textures),
-        sampled and path traced (see :mod:`rtmesh.rendering.physical_shading`); its
+        sampled and path traced (the path kernel; ``tests/wavefront/physical_shading.py``, its NumPy reference); its
         ``diffuse`` is ``base_color (1 - metallic)``, kept for the albedo pass and the
         ambient term, and its Blinn-Phong fields are otherwise unused.
     diffuse : (3,) float

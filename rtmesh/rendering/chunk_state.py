@@ -77,7 +77,7 @@ class SurfaceRecords:
     None) is the BSDF density of the incoming rays (see :attr:`rtmesh.core.rays.RayBatch.pdf`),
     ``origin`` ((k, 3) or None, set with ``pdf``) where they started.  ``physical`` is the
     metallic-roughness stage's rows and BRDF parameters of these hits, formed on first use
-    (:meth:`rtmesh.rendering.physical_shading.PhysicalShading.hits`; None until then).
+    (the tests' wavefront, ``tests/wavefront/physical_shading.py``; None until then).
     """
 
     __slots__ = ("p", "ng", "ns", "d", "front", "mat", "prim", "sample", "time", "tints", "pdf", "origin",

@@ -11,10 +11,10 @@ threads (:mod:`~rtmesh.rendering.scheduler`); each chunk goes to one of three st
   take, in the kernel's Whitted configuration (:mod:`~rtmesh.rendering.whitted_rows`);
 - the fused direct-lighting stage (:mod:`~rtmesh.rendering.direct_stage`): Whitted scenes
   that need only direct light from point-like lights;
-- the general wavefront (:mod:`~rtmesh.rendering.wavefront`, NumPy batches a depth level
-  at a time): only for the tests that take it as the kernel's reference
-  (:meth:`Integrator.use_general_wavefront`).  What the kernel cannot render (without
-  Embree's packet queries, lights without compiled rows) is refused in one line.
+- a reference stage (:data:`REFERENCE_STAGE`): the tests' NumPy wavefront
+  (``tests/wavefront``), which renders Whitted scenes a depth level at a time as the
+  kernel's reference.  What the kernel cannot render (without Embree's packet queries,
+  lights without compiled rows) is refused in one line.
 
 Every random number is a function of (seed, pixel, sample, dimension), each pixel is
 rendered whole inside one chunk, and the chunks do not depend on the thread count (see
@@ -46,18 +46,13 @@ from rtmesh.rendering.centre_rays import centre_passes
 from rtmesh.rendering.chunk_state import Clock
 from rtmesh.rendering.direct_stage import DirectStage
 from rtmesh.rendering.film import Film
-from rtmesh.rendering.general_kernels import GENERAL_KERNELS
-from rtmesh.rendering.local_shading import LocalShading
 from rtmesh.rendering.media import Media
 from rtmesh.rendering.path_stage import PathStage, unsupported_lights
-from rtmesh.rendering.physical_shading import PhysicalShading
 from rtmesh.rendering.render_plan import RenderPlan
 from rtmesh.rendering.render_result import RenderResult
 from rtmesh.rendering.scheduler import pixel_chunks, run_on_threads, sample_indices
-from rtmesh.rendering.secondary_rays import SecondaryRays
 from rtmesh.rendering.stats import RenderStats
 from rtmesh.rendering.surface_stage import SurfaceStage
-from rtmesh.rendering.wavefront import Wavefront
 from rtmesh.sampling.pixel_samples import PixelSampler, pixel_positions
 from rtmesh.sampling.sampler import Sampler
 from rtmesh.scene import instances
@@ -66,11 +61,12 @@ from rtmesh.scene.background import as_background
 log = logging.getLogger(__name__)
 
 
-# Whether Whitted renders that the fused stage does not take go through the path kernel
-# configured as the Whitted integrator (rtmesh.rendering.whitted_rows), as every render does;
-# off, they go through the general wavefront, the kernel's test reference (its images within
-# noise of the kernel's: tests/rendering/test_whitted_kernel.py).  Only tests turn it off.
-WHITTED_THROUGH_KERNEL = True
+# Whitted renders that the fused stage does not take go through the path kernel configured as
+# the Whitted integrator (rtmesh.rendering.whitted_rows).  Tests set this to a stage of their
+# own (``REFERENCE_STAGE(integrator)`` -> an object whose ``render`` takes a chunk's samples as
+# Integrator.render_chunk hands them over): the NumPy wavefront of tests/wavefront, the
+# kernel's reference (its images within noise of the kernel's: tests/rendering/test_whitted_kernel.py).
+REFERENCE_STAGE = None
 
 
 def _translated(obj, shift):
@@ -127,8 +123,8 @@ class Integrator:
         missing = instances.unsupported(scene, self.settings)
         if self.settings.integrator == "whitted":
             # Whitted renders trace instances through the path kernel's Whitted configuration
-            if not WHITTED_THROUGH_KERNEL:
-                missing.append("integrator 'whitted' through the general wavefront")
+            if REFERENCE_STAGE is not None:
+                missing.append("integrator 'whitted' through the reference wavefront")
             missing.extend(unsupported_lights(scene.lights))
         return missing
 
@@ -225,24 +221,13 @@ class Integrator:
         self.direct_stage = DirectStage.plan(self) if self.path_stage is None else None
         self.wavefront = None
         if self.direct_stage is None and self.path_stage is None:
-            if WHITTED_THROUGH_KERNEL:
+            if REFERENCE_STAGE is None:
                 # the others the path kernel, configured as the Whitted integrator (a
                 # SceneError for what it cannot render)
                 self.path_stage = PathStage(self)
             else:
-                self.use_general_wavefront()  # the kernel's test reference
+                self.wavefront = REFERENCE_STAGE(self)  # the kernel's test reference
         self.plan = dataclasses.replace(self.plan, fused_direct=self.direct_stage is not None)
-
-    def use_general_wavefront(self):
-        """Render the chunks through the general wavefront (:mod:`rtmesh.rendering.wavefront`):
-        build its stages, each reading the integrator's tables.  For the tests that take it
-        as the kernel's reference (after setting ``direct_stage`` and ``path_stage`` to None,
-        or with ``WHITTED_THROUGH_KERNEL`` off)."""
-        self.local_shading = LocalShading(self)
-        self.secondary_rays = SecondaryRays(self)
-        self.physical_shading = PhysicalShading(self) if self.plan.physical else None
-        self.wavefront = Wavefront(self)
-        GENERAL_KERNELS.prepare()
 
     def _init_media(self):
         """Medium stacks (see :mod:`rtmesh.rendering.media`), only for scenes that refract.

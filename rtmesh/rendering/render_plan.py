@@ -41,7 +41,7 @@ class RenderPlan:
         Some material shows its colour unlit.
     physical : bool
         Some material has the glTF metallic-roughness model
-        (:mod:`rtmesh.rendering.physical_shading`).
+        (the path kernel).
     reflection, glossy, refraction : bool
         Mirror, dielectric or BSDF-sampled rays are spawned (``max_depth > 0``), glossy
         lobes sampled, refraction rays traced.

@@ -2,7 +2,7 @@
 
 Formed once per scene (:class:`rtmesh.rendering.integrator.Integrator` builds them with the
 Embree scene) and shared by every view of it, the general path's stages
-(:mod:`rtmesh.rendering.surface_stage`, :mod:`rtmesh.rendering.local_shading`) and the
+(:mod:`rtmesh.rendering.surface_stage`, the tests' wavefront (``tests/wavefront``)) and the
 fused direct-lighting stage (:mod:`rtmesh.rendering.direct_stage`) read them by name.
 """
 
@@ -23,7 +23,7 @@ class ShadingTables:
     ----------
     shaded : (m,) bool
         Blinn-Phong materials that reflect light (diffuse or specular, not unlit); the
-        metallic-roughness ones are shaded by :mod:`rtmesh.rendering.physical_shading`.
+        metallic-roughness ones are shaded by the path kernel.
     all_shaded : bool
         Every material is ``shaded``: no per-hit lookup is needed.
     diffuse, specular, emission, ambient_light : (m, 3) float64

@@ -4,7 +4,7 @@ from dataclasses import dataclass, field
 
 # "shadow": one per (hit, point/spot/directional light); "area_shadow": light_samples per
 # (hit, area light or emissive object); "cutout": rays traced again beyond a cut-out surface;
-# "bsdf": rays drawn from a metallic-roughness BRDF (see rtmesh.rendering.physical_shading)
+# "bsdf": rays drawn from a metallic-roughness BRDF (the path kernel)
 # "bounce": the path integrator's BSDF-sampled segments (its shadow rays count as "shadow");
 # "photon": the segments of its photon passes (caustics)
 RAY_KINDS = ("camera", "shadow", "area_shadow", "environment", "reflection", "refraction", "bsdf", "ao", "cutout",

@@ -19,7 +19,7 @@ from rtmesh.geometry import embree_packets
 from rtmesh.geometry.build_kernels import BUILD_KERNELS
 from rtmesh.io.images import read_image
 from rtmesh.rendering.direct_stage import FUSED_KERNELS
-from rtmesh.rendering.general_kernels import GENERAL_KERNELS
+from wavefront.kernels import GENERAL_KERNELS
 
 ASSETS = scenes.ASSETS
 PACKAGE_PARENT = os.path.dirname(os.path.dirname(os.path.abspath(rtmesh.__file__)))

@@ -33,6 +33,7 @@ from rtmesh.sampling.sampler import light_dimension
 from rtmesh.sampling.warps import square_to_uniform_triangle, uniform_triangle_to_square
 from rtmesh.scene.camera import Camera
 from rtmesh.scene.model import Scene
+import wavefront
 
 DOWN = np.array([0.0, 0.0, -1.0])
 
@@ -455,7 +456,7 @@ def test_area_light_and_ao_points_of_a_pixel_are_one_stratified_set(sampler, mon
     import rtmesh.sampling.sampler
     from rtmesh.rendering import integrator as integrator_module
 
-    monkeypatch.setattr(integrator_module, "WHITTED_THROUGH_KERNEL", False)
+    monkeypatch.setattr(integrator_module, "REFERENCE_STAGE", wavefront.attach)
     drawn = []
 
     def recording(module):

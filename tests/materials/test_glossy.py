@@ -15,7 +15,7 @@ from rtmesh.rendering.integrator import Integrator
 from rtmesh.sampling.patterns import Dim, decorrelated_points
 from rtmesh.scene.camera import Camera
 from rtmesh.scene.model import Scene
-from rtmesh.rendering.secondary_rays import SecondaryRays
+from wavefront.secondary_rays import SecondaryRays
 
 EXPONENTS = [0.0, 1.0, 7.5, 100.0, 1e4]
 

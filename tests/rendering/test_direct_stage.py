@@ -14,6 +14,7 @@ from rtmesh.rendering.integrator import Integrator
 from rtmesh.scene.background import GradientBackground
 from rtmesh.scene.camera import Camera
 from rtmesh.scene.model import Scene
+import wavefront
 
 pytestmark = pytest.mark.skipif(embree_library.packet_library() is None,
                                 reason="the fused stage traces Embree packets")
@@ -44,7 +45,7 @@ def render_both(scene, **overrides):
     assert fused.direct_stage is not None
     general = Integrator(scene, settings(**overrides))
     general.direct_stage = None
-    general.use_general_wavefront()
+    wavefront.attach(general)
     a, b = fused.render(), general.render()
     assert_finite(a)
     return a, b

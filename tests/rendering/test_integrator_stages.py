@@ -16,6 +16,7 @@ from rtmesh.materials.table import Material
 from rtmesh.rendering.integrator import Integrator
 from rtmesh.scene.camera import Camera
 from rtmesh.scene.model import Scene
+import wavefront
 
 TOP_DOWN = Camera([0.0, 0.0, 5.0], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0], 40.0)
 
@@ -211,7 +212,7 @@ def test_ao_beside_a_wall_matches_the_closed_form():
 def test_ao_darkens_ambient_light_in_the_image(kernel, monkeypatch):
     from rtmesh.rendering import integrator as integrator_module
 
-    monkeypatch.setattr(integrator_module, "WHITTED_THROUGH_KERNEL", kernel)
+    monkeypatch.setattr(integrator_module, "REFERENCE_STAGE", None if kernel else wavefront.attach)
     ao_distance = 1.0
     big = 6.0
     floor = quad([[0.0, -big, 0.0], [big, -big, 0.0], [big, big, 0.0], [0.0, big, 0.0]])

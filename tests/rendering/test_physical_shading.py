@@ -1,5 +1,5 @@
 """The physically based stage: glTF metallic-roughness surfaces lit by lights and the
-environment, path traced with multiple importance sampling (rtmesh.rendering.physical_shading)."""
+environment, path traced with multiple importance sampling (tests/wavefront/physical_shading.py)."""
 
 import math
 
@@ -15,12 +15,13 @@ from rtmesh.lights.point_lights import PointLight
 from rtmesh.materials import metallic_roughness as brdf
 from rtmesh.materials.table import Material
 from rtmesh.rendering.integrator import Integrator
-from rtmesh.rendering.physical_shading import bsdf_weight
-from rtmesh.rendering.wavefront import Wavefront
+from wavefront.physical_shading import bsdf_weight
+from wavefront.stage import Wavefront
 from rtmesh.scene.background import SolidBackground
 from rtmesh.scene.camera import Camera
 from rtmesh.scene.model import Scene
 from rtmesh.scene.studio import STUDIO_PATH, studio_rotation
+import wavefront
 
 
 def physical(name="pbr", base=1.0, metallic=1.0, roughness=0.5, **fields):
@@ -151,7 +152,7 @@ def test_mis_estimate_matches_bsdf_sampling_alone(monkeypatch):
 
     from rtmesh.rendering import integrator as integrator_module
 
-    monkeypatch.setattr(integrator_module, "WHITTED_THROUGH_KERNEL", False)
+    monkeypatch.setattr(integrator_module, "REFERENCE_STAGE", wavefront.attach)
 
     material = physical(base=[0.9, 0.7, 0.5], metallic=1.0, roughness=0.4)
     sky = sun_sky(64)
@@ -231,9 +232,9 @@ def test_mis_tames_the_reflection_of_a_small_light_in_a_smooth_metal(monkeypatch
     mean of BSDF sampling alone, and its noise (the RMS difference of two seeds) is a
     fraction of light sampling's.  The Whitted stages' strategies, as above."""
     from rtmesh.rendering import integrator as integrator_module
-    from rtmesh.rendering import local_shading, physical_shading, wavefront
+    from wavefront import local_shading, physical_shading, stage
 
-    monkeypatch.setattr(integrator_module, "WHITTED_THROUGH_KERNEL", False)
+    monkeypatch.setattr(integrator_module, "REFERENCE_STAGE", wavefront.attach)
 
     floor = tilted_quad(0.0, half=3.0)
     camera = Camera([0.0, -2.0, 1.5], [0.0, 0.0, 0.0], [0.0, 0.0, 1.0], 50.0)
@@ -249,7 +250,7 @@ def test_mis_tames_the_reflection_of_a_small_light_in_a_smooth_metal(monkeypatch
     mis_mean, mis_noise = two_seeds(64)
 
     def strategy(weight):
-        for module in (wavefront, local_shading, physical_shading):
+        for module in (stage, local_shading, physical_shading):
             monkeypatch.setattr(module, "bsdf_weight", lambda bsdf_pdf, light_pdf, samples: np.full(len(bsdf_pdf),
                                                                                                    weight))
 

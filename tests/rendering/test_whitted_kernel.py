@@ -1,5 +1,5 @@
 """The Whitted integrator as a configuration of the path kernel (rtmesh.rendering.whitted_rows,
-``integrator.WHITTED_THROUGH_KERNEL``) against the general wavefront on every Whitted scene
+``integrator.REFERENCE_STAGE`` unset) against the general wavefront (tests/wavefront) on every Whitted scene
 in assets/: the same image within noise.
 
 Scenes whose Whitted image is a deterministic function of the camera samples (point, spot
@@ -19,6 +19,7 @@ from rtmesh.api import load_scene
 from rtmesh.rendering.integrator import Integrator
 
 from scenes import ASSETS
+import wavefront
 
 DETERMINISTIC = ["showcase", "passes", "effects/dof", "effects/motion_blur"]
 SAMPLED = [("glass_edges", {}), ("effects/glossy", {}), ("effects/soft_shadow", {}), ("cornell_box", {}),
@@ -28,7 +29,7 @@ SAMPLED = [("glass_edges", {}), ("effects/glossy", {}), ("effects/soft_shadow", 
 
 def _render(scene, settings, kernel, seed=0):
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(integrator_module, "WHITTED_THROUGH_KERNEL", kernel)
+        patch.setattr(integrator_module, "REFERENCE_STAGE", None if kernel else wavefront.attach)
         integrator = Integrator(scene, dataclasses.replace(settings, seed=seed))
         assert (integrator.path_stage is not None) == kernel and integrator.direct_stage is None
         return np.asarray(integrator.render().image, dtype=np.float64)

@@ -14,6 +14,7 @@ from rtmesh.rendering.settings import RenderSettings
 from rtmesh.scene import instances
 from rtmesh.scene.model import MeshPart, Placement, Scene
 from scenes import block_means, reusing_glb, scattered_transforms
+import wavefront
 
 
 def placed_scene(count=50, subdivisions=2, textured=False):
@@ -95,7 +96,7 @@ def test_whitted_traces_instances_through_the_kernel():
 def test_whitted_through_the_wavefront_renders_the_copies(caplog, monkeypatch):
     from rtmesh.rendering import integrator as integrator_module
 
-    monkeypatch.setattr(integrator_module, "WHITTED_THROUGH_KERNEL", False)
+    monkeypatch.setattr(integrator_module, "REFERENCE_STAGE", wavefront.attach)
     scene = placed_scene(count=5)
     settings = RenderSettings(width=32, height=24, spp=2, integrator="whitted", passes=("object_id", "instance_id"))
     with caplog.at_level(logging.INFO, logger="rtmesh.rendering.built_scene"):

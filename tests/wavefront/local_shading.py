@@ -4,7 +4,7 @@ Emission, unlit colours, ambient light (with ambient occlusion), and direct ligh
 point-like light through its :meth:`~rtmesh.lights.interface.PointLikeLight.illuminate`,
 one shadow ray per lit hit (:func:`rtmesh.shading.direct_light.light_samples`), and the
 area lights (:mod:`rtmesh.lights.area_lighting`), for Blinn-Phong materials; metallic-roughness
-materials take their direct light from :mod:`rtmesh.rendering.physical_shading`.
+materials take their direct light from :mod:`wavefront.physical_shading`.
 """
 
 import numpy as np
@@ -15,7 +15,7 @@ from rtmesh.core.vecmath import orthonormal_basis
 from rtmesh.geometry.accel import offset_ray_origins
 from rtmesh.materials.blinn_phong import raise_highlights, surface_reflectance
 from rtmesh.rendering.chunk_state import Stage, add_rows_or_all, rows_at
-from rtmesh.rendering.physical_shading import bsdf_weight
+from wavefront.physical_shading import bsdf_weight
 from rtmesh.sampling.warps import square_to_cosine_hemisphere
 from rtmesh.shading.direct_light import SHADOW_SHORTEN, add_light, light_samples
 
@@ -35,7 +35,7 @@ class LocalShading(Stage):
                 local = local * srf.tints.emission
             if srf.pdf is not None and it.area_lighting is not None:
                 # emissive triangles are area lights: what BSDF-sampled rays see of them is
-                # weighed against light sampling (see rtmesh.rendering.physical_shading)
+                # weighed against light sampling (see wavefront.physical_shading)
                 local = local * self._emission_weight(srf)[:, None]
         tint = None if srf.tints is None else srf.tints.diffuse
         if st.unlit:
@@ -134,7 +134,7 @@ class LocalShading(Stage):
 
     def _emission_weight(self, srf):
         """(k,) MIS weight of the emission that the hits' incoming rays see: 1 for camera
-        rays and delta lobes, :func:`rtmesh.rendering.physical_shading.bsdf_weight` against
+        rays and delta lobes, :func:`wavefront.physical_shading.bsdf_weight` against
         the emitters' light sampling for BSDF-sampled rays."""
         lighting = self.it.area_lighting
         weight = np.ones(len(srf.pdf))

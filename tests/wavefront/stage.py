@@ -1,15 +1,14 @@
 """The general wavefront: a chunk's samples one depth level at a time, as NumPy batches and
 compiled passes (rtmesh.rendering.surface_stage, local_shading, physical_shading,
-secondary_rays).  Whitted renders that neither the fused direct stage nor the path kernel's
-Whitted configuration take run here (docs/ARCHITECTURE.md: all of them while
-``integrator.WHITTED_THROUGH_KERNEL`` is off); it leaves the render path when that goes on.
+secondary_rays): the tests' reference of the path kernel's Whitted configuration (see
+this package's ``attach``).
 """
 
 import numpy as np
 
 from rtmesh.core.rays import RayBatch, repeated_row, take_rows
 from rtmesh.rendering.chunk_state import ChunkState, Stage, scatter_add
-from rtmesh.rendering.physical_shading import bsdf_weight
+from wavefront.physical_shading import bsdf_weight
 
 # a camera ray's throughput, shared read-only by the rays of a chunk
 UNIT_THROUGHPUT = np.ones(3)
@@ -133,7 +132,7 @@ class Wavefront(Stage):
         """Weight of the background seen by rays that left the scene, from the density of
         their BSDF samples ((k,) -> (k,)): 1 for camera rays and delta lobes; the MIS
         weight against environment light sampling where the background lights the scene,
-        else 0 (see :mod:`rtmesh.rendering.physical_shading`)."""
+        else 0 (see :mod:`wavefront.physical_shading`)."""
         it = self.it
         lighting = it.environment_lighting if it.plan.environment_lighting else None
         if lighting is None:
