@@ -65,6 +65,14 @@ ROW_WORDS = ROW.itemsize // 8
 _F64, _F64_2D, _I64 = types.float64[::1], types.float64[:, ::1], types.int64[::1]
 # the steps direct_samples calls, each a kernel of its own (cached apart from it, so that a
 # first run can compile them in two processes, see rtmesh.core.compile_ahead)
+# What the fused stage renders (RenderPlan's names): pinhole camera rays over surfaces, flat
+# or smooth, lit by ambient light, emission seen and point-like lights with hard shadows,
+# Blinn-Phong highlights, over a solid background; every other render is the path kernel's
+# (the same Whitted model in its Whitted configuration).  DirectStage.plan checks the rest
+# of what a render needs that no plan flag names (the camera, the background, the lights'
+# compiled rows, the traversal).
+FUSED_CAN_RENDER = frozenset({"emission", "ambient", "lights", "specular", "smooth_normals", "background"})
+
 FUSED_KERNELS = KernelGroup(__name__, "fused direct", [
     (block_scratch, (_F64, types.int64)),
     (camera_block, (types.int64, types.uint64[::1], _F64_2D, _F64, types.int64, types.int64, types.int64,
@@ -142,10 +150,9 @@ class DirectStage:
         """
         it = integrator
         st = it.plan
-        needs_general = ("area_lights", "area_light_visibility", "environment_lighting", "textures", "normal_maps", "cutouts",
-                         "unlit", "physical", "reflection", "glossy", "refraction", "absorption", "passes", "ao", "lens",
-                         "motion")
-        if any(getattr(st, name) for name in needs_general):
+        # what the scene needs beyond what the stage can render (a plan flag added later
+        # for a new feature is beyond it until the stage learns it)
+        if st.needs() - FUSED_CAN_RENDER:
             return None
         if type(it.accel) is not Accel or not it.accel.packets or it.media is not None or it.instances is not None:
             return None

@@ -93,3 +93,9 @@ class RenderPlan:
     def enabled(self):
         """Names of the stages that run, in declaration order (list of str)."""
         return [field.name for field in dataclasses.fields(self) if getattr(self, field.name)]
+
+    def needs(self):
+        """What the render needs (the enabled stages but ``fused_direct``, which is the
+        decision taken on them): frozenset of str, for a stage to compare with what it can
+        render (:data:`rtmesh.rendering.direct_stage.FUSED_CAN_RENDER`)."""
+        return frozenset(self.enabled()) - {"fused_direct"}

@@ -23,3 +23,17 @@ def test_a_render_reports_its_plan():
     assert integrator.plan.smooth_normals and integrator.plan.lights and not integrator.plan.reflection
     result = integrator.render()
     assert result.stats.stages_enabled == integrator.plan.enabled()
+
+
+def test_the_fused_stage_takes_only_what_it_can_render():
+    """Its choice is a capability list: every need of the plan beyond it (each other flag,
+    and one a later feature might add) sends the render to the path kernel."""
+    from rtmesh.rendering.direct_stage import FUSED_CAN_RENDER
+
+    plan = RenderPlan(lights=True, smooth_normals=True, fused_direct=True)
+    assert plan.needs() == {"lights", "smooth_normals"} and plan.needs() <= FUSED_CAN_RENDER
+    scene = sphere_on_floor_scene(smooth=True)
+    assert Integrator(scene, settings(width=8, height=8)).direct_stage is not None
+    for name in (f.name for f in dataclasses.fields(RenderPlan)):
+        if name not in FUSED_CAN_RENDER | {"fused_direct"}:
+            assert not dataclasses.replace(plan, **{name: True}).needs() <= FUSED_CAN_RENDER
