@@ -333,42 +333,60 @@ def lights_from_gltf(doc, transform=None, source="gltf", physical=False):
     for the unit conversion; ``physical``: the path integrator's units).  ``source`` names
     the file in warnings (a light node with a zero scale is skipped).
 
+    Parameters
+    ----------
+    transform : (4, 4) or (k, 4, 4) float, optional
+        Where the file is placed; with ``k`` transforms (a file placed ``k`` times) each of
+        its lights is placed ``k`` times, placement by placement.
+
     Returns
     -------
     list of PointLight, SpotLight or DirectionalLight
     """
-    transform = np.eye(4) if transform is None else np.asarray(transform, dtype=np.float64)
+    transforms = (np.eye(4) if transform is None else np.asarray(transform, dtype=np.float64)).reshape(-1, 4, 4)
     table = doc.get("extensions", {}).get("KHR_lights_punctual", {}).get("lights", [])
     out = []
-    for index, world in node_world_transforms(doc):
-        ref = doc["nodes"][index].get("extensions", {}).get("KHR_lights_punctual")
-        if ref is None or not 0 <= ref.get("light", -1) < len(table):
-            continue
-        spec = table[ref["light"]]
-        frame = _frame(_placed(transform, world))
-        if frame is None:
-            _hidden(source, "light", doc["nodes"][index])
-            continue
-        position, direction, _ = frame
-        # photometric value -> rtmesh units: viewers show cd / d^2 * kd / pi; Whitted has no 1/pi
-        power = np.asarray(spec.get("color", (1.0, 1.0, 1.0)), dtype=np.float64) * float(
-            spec.get("intensity", 1.0)) / (1.0 if physical else math.pi)
-        kind = spec.get("type")
-        if kind == "point":
-            out.append(PointLight(position, power))
-        elif kind == "directional":
-            out.append(DirectionalLight(direction, power))
-        elif kind == "spot":
-            cone = spec.get("spot", {})
-            inner = math.degrees(float(cone.get("innerConeAngle", 0.0)))
-            outer = math.degrees(float(cone.get("outerConeAngle", math.pi / 4.0)))
-            out.append(SpotLight(position, direction, power, inner, max(outer, inner)))
+    nodes = list(node_world_transforms(doc))
+    for j, placement in enumerate(transforms):
+        for index, world in nodes:
+            ref = doc["nodes"][index].get("extensions", {}).get("KHR_lights_punctual")
+            if ref is None or not 0 <= ref.get("light", -1) < len(table):
+                continue
+            frame = _frame(_placed(placement, world))
+            if frame is None:
+                if j == 0:  # (placements are not singular: the node's own scale, once)
+                    _hidden(source, "light", doc["nodes"][index])
+                continue
+            light = _light_at(table[ref["light"]], frame, physical)
+            if light is not None:
+                out.append(light)
     return out
 
 
-def file_cameras_and_lights(path, transform=None, physical=False):
+def _light_at(spec, frame, physical):
+    """The light of a KHR_lights_punctual entry ``spec`` at a node's ``frame`` (as
+    :func:`_frame` gives it), or None for a type it does not name."""
+    position, direction, _ = frame
+    # photometric value -> rtmesh units: viewers show cd / d^2 * kd / pi; Whitted has no 1/pi
+    power = np.asarray(spec.get("color", (1.0, 1.0, 1.0)), dtype=np.float64) * float(
+        spec.get("intensity", 1.0)) / (1.0 if physical else math.pi)
+    kind = spec.get("type")
+    if kind == "point":
+        return PointLight(position, power)
+    if kind == "directional":
+        return DirectionalLight(direction, power)
+    if kind == "spot":
+        cone = spec.get("spot", {})
+        inner = math.degrees(float(cone.get("innerConeAngle", 0.0)))
+        outer = math.degrees(float(cone.get("outerConeAngle", math.pi / 4.0)))
+        return SpotLight(position, direction, power, inner, max(outer, inner))
+    return None
+
+
+def file_cameras_and_lights(path, transform=None, physical=False, light_transforms=None):
     """Cameras and lights of a mesh file: empty lists unless it is glTF (lights in the path
-    integrator's units when ``physical``).
+    integrator's units when ``physical``), placed by ``transform`` ((4, 4)); the lights by
+    each of ``light_transforms`` ((k, 4, 4)) instead when given (a file placed k times).
 
     Returns
     -------
@@ -386,7 +404,8 @@ def file_cameras_and_lights(path, transform=None, physical=False):
     doc = read_gltf_json(path)
     try:
         return (cameras_from_gltf(doc, transform, source=path),
-                lights_from_gltf(doc, transform, source=path, physical=physical))
+                lights_from_gltf(doc, transform if light_transforms is None else light_transforms, source=path,
+                                 physical=physical))
     except (KeyError, IndexError, TypeError, ValueError, AttributeError) as exc:
         # a camera or light entry that breaks the glTF schema (a bad index, a missing yfov)
         raise MeshError(f"{path}: malformed glTF camera or light: {type(exc).__name__}: {exc}") from None

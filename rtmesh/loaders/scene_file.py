@@ -130,16 +130,16 @@ def scene_from_dict(doc, source="scene", base_dir=".", overrides=None, check_set
         parts.extend(object_parts(r, values, where, base_dir, materials, material_index, placing, i))
         if "mesh" in values:
             try:
-                cameras, lights = file_cameras_and_lights(object_mesh_path(values, base_dir), object_transform(values),
-                                                          physical=settings.integrator == "path")
+                # the file's lights at each of the object's instances (rows after the object's
+                # transform, as its meshes are placed); its cameras by the object's transform
+                transform, rows = object_transform(values), placing.rows[i]
+                cameras, lights = file_cameras_and_lights(object_mesh_path(values, base_dir), transform,
+                                                          physical=settings.integrator == "path",
+                                                          light_transforms=None if rows is None else transform @ rows)
             except RtmeshError as exc:
                 raise r.error(f"{where}.mesh", str(exc)) from None
             file_cameras.extend(cameras)
             if values.get("import_lights", True):
-                if lights and placing.rows[i] is not None:
-                    log.warning("%s: %s: the file's %d lights are placed once, by the object's transform, not "
-                                "by each of its instances (import_lights = false drops them)", source, where,
-                                len(lights))
                 file_lights.extend(lights)
         elif "import_lights" in values:
             raise r.error(f"{where}.import_lights", "does not apply to a primitive")

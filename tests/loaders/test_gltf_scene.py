@@ -211,6 +211,21 @@ def test_scene_file_picks_a_camera_by_name_and_applies_the_object_transform(gltf
     assert len(scene.lights) == 3 and all(isinstance(light, DirectionalLight) for light in scene.lights)
 
 
+def test_a_file_placed_by_instances_brings_its_lights_to_every_placement(gltf_file, tmp_path):
+    """A lamp file placed three times by ``instances`` lights the scene from three places
+    (its lights at each row, after the object's transform); its cameras stay the object's."""
+    rows = np.tile(np.eye(4), (3, 1, 1))
+    rows[:, 0, 3] = [-10.0, 0.0, 10.0]
+    np.save(tmp_path / "rows.npy", rows)
+    doc = {"objects": [{"mesh": str(gltf_file), "translate": [0.0, 0.0, 1.0], "instances": "rows.npy"}],
+           "camera": {"from_file": "top", "aperture": 0.0}}
+    scene, _ = scene_from_dict(doc, base_dir=str(tmp_path))
+    np.testing.assert_allclose(scene.camera.position, [0.0, 6.0, 1.0], atol=1e-12)
+    points = sorted(tuple(light.position) for light in scene.lights if isinstance(light, PointLight))
+    np.testing.assert_allclose(points, [(-10.0, 5.0, 1.0), (0.0, 5.0, 1.0), (10.0, 5.0, 1.0)], atol=1e-12)
+    assert len(scene.lights) == 9
+
+
 @pytest.mark.parametrize("camera, message", [
     ({"from_file": "nope"}, "no camera named 'nope'.*available: 'front_cam_node', 'top_cam_node'"),
     ({"from_file": "top", "fov": 30}, "camera.fov: does not apply with from_file"),
