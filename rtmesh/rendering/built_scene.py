@@ -9,6 +9,7 @@ another view of the same build, so that N views of one asset cost one build and 
 """
 
 import dataclasses
+import functools
 import logging
 
 import numpy as np
@@ -163,23 +164,8 @@ class BuiltScene:
                                        m.alpha_mode == ALPHA_MODES.index("blend"), m.alpha_cutoff,
                                        self.textures, self.offset_scale, sampler)
             self.accel = self.cutouts
-        self.emitters = None
-        if m.any_emission:
-            tint = mean_tint = None
-            if self.textures.emission_textured:
-                material_id = scene.material_id
-
-                def tint(prim, u, v):
-                    return self.textures.emission_tints(prim, u, v, material_id[prim])
-
-                mean_tint = self.textures.mean_emission_tints()[material_id]
-            emission = m.emission[scene.material_id]
-            if self.instances is not None:
-                # placed emitters are the path kernel's lights (one per placement,
-                # rtmesh.lights.light_table.LightTable); these are the world's faces only
-                emission[self.instances.first_face:] = 0.0
-            self.emitters = emissive_mesh_light(self.accel.triangles, scene.face_normals, emission, tint,
-                                                mean_tint)
+        # faces that emit (the path kernel's light table makes each a light)
+        self.emits = bool(m.any_emission and (m.emission[scene.material_id] > 0).any())
         lit = ~m.unlit[:, None]
         self.shaded_any = bool((((m.diffuse > 0) | (m.specular > 0)) & lit).any()) or m.any_physical
         self.ao_distance = settings.ao_distance or 0.2 * float(np.linalg.norm(np.ptp(scene_bounds, axis=0)))
@@ -199,6 +185,28 @@ class BuiltScene:
         self.path_tables = None
         self.path_media = None
         self._lit_background = (None, None)
+
+    @functools.cached_property
+    def emitters(self):
+        """The emissive faces of the world as one :class:`~rtmesh.lights.mesh_lights.MeshLight`
+        (None without any), the NumPy estimator's (the tests' wavefront); formed on first use."""
+        scene, m = self.scene, self.scene.materials
+        if not self.emits:
+            return None
+        tint = mean_tint = None
+        if self.textures.emission_textured:
+            material_id = scene.material_id
+
+            def tint(prim, u, v):
+                return self.textures.emission_tints(prim, u, v, material_id[prim])
+
+            mean_tint = self.textures.mean_emission_tints()[material_id]
+        emission = m.emission[scene.material_id]
+        if self.instances is not None:
+            # placed emitters are the path kernel's lights (one per placement,
+            # rtmesh.lights.light_table.LightTable); these are the world's faces only
+            emission[self.instances.first_face:] = 0.0
+        return emissive_mesh_light(self.accel.triangles, scene.face_normals, emission, tint, mean_tint)
 
     def environment_lighting(self, background, source):
         """The light sampler of ``background`` (an object of :mod:`rtmesh.scene.background`)

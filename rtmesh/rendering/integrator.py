@@ -38,7 +38,6 @@ from rtmesh.core.rays import kernel_input
 from rtmesh.geometry.motion import object_motions
 from rtmesh.io import denoising
 from rtmesh.io.passes import DERIVED_PASSES, PassRecorder, derived_pass
-from rtmesh.lights.area_lighting import AreaLighting
 from rtmesh.lights.area_lights import is_area_light
 from rtmesh.rendering.adaptive import render_rounds
 from rtmesh.rendering.built_scene import BuiltScene
@@ -178,10 +177,7 @@ class Integrator:
         lights = [_translated(light, self.shift) for light in scene.lights if not light.is_black]
         self.view_lights = lights
         self.lights = [light for light in lights if not is_area_light(light)]
-        area_lights = [light for light in lights if is_area_light(light)]
-        area_lights += [self.built.emitters] if self.built.emitters is not None else []
-        self.area_lighting = (AreaLighting(area_lights, self.accel, self.settings, self.offset_scale)
-                              if area_lights else None)
+        self.area_lights = [light for light in lights if is_area_light(light)]
         shaded_any = self.built.shaded_any
         # only the passes asked for are computed; a transparent background needs coverage;
         # the denoiser's guides are computed even when they are not written
@@ -192,8 +188,8 @@ class Integrator:
             emission=m.any_emission,
             ambient=self.built.ambient_on,
             lights=bool(self.lights) and shaded_any,
-            area_lights=self.area_lighting is not None and shaded_any,
-            area_light_visibility=self.area_lighting is not None and bool(self.area_lighting.visible),
+            area_lights=(bool(self.area_lights) or self.built.emits) and shaded_any,
+            area_light_visibility=any(light.visible for light in self.area_lights),
             environment_lighting=self.environment_lighting is not None and shaded_any,
             specular=m.any_specular,
             smooth_normals=scene.vertex_normals is not None,

@@ -12,14 +12,19 @@ compares the two on every Whitted scene of ``assets/``).
 def attach(integrator):
     """Build the wavefront's stages for ``integrator`` (each reads the integrator's tables;
     the shading stages are set on it as ``local_shading``, ``secondary_rays``,
-    ``physical_shading``) and return the stage that renders its chunks
+    ``physical_shading``, the area lights' estimator as ``area_lighting``) and return the stage that renders its chunks
     (:data:`rtmesh.rendering.integrator.REFERENCE_STAGE`'s contract)."""
+    from rtmesh.lights.area_lighting import AreaLighting
     from wavefront.kernels import GENERAL_KERNELS
     from wavefront.local_shading import LocalShading
     from wavefront.physical_shading import PhysicalShading
     from wavefront.secondary_rays import SecondaryRays
     from wavefront.stage import Wavefront
 
+    # the area lights and the world's emissive faces (one MeshLight) as one NumPy estimator
+    it = integrator
+    area = it.area_lights + ([it.built.emitters] if it.built.emitters is not None else [])
+    it.area_lighting = AreaLighting(area, it.accel, it.settings, it.offset_scale) if area else None
     integrator.local_shading = LocalShading(integrator)
     integrator.secondary_rays = SecondaryRays(integrator)
     integrator.physical_shading = PhysicalShading(integrator) if integrator.plan.physical else None
