@@ -107,16 +107,19 @@ def _triangle_block(corner, e1, e2, normals, emission, faces, two_sided, keep_al
     ``faces`` their faces in the per-face tables) and the faces kept: those of non-zero area
     (all of them with ``keep_all``)."""
     area = 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
-    keep = np.ones(len(area), bool) if keep_all else area > 0.0
-    block = np.zeros((int(keep.sum()), WIDTH))
+    if not keep_all and not (area > 0.0).all():
+        keep = area > 0.0
+        corner, e1, e2, normals, emission, faces, area = (a[keep] for a in (corner, e1, e2, normals, emission,
+                                                                            faces, area))
+    block = np.empty((len(area), WIDTH))
     block[:, 0] = TRIANGLE
-    block[:, 1:4], block[:, 10:13], block[:, 13:16] = corner[keep], e1[keep], e2[keep]
-    block[:, 4:7], block[:, 7:10] = normals[keep], emission[keep]
+    block[:, 1:4], block[:, 10:13], block[:, 13:16] = corner, e1, e2
+    block[:, 4:7], block[:, 7:10] = normals, emission
     # one-sided, toward the winding's normal (as pbrt's and Mitsuba's area lights), or
     # on both sides (the Whitted convention, rtmesh.lights.mesh_lights)
-    block[:, AREA], block[:, TWO_SIDED], block[:, VISIBLE], block[:, FACE] = area[keep], float(two_sided), 1.0, \
-        faces[keep]
-    return block, faces[keep]
+    block[:, AREA], block[:, TWO_SIDED], block[:, VISIBLE], block[:, FACE] = area, float(two_sided), 1.0, faces
+    block[:, FACE + 1:] = 0.0
+    return block, faces
 
 
 def _row(kind, point, normal, radiance, a, b, area, two_sided, visible, face=-1.0):
