@@ -26,7 +26,8 @@ stages).  Per lane and vertex:
    BSDF sample of that vertex meets is weighted with the same counts);
 3. a BSDF sample continues the path (:func:`rtmesh.materials.models.sample`); after
    ``rr_depth`` vertices Russian roulette on the throughput's largest channel ends it (the
-   throughput without the radiance scaling of the refractions so far, pbrt-v4's ``etaScale``).
+   throughput without the radiance scaling of the refractions so far, pbrt-v4's ``etaScale``;
+   a path survives with at most ``path_scatter.SURVIVAL`` = 0.95, Mitsuba's rule, so that it ends).
 
 The packet queries (nearest hits, shadow rays, moving objects, placements, cut-out layers)
 are :mod:`rtmesh.rendering.path_packets`' rows, the light rows :mod:`rtmesh.rendering.path_lights`',

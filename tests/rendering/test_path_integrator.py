@@ -102,6 +102,26 @@ def test_a_camera_inside_absorbing_glass_sees_through_it(sphere):
     assert abs(image.mean() / expected - 1.0) < 0.01
 
 
+def test_paths_trapped_by_total_internal_reflection_end():
+    """A camera off the centre of a clear, non-absorbing glass ball (smooth shading): rays
+    that meet its surface beyond the critical angle stay inside, and the throughput of
+    such a path never falls, so roulette alone let it on for ever under max_depth -1 (this
+    render did not end).  A path survives with at most path_scatter.SURVIVAL, so paths end
+    about 20 vertices past rr_depth (measured: 23 bounce rays a sample)."""
+    from rtmesh.loaders.scene_file import scene_from_dict
+    from rtmesh.rendering.path_scatter import SURVIVAL
+
+    doc = {"render": {"width": 8, "height": 6, "spp": 4, "integrator": "path", "caustics": "off", "threads": 1},
+           "camera": {"position": [0.5, 0.0, 0.0], "look_at": [0.0, 0.0, 5.0], "fov": 50},
+           "materials": {"glass": {"transmission": [1, 1, 1], "ior": 1.5, "diffuse": 0}},
+           "lights": [{"type": "directional", "direction": [-0.3, -1, -0.4], "irradiance": 3}],
+           "objects": [{"primitive": "icosphere", "subdivisions": 2, "radius": 0.6, "material": "glass"}]}
+    scene, settings = scene_from_dict(doc)
+    result = Integrator(scene, settings).render()
+    assert SURVIVAL < 1.0 and np.isfinite(result.image).all()
+    assert result.stats.rays["bounce"] < 60 * 8 * 6 * 4
+
+
 def test_images_do_not_depend_on_the_thread_count(sphere):
     scene = _outside(sphere, Material("m", model="conductor", mirror=(0.9, 0.6, 0.3), roughness=0.4))
     one = Integrator(scene, RenderSettings(width=16, height=12, spp=8, threads=1, integrator="path",
