@@ -383,10 +383,11 @@ def _light_at(spec, frame, physical):
     return None
 
 
-def file_cameras_and_lights(path, transform=None, physical=False, light_transforms=None):
+def file_cameras_and_lights(path, transform=None, physical=False, light_transforms=None, lights=True):
     """Cameras and lights of a mesh file: empty lists unless it is glTF (lights in the path
     integrator's units when ``physical``), placed by ``transform`` ((4, 4)); the lights by
     each of ``light_transforms`` ((k, 4, 4)) instead when given (a file placed k times).
+    Without ``lights`` no light is read (nor warned about).
 
     Returns
     -------
@@ -405,7 +406,7 @@ def file_cameras_and_lights(path, transform=None, physical=False, light_transfor
     try:
         return (cameras_from_gltf(doc, transform, source=path),
                 lights_from_gltf(doc, transform if light_transforms is None else light_transforms, source=path,
-                                 physical=physical))
+                                 physical=physical) if lights else [])
     except (KeyError, IndexError, TypeError, ValueError, AttributeError) as exc:
         # a camera or light entry that breaks the glTF schema (a bad index, a missing yfov)
         raise MeshError(f"{path}: malformed glTF camera or light: {type(exc).__name__}: {exc}") from None

@@ -135,12 +135,12 @@ def scene_from_dict(doc, source="scene", base_dir=".", overrides=None, check_set
                 transform, rows = object_transform(values), placing.rows[i]
                 cameras, lights = file_cameras_and_lights(object_mesh_path(values, base_dir), transform,
                                                           physical=settings.integrator == "path",
-                                                          light_transforms=None if rows is None else transform @ rows)
+                                                          light_transforms=None if rows is None else transform @ rows,
+                                                          lights=values.get("import_lights", True))
             except RtmeshError as exc:
                 raise r.error(f"{where}.mesh", str(exc)) from None
             file_cameras.extend(cameras)
-            if values.get("import_lights", True):
-                file_lights.extend(lights)
+            file_lights.extend(lights)
         elif "import_lights" in values:
             raise r.error(f"{where}.import_lights", "does not apply to a primitive")
 

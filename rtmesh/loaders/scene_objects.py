@@ -287,7 +287,8 @@ def _instance_rows(r, values, where, base_dir):
                 raise r.error(key, f"{path}: an array of shape {shape}, expected (k, 4, 4) with k >= 1 "
                                    "(a model-to-world transform a row)")
             # a placement's records are counted before the file is read (its mesh with it later)
-            memory.check_load(path, f"{shape[0]} instance transforms", memory.load_estimate(0, 0, shape[0]))
+            memory.check_load(f"{r.source}: {key}: {path}", f"{shape[0]} instance transforms",
+                              memory.load_estimate(0, 0, shape[0]))
             f.seek(0)
             try:
                 rows = np.lib.format.read_array(f, allow_pickle=False).astype(np.float64)

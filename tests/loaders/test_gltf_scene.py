@@ -226,6 +226,19 @@ def test_a_file_placed_by_instances_brings_its_lights_to_every_placement(gltf_fi
     assert len(scene.lights) == 9
 
 
+@pytest.mark.parametrize("import_lights", [True, False])
+def test_lights_not_imported_are_not_read_or_warned_about(gltf_file, caplog, import_lights):
+    doc = json.loads(gltf_file.read_text())
+    lamp = next(node for node in doc["nodes"] if node["name"] == "lamp")
+    lamp["scale"] = [0.0, 0.0, 0.0]  # a hidden light: a warning when its lights are read
+    gltf_file.write_text(json.dumps(doc))
+    with caplog.at_level("WARNING"):
+        scene, _ = scene_from_dict({"objects": [{"mesh": str(gltf_file), "import_lights": import_lights}]})
+    warned = [r for r in caplog.records if "light node 'lamp'" in r.getMessage()]
+    assert len(warned) == int(import_lights)
+    assert sum(isinstance(light, SpotLight) for light in scene.lights) == int(import_lights)
+
+
 @pytest.mark.parametrize("camera, message", [
     ({"from_file": "nope"}, "no camera named 'nope'.*available: 'front_cam_node', 'top_cam_node'"),
     ({"from_file": "top", "fov": 30}, "camera.fov: does not apply with from_file"),

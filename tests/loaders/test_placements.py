@@ -202,6 +202,18 @@ def _placed_spheres(tmp_path, capsys, material, limit):
     return status, capsys.readouterr().err, out
 
 
+def test_too_many_instance_rows_are_refused_naming_the_scene_file_and_the_key(tmp_path, capsys):
+    # 200,000 placements' records (~230 MiB) before the rows are read
+    rows = np.tile(np.eye(4), (200_000, 1, 1))
+    path = _scene_file(tmp_path, '[[objects]]\nprimitive = "icosphere"\ninstances = "rows.npy"\n', rows)
+    out = tmp_path / "out.png"
+    status = main(["render", str(path), "-o", str(out), "--width", "16", "--height", "12", "-q",
+                   "--memory-limit", "100M"])
+    err = capsys.readouterr().err
+    assert status == 2 and not out.exists() and err.count("\n") == 1, err
+    assert f"{path}: objects[1].instances: {tmp_path / 'rows.npy'}: 200000 instance transforms would need about" in err
+
+
 def test_placed_emitters_beyond_the_memory_limit_stop_before_them(tmp_path, capsys):
     # loaded once (~25 MB); every placed face is a light of its own (~5 GB of light rows):
     # refused, one line, before the render takes them
