@@ -15,6 +15,7 @@ it does not trace through them yet); everything else renders :func:`flattened`, 
 the loaders made before instancing existed.
 """
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -340,9 +341,7 @@ def unsupported(scene, settings):
 
 def subset(placed, placements):
     """The :class:`Instances` of the ``placements`` (indices) of ``placed`` alone (for a
-    memory estimate of their copies)."""
-    import dataclasses
-
+    memory estimate of their copies; the placements left after some are copied)."""
     return dataclasses.replace(placed, transforms=placed.transforms[placements],
                                prototype=placed.prototype[placements], object_id=placed.object_id[placements])
 
@@ -367,7 +366,6 @@ def flattened(scene, placements=None):
         Without ``instances`` when every placement is copied (the prototypes' own faces
         are gone), else with the placements left.
     """
-    import dataclasses
 
     inst = scene.instances
     f0, v0 = inst.first_face, inst.first_vertex
@@ -418,11 +416,9 @@ def flattened(scene, placements=None):
         take(scene.vertices[v0:], np.asarray(scene.faces[prototypes], dtype=np.int64) - v0,
              None if scene.vertex_normals is None else scene.vertex_normals[v0:], scene.face_normals[prototypes],
              prototypes, slice(v0, len(scene.vertices)), None)
-        placed = dataclasses.replace(inst, first_face=first_face, first_vertex=first_vertex,
+        placed = dataclasses.replace(subset(inst, left), first_face=first_face, first_vertex=first_vertex,
                                      prototype_faces=inst.prototype_faces - f0 + first_face,
-                                     prototype_vertices=inst.prototype_vertices - v0 + first_vertex,
-                                     transforms=inst.transforms[left], prototype=inst.prototype[left],
-                                     object_id=inst.object_id[left])
+                                     prototype_vertices=inst.prototype_vertices - v0 + first_vertex)
     joined = {name: (np.concatenate(arrays) if arrays else None) for name, arrays in parts.items()}
     return dataclasses.replace(scene, instances=placed, vertices=joined["vertices"],
                                faces=joined["faces"].astype(np.int32), face_normals=joined["face_normals"],
