@@ -33,6 +33,14 @@ from rtmesh.geometry.float32_rays import F32_MAX
 LANES = 16
 RAY_WORDS = 12  # RTCRay: org xyz, tnear, dir xyz, time, tfar, mask, id, flags
 RAYHIT_WORDS = 21  # + RTCHit: Ng xyz, u, v, primID, geomID, instID, instPrimID
+# Words per lane an occlusion query touches: rtcOccluded16 of the library embreex ships reads
+# the nine hit rows that follow an RTCRay16 (where an RTCRayHit16 keeps its hit) and writes
+# them back as it read them.  Inside a buffer its thread owns that changes nothing; past the
+# buffer's end it restores stale words into memory another thread may have changed in the
+# meantime: a second thread writing those rows finds its writes undone, none beyond them
+# (benchmarks/probe_occlusion_rows.py), and two render threads corrupted the heap.  So
+# every packet buffer has room for them.
+OCCLUSION_EXTENT = RAYHIT_WORDS
 ALIGN_WORDS = 16  # 64 bytes: Embree's packets must be aligned to their width
 # word offsets of the fields, in units of LANES
 ORG, TNEAR, DIR, TIME, TFAR, MASK, RAY_ID, FLAGS = 0, 3, 4, 7, 8, 9, 10, 11
@@ -167,7 +175,9 @@ def packet_buffers(fields, packets, flags):
 
     Returns
     -------
-    rays : (packets * fields * LANES,) float32
+    rays : (((packets - 1) * fields + max(fields, RAYHIT_WORDS)) * LANES,) float32
+        Packet ``q`` at ``q * fields * LANES``; the last one is followed by the hit rows
+        an occlusion query touches (:data:`OCCLUSION_EXTENT`).
     words : the same memory as int32
     valid : (packets * LANES,) int32
         Lane masks, packet ``q``'s at ``q * LANES``.
@@ -178,8 +188,12 @@ def packet_buffers(fields, packets, flags):
     -----
     Callers pass ``np.int64(...)``, not bare constants: numba compiles a row once for each
     literal value it is called with (about half a second each on a first run).
+
+    Packets side by side at a stride of :data:`RAY_WORDS` are safe for occlusion queries:
+    the rows that ``rtcOccluded16`` of packet ``q`` reads and writes back are packet
+    ``q + 1``'s, which nothing changes while the same thread waits for the query.
     """
-    rays = aligned_words(packets * fields * LANES, np.float32)
+    rays = aligned_words(((packets - 1) * fields + max(fields, OCCLUSION_EXTENT)) * LANES, np.float32)
     return rays, rays.view(np.int32), aligned_words(packets * LANES, np.int32), query_arguments(flags)
 
 

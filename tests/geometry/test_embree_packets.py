@@ -5,11 +5,12 @@ import os
 import subprocess
 import sys
 
+import numba
 import numpy as np
 import pytest
 import trimesh
 
-from rtmesh.geometry import embree_library
+from rtmesh.geometry import embree_library, embree_packets
 from rtmesh.geometry.accel import Accel
 
 pytestmark = pytest.mark.skipif(embree_library.packet_library() is None,
@@ -150,3 +151,22 @@ def test_coherent_packets_with_nearly_axis_aligned_rays(twins, tiniest):
     t_max = np.full(n, 2.5)
     np.testing.assert_array_equal(packets.occluded(origins, directions, t_max),
                                   single.occluded(origins, directions, t_max))
+
+
+@numba.njit
+def _packet_buffers(fields, packets):
+    rays, words, valid, _ = embree_packets.packet_buffers(fields, packets, np.int64(0))
+    return rays, words, valid
+
+
+@pytest.mark.parametrize("fields", [embree_packets.RAY_WORDS, embree_packets.RAYHIT_WORDS])
+@pytest.mark.parametrize("packets", [1, 4])
+def test_every_packet_buffer_holds_the_hit_rows_an_occlusion_query_rewrites(fields, packets):
+    """rtcOccluded16 reads and writes back the nine hit rows after an RTCRay16
+    (benchmarks/probe_occlusion_rows.py): a buffer whose last packet lacked them let a query
+    restore stale words into memory another render thread had changed (heap corruption)."""
+    rays, words, valid = _packet_buffers(np.int64(fields), np.int64(packets))
+    lanes = embree_packets.LANES
+    assert len(rays) >= ((packets - 1) * fields + embree_packets.RAYHIT_WORDS) * lanes
+    assert words.ctypes.data == rays.ctypes.data and len(valid) == packets * lanes
+    assert rays.ctypes.data % 64 == 0 and valid.ctypes.data % 64 == 0
