@@ -17,7 +17,7 @@ from rtmesh.io.images import check_output_path, write_display_image
 from rtmesh.io.passes import display_values
 from rtmesh.rendering import memory
 from rtmesh.rendering.integrator import Integrator
-from rtmesh.rendering.settings import CAUSTICS, FRESNEL_MODES, INTEGRATORS, PASSES
+from rtmesh.rendering.settings import CAUSTICS, FRESNEL_MODES, INTEGRATORS, LIGHT_SAMPLERS, PASSES
 from rtmesh.sampling.patterns import SAMPLERS
 from rtmesh.scene.background import background_from_option
 from rtmesh.scene.camera_json import camera_record, write_camera_json
@@ -88,6 +88,9 @@ def build_parser():
     p.add_argument("--caustics", choices=CAUSTICS,
                    help="path: photon passes for caustics; auto (the default) when a small or delta light can "
                    "reach a mirror or smooth glass")
+    p.add_argument("--light-sampler", choices=LIGHT_SAMPLERS,
+                   help="path: choose the light of each light sample by its power (the default) or by its "
+                   "importance at the shading point (a light tree: many or nearby emitters)")
     p.add_argument("--photons", type=_positive_int, help="path: photons a caustic photon pass traces "
                    "(default: a quarter of the pixel count, 16384 to 1048576)")
     p.add_argument("--seed", type=int, help="random seed (same seed, same image)")
@@ -356,6 +359,7 @@ def cmd_render(args):
         "fresnel": args.fresnel, "exposure": args.exposure, "tonemap": args.tonemap,
         "denoise": args.denoise, "integrator": args.integrator, "clamp": args.clamp,
         "caustics": args.caustics, "photons": args.photons, "dither": args.dither,
+        "light_sampler": args.light_sampler,
     }
     background = None if args.background is None else background_from_option(args.background)
     # the command owns its process: tune it for rendering (allocator, GIL, kept threads)

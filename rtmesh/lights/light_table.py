@@ -162,6 +162,9 @@ class LightTable:
         The alias table (:mod:`rtmesh.sampling.alias`).
     pmf : (L,) float64
         Each light's choice probability.
+    power : (L,) float64
+        What the choice weighs each light by (its power; the lights at infinity: what falls
+        on the scene).
     face_light : (F,) int64
         The light of each emissive face, -1 elsewhere; for a prototype's face, its rank among
         its prototype's emissive faces (the light is ``placement_light[j]`` plus the rank).
@@ -239,6 +242,7 @@ class LightTable:
                            if power else np.zeros(0), 0.0)
         if len(power) and not power.sum() > 0.0:
             power = np.ones_like(power)
+        self.power = power
         self.probability, self.alias, self.pmf = alias_table(power)
         kinds = self.rows[:, 0] if len(self.rows) else np.zeros(0)
         self.analytic = np.flatnonzero(((kinds == QUAD) | (kinds == DISK)) & (self.rows[:, VISIBLE] > 0)

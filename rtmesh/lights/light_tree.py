@@ -27,8 +27,9 @@ Records
 -------
 ``tree = (nodes, links, trails, infinite)``:
 
-* ``nodes`` (N, 12) float64: box min (0-2) and max (3-5), ``phi`` (6), cone axis ``w``
-  (7-9), ``cos theta_o`` (10), ``cos theta_e`` (11);
+* ``nodes`` (N, NODE_WIDTH) float64: box min (0-2) and max (3-5), ``phi`` (6), cone axis
+  ``w`` (7-9), ``cos theta_o`` (10), ``cos theta_e`` (11), and what the walk derives from
+  them: the box's centre (12-14), half its diagonal (15), ``sin theta_o`` (16);
 * ``links`` (N, 2) int64: a leaf's light row or an interior node's second child (0), flags
   (1: :data:`LEAF`, :data:`TWO_SIDED`);
 * ``trails`` (L,) uint64: each light's path from the root, a bit a level (0 first child),
@@ -44,12 +45,16 @@ from rtmesh.core.compiled import kernel, row
 from rtmesh.lights import light_table as lt
 from rtmesh.lights import point_light_rows as plr
 
-NODE_WIDTH = 12
+NODE_WIDTH = 17
 BOX, PHI, AXIS, COS_O, COS_E = 0, 6, 7, 10, 11
+# derived for the walk: the box's centre, half its diagonal, sin theta_o
+CENTRE, HALF_DIAGONAL, SIN_O = 12, 15, 16
 LEAF, TWO_SIDED = 1, 2
 NOT_IN_TREE = np.uint64(0xFFFFFFFFFFFFFFFF)
 # the largest number below 1, for the remapped sample number (pbrt's OneMinusEpsilon)
 _BELOW_ONE = 1.0 - 2.0 ** -53
+# the record of no tree (lights chosen by power): no trails
+NO_TREE = (np.zeros((0, NODE_WIDTH)), np.zeros((0, 2), np.int64), np.zeros(0, np.uint64), np.zeros(0, np.int64))
 
 
 def light_bounds(rows, power):
@@ -224,6 +229,13 @@ def _build(leaves, two_sided, light_rows, nodes, links, trails):
         nodes[i, AXIS], nodes[i, AXIS + 1], nodes[i, AXIS + 2], nodes[i, COS_O] = wx, wy, wz, cos_o
         nodes[i, COS_E] = min(nodes[a, COS_E], nodes[b, COS_E])
         links[i, 1] = (links[a, 1] | links[b, 1]) & TWO_SIDED
+    for i in range(len(nodes)):
+        ex, ey, ez = nodes[i, BOX + 3] - nodes[i, BOX], nodes[i, BOX + 4] - nodes[i, BOX + 1], \
+            nodes[i, BOX + 5] - nodes[i, BOX + 2]
+        for c in range(3):
+            nodes[i, CENTRE + c] = 0.5 * (nodes[i, BOX + c] + nodes[i, BOX + 3 + c])
+        nodes[i, HALF_DIAGONAL] = 0.5 * math.sqrt(ex * ex + ey * ey + ez * ez)
+        nodes[i, SIN_O] = math.sqrt(max(1.0 - nodes[i, COS_O] * nodes[i, COS_O], 0.0))
 
 
 @row
@@ -236,18 +248,14 @@ def importance(nodes, links, i, px, py, pz, nx, ny, nz):
     node = nodes[i]
     if not node[PHI] > 0.0:
         return 0.0
-    cx = 0.5 * (node[BOX] + node[BOX + 3])
-    cy = 0.5 * (node[BOX + 1] + node[BOX + 4])
-    cz = 0.5 * (node[BOX + 2] + node[BOX + 5])
-    ex, ey, ez = node[BOX + 3] - node[BOX], node[BOX + 4] - node[BOX + 1], node[BOX + 5] - node[BOX + 2]
-    diagonal = math.sqrt(ex * ex + ey * ey + ez * ez)
-    vx, vy, vz = px - cx, py - cy, pz - cz
+    half = node[HALF_DIAGONAL]
+    vx, vy, vz = px - node[CENTRE], py - node[CENTRE + 1], pz - node[CENTRE + 2]
     d2 = vx * vx + vy * vy + vz * vz
     # (pbrt clamps the squared distance by half the diagonal's length)
-    d2c = max(d2, 0.5 * diagonal)
-    d = math.sqrt(d2)
-    if d > 0.0:
-        wix, wiy, wiz = vx / d, vy / d, vz / d
+    d2c = max(d2, half)
+    inverse_d = 1.0 / math.sqrt(d2) if d2 > 0.0 else 0.0
+    if inverse_d > 0.0:
+        wix, wiy, wiz = vx * inverse_d, vy * inverse_d, vz * inverse_d
     else:
         wix, wiy, wiz = 0.0, 0.0, 1.0
     cos_w = node[AXIS] * wix + node[AXIS + 1] * wiy + node[AXIS + 2] * wiz
@@ -255,14 +263,12 @@ def importance(nodes, links, i, px, py, pz, nx, ny, nz):
         cos_w = abs(cos_w)
     sin_w = math.sqrt(max(1.0 - cos_w * cos_w, 0.0))
     # the directions the box subtends from p: its bounding sphere's cone (all, from inside)
-    radius2 = 0.25 * diagonal * diagonal
-    if d2 < radius2:
-        cos_b = -1.0
+    if d2 < half * half:
+        cos_b, sin_b = -1.0, 0.0
     else:
-        cos_b = math.sqrt(max(1.0 - radius2 / d2, 0.0))
-    sin_b = math.sqrt(max(1.0 - cos_b * cos_b, 0.0))
-    cos_o = node[COS_O]
-    sin_o = math.sqrt(max(1.0 - cos_o * cos_o, 0.0))
+        sin_b = half * inverse_d
+        cos_b = math.sqrt(max(1.0 - sin_b * sin_b, 0.0))
+    cos_o, sin_o = node[COS_O], node[SIN_O]
     # theta_x = max(theta_w - theta_o, 0), theta' = max(theta_x - theta_b, 0)
     if cos_w > cos_o:
         cos_x, sin_x = 1.0, 0.0

@@ -14,7 +14,7 @@ import numpy as np
 from rtmesh.core.errors import SceneError
 from rtmesh.loaders.light_registry import LIGHT_TYPES
 from rtmesh.materials.models import MODEL_NAMES
-from rtmesh.rendering.settings import CAUSTICS, INTEGRATORS
+from rtmesh.rendering.settings import CAUSTICS, INTEGRATORS, LIGHT_SAMPLERS
 from rtmesh.scene.background import BACKGROUND_TYPES
 
 # ---------------------------------------------------------------- value types
@@ -153,6 +153,7 @@ RENDER_KEYS = {
     "exposure": _float, "tonemap": _str, "dither": _bool,
     "target_error": _positive, "time_limit": _positive, "max_spp": _int, "denoise": _bool,
     "integrator": _one_of(*INTEGRATORS), "clamp": _non_negative, "caustics": _one_of(*CAUSTICS), "photons": _int,
+    "light_sampler": _one_of(*LIGHT_SAMPLERS),
 }
 CAMERA_KEYS = {
     "position": _vec3, "look_at": _vec3, "up": _vec3, "fov": _fov,

@@ -12,6 +12,7 @@ import numpy as np
 from rtmesh.core.compile_ahead import KernelGroup, compile_locked
 from rtmesh.core.compiled import entry_point
 from rtmesh.lights import light_table as lt
+from rtmesh.lights.light_tree import NO_TREE
 from rtmesh.materials import lobes, models
 from rtmesh.rendering import path_rays, path_scatter
 from rtmesh.rendering.film_sums import accumulate_samples
@@ -53,7 +54,7 @@ def small_records():
                energy, z((1, 6), np.int64), z((1, 6), np.int64), z(1), z(1, np.int64), z(1), z(1),
                z(1, np.float32), z((1, 12)), z(1), z(0, np.int64))
     lights = (z((1, lt.WIDTH)), z(1), z(1, np.int64), z(1), z(1, np.int64), z(0, np.int64), -1, z(1, np.float32),
-              z((0, 12)), z(0, np.int64))
+              z((0, 12)), z(0, np.int64), NO_TREE)
     env = (z((1, 3, 3)), z(2), z((1, 2)), z((1, 1)), 1.0, 1.0, 0.0)
     return energy, geometry, surface, lights, env
 

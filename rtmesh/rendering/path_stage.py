@@ -22,7 +22,9 @@ from rtmesh.geometry import embree_library
 from rtmesh.geometry.cutouts import CutoutAccel
 from rtmesh.io.texture_atlas import TextureAtlas
 from rtmesh.lights.environment import EnvironmentLighting
+from rtmesh.lights import light_table as lt
 from rtmesh.lights.light_table import BYTES_PER_LIGHT, EnvironmentTables, LightTable, placed_light_count
+from rtmesh.lights.light_tree import NO_TREE, LightTree
 from rtmesh.lights.mesh_lights import MeshLight
 from rtmesh.lights.projector import ProjectorLight
 from rtmesh.materials.models import SLOTS, material_rows, tables
@@ -238,6 +240,21 @@ class PathStage:
         packet queries are not available, or a light has no compiled row.
     """
 
+    def _light_tree(self, settings):
+        """The lights' tree record (``light_sampler = "tree"``, rtmesh.lights.light_tree), or
+        :data:`~rtmesh.lights.light_tree.NO_TREE`: lights chosen by power."""
+        rows = self.lights.rows
+        if settings.light_sampler != "tree" or self.whitted or not len(rows):
+            return NO_TREE
+        face_mover = self._motion[6]
+        triangles = rows[:, 0] == lt.TRIANGLE
+        if len(face_mover) and (face_mover[rows[triangles, lt.FACE].astype(np.int64)] >= 0).any():
+            # the tree would bound these emitters where they rest
+            log.warning("light_sampler 'tree' does not bound emitters on moving objects: lights are chosen by "
+                        "power")
+            return NO_TREE
+        return LightTree(rows, self.lights.power).record
+
     def __init__(self, it):
         missing = unsupported(it)
         if missing:
@@ -304,6 +321,7 @@ class PathStage:
             self._seed_key = mix64(np.uint64(settings.seed % (1 << 64)) ^ np.uint64(0x5A17_7ACE_D00D_F00D))
         library = embree_library.packet_library()
         self._motion, handle = motion_record(it)
+        self.light_record += (self._light_tree(settings),)
         self._instances = instance_record(it)
         self._queries = (library.intersect16, library.occluded16, handle)
         # a pinhole camera's rays are formed in the kernel (rtmesh.rendering.path_camera);

@@ -33,6 +33,7 @@ import numpy as np
 from rtmesh.core.compiled import borrowed, inline_row, kernel
 from rtmesh.geometry.embree_packets import LANES
 from rtmesh.lights import light_table as lt
+from rtmesh.lights import light_tree
 from rtmesh.materials import models
 from rtmesh.materials.metallic_roughness import square_to_cosine_hemisphere_row
 from rtmesh.rendering.path_camera_hits import HIT_AO_HERE, record_camera_hit
@@ -94,6 +95,16 @@ def shaded_vertex(vertex, vertex_ids, lane, scratch, params, tags):
             vertex[lane, 15], vertex[lane, 16], vertex[lane, 17])
 
 
+@inline_row
+def _choice(choice_pmf, by_tree, tree, light, vertex, lane):
+    """The probability that next-event estimation at the lane's previous vertex chose
+    ``light``: its power share, or the light tree's pmf at that vertex's point and normal."""
+    if by_tree:
+        return light_tree.light_pmf(tree, light, vertex[lane, 0], vertex[lane, 1], vertex[lane, 2], vertex[lane, 6],
+                                    vertex[lane, 7], vertex[lane, 8])
+    return choice_pmf[light]
+
+
 @kernel
 def meet(lanes, hits, vertices, keys, start, geometry, surface, textured, lights, env, options, whitted, motion,
          instances, photon_map):
@@ -126,7 +137,7 @@ def meet(lanes, hits, vertices, keys, start, geometry, surface, textured, lights
     material_id = geometry[5]
     tags, transmissive, unlit, albedo_table = surface[0], surface[2], surface[5], surface[6]
     light_rows, light_pmf, face_light, analytic, env_light = lights[0], lights[3], lights[4], lights[5], lights[6]
-    placement_light = lights[9]
+    placement_light, tree = lights[9], lights[10]
     max_depth, clamp, offset_scale, background_seen, cutouts, split = (options[0], options[2], options[3], options[4],
                                                                        options[5], options[6])
     media = len(options[7])
@@ -134,6 +145,8 @@ def meet(lanes, hits, vertices, keys, start, geometry, surface, textured, lights
     whitted_on, group_pmf, ambient, occlusion_strength, ao_samples = whitted[0], whitted[6], whitted[7], whitted[8], \
         whitted[12]
     choice_pmf = group_pmf if whitted_on else light_pmf
+    # a light tree chooses by the previous vertex (its point and normal, still in vertex)
+    by_tree = (not whitted_on) and len(tree[2]) > 0
     env_pixels, env_func, env_mean, env_cos, env_sin = env[0], env[3], env[4], env[5], env[6]
     moves, face_mover = motion[5], motion[6]
     instance_to_world, instance_normals = instances[1], instances[2]
@@ -170,7 +183,7 @@ def meet(lanes, hits, vertices, keys, start, geometry, surface, textured, lights
             light = light_rows[seen]
             w = 1.0
             if not prev_delta[lane]:
-                w = power_heuristic(prev_pdf[lane], choice_pmf[seen] * area_pdf(
+                w = power_heuristic(prev_pdf[lane], _choice(choice_pmf, by_tree, tree, seen, vertex, lane) * area_pdf(
                     light, px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], t) * prev_count[lane])
             r, g, b = clamped(beta[lane, 0] * light[lt.RADIANCE] * w, beta[lane, 1] * light[lt.RADIANCE + 1] * w,
                                beta[lane, 2] * light[lt.RADIANCE + 2] * w, limit)
@@ -194,7 +207,8 @@ def meet(lanes, hits, vertices, keys, start, geometry, surface, textured, lights
                     lr, lg, lb = env_pixels[0, 0, 0], env_pixels[0, 0, 1], env_pixels[0, 0, 2]
                 w = 1.0
                 if not prev_delta[lane]:
-                    w = power_heuristic(prev_pdf[lane], choice_pmf[env_light] * environment_pdf_uv(
+                    w = power_heuristic(prev_pdf[lane], _choice(choice_pmf, by_tree, tree, env_light, vertex,
+                                                                lane) * environment_pdf_uv(
                         env_func, env_mean, u, v, dy[lane]) * prev_count[lane])
                 r, g, b = clamped(beta[lane, 0] * lr * w, beta[lane, 1] * lg * w, beta[lane, 2] * lb * w,
                                    limit)
@@ -236,7 +250,7 @@ def meet(lanes, hits, vertices, keys, start, geometry, surface, textured, lights
                     # a placed emitter: its placement's lights, by the face's rank
                     light += placement_light[best_instance[lane]]
                 if light >= 0:
-                    w = power_heuristic(prev_pdf[lane], choice_pmf[light] * area_pdf(
+                    w = power_heuristic(prev_pdf[lane], _choice(choice_pmf, by_tree, tree, light, vertex, lane) * area_pdf(
                         light_at(light_rows, light, face_mover, moves, lane_time[lane], moved, lane),
                         px[lane], py[lane], pz[lane], dx[lane], dy[lane], dz[lane], t) * prev_count[lane])
             r, g, b = clamped(beta[lane, 0] * er * w, beta[lane, 1] * eg * w, beta[lane, 2] * eb * w, limit)
@@ -340,7 +354,7 @@ def sample_lights(lanes, vertices, shadows, keys, pixels, samples, sobol_keys, s
     shadow_rays, shadow_set, shadow_count, shadow_kind, pending, pending_paths = shadows
     tags, params, transmissive, albedo_table = surface[0], surface[1], surface[2], surface[6]
     light_rows, light_probability, light_alias, light_pmf = lights[0], lights[1], lights[2], lights[3]
-    light_texels, light_descriptors = lights[7], lights[8]
+    light_texels, light_descriptors, tree = lights[7], lights[8], lights[10]
     max_depth, clamp, offset_scale, split, light_samples, light_block = (options[0], options[2], options[3],
                                                                          options[6], options[8], options[9])
     (whitted_on, delta_rows, group_start, group_order, group_probability, group_alias, group_pmf) = whitted[:7]
@@ -348,6 +362,7 @@ def sample_lights(lanes, vertices, shadows, keys, pixels, samples, sobol_keys, s
     ao_pass = options[11]
     deltas = len(delta_rows) if whitted_on else 0
     choice_pmf = group_pmf if whitted_on else light_pmf
+    by_tree = (not whitted_on) and len(tree[2]) > 0
     area_rounds = light_samples * (len(group_start) - 1) if whitted_on else light_samples
     moves, face_mover = motion[5], motion[6]
     has_lights = len(light_rows) > 0
@@ -392,6 +407,7 @@ def sample_lights(lanes, vertices, shadows, keys, pixels, samples, sobol_keys, s
                                                  light_block)
                 else:
                     lu1, lu2 = uniform(light_key, base + LIGHT_U1), uniform(light_key, base + LIGHT_U2)
+                tree_pmf = 1.0
                 if kk < 0:
                     chosen, count_f = delta_rows[k], 1.0
                 elif whitted_on:
@@ -402,6 +418,13 @@ def sample_lights(lanes, vertices, shadows, keys, pixels, samples, sobol_keys, s
                     pick, lu1 = alias_sample_remapped(group_probability[lo:hi], group_alias[lo:hi], lu1)
                     chosen = group_order[lo + pick]
                     count_f = np.float64(light_samples)
+                elif by_tree:
+                    # by the lights' importance at this vertex (rtmesh.lights.light_tree)
+                    chosen, tree_pmf = light_tree.choose_light(tree, hx, hy, hz, nx, ny, nz,
+                                                               uniform(light_key, base + LIGHT_CHOICE))
+                    if chosen < 0:
+                        continue
+                    count_f = np.float64(area_count)
                 else:
                     chosen = alias_sample(light_probability, light_alias, uniform(light_key, base + LIGHT_CHOICE))
                     count_f = np.float64(area_count)
@@ -429,7 +452,7 @@ def sample_lights(lanes, vertices, shadows, keys, pixels, samples, sobol_keys, s
                                                             loz, lix, liy, liz)
                 if not ((fr > 0.0) | (fg > 0.0) | (fbb > 0.0)):
                     continue
-                p_light = (1.0 if kk < 0 else choice_pmf[chosen]) * pdf_li
+                p_light = (1.0 if kk < 0 else (tree_pmf if by_tree else choice_pmf[chosen])) * pdf_li
                 w = 1.0 if delta else power_heuristic(p_light * count_f, pdf_bsdf)
                 scale = w / (p_light * count_f)
                 pending[k, lane, 0], pending[k, lane, 1], pending[k, lane, 2] = clamped(

@@ -17,6 +17,9 @@ FRESNEL_MODES = ("schlick", "exact")
 # for it); "path": physically based path tracing (rtmesh.rendering.path_stage)
 INTEGRATORS = ("whitted", "path")
 CAUSTICS = ("auto", "photons", "off")
+# how next-event estimation chooses a light: by power (an alias table) or by its importance at
+# the shading point (a light tree, rtmesh.lights.light_tree)
+LIGHT_SAMPLERS = ("power", "tree")
 # photons a pass may trace (a pass's photons take 104 bytes each)
 MAX_PHOTONS = 1 << 26
 # max_depth when it is not given: Whitted's bounces; the path integrator's "unlimited"
@@ -117,6 +120,10 @@ class RenderSettings:
         ``auto`` runs them when a small or delta light can reach a specular surface.
     photons : int or None
         Photons a photon pass traces; None: a quarter of the pixel count, within 16384 .. 1048576.
+    light_sampler : {"power", "tree"}
+        Path integrator: how next-event estimation chooses a light, in proportion to its
+        power, or to an estimate of its contribution at the shading point (distance,
+        orientation: a light tree, :mod:`rtmesh.lights.light_tree`).
     denoise : bool
         Denoise the image with Intel Open Image Denoise, guided by the albedo and normal
         passes (see :mod:`rtmesh.io.denoising`; needs the ``denoise`` extra).
@@ -147,6 +154,7 @@ class RenderSettings:
     clamp: float = 0.0
     caustics: str = "auto"
     photons: int | None = None
+    light_sampler: str = "power"
 
     def validate(self):
         """Raise ValueError naming the first setting out of range (and the value given)."""
@@ -175,6 +183,7 @@ class RenderSettings:
              f">= {lowest_depth} and <= {MAX_DEPTH}"),
             ("clamp", real(self.clamp) and self.clamp >= 0, ">= 0 and finite (0: no clamp)"),
             ("caustics", self.caustics in CAUSTICS, f"one of {', '.join(CAUSTICS)}"),
+            ("light_sampler", self.light_sampler in LIGHT_SAMPLERS, f"one of {', '.join(LIGHT_SAMPLERS)}"),
             ("photons", self.photons is None or whole(self.photons, 1, MAX_PHOTONS), f">= 1 and <= {MAX_PHOTONS}"),
             ("seed", whole(self.seed, -2**63, 2**64 - 1), ">= -2**63 and <= 2**64 - 1"),
             ("threads", self.threads is None or whole(self.threads, 1, MAX_THREADS),
@@ -225,6 +234,8 @@ class RenderSettings:
              f"passes {', '.join(p for p in self.passes if p in LIGHT_PATH_PASSES)} need integrator 'path'"),
             (self.integrator == "path" or self.caustics != "photons",
              "caustics 'photons' needs integrator 'path'"),
+            (self.integrator == "path" or self.light_sampler != "tree",
+             "light_sampler 'tree' needs integrator 'path'"),
             (self.spp >= 2 or not self.adaptive,
              "spp must be >= 2 with target_error or time_limit (one sample gives no error estimate)"),
         ]
