@@ -287,6 +287,16 @@ def importance(nodes, links, i, px, py, pz, nx, ny, nz):
 
 
 @row
+def _children(nodes, links, i, px, py, pz, nx, ny, nz):
+    """Interior node ``i``'s children and the probability of choosing the first at ``p``,
+    ``n`` (-1 where neither can light it)."""
+    a, b = i + 1, links[i, 0]
+    ca = importance(nodes, links, a, px, py, pz, nx, ny, nz)
+    cb = importance(nodes, links, b, px, py, pz, nx, ny, nz)
+    return a, b, (ca / (ca + cb) if ca + cb > 0.0 else -1.0)
+
+
+@row
 def infinite_share(tree):
     """The probability of choosing among the lights at infinity."""
     nodes, infinite = tree[0], tree[3]
@@ -316,12 +326,9 @@ def choose_light(tree, px, py, pz, nx, ny, nz, u):
     pmf = 1.0 - share
     i = 0
     while not links[i, 1] & LEAF:
-        a, b = i + 1, links[i, 0]
-        ca = importance(nodes, links, a, px, py, pz, nx, ny, nz)
-        cb = importance(nodes, links, b, px, py, pz, nx, ny, nz)
-        if not ca + cb > 0.0:
+        a, b, pa = _children(nodes, links, i, px, py, pz, nx, ny, nz)
+        if pa < 0.0:
             return -1, 0.0
-        pa = ca / (ca + cb)
         if u < pa:
             u, pmf, i = min(u / pa, _BELOW_ONE), pmf * pa, a
         else:
@@ -342,16 +349,14 @@ def light_pmf(tree, light, px, py, pz, nx, ny, nz):
     pmf = 1.0 - share
     i = 0
     while not links[i, 1] & LEAF:
-        a, b = i + 1, links[i, 0]
-        ca = importance(nodes, links, a, px, py, pz, nx, ny, nz)
-        cb = importance(nodes, links, b, px, py, pz, nx, ny, nz)
-        if not ca + cb > 0.0:
+        a, b, pa = _children(nodes, links, i, px, py, pz, nx, ny, nz)
+        if pa < 0.0:
             return 0.0
         if trail & np.uint64(1):
-            pmf *= cb / (ca + cb)
+            pmf *= 1.0 - pa
             i = b
         else:
-            pmf *= ca / (ca + cb)
+            pmf *= pa
             i = a
         trail >>= np.uint64(1)
     if i == 0 and not importance(nodes, links, 0, px, py, pz, nx, ny, nz) > 0.0:
