@@ -385,3 +385,15 @@ def test_whitted_only_keys_are_ignored_under_path_with_one_warning(sphere, caplo
         Integrator(_outside(sphere, Material("m", model="lambert")),
                    RenderSettings(width=8, height=8, spp=1, integrator="path")).render()
     assert not [r for r in caplog.records if "ignores" in r.getMessage()]
+
+
+def test_a_moving_emitter_keeps_the_power_choice_under_the_light_tree(caplog):
+    """The light tree bounds emitters where they rest: with an emitter on a moving object the
+    choice stays by power (the same image, bit for bit) and one warning says so."""
+    scene = _moving_lamp((0.0, 1.0), MOVING_LAMP)
+    power = _mean(scene, spp=4, size=16, integrator="path", max_depth=1)
+    with caplog.at_level("WARNING"):
+        tree = _mean(scene, spp=4, size=16, integrator="path", max_depth=1, light_sampler="tree")
+    np.testing.assert_array_equal(tree, power)
+    assert [r.message for r in caplog.records].count(
+        "light_sampler 'tree' does not bound emitters on moving objects: lights are chosen by power") == 1
