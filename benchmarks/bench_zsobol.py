@@ -54,18 +54,19 @@ LIGHTS = ("all", "quad", "mesh")
 EMITTER_MARGIN = 2
 
 
-def render(width, height, spp, sampler, seed, light_samples, threads, lights="all"):
+def render(width, height, spp, sampler, seed, light_samples, threads, lights="all", overrides=None):
     """One linear image of the scene, (h, w, 3) float64, and its render seconds.
 
     ``lights``: ``"all"`` (the scene as it is), ``"quad"`` (no emissive material) or
-    ``"mesh"`` (no quad light), see the module notes.
+    ``"mesh"`` (no quad light), see the module notes.  ``overrides``: more render settings
+    (``integrator``, ``light_sampler``).
     """
     from rtmesh import api
     from rtmesh.materials.table import MaterialTable
 
     start = time.perf_counter()
     scene, settings = api.load_scene(str(SCENE), width=width, height=height, spp=spp, sampler=sampler, seed=seed,
-                                     light_samples=light_samples, threads=threads)
+                                     light_samples=light_samples, threads=threads, **(overrides or {}))
     if lights == "quad":
         scene.materials = MaterialTable([dataclasses.replace(m, emission=np.zeros(3))
                                          for m in scene.materials.materials])
@@ -75,14 +76,14 @@ def render(width, height, spp, sampler, seed, light_samples, threads, lights="al
     return np.asarray(image, np.float64), time.perf_counter() - start
 
 
-def reference(width, height, spp, threads, cache, lights="all"):
-    """The reference image (``spp`` x 4 light samples, jittered), rendered once per size and
-    lights and kept in the folder ``cache``."""
-    variant = "" if lights == "all" else f"_{lights}"
+def reference(width, height, spp, threads, cache, lights="all", overrides=None):
+    """The reference image (``spp`` x 4 light samples, jittered), rendered once per size,
+    lights and settings and kept in the folder ``cache``."""
+    variant = ("" if lights == "all" else f"_{lights}") + "".join(f"_{v}" for v in (overrides or {}).values())
     path = Path(cache) / f"soft_shadow{variant}_{width}x{height}_{spp}spp.npy"
     if path.exists():
         return np.load(path)
-    image, took = render(width, height, spp, "jittered", 12345, 4, threads, lights)
+    image, took = render(width, height, spp, "jittered", 12345, 4, threads, lights, overrides)
     print(f"reference: {spp} spp x 4 light samples in {took:.0f} s")
     path.parent.mkdir(parents=True, exist_ok=True)
     np.save(path, image)
@@ -172,7 +173,7 @@ def far_mask(ref):
     return ~windows.any(axis=(2, 3))
 
 
-def measure(ref, spps, seeds, threads=1, samplers=SAMPLERS, log=print, lights="all"):
+def measure(ref, spps, seeds, threads=1, samplers=SAMPLERS, log=print, lights="all", overrides=None):
     """Errors, spectra and times of every (spp, sampler), and seed 0's error images.
 
     Returns
@@ -199,7 +200,7 @@ def measure(ref, spps, seeds, threads=1, samplers=SAMPLERS, log=print, lights="a
             power = {name: 0.0 for name in masks}
             times = []
             for seed in range(seeds):
-                image, took = render(width, height, spp, sampler, seed, 1, threads, lights)
+                image, took = render(width, height, spp, sampler, seed, 1, threads, lights, overrides)
                 times.append(took)
                 error = image - ref
                 blurred = _lib.gaussian_blur(image) - blurred_ref
@@ -312,6 +313,8 @@ def main(argv=None):
     parser.add_argument("--lights", choices=LIGHTS, default="all",
                         help="the scene's lights (quad or mesh: one alone, against its own reference)")
     parser.add_argument("--no-figures", action="store_true", help="(figures are written for --lights all only)")
+    parser.add_argument("--integrator", choices=("whitted", "path"), help="(default: the scene's, whitted)")
+    parser.add_argument("--light-sampler", choices=("power", "tree"), help="path: how light samples choose a light")
     parser.add_argument("--fixed-point", action="store_true",
                         help="only each area light's estimator at one point, the same in every pixel")
     args = parser.parse_args(argv)
@@ -323,12 +326,14 @@ def main(argv=None):
             print(f"| {r['light']} | {r['spp']} | {r['raw']:.2f} | {r['blurred']:.2f} | "
                   f"{r['blue']:.2f}, {r['blue_sobol']:.2f} |")
         return
-    ref = reference(args.width, args.height, args.ref_spp, args.threads, args.cache, args.lights)
+    overrides = {k: v for k, v in (("integrator", args.integrator), ("light_sampler", args.light_sampler)) if v}
+    ref = reference(args.width, args.height, args.ref_spp, args.threads, args.cache, args.lights, overrides)
     rows, spectra, examples = measure(ref, args.spp, args.seeds, args.threads,
-                                      log=lambda line: print(line, flush=True), lights=args.lights)
+                                      log=lambda line: print(line, flush=True), lights=args.lights,
+                                      overrides=overrides)
     print()
     print(table(rows, args))
-    if not args.no_figures and args.lights == "all":
+    if not args.no_figures and args.lights == "all" and not overrides:
         figures(spectra, examples, args)
         print(f"figures written to {args.figures}/samplers_error.png and samplers_spectra.png")
 
