@@ -29,6 +29,7 @@ import trimesh
 
 from rtmesh.geometry import embree_packets as ep
 from rtmesh.geometry.accel import Accel
+from rtmesh.geometry.embree_library import aligned_array
 
 
 @numba.njit(nogil=True)
@@ -45,21 +46,15 @@ def _write_and_count(words, stop, lo, hi):
     return undone, value
 
 
-def _aligned(count, dtype):
-    raw = np.zeros(count + ep.ALIGN_WORDS, dtype)
-    skip = ((-raw.ctypes.data) % 64) // 4
-    return raw[skip:skip + count]
-
-
 def probe(first_row, last_row, queries, seed=0):
     """Undone writes and rounds of the writer on rows ``first_row .. last_row - 1``."""
     sphere, box = trimesh.creation.icosphere(3), trimesh.creation.box((4, 4, 4))
     accel = Accel(np.vstack([sphere.vertices, box.vertices]),
                   np.vstack([sphere.faces, box.faces + len(sphere.vertices)]), packets=True)
     lanes = ep.LANES
-    words = _aligned(40 * lanes, np.int32)
+    words = aligned_array(40 * lanes, np.int32)
     rays = words.view(np.float32)
-    valid, args = _aligned(lanes, np.int32), _aligned(8, np.int32)
+    valid, args = aligned_array(lanes, np.int32), aligned_array(8, np.int32)
     args[0], args[1] = ep.RTC_RAY_QUERY_FLAG_INCOHERENT, ep.RTC_FEATURE_FLAG_ALL
     stop, result = np.zeros(1, np.int64), {}
     rng = np.random.default_rng(seed)

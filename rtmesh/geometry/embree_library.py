@@ -254,6 +254,15 @@ def _probe(library):
     return None
 
 
+def aligned_array(count, dtype):
+    """A zeroed NumPy array of ``count`` 4-byte words starting on a 64-byte boundary:
+    :func:`rtmesh.geometry.embree_packets.aligned_words` for Python callers (that one is
+    compiled-only)."""
+    raw = np.zeros(count + ALIGN_WORDS, dtype)
+    skip = ((-raw.ctypes.data) % 64) // 4
+    return raw[skip:skip + count]
+
+
 def _probe_packets(library, scene, origins, directions):
     """Trace float32 rays 16 at a time through ctypes calls (no compiled code: the probe
     runs before the kernels are trusted), each packet followed by 64 guard words.
@@ -272,19 +281,12 @@ def _probe_packets(library, scene, origins, directions):
     words = RAYHIT_WORDS * LANES
     guard = np.int32(0x5EED5EED)
 
-    def aligned(count, dtype):
-        """:func:`rtmesh.geometry.embree_packets.aligned_words` for NumPy (that one is
-        compiled-only)."""
-        raw = np.zeros(count + ALIGN_WORDS, dtype)
-        skip = ((-raw.ctypes.data) % 64) // 4
-        return raw[skip:skip + count]
-
-    buffer = aligned(words + 64, np.float32)
+    buffer = aligned_array(words + 64, np.float32)
     ints = buffer.view(np.int32)
     packet = buffer[:words].reshape(RAYHIT_WORDS, LANES)
     fields = packet.view(np.int32)
-    valid = aligned(LANES, np.int32)
-    args = aligned(8, np.int32)
+    valid = aligned_array(LANES, np.int32)
+    args = aligned_array(8, np.int32)
     args[0], args[1] = RTC_RAY_QUERY_FLAG_COHERENT, RTC_FEATURE_FLAG_ALL
     intact = True
     for start in range(0, n, LANES):

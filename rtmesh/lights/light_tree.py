@@ -297,6 +297,13 @@ def _children(nodes, links, i, px, py, pz, nx, ny, nz):
 
 
 @row
+def in_use(tree):
+    """Whether ``tree`` chooses the lights (not :data:`NO_TREE`, which the path stage hands
+    the kernels for ``light_sampler = "power"`` and under the Whitted configuration)."""
+    return len(tree[2]) > 0
+
+
+@row
 def infinite_share(tree):
     """The probability of choosing among the lights at infinity."""
     nodes, infinite = tree[0], tree[3]

@@ -292,11 +292,6 @@ class PathStage:
         self.lights = LightTable([light for light in it.view_lights if not isinstance(light, MeshLight)],
                                  self.geometry[0], self.geometry[1], face_emission,
                                  environment if lights_scene else None, it.offset_scale, self.whitted, it.instances)
-        lights = self.lights
-        # the kernels' ``lights`` record (rtmesh.rendering.path_kernel), formed once a view
-        self.light_record = (lights.rows, lights.probability, lights.alias, lights.pmf, lights.face_light,
-                             lights.analytic, lights.environment, lights.texels, lights.descriptors,
-                             lights.placement_light)
         # the ao pass's rays at the camera rays' surfaces (rtmesh.rendering.path_camera_hits)
         self._ao_pass = "ao" in settings.passes and it.ao_samples > 0
         self._pass_albedo = np.ascontiguousarray(it.passes.diffuse, dtype=np.float64).reshape(-1, 3)
@@ -321,7 +316,12 @@ class PathStage:
             self._seed_key = mix64(np.uint64(settings.seed % (1 << 64)) ^ np.uint64(0x5A17_7ACE_D00D_F00D))
         library = embree_library.packet_library()
         self._motion, handle = motion_record(it)
-        self.light_record += (self._light_tree(settings),)
+        # the kernels' ``lights`` record (rtmesh.rendering.path_kernel), formed once a view
+        # (the tree after the motion record, which says whether an emitter moves)
+        lights = self.lights
+        self.light_record = (lights.rows, lights.probability, lights.alias, lights.pmf, lights.face_light,
+                             lights.analytic, lights.environment, lights.texels, lights.descriptors,
+                             lights.placement_light, self._light_tree(settings))
         self._instances = instance_record(it)
         self._queries = (library.intersect16, library.occluded16, handle)
         # a pinhole camera's rays are formed in the kernel (rtmesh.rendering.path_camera);

@@ -146,7 +146,7 @@ def meet(lanes, hits, vertices, keys, start, geometry, surface, textured, lights
         whitted[12]
     choice_pmf = group_pmf if whitted_on else light_pmf
     # a light tree chooses by the previous vertex (its point and normal, still in vertex)
-    by_tree = (not whitted_on) and len(tree[2]) > 0
+    by_tree = light_tree.in_use(tree)
     env_pixels, env_func, env_mean, env_cos, env_sin = env[0], env[3], env[4], env[5], env[6]
     moves, face_mover = motion[5], motion[6]
     instance_to_world, instance_normals = instances[1], instances[2]
@@ -362,7 +362,7 @@ def sample_lights(lanes, vertices, shadows, keys, pixels, samples, sobol_keys, s
     ao_pass = options[11]
     deltas = len(delta_rows) if whitted_on else 0
     choice_pmf = group_pmf if whitted_on else light_pmf
-    by_tree = (not whitted_on) and len(tree[2]) > 0
+    by_tree = light_tree.in_use(tree)
     area_rounds = light_samples * (len(group_start) - 1) if whitted_on else light_samples
     moves, face_mover = motion[5], motion[6]
     has_lights = len(light_rows) > 0
