@@ -135,8 +135,9 @@ def trace_paths(intersect16, occluded16, scene, camera, origins, directions, key
         Each ray's pixel and sample index: the first vertex's light, BSDF and (whitted) AO
         points are Sobol pairs of the pixel's sequences (``samples`` empty: hashed numbers
         throughout).
-    sobol_keys : (7,) uint64
-        Those sequences (sobol or zsobol) and their three dimension keys
+    sobol_keys : (8,) uint64
+        Those sequences (sobol or zsobol) and their four dimension keys (light point, BSDF,
+        AO, light choice)
         (:func:`rtmesh.sampling.zsobol.sequence_keys`).
     times : (n,) float64, or (0,)
         Each sample's time in the shutter (scenes with moving objects).

@@ -39,7 +39,7 @@ def scatter(lanes, vertices, branches_, keys, pixels, samples, sobol_keys, start
     lanes, vertices, branches_ : tuples
         The module's records.
     keys, pixels, samples : (n,) arrays
-    sobol_keys : (7,) uint64
+    sobol_keys : (8,) uint64
     start : int
         Lane ``j`` is sample ``start + j``.
     surface, options, whitted : tuples

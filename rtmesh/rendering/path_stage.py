@@ -308,9 +308,9 @@ class PathStage:
         transmissive = self.surface[2]
         self._camera_media = (kernel_input(it.camera_media(transmissive), np.int64) if transmissive.any()
                               else np.zeros(0, np.int64))
-        # the first vertex's light, BSDF and (whitted) AO points (rtmesh.rendering.path_kernel)
+        # the first vertex's light, BSDF and (whitted) AO points and light choice (rtmesh.rendering.path_kernel)
         self._sobol_keys = sequence_keys("zsobol" if settings.sampler == "zsobol" else "sobol", settings.seed,
-                                         (Dim.PATH_LIGHT, Dim.PATH_BSDF, Dim.AO), settings.spp,
+                                         (Dim.PATH_LIGHT, Dim.PATH_BSDF, Dim.AO, Dim.PATH_CHOICE), settings.spp,
                                          (settings.width, settings.height))
         with np.errstate(over="ignore"):  # the hash's products wrap modulo 2**64 by design
             self._seed_key = mix64(np.uint64(settings.seed % (1 << 64)) ^ np.uint64(0x5A17_7ACE_D00D_F00D))

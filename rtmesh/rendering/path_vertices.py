@@ -51,7 +51,7 @@ from rtmesh.rendering.whitted_rows import light_factor
 from rtmesh.sampling.alias import alias_sample_remapped
 from rtmesh.sampling.hashing import mix64, uniform
 from rtmesh.sampling.mis import power_heuristic
-from rtmesh.sampling.zsobol import sequence_ray_pair
+from rtmesh.sampling.zsobol import sequence_number, sequence_ray_pair
 
 # Sobol sequences hold 2**32 points; later samples take hashed numbers
 SOBOL_LIMIT = 1 << 32
@@ -337,7 +337,7 @@ def sample_lights(lanes, vertices, shadows, keys, pixels, samples, sobol_keys, s
         The module's records.
     keys, pixels, samples : (n,) arrays
         Each sample's random key, pixel and sample index (:func:`rtmesh.rendering.path_kernel.trace_paths`).
-    sobol_keys : (7,) uint64
+    sobol_keys : (8,) uint64
     start : int
         Lane ``j`` is sample ``start + j``.
     geometry, surface, lights, env, options, whitted, motion : tuples
@@ -418,16 +418,22 @@ def sample_lights(lanes, vertices, shadows, keys, pixels, samples, sobol_keys, s
                     pick, lu1 = alias_sample_remapped(group_probability[lo:hi], group_alias[lo:hi], lu1)
                     chosen = group_order[lo + pick]
                     count_f = np.float64(light_samples)
-                elif by_tree:
-                    # by the lights' importance at this vertex (rtmesh.lights.light_tree)
-                    chosen, tree_pmf = light_tree.choose_light(tree, hx, hy, hz, nx, ny, nz,
-                                                               uniform(light_key, base + LIGHT_CHOICE))
-                    if chosen < 0:
-                        continue
-                    count_f = np.float64(area_count)
                 else:
-                    chosen = alias_sample(light_probability, light_alias, uniform(light_key, base + LIGHT_CHOICE))
+                    # the light's number: at the first vertex one of the pixel's stratified
+                    # set (a dimension of its own, its strata not following the pixel
+                    # position: zsobol.sequence_number), later a hashed one
+                    if sobol and sample_index * light_samples + kk < SOBOL_LIMIT:
+                        uc = sequence_number(sobol_keys, 3, pixel, sample_index, kk, light_samples, light_block)
+                    else:
+                        uc = uniform(light_key, base + LIGHT_CHOICE)
                     count_f = np.float64(area_count)
+                    if by_tree:
+                        # by the lights' importance at this vertex (rtmesh.lights.light_tree)
+                        chosen, tree_pmf = light_tree.choose_light(tree, hx, hy, hz, nx, ny, nz, uc)
+                        if chosen < 0:
+                            continue
+                    else:
+                        chosen = alias_sample(light_probability, light_alias, uc)
                 nee_limit = (clamp if depth > 0 else 0.0) / count_f
                 # an emitter on a moving object where it is at the lane's time
                 light = light_at(light_rows, chosen, face_mover, moves, lane_time[lane], moved, lane)

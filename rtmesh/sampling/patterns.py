@@ -48,6 +48,7 @@ class Dim(IntEnum):
     PHOTON_POINT = (1 << 29) + 4  # a photon pass's emission points (Sobol pairs over the photon index)
     PHOTON_DIRECTION = (1 << 29) + 6  # and its emission directions
     DITHER = (1 << 29) + 8  # the blue-noise thresholds of 8-bit output (one number; see rtmesh.io.images)
+    PATH_CHOICE = (1 << 29) + 10  # the path integrator's light choice at its first vertex (one number)
 
 
 def dimension_key(seed, dimension):

@@ -38,7 +38,7 @@ import itertools
 import numpy as np
 
 from rtmesh.core.compiled import kernel, row
-from rtmesh.sampling.hashing import GOLDEN, mix64, pixel_sequence
+from rtmesh.sampling.hashing import GOLDEN, mix64, permutation_element, pixel_sequence, uniform
 from rtmesh.sampling.lowdiscrepancy import SOBOL1_TABLES, reverse_bits, scramble_seed, sobol_bits, sobol_pair
 
 # the 24 permutations of a base-4 digit, one row each
@@ -316,6 +316,37 @@ def sequence_pair(keys, which, pixel, sample):
         return zsobol_pair(key, morton_code(np.uint64(pixel), keys[WIDTH]), np.uint64(sample), np.uint64(0),
                            log2_spp, _ONE, keys[LEVELS], log2_spp)
     return sobol_pair(pixel_sequence(key, np.uint64(pixel)), sample)
+
+
+@row
+def sequence_number(keys, which, pixel, sample, ray, rays, log2_block):
+    """One number in [0, 1) of ray ``ray`` of the ``rays`` a pixel sample sends (int64 all)
+    in the dimension ``which`` of a :func:`sequence_keys` record, for a one-dimensional choice
+    (the light a light sample takes): a pixel's ``spp * rays`` numbers fall in distinct
+    strata of ``2^log2_block``, and which sample gets which stratum does not follow the
+    sample index.
+
+    Under zsobol, the first coordinate of :func:`sequence_ray_pair`'s point (blue noise
+    across pixels; zsobol's per-dimension digit permutations decorrelate it from the other
+    dimensions, as in pbrt-v4).  Under sobol, a jittered point in stratum
+    :func:`rtmesh.sampling.hashing.permutation_element` of the sample's index within its
+    block, as pbrt-v4's padded samplers draw one-dimensional samples: the first coordinate
+    of a pixel's own (0,2)-sequence would put the samples that make one choice (those of
+    one stratum of values) at the same in-pixel index bits as the samples of one stratum of
+    the pixel position, and so choose a rare light from one part of the pixel only (a
+    pixel an edge crosses then gives all such samples to one side).
+    """
+    key = keys[4 + which]
+    if keys[ZORDER] == _ONE:
+        return zsobol_pair(key, morton_code(np.uint64(pixel), keys[WIDTH]), np.uint64(sample), np.uint64(ray),
+                           keys[LOG2_SPP], np.uint64(rays), keys[LEVELS], np.uint64(log2_block))[0]
+    j = sample * rays + ray
+    block = np.int64(1) << log2_block
+    # one permutation per pixel and block of indices (adaptive rounds continue the index)
+    stream = mix64(pixel_sequence(key, np.uint64(pixel)) ^ (np.uint64(j >> log2_block) * GOLDEN))
+    within = j & (block - 1)
+    stratum = permutation_element(within, block, stream)
+    return (stratum + uniform(stream, within)) / block
 
 
 @row

@@ -71,3 +71,36 @@ def test_the_tree_needs_the_path_integrator():
         RenderSettings(integrator="whitted", light_sampler="tree").validate()
     with pytest.raises(ValueError, match="light_sampler must be one of power, tree"):
         RenderSettings(integrator="path", light_sampler="bvh").validate()
+
+
+@pytest.fixture(scope="module")
+def two_lamps():
+    """A grey floor seen from above under two point lights of equal power far apart: at
+    each floor point one lamp gives several times the light the other does."""
+    from rtmesh.lights.point_lights import PointLight
+    from rtmesh.materials.table import Material
+    from rtmesh.scene.camera import Camera
+    from rtmesh.scene.model import Scene
+    from scenes import floor_quad, part
+
+    lights = [PointLight([-3.0, 0.0, 4.0], 10.0), PointLight([3.0, 0.0, 4.0], 10.0)]
+    camera = Camera([0.0, 0.0, 6.0], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0], 50.0)
+    return Scene.from_parts([part("floor", floor_quad(8.0))], [Material("floor", diffuse=0.5)], lights, camera)
+
+
+def _direct(scene, sampler, spp, seed=1):
+    settings = RenderSettings(width=24, height=24, spp=spp, integrator="path", light_samples=1, max_depth=1,
+                              sampler=sampler, seed=seed, threads=1)
+    return np.asarray(Integrator(scene, settings).render().image, np.float64)
+
+
+@pytest.mark.parametrize("sampler", ["sobol", "zsobol", "jittered"])
+def test_the_first_vertexs_light_choice_is_stratified_over_a_pixels_samples(two_lamps, sampler):
+    # two samples a pixel: a stratified choice takes each lamp once (zsobol.sequence_number),
+    # so what is left is the light's change across the pixel; hashed choices (the random
+    # sampler) give half the pixels one lamp twice
+    reference = _direct(two_lamps, "sobol", 256)
+    stratified = _relative(_direct(two_lamps, sampler, 2), reference)
+    hashed = _relative(_direct(two_lamps, "random", 2), reference)
+    assert hashed > 0.2
+    assert stratified < 0.1 * hashed

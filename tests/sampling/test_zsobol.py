@@ -15,8 +15,8 @@ from rtmesh.lights.point_lights import PointLight
 from rtmesh.materials.table import Material
 from rtmesh.rendering.settings import RenderSettings
 from rtmesh.sampling.patterns import Dim, decorrelated_points, dimension_key, pixel_offsets
-from rtmesh.sampling.zsobol import (PERMUTATIONS, block_bits, sequence_keys, sequence_pair, sequence_ray_pair,
-                                    zsobol_index)
+from rtmesh.sampling.zsobol import (PERMUTATIONS, block_bits, sequence_keys, sequence_number, sequence_pair,
+                                    sequence_ray_pair, zsobol_index)
 from rtmesh.scene.camera import Camera
 from rtmesh.scene.model import Scene
 
@@ -212,6 +212,47 @@ def test_path_kernel_light_samples_are_the_samplers_rays_of_a_hit(sampler, rays)
     if rays == 1:
         np.testing.assert_array_equal(_path_ray_pairs(keys, 0, pixel, sample, 0, 1, block_bits(spp)),
                                       _path_pairs(keys, 0, pixel, sample))
+
+
+@numba.njit
+def _numbers(keys, which, pixel, sample, ray, rays, log2_block):
+    out = np.empty(len(pixel))
+    for i in range(len(pixel)):
+        out[i] = sequence_number(keys, which, np.uint64(pixel[i]), sample[i], ray, rays, log2_block)
+    return out
+
+
+@pytest.mark.parametrize("sampler", ["sobol", "zsobol"])
+@pytest.mark.parametrize("rays", [1, 2])
+def test_light_choice_numbers_are_stratified_in_a_dimension_of_their_own(sampler, rays):
+    # the path kernel's first-vertex light choice (zsobol.sequence_number): a pixel's
+    # spp x rays numbers (two adaptive rounds' worth) take distinct strata, and the samples
+    # of one stratum are not those of one stratum of the light points (the earlier design
+    # rescaled the light pair's first number, so they were)
+    width, height, spp = 16, 16, 32
+    keys = sequence_keys(sampler, 9, (Dim.PATH_LIGHT, Dim.PATH_BSDF, Dim.AO, Dim.PATH_CHOICE), spp,
+                         (width, height))
+    block = block_bits(spp, rays)
+    pixels = np.repeat(np.arange(width * height), spp)
+    samples = np.tile(np.arange(spp), width * height)
+    spread = []
+    for round_ in range(2):
+        numbers = np.stack([_numbers(keys, 3, pixels, samples + round_ * spp, ray, rays, block)
+                            for ray in range(rays)], axis=-1).reshape(width * height, spp * rays)
+        assert numbers.min() >= 0.0 and numbers.max() < 1.0
+        strata = np.floor(numbers * (1 << block)).astype(np.int64)
+        assert all(len(np.unique(row)) == spp * rays for row in strata)
+        points = np.stack([_path_ray_pairs(keys, 0, pixels, samples + round_ * spp, ray, rays, block)[:, 0]
+                           for ray in range(rays)], axis=-1).reshape(width * height, spp * rays)
+        # the light points' x (in eighths) of the samples whose number lies in the first eighth
+        chosen = [np.unique(np.floor(p[n < 0.125] * 8)) for n, p in zip(numbers, points)]
+        spread.append(np.mean([len(c) for c in chosen]))
+    # a random choice of 4 or 8 of the pixel's points: ~3 or ~5 distinct eighths; one if dependent
+    assert min(spread) > (2.5 if spp * rays == 32 else 4.0)
+    if sampler == "zsobol":
+        # zsobol's number is the first coordinate of the dimension's point (blue noise)
+        np.testing.assert_array_equal(_numbers(keys, 3, pixels, samples, 0, rays, block),
+                                      _path_ray_pairs(keys, 3, pixels, samples, 0, rays, block)[:, 0])
 
 
 def test_spp_not_a_power_of_two_rounds_up_with_a_warning(caplog):
