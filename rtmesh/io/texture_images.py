@@ -79,6 +79,11 @@ class Texture:
         The UV transform (the identity when none was given).
     transformed : bool
         Whether :attr:`transform` is not the identity.
+    bytes : (h, w, c) uint8 or None
+        The 8-bit texels :attr:`pixels` were decoded from (:meth:`from_8bit`), which the
+        kernels' atlas keeps instead of float values; None for other textures.
+    srgb : bool
+        Whether :attr:`bytes`' first three channels are sRGB-encoded.
 
     Notes
     -----
@@ -106,6 +111,8 @@ class Texture:
         self.transform = matrix
         # the identity (every MTL texture, most glTF ones) skips the multiply in sample()
         self.transformed = not np.array_equal(matrix, IDENTITY_UV_TRANSFORM)
+        self.bytes = None
+        self.srgb = False
 
     @classmethod
     def from_8bit(cls, pixels, srgb=True, **options):
@@ -113,17 +120,24 @@ class Texture:
 
         Parameters
         ----------
-        pixels : (h, w, c) uint8
+        pixels : (h, w, c) or (h, w) uint8
         srgb : bool
             True for colour textures (base colour, diffuse); False for data (normals,
             roughness), which are stored linearly.
         """
-        values = np.asarray(pixels, dtype=np.float64) / 255.0
+        encoded = np.asarray(pixels, dtype=np.uint8)
+        if encoded.ndim == 2:
+            # one channel (grey): channels are the last axis, as for the others
+            encoded = encoded[:, :, None]
+        values = encoded / 255.0
         if srgb:
             # alpha is always linear
             colour = srgb_to_linear(values[..., :3])
             values = np.concatenate([colour, values[..., 3:]], axis=-1)
-        return cls(values, **options)
+        texture = cls(values, **options)
+        texture.bytes = encoded
+        texture.srgb = bool(srgb)
+        return texture
 
     @classmethod
     def from_pil(cls, image, srgb=True, **options):

@@ -11,6 +11,7 @@ import numpy as np
 
 from rtmesh.core.compile_ahead import KernelGroup, compile_locked
 from rtmesh.core.compiled import entry_point
+from rtmesh.io.texture_atlas import DESCRIPTOR_WIDTH
 from rtmesh.lights import light_table as lt
 from rtmesh.lights.light_tree import NO_TREE
 from rtmesh.materials import lobes, models
@@ -52,9 +53,9 @@ def small_records():
                 z((0, 12)), z((0, 6)))
     surface = (z(1, np.int64), z((1, lobes.PARAMETER_WIDTH)), z(1, bool), z((1, 3)), z((1, 3)), z((1, 4)),
                energy, z((1, 6), np.int64), z((1, 6), np.int64), z(1), z(1, np.int64), z(1), z(1),
-               z(1, np.float32), z((1, 12)), z(1), z(0, np.int64))
+               z(1, np.float32), z((1, DESCRIPTOR_WIDTH)), z(1), z(0, np.int64))
     lights = (z((1, lt.WIDTH)), z(1), z(1, np.int64), z(1), z(1, np.int64), z(0, np.int64), -1, z(1, np.float32),
-              z((0, 12)), z(0, np.int64), NO_TREE)
+              z((0, DESCRIPTOR_WIDTH)), z(0, np.int64), NO_TREE)
     env = (z((1, 3, 3)), z(2), z((1, 2)), z((1, 1)), 1.0, 1.0, 0.0)
     return energy, geometry, surface, lights, env
 

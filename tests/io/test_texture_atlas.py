@@ -45,3 +45,27 @@ def test_textures_are_named_by_identity(textures):
     assert atlas.index(None) == -1
     with pytest.raises(KeyError):
         atlas.index(Texture(np.ones((1, 1, 3))))
+
+
+def _as_float(texture):
+    """The same texture without its bytes: the atlas keeps it as float32 texels."""
+    return Texture(texture.pixels, wrap=(texture.wrap_u, texture.wrap_v), transform=texture.transform)
+
+
+def test_8bit_textures_are_kept_as_bytes_and_read_as_their_float32_texels():
+    # every byte value, in sRGB colour with linear alpha, linear data, and grey; odd sizes
+    # so that regions start mid-word unless the atlas aligns them
+    rng = np.random.default_rng(3)
+    textures = [Texture.from_8bit(rng.integers(0, 256, (33, 17, 4), dtype=np.uint8), srgb=True),
+                Texture.from_8bit(rng.integers(0, 256, (9, 31, 3), dtype=np.uint8), srgb=False, wrap="mirror"),
+                Texture.from_8bit(rng.integers(0, 256, (5, 7), dtype=np.uint8), srgb=True, wrap="clamp"),
+                Texture(rng.random((6, 5, 3)))]
+    atlas = TextureAtlas(textures)
+    floats = TextureAtlas([_as_float(t) for t in textures])
+    # bytes take a quarter of the float32 words (each texture's region from a whole word)
+    assert atlas.texels.size == sum(-(-n // 4) for n in (33 * 17 * 4, 9 * 31 * 3, 5 * 7)) + 6 * 5 * 3
+    assert floats.texels.size == 33 * 17 * 4 + 9 * 31 * 3 + 5 * 7 + 6 * 5 * 3
+    uv = rng.uniform(-1.5, 2.5, (3000, 2))
+    for i in range(len(textures)):
+        np.testing.assert_array_equal(_lookups(atlas.texels, atlas.descriptors, i, uv),
+                                      _lookups(floats.texels, floats.descriptors, i, uv))
