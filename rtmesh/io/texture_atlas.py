@@ -63,7 +63,7 @@ class TextureAtlas:
         self.textures = list(textures)
         rows, words = [], 0
         for texture in self.textures:
-            h, w, c = texture.pixels.shape
+            h, w, c = texture.shape
             encoding = FLOAT32 if texture.bytes is None else (SRGB8 if texture.srgb else LINEAR8)
             size = h * w * c if encoding == FLOAT32 else -(-h * w * c // 4)
             rows.append([words if encoding == FLOAT32 else 4 * words, w, h, c, WRAP_MODES.index(texture.wrap_u),

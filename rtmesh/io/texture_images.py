@@ -18,8 +18,10 @@ WRAP_MODES = ("repeat", "clamp", "mirror")
 # the 2 x 3 affine UV transform of a texture that has none: ``uv' = A uv + b`` as ``[A | b]``
 IDENTITY_UV_TRANSFORM = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 
-# The largest texture rtmesh reads, in pixels (8192 x 8192): a texture is kept as float64
-# texels, 24-32 bytes a pixel (2 GiB at this size).  A larger one is refused with a message
+# The largest texture rtmesh reads, in pixels (8192 x 8192): an 8-bit texture is kept as its
+# bytes (and the kernels' copy, 6-8 bytes a pixel), a float one as float64 texels and a float32
+# copy (36-48 bytes a pixel, 3 GiB at this size); the scene build decodes an 8-bit one to
+# float64 for its NumPy lookups, one texture at a time.  A larger one is refused with a message
 # naming the file (docs/LIMITS.md); PIL's own limit (its decompression-bomb guard) lies
 # above it and is reported the same way.
 MAX_TEXTURE_PIXELS = 1 << 26
@@ -104,7 +106,7 @@ class Texture:
         pixels = np.asarray(pixels, dtype=np.float64)
         if pixels.ndim == 2:
             pixels = pixels[:, :, None]
-        self.pixels = pixels
+        self._pixels = pixels
         self.wrap = wrap
         self.wrap_u, self.wrap_v = modes
         self.name = name
@@ -113,6 +115,21 @@ class Texture:
         self.transformed = not np.array_equal(matrix, IDENTITY_UV_TRANSFORM)
         self.bytes = None
         self.srgb = False
+
+    @property
+    def pixels(self):
+        """(h, w, c) float64 texel values, linear.  A texture read from 8-bit texels keeps
+        only its :attr:`bytes` and decodes them here at each access (the scene build's few
+        NumPy lookups; the kernels read the bytes): float64 texels would take eight times
+        their memory for the life of the scene."""
+        if self._pixels is not None:
+            return self._pixels
+        return _decode_8bit(self.bytes, self.srgb)
+
+    @property
+    def shape(self):
+        """``(h, w, c)``, without decoding anything."""
+        return (self._pixels if self._pixels is not None else self.bytes).shape
 
     @classmethod
     def from_8bit(cls, pixels, srgb=True, **options):
@@ -129,12 +146,9 @@ class Texture:
         if encoded.ndim == 2:
             # one channel (grey): channels are the last axis, as for the others
             encoded = encoded[:, :, None]
-        values = encoded / 255.0
-        if srgb:
-            # alpha is always linear
-            colour = srgb_to_linear(values[..., :3])
-            values = np.concatenate([colour, values[..., 3:]], axis=-1)
-        texture = cls(values, **options)
+        # (one texel stands in for the image while the options are checked)
+        texture = cls(np.zeros((1, 1, encoded.shape[2])), **options)
+        texture._pixels = None
         texture.bytes = encoded
         texture.srgb = bool(srgb)
         return texture
@@ -159,7 +173,7 @@ class Texture:
 
     @property
     def channels(self):
-        return self.pixels.shape[2]
+        return self.shape[2]
 
     @staticmethod
     def _wrap(i, size, mode):
@@ -184,7 +198,7 @@ class Texture:
         """
         if self.transformed:
             uv = uv @ self.transform[:, :2].T + self.transform[:, 2]
-        h, w, _ = self.pixels.shape
+        h, w, _ = self.shape
         x = uv[:, 0] * w - 0.5
         y = (1.0 - uv[:, 1]) * h - 0.5  # v grows upward, rows grow downward
         x0, y0 = np.floor(x), np.floor(y)
@@ -215,6 +229,16 @@ class Texture:
         n /= np.linalg.norm(n, axis=2, keepdims=True)
         return Texture(0.5 + 0.5 * n, wrap=self.wrap, name=f"{self.name} (normals)",
                        transform=self.transform)
+
+
+def _decode_8bit(encoded, srgb):
+    """(h, w, c) uint8 texels as linear float64: divided by 255, the first three channels
+    decoded from sRGB when ``srgb`` (alpha is always linear)."""
+    values = encoded / 255.0
+    if srgb:
+        colour = srgb_to_linear(values[..., :3])
+        values = np.concatenate([colour, values[..., 3:]], axis=-1)
+    return values
 
 
 def load_texture(path, srgb=True, wrap="repeat", cache=None):

@@ -194,7 +194,7 @@ class LightTable:
             if isinstance(light, ProjectorLight):
                 forward, right, up = light.frame()
                 half_height = math.tan(math.radians(light.fov) / 2.0)
-                height, width = light.image.pixels.shape[:2]
+                height, width = light.image.shape[:2]
                 r = _row(PROJECTOR, light.position, forward, light.intensity, right, up, 0.0, 0.0, 0.0)
                 r[IMAGE], r[HALF_WIDTH], r[HALF_HEIGHT] = atlas.index(light.image), half_height * width / height, \
                     half_height

@@ -100,7 +100,7 @@ class ProjectorLight:
         ahead = depth > 0.0
         depth = np.where(ahead, depth, 1.0)
         half_height = np.tan(np.radians(self.fov) / 2.0)
-        height, width = self.image.pixels.shape[:2]
+        height, width = self.image.shape[:2]
         half_width = half_height * width / height
         uv = np.column_stack([0.5 - (wi @ right) / depth / (2.0 * half_width),
                               0.5 - (wi @ up) / depth / (2.0 * half_height)])

@@ -72,3 +72,22 @@ def test_wrap_modes_apply_per_axis():
 def test_unknown_wrap_mode_is_an_error():
     with pytest.raises(ValueError, match="wrap mode"):
         Texture(PIXELS, wrap=("repeat", "tile"))
+
+
+def test_an_8bit_texture_keeps_its_bytes_and_decodes_them_when_read():
+    # float64 texels would take eight times the bytes' memory for the life of the scene:
+    # an 8-bit texture keeps the bytes, and each read of its pixels decodes them anew
+    texels = np.random.default_rng(5).integers(0, 256, (6, 9, 4), dtype=np.uint8)
+    texture = Texture.from_8bit(texels, srgb=True, wrap="clamp")
+    assert texture.shape == (6, 9, 4) and texture.channels == 4
+    np.testing.assert_array_equal(texture.bytes, texels)
+    first, second = texture.pixels, texture.pixels
+    assert first is not second
+    values = texels / 255.0
+    expected = np.where(values <= 0.04045, values / 12.92, ((values + 0.055) / 1.055) ** 2.4)
+    np.testing.assert_allclose(first[..., :3], expected[..., :3], rtol=1e-12)
+    np.testing.assert_array_equal(first[..., 3], values[..., 3])
+    np.testing.assert_array_equal(first, second)
+    # a float texture keeps its texels
+    floats = Texture(first)
+    assert floats.bytes is None and floats.pixels is floats.pixels
