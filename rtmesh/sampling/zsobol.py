@@ -330,11 +330,10 @@ def sequence_number(keys, which, pixel, sample, ray, rays, log2_block):
     across pixels; zsobol's per-dimension digit permutations decorrelate it from the other
     dimensions, as in pbrt-v4).  Under sobol, a jittered point in stratum
     :func:`rtmesh.sampling.hashing.permutation_element` of the sample's index within its
-    block, as pbrt-v4's padded samplers draw one-dimensional samples: the first coordinate
-    of a pixel's own (0,2)-sequence would put the samples that make one choice (those of
-    one stratum of values) at the same in-pixel index bits as the samples of one stratum of
-    the pixel position, and so choose a rare light from one part of the pixel only (a
-    pixel an edge crosses then gives all such samples to one side).
+    block, as pbrt-v4's padded samplers draw one-dimensional samples: a random permutation
+    of the index, where the nested index scramble of :func:`sequence_ray_pair` keeps aligned
+    blocks of indices together.  (The first coordinate of the dimension's own Sobol
+    sequence, as under zsobol, was not measured against it.)
     """
     key = keys[4 + which]
     if keys[ZORDER] == _ONE:

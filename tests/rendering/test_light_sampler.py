@@ -5,6 +5,7 @@ thread-count independent, and reachable from scene files and the command line.""
 import numpy as np
 import pytest
 
+from benchmarks._lib import relative_rmse
 from benchmarks.bench_instancing import _scene
 from rtmesh import api
 from rtmesh.cli import main
@@ -26,26 +27,17 @@ def _render(scene, sampler, seed, spp=8, threads=2):
     return np.asarray(Integrator(scene, settings).render().image, np.float64)
 
 
-def _blocks(image, k=6):
-    h, w = image.shape[0] // k * k, image.shape[1] // k * k
-    return image[:h, :w].reshape(h // k, k, w // k, k, 3).mean(axis=(1, 3))
-
-
-def _relative(a, b):
-    return float(np.sqrt(np.mean((a - b) ** 2)) / np.mean(b))
-
-
 def test_the_tree_is_unbiased_and_less_noisy_among_many_emitters(balls):
     power = [_render(balls, "power", seed) for seed in (1, 2, 3, 4)]
     tree = [_render(balls, "tree", seed) for seed in (1, 2, 3, 4)]
     # noise: the difference of two seeds (over sqrt 2)
-    noise_power = (_relative(power[0], power[1]) + _relative(power[2], power[3])) / 2
-    noise_tree = (_relative(tree[0], tree[1]) + _relative(tree[2], tree[3])) / 2
+    noise_power = (relative_rmse(power[0], power[1]) + relative_rmse(power[2], power[3])) / 2
+    noise_tree = (relative_rmse(tree[0], tree[1]) + relative_rmse(tree[2], tree[3])) / 2
     assert noise_tree < 0.85 * noise_power
     # the means of four seeds agree as block means, within their noise
     mean_power, mean_tree = np.mean(power, axis=0), np.mean(tree, axis=0)
-    block_noise = _relative(_blocks(power[0] + power[1]), _blocks(power[2] + power[3])) / 2
-    assert _relative(_blocks(mean_tree), _blocks(mean_power)) < 3 * block_noise
+    block_noise = relative_rmse(power[0] + power[1], power[2] + power[3], block=6) / 2
+    assert relative_rmse(mean_tree, mean_power, block=6) < 3 * block_noise
     assert np.mean(mean_tree) == pytest.approx(np.mean(mean_power), rel=0.02)
 
 
@@ -100,7 +92,7 @@ def test_the_first_vertexs_light_choice_is_stratified_over_a_pixels_samples(two_
     # so what is left is the light's change across the pixel; hashed choices (the random
     # sampler) give half the pixels one lamp twice
     reference = _direct(two_lamps, "sobol", 256)
-    stratified = _relative(_direct(two_lamps, sampler, 2), reference)
-    hashed = _relative(_direct(two_lamps, "random", 2), reference)
+    stratified = relative_rmse(_direct(two_lamps, sampler, 2), reference)
+    hashed = relative_rmse(_direct(two_lamps, "random", 2), reference)
     assert hashed > 0.2
     assert stratified < 0.1 * hashed
