@@ -132,10 +132,10 @@ def packet_runner(accel, calls, threads):
     def trace(share):
         for call in share:
             if call[0] == "intersect":
-                intersect_rays(library.intersect16, handle, *embree_packets.closest_rays(call[1], call[2]), flags,
+                intersect_rays(library.intersect, handle, *embree_packets.closest_rays(call[1], call[2]), flags,
                                accel._face_offset)
             else:
-                occluded_rays(library.occluded16, handle, *embree_packets.shadow_rays(call[1], call[2], call[3]),
+                occluded_rays(library.occluded, handle, *embree_packets.shadow_rays(call[1], call[2], call[3]),
                               call[4], flags)
 
     shares = [calls[i::threads] for i in range(threads)]

@@ -7,10 +7,11 @@ tool measures that floor: the smallest kernel that renders the peer image, with 
 renderer would add (no materials table, no film sums for error estimates, no highlights,
 no emission, no origin offsets: the shadow rays start on the surface with ``tnear``).
 
-Per 16-wide packet of one pixel's samples (the packets of rtmesh's fused stage at 16 spp)
-it hashes the sample positions, forms pinhole rays, traces them with ``rtcIntersect16``
+Per packet of 16 of one pixel's samples (the packets of rtmesh's fused stage at 16 spp)
+it hashes the sample positions, forms pinhole rays, traces them with Embree's packet query
+(:func:`rtmesh.geometry.embree_packets.query_packet`: ``rtcIntersectN`` of the native width)
 (coherent), interpolates the vertex normals, forms Lambert + one point light, traces the
-shadow packet with ``rtcOccluded16`` (coherent) and adds the samples to the pixel.  It
+shadow packet with ``rtcOccludedN`` (coherent) and adds the samples to the pixel.  It
 runs on rtmesh's own Embree scene, camera and normal tables (taken from an
 :class:`~rtmesh.rendering.integrator.Integrator`), in two compiled variants: float32
 arithmetic throughout, and float64 (packets float32, as Embree needs).
@@ -75,20 +76,20 @@ def make_floor(real):
         return x
 
     @numba.njit(nogil=True, error_model="numpy")
-    def render(intersect16, occluded16, scene, width, height, spp, camera, light, power, faces, smooth,
+    def render(intersect, occluded, scene, width, height, spp, camera, light, power, faces, smooth,
                normals, image, ticks):
         """Adds the mean of ``spp`` samples of each pixel to ``image`` (height, width);
         ``ticks[0]``, ``ticks[1]`` gather the counter ticks inside the two queries."""
         # one packet of each kind, with rtmesh's packet helpers (64-byte aligned buffers, the
         # lane fields no query changes)
         flags = np.int64(ep.RTC_RAY_QUERY_FLAG_COHERENT)
-        rays, words, valid, args = ep.packet_buffers(np.int64(ep.RAYHIT_WORDS), np.int64(1), flags)
-        shadow, shadow_words, shadow_valid, _ = ep.packet_buffers(np.int64(ep.RAY_WORDS), np.int64(1), flags)
+        rays, words, valid, args = ep.packet_buffers(np.int64(1), flags)
+        shadow, shadow_words, shadow_valid, _ = ep.packet_buffers(np.int64(1), flags)
         for lane in range(LANES):
             valid[lane] = -1
             ep.set_lane(rays, words, lane, camera[0], camera[1], camera[2], 0.0, 0.0, 1.0, ep.DEFAULT_TFAR)
             ep.set_lane(shadow, shadow_words, lane, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, np.float32(0.0))
-            shadow[ep.TNEAR * LANES + lane] = tnear
+            shadow[ep.lane_word(ep.TNEAR, lane)] = tnear
         term = np.empty(LANES, real)
         ox, oy, oz = real(camera[0]), real(camera[1]), real(camera[2])
         ax, bx, ay, by = real(camera[3]), real(camera[4]), real(camera[5]), real(camera[6])
@@ -109,31 +110,31 @@ def make_floor(real):
                     sx = (real(column) + real(h1) * to_unit) * ax + bx
                     sy = (real(line) + real(h2) * to_unit) * ay + by
                     inv = one / np.sqrt(sx * sx + sy * sy + one)
-                    rays[ep.DIR * LANES + lane] = np.float32((fx + sx * rx + sy * ux) * inv)
-                    rays[(ep.DIR + 1) * LANES + lane] = np.float32((fy + sx * ry + sy * uy) * inv)
-                    rays[(ep.DIR + 2) * LANES + lane] = np.float32((fz + sx * rz + sy * uz) * inv)
-                    rays[ep.TFAR * LANES + lane] = ep.DEFAULT_TFAR
+                    rays[ep.lane_word(ep.DIR, lane)] = np.float32((fx + sx * rx + sy * ux) * inv)
+                    rays[ep.lane_word(ep.DIR + 1, lane)] = np.float32((fy + sx * ry + sy * uy) * inv)
+                    rays[ep.lane_word(ep.DIR + 2, lane)] = np.float32((fz + sx * rz + sy * uz) * inv)
+                    rays[ep.lane_word(ep.TFAR, lane)] = ep.DEFAULT_TFAR
                     ep.clear_hit(words, lane)
                 start = cycle_counter()
-                intersect16(valid.ctypes.data, scene, rays.ctypes.data, args.ctypes.data)
+                ep.query_packet(intersect, scene, valid, rays, args, 0)
                 ticks[0] += cycle_counter() - start
                 for lane in range(LANES):
                     term[lane] = zero
                     shadow_valid[lane] = 0
-                    if words[ep.GEOM_ID * LANES + lane] == ep.INVALID_ID:
+                    if words[ep.lane_word(ep.GEOM_ID, lane)] == ep.INVALID_ID:
                         continue
-                    f = words[ep.PRIM_ID * LANES + lane]
-                    t = real(rays[ep.TFAR * LANES + lane])
-                    u, v = real(rays[ep.U * LANES + lane]), real(rays[ep.V * LANES + lane])
+                    f = words[ep.lane_word(ep.PRIM_ID, lane)]
+                    t = real(rays[ep.lane_word(ep.TFAR, lane)])
+                    u, v = real(rays[ep.lane_word(ep.U, lane)]), real(rays[ep.lane_word(ep.V, lane)])
                     if smooth[f]:  # per face [n0, n1 - n0, n2 - n0]
                         nx = real(normals[f, 0]) + u * real(normals[f, 3]) + v * real(normals[f, 6])
                         ny = real(normals[f, 1]) + u * real(normals[f, 4]) + v * real(normals[f, 7])
                         nz = real(normals[f, 2]) + u * real(normals[f, 5]) + v * real(normals[f, 8])
                     else:  # the face's unit normal
                         nx, ny, nz = real(faces[f, 9]), real(faces[f, 10]), real(faces[f, 11])
-                    px = ox + t * real(rays[ep.DIR * LANES + lane])
-                    py = oy + t * real(rays[(ep.DIR + 1) * LANES + lane])
-                    pz = oz + t * real(rays[(ep.DIR + 2) * LANES + lane])
+                    px = ox + t * real(rays[ep.lane_word(ep.DIR, lane)])
+                    py = oy + t * real(rays[ep.lane_word(ep.DIR + 1, lane)])
+                    pz = oz + t * real(rays[ep.lane_word(ep.DIR + 2, lane)])
                     wx, wy, wz = lx - px, ly - py, lz - pz
                     squared = wx * wx + wy * wy + wz * wz
                     distance = np.sqrt(squared)
@@ -141,20 +142,20 @@ def make_floor(real):
                     if cosine <= zero:
                         continue
                     shadow_valid[lane] = -1
-                    shadow[ep.ORG * LANES + lane] = np.float32(px)
-                    shadow[(ep.ORG + 1) * LANES + lane] = np.float32(py)
-                    shadow[(ep.ORG + 2) * LANES + lane] = np.float32(pz)
-                    shadow[ep.DIR * LANES + lane] = np.float32(wx / distance)
-                    shadow[(ep.DIR + 1) * LANES + lane] = np.float32(wy / distance)
-                    shadow[(ep.DIR + 2) * LANES + lane] = np.float32(wz / distance)
-                    shadow[ep.TFAR * LANES + lane] = np.float32(distance * shorten)
+                    shadow[ep.lane_word(ep.ORG, lane)] = np.float32(px)
+                    shadow[ep.lane_word(ep.ORG + 1, lane)] = np.float32(py)
+                    shadow[ep.lane_word(ep.ORG + 2, lane)] = np.float32(pz)
+                    shadow[ep.lane_word(ep.DIR, lane)] = np.float32(wx / distance)
+                    shadow[ep.lane_word(ep.DIR + 1, lane)] = np.float32(wy / distance)
+                    shadow[ep.lane_word(ep.DIR + 2, lane)] = np.float32(wz / distance)
+                    shadow[ep.lane_word(ep.TFAR, lane)] = np.float32(distance * shorten)
                     term[lane] = power * cosine / squared
                 start = cycle_counter()
-                occluded16(shadow_valid.ctypes.data, scene, shadow.ctypes.data, args.ctypes.data)
+                ep.query_packet(occluded, scene, shadow_valid, shadow, args, 0)
                 ticks[1] += cycle_counter() - start
                 for lane in range(LANES):
                     # Embree marks an occluded ray by setting its tfar to -inf
-                    if shadow_valid[lane] != 0 and shadow[ep.TFAR * LANES + lane] != -np.inf:
+                    if shadow_valid[lane] != 0 and shadow[ep.lane_word(ep.TFAR, lane)] != -np.inf:
                         total += term[lane]
             image[line, column] += total * weight
 
@@ -172,7 +173,7 @@ def floor_inputs(integrator):
     # the peer scene's albedo times the light's (grey) intensity
     power = ALBEDO * float(np.asarray(light.intensity).reshape(-1)[0])
     library = packet_library()
-    return (library.intersect16, library.occluded16, it.accel._shared.handle, s.width, s.height, s.spp,
+    return (library.intersect, library.occluded, it.accel._shared.handle, s.width, s.height, s.spp,
             camera, np.asarray(light.position, dtype=np.float64), power, it.tables.faces, it.tables.smooth,
             np.ascontiguousarray(it.tables.vertex_normals))
 
@@ -238,7 +239,7 @@ def main():
     lines = [f"## {SECTION}", "", f"`python -m benchmarks.bench_floor --spp {args.spp} --runs {args.runs}`", "",
              f"Peer scene ({args.size}x{args.size}, {args.spp} spp, jittered), 1 thread, medians of {args.runs} "
              f"interleaved runs; {machine()}; the cycle counter ticks {rates:.2f} times a ns.", "",
-             "| kernel | ns a sample | x float32 floor | inside rtcIntersect16 | inside rtcOccluded16 | "
+             "| kernel | ns a sample | x float32 floor | inside the intersect queries | inside the occlusion queries | "
              "rest | image vs rtmesh (rel. RMSE) |", "|---|---:|---:|---:|---:|---:|---:|"]
     floor = per_sample["float32"]
     for name in (*variants, "rtmesh"):

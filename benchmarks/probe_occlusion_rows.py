@@ -11,9 +11,9 @@ counts the words it finds changed by someone else.
 
 Rows 12-20 (the hit part) are the ones the query rewrites; rows 21-29 (beyond an
 ``RTCRayHit16``) are a control and must stay 0.  This is why
-:func:`rtmesh.geometry.embree_packets.packet_buffers` gives every buffer room for a whole
-``RTCRayHit16`` after its last packet (:data:`~rtmesh.geometry.embree_packets.OCCLUSION_EXTENT`):
-without it two render threads corrupted the heap.  Needs two free cores to see the race.
+:func:`rtmesh.geometry.embree_packets.packet_buffers` gives every group of a packet a whole
+``RTCRayHitN`` (:data:`~rtmesh.geometry.embree_packets.OCCLUSION_EXTENT`): without room after
+the last packet two render threads corrupted the heap.  Needs two free cores to see the race.
 
 Usage::
 
@@ -21,6 +21,7 @@ Usage::
 """
 
 import argparse
+import ctypes
 import threading
 
 import numba
@@ -29,7 +30,7 @@ import trimesh
 
 from rtmesh.geometry import embree_packets as ep
 from rtmesh.geometry.accel import Accel
-from rtmesh.geometry.embree_library import aligned_array
+from rtmesh.geometry.embree_library import aligned_array, packet_library
 
 
 @numba.njit(nogil=True)
@@ -51,7 +52,9 @@ def probe(first_row, last_row, queries, seed=0):
     sphere, box = trimesh.creation.icosphere(3), trimesh.creation.box((4, 4, 4))
     accel = Accel(np.vstack([sphere.vertices, box.vertices]),
                   np.vstack([sphere.faces, box.faces + len(sphere.vertices)]), packets=True)
-    lanes = ep.LANES
+    lanes = 16  # rtcOccluded16, whatever width the kernels' packets use here
+    library = packet_library()
+    occluded16 = ep.PACKET_QUERY(ctypes.cast(library._lib.rtcOccluded16, ctypes.c_void_p).value)
     words = aligned_array(40 * lanes, np.int32)
     rays = words.view(np.float32)
     valid, args = aligned_array(lanes, np.int32), aligned_array(8, np.int32)
@@ -72,7 +75,7 @@ def probe(first_row, last_row, queries, seed=0):
             words[ep.MASK * lanes:(ep.FLAGS + 1) * lanes] = 0
             words[ep.MASK * lanes:(ep.MASK + 1) * lanes] = -1
             valid[:] = -1
-            accel._occluded16(valid.ctypes.data, accel._shared.handle, rays.ctypes.data, args.ctypes.data)
+            occluded16(valid.ctypes.data, accel._shared.handle, rays.ctypes.data, args.ctypes.data)
         stop[0] = 1
 
     def write():

@@ -59,11 +59,17 @@ def kernel_modules(package=None):
 @functools.cache
 def package_stamp():
     """SHA-256 of the sources of :func:`kernel_modules` (and their paths), read once per
-    process."""
+    process, and of the packet layout the kernels are compiled for
+    (the packets' group width, :data:`rtmesh.geometry.embree_packets.GROUP`, a property of
+    the CPU: numba's own cache key names the CPU too, but not where ``NUMBA_CPU_NAME`` makes
+    it generic)."""
+    from rtmesh.core.packet_group import native_group
+
     digest = hashlib.sha256()
     for name in kernel_modules():
         with open(os.path.join(_PACKAGE, name), "rb") as source:
             digest.update(name.encode() + b"\0" + source.read())
+    digest.update(b"packet group %d" % native_group())
     return digest.digest()
 
 

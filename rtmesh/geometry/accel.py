@@ -201,11 +201,11 @@ class Accel:
         if instances is not None:
             self._shared = _InstancedScene(library, vertices, self.faces, instances)
             self.vertices32 = self._shared.vertices32
-            self._intersect16, self._occluded16 = library.intersect16, library.occluded16
+            self._intersect, self._occluded = library.intersect, library.occluded
         elif self.packets:
             self._shared = embree_library.SharedScene(library, vertices, self.faces)
             self.vertices32 = self._shared.vertices32
-            self._intersect16, self._occluded16 = library.intersect16, library.occluded16
+            self._intersect, self._occluded = library.intersect, library.occluded
         else:
             self.vertices32 = np.ascontiguousarray(vertices, dtype=np.float32)
             self._scene = rtcore_scene.EmbreeScene(robust=True)
@@ -243,7 +243,7 @@ class Accel:
             return Hits(empty, np.zeros(0, np.int32), empty, empty, np.zeros(0, np.int32) if placed else None)
         if self.packets:
             intersect_rays, _ = embree_packets.query_kernels()
-            t, prim, u, v, instance = intersect_rays(self._intersect16, self._shared.handle,
+            t, prim, u, v, instance = intersect_rays(self._intersect, self._shared.handle,
                                                      *embree_packets.closest_rays(origins, directions), _PACKET_FLAGS,
                                                      self._face_offset)
             return Hits(t, prim, u, v, instance if placed else None)
@@ -276,7 +276,7 @@ class Accel:
             rows = _NO_ROWS if rows is None else np.asarray(rows, dtype=np.int64)
             o, d, t = embree_packets.shadow_rays(origins, directions, t_max)
             _, occluded_rays = embree_packets.query_kernels()
-            return occluded_rays(self._occluded16, self._shared.handle, o, d, t, rows, _PACKET_FLAGS)
+            return occluded_rays(self._occluded, self._shared.handle, o, d, t, rows, _PACKET_FLAGS)
         if rows is not None:
             t_max = t_max[rows]
         if len(t_max) == 0:

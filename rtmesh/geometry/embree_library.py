@@ -19,8 +19,8 @@ import threading
 
 import numpy as np
 
-from rtmesh.geometry.embree_packets import (ALIGN_WORDS, DEFAULT_TFAR, DIR, GEOM_ID, INST_PRIM_ID, INVALID_ID, LANES,
-                                            MASK, ORG, PACKET_QUERY, PRIM_ID, RAYHIT_WORDS,
+from rtmesh.geometry.embree_packets import (ALIGN_WORDS, DEFAULT_TFAR, DIR, GEOM_ID, GROUP, INST_PRIM_ID, INVALID_ID,
+                                            LANES, MASK, ORG, PACKET_QUERY, PACKET_WORDS, PRIM_ID, RAYHIT_WORDS,
                                             RTC_FEATURE_FLAG_ALL, RTC_RAY_QUERY_FLAG_COHERENT, TFAR, U, V)
 
 log = logging.getLogger(__name__)
@@ -40,6 +40,7 @@ _RTC_BUFFER_TYPE_INDEX, _RTC_BUFFER_TYPE_VERTEX = 0, 1
 _RTC_FORMAT_UINT3, _RTC_FORMAT_FLOAT3 = 0x5003, 0x9003
 _RTC_DEVICE_PROPERTY_VERSION_MAJOR, _RTC_DEVICE_PROPERTY_VERSION_MINOR = 1, 2
 _RTC_DEVICE_PROPERTY_VERSION_PATCH = 3
+_RTC_DEVICE_PROPERTY_NATIVE_RAY = {4: 32, 8: 33, 16: 34}
 
 def _library_path():
     """The Embree library embreex loads (its wheel's ``embreex.libs``), or None."""
@@ -63,8 +64,10 @@ class PacketLibrary:
     path : str
     version : tuple of int
         (major, minor, patch) as the device reports it.
-    intersect16, occluded16 : ctypes function objects
-        ``rtcIntersect16`` and ``rtcOccluded16``, typed for the kernels of :mod:`rtmesh.geometry.embree_packets`.
+    intersect, occluded : ctypes function objects
+        ``rtcIntersectN`` and ``rtcOccludedN`` of the machine's native width N
+        (:data:`rtmesh.geometry.embree_packets.GROUP`), typed for the kernels of
+        :mod:`rtmesh.geometry.embree_packets`.
     """
 
     def __init__(self, path):
@@ -97,8 +100,13 @@ class PacketLibrary:
         self.version = tuple(int(lib.rtcGetDeviceProperty(self.device, p)) for p in (
             _RTC_DEVICE_PROPERTY_VERSION_MAJOR, _RTC_DEVICE_PROPERTY_VERSION_MINOR,
             _RTC_DEVICE_PROPERTY_VERSION_PATCH))
-        self.intersect16 = PACKET_QUERY(ctypes.cast(lib.rtcIntersect16, ctypes.c_void_p).value)
-        self.occluded16 = PACKET_QUERY(ctypes.cast(lib.rtcOccluded16, ctypes.c_void_p).value)
+        self.intersect = PACKET_QUERY(ctypes.cast(getattr(lib, f"rtcIntersect{GROUP}"), ctypes.c_void_p).value)
+        self.occluded = PACKET_QUERY(ctypes.cast(getattr(lib, f"rtcOccluded{GROUP}"), ctypes.c_void_p).value)
+
+    def native(self, width):
+        """Whether the device traces packets of ``width`` (4, 8 or 16) lanes natively
+        (``RTC_DEVICE_PROPERTY_NATIVE_RAY{width}_SUPPORTED``)."""
+        return bool(self._lib.rtcGetDeviceProperty(self.device, _RTC_DEVICE_PROPERTY_NATIVE_RAY[width]))
 
     def new_scene(self, vertices32, faces32, instances=None):
         """Build and commit a robust triangle scene over shared (not copied) buffers.
@@ -193,8 +201,8 @@ def packet_library():
             _library_failure = reason
             log.info("tracing with embreex run(), one ray at a time: %s", reason)
         else:
-            log.info("tracing with Embree %s 16-wide packets (%s)",
-                     ".".join(map(str, _library.version)), _library.path)
+            log.info("tracing with Embree %s packets of %d rays, %d-wide queries (%s)",
+                     ".".join(map(str, _library.version)), LANES, GROUP, _library.path)
         return _library
 
 
@@ -244,7 +252,7 @@ def _probe(library):
         t, prim, u, v, guard_intact = _probe_packets(library, scene.handle, origins,
                                                      directions.astype(np.float32))
     if not guard_intact:
-        return "Embree wrote past the 16-wide packet: its layout differs from the one rtmesh expects"
+        return "Embree wrote past the packet: its layout differs from the one rtmesh expects"
     hit = expected["primID"] >= 0
     if not hit.any():
         return "the probe scene was missed by every ray"
@@ -264,8 +272,10 @@ def aligned_array(count, dtype):
 
 
 def _probe_packets(library, scene, origins, directions):
-    """Trace float32 rays 16 at a time through ctypes calls (no compiled code: the probe
-    runs before the kernels are trusted), each packet followed by 64 guard words.
+    """Trace float32 rays 16 at a time, in groups of the native width as the kernels lay
+    them out (:func:`rtmesh.geometry.embree_packets.lane_word`), through ctypes calls (no
+    compiled code: the probe runs before the kernels are trusted), each packet followed by
+    64 guard words.
 
     Returns
     -------
@@ -278,12 +288,13 @@ def _probe_packets(library, scene, origins, directions):
     n = len(origins)
     t, u, v = (np.empty(n, np.float32) for _ in range(3))
     prim = np.empty(n, np.int32)
-    words = RAYHIT_WORDS * LANES
+    groups = LANES // GROUP
     guard = np.int32(0x5EED5EED)
 
-    buffer = aligned_array(words + 64, np.float32)
+    buffer = aligned_array(PACKET_WORDS + 64, np.float32)
     ints = buffer.view(np.int32)
-    packet = buffer[:words].reshape(RAYHIT_WORDS, LANES)
+    # (group, field, lane in the group)
+    packet = buffer[:PACKET_WORDS].reshape(groups, RAYHIT_WORDS, GROUP)
     fields = packet.view(np.int32)
     valid = aligned_array(LANES, np.int32)
     args = aligned_array(8, np.int32)
@@ -292,20 +303,27 @@ def _probe_packets(library, scene, origins, directions):
     for start in range(0, n, LANES):
         count = min(LANES, n - start)
         rows = slice(start, start + count)
-        ints[words:] = guard
+        ints[PACKET_WORDS:] = guard
         packet[:] = 0.0
-        packet[ORG:ORG + 3, :count] = origins[rows].T
-        packet[DIR:DIR + 3, :count] = directions[rows].T
-        packet[TFAR, :count] = DEFAULT_TFAR
-        fields[MASK] = -1
-        fields[GEOM_ID:INST_PRIM_ID + 1] = INVALID_ID
+        lanes = np.zeros((RAYHIT_WORDS, LANES), np.float32)
+        lanes[ORG:ORG + 3, :count] = origins[rows].T
+        lanes[DIR:DIR + 3, :count] = directions[rows].T
+        lanes[TFAR, :count] = DEFAULT_TFAR
+        packet[:] = lanes.reshape(RAYHIT_WORDS, groups, GROUP).transpose(1, 0, 2)
+        fields[:, MASK] = -1
+        fields[:, GEOM_ID:INST_PRIM_ID + 1] = INVALID_ID
         valid[:] = 0
         valid[:count] = -1
-        library.intersect16(valid.ctypes.data, scene, buffer.ctypes.data, args.ctypes.data)
-        intact = intact and bool((ints[words:] == guard).all())
-        hit = fields[GEOM_ID, :count] != INVALID_ID
-        prim[rows] = np.where(hit, fields[PRIM_ID, :count], -1)
-        t[rows], u[rows], v[rows] = packet[TFAR, :count], packet[U, :count], packet[V, :count]
+        for group in range(groups):
+            library.intersect(valid.ctypes.data + 4 * GROUP * group, scene,
+                              buffer.ctypes.data + 4 * RAYHIT_WORDS * GROUP * group, args.ctypes.data)
+        intact = intact and bool((ints[PACKET_WORDS:] == guard).all())
+        # (field, lane) copies of the packet's results
+        by_field = packet.transpose(1, 0, 2).reshape(RAYHIT_WORDS, LANES)
+        by_field_ints = fields.transpose(1, 0, 2).reshape(RAYHIT_WORDS, LANES)
+        hit = by_field_ints[GEOM_ID, :count] != INVALID_ID
+        prim[rows] = np.where(hit, by_field_ints[PRIM_ID, :count], -1)
+        t[rows], u[rows], v[rows] = by_field[TFAR, :count], by_field[U, :count], by_field[V, :count]
     return t, prim, u, v, intact
 
 

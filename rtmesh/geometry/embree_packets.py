@@ -1,23 +1,39 @@
-"""Embree's 16-wide packet queries, called from compiled kernels.
+"""Embree's packet queries, called from compiled kernels, 16 rays a packet.
 
 ``embreex`` traces one ray per call (``rtcIntersect1`` inside its ``run()``).  Embree's
-16-wide packet queries with the coherent flag trace several times more rays per second, but
+packet queries with the coherent flag trace several times more rays per second, but
 embreex exposes neither them nor its scene handle: :mod:`rtmesh.geometry.embree_library`
 opens the library embreex installed, verifies it and builds scenes; this module holds the
 packet layout and the kernels that trace rays 16 at a time without the GIL.
 
 The packet structure is not described by embreex's headers: the library embreex ships is
-compiled with one instance level and with ``instPrimID``, so ``RTCRayHit16`` is 21 words per
+compiled with one instance level and with ``instPrimID``, so ``RTCRayHitN`` is 21 words per
 lane (ray: ``org_x org_y org_z tnear dir_x dir_y dir_z time tfar mask id flags``; hit: ``Ng_x
-Ng_y Ng_z u v primID geomID instID instPrimID``), 1344 bytes, and must be 64-byte aligned.
-That layout is a property of how the library was compiled, so
+Ng_y Ng_z u v primID geomID instID instPrimID``), field by field, N lanes each, and must be
+64-byte aligned.  That layout is a property of how the library was compiled, so
 :func:`rtmesh.geometry.embree_library.packet_library` proves it once per process before any
 kernel here runs.
+
+**Groups of the machine's native width.**  rtmesh's packets have 16 lanes (:data:`LANES`);
+Embree traces a packet natively only as wide as the CPU's vectors: 16 lanes with AVX-512, 8
+with AVX or AVX2, 4 with SSE.  A wider query is emulated one ray at a time, which loses the
+coherent traversal: on a 2-vCPU AMD EPYC with AVX2, ``rtcIntersect16`` took 99-105 ns a
+coherent camera ray and ``rtcIntersect8`` 35-36 (``rtcOccluded16`` 100 against 42 for
+shadow rays; docs/BENCHMARKS.md, "Session 23").  So a packet is laid out as
+``LANES // GROUP`` consecutive ``RTCRayHitN`` structures of :data:`GROUP` lanes (Embree's
+native width here, :func:`rtmesh.core.packet_group.native_group`), each of the full 21 words a lane, and
+:func:`query_packet` traces it with one native query a group that has an active lane.
+With ``GROUP = 16`` that is one ``RTCRayHit16``.  Word ``field`` of lane ``lane`` is at
+:func:`lane_word`.  Every query gives the same hits at every width (the same traversal
+arithmetic per ray; the probe of :mod:`~rtmesh.geometry.embree_library` and the tests
+compare them with single rays).
 
 numba calls the C functions through ctypes function objects passed as kernel arguments:
 a function address baked into a kernel as a global would forbid numba's disk cache, and
 the argument form compiles once and stays correct when the library loads at another
-address in the next process.
+address in the next process.  :data:`GROUP` is baked in (a constant of the layout): it is
+part of the disk cache's stamp (:func:`rtmesh.core.compiled.package_stamp`), so a cache
+compiled on a machine of another width is never loaded.
 """
 
 import ctypes
@@ -28,6 +44,7 @@ from numba import types
 
 from rtmesh.core.compile_ahead import KernelGroup
 from rtmesh.core.compiled import fix_signatures, kernel, row
+from rtmesh.core.packet_group import native_group
 from rtmesh.geometry.float32_rays import F32_MAX
 
 LANES = 16
@@ -46,6 +63,14 @@ ALIGN_WORDS = 16  # 64 bytes: Embree's packets must be aligned to their width
 ORG, TNEAR, DIR, TIME, TFAR, MASK, RAY_ID, FLAGS = 0, 3, 4, 7, 8, 9, 10, 11
 NG, U, V, PRIM_ID, GEOM_ID, INST_ID, INST_PRIM_ID = 12, 15, 16, 17, 18, 19, 20
 
+
+# Lanes per native query (see the module docstring) and the words of one group; every packet,
+# closest-hit or occlusion, takes PACKET_WORDS: each group has room for the nine hit rows that
+# an occlusion query reads and writes back after its rays (OCCLUSION_EXTENT)
+GROUP = native_group()
+GROUP_WORDS = RAYHIT_WORDS * GROUP
+PACKET_WORDS = RAYHIT_WORDS * LANES
+
 RTC_RAY_QUERY_FLAG_INCOHERENT = 0
 RTC_RAY_QUERY_FLAG_COHERENT = 1 << 16
 RTC_FEATURE_FLAG_ALL = -1  # 0xFFFFFFFF as the int32 Embree reads
@@ -62,8 +87,8 @@ _F32_ZERO = np.float32(0.0)
 MIN_RCP_INPUT = np.float32(1e-18)
 INVALID_ID = -1  # RTC_INVALID_GEOMETRY_ID as int32
 
-# void rtcIntersect16(const int* valid, RTCScene, RTCRayHit16*, RTCIntersectArguments*),
-# and rtcOccluded16 alike; pointers travel as 64-bit integers (array.ctypes.data)
+# void rtcIntersectN(const int* valid, RTCScene, RTCRayHitN*, RTCIntersectArguments*),
+# and rtcOccludedN alike; pointers travel as 64-bit integers (array.ctypes.data)
 PACKET_QUERY = ctypes.CFUNCTYPE(None, ctypes.c_int64, ctypes.c_int64, ctypes.c_int64, ctypes.c_int64)
 
 
@@ -161,23 +186,21 @@ def query_arguments(flags):
 
 
 @row
-def packet_buffers(fields, packets, flags):
+def packet_buffers(packets, flags):
     """Scratch for ``packets`` packets side by side, each 64-byte aligned.
 
     Parameters
     ----------
-    fields : int
-        Words per lane: :data:`RAYHIT_WORDS` for closest-hit queries, :data:`RAY_WORDS` for
-        occlusion.
     packets : int
     flags : int
         Query flags.
 
     Returns
     -------
-    rays : (((packets - 1) * fields + max(fields, RAYHIT_WORDS)) * LANES,) float32
-        Packet ``q`` at ``q * fields * LANES``; the last one is followed by the hit rows
-        an occlusion query touches (:data:`OCCLUSION_EXTENT`).
+    rays : (packets * PACKET_WORDS,) float32
+        Packet ``q`` at ``q * PACKET_WORDS``, its words at :func:`lane_word`: closest-hit and
+        occlusion packets alike (each group has room for the hit rows that an occlusion
+        query touches, :data:`OCCLUSION_EXTENT`).
     words : the same memory as int32
     valid : (packets * LANES,) int32
         Lane masks, packet ``q``'s at ``q * LANES``.
@@ -188,13 +211,30 @@ def packet_buffers(fields, packets, flags):
     -----
     Callers pass ``np.int64(...)``, not bare constants: numba compiles a row once for each
     literal value it is called with (about half a second each on a first run).
-
-    Packets side by side at a stride of :data:`RAY_WORDS` are safe for occlusion queries:
-    the rows that ``rtcOccluded16`` of packet ``q`` reads and writes back are packet
-    ``q + 1``'s, which nothing changes while the same thread waits for the query.
     """
-    rays = aligned_words(((packets - 1) * fields + max(fields, OCCLUSION_EXTENT)) * LANES, np.float32)
+    rays = aligned_words(packets * PACKET_WORDS, np.float32)
     return rays, rays.view(np.int32), aligned_words(packets * LANES, np.int32), query_arguments(flags)
+
+
+@row
+def lane_word(field, lane):
+    """Word offset of ``field`` of lane ``lane`` (0 .. LANES - 1) in a packet: in group
+    ``lane // GROUP``, an ``RTCRayHitN`` of :data:`GROUP` lanes (field by field)."""
+    return (lane // GROUP) * GROUP_WORDS + field * GROUP + lane % GROUP
+
+
+@row
+def query_packet(query, scene, valid, rays, args, q):
+    """Trace packet ``q`` of a buffer (:func:`packet_buffers`) with Embree's native query
+    ``query`` (``rtcIntersectN`` or ``rtcOccludedN``, N = :data:`GROUP`), once for each
+    group with an active lane."""
+    for group in range(LANES // GROUP):
+        first = q * LANES + group * GROUP
+        for lane in range(first, first + GROUP):
+            if valid[lane]:
+                query(valid.ctypes.data + 4 * first, scene, rays.ctypes.data + 4 * (q * PACKET_WORDS + group * GROUP_WORDS),
+                      args.ctypes.data)
+                break
 
 
 @row
@@ -204,17 +244,17 @@ def set_lane(ray, words, lane, ox, oy, oz, dx, dy, dz, tfar):
     The coordinates are rounded to float32 (to nearest, as NumPy's ``astype`` does), the
     direction's as :func:`packet_direction` forms them.
     """
-    ray[ORG * LANES + lane] = np.float32(ox)
-    ray[(ORG + 1) * LANES + lane] = np.float32(oy)
-    ray[(ORG + 2) * LANES + lane] = np.float32(oz)
+    ray[lane_word(ORG, lane)] = np.float32(ox)
+    ray[lane_word(ORG + 1, lane)] = np.float32(oy)
+    ray[lane_word(ORG + 2, lane)] = np.float32(oz)
     for c, value in ((0, dx), (1, dy), (2, dz)):
-        ray[(DIR + c) * LANES + lane] = packet_direction(value)
-    ray[TFAR * LANES + lane] = np.float32(tfar)
-    ray[TNEAR * LANES + lane] = _F32_ZERO
-    ray[TIME * LANES + lane] = _F32_ZERO
-    words[MASK * LANES + lane] = -1
-    words[RAY_ID * LANES + lane] = 0
-    words[FLAGS * LANES + lane] = 0
+        ray[lane_word(DIR + c, lane)] = packet_direction(value)
+    ray[lane_word(TFAR, lane)] = np.float32(tfar)
+    ray[lane_word(TNEAR, lane)] = _F32_ZERO
+    ray[lane_word(TIME, lane)] = _F32_ZERO
+    words[lane_word(MASK, lane)] = -1
+    words[lane_word(RAY_ID, lane)] = 0
+    words[lane_word(FLAGS, lane)] = 0
 
 
 @row
@@ -227,11 +267,11 @@ def packet_direction(value):
 
 @row
 def clear_hit(words, lane):
-    """Mark lane ``lane`` of a ``RTCRayHit16`` packet as not hitting anything yet."""
-    words[GEOM_ID * LANES + lane] = INVALID_ID
-    words[PRIM_ID * LANES + lane] = INVALID_ID
-    words[INST_ID * LANES + lane] = INVALID_ID
-    words[INST_PRIM_ID * LANES + lane] = INVALID_ID
+    """Mark lane ``lane`` of a closest-hit packet as not hitting anything yet."""
+    words[lane_word(GEOM_ID, lane)] = INVALID_ID
+    words[lane_word(PRIM_ID, lane)] = INVALID_ID
+    words[lane_word(INST_ID, lane)] = INVALID_ID
+    words[lane_word(INST_PRIM_ID, lane)] = INVALID_ID
 
 
 @row
@@ -252,23 +292,23 @@ def _load_rays(ray, words, valid, origins, directions, rows, start, count, tfar)
 
 
 @row
-def _intersect_packet(intersect16, scene, ray, words, valid, args, origins, directions, start, count):
+def _intersect_packet(intersect, scene, ray, words, valid, args, origins, directions, start, count):
     """Trace rays ``start .. start + count - 1`` as one packet; the hits are left in it."""
     _load_rays(ray, words, valid, origins, directions, np.empty(0, np.int64), start, count,
                np.empty(0, np.float32))
     for lane in range(LANES):
         clear_hit(words, lane)
-    intersect16(valid.ctypes.data, scene, ray.ctypes.data, args.ctypes.data)
+    query_packet(intersect, scene, valid, ray, args, 0)
 
 
 @kernel
-def intersect_rays(intersect16, scene, origins, directions, flags, face_offset):
-    """Closest hits of rays, 16 at a time through ``rtcIntersect16``.
+def intersect_rays(intersect, scene, origins, directions, flags, face_offset):
+    """Closest hits of rays, a packet of 16 at a time (:func:`query_packet`).
 
     Parameters
     ----------
-    intersect16 : ctypes function object
-        :attr:`PacketLibrary.intersect16`.
+    intersect : ctypes function object
+        :attr:`PacketLibrary.intersect`.
     scene : int
         A committed ``RTCScene``.
     origins, directions : (n, 3) float64, any strides
@@ -298,39 +338,39 @@ def intersect_rays(intersect16, scene, origins, directions, flags, face_offset):
     u = np.empty(n)
     v = np.empty(n)
     instance = np.empty(n, np.int32)
-    ray, words, valid, args = packet_buffers(np.int64(RAYHIT_WORDS), np.int64(1), flags)
+    ray, words, valid, args = packet_buffers(np.int64(1), flags)
     for start in range(0, n, LANES):
         count = min(LANES, n - start)
-        _intersect_packet(intersect16, scene, ray, words, valid, args, origins, directions, start, count)
+        _intersect_packet(intersect, scene, ray, words, valid, args, origins, directions, start, count)
         for lane in range(count):
             i = start + lane
             instance[i] = -1
-            if words[GEOM_ID * LANES + lane] == INVALID_ID:
+            if words[lane_word(GEOM_ID, lane)] == INVALID_ID:
                 prim[i] = -1
                 t[i] = np.inf
                 u[i] = 0.0
                 v[i] = 0.0
             else:
-                prim[i] = words[PRIM_ID * LANES + lane]
-                if len(face_offset) and words[INST_ID * LANES + lane] != INVALID_ID:
+                prim[i] = words[lane_word(PRIM_ID, lane)]
+                if len(face_offset) and words[lane_word(INST_ID, lane)] != INVALID_ID:
                     # a placement (one instance level): its prototype's face
-                    placed = words[INST_PRIM_ID * LANES + lane]
+                    placed = words[lane_word(INST_PRIM_ID, lane)]
                     instance[i] = placed
                     prim[i] = np.int32(face_offset[placed] + prim[i])
-                t[i] = np.float64(ray[TFAR * LANES + lane])
-                u[i] = np.float64(ray[U * LANES + lane])
-                v[i] = np.float64(ray[V * LANES + lane])
+                t[i] = np.float64(ray[lane_word(TFAR, lane)])
+                u[i] = np.float64(ray[lane_word(U, lane)])
+                v[i] = np.float64(ray[lane_word(V, lane)])
     return t, prim, u, v, instance
 
 
 @kernel
-def occluded_rays(occluded16, scene, origins, directions, t_max, rows, flags):
-    """Whether anything lies on each segment, 16 at a time through ``rtcOccluded16``.
+def occluded_rays(occluded, scene, origins, directions, t_max, rows, flags):
+    """Whether anything lies on each segment, a packet of 16 at a time (:func:`query_packet`).
 
     Parameters
     ----------
-    occluded16 : ctypes function object
-        :attr:`PacketLibrary.occluded16`.
+    occluded : ctypes function object
+        :attr:`PacketLibrary.occluded`.
     scene : int
     origins, directions : (n, 3) float32, any strides
     t_max : (n,) float32
@@ -347,14 +387,14 @@ def occluded_rays(occluded16, scene, origins, directions, t_max, rows, flags):
     """
     n = len(rows) if len(rows) else origins.shape[0]
     blocked = np.empty(n, np.bool_)
-    ray, words, valid, args = packet_buffers(np.int64(RAY_WORDS), np.int64(1), flags)
+    ray, words, valid, args = packet_buffers(np.int64(1), flags)
     for start in range(0, n, LANES):
         count = min(LANES, n - start)
         _load_rays(ray, words, valid, origins, directions, rows, start, count, t_max)
-        occluded16(valid.ctypes.data, scene, ray.ctypes.data, args.ctypes.data)
+        query_packet(occluded, scene, valid, ray, args, 0)
         for lane in range(count):
             # Embree marks an occluded ray by setting its tfar to -inf
-            blocked[start + lane] = ray[TFAR * LANES + lane] == -np.inf
+            blocked[start + lane] = ray[lane_word(TFAR, lane)] == -np.inf
     return blocked
 
 

@@ -303,7 +303,7 @@ class Caustics:
             pass_key = mix64(self._seed_key ^ (np.uint64(k) * np.uint64(0x9E3779B97F4A7C15)))
         sobol_keys = np.array([sequence_key(s.seed, np.array([k]), Dim.PHOTON_POINT)[0],
                                sequence_key(s.seed, np.array([k]), Dim.PHOTON_DIRECTION)[0]], dtype=np.uint64)
-        intersect16, _, handle = stage._queries
+        intersect, _, handle = stage._queries
         options = (self.max_bounces, np.float32(self.it.offset_scale), stage.cutouts, len(stage._camera_media))
 
         def chunk(first):
@@ -313,7 +313,7 @@ class Caustics:
                 rows = np.zeros((capacity, FIELDS))
                 stored = np.zeros(2, np.int64)
                 counts = np.zeros(1, np.int64)
-                trace_photons(intersect16, handle, pass_key, sobol_keys, first, count, stage.geometry,
+                trace_photons(intersect, handle, pass_key, sobol_keys, first, count, stage.geometry,
                               stage.surface, stage.light_record, stage._env, stage._instances, self.aim,
                               self.scene_sphere,
                               self.specular, self.scatters, options, rows, stored, counts)

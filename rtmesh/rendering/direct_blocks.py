@@ -1,7 +1,8 @@
 """The steps of one block of the fused direct-lighting stage, compiled.
 
-A block is :data:`BLOCK` film samples, four 16-wide packets (sample ``b`` is lane
-``b % 16`` of packet ``b // 16``).  Each step works on the block's scratch arrays: the
+A block is :data:`BLOCK` film samples, four packets of 16 lanes side by side (sample ``b``
+is lane ``b % 16`` of packet ``b // 16``, at the words
+:func:`rtmesh.geometry.embree_packets.lane_word` gives for ``b``).  Each step works on the block's scratch arrays: the
 camera step (positions, then pinhole directions), the surface step (gathered face rows,
 then the arithmetic of :func:`rtmesh.shading.surfaces.surface_records`), the light step
 (the arithmetic of :func:`rtmesh.shading.direct_light.light_samples` for one light), the
@@ -85,14 +86,14 @@ def block_scratch(position, flags):
     direct : (3, BLOCK) float64
         The sum of the lights' terms.
     """
-    rays, words, valid, args = ep.packet_buffers(np.int64(ep.RAYHIT_WORDS), np.int64(PACKETS), flags)
-    shadow, shadow_words, shadow_valid, _ = ep.packet_buffers(np.int64(ep.RAY_WORDS), np.int64(PACKETS), flags)
+    rays, words, valid, args = ep.packet_buffers(np.int64(PACKETS), flags)
+    shadow, shadow_words, shadow_valid, _ = ep.packet_buffers(np.int64(PACKETS), flags)
     # (a loop over len(valid), not the constant BLOCK: LLVM would unroll it, which costs
-    # compile time and saves nothing in a loop run once per chunk)
+    # compile time and saves nothing in a loop run once per chunk; sample b is lane b of
+    # the packets side by side, rtmesh.geometry.embree_packets.lane_word)
     for b in range(len(valid)):
-        ep.set_lane(rays, words, hit_lane(b), position[0], position[1], position[2], 0.0, 0.0, 1.0,
-                    ep.DEFAULT_TFAR)
-        ep.set_lane(shadow, shadow_words, ray_lane(b), 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, np.float32(0.0))
+        ep.set_lane(rays, words, b, position[0], position[1], position[2], 0.0, 0.0, 1.0, ep.DEFAULT_TFAR)
+        ep.set_lane(shadow, shadow_words, b, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, np.float32(0.0))
     return (rays, words, valid, args, shadow, shadow_words, shadow_valid, np.empty((2, BLOCK)),
             np.empty(BLOCK, np.intp), np.empty(BLOCK, np.intp), np.empty(BLOCK, np.bool_), np.empty(BLOCK, np.intp),
             np.empty(BLOCK, np.bool_), np.empty((2, BLOCK)), np.empty((3, BLOCK)), np.empty(BLOCK, np.uint64),
@@ -141,38 +142,39 @@ def camera_block(code, keys, corners, size, spp, start, count, sample, sequence,
 @row
 def write_directions(d, rays):
     """Camera ray directions ``d`` (3, BLOCK) and the default ``tfar`` into the block's
-    ``RTCRayHit16`` packets ``rays`` (:func:`rtmesh.geometry.embree_packets.packet_direction`);
-    one branch-free loop of 16 lanes per packet and field, which LLVM vectorises."""
+    packets ``rays`` (:func:`rtmesh.geometry.embree_packets.packet_direction`); one
+    branch-free loop over the lanes of each group of the packets (``GROUP`` lanes of one
+    field side by side) and field, which LLVM vectorises."""
     far = np.float32(ep.DEFAULT_TFAR)
-    for q in range(PACKETS):
-        base = q * ep.RAYHIT_WORDS * LANES
+    for group in range(BLOCK // ep.GROUP):
+        base, first = group * ep.GROUP_WORDS, group * ep.GROUP
         for c in range(3):
-            at = base + (ep.DIR + c) * LANES
-            for lane in range(LANES):
-                rays[at + lane] = ep.packet_direction(d[c, q * LANES + lane])
-        at = base + ep.TFAR * LANES
-        for lane in range(LANES):
+            at = base + (ep.DIR + c) * ep.GROUP
+            for lane in range(ep.GROUP):
+                rays[at + lane] = ep.packet_direction(d[c, first + lane])
+        at = base + ep.TFAR * ep.GROUP
+        for lane in range(ep.GROUP):
             rays[at + lane] = far
 
 
 @kernel
 def write_rays(ray, rays):
     """Shadow rays ``ray`` (7, BLOCK) float32 (origin, direction, length: see
-    :func:`light_block`) into the block's ``RTCRay16`` packets ``rays``, as
-    :func:`rtmesh.geometry.embree_packets.set_lane` writes one lane, in branch-free loops of
-    16 lanes that LLVM vectorises."""
-    for q in range(PACKETS):
-        base = q * ep.RAY_WORDS * LANES
+    :func:`light_block`) into the block's packets ``rays``, as
+    :func:`rtmesh.geometry.embree_packets.set_lane` writes one lane, in branch-free loops over
+    the lanes of each group that LLVM vectorises."""
+    for group in range(BLOCK // ep.GROUP):
+        base, first = group * ep.GROUP_WORDS, group * ep.GROUP
         for c in range(3):
-            at = base + (ep.ORG + c) * LANES
-            for lane in range(LANES):
-                rays[at + lane] = ray[c, q * LANES + lane]
-            at = base + (ep.DIR + c) * LANES
-            for lane in range(LANES):
-                rays[at + lane] = ep.packet_direction(ray[3 + c, q * LANES + lane])
-        at = base + ep.TFAR * LANES
-        for lane in range(LANES):
-            rays[at + lane] = ray[6, q * LANES + lane]
+            at = base + (ep.ORG + c) * ep.GROUP
+            for lane in range(ep.GROUP):
+                rays[at + lane] = ray[c, first + lane]
+            at = base + (ep.DIR + c) * ep.GROUP
+            for lane in range(ep.GROUP):
+                rays[at + lane] = ep.packet_direction(ray[3 + c, first + lane])
+        at = base + ep.TFAR * ep.GROUP
+        for lane in range(ep.GROUP):
+            rays[at + lane] = ray[6, first + lane]
 
 
 @row
@@ -365,23 +367,3 @@ def add_light_row(d0, d1, d2, kd0, kd1, kd2, ks0, ks1, ks2, cos_i, power, e0, e1
     f0, f1, f2 = blinn_phong_row(kd0, kd1, kd2, ks0, ks1, ks2, cos_i, power)
     return d0 + f0 * e0, d1 + f1 * e1, d2 + f2 * e2
 
-
-@row
-def hit_lane(b):
-    """Word offset of sample ``b`` of a block in the ``RTCRayHit16`` packets (field 0)."""
-    return (b >> 4) * (ep.RAYHIT_WORDS * LANES) + (b & 15)
-
-
-@row
-def ray_lane(b):
-    """Word offset of sample ``b`` of a block in the ``RTCRay16`` packets (field 0)."""
-    return (b >> 4) * (ep.RAY_WORDS * LANES) + (b & 15)
-
-
-@row
-def any_valid(valid, q):
-    """Whether packet ``q`` of a block has an active lane."""
-    for lane in range(LANES * q, LANES * q + LANES):
-        if valid[lane]:
-            return True
-    return False

@@ -41,8 +41,8 @@ from rtmesh.geometry import embree_packets as ep
 from rtmesh.geometry.embree_library import packet_library
 from rtmesh.geometry.accel import Accel
 from rtmesh.lights.point_light_rows import ROW
-from rtmesh.rendering.direct_blocks import (BLOCK, LANES, PACKETS, add_light_row, any_valid, block_scratch,
-                                            camera_block, camera_numbers, hit_lane, light_block, radiance_block,
+from rtmesh.rendering.direct_blocks import (BLOCK, LANES, add_light_row, block_scratch,
+                                            camera_block, camera_numbers, light_block, radiance_block,
                                             surface_block, write_rays)
 from rtmesh.materials.blinn_phong import raise_highlight
 from rtmesh.rendering.film_sums import pixel_errors
@@ -56,8 +56,6 @@ _NO_COUNT = np.zeros(0, dtype=np.int64)
 _NO_IMAGE = np.zeros((0, 3), dtype=np.float32)
 # "the chunk's pixels are a run from first_pixel" for direct_samples
 _NO_PIXELS = np.zeros(0, dtype=np.int64)
-_PACKET_BYTES = 4 * ep.RAYHIT_WORDS * LANES  # 4-byte words
-_SHADOW_BYTES = 4 * ep.RAY_WORDS * LANES
 # float64 words of a light row
 ROW_WORDS = ROW.itemsize // 8
 
@@ -105,7 +103,7 @@ class DirectStage:
         accel = it.accel
         m = it.scene.materials
         library = packet_library()
-        self._queries = (library.intersect16, library.occluded16, accel._shared.handle,
+        self._queries = (library.intersect, library.occluded, accel._shared.handle,
                          ep.RTC_RAY_QUERY_FLAG_COHERENT)
         camera, s = it.camera, it.settings
         forward, right, up = it.camera_frame
@@ -217,7 +215,7 @@ class DirectStage:
 
 
 @kernel
-def direct_samples(intersect16, occluded16, scene, flags, sampler, keys, corners, size, spp,
+def direct_samples(intersect, occluded, scene, flags, sampler, keys, corners, size, spp,
                    pixel_list, first_pixel, first, counts, n, total, total_sq, film_count, image,
                    width, image_plane, position, forward, right, up, faces, vertex_normals, smooth,
                    material_id, fix_terminator, base, background, lights, shaded, diffuse, specular, exponent,
@@ -227,7 +225,7 @@ def direct_samples(intersect16, occluded16, scene, flags, sampler, keys, corners
 
     Parameters
     ----------
-    intersect16, occluded16 : ctypes function objects
+    intersect, occluded : ctypes function objects
     scene : int
         The committed ``RTCScene``.
     flags : int
@@ -348,22 +346,20 @@ def direct_samples(intersect16, occluded16, scene, flags, sampler, keys, corners
         for b in range(BLOCK):
             valid[b] = -1 if b < count else 0
         for b in range(BLOCK):
-            ep.clear_hit(words, hit_lane(b))
+            ep.clear_hit(words, b)
         for q in range((count + LANES - 1) // LANES):
-            intersect16(valid.ctypes.data + 64 * q, scene, rays.ctypes.data + _PACKET_BYTES * q,
-                        args.ctypes.data)
+            ep.query_packet(intersect, scene, valid, rays, args, q)
         # surface records (rtmesh.shading.surfaces.surface_records): the rows of the faces hit (misses use
         # face 0) are gathered first, then one loop does the arithmetic (surface_block)
         for b in range(count):
-            at = hit_lane(b)
-            hit[b] = words[ep.GEOM_ID * LANES + at] != -1
-            f = np.intp(words[ep.PRIM_ID * LANES + at]) if hit[b] else np.intp(0)
+            hit[b] = words[ep.lane_word(ep.GEOM_ID, b)] != -1
+            f = np.intp(words[ep.lane_word(ep.PRIM_ID, b)]) if hit[b] else np.intp(0)
             mat[b] = material_id[f]
             receives[b] = hit[b] and shaded[mat[b]]
             shininess[b], highlight_from[b] = exponent[mat[b]], visible_from[mat[b]]
             interpolate[b] = has_smooth and smooth[f]
-            barycentrics[0, b] = np.float64(rays[ep.U * LANES + at])
-            barycentrics[1, b] = np.float64(rays[ep.V * LANES + at])
+            barycentrics[0, b] = np.float64(rays[ep.lane_word(ep.U, b)])
+            barycentrics[1, b] = np.float64(rays[ep.lane_word(ep.V, b)])
             face[b], normal_row[b] = f, f if has_smooth else 0
         srf = surface_block(barycentrics, face, normal_row, faces, normals, interpolate, d, count, fix_terminator)
         # each light in turn: its samples (rtmesh.shading.direct_light.light_samples), the shadow
@@ -381,13 +377,11 @@ def direct_samples(intersect16, occluded16, scene, flags, sampler, keys, corners
                 cosine[b], raise_it = highlight_to_raise(shininess[b], values[4, b], highlight_from[b])
                 raised[b] = on & raise_it
             for q in range((count + LANES - 1) // LANES):
-                if any_valid(shadow_valid, q):
-                    occluded16(shadow_valid.ctypes.data + 64 * q, scene, shadow.ctypes.data + _SHADOW_BYTES * q,
-                               args.ctypes.data)
-            for q in range(PACKETS):
-                at = q * ep.RAY_WORDS * LANES + ep.TFAR * LANES
-                for lane in range(LANES):
-                    b = q * LANES + lane
+                ep.query_packet(occluded, scene, shadow_valid, shadow, args, q)
+            for group in range(BLOCK // ep.GROUP):
+                at = group * ep.GROUP_WORDS + ep.TFAR * ep.GROUP
+                for lane in range(ep.GROUP):
+                    b = group * ep.GROUP + lane
                     on = shadow_valid[b] != 0
                     shadow_rays += on
                     # Embree marks an occluded ray by setting its tfar to -inf

@@ -99,8 +99,8 @@ sample's lobe); everything after more vertices by the first vertex's sampled lob
 import numpy as np
 
 from rtmesh.core.compiled import borrowed, call_at, keep_alive, kernel
-from rtmesh.geometry.embree_packets import (LANES, RAYHIT_WORDS, RTC_RAY_QUERY_FLAG_COHERENT,
-                                            RTC_RAY_QUERY_FLAG_INCOHERENT, packet_buffers, query_arguments)
+from rtmesh.geometry.embree_packets import (LANES, RTC_RAY_QUERY_FLAG_COHERENT, RTC_RAY_QUERY_FLAG_INCOHERENT,
+                                            packet_buffers, query_arguments)
 from rtmesh.lights import light_table as lt
 from rtmesh.materials import lobes
 from rtmesh.rendering.path_camera import camera_lanes
@@ -113,14 +113,14 @@ from rtmesh.rendering.whitted_rows import BRANCH_WORDS, pop_branch
 
 
 @kernel
-def trace_paths(intersect16, occluded16, scene, camera, origins, directions, keys, pixels, samples, sobol_keys, times,
+def trace_paths(intersect, occluded, scene, camera, origins, directions, keys, pixels, samples, sobol_keys, times,
                 geometry, surface, lights, env, options, whitted, motion, instances, photon_map, stages, radiance,
                 light_paths, camera_hits, counts):
     """Trace one path per camera ray and write its radiance.
 
     Parameters
     ----------
-    intersect16, occluded16 : ctypes function objects
+    intersect, occluded : ctypes function objects
         Embree's packet queries (:class:`rtmesh.geometry.embree_library.PacketLibrary`).
     scene : int
         The committed ``RTCScene``.
@@ -182,14 +182,11 @@ def trace_paths(intersect16, occluded16, scene, camera, origins, directions, key
     # light once and light_samples of each other light (whitted: LightTable.light_groups)
     deltas = len(delta_rows) if whitted_on else 0
     area_rounds = light_samples * (len(group_start) - 1) if whitted_on else light_samples
-    ray, words, valid, args_coherent = packet_buffers(np.int64(RAYHIT_WORDS), np.int64(1),
-                                                      np.int64(RTC_RAY_QUERY_FLAG_COHERENT))
+    ray, words, valid, args_coherent = packet_buffers(np.int64(1), np.int64(RTC_RAY_QUERY_FLAG_COHERENT))
     args_incoherent = query_arguments(np.int64(RTC_RAY_QUERY_FLAG_INCOHERENT))
-    shadow, shadow_words, shadow_valid, _ = packet_buffers(np.int64(RAYHIT_WORDS), np.int64(1),
-                                                           np.int64(RTC_RAY_QUERY_FLAG_INCOHERENT))
+    shadow, shadow_words, shadow_valid, _ = packet_buffers(np.int64(1), np.int64(RTC_RAY_QUERY_FLAG_INCOHERENT))
     # a mover's packet (its rest frame), and the nearest hit of each lane over the scenes
-    rest, rest_words, rest_valid, _ = packet_buffers(np.int64(RAYHIT_WORDS), np.int64(1),
-                                                     np.int64(RTC_RAY_QUERY_FLAG_INCOHERENT))
+    rest, rest_words, rest_valid, _ = packet_buffers(np.int64(1), np.int64(RTC_RAY_QUERY_FLAG_INCOHERENT))
     best_t = np.zeros(WIDTH)
     best_prim = np.zeros(WIDTH, np.int64)
     best_instance = np.full(WIDTH, -1, np.int64)
@@ -272,7 +269,7 @@ def trace_paths(intersect16, occluded16, scene, camera, origins, directions, key
     vertices = (vertex, vertex_ids, shaded)
     shadows = (shadow_rays, shadow_set, shadow_count, shadow_kind, pending, pending_paths)
     branches = (branch, branch_media, branch_top)
-    queries = (intersect16, occluded16, scene, args_coherent, args_incoherent)
+    queries = (intersect, occluded, scene, args_coherent, args_incoherent)
     packet, shadow_packet, rest_packet = (ray, words, valid), (shadow, shadow_words, shadow_valid), (rest, rest_words,
                                                                                                    rest_valid)
     for start in range(0, n, WIDTH):

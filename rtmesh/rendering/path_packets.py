@@ -16,8 +16,8 @@ import math
 import numpy as np
 
 from rtmesh.core.compiled import inline_row, row
-from rtmesh.geometry.embree_packets import (DEFAULT_TFAR, GEOM_ID, INST_ID, INST_PRIM_ID, INVALID_ID, LANES, PRIM_ID,
-                                            TFAR, U, V)
+from rtmesh.geometry.embree_packets import (DEFAULT_TFAR, DIR, GEOM_ID, INST_ID, INST_PRIM_ID, INVALID_ID, LANES, ORG,
+                                            PRIM_ID, TFAR, U, V, lane_word, query_packet)
 from rtmesh.geometry.float32_rays import offset_origin
 from rtmesh.rendering.path_surfaces import clear_hit, is_transparent, set_lane, surface_point
 from rtmesh.sampling.hashing import mix64, uniform
@@ -81,7 +81,7 @@ def mover_to_world(moves, j, time, px, py, pz, gx, gy, gz, nx, ny, nz):
 
 
 @row
-def nearest_on_movers(intersect16, motion, lane_time, valid, ox, oy, oz, ex, ey, ez, rest, rest_words, rest_valid,
+def nearest_on_movers(intersect, motion, lane_time, valid, ox, oy, oz, ex, ey, ez, rest, rest_words, rest_valid,
                        args, best_t, best_prim, best_u, best_v):
     """Each valid lane's ray (world origin ``o`` and direction ``e``, (LANES,) float64 each)
     against every moving object, traced in the object's rest pose at the lane's time up to
@@ -98,15 +98,15 @@ def nearest_on_movers(intersect16, motion, lane_time, valid, ox, oy, oz, ex, ey,
                 set_lane(rest, rest_words, lane, qx, qy, qz, fx, fy, fz,
                          np.float32(min(best_t[lane], np.float64(DEFAULT_TFAR))))
                 clear_hit(rest_words, lane)
-        intersect16(rest_valid.ctypes.data, movers[j], rest.ctypes.data, args.ctypes.data)
+        query_packet(intersect, movers[j], rest_valid, rest, args, 0)
         for lane in range(LANES):
-            if rest_valid[lane] and rest_words[GEOM_ID * LANES + lane] != INVALID_ID:
-                tm = np.float64(rest[TFAR * LANES + lane])
+            if rest_valid[lane] and rest_words[lane_word(GEOM_ID, lane)] != INVALID_ID:
+                tm = np.float64(rest[lane_word(TFAR, lane)])
                 if tm < best_t[lane]:
                     best_t[lane] = tm
-                    best_prim[lane] = face_maps[face_offsets[j] + rest_words[PRIM_ID * LANES + lane]]
-                    best_u[lane] = np.float64(rest[U * LANES + lane])
-                    best_v[lane] = np.float64(rest[V * LANES + lane])
+                    best_prim[lane] = face_maps[face_offsets[j] + rest_words[lane_word(PRIM_ID, lane)]]
+                    best_u[lane] = np.float64(rest[lane_word(U, lane)])
+                    best_v[lane] = np.float64(rest[lane_word(V, lane)])
 
 
 @inline_row
@@ -132,15 +132,15 @@ def hit_face(words, lane, instance_faces, static_faces):
     """The face a packet lane hit, in the per-face tables, and its placement (-1: none):
     a placement's hit is its prototype's face ``instance_faces[placement] + primID``, the
     static scene's its ``static_faces`` entry (empty: the identity)."""
-    local = words[PRIM_ID * LANES + lane]
-    if words[INST_ID * LANES + lane] != INVALID_ID:
-        placement = np.int64(words[INST_PRIM_ID * LANES + lane])
+    local = words[lane_word(PRIM_ID, lane)]
+    if words[lane_word(INST_ID, lane)] != INVALID_ID:
+        placement = np.int64(words[lane_word(INST_PRIM_ID, lane)])
         return instance_faces[placement] + local, placement
     return (static_faces[local] if len(static_faces) else np.int64(local)), np.int64(-1)
 
 
 @row
-def shadows_through_cutouts(intersect16, scene, args, shadow, shadow_words, shadow_valid, geometry, surface,
+def shadows_through_cutouts(intersect, scene, args, shadow, shadow_words, shadow_valid, geometry, surface,
                              offset_scale, keys, start, lane_depth, reach, counts, motion, instances, lane_time,
                              segment, rest, rest_words, rest_valid, best_t, best_prim, best_instance, best_u, best_v,
                              first_layer):
@@ -166,22 +166,22 @@ def shadows_through_cutouts(intersect16, scene, args, shadow, shadow_words, shad
         if layer > 0:
             counts[SHADOW] += active
         if has_static:
-            intersect16(shadow_valid.ctypes.data, scene, shadow.ctypes.data, args.ctypes.data)
+            query_packet(intersect, scene, shadow_valid, shadow, args, 0)
         for lane in range(LANES):
             # nothing nearer than the segment's end, unless the static scene has it
             best_t[lane] = reach[lane]
             best_prim[lane] = -1
             best_instance[lane] = -1
-            if shadow_valid[lane] and has_static and shadow_words[GEOM_ID * LANES + lane] != INVALID_ID:
-                best_t[lane] = np.float64(shadow[TFAR * LANES + lane])
+            if shadow_valid[lane] and has_static and shadow_words[lane_word(GEOM_ID, lane)] != INVALID_ID:
+                best_t[lane] = np.float64(shadow[lane_word(TFAR, lane)])
                 best_prim[lane], best_instance[lane] = hit_face(shadow_words, lane, instance_faces, static_faces)
-                best_u[lane] = np.float64(shadow[U * LANES + lane])
-                best_v[lane] = np.float64(shadow[V * LANES + lane])
+                best_u[lane] = np.float64(shadow[lane_word(U, lane)])
+                best_v[lane] = np.float64(shadow[lane_word(V, lane)])
             for k in range(3):
-                segment[k, lane] = np.float64(shadow[k * LANES + lane])
-                segment[3 + k, lane] = np.float64(shadow[(4 + k) * LANES + lane])
+                segment[k, lane] = np.float64(shadow[lane_word(ORG + k, lane)])
+                segment[3 + k, lane] = np.float64(shadow[lane_word(DIR + k, lane)])
         if len(movers):
-            nearest_on_movers(intersect16, motion, lane_time, shadow_valid, segment[0], segment[1], segment[2],
+            nearest_on_movers(intersect, motion, lane_time, shadow_valid, segment[0], segment[1], segment[2],
                                segment[3], segment[4], segment[5], rest, rest_words, rest_valid, args, best_t,
                                best_prim, best_u, best_v)
         more = False
@@ -219,7 +219,7 @@ def shadows_through_cutouts(intersect16, scene, args, shadow, shadow_words, shad
 
 
 @row
-def nearest_hits(intersect16, scene, args, args_incoherent, ray, words, valid, motion, instance_faces, lane_time,
+def nearest_hits(intersect, scene, args, args_incoherent, ray, words, valid, motion, instance_faces, lane_time,
                   px, py, pz, dx, dy, dz, rest, rest_words, rest_valid, best_t, best_prim, best_instance, best_u,
                   best_v):
     """Trace the packet ``ray`` (its ``valid`` lanes) against the static scene and every
@@ -229,44 +229,44 @@ def nearest_hits(intersect16, scene, args, args_incoherent, ray, words, valid, m
     inlined: the path kernel's first-run compile grows faster than its length)."""
     has_static, static_faces = motion[0], motion[1]
     if has_static:
-        intersect16(valid.ctypes.data, scene, ray.ctypes.data, args.ctypes.data)
+        query_packet(intersect, scene, valid, ray, args, 0)
     for lane in range(LANES):
         best_t[lane] = math.inf
         best_prim[lane] = -1
         best_instance[lane] = -1
-        if valid[lane] and has_static and words[GEOM_ID * LANES + lane] != INVALID_ID:
-            best_t[lane] = np.float64(ray[TFAR * LANES + lane])
+        if valid[lane] and has_static and words[lane_word(GEOM_ID, lane)] != INVALID_ID:
+            best_t[lane] = np.float64(ray[lane_word(TFAR, lane)])
             best_prim[lane], best_instance[lane] = hit_face(words, lane, instance_faces, static_faces)
-            best_u[lane] = np.float64(ray[U * LANES + lane])
-            best_v[lane] = np.float64(ray[V * LANES + lane])
+            best_u[lane] = np.float64(ray[lane_word(U, lane)])
+            best_v[lane] = np.float64(ray[lane_word(V, lane)])
     # (a scene with moving objects has no placements: rtmesh.scene.instances.unsupported
     # renders it from copies, so a mover's hit leaves best_instance at -1)
-    nearest_on_movers(intersect16, motion, lane_time, valid, px, py, pz, dx, dy, dz, rest, rest_words,
+    nearest_on_movers(intersect, motion, lane_time, valid, px, py, pz, dx, dy, dz, rest, rest_words,
                        rest_valid, args_incoherent, best_t, best_prim, best_u, best_v)
 
 
 @row
-def occluded(occluded16, scene, args, shadow, shadow_valid, motion, lane_time, reach, rest, rest_words, rest_valid):
+def occluded(occluded_query, scene, args, shadow, shadow_valid, motion, lane_time, reach, rest, rest_words, rest_valid):
     """Clear ``shadow_valid`` of the lanes whose shadow ray (the packet ``shadow``, each
     lane ``reach[lane]`` long) meets the static scene or a moving object (at the lane's
     time, in the object's rest pose).  Once a packet: a call, as :func:`nearest_hits`."""
     has_static, movers, moves = motion[0], motion[2], motion[5]
     if has_static:
-        occluded16(shadow_valid.ctypes.data, scene, shadow.ctypes.data, args.ctypes.data)
+        query_packet(occluded_query, scene, shadow_valid, shadow, args, 0)
         for lane in range(LANES):
-            if shadow_valid[lane] and shadow[TFAR * LANES + lane] == -np.inf:
+            if shadow_valid[lane] and shadow[lane_word(TFAR, lane)] == -np.inf:
                 shadow_valid[lane] = 0
     for j in range(len(movers)):
         for lane in range(LANES):
             rest_valid[lane] = shadow_valid[lane]
             if shadow_valid[lane]:
                 ox, oy, oz, ex, ey, ez = mover_to_rest(
-                    moves, j, lane_time[lane], np.float64(shadow[lane]),
-                    np.float64(shadow[LANES + lane]), np.float64(shadow[2 * LANES + lane]),
-                    np.float64(shadow[4 * LANES + lane]), np.float64(shadow[5 * LANES + lane]),
-                    np.float64(shadow[6 * LANES + lane]))
+                    moves, j, lane_time[lane], np.float64(shadow[lane_word(ORG, lane)]),
+                    np.float64(shadow[lane_word(ORG + 1, lane)]), np.float64(shadow[lane_word(ORG + 2, lane)]),
+                    np.float64(shadow[lane_word(DIR, lane)]), np.float64(shadow[lane_word(DIR + 1, lane)]),
+                    np.float64(shadow[lane_word(DIR + 2, lane)]))
                 set_lane(rest, rest_words, lane, ox, oy, oz, ex, ey, ez, np.float32(reach[lane]))
-        occluded16(rest_valid.ctypes.data, movers[j], rest.ctypes.data, args.ctypes.data)
+        query_packet(occluded_query, movers[j], rest_valid, rest, args, 0)
         for lane in range(LANES):
-            if rest_valid[lane] and rest[TFAR * LANES + lane] == -np.inf:
+            if rest_valid[lane] and rest[lane_word(TFAR, lane)] == -np.inf:
                 shadow_valid[lane] = 0

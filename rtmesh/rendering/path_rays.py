@@ -6,7 +6,7 @@ the vertices' shadow rays (:func:`trace_shadows`), one Embree packet query per 1
 :mod:`rtmesh.rendering.path_vertices`, so that each compiles and caches on its own (their
 packet rows, :mod:`rtmesh.rendering.path_packets`, took half of the path kernel's compile).
 
-Records: ``queries = (intersect16, occluded16, scene, coherent, incoherent)`` (Embree's
+Records: ``queries = (intersect, occluded, scene, coherent, incoherent)`` (Embree's
 packet queries, the committed scene's handle, the query arguments of camera rays and of
 the others), ``packet`` and ``rest`` (``(ray, words, valid)`` of the packet traced and of
 a mover's rest frame, :func:`rtmesh.geometry.embree_packets.packet_buffers`), ``lanes``,
@@ -42,7 +42,7 @@ def trace_segments(queries, first, packet, rest, lanes, hits, motion, instances)
     # views that own nothing, known so here: no reference counts (rtmesh.core.compiled.borrowed)
     queries, packet, rest, lanes, hits, motion, instances = borrowed(
         (queries, packet, rest, lanes, hits, motion, instances))
-    intersect16, scene, coherent, incoherent = queries[0], queries[2], queries[3], queries[4]
+    intersect, scene, coherent, incoherent = queries[0], queries[2], queries[3], queries[4]
     ray, words, valid = packet
     rest_ray, rest_words, rest_valid = rest
     px, py, pz, dx, dy, dz = lanes[PX], lanes[PY], lanes[PZ], lanes[DX], lanes[DY], lanes[DZ]
@@ -54,7 +54,7 @@ def trace_segments(queries, first, packet, rest, lanes, hits, motion, instances)
         if load_lanes(alive[lo:hi], ray, words, valid, px[lo:hi], py[lo:hi], pz[lo:hi], dx[lo:hi], dy[lo:hi],
                       dz[lo:hi], DEFAULT_TFAR) == 0:
             continue
-        nearest_hits(intersect16, scene, args, incoherent, ray, words, valid, motion, instances[0], lane_time[lo:hi],
+        nearest_hits(intersect, scene, args, incoherent, ray, words, valid, motion, instances[0], lane_time[lo:hi],
                      px[lo:hi], py[lo:hi], pz[lo:hi], dx[lo:hi], dy[lo:hi], dz[lo:hi], rest_ray, rest_words,
                      rest_valid, best_t[lo:hi], best_prim[lo:hi], best_instance[lo:hi], best_u[lo:hi],
                      best_v[lo:hi])
@@ -87,7 +87,7 @@ def trace_shadows(queries, packet, rest, segment, reach, lanes, hits, shadows, k
     queries, packet, rest, segment, reach, lanes, hits, shadows, keys, counts, geometry, surface, options, \
         motion, instances = borrowed((queries, packet, rest, segment, reach, lanes, hits, shadows, keys, counts,
                                       geometry, surface, options, motion, instances))
-    intersect16, occluded16, scene, incoherent = queries[0], queries[1], queries[2], queries[4]
+    intersect, occluded_query, scene, incoherent = queries[0], queries[1], queries[2], queries[4]
     shadow, shadow_words, shadow_valid = packet
     rest_ray, rest_words, rest_valid = rest
     total, paths, lane_depth, lane_time = lanes[TOTAL], lanes[PATHS], lanes[LANE_DEPTH], lanes[LANE_TIME]
@@ -117,13 +117,13 @@ def trace_shadows(queries, packet, rest, segment, reach, lanes, hits, shadows, k
             if set_count == 0:
                 continue
             if cutouts:
-                shadows_through_cutouts(intersect16, scene, incoherent, shadow, shadow_words, shadow_valid, geometry,
+                shadows_through_cutouts(intersect, scene, incoherent, shadow, shadow_words, shadow_valid, geometry,
                                         surface, offset_scale, keys, start + lo, lane_depth[lo:hi], reach[lo:hi],
                                         counts, motion, instances, lane_time[lo:hi], segment, rest_ray, rest_words,
                                         rest_valid, best_t[lo:hi], best_prim[lo:hi], best_instance[lo:hi],
                                         best_u[lo:hi], best_v[lo:hi], (k + 1) * MAX_LAYERS)
             else:
-                occluded(occluded16, scene, incoherent, shadow, shadow_valid, motion, lane_time[lo:hi], reach[lo:hi],
+                occluded(occluded_query, scene, incoherent, shadow, shadow_valid, motion, lane_time[lo:hi], reach[lo:hi],
                          rest_ray, rest_words, rest_valid)
             if ao_pass and shadow_kind[k] == AO:
                 count_escaped(shadow_valid, first_hit[lo:hi])

@@ -323,7 +323,7 @@ class PathStage:
                              lights.analytic, lights.environment, lights.texels, lights.descriptors,
                              lights.placement_light, self._light_tree(settings))
         self._instances = instance_record(it)
-        self._queries = (library.intersect16, library.occluded16, handle)
+        self._queries = (library.intersect, library.occluded, handle)
         # a pinhole camera's rays are formed in the kernel (rtmesh.rendering.path_camera);
         # a thin lens, an orthographic camera, moving objects' times and a camera class
         # with rays of its own hand it theirs
@@ -417,7 +417,7 @@ class PathStage:
         keys = path_keys(self._seed_key, pixel_index, sample_index)
         radiance = np.zeros((n, 3))
         counts = np.zeros(len(COUNTER_NAMES), np.int64)
-        intersect16, occluded16, handle = self._queries
+        intersect, occluded, handle = self._queries
         split = passes is not None and any(passes.wants(name) for name in LIGHT_PATH_PASSES)
         record_hits = passes is not None and any(passes.wants(name) for name in CAMERA_HIT_PASSES)
         # whitted: max_depth counts the bounces (one segment more: the light of the last hit),
@@ -435,7 +435,7 @@ class PathStage:
         else:
             camera = no_camera()
             origins, directions = kernel_input(origins, np.float64), kernel_input(directions, np.float64)
-        complete = trace_paths(intersect16, occluded16, handle, camera, origins, directions, keys,
+        complete = trace_paths(intersect, occluded, handle, camera, origins, directions, keys,
                                *self._sobol(pixel_index, sample_index),
                                np.zeros(0) if times is None else kernel_input(times, np.float64),
                                self.geometry, self.surface, self.light_record, self._env, options, self._whitted,

@@ -33,8 +33,8 @@ import math
 import numpy as np
 
 from rtmesh.core.compiled import borrowed, keep_alive, inline_row, kernel, row
-from rtmesh.geometry.embree_packets import (DEFAULT_TFAR, GEOM_ID, INVALID_ID, LANES, RAYHIT_WORDS,
-                                            RTC_RAY_QUERY_FLAG_INCOHERENT, TFAR, U, V, packet_buffers)
+from rtmesh.geometry.embree_packets import (DEFAULT_TFAR, GEOM_ID, INVALID_ID, LANES, RTC_RAY_QUERY_FLAG_INCOHERENT,
+                                            TFAR, U, V, lane_word, packet_buffers, query_packet)
 from rtmesh.lights import light_table as lt
 from rtmesh.materials import lambert, lobes, models
 from rtmesh.rendering.path_packets import MAX_LAYERS, hit_face, placed
@@ -168,13 +168,13 @@ def sample_emission(light, env, texels, descriptors, aim, scene_sphere, u1, u2, 
 
 
 @kernel
-def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geometry, surface, lights, env, instances,
+def trace_photons(intersect, scene, pass_key, sobol_keys, first, count, geometry, surface, lights, env, instances,
                   aim, scene_sphere, specular, scatters, options, photons, stored, counts):
     """Trace photons ``first .. first + count - 1`` of a pass and store where they land.
 
     Parameters
     ----------
-    intersect16 : ctypes function object
+    intersect : ctypes function object
         Embree's ``rtcIntersect16``.
     scene : int
         The committed ``RTCScene``.
@@ -218,8 +218,7 @@ def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geomet
     albedo_table, slots = surface[6], surface[7]
     textured = textured_materials(surface, geometry)
     light_rows, light_probability, light_alias, light_pmf = lights[0], lights[1], lights[2], lights[3]
-    ray, words, valid, args = packet_buffers(np.int64(RAYHIT_WORDS), np.int64(1),
-                                             np.int64(RTC_RAY_QUERY_FLAG_INCOHERENT))
+    ray, words, valid, args = packet_buffers(np.int64(1), np.int64(RTC_RAY_QUERY_FLAG_INCOHERENT))
     scratch = np.zeros((LANES, lobes.PARAMETER_WIDTH))
     px, py, pz = np.zeros(LANES), np.zeros(LANES), np.zeros(LANES)
     dx, dy, dz = np.zeros(LANES), np.zeros(LANES), np.zeros(LANES)
@@ -273,19 +272,19 @@ def trace_photons(intersect16, scene, pass_key, sobol_keys, first, count, geomet
             if active == 0:
                 break
             counts[0] += active
-            intersect16(valid.ctypes.data, scene, ray.ctypes.data, args.ctypes.data)
+            query_packet(intersect, scene, valid, ray, args, 0)
             for lane in range(LANES):
                 if not alive[lane]:
                     continue
-                if words[GEOM_ID * LANES + lane] == INVALID_ID:
+                if words[lane_word(GEOM_ID, lane)] == INVALID_ID:
                     alive[lane] = False
                     continue
                 key = keys[lane]
                 base = DIMENSIONS_PER_BOUNCE * (bounces[lane] + 1)
-                t = np.float64(ray[TFAR * LANES + lane])
+                t = np.float64(ray[lane_word(TFAR, lane)])
                 prim, placement = hit_face(words, lane, instance_faces, static_faces)
-                bu = np.float64(ray[U * LANES + lane])
-                bv = np.float64(ray[V * LANES + lane])
+                bu = np.float64(ray[lane_word(U, lane)])
+                bv = np.float64(ray[lane_word(V, lane)])
                 if sigma[lane, 0] + sigma[lane, 1] + sigma[lane, 2] > 0.0:
                     for c in range(3):
                         beta[lane, c] *= math.exp(-sigma[lane, c] * t)

@@ -1,6 +1,8 @@
-"""The two tracing paths, Embree's 16-wide packets from compiled kernels and embreex's
-``run()``, answer the same queries with the same hits on a robust scene."""
+"""The two tracing paths, Embree's packets from compiled kernels and embreex's ``run()``,
+answer the same queries with the same hits on a robust scene; the packets' layout in groups
+of the machine's native width."""
 
+import ctypes
 import os
 import subprocess
 import sys
@@ -10,6 +12,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from rtmesh.core import packet_group
 from rtmesh.geometry import embree_library, embree_packets
 from rtmesh.geometry.accel import Accel
 
@@ -154,19 +157,113 @@ def test_coherent_packets_with_nearly_axis_aligned_rays(twins, tiniest):
 
 
 @numba.njit
-def _packet_buffers(fields, packets):
-    rays, words, valid, _ = embree_packets.packet_buffers(fields, packets, np.int64(0))
+def _packet_buffers(packets):
+    rays, words, valid, _ = embree_packets.packet_buffers(packets, np.int64(0))
     return rays, words, valid
 
 
-@pytest.mark.parametrize("fields", [embree_packets.RAY_WORDS, embree_packets.RAYHIT_WORDS])
+@numba.njit
+def _lane_words(fields, lanes):
+    """lane_word of every field and lane, (fields, lanes)."""
+    out = np.empty((fields, lanes), np.int64)
+    for field in range(fields):
+        for lane in range(lanes):
+            out[field, lane] = embree_packets.lane_word(field, lane)
+    return out
+
+
 @pytest.mark.parametrize("packets", [1, 4])
-def test_every_packet_buffer_holds_the_hit_rows_an_occlusion_query_rewrites(fields, packets):
+def test_every_packet_buffer_holds_the_hit_rows_an_occlusion_query_rewrites(packets):
     """rtcOccluded16 reads and writes back the nine hit rows after an RTCRay16
     (benchmarks/probe_occlusion_rows.py): a buffer whose last packet lacked them let a query
-    restore stale words into memory another render thread had changed (heap corruption)."""
-    rays, words, valid = _packet_buffers(np.int64(fields), np.int64(packets))
+    restore stale words into memory another render thread had changed (heap corruption).
+    Every group of every packet, occlusion packets included, has the whole RTCRayHitN."""
+    rays, words, valid = _packet_buffers(np.int64(packets))
     lanes = embree_packets.LANES
-    assert len(rays) >= ((packets - 1) * fields + embree_packets.RAYHIT_WORDS) * lanes
+    assert len(rays) == packets * embree_packets.RAYHIT_WORDS * lanes
     assert words.ctypes.data == rays.ctypes.data and len(valid) == packets * lanes
     assert rays.ctypes.data % 64 == 0 and valid.ctypes.data % 64 == 0
+
+
+def test_lane_words_lay_each_group_out_as_embrees_native_packet():
+    """Lane b of packets side by side (b up to four packets' lanes) lies in group b // GROUP,
+    an RTCRayHitN of GROUP lanes: its fields GROUP words apart, its lanes consecutive, the
+    group starting on a boundary of its own size (Embree's alignment of an N-wide packet);
+    every word of the buffer once."""
+    group, fields = embree_packets.GROUP, embree_packets.RAYHIT_WORDS
+    words = _lane_words(fields, 4 * embree_packets.LANES)
+    assert np.array_equal(np.sort(words.ravel()), np.arange(words.size))
+    for b in range(words.shape[1]):
+        start = (b // group) * fields * group
+        assert (start * 4) % (4 * group) == 0
+        np.testing.assert_array_equal(words[:, b], start + np.arange(fields) * group + b % group)
+    if group == embree_packets.LANES:  # one RTCRayHit16 a packet: field-major rows of 16 lanes
+        np.testing.assert_array_equal(words[:, :16], np.arange(fields)[:, None] * 16 + np.arange(16))
+
+
+@pytest.mark.parametrize("features, group", [
+    ({"avx512f": True, "avx512cd": True, "avx512dq": True, "avx512bw": True, "avx512vl": True, "avx2": True,
+      "avx": True}, 16),
+    ({"avx512f": True, "avx512cd": True, "avx2": True, "avx": True}, 8),  # AVX-512 without BW, DQ, VL (KNL)
+    ({"avx2": True, "avx": True, "fma": True}, 8),
+    ({"avx": True}, 8),
+    ({"sse4.2": True}, 4),
+])
+def test_native_group_follows_the_cpus_vector_width(features, group):
+    assert packet_group.native_group(features) == group
+
+
+def test_embree_traces_the_chosen_group_natively_and_no_wider_group():
+    """The layout's width is the widest packet Embree reports as native on this machine."""
+    library = embree_library.packet_library()
+    assert library.native(embree_packets.GROUP)
+    if embree_packets.GROUP < 16:
+        assert not library.native(2 * embree_packets.GROUP)
+
+
+@pytest.mark.parametrize("width", [4, 8, 16])
+def test_every_packet_width_gives_the_single_rays_hits(width):
+    """rtcIntersect4, 8 and 16 (native or emulated here) give run()'s hits to the bit:
+    the packet width is a matter of speed only."""
+    vertices, faces = _scene()
+    library = embree_library.packet_library()
+    rng = np.random.default_rng(7)
+    n = 4 * width
+    origins = np.zeros((n, 3), np.float32)
+    origins[:, 2] = 3.0
+    directions = rng.normal(size=(n, 3))
+    directions[:, 2] = -np.abs(directions[:, 2]) - 1.0
+    directions = (directions / np.linalg.norm(directions, axis=1, keepdims=True)).astype(np.float32)
+    query = embree_packets.PACKET_QUERY(ctypes.cast(getattr(library._lib, f"rtcIntersect{width}"), ctypes.c_void_p).value)
+    packet = embree_library.aligned_array(embree_packets.RAYHIT_WORDS * width, np.float32)
+    rows = packet.reshape(embree_packets.RAYHIT_WORDS, width)
+    ints = rows.view(np.int32)
+    valid = embree_library.aligned_array(width, np.int32)
+    args = embree_library.aligned_array(8, np.int32)
+    args[0], args[1] = embree_packets.RTC_RAY_QUERY_FLAG_COHERENT, embree_packets.RTC_FEATURE_FLAG_ALL
+    t, prim, u, v = np.empty(n, np.float32), np.empty(n, np.int32), np.empty(n, np.float32), np.empty(n, np.float32)
+    with embree_library.SharedScene(library, vertices, faces) as scene:
+        for start in range(0, n, width):
+            part = slice(start, start + width)
+            rows[:] = 0.0
+            rows[embree_packets.ORG:embree_packets.ORG + 3] = origins[part].T
+            rows[embree_packets.DIR:embree_packets.DIR + 3] = directions[part].T
+            rows[embree_packets.TFAR] = embree_packets.DEFAULT_TFAR
+            ints[embree_packets.MASK] = -1
+            ints[embree_packets.GEOM_ID:embree_packets.INST_PRIM_ID + 1] = embree_packets.INVALID_ID
+            valid[:] = -1
+            query(valid.ctypes.data, scene.handle, packet.ctypes.data, args.ctypes.data)
+            hit = ints[embree_packets.GEOM_ID] != embree_packets.INVALID_ID
+            prim[part] = np.where(hit, ints[embree_packets.PRIM_ID], -1)
+            t[part], u[part], v[part] = rows[embree_packets.TFAR], rows[embree_packets.U], rows[embree_packets.V]
+    from embreex import rtcore_scene
+    from embreex.mesh_construction import TriangleMesh
+
+    reference = rtcore_scene.EmbreeScene(robust=True)
+    TriangleMesh(reference, vertices.astype(np.float32), faces.astype(np.int32))
+    expected = reference.run(origins, directions, output=1)
+    hits = expected["primID"] >= 0
+    assert hits.mean() > 0.5
+    np.testing.assert_array_equal(prim, expected["primID"])
+    for ours, theirs in ((t, "tfar"), (u, "u"), (v, "v")):
+        np.testing.assert_array_equal(ours[hits], expected[theirs][hits])
