@@ -256,7 +256,7 @@ def main():
         "|---|---:|---:|---:|",
         *rows,
         "",
-        f"- Tracing: {'Embree 16-wide packets (coherent)' if packets else 'embreex run() (packets unavailable)'}; "
+        f"- Tracing: {f'Embree packets of {embree_packets.LANES} rays, {embree_packets.GROUP}-wide queries (coherent)' if packets else 'embreex run() (packets unavailable)'}; "
         f"{'the fused direct-lighting stage' if one.direct_stage is not None else 'the general wavefront'} renders",
         f"- rtmesh 1 thread / its packet queries alone, 1 thread: **{packet_overhead:.2f}** (target <= 1.3); "
         f"per run {spread['packet overhead']}",

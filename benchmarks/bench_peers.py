@@ -55,6 +55,7 @@ from benchmarks._lib import (ALBEDO, CAMERA, LIGHT_INTENSITY, LIGHT_POSITION, PE
                              relative_rmse, run_peer, seconds, sphere_meshes, sphere_scene, write_ply)
 from rtmesh.core import runtime
 from rtmesh.geometry.accel import Accel
+from rtmesh.geometry.embree_packets import GROUP, LANES
 from rtmesh.rendering.integrator import Integrator
 from rtmesh.rendering.settings import DEFAULT_MAX_SPP, RenderSettings
 
@@ -368,7 +369,7 @@ def main():
         words.append("--spp " + ",".join(map(str, args.spp)))
     if args.adaptive_targets != list(ADAPTIVE_TARGETS):
         words.append("--adaptive-targets " + ",".join(f"{t:g}" for t in args.adaptive_targets))
-    tracing = ("Embree 16-wide packet queries" if packets else
+    tracing = (f"Embree packets of {LANES} rays, {GROUP}-wide queries (the CPU's native width)" if packets else
                "embreex `run()`, one ray at a time" +
                (" (`RTMESH_EMBREE=run`)" if os.environ.get("RTMESH_EMBREE", "").strip().lower() == "run" else ""))
     text = "\n".join([

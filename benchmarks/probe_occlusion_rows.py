@@ -1,6 +1,6 @@
 """Which memory after an ``RTCRay16`` packet Embree's ``rtcOccluded16`` touches.
 
-The library embreex ships reads the nine rows that follow a 16-wide ray packet (where an
+The library embreex ships reads the nine rows that follow a ray packet of 16 (where an
 ``RTCRayHit16`` keeps its hit: Ng, u, v and the ids) during an occlusion query and writes
 them back as it read them.  No single-threaded check sees it (the words come back
 unchanged), but a second thread that writes those words while a query runs sees some of
