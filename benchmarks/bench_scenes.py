@@ -83,8 +83,13 @@ def main():
             for scene in SCENES:
                 times = {"this": [], "other": []}
                 images = {key: Path(folder) / f"{key}.npy" for key in times}
-                for source, key in ((ROOT, "this"), (other, "other")):  # warm-up: compile, cache
-                    render_once(source, scene, args.threads, args.scale, images[key])
+                try:
+                    for source, key in ((ROOT, "this"), (other, "other")):  # warm-up: compile, cache
+                        render_once(source, scene, args.threads, args.scale, images[key])
+                except subprocess.CalledProcessError as failed:  # a scene or key the revision lacks
+                    rows.append(f"| {scene} | fails ({key}: {failed.stderr.strip().splitlines()[-1][:80]}) | | | | |")
+                    print(rows[-1], flush=True)
+                    continue
                 this_image, other_image = np.load(images["this"]), np.load(images["other"])
                 difference = (relative_rmse(this_image, other_image),
                               relative_rmse(this_image, other_image, block=8))
