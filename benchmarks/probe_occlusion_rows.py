@@ -12,7 +12,7 @@ counts the words it finds changed by someone else.
 Rows 12-20 (the hit part) are the ones the query rewrites; rows 21-29 (beyond an
 ``RTCRayHit16``) are a control and must stay 0.  This is why
 :func:`rtmesh.geometry.embree_packets.packet_buffers` gives every group of a packet a whole
-``RTCRayHitN`` (:data:`~rtmesh.geometry.embree_packets.OCCLUSION_EXTENT`): without room after
+``RTCRayHitN`` (:data:`~rtmesh.geometry.embree_packets.PACKET_WORDS`): without room after
 the last packet two render threads corrupted the heap.  Needs two free cores to see the race.
 
 Usage::
@@ -21,7 +21,6 @@ Usage::
 """
 
 import argparse
-import ctypes
 import threading
 
 import numba
@@ -53,8 +52,7 @@ def probe(first_row, last_row, queries, seed=0):
     accel = Accel(np.vstack([sphere.vertices, box.vertices]),
                   np.vstack([sphere.faces, box.faces + len(sphere.vertices)]), packets=True)
     lanes = 16  # rtcOccluded16, whatever width the kernels' packets use here
-    library = packet_library()
-    occluded16 = ep.PACKET_QUERY(ctypes.cast(library._lib.rtcOccluded16, ctypes.c_void_p).value)
+    occluded16 = packet_library().packet_query("Occluded", 16)
     words = aligned_array(40 * lanes, np.int32)
     rays = words.view(np.float32)
     valid, args = aligned_array(lanes, np.int32), aligned_array(8, np.int32)

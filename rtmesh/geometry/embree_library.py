@@ -100,8 +100,13 @@ class PacketLibrary:
         self.version = tuple(int(lib.rtcGetDeviceProperty(self.device, p)) for p in (
             _RTC_DEVICE_PROPERTY_VERSION_MAJOR, _RTC_DEVICE_PROPERTY_VERSION_MINOR,
             _RTC_DEVICE_PROPERTY_VERSION_PATCH))
-        self.intersect = PACKET_QUERY(ctypes.cast(getattr(lib, f"rtcIntersect{GROUP}"), ctypes.c_void_p).value)
-        self.occluded = PACKET_QUERY(ctypes.cast(getattr(lib, f"rtcOccluded{GROUP}"), ctypes.c_void_p).value)
+        self.intersect = self.packet_query("Intersect", GROUP)
+        self.occluded = self.packet_query("Occluded", GROUP)
+
+    def packet_query(self, kind, width):
+        """``rtcIntersectN`` or ``rtcOccludedN`` (``kind`` "Intersect" or "Occluded") of
+        ``width`` (4, 8 or 16) lanes, as the kernels call it (:data:`PACKET_QUERY`)."""
+        return PACKET_QUERY(ctypes.cast(getattr(self._lib, f"rtc{kind}{width}"), ctypes.c_void_p).value)
 
     def native(self, width):
         """Whether the device traces packets of ``width`` (4, 8 or 16) lanes natively
@@ -271,11 +276,11 @@ def aligned_array(count, dtype):
     return raw[skip:skip + count]
 
 
-def _probe_packets(library, scene, origins, directions):
-    """Trace float32 rays 16 at a time, in groups of the native width as the kernels lay
-    them out (:func:`rtmesh.geometry.embree_packets.lane_word`), through ctypes calls (no
-    compiled code: the probe runs before the kernels are trusted), each packet followed by
-    64 guard words.
+def _probe_packets(library, scene, origins, directions, group=GROUP):
+    """Trace float32 rays 16 at a time, in groups of ``group`` lanes (``rtcIntersect{group}``
+    each; by default the native width, as the kernels lay packets out:
+    :func:`rtmesh.geometry.embree_packets.lane_word`), through ctypes calls (no compiled code:
+    the probe runs before the kernels are trusted), each packet followed by 64 guard words.
 
     Returns
     -------
@@ -288,13 +293,14 @@ def _probe_packets(library, scene, origins, directions):
     n = len(origins)
     t, u, v = (np.empty(n, np.float32) for _ in range(3))
     prim = np.empty(n, np.int32)
-    groups = LANES // GROUP
+    groups = LANES // group
+    intersect = library.packet_query("Intersect", group)
     guard = np.int32(0x5EED5EED)
 
     buffer = aligned_array(PACKET_WORDS + 64, np.float32)
     ints = buffer.view(np.int32)
     # (group, field, lane in the group)
-    packet = buffer[:PACKET_WORDS].reshape(groups, RAYHIT_WORDS, GROUP)
+    packet = buffer[:PACKET_WORDS].reshape(groups, RAYHIT_WORDS, group)
     fields = packet.view(np.int32)
     valid = aligned_array(LANES, np.int32)
     args = aligned_array(8, np.int32)
@@ -304,19 +310,18 @@ def _probe_packets(library, scene, origins, directions):
         count = min(LANES, n - start)
         rows = slice(start, start + count)
         ints[PACKET_WORDS:] = guard
-        packet[:] = 0.0
         lanes = np.zeros((RAYHIT_WORDS, LANES), np.float32)
         lanes[ORG:ORG + 3, :count] = origins[rows].T
         lanes[DIR:DIR + 3, :count] = directions[rows].T
         lanes[TFAR, :count] = DEFAULT_TFAR
-        packet[:] = lanes.reshape(RAYHIT_WORDS, groups, GROUP).transpose(1, 0, 2)
+        packet[:] = lanes.reshape(RAYHIT_WORDS, groups, group).transpose(1, 0, 2)
         fields[:, MASK] = -1
         fields[:, GEOM_ID:INST_PRIM_ID + 1] = INVALID_ID
         valid[:] = 0
         valid[:count] = -1
-        for group in range(groups):
-            library.intersect(valid.ctypes.data + 4 * GROUP * group, scene,
-                              buffer.ctypes.data + 4 * RAYHIT_WORDS * GROUP * group, args.ctypes.data)
+        for g in range(groups):
+            intersect(valid.ctypes.data + 4 * group * g, scene, buffer.ctypes.data + 4 * RAYHIT_WORDS * group * g,
+                      args.ctypes.data)
         intact = intact and bool((ints[PACKET_WORDS:] == guard).all())
         # (field, lane) copies of the packet's results
         by_field = packet.transpose(1, 0, 2).reshape(RAYHIT_WORDS, LANES)

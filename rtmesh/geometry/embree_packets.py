@@ -48,25 +48,23 @@ from rtmesh.core.packet_group import native_group
 from rtmesh.geometry.float32_rays import F32_MAX
 
 LANES = 16
-RAY_WORDS = 12  # RTCRay: org xyz, tnear, dir xyz, time, tfar, mask, id, flags
-RAYHIT_WORDS = 21  # + RTCHit: Ng xyz, u, v, primID, geomID, instID, instPrimID
-# Words per lane an occlusion query touches: rtcOccluded16 of the library embreex ships reads
-# the nine hit rows that follow an RTCRay16 (where an RTCRayHit16 keeps its hit) and writes
-# them back as it read them.  Inside a buffer its thread owns that changes nothing; past the
-# buffer's end it restores stale words into memory another thread may have changed in the
-# meantime: a second thread writing those rows finds its writes undone, none beyond them
-# (benchmarks/probe_occlusion_rows.py), and two render threads corrupted the heap.  So
-# every packet buffer has room for them.
-OCCLUSION_EXTENT = RAYHIT_WORDS
+# RTCRay (org xyz, tnear, dir xyz, time, tfar, mask, id, flags: 12 words) + RTCHit (Ng xyz,
+# u, v, primID, geomID, instID, instPrimID)
+RAYHIT_WORDS = 21
 ALIGN_WORDS = 16  # 64 bytes: Embree's packets must be aligned to their width
 # word offsets of the fields, in units of LANES
 ORG, TNEAR, DIR, TIME, TFAR, MASK, RAY_ID, FLAGS = 0, 3, 4, 7, 8, 9, 10, 11
 NG, U, V, PRIM_ID, GEOM_ID, INST_ID, INST_PRIM_ID = 12, 15, 16, 17, 18, 19, 20
 
 
-# Lanes per native query (see the module docstring) and the words of one group; every packet,
-# closest-hit or occlusion, takes PACKET_WORDS: each group has room for the nine hit rows that
-# an occlusion query reads and writes back after its rays (OCCLUSION_EXTENT)
+# Lanes per native query (see the module docstring) and the words of one group.  Every
+# packet, closest-hit or occlusion, takes PACKET_WORDS: an occlusion query of the library
+# embreex ships reads the nine hit rows that follow its RTCRayN (where an RTCRayHitN keeps its
+# hit) and writes them back as it read them.  Inside a buffer its thread owns that changes
+# nothing; past the buffer's end it restores stale words into memory another thread may have
+# changed in the meantime: a second thread writing those rows finds its writes undone, none
+# beyond them (benchmarks/probe_occlusion_rows.py), and two render threads corrupted the
+# heap.  So every group has room for a whole RTCRayHitN.
 GROUP = native_group()
 GROUP_WORDS = RAYHIT_WORDS * GROUP
 PACKET_WORDS = RAYHIT_WORDS * LANES
@@ -200,7 +198,7 @@ def packet_buffers(packets, flags):
     rays : (packets * PACKET_WORDS,) float32
         Packet ``q`` at ``q * PACKET_WORDS``, its words at :func:`lane_word`: closest-hit and
         occlusion packets alike (each group has room for the hit rows that an occlusion
-        query touches, :data:`OCCLUSION_EXTENT`).
+        query touches, :data:`PACKET_WORDS`).
     words : the same memory as int32
     valid : (packets * LANES,) int32
         Lane masks, packet ``q``'s at ``q * LANES``.
@@ -218,8 +216,10 @@ def packet_buffers(packets, flags):
 
 @row
 def lane_word(field, lane):
-    """Word offset of ``field`` of lane ``lane`` (0 .. LANES - 1) in a packet: in group
-    ``lane // GROUP``, an ``RTCRayHitN`` of :data:`GROUP` lanes (field by field)."""
+    """Word offset of ``field`` of lane ``lane`` in a packet: in group ``lane // GROUP``, an
+    ``RTCRayHitN`` of :data:`GROUP` lanes (field by field).  Lanes past ``LANES - 1`` run on
+    into the packets that follow (lane ``b`` of a buffer is lane ``b % LANES`` of packet
+    ``b // LANES``), as the fused stage's blocks address them."""
     return (lane // GROUP) * GROUP_WORDS + field * GROUP + lane % GROUP
 
 
@@ -232,8 +232,8 @@ def query_packet(query, scene, valid, rays, args, q):
         first = q * LANES + group * GROUP
         for lane in range(first, first + GROUP):
             if valid[lane]:
-                query(valid.ctypes.data + 4 * first, scene, rays.ctypes.data + 4 * (q * PACKET_WORDS + group * GROUP_WORDS),
-                      args.ctypes.data)
+                words = q * PACKET_WORDS + group * GROUP_WORDS
+                query(valid.ctypes.data + 4 * first, scene, rays.ctypes.data + 4 * words, args.ctypes.data)
                 break
 
 

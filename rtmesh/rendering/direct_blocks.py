@@ -2,9 +2,10 @@
 
 A block is :data:`BLOCK` film samples, four packets of 16 lanes side by side (sample ``b``
 is lane ``b % 16`` of packet ``b // 16``, at the words
-:func:`rtmesh.geometry.embree_packets.lane_word` gives for ``b``).  Each step works on the block's scratch arrays: the
-camera step (positions, then pinhole directions), the surface step (gathered face rows,
-then the arithmetic of :func:`rtmesh.shading.surfaces.surface_records`), the light step
+:func:`rtmesh.geometry.embree_packets.lane_word` gives for ``b``).  Each step works on the
+block's scratch arrays: the camera step (positions, then pinhole directions), the surface
+step (gathered face rows, then the arithmetic of
+:func:`rtmesh.shading.surfaces.surface_records`), the light step
 (the arithmetic of :func:`rtmesh.shading.direct_light.light_samples` for one light), the
 Blinn-Phong sum of one light at one sample, and the radiance step (each sample's radiance,
 into the chunk's rows or its pixel's film sums).  :func:`rtmesh.rendering.direct_stage.direct_samples`

@@ -2,7 +2,6 @@
 answer the same queries with the same hits on a robust scene; the packets' layout in groups
 of the machine's native width."""
 
-import ctypes
 import os
 import subprocess
 import sys
@@ -234,28 +233,10 @@ def test_every_packet_width_gives_the_single_rays_hits(width):
     directions = rng.normal(size=(n, 3))
     directions[:, 2] = -np.abs(directions[:, 2]) - 1.0
     directions = (directions / np.linalg.norm(directions, axis=1, keepdims=True)).astype(np.float32)
-    query = embree_packets.PACKET_QUERY(ctypes.cast(getattr(library._lib, f"rtcIntersect{width}"), ctypes.c_void_p).value)
-    packet = embree_library.aligned_array(embree_packets.RAYHIT_WORDS * width, np.float32)
-    rows = packet.reshape(embree_packets.RAYHIT_WORDS, width)
-    ints = rows.view(np.int32)
-    valid = embree_library.aligned_array(width, np.int32)
-    args = embree_library.aligned_array(8, np.int32)
-    args[0], args[1] = embree_packets.RTC_RAY_QUERY_FLAG_COHERENT, embree_packets.RTC_FEATURE_FLAG_ALL
-    t, prim, u, v = np.empty(n, np.float32), np.empty(n, np.int32), np.empty(n, np.float32), np.empty(n, np.float32)
     with embree_library.SharedScene(library, vertices, faces) as scene:
-        for start in range(0, n, width):
-            part = slice(start, start + width)
-            rows[:] = 0.0
-            rows[embree_packets.ORG:embree_packets.ORG + 3] = origins[part].T
-            rows[embree_packets.DIR:embree_packets.DIR + 3] = directions[part].T
-            rows[embree_packets.TFAR] = embree_packets.DEFAULT_TFAR
-            ints[embree_packets.MASK] = -1
-            ints[embree_packets.GEOM_ID:embree_packets.INST_PRIM_ID + 1] = embree_packets.INVALID_ID
-            valid[:] = -1
-            query(valid.ctypes.data, scene.handle, packet.ctypes.data, args.ctypes.data)
-            hit = ints[embree_packets.GEOM_ID] != embree_packets.INVALID_ID
-            prim[part] = np.where(hit, ints[embree_packets.PRIM_ID], -1)
-            t[part], u[part], v[part] = rows[embree_packets.TFAR], rows[embree_packets.U], rows[embree_packets.V]
+        t, prim, u, v, guard_intact = embree_library._probe_packets(library, scene.handle, origins, directions,
+                                                                    group=width)
+    assert guard_intact
     from embreex import rtcore_scene
     from embreex.mesh_construction import TriangleMesh
 
