@@ -133,8 +133,48 @@ def compile_locked(dispatcher, signature):
     """
     if signature in dispatcher.overloads:
         return
+    if getattr(dispatcher, "_compiles_locked", False):
+        dispatcher.compile(signature)  # it holds its lock file itself (lock_compiles)
+        return
     with _kernel_lock(dispatcher):
         dispatcher.compile(signature)
+
+
+def lock_compiles(dispatcher):
+    """Make every compile of ``dispatcher`` hold its lock file (:func:`compile_locked`),
+    also the compiles numba starts itself: a call from Python with new argument types, and
+    the typing of another kernel that calls this one.
+
+    Two processes of a first run (test workers, a render and its helper, a batch's workers)
+    compile different kernels that call the same one (the BSDF dispatch, called by the
+    light samples' stage and by the photon gather): without the lock both compiled it, about
+    9 s of CPU each; with it the second waits, then loads it from the disk cache.
+
+    numba's own compiler lock (one per process) is taken first: a thread that waits for
+    the file holds it, so that no thread of this process can hold the file while it waits
+    for numba's lock.  Kernels call each other without cycles, so two processes holding
+    one lock file each never wait for each other's.
+
+    Parameters
+    ----------
+    dispatcher : numba dispatcher with a disk cache
+        Changed in place (its ``compile``); returned.
+    """
+    from numba.core import sigutils
+    from numba.core.compiler_lock import global_compiler_lock
+
+    unlocked = dispatcher.compile
+
+    def compile(sig):
+        args, _ = sigutils.normalize_signature(sig)
+        if tuple(args) in dispatcher.overloads:
+            return unlocked(sig)
+        with global_compiler_lock, _kernel_lock(dispatcher):
+            return unlocked(sig)
+
+    dispatcher.compile = compile
+    dispatcher._compiles_locked = True
+    return dispatcher
 
 
 def compile_for(dispatcher, args):

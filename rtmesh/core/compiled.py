@@ -119,9 +119,28 @@ def kernel(function):
     * ``error_model="numpy"``: a division by zero gives inf or NaN as in NumPy, never an
       exception;
     * no ``fastmath``: no reassociation or fused multiply-adds, so each formula rounds as
-      written, the same on every machine and for every chunk and thread count.
+      written, the same on every machine and for every chunk and thread count;
+    * every compile holds the kernel's lock file
+      (:func:`rtmesh.core.compile_ahead.lock_compiles`), so that the processes of a first
+      run compile it once between them.
     """
-    return _with_package_cache(numba.njit(nogil=True, error_model="numpy")(function))
+    return _kernel(function)
+
+
+def stage(function):
+    """Compile ``function`` as a :func:`kernel` that only other kernels call, through its
+    address (:func:`entry_point`, :func:`call_at`): without the wrappers numba builds for
+    calls from Python and from C, about 2 s of the first compile of each of the path
+    kernel's stages (their arguments are tuples of dozens of arrays, each unboxed by the
+    CPython wrapper)."""
+    return _kernel(function, no_cpython_wrapper=True, no_cfunc_wrapper=True)
+
+
+def _kernel(function, **options):
+    """:func:`kernel` with more numba options."""
+    from rtmesh.core.compile_ahead import lock_compiles
+
+    return lock_compiles(_with_package_cache(numba.njit(nogil=True, error_model="numpy", **options)(function)))
 
 
 def fix_signatures(dispatcher, signatures):

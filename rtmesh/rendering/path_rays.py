@@ -15,7 +15,7 @@ a mover's rest frame, :func:`rtmesh.geometry.embree_packets.packet_buffers`), ``
 
 import numpy as np
 
-from rtmesh.core.compiled import borrowed, kernel
+from rtmesh.core.compiled import borrowed, stage
 from rtmesh.geometry.embree_packets import DEFAULT_TFAR, LANES
 from rtmesh.rendering.path_camera_hits import count_escaped
 from rtmesh.rendering.path_packets import AO, MAX_LAYERS, nearest_hits, occluded, shadows_through_cutouts
@@ -25,7 +25,7 @@ from rtmesh.rendering.path_vertices import (ALIVE, DX, DY, DZ, FIRST_HIT, LANE_D
 from rtmesh.rendering.path_sums import accept_shadows
 
 
-@kernel
+@stage
 def trace_segments(queries, first, packet, rest, lanes, hits, motion, instances):
     """The nearest hit of every live lane's ray, into ``hits``: one ``rtcIntersect16`` per
     packet of lanes with a live one (camera rays, ``first``, with the coherent flag).
@@ -60,7 +60,7 @@ def trace_segments(queries, first, packet, rest, lanes, hits, motion, instances)
                      best_v[lo:hi])
 
 
-@kernel
+@stage
 def trace_shadows(queries, packet, rest, segment, reach, lanes, hits, shadows, keys, start, counts, geometry,
                   surface, options, motion, instances):
     """The shadow rays the vertex stages set: one occlusion packet per light sample and

@@ -6,7 +6,7 @@ split rays.  Records and calling as :mod:`rtmesh.rendering.path_vertices` descri
 
 import numpy as np
 
-from rtmesh.core.compiled import borrowed, kernel
+from rtmesh.core.compiled import borrowed, stage
 from rtmesh.materials import lobes, models
 from rtmesh.rendering.path_packets import (BSDF, BSDF_U1, BSDF_U2, DIMENSIONS_PER_VERTEX, LOBE, REFLECTION,
                                            REFRACTION, ROULETTE)
@@ -28,7 +28,7 @@ from rtmesh.sampling.zsobol import sequence_pair
 SURVIVAL = 0.95
 
 
-@kernel
+@stage
 def scatter(lanes, vertices, branches_, keys, pixels, samples, sobol_keys, start, surface, options, whitted):
     """The ray that continues each shaded lane's path: a BSDF sample (then Russian roulette
     after ``rr_depth`` vertices), or (whitted, Blinn-Phong hits) the mirror or refracted

@@ -30,7 +30,7 @@ import math
 
 import numpy as np
 
-from rtmesh.core.compiled import borrowed, inline_row, kernel
+from rtmesh.core.compiled import borrowed, inline_row, stage
 from rtmesh.geometry.embree_packets import LANES
 from rtmesh.lights import light_table as lt
 from rtmesh.lights import light_tree
@@ -105,7 +105,7 @@ def _choice(choice_pmf, by_tree, tree, light, vertex, lane):
     return choice_pmf[light]
 
 
-@kernel
+@stage
 def meet(lanes, hits, vertices, keys, start, geometry, surface, textured, lights, env, options, whitted, motion,
          instances, photon_map):
     """What each live lane's segment meets: a visible quad or disk light, the background, a
@@ -323,7 +323,7 @@ def meet(lanes, hits, vertices, keys, start, geometry, surface, textured, lights
         shaded[lane] = True
 
 
-@kernel
+@stage
 def sample_lights(lanes, vertices, shadows, keys, pixels, samples, sobol_keys, start, geometry, surface, lights, env,
                   options, whitted, motion):
     """Next-event estimation at each shaded lane's vertex: ``light_samples`` estimates at a

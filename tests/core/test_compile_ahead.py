@@ -131,6 +131,46 @@ def test_a_kernel_being_compiled_by_the_other_process_is_waited_for():
     assert _twice(1.5) == 3.0
 
 
+# run in a process of its own with an empty disk cache: ``outer``'s typing compiles
+# ``inner`` (numba starts that compile, not rtmesh); it must wait for inner's lock file,
+# held here on another file descriptor as another process would hold it while compiling
+NESTED_COMPILE = """
+import fcntl, os, sys, threading, time
+from numba import types
+from rtmesh.core.compiled import kernel
+
+@kernel
+def inner(x):
+    return x + 1.0
+
+@kernel
+def outer(x):
+    return 2.0 * inner(x)
+
+signature = (types.float64,)
+os.makedirs(inner._cache._cache_path, exist_ok=True)
+lock_path = os.path.join(inner._cache._cache_path, __name__ + ".inner.compiling")
+with open(lock_path, "a") as held:
+    fcntl.flock(held, fcntl.LOCK_EX)
+    waiter = threading.Thread(target=outer.compile, args=(signature,))
+    waiter.start()
+    time.sleep(0.5)
+    assert waiter.is_alive() and signature not in inner.overloads, "inner compiled beside the lock"
+    fcntl.flock(held, fcntl.LOCK_UN)
+waiter.join(timeout=120)
+assert not waiter.is_alive() and signature in inner.overloads
+assert outer(1.5) == 5.0
+"""
+
+
+def test_a_kernel_that_another_calls_is_compiled_under_its_lock_file_too(tmp_path):
+    script = tmp_path / "nested.py"
+    script.write_text(NESTED_COMPILE)
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"), PYTHONPATH=PACKAGE_PARENT)
+    done = subprocess.run([sys.executable, str(script)], env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+
+
 def test_without_a_helper_prepare_compiles_under_the_lock_and_starts_no_process(monkeypatch):
     # outside the test session's own helper block (tests/conftest.py): a group the cache
     # lacks is compiled under its lock files (a process compiling it meanwhile is waited
