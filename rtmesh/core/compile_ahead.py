@@ -198,9 +198,9 @@ def _kernel_lock(dispatcher):
     there is no such lock (no ``fcntl``, no cache folder, a file system that refuses it),
     the block runs without one, and two processes may then compile the kernel twice."""
     cache_path = getattr(dispatcher._cache, "_cache_path", None)
-    name = dispatcher.py_func.__module__ + "." + dispatcher.py_func.__qualname__
     lock = None
     if fcntl is not None and cache_path is not None:
+        name = dispatcher.py_func.__module__ + "." + dispatcher.py_func.__qualname__
         try:
             os.makedirs(cache_path, exist_ok=True)
             lock = open(os.path.join(cache_path, name + ".compiling"), "a")
