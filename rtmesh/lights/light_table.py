@@ -445,15 +445,29 @@ def area_pdf(light, px, py, pz, dx, dy, dz, distance):
     """Solid-angle density of ``sample_li`` reaching a point of an area light from ``p``
     along unit ``d`` at ``distance``; 0 from behind a one-sided light.  A triangle that
     :func:`solid_angle_sampled` says is sampled in solid angle has ``1 / omega``."""
+    omega = 0.0
+    if light[0] == TRIANGLE and _facing_cosine(light, dx, dy, dz) > 0.0:
+        omega = triangle_solid_angle(light, px, py, pz)
+    return _area_density(light, omega, dx, dy, dz, distance)
+
+
+@row
+def _facing_cosine(light, dx, dy, dz):
+    """Cosine between an area light's emitting side and the reverse of unit ``d`` (its
+    absolute value for a two-sided light)."""
     cos_l = -((light[4] * dx + light[5] * dy) + light[6] * dz)
-    if light[TWO_SIDED] > 0.0:
-        cos_l = abs(cos_l)
+    return abs(cos_l) if light[TWO_SIDED] > 0.0 else cos_l
+
+
+@row
+def _area_density(light, omega, dx, dy, dz, distance):
+    """:func:`area_pdf` where the solid angle ``omega`` a triangle light subtends from the
+    point is known (quads and disks: not read), as :func:`sample_area` knows it."""
+    cos_l = _facing_cosine(light, dx, dy, dz)
     if not cos_l > 0.0:
         return 0.0
-    if light[0] == TRIANGLE:
-        omega = triangle_solid_angle(light, px, py, pz)
-        if solid_angle_sampled(omega):
-            return 1.0 / omega
+    if light[0] == TRIANGLE and solid_angle_sampled(omega):
+        return 1.0 / omega
     return distance * distance / (light[AREA] * cos_l)
 
 
@@ -480,12 +494,14 @@ def solid_angle_sampled(omega):
 
 
 @row
-def sample_triangle_solid_angle(light, px, py, pz, u1, u2, omega):
+def sample_triangle_solid_angle(light, px, py, pz, u1, u2, omega, corners):
     """A point of a triangle light uniform in the solid angle ``omega`` it subtends from
-    ``p``: ``(wx, wy, wz, distance, b1, b2, ok)``, the unit direction, the distance to the
-    point and its barycentric weights of the corners 1 and 2 (least squares on the edges);
-    ``ok`` False where the direction misses the triangle's plane (seen edge-on)."""
-    ax, ay, az, bx, by, bz, cx, cy, cz = _corner_directions(light, px, py, pz)
+    ``p``, whose corners lie in the unit directions ``corners`` from ``p``
+    (:func:`_corner_directions`, nine numbers): ``(wx, wy, wz, distance, b1, b2, ok)``, the
+    unit direction, the distance to the point and its barycentric weights of the corners 1
+    and 2 (least squares on the edges); ``ok`` False where the direction misses the
+    triangle's plane (seen edge-on)."""
+    ax, ay, az, bx, by, bz, cx, cy, cz = corners
     wx, wy, wz = spherical_triangle_row(u1, u2, ax, ay, az, bx, by, bz, cx, cy, cz, omega)
     nx, ny, nz = light[4], light[5], light[6]
     cos = (wx * nx + wy * ny) + wz * nz
@@ -518,12 +534,17 @@ def sample_area(light, px, py, pz, u1, u2):
     it subtends where :func:`solid_angle_sampled` (and the direction meets its plane), every
     light by area elsewhere (:func:`sample_area_point`)."""
     b1 = b2 = 0.0
+    # a triangle's solid angle from p, and its corners' directions, computed once for the
+    # choice, the sample and its density (each an atan2 and three normalisations)
+    omega = 0.0
     if light[0] == TRIANGLE:
-        omega = triangle_solid_angle(light, px, py, pz)
+        corners = _corner_directions(light, px, py, pz)
+        omega = spherical_triangle_area_row(*corners)
         if solid_angle_sampled(omega):
-            dx, dy, dz, distance, b1, b2, ok = sample_triangle_solid_angle(light, px, py, pz, u1, u2, omega)
+            dx, dy, dz, distance, b1, b2, ok = sample_triangle_solid_angle(light, px, py, pz, u1, u2, omega,
+                                                                           corners)
             if ok:
-                return dx, dy, dz, distance, area_pdf(light, px, py, pz, dx, dy, dz, distance), b1, b2
+                return dx, dy, dz, distance, _area_density(light, omega, dx, dy, dz, distance), b1, b2
         b1, b2 = uniform_triangle_weights(u1, u2)
     qx, qy, qz = sample_area_point(light, u1, u2)
     dx, dy, dz = qx - px, qy - py, qz - pz
@@ -531,7 +552,7 @@ def sample_area(light, px, py, pz, u1, u2):
     if not distance > 0.0:
         return 0.0, 0.0, 1.0, 0.0, 0.0, b1, b2
     dx, dy, dz = dx / distance, dy / distance, dz / distance
-    return dx, dy, dz, distance, area_pdf(light, px, py, pz, dx, dy, dz, distance), b1, b2
+    return dx, dy, dz, distance, _area_density(light, omega, dx, dy, dz, distance), b1, b2
 
 
 @row
