@@ -527,20 +527,25 @@ class Integrator:
         in_pixel = pixel_positions(ps.code, ps.keys, ps.corners, ps.size, ps.spp, kernel_input(pixel, np.int64),
                                    kernel_input(sample_in_pixel, np.int64))
         lens_uv = self.sampler.lens(pixel, sample_in_pixel) if self.plan.lens else None
-        sample_time = None
-        if self.plan.motion:
-            # one time per camera sample, stratified per pixel; its rays all inherit it
-            t_open, t_close = self.camera.shutter
-            sample_time = t_open + (t_close - t_open) * self.sampler.time(pixel, sample_in_pixel)
         origins, directions = self.camera.generate_rays(in_pixel, s.width, s.height, lens_uv, pixel,
                                                         self.camera_frame)
-        return origins, directions, sample_time
+        return origins, directions, self._sample_times(pixel, sample_in_pixel)
+
+    def _sample_times(self, pixel, sample_in_pixel):
+        """Each camera sample's time in the shutter ((n,) float64; one per sample, stratified
+        per pixel, and its rays all inherit it), or None without moving objects."""
+        if not self.plan.motion:
+            return None
+        t_open, t_close = self.camera.shutter
+        return t_open + (t_close - t_open) * self.sampler.time(pixel, sample_in_pixel)
 
     def _render_paths(self, pixel, sample_in_pixel, m, spp, ragged, stats, clock):
         """:meth:`render_chunk` under the path integrator (and the Whitted configuration of
         its kernel): camera rays, then the path kernel, which writes the passes too."""
-        origins = directions = times = None
-        if not self.path_stage.camera_in_kernel:
+        origins = directions = None
+        if self.path_stage.camera_in_kernel:
+            times = self._sample_times(pixel, sample_in_pixel)
+        else:
             origins, directions, times = self._camera_rays(pixel, sample_in_pixel)
         n = len(pixel)
         clock.lap("camera")

@@ -3,7 +3,8 @@ position in its pixel from the sampler (:func:`rtmesh.sampling.pixel_samples.sam
 the compiled twin of :meth:`rtmesh.sampling.sampler.Sampler.pixel`) and its direction
 through the image plane (:mod:`rtmesh.scene.camera_rays`' rows), the same numbers
 :meth:`rtmesh.rendering.integrator.Integrator` forms for the other cameras (thin lens,
-orthographic, moving objects' times), which hand the kernel their rays instead.
+orthographic), which hand the kernel their rays instead; with moving objects the chunk hands
+it each sample's time.
 
 ``camera = (on, code, keys, corners, size, spp, width, frame, eye, pixels, samples)``:
 whether the kernel forms the camera rays; the

@@ -324,11 +324,12 @@ class PathStage:
                              lights.placement_light, self._light_tree(settings))
         self._instances = instance_record(it)
         self._queries = (library.intersect, library.occluded, handle)
-        # a pinhole camera's rays are formed in the kernel (rtmesh.rendering.path_camera);
-        # a thin lens, an orthographic camera, moving objects' times and a camera class
-        # with rays of its own hand it theirs
+        # a pinhole camera's rays are formed in the kernel (rtmesh.rendering.path_camera),
+        # with moving objects too (the camera does not move: the chunk hands the kernel each
+        # sample's time); a thin lens, an orthographic camera and a camera class with rays
+        # of its own hand it theirs
         camera = it.camera
-        self.camera_in_kernel = not (camera.orthographic or it.plan.lens or it.plan.motion
+        self.camera_in_kernel = not (camera.orthographic or it.plan.lens
                                      or type(camera).generate_rays is not Camera.generate_rays)
         sampler = it.pixel_sampler
         self._camera = (self.camera_in_kernel, sampler.code, sampler.keys, sampler.corners, sampler.size, sampler.spp,

@@ -30,7 +30,8 @@ def _render(scene, settings, in_kernel, monkeypatch):
 
 
 @pytest.mark.parametrize("sampler", ["regular", "jittered", "random", "sobol", "zsobol"])
-@pytest.mark.parametrize("source, integrator", [("showcase.toml", "whitted"), ("glass_edges.toml", "path")])
+@pytest.mark.parametrize("source, integrator", [("showcase.toml", "whitted"), ("glass_edges.toml", "path"),
+                                                ("effects/motion_blur.toml", "whitted")])
 def test_the_kernels_camera_rays_are_the_cameras(source, integrator, sampler, monkeypatch):
     scene, settings = load_scene(os.path.join(ASSETS, source), width=24, height=16, spp=2, sampler=sampler,
                                  integrator=integrator, passes=("depth", "normal"))
@@ -46,3 +47,10 @@ def test_a_thin_lens_hands_the_kernel_its_rays():
     scene, settings = load_scene(os.path.join(ASSETS, "effects", "dof.toml"), width=16, height=12, spp=1)
     integrator = Integrator(scene, settings)
     assert integrator.path_stage is not None and not integrator.path_stage.camera_in_kernel
+
+
+def test_moving_objects_leave_the_camera_rays_to_the_kernel():
+    # the camera does not move: the kernel forms its rays, the chunk hands it the times
+    scene, settings = load_scene(os.path.join(ASSETS, "effects", "motion_blur.toml"), width=16, height=12, spp=1)
+    integrator = Integrator(scene, settings)
+    assert integrator.plan.motion and integrator.path_stage is not None and integrator.path_stage.camera_in_kernel
