@@ -542,15 +542,17 @@ class Integrator:
     def _render_paths(self, pixel, sample_in_pixel, m, spp, ragged, stats, clock):
         """:meth:`render_chunk` under the path integrator (and the Whitted configuration of
         its kernel): camera rays, then the path kernel, which writes the passes too."""
-        origins = directions = None
+        origins = directions = lens = None
         if self.path_stage.camera_in_kernel:
             times = self._sample_times(pixel, sample_in_pixel)
+            if self.plan.lens:
+                lens = self.camera.lens_disk(self.sampler.lens(pixel, sample_in_pixel))
         else:
             origins, directions, times = self._camera_rays(pixel, sample_in_pixel)
         n = len(pixel)
         clock.lap("camera")
         buffers = self.passes.buffers(n) if self.plan.passes else None
-        radiance = self.path_stage.render(origins, directions, pixel, sample_in_pixel, stats, buffers, times)
+        radiance = self.path_stage.render(origins, directions, pixel, sample_in_pixel, stats, buffers, times, lens)
         clock.lap("direct")
         if ragged:
             return radiance, (self.passes.per_sample(buffers, n) or None) if buffers is not None else None, stats

@@ -171,7 +171,7 @@ def trace_paths(intersect, occluded, scene, camera, origins, directions, keys, p
         camera_hits, counts = borrowed((camera, origins, directions, keys, pixels, samples, sobol_keys, times, stages,
                                         radiance, light_paths, camera_hits, counts))
     n = keys.shape[0]
-    camera_on, eye = camera[0], camera[8]
+    camera_on = camera[0]
     absorption = surface[4]
     textured = textured_materials(surface, geometry)
     split, camera_media, light_samples, record_hits = options[6], options[7], options[8], options[10]
@@ -275,16 +275,14 @@ def trace_paths(intersect, occluded, scene, camera, origins, directions, keys, p
     for start in range(0, n, WIDTH):
         count = min(WIDTH, n - start)
         if camera_on:
-            camera_lanes(camera, start, count, sequence, index, xy, dx, dy, dz)
+            camera_lanes(camera, start, count, sequence, index, xy, px, py, pz, dx, dy, dz)
         for lane in range(WIDTH):
             alive[lane] = lane < count
             branch_top[lane] = 0
             ray_kind[lane] = CAMERA
             if lane < count:
                 i = start + lane
-                if camera_on:
-                    px[lane], py[lane], pz[lane] = eye[0], eye[1], eye[2]
-                else:
+                if not camera_on:
                     px[lane], py[lane], pz[lane] = origins[i, 0], origins[i, 1], origins[i, 2]
                     dx[lane], dy[lane], dz[lane] = directions[i, 0], directions[i, 1], directions[i, 2]
                 beta[lane, 0] = beta[lane, 1] = beta[lane, 2] = 1.0

@@ -40,7 +40,8 @@ def no_camera():
     """The kernel's ``camera`` record when the camera rays are handed to it
     (:mod:`rtmesh.rendering.path_camera`)."""
     z = np.zeros
-    return (False, 0, z(5, np.uint64), z((1, 2)), z(2), 1, 1, z(13), z(3), z(0, np.int64), z(0, np.int64))
+    return (False, 0, z(5, np.uint64), z((1, 2)), z(2), 1, 1, z(13), z(3), 1.0, z(0, np.int64), z(0, np.int64),
+            z((0, 2)))
 
 
 def small_records():

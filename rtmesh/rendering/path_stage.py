@@ -324,18 +324,17 @@ class PathStage:
                              lights.placement_light, self._light_tree(settings))
         self._instances = instance_record(it)
         self._queries = (library.intersect, library.occluded, handle)
-        # a pinhole camera's rays are formed in the kernel (rtmesh.rendering.path_camera),
-        # with moving objects too (the camera does not move: the chunk hands the kernel each
-        # sample's time); a thin lens, an orthographic camera and a camera class with rays
-        # of its own hand it theirs
+        # a pinhole or thin-lens camera's rays are formed in the kernel
+        # (rtmesh.rendering.path_camera; the chunk hands it each sample's point on the
+        # aperture, and with moving objects its time: the camera does not move); an
+        # orthographic camera and a camera class with rays of its own hand it theirs
         camera = it.camera
-        self.camera_in_kernel = not (camera.orthographic or it.plan.lens
-                                     or type(camera).generate_rays is not Camera.generate_rays)
+        self.camera_in_kernel = not (camera.orthographic or type(camera).generate_rays is not Camera.generate_rays)
         sampler = it.pixel_sampler
         self._camera = (self.camera_in_kernel, sampler.code, sampler.keys, sampler.corners, sampler.size, sampler.spp,
                         int(settings.width),
                         np.concatenate([camera.image_plane(settings.width, settings.height), *it.camera_frame]),
-                        np.ascontiguousarray(camera.position, dtype=np.float64))
+                        np.ascontiguousarray(camera.position, dtype=np.float64), float(camera.focus))
         PATH_KERNELS.prepare()
         # the kernel's and its stages' libraries, loaded from the disk cache once a process
         # (about 0.25 s) as the scene is set up, not within the first render
@@ -390,7 +389,7 @@ class PathStage:
             # the fraction of the surface's ambient-occlusion rays that escaped
             passes.write("ao", rows, hit[:, ch.HIT_FREE] / self.it.ao_samples)
 
-    def render(self, origins, directions, pixel, sample, stats, passes=None, times=None):
+    def render(self, origins, directions, pixel, sample, stats, passes=None, times=None, lens=None):
         """Radiance of the camera rays of one chunk.
 
         Parameters
@@ -407,6 +406,9 @@ class PathStage:
             written to it (:meth:`rtmesh.io.passes.PassRecorder.record_hits`).
         times : (n,) float, optional
             Each ray's time in the shutter (scenes with moving objects).
+        lens : (n, 2) float, optional
+            Where the kernel forms the camera rays of a thin lens: each sample's point on the
+            aperture (:meth:`rtmesh.scene.camera.Camera.lens_disk`).
 
         Returns
         -------
@@ -431,7 +433,8 @@ class PathStage:
         light_paths = np.zeros((n if split else 0, LIGHT_PATHS, 3))
         camera_hits = np.zeros((n if record_hits else 0, ch.CAMERA_HIT_WORDS))
         if origins is None:
-            camera, origins = self._camera + (pixel_index, sample_index), np.zeros((0, 3))
+            lens = np.zeros((0, 2)) if lens is None else np.ascontiguousarray(lens, dtype=np.float64)
+            camera, origins = self._camera + (pixel_index, sample_index, lens), np.zeros((0, 3))
             directions = origins
         else:
             camera = no_camera()

@@ -138,6 +138,26 @@ class Camera:
         # a real component-major array: later stages may gather or update direction rows
         return origins, np.asfortranarray(np.broadcast_to(forward, origins.shape), dtype=np.float64)
 
+    def lens_disk(self, lens_uv):
+        """Points on the thin-lens aperture of uniform samples of the square.
+
+        Thin lens: rays start on the aperture and meet on the plane of focus, so that plane
+        is sharp and everything else blurs with distance from it.
+
+        Parameters
+        ----------
+        lens_uv : (n, 2) float
+            Uniform samples in [0, 1)^2.
+
+        Returns
+        -------
+        (n, 2) float64
+            Scene units along the camera's right and up axes; (0, 2) for a pinhole camera.
+        """
+        if not self.aperture > 0.0:
+            return np.zeros((0, 2))
+        return square_to_uniform_disk_concentric(lens_uv) * (0.5 * self.aperture)
+
     def generate_rays(self, film_xy, width, height, lens_uv=None, pixels=None, frame=None):
         """Primary rays through continuous film positions.
 
@@ -167,11 +187,7 @@ class Camera:
         if self.orthographic:
             return self._orthographic_rays(np.asarray(film_xy, dtype=np.float64), pixels, width, image_plane,
                                            forward, right, up)
-        disk = np.zeros((0, 2))
-        if self.aperture > 0.0 and lens_uv is not None:
-            # thin lens: rays start on the aperture and meet on the plane of focus, so that
-            # plane is sharp and everything else blurs with distance from it
-            disk = square_to_uniform_disk_concentric(lens_uv) * (0.5 * self.aperture)
+        disk = np.zeros((0, 2)) if lens_uv is None else self.lens_disk(lens_uv)
         origins, directions = camera_rays.camera_rays(
             np.asarray(film_xy, dtype=np.float64), np.zeros(0, np.int64) if pixels is None else pixels, width,
             disk, self.position, forward, right, up, image_plane, self.focus)

@@ -38,6 +38,25 @@ def pinhole_direction(sx, sy, forward, right, up):
 
 
 @row
+def thin_lens_xyz(sx, sy, lx, ly, ex, ey, ez, fx, fy, fz, rx, ry, rz, ux, uy, uz, focus):
+    """Origin and unit direction ``(ox, oy, oz, dx, dy, dz)`` of the thin-lens ray through
+    image-plane point ``(sx, sy)`` from the aperture point ``(lx, ly)`` (scene units along
+    right and up, :meth:`rtmesh.scene.camera.Camera.lens_disk`), for the eye ``e``, the
+    camera frame (forward ``f``, right ``r``, up ``u``) and the focus distance."""
+    # every ray through a film point meets the pinhole ray on the plane of focus: the
+    # unnormalised pinhole direction has a forward component of exactly 1, so
+    # eye + focus * direction lies on the plane at depth `focus`
+    ox = (ex + lx * rx) + ly * ux
+    oy = (ey + lx * ry) + ly * uy
+    oz = (ez + lx * rz) + ly * uz
+    dx = (ex + ((fx + rx * sx) + ux * sy) * focus) - ox
+    dy = (ey + ((fy + ry * sx) + uy * sy) * focus) - oy
+    dz = (ez + ((fz + rz * sx) + uz * sy) * focus) - oz
+    dx, dy, dz = normalized3(dx, dy, dz, 1.0)
+    return ox, oy, oz, dx, dy, dz
+
+
+@row
 def pinhole_xyz(sx, sy, fx, fy, fz, rx, ry, rz, ux, uy, uz):
     """:func:`pinhole_direction` with the camera frame (forward ``f``, right ``r``, up ``u``)
     given as numbers (see :func:`image_plane_xy`)."""
@@ -87,14 +106,9 @@ def camera_rays(film_xy, pixels, width, disk, position, forward, right, up, imag
         sx, sy = image_plane_point(film_xy[i, 0], film_xy[i, 1], pixels[i] if in_pixels else -1, width,
                                     inverse_width, image_plane)
         if lens:
-            # every ray through a film point meets the pinhole ray on the plane of focus: the
-            # unnormalised pinhole direction has a forward component of exactly 1, so
-            # position + focus * direction lies on the plane at depth `focus`
-            for c in range(3):
-                toward = (forward[c] + right[c] * sx) + up[c] * sy
-                origins[c, i] = (position[c] + disk[i, 0] * right[c]) + disk[i, 1] * up[c]
-                d[c, i] = (position[c] + toward * focus) - origins[c, i]
-            d[0, i], d[1, i], d[2, i] = normalized3(d[0, i], d[1, i], d[2, i], 1.0)
+            origins[0, i], origins[1, i], origins[2, i], d[0, i], d[1, i], d[2, i] = thin_lens_xyz(
+                sx, sy, disk[i, 0], disk[i, 1], position[0], position[1], position[2], forward[0], forward[1],
+                forward[2], right[0], right[1], right[2], up[0], up[1], up[2], focus)
         else:
             d[0, i], d[1, i], d[2, i] = pinhole_direction(sx, sy, forward, right, up)
     return origins.T, d.T

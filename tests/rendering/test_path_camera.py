@@ -2,6 +2,7 @@
 integrator forms with Camera.generate_rays and hands to the kernel: the same image, bit for
 bit, under every sampler, in both of the kernel's configurations."""
 
+import dataclasses
 import os
 
 import numpy as np
@@ -31,7 +32,7 @@ def _render(scene, settings, in_kernel, monkeypatch):
 
 @pytest.mark.parametrize("sampler", ["regular", "jittered", "random", "sobol", "zsobol"])
 @pytest.mark.parametrize("source, integrator", [("showcase.toml", "whitted"), ("glass_edges.toml", "path"),
-                                                ("effects/motion_blur.toml", "whitted")])
+                                                ("effects/motion_blur.toml", "whitted"), ("effects/dof.toml", "path")])
 def test_the_kernels_camera_rays_are_the_cameras(source, integrator, sampler, monkeypatch):
     scene, settings = load_scene(os.path.join(ASSETS, source), width=24, height=16, spp=2, sampler=sampler,
                                  integrator=integrator, passes=("depth", "normal"))
@@ -43,14 +44,13 @@ def test_the_kernels_camera_rays_are_the_cameras(source, integrator, sampler, mo
     assert ours.stats.rays == handed.stats.rays
 
 
-def test_a_thin_lens_hands_the_kernel_its_rays():
-    scene, settings = load_scene(os.path.join(ASSETS, "effects", "dof.toml"), width=16, height=12, spp=1)
+@pytest.mark.parametrize("source, feature", [("dof.toml", "lens"), ("motion_blur.toml", "motion")])
+def test_a_thin_lens_and_moving_objects_leave_the_camera_rays_to_the_kernel(source, feature):
+    # the chunk hands the kernel each sample's point on the aperture, or its time (the
+    # camera does not move); an orthographic camera still hands it the rays
+    scene, settings = load_scene(os.path.join(ASSETS, "effects", source), width=16, height=12, spp=1)
     integrator = Integrator(scene, settings)
-    assert integrator.path_stage is not None and not integrator.path_stage.camera_in_kernel
-
-
-def test_moving_objects_leave_the_camera_rays_to_the_kernel():
-    # the camera does not move: the kernel forms its rays, the chunk hands it the times
-    scene, settings = load_scene(os.path.join(ASSETS, "effects", "motion_blur.toml"), width=16, height=12, spp=1)
-    integrator = Integrator(scene, settings)
-    assert integrator.plan.motion and integrator.path_stage is not None and integrator.path_stage.camera_in_kernel
+    assert getattr(integrator.plan, feature) and integrator.path_stage is not None
+    assert integrator.path_stage.camera_in_kernel
+    scene.camera = dataclasses.replace(scene.camera, projection="orthographic", aperture=0.0, ortho_height=2.0)
+    assert not Integrator(scene, settings).path_stage.camera_in_kernel
