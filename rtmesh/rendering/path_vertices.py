@@ -51,10 +51,12 @@ from rtmesh.rendering.whitted_rows import light_factor
 from rtmesh.sampling.alias import alias_sample_remapped
 from rtmesh.sampling.hashing import mix64, uniform
 from rtmesh.sampling.mis import power_heuristic
-from rtmesh.sampling.zsobol import sequence_number, sequence_ray_pair
+from rtmesh.sampling.zsobol import seeded_ray_pair, sequence_number, sequence_seeds
 
 # Sobol sequences hold 2**32 points; later samples take hashed numbers
 SOBOL_LIMIT = 1 << 32
+# the seeds of a vertex past the first (its numbers are hashed, not drawn from a sequence)
+_NO_SEEDS = (np.uint64(0), np.uint64(0), np.uint64(0))
 # the key of light sample k > 0 of a vertex is mix64(key + k * _LIGHT_ROUND) (sample 0 takes
 # the path's own key): its choice and point are the vertex's usual dimensions of that key
 _LIGHT_ROUND = np.uint64(0xD1B54A32D192ED03)
@@ -382,6 +384,9 @@ def sample_lights(lanes, vertices, shadows, keys, pixels, samples, sobol_keys, s
         sample_index = samples[start + lane] if len(samples) else -1
         sobol = (depth == 0) & (sample_index >= 0) & (sample_index < SOBOL_LIMIT)
         pixel = np.uint64(pixels[start + lane]) if sobol else np.uint64(0)
+        # the scrambling seeds of the pixel's light-point and AO sequences, formed once for
+        # all of the vertex's light samples and AO rays
+        light_seeds = sequence_seeds(sobol_keys, 0, pixel) if sobol else _NO_SEEDS
         # next-event estimation: light_samples estimates at the first vertex that can
         # take light (reached from the camera through delta lobes only), one at later
         # vertices; each weighted against the one BSDF sample by the power heuristic
@@ -404,8 +409,8 @@ def sample_lights(lanes, vertices, shadows, keys, pixels, samples, sobol_keys, s
                 if kk < 0:
                     lu1 = lu2 = 0.5
                 elif stratified:
-                    lu1, lu2 = sequence_ray_pair(sobol_keys, 0, pixel, sample_index, kk, light_samples,
-                                                 light_block)
+                    lu1, lu2 = seeded_ray_pair(sobol_keys, 0, light_seeds, pixel, sample_index, kk, light_samples,
+                                               light_block)
                 else:
                     lu1, lu2 = uniform(light_key, base + LIGHT_U1), uniform(light_key, base + LIGHT_U2)
                 # choice: the probability of choosing this light
@@ -505,12 +510,13 @@ def sample_lights(lanes, vertices, shadows, keys, pixels, samples, sobol_keys, s
             else:
                 ux, uy, uz = gx, gy, gz
             ax, ay, az, cx, cy, cz = tangent_frame(ux, uy, uz)
+            ao_seeds = sequence_seeds(sobol_keys, 2, pixel) if sobol else _NO_SEEDS
             for j in range(ao_samples):
                 k = deltas + area_rounds + j
                 if sobol and sample_index * ao_samples + j < SOBOL_LIMIT:
                     # the first vertex's: a pixel's spp x ao_samples directions one stratified set
                     # in the sampler's AO dimension (the Whitted stages' points under sobol)
-                    au1, au2 = sequence_ray_pair(sobol_keys, 2, pixel, sample_index, j, ao_samples, ao_block)
+                    au1, au2 = seeded_ray_pair(sobol_keys, 2, ao_seeds, pixel, sample_index, j, ao_samples, ao_block)
                 else:
                     ao_key = mix64(key + np.uint64(k) * _LIGHT_ROUND)
                     au1, au2 = uniform(ao_key, base + LIGHT_U1), uniform(ao_key, base + LIGHT_U2)

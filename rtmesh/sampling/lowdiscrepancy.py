@@ -118,11 +118,24 @@ def sobol_pair(key, index):
     """Point ``index`` (below 2**32) of the Owen-scrambled (0,2)-sequence keyed ``key`` (a
     pixel's sequence key, :func:`rtmesh.sampling.patterns.sequence_key`), ``(x, y)`` in
     [0, 1)^2: values in 0.32 fixed point, so exact doubles."""
-    # three independent 32-bit seeds per sequence: the index shuffle, x and y.  Scrambling
-    # the index permutes points only inside aligned power-of-two blocks, so every
-    # power-of-two prefix is still a whole (0,m,2)-net; it decorrelates pixels
-    shuffled = nested_uniform_scramble(np.uint64(index) & _LOW32, scramble_seed(key, 1))
-    return owen_sobol_pair(shuffled, scramble_seed(key, 2), scramble_seed(key, 3))
+    return seeded_sobol_pair(sobol_seeds(key), index)
+
+
+@row
+def sobol_seeds(key):
+    """The three 32-bit scrambling seeds of the sequence keyed ``key`` (uint64 words): of
+    the index shuffle, of x and of y.  Scrambling the index permutes points only inside
+    aligned power-of-two blocks, so every power-of-two prefix is still a whole
+    (0,m,2)-net; it decorrelates pixels.  Formed once, for a caller drawing many points of
+    one sequence (:func:`seeded_sobol_pair`)."""
+    return scramble_seed(key, 1), scramble_seed(key, 2), scramble_seed(key, 3)
+
+
+@row
+def seeded_sobol_pair(seeds, index):
+    """:func:`sobol_pair` of the sequence whose :func:`sobol_seeds` are ``seeds``."""
+    shuffled = nested_uniform_scramble(np.uint64(index) & _LOW32, seeds[0])
+    return owen_sobol_pair(shuffled, seeds[1], seeds[2])
 
 
 @kernel

@@ -39,7 +39,8 @@ import numpy as np
 
 from rtmesh.core.compiled import kernel, row
 from rtmesh.sampling.hashing import GOLDEN, mix64, permutation_element, pixel_sequence, uniform
-from rtmesh.sampling.lowdiscrepancy import SOBOL1_TABLES, reverse_bits, scramble_seed, sobol_bits, sobol_pair
+from rtmesh.sampling.lowdiscrepancy import (SOBOL1_TABLES, reverse_bits, scramble_seed, seeded_sobol_pair, sobol_bits,
+                                            sobol_pair, sobol_seeds)
 
 # the 24 permutations of a base-4 digit, one row each
 PERMUTATIONS = np.array(list(itertools.permutations(range(4))), dtype=np.uint64)
@@ -358,8 +359,26 @@ def sequence_ray_pair(keys, which, pixel, sample, ray, rays, log2_block):
     stratified set and the rays of one sample an aligned block of it.  One ray
     (``ray`` 0, ``rays`` 1, ``log2_block`` the record's ``log2(spp)``) is
     :func:`sequence_pair`'s point."""
-    key = keys[4 + which]
+    return seeded_ray_pair(keys, which, sequence_seeds(keys, which, pixel), pixel, sample, ray, rays, log2_block)
+
+
+@row
+def sequence_seeds(keys, which, pixel):
+    """What :func:`sequence_ray_pair` forms once per pixel and dimension (int64 ``pixel``):
+    the scrambling seeds of the pixel's own sequence under sobol
+    (:func:`rtmesh.sampling.lowdiscrepancy.sobol_seeds`); zeros under zsobol, whose points
+    take none.  For a caller drawing many points of one pixel's dimension
+    (:func:`seeded_ray_pair`)."""
     if keys[ZORDER] == _ONE:
-        return zsobol_pair(key, morton_code(np.uint64(pixel), keys[WIDTH]), np.uint64(sample), np.uint64(ray),
-                           keys[LOG2_SPP], np.uint64(rays), keys[LEVELS], np.uint64(log2_block))
-    return sobol_pair(pixel_sequence(key, np.uint64(pixel)), sample * rays + ray)
+        return np.uint64(0), np.uint64(0), np.uint64(0)
+    return sobol_seeds(pixel_sequence(keys[4 + which], np.uint64(pixel)))
+
+
+@row
+def seeded_ray_pair(keys, which, seeds, pixel, sample, ray, rays, log2_block):
+    """:func:`sequence_ray_pair` with the pixel's :func:`sequence_seeds` of dimension
+    ``which`` given."""
+    if keys[ZORDER] == _ONE:
+        return zsobol_pair(keys[4 + which], morton_code(np.uint64(pixel), keys[WIDTH]), np.uint64(sample),
+                           np.uint64(ray), keys[LOG2_SPP], np.uint64(rays), keys[LEVELS], np.uint64(log2_block))
+    return seeded_sobol_pair(seeds, sample * rays + ray)
