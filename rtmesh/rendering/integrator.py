@@ -287,16 +287,18 @@ class Integrator:
     def _camera_stack(self, media):
         """``media.camera_stack`` from the camera's position, probing the scene as it is when
         the shutter opens."""
-        trace, to_rest = self.accel.intersect, None
-        if self.motion is not None:
-            def at_open(n):
-                return np.full(n, self.camera.shutter[0])
+        if self.motion is None:
+            return media.camera_stack(self.accel.intersect, self.camera.position, self.offset_scale, None)
 
-            def trace(origins, directions):
-                return self.accel.intersect(origins, directions, at_open(len(origins)))
+        def at_open(n):
+            return np.full(n, self.camera.shutter[0])
 
-            def to_rest(prim, directions):
-                return self.motion.directions_to_rest(prim, at_open(len(prim)), directions)
+        def trace(origins, directions):
+            return self.accel.intersect(origins, directions, at_open(len(origins)))
+
+        def to_rest(prim, directions):
+            return self.motion.directions_to_rest(prim, at_open(len(prim)), directions)
+
         return media.camera_stack(trace, self.camera.position, self.offset_scale, to_rest)
 
     # ---------------------------------------------------------------- whole image
