@@ -250,15 +250,28 @@ def _relative(job, pending):
 
 def warm_up():
     """Convert a tiny asset the way a job does (load, smooth, render, write a PNG, in a
-    temporary folder), so that the kernels are compiled, or loaded from numba's disk cache,
-    before a worker's first real asset, whose time limit then does not pay for them."""
+    temporary folder) under each integrator, so that the kernels are compiled, or loaded
+    from numba's disk cache, before a worker's first real asset, whose time limit then does
+    not pay for them: Whitted (a mesh file's default; a bare mesh takes the fused direct
+    stage) and path (glTF's default, and the kernel that renders every other Whitted scene).
+    Run within :func:`rtmesh.core.compile_ahead.helper` on a first run, the helper process
+    compiles half of each.
+
+    Returns
+    -------
+    tuple of dict
+        :func:`run_job`'s result of each render.
+    """
     with tempfile.TemporaryDirectory(prefix="rtmesh-warm-up-") as folder:
         path = os.path.join(folder, "warm-up.obj")
         with open(path, "w", encoding="utf-8") as f:
             f.write("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n")
-        task = ImageTask("warm-up", fixed_view("iso"), ("warm-up.png",), "")
-        settings = {"width": 8, "height": 8, "spp": 1, "threads": 1}
-        return run_job(AssetJob("warm-up.obj", path, folder, settings, (task,), ground=True))
+        results = []
+        for integrator in ("whitted", "path"):
+            task = ImageTask(f"warm-up-{integrator}", fixed_view("iso"), (f"warm-up-{integrator}.png",), "")
+            settings = {"width": 8, "height": 8, "spp": 1, "threads": 1, "integrator": integrator}
+            results.append(run_job(AssetJob("warm-up.obj", path, folder, settings, (task,), ground=True)))
+        return tuple(results)
 
 
 def _check_deadline(deadline):

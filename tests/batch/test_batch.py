@@ -1156,12 +1156,22 @@ def test_a_resume_cancels_the_earlier_runs_tasks_of_its_folder_without_waiting()
         _RELEASE.set()
 
 
-def test_warm_up_converts_a_tiny_asset_one_worker_per_host_first():
+def test_warm_up_converts_a_tiny_asset_one_worker_per_host_first(monkeypatch):
+    from rtmesh.batch import worker
     from rtmesh.batch.dask_pool import warm_up_workers
-    from rtmesh.batch.worker import warm_up
 
-    (image,) = warm_up()["images"]
-    assert image["status"] == "done" and image["outputs"][0][1] > 0
+    # a render under each integrator, so that the kernels of both are compiled or loaded
+    # before the first asset (a glTF asset's path kernel was compiled within its first job)
+    used = []
+    original = worker.integrator_for_view
+    monkeypatch.setattr(worker, "integrator_for_view",
+                        lambda built, loaded, view, settings, ground: used.append(settings.integrator) or original(
+                            built, loaded, view, settings, ground))
+    results = worker.warm_up()
+    assert used == ["whitted", "path"]
+    for result in results:
+        (image,) = result["images"]
+        assert image["status"] == "done" and image["outputs"][0][1] > 0
 
     class Client:
         calls = []
