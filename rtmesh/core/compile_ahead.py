@@ -133,11 +133,8 @@ def compile_locked(dispatcher, signature):
     """
     if signature in dispatcher.overloads:
         return
-    if getattr(dispatcher, "_compiles_locked", False):
-        dispatcher.compile(signature)  # it holds its lock file itself (lock_compiles)
-        return
-    with _kernel_lock(dispatcher):
-        dispatcher.compile(signature)
+    # a compiled.kernel takes its lock file in every compile already
+    lock_compiles(dispatcher).compile(signature)
 
 
 def lock_compiles(dispatcher):
@@ -158,8 +155,10 @@ def lock_compiles(dispatcher):
     Parameters
     ----------
     dispatcher : numba dispatcher with a disk cache
-        Changed in place (its ``compile``); returned.
+        Changed in place (its ``compile``; once: a second call changes nothing); returned.
     """
+    if getattr(dispatcher, "_compiles_locked", False):
+        return dispatcher
     from numba.core import sigutils
     from numba.core.compiler_lock import global_compiler_lock
 

@@ -445,10 +445,11 @@ def area_pdf(light, px, py, pz, dx, dy, dz, distance):
     """Solid-angle density of ``sample_li`` reaching a point of an area light from ``p``
     along unit ``d`` at ``distance``; 0 from behind a one-sided light.  A triangle that
     :func:`solid_angle_sampled` says is sampled in solid angle has ``1 / omega``."""
+    cos_l = _facing_cosine(light, dx, dy, dz)
     omega = 0.0
-    if light[0] == TRIANGLE and _facing_cosine(light, dx, dy, dz) > 0.0:
+    if light[0] == TRIANGLE and cos_l > 0.0:
         omega = triangle_solid_angle(light, px, py, pz)
-    return _area_density(light, omega, dx, dy, dz, distance)
+    return _area_density(light, omega, cos_l, distance)
 
 
 @row
@@ -460,10 +461,10 @@ def _facing_cosine(light, dx, dy, dz):
 
 
 @row
-def _area_density(light, omega, dx, dy, dz, distance):
-    """:func:`area_pdf` where the solid angle ``omega`` a triangle light subtends from the
-    point is known (quads and disks: not read), as :func:`sample_area` knows it."""
-    cos_l = _facing_cosine(light, dx, dy, dz)
+def _area_density(light, omega, cos_l, distance):
+    """:func:`area_pdf` given the solid angle ``omega`` a triangle light subtends from the
+    point (quads and disks: not read), as :func:`sample_area` knows it, and the light's
+    :func:`_facing_cosine` toward the point."""
     if not cos_l > 0.0:
         return 0.0
     if light[0] == TRIANGLE and solid_angle_sampled(omega):
@@ -544,7 +545,7 @@ def sample_area(light, px, py, pz, u1, u2):
             dx, dy, dz, distance, b1, b2, ok = sample_triangle_solid_angle(light, px, py, pz, u1, u2, omega,
                                                                            corners)
             if ok:
-                return dx, dy, dz, distance, _area_density(light, omega, dx, dy, dz, distance), b1, b2
+                return dx, dy, dz, distance, _area_density(light, omega, _facing_cosine(light, dx, dy, dz), distance), b1, b2
         b1, b2 = uniform_triangle_weights(u1, u2)
     qx, qy, qz = sample_area_point(light, u1, u2)
     dx, dy, dz = qx - px, qy - py, qz - pz
@@ -552,7 +553,7 @@ def sample_area(light, px, py, pz, u1, u2):
     if not distance > 0.0:
         return 0.0, 0.0, 1.0, 0.0, 0.0, b1, b2
     dx, dy, dz = dx / distance, dy / distance, dz / distance
-    return dx, dy, dz, distance, _area_density(light, omega, dx, dy, dz, distance), b1, b2
+    return dx, dy, dz, distance, _area_density(light, omega, _facing_cosine(light, dx, dy, dz), distance), b1, b2
 
 
 @row

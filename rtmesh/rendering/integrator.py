@@ -528,10 +528,15 @@ class Integrator:
         ps = self.pixel_sampler
         in_pixel = pixel_positions(ps.code, ps.keys, ps.corners, ps.size, ps.spp, kernel_input(pixel, np.int64),
                                    kernel_input(sample_in_pixel, np.int64))
-        lens_uv = self.sampler.lens(pixel, sample_in_pixel) if self.plan.lens else None
-        origins, directions = self.camera.generate_rays(in_pixel, s.width, s.height, lens_uv, pixel,
+        origins, directions = self.camera.generate_rays(in_pixel, s.width, s.height,
+                                                        self._lens_points(pixel, sample_in_pixel), pixel,
                                                         self.camera_frame)
         return origins, directions, self._sample_times(pixel, sample_in_pixel)
+
+    def _lens_points(self, pixel, sample_in_pixel):
+        """Each camera sample's point of the sampler's lens dimension ((n, 2) in [0, 1)^2,
+        before the aperture's disk warp), or None for a pinhole camera."""
+        return self.sampler.lens(pixel, sample_in_pixel) if self.plan.lens else None
 
     def _sample_times(self, pixel, sample_in_pixel):
         """Each camera sample's time in the shutter ((n,) float64; one per sample, stratified
@@ -547,8 +552,9 @@ class Integrator:
         origins = directions = lens = None
         if self.path_stage.camera_in_kernel:
             times = self._sample_times(pixel, sample_in_pixel)
-            if self.plan.lens:
-                lens = self.camera.lens_disk(self.sampler.lens(pixel, sample_in_pixel))
+            lens_uv = self._lens_points(pixel, sample_in_pixel)
+            if lens_uv is not None:
+                lens = self.camera.lens_disk(lens_uv)
         else:
             origins, directions, times = self._camera_rays(pixel, sample_in_pixel)
         n = len(pixel)

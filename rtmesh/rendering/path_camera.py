@@ -2,9 +2,9 @@
 position in its pixel from the sampler (:func:`rtmesh.sampling.pixel_samples.sample_positions`,
 the compiled twin of :meth:`rtmesh.sampling.sampler.Sampler.pixel`) and its direction
 through the image plane (:mod:`rtmesh.scene.camera_rays`' rows), the same numbers
-:meth:`rtmesh.rendering.integrator.Integrator` forms for the other cameras (thin lens,
-orthographic), which hand the kernel their rays instead; with moving objects the chunk hands
-it each sample's time.
+:meth:`rtmesh.scene.camera.Camera.generate_rays` gives; an orthographic camera and a camera
+class with rays of its own hand the kernel theirs instead.  With moving objects the chunk
+hands it each sample's time.
 
 ``camera = (on, code, keys, corners, size, spp, width, frame, eye, focus, pixels, samples,
 lens)``: whether the kernel forms the camera rays; the
