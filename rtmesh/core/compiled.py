@@ -122,25 +122,29 @@ def kernel(function):
       written, the same on every machine and for every chunk and thread count;
     * every compile holds the kernel's lock file
       (:func:`rtmesh.core.compile_ahead.lock_compiles`), so that the processes of a first
-      run compile it once between them.
+      run compile it once between them;
+    * no C wrapper (``no_cfunc_wrapper``): kernels are called from Python and from other
+      kernels, never through a C function pointer, and numba's wrapper for that costs about
+      5 % of a first compile (with the rows' own, below).
     """
     return _kernel(function)
 
 
 def stage(function):
     """Compile ``function`` as a :func:`kernel` that only other kernels call, through its
-    address (:func:`entry_point`, :func:`call_at`): without the wrappers numba builds for
-    calls from Python and from C, about 2 s of the first compile of each of the path
-    kernel's stages (their arguments are tuples of dozens of arrays, each unboxed by the
+    address (:func:`entry_point`, :func:`call_at`): without the wrapper numba builds for
+    calls from Python either, about 2 s of the first compile of each of the path kernel's
+    stages (their arguments are tuples of dozens of arrays, each unboxed by the
     CPython wrapper)."""
-    return _kernel(function, no_cpython_wrapper=True, no_cfunc_wrapper=True)
+    return _kernel(function, no_cpython_wrapper=True)
 
 
 def _kernel(function, **options):
     """:func:`kernel` with more numba options."""
     from rtmesh.core.compile_ahead import lock_compiles
 
-    return lock_compiles(_with_package_cache(numba.njit(nogil=True, error_model="numpy", **options)(function)))
+    return lock_compiles(_with_package_cache(numba.njit(nogil=True, error_model="numpy", no_cfunc_wrapper=True,
+                                                        **options)(function)))
 
 
 def fix_signatures(dispatcher, signatures):
@@ -191,8 +195,8 @@ def row(function):
     """Compile ``function`` as a one-row helper of kernels: like :func:`kernel`, but
     callable only from compiled code (no CPython wrapper) and not cached by itself (the
     kernels that call it are cached with it inlined), which saves compile time on the
-    first run."""
-    return numba.njit(nogil=True, error_model="numpy", no_cpython_wrapper=True)(function)
+    first run, and without numba's C wrapper (see :func:`kernel`)."""
+    return numba.njit(nogil=True, error_model="numpy", no_cpython_wrapper=True, no_cfunc_wrapper=True)(function)
 
 
 def inline_row(function):
@@ -205,7 +209,8 @@ def inline_row(function):
     sample in the fused stage's loops (see :mod:`rtmesh.rendering.direct_stage`).  Each caller
     compiles the row again, so keep it for such rows.
     """
-    return numba.njit(nogil=True, error_model="numpy", no_cpython_wrapper=True, inline="always")(function)
+    return numba.njit(nogil=True, error_model="numpy", no_cpython_wrapper=True, no_cfunc_wrapper=True,
+                      inline="always")(function)
 
 
 def cached(compiler):
