@@ -111,10 +111,11 @@ def test_the_memory_estimate_covers_the_measured_film_and_chunks():
     film = Film(96, 64, {name: pass_width(name) for name in passes}, one_pass=True)
     assert film.nbytes < estimate(s).film < 2 * film.nbytes
     # the chunks: the measured chunk phase of renders below the estimate, whatever the spp
-    # (a chunk holds whole pixels: 4096 samples of one pixel make a chunk of their own),
-    # on the general path and on the fused stage, which keeps a block's records in scratch
-    # and needs far less (about 40 bytes a sample against 500)
-    for width, height, spp in ((128, 128, 4), (16, 16, 4096)):
+    # (a chunk holds whole pixels: 4096 samples of one pixel make a chunk of their own; 16
+    # such chunks keep both threads busy), on the general path and on the fused stage,
+    # which keeps a block's records in scratch and needs far less (about 40 bytes a sample
+    # against 500)
+    for width, height, spp in ((128, 128, 4), (4, 4, 4096)):
         for passes in ((), ("depth",)):
             measured = chunk_phase(width, height, spp, passes=passes)
             expected = estimate(validated(width=width, height=height, spp=spp, threads=THREADS,
