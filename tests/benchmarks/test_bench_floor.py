@@ -11,6 +11,9 @@ from rtmesh.rendering.integrator import Integrator
 from rtmesh.rendering.settings import RenderSettings
 
 
+# under -m slow: a benchmark tool's check, about 7 s of CPU on a first run (its kernel
+# compiled for float32 and float64, a 48 x 48 x 32 reference)
+@pytest.mark.slow
 @pytest.mark.skipif(packet_library() is None, reason="the floor traces with Embree's packet queries")
 def test_the_floor_kernel_renders_rtmeshs_picture():
     size, spp = 48, 32
