@@ -57,7 +57,7 @@ def small_records():
                z(1, np.float32), z((1, DESCRIPTOR_WIDTH)), z(1), z(0, np.int64))
     lights = (z((1, lt.WIDTH)), z(1), z(1, np.int64), z(1), z(1, np.int64), z(0, np.int64), -1, z(1, np.float32),
               z((0, DESCRIPTOR_WIDTH)), z(0, np.int64), NO_TREE)
-    env = (z((1, 3, 3)), z(2), z((1, 2)), z((1, 1)), 1.0, 1.0, 0.0)
+    env = (z((1, 3, 3), np.float32), z(2), z((1, 2)), z((1, 1)), 1.0, 1.0, 0.0)
     return energy, geometry, surface, lights, env
 
 
