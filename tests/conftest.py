@@ -62,18 +62,12 @@ def pytest_unconfigure(config):
 # kernel groups: wrap ``rtmesh.core.compile_ahead.KernelGroup.prepare`` in a plugin that
 # writes the group's name and the running test.)
 _PATH_TESTS = {
-    "batch/test_annotations.py": ("test_a_moving_objects_pose_is_where_the_shutter_opens",
-                                  # the three of the module fixture that renders the tiles
-                                  "test_masks_areas_and_boxes_agree_with_pycocotools_and_the_object_id_pass",
-                                  "test_a_square_half_hidden_is_half_visible_and_an_unoccluded_one_wholly",
-                                  "test_keypoints_and_pose_place_the_model_box"),
     "batch/test_batch.py": ("test_editing_a_dependency_or_damaging_an_image_redoes_it",),
     "batch/test_batch_instances.py": ("test_the_worker_traces_the_placements_as_instances",),
     "batch/test_many_views.py": ("test_physical_assets_get_the_studio_turned_to_each_view",),
     "core/test_compile_ahead.py": ("test_a_path_render_of_one_ray_calls_the_path_kernel_with_the_declared_types",),
     "core/test_runtime.py": ("test_the_render_command_tunes_its_process",),
-    "geometry/test_cutouts.py": ("test_masked_checker_lets_exactly_the_transparent_texels_through",
-                                 "test_path_sees_moving_cutouts_as_whitted_does",
+    "geometry/test_cutouts.py": ("test_path_sees_moving_cutouts_as_whitted_does",
                                  "test_path_shadows_through_moving_cutouts_as_whitted_does"),
     "io/test_passes.py": ("test_exr_holds_every_pass_under_its_layer_names_and_pngs_map_them",
                           "test_passes_are_bit_identical_across_threads_and_chunk_sizes"),
