@@ -297,19 +297,12 @@ class PathStage:
         self._pass_albedo = np.ascontiguousarray(it.passes.diffuse, dtype=np.float64).reshape(-1, 3)
         self._whitted = self._whitted_record() if self.whitted else no_whitted(
             len(self.surface[0]), *self._ao_rays() if self._ao_pass else ())
-        # the map's padded image in float32 (its lookups still compute in float64): half the
-        # bytes, so the studio map's 256 x 128 texels (396 KiB) fit a 512 KiB L2 cache, and
-        # rays that miss the asset (most of a real asset's samples) and the map's light
-        # samples find their texels there (Duck.glb and monkey.glb 2.5-4 % faster, one
-        # thread). The same radiance wherever the map holds 32-bit or half floats (EXR, HDR);
-        # an 8-bit map's values round to float32 (relative 6e-8)
         if environment is None:
             self._env = (np.zeros((1, 3, 3), np.float32), np.zeros(2), np.zeros((1, 2)), np.ones((1, 1)), 1.0, 1.0,
                          0.0)
         else:
             e = environment
-            self._env = (e.pixels.astype(np.float32), e.marginal, e.conditional, e.func, e.mean, e.cos_rotation,
-                         e.sin_rotation)
+            self._env = (e.pixels, e.marginal, e.conditional, e.func, e.mean, e.cos_rotation, e.sin_rotation)
         # the media the camera sits in, by the transmissive materials of the path's own
         # models (a glass of model = "dielectric" as much as one with a Whitted transmission
         # colour); no stack at all without transmissive materials
