@@ -79,3 +79,27 @@ def test_a_kernel_called_at_its_entry_point_runs_only_with_its_signature_token()
     other = compiled.signature_token((numba.typeof(out), numba.typeof(pair), numba.types.float64))
     assert not _call_twice(address, other, out, pair, 1)
     np.testing.assert_array_equal(out, 2 * (np.arange(3.0) * 2.0 + 1))
+
+
+@compiled.row
+def _offset(base, k):
+    return base * 16 + k
+
+
+@compiled.row
+def _item(record, k):
+    return record[k]  # a heterogeneous tuple: typed only with k's value
+
+
+@numba.njit
+def _constants(base):
+    record = (1.5, 7)
+    return _offset(base, 3) + _offset(base, 9) + _offset(base, 17), _item(record, 0) + _item(record, 1)
+
+
+def test_a_row_called_with_constants_compiles_once_for_their_type():
+    # numba compiles a callee once per constant argument it is passed; a row is compiled
+    # for the types (one compile), unless it needs the value (a tuple's index: one each)
+    assert _constants(2) == (3 * 32 + 3 + 9 + 17, 8.5)
+    assert [tuple(map(str, s)) for s in _offset.signatures] == [("int64", "int64")]
+    assert len(_item.signatures) == 2
