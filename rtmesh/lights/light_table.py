@@ -551,7 +551,7 @@ def sample_area(light, px, py, pz, u1, u2):
             dx, dy, dz, distance, b1, b2, ok = sample_triangle_solid_angle(light, px, py, pz, u1, u2, omega,
                                                                            corners)
             if ok:
-                return dx, dy, dz, distance, _area_density(light, omega, _facing_cosine(light, dx, dy, dz), distance), b1, b2
+                return dx, dy, dz, distance, _sample_density(light, omega, dx, dy, dz, distance), b1, b2
         b1, b2 = uniform_triangle_weights(u1, u2)
     qx, qy, qz = sample_area_point(light, u1, u2)
     dx, dy, dz = qx - px, qy - py, qz - pz
@@ -559,7 +559,14 @@ def sample_area(light, px, py, pz, u1, u2):
     if not distance > 0.0:
         return 0.0, 0.0, 1.0, 0.0, 0.0, b1, b2
     dx, dy, dz = dx / distance, dy / distance, dz / distance
-    return dx, dy, dz, distance, _area_density(light, omega, _facing_cosine(light, dx, dy, dz), distance), b1, b2
+    return dx, dy, dz, distance, _sample_density(light, omega, dx, dy, dz, distance), b1, b2
+
+
+@row
+def _sample_density(light, omega, dx, dy, dz, distance):
+    """:func:`area_pdf` of :func:`sample_area`'s sample along unit ``d`` at ``distance``,
+    given the solid angle ``omega`` of a triangle light it computed (0: not a triangle)."""
+    return _area_density(light, omega, _facing_cosine(light, dx, dy, dz), distance)
 
 
 @row
