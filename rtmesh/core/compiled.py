@@ -230,17 +230,40 @@ def _typed_by_types(dispatcher):
 
 
 def inline_row(function):
-    """Compile ``function`` as a :func:`row` that numba inlines into every caller itself
-    (``inline="always"``), before LLVM sees the code.
+    """Compile ``function`` as a :func:`row` that LLVM inlines into every caller: its
+    machine-code function carries LLVM's ``alwaysinline`` attribute (:func:`_inlined_by_llvm`).
 
-    LLVM inlines only small rows; a loop that calls a larger one stays a scalar loop with
-    a call per iteration, which passes every argument through the stack and may take and
-    release a reference to each array argument (atomic instructions).  For rows called per
-    sample in the fused stage's loops (see :mod:`rtmesh.rendering.direct_stage`).  Each caller
-    compiles the row again, so keep it for such rows.
+    LLVM inlines only small rows by its own measure; a loop that calls a larger one stays a
+    scalar loop with a call per iteration, which passes every argument through the stack
+    (a record, a tuple of arrays, is seven words an array) and may take and release a
+    reference to each array argument (atomic instructions).  For rows called per sample or
+    per lane in the kernels' loops (see :mod:`rtmesh.rendering.direct_stage` and
+    :mod:`rtmesh.rendering.path_surfaces`).
+
+    Like any row, it is typed and compiled once per signature in a process, and inlined
+    where a caller's module is optimised with it (numba links a callee's module into its
+    caller's and optimises the two together).  numba's own inlining (``inline="always"``),
+    which rtmesh used before, copies the row's untyped code into each call site and types
+    it again there, nested rows in every copy of the rows that call them: the path and
+    photon kernels' stages compiled in 89-97 s of CPU that way and in 53-55 s this way,
+    their images bit-identical and their renders as fast (docs/BENCHMARKS.md, "Session 26").
     """
-    return numba.njit(nogil=True, error_model="numpy", no_cpython_wrapper=True, no_cfunc_wrapper=True,
-                      inline="always")(function)
+    return _inlined_by_llvm(row(function))
+
+
+def _inlined_by_llvm(dispatcher):
+    """Mark every compile of ``dispatcher`` ``alwaysinline`` in the module numba links into
+    its callers (``CodeLibrary._get_module_for_linking``, which numba builds once per compile
+    and keeps), as each compile is added, before any caller links it."""
+    add_overload = dispatcher.add_overload
+
+    def add_inlined_overload(cres):
+        linked = cres.library._get_module_for_linking()
+        linked.get_function(cres.fndesc.llvm_func_name).add_function_attribute("alwaysinline")
+        add_overload(cres)
+
+    dispatcher.add_overload = add_inlined_overload
+    return dispatcher
 
 
 def cached(compiler):

@@ -1,6 +1,7 @@
 """Compiled kernels share one disk-cache stamp covering every module with compiled code; a
 kernel called by its entry point runs only for its signature."""
 
+import math
 import pathlib
 import re
 import shutil
@@ -103,3 +104,48 @@ def test_a_row_called_with_constants_compiles_once_for_their_type():
     assert _constants(2) == (3 * 32 + 3 + 9 + 17, 8.5)
     assert [tuple(map(str, s)) for s in _offset.signatures] == [("int64", "int64")]
     assert len(_item.signatures) == 2
+
+
+def _bulky(x):
+    # enough libm calls and branches that LLVM's own measure keeps it a call
+    s = 0.0
+    for k in range(4):
+        s += math.sin(x + k) * math.exp(-x * k) + math.atan2(x, k + 1.0) * math.sqrt(x * x + k)
+        if s > 10.0:
+            s = math.log(s) + math.cos(s)
+    return s
+
+
+_inlined = compiled.inline_row(_bulky)
+_called = compiled.row(_bulky)
+
+
+@numba.njit
+def _use_inlined(xs, out):
+    for i in range(len(xs)):
+        out[i] = _inlined(xs[i]) + _inlined(xs[i] * 2.0)
+
+
+@numba.njit
+def _use_called(xs, out):
+    for i in range(len(xs)):
+        out[i] = _called(xs[i]) + _called(xs[i] * 2.0)
+
+
+def _mentions(caller, row):
+    """How often the caller's machine code names the row's function (its calls)."""
+    (signature,) = row.signatures
+    return caller.inspect_asm(caller.signatures[0]).count(row.overloads[signature].fndesc.llvm_func_name)
+
+
+def test_an_inline_row_is_compiled_once_and_inlined_by_llvm_into_each_call():
+    xs = np.linspace(0.0, 3.0, 7)
+    inlined, called = np.zeros(7), np.zeros(7)
+    _use_inlined(xs, inlined)
+    _use_called(xs, called)
+    np.testing.assert_array_equal(inlined, called)
+    # one compile for both call sites (numba's own inlining types a copy at each), and no
+    # call left in the caller, where the same row as a plain row stays a call
+    assert len(_inlined.signatures) == 1
+    assert _mentions(_use_inlined, _inlined) == 0
+    assert _mentions(_use_called, _called) > 0
