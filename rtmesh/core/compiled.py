@@ -254,12 +254,15 @@ def inline_row(function):
 def _inlined_by_llvm(dispatcher):
     """Mark every compile of ``dispatcher`` ``alwaysinline`` in the module numba links into
     its callers (``CodeLibrary._get_module_for_linking``, which numba builds once per compile
-    and keeps), as each compile is added, before any caller links it."""
+    and keeps), as each compile is added, before any caller links it.  A numba without that
+    method leaves the row a plain row (called where LLVM does not inline it: slower, the
+    same results; ``tests/core/test_compiled.py`` notices)."""
     add_overload = dispatcher.add_overload
 
     def add_inlined_overload(cres):
-        linked = cres.library._get_module_for_linking()
-        linked.get_function(cres.fndesc.llvm_func_name).add_function_attribute("alwaysinline")
+        linking = getattr(cres.library, "_get_module_for_linking", None)
+        if linking is not None:
+            linking().get_function(cres.fndesc.llvm_func_name).add_function_attribute("alwaysinline")
         add_overload(cres)
 
     dispatcher.add_overload = add_inlined_overload
