@@ -25,8 +25,10 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 SCENES = (os.path.join(ROOT, "assets", "showcase.toml"), os.path.join(ROOT, "assets", "meshes", "bunny.ply"))
 
-# the command line (with its compile helper), or the Python API (without)
-COMMAND = "import sys; from rtmesh.cli import main; sys.exit(main(['render', sys.argv[1], '-o', sys.argv[2], '-q']))"
+# the command line (with its compile helper) as its console script runs it (cli.command;
+# trees before it had main only), or the Python API (without)
+COMMAND = ("import sys; sys.argv[1:] = ['render', sys.argv[1], '-o', sys.argv[2], '-q']; from rtmesh import cli; "
+           "cli.command() if hasattr(cli, 'command') else sys.exit(cli.main())")
 API = "import sys, rtmesh; rtmesh.render(sys.argv[1])"
 
 

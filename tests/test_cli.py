@@ -181,6 +181,23 @@ def test_bundled_showcase_scene_renders(tmp_path):
     assert image.std() > 0.05
 
 
+def test_the_program_flushes_its_line_and_a_closed_pipe_is_no_error(scene_file, tmp_path):
+    # the program ends without the interpreter's teardown (cli.command): what it printed
+    # still reaches the reader
+    out = tmp_path / "a.png"
+    code, stdout, err = run_cli("render", scene_file, "-o", out)
+    assert code == 0 and err == ""
+    assert stdout.startswith(f"{out}: 48x32, 2 spp") and stdout.endswith("\n")
+    # and a reader that has gone away (| head) does not make the finished render an error
+    out.unlink()
+    proc = subprocess.Popen([sys.executable, "-m", "rtmesh.cli", "render", str(scene_file), "-o", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc.stdout.close()
+    err = proc.stderr.read()
+    assert proc.wait(timeout=120) == 0 and err == ""
+    assert read_image(out)[0].shape == (32, 48, 3)
+
+
 def test_argparse_error_is_one_line_exit_2(tmp_path):
     code, out, err = run_cli("render", tmp_path / "scene.toml", "--width", "0")
     assert code == 2
