@@ -510,24 +510,11 @@ def _one_line(exc):
 
 def command():
     """The ``rtmesh`` program (its console script, and ``python -m rtmesh.cli``): :func:`main`,
-    then the process ends with its exit status without tearing down the interpreter.
-
-    When :func:`main` returns, a command's work is done: its images and files are closed and
-    in place, its worker and helper processes stopped, a Dask client closed.  What the
-    interpreter's teardown would still do is free every object of the imported libraries one
-    by one (numba's compiled functions and types, trimesh, SciPy, OpenImageIO's bindings),
-    about 0.2-0.3 s of a 2 s render of a small scene, which nobody waits for.  The standard
-    streams and the log handlers are flushed first; a reader that has gone away (a closed
-    pipe) loses only what it no longer reads.
-    """
-    status = main()
-    logging.shutdown()
-    for stream in (sys.stdout, sys.stderr):
-        try:
-            stream.flush()
-        except (OSError, ValueError):  # a closed pipe or stream: nobody reads it any more
-            pass
-    os._exit(status)
+    then the process ends with its exit status without tearing down the interpreter
+    (:func:`rtmesh.core.runtime.end_process`): when :func:`main` returns, the command's
+    images and files are closed and in place, its worker and helper processes stopped, a
+    Dask client closed."""
+    runtime.end_process(main())
 
 
 if __name__ == "__main__":

@@ -201,11 +201,15 @@ def _worker_main(conn, memory_limit, parent_pid):
         try:
             job = conn.recv()
         except (EOFError, OSError):
-            return
+            break
         if job is None:
-            return
+            break
         result = run_job(job, on_image=lambda image: conn.send(("image", image)))
         conn.send(("done", result))
+    # every job's files are written and reported: the batch waits for this process to end,
+    # and the interpreter's teardown would take a quarter of a second of it
+    conn.close()
+    runtime.end_process(0)
 
 
 def _exit_with_parent(parent_pid):
