@@ -7,8 +7,10 @@ processes, alternating between the two, ``--runs`` times each after a warm-up re
 compiles the kernels.  Each process is tuned as the ``rtmesh`` command tunes its own
 (:func:`rtmesh.core.runtime.tune_process` where the revision has it; older revisions tuned
 every process as they built a renderer).  Only the render is timed
-(``stats.wall_seconds``: no start-up, no scene loading, no image writing).  Prints a table
-of median times and speed-ups, and how far apart the two images are: relative RMSE
+(``stats.wall_seconds``: no start-up, no scene loading, no image writing), and at ``--scale``
+1 the whole ``rtmesh render`` command too (``python -m rtmesh.cli`` from each tree, start-up
+to exit: what a user waits for).  Prints a table of median times and speed-ups, and how far
+apart the two images are: relative RMSE
 (:func:`benchmarks._lib.relative_rmse`, RMSE over the other revision's mean; 0 for
 bit-identical images) of the pixels and of 8 x 8 block means.
 
@@ -23,6 +25,7 @@ import os
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -67,6 +70,15 @@ def render_once(source, scene, threads, scale, image_path):
     return json.loads(done.stdout.strip().splitlines()[-1])["seconds"]
 
 
+def command_once(source, scene, threads, output):
+    """Seconds of the whole ``rtmesh render`` command with the rtmesh under ``source``."""
+    env = dict(os.environ, PYTHONPATH=str(source))
+    start = time.perf_counter()
+    subprocess.run([sys.executable, "-m", "rtmesh.cli", "render", str(ROOT / scene), "-o", str(output), "--threads",
+                    str(threads), "-q"], env=env, capture_output=True, check=True, cwd=source)
+    return time.perf_counter() - start
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--against", default="4c3801c", help="git revision to compare with")
@@ -82,12 +94,14 @@ def main():
             rows = []
             for scene in SCENES:
                 times = {"this": [], "other": []}
+                whole = {"this": [], "other": []}
                 images = {key: Path(folder) / f"{key}.npy" for key in times}
                 try:
                     for source, key in ((ROOT, "this"), (other, "other")):  # warm-up: compile, cache
                         render_once(source, scene, args.threads, args.scale, images[key])
                 except subprocess.CalledProcessError as failed:  # a scene or key the revision lacks
-                    rows.append(f"| {scene} | fails ({key}: {failed.stderr.strip().splitlines()[-1][:80]}) | | | | |")
+                    rows.append(f"| {scene} | fails ({key}: {failed.stderr.strip().splitlines()[-1][:80]}) "
+                                "| | | | | | | |")
                     print(rows[-1], flush=True)
                     continue
                 this_image, other_image = np.load(images["this"]), np.load(images["other"])
@@ -96,8 +110,14 @@ def main():
                 for _ in range(args.runs):
                     for source, key in ((ROOT, "this"), (other, "other")):
                         times[key].append(render_once(source, scene, args.threads, args.scale, images[key]))
+                        if args.scale == 1.0:
+                            whole[key].append(command_once(source, scene, args.threads, Path(folder) / "out.png"))
                 this, then = float(np.median(times["this"])), float(np.median(times["other"]))
-                rows.append(f"| {scene} | {1e3 * then:.0f} | {1e3 * this:.0f} | {then / this:.2f} | "
+                process = "| | |"
+                if whole["this"]:
+                    p_this, p_then = float(np.median(whole["this"])), float(np.median(whole["other"]))
+                    process = f"| {p_then:.2f} | {p_this:.2f} | {p_then / p_this:.2f} |"
+                rows.append(f"| {scene} | {1e3 * then:.0f} | {1e3 * this:.0f} | {then / this:.2f} {process} "
                             f"{difference[0]:.2g} | {difference[1]:.2g} |")
                 print(rows[-1], flush=True)
         finally:
@@ -105,8 +125,10 @@ def main():
     print()
     print(f"Render times, ms (medians of {args.runs}, {args.threads} threads, scale {args.scale}); "
           f"{args.against} against this checkout:")
-    print(f"| scene | {args.against} | this | speed-up | image difference (rel. RMSE) | of 8x8 block means |")
-    print("|---|---:|---:|---:|---:|---:|")
+    print("Whole command, s (medians; at scale 1 only): start-up, loading, render, writing, exit.")
+    print(f"| scene | {args.against} render ms | this render ms | speed-up | {args.against} command s | "
+          "this command s | speed-up | image difference (rel. RMSE) | of 8x8 block means |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
     print("\n".join(rows))
 
 
