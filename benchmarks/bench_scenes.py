@@ -100,8 +100,8 @@ def main():
                     for source, key in ((ROOT, "this"), (other, "other")):  # warm-up: compile, cache
                         render_once(source, scene, args.threads, args.scale, images[key])
                 except subprocess.CalledProcessError as failed:  # a scene or key the revision lacks
-                    rows.append(f"| {scene} | fails ({key}: {failed.stderr.strip().splitlines()[-1][:80]}) "
-                                "| | | | | | | |")
+                    why = (failed.stderr.strip().splitlines() or [f"exit status {failed.returncode}"])[-1]
+                    rows.append(f"| {scene} | fails ({key}: {why[:80]}) | | | | | | | |")
                     print(rows[-1], flush=True)
                     continue
                 this_image, other_image = np.load(images["this"]), np.load(images["other"])
