@@ -786,7 +786,7 @@ def test_dask_worker_with_a_private_output_folder_is_refused(tmp_path, capsys, c
             assert os.listdir(private) == []
             assert not [n for n in os.listdir(out) if n.endswith(".png")]
             # with a worker that shares the folder, it does every job and the other none
-            cluster.scale(2)
+            cluster.scale(1)
             wait_for_workers(client, 2)
             caplog.set_level("WARNING", logger="rtmesh.batch.runner")
             caplog.clear()  # the refusal of the run above
