@@ -113,7 +113,7 @@ def main():
                         if args.scale == 1.0:
                             whole[key].append(command_once(source, scene, args.threads, Path(folder) / "out.png"))
                 this, then = float(np.median(times["this"])), float(np.median(times["other"]))
-                process = "| | |"
+                process = "| | | |"  # the three command columns, empty below scale 1
                 if whole["this"]:
                     p_this, p_then = float(np.median(whole["this"])), float(np.median(whole["other"]))
                     process = f"| {p_then:.2f} | {p_this:.2f} | {p_then / p_this:.2f} |"
