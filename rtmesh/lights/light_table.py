@@ -13,7 +13,8 @@ A row is :data:`WIDTH` float64 words.  Point, spot and directional lights keep t
 QUAD (3)       corner (1-3), normal (4-6), radiance (7-9), edge1 (10-12), edge2 (13-15)
 DISK (4)       centre (1-3), normal (4-6), radiance (7-9), radius x tangents (10-15)
 TRIANGLE (5)   corner v0 (1-3), normal (4-6), radiance (7-9), e1 (10-12), e2 (13-15)
-ENVIRONMENT (6) the background (its tables are :class:`EnvironmentTables`)
+ENVIRONMENT (6) the background (its tables are
+               :class:`rtmesh.lights.environment_table.EnvironmentTables`)
 PROJECTOR (7)  pinhole (1-3), forward (4-6), intensity (7-9), image right (10-12), image
                up (13-15), its image in the lights' atlas (:data:`IMAGE`), the half-width
                and half-height of the image plane at unit distance (:data:`HALF_WIDTH`,
@@ -41,6 +42,7 @@ from rtmesh.io.texture_atlas import TextureAtlas, texel
 from rtmesh.lights import point_light_rows
 from rtmesh.lights.area_lights import DiskLight, QuadLight
 from rtmesh.lights.projector import ProjectorLight
+from rtmesh.materials.lobes import LUMA_B, LUMA_G, LUMA_R
 from rtmesh.sampling.alias import alias_table
 from rtmesh.sampling.warps import (concentric_disk_row, spherical_triangle_area_row, spherical_triangle_row,
                                    uniform_triangle_weights)
@@ -60,7 +62,7 @@ WIDTH = 24
 RADIANCE = 7
 AREA, TWO_SIDED, VISIBLE, FACE = 16, 17, 18, 19
 IMAGE, HALF_WIDTH, HALF_HEIGHT = 20, 21, 22
-_LUMA = np.array([0.2126, 0.7152, 0.0722])
+_LUMA = np.array([LUMA_R, LUMA_G, LUMA_B])
 
 
 def _luminance(colour):
@@ -142,7 +144,7 @@ class LightTable:
     face_normals : (F, 3) float64
     face_emission : (F, 3) float64
         Emitted radiance of each face (zero for most).
-    environment : EnvironmentTables or None
+    environment : rtmesh.lights.environment_table.EnvironmentTables or None
         The background, when it lights the scene.
     scene_radius : float
         Bounds the power of lights at infinity (directional, environment): what falls on
@@ -346,106 +348,7 @@ def _projector_power(light, half_width, half_height):
     return float(np.sum((colour @ (_LUMA * light.intensity)) * solid_angle))
 
 
-class EnvironmentTables:
-    """The background as compiled code reads it: its radiance on a latitude-longitude grid
-    (bilinear, as :class:`rtmesh.scene.background.EnvironmentBackground` looks it up) and
-    the sampling tables of :class:`rtmesh.lights.environment.EnvironmentLighting` (whose
-    row :func:`rtmesh.lights.environment.sample_direction` draws from them).
-
-    Parameters
-    ----------
-    lighting : EnvironmentLighting
-        Its tables (marginal and conditional cdfs, the tabulated density).
-    background : background object
-
-    Attributes
-    ----------
-    pixels : (h, w + 2, 3) float32
-        Radiance, one wrapped column on each side (the azimuth's seam); a solid background
-        is one row (1, 3, 3) of its colour.  float32, as lookups read it (they compute in
-        float64): half the bytes, so that the studio map's 256 x 128 texels (396 KiB) fit a
-        512 KiB L2 cache, where the rays that miss an asset (most of a real asset's samples)
-        and the map's light samples find them (Duck.glb and monkey.glb 2.5-4 % faster, one
-        thread).  The same radiance where the map holds 32-bit or half floats (EXR, HDR); an
-        8-bit map's or a colour's values round to float32 (relative 6e-8).
-    marginal, conditional, func, mean, cos_rotation, sin_rotation
-        As :func:`rtmesh.lights.environment._sample_directions` takes them.
-    """
-
-    def __init__(self, lighting, background):
-        image = getattr(background, "_texture", None)
-        colour = getattr(background, "colour", None)
-        if image is None and colour is not None:
-            # a solid background: one row of one texel (the kernel reads it without a lookup)
-            pixels = np.tile(np.asarray(colour, dtype=np.float64).reshape(1, 1, 3), (1, 3, 1))
-        elif image is not None:
-            pixels = np.ascontiguousarray(image.pixels[:, :, :3], dtype=np.float64)
-        else:
-            # a procedural background (a gradient) tabulated finely enough that the bilinear
-            # lookup stays within 1e-5 of it (its sampling tables are the lighting's)
-            h, w = 256, 512
-            v = 1.0 - (np.arange(h) + 0.5) / h
-            u = (np.arange(w) + 0.5) / w
-            uv = np.stack(np.meshgrid(u, v), axis=2).reshape(-1, 2)
-            grid = np.asarray(background.radiance(lighting.directions(uv)), dtype=np.float64).reshape(h, w, 3)
-            pixels = np.concatenate([grid[:, -1:], grid, grid[:, :1]], axis=1)
-        self.pixels = pixels.astype(np.float32)
-        angle = math.radians(getattr(background, "rotation", 0.0))
-        self.cos_rotation, self.sin_rotation = math.cos(angle), math.sin(angle)
-        self.marginal, self.conditional = lighting._marginal, lighting._conditional
-        self.func, self.mean = lighting._func, lighting._mean
-        self.mean_luminance = float((pixels[:, 1:-1] @ _LUMA).mean())
-
-    def power(self, scene_radius):
-        """What the environment sends onto the scene's bounding disk (for choosing lights)."""
-        return math.pi * scene_radius * scene_radius * 4.0 * math.pi * self.mean_luminance
-
-
 # ------------------------------------------------------------------ compiled rows
-@row
-def latlong_uv(cos_rotation, sin_rotation, dx, dy, dz):
-    """The environment map's ``(u, v)`` of a unit direction: :func:`rtmesh.sampling.warps.direction_to_latlong`
-    of the direction turned by the map's rotation."""
-    xr = cos_rotation * dx - sin_rotation * dz
-    zr = sin_rotation * dx + cos_rotation * dz
-    return 0.5 + math.atan2(zr, xr) / (2.0 * math.pi), 0.5 + math.asin(min(max(dy, -1.0), 1.0)) / math.pi
-
-
-@row
-def environment_radiance_uv(pixels, u, v):
-    """Background radiance at the map's ``(u, v)``: the clamped bilinear lookup of the padded
-    image (r, g, b)."""
-    h, w2 = pixels.shape[0], pixels.shape[1]
-    w = w2 - 2
-    x = (u * w + 1.0) / (w + 2.0) * w2 - 0.5
-    y = (1.0 - v) * h - 0.5
-    x0, y0 = math.floor(x), math.floor(y)
-    fx, fy = x - x0, y - y0
-    xa, xb = min(max(int(x0), 0), w2 - 1), min(max(int(x0) + 1, 0), w2 - 1)
-    ya, yb = min(max(int(y0), 0), h - 1), min(max(int(y0) + 1, 0), h - 1)
-    out0 = (pixels[ya, xa, 0] * (1.0 - fx) + pixels[ya, xb, 0] * fx) * (1.0 - fy) + (
-        pixels[yb, xa, 0] * (1.0 - fx) + pixels[yb, xb, 0] * fx) * fy
-    out1 = (pixels[ya, xa, 1] * (1.0 - fx) + pixels[ya, xb, 1] * fx) * (1.0 - fy) + (
-        pixels[yb, xa, 1] * (1.0 - fx) + pixels[yb, xb, 1] * fx) * fy
-    out2 = (pixels[ya, xa, 2] * (1.0 - fx) + pixels[ya, xb, 2] * fx) * (1.0 - fy) + (
-        pixels[yb, xa, 2] * (1.0 - fx) + pixels[yb, xb, 2] * fx) * fy
-    return out0, out1, out2
-
-
-@row
-def environment_pdf_uv(func, mean, u, v, dy):
-    """Solid-angle density of :func:`rtmesh.lights.environment.sample_direction` (as
-    :meth:`rtmesh.lights.environment.EnvironmentLighting.pdf`) at the map's ``(u, v)``
-    (:func:`latlong_uv`) of a unit direction whose ``y`` is ``dy``."""
-    h, w = func.shape
-    r = min(max(int((1.0 - v) * h), 0), h - 1)
-    c = min(max(int(u * w), 0), w - 1)
-    sin_theta = math.sqrt(max(1.0 - dy * dy, 0.0))
-    if not sin_theta > 0.0:
-        return math.inf
-    return func[r, c] / mean / (2.0 * math.pi * math.pi * sin_theta)
-
-
 @row
 def area_pdf(light, px, py, pz, dx, dy, dz, distance):
     """Solid-angle density of ``sample_li`` reaching a point of an area light from ``p``

@@ -104,6 +104,7 @@ from numba import types
 
 from rtmesh.core.compiled import fix_signatures, kernel, row
 from rtmesh.core.row_vectors import dot3, normalized3, tangent_frame
+from rtmesh.materials.lobes import LUMA_B, LUMA_G, LUMA_R
 
 # Smallest alpha (= roughness^2) the model is evaluated with.  As alpha -> 0 GGX becomes a
 # delta: the peak D = 1 / (pi alpha^2) grows without bound, and D's denominator
@@ -115,9 +116,8 @@ from rtmesh.core.row_vectors import dot3, normalized3, tangent_frame
 # resolution of images.
 MIN_ALPHA = 1e-3
 
-# Luminance of linear sRGB (Rec. 709 primaries, D65), to weigh the two lobes of an RGB BRDF
-# with one number; the weights sum to 1, so luminance(b + (1 - b) w) = L + (1 - L) w.
-_LUMA_R, _LUMA_G, _LUMA_B = 0.2126, 0.7152, 0.0722
+# Luminance (lobes.LUMA_*) weighs the two lobes of an RGB BRDF with one number; the weights
+# sum to 1, so luminance(b + (1 - b) w) = L + (1 - L) w.
 
 # Bounds of the probability of the GGX lobe when both lobes reflect something.  A lobe drawn
 # with probability p gets weights up to 1 / p times its own f cos / density; where the
@@ -214,7 +214,7 @@ def specular_probability(nv, b0, b1, b2, metallic, transmission):
     """
     w = schlick_weight(nv)
     f_d = 0.04 + 0.96 * w
-    lum = (_LUMA_R * b0 + _LUMA_G * b1) + _LUMA_B * b2
+    lum = (LUMA_R * b0 + LUMA_G * b1) + LUMA_B * b2
     specular = (1.0 - metallic) * f_d + metallic * (lum + (1.0 - lum) * w)
     diffuse = (1.0 - metallic) * (1.0 - transmission) * (1.0 - f_d) * lum
     if not diffuse > 0.0:

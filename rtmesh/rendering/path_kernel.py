@@ -45,7 +45,7 @@ Records (tuples of arrays, built once by :class:`rtmesh.rendering.path_stage.Pat
 ``lights = (rows, probability, alias, pmf, face_light, analytic, environment, texels,
 descriptors, placement_light)`` (:class:`rtmesh.lights.light_table.LightTable`, ``texels``
 and ``descriptors`` its projectors' images); ``env = (pixels, marginal, conditional,
-func, mean, cos_rotation, sin_rotation)`` (:class:`rtmesh.lights.light_table.EnvironmentTables`);
+func, mean, cos_rotation, sin_rotation)`` (:class:`rtmesh.lights.environment_table.EnvironmentTables`);
 ``options = (max_depth, rr_depth, clamp, offset_scale, background_seen, cutouts, split,
 camera_media, light_samples, light_block, record_hits, ao_pass, pass_albedo)``:
 ``record_hits`` whether to record the camera-hit passes' surfaces, ``ao_pass`` whether to

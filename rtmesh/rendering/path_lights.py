@@ -11,6 +11,7 @@ import numpy as np
 
 from rtmesh.core.compiled import inline_row
 from rtmesh.geometry.float32_rays import F32_MAX, offset_origin
+from rtmesh.lights import environment_table
 from rtmesh.lights import light_table as lt
 from rtmesh.rendering.path_packets import mover_to_world
 from rtmesh.rendering.path_surfaces import environment_radiance as _environment_radiance
@@ -24,7 +25,7 @@ from rtmesh.rendering.path_surfaces import projector_incident as _projector_inci
 # rows of numbers only stay calls (inlining them too cost compile time, no speed)
 area_pdf = inline_row(lt.area_pdf.py_func)
 hit_analytic = inline_row(lt.hit_analytic.py_func)
-environment_pdf_uv = inline_row(lt.environment_pdf_uv.py_func)
+environment_pdf_uv = inline_row(environment_table.environment_pdf_uv.py_func)
 
 
 @inline_row

@@ -23,7 +23,8 @@ from rtmesh.geometry.cutouts import CutoutAccel
 from rtmesh.io.texture_atlas import TextureAtlas
 from rtmesh.lights.environment import EnvironmentLighting
 from rtmesh.lights import light_table as lt
-from rtmesh.lights.light_table import BYTES_PER_LIGHT, EnvironmentTables, LightTable, placed_light_count
+from rtmesh.lights.environment_table import EnvironmentTables
+from rtmesh.lights.light_table import BYTES_PER_LIGHT, LightTable, placed_light_count
 from rtmesh.lights.light_tree import NO_TREE, LightTree
 from rtmesh.lights.mesh_lights import MeshLight
 from rtmesh.lights.projector import ProjectorLight

@@ -43,7 +43,7 @@ from rtmesh.core.compiled import inline_row, row
 from rtmesh.geometry import embree_packets
 from rtmesh.geometry.float32_rays import offset_origin
 from rtmesh.io.texture_atlas import texel
-from rtmesh.lights import light_table
+from rtmesh.lights import environment_table, light_table
 from rtmesh.lights.environment import sample_direction
 from rtmesh.lights.light_table import FACE
 from rtmesh.lights.point_light_rows import illuminate_row
@@ -78,7 +78,7 @@ OPAQUE, MASK, BLEND = (ALPHA_MODES.index(name) for name in ("opaque", "mask", "b
 set_lane = inline_row(embree_packets.set_lane.py_func)
 clear_hit = inline_row(embree_packets.clear_hit.py_func)
 alias_sample = inline_row(_alias_sample.py_func)
-environment_radiance_uv = inline_row(light_table.environment_radiance_uv.py_func)
+environment_radiance_uv = inline_row(environment_table.environment_radiance_uv.py_func)
 environment_sample = inline_row(sample_direction.py_func)
 sample_area_point = inline_row(light_table.sample_area_point.py_func)
 illuminate = inline_row(illuminate_row.py_func)
@@ -87,8 +87,8 @@ illuminate = inline_row(illuminate_row.py_func)
 @inline_row
 def environment_radiance(pixels, cos_rotation, sin_rotation, dx, dy, dz):
     """Background radiance along a unit direction: the map's ``(u, v)``
-    (:func:`rtmesh.lights.light_table.latlong_uv`) and its bilinear lookup, inlined."""
-    u, v = light_table.latlong_uv(cos_rotation, sin_rotation, dx, dy, dz)
+    (:func:`rtmesh.lights.environment_table.latlong_uv`) and its bilinear lookup, inlined."""
+    u, v = environment_table.latlong_uv(cos_rotation, sin_rotation, dx, dy, dz)
     return environment_radiance_uv(pixels, u, v)
 projector_incident = inline_row(light_table.projector_incident.py_func)
 

@@ -33,6 +33,7 @@ import numpy as np
 from rtmesh.core.compiled import borrowed, inline_row, stage
 from rtmesh.geometry.embree_packets import LANES
 from rtmesh.lights import light_table as lt
+from rtmesh.lights.environment_table import latlong_uv
 from rtmesh.lights import light_tree
 from rtmesh.materials import models
 from rtmesh.materials.metallic_roughness import square_to_cosine_hemisphere_row
@@ -201,7 +202,7 @@ def meet(lanes, hits, vertices, keys, start, geometry, surface, textured, lights
                 mapped = env_pixels.shape[0] != 1
                 u = v = 0.0
                 if mapped or not prev_delta[lane]:
-                    u, v = lt.latlong_uv(env_cos, env_sin, dx[lane], dy[lane], dz[lane])
+                    u, v = latlong_uv(env_cos, env_sin, dx[lane], dy[lane], dz[lane])
                 if mapped:
                     lr, lg, lb = environment_radiance_uv(env_pixels, u, v)
                 else:
