@@ -1,6 +1,7 @@
 """Command line: ``rtmesh render`` and ``rtmesh batch``."""
 
 import argparse
+import contextlib
 import logging
 import os
 import sys
@@ -337,6 +338,52 @@ class ProgressBar:
             self.stream.flush()
 
 
+FIRST_RUN_NOTE = ("rtmesh: compiling the renderer's kernels for this machine (after an install, once: "
+                  "a minute or so; later renders start at once)")
+
+
+class _FirstCompile(logging.Handler):
+    """Writes :data:`FIRST_RUN_NOTE` once, at the first kernel group a render compiles."""
+
+    def __init__(self, stream):
+        super().__init__(logging.INFO)
+        self.stream, self.told = stream, False
+
+    def emit(self, record):
+        if record.levelno >= logging.WARNING:  # what the command shows anyway
+            logging.getLogger().handle(record)
+        elif not self.told:
+            self.told = True
+            self.stream.write(FIRST_RUN_NOTE + "\n")
+            self.stream.flush()
+
+
+@contextlib.contextmanager
+def first_run_note(stream, enabled=True):
+    """Within the block, tell the user at ``stream`` in one line when the render first
+    compiles kernels (:meth:`rtmesh.core.compile_ahead.KernelGroup.prepare` logs each group
+    it compiles), so that the first render after an install, silent for a minute or so
+    before the progress bar, does not look hung.  Nothing when ``enabled`` is False, and
+    nothing once the kernels are cached.  The module's logger takes INFO records within the
+    block, to this note only (its warnings still reach the command's handler); its level
+    and propagation are restored after.
+    """
+    if not enabled:
+        yield
+        return
+    logger = compile_ahead.log
+    handler, level, propagate = _FirstCompile(stream), logger.level, logger.propagate
+    logger.addHandler(handler)
+    logger.setLevel(logging.INFO)
+    logger.propagate = False
+    try:
+        yield
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(level)
+        logger.propagate = propagate
+
+
 def _pass_png_path(output, name):
     """``out.exr`` -> ``out_depth.png``: where ``--pass-png`` writes a pass."""
     return f"{os.path.splitext(output)[0]}_{name}.png"
@@ -364,8 +411,10 @@ def cmd_render(args):
     background = None if args.background is None else background_from_option(args.background)
     # the command owns its process: tune it for rendering (allocator, GIL, kept threads)
     runtime.tune_process()
-    # on a first run, a second process compiles kernels alongside this one
-    with compile_ahead.helper():
+    # on a first run, a second process compiles kernels alongside this one; a user at a
+    # terminal is told why the render takes a while to start
+    interactive = not args.quiet and sys.stderr.isatty()
+    with first_run_note(sys.stderr, enabled=interactive), compile_ahead.helper():
         # the memory check runs on the settings before any mesh is read, and the loaders
         # check what a file would take before they take it (and the integrator what
         # flattening instances would)
@@ -374,7 +423,7 @@ def cmd_render(args):
             if background is not None:
                 scene.background = background
             integrator = Integrator(scene, settings)
-        bar = ProgressBar(enabled=not args.quiet and sys.stderr.isatty())
+        bar = ProgressBar(enabled=interactive)
         try:
             result = integrator.render(progress=bar)
         finally:

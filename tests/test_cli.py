@@ -1,5 +1,7 @@
 """End-to-end command line: renders that read back, and one-line errors for bad input."""
 
+import io
+import logging
 import os
 import subprocess
 import sys
@@ -315,3 +317,31 @@ def test_without_embree_packets_a_render_is_refused_in_one_line(scene_file, tmp_
     assert proc.returncode == 2 and not out.exists()
     assert proc.stderr.strip().splitlines() == ["rtmesh: error: rtmesh cannot render without Embree's packet queries "
                                                 "(RTMESH_EMBREE=run)"]
+
+
+class _Terminal(io.StringIO):
+    def isatty(self):
+        return True
+
+
+def test_a_terminal_is_told_once_that_a_first_render_compiles_and_warnings_still_pass(caplog):
+    from rtmesh.cli import FIRST_RUN_NOTE, first_run_note
+    from rtmesh.core import compile_ahead
+
+    logger = compile_ahead.log
+    before = (logger.level, logger.propagate, list(logger.handlers))
+    terminal = _Terminal()
+    with first_run_note(terminal):
+        # what KernelGroup.prepare logs for each group the disk cache lacks
+        logger.info("compiling the %s kernels for this machine", "build")
+        logger.info("compiling the %s kernels for this machine", "path")
+        logger.warning("a warning of the module")
+    assert terminal.getvalue() == FIRST_RUN_NOTE + "\n"
+    assert [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING] == ["a warning of the module"]
+    assert (logger.level, logger.propagate, list(logger.handlers)) == before
+    # -q, or stderr not a terminal (cmd_render's condition): nothing
+    quiet = _Terminal()
+    with first_run_note(quiet, enabled=False):
+        logger.info("compiling the %s kernels for this machine", "build")
+    assert quiet.getvalue() == ""
+

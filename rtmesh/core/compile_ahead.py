@@ -92,6 +92,8 @@ class KernelGroup:
             self._prepared = True
         if self.cached():
             return
+        # (the rtmesh command tells a user at a terminal, once: rtmesh.cli.first_run_note)
+        log.info("compiling the %s kernels for this machine", self.name)
         _announce(self)
         for dispatcher, signature in self.kernels:
             compile_locked(dispatcher, signature)

@@ -1,6 +1,7 @@
 """Kernel groups compiled ahead by a helper process on a first run (rtmesh.core.compile_ahead)."""
 
 import fcntl
+import logging
 import os
 import subprocess
 import sys
@@ -192,6 +193,24 @@ def test_without_a_helper_prepare_compiles_under_the_lock_and_starts_no_process(
             group.prepare()
             group.prepare()  # once a process
         assert (types.int16,) in _twice.overloads and locked == [_twice] and not started
+    finally:
+        del compile_ahead._GROUPS[group.name]
+
+
+def test_prepare_logs_each_group_it_compiles_and_nothing_for_a_cached_one(monkeypatch, caplog):
+    # (the rtmesh command turns the first such record into one line for a user at a terminal)
+    monkeypatch.setattr(compile_ahead, "_enabled", False)
+    group = compile_ahead.KernelGroup(__name__, "test: logged", [(_twice, (types.uint8,))])
+    try:
+        with caplog.at_level(logging.INFO, logger=compile_ahead.__name__):
+            monkeypatch.setattr(group, "cached", lambda: True)
+            group.prepare()
+            assert caplog.records == []
+            group._prepared = False
+            monkeypatch.setattr(group, "cached", lambda: False)
+            with compile_ahead.helper(enabled=False):
+                group.prepare()
+        assert [r.getMessage() for r in caplog.records] == ["compiling the test: logged kernels for this machine"]
     finally:
         del compile_ahead._GROUPS[group.name]
 
