@@ -338,8 +338,8 @@ class ProgressBar:
             self.stream.flush()
 
 
-FIRST_RUN_NOTE = ("rtmesh: compiling the renderer's kernels for this machine (after an install, once: "
-                  "a minute or so; later renders start at once)")
+FIRST_RUN_NOTE = ("rtmesh: compiling the renderer's kernels for this machine (once after an install, "
+                  "up to a minute or so; later renders start at once)")
 
 
 class _FirstCompile(logging.Handler):
