@@ -3,7 +3,7 @@
 A block is :data:`BLOCK` film samples, four packets of 16 lanes side by side (sample ``b``
 is lane ``b % 16`` of packet ``b // 16``, at the words
 :func:`rtmesh.geometry.embree_packets.lane_word` gives for ``b``).  Each step works on the
-block's scratch arrays: the camera step (positions, then pinhole directions), the surface
+block's scratch arrays: the camera step (positions, then pinhole or thin-lens rays), the surface
 step (gathered face rows, then the arithmetic of
 :func:`rtmesh.shading.surfaces.surface_records`), the light step
 (the arithmetic of :func:`rtmesh.shading.direct_light.light_samples` for one light), the
@@ -28,7 +28,7 @@ from rtmesh.lights.point_light_rows import KIND, POINT, illuminate_row, point_ro
 from rtmesh.materials.blinn_phong import blinn_phong_row
 from rtmesh.rendering.film_sums import pixel_sums, store_pixel
 from rtmesh.sampling.pixel_samples import sample_positions
-from rtmesh.scene.camera_rays import pinhole_xyz
+from rtmesh.scene.camera_rays import pinhole_xyz, thin_lens_xyz
 from rtmesh.shading.direct_light import light_sample
 from rtmesh.shading.surfaces import surface_from_rows_inlined
 
@@ -104,11 +104,18 @@ def block_scratch(position, flags):
 
 
 @kernel
-def camera_block(code, keys, corners, size, spp, start, count, sample, sequence, column, line, camera, xy, d, rays):
+def camera_block(code, keys, corners, size, spp, start, count, sample, sequence, column, line, camera, xy, d, rays,
+                 lens, eye, o):
     """Writes into ``d`` (3, BLOCK) and into the block's ``RTCRayHit16`` packets ``rays``
     the unit directions of the camera rays of samples ``start .. start + count - 1``
     (lanes past the end repeat sample ``start``), as
-    :func:`rtmesh.scene.camera_rays.camera_rays` makes them for a pinhole.
+    :func:`rtmesh.scene.camera_rays.camera_rays` makes them: for a pinhole (``lens`` empty,
+    every ray from the eye, whose position the packets hold already), or for a thin lens,
+    ``lens`` (n, 2) float64 holding each of the chunk's samples' point on the aperture
+    (scene units along right and up, :meth:`rtmesh.scene.camera.Camera.lens_disk`), the
+    rays then leaving those points for the plane of focus
+    (:func:`rtmesh.scene.camera_rays.thin_lens_xyz`; ``eye`` is the camera's position and
+    focus distance), their origins written into the packets too (``o`` (3, BLOCK) scratch).
 
     ``sample`` (BLOCK,) uint64 holds each sample's index, and what the caller formed once
     per pixel: ``sequence`` (2, BLOCK) uint64, the pixel's keys
@@ -133,11 +140,34 @@ def camera_block(code, keys, corners, size, spp, start, count, sample, sequence,
     for b in range(count, BLOCK):
         xy[0, b], xy[1, b], column[b], line[b] = xy[0, 0], xy[1, 0], column[0], line[0]
     # image_plane_xy, with the pixel's column and row formed by the caller
-    for b in range(BLOCK):
-        sx = (xy[0, b] + column[b]) * ax + bx
-        sy = (xy[1, b] + line[b]) * ay + by
-        d[0, b], d[1, b], d[2, b] = pinhole_xyz(sx, sy, fx, fy, fz, rx, ry, rz, ux, uy, uz)
+    if len(lens) == 0:
+        for b in range(BLOCK):
+            sx = (xy[0, b] + column[b]) * ax + bx
+            sy = (xy[1, b] + line[b]) * ay + by
+            d[0, b], d[1, b], d[2, b] = pinhole_xyz(sx, sy, fx, fy, fz, rx, ry, rz, ux, uy, uz)
+    else:
+        ex, ey, ez, focus = eye
+        for b in range(BLOCK):
+            sx = (xy[0, b] + column[b]) * ax + bx
+            sy = (xy[1, b] + line[b]) * ay + by
+            k = start + (b if b < count else 0)
+            o[0, b], o[1, b], o[2, b], d[0, b], d[1, b], d[2, b] = thin_lens_xyz(
+                sx, sy, lens[k, 0], lens[k, 1], ex, ey, ez, fx, fy, fz, rx, ry, rz, ux, uy, uz, focus)
+        write_origins(o, rays)
     write_directions(d, rays)
+
+
+@row
+def write_origins(o, rays):
+    """Ray origins ``o`` (3, BLOCK) into the block's packets ``rays``, rounded to float32 as
+    :func:`rtmesh.geometry.embree_packets.set_lane` writes them; a branch-free loop over the
+    lanes of each group and field, as :func:`write_directions`."""
+    for group in range(BLOCK // ep.GROUP):
+        base, first = group * ep.GROUP_WORDS, group * ep.GROUP
+        for c in range(3):
+            at = base + (ep.ORG + c) * ep.GROUP
+            for lane in range(ep.GROUP):
+                rays[at + lane] = np.float32(o[c, first + lane])
 
 
 @row

@@ -56,6 +56,7 @@ _NO_COUNT = np.zeros(0, dtype=np.int64)
 _NO_IMAGE = np.zeros((0, 3), dtype=np.float32)
 # "the chunk's pixels are a run from first_pixel" for direct_samples
 _NO_PIXELS = np.zeros(0, dtype=np.int64)
+_NO_LENS = np.zeros((0, 2))  # a pinhole camera
 # float64 words of a light row
 ROW_WORDS = ROW.itemsize // 8
 
@@ -63,19 +64,19 @@ ROW_WORDS = ROW.itemsize // 8
 _F64, _F64_2D, _I64 = types.float64[::1], types.float64[:, ::1], types.int64[::1]
 # the steps direct_samples calls, each a kernel of its own (cached apart from it, so that a
 # first run can compile them in two processes, see rtmesh.core.compile_ahead)
-# What the fused stage renders (RenderPlan's names): pinhole camera rays over surfaces, flat
+# What the fused stage renders (RenderPlan's names): pinhole or thin-lens camera rays over surfaces, flat
 # or smooth, lit by ambient light, emission seen and point-like lights with hard shadows,
 # Blinn-Phong highlights, over a solid background; every other render is the path kernel's
 # (the same Whitted model in its Whitted configuration).  DirectStage.plan checks the rest
 # of what a render needs that no plan flag names (the camera, the background, the lights'
 # compiled rows, the traversal).
-FUSED_CAN_RENDER = frozenset({"emission", "ambient", "lights", "specular", "smooth_normals", "background"})
+FUSED_CAN_RENDER = frozenset({"emission", "ambient", "lights", "specular", "smooth_normals", "background", "lens"})
 
 FUSED_KERNELS = KernelGroup(__name__, "fused direct", [
     (block_scratch, (_F64, types.int64)),
     (camera_block, (types.int64, types.uint64[::1], _F64_2D, _F64, types.int64, types.int64, types.int64,
                     types.uint64[::1], types.uint64[:, ::1], _F64, _F64, types.UniTuple(types.float64, 13), _F64_2D,
-                    _F64_2D, types.float32[::1])),
+                    _F64_2D, types.float32[::1], _F64_2D, types.UniTuple(types.float64, 4), _F64_2D)),
     (surface_block, (_F64_2D, _I64, _I64, _F64_2D, _F64_2D, types.boolean[::1], _F64_2D, types.int64,
                      types.boolean)),
     (light_block, (_F64, _F64_2D, _F64_2D, types.int64, types.float32, types.float64, types.boolean)),
@@ -107,8 +108,9 @@ class DirectStage:
                          ep.RTC_RAY_QUERY_FLAG_COHERENT)
         camera, s = it.camera, it.settings
         forward, right, up = it.camera_frame
-        self._camera = (s.width, camera.image_plane(s.width, s.height),
-                        np.ascontiguousarray(camera.position, dtype=np.float64), forward, right, up)
+        position = np.ascontiguousarray(camera.position, dtype=np.float64)
+        self._camera = (s.width, camera.image_plane(s.width, s.height), position, forward, right, up)
+        self._eye = (float(position[0]), float(position[1]), float(position[2]), float(camera.focus))
         st = it.plan
         self._surfaces = (it.tables.faces, it.tables.vertex_normals, it.tables.smooth, it.tables.material_id,
                           st.smooth_normals and not st.normal_maps)
@@ -154,7 +156,7 @@ class DirectStage:
             return None
         if type(it.accel) is not Accel or not it.accel.packets or it.media is not None or it.instances is not None:
             return None
-        if it.camera.orthographic:  # the fused camera step forms pinhole rays
+        if it.camera.orthographic:  # the fused camera step forms pinhole or thin-lens rays
             return None
         # lights without a compiled row are evaluated by the general path
         if st.lights and any(light.kernel_row() is None for light in it.lights):
@@ -164,7 +166,7 @@ class DirectStage:
             return None
         return cls(integrator)
 
-    def render(self, pixels, first_sample, spp, stats, film=None):
+    def render(self, pixels, first_sample, spp, stats, film=None, lens=None):
         """Radiance of the samples of a chunk of pixels, or those samples added to a film.
 
         Parameters
@@ -182,6 +184,9 @@ class DirectStage:
             order, count, and the image of a ``one_pass`` film) as it finishes the pixel,
             while they are in the cache, instead of a pass over the chunk's radiance after
             it (:meth:`Film.add_tile`, :meth:`Film.add_samples` form the same sums).
+        lens : (n, 2) float64, optional
+            A thin lens's point on the aperture for each sample, pixel by pixel in sample
+            order (:meth:`rtmesh.scene.camera.Camera.lens_disk`); None for a pinhole.
 
         Returns
         -------
@@ -201,7 +206,8 @@ class DirectStage:
         n = m * int(counts[0]) if len(counts) == 1 else int(counts.sum())
         sums = (_NO_SUMS, _NO_SUMS, _NO_COUNT, _NO_IMAGE) if film is None else film.kernel_arrays()
         args = (*self._queries, *self._sampler_arrays, pixel_list, first_pixel, first, counts, n, *sums,
-                *self._camera, *self._surfaces, self._base, self._background, self._lights, *self._materials,
+                *self._camera, _NO_LENS if lens is None else kernel_input(lens, np.float64), self._eye,
+                *self._surfaces, self._base, self._background, self._lights, *self._materials,
                 self._offset_scale, SHADOW_SHORTEN, self._highlights)
         if (film is None) not in self._compiled:
             # its steps are FUSED_KERNELS; the kernel around them is compiled (or loaded) under
@@ -217,7 +223,7 @@ class DirectStage:
 @kernel
 def direct_samples(intersect, occluded, scene, flags, sampler, keys, corners, size, spp,
                    pixel_list, first_pixel, first, counts, n, total, total_sq, film_count, image,
-                   width, image_plane, position, forward, right, up, faces, vertex_normals, smooth,
+                   width, image_plane, position, forward, right, up, lens, eye, faces, vertex_normals, smooth,
                    material_id, fix_terminator, base, background, lights, shaded, diffuse, specular, exponent,
                    visible_from, scale, shorten, highlights):
     """Radiance of the camera samples of a chunk of pixels with direct light, in blocks of
@@ -253,6 +259,11 @@ def direct_samples(intersect, occluded, scene, flags, sampler, keys, corners, si
     image_plane : (4,) float64
     position, forward, right, up : (3,) float64
         The camera (see :func:`rtmesh.scene.camera_rays.camera_rays`).
+    lens : (n, 2) float64 or (0, 2)
+        A thin lens's point on the aperture for each of the ``n`` samples, in their order
+        (:meth:`rtmesh.scene.camera.Camera.lens_disk`); empty for a pinhole.
+    eye : tuple of 4 float
+        The camera's position and focus distance (the thin lens's rays, :func:`camera_block`).
     faces, vertex_normals, smooth, material_id, fix_terminator
         As for :func:`rtmesh.shading.surfaces.surface_records`.
     base : (M, 3) float64
@@ -316,6 +327,7 @@ def direct_samples(intersect, occluded, scene, flags, sampler, keys, corners, si
     sums, state = np.zeros(6), np.full(2, -1, np.int64)
     shadow_rays = 0
     camera = camera_numbers(image_plane, forward, right, up)
+    origins = np.empty((3, BLOCK))  # a thin lens's, per block
     for start in range(0, n, BLOCK):
         count = min(BLOCK, n - start)
         # the block's samples, pixel by pixel in sample order
@@ -342,7 +354,7 @@ def direct_samples(intersect, occluded, scene, flags, sampler, keys, corners, si
         # camera rays (rtmesh.scene.camera_rays.camera_rays, pinhole) into the packets; lanes past
         # the end repeat sample 0
         camera_block(sampler, keys, corners, size, spp, start, count, sample, sequence, column, line, camera, xy,
-                     d, rays)
+                     d, rays, lens, eye, origins)
         for b in range(BLOCK):
             valid[b] = -1 if b < count else 0
         for b in range(BLOCK):

@@ -499,9 +499,10 @@ class Integrator:
         ragged = isinstance(spp, np.ndarray) or isinstance(first_sample, np.ndarray)
         if self.direct_stage is not None:
             # the stage forms the pixel and sample index of each sample and its position itself
-            # (see rtmesh.sampling.pixel_samples)
+            # (see rtmesh.sampling.pixel_samples); a thin lens's aperture points come from here
+            lens = self._aperture_points(*sample_indices(pixels, first_sample, spp)) if self.plan.lens else None
             clock.lap("camera")
-            radiance = self.direct_stage.render(pixels, first_sample, spp, stats, film)
+            radiance = self.direct_stage.render(pixels, first_sample, spp, stats, film, lens)
             clock.lap("direct")
             if radiance is None or ragged:
                 return radiance, None, stats
@@ -538,6 +539,13 @@ class Integrator:
         before the aperture's disk warp), or None for a pinhole camera."""
         return self.sampler.lens(pixel, sample_in_pixel) if self.plan.lens else None
 
+    def _aperture_points(self, pixel, sample_in_pixel):
+        """Each camera sample's point on a thin lens's aperture ((n, 2) float64, scene units
+        along the camera's right and up: :meth:`rtmesh.scene.camera.Camera.lens_disk` of
+        :meth:`_lens_points`), or None for a pinhole camera."""
+        lens_uv = self._lens_points(pixel, sample_in_pixel)
+        return None if lens_uv is None else self.camera.lens_disk(lens_uv)
+
     def _sample_times(self, pixel, sample_in_pixel):
         """Each camera sample's time in the shutter ((n,) float64; one per sample, stratified
         per pixel, and its rays all inherit it), or None without moving objects."""
@@ -552,9 +560,7 @@ class Integrator:
         origins = directions = lens = None
         if self.path_stage.camera_in_kernel:
             times = self._sample_times(pixel, sample_in_pixel)
-            lens_uv = self._lens_points(pixel, sample_in_pixel)
-            if lens_uv is not None:
-                lens = self.camera.lens_disk(lens_uv)
+            lens = self._aperture_points(pixel, sample_in_pixel)
         else:
             origins, directions, times = self._camera_rays(pixel, sample_in_pixel)
         n = len(pixel)

@@ -65,6 +65,21 @@ def test_fused_stage_matches_the_general_path(sampler, spp):
     assert a.image.max() > 0.1  # lit, not a black frame
 
 
+@pytest.mark.parametrize("sampler", ["jittered", "sobol", "zsobol"])
+def test_a_thin_lens_renders_as_the_general_path(sampler):
+    """A thin lens's rays leave the aperture points the integrator hands the stage, for the
+    plane of focus: the general path's image and ray counts to the bit, and blurred away
+    from that plane (a pinhole's image differs)."""
+    import dataclasses
+
+    scene = lit_scene()
+    pinhole = Integrator(scene, settings(width=31, height=23, spp=4, sampler=sampler)).render()
+    scene.camera = dataclasses.replace(scene.camera, aperture=0.6, focus_distance=4.0)
+    a, b = render_both(scene, width=31, height=23, spp=4, sampler=sampler)
+    assert_same(a, b)
+    assert not np.array_equal(a.image, pinhole.image)
+
+
 def test_ambient_and_a_solid_background():
     scene = lit_scene(background=[0.2, 0.3, 0.4], ambient=[0.05, 0.1, 0.02])
     a, b = render_both(scene, width=40, height=30, spp=2)
@@ -146,19 +161,21 @@ fused_cases = st.fixed_dictionaries({
     "threads": st.sampled_from([1, 2]),
     "seed": st.integers(0, 3),
     "adaptive": st.booleans(),
+    "aperture": st.sampled_from([0.0, 0.0, 0.5]),  # a pinhole, or a thin lens
 })
 
 
 def check_fused_case(case):
     """A scene the fused stage takes (point-like lights of the kinds drawn, materials with
     and without highlights, ambient and a solid background or not) rendered with settings
-    that move block, pixel and chunk boundaries (spp, chunk size, threads, sampler, rounds)."""
+    that move block, pixel and chunk boundaries (spp, chunk size, threads, sampler, rounds),
+    through a pinhole or a thin lens."""
     materials = [Material(f"m{i}", diffuse=0.5, specular=0.0 if s < 0 else 0.4, shininess=max(s, 0.0))
                  for i, s in enumerate(case["shininess"])]
     parts = [part("ball", icosphere(2, 1.0, (0.0, 0.0, 1.0)), 0, smooth=case["smooth"]),
              part("box", box((1.0, 1.0, 1.5), (1.8, 0.5, 0.75)), 1),
              part("floor", floor_quad(6.0), 2)]
-    camera = Camera([0.5, -6.0, 4.0], [0.3, 0.0, 0.6], [0.0, 0.0, 1.0], 45.0)
+    camera = Camera([0.5, -6.0, 4.0], [0.3, 0.0, 0.6], [0.0, 0.0, 1.0], 45.0, aperture=case["aperture"])
     scene = Scene.from_parts(parts, materials, [LIGHT_KINDS[k](i) for i, k in enumerate(case["lights"])],
                              camera, ambient=case["ambient"], background=case["background"])
     overrides = {name: case[name] for name in ("spp", "sampler", "chunk_samples", "threads", "seed")}
