@@ -159,7 +159,7 @@ def camera_block(code, keys, corners, size, spp, start, count, sample, sequence,
 
 @row
 def write_origins(o, rays):
-    """Ray origins ``o`` (3, BLOCK) into the block's packets ``rays``, rounded to float32 as
+    """Ray origins ``o`` (rows 0-2 of (k, BLOCK)) into the block's packets ``rays``, rounded to float32 as
     :func:`rtmesh.geometry.embree_packets.set_lane` writes them; a branch-free loop over the
     lanes of each group and field, as :func:`write_directions`."""
     for group in range(BLOCK // ep.GROUP):
@@ -194,12 +194,10 @@ def write_rays(ray, rays):
     :func:`light_block`) into the block's packets ``rays``, as
     :func:`rtmesh.geometry.embree_packets.set_lane` writes one lane, in branch-free loops over
     the lanes of each group that LLVM vectorises."""
+    write_origins(ray, rays)  # rows 0-2, float32 already
     for group in range(BLOCK // ep.GROUP):
         base, first = group * ep.GROUP_WORDS, group * ep.GROUP
         for c in range(3):
-            at = base + (ep.ORG + c) * ep.GROUP
-            for lane in range(ep.GROUP):
-                rays[at + lane] = ray[c, first + lane]
             at = base + (ep.DIR + c) * ep.GROUP
             for lane in range(ep.GROUP):
                 rays[at + lane] = ep.packet_direction(ray[3 + c, first + lane])
