@@ -64,12 +64,12 @@ ROW_WORDS = ROW.itemsize // 8
 _F64, _F64_2D, _I64 = types.float64[::1], types.float64[:, ::1], types.int64[::1]
 # the steps direct_samples calls, each a kernel of its own (cached apart from it, so that a
 # first run can compile them in two processes, see rtmesh.core.compile_ahead)
-# What the fused stage renders (RenderPlan's names): pinhole or thin-lens camera rays over surfaces, flat
-# or smooth, lit by ambient light, emission seen and point-like lights with hard shadows,
-# Blinn-Phong highlights, over a solid background; every other render is the path kernel's
-# (the same Whitted model in its Whitted configuration).  DirectStage.plan checks the rest
-# of what a render needs that no plan flag names (the camera, the background, the lights'
-# compiled rows, the traversal).
+# What the fused stage renders (RenderPlan's names): camera rays from a pinhole or a thin
+# lens, over surfaces flat or smooth, lit by ambient light, emission seen and point-like
+# lights with hard shadows, Blinn-Phong highlights, over a solid background; every other
+# render is the path kernel's (the same Whitted model in its Whitted configuration).
+# DirectStage.plan checks the rest of what a render needs that no plan flag names (the
+# camera, the background, the lights' compiled rows, the traversal).
 FUSED_CAN_RENDER = frozenset({"emission", "ambient", "lights", "specular", "smooth_normals", "background", "lens"})
 
 FUSED_KERNELS = KernelGroup(__name__, "fused direct", [
@@ -351,8 +351,8 @@ def direct_samples(intersect, occluded, scene, flags, sampler, keys, corners, si
             px_sample += run
             left -= run
             b += run
-        # camera rays (rtmesh.scene.camera_rays.camera_rays, pinhole) into the packets; lanes past
-        # the end repeat sample 0
+        # camera rays (rtmesh.scene.camera_rays.camera_rays, pinhole or thin lens) into the
+        # packets; lanes past the end repeat sample 0
         camera_block(sampler, keys, corners, size, spp, start, count, sample, sequence, column, line, camera, xy,
                      d, rays, lens, eye, origins)
         for b in range(BLOCK):
