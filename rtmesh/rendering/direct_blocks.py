@@ -12,9 +12,9 @@ into the chunk's rows or its pixel's film sums).  :func:`rtmesh.rendering.direct
 calls them in order; their loops have no branches, gathers or calls where LLVM is to
 vectorise them, and outputs of the block's constant size (see :func:`light_block`).
 
-The larger steps (:func:`block_scratch`, :func:`camera_block`, :func:`surface_block`,
-:func:`light_block`, :func:`write_rays`, :func:`radiance_block`) are kernels, each cached on disk apart from the
-stage, so that a first run compiles them in two processes
+The larger steps (:func:`block_scratch`, :func:`camera_block` or :func:`lens_camera_block`,
+:func:`surface_block`, :func:`light_block`, :func:`write_rays`, :func:`radiance_block`) are
+kernels, each cached on disk apart from the stage, so that a first run compiles them in two processes
 (:data:`rtmesh.rendering.direct_stage.FUSED_KERNELS`); called once per block, like rows,
 they cost the stage nothing measurable (peer scene, 1 and 16 spp, 1 thread;
 :func:`block_scratch` runs once per chunk).
@@ -22,7 +22,7 @@ they cost the stage nothing measurable (peer scene, 1 and 16 spp, 1 thread;
 
 import numpy as np
 
-from rtmesh.core.compiled import kernel, row
+from rtmesh.core.compiled import inline_row, kernel, row
 from rtmesh.geometry import embree_packets as ep
 from rtmesh.lights.point_light_rows import KIND, POINT, illuminate_row, point_row
 from rtmesh.materials.blinn_phong import blinn_phong_row
@@ -104,18 +104,11 @@ def block_scratch(position, flags):
 
 
 @kernel
-def camera_block(code, keys, corners, size, spp, start, count, sample, sequence, column, line, camera, xy, d, rays,
-                 lens, eye, o):
+def camera_block(code, keys, corners, size, spp, start, count, sample, sequence, column, line, camera, xy, d, rays):
     """Writes into ``d`` (3, BLOCK) and into the block's ``RTCRayHit16`` packets ``rays``
     the unit directions of the camera rays of samples ``start .. start + count - 1``
     (lanes past the end repeat sample ``start``), as
-    :func:`rtmesh.scene.camera_rays.camera_rays` makes them: for a pinhole (``lens`` empty,
-    every ray from the eye, whose position the packets hold already), or for a thin lens,
-    ``lens`` (n, 2) float64 holding each of the chunk's samples' point on the aperture
-    (scene units along right and up, :meth:`rtmesh.scene.camera.Camera.lens_disk`), the
-    rays then leaving those points for the plane of focus
-    (:func:`rtmesh.scene.camera_rays.thin_lens_xyz`; ``eye`` is the camera's position and
-    focus distance), their origins written into the packets too (``o`` (3, BLOCK) scratch).
+    :func:`rtmesh.scene.camera_rays.camera_rays` makes them for a pinhole.
 
     ``sample`` (BLOCK,) uint64 holds each sample's index, and what the caller formed once
     per pixel: ``sequence`` (2, BLOCK) uint64, the pixel's keys
@@ -135,26 +128,45 @@ def camera_block(code, keys, corners, size, spp, start, count, sample, sequence,
     1 spp).
     """
     ax, bx, ay, by, fx, fy, fz, rx, ry, rz, ux, uy, uz = camera
+    _film_positions(code, keys, corners, size, spp, count, sample, sequence, column, line, xy)
+    # image_plane_xy, with the pixel's column and row formed by the caller
+    for b in range(BLOCK):
+        sx = (xy[0, b] + column[b]) * ax + bx
+        sy = (xy[1, b] + line[b]) * ay + by
+        d[0, b], d[1, b], d[2, b] = pinhole_xyz(sx, sy, fx, fy, fz, rx, ry, rz, ux, uy, uz)
+    write_directions(d, rays)
+
+
+@kernel
+def lens_camera_block(code, keys, corners, size, spp, start, count, sample, sequence, column, line, camera, xy, d,
+                      rays, lens, eye, o):
+    """:func:`camera_block` for a thin lens: ``lens`` (n, 2) float64 holds each of the
+    chunk's samples' point on the aperture (scene units along right and up,
+    :meth:`rtmesh.scene.camera.Camera.lens_disk`), and the rays leave those points for the
+    plane of focus (:func:`rtmesh.scene.camera_rays.thin_lens_xyz`; ``eye`` is the camera's
+    position and focus distance), their origins written into the packets too (``o``
+    (3, BLOCK) scratch).  A kernel of its own, so that the pinhole's step stays as it is."""
+    ax, bx, ay, by, fx, fy, fz, rx, ry, rz, ux, uy, uz = camera
+    ex, ey, ez, focus = eye
+    _film_positions(code, keys, corners, size, spp, count, sample, sequence, column, line, xy)
+    for b in range(BLOCK):
+        sx = (xy[0, b] + column[b]) * ax + bx
+        sy = (xy[1, b] + line[b]) * ay + by
+        k = start + (b if b < count else 0)
+        o[0, b], o[1, b], o[2, b], d[0, b], d[1, b], d[2, b] = thin_lens_xyz(
+            sx, sy, lens[k, 0], lens[k, 1], ex, ey, ez, fx, fy, fz, rx, ry, rz, ux, uy, uz, focus)
+    write_origins(o, rays)
+    write_directions(d, rays)
+
+
+@inline_row
+def _film_positions(code, keys, corners, size, spp, count, sample, sequence, column, line, xy):
+    """The block's samples' positions in their pixels into ``xy`` (2, BLOCK), the inactive
+    lanes of the last packet given the first sample's position and pixel (a copy of the
+    first ray keeps their words finite)."""
     sample_positions(code, keys, corners, size, spp, sample, sequence, count, xy)
-    # inactive lanes of the last packet: a copy of the first ray keeps their words finite
     for b in range(count, BLOCK):
         xy[0, b], xy[1, b], column[b], line[b] = xy[0, 0], xy[1, 0], column[0], line[0]
-    # image_plane_xy, with the pixel's column and row formed by the caller
-    if len(lens) == 0:
-        for b in range(BLOCK):
-            sx = (xy[0, b] + column[b]) * ax + bx
-            sy = (xy[1, b] + line[b]) * ay + by
-            d[0, b], d[1, b], d[2, b] = pinhole_xyz(sx, sy, fx, fy, fz, rx, ry, rz, ux, uy, uz)
-    else:
-        ex, ey, ez, focus = eye
-        for b in range(BLOCK):
-            sx = (xy[0, b] + column[b]) * ax + bx
-            sy = (xy[1, b] + line[b]) * ay + by
-            k = start + (b if b < count else 0)
-            o[0, b], o[1, b], o[2, b], d[0, b], d[1, b], d[2, b] = thin_lens_xyz(
-                sx, sy, lens[k, 0], lens[k, 1], ex, ey, ez, fx, fy, fz, rx, ry, rz, ux, uy, uz, focus)
-        write_origins(o, rays)
-    write_directions(d, rays)
 
 
 @row

@@ -41,8 +41,8 @@ from rtmesh.geometry import embree_packets as ep
 from rtmesh.geometry.embree_library import packet_library
 from rtmesh.geometry.accel import Accel
 from rtmesh.lights.point_light_rows import ROW
-from rtmesh.rendering.direct_blocks import (BLOCK, LANES, add_light_row, block_scratch,
-                                            camera_block, camera_numbers, light_block, radiance_block,
+from rtmesh.rendering.direct_blocks import (BLOCK, LANES, add_light_row, block_scratch, camera_block,
+                                            camera_numbers, lens_camera_block, light_block, radiance_block,
                                             surface_block, write_rays)
 from rtmesh.materials.blinn_phong import raise_highlight
 from rtmesh.rendering.film_sums import pixel_errors
@@ -62,6 +62,9 @@ ROW_WORDS = ROW.itemsize // 8
 
 
 _F64, _F64_2D, _I64 = types.float64[::1], types.float64[:, ::1], types.int64[::1]
+_CAMERA_BLOCK = (types.int64, types.uint64[::1], _F64_2D, _F64, types.int64, types.int64, types.int64,
+                 types.uint64[::1], types.uint64[:, ::1], _F64, _F64, types.UniTuple(types.float64, 13), _F64_2D,
+                 _F64_2D, types.float32[::1])
 # the steps direct_samples calls, each a kernel of its own (cached apart from it, so that a
 # first run can compile them in two processes, see rtmesh.core.compile_ahead)
 # What the fused stage renders (RenderPlan's names): camera rays from a pinhole or a thin
@@ -74,9 +77,8 @@ FUSED_CAN_RENDER = frozenset({"emission", "ambient", "lights", "specular", "smoo
 
 FUSED_KERNELS = KernelGroup(__name__, "fused direct", [
     (block_scratch, (_F64, types.int64)),
-    (camera_block, (types.int64, types.uint64[::1], _F64_2D, _F64, types.int64, types.int64, types.int64,
-                    types.uint64[::1], types.uint64[:, ::1], _F64, _F64, types.UniTuple(types.float64, 13), _F64_2D,
-                    _F64_2D, types.float32[::1], _F64_2D, types.UniTuple(types.float64, 4), _F64_2D)),
+    (camera_block, _CAMERA_BLOCK),
+    (lens_camera_block, _CAMERA_BLOCK + (_F64_2D, types.UniTuple(types.float64, 4), _F64_2D)),
     (surface_block, (_F64_2D, _I64, _I64, _F64_2D, _F64_2D, types.boolean[::1], _F64_2D, types.int64,
                      types.boolean)),
     (light_block, (_F64, _F64_2D, _F64_2D, types.int64, types.float32, types.float64, types.boolean)),
@@ -353,8 +355,12 @@ def direct_samples(intersect, occluded, scene, flags, sampler, keys, corners, si
             b += run
         # camera rays (rtmesh.scene.camera_rays.camera_rays, pinhole or thin lens) into the
         # packets; lanes past the end repeat sample 0
-        camera_block(sampler, keys, corners, size, spp, start, count, sample, sequence, column, line, camera, xy,
-                     d, rays, lens, eye, origins)
+        if len(lens):
+            lens_camera_block(sampler, keys, corners, size, spp, start, count, sample, sequence, column, line,
+                              camera, xy, d, rays, lens, eye, origins)
+        else:
+            camera_block(sampler, keys, corners, size, spp, start, count, sample, sequence, column, line, camera,
+                         xy, d, rays)
         for b in range(BLOCK):
             valid[b] = -1 if b < count else 0
         for b in range(BLOCK):
