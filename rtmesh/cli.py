@@ -338,12 +338,9 @@ class ProgressBar:
             self.stream.flush()
 
 
-FIRST_RUN_NOTE = ("rtmesh: compiling the renderer's kernels for this machine (once after an install, "
-                  "up to a minute or so; later renders start at once)")
-
-
 class _FirstCompile(logging.Handler):
-    """Writes :data:`FIRST_RUN_NOTE` once, at the first kernel group a render compiles."""
+    """Writes :data:`rtmesh.core.compile_ahead.FIRST_RUN_NOTE` once, at the first kernel
+    group a render compiles."""
 
     def __init__(self, stream):
         super().__init__(logging.INFO)
@@ -354,7 +351,7 @@ class _FirstCompile(logging.Handler):
             logging.getLogger().handle(record)
         elif not self.told:
             self.told = True
-            self.stream.write(FIRST_RUN_NOTE + "\n")
+            self.stream.write(compile_ahead.FIRST_RUN_NOTE + "\n")
             self.stream.flush()
 
 

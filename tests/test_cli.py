@@ -325,8 +325,9 @@ class _Terminal(io.StringIO):
 
 
 def test_a_terminal_is_told_once_that_a_first_render_compiles_and_warnings_still_pass(caplog):
-    from rtmesh.cli import FIRST_RUN_NOTE, first_run_note
+    from rtmesh.cli import first_run_note
     from rtmesh.core import compile_ahead
+    from rtmesh.core.compile_ahead import FIRST_RUN_NOTE
 
     logger = compile_ahead.log
     before = (logger.level, logger.propagate, list(logger.handlers))

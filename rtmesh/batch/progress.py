@@ -45,6 +45,12 @@ class BatchProgress:
             self.stream.write("rtmesh batch: " + text + "\n")
         self.stream.flush()
 
+    def note(self, text):
+        """One line for a user watching the bar (``text``); nothing in a log or without a bar."""
+        if self.enabled and self.tty:
+            self.stream.write(text + "\n")
+            self.stream.flush()
+
     def close(self):
         if self.shown:
             self.stream.write("\n")
@@ -70,6 +76,9 @@ class JsonProgress:
                 "errors": record["errors"], "finished": self.finished, "total": self.total}
         self.stream.write(json.dumps(line, separators=(",", ":")) + "\n")
         self.stream.flush()
+
+    def note(self, text):
+        """Nothing: the lines are one JSON object per finished asset, for programs."""
 
     def close(self):
         pass

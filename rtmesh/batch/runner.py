@@ -49,6 +49,7 @@ from rtmesh.batch.options import FORMATS, BatchOptions, check_names, check_passe
 from rtmesh.batch.publish import Leftovers
 from rtmesh.batch.view_sets import view_set
 from rtmesh.batch.jobs import CAMERA_SUFFIX, VIEWS, AssetJob, ImageTask, fixed_view, turntable_views
+from rtmesh.core import compile_ahead
 from rtmesh.core.errors import OutputError
 from rtmesh.core.runtime import usable_cores
 from rtmesh.io.atomic_files import write_text
@@ -137,6 +138,10 @@ def batch_convert(inputs, outdir, **options):
                 workers = opts.workers or usable_cores()
                 used = min(workers, len(jobs))
                 runner = f"{used} local worker{'s' if used > 1 else ''}"
+                # the workers' warm-up compiles the kernels on a first run, a minute or so
+                # before the first asset is done and the bar moves
+                if compile_ahead.first_run():
+                    book.progress.note(compile_ahead.FIRST_RUN_NOTE)
                 run_local(jobs, workers, book.on_image, book.on_job, time_limit=opts.time_limit,
                           memory_limit=_memory_limit(opts.memory_limit, workers))
         finally:

@@ -38,6 +38,9 @@ log = logging.getLogger(__name__)
 
 # every group, by name: the helper process finds a group the render announces here
 _GROUPS = {}
+# what the rtmesh command tells a user at a terminal when a first run compiles
+FIRST_RUN_NOTE = ("rtmesh: compiling the renderer's kernels for this machine (once after an install, "
+                  "up to a minute or so; later renders start at once)")
 # within helper(): whether groups may be compiled ahead, and the helper process once
 # started; the lock guards both and the helper's pipe
 _enabled = False
@@ -255,7 +258,7 @@ def helper(enabled=True):
         hasattr(dispatcher._cache, "_cache_file") for group in _GROUPS.values() for dispatcher, _ in group.kernels)
     with _helper_lock:
         _enabled = enabled
-    if enabled and not all(group.cached() for group in _GROUPS.values() if group.every_render):
+    if enabled and first_run():
         _announce(None)
     try:
         yield
@@ -266,6 +269,12 @@ def helper(enabled=True):
                 group._prepared = False
         if process is not None:
             _stop(process)
+
+
+def first_run():
+    """Whether the disk cache lacks a kernel group that every render prepares (the scene
+    build's): the first render after an install compiles the kernels."""
+    return not all(group.cached() for group in _GROUPS.values() if group.every_render)
 
 
 def _announce(group):

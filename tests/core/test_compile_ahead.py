@@ -215,6 +215,15 @@ def test_prepare_logs_each_group_it_compiles_and_nothing_for_a_cached_one(monkey
         del compile_ahead._GROUPS[group.name]
 
 
+def test_a_first_run_is_a_render_group_the_disk_cache_lacks(monkeypatch):
+    every = [group for group in compile_ahead._GROUPS.values() if group.every_render]
+    assert every  # the scene build's group
+    for cached in (True, False):
+        for group in every:
+            monkeypatch.setattr(group, "cached", lambda cached=cached: cached)
+        assert compile_ahead.first_run() is (not cached)
+
+
 @pytest.mark.slow
 def test_a_first_run_with_the_helper_renders_what_a_later_run_renders(tmp_path):
     # the command line from an empty cache: the helper compiles half of the build and
