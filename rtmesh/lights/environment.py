@@ -42,7 +42,7 @@ from rtmesh.core.compiled import kernel, row
 from rtmesh.core.rays import take_rows
 from rtmesh.core.vecmath import dot
 from rtmesh.geometry.accel import offset_ray_origins
-from rtmesh.materials.lobes import LUMA_B, LUMA_G, LUMA_R
+from rtmesh.materials.lobes import LUMA
 from rtmesh.sampling.sampler import Sampler
 from rtmesh.sampling.warps import direction_to_latlong, latlong_direction, latlong_to_direction
 
@@ -82,7 +82,7 @@ class EnvironmentLighting:
         u = (np.arange(width) + 0.5) / width
         directions = self.directions(np.stack(np.meshgrid(u, v), axis=2).reshape(-1, 2))
         radiance = np.asarray(background.radiance(directions), dtype=np.float64).reshape(height, width, 3)
-        luminance = radiance @ np.array([LUMA_R, LUMA_G, LUMA_B])
+        luminance = radiance @ LUMA
         # the bilinear lookup spreads a texel's radiance over its neighbours' cells: sample
         # each cell by the brightest of the 3 x 3 texels around it, so the weight L / pdf
         # stays bounded next to a small bright source (with the texel's own value, a sample

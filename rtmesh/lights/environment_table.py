@@ -13,9 +13,7 @@ import math
 import numpy as np
 
 from rtmesh.core.compiled import row
-from rtmesh.materials.lobes import LUMA_B, LUMA_G, LUMA_R
-
-_LUMA = np.array([LUMA_R, LUMA_G, LUMA_B])
+from rtmesh.materials.lobes import LUMA
 
 
 class EnvironmentTables:
@@ -66,7 +64,7 @@ class EnvironmentTables:
         self.cos_rotation, self.sin_rotation = math.cos(angle), math.sin(angle)
         self.marginal, self.conditional = lighting._marginal, lighting._conditional
         self.func, self.mean = lighting._func, lighting._mean
-        self.mean_luminance = float((pixels[:, 1:-1] @ _LUMA).mean())
+        self.mean_luminance = float((pixels[:, 1:-1] @ LUMA).mean())
 
     def power(self, scene_radius):
         """What the environment sends onto the scene's bounding disk (for choosing lights)."""

@@ -42,7 +42,7 @@ from rtmesh.io.texture_atlas import TextureAtlas, texel
 from rtmesh.lights import point_light_rows
 from rtmesh.lights.area_lights import DiskLight, QuadLight
 from rtmesh.lights.projector import ProjectorLight
-from rtmesh.materials.lobes import LUMA_B, LUMA_G, LUMA_R
+from rtmesh.materials.lobes import LUMA as _LUMA
 from rtmesh.sampling.alias import alias_table
 from rtmesh.sampling.warps import (concentric_disk_row, spherical_triangle_area_row, spherical_triangle_row,
                                    uniform_triangle_weights)
@@ -62,7 +62,6 @@ WIDTH = 24
 RADIANCE = 7
 AREA, TWO_SIDED, VISIBLE, FACE = 16, 17, 18, 19
 IMAGE, HALF_WIDTH, HALF_HEIGHT = 20, 21, 22
-_LUMA = np.array([LUMA_R, LUMA_G, LUMA_B])
 
 
 def _luminance(colour):

@@ -38,6 +38,7 @@ PARAMETER_WIDTH = 32
 
 # Luminance of linear sRGB (Rec. 709, D65): one number for an RGB weight, to choose lobes
 LUMA_R, LUMA_G, LUMA_B = 0.2126, 0.7152, 0.0722
+LUMA = np.array([LUMA_R, LUMA_G, LUMA_B])  # the same weights as a vector, for NumPy
 
 
 @functools.lru_cache(maxsize=None)
