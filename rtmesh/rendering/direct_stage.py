@@ -112,7 +112,7 @@ class DirectStage:
         forward, right, up = it.camera_frame
         position = np.ascontiguousarray(camera.position, dtype=np.float64)
         self._camera = (s.width, camera.image_plane(s.width, s.height), position, forward, right, up)
-        self._eye = (float(position[0]), float(position[1]), float(position[2]), float(camera.focus))
+        self._focus = float(camera.focus)
         st = it.plan
         self._surfaces = (it.tables.faces, it.tables.vertex_normals, it.tables.smooth, it.tables.material_id,
                           st.smooth_normals and not st.normal_maps)
@@ -208,7 +208,7 @@ class DirectStage:
         n = m * int(counts[0]) if len(counts) == 1 else int(counts.sum())
         sums = (_NO_SUMS, _NO_SUMS, _NO_COUNT, _NO_IMAGE) if film is None else film.kernel_arrays()
         args = (*self._queries, *self._sampler_arrays, pixel_list, first_pixel, first, counts, n, *sums,
-                *self._camera, _NO_LENS if lens is None else kernel_input(lens, np.float64), self._eye,
+                *self._camera, _NO_LENS if lens is None else kernel_input(lens, np.float64), self._focus,
                 *self._surfaces, self._base, self._background, self._lights, *self._materials,
                 self._offset_scale, SHADOW_SHORTEN, self._highlights)
         if (film is None) not in self._compiled:
@@ -225,7 +225,7 @@ class DirectStage:
 @kernel
 def direct_samples(intersect, occluded, scene, flags, sampler, keys, corners, size, spp,
                    pixel_list, first_pixel, first, counts, n, total, total_sq, film_count, image,
-                   width, image_plane, position, forward, right, up, lens, eye, faces, vertex_normals, smooth,
+                   width, image_plane, position, forward, right, up, lens, focus, faces, vertex_normals, smooth,
                    material_id, fix_terminator, base, background, lights, shaded, diffuse, specular, exponent,
                    visible_from, scale, shorten, highlights):
     """Radiance of the camera samples of a chunk of pixels with direct light, in blocks of
@@ -264,8 +264,8 @@ def direct_samples(intersect, occluded, scene, flags, sampler, keys, corners, si
     lens : (n, 2) float64 or (0, 2)
         A thin lens's point on the aperture for each of the ``n`` samples, in their order
         (:meth:`rtmesh.scene.camera.Camera.lens_disk`); empty for a pinhole.
-    eye : tuple of 4 float
-        The camera's position and focus distance (the thin lens's rays, :func:`camera_block`).
+    focus : float
+        The focus distance (a thin lens's rays, :func:`rtmesh.rendering.direct_blocks.lens_camera_block`).
     faces, vertex_normals, smooth, material_id, fix_terminator
         As for :func:`rtmesh.shading.surfaces.surface_records`.
     base : (M, 3) float64
@@ -330,6 +330,7 @@ def direct_samples(intersect, occluded, scene, flags, sampler, keys, corners, si
     shadow_rays = 0
     camera = camera_numbers(image_plane, forward, right, up)
     origins = np.empty((3, BLOCK))  # a thin lens's, per block
+    eye = (position[0], position[1], position[2], focus)
     for start in range(0, n, BLOCK):
         count = min(BLOCK, n - start)
         # the block's samples, pixel by pixel in sample order
