@@ -197,9 +197,10 @@ class BuiltScene:
         if self.textures.emission_textured:
             material_id = scene.material_id
 
-            def tint(prim, u, v):
+            def emission_tint(prim, u, v):
                 return self.textures.emission_tints(prim, u, v, material_id[prim])
 
+            tint = emission_tint
             mean_tint = self.textures.mean_emission_tints()[material_id]
         emission = m.emission[scene.material_id]
         if self.instances is not None:
