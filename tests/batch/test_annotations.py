@@ -4,14 +4,14 @@ test extra), visible fractions of an analytic occlusion, amodal boxes, keypoints
 import json
 
 import numpy as np
+import pycocotools.coco as coco_api
+import pycocotools.mask as mask_api
 import pytest
 
 from rtmesh.cli import main
 from rtmesh.io.images import read_image
 from rtmesh.io.rle import encode, mask_box
 
-mask_api = pytest.importorskip("pycocotools.mask")
-coco_api = pytest.importorskip("pycocotools.coco")
 # pycocotools' decode passes copy=False to an __array__ without it (NumPy 2), not our concern
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
 

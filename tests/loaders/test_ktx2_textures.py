@@ -54,4 +54,6 @@ def test_a_ktx2_texture_with_a_fallback_image_uses_the_fallback_without_a_word(t
     with caplog.at_level(logging.WARNING):
         _, materials = parts_from_trimesh(load_trimesh(path), str(path))
     assert not caplog.records
-    assert materials[0].diffuse_texture is not None
+    # the fallback PNG's texels: 4 x 4, black
+    texture = materials[0].diffuse_texture
+    assert texture.bytes.shape[:2] == (4, 4) and not texture.bytes[..., :3].any()

@@ -14,15 +14,13 @@ import numpy as np
 import pytest
 import trimesh
 from PIL import Image
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade
 
-pxr = pytest.importorskip("pxr", reason="usd-core (rtmesh[usd]) is not installed")
-from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade  # noqa: E402
-
-from rtmesh.api import load_scene  # noqa: E402
-from rtmesh.batch.books import REPORT_NAME  # noqa: E402
-from rtmesh.cli import main  # noqa: E402
-from rtmesh.core.errors import MeshError, MissingExtraError, ResourceError  # noqa: E402
-from rtmesh.loaders.usd_files import read_usd  # noqa: E402
+from rtmesh.api import load_scene
+from rtmesh.batch.books import REPORT_NAME
+from rtmesh.cli import main
+from rtmesh.core.errors import MeshError, MissingExtraError, ResourceError
+from rtmesh.loaders.usd_files import read_usd
 from rtmesh.rendering import memory  # noqa: E402
 from rtmesh.rendering.integrator import Integrator  # noqa: E402
 from rtmesh.scene import instances  # noqa: E402
@@ -224,7 +222,7 @@ def test_usd_content_is_mapped_in_rtmesh_units(usd_file):
     quad = content.parts[1]
     assert quad.uv is not None and len(quad.vertices) == 4
     materials = {m.name: m for m in content.materials}
-    assert materials["Checker"].diffuse_texture is not None
+    np.testing.assert_array_equal(materials["Checker"].diffuse_texture.bytes[..., :3], np.asarray(_checker()))
     assert materials["Red"].model == "metallic_roughness" and np.allclose(materials["Red"].base_color, [0.8, 0.1, 0.1])
     camera = content.camera
     assert np.allclose(camera.position, CAMERA_AT)
@@ -454,7 +452,8 @@ def test_a_usdz_package_reads_its_textures_from_the_package(usd_file, tmp_path):
     package = tmp_path / "scene.usdz"
     assert UsdUtils.CreateNewUsdzPackage(Sdf.AssetPath(str(usd_file)), str(package))
     content = read_usd(package)
-    assert {m.name: m for m in content.materials}["Checker"].diffuse_texture is not None
+    texture = {m.name: m for m in content.materials}["Checker"].diffuse_texture
+    np.testing.assert_array_equal(texture.bytes[..., :3], np.asarray(_checker()))
     assert len(content.parts) + len(content.placements) == 3
 
 

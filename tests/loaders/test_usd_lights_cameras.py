@@ -3,14 +3,11 @@
 import logging
 
 import numpy as np
-import pytest
 from PIL import Image
+from pxr import Usd, UsdGeom, UsdLux
 
-pytest.importorskip("pxr", reason="usd-core (rtmesh[usd]) is not installed")
-from pxr import Usd, UsdGeom, UsdLux  # noqa: E402
-
-from rtmesh.loaders.usd_files import read_usd  # noqa: E402
-from rtmesh.scene.background import EnvironmentBackground, SolidBackground  # noqa: E402
+from rtmesh.loaders.usd_files import read_usd
+from rtmesh.scene.background import EnvironmentBackground, SolidBackground
 
 
 def _dome_stage(path, texture=None):
