@@ -3,6 +3,7 @@
 chi-square, as pbrt's bsdfs_test and Mitsuba's chi2 tests), weights equal to f cos / pdf,
 and white-furnace energy bounds."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -22,9 +23,14 @@ CASES = {
     "conductor": [Material(model="conductor", mirror=(0.95, 0.64, 0.54), roughness=r) for r in (0.2, 0.6, 1.0)],
     "dielectric": [Material(model="dielectric", ior=1.5, roughness=r) for r in (0.3, 0.7)],
     "metallic_roughness": [Material(model="metallic_roughness", base_color=(0.7, 0.4, 0.2), metallic=m,
-                                    perceptual_roughness=r) for m, r in ((0.0, 0.5), (1.0, 0.4), (0.5, 0.8))],
+                                    perceptual_roughness=r) for m, r in ((0.0, 0.5), (1.0, 0.4), (0.5, 0.8))]
+    # KHR_materials_transmission (rtmesh.materials.gltf_pbr)
+    + [Material(model="metallic_roughness", base_color=(0.9, 0.8, 0.6), metallic=0.0, perceptual_roughness=0.5,
+                transmission_factor=0.8, ior=1.5)],
     "blinn_phong": [Material(diffuse=0.5, specular=0.3, shininess=20.0),
-                    Material(diffuse=0.2, mirror=0.5, roughness=0.2)],
+                    Material(diffuse=0.2, mirror=0.5, roughness=0.2),
+                    # the kt lobe (rtmesh.materials.phong): a rough interface
+                    Material(diffuse=0.2, transmission=0.6, ior=1.5, roughness=0.3)],
 }
 
 
@@ -46,11 +52,27 @@ CASES["gltf_layered"] = [
              anisotropy=0.5, anisotropy_rotation=0.7, iridescence=0.5, clearcoat=0.5, clearcoat_roughness=0.2),
     _layered(roughness=0.5, transmission=0.8, sheen_colour=np.array([0.3, 0.3, 0.3]), specular=0.9),
 ]
+PARAMS = [(name, i) for name, cases in CASES.items() for i in range(len(cases))]
 # KHR_materials_clearcoat weighs its layers by Fresnel at n_c.wo (the specification's
 # fresnel_coat uses the normal, not the half vector): materials with a clear coat are not
-# reciprocal, by their specification; every other layer is
-NOT_RECIPROCAL = {("gltf_layered", 1), ("gltf_layered", 5)}
-PARAMS = [(name, i) for name, cases in CASES.items() for i in range(len(cases))]
+# reciprocal, by their specification (test_clear_coat_breaks_reciprocity_by_its_fresnel_weight_at_wo);
+# every other layer is
+COATED = [("gltf_layered", 1), ("gltf_layered", 5)]
+# gltf_layered with KHR_materials_transmission sees the interface alone from inside, not
+# weighed by the layers and the transmission factor over it as seen from outside
+# (gltf_layered._interface_weight): not reciprocal, by design
+# (test_layered_transmission_is_reciprocal_but_for_the_weight_of_the_outside)
+LAYERED_TRANSMISSION = [("gltf_layered", 6)]
+RECIPROCAL = [case for case in PARAMS if case not in COATED + LAYERED_TRANSMISSION]
+
+# The energy compensation of the rough dielectric interface divides its f by the interface's
+# albedo E at wo (rtmesh.materials.dielectric_albedo): not reciprocal, by design
+# (test_compensated_interface_is_the_interface_over_its_albedo,
+# test_compensation_divides_the_interface_by_its_albedo_at_wo).  dielectric turns it off in
+# its row (COMPENSATE); metallic_roughness, blinn_phong and gltf_layered call the interface
+# with it on, so the reciprocity tests pass an albedo table of ones instead: E = 1 for every
+# model (the other two tables unchanged).
+UNCOMPENSATED = (TABLE[0], np.ones_like(TABLE[1]), TABLE[2])
 
 
 def test_every_registered_model_has_cases():
@@ -71,26 +93,122 @@ def _directions(n, rng, hemisphere):
     return v
 
 
-@pytest.mark.parametrize("name,i", PARAMS)
-def test_reflection_is_reciprocal(name, i):
+def _both_ways(name, i, n=2000, seed=3, table=UNCOMPENSATED):
+    """``f(wo, wi)`` and ``f(wi, wo)`` (evaluate's ``f |cos wi|`` over the cosine) of pairs of
+    directions on the upper hemisphere (reflection-only models) or on the whole sphere
+    (transmissive ones), and the pairs."""
     tag, params, transmissive = _rows(CASES[name][i])
-    if (name, i) in NOT_RECIPROCAL:
-        pytest.skip("the specification's layering is not reciprocal (see NOT_RECIPROCAL)")
-    if transmissive and name == "gltf_layered":
-        pytest.skip("the compensated transmission interface is not reciprocal (as dielectric's)")
-    if name == "dielectric":
-        # the energy compensation divides by the albedo at wo (not reciprocal, by design:
-        # test_compensated_interface_is_the_interface_over_its_albedo); the interface itself is
-        params[0, dielectric.COMPENSATE] = 0.0
-    rng = np.random.default_rng(3)
-    wo, wi = _directions(2000, rng, True), _directions(2000, rng, True)
-    f_oi, _ = models.evaluate_many(tag, params, 0, TABLE, wo, wi)
-    f_io, _ = models.evaluate_many(tag, params, 0, TABLE, wi, wo)
-    # evaluate returns f |cos wi|
-    a = f_oi / wi[:, 2:3]
-    b = f_io / wo[:, 2:3]
+    rng = np.random.default_rng(seed)
+    wo, wi = _directions(n, rng, not transmissive), _directions(n, rng, not transmissive)
+    f_oi, _ = models.evaluate_many(tag, params, 0, table, wo, wi)
+    f_io, _ = models.evaluate_many(tag, params, 0, table, wi, wo)
+    return f_oi / np.abs(wi[:, 2:3]), f_io / np.abs(wo[:, 2:3]), wo, wi
+
+
+def _index(material, w):
+    """The index of refraction on the side of each direction (1 outside, z > 0; the
+    material's ``ior`` inside)."""
+    return np.where(w[:, 2] > 0.0, 1.0, material.ior)[:, None]
+
+
+# Generalized reciprocity (Veach 1997, section 5.2).  evaluate() returns f(wo, wi) |wi.z| with
+# f the BSDF of radiance (rtmesh.materials.lobes: transport from the camera, pbrt-v4's
+# TransportMode::Radiance): dielectric.rough_interface divides Walter's transmission term
+#     f0 = (1 - F) D G2 |wi.h wo.h| / (|wo.z wi.z| (wi.h + wo.h / eta')^2)
+# by eta'^2, eta' = n_i / n_o (the index on wi's side over that on wo's).  Writing
+# (wi.h + wo.h / eta')^2 = (n_i wi.h + n_o wo.h)^2 / n_i^2 gives f0 = n_i^2 S with
+#     S = (1 - F) D G2 |wi.h wo.h| / (|wo.z wi.z| (n_i wi.h + n_o wo.h)^2),
+# symmetric under wo <-> wi (the same h; Fresnel is the same at both ends of a refracted
+# pair; D and the height-correlated G2 are symmetric), so f = f0 / eta'^2 = n_o^2 S and
+#     f(wo, wi) / n_o^2 = f(wi, wo) / n_i^2
+# (Veach's eq. 5.14, f(wi -> wo) / eta_o^2 = f(wo -> wi) / eta_i^2).  The unscaled f0 (the BSDF
+# of importance) satisfies the other form, f0(wo, wi) / n_i^2 = f0(wi, wo) / n_o^2.  Where
+# both directions are on one side, n_o = n_i: plain reciprocity.
+@pytest.mark.parametrize("name,i", RECIPROCAL)
+def test_bsdf_is_reciprocal(name, i):
+    material = CASES[name][i]
+    a, b, wo, wi = _both_ways(name, i)
+    lhs, rhs = a / _index(material, wo) ** 2, b / _index(material, wi) ** 2
     assert np.abs(a).max() > 0
-    np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12)
+    # (rtol 1e-8: where the transmitted value is tiny, its denominator cancels to ~1e-10)
+    np.testing.assert_allclose(lhs, rhs, rtol=1e-8, atol=1e-12 * np.abs(lhs).max())
+    if _rows(material)[2]:
+        # light through the interface, in both directions, was checked
+        through = (wo[:, 2] * wi[:, 2] < 0.0) & (a[:, 0] > 0.0)
+        assert through.sum() > 100
+
+
+@pytest.mark.parametrize("name,i", COATED)
+def test_clear_coat_breaks_reciprocity_by_its_fresnel_weight_at_wo(name, i):
+    """f(wo, wi) = (1 - k(wo)) B(wo, wi) + k(wo) C(wo, wi), with B the coat-less material's
+    BRDF and C the coat's (both reciprocal) and k(w) = clearcoat F_c(n_c.w) the coat's Fresnel
+    weight (Schlick, F0 = 0.04; n_c the shading normal here).  Eliminating C:
+        k(wi) f(wo, wi) - k(wo) f(wi, wo) = (k(wi) - k(wo)) B(wo, wi),
+    so the asymmetry is exactly that of the coat's weight at wo."""
+    material = CASES[name][i]
+    a, b, wo, wi = _both_ways(name, i)
+    bare = dataclasses.replace(material, layers=dataclasses.replace(material.layers, clearcoat=0.0))
+    tag, params, _ = _rows(bare)
+    f_bare, _ = models.evaluate_many(tag, params, 0, UNCOMPENSATED, wo, wi)
+    base = f_bare / wi[:, 2:3]
+
+    def k(w):
+        return material.layers.clearcoat * (0.04 + 0.96 * (1.0 - w[:, 2:3]) ** 5)
+
+    lhs, rhs = k(wi) * a - k(wo) * b, (k(wi) - k(wo)) * base
+    assert (np.abs(lhs - rhs) <= 1e-12 * (k(wi) * a + k(wo) * b)).all()
+    # and it is not reciprocal
+    assert np.max(np.abs(a - b) / a) > 0.1
+
+
+@pytest.mark.parametrize("name,i", LAYERED_TRANSMISSION)
+def test_layered_transmission_is_reciprocal_but_for_the_weight_of_the_outside(name, i):
+    """Seen from outside, gltf_layered's interface is weighed by t = transmission (1 - metallic)
+    and the sheen's albedo scaling s = min(1 - c E(|wo.z|), 1 - c E(|wi.z|)) (c the sheen
+    colour's largest channel, E its albedo clamped to 1); from inside by nothing.  With w = t s
+    on the outside and 1 inside:  f(wo, wi) / (w(wo) n_o^2) = f(wi, wo) / (w(wi) n_i^2)."""
+    material = CASES[name][i]
+    a, b, wo, wi = _both_ways(name, i)
+    layers = material.layers
+    t = material.transmission_factor * (1.0 - material.metallic)
+    c = max(layers.sheen_colour)
+    scale = np.array([min(1.0 - c * min(_sheen_albedo(abs(o), layers.sheen_roughness), 1.0),
+                          1.0 - c * min(_sheen_albedo(abs(w), layers.sheen_roughness), 1.0))
+                      for o, w in zip(wo[:, 2], wi[:, 2])])[:, None]
+
+    def weight(w):
+        return np.where(w[:, 2:3] > 0.0, t * scale, 1.0)
+
+    lhs = a / (weight(wo) * _index(material, wo) ** 2)
+    rhs = b / (weight(wi) * _index(material, wi) ** 2)
+    np.testing.assert_allclose(lhs, rhs, rtol=1e-8, atol=1e-12 * np.abs(lhs).max())
+    through = (wo[:, 2] * wi[:, 2] < 0.0) & (a[:, 0] > 0.0)
+    assert through.sum() > 100
+    # the interface alone would be reciprocal: the weight is what breaks it
+    assert np.max(np.abs(a / _index(material, wo) ** 2 - b / _index(material, wi) ** 2)[through]
+                  / (a / _index(material, wo) ** 2)[through]) > 0.1
+
+
+@pytest.mark.parametrize("name,i", [case for case in PARAMS if _rows(CASES[case[0]][case[1]])[2]
+                                    and case[0] != "dielectric"])
+def test_compensation_divides_the_interface_by_its_albedo_at_wo(name, i):
+    """Where light meets the interface alone (seen from inside, or across it), the model's f
+    with the shipped albedo table is its f with E = 1 (UNCOMPENSATED) over E(|wo.z|) at wo's
+    side, as the dielectric's (test_compensated_interface_is_the_interface_over_its_albedo):
+    the only factor the reciprocity tests leave out."""
+    material = CASES[name][i]
+    tag, params, _ = _rows(material)
+    rng = np.random.default_rng(41)
+    wo, wi = _directions(400, rng, False), _directions(400, rng, False)
+    alone = (wo[:, 2] < 0.0) | (wi[:, 2] < 0.0)
+    wo, wi = wo[alone], wi[alone]
+    f_c, p_c = models.evaluate_many(tag, params, 0, TABLE, wo, wi)
+    f_u, p_u = models.evaluate_many(tag, params, 0, UNCOMPENSATED, wo, wi)
+    np.testing.assert_array_equal(p_c, p_u)
+    roughness = material.roughness ** 0.5 if name == "blinn_phong" else material.perceptual_roughness
+    e = np.array([dielectric_albedo.albedo_of(abs(z), roughness, material.ior, z < 0) for z in wo[:, 2]])
+    assert f_u.max() > 0
+    np.testing.assert_allclose(f_c, f_u / e[:, None], rtol=1e-12)
 
 
 @pytest.mark.parametrize("name,i", PARAMS)
@@ -114,22 +232,24 @@ def test_pdf_integrates_to_at_most_one(name, i):
     tag, params, transmissive = _rows(CASES[name][i])
     rng = np.random.default_rng(7)
     n = 400000
-    for mu in (0.3, 0.9):
+    # transmissive models also seen from inside (wo.z < 0), where only the interface scatters
+    for mu in (0.3, 0.9, -0.3, -0.9) if transmissive else (0.3, 0.9):
         wo = np.tile([math.sqrt(1 - mu * mu), 0.0, mu], (n, 1))
         wi = _directions(n, rng, False)
         _, pdf = models.evaluate_many(tag, params, 0, TABLE, wo, wi)
         integral = 4.0 * math.pi * pdf.mean()
         error = 4.0 * math.pi * pdf.std() / math.sqrt(n)
-        assert integral <= 1.0 + 4 * error + 1e-3
+        assert integral <= 1.0 + 4 * error + 1e-3, f"mu {mu}"
         # and the failed samples account for the rest
         wi_s, _, _, flags = models.sample_many(tag, params, 0, TABLE, wo[:20000], rng.random((20000, 3)))
         drawn = float(np.mean(flags != lobes.FAILED))
-        assert abs(integral - drawn) < 4 * error + 0.01
+        assert abs(integral - drawn) < 4 * error + 0.01, f"mu {mu}: pdf integrates to {integral:.4f}, {drawn:.4f} drawn"
 
 
-def _chi2_pvalue(tag, params, wo, rng, n=200000, theta_bins=10, phi_bins=20):
+def _chi2_pvalue(tag, params, wo, rng, n=200000, theta_bins=10, phi_bins=20, pdf_params=None):
     """pbrt's chi-square test: sampled directions binned over (cos theta, phi) against the
-    pdf integrated over each bin, bins with expected counts below 5 pooled."""
+    pdf integrated over each bin, bins with expected counts below 5 pooled.  ``pdf_params``:
+    the row whose pdf predicts the counts (default ``params``; test_chi_square_rejects_a_wrong_pdf)."""
     wi, _, _, flags = models.sample_many(tag, params, 0, TABLE, np.tile(wo, (n, 1)), rng.random((n, 3)))
     wi = wi[flags != lobes.FAILED]
     cos_edges = np.linspace(-1, 1, theta_bins + 1)
@@ -142,7 +262,8 @@ def _chi2_pvalue(tag, params, wo, rng, n=200000, theta_bins=10, phi_bins=20):
     cc, pp = np.meshgrid(c.ravel(), p.ravel(), indexing="ij")
     s = np.sqrt(np.maximum(1 - cc ** 2, 0))
     dirs = np.stack([s * np.cos(pp), s * np.sin(pp), cc], axis=-1).reshape(-1, 3)
-    _, pdf = models.evaluate_many(tag, params, 0, TABLE, np.tile(wo, (len(dirs), 1)), dirs)
+    _, pdf = models.evaluate_many(tag, params if pdf_params is None else pdf_params, 0, TABLE,
+                                  np.tile(wo, (len(dirs), 1)), dirs)
     cell = (2.0 / theta_bins / k) * (2 * math.pi / phi_bins / k)
     expected = (pdf.reshape(theta_bins, k, phi_bins, k).sum(axis=(1, 3)) * cell) * n
     o, e = observed.ravel(), expected.ravel()
@@ -153,7 +274,8 @@ def _chi2_pvalue(tag, params, wo, rng, n=200000, theta_bins=10, phi_bins=20):
     o, e = o[~small], e[~small]
     if pooled_e > 0:
         o, e = np.append(o, pooled_o), np.append(e, pooled_e)
-    # the failed samples' share makes the totals differ slightly; compare shapes
+    # the failed samples' share makes the totals differ slightly; compare shapes (the totals:
+    # test_pdf_integrates_to_at_most_one)
     e = e * (o.sum() / e.sum())
     chi2 = float(((o - e) ** 2 / e).sum())
     return stats.chi2.sf(chi2, len(o) - 1)
@@ -165,7 +287,20 @@ def test_sampling_passes_chi_square(name, i):
     rng = np.random.default_rng(11)
     for mu in ((0.5, -0.8) if transmissive else (0.5, 0.95)):
         wo = np.array([math.sqrt(1 - mu * mu), 0.0, mu])
-        assert _chi2_pvalue(tag, params, wo, rng) > 1e-3
+        assert _chi2_pvalue(tag, params, wo, rng) > 1e-3, f"mu {mu}"
+
+
+@pytest.mark.parametrize("material,wrong,mu", [
+    # a Blinn-Phong exponent 20 % off
+    (Material(diffuse=0.5, specular=0.3, shininess=20.0), Material(diffuse=0.5, specular=0.3, shininess=24.0), 0.5),
+    # a transmitting interface seen from inside, its roughness 20 % off
+    (Material(model="dielectric", ior=1.5, roughness=0.3), Material(model="dielectric", ior=1.5, roughness=0.36), -0.8),
+], ids=["phong-exponent", "dielectric-inside-roughness"])
+def test_chi_square_rejects_a_wrong_pdf(material, wrong, mu):
+    """The chi-square test has power: the counts sample() draws against a pdf 20 % off."""
+    tag, params, _ = _rows(material)
+    wo = np.array([math.sqrt(1 - mu * mu), 0.0, mu])
+    assert _chi2_pvalue(tag, params, wo, np.random.default_rng(11), pdf_params=_rows(wrong)[1]) < 1e-6
 
 
 @pytest.mark.parametrize("roughness", [0.05, 0.2, 0.5, 0.8, 1.0])
@@ -273,25 +408,31 @@ def _albedos(material, mus=(0.05, 0.2, 0.5, 0.8, 1.0), n=100000, seed=31):
 WHITE = (1.0, 1.0, 1.0)
 
 
-@pytest.mark.parametrize("layers", [
-    dict(clearcoat=1.0, clearcoat_roughness=0.0), dict(clearcoat=1.0, clearcoat_roughness=0.5),
-    dict(sheen_colour=np.ones(3), sheen_roughness=0.1), dict(sheen_colour=np.ones(3), sheen_roughness=0.6),
-    dict(anisotropy=1.0), dict(anisotropy=0.5, anisotropy_rotation=1.0),
-    dict(iridescence=1.0, thickness_max=250.0), dict(iridescence=1.0, iridescence_ior=2.0, thickness_max=600.0),
-    dict(clearcoat=1.0, clearcoat_roughness=0.3, sheen_colour=np.ones(3), sheen_roughness=0.4, anisotropy=0.6,
-         iridescence=0.7)], ids=["coat-smooth", "coat-rough", "sheen-0.1", "sheen-0.6", "aniso", "aniso-rotated",
-                                 "film", "film-dense", "all"])
-@pytest.mark.parametrize("metallic,specular", [(1.0, 1.0), (0.0, 0.0)], ids=["white-metal", "white-lambert"])
+LAYERS = {"coat-smooth": dict(clearcoat=1.0, clearcoat_roughness=0.0),
+          "coat-rough": dict(clearcoat=1.0, clearcoat_roughness=0.5),
+          "sheen-0.1": dict(sheen_colour=np.ones(3), sheen_roughness=0.1),
+          "sheen-0.6": dict(sheen_colour=np.ones(3), sheen_roughness=0.6),
+          "aniso": dict(anisotropy=1.0), "aniso-rotated": dict(anisotropy=0.5, anisotropy_rotation=1.0),
+          "film": dict(iridescence=1.0, thickness_max=250.0),
+          "film-dense": dict(iridescence=1.0, iridescence_ior=2.0, thickness_max=600.0),
+          "all": dict(clearcoat=1.0, clearcoat_roughness=0.3, sheen_colour=np.ones(3), sheen_roughness=0.4,
+                      anisotropy=0.6, iridescence=0.7)}
+BASES = {"white-metal": (1.0, 1.0), "white-lambert": (0.0, 0.0)}  # metallic, specular
+
+
+# Left out: a film over the white Lambertian base (film and film-dense without a coat).  The
+# film gives the dielectric (specular 0: a Lambertian) a Fresnel term again, and with it the
+# metallic-roughness dielectric's per-direction weighting 1 - max3(F(wo.h)) of the diffuse
+# term, which reflects more than 1 at grazing views (1.16 and 1.18 at mu = 0.05; the plain
+# model 1.57 at 85 degrees, rtmesh.materials.metallic_roughness and
+# test_metallic_roughness.test_white_dielectric_albedo_exceeds_one_at_grazing_views): the
+# specification's model, not bounded by 1 by design.
+@pytest.mark.parametrize("layers,metallic,specular", [
+    pytest.param(LAYERS[layer], *BASES[base], id=f"{base}-{layer}") for base in BASES for layer in LAYERS
+    if not (base == "white-lambert" and layer in ("film", "film-dense"))])
 def test_layers_reflect_at_most_everything(layers, metallic, specular):
     """White furnace: over a base that loses nothing the specification's layers do not
     create energy (<= 1 at every angle, within 4 standard errors)."""
-    if specular == 0.0 and "iridescence" in layers and "clearcoat" not in layers:
-        # a film gives the dielectric (specular 0: a Lambertian) a Fresnel term again, and with
-        # it the metallic-roughness dielectric's per-direction weighting 1 - max3(F(wo.h)) of
-        # the diffuse term, which reflects more than 1 at grazing views (1.16 at mu = 0.05;
-        # the plain model 1.57 at 85 degrees, rtmesh.materials.metallic_roughness): the
-        # specification's, not the layer's
-        pytest.skip("the specification's dielectric base is not bounded by 1 at grazing views")
     material = _layered(base=WHITE, metallic=metallic, roughness=0.5, specular=specular, **layers)
     for albedo, error in _albedos(material):
         assert albedo <= 1.0 + 4 * error
