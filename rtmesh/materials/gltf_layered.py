@@ -311,8 +311,9 @@ def _probabilities(params, m, table, ox, oy, oz):
 @row
 def _interface_weight(params, m, oz):
     """What the transmission interface's value is weighed by: ``t = transmission (1 - m)``
-    from outside; 1 from inside, where light meets nothing but the interface (as
-    :mod:`~rtmesh.materials.gltf_pbr`, whose inside is the interface alone)."""
+    from outside; 1 from inside, where light meets nothing but the interface (not
+    reciprocal by that factor; :mod:`~rtmesh.materials.gltf_pbr` weighs its inside by ``t``
+    too and absorbs the rest)."""
     t = params[m, TRANSMISSION_AT] * (1.0 - params[m, METALLIC_AT])
     return t if (oz > 0.0) | (t <= 0.0) else 1.0
 

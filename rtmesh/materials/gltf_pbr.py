@@ -10,8 +10,10 @@ specular layer over the diffuse base) already leaves out the transmitted part of
 diffuse term, and KHR_materials_transmission replaces only that base, so of the interface
 only what it lets through is added; its reflection is the specular layer's, counted once
 (with both, a clear ball in a white furnace returned 1.036), but inside (``wo.z < 0``),
-where the one-sided BRDF has nothing, the interface reflects (and totally reflects) itself.  Sampling chooses the interface
-with probability ``t``, the BRDF otherwise; the density is the mixture (a reflection the
+where the one-sided BRDF has nothing, the interface reflects (and totally reflects) itself,
+weighed by ``t`` as from outside (reciprocal: the rest meets the opaque base's back and is
+absorbed).  Sampling chooses the interface with probability ``t`` (inside: absorbs
+otherwise), the BRDF otherwise; the density is the mixture (a reflection the
 interface draws outside is weighed by ``f`` over that density; a smooth interface's delta
 reflection outside, which ``f`` does not have, gives no sample).
 
@@ -73,7 +75,8 @@ def sample(params, m, table, ox, oy, oz, u0, u1, u2):
     """Draw ``wi``: ``(wx, wy, wz, weight r, g, b, pdf, flags)``."""
     t = params[m, 6] * (1.0 - params[m, 3])
     if u0 < t or not oz > 0.0:
-        if t <= 0.0:
+        if not u0 < t:
+            # inside, the rest (1 - t) of the light meets the back of the opaque base: absorbed
             return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, lobes.FAILED
         wx, wy, wz, weight, pdf, flags = dielectric.sample_interface(table, ox, oy, oz, min(u0 / t, 1.0), u1, u2,
                                                                      params[m, 7], params[m, 5], 1.0)

@@ -93,7 +93,8 @@ def evaluate(params, m, table, ox, oy, oz, wx, wy, wz):
         fr += params[m, 10] * value
         fg += params[m, 11] * value
         fb += params[m, 12] * value
-        pdf += pt * p
+        # seen from inside the interface is the one lobe sample() draws
+        pdf += (pt if oz > 0.0 else 1.0) * p
     return fr, fg, fb, pdf
 
 

@@ -147,12 +147,14 @@ class SpecularScattering:
                                                  roughness.take(rough), u)
         return mirror
 
-    def pdf(self, wo, ns, mat, wi):
+    def pdf(self, wo, ns, mat, wi, ng=None):
         """Solid-angle density with which :meth:`sample` draws ``wi`` in the reflection lobe.
 
         Infinite for smooth materials (a delta lobe: only the mirror direction); for rough
-        ones the Phong lobe's density around the mirror direction (before folding
-        directions that fall under the surface back above it).
+        ones the Phong lobe's density around the mirror direction, with the part of the
+        lobe under the surface folded back above it as :meth:`sample` folds its directions
+        (:mod:`rtmesh.materials.glossy`): above the surface the density at ``wi`` plus that
+        at its mirror image below, zero below.
 
         Parameters
         ----------
@@ -160,22 +162,34 @@ class SpecularScattering:
         mat : (k,) intp
         wi : (k, 3) float64
             Unit directions.
+        ng : (k, 3) float64, optional
+            Geometric normals, about whose tangent plane directions are folded (default
+            ``ns``).  (Where the shading normal's mirror direction falls under the surface,
+            :meth:`sample` mirrors about ``ng`` instead; this density does not follow it.)
 
         Returns
         -------
         (k,) float64
         """
+        ng = ns if ng is None else ng
         roughness = self.roughness.take(mat)
         rough = roughness > 0.0
         pdf = np.full(len(mat), np.inf)
         if rough.any():
             mirror = reflect(wo[rough], ns[rough])
             t, b = orthonormal_basis(mirror)
-            local = np.column_stack([dot(wi[rough], t), dot(wi[rough], b), dot(wi[rough], mirror)])
-            pdf[rough] = square_to_phong_lobe_pdf(local, roughness_exponent(roughness[rough]))
+            exponent = roughness_exponent(roughness[rough])
+
+            def lobe(directions):
+                local = np.column_stack([dot(directions, t), dot(directions, b), dot(directions, mirror)])
+                return square_to_phong_lobe_pdf(local, exponent)
+
+            w, g = wi[rough], ng[rough]
+            height = dot(w, g)
+            pdf[rough] = np.where(height >= 0.0, lobe(w) + lobe(w - (2.0 * height)[:, None] * g), 0.0)
         return pdf
 
-    def evaluate(self, wo, ns, mat, wi):
+    def evaluate(self, wo, ns, mat, wi, ng=None):
         """``f(wo, wi) |cos|`` of the reflection lobe of a mirror or rough material.
 
         Zero for smooth materials (a delta lobe reflects toward no other direction); for
@@ -187,11 +201,13 @@ class SpecularScattering:
         wo, ns : (k, 3) float64
         mat : (k,) intp
         wi : (k, 3) float64
+        ng : (k, 3) float64, optional
+            As for :meth:`pdf`.
 
         Returns
         -------
         (k, 3) float64
         """
-        pdf = self.pdf(wo, ns, mat, wi)
+        pdf = self.pdf(wo, ns, mat, wi, ng)
         density = np.where(np.isfinite(pdf), pdf, 0.0)
         return self.mirror[mat] * density[:, None]

@@ -241,3 +241,77 @@ def test_lobe_kernel_equals_the_numpy_formulation():
 
     np.testing.assert_array_equal(sample_glossy_directions(mirror, ng, roughness, u), expected)
     np.testing.assert_array_equal(square_to_phong_lobe(u, roughness_exponent(roughness)), local)
+
+
+# ---------------------------------------------------------------- the lobe as a BSDF
+def _rough_mirror(roughness=0.3):
+    """SpecularScattering of a table whose material 1 is a rough mirror (kr 0.8)."""
+    return SpecularScattering(MaterialTable([Material("default"), Material("rough", mirror=0.8,
+                                                                            roughness=roughness)]))
+
+
+def test_the_glossy_lobe_is_not_reciprocal_by_design():
+    """Not reciprocal, by design (rtmesh.materials.glossy): the lobe is sampled exactly from its
+    density so that every sample weighs kr, hence evaluate = f(wo, wi) |cos wi| = kr pdf(wi),
+    the Phong density about the mirror direction R(wo).  That density is symmetric,
+    wi . R(wo) = 2 (wo.n)(wi.n) - wo.wi = wo . R(wi), so f |cos wi| is, and f itself is not:
+    f(wo, wi) / f(wi, wo) = cos wo / cos wi.  (The Phong lobe is reciprocal where f, not f cos,
+    is the cos^n lobe: Lafortune and Willems 1994.)"""
+    scattering = _rough_mirror()
+    rng = np.random.default_rng(43)
+    k = 5000
+    wo, wi = (v / np.linalg.norm(v, axis=1)[:, None] for v in (rng.normal(size=(k, 3)), rng.normal(size=(k, 3))))
+    wo[:, 2], wi[:, 2] = np.abs(wo[:, 2]), np.abs(wi[:, 2])
+    ns, mat = np.tile([0.0, 0.0, 1.0], (k, 1)), np.full(k, 1, dtype=np.intp)
+    forward, backward = scattering.evaluate(wo, ns, mat, wi), scattering.evaluate(wi, ns, mat, wo)
+    assert np.count_nonzero(forward[:, 0]) > k // 4
+    np.testing.assert_allclose(forward, backward, rtol=1e-9, atol=1e-15)
+    # so f = evaluate / cos wi differs both ways by the ratio of the cosines
+    f_forward, f_backward = forward / wi[:, 2:3], backward / wo[:, 2:3]
+    np.testing.assert_allclose(f_forward * wi[:, 2:3], f_backward * wo[:, 2:3], rtol=1e-9, atol=1e-15)
+    seen = forward[:, 0] > 1e-3
+    assert np.max(np.abs(f_forward[seen, 0] / f_backward[seen, 0] - 1.0)) > 0.5
+
+
+@pytest.mark.parametrize("theta_o", [0.0, 80.0])
+def test_glossy_samples_pass_a_chi_square_test_against_the_pdf(theta_o):
+    """What sample() returns (directions under the surface folded back above it) against
+    pdf(), over the whole sphere, at normal and grazing incidence (roughness 0.3: at 80 degrees
+    over a quarter of the unfolded lobe lies under the surface).  No sample fails, so the
+    expected counts are pdf's integral over each bin, not rescaled to the drawn total: a pdf
+    that put mass where sample() sends nothing fails."""
+    scattering = _rough_mirror(0.3)
+    n = 200_000
+    rng = np.random.default_rng(47)
+    wo = np.array([np.sin(np.radians(theta_o)), 0.0, np.cos(np.radians(theta_o))])
+    ns = np.tile([0.0, 0.0, 1.0], (n, 1))
+    reflection, _ = scattering.sample(np.tile(wo, (n, 1)), ns, ns, np.full(n, 1, dtype=np.intp), None, None,
+                                      lambda rows, weight: np.ones(len(weight), dtype=bool),
+                                      lambda rows: rng.random((len(rows), 2)))
+    wi = reflection.directions
+    assert len(wi) == n
+    theta_bins, phi_bins, k = 10, 20, 24
+    cos_edges, phi_edges = np.linspace(-1.0, 1.0, theta_bins + 1), np.linspace(-np.pi, np.pi, phi_bins + 1)
+    observed, _, _ = np.histogram2d(wi[:, 2], np.arctan2(wi[:, 1], wi[:, 0]), [cos_edges, phi_edges])
+    # pdf over each bin by a k x k midpoint rule, uniform in cos theta and phi (dw = dcos dphi)
+    c = (cos_edges[:-1, None] + (np.arange(k) + 0.5) * (2.0 / theta_bins / k)).ravel()
+    p = (phi_edges[:-1, None] + (np.arange(k) + 0.5) * (2.0 * np.pi / phi_bins / k)).ravel()
+    cc, pp = np.meshgrid(c, p, indexing="ij")
+    s = np.sqrt(1.0 - cc ** 2)
+    directions = np.stack([s * np.cos(pp), s * np.sin(pp), cc], axis=-1).reshape(-1, 3)
+    m = len(directions)
+    density = scattering.pdf(np.tile(wo, (m, 1)), np.tile([0.0, 0.0, 1.0], (m, 1)), np.full(m, 1, dtype=np.intp),
+                             directions)
+    cell = (2.0 / theta_bins / k) * (2.0 * np.pi / phi_bins / k)
+    expected = n * cell * density.reshape(theta_bins, k, phi_bins, k).sum(axis=(1, 3))
+    o, e = observed.ravel(), expected.ravel()
+    # bins expecting fewer than 5 samples pooled into one
+    sparse = e < 5.0
+    o, e = np.append(o[~sparse], o[sparse].sum()), np.append(e[~sparse], e[sparse].sum())
+    if e[-1] < 5.0:
+        o, e = o[:-1], e[:-1]
+    assert len(e) > 20
+    statistic = float(np.sum((o - e) ** 2 / e))
+    assert stats.chi2.sf(statistic, len(e) - 1) > 1e-3, (
+        f"chi2 {statistic:.0f} over {len(e)} bins; pdf's mass under the surface "
+        f"{expected[:theta_bins // 2].sum() / n:.4f}, samples there {observed[:theta_bins // 2].sum() / n:.4f}")
