@@ -3,6 +3,7 @@
 import argparse
 import contextlib
 import logging
+import math
 import os
 import sys
 import time
@@ -196,9 +197,11 @@ def _bytes(text):
         value = float(t[:-1] if unit else t)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a size like 4G or 512M, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"expected a size >= 0, got {text!r}")
-    return int(value * units[unit])
+    size = value * units[unit]
+    # (0 turns the check off; a fraction of a byte would too, by rounding down)
+    if not (math.isfinite(size) and (size == 0 or 1 <= size < 2**63)):
+        raise argparse.ArgumentTypeError(f"expected 0 or a size from 1 byte to 8 EiB, got {text!r}")
+    return int(size)
 
 
 def _add_batch_parser(commands):
@@ -386,14 +389,32 @@ def _pass_png_path(output, name):
     return f"{os.path.splitext(output)[0]}_{name}.png"
 
 
-def cmd_render(args):
+def _check_outputs(args):
+    """Every file ``rtmesh render`` writes can be written, before the render: the image, the
+    camera and annotation files and the pass PNGs, none a folder, none the input or another
+    of them (each would replace the other)."""
     check_output_path(args.output)
+    outputs = [(args.output, "image")]
     for path, what in ((args.camera_json, "camera"), (args.annotations, "annotations")):
-        if path and not os.path.isdir(os.path.dirname(os.path.abspath(path))):
-            raise OutputError(f"{path}: no such folder for the {what} file")
+        if path:
+            if not os.path.isdir(os.path.dirname(os.path.abspath(path))):
+                raise OutputError(f"{path}: no such folder for the {what} file")
+            if os.path.isdir(path):
+                raise OutputError(f"{path}: is a folder, not a name for the {what} file")
+            outputs.append((path, f"{what} file"))
     if args.pass_png:
         for name in args.passes or ():
             check_output_path(_pass_png_path(args.output, name))
+            outputs.append((_pass_png_path(args.output, name), f"{name} pass PNG"))
+    seen = {os.path.realpath(args.input): "input"}
+    for path, what in outputs:
+        other = seen.setdefault(os.path.realpath(path), what)
+        if other != what:
+            raise OutputError(f"{path}: the {what} would replace the {other}")
+
+
+def cmd_render(args):
+    _check_outputs(args)
     overrides = {
         "width": args.width, "height": args.height, "spp": args.spp, "sampler": args.sampler,
         "max_depth": args.max_depth, "seed": args.seed, "threads": args.threads,

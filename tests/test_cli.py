@@ -288,6 +288,39 @@ def test_memory_limit_zero_turns_the_check_off(scene_file, tmp_path):
     assert out.exists()
 
 
+@pytest.mark.parametrize("command", ["render", "batch"])
+@pytest.mark.parametrize("size", ["inf", "1e400", "infK", "nan", "-1", "0.5", "0.9", "1e30G"])
+def test_a_memory_limit_that_is_no_size_is_refused_in_one_line(command, size, scene_file, tmp_path, cli):
+    """Not finite, negative, or below one byte (which would round to 0, no check)."""
+    out = tmp_path / ("x.png" if command == "render" else "out")
+    code, _, err = cli(command, scene_file, "-o", out, "--memory-limit", size, "-q")
+    assert code == 2 and "Traceback" not in err
+    assert err == (f"rtmesh: error: argument --memory-limit: expected 0 or a size from 1 byte to 8 EiB, got "
+                   f"{size!r} (see rtmesh {command} --help)\n")
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--camera-json", "{tmp}"], "{tmp}: is a folder, not a name for the camera file"),
+    (["--annotations", "{tmp}"], "{tmp}: is a folder, not a name for the annotations file"),
+    (["--camera-json", "{scene}"], "{scene}: the camera file would replace the input"),
+    (["--annotations", "{scene}"], "{scene}: the annotations file would replace the input"),
+    (["--camera-json", "{tmp}/x.png"], "{tmp}/x.png: the camera file would replace the image"),
+    (["--camera-json", "{tmp}/a.json", "--annotations", "{tmp}/a.json"],
+     "{tmp}/a.json: the annotations file would replace the camera file"),
+    (["--passes", "depth", "--pass-png", "--camera-json", "{tmp}/x_depth.png"],
+     "{tmp}/x_depth.png: the depth pass PNG would replace the camera file"),
+])
+def test_side_outputs_that_would_replace_a_file_or_are_folders_are_refused_before_rendering(
+        extra, message, scene_file, tmp_path, cli):
+    before = scene_file.read_bytes()
+    fill = {"tmp": tmp_path, "scene": scene_file}
+    code, _, err = cli("render", scene_file, "-o", tmp_path / "x.png", *[a.format(**fill) for a in extra], "-q")
+    assert code == 2 and err == f"rtmesh: error: {message.format(**fill)}\n"
+    assert not (tmp_path / "x.png").exists() and not (tmp_path / "a.json").exists()
+    assert scene_file.read_bytes() == before
+
+
 def test_the_memory_check_comes_before_any_mesh_is_read(tmp_path, monkeypatch, capsys):
     import rtmesh.api
     import rtmesh.loaders.scene_objects

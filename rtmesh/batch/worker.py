@@ -133,6 +133,13 @@ def run_job(job, on_image=None, deadline=None, abandoned=None):
     except (TypeError, ValueError) as exc:
         fail_all(job.images, "settings", str(exc))
         return _job_result(job, results, start)
+    try:
+        # a render beyond the worker's memory fails at once, as rtmesh render refuses it
+        # (without a worker limit, as on a Dask worker: beyond the memory available now)
+        memory.check(settings, view_scenes.LOAD_LIMIT or None)
+    except RtmeshError as exc:
+        fail_all(job.images, "memory", str(exc))
+        return _job_result(job, results, start)
     opened = OpenedFiles()
     try:
         # a file too large for the worker's limit fails here, at the load stage, in one line

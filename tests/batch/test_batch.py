@@ -243,6 +243,17 @@ def test_memory_guard_fails_an_asset_that_needs_too_much(tmp_path):
     assert "memory" in failed["errors"][0]["message"]
 
 
+@pytest.mark.usefixtures("in_process_jobs")
+def test_a_render_beyond_the_memory_fails_at_once_as_rtmesh_render_refuses_it(tmp_path):
+    src = make_mesh(tmp_path / "a.obj")
+    report = rtmesh.batch_convert([src], tmp_path / "out", workers=1, width=32, height=24, spp=10**11,
+                                  quiet=True)
+    (failed,) = report.failed
+    (error,) = failed["errors"]
+    assert error["stage"] == "memory"
+    assert error["message"].startswith("a 32x24 render at 100000000000 spp on ") and "needs about" in error["message"]
+
+
 # ------------------------------------------------------------------------- resume
 
 @pytest.mark.usefixtures("in_process_jobs")
