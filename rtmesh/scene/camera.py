@@ -89,7 +89,9 @@ class Camera:
         """
         forward = self.look_at - self.position
         length = np.linalg.norm(forward)
-        if not length > 0.0:
+        # (apart by less than 1e-12 of their size, the renderer's re-centred frame, which
+        # subtracts the scene's centre, could not tell them apart: coincident too)
+        if not length > 1e-12 * max(np.linalg.norm(self.position), np.linalg.norm(self.look_at)):
             raise CameraError("camera position and look_at coincide")
         forward = forward / length
         right = _cross(forward, self.up)
