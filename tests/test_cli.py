@@ -379,3 +379,23 @@ def test_a_terminal_is_told_once_that_a_first_render_compiles_and_warnings_still
         logger.info("compiling the %s kernels for this machine", "build")
     assert quiet.getvalue() == ""
 
+
+
+def test_compile_prepares_every_kernel_group_the_cache_lacks_and_says_so(monkeypatch, cli):
+    from rtmesh.core import compile_ahead
+
+    prepared = []
+    monkeypatch.setattr(compile_ahead.KernelGroup, "cached", lambda self: self.name == "build")
+    monkeypatch.setattr(compile_ahead.KernelGroup, "compile_ahead", lambda self: None)
+    monkeypatch.setattr(compile_ahead.KernelGroup, "prepare", lambda self: prepared.append(self.name))
+    code, out, err = cli("compile")
+    names = [group.name for group in compile_ahead.groups()]
+    # the package's five groups (and the tests' wavefront's, declared in this process)
+    assert {"build", "fused direct", "path", "photons", "packet queries"} <= set(names)
+    assert code == 0 and err == ""
+    assert prepared == [name for name in names if name != "build"]
+    assert out == f"rtmesh: {len(names) - 1} of {len(names)} kernel groups compiled for this machine in 0 s\n"
+    monkeypatch.setattr(compile_ahead.KernelGroup, "cached", lambda self: True)
+    prepared.clear()
+    assert cli("compile")[1] == f"rtmesh: all {len(names)} kernel groups are compiled for this machine already\n"
+    assert prepared == []

@@ -126,6 +126,11 @@ class KernelGroup:
         return all(_in_disk_cache(dispatcher, signature) for dispatcher, signature in self.kernels)
 
 
+def groups():
+    """Every kernel group declared so far (by the modules imported), in declaration order."""
+    return tuple(_GROUPS.values())
+
+
 def compile_locked(dispatcher, signature):
     """Compile ``dispatcher`` for ``signature``, or load it from the disk cache, holding
     the kernel's lock file: a process that finds the lock held waits, then loads what the
