@@ -74,7 +74,8 @@ class RenderSettings:
     threads : int or None
         Worker threads; None uses every core.
     chunk_samples : int
-        Pixel samples per work chunk; bounds memory, never changes the image.
+        Pixel samples per work chunk; bounds memory, never changes the image (but for which of
+        two coplanar overlapping triangles a ray reports).
     cutoff : float
         Paths whose largest throughput channel falls below this stop.
     fresnel : {"schlick", "exact"}
