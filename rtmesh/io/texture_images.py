@@ -241,8 +241,8 @@ def _decode_8bit(encoded, srgb):
     return values
 
 
-def load_texture(path, srgb=True, wrap="repeat", cache=None):
-    """Read an image file as a :class:`Texture`, once per (path, srgb, wrap) in ``cache``.
+def load_texture(path, srgb=True, wrap="repeat", cache=None, signed=False):
+    """Read an image file as a :class:`Texture`, once per (path, srgb, wrap, signed) in ``cache``.
 
     Parameters
     ----------
@@ -253,14 +253,18 @@ def load_texture(path, srgb=True, wrap="repeat", cache=None):
         PIL, 8 bits per channel.
     wrap : str
     cache : dict, optional
+    signed : bool
+        The map may hold negative values (a normal or height map); colours and weights
+        may not.
 
     Raises
     ------
     MeshError
-        The file exists but cannot be decoded, or is larger than :data:`MAX_TEXTURE_PIXELS`
-        (one line naming it).
+        The file exists but cannot be decoded, is larger than :data:`MAX_TEXTURE_PIXELS`, or
+        (EXR, HDR) holds NaN or infinite texels, or negative ones where not ``signed`` (one
+        line naming it).
     """
-    key = (os.path.abspath(path), srgb, wrap)
+    key = (os.path.abspath(path), srgb, wrap, signed)
     if cache is not None and key in cache:
         return cache[key]
     if os.path.splitext(path)[1].lower() not in _LINEAR_FORMATS:
@@ -283,7 +287,32 @@ def load_texture(path, srgb=True, wrap="repeat", cache=None):
     except RtmeshError as exc:
         detail = str(exc).splitlines()[0].removeprefix(f"{path}: ")
         raise MeshError(f"{path}: corrupt or unreadable texture ({detail})") from None
+    check_texel_values(pixels, path, signed)
     return _cached(cache, key, Texture(pixels, wrap=wrap, name=os.path.basename(path)))
+
+
+def check_texel_values(pixels, source, signed=False):
+    """Raise MeshError for float texels (an EXR or HDR file's) that are NaN or infinite, or
+    negative where the map is not ``signed``: a colour or a weight is finite and >= 0, and one
+    such texel would make pixels NaN or negative wherever it is seen (environment images are
+    refused alike, :class:`rtmesh.scene.background.EnvironmentBackground`); a normal or
+    height map may be negative.
+
+    Parameters
+    ----------
+    pixels : (h, w, c) float
+    source : str
+        For the message: ``n.exr: texture holds NaN or infinite values (16 of its 48 values); ...``.
+    signed : bool
+    """
+    pixels = np.asarray(pixels)
+    bad = ~np.isfinite(pixels)
+    if bad.any():
+        raise MeshError(f"{source}: texture holds NaN or infinite values ({int(bad.sum())} of its "
+                        f"{pixels.size} values); a texture must be finite and >= 0")
+    if not signed and (pixels < 0).any():
+        raise MeshError(f"{source}: texture holds negative values (the least {float(pixels.min()):g}); "
+                        "a texture must be finite and >= 0")
 
 
 def _cached(cache, key, texture):

@@ -13,7 +13,7 @@ import trimesh
 from rtmesh.core.errors import MeshError, RtmeshError
 from rtmesh.io.texture_images import image_size_guard
 from rtmesh.loaders import gltf_compression
-from rtmesh.loaders.gltf_nodes import (GLTF_EXTENSIONS, check_external_files, check_node_graph,
+from rtmesh.loaders.gltf_nodes import (GLTF_EXTENSIONS, check_document, check_external_files, check_node_graph,
                                        file_cameras_and_lights, flattened_size, read_gltf_json)
 from rtmesh.loaders.mesh_files import check_content, check_file, format_name
 from rtmesh.loaders.mesh_processing import drop_bad_index_faces, process
@@ -83,16 +83,28 @@ def load_trimesh(path):
 
 
 def _load(path, ext):
-    """trimesh's scene of a mesh file, processed (see :func:`process`)."""
+    """trimesh's scene of a mesh file, processed (see :func:`process`).
+
+    trimesh's readers cast the file's floats to integers to group them (a PLY file's
+    per-face texture coordinates, ``grouping.unique_rows``), which NumPy warns about for NaN
+    and infinite values; such values are dropped or replaced later with rtmesh's own
+    warning (faces with non-finite vertices here, texture coordinates and colours by
+    :meth:`Scene.from_parts`), so within trimesh's reading NumPy's invalid-value warnings
+    are off (``np.errstate``: this thread only, restored after).
+    """
     if ext in GLTF_EXTENSIONS:
         # trimesh leaves glTF meshes unprocessed
-        scene = trimesh.load(**_gltf_source(path, ext), force="scene")
+        source = _gltf_source(path, ext)
+        with np.errstate(invalid="ignore"):
+            scene = trimesh.load(**source, force="scene")
         for key, geometry in scene.geometry.items():
             if isinstance(geometry, trimesh.Trimesh) and geometry.faces.ndim == 2 and len(geometry.faces):
                 drop_bad_index_faces(geometry, _geometry_source(path, scene, key))
         return scene
     # trimesh's processing, done by process() where it changes something
-    scene = trimesh.load(**_obj_source(path, ext), force="scene", process=False)
+    source = _obj_source(path, ext)
+    with np.errstate(invalid="ignore"):
+        scene = trimesh.load(**source, force="scene", process=False)
     for key, geometry in scene.geometry.items():
         if isinstance(geometry, trimesh.Trimesh) and not geometry.metadata.get("processed"):
             _warn_if_short(geometry, _geometry_source(path, scene, key))
@@ -106,10 +118,14 @@ def _gltf_source(path, ext):
     images resolved as beside the file."""
     doc = read_gltf_json(path)
     check_node_graph(path, doc)
+    # bad indices and accessors in one line, not trimesh's bare exceptions (the data of a file
+    # gltf_compression rewrites: checked as it reads it)
+    decoded = gltf_compression.uses_decoded_extensions(doc)
+    check_document(path, doc, extents=not decoded)
     copies, vertices, triangles = flattened_size(doc)
     memory.check_load(path, f"{copies} mesh nodes of {triangles} triangles in all, copied where not instanced",
                       memory.load_estimate(vertices, triangles, copies))
-    if not gltf_compression.uses_decoded_extensions(doc):
+    if not decoded:
         return dict(file_obj=path)
     return dict(file_obj=io.BytesIO(gltf_compression.plain_glb(path, doc)), file_type="glb",
                 resolver=trimesh.resolvers.FilePathResolver(path))
@@ -136,15 +152,23 @@ def _warn_if_short(mesh, source):
 
 def _obj_source(path, ext):
     """What trimesh reads: the file, or for an OBJ with polygons of five or more corners its
-    text with them ear-clipped (:mod:`rtmesh.loaders.obj_polygons`), materials resolved as beside
-    the file."""
+    text with them ear-clipped (:mod:`rtmesh.loaders.obj_polygons`), or without the UTF-8
+    byte order mark it starts with (trimesh would read the first line's ``v`` as ``\\ufeffv``
+    and lose that vertex), materials resolved as beside the file."""
     if ext == ".obj":
         with open(path, "rb") as f:
-            text = triangulate_polygons(f.read())
+            data = f.read()
+        bom = data.startswith(_UTF8_BOM)
+        data = data[len(_UTF8_BOM):] if bom else data
+        text = triangulate_polygons(data)
+        text = data if text is None and bom else text
         if text is not None:
             return dict(file_obj=io.BytesIO(text), file_type="obj",
                         resolver=trimesh.resolvers.FilePathResolver(path))
     return dict(file_obj=path)
+
+
+_UTF8_BOM = b"\xef\xbb\xbf"
 
 
 def _geometry_source(path, scene, key):

@@ -52,6 +52,10 @@ def process(mesh, source="mesh"):
         return
     drop_bad_index_faces(mesh, source)
     _drop_non_finite_faces(mesh, source)
+    if not len(mesh.faces):
+        # every face used a non-finite vertex: nothing to merge (parts_from_trimesh skips it)
+        mesh.metadata["processed"] = True
+        return
     digits = merge_digits(mesh.vertices.view(np.ndarray), mesh.faces.view(np.ndarray))
     if not _merge_keeps_everything(mesh, digits):
         # as Trimesh.process: the cache lock keeps the file's normals across the merge
@@ -64,7 +68,7 @@ def process(mesh, source="mesh"):
 def drop_bad_index_faces(mesh, source):
     """Drop the faces that refer to vertices the file does not have, saying how many."""
     faces = mesh.faces.view(np.ndarray)
-    if faces.min() >= 0 and faces.max() < len(mesh.vertices):
+    if not faces.size or (faces.min() >= 0 and faces.max() < len(mesh.vertices)):
         return
     bad = ((faces < 0) | (faces >= len(mesh.vertices))).any(axis=1)
     if bad.any():

@@ -182,8 +182,8 @@ def _map_texture(statements, keys, folder, cache, srgb, source, kind="colour", p
                       LINES: {option: statements.get(LINES, {}).get(key)}}
                 strength = _floats(bm, option, 1, problems)
                 strength = 1.0 if strength is None else strength
-                return load_texture(path, srgb=False, wrap=wrap, cache=cache).height_to_normals(strength)
-            return load_texture(path, srgb=srgb, wrap=wrap, cache=cache)
+                return load_texture(path, srgb=False, wrap=wrap, cache=cache, signed=True).height_to_normals(strength)
+            return load_texture(path, srgb=srgb, wrap=wrap, cache=cache, signed=kind == "normal")
     return None
 
 
@@ -251,7 +251,7 @@ def mtl_material(statements, name, folder, cache=None, source="mtl", problems=No
     texture = lambda keys, srgb=True, kind="colour": _map_texture(  # noqa: E731
         statements, keys, folder, cache, srgb, source, kind, problems)
     opacity_texture = texture(("map_d",), srgb=False)
-    normal_texture = texture(("norm",), srgb=False)
+    normal_texture = texture(("norm",), srgb=False, kind="normal")
     if normal_texture is None:
         normal_texture = texture(("bump", "map_bump"), kind="bump")
     blended = not glass and (opacity < 1.0 or opacity_texture is not None)

@@ -18,9 +18,10 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
-from rtmesh.core.errors import RtmeshError, SceneError
+from rtmesh.core.errors import MeshError, RtmeshError, SceneError
 from rtmesh.loaders.gltf_nodes import file_cameras_and_lights
 from rtmesh.loaders.light_registry import LIGHT_TYPES
+from rtmesh.loaders.mesh_files import check_file
 from rtmesh.loaders.scene_keys import (BACKGROUND_ALLOWED, BACKGROUND_KEYS, BACKGROUND_REQUIRED, CAMERA_KEYS,
                                        ENVIRONMENT_KEYS, MATERIAL_KEYS, OBJECT_KEYS, RENDER_KEYS, TOP_LEVEL,
                                        TableReader, light_keys)
@@ -32,6 +33,11 @@ from rtmesh.scene.camera import Camera
 from rtmesh.scene.model import Scene
 
 log = logging.getLogger(__name__)
+
+# The largest scene file rtmesh reads (docs/LIMITS.md): scene files are small text (meshes,
+# images and instance arrays live in files of their own), and a larger one, or a device
+# such as /dev/zero, would otherwise be read into memory without limit.
+MAX_SCENE_FILE_BYTES = 16 << 20
 
 
 def read_scene_file(path, overrides=None, check_settings=None):
@@ -55,14 +61,24 @@ def read_scene_file(path, overrides=None, check_settings=None):
     Raises
     ------
     SceneError
-        Unreadable file, TOML syntax error, unknown key, wrong type or bad value.
+        Unreadable file, not a regular file, larger than :data:`MAX_SCENE_FILE_BYTES`, TOML
+        syntax error, unknown key, wrong type or bad value.
     MeshError
         A mesh the scene names cannot be read.
     """
     path = os.fspath(path)
     try:
+        check_file(path)  # the mesh loaders' check: missing, a directory, a device, a link loop
+    except MeshError as exc:
+        raise SceneError(str(exc).replace("mesh file", "scene file")) from None
+    try:
         with open(path, "rb") as f:
-            doc = tomllib.load(f)
+            # at most one byte beyond the limit (a file may grow, or report no size: /proc)
+            data = f.read(MAX_SCENE_FILE_BYTES + 1)
+        if len(data) > MAX_SCENE_FILE_BYTES:
+            raise SceneError(f"{path}: scene file larger than rtmesh reads ({MAX_SCENE_FILE_BYTES >> 20} MiB; "
+                             "scene files are small text: keep meshes and instances in files of their own)")
+        doc = tomllib.loads(data.decode("utf-8"))
     except FileNotFoundError:
         raise SceneError(f"{path}: no such scene file") from None
     except OSError as exc:
@@ -228,6 +244,10 @@ def _light(r, values, where, base_dir):
             values = {**values, key: path}
     try:
         return light_type.build(values)
+    except MeshError as exc:
+        # a file the light reads cannot be used (a projector's corrupt image): name its key
+        files = [key for key, key_kind in light_type.keys.items() if key_kind == "path" and key in values]
+        raise r.error(f"{where}.{files[0]}" if len(files) == 1 else where, str(exc)) from None
     except ValueError as exc:
         raise r.error(where, str(exc)) from None
 
