@@ -396,6 +396,45 @@ def _pass_png_path(output, name):
     return f"{os.path.splitext(output)[0]}_{name}.png"
 
 
+class _HeldRecords(logging.Handler):
+    """The records of warnings and worse, kept (:func:`_load_warnings_held`)."""
+
+    def __init__(self):
+        super().__init__(logging.WARNING)
+        self.records = []
+
+    def emit(self, record):
+        self.records.append(record)
+
+
+@contextlib.contextmanager
+def _load_warnings_held(path):
+    """``rtmesh render``'s load and scene build: their warnings are shown once it has
+    succeeded; when it fails a user sees one line, the error with the first warning, which
+    often says why (``m.obj: nothing to render (...); while loading: object 'm.obj': dropped 3
+    zero-area faces``).  The command owns its process: the root logger's handlers (its
+    ``logging.basicConfig``) are set aside meanwhile and put back after."""
+    root = logging.getLogger()
+    handlers, held = root.handlers[:], _HeldRecords()
+    root.handlers = [held]
+    try:
+        yield
+    except RtmeshError as exc:
+        root.handlers = handlers
+        if not held.records:
+            raise
+        first = " ".join(held.records[0].getMessage().split())
+        for prefix in (f"{path}: ", f"{os.path.basename(path)}: "):
+            first = first.removeprefix(prefix)
+        more = len(held.records) - 1
+        raise RtmeshError(f"{_one_line(exc)}; while loading: {first}"
+                          + (f" (and {more} more warning{'s' if more > 1 else ''})" if more else "")) from exc
+    finally:
+        root.handlers = handlers
+    for record in held.records:
+        root.handle(record)
+
+
 def _check_outputs(args):
     """Every file ``rtmesh render`` writes can be written, before the render: the image, the
     camera and annotation files and the pass PNGs, none a folder, none the input or another
@@ -443,7 +482,7 @@ def cmd_render(args):
         # the memory check runs on the settings before any mesh is read, and the loaders
         # check what a file would take before they take it (and the integrator what
         # flattening instances would)
-        with memory.loading_limit(args.memory_limit):
+        with memory.loading_limit(args.memory_limit), _load_warnings_held(args.input):
             scene, settings = load_scene(args.input, lambda s: memory.check(s, args.memory_limit), **overrides)
             if background is not None:
                 scene.background = background

@@ -12,7 +12,9 @@ from rtmesh.batch import coco, jobs, view_scenes, worker
 from rtmesh.batch.bop import BOP_SUFFIXES
 from rtmesh.batch.coco import COCO_SUFFIX
 from rtmesh.io.images import read_image
+from rtmesh.rendering import memory
 from rtmesh.rendering.built_scene import recentred
+from rtmesh.rendering.settings import RenderSettings
 from rtmesh.scene import instances
 
 PLACED = 8
@@ -138,10 +140,12 @@ def test_copies_beyond_a_workers_limit_fail_the_asset_in_one_line(tmp_path, monk
     from rtmesh.scene import instances
 
     mesh = reusing_glb(tmp_path / "reuse.glb", count=PLACED, subdivisions=2)
-    monkeypatch.setattr(view_scenes, "LOAD_LIMIT", 600_000)
+    fields = dict(FIELDS, integrator="path", passes=())
+    # the render's own memory fits (the worker checks it first, as rtmesh render does)
+    render_bytes = memory.estimate(RenderSettings(**fields).validate()).total
+    monkeypatch.setattr(view_scenes, "LOAD_LIMIT", render_bytes + 100_000)  # the copies need 1.55 MB
     monkeypatch.setattr(instances, "unsupported", lambda scene, settings: ["transmissive materials (media)"])
     task = jobs.ImageTask("iso", jobs.fixed_view("iso"), ("iso.png",), "")
-    fields = dict(FIELDS, integrator="path", passes=())
     (image,) = worker.run_job(jobs.AssetJob("reuse.glb", str(mesh), str(tmp_path), fields, (task,)))["images"]
     assert (image["status"], image["stage"]) == ("failed", "render")
     assert "\n" not in image["message"] and f"{PLACED} placements flattened into copies" in image["message"]
