@@ -13,8 +13,9 @@ import trimesh
 from rtmesh.core.errors import MeshError, RtmeshError
 from rtmesh.io.texture_images import image_size_guard
 from rtmesh.loaders import gltf_compression
-from rtmesh.loaders.gltf_nodes import (GLTF_EXTENSIONS, check_document, check_external_files, check_node_graph,
-                                       file_cameras_and_lights, flattened_size, read_gltf_json)
+from rtmesh.loaders.gltf_checks import check_document
+from rtmesh.loaders.gltf_nodes import (GLTF_EXTENSIONS, check_external_files, check_node_graph, file_cameras_and_lights,
+                                       flattened_size, read_gltf_json)
 from rtmesh.loaders.mesh_files import check_content, check_file, format_name
 from rtmesh.loaders.mesh_processing import drop_bad_index_faces, process
 from rtmesh.loaders.obj_polygons import triangulate_polygons

@@ -106,7 +106,7 @@ def parts_from_trimesh(obj, name="mesh", transform=None, material=None, smooth=N
         if len(mesh.faces) == 0:
             continue
         if mesh.vertices.ndim != 2 or mesh.vertices.shape[1] != 3:
-            # (a glTF file's are checked before trimesh reads it: gltf_nodes.check_document)
+            # (a glTF file's are checked before trimesh reads it: gltf_checks.check_document)
             raise MeshError(f"{name}: node '{node_name}': vertices of {mesh.vertices.shape[-1]} coordinates; "
                             "positions must be 3D")
         instanced = placements is not None and worth_instancing(len(mesh.faces), uses[id(mesh)])

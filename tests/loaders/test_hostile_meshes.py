@@ -14,7 +14,7 @@ import pytest
 import trimesh
 
 from rtmesh.core.errors import MeshError
-from rtmesh.loaders.gltf_nodes import check_document
+from rtmesh.loaders.gltf_checks import check_document
 from rtmesh.loaders.importers import load_mesh_scene, load_trimesh
 from rtmesh.loaders.trimesh_parts import parts_from_trimesh
 
