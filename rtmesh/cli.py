@@ -2,6 +2,7 @@
 
 import argparse
 import contextlib
+import importlib
 import logging
 import math
 import os
@@ -549,12 +550,16 @@ def summary_line(output, settings, st):
             f"{st.wall_seconds:.2f} s, {st.threads} threads{error}{adaptive}{path}")
 
 
+# the modules that declare the renderer's kernel groups (importing one registers its group)
+_KERNEL_GROUP_MODULES = ("rtmesh.geometry.build_kernels", "rtmesh.rendering.direct_stage",
+                         "rtmesh.rendering.path_signatures", "rtmesh.rendering.caustics",
+                         "rtmesh.geometry.embree_packets")
+
+
 def cmd_compile(args):
     """Compile every kernel group the cache lacks (the render's helper process beside)."""
-    # the modules that declare the groups (importing one registers its group)
-    from rtmesh.geometry import build_kernels, embree_packets  # noqa: F401
-    from rtmesh.rendering import caustics, direct_stage, path_signatures  # noqa: F401
-
+    for module in _KERNEL_GROUP_MODULES:
+        importlib.import_module(module)
     every = compile_ahead.groups()
     missing = [group for group in every if not group.cached()]
     start = time.perf_counter()
