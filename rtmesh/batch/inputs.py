@@ -17,13 +17,15 @@ Symbolic links to folders are followed (each real folder once).
 
 import csv
 import hashlib
+import io
 import logging
 import os
 import re
 from dataclasses import dataclass, field
 
-from rtmesh.core.errors import RtmeshError
+from rtmesh.core.errors import MeshError, RtmeshError
 from rtmesh.loaders.importers import MESH_EXTENSIONS
+from rtmesh.loaders.mesh_files import check_file
 
 LINE_MANIFEST_EXTENSIONS = (".txt", ".lst", ".list", ".manifest")
 CSV_MANIFEST_EXTENSIONS = (".csv",)
@@ -35,6 +37,9 @@ _LIST_COLUMNS = ("views", "formats", "passes")
 CSV_COLUMNS = ("path",) + _INT_COLUMNS + _LIST_COLUMNS
 # a comment: "#" at the start of a line or after white space ("a#b.obj" is a file name)
 _COMMENT = re.compile(r"(^|\s)#.*$")
+# The largest manifest read: a million paths of a few hundred bytes; a larger file (or a
+# device such as /dev/zero) would otherwise be read into memory without limit.
+MAX_MANIFEST_BYTES = 1 << 30
 
 log = logging.getLogger(__name__)
 
@@ -172,13 +177,35 @@ def read_line_manifest(path):
         Absolute paths (relative ones resolved against the manifest's folder).
     """
     folder = os.path.dirname(path)
+    lines = _manifest_text(path).splitlines()
+    entries = [(n, _COMMENT.sub("", line).strip()) for n, line in enumerate(lines, 1)]
+    return [_entry_path(path, n, folder, e) for n, e in entries if e]
+
+
+def _manifest_text(path):
+    """A manifest's text: a regular file of at most :data:`MAX_MANIFEST_BYTES`, UTF-8."""
     try:
-        with open(path, encoding="utf-8") as f:
-            lines = f.read().splitlines()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: cannot read manifest: {exc}") from None
-    entries = (_COMMENT.sub("", line).strip() for line in lines)
-    return [os.path.abspath(os.path.join(folder, os.path.expanduser(e))) for e in entries if e]
+        check_file(path, "manifest")
+        with open(path, "rb") as f:
+            # at most one byte beyond the limit (a file may grow while it is read)
+            data = f.read(MAX_MANIFEST_BYTES + 1)
+    except MeshError as exc:
+        raise InputError(str(exc)) from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read manifest: {exc.strerror}") from None
+    if len(data) > MAX_MANIFEST_BYTES:
+        raise InputError(f"{path}: manifest larger than rtmesh reads ({MAX_MANIFEST_BYTES >> 20} MiB)")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{path}: cannot read manifest: not UTF-8 text (byte {exc.start})") from None
+
+
+def _entry_path(manifest, line, folder, entry):
+    """The absolute path a manifest's entry names (relative to the manifest's folder)."""
+    if "\0" in entry:
+        raise InputError(f"{manifest}: line {line}: the path holds a NUL character")
+    return os.path.abspath(os.path.join(folder, os.path.expanduser(entry)))
 
 
 def read_csv_manifest(path):
@@ -191,9 +218,8 @@ def read_csv_manifest(path):
     """
     folder = os.path.dirname(path)
     try:
-        with open(path, encoding="utf-8", newline="") as f:
-            rows = list(csv.reader(f))
-    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        rows = list(csv.reader(io.StringIO(_manifest_text(path), newline="")))
+    except csv.Error as exc:
         raise InputError(f"{path}: cannot read manifest: {exc}") from None
     rows = [(n, r) for n, r in enumerate(rows, 1) if any(c.strip() for c in r)]
     if not rows:
@@ -227,8 +253,7 @@ def read_csv_manifest(path):
                 overrides[column] = value
             else:
                 overrides[column] = tuple(split_names(text))
-        entries.append((os.path.abspath(os.path.join(folder, os.path.expanduser(cells["path"]))),
-                        overrides))
+        entries.append((_entry_path(path, line, folder, cells["path"]), overrides))
     return entries
 
 

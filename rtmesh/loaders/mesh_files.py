@@ -13,12 +13,14 @@ import os
 from rtmesh.core.errors import MeshError
 
 
-def check_file(path):
+def check_file(path, what="mesh file"):
     """Raise MeshError unless ``path`` is a readable regular file, saying what it is instead.
 
     Parameters
     ----------
     path : str
+    what : str
+        What the file should be, in messages (``mesh file``, ``scene file``, ``manifest``).
 
     Raises
     ------
@@ -28,20 +30,20 @@ def check_file(path):
     """
     if os.path.isfile(path):
         if not os.access(path, os.R_OK):
-            raise MeshError(f"{path}: cannot read the mesh file (permission denied)")
+            raise MeshError(f"{path}: cannot read the {what} (permission denied)")
         return
     if os.path.isdir(path):
-        raise MeshError(f"{path}: is a directory, not a mesh file")
+        raise MeshError(f"{path}: is a directory, not a {what}")
     if os.path.islink(path):
         try:
             os.stat(path)
         except OSError as exc:
             if exc.errno == errno.ELOOP:
-                raise MeshError(f"{path}: symbolic link loop, not a mesh file") from None
-            raise MeshError(f"{path}: broken symbolic link (to {os.readlink(path)}), no such mesh file") from None
+                raise MeshError(f"{path}: symbolic link loop, not a {what}") from None
+            raise MeshError(f"{path}: broken symbolic link (to {os.readlink(path)}), no such {what}") from None
     if os.path.exists(path):
         raise MeshError(f"{path}: not a regular file")
-    raise MeshError(f"{path}: no such mesh file")
+    raise MeshError(f"{path}: no such {what}")
 
 
 def format_name(ext):

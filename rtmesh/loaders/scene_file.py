@@ -68,9 +68,9 @@ def read_scene_file(path, overrides=None, check_settings=None):
     """
     path = os.fspath(path)
     try:
-        check_file(path)  # the mesh loaders' check: missing, a directory, a device, a link loop
+        check_file(path, "scene file")  # missing, a directory, a device, a link loop
     except MeshError as exc:
-        raise SceneError(str(exc).replace("mesh file", "scene file")) from None
+        raise SceneError(str(exc)) from None
     try:
         with open(path, "rb") as f:
             # at most one byte beyond the limit (a file may grow, or report no size: /proc)

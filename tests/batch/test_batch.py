@@ -167,6 +167,23 @@ def test_manifests_line_and_csv_with_per_asset_overrides(tmp_path):
         rtmesh.batch_convert([tmp_path / "bad.csv"], tmp_path / "out3", **TINY)
 
 
+@pytest.mark.parametrize("name, content, message", [
+    ("nul.txt", b"a\0b.obj\n", "{m}: line 1: the path holds a NUL character"),
+    ("nul.csv", b'path\n"a\0b.obj"\n', "{m}: line 2: the path holds a NUL character"),
+    ("latin.txt", b"caf\xe9.obj\n", "{m}: cannot read manifest: not UTF-8 text (byte 3)"),
+    ("zero.txt", "/dev/zero", "{m}: not a regular file"),
+])
+def test_a_manifest_that_cannot_be_read_is_one_line_before_anything_runs(name, content, message, tmp_path, cli):
+    manifest = tmp_path / name
+    if isinstance(content, str):
+        manifest.symlink_to(content)  # a device: read, it would never end
+    else:
+        manifest.write_bytes(content)
+    code, _, err = cli("batch", manifest, "-o", tmp_path / "out", "-q")
+    assert code == 2 and err == f"rtmesh: error: {message.format(m=manifest)}\n"
+    assert not (tmp_path / "out").exists()
+
+
 # ------------------------------------------------------------------------- bad assets, bad outputs
 
 def test_corrupt_files_in_the_middle_of_a_batch_fail_alone(tmp_path):
