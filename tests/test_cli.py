@@ -399,3 +399,16 @@ def test_compile_prepares_every_kernel_group_the_cache_lacks_and_says_so(monkeyp
     prepared.clear()
     assert cli("compile")[1] == f"rtmesh: all {len(names)} kernel groups are compiled for this machine already\n"
     assert prepared == []
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--time-limit", "inf"], "argument --time-limit: expected a finite number > 0, got inf (see rtmesh batch --help)"),
+    (["--time-limit", "1e300"], "time limit: must be > 0 and at most 1e+07 seconds, got 1e+300"),
+    (["--turntable", "100000000"], "turntable: must be from 0 to 100000 frames, got 100000000"),
+])
+def test_batch_options_without_bounds_are_refused_before_anything_runs(args, message, scene_file, tmp_path, cli):
+    """An infinite time limit overflowed the clocks (an internal error, a temporary image
+    left); a turntable of 1e8 frames ran out of memory building its views."""
+    code, _, err = cli("batch", scene_file, "-o", tmp_path / "out", *args, "-q")
+    assert code == 2 and err == f"rtmesh: error: {message}\n"
+    assert not (tmp_path / "out").exists()

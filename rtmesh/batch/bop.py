@@ -216,3 +216,7 @@ def _copy(source, destination):
     except OSError:
         shutil.copyfile(source, tmp)
     os.replace(tmp, destination)
+    if os.path.lexists(tmp):
+        # rename(2) between two links to one file does nothing (a resume linking an image
+        # already linked): the destination is that file already
+        os.unlink(tmp)

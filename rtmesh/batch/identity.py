@@ -25,6 +25,7 @@ its entries.
 import hashlib
 import json
 import os
+import stat
 import re
 import sys
 import threading
@@ -54,11 +55,14 @@ def checksum(path):
 
 
 def describe(path, name):
-    """The entry ``[name, size, mtime_ns, checksum]`` of a file (size None if missing)."""
+    """The entry ``[name, size, mtime_ns, checksum]`` of a file (size None if missing, or
+    not a regular file: a device or a pipe is never read, it could go on for ever)."""
     try:
         st = os.stat(path)
+        if not stat.S_ISREG(st.st_mode):
+            return [name, None, None, None]
         return [name, st.st_size, st.st_mtime_ns, checksum(path)]
-    except OSError:
+    except (OSError, ValueError):  # (ValueError: a path holding a NUL character)
         return [name, None, None, None]
 
 

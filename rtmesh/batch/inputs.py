@@ -24,6 +24,7 @@ import re
 from dataclasses import dataclass, field
 
 from rtmesh.core.errors import MeshError, RtmeshError
+from rtmesh.batch.view_sets import MAX_VIEWS
 from rtmesh.loaders.importers import MESH_EXTENSIONS
 from rtmesh.loaders.mesh_files import check_file
 
@@ -248,8 +249,10 @@ def read_csv_manifest(path):
                 except ValueError:
                     raise InputError(f"{path}: line {line}: {column}: expected an integer, "
                                      f"got {text!r}") from None
-                if value < (0 if column == "seed" else 1):
-                    raise InputError(f"{path}: line {line}: {column}: must be >= 1, got {value}")
+                least = 0 if column == "seed" else 1
+                if value < least or column == "turntable" and value > MAX_VIEWS:
+                    most = f" and <= {MAX_VIEWS}" if column == "turntable" else ""
+                    raise InputError(f"{path}: line {line}: {column}: must be >= {least}{most}, got {value}")
                 overrides[column] = value
             else:
                 overrides[column] = tuple(split_names(text))

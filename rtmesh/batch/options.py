@@ -11,7 +11,7 @@ from rtmesh.batch.flow import FLOW_FORMATS
 from rtmesh.batch.inputs import InputError
 from rtmesh.batch.movies import MOVIE_FORMATS, require_mp4
 from rtmesh.batch.normalize import NORMALIZE_MODES
-from rtmesh.batch.view_sets import is_view_set, parse_elevation, view_set
+from rtmesh.batch.view_sets import MAX_VIEWS, is_view_set, parse_elevation, view_set
 from rtmesh.batch.jobs import VIEWS
 from rtmesh.rendering.settings import PASSES, RenderSettings
 
@@ -23,6 +23,8 @@ PROGRESS_MODES = ("bar", "jsonl", "none")
 
 # address space a local worker needs to start (imports, thread stacks, the BLAS buffers)
 MIN_MEMORY_LIMIT = 1 << 30
+# the longest time limit of an asset: about 116 days (waits of longer overflow the clocks)
+MAX_TIME_LIMIT = 1e7
 
 
 @dataclass
@@ -204,10 +206,11 @@ class BatchOptions:
             value = getattr(self, name)
             if value is not None and value < 1:
                 raise InputError(f"{name}: must be >= 1, got {value}")
-        if self.turntable < 0:
-            raise InputError(f"turntable: must be >= 0, got {self.turntable}")
-        if self.time_limit is not None and self.time_limit <= 0:
-            raise InputError(f"time limit: must be > 0 seconds, got {self.time_limit}")
+        if not 0 <= self.turntable <= MAX_VIEWS:
+            raise InputError(f"turntable: must be from 0 to {MAX_VIEWS} frames, got {self.turntable}")
+        if self.time_limit is not None and not 0 < self.time_limit <= MAX_TIME_LIMIT:
+            # (NaN fails too; an unbounded wait overflows the clocks it is given to)
+            raise InputError(f"time limit: must be > 0 and at most {MAX_TIME_LIMIT:g} seconds, got {self.time_limit}")
         if self.memory_limit and self.memory_limit < MIN_MEMORY_LIMIT:
             raise InputError(f"memory limit: {self.memory_limit / 2**20:.0f} MiB is below the "
                              f"{MIN_MEMORY_LIMIT / 2**30:.0f} GiB a worker process needs to start")

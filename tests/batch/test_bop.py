@@ -96,3 +96,18 @@ def test_bop_refuses_orthographic_views_and_exr_alone(tmp_path):
         with pytest.raises(rtmesh.RtmeshError, match="bop"):
             rtmesh.batch_convert([tmp_path], tmp_path / "out", dataset="bop", **options)
     assert not (tmp_path / "out").exists()
+
+
+def test_a_resume_leaves_no_temporary_file_in_the_bop_folder(tmp_path):
+    """A resume links the images into the BOP folder again; a rename between two links to one
+    file does nothing, so the temporary link must be removed by hand."""
+    (tmp_path / "src").mkdir()
+    trimesh.creation.box().export(tmp_path / "src" / "box.obj")
+    settings = dict(workers=1, width=16, height=12, spp=1, views=("front",), dataset="bop", progress="none")
+    with jobs_in_this_process():
+        for run in range(2):
+            report = rtmesh.batch_convert([tmp_path / "src"], tmp_path / "out", **settings)
+            assert report.exit_code == 0
+    names = [p.name for p in (tmp_path / "out").rglob("*")]
+    assert any(name.endswith(".png") for name in names)
+    assert not [name for name in names if "rtmesh-tmp" in name]
