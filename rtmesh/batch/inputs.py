@@ -70,7 +70,7 @@ class Asset:
     overrides: dict = field(default_factory=dict, compare=False, hash=False)
 
 
-def discover(inputs):
+def discover(inputs, skip=()):
     """Find every asset named by the inputs.
 
     Parameters
@@ -78,6 +78,9 @@ def discover(inputs):
     inputs : sequence of str or os.PathLike
         Mesh files, folders (searched recursively for ``MESH_EXTENSIONS``, hidden entries
         skipped) and manifests (``.txt``/``.lst``/``.list``/``.manifest`` or ``.csv``).
+    skip : sequence of str, optional
+        Folders a search does not enter (the batch's output folder, when it lies inside an
+        input folder: its BOP models would be found as assets on the next run).
 
     Returns
     -------
@@ -96,7 +99,7 @@ def discover(inputs):
         path = os.path.abspath(os.fspath(item))
         ext = os.path.splitext(path)[1].lower()
         if os.path.isdir(path):
-            found.extend((p, path, name, {}) for p, name in _walk(path))
+            found.extend((p, path, name, {}) for p, name in _walk(path, skip))
         elif not os.path.exists(path):
             raise InputError(f"{item}: no such file or folder")
         elif ext in MESH_EXTENSIONS:
@@ -139,8 +142,9 @@ def _manifest_root(manifest, path):
     return os.path.dirname(path)
 
 
-def _walk(folder):
-    """Mesh files under ``folder``, recursively, in a stable (sorted) order.
+def _walk(folder, skip=()):
+    """Mesh files under ``folder``, recursively, in a stable (sorted) order, the folders
+    ``skip`` names left out.
 
     Returns
     -------
@@ -148,6 +152,7 @@ def _walk(folder):
         Each file's path and its name relative to ``folder`` (``/``-separated).
     """
     paths, visited = [], {os.path.realpath(folder)}
+    skipped = {os.path.realpath(os.fspath(s)) for s in skip}
     for here, dirs, files in os.walk(folder, followlinks=True):
         prefix = os.path.relpath(here, folder).replace(os.sep, "/") + "/" if here != folder else ""
         # hidden folders hold editor and VCS files, and our own temporary files start with ".";
@@ -155,6 +160,8 @@ def _walk(folder):
         kept = []
         for d in sorted(d for d in dirs if not d.startswith(".")):
             real = os.path.realpath(os.path.join(here, d))
+            if real in skipped:
+                continue
             if real in visited:
                 log.warning("%s: links to a folder already searched; skipped", os.path.join(here, d))
                 continue

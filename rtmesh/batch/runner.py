@@ -97,7 +97,8 @@ def batch_convert(inputs, outdir, **options):
     if isinstance(inputs, (str, os.PathLike)):
         inputs = [inputs]
     start = time.perf_counter()
-    assets = discover(inputs)
+    # (an output folder inside an input folder is not searched: its BOP models are meshes)
+    assets = discover(inputs, skip=(outdir,))
     if not assets:
         raise InputError(f"no mesh files ({', '.join(MESH_EXTENSIONS)}) found in "
                          f"{', '.join(map(os.fspath, inputs)) or '(no inputs)'}")

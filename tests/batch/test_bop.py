@@ -111,3 +111,15 @@ def test_a_resume_leaves_no_temporary_file_in_the_bop_folder(tmp_path):
     names = [p.name for p in (tmp_path / "out").rglob("*")]
     assert any(name.endswith(".png") for name in names)
     assert not [name for name in names if "rtmesh-tmp" in name]
+
+
+def test_an_output_folder_inside_the_input_folder_is_not_searched_for_assets(tmp_path):
+    """The BOP folder holds the models as PLY meshes: a second run over the input folder
+    would otherwise render them as new assets."""
+    trimesh.creation.box().export(tmp_path / "box.obj")
+    settings = dict(workers=1, width=16, height=12, spp=1, views=("front",), dataset="bop", progress="none")
+    with jobs_in_this_process():
+        for run in range(2):
+            report = rtmesh.batch_convert([tmp_path], tmp_path / "out", **settings)
+            assert report.exit_code == 0 and report.counts["assets"] == 1, report.counts
+    assert not (tmp_path / "out" / "out").exists()
