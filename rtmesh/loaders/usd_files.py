@@ -52,7 +52,7 @@ from rtmesh.core.errors import MeshError, RtmeshError
 from rtmesh.loaders.usd_lights_cameras import UsdLightCameraReader
 from rtmesh.loaders.usd_materials import UsdMaterialReader
 from rtmesh.loaders.usd_meshes import UsdMeshReader
-from rtmesh.loaders.usd_stage import open_stage, pxr_modules, tf_message
+from rtmesh.loaders.usd_stage import open_stage, pxr_modules, quiet_stderr, tf_message, usd_array, usd_number
 
 log = logging.getLogger(__name__)
 
@@ -132,7 +132,9 @@ class _Reader(UsdMeshReader, UsdMaterialReader, UsdLightCameraReader):
         self.time = stage.GetStartTimeCode() if stage.HasAuthoredTimeCodeRange() else Usd.TimeCode.Default()
         self.cache = UsdGeom.XformCache(self.time)
         # stage frame -> rtmesh frame: metres, Y up
-        scale = float(UsdGeom.GetStageMetersPerUnit(stage))
+        from rtmesh.loaders.scene_keys import _positive
+
+        scale = usd_number(UsdGeom.GetStageMetersPerUnit(stage), f"{path}: metersPerUnit", _positive)
         self.meters = scale
         frame = np.eye(4)
         if UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z:
@@ -145,6 +147,8 @@ class _Reader(UsdMeshReader, UsdMaterialReader, UsdLightCameraReader):
         self.material_ids = {}
         self.skipped = {}
         self.estimated = 0
+        # the point instancers being walked (outermost first): a prototype holding one is a cycle
+        self.instancing = []
 
     # ------------------------------------------------------------ traversal
 
@@ -157,8 +161,27 @@ class _Reader(UsdMeshReader, UsdMaterialReader, UsdLightCameraReader):
         return self.content
 
     def _world(self, prim):
-        """A prim's local-to-world transform, column vectors (USD's matrices are row vectors)."""
+        """A prim's local-to-world transform, column vectors (USD's matrices are row vectors).
+
+        Its own transform must be finite and at most 1e18 (the scene file's limit) in
+        magnitude: else a MeshError naming the prim and the xformOp.  The composed one is
+        computed without NumPy warnings; a non-finite product is left to :meth:`_kept`."""
+        local = np.array(self.cache.GetLocalTransformation(prim)[0], dtype=np.float64)
+        if not (np.isfinite(local).all() and np.abs(local).max() <= 1e18):
+            self._bad_transform(prim)
         return np.array(self.cache.GetLocalToWorldTransform(prim), dtype=np.float64).T
+
+    def _bad_transform(self, prim):
+        name = "xformOpOrder"
+        xformable = self.UsdGeom.Xformable(prim)
+        for op in (xformable.GetOrderedXformOps() if xformable else []):
+            try:
+                usd_array(np.ravel(np.asarray(op.Get(self.time), dtype=np.float64)), "", None)
+            except (MeshError, TypeError, ValueError):
+                name = op.GetOpName()
+                break
+        raise MeshError(f"{self.path}: {prim.GetPath()}.{name}: a transform that is not finite or is "
+                        "more than 1e18 in magnitude")
 
     def _skip(self, kind, prim):
         self.skipped.setdefault(kind, []).append(str(prim.GetPath()))
@@ -170,7 +193,8 @@ class _Reader(UsdMeshReader, UsdMaterialReader, UsdLightCameraReader):
         transform is divided out; None: the world) to rtmesh's frame, once per copy.
         """
         Usd, UsdGeom, UsdLux = self.Usd, self.UsdGeom, self.UsdLux
-        base = None if relative_to is None else np.linalg.inv(self._world(relative_to))
+        with np.errstate(all="ignore"):
+            base = None if relative_to is None else np.linalg.inv(self._world(relative_to))
         prims = iter(Usd.PrimRange(root, Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)))
         for prim in prims:
             if prim.IsA(UsdGeom.Imageable):
@@ -179,7 +203,8 @@ class _Reader(UsdMeshReader, UsdMaterialReader, UsdLightCameraReader):
                         or imageable.ComputePurpose() in (UsdGeom.Tokens.guide, UsdGeom.Tokens.proxy)):
                     prims.PruneChildren()
                     continue
-            local = self._world(prim) if base is None else base @ self._world(prim)
+            with np.errstate(all="ignore"):
+                local = self._world(prim) if base is None else base @ self._world(prim)
             if prim.IsA(UsdGeom.PointInstancer):
                 self._instancer(prim, local, placements)
                 prims.PruneChildren()
@@ -195,30 +220,56 @@ class _Reader(UsdMeshReader, UsdMaterialReader, UsdLightCameraReader):
                 self.content.camera = self._camera(prim, self.frame @ self._world(prim))
 
     def _instancer(self, prim, local, placements):
-        """A point instancer's prototypes, flattened once per instance."""
+        """A point instancer's prototypes, flattened once per instance (its invisible and
+        inactive instances left out).  Its arrays are checked here (lengths, values) and USD's
+        own warnings about them silenced; a prototype that holds the instancer, or one being
+        walked around it, is a cycle and refused."""
         UsdGeom = self.UsdGeom
         instancer = UsdGeom.PointInstancer(prim)
         where = f"{self.path}: {prim.GetPath()}"
-        indices = np.asarray(instancer.GetProtoIndicesAttr().Get(self.time) or [], dtype=np.int64)
+        indices = usd_array(instancer.GetProtoIndicesAttr().Get(self.time), f"{where}.protoIndices", integer=True)
         targets = instancer.GetPrototypesRel().GetTargets()
         if len(indices) and (indices.min() < 0 or indices.max() >= len(targets)):
             raise MeshError(f"{where}: protoIndices name prototypes the instancer does not have "
                             f"({len(targets)} prototypes)")
-        rows = instancer.ComputeInstanceTransformsAtTime(self.time, self.time)
+        for target in targets:
+            for walked in self.instancing + [prim.GetPath()]:
+                if walked.HasPrefix(target):
+                    raise MeshError(f"{where}.prototypes: prototype {target} holds the point instancer {walked} "
+                                    "(a cycle of instancing)")
+        positions = usd_array(instancer.GetPositionsAttr().Get(self.time), f"{where}.positions", 3)
+        if len(positions) != len(indices):
+            raise MeshError(f"{where}.positions: {len(positions)} positions but {len(indices)} protoIndices")
+        for name, attribute, width in (("scales", instancer.GetScalesAttr(), 3),
+                                       ("orientations", instancer.GetOrientationsAttr(), None)):
+            value = attribute.Get(self.time)
+            if value is not None and len(value) and len(value) != len(indices):
+                raise MeshError(f"{where}.{name}: {len(value)} {name} but {len(indices)} protoIndices")
+            if width and value is not None:
+                usd_array(value, f"{where}.{name}", width)
+        with quiet_stderr():
+            mask = instancer.ComputeMaskAtTime(self.time)
+            rows = instancer.ComputeInstanceTransformsAtTime(self.time, self.time)
+        if mask is not None and len(mask):
+            indices = indices[np.asarray(mask, dtype=bool)]
         instances = np.array([np.array(m, dtype=np.float64).T for m in rows]).reshape(-1, 4, 4)
         if len(instances) != len(indices):
             raise MeshError(f"{where}: {len(indices)} protoIndices but {len(instances)} instance transforms")
-        if not np.isfinite(instances).all():
-            raise MeshError(f"{where}: instance transforms that are not finite")
-        for k, target in enumerate(targets):
-            chosen = instances[indices == k]
-            prototype = self.stage.GetPrimAtPath(target)
-            if not len(chosen) or not prototype:
-                continue
-            # prototype space (its root's own transform included) -> instancer -> rtmesh frame
-            copies = (placements[:, None] @ local[None, None] @ chosen[None]).reshape(-1, 4, 4)
-            self._walk(prototype, prototype.GetParent(), copies)
-
+        if not (np.isfinite(instances).all() and (not len(instances) or np.abs(instances).max() <= 1e18)):
+            raise MeshError(f"{where}: instance transforms that are not finite or are more than 1e18 in magnitude")
+        self.instancing.append(prim.GetPath())
+        try:
+            for k, target in enumerate(targets):
+                chosen = instances[indices == k]
+                prototype = self.stage.GetPrimAtPath(target)
+                if not len(chosen) or not prototype:
+                    continue
+                # prototype space (its root's own transform included) -> instancer -> rtmesh frame
+                with np.errstate(all="ignore"):
+                    copies = (placements[:, None] @ local[None, None] @ chosen[None]).reshape(-1, 4, 4)
+                self._walk(prototype, prototype.GetParent(), copies)
+        finally:
+            self.instancing.pop()
 
 def load_usd_scene(path, physical=True, **scene_options):
     """A renderable :class:`Scene` of a USD file: its camera and lights when it has them,

@@ -8,8 +8,10 @@ import math
 
 import numpy as np
 
+from rtmesh.core.errors import MeshError
 from rtmesh.lights.area_lights import DiskLight, QuadLight
 from rtmesh.lights.point_lights import DirectionalLight, PointLight
+from rtmesh.loaders.usd_stage import usd_number
 from rtmesh.scene.background import SolidBackground, read_environment
 from rtmesh.scene.camera import Camera
 
@@ -26,12 +28,41 @@ class UsdLightCameraReader:
         UsdLux = self.UsdLux
         light = UsdLux.LightAPI(prim)
 
+        from rtmesh.loaders.scene_keys import MAX_NUMBER, _colour, _float, _non_negative, _positive
+
         def get(attribute, default):
             value = attribute.Get(self.time) if attribute and attribute.HasValue() else None
             return default if value is None else value
 
-        radiance = (np.asarray(get(light.GetColorAttr(), (1.0, 1.0, 1.0)), dtype=np.float64)
-                    * float(get(light.GetIntensityAttr(), 1.0)) * 2.0 ** float(get(light.GetExposureAttr(), 0.0)))
+        def where(attribute):
+            return f"{self.path}: {prim.GetPath()}.{attribute.GetName()}"
+
+        def number(attribute, default, reader=_non_negative):
+            value = get(attribute, None)
+            return default if value is None else usd_number(value, where(attribute), reader)
+
+        # held to the scene file's limits for its lights, as glTF's are (gltf_nodes._light_at)
+        colour_attr = light.GetColorAttr()
+        colour = get(colour_attr, (1.0, 1.0, 1.0))
+        values = np.asarray(colour) if not isinstance(colour, str) else np.asarray([colour])
+        if values.dtype.kind not in "fiu" or values.size != 3:
+            raise MeshError(f"{where(colour_attr)}: expected 3 numbers (got {colour!r})")
+        try:
+            colour = _colour([float(c) for c in values.ravel()])
+        except TypeError as exc:
+            raise MeshError(f"{where(colour_attr)}: {exc} (got {[float(c) for c in values.ravel()]})") from None
+        intensity = number(light.GetIntensityAttr(), 1.0)
+        exposure = number(light.GetExposureAttr(), 0.0, _float)
+        try:
+            gain = 2.0 ** exposure
+        except OverflowError:
+            gain = math.inf
+        with np.errstate(all="ignore"):
+            radiance = colour * intensity * gain if (colour * intensity > 0).any() else np.zeros(3)
+        if not np.isfinite(radiance).all() or (radiance > MAX_NUMBER).any():
+            raise MeshError(f"{where(light.GetIntensityAttr())}: color x intensity x 2^exposure "
+                            f"{float(np.max(radiance)):g} is more than the largest intensity a scene file "
+                            f"takes ({MAX_NUMBER:g})")
         normalize = bool(get(light.GetNormalizeAttr(), False))
         position = world[:3, 3]
         forward = world[:3, :3] @ np.array([0.0, 0.0, -1.0])
@@ -42,21 +73,22 @@ class UsdLightCameraReader:
         if prim.IsA(UsdLux.DistantLight):
             self.content.lights.append(DirectionalLight(forward, radiance * self.point_units))
         elif prim.IsA(UsdLux.SphereLight):
-            radius = float(get(UsdLux.SphereLight(prim).GetRadiusAttr(), 0.5)) * float(lengths.mean())
+            radius = number(UsdLux.SphereLight(prim).GetRadiusAttr(), 0.5) * float(lengths.mean())
             area = 4.0 * math.pi * radius ** 2
             scale = 1.0 / area if normalize and area > 0 else 1.0
             self.content.lights.append(PointLight(position, radiance * scale * math.pi * radius ** 2
                                                   * self.point_units))
         elif prim.IsA(UsdLux.RectLight):
             rect = UsdLux.RectLight(prim)
-            width, height = float(get(rect.GetWidthAttr(), 1.0)), float(get(rect.GetHeightAttr(), 1.0))
+            width, height = (number(rect.GetWidthAttr(), 1.0, _positive),
+                             number(rect.GetHeightAttr(), 1.0, _positive))
             edge1 = world[:3, :3] @ np.array([0.0, height, 0.0])
             edge2 = world[:3, :3] @ np.array([width, 0.0, 0.0])
             area = float(np.linalg.norm(np.cross(edge1, edge2)))
             self.content.lights.append(QuadLight(position, edge1, edge2,
                                                  radiance / area if normalize and area > 0 else radiance))
         elif prim.IsA(UsdLux.DiskLight):
-            radius = float(get(UsdLux.DiskLight(prim).GetRadiusAttr(), 0.5)) * float(lengths[:2].mean())
+            radius = number(UsdLux.DiskLight(prim).GetRadiusAttr(), 0.5, _positive) * float(lengths[:2].mean())
             area = math.pi * radius ** 2
             self.content.lights.append(DiskLight(position, forward, radius,
                                                  radiance / area if normalize and area > 0 else radiance))
@@ -81,9 +113,13 @@ class UsdLightCameraReader:
         UsdGeom = self.UsdGeom
         camera = UsdGeom.Camera(prim)
 
-        def get(attribute, default):
+        from rtmesh.loaders.scene_keys import _non_negative, _positive
+
+        def get(attribute, default, reader=_positive):
             value = attribute.Get(self.time) if attribute else None
-            return default if value is None else float(value)
+            if value is None:
+                return default
+            return usd_number(value, f"{self.path}: {prim.GetPath()}.{attribute.GetName()}", reader)
 
         position = world[:3, 3]
         forward = world[:3, :3] @ np.array([0.0, 0.0, -1.0])
@@ -100,7 +136,11 @@ class UsdLightCameraReader:
             height = vertical * tenth * float(np.linalg.norm(up))
             return Camera(position, position + forward, up, projection="orthographic", ortho_height=height)
         fov = math.degrees(2.0 * math.atan(0.5 * vertical / focal))
-        f_stop, focus = get(camera.GetFStopAttr(), 0.0), get(camera.GetFocusDistanceAttr(), 0.0)
+        if not 0.0 < fov < 180.0:  # a focal length tiny beside the aperture: rounds to 180
+            raise MeshError(f"{self.path}: {prim.GetPath()}.focalLength: {focal:g} with a vertical aperture of "
+                            f"{vertical:g} is a field of view of {fov:g} degrees (it must be less than 180)")
+        f_stop = get(camera.GetFStopAttr(), 0.0, _non_negative)
+        focus = get(camera.GetFocusDistanceAttr(), 0.0, _non_negative)
         aperture = focal * tenth / f_stop if f_stop > 0 and focus > 0 else 0.0
         return Camera(position, position + forward, up, fov=fov, aperture=aperture,
                       focus_distance=focus * self.meters if aperture > 0 else None)

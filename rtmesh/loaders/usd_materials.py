@@ -6,14 +6,55 @@ USDZ package."""
 
 import io
 import logging
+import os
 
 import numpy as np
 import trimesh
 
 from rtmesh.core.errors import MeshError
+from rtmesh.io.texture_images import (MAX_TEXTURE_PIXELS, Texture, check_texture_size, image_size_guard,
+                                      load_texture)
 from rtmesh.loaders.gltf_materials import OPTIONS_KEY, gltf_material
+from rtmesh.loaders.mesh_files import check_file
+from rtmesh.loaders.usd_stage import usd_array, usd_number
+
+# the largest texture file read (a float RGBA image of MAX_TEXTURE_PIXELS, uncompressed)
+MAX_TEXTURE_BYTES = 16 * MAX_TEXTURE_PIXELS
 
 log = logging.getLogger(__name__)
+
+# texture roles whose EXR or HDR texels are kept as floats (the Material's attribute of each)
+_FLOAT_ROLES = {"baseColorTexture": "diffuse_texture", "emissiveTexture": "emission_texture",
+                "normalTexture": "normal_texture"}
+
+
+class _FloatImage:
+    """An EXR or HDR texture's linear texels (h, w, c) where a PIL image would be: read by
+    :func:`rtmesh.io.texture_images.load_texture` (OpenImageIO; NaN, infinite and negative
+    texels refused), placed in the material after :func:`gltf_material` built it."""
+
+    def __init__(self, pixels):
+        self.pixels = np.asarray(pixels, dtype=np.float64)
+        if self.pixels.ndim == 2:
+            self.pixels = self.pixels[:, :, None]
+
+    def channel(self, index):
+        pixels = self.pixels
+        if index < pixels.shape[2]:
+            return _FloatImage(pixels[:, :, index])
+        return _FloatImage(np.ones(pixels.shape[:2]) if index == 3 else pixels[:, :, :1])
+
+    def rgb(self):
+        """Three or four channels, as Texture.from_pil gives for a PIL image."""
+        pixels = self.pixels
+        return pixels if pixels.shape[2] in (3, 4) else np.repeat(pixels[:, :, :1], 3, axis=2)
+
+    def to_pil(self):
+        """The first channel as an 8-bit PIL image (a weight: roughness, metalness)."""
+        from PIL import Image
+
+        return Image.fromarray((np.clip(self.pixels[:, :, 0], 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8), "L")
+
 
 _WRAP = {"repeat": "repeat", "mirror": "mirror", "clamp": "clamp", "black": "clamp", "useMetadata": "repeat"}
 
@@ -108,15 +149,18 @@ class UsdMaterialReader:
                                                       metallicFactor=0.0, roughnessFactor=0.5)
             return gltf_material(pbr, {"name": name}, name, self.path)
 
-        def number(key, default):
+        from rtmesh.loaders.scene_keys import _float, _non_negative
+
+        def number(key, default, reader=_non_negative):
             value = self._input_value(shader, key)
-            return default if value is None else float(value)
+            return default if value is None else usd_number(value, f"{self.path}: {shader.GetPath()}.inputs:{key}",
+                                                            reader)
 
         def colour(key, default):
             value = self._input_value(shader, key)
-            return list(default) if value is None else [float(c) for c in value]
+            return list(default) if value is None else list(_colour(value, f"{self.path}: {shader.GetPath()}.inputs:{key}"))
 
-        if number("useSpecularWorkflow", 0.0):
+        if number("useSpecularWorkflow", 0.0, _float):
             self._skip("materials in the specular workflow (read as metallic-roughness)", material.GetPrim())
         opacity = number("opacity", 1.0)
         threshold = number("opacityThreshold", 0.0)
@@ -125,17 +169,31 @@ class UsdMaterialReader:
         emissive = colour("emissiveColor", (0.0, 0.0, 0.0))
         metallic, roughness = number("metallic", 0.0), number("roughness", 0.5)
 
+        floats = {}
+
+        def placed(role, found):
+            """A PIL image for trimesh's material: an EXR's texels wait in ``floats``."""
+            image = found[0]
+            if isinstance(image, _FloatImage):
+                from PIL import Image
+
+                floats[role] = (image, found[1])
+                return Image.new("RGB", (1, 1))
+            return image
+
         diffuse = self._texture(shader, "diffuseColor", name)
         if diffuse is not None:
-            images["baseColorTexture"], options["baseColorTexture"], scale = diffuse
+            images["baseColorTexture"], options["baseColorTexture"], scale = placed("baseColorTexture", diffuse), \
+                diffuse[1], diffuse[2]
             base = list(scale[:3])
         emission = self._texture(shader, "emissiveColor", name)
         if emission is not None:
-            images["emissiveTexture"], options["emissiveTexture"], scale = emission
+            images["emissiveTexture"], options["emissiveTexture"], scale = placed("emissiveTexture", emission), \
+                emission[1], emission[2]
             emissive = list(scale[:3])
         normal = self._texture(shader, "normal", name)
         if normal is not None:
-            images["normalTexture"], options["normalTexture"], _ = normal
+            images["normalTexture"], options["normalTexture"] = placed("normalTexture", normal), normal[1]
         rough, metal = self._texture(shader, "roughness", name), self._texture(shader, "metallic", name)
         if rough is not None or metal is not None:
             images["metallicRoughnessTexture"], options["metallicRoughnessTexture"] = _packed(rough, metal)
@@ -157,7 +215,11 @@ class UsdMaterialReader:
                          OPTIONS_KEY: options}
         if threshold > 0.0:
             json_material["alphaCutoff"] = threshold
-        return gltf_material(pbr, json_material, name, self.path)
+        result = gltf_material(pbr, json_material, name, self.path)
+        for role, (image, texture_options) in floats.items():
+            if getattr(result, _FLOAT_ROLES[role], None) is not None:
+                setattr(result, _FLOAT_ROLES[role], Texture(image.rgb(), name=f"{name} {role}", **texture_options))
+        return result
 
     def _texture(self, shader, key, material_name):
         """(PIL image of the channels the input reads, texture options, scale (4,)) of a
@@ -167,21 +229,31 @@ class UsdMaterialReader:
             return None
         texture, output = found
         asset = self._input_value(texture, "file")
-        image = self._image(asset, f"material '{material_name}' {key}")
+        image = self._image(asset, f"material '{material_name}' {key}", f"{texture.GetPath()}.inputs:file",
+                            signed=key == "normal")
         if image is None:
             return None
         wrap = tuple(_WRAP.get(str(self._input_value(texture, axis) or "useMetadata"), "repeat")
                      for axis in ("wrapS", "wrapT"))
         scale = self._input_value(texture, "scale")
-        scale = np.ones(4) if scale is None else np.asarray(scale, dtype=np.float64)
+        where = f"{self.path}: {texture.GetPath()}.inputs:scale"
+        scale = np.ones(4) if scale is None else _numbers(scale, where, 4)
+        if key in ("diffuseColor", "emissiveColor"):
+            _colour(scale[:3], where)  # the colour factor: >= 0
         channels = {"r": "R", "g": "G", "b": "B", "a": "A"}
-        if output in channels:
+        if isinstance(image, _FloatImage):
+            if output in channels:
+                image = image.channel("rgba".index(output))
+        elif output in channels:
             image = image.convert("RGBA").getchannel(channels[output])
         return image, {"wrap": wrap, "transform": None}, scale
 
-    def _image(self, asset, what):
+    def _image(self, asset, what, key=None, signed=False):
         """A texture's PIL image from its asset path (a file, or a file inside a USDZ
-        package); None with a warning when it is missing."""
+        package); None with a warning when it is missing.  A path that is not a regular
+        file (a directory, a device, a FIFO), a file larger than :data:`MAX_TEXTURE_BYTES` or
+        an image of more than MAX_TEXTURE_PIXELS pixels is refused in one line naming the
+        shader's ``key`` (``m.usda: /World/Looks/M/Tex.inputs:file: ...``)."""
         from PIL import Image
 
         if asset is None:
@@ -197,20 +269,66 @@ class UsdMaterialReader:
                     raise OSError("not in the package")
                 data = bytes(data)
             elif resolved:
+                if os.path.lexists(resolved):
+                    try:
+                        check_file(resolved, "texture")
+                    except MeshError as exc:
+                        raise MeshError(f"{self.path}: {key or what}: {authored}: "
+                                        f"{str(exc).removeprefix(resolved + ': ')}") from None
+                    if os.path.getsize(resolved) > MAX_TEXTURE_BYTES:
+                        raise MeshError(f"{self.path}: {key or what}: {authored}: a texture file of "
+                                        f"{os.path.getsize(resolved)} bytes, more than rtmesh reads "
+                                        f"({MAX_TEXTURE_BYTES})")
+                if os.path.splitext(resolved)[1].lower() in (".exr", ".hdr"):
+                    return self._float_image(resolved, authored, key or what, signed)
                 with open(resolved, "rb") as f:
-                    data = f.read()
+                    data = f.read(MAX_TEXTURE_BYTES + 1)
             else:
                 raise OSError("not found")
         except OSError as exc:
             log.warning("%s: %s: texture %s cannot be read (%s); not used", self.path, what, authored, exc)
             return None
         try:
-            image = Image.open(io.BytesIO(data))
-            image.load()
+            with image_size_guard(f"{self.path}: {key or what}: {authored}"):
+                image = Image.open(io.BytesIO(data))
+                check_texture_size(image, f"{self.path}: {key or what}: {authored}")
+                image.load()
+        except MeshError:
+            raise
         except Exception as exc:  # PIL raises many types for corrupt images
             raise MeshError(f"{self.path}: {what}: texture {authored}: corrupt or unreadable "
                             f"({type(exc).__name__})") from None
         return image
+
+    def _float_image(self, resolved, authored, where, signed=False):
+        """An EXR or HDR texture's texels through OpenImageIO (as glTF's and scene files'
+        textures are), its errors one line naming the shader's input."""
+        try:
+            texture = load_texture(resolved, srgb=False, signed=signed)
+        except MeshError as exc:
+            raise MeshError(f"{self.path}: {where}: {authored}: {str(exc).removeprefix(resolved + ': ')}") from None
+        pixels = texture._pixels
+        if pixels.shape[0] * pixels.shape[1] > MAX_TEXTURE_PIXELS:
+            raise MeshError(f"{self.path}: {where}: {authored}: texture of {pixels.shape[1]}x{pixels.shape[0]} pixels "
+                            f"is larger than rtmesh reads ({MAX_TEXTURE_PIXELS} pixels, e.g. 8192x8192): downsample it")
+        return _FloatImage(pixels)
+
+
+def _numbers(value, where, count):
+    """``count`` numbers of a shader input (finite, at most 1e18 in magnitude), else a
+    MeshError naming ``where``."""
+    array = np.asarray(value) if not isinstance(value, str) else np.asarray([value])
+    if array.dtype.kind not in "fiu" or array.size != count:
+        raise MeshError(f"{where}: expected {count} numbers (got {value!r})")
+    return usd_array(array.astype(np.float64).ravel(), where)
+
+
+def _colour(value, where):
+    """A colour input: 3 numbers, finite, >= 0 and at most 1e18 (the scene file's colours)."""
+    colour = _numbers(value, where, 3)
+    if (colour < 0).any():
+        raise MeshError(f"{where}: a negative colour component ({float(colour.min()):g}); colours are >= 0")
+    return colour
 
 
 def _packed(rough, metal):
@@ -218,6 +336,8 @@ def _packed(rough, metal):
     preview surface's separate one-channel roughness and metallic textures."""
     from PIL import Image
 
+    rough, metal = (None if t is None else (t[0].to_pil() if isinstance(t[0], _FloatImage) else t[0], *t[1:])
+                    for t in (rough, metal))
     images = [t[0] for t in (rough, metal) if t is not None]
     size = max((image.size for image in images), key=lambda s: s[0] * s[1])
     zero = Image.new("L", size, 0)

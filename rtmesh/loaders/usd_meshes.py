@@ -10,6 +10,7 @@ import trimesh
 from rtmesh.core.errors import MeshError
 from rtmesh.geometry.smoothing import CREASE_ANGLE, smooth_vertex_normals
 from rtmesh.loaders.placements import copied, held_copies, placed_estimate
+from rtmesh.loaders.usd_stage import quiet_stderr, usd_array, usd_number
 from rtmesh.rendering import memory
 from rtmesh.scene.instances import worth_instancing
 from rtmesh.scene.model import MeshPart, Placement
@@ -37,7 +38,8 @@ class UsdMeshReader:
         geometry = self._prepared(prim, len(placements))
         if geometry is None:
             return
-        matrices = self._kept(prim, placements @ local[None])
+        with np.errstate(all="ignore"):
+            matrices = self._kept(prim, placements @ local[None])
         name = str(prim.GetPath())
         if worth_instancing(len(geometry.faces), len(matrices)):
             names = [f"{name}[{j}]" for j in range(len(matrices))]
@@ -65,7 +67,10 @@ class UsdMeshReader:
     def _kept(self, prim, matrices):
         """The placements (m, 4, 4) that can place a mesh: finite and non-singular (the others
         skipped with a warning), their bottom row ``0 0 0 1`` (copies ignore it)."""
-        keep = np.isfinite(matrices).all(axis=(1, 2)) & (np.linalg.det(matrices[:, :3, :3]) != 0.0)
+        with np.errstate(all="ignore"):
+            keep = np.isfinite(matrices).all(axis=(1, 2)) & (np.abs(matrices) <= 1e18).all(axis=(1, 2))
+            determinant = np.linalg.det(np.where(keep[:, None, None], matrices, 1.0)[:, :3, :3])
+            keep &= np.isfinite(determinant) & (determinant != 0.0)
         if not keep.all():
             self._skip("copies with a zero scale or a non-finite transform (not rendered)", prim)
         matrices = matrices[keep]
@@ -80,7 +85,9 @@ class UsdMeshReader:
         group = self.proxies.get(key)
         if group is None:
             group = self.proxies[key] = dict(geometry=self._geometry(prim), slots=[], prim=prim)
-        group["slots"].append((len(self.content.parts), self._kept(prim, placements @ local[None]), prim))
+        with np.errstate(all="ignore"):
+            matrices = self._kept(prim, placements @ local[None])
+        group["slots"].append((len(self.content.parts), matrices, prim))
         self.content.parts.append(None)
 
     def _place_proxies(self):
@@ -121,24 +128,30 @@ class UsdMeshReader:
         a mesh, cube or sphere prim, in its own space; None for an empty one."""
         UsdGeom = self.UsdGeom
         where = f"{self.path}: {prim.GetPath()}"
+        from rtmesh.loaders.scene_keys import _positive
+
         if prim.IsA(UsdGeom.Cube):
-            size = float(UsdGeom.Cube(prim).GetSizeAttr().Get(self.time))
+            size = usd_number(UsdGeom.Cube(prim).GetSizeAttr().Get(self.time), f"{where}.size", _positive)
             shape = trimesh.creation.box(extents=[size] * 3)
             points, counts, indices = shape.vertices, np.full(len(shape.faces), 3), shape.faces.ravel()
             left_handed, normals_spec = False, None
         elif prim.IsA(UsdGeom.Sphere):
-            radius = float(UsdGeom.Sphere(prim).GetRadiusAttr().Get(self.time))
+            radius = usd_number(UsdGeom.Sphere(prim).GetRadiusAttr().Get(self.time), f"{where}.radius", _positive)
             shape = trimesh.creation.icosphere(subdivisions=3, radius=radius)
             points, counts, indices = shape.vertices, np.full(len(shape.faces), 3), shape.faces.ravel()
-            left_handed, normals_spec = False, ("vertex", shape.vertices / radius if radius else None)
+            left_handed, normals_spec = False, ("vertex", shape.vertices / radius)
         else:
             mesh = UsdGeom.Mesh(prim)
-            points = np.asarray(mesh.GetPointsAttr().Get(self.time) or [], dtype=np.float64).reshape(-1, 3)
-            counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get(self.time) or [], dtype=np.int64)
-            indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(self.time) or [], dtype=np.int64)
+            points = usd_array(mesh.GetPointsAttr().Get(self.time), f"{where}.points", 3, finite=False)
+            counts = usd_array(mesh.GetFaceVertexCountsAttr().Get(self.time), f"{where}.faceVertexCounts",
+                               integer=True)
+            indices = usd_array(mesh.GetFaceVertexIndicesAttr().Get(self.time), f"{where}.faceVertexIndices",
+                                integer=True)
             left_handed = mesh.GetOrientationAttr().Get(self.time) == UsdGeom.Tokens.leftHanded
             normals_spec = None
-            holes = np.asarray(mesh.GetHoleIndicesAttr().Get(self.time) or [], dtype=np.int64)
+            holes = usd_array(mesh.GetHoleIndicesAttr().Get(self.time), f"{where}.holeIndices", integer=True)
+            if (counts < 0).any():
+                raise MeshError(f"{where}.faceVertexCounts: a negative count ({int(counts.min())})")
         if not len(counts):
             return None
         if counts.sum() != len(indices) or (counts < 0).any():
@@ -189,10 +202,28 @@ class UsdMeshReader:
         warning) for one whose length does not fit its interpolation."""
         if not primvar or not primvar.HasValue():
             return None
-        values = primvar.ComputeFlattened(self.time)
+        where = f"{self.path}: {primvar.GetAttr().GetPath()}"
+        with quiet_stderr():
+            authored = primvar.Get(self.time)
+            indices = primvar.GetIndices(self.time) if primvar.IsIndexed() else None
+            if indices is not None and len(indices):
+                indices = np.asarray(indices, dtype=np.int64)
+                size = 0 if authored is None else len(authored)
+                if indices.min() < 0 or indices.max() >= size:
+                    bad = int(indices[(indices < 0) | (indices >= size)][0])
+                    raise MeshError(f"{where}: index {bad} in its indices refers to a value it does not have "
+                                    f"({size} values)")
+            values = primvar.ComputeFlattened(self.time)
         if values is None:
             return None
-        values = np.asarray(values, dtype=np.float64).reshape(len(values), -1)
+        values = np.asarray(values)
+        if not len(values):
+            return None
+        if values.dtype.kind not in "fiu":
+            raise MeshError(f"{where}: expected numbers (got a value of type {primvar.GetTypeName()})")
+        values = usd_array(values.astype(np.float64).reshape(len(values), -1), where, values.size // max(len(values), 1))
+        if what in ("colour", "opacity") and (values < 0).any():
+            raise MeshError(f"{where}: a negative {what} ({float(values.min()):g}); colours are >= 0")
         if values.shape[1] < width:
             return None
         values = values[:, :width]
@@ -229,7 +260,7 @@ class UsdMeshReader:
         if not attribute.HasValue():
             return None
         # the normals attribute, with its own interpolation
-        values = np.asarray(attribute.Get(self.time), dtype=np.float64).reshape(-1, 3)
+        values = usd_array(attribute.Get(self.time), f"{self.path}: {attribute.GetPath()}", 3)
         interpolation = mesh.GetNormalsInterpolation()
         index = {"uniform": "face", "vertex": "point", "varying": "point", "faceVarying": "corner"}.get(
             interpolation, "point")

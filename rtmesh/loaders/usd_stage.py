@@ -9,6 +9,8 @@ import os
 import re
 import sys
 
+import numpy as np
+
 from rtmesh.core.errors import MeshError, MissingExtraError
 from rtmesh.loaders.mesh_files import check_file
 
@@ -42,6 +44,76 @@ def _quiet_stderr():
         os.dup2(saved, 2)
         os.close(saved)
 
+
+def quiet_stderr():
+    """:func:`_quiet_stderr` for the reader's calls into USD that print warnings (primvar
+    indices out of range, point instancer arrays of the wrong length): the reader checks
+    what they return itself and reports it in one line."""
+    return _quiet_stderr()
+
+
+def usd_number(value, where, reader=None):
+    """A number of a USD attribute held to the scene file's range (finite; 0 or of a
+    magnitude from 1e-18 to 1e18, :mod:`rtmesh.loaders.scene_keys`), read by one of its
+    readers (``_float`` by default, ``_positive``, ``_non_negative``).
+
+    Raises
+    ------
+    MeshError
+        ``m.usda: /World/Cam.focalLength: expected a number > 0 (got 0.0)``: ``where`` names
+        the file, the prim and the attribute.
+    """
+    from rtmesh.loaders.scene_keys import _float
+
+    reader = reader or _float
+    if isinstance(value, (bool, str)) or not isinstance(value, (int, float, np.number)):
+        raise MeshError(f"{where}: expected a number (got {value!r})")
+    try:
+        return reader(float(value))
+    except TypeError as exc:
+        raise MeshError(f"{where}: {exc} (got {float(value)!r})") from None
+
+
+def usd_array(value, where, width=None, integer=False, limit=None, finite=True):
+    """A USD array attribute's value as a NumPy array, its type and values checked: numbers
+    (integers where ``integer``), ``width`` of them an element (None: scalars), finite (unless
+    not ``finite``: a mesh's points, whose faces on non-finite points are dropped later with a
+    warning, as every mesh format's) and at most ``limit`` (the scene file's 1e18 by default)
+    in magnitude.  None is an empty array.
+
+    Raises
+    ------
+    MeshError
+        One line naming ``where`` (``m.usda: /World/Cube.points``) and what is wrong.
+    """
+    from rtmesh.loaders.scene_keys import MAX_NUMBER
+
+    limit = MAX_NUMBER if limit is None else limit
+    shape = "integers" if integer else (f"{width}-vectors of numbers" if width else "numbers")
+    if value is None:
+        return np.zeros((0,) if width is None else (0, width), np.int64 if integer else np.float64)
+    try:
+        array = np.asarray(value)
+    except Exception:  # a value NumPy cannot hold as an array
+        raise MeshError(f"{where}: expected an array of {shape} (got {type(value).__name__})") from None
+    kinds = "iu" if integer else "fiu"
+    expected_ndim = 1 if width is None else 2
+    if array.dtype.kind not in kinds or array.ndim != expected_ndim or (width and array.shape[1] != width):
+        got = (f"{array.shape[1]} numbers an element" if array.ndim == 2 and array.dtype.kind in "fiu"
+               else f"a value of type {type(value).__name__}")
+        raise MeshError(f"{where}: expected an array of {shape} (got {got})")
+    if integer:
+        return array.astype(np.int64)
+    array = array.astype(np.float64)
+    bad = ~np.isfinite(array)
+    if not finite:
+        return array
+    if bad.any():
+        raise MeshError(f"{where}: {int(bad.sum())} values that are NaN or infinite (of {array.size})")
+    if array.size and np.abs(array).max() > limit:
+        raise MeshError(f"{where}: values up to {float(np.abs(array).max()):g} in magnitude, more than "
+                        f"rtmesh takes ({limit:g})")
+    return array
 
 
 def open_stage(path):
