@@ -136,6 +136,7 @@ _PATH_TESTS = {
     "loaders/test_load_memory.py": ("test_ten_thousand_placements_of_a_large_mesh_render_within_a_small_limit",
                                     # its batch worker process renders a glTF asset
                                     "test_a_batch_worker_fails_an_asset_beyond_its_limit_at_the_load_stage"),
+    "loaders/test_hostile_meshes.py": ("test_nan_texture_coordinates_in_a_ply_are_one_warning_and_no_numpy_warning",),
     "loaders/test_placements.py": ("*",),
     "loaders/test_real_assets.py": ("*",),
     "loaders/test_texture_transform.py": ("*",),
