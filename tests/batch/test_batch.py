@@ -719,6 +719,9 @@ def two_worker_cluster():
         yield cluster
 
 
+# a Dask cluster's failure drill (a cluster and processes, about 3-6 s of CPU): under -m slow,
+# where the local resume after a killed batch (test_resume_after_sigkill_...) stays in the default run
+@pytest.mark.slow
 def test_dask_cluster_with_a_worker_killed_mid_batch(tmp_path, two_worker_cluster):
     src = tmp_path / "src"
     for i in range(14):
@@ -919,6 +922,9 @@ def wait_for_rows(out, n, proc, timeout=90):
     raise AssertionError(f"no {n} ledger rows (batch exit status {proc.poll()})")
 
 
+# a Dask cluster's failure drill (a cluster and processes, about 3-6 s of CPU): under -m slow,
+# where the local resume after a killed batch (test_resume_after_sigkill_...) stays in the default run
+@pytest.mark.slow
 def test_a_lost_scheduler_ends_the_batch_with_its_own_exit_code_and_no_failures(tmp_path):
     src = tmp_path / "src"
     for i in range(12):
@@ -952,6 +958,9 @@ def test_a_lost_scheduler_ends_the_batch_with_its_own_exit_code_and_no_failures(
 SIDE = 96  # pixels of the images of the resume after a killed client
 
 
+# a Dask cluster's failure drill (a cluster and processes, about 3-6 s of CPU): under -m slow,
+# where the local resume after a killed batch (test_resume_after_sigkill_...) stays in the default run
+@pytest.mark.slow
 def test_resume_right_after_killing_the_client_gives_each_image_one_writer(tmp_path, two_worker_cluster):
     """kill -9 of the submitting process at the worst moment (a Dask worker has finished an
     image it has not recorded, others are rendering), and a resume at once: the killed
