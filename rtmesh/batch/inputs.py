@@ -63,11 +63,14 @@ class Asset:
         ``/``-separated, extension kept (``"chairs/oak.obj"``).
     overrides : dict
         Per-asset settings from a CSV manifest (``width``, ``views``...).
+    source : str
+        Where the overrides come from, for messages (``m.csv: line 3``; empty without).
     """
 
     path: str
     name: str
     overrides: dict = field(default_factory=dict, compare=False, hash=False)
+    source: str = field(default="", compare=False, hash=False)
 
 
 def discover(inputs, skip=()):
@@ -94,26 +97,27 @@ def discover(inputs, skip=()):
         A command-line input that does not exist, has an unknown extension, or a manifest
         that cannot be read or has a bad value.  Nothing has run yet when this is raised.
     """
-    found = []  # (absolute path, root folder, name relative to the root, overrides)
+    found = []  # (absolute path, root folder, name relative to the root, overrides, their source)
     for item in inputs:
         path = os.path.abspath(os.fspath(item))
         ext = os.path.splitext(path)[1].lower()
         if os.path.isdir(path):
-            found.extend((p, path, name, {}) for p, name in _walk(path, skip))
+            found.extend((p, path, name, {}, "") for p, name in _walk(path, skip))
         elif not os.path.exists(path):
             raise InputError(f"{item}: no such file or folder")
         elif ext in MESH_EXTENSIONS:
-            found.append((path, os.path.dirname(path), None, {}))
+            found.append((path, os.path.dirname(path), None, {}, ""))
         elif ext in CSV_MANIFEST_EXTENSIONS:
-            found.extend((p, _manifest_root(path, p), None, o) for p, o in read_csv_manifest(path))
+            found.extend((p, _manifest_root(path, p), None, o, f"{path}: line {n}")
+                         for p, o, n in read_csv_manifest(path))
         elif ext in LINE_MANIFEST_EXTENSIONS:
-            found.extend((p, _manifest_root(path, p), None, {}) for p in read_line_manifest(path))
+            found.extend((p, _manifest_root(path, p), None, {}, "") for p in read_line_manifest(path))
         else:
             raise InputError(
                 f"{item}: not a mesh file ({', '.join(MESH_EXTENSIONS)}), a folder or a manifest "
                 f"({', '.join(LINE_MANIFEST_EXTENSIONS + CSV_MANIFEST_EXTENSIONS)})")
     assets, seen, names, real_folders = [], set(), set(), {}
-    for path, root, name, overrides in found:
+    for path, root, name, overrides, source in found:
         # a file reached twice (two inputs, a link) is the same real folder and file name
         folder, base = os.path.split(path)
         real = real_folders.get(folder)
@@ -129,7 +133,7 @@ def discover(inputs, skip=()):
             tag = f"{os.path.basename(root)}/{name}".encode()
             name = f"{name}-{hashlib.sha1(tag).hexdigest()[:8]}"
         names.add(name.lower())
-        assets.append(Asset(path, name, overrides))
+        assets.append(Asset(path, name, overrides, source))
     return assets
 
 
@@ -221,8 +225,8 @@ def read_csv_manifest(path):
 
     Returns
     -------
-    list of (str, dict)
-        Absolute path and overrides (empty cells mean "batch default").
+    list of (str, dict, int)
+        Absolute path, overrides (empty cells mean "batch default") and the line.
     """
     folder = os.path.dirname(path)
     try:
@@ -263,7 +267,7 @@ def read_csv_manifest(path):
                 overrides[column] = value
             else:
                 overrides[column] = tuple(split_names(text))
-        entries.append((_entry_path(path, line, folder, cells["path"]), overrides))
+        entries.append((_entry_path(path, line, folder, cells["path"]), overrides, line))
     return entries
 
 

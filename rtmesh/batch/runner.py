@@ -159,7 +159,7 @@ def batch_convert(inputs, outdir, **options):
 
 def _check_overrides(asset, opts):
     o = asset.overrides
-    where = f"{asset.path}: "
+    where = f"{asset.source or asset.path}: "
     check_names(where + "views", o.get("views", ()), VIEWS)
     check_names(where + "formats", o.get("formats", ()), FORMATS)
     check_names(where + "passes", o.get("passes", ()), PASSES)

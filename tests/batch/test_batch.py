@@ -167,6 +167,19 @@ def test_manifests_line_and_csv_with_per_asset_overrides(tmp_path):
         rtmesh.batch_convert([tmp_path / "bad.csv"], tmp_path / "out3", **TINY)
 
 
+@pytest.mark.parametrize("cell, message", [
+    ("views", "views: unknown 'bogus' (expected iso, front, back, left, right, top, bottom)"),
+    ("formats", "formats: unknown 'bogus' (expected png, exr, jpg)"),
+])
+def test_a_bad_manifest_cell_is_named_by_the_manifests_line(cell, message, tmp_path, cli):
+    make_mesh(tmp_path / "a.obj")
+    manifest = tmp_path / "m.csv"
+    manifest.write_text(f"path,{cell}\n\na.obj,bogus\n")
+    code, _, err = cli("batch", manifest, "-o", tmp_path / "out", "-q")
+    assert code == 2 and err == f"rtmesh: error: {manifest}: line 3: {message}\n"
+    assert not (tmp_path / "out").exists()
+
+
 @pytest.mark.parametrize("name, content, message", [
     ("nul.txt", b"a\0b.obj\n", "{m}: line 1: the path holds a NUL character"),
     ("nul.csv", b'path\n"a\0b.obj"\n', "{m}: line 2: the path holds a NUL character"),
