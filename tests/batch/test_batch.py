@@ -800,6 +800,8 @@ def stop(*procs):
         proc.wait()
 
 
+# a Dask cluster of its own (about 5 s of CPU): under -m slow with the cluster drills
+@pytest.mark.slow
 def test_dask_worker_with_a_private_output_folder_is_refused(tmp_path, capsys, caplog):
     """A real second worker process in its own mount namespace, where OUTDIR is another
     folder (as on a node that mounts its own disk there): it is refused before any job."""

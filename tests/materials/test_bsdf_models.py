@@ -234,7 +234,7 @@ def test_samples_agree_with_evaluate(name, i):
 def test_pdf_integrates_to_at_most_one(name, i):
     tag, params, transmissive = _rows(CASES[name][i])
     rng = np.random.default_rng(7)
-    n = 400000
+    n = 200000
     # transmissive models also seen from inside (wo.z < 0), where only the interface scatters
     for mu in (0.3, 0.9, -0.3, -0.9) if transmissive else (0.3, 0.9):
         wo = np.tile([math.sqrt(1 - mu * mu), 0.0, mu], (n, 1))
@@ -249,7 +249,7 @@ def test_pdf_integrates_to_at_most_one(name, i):
         assert abs(integral - drawn) < 4 * error + 0.01, f"mu {mu}: pdf integrates to {integral:.4f}, {drawn:.4f} drawn"
 
 
-def _chi2_pvalue(tag, params, wo, rng, n=200000, theta_bins=10, phi_bins=20, pdf_params=None):
+def _chi2_pvalue(tag, params, wo, rng, n=100000, theta_bins=10, phi_bins=20, pdf_params=None):
     """pbrt's chi-square test: sampled directions binned over (cos theta, phi) against the
     pdf integrated over each bin, bins with expected counts below 5 pooled.  ``pdf_params``:
     the row whose pdf predicts the counts (default ``params``; test_chi_square_rejects_a_wrong_pdf)."""
