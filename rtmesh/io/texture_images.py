@@ -287,6 +287,9 @@ def load_texture(path, srgb=True, wrap="repeat", cache=None, signed=False):
     except RtmeshError as exc:
         detail = str(exc).splitlines()[0].removeprefix(f"{path}: ")
         raise MeshError(f"{path}: corrupt or unreadable texture ({detail})") from None
+    if pixels.shape[0] * pixels.shape[1] > MAX_TEXTURE_PIXELS:
+        # (PIL's images are refused from their header above; OpenImageIO's once read)
+        raise _too_large(path, pixels.shape[1], pixels.shape[0])
     check_texel_values(pixels, path, signed)
     return _cached(cache, key, Texture(pixels, wrap=wrap, name=os.path.basename(path)))
 

@@ -275,10 +275,10 @@ class UsdMaterialReader:
                     except MeshError as exc:
                         raise MeshError(f"{self.path}: {key or what}: {authored}: "
                                         f"{str(exc).removeprefix(resolved + ': ')}") from None
-                    if os.path.getsize(resolved) > MAX_TEXTURE_BYTES:
-                        raise MeshError(f"{self.path}: {key or what}: {authored}: a texture file of "
-                                        f"{os.path.getsize(resolved)} bytes, more than rtmesh reads "
-                                        f"({MAX_TEXTURE_BYTES})")
+                    size = os.path.getsize(resolved)
+                    if size > MAX_TEXTURE_BYTES:
+                        raise MeshError(f"{self.path}: {key or what}: {authored}: a texture file of {size} bytes, "
+                                        f"more than rtmesh reads ({MAX_TEXTURE_BYTES})")
                 if os.path.splitext(resolved)[1].lower() in (".exr", ".hdr"):
                     return self._float_image(resolved, authored, key or what, signed)
                 with open(resolved, "rb") as f:
@@ -307,11 +307,7 @@ class UsdMaterialReader:
             texture = load_texture(resolved, srgb=False, signed=signed)
         except MeshError as exc:
             raise MeshError(f"{self.path}: {where}: {authored}: {str(exc).removeprefix(resolved + ': ')}") from None
-        pixels = texture._pixels
-        if pixels.shape[0] * pixels.shape[1] > MAX_TEXTURE_PIXELS:
-            raise MeshError(f"{self.path}: {where}: {authored}: texture of {pixels.shape[1]}x{pixels.shape[0]} pixels "
-                            f"is larger than rtmesh reads ({MAX_TEXTURE_PIXELS} pixels, e.g. 8192x8192): downsample it")
-        return _FloatImage(pixels)
+        return _FloatImage(texture.pixels)
 
 
 def _numbers(value, where, count):

@@ -154,7 +154,7 @@ class UsdMeshReader:
                 raise MeshError(f"{where}.faceVertexCounts: a negative count ({int(counts.min())})")
         if not len(counts):
             return None
-        if counts.sum() != len(indices) or (counts < 0).any():
+        if counts.sum() != len(indices):
             raise MeshError(f"{where}: faceVertexCounts add up to {int(counts.sum())} but there are "
                             f"{len(indices)} faceVertexIndices")
         if len(indices) and (indices.min() < 0 or indices.max() >= len(points)):

@@ -28,7 +28,7 @@ def pxr_modules():
 
 
 @contextlib.contextmanager
-def _quiet_stderr():
+def quiet_stderr():
     """USD prints its diagnostics on the process's standard error (file descriptor 2); the
     loader reports them itself, in one line, so they are sent to nothing meanwhile."""
     try:
@@ -43,13 +43,6 @@ def _quiet_stderr():
     finally:
         os.dup2(saved, 2)
         os.close(saved)
-
-
-def quiet_stderr():
-    """:func:`_quiet_stderr` for the reader's calls into USD that print warnings (primvar
-    indices out of range, point instancer arrays of the wrong length): the reader checks
-    what they return itself and reports it in one line."""
-    return _quiet_stderr()
 
 
 def usd_number(value, where, reader=None):
@@ -105,9 +98,9 @@ def usd_array(value, where, width=None, integer=False, limit=None, finite=True):
     if integer:
         return array.astype(np.int64)
     array = array.astype(np.float64)
-    bad = ~np.isfinite(array)
     if not finite:
         return array
+    bad = ~np.isfinite(array)
     if bad.any():
         raise MeshError(f"{where}: {int(bad.sum())} values that are NaN or infinite (of {array.size})")
     if array.size and np.abs(array).max() > limit:
@@ -140,7 +133,7 @@ def open_stage(path):
     """
     _, _, Tf, Usd, _, _, _ = pxr_modules()
     check_file(path)
-    with _quiet_stderr():
+    with quiet_stderr():
         try:
             stage = Usd.Stage.Open(path)
         except Tf.ErrorException as exc:

@@ -97,6 +97,15 @@ def test_an_exr_normal_map_may_hold_negative_values_and_not_nan(tmp_path, capsys
         load_texture(str(tmp_path / "n2.exr"), srgb=False, signed=True)
 
 
+def test_an_exr_texture_beyond_the_pixel_limit_is_refused(tmp_path, monkeypatch):
+    from rtmesh.io import texture_images
+
+    monkeypatch.setattr(texture_images, "MAX_TEXTURE_PIXELS", 15)
+    exr = write_exr(tmp_path / "t.exr", np.full((4, 4, 3), 0.5))
+    with pytest.raises(MeshError, match=r"t\.exr: texture of 4x4 pixels is larger than rtmesh reads \(15 pixels"):
+        load_texture(str(exr))
+
+
 def test_a_finite_exr_texture_loads_as_stored(tmp_path):
     texels = np.linspace(0.0, 1e30, 48).reshape(4, 4, 3)  # large but finite: kept
     texture = load_texture(str(write_exr(tmp_path / "t.exr", texels)))
